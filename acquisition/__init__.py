@@ -1,0 +1,1 @@
+"""impactlab.acquisition: the analyser driver, transports, capture sessions and recordings."""

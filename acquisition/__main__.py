@@ -1,0 +1,16 @@
+"""``python -m acquisition capture|replay|export|import|demo ...``"""
+import sys
+
+from analysis._cli_dispatch import dispatch
+
+COMMANDS = {
+    "capture": ("acquisition.cli_capture", "run an impact test and write a recording (HDF5)"),
+    "replay": ("acquisition.cli_replay", "recompute FRFs from a recording with other settings"),
+    "export": ("acquisition.cli_export", "write a recording's FRFs (and time data) as UFF 58"),
+    "import": ("acquisition.cli_import", "turn .lvm, DataPhysics .mat or numpy time data into a recording"),
+    "identify": ("acquisition.cli_identify", "open a device URL and print identity and capabilities"),
+    "demo": ("acquisition.cli_demo", "the make-demo job: capture on the simulated frame, fit, summarise"),
+}
+
+if __name__ == "__main__":
+    sys.exit(dispatch("acquisition", COMMANDS))

@@ -1,0 +1,65 @@
+"""Exceptions of the acquisition layer. Each subclasses a built-in so callers may catch broadly.
+
+Every message names the problem and what to do about it.
+"""
+from __future__ import annotations
+
+__all__ = [
+    "ImpactlabError",
+    "InvalidDeviceURL",
+    "TransportError",
+    "TransportTimeout",
+    "DeviceGone",
+    "EndpointStalled",
+    "ProtocolError",
+    "CommandFailed",
+    "SetupError",
+    "RecordingError",
+]
+
+
+class ImpactlabError(Exception):
+    """Base of all impactlab errors."""
+
+
+class InvalidDeviceURL(ImpactlabError, ValueError):
+    """A device URL that no door understands; the message shows the accepted syntax."""
+
+
+class SetupError(ImpactlabError, ValueError):
+    """A set-up value outside the analyser's capabilities (checked before anything is written)."""
+
+
+class TransportError(ImpactlabError, OSError):
+    """The byte link failed."""
+
+
+class TransportTimeout(TransportError, TimeoutError):
+    """A read or write did not complete within its bound."""
+
+
+class DeviceGone(TransportError, ConnectionError):
+    """The device disconnected or the link closed."""
+
+
+class EndpointStalled(TransportError):
+    """A USB bulk endpoint answered STALL (the host must clear the halt)."""
+
+
+class ProtocolError(ImpactlabError):
+    """The device broke the bulk-only envelope: bad signature, wrong tag, phase error, bad length."""
+
+
+class CommandFailed(ImpactlabError):
+    """A command ended with CHECK CONDITION; carries the sense data the device reported."""
+
+    def __init__(self, message: str, *, opcode: int = -1, sense_key: int = 0, asc: int = 0, ascq: int = 0):
+        super().__init__(message)
+        self.opcode = opcode
+        self.sense_key = sense_key
+        self.asc = asc
+        self.ascq = ascq
+
+
+class RecordingError(ImpactlabError, OSError):
+    """A recording file that cannot be read or written (damaged, wrong schema version...)."""

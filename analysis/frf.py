@@ -1,0 +1,151 @@
+"""The FRF set: the plain data container that flows from estimation to fitting.
+
+Axis order of ``H``: ``(n_outputs, n_references, n_freq)``: response point, excitation
+(reference) point, frequency line. ``freq_hz`` is in Hz, strictly increasing.
+
+``quantity`` names the FRF form, all per newton of force:
+
+=============  ==========  ==================================
+quantity       unit        relation to receptance H_d
+=============  ==========  ==================================
+receptance     m/N         H_d
+mobility       (m/s)/N     j*omega * H_d
+accelerance    (m/s^2)/N   -omega^2 * H_d
+=============  ==========  ==================================
+
+Other units (g/N, V/V) may be carried in ``unit``; the form is what matters to the fitter.
+
+``exp_window_tau_s`` records the time constant tau (s) of an exponential window
+w(t) = exp(-t/tau) applied to the responses: it adds sigma_w = 1/tau (rad/s) to
+every pole's decay rate, which a fitter removes (apparent damping sigma_w/omega_n).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Optional, Sequence
+
+import numpy as np
+
+__all__ = ["FRFSet", "QUANTITIES", "convert_quantity"]
+
+QUANTITIES = ("receptance", "mobility", "accelerance")
+_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+
+
+@dataclass(frozen=True)
+class FRFSet:
+    """FRFs of one test: ``H[o, r, k]`` from reference ``r`` to output ``o`` at ``freq_hz[k]``.
+
+    Parameters
+    ----------
+    freq_hz : (n_freq,) float, Hz, strictly increasing.
+    H : (n_out, n_ref, n_freq) complex.
+    quantity : "receptance", "mobility" or "accelerance".
+    outputs, references : point labels (``component:node:direction``), one per axis entry.
+    unit : unit string of H, e.g. "(m/s^2)/N" or "g/N".
+    coherence : optional (n_out, n_ref, n_freq) float in [0, 1].
+    exp_window_tau_s : optional time constant (s) of an exponential window on the responses.
+    meta : free-form provenance (estimator, number of averages, source file...).
+    """
+
+    freq_hz: np.ndarray
+    H: np.ndarray
+    quantity: str = "accelerance"
+    outputs: tuple = ()
+    references: tuple = ()
+    unit: str = ""
+    coherence: Optional[np.ndarray] = None
+    exp_window_tau_s: Optional[float] = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        f = np.asarray(self.freq_hz, dtype=float)
+        H = np.asarray(self.H)
+        if H.ndim == 1:
+            H = H[None, None, :]
+        elif H.ndim == 2:
+            H = H[:, None, :]
+        H = H.astype(complex)
+        if H.ndim != 3:
+            raise ValueError(f"H must have axes (n_out, n_ref, n_freq); got shape {H.shape}")
+        if f.ndim != 1 or f.size != H.shape[2]:
+            raise ValueError(f"freq_hz has {f.size} lines but H has {H.shape[2]} (shape {H.shape})")
+        if f.size > 1 and np.any(np.diff(f) <= 0):
+            raise ValueError("freq_hz must be strictly increasing")
+        if self.quantity not in QUANTITIES:
+            raise ValueError(f"quantity {self.quantity!r} is not one of {QUANTITIES}")
+        outs = tuple(str(o) for o in self.outputs) or tuple(f"n:{i + 1}:Z" for i in range(H.shape[0]))
+        refs = tuple(str(r) for r in self.references) or tuple(f"n:{1000 + j}:Z" for j in range(H.shape[1]))
+        if len(outs) != H.shape[0] or len(refs) != H.shape[1]:
+            raise ValueError(
+                f"{len(outs)} output and {len(refs)} reference labels for H of shape {H.shape}"
+            )
+        coh = None
+        if self.coherence is not None:
+            coh = np.asarray(self.coherence, dtype=float).reshape(H.shape)
+        f.setflags(write=False)
+        H.setflags(write=False)
+        if coh is not None:
+            coh.setflags(write=False)
+        object.__setattr__(self, "freq_hz", f)
+        object.__setattr__(self, "H", H)
+        object.__setattr__(self, "outputs", outs)
+        object.__setattr__(self, "references", refs)
+        object.__setattr__(self, "coherence", coh)
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Angular frequency (rad/s)."""
+        return 2 * np.pi * self.freq_hz
+
+    @property
+    def n_outputs(self) -> int:
+        return self.H.shape[0]
+
+    @property
+    def n_references(self) -> int:
+        return self.H.shape[1]
+
+    def band(self, lo_hz: float, hi_hz: float) -> "FRFSet":
+        """A new FRF set restricted to lo_hz <= f <= hi_hz."""
+        sel = (self.freq_hz >= lo_hz) & (self.freq_hz <= hi_hz)
+        if sel.sum() < 2:
+            raise ValueError(
+                f"band {lo_hz}:{hi_hz} Hz holds {int(sel.sum())} lines; data span "
+                f"{self.freq_hz[0]:.4g}..{self.freq_hz[-1]:.4g} Hz"
+            )
+        coh = None if self.coherence is None else self.coherence[..., sel]
+        return replace(self, freq_hz=self.freq_hz[sel], H=self.H[..., sel], coherence=coh)
+
+    def select(self, outputs: Sequence[str] | None = None, references: Sequence[str] | None = None) -> "FRFSet":
+        """A new FRF set with the named outputs/references (in the order given)."""
+        oi = [self.outputs.index(str(o)) for o in outputs] if outputs else list(range(self.n_outputs))
+        ri = [self.references.index(str(r)) for r in references] if references else list(range(self.n_references))
+        coh = None if self.coherence is None else self.coherence[np.ix_(oi, ri)]
+        return replace(
+            self,
+            H=self.H[np.ix_(oi, ri)],
+            outputs=tuple(self.outputs[i] for i in oi),
+            references=tuple(self.references[i] for i in ri),
+            coherence=coh,
+        )
+
+    def as_quantity(self, quantity: str) -> "FRFSet":
+        """The same FRFs in another form (see :func:`convert_quantity`)."""
+        return replace(self, H=convert_quantity(self.H, self.freq_hz, self.quantity, quantity), quantity=quantity,
+                       unit="")
+
+
+def convert_quantity(H: np.ndarray, freq_hz: np.ndarray, src: str, dst: str) -> np.ndarray:
+    """Convert FRFs between receptance, mobility and accelerance: multiply by (j omega)^(p_dst - p_src).
+
+    Lines at f = 0 are undefined when dividing and come back as NaN.
+    """
+    for q in (src, dst):
+        if q not in QUANTITIES:
+            raise ValueError(f"quantity {q!r} is not one of {QUANTITIES}")
+    p = _POWER[dst] - _POWER[src]
+    jw = 1j * 2 * np.pi * np.asarray(freq_hz, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = jw ** p if p >= 0 else np.where(jw == 0, np.nan, 1.0 / np.where(jw == 0, 1, jw) ** (-p))
+    return np.asarray(H) * factor

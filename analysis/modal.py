@@ -1,0 +1,157 @@
+"""Modal model container and FRF synthesis (the paper's eq. (11)).
+
+Symbols
+-------
+lambda_r : pole of mode r (rad/s), ``sigma_r + j omega_d,r`` with ``sigma_r < 0``.
+f_r      : natural frequency ``|lambda_r| / 2 pi`` (Hz).
+zeta_r   : damping ratio ``-Re(lambda_r) / |lambda_r|``.
+f_d,r    : damped natural frequency ``Im(lambda_r) / 2 pi`` (Hz).
+R_ijr    : residue of mode r from reference j to output i.
+UR, LR   : upper and lower residual terms.
+
+The synthesised FRF in the form of quantity ``q`` (p = 0, 1, 2 for receptance,
+mobility, accelerance) is
+
+    H_ij(w) = sum_r [ R_ijr / (jw - lambda_r) + conj(R_ijr) / (jw - conj(lambda_r)) ]
+              + UR_ij * b_U(w) + LR_ij * b_L(w)
+
+with the residual basis ``(b_U, b_L)`` chosen by ``residual_form``:
+
+* ``"paper"``: ``(1, 1/w^2)`` whatever the quantity (the paper's eq. (10)/(11)).
+* ``"physical"``: the receptance-equivalent terms carried into the form,
+  ``((jw)^p, (jw)^p / w^2)``: receptance ``(1, 1/w^2)``, mobility ``(jw, j/w)``,
+  accelerance ``(-w^2, -1)``. UR is then a flexibility (m/N) and LR a
+  flexibility times (rad/s)^2 whatever the form, so values compare across forms.
+* ``"none"``: no residual terms.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from .frf import FRFSet, QUANTITIES
+
+__all__ = [
+    "ModalModel",
+    "RESIDUAL_FORMS",
+    "residual_basis",
+    "synthesize",
+    "pole_from_fz",
+    "natural_freq_hz",
+    "damping_ratio",
+    "damped_freq_hz",
+]
+
+RESIDUAL_FORMS = ("physical", "paper", "none")
+_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+
+
+def pole_from_fz(freq_hz: "np.ndarray | float", zeta: "np.ndarray | float") -> np.ndarray:
+    """Pole(s) lambda = -zeta w_n + j w_n sqrt(1 - zeta^2) from natural frequency (Hz) and damping ratio."""
+    wn = 2 * np.pi * np.asarray(freq_hz, dtype=float)
+    z = np.asarray(zeta, dtype=float)
+    return -z * wn + 1j * wn * np.sqrt(1 - z ** 2)
+
+
+def natural_freq_hz(poles: np.ndarray) -> np.ndarray:
+    """|lambda| / 2 pi (Hz)."""
+    return np.abs(poles) / (2 * np.pi)
+
+
+def damping_ratio(poles: np.ndarray) -> np.ndarray:
+    """-Re(lambda) / |lambda| (dimensionless)."""
+    return -np.real(poles) / np.abs(poles)
+
+
+def damped_freq_hz(poles: np.ndarray) -> np.ndarray:
+    """Im(lambda) / 2 pi (Hz)."""
+    return np.imag(poles) / (2 * np.pi)
+
+
+def residual_basis(omega: np.ndarray, quantity: str, residual_form: str) -> np.ndarray:
+    """Residual basis functions, shape (2, n_freq) for (UR, LR), or (0, n_freq) for ``"none"``.
+
+    ``omega`` in rad/s; at omega = 0 the 1/w^2 term is set to 0 (undefined there).
+    """
+    if quantity not in QUANTITIES:
+        raise ValueError(f"quantity {quantity!r} is not one of {QUANTITIES}")
+    if residual_form not in RESIDUAL_FORMS:
+        raise ValueError(f"residual_form {residual_form!r} is not one of {RESIDUAL_FORMS}")
+    w = np.asarray(omega, dtype=float)
+    if residual_form == "none":
+        return np.zeros((0, w.size), dtype=complex)
+    with np.errstate(divide="ignore"):
+        inv_w2 = np.where(w == 0, 0.0, 1.0 / np.where(w == 0, 1.0, w) ** 2)
+    if residual_form == "paper":
+        return np.vstack([np.ones_like(w, dtype=complex), inv_w2.astype(complex)])
+    s = (1j * w) ** _POWER[quantity]
+    return np.vstack([s, s * inv_w2])
+
+
+@dataclass(frozen=True)
+class ModalModel:
+    """Poles, residues and residual terms of a modal model.
+
+    poles : (n_modes,) complex, rad/s, upper half plane (Im > 0).
+    residues : (n_out, n_ref, n_modes) complex, in the units of the FRF times rad/s.
+    upper_residual, lower_residual : (n_out, n_ref) complex or None.
+    quantity, residual_form : see module docstring.
+    outputs, references : point labels.
+    """
+
+    poles: np.ndarray
+    residues: np.ndarray
+    quantity: str = "accelerance"
+    residual_form: str = "physical"
+    upper_residual: Optional[np.ndarray] = None
+    lower_residual: Optional[np.ndarray] = None
+    outputs: tuple = ()
+    references: tuple = ()
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        p = np.atleast_1d(np.asarray(self.poles, dtype=complex))
+        R = np.asarray(self.residues, dtype=complex)
+        if R.ndim == 1:
+            R = R[None, None, :]
+        if R.ndim != 3 or R.shape[2] != p.size:
+            raise ValueError(f"residues must be (n_out, n_ref, n_modes={p.size}); got {R.shape}")
+        object.__setattr__(self, "poles", p)
+        object.__setattr__(self, "residues", R)
+        for name in ("upper_residual", "lower_residual"):
+            v = getattr(self, name)
+            if v is not None:
+                object.__setattr__(self, name, np.asarray(v, dtype=complex).reshape(R.shape[:2]))
+        if self.quantity not in QUANTITIES:
+            raise ValueError(f"quantity {self.quantity!r} is not one of {QUANTITIES}")
+        if self.residual_form not in RESIDUAL_FORMS:
+            raise ValueError(f"residual_form {self.residual_form!r} is not one of {RESIDUAL_FORMS}")
+
+    @property
+    def freq_hz(self) -> np.ndarray:
+        return natural_freq_hz(self.poles)
+
+    @property
+    def damping(self) -> np.ndarray:
+        return damping_ratio(self.poles)
+
+
+def synthesize(model: ModalModel, freq_hz: np.ndarray) -> FRFSet:
+    """FRFs of a modal model at ``freq_hz`` (Hz), eq. (11); returns an :class:`FRFSet`."""
+    f = np.asarray(freq_hz, dtype=float)
+    jw = 1j * 2 * np.pi * f
+    lam = model.poles
+    # (n_modes, n_freq) pole kernels
+    K = 1.0 / (jw[None, :] - lam[:, None])
+    Kc = 1.0 / (jw[None, :] - np.conj(lam)[:, None])
+    R = model.residues
+    H = np.einsum("orm,mk->ork", R, K) + np.einsum("orm,mk->ork", np.conj(R), Kc)
+    B = residual_basis(2 * np.pi * f, model.quantity, model.residual_form)
+    if B.shape[0] == 2:
+        if model.upper_residual is not None:
+            H = H + model.upper_residual[..., None] * B[0]
+        if model.lower_residual is not None:
+            H = H + model.lower_residual[..., None] * B[1]
+    return FRFSet(freq_hz=f, H=H, quantity=model.quantity, outputs=model.outputs, references=model.references)

@@ -1,0 +1,1 @@
+"""impactlab.simulator: a simulated steel frame and a simulated SigLab-like analyser."""
