@@ -9,6 +9,7 @@ __all__ = [
     "InvalidDeviceURL",
     "TransportError",
     "TransportTimeout",
+    "TriggerTimeout",
     "DeviceGone",
     "EndpointStalled",
     "ProtocolError",
@@ -36,6 +37,10 @@ class TransportError(ImpactlabError, OSError):
 
 class TransportTimeout(TransportError, TimeoutError):
     """A read or write did not complete within its bound."""
+
+
+class TriggerTimeout(TransportTimeout):
+    """The armed analyser saw no trigger within the wait (the link itself is fine)."""
 
 
 class DeviceGone(TransportError, ConnectionError):

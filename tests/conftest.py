@@ -1,7 +1,12 @@
 """Shared fixtures. Real measured data lives in ../shared/data and is never committed."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+# The tests solve many small linear-algebra problems; threaded OpenBLAS on the shared 2-core
+# machine is 10-100x slower for them under contention. Must be set before numpy is imported.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import pytest
 

@@ -1,0 +1,282 @@
+"""``python -m acquisition capture``: run an impact test and write a recording.
+
+    python -m acquisition capture --device URL --out REC.h5 [--points P1,P2,...] [--reference POINT]
+        [--mode roving-hammer|roving-accelerometer] [--hits N] [--auto] [--seed N] [--setup FILE]
+        [--force-window WIDTH[,TAPER]|none] [--exp-window TAU|PCT%|none] [--timeout S] [--overwrite]
+
+Without ``--points`` the plan is one measurement with the set-up's own points (the default set-up:
+hammer at ``right:6:-X``, accelerometers at ``left:9:Y``, ``top:4:X``, ``right:4:-Z``). With
+``--points`` and no ``--reference`` the hammer roves over the points; with ``--reference`` the
+hammer stays there and the first accelerometer roves. ``--seed`` is added to a simulator URL.
+``sim://?replay=REC.h5`` plays a recording back through the simulated analyser.
+
+Windows: ``--force-window 10ms,2ms`` (rectangle 10 ms after the trigger, 2 ms cosine taper; s, ms
+or samples); ``--exp-window 1%`` (decays to 1 % at the block end), ``--exp-window 0.3s`` (tau).
+Exit status: 0 done, 1 device or session failure, 2 bad input.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from analysis.spectra import WindowSettings, parse_duration
+
+from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError
+
+__all__ = ["main", "build_parser", "parse_windows", "open_analyser", "summary_text", "DEFAULT_FORCE_WINDOW",
+           "DEFAULT_EXP_WINDOW"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_FORCE_WINDOW = "20ms,5ms"
+DEFAULT_EXP_WINDOW = "none"
+
+
+class UsageError(ValueError):
+    """Bad command-line input (exit 2)."""
+
+
+def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[float],
+                  base: Optional[WindowSettings] = None) -> WindowSettings:
+    """Window settings from the ``--force-window`` and ``--exp-window`` texts (None: keep ``base``)."""
+    b = base or WindowSettings()
+    fw, ft = b.force_width_s, b.force_taper_s
+    tau, decay = b.exp_tau_s, b.exp_decay
+    try:
+        if force is not None:
+            t = force.strip().lower()
+            if t in ("none", "off", ""):
+                fw, ft = None, 0.0
+            else:
+                parts = [x for x in t.split(",")]
+                if len(parts) > 2:
+                    raise UsageError(f"--force-window {force!r}: give WIDTH or WIDTH,TAPER (e.g. 10ms,2ms)")
+                fw = parse_duration(parts[0], fs_hz)
+                ft = parse_duration(parts[1], fs_hz) if len(parts) == 2 else 0.0
+                if fw <= 0:
+                    raise UsageError(f"--force-window {force!r}: the width must be positive")
+        if exp is not None:
+            t = exp.strip().lower()
+            if t in ("none", "off", ""):
+                tau, decay = None, None
+            elif t.endswith("%"):
+                decay = float(t[:-1]) / 100.0
+                tau = None
+                if not 0 < decay < 1:
+                    raise UsageError(f"--exp-window {exp!r}: the end value must lie between 0 and 100 %")
+            else:
+                tau = parse_duration(t[4:] if t.startswith("tau=") else t, fs_hz)
+                decay = None
+                if tau <= 0:
+                    raise UsageError(f"--exp-window {exp!r}: tau must be positive")
+        return WindowSettings(fw, ft, tau, decay, b.exp_on_force)
+    except UsageError:
+        raise
+    except ValueError as exc:
+        raise UsageError(f"bad window option: {exc}") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m acquisition capture", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--device", required=True, help="device URL, e.g. sim://?seed=1, socket://HOST:PORT, usb://VID:PID")
+    p.add_argument("--out", required=True, help="recording to write (HDF5)")
+    p.add_argument("--points", help="comma-separated measurement points (component:node:direction)")
+    p.add_argument("--reference", help="hammer point of a roving-accelerometer test")
+    p.add_argument("--mode", choices=("roving-hammer", "roving-accelerometer"),
+                   help="default: roving-accelerometer with --reference, else roving-hammer")
+    p.add_argument("--hits", type=int, help="accepted hits per point (default 5, or as recorded for a replay)")
+    p.add_argument("--auto", action="store_true", help="accept every hit that passes the automatic checks")
+    p.add_argument("--seed", type=int, help="random seed of a simulated device (sim://, usbsim://)")
+    p.add_argument("--setup", help="set-up file (JSON/TOML of AcquisitionSetup.to_dict()); default: default_setup()")
+    p.add_argument("--force-window", default=DEFAULT_FORCE_WINDOW,
+                   help=f"WIDTH[,TAPER] after the trigger, or none (default {DEFAULT_FORCE_WINDOW})")
+    p.add_argument("--exp-window", default=DEFAULT_EXP_WINDOW,
+                   help="exponential window: PCT%% at block end, TAU (s/ms/samples), or none (default none)")
+    p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for each trigger (default 10)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    p.add_argument("-q", "--quiet", action="store_true", help="print only the final summary")
+    return p
+
+
+def _with_seed(url: str, seed: Optional[int]) -> str:
+    if seed is None:
+        return url
+    if not url.startswith(("sim://", "usbsim://")):
+        raise UsageError(f"--seed applies to simulated devices (sim://, usbsim://), not {url!r}")
+    if "seed=" in url:
+        raise UsageError(f"the URL {url!r} already has a seed; drop --seed or the URL's seed")
+    return url + ("&" if "?" in url else "?") + f"seed={seed}"
+
+
+def open_analyser(url: str, timeout_s: float = 10.0) -> Any:
+    """An ``Analyser`` on ``url`` (``sim://?replay=REC.h5``: the simulated analyser plays a recording back
+    through :class:`simulator.replay_stand.ReplayStand`). ``timeout_s`` bounds each command."""
+    from .driver import Analyser
+
+    return Analyser(url, timeout_s=timeout_s)
+
+
+def _plan(args: argparse.Namespace, replay_plan: Optional[dict]):
+    from .session import TestPlan
+
+    points: tuple = ()
+    if args.points:
+        points = tuple(p.strip() for p in args.points.split(",") if p.strip())
+    mode = args.mode.replace("-", "_") if args.mode else ("roving_accelerometer" if args.reference else "roving_hammer")
+    hits = args.hits if args.hits is not None else 5
+    reference = args.reference
+    if replay_plan and not args.points and not args.mode and not args.reference:
+        mode = replay_plan.get("mode", mode)
+        points = tuple(replay_plan.get("points", ()))
+        if args.hits is None:
+            hits = int(replay_plan.get("hits_per_point", hits))
+        if mode == "roving_accelerometer":
+            reference = replay_plan.get("reference")
+    if hits < 1:
+        raise UsageError(f"--hits {hits}: need at least one hit per point")
+    try:
+        return TestPlan(mode=mode, points=points, hits_per_point=hits, reference=reference)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _recorded_plan(rec: Any) -> dict:
+    """The plan of a recording to replay: as stored, completed from its accepted hits."""
+    plan = dict(rec.plan)
+    hits = list(rec.hits(accepted_only=True, skip_damaged=True))
+    order: list = []
+    for h in hits:
+        if h.measurement not in [m for m, _, _ in order]:
+            order.append((h.measurement, h.point, h.reference))
+    if plan.get("mode") not in ("roving_hammer", "roving_accelerometer"):
+        refs = {r for _, _, r in order}
+        plan["mode"] = "roving_hammer" if len(refs) > 1 or len(order) == 1 else "roving_accelerometer"
+        plan.pop("reference", None)
+        if plan["mode"] == "roving_accelerometer":
+            plan["reference"] = order[0][2]
+    if not plan.get("points"):
+        plan["points"] = [p for _, p, _ in order]
+    if "hits_per_point" not in plan and order:
+        plan["hits_per_point"] = min(sum(1 for h in hits if h.measurement == m) for m, _, _ in order)
+    return plan
+
+
+def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8) -> str:
+    """Hits accepted/rejected with reasons, an FRF peak table and the mean coherence per FRF."""
+    from scipy.signal import find_peaks
+
+    lines = [f"hits accepted: {result.accepted}, rejected: {len(result.rejected)}"]
+    for m, point, idx, reasons in result.rejected:
+        lines.append(f"  rejected hit {idx} at point {m + 1} ({point}): {'; '.join(reasons)}")
+    avgs = [a for a in result.averages if a.n_averages > 0]
+    if not avgs:
+        lines.append("no FRF: no point has an accepted hit")
+        return "\n".join(lines)
+    for a in avgs:
+        s = a.frfset(estimator)
+        f = s.freq_hz
+        hi = f[-1] / 1.28  # alias-free band (fs / 2.56)
+        band = (f > 2.0) & (f <= hi)
+        mag = np.abs(s.H[:, 0, :])
+        live = [i for i in range(s.n_outputs) if np.any(a.acc.spectra()[1][i] > 0)]  # outputs with any signal
+        # peaks of the sum of the live outputs' magnitudes, each normalised to its own maximum
+        total = sum((np.where(band, mag[i], 0.0) / max(float(np.nanmax(np.where(band, mag[i], 0.0))), 1e-300)
+                     for i in live), np.zeros(f.size))
+        pk, prop = find_peaks(np.nan_to_num(total), prominence=0.02 * max(float(np.nanmax(total)), 1e-300))
+        top = np.sort(pk[np.argsort(prop["prominences"])[::-1][:n_peaks]])
+        tau = f"{s.exp_window_tau_s:.4g} s" if s.exp_window_tau_s else "none"
+        lines.append(f"point {a.index + 1}: reference {a.reference}, {a.n_averages} averages, {estimator} "
+                     f"[{s.unit}], exponential window tau {tau}")
+        lines.append("  peak Hz " + "".join(f"{o:>24s}" for o in s.outputs))
+        for k in top:
+            cells = "".join(f"{mag[i, k]:12.4g} (coh {s.coherence[i, 0, k]:.3f})" if i in live else f"{'-':>24s}"
+                            for i in range(s.n_outputs))
+            lines.append(f"  {f[k]:7.2f} {cells}")
+        coh = ", ".join(f"{o} {np.mean(s.coherence[i, 0, band]):.3f}" if i in live else f"{o} no signal (below 1 LSB)"
+                        for i, o in enumerate(s.outputs))
+        lines.append(f"  mean coherence 2..{hi:.0f} Hz: {coh}")
+    return "\n".join(lines)
+
+
+def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, Any]:
+    """The capture job behind :func:`main`. Returns (exit code, SessionResult or None).
+
+    Everything the operator typed is checked before the analyser is opened.
+    """
+    from .recording import Recording, RecordingWriter
+    from .session import CaptureSession, SessionError, auto_accept, channel_table, terminal_decider
+    from .setup import AcquisitionSetup, default_setup, load_setup
+    from .urls import SimURL, parse_device_url
+
+    url = _with_seed(args.device, args.seed)
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        raise UsageError(f"{out} exists: choose another --out file or add --overwrite")
+    parsed = parse_device_url(url)
+    replay_path = parsed.options.get("replay") if isinstance(parsed, SimURL) else None
+    replay_plan = None
+    if args.setup:
+        setup = load_setup(args.setup)
+    elif replay_path:
+        with Recording(replay_path) as rec:
+            try:
+                setup = AcquisitionSetup.from_dict(rec.setup)
+            except SetupError as exc:
+                raise UsageError(f"{replay_path} holds no analyser set-up to replay ({exc}); give --setup") from None
+            replay_plan = _recorded_plan(rec)
+    else:
+        setup = default_setup()
+    plan = _plan(args, replay_plan)
+    windows = parse_windows(args.force_window, args.exp_window, setup.sample_rate_hz)
+    measurements = plan.measurements(setup)  # checks the set-up has a force channel and responses
+    analyser = open_analyser(url)
+    with analyser:
+        identity = analyser.identify()
+        instrument = identity.as_dict() if hasattr(identity, "as_dict") else dict(vars(identity))
+        say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
+        say(f"analyser: {identity}; {len(measurements)} point(s) x {plan.hits_per_point} hits, {plan.mode}")
+        decide = auto_accept if args.auto else terminal_decider()
+        with RecordingWriter(out, instrument=instrument, setup=setup.to_dict(), channels=channel_table(setup),
+                             windows=windows.resolved(setup.block_size, setup.sample_rate_hz,
+                                                      setup.trigger.pretrigger_samples),
+                             plan={**plan.to_dict(), "device": url}, overwrite=args.overwrite) as writer:
+            session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
+                                     progress=say, timeout_s=args.timeout)
+            try:
+                result = session.run()
+            except SessionError as exc:
+                writer.log("ERROR", str(exc))
+                print(f"capture: {exc}", file=sys.stderr)
+                return 1, None
+    print(summary_text(result), file=out_stream)
+    print(f"recording written: {out}", file=out_stream)
+    return 0, result
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        code, _ = run_capture(args)
+        return code
+    except (UsageError, InvalidDeviceURL, SetupError, RecordingError) as exc:
+        print(f"capture: {exc}", file=sys.stderr)
+        return 2
+    except ImpactlabError as exc:
+        print(f"capture: device or session failure: {exc}", file=sys.stderr)
+        return 1
+    except ValueError as exc:  # bad values reaching the library (file contents, options)
+        print(f"capture: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"capture: interrupted; {args.out} keeps every hit written so far "
+              "(recompute its FRFs with 'python -m acquisition replay')", file=sys.stderr)
+        return 130
+    except OSError as exc:
+        print(f"capture: {exc}", file=sys.stderr)
+        return 1

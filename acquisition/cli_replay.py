@@ -1,0 +1,132 @@
+"""``python -m acquisition replay``: recompute FRFs from a recording's raw data with other settings.
+
+    python -m acquisition replay REC.h5 --out NEW.h5 [--force-window WIDTH[,TAPER]|none]
+        [--exp-window TAU|PCT%|none] [--window ...] [--exclude-hits 3,7-9] [--estimator H1|H2] [--overwrite]
+
+The original is never modified: NEW.h5 receives a copy of the set-up, instrument, every hit
+(accepted or rejected, counts and scaling untouched), the event log plus a replay event, and new
+FRF results from the accepted hits that are not excluded. Windows not given keep the recording's.
+``--window`` is shorthand: ``--window force=10ms,2ms;exp=1%``. With the original windows and no
+exclusions the FRFs equal the original ones bit for bit.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Optional, Sequence
+
+from analysis.spectra import WindowSettings
+
+from .cli_capture import UsageError, parse_windows
+from .errors import RecordingError
+
+__all__ = ["main", "replay", "parse_hit_list"]
+
+
+def parse_hit_list(text: Optional[str]) -> set[int]:
+    """``"3,7-9"`` -> {3, 7, 8, 9} (hit indices as stored)."""
+    out: set[int] = set()
+    if not text:
+        return out
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        try:
+            if "-" in part:
+                a, b = part.split("-", 1)
+                lo, hi = int(a), int(b)
+                if hi < lo:
+                    raise ValueError
+                out.update(range(lo, hi + 1))
+            else:
+                out.add(int(part))
+        except ValueError:
+            raise UsageError(f"--exclude-hits {text!r}: write hit indices and ranges like 3,7-9") from None
+    return out
+
+
+def _split_window(text: str) -> tuple[Optional[str], Optional[str]]:
+    force = exp = None
+    for item in text.split(";"):
+        key, _, val = item.partition("=")
+        key = key.strip().lower()
+        if key == "force":
+            force = val
+        elif key == "exp":
+            exp = val
+        else:
+            raise UsageError(f"--window {text!r}: use force=WIDTH[,TAPER] and/or exp=TAU|PCT%, joined by ';'")
+    return force, exp
+
+
+def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSettings] = None,
+           exclude: Sequence[int] = (), estimator: str = "H1", overwrite: bool = False) -> list:
+    """Recompute the FRFs of ``src`` into a new recording ``out``; returns the new averages."""
+    from .recording import Recording, RecordingWriter
+    from .session import average_recorded_hits
+
+    src, out = Path(src), Path(out)
+    if src.resolve() == out.resolve():
+        raise UsageError("--out must differ from the input: replay never modifies the original")
+    with Recording(src) as rec:
+        win = windows or rec.windows
+        all_hits = list(rec.hits())
+        unknown = set(exclude) - {h.index for h in all_hits}
+        if unknown:
+            raise UsageError(f"--exclude-hits names hit(s) {sorted(unknown)} that {src} does not hold "
+                             f"(it has 0..{len(all_hits) - 1})")
+        keep = [h for h in all_hits if h.accepted and h.index not in set(exclude)]
+        averages = average_recorded_hits(keep, win, rec.channels)
+        with RecordingWriter(out, instrument=rec.instrument, setup=rec.setup, channels=rec.channels,
+                             windows=averages[0].windows, plan=rec.plan, overwrite=overwrite) as w:
+            for t, level, msg in rec.events():
+                w.log(level, f"[original {t:.3f}] {msg}")
+            for h in all_hits:
+                w.write_hit(counts=h.counts, eu_per_count=h.eu_per_count, volts_per_count=h.volts_per_count,
+                            trigger_index=h.trigger_index, sample_rate_hz=h.sample_rate_hz, sequence=h.sequence,
+                            timestamp=h.timestamp, measurement=h.measurement, point=h.point, reference=h.reference,
+                            outputs=h.outputs, force_channel=h.force_channel, response_channels=h.response_channels,
+                            overload=h.overload, accepted=h.accepted, reasons=h.reasons, check=h.check)
+            w.log("INFO", f"replayed from {src} with windows {averages[0].windows.describe()}; excluded hits "
+                          f"{sorted(exclude) or 'none'}; preferred estimator {estimator}")
+            for a in averages:
+                a.write(w)
+            w.set_attr("preferred_estimator", estimator.upper())
+    return averages
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m acquisition replay", description=__doc__.split("\n\n")[0])
+    p.add_argument("recording", help="the recording to read (never modified)")
+    p.add_argument("--out", required=True, help="the new recording to write")
+    p.add_argument("--force-window", help="WIDTH[,TAPER] or none (default: the recording's)")
+    p.add_argument("--exp-window", help="PCT%%, TAU or none (default: the recording's)")
+    p.add_argument("--window", help="shorthand 'force=10ms,2ms;exp=1%%'")
+    p.add_argument("--exclude-hits", help="hit indices to leave out, e.g. 3,7-9")
+    p.add_argument("--estimator", choices=("H1", "H2", "h1", "h2"), default="H1")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    args = p.parse_args(argv)
+    try:
+        from .recording import Recording
+
+        force, exp = args.force_window, args.exp_window
+        if args.window:
+            f2, e2 = _split_window(args.window)
+            force = f2 if f2 is not None else force
+            exp = e2 if e2 is not None else exp
+        with Recording(args.recording) as rec:
+            base = rec.windows
+            first = next(rec.hits(), None)
+            fs = first.sample_rate_hz if first is not None else None
+        windows = parse_windows(force, exp, fs, base) if (force is not None or exp is not None) else None
+        averages = replay(args.recording, args.out, windows=windows, exclude=parse_hit_list(args.exclude_hits),
+                          estimator=args.estimator, overwrite=args.overwrite)
+    except (UsageError, RecordingError, ValueError) as exc:
+        print(f"replay: {exc}", file=sys.stderr)
+        return 2
+    for a in averages:
+        print(f"point {a.index + 1} ({a.point}): {a.n_averages} averages, windows {a.windows.describe()}")
+    print(f"recording written: {args.out}")
+    return 0

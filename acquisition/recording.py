@@ -1,0 +1,534 @@
+"""Impact-test recordings: HDF5 schema ``impactlab-recording`` version 1 (``docs/recording-format.md``).
+
+The writer appends as the test goes: every hit (accepted or rejected) is written as raw ADC
+counts (int16) with its scaling and flushed before the analyser is armed again, so a crash
+loses no accepted hit and leaves a file that opens. FRF results are written per measurement
+point when its average is complete. The reader validates the schema and checksums and turns
+any damaged, truncated, foreign or wrong-version file into :class:`RecordingError`.
+
+Scaling: a channel's value in engineering units is ``counts * eu_per_count`` (float64), and its
+input voltage ``counts * volts_per_count``. :func:`scale_counts` is the one place that does it, so
+the session and a replay compute FRFs from bit-identical inputs.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import logging
+import time
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator, Optional, Sequence
+
+import numpy as np
+
+from analysis.frf import FRFSet
+from analysis.spectra import WindowSettings
+
+from .errors import RecordingError
+
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "CHANNEL_FIELDS",
+    "scale_counts",
+    "counts_crc32",
+    "RecordingWriter",
+    "RecordedHit",
+    "Recording",
+    "open_recording",
+    "load_frfset",
+    "merge_frfsets",
+]
+
+log = logging.getLogger(__name__)
+
+SCHEMA = "impactlab-recording"
+SCHEMA_VERSION = 1
+CHANNEL_FIELDS = ("name", "point", "direction", "quantity", "sensitivity", "sensitivity_unit", "unit",
+                  "range_v", "coupling", "iepe")
+
+
+def _h5py():
+    import h5py  # local import keeps module import cheap and side-effect free
+
+    return h5py
+
+
+def scale_counts(counts: np.ndarray, eu_per_count: np.ndarray) -> np.ndarray:
+    """Engineering units from raw counts: ``counts[ch, n] * eu_per_count[ch]`` (float64, new array)."""
+    c = np.asarray(counts)
+    s = np.asarray(eu_per_count, dtype=float)
+    return c.astype(np.float64) * s[:, None]
+
+
+def counts_crc32(counts: np.ndarray) -> int:
+    """CRC-32 (zlib) of the counts as little-endian int16 in C order."""
+    return int(zlib.crc32(np.ascontiguousarray(counts, dtype="<i2").tobytes()) & 0xFFFFFFFF)
+
+
+def _now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
+def _channel_table(channels: Sequence[dict]):
+    h5py = _h5py()
+    s = h5py.string_dtype()
+    dt = np.dtype([("name", s), ("point", s), ("direction", s), ("quantity", s), ("sensitivity", "f8"),
+                   ("sensitivity_unit", s), ("unit", s), ("range_v", "f8"), ("coupling", s), ("iepe", "?")])
+    rows = []
+    for ch in channels:
+        rows.append((str(ch.get("name", "")), str(ch.get("point", "")), str(ch.get("direction", "")),
+                     str(ch.get("quantity", "")), float(ch.get("sensitivity", np.nan)),
+                     str(ch.get("sensitivity_unit", "")), str(ch.get("unit", "")),
+                     float(ch.get("range_v", np.nan)), str(ch.get("coupling", "")), bool(ch.get("iepe", False))))
+    return np.array(rows, dtype=dt)
+
+
+class RecordingWriter:
+    """Write a schema-v1 recording as the test goes (see module doc). Use as a context manager.
+
+    Parameters
+    ----------
+    path : output file (created; an existing file is replaced only with ``overwrite=True``).
+    instrument : the analyser's identity (vendor, model, serial, firmware...).
+    setup : ``AcquisitionSetup.to_dict()`` (stored as JSON).
+    channels : one dict per analyser channel with the keys of :data:`CHANNEL_FIELDS`.
+    windows : the window settings used for the FRFs.
+    plan : the test plan (kind "roving_hammer"/"roving_accelerometer", points...), stored as JSON.
+    """
+
+    def __init__(
+        self,
+        path: "str | Path",
+        *,
+        instrument: dict,
+        setup: dict,
+        channels: Sequence[dict],
+        windows: WindowSettings,
+        plan: Optional[dict] = None,
+        software: str = "impactlab",
+        overwrite: bool = False,
+    ) -> None:
+        h5py = _h5py()
+        self.path = Path(path)
+        if self.path.exists() and not overwrite:
+            raise RecordingError(f"{self.path} exists: choose another --out file or delete it first")
+        try:
+            self._f = h5py.File(self.path, "w")
+        except OSError as exc:
+            raise RecordingError(f"cannot create recording {self.path}: {exc}") from None
+        f = self._f
+        f.attrs["schema"] = SCHEMA
+        f.attrs["schema_version"] = SCHEMA_VERSION
+        f.attrs["created_utc"] = _now_iso()
+        f.attrs["software"] = software
+        g = f.create_group("instrument")
+        g.attrs["json"] = json.dumps(instrument, default=str)
+        for k, v in instrument.items():
+            if isinstance(v, (str, int, float, bool)):
+                g.attrs[k] = v
+        s = f.create_group("setup")
+        s.attrs["json"] = json.dumps(setup, default=str)
+        s.create_dataset("channels", data=_channel_table(channels))
+        f.create_group("windows").attrs["json"] = json.dumps(windows.to_dict())
+        f.attrs["plan_json"] = json.dumps(plan or {}, default=str)
+        f.create_group("hits")
+        f.create_group("frf")
+        ev = f.create_group("events")
+        sdt = h5py.string_dtype()
+        ev.create_dataset("time_unix_s", shape=(0,), maxshape=(None,), dtype="f8", chunks=(256,))
+        ev.create_dataset("level", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
+        ev.create_dataset("message", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
+        self._n_hits = 0
+        f.flush()
+
+    # -- writing -------------------------------------------------------------------------------
+    @property
+    def n_hits(self) -> int:
+        return self._n_hits
+
+    def log(self, level: str, message: str) -> None:
+        """Append an event (time, level, message) and flush."""
+        ev = self._f["events"]
+        n = ev["time_unix_s"].shape[0]
+        for name, value in (("time_unix_s", time.time()), ("level", str(level)), ("message", str(message))):
+            ev[name].resize((n + 1,))
+            ev[name][n] = value
+        self._f.flush()
+
+    def write_hit(
+        self,
+        *,
+        counts: np.ndarray,
+        eu_per_count: Sequence[float],
+        volts_per_count: Sequence[float],
+        trigger_index: int,
+        sample_rate_hz: float,
+        sequence: int,
+        timestamp: float,
+        measurement: int,
+        point: str,
+        reference: str,
+        outputs: Sequence[str],
+        force_channel: int,
+        response_channels: Sequence[int],
+        overload: Sequence[bool],
+        accepted: bool,
+        reasons: Sequence[str] = (),
+        check: Optional[dict] = None,
+    ) -> int:
+        """Write one hit and flush; returns its index. ``counts`` int16 (n_ch, n)."""
+        c = np.asarray(counts)
+        if c.dtype != np.int16 or c.ndim != 2:
+            raise RecordingError(f"hit counts must be int16 of shape (n_channels, n); got {c.dtype} {c.shape}")
+        idx = self._n_hits
+        g = self._f["hits"].create_group(f"{idx:06d}")
+        g.create_dataset("counts", data=c)
+        a = g.attrs
+        a["eu_per_count"] = np.asarray(eu_per_count, dtype=float)
+        a["volts_per_count"] = np.asarray(volts_per_count, dtype=float)
+        a["trigger_index"] = int(trigger_index)
+        a["sample_rate_hz"] = float(sample_rate_hz)
+        a["sequence"] = int(sequence)
+        a["timestamp"] = float(timestamp)
+        a["measurement"] = int(measurement)
+        a["point"] = str(point)
+        a["reference"] = str(reference)
+        a["outputs"] = json.dumps([str(o) for o in outputs])
+        a["force_channel"] = int(force_channel)
+        a["response_channels"] = np.asarray(list(response_channels), dtype=np.int64)
+        a["overload"] = np.asarray(list(overload), dtype=bool)
+        a["accepted"] = bool(accepted)
+        a["reasons"] = json.dumps(list(reasons))
+        a["check_json"] = json.dumps(check or {}, default=float)
+        a["crc32"] = counts_crc32(c)
+        a["complete"] = True  # written last: a hit cut short by a crash lacks it
+        self._n_hits += 1
+        self._f.flush()
+        return idx
+
+    def write_frf(
+        self,
+        measurement: int,
+        *,
+        point: str,
+        freq_hz: np.ndarray,
+        H1: np.ndarray,
+        H2: np.ndarray,
+        coherence: np.ndarray,
+        Gff: np.ndarray,
+        Gxx: np.ndarray,
+        Gfx: np.ndarray,
+        outputs: Sequence[str],
+        reference: str,
+        n_averages: int,
+        hits: Sequence[int],
+        quantity: str,
+        unit: str,
+        windows: WindowSettings,
+        exp_window_tau_s: Optional[float],
+    ) -> None:
+        """Write (or replace) the FRF results of one measurement point and flush.
+
+        H1, H2, coherence, Gxx, Gfx: (n_out, n_freq); Gff: (n_freq,).
+        """
+        grp = self._f["frf"]
+        name = f"m{int(measurement):03d}"
+        if name in grp:
+            del grp[name]
+        g = grp.create_group(name)
+        for key, val in (("freq_hz", freq_hz), ("H1", H1), ("H2", H2), ("coherence", coherence),
+                         ("Gff", Gff), ("Gxx", Gxx), ("Gfx", Gfx)):
+            g.create_dataset(key, data=np.asarray(val))
+        a = g.attrs
+        a["measurement"] = int(measurement)
+        a["point"] = str(point)
+        a["outputs"] = json.dumps([str(o) for o in outputs])
+        a["reference"] = str(reference)
+        a["n_averages"] = int(n_averages)
+        a["hits"] = np.asarray(list(hits), dtype=np.int64)
+        a["quantity"] = str(quantity)
+        a["unit"] = str(unit)
+        a["windows_json"] = json.dumps(windows.to_dict())
+        a["exp_window_tau_s"] = float("nan") if exp_window_tau_s is None else float(exp_window_tau_s)
+        self._f.flush()
+
+    def set_attr(self, key: str, value: Any) -> None:
+        """Set a root attribute (str, number or bool) and flush."""
+        self._f.attrs[str(key)] = value
+        self._f.flush()
+
+    def close(self) -> None:
+        if self._f.id.valid:
+            self._f.attrs["closed_utc"] = _now_iso()
+            self._f.close()
+
+    def __enter__(self) -> "RecordingWriter":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+@dataclass
+class RecordedHit:
+    """One hit as stored. ``data`` (EU) = ``counts * eu_per_count`` per channel."""
+
+    index: int
+    counts: np.ndarray
+    eu_per_count: np.ndarray
+    volts_per_count: np.ndarray
+    trigger_index: int
+    sample_rate_hz: float
+    sequence: int
+    timestamp: float
+    measurement: int
+    point: str
+    reference: str
+    outputs: list
+    force_channel: int
+    response_channels: list
+    overload: np.ndarray
+    accepted: bool
+    reasons: list
+    check: dict = field(default_factory=dict)
+    crc_ok: bool = True
+
+    @property
+    def data(self) -> np.ndarray:
+        return scale_counts(self.counts, self.eu_per_count)
+
+    @property
+    def volts(self) -> np.ndarray:
+        return scale_counts(self.counts, self.volts_per_count)
+
+
+class Recording:
+    """Read-only view of a recording; validates the schema on open. Use as a context manager."""
+
+    def __init__(self, path: "str | Path") -> None:
+        h5py = _h5py()
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise RecordingError(f"recording {self.path} not found: check the path")
+        try:
+            is_h5 = h5py.is_hdf5(self.path)
+        except OSError as exc:
+            raise RecordingError(f"cannot read {self.path}: {exc}") from None
+        if not is_h5:
+            raise RecordingError(
+                f"{self.path} is not an HDF5 file: give an impactlab recording (.h5) written by "
+                "'python -m acquisition capture' or 'python -m acquisition import'"
+            )
+        try:
+            self._f = h5py.File(self.path, "r")
+        except OSError as exc:
+            raise RecordingError(
+                f"{self.path} is damaged or truncated and cannot be opened ({exc}); "
+                "use a backup or re-run the test"
+            ) from None
+        try:
+            self._validate()
+        except RecordingError:
+            self._f.close()
+            raise
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            self._f.close()
+            raise RecordingError(f"{self.path} is damaged ({type(exc).__name__}: {exc}); use a backup or re-run the test") from None
+
+    def _validate(self) -> None:
+        a = self._f.attrs
+        schema = a.get("schema")
+        if schema is None or _as_str(schema) != SCHEMA:
+            raise RecordingError(
+                f"{self.path} is an HDF5 file but not an impactlab recording (schema attribute "
+                f"{_as_str(schema)!r}, expected {SCHEMA!r})"
+            )
+        ver = int(a.get("schema_version", -1))
+        if ver != SCHEMA_VERSION:
+            raise RecordingError(
+                f"{self.path} uses recording schema version {ver}; this impactlab reads version {SCHEMA_VERSION}: "
+                "use the impactlab release that wrote it or convert the file"
+            )
+        for g in ("instrument", "setup", "windows", "hits", "frf", "events"):
+            if g not in self._f:
+                raise RecordingError(f"{self.path} is damaged: group '/{g}' is missing")
+        self.instrument = json.loads(_as_str(self._f["instrument"].attrs["json"]))
+        self.setup = json.loads(_as_str(self._f["setup"].attrs["json"]))
+        table = self._f["setup/channels"][()]
+        self.channels = [
+            {k: (_as_str(row[k]) if isinstance(row[k], (bytes, str)) else row[k].item()) for k in table.dtype.names}
+            for row in table
+        ]
+        self.windows = WindowSettings.from_dict(json.loads(_as_str(self._f["windows"].attrs["json"])))
+        self.plan = json.loads(_as_str(a.get("plan_json", "{}")))
+        self.created_utc = _as_str(a.get("created_utc", ""))
+        self.closed_cleanly = "closed_utc" in a
+
+    # -- hits ----------------------------------------------------------------------------------
+    def hit_names(self) -> list[str]:
+        return sorted(self._f["hits"].keys())
+
+    @property
+    def n_hits(self) -> int:
+        return len(self.hit_names())
+
+    def hit(self, index: int) -> RecordedHit:
+        """One hit by index; raises RecordingError when it is incomplete or its checksum fails."""
+        name = f"{int(index):06d}"
+        if name not in self._f["hits"]:
+            raise RecordingError(f"{self.path} has no hit {index} (it holds {self.n_hits})")
+        try:
+            g = self._f["hits"][name]
+            a = g.attrs
+            if not a.get("complete", False):
+                raise RecordingError(f"hit {index} in {self.path} is incomplete (the writer stopped mid-hit)")
+            counts = g["counts"][()]
+            crc_ok = counts_crc32(counts) == int(a["crc32"])
+            if not crc_ok:
+                raise RecordingError(
+                    f"hit {index} in {self.path} fails its CRC-32 check: the raw data are damaged"
+                )
+            return RecordedHit(
+                index=int(index), counts=counts, eu_per_count=np.asarray(a["eu_per_count"], float),
+                volts_per_count=np.asarray(a["volts_per_count"], float), trigger_index=int(a["trigger_index"]),
+                sample_rate_hz=float(a["sample_rate_hz"]), sequence=int(a["sequence"]),
+                timestamp=float(a["timestamp"]), measurement=int(a["measurement"]), point=_as_str(a["point"]),
+                reference=_as_str(a["reference"]), outputs=json.loads(_as_str(a["outputs"])),
+                force_channel=int(a["force_channel"]),
+                response_channels=[int(i) for i in np.atleast_1d(a["response_channels"])],
+                overload=np.asarray(a["overload"], bool), accepted=bool(a["accepted"]),
+                reasons=json.loads(_as_str(a["reasons"])), check=json.loads(_as_str(a.get("check_json", "{}"))),
+                crc_ok=crc_ok,
+            )
+        except RecordingError:
+            raise
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise RecordingError(f"hit {index} in {self.path} is damaged ({type(exc).__name__}: {exc})") from None
+
+    def hits(self, accepted_only: bool = False, skip_damaged: bool = False) -> Iterator[RecordedHit]:
+        """All hits in order (``accepted_only``: only accepted ones; ``skip_damaged``: drop incomplete ones)."""
+        for name in self.hit_names():
+            try:
+                h = self.hit(int(name))
+            except RecordingError:
+                if skip_damaged:
+                    log.warning("skipping damaged hit %s in %s", name, self.path)
+                    continue
+                raise
+            if accepted_only and not h.accepted:
+                continue
+            yield h
+
+    # -- events and FRFs -----------------------------------------------------------------------
+    def events(self) -> list[tuple[float, str, str]]:
+        ev = self._f["events"]
+        t = ev["time_unix_s"][()]
+        lv = [_as_str(x) for x in ev["level"][()]]
+        ms = [_as_str(x) for x in ev["message"][()]]
+        n = min(len(t), len(lv), len(ms))
+        return [(float(t[i]), lv[i], ms[i]) for i in range(n)]
+
+    def measurement_names(self) -> list[str]:
+        return sorted(self._f["frf"].keys())
+
+    def frf_group(self, name: str) -> dict:
+        """All stored arrays and attributes of one measurement's FRF results."""
+        try:
+            g = self._f["frf"][name]
+            out: dict[str, Any] = {k: g[k][()] for k in g.keys()}
+            for k, v in g.attrs.items():
+                out[k] = _as_str(v) if isinstance(v, (bytes, str)) else v
+            out["outputs"] = json.loads(out["outputs"])
+            out["windows"] = WindowSettings.from_dict(json.loads(out.pop("windows_json")))
+            tau = float(out["exp_window_tau_s"])
+            out["exp_window_tau_s"] = None if np.isnan(tau) else tau
+            return out
+        except KeyError as exc:
+            raise RecordingError(f"FRF results {name!r} in {self.path} are missing or damaged ({exc})") from None
+
+    def frfsets(self, estimator: str = "H1") -> list[FRFSet]:
+        """One FRF set per measurement point (one reference each)."""
+        est = estimator.upper()
+        if est not in ("H1", "H2"):
+            raise ValueError(f"estimator {estimator!r} is not H1 or H2")
+        sets = []
+        for name in self.measurement_names():
+            g = self.frf_group(name)
+            sets.append(FRFSet(
+                freq_hz=g["freq_hz"], H=g[est][:, None, :], quantity=g["quantity"], outputs=tuple(g["outputs"]),
+                references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
+                exp_window_tau_s=g["exp_window_tau_s"],
+                meta={"estimator": est, "n_averages": int(g["n_averages"]), "source": str(self.path),
+                      "measurement": name, "point": g["point"]},
+            ))
+        return sets
+
+    def close(self) -> None:
+        if self._f.id.valid:
+            self._f.close()
+
+    def __enter__(self) -> "Recording":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def _as_str(v: Any) -> str:
+    if isinstance(v, bytes):
+        return v.decode("utf-8", "replace")
+    return str(v)
+
+
+def open_recording(path: "str | Path") -> Recording:
+    """Open and validate a recording (raises :class:`RecordingError` with a clear message)."""
+    return Recording(path)
+
+
+def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
+    """Combine single-reference FRF sets into one ``H[n_out, n_ref, n_freq]``.
+
+    Outputs and references are the union in order of first appearance (roving hammer: the
+    references grow; roving accelerometer: the outputs grow). Combinations never measured are NaN.
+    Sets that repeat an (output, reference) pair: the later one wins.
+    """
+    if not sets:
+        raise RecordingError("the recording holds no FRF results: capture or replay at least one measurement point")
+    f0 = sets[0].freq_hz
+    for s in sets[1:]:
+        if s.freq_hz.shape != f0.shape or not np.allclose(s.freq_hz, f0):
+            raise RecordingError("measurement points have different frequency axes and cannot be combined")
+        if s.quantity != sets[0].quantity:
+            raise RecordingError(f"measurement points mix quantities {sets[0].quantity} and {s.quantity}")
+    outs: list[str] = []
+    refs: list[str] = []
+    for s in sets:
+        outs += [o for o in s.outputs if o not in outs]
+        refs += [r for r in s.references if r not in refs]
+    H = np.full((len(outs), len(refs), f0.size), np.nan + 0j)
+    C = np.full((len(outs), len(refs), f0.size), np.nan)
+    for s in sets:
+        for i, o in enumerate(s.outputs):
+            for j, r in enumerate(s.references):
+                H[outs.index(o), refs.index(r)] = s.H[i, j]
+                if s.coherence is not None:
+                    C[outs.index(o), refs.index(r)] = s.coherence[i, j]
+    taus = {s.exp_window_tau_s for s in sets}
+    tau = sets[0].exp_window_tau_s if len(taus) == 1 else None
+    meta = dict(sets[0].meta)
+    meta.pop("measurement", None)
+    meta.pop("point", None)
+    meta["n_averages"] = [s.meta.get("n_averages") for s in sets]
+    if len(taus) > 1:
+        meta["exp_window_tau_s_per_measurement"] = [s.exp_window_tau_s for s in sets]
+    return FRFSet(freq_hz=f0, H=H, quantity=sets[0].quantity, outputs=tuple(outs), references=tuple(refs),
+                  unit=sets[0].unit, coherence=C, exp_window_tau_s=tau, meta=meta)
+
+
+def load_frfset(path: "str | Path", estimator: str = "H1") -> FRFSet:
+    """All FRF results of a recording as one :class:`FRFSet` (see :func:`merge_frfsets`)."""
+    with Recording(path) as rec:
+        return merge_frfsets(rec.frfsets(estimator))

@@ -1,0 +1,283 @@
+"""The operator's vocabulary for an impact test set-up, validated against the analyser's capabilities.
+
+A set-up is plain data (dataclasses) that round-trips through a plain dict (JSON/TOML, the
+``--setup FILE`` option and the recording's stored set-up). :func:`validate_setup` checks every
+value against :class:`Capabilities` *before* anything is written to the analyser and raises
+:class:`acquisition.errors.SetupError` naming the value and the allowed ones.
+
+Units: sample rate Hz; ranges volts peak at the analyser input; sensitivities mV/N (force) or
+mV/g (acceleration, g = 9.80665 m/s^2); trigger level in the trigger channel's engineering unit
+(N for force, m/s^2 for acceleration); pre-trigger in samples. Engineering units of the data are
+SI: N and m/s^2. Bandwidth = fs / 2.56.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from acquisition import protocol
+from acquisition.errors import SetupError
+from analysis.points import PointLabelError, parse_point
+
+__all__ = [
+    "G", "ChannelSetup", "TriggerSetup", "AcquisitionSetup", "Capabilities", "validate_setup",
+    "default_setup", "setup_to_wire", "setup_from_wire", "load_setup",
+]
+
+#: standard gravity, m/s^2 (mV/g -> mV/(m/s^2))
+G = 9.80665
+_UNIT_OF = {"force": "mV/N", "acceleration": "mV/g"}
+_EU_OF = {"force": "N", "acceleration": "m/s^2"}
+
+
+@dataclass(frozen=True)
+class ChannelSetup:
+    """One analyser input as the operator sets it up.
+
+    ``sensitivity`` in ``sensitivity_unit`` (mV/N for force, mV/g for acceleration);
+    ``range_v`` volts peak; ``point`` a label ``component:node:direction``.
+    """
+
+    name: str
+    point: str
+    quantity: str = "acceleration"
+    sensitivity: float = 100.0
+    sensitivity_unit: str = "mV/g"
+    coupling: str = "AC"
+    iepe: bool = True
+    range_v: float = 5.0
+
+    @property
+    def volts_per_unit(self) -> float:
+        """Sensitivity in volts per SI engineering unit: V/N, or V/(m/s^2) (mV/g * 1e-3 / 9.80665)."""
+        v = self.sensitivity * 1e-3
+        return v / G if self.sensitivity_unit == "mV/g" else v
+
+    @property
+    def unit(self) -> str:
+        """The SI engineering unit of this channel's data: ``"N"`` or ``"m/s^2"``."""
+        return _EU_OF.get(self.quantity, "?")
+
+
+@dataclass(frozen=True)
+class TriggerSetup:
+    """Trigger on channel index ``channel`` crossing ``level`` (engineering units) with ``slope``;
+    the block keeps ``pretrigger_samples`` samples before the crossing."""
+
+    channel: int = 0
+    level: float = 10.0
+    slope: str = "rising"
+    pretrigger_samples: int = 128
+
+
+@dataclass(frozen=True)
+class AcquisitionSetup:
+    """Sample rate (Hz), block size (samples per channel), channels and trigger."""
+
+    sample_rate_hz: float
+    block_size: int
+    channels: tuple[ChannelSetup, ...]
+    trigger: TriggerSetup = field(default_factory=TriggerSetup)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "channels", tuple(self.channels))
+
+    @property
+    def bandwidth_hz(self) -> float:
+        """Alias-free bandwidth fs / 2.56, Hz."""
+        return self.sample_rate_hz / 2.56
+
+    @property
+    def duration_s(self) -> float:
+        """Block length in seconds."""
+        return self.block_size / self.sample_rate_hz
+
+    def to_dict(self) -> dict[str, Any]:
+        """A plain dict (JSON/TOML-able)."""
+        return {
+            "sample_rate_hz": self.sample_rate_hz,
+            "block_size": self.block_size,
+            "channels": [asdict(ch) for ch in self.channels],
+            "trigger": asdict(self.trigger),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "AcquisitionSetup":
+        """Inverse of :meth:`to_dict`; unknown or missing keys raise SetupError naming them."""
+        if not isinstance(data, Mapping):
+            raise SetupError(f"a set-up must be a mapping (JSON object / TOML table), got {type(data).__name__}")
+        _check_keys("set-up", data, {"sample_rate_hz", "block_size", "channels"}, {"trigger"})
+        chans = data["channels"]
+        if not isinstance(chans, (list, tuple)) or not chans:
+            raise SetupError("set-up 'channels' must be a non-empty list of channel tables")
+        channels = []
+        for i, ch in enumerate(chans):
+            if not isinstance(ch, Mapping):
+                raise SetupError(f"set-up channel {i} must be a table, got {type(ch).__name__}")
+            _check_keys(f"channel {i}", ch, {"name", "point"}, set(ChannelSetup.__dataclass_fields__) - {"name", "point"})
+            channels.append(ChannelSetup(**ch))
+        trig = data.get("trigger", {})
+        if not isinstance(trig, Mapping):
+            raise SetupError("set-up 'trigger' must be a table")
+        _check_keys("trigger", trig, set(), set(TriggerSetup.__dataclass_fields__))
+        try:
+            return cls(float(data["sample_rate_hz"]), int(data["block_size"]), tuple(channels), TriggerSetup(**trig))
+        except (TypeError, ValueError) as exc:
+            raise SetupError(f"set-up has a value of the wrong type: {exc}") from None
+
+
+def _check_keys(what: str, data: Mapping[str, Any], required: set[str], optional: set[str]) -> None:
+    missing = required - set(data)
+    unknown = set(data) - required - optional
+    if missing:
+        raise SetupError(f"{what} is missing {sorted(missing)}")
+    if unknown:
+        raise SetupError(f"{what} has unknown key(s) {sorted(unknown)}; allowed: {sorted(required | optional)}")
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """The analyser's capabilities in operator units (volts, Hz)."""
+
+    n_inputs: int
+    sample_rates_hz: tuple[float, ...]
+    ranges_v: tuple[float, ...]
+    block_sizes: tuple[int, ...]
+    couplings: tuple[str, ...] = ("AC", "DC")
+    iepe: bool = True
+    trigger_any_channel: bool = True
+    adc_bits: int = 16
+    max_pretrigger: int = 32768
+    max_transfer: int = protocol.MAX_TRANSFER
+
+    @classmethod
+    def from_wire(cls, caps: protocol.CapabilitiesData) -> "Capabilities":
+        couplings = tuple(c for c, ok in (("AC", caps.ac), ("DC", caps.dc)) if ok)
+        return cls(caps.n_inputs, tuple(float(r) for r in caps.sample_rates_hz),
+                   tuple(m / 1000.0 for m in caps.ranges_mv), tuple(caps.block_sizes), couplings, caps.iepe,
+                   caps.trigger_any_channel, caps.adc_bits, caps.max_pretrigger, caps.max_transfer)
+
+    def bandwidths_hz(self) -> tuple[float, ...]:
+        """fs / 2.56 for each allowed rate."""
+        return tuple(fs / 2.56 for fs in self.sample_rates_hz)
+
+
+def _fmt(values: Any) -> str:
+    return ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in values)
+
+
+def validate_setup(setup: AcquisitionSetup, caps: Capabilities) -> None:
+    """Raise SetupError for the first value outside ``caps`` (the message lists the allowed values)."""
+    if not any(math.isclose(setup.sample_rate_hz, r, rel_tol=1e-9) for r in caps.sample_rates_hz):
+        raise SetupError(f"sample rate {setup.sample_rate_hz:g} Hz is not offered; choose one of "
+                         f"{_fmt(caps.sample_rates_hz)} Hz")
+    if setup.block_size not in caps.block_sizes:
+        raise SetupError(f"block size {setup.block_size} is not offered; choose one of {_fmt(caps.block_sizes)}")
+    n = len(setup.channels)
+    if not 1 <= n <= caps.n_inputs:
+        raise SetupError(f"{n} channels set up; the analyser has 1..{caps.n_inputs} inputs")
+    names = [ch.name for ch in setup.channels]
+    if len(set(names)) != n:
+        raise SetupError(f"channel names must be unique, got {names}")
+    for i, ch in enumerate(setup.channels):
+        where = f"channel {i} ({ch.name!r})"
+        try:
+            parse_point(ch.point)
+        except PointLabelError as exc:
+            raise SetupError(f"{where}: {exc}") from None
+        if len(ch.point.encode("ascii", errors="replace")) > 24:
+            raise SetupError(f"{where}: point label {ch.point!r} is longer than 24 characters")
+        if ch.quantity not in _UNIT_OF:
+            raise SetupError(f"{where}: quantity {ch.quantity!r} must be 'force' or 'acceleration'")
+        if ch.sensitivity_unit != _UNIT_OF[ch.quantity]:
+            raise SetupError(f"{where}: a {ch.quantity} sensor's sensitivity is given in "
+                             f"{_UNIT_OF[ch.quantity]}, not {ch.sensitivity_unit!r}")
+        if not (math.isfinite(ch.sensitivity) and ch.sensitivity > 0):
+            raise SetupError(f"{where}: sensitivity {ch.sensitivity} {ch.sensitivity_unit} must be positive")
+        if ch.coupling not in caps.couplings:
+            raise SetupError(f"{where}: coupling {ch.coupling!r} is not offered; choose one of {_fmt(caps.couplings)}")
+        if ch.iepe and not caps.iepe:
+            raise SetupError(f"{where}: this analyser has no IEPE supply; set iepe = false")
+        if ch.iepe and ch.coupling != "AC":
+            raise SetupError(f"{where}: IEPE sensors need AC coupling (the IEPE bias is DC); set coupling = 'AC'")
+        if not any(math.isclose(ch.range_v, r, rel_tol=1e-9) for r in caps.ranges_v):
+            raise SetupError(f"{where}: input range {ch.range_v:g} V is not offered; choose one of "
+                             f"{_fmt(caps.ranges_v)} V")
+    trig = setup.trigger
+    if not 0 <= trig.channel < n:
+        raise SetupError(f"trigger channel {trig.channel} does not exist; choose 0..{n - 1}")
+    if trig.slope not in protocol.SLOPES:
+        raise SetupError(f"trigger slope {trig.slope!r} must be one of {_fmt(protocol.SLOPES)}")
+    limit = min(caps.max_pretrigger, setup.block_size - 1)
+    if not 0 <= trig.pretrigger_samples <= limit:
+        raise SetupError(f"pre-trigger of {trig.pretrigger_samples} samples is outside 0..{limit}")
+    ch = setup.channels[trig.channel]
+    level_v = trig.level * ch.volts_per_unit
+    if not math.isfinite(level_v) or abs(level_v) >= ch.range_v:
+        raise SetupError(f"trigger level {trig.level:g} {ch.unit} is {level_v:g} V at the input, outside the "
+                         f"{ch.range_v:g} V range of channel {trig.channel}; lower the level or raise the range")
+
+
+def setup_to_wire(setup: AcquisitionSetup) -> protocol.SetupData:
+    """The wire set-up (sensitivity in V per SI unit, range in mV, trigger level in volts)."""
+    trig = setup.trigger
+    level_v = trig.level * setup.channels[trig.channel].volts_per_unit
+    chans = tuple(protocol.ChannelRecord(i, ch.coupling, ch.iepe, ch.quantity, int(round(ch.range_v * 1000)),
+                                         ch.volts_per_unit, ch.point) for i, ch in enumerate(setup.channels))
+    return protocol.SetupData(int(round(setup.sample_rate_hz)), setup.block_size, trig.pretrigger_samples,
+                              trig.channel, trig.slope, level_v, chans)
+
+
+def _decimal(x: float) -> float:
+    """Undo float round-off of a unit conversion (operator values have far fewer than 12 digits)."""
+    return float(f"{x:.12g}")
+
+
+def setup_from_wire(data: protocol.SetupData, names: "list[str] | None" = None) -> AcquisitionSetup:
+    """Rebuild an operator set-up from the wire (names default to ``ch0``...; sensitivities back in mV/N, mV/g)."""
+    chans = []
+    for i, rec in enumerate(data.channels):
+        unit = _UNIT_OF[rec.quantity]
+        sens = _decimal(rec.sensitivity * 1e3 * (G if unit == "mV/g" else 1.0))
+        chans.append(ChannelSetup(names[i] if names else f"ch{i}", rec.point, rec.quantity, sens, unit,
+                                  rec.coupling, rec.iepe, rec.range_mv / 1000.0))
+    trig_ch = data.trigger_channel
+    vpu = chans[trig_ch].volts_per_unit if trig_ch < len(chans) else 1.0
+    trig = TriggerSetup(trig_ch, _decimal(data.trigger_level_v / vpu), data.trigger_slope, data.pretrigger)
+    return AcquisitionSetup(float(data.sample_rate_hz), data.block_size, tuple(chans), trig)
+
+
+def default_setup() -> AcquisitionSetup:
+    """The simulated frame's default test plan: hammer at right:6:-X (2.25 mV/N, 1 V range =
+    444 N), accelerometers at left:9:Y, top:4:X, right:4:-Z (100 mV/g, 5 V range = 51 g), all IEPE
+    with AC coupling; 6400 Hz (2500 Hz bandwidth, above the frame's modes of interest), 8192
+    samples (1.28 s, df 0.78 Hz); trigger on the force at 20 N rising with 128 samples pre-trigger.
+
+    The ranges leave generous headroom over the simulated frame's peaks with the default hammer
+    (about 107 N, 0.24 V; accelerations up to about 38 m/s^2, 0.39 V, over the test plan's points),
+    so a hard or double hit does not overload."""
+    hammer = ChannelSetup("force", "right:6:-X", "force", 2.25, "mV/N", "AC", True, 1.0)
+    accels = tuple(ChannelSetup(f"acc{i + 1}", p, "acceleration", 100.0, "mV/g", "AC", True, 5.0)
+                   for i, p in enumerate(("left:9:Y", "top:4:X", "right:4:-Z")))
+    return AcquisitionSetup(6400.0, 8192, (hammer,) + accels, TriggerSetup(0, 20.0, "rising", 128))
+
+
+def load_setup(path: "str | Path") -> AcquisitionSetup:
+    """Read a set-up from a ``.json`` or ``.toml`` file (the layout of :meth:`AcquisitionSetup.to_dict`)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SetupError(f"cannot read set-up file {p}: {exc.strerror}") from None
+    try:
+        if p.suffix.lower() == ".toml":
+            import tomllib
+            data = tomllib.loads(text)
+        else:
+            data = json.loads(text)
+    except ValueError as exc:
+        raise SetupError(f"set-up file {p} is not valid {p.suffix.lstrip('.') or 'JSON'}: {exc}") from None
+    return AcquisitionSetup.from_dict(data)

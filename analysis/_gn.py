@@ -1,0 +1,148 @@
+"""Gauss-Newton iteration (the paper's eq. (7)) on the poles of a :class:`ProjectedProblem`.
+
+Each iteration solves the normal equations ``J^T J d = -J^T r`` (Kaufman's variable-projection
+Jacobian, column-scaled by ``D = sqrt(diag J^T J)``) and takes the full step. A step that
+increases S is not taken: the iteration stops with status ``S_INCREASED`` (the paper: "if
+the sum of square errors increases ... the method is not convergent"), keeping the best
+poles. Steps that push a pole to ``Re >= 0`` or ``Im <= 0`` stop with ``UNSTABLE``; a
+rank-deficient basis (poles collapsed onto each other) stops with ``COLLAPSED``.
+
+Stopping rules (shared with LM, :mod:`analysis._lm`):
+
+* ``FTOL``: ``(S_old - S_new) <= ftol * S_old`` on an accepted step, or the decrease
+  predicted by the Gauss-Newton model, ``-g^T d = g^T (J^T J)^-1 g``, is at most
+  ``max(ftol, 1e-13) * S`` (a stationary point to within round-off; tested before each step);
+* ``XTOL``: ``max_r |d lambda_r| / |lambda_r| <= xtol``;
+* ``ROUNDOFF``: ``S <= (1000 eps)^2 ||y||^2`` (noise-free data fitted to round-off);
+* ``MAX_ITER``: iteration cap reached (the caller warns).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
+
+__all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
+
+
+def roundoff_floor(problem: ProjectedProblem) -> float:
+    """S below which the fit is at round-off level: ``(1000 eps)^2 ||y||^2``."""
+    return (1e3 * np.finfo(float).eps) ** 2 * problem.y_norm2
+
+
+def check_poles(theta: np.ndarray) -> str:
+    """Empty string when every pole is stable with positive damped frequency, else a reason."""
+    lam = theta_to_poles(theta)
+    bad = np.flatnonzero(lam.real >= 0)
+    if bad.size:
+        return f"pole {int(bad[0]) + 1} would become unstable (Re lambda = {lam[bad[0]].real:.4g} rad/s >= 0)"
+    bad = np.flatnonzero(lam.imag <= 0)
+    if bad.size:
+        return f"pole {int(bad[0]) + 1} would reach zero or negative damped frequency"
+    if not np.all(np.isfinite(lam)):
+        return "poles became non-finite"
+    return ""
+
+
+def relative_step(theta: np.ndarray, d: np.ndarray) -> float:
+    """``max_r |d lambda_r| / |lambda_r|``."""
+    lam = theta_to_poles(theta)
+    dl = theta_to_poles(d)
+    return float(np.max(np.abs(dl) / np.abs(lam)))
+
+
+#: predicted relative decreases of S below this are at round-off level (converged whatever ftol)
+PRED_FLOOR = 1e-13
+
+#: relative progress (of S, or of the poles) below which fast evaluations give way to precise ones
+SWITCH_TO_PRECISE = 1e-6
+
+
+def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float) -> NLSOutcome:
+    """Gauss-Newton from ``theta0`` (see the module docstring); never raises on non-convergence.
+
+    Big problems start with fast evaluations and switch to precise ones when the progress
+    falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
+    """
+    theta = np.array(theta0, dtype=float)
+    fast = problem.fast_ok
+    ev = problem.evaluate(theta, fast=fast)
+    nfev = 1
+    history = [ev.S]
+    floor = roundoff_floor(problem)
+    if not ev.rank_ok:
+        return NLSOutcome(theta, ev, history, 0, nfev, Status.COLLAPSED,
+                          f"initial poles give a rank-deficient basis (rcond {ev.rcond:.2g})")
+    if ev.S <= floor:
+        return NLSOutcome(theta, ev, history, 0, nfev, Status.ROUNDOFF, "initial fit already at round-off level")
+    verdict = None
+    for it in range(1, max_iter + 1):
+        if verdict is not None and fast:
+            # re-check the verdict with precise evaluations
+            fast = False
+            verdict = None
+            ev = problem.evaluate(theta)
+            nfev += 1
+            if not ev.rank_ok:
+                return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
+                                  f"GN stopped: poles collapsed (basis rcond {ev.rcond:.2g})")
+        elif verdict is not None:
+            return NLSOutcome(theta, ev, history, it - 1, nfev, *verdict)
+        JtJ, g = problem.normal_equations(ev)
+        D = np.sqrt(np.diag(JtJ))
+        D[D == 0] = 1.0
+        d, _ = solve_scaled(JtJ, g, D)
+        pred = -float(g @ d)
+        if 0.0 <= pred <= max(ftol, PRED_FLOOR) * ev.S:
+            if fast:
+                # confirmed with a precise evaluation at the loop top
+                verdict = (Status.FTOL, f"converged: predicted decrease of S {pred / ev.S:.2g} S <= ftol")
+                history.append(ev.S)
+                continue
+            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL,
+                              f"converged: predicted decrease of S {pred / ev.S:.2g} S <= ftol")
+        step = relative_step(theta, d)
+        trial = theta + d
+        reason = check_poles(trial)
+        if reason:
+            history.append(ev.S)
+            verdict = (Status.UNSTABLE, "GN stopped: " + reason)
+            continue
+        new = problem.evaluate(trial, fast=fast)
+        nfev += 1
+        if not new.rank_ok:
+            history.append(ev.S)
+            verdict = (Status.COLLAPSED, f"GN stopped: poles collapsed (basis rcond {new.rcond:.2g})")
+            continue
+        if new.S > ev.S:
+            history.append(ev.S)
+            if step <= xtol:
+                verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol (S at its floor)")
+            else:
+                verdict = (Status.S_INCREASED,
+                           f"GN step increased S from {ev.S:.6g} to {new.S:.6g} at iteration {it}; the method is "
+                           "not converging from these initial poles (try method='lm' or better poles)")
+            continue
+        rel = (ev.S - new.S) / ev.S if ev.S > 0 else 0.0
+        theta, ev = trial, new
+        history.append(ev.S)
+        if ev.S <= floor:
+            verdict = (Status.ROUNDOFF, "converged: S at round-off level")
+        elif step <= xtol:
+            verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol")
+        elif rel <= ftol:
+            verdict = (Status.FTOL, f"converged: relative change of S {rel:.2g} <= ftol")
+        elif fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
+            fast = False
+            ev = problem.evaluate(theta)
+            nfev += 1
+    if verdict is not None and not fast:
+        return NLSOutcome(theta, ev, history, max_iter, nfev, *verdict)
+    if verdict is not None:
+        # verdict reached on the last iteration with fast evaluations: confirm S precisely
+        ev = problem.evaluate(theta)
+        nfev += 1
+        if ev.rank_ok:
+            return NLSOutcome(theta, ev, history, max_iter, nfev, *verdict)
+    return NLSOutcome(theta, ev, history, max_iter, nfev, Status.MAX_ITER,
+                      f"GN reached max_iter={max_iter} without meeting ftol/xtol")

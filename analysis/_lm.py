@@ -1,0 +1,158 @@
+"""Levenberg-Marquardt iteration (the paper's eq. (9)) on the poles of a :class:`ProjectedProblem`.
+
+Step: ``(J^T J + mu D^2) d = -J^T r`` with Marquardt/More scaling ``D = sqrt(diag J^T J)``
+(kept as the running maximum over iterations), i.e. in the scaled variables ``x = D d``
+``(M + mu I) x = -D^-1 J^T r`` where ``diag M = 1``: ``mu`` is *relative to the diagonal of
+J^T J* and the floor/ceiling below are relative to it too.
+
+mu update (Nielsen 1999, as in Madsen, Nielsen & Tingleff, "Methods for non-linear least
+squares problems", 2004):
+
+* gain ratio ``rho = (S - S_new) / (L(0) - L(d))`` with the linear model's predicted decrease
+  ``L(0) - L(d) = x^T (mu x - D^-1 J^T r)`` (for ``S = r^T r``);
+* accepted when ``S_new < S`` and ``rho > 0``: ``mu <- mu * max(1/3, 1 - (2 rho - 1)^3)``,
+  ``nu <- 2``;
+* rejected otherwise (a step that increases S is never taken): ``mu <- mu * nu``,
+  ``nu <- 2 nu``. Steps that would make a pole unstable (``Re >= 0``), give it a non-positive
+  damped frequency, or make the basis rank deficient (poles collapsing) are rejected the
+  same way.
+
+Safeguards: ``mu`` never falls below ``MU_MIN = 1e-12`` (no pure GN on a singular M); when
+``mu`` exceeds ``MU_MAX = 1e10`` no decrease can be found and the iteration stops with
+status ``NO_PROGRESS`` (or ``UNSTABLE``/``COLLAPSED`` when that was why steps failed).
+Default initial ``mu0 = 1e-3``. Each attempted step counts as an iteration; the history holds
+S after each. Stopping rules as in :mod:`analysis._gn` (``ftol``/``xtol`` tested on accepted
+steps; a rejected step below ``xtol`` with ``mu <= 1`` also counts as converged; at every new
+point the Gauss-Newton predicted decrease ``g^T (J^T J)^-1 g <= max(ftol, 1e-13) S`` counts as
+converged with status ``FTOL``).
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from ._gn import PRED_FLOOR, SWITCH_TO_PRECISE, check_poles, relative_step, roundoff_floor
+from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
+
+__all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
+
+MU_MIN = 1e-12
+MU_MAX = 1e10
+MU0_DEFAULT = 1e-3
+
+
+def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
+           mu0: Optional[float] = None) -> NLSOutcome:
+    """Levenberg-Marquardt from ``theta0`` (see the module docstring); never raises on non-convergence.
+
+    Big problems start with fast evaluations and switch to precise ones when the progress
+    falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
+    """
+    theta = np.array(theta0, dtype=float)
+    fast = problem.fast_ok
+    ev = problem.evaluate(theta, fast=fast)
+    nfev = 1
+    history = [ev.S]
+    floor = roundoff_floor(problem)
+    if not ev.rank_ok:
+        return NLSOutcome(theta, ev, history, 0, nfev, Status.COLLAPSED,
+                          f"initial poles give a rank-deficient basis (rcond {ev.rcond:.2g})")
+    if ev.S <= floor:
+        return NLSOutcome(theta, ev, history, 0, nfev, Status.ROUNDOFF, "initial fit already at round-off level")
+    mu = MU0_DEFAULT if mu0 is None else float(mu0)
+    mu = min(max(mu, MU_MIN), MU_MAX)
+    nu = 2.0
+    JtJ, g = problem.normal_equations(ev)
+    D = np.sqrt(np.diag(JtJ))
+    D[D == 0] = 1.0
+    fail_status, fail_reason = Status.NO_PROGRESS, ""
+    verdict = None
+    check_pred = True
+
+    for it in range(1, max_iter + 1):
+        if verdict is not None:
+            if not fast:
+                return NLSOutcome(theta, ev, history, it - 1, nfev, *verdict)
+            # confirm the verdict with precise evaluations
+            fast, verdict = False, None
+            ev = problem.evaluate(theta)
+            nfev += 1
+            JtJ, g = problem.normal_equations(ev)
+            check_pred = True
+            mu = min(mu, 1.0)
+            nu = 2.0
+        if check_pred:
+            # Gauss-Newton predicted decrease at a new point: a stationary point to round-off?
+            check_pred = False
+            d_gn, _ = solve_scaled(JtJ, g, D)
+            pred_gn = -float(g @ d_gn)
+            if 0.0 <= pred_gn <= max(ftol, PRED_FLOOR) * ev.S:
+                msg = f"converged: predicted decrease of S {pred_gn / ev.S:.2g} S <= ftol"
+                if not fast:
+                    return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL, msg)
+                history.append(ev.S)
+                verdict = (Status.FTOL, msg)
+                continue
+        d, x = solve_scaled(JtJ, g, D, mu)
+        step = relative_step(theta, d)
+        pred = float(x @ (mu * x - g / D))
+        trial = theta + d
+        reason = check_poles(trial)
+        new = None
+        if reason:
+            fail_status = Status.UNSTABLE
+        else:
+            new = problem.evaluate(trial, fast=fast)
+            nfev += 1
+            if not new.rank_ok:
+                reason = f"poles would collapse (basis rcond {new.rcond:.2g})"
+                fail_status = Status.COLLAPSED
+        if new is not None and new.rank_ok and new.S < ev.S and pred > 0:
+            rho = (ev.S - new.S) / pred
+            rel = (ev.S - new.S) / ev.S
+            theta, ev = trial, new
+            history.append(ev.S)
+            mu = max(mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), MU_MIN)
+            nu = 2.0
+            fail_status, fail_reason = Status.NO_PROGRESS, ""
+            if ev.S <= floor:
+                verdict = (Status.ROUNDOFF, "converged: S at round-off level")
+            elif step <= xtol:
+                verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol")
+            elif rel <= ftol:
+                verdict = (Status.FTOL, f"converged: relative change of S {rel:.2g} <= ftol")
+            elif fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
+                fast = False
+                ev = problem.evaluate(theta)
+                nfev += 1
+            if verdict is None:
+                JtJ, g = problem.normal_equations(ev)
+                D = np.maximum(D, np.sqrt(np.diag(JtJ)))
+                check_pred = True
+            continue
+        # rejected step
+        history.append(ev.S)
+        if reason:
+            fail_reason = reason
+        if not reason and step <= xtol and mu <= 1.0:
+            verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol (no further decrease of S)")
+            continue
+        if fast and not reason and step <= SWITCH_TO_PRECISE:
+            verdict = (Status.NO_PROGRESS, "")   # re-evaluated precisely at the top of the loop
+            continue
+        mu *= nu
+        nu *= 2.0
+        if mu > MU_MAX:
+            msg = "LM could not decrease S (mu reached its ceiling)"
+            if fail_reason:
+                verdict = (fail_status, msg + ": " + fail_reason)
+            else:
+                verdict = (Status.NO_PROGRESS, msg)
+    if verdict is not None and fast:
+        ev = problem.evaluate(theta)
+        nfev += 1
+    if verdict is not None and ev.rank_ok and verdict[1]:
+        return NLSOutcome(theta, ev, history, max_iter, nfev, *verdict)
+    return NLSOutcome(theta, ev, history, max_iter, nfev, Status.MAX_ITER,
+                      f"LM reached max_iter={max_iter} without meeting ftol/xtol")

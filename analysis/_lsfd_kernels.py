@@ -1,0 +1,342 @@
+"""Numerical kernels of the nonlinear LSFD fit: model basis, variable projection, normal equations.
+
+Model (the paper's eq. (11)) for FRF ``f`` (one (output, reference) pair) at line ``n``::
+
+    H_f(w_n) = sum_r [ R_fr / (jw_n - lambda_r) + conj(R_fr) / (jw_n - conj(lambda_r)) ]
+               + sum_k T_fk b_k(w_n)
+
+with global poles ``lambda_r = sigma_r + j omega_r`` (rad/s) and per-FRF residues ``R_fr``
+and residual terms ``T_fk`` (basis ``b_k`` from :func:`analysis.modal.residual_basis`).
+
+Real linear parameters
+----------------------
+With ``K_r = 1/(jw - lambda_r)``, ``Kc_r = 1/(jw - conj(lambda_r))`` and ``R = a + j b``::
+
+    R K_r + conj(R) Kc_r = a g1_r + b g2_r,   g1_r = K_r + Kc_r,   g2_r = j (K_r - Kc_r)
+
+and ``T b_k = Re(T) b_k + Im(T) (j b_k)``. The columns ``g1_r, g2_r, b_k, j b_k`` form the
+complex basis ``Phi`` (n_freq x P, ``P = 2 m + 2 n_res``) with *real* coefficients; stacking
+real and imaginary parts (rows ``[Re; Im]``) gives the real problem ``A c_f ~ y_f`` with
+``A`` (2 n_freq x P) shared by all FRFs.
+
+Variable projection
+-------------------
+For fixed poles the coefficients are the least-squares solution ``c_f = A^+ y_f`` (one
+QR of ``A`` serves every FRF as a right-hand side) and the residual is ``r_f = P y_f`` with
+``P = I - Q Q^T`` (``A = Q R``). The nonlinear parameters are
+``theta = (sigma_1, omega_1, ..., sigma_m, omega_m)`` (rad/s). Kaufman's Jacobian of
+``r_f`` is ``J_f = -P (dA/dtheta) c_f``. The derivatives of the mode-r columns are
+
+    E1_r = K_r^2 + Kc_r^2,  E2_r = j (K_r^2 - Kc_r^2)
+    d(a g1 + b g2)/d sigma_r = a E1_r + b E2_r,   d(a g1 + b g2)/d omega_r = a E2_r - b E1_r
+
+so ``J_f = -P E Gamma_f`` with ``E = [E1_1, E2_1, ..., E1_m, E2_m]`` (stacked real,
+2 n_freq x 2 m) shared by all FRFs and ``Gamma_f`` block diagonal with the 2x2 blocks
+``[[a, -b], [b, a]]`` of the residues of FRF f. Hence, with ``G = (P E)^T (P E)``::
+
+    J^T J = sum_f Gamma_f^T G Gamma_f,    J^T r = -sum_f Gamma_f^T E^T r_f
+
+(using ``P r_f = r_f``). The stacked Jacobian (2 n_freq n_frf x 2 m) is never formed:
+the cost per evaluation is a QR of ``A`` plus a few products with the data matrix.
+
+Weights
+-------
+Line weights ``w_n`` (real, > 0) multiply rows of ``A``, ``E`` and the data; FRF weights
+``v_f`` multiply data columns. The fitted objective is ``S = sum_f sum_n |v_f w_n e_fn|^2``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+import scipy.linalg as sla
+
+from .modal import residual_basis
+
+__all__ = [
+    "ProjectedProblem",
+    "Evaluation",
+    "poles_to_theta",
+    "theta_to_poles",
+    "Status",
+    "NLSOutcome",
+    "solve_scaled",
+    "projected_gram",
+    "gram_from_G",
+    "RANK_TOL",
+]
+
+#: relative threshold on the diagonal of the QR factor below which the basis is rank deficient
+RANK_TOL = 1e-11
+
+
+class Status:
+    """Status codes of the nonlinear solvers (``> 0`` is success)."""
+
+    MAX_ITER = 0
+    FTOL = 1
+    XTOL = 2
+    ROUNDOFF = 4
+    S_INCREASED = -1
+    UNSTABLE = -2
+    COLLAPSED = -3
+    NO_PROGRESS = -4
+
+
+@dataclass
+class NLSOutcome:
+    """What a solver returns: final parameters, its evaluation and the bookkeeping."""
+
+    theta: np.ndarray
+    evaluation: "Evaluation"
+    history: list
+    iterations: int
+    nfev: int
+    status: int
+    message: str
+
+
+def poles_to_theta(poles: np.ndarray) -> np.ndarray:
+    """(sigma_1, omega_1, ..., sigma_m, omega_m) in rad/s from poles ``sigma + j omega``."""
+    p = np.asarray(poles, dtype=complex)
+    return np.column_stack([p.real, p.imag]).ravel()
+
+
+def theta_to_poles(theta: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`poles_to_theta`."""
+    t = np.asarray(theta, dtype=float).reshape(-1, 2)
+    return t[:, 0] + 1j * t[:, 1]
+
+
+def _stack(z: np.ndarray) -> np.ndarray:
+    """Rows [Re; Im] of a complex (n, ...) array -> real (2n, ...)."""
+    return np.concatenate([z.real, z.imag], axis=0)
+
+
+@dataclass
+class Evaluation:
+    """The variable-projection state at one set of poles.
+
+    ``precise`` evaluations hold the orthonormal factor and the explicit residuals; fast ones
+    (see :meth:`ProjectedProblem.evaluate`) hold the Gram quantities ``G = (P E)^T (P E)`` and
+    ``E^T r`` instead.
+    """
+
+    theta: np.ndarray
+    S: float
+    coef: Optional[np.ndarray]       # (P, n_frf) real coefficients of the weighted data
+    rank_ok: bool
+    rcond: float
+    precise: bool = True
+    Q: Optional[np.ndarray] = None   # (2N, P) orthonormal basis of the weighted A
+    resid: Optional[np.ndarray] = None  # (2N, n_frf) weighted residuals
+    E: Optional[np.ndarray] = None   # (2N, 2m) weighted derivative columns
+    G: Optional[np.ndarray] = None   # (2m, 2m) (P E)^T (P E)  (fast evaluations)
+    EtR: Optional[np.ndarray] = None  # (2m, n_frf) E^T r       (fast evaluations)
+
+
+class ProjectedProblem:
+    """The separable least-squares problem of one FRF set (see the module docstring).
+
+    Parameters
+    ----------
+    omega : (N,) rad/s.
+    Y : (n_frf, N) complex FRFs (rows are the FRFs).
+    quantity, residual_form : select the residual basis (:func:`analysis.modal.residual_basis`).
+    line_weights : (N,) positive or None.
+    frf_weights : (n_frf,) positive or None.
+    """
+
+    def __init__(
+        self,
+        omega: np.ndarray,
+        Y: np.ndarray,
+        quantity: str,
+        residual_form: str,
+        line_weights: Optional[np.ndarray] = None,
+        frf_weights: Optional[np.ndarray] = None,
+    ) -> None:
+        self.omega = np.asarray(omega, dtype=float)
+        self.jw = 1j * self.omega
+        self.N = self.omega.size
+        self.B = residual_basis(self.omega, quantity, residual_form)   # (n_res, N)
+        self.n_res = self.B.shape[0]
+        self.line_w = None if line_weights is None else np.asarray(line_weights, dtype=float)
+        self.frf_w = None if frf_weights is None else np.asarray(frf_weights, dtype=float)
+        Yw = np.asarray(Y).T                       # (N, n_frf), view
+        ys = np.empty((2 * self.N, Yw.shape[1]))
+        ys[: self.N] = Yw.real
+        ys[self.N:] = Yw.imag
+        if self.line_w is not None:
+            ys *= np.concatenate([self.line_w, self.line_w])[:, None]
+        if self.frf_w is not None:
+            ys *= self.frf_w[None, :]
+        self.Ys = ys                               # (2N, n_frf) weighted stacked data
+        self.n_frf = ys.shape[1]
+        self.y_norm2 = float(np.einsum("ij,ij->", ys, ys))
+        # residual-term columns b_k and j b_k (fixed)
+        if self.n_res:
+            cols = np.empty((self.N, 2 * self.n_res), dtype=complex)
+            cols[:, 0::2] = self.B.T
+            cols[:, 1::2] = 1j * self.B.T
+            self._res_cols = cols
+        else:
+            self._res_cols = np.zeros((self.N, 0), dtype=complex)
+
+    # ------------------------------------------------------------------ basis
+    def n_linear(self, n_modes: int) -> int:
+        """Number of real linear parameters per FRF, ``P = 2 m + 2 n_res``."""
+        return 2 * n_modes + 2 * self.n_res
+
+    def basis(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted stacked basis ``A`` (2N x P) and derivative columns ``E`` (2N x 2m)."""
+        lam = theta_to_poles(theta)
+        m = lam.size
+        K = 1.0 / (self.jw[:, None] - lam[None, :])             # (N, m)
+        Kc = 1.0 / (self.jw[:, None] - np.conj(lam)[None, :])
+        Phi = np.empty((self.N, 2 * m + 2 * self.n_res), dtype=complex)
+        Phi[:, 0:2 * m:2] = K + Kc
+        Phi[:, 1:2 * m:2] = 1j * (K - Kc)
+        Phi[:, 2 * m:] = self._res_cols
+        K2 = K * K
+        Kc2 = Kc * Kc
+        Ec = np.empty((self.N, 2 * m), dtype=complex)
+        Ec[:, 0::2] = K2 + Kc2
+        Ec[:, 1::2] = 1j * (K2 - Kc2)
+        A = _stack(Phi)
+        E = _stack(Ec)
+        if self.line_w is not None:
+            w2 = np.concatenate([self.line_w, self.line_w])[:, None]
+            A *= w2
+            E *= w2
+        return A, E
+
+    # ------------------------------------------------------------- evaluation
+    #: problems with at least this many data values (n_freq x n_frf) may use fast evaluations
+    FAST_MIN_SIZE = 200_000
+    #: fast evaluations fall back to precise ones when S < FAST_MIN_REL_S ||y||^2
+    FAST_MIN_REL_S = 1e-6
+
+    @property
+    def fast_ok(self) -> bool:
+        """Whether fast (Gram-based) evaluations are worth it for this problem size."""
+        return self.N * self.n_frf >= self.FAST_MIN_SIZE
+
+    def evaluate(self, theta: np.ndarray, *, fast: bool = False) -> Evaluation:
+        """Project the data on the basis at ``theta``: S, coefficients and what the normal equations need.
+
+        Precise: Householder QR ``A = Q R`` (columns normalised), ``r = y - Q Q^T y`` explicitly,
+        ``S = ||r||^2``. Fast: only the triangular factor; ``Q^T y = R^-T (A^T y)``,
+        ``S = ||y||^2 - ||Q^T y||^2``, ``E^T r = E^T y - (Q^T E)^T Q^T y`` and
+        ``G = E^T E - (Q^T E)^T (Q^T E)``: one product ``[A E]^T Y`` with the data instead of
+        three, at the price of cancellation (relative error of S about eps cond(A) ||y||^2 / S);
+        it falls back to the precise path when ``S < 1e-6 ||y||^2``. When the basis is rank
+        deficient (poles collapsed onto each other) ``rank_ok`` is False.
+        """
+        theta = np.array(theta, dtype=float)
+        A, E = self.basis(theta)
+        norms = np.sqrt(np.einsum("ij,ij->j", A, A))
+        norms[norms == 0] = 1.0
+        An = A / norms
+        P = An.shape[1]
+        if fast:
+            Rq = sla.qr(An, mode="r", check_finite=False)[0][:P]
+        else:
+            Q, Rq = np.linalg.qr(An)
+        d = np.abs(np.diag(Rq))
+        rcond = float(d.min() / d.max()) if d.size else 1.0
+        rank_ok = bool(np.all(np.isfinite(Rq))) and rcond > RANK_TOL
+        if not rank_ok:
+            return Evaluation(theta, np.nan, None, False, rcond, precise=not fast)
+        if fast:
+            AE = np.concatenate([An, E], axis=1)
+            prod = AE.T @ self.Ys                                   # (P + 2m, n_frf)
+            QtY = sla.solve_triangular(Rq, prod[:P], trans="T")
+            S = self.y_norm2 - float(np.einsum("ij,ij->", QtY, QtY))
+            if S >= self.FAST_MIN_REL_S * self.y_norm2:
+                QtE = sla.solve_triangular(Rq, An.T @ E, trans="T")
+                G = E.T @ E - QtE.T @ QtE
+                EtR = prod[P:] - QtE.T @ QtY
+                coef = sla.solve_triangular(Rq, QtY) / norms[:, None]
+                return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
+            Q, Rq = np.linalg.qr(An)
+        QtY = Q.T @ self.Ys
+        resid = self.Ys - Q @ QtY
+        S = float(np.einsum("ij,ij->", resid, resid))
+        coef = sla.solve_triangular(Rq, QtY) / norms[:, None]
+        return Evaluation(theta, S, coef, True, rcond, precise=True, Q=Q, resid=resid, E=E)
+
+    def normal_equations(self, ev: Evaluation) -> tuple[np.ndarray, np.ndarray]:
+        """Kaufman's ``J^T J`` (2m x 2m) and gradient ``J^T r`` (2m,) at an evaluation.
+
+        ``S = r^T r``, so ``dS/dtheta = 2 J^T r``.
+        """
+        if not ev.rank_ok:
+            raise ValueError("normal equations need a full-rank evaluation")
+        m = ev.theta.size // 2
+        if ev.precise:
+            JtJ, Gam = projected_gram(ev.Q, ev.E, ev.coef[:2 * m])
+            EtR = ev.E.T @ ev.resid
+        else:
+            JtJ, Gam = gram_from_G(ev.G, ev.coef[:2 * m])
+            EtR = ev.EtR
+        g = -np.einsum("rpif,rpf->ri", Gam, EtR.reshape(m, 2, -1)).reshape(2 * m)
+        return JtJ, g
+
+    # -------------------------------------------------------------- unpacking
+    def linear_parameters(self, ev: Evaluation) -> tuple[np.ndarray, np.ndarray]:
+        """Residues (n_frf, m) and residual terms (n_frf, n_res), complex, unweighted."""
+        m = ev.theta.size // 2
+        c = ev.coef
+        if self.frf_w is not None:
+            c = c / self.frf_w[None, :]
+        R = (c[0:2 * m:2] + 1j * c[1:2 * m:2]).T
+        T = (c[2 * m::2] + 1j * c[2 * m + 1::2]).T
+        return R, T
+
+
+def projected_gram(Q: np.ndarray, E: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``sum_f Gamma_f^T (P E)^T (P E) Gamma_f`` (2m x 2m) and the ``Gamma`` array (m, 2, 2, n_frf).
+
+    Q : (2N, P) orthonormal basis of A; E : (2N, 2m) derivative columns;
+    mode_coef : (2m, n_frf) real coefficients ``(a_1, b_1, ..., a_m, b_m)`` (R = a + j b) per FRF.
+    This is the Schur complement of the linear parameters in the Gauss-Newton matrix of the
+    full problem, i.e. J^T J of the variable-projection (Kaufman) Jacobian.
+    """
+    PE = E - Q @ (Q.T @ E)
+    return gram_from_G(PE.T @ PE, mode_coef)
+
+
+def gram_from_G(G: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``sum_f Gamma_f^T G Gamma_f`` and ``Gamma`` from ``G = (P E)^T (P E)`` (see :func:`projected_gram`)."""
+    m = G.shape[0] // 2
+    G4 = G.reshape(m, 2, m, 2)
+    a = mode_coef[0::2]                                     # (m, f)
+    b = mode_coef[1::2]
+    # Gam[r, p, i, f]: coefficient of E_(r,p) in d model_f / d theta_(r,i)
+    Gam = np.empty((m, 2, 2, a.shape[1]))
+    Gam[:, 0, 0] = a
+    Gam[:, 1, 0] = b
+    Gam[:, 0, 1] = -b
+    Gam[:, 1, 1] = a
+    GG = np.einsum("rpsq,sqjf->rpsjf", G4, Gam, optimize=True)
+    JtJ = np.einsum("rpif,rpsjf->risj", Gam, GG, optimize=True).reshape(2 * m, 2 * m)
+    return 0.5 * (JtJ + JtJ.T), Gam
+
+
+def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Solve ``(J^T J + mu D^2) d = -g`` through the scaled system.
+
+    With ``M = D^-1 J^T J D^-1`` and ``x = D d``: ``(M + mu I) x = -D^-1 g``. Cholesky when
+    positive definite, least squares otherwise. Returns ``(d, x)``.
+    """
+    M = JtJ / np.outer(D, D)
+    rhs = -g / D
+    Mm = M + mu * np.eye(M.shape[0])
+    try:
+        c = sla.cho_factor(Mm, lower=True, check_finite=True)
+        x = sla.cho_solve(c, rhs)
+    except (np.linalg.LinAlgError, ValueError):
+        x = np.linalg.lstsq(Mm, rhs, rcond=None)[0]
+    return x / D, x

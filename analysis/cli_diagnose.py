@@ -1,0 +1,145 @@
+"""``python -m analysis diagnose --measured M --simulated S --json OUT.json [--report DIR]``.
+
+M is a recording (``.h5``) or a UFF 58 file. S is a recording or UFF 58 file with the same points
+(matched by ``component:node:direction`` labels of outputs and references), or a simulator
+configuration (``.toml``), simulated on the fly at M's points and lines. A simulated FRF file is
+first turned into a modal model by the automatic fit (:func:`analysis.pipeline.fit_auto`), so the
+modal effects can act on it. Exit codes: 0 done, 2 bad input (message on stderr).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+__all__ = ["main", "build_parser", "load_simulation"]
+
+log = logging.getLogger(__name__)
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:
+        raise _UsageError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="python -m analysis diagnose",
+                description="Compare a measurement with a simulation, name the physical cause of the "
+                            "difference from a catalogue of effects, extend the model and measure the gain.")
+    p.add_argument("--measured", required=True, metavar="M", help="recording (.h5) or UFF 58 file")
+    p.add_argument("--simulated", required=True, metavar="S",
+                   help="recording or UFF 58 file with the same points, or a simulator config (.toml)")
+    p.add_argument("--json", required=True, metavar="OUT.json", help="write the diagnosis as JSON")
+    p.add_argument("--report", metavar="DIR", help="write report.md and plots into DIR")
+    p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: all lines above 0 Hz)")
+    p.add_argument("--effects", metavar="A,B,...", help="only these effects of the catalogue")
+    p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
+    return p
+
+
+def load_simulation(path: str, measured, estimator: str = "H1"):
+    """The simulation as a :class:`ModalModel` at the measured points (outputs, references order)."""
+    from .inputs import InputError, load_input
+    from .diagnosis.compare import common_points
+
+    p = Path(path)
+    if p.suffix.lower() == ".toml":
+        from simulator.config import ConfigError
+        from simulator.effects import base_model
+        from simulator.fem import ModelError
+
+        try:
+            return base_model(p, measured.outputs, measured.references)
+        except (ConfigError, ModelError, OSError) as exc:
+            raise InputError(f"simulator config {p}: {exc}") from None
+    sim = load_input(p, estimator=estimator)
+    outs, refs = common_points(measured, sim)
+    if len(outs) != measured.n_outputs or len(refs) != measured.n_references:
+        raise InputError(f"{p} lacks some measured points: it has outputs {list(sim.outputs)} and references "
+                         f"{list(sim.references)}; measured {list(measured.outputs)} / {list(measured.references)}")
+    sim = sim.select(outs, refs)
+    from .pipeline import FitError, fit_auto
+
+    try:
+        result, _ = fit_auto(sim)
+    except FitError as exc:
+        raise InputError(f"cannot build a modal model of the simulated FRFs in {p}: {exc}") from None
+    return model_with_correction(result.model, sim)
+
+
+def model_with_correction(model, sim):
+    """The fitted model plus, in ``meta["frf_correction"]``, what it misses of the simulated FRFs,
+    so that the prediction without effects is the simulated FRFs themselves (modal effects move
+    only the fitted modes)."""
+    from dataclasses import replace
+
+    from .modal import synthesize
+
+    syn = synthesize(model, sim.freq_hz)
+    same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
+    corr = replace(same, H=same.H - syn.H, coherence=None)
+    meta = dict(model.meta)
+    meta["frf_correction"] = corr
+    return replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references), meta=meta)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the command; returns the exit code (0 done, 2 bad input)."""
+    from .inputs import InputError, load_input, parse_band_text
+    from .diagnosis import EFFECTS, EffectError, diagnose
+    from .diagnosis.compare import common_points
+
+    parser = build_parser()
+    try:
+        args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    except _UsageError as exc:
+        print(f"{exc}\n(see --help)", file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    try:
+        out_dir = Path(args.json).resolve().parent
+        if not out_dir.is_dir():
+            raise InputError(f"cannot write {args.json}: folder {out_dir} does not exist")
+        effects = None
+        if args.effects:
+            effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+            bad = [e for e in effects if e not in EFFECTS]
+            if bad:
+                raise InputError(f"unknown effect(s) {bad}; the catalogue has {', '.join(EFFECTS)}")
+        measured = load_input(args.measured, estimator=args.estimator)
+        band = parse_band_text(args.band)
+        f = measured.freq_hz
+        lo, hi = (band if band is not None else (f[f > 0][0], f[-1]))
+        measured = measured.band(lo, hi)
+        finite = np.all(np.isfinite(measured.H), axis=(0, 1))
+        if not finite.all():
+            raise InputError(f"{args.measured} holds NaN/inf lines at {np.count_nonzero(~finite)} frequencies; "
+                             "give --band to exclude them")
+        base = load_simulation(args.simulated, measured, args.estimator)
+        outs, refs = common_points(measured, base)
+        measured = measured.select(outs, refs)
+        diag = diagnose(measured, base, effects=effects)
+    except (InputError, EffectError, ValueError) as exc:
+        print(f"analysis diagnose: {exc}", file=sys.stderr)
+        return 2
+    Path(args.json).write_text(json.dumps(diag.to_json(), indent=1))
+    if args.report:
+        from .diagnosis.report import write_report
+
+        write_report(diag, args.report)
+    print(f"verdict: {diag.verdict}")
+    print(f"error before {diag.error_before_db:.1f} dB, after {diag.error_after_db:.1f} dB "
+          f"(noise {diag.noise_db['difference']:.1f} dB)")
+    for c in diag.causes[:5]:
+        print(f"  {'*' if c['significant'] else ' '} {c['evidence']}")
+    return 0

@@ -1,0 +1,166 @@
+"""``python -m analysis fit INPUT --json OUT.json [options]``: the whole automatic modal fit.
+
+INPUT is a recording (``.h5``) or a UFF file with dataset-58 FRFs. The terminal shows the
+paper's Table 1 for one FRF; the JSON holds every FRF's parameters. Exit codes: 0 done
+(check ``success`` in the JSON), 2 bad input or a fit that cannot start (message on stderr).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+__all__ = ["main", "build_parser"]
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # argparse would sys.exit(2); main() reports instead
+        raise _UsageError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(
+        prog="python -m analysis fit",
+        description="Automatic modal fit: band, stabilization (LSCF/LSCE), pole selection, nonlinear LSFD "
+                    "(Gauss-Newton or Levenberg-Marquardt).",
+    )
+    p.add_argument("input", metavar="INPUT", help="recording (.h5) or UFF file with dataset-58 FRFs")
+    p.add_argument("--json", metavar="OUT.json", required=True, help="write the fit results as JSON")
+    p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: automatic, see docs/fitting.md)")
+    p.add_argument("--modes", type=int, metavar="N", help="number of modes to keep (the N most stable clusters)")
+    p.add_argument("--order", type=int, metavar="N",
+                   help="largest model order of the stabilization, in modes (polynomial order 2N)")
+    p.add_argument("--method", choices=("gn", "lm"), default="lm", help="LSFD iteration (default lm)")
+    p.add_argument("--initial", choices=("lscf", "lsce"), default="lscf",
+                   help="initial-pole method of the stabilization (default lscf)")
+    p.add_argument("--poles", metavar="F1,F2,...", help="natural frequencies (Hz) to fit instead of automatic selection")
+    p.add_argument("--residuals", choices=("physical", "paper", "none"), default="physical",
+                   help="residual terms (default physical)")
+    p.add_argument("--per-frf", action="store_true", help="also fit every FRF alone (results in the JSON)")
+    p.add_argument("--max-iter", type=int, default=100, metavar="N", help="LSFD iteration cap (default 100)")
+    p.add_argument("--plot", metavar="PNG", help="measured vs synthesised FRFs with the relative error (paper Fig. 7)")
+    p.add_argument("--uff", metavar="OUT.uff", help="write UFF 55 mode shapes and UFF 58 synthesised FRFs")
+    p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
+    p.add_argument("--frf", metavar="OUTPUT",
+                   help="output point shown in the terminal table (default: the strongest FRF)")
+    return p
+
+
+def _check_out(path: Optional[str], what: str) -> None:
+    if path is None:
+        return
+    d = Path(path).resolve().parent
+    if not d.is_dir():
+        raise _UsageError(f"cannot write the {what} {path}: folder {d} does not exist")
+
+
+def _write_uff(path: str, frf, result) -> None:
+    """UFF 55 mode shapes, then UFF 58 synthesised FRFs appended in the same file."""
+    from .modal import synthesize
+    from .uff import write_uff55, write_uff58
+
+    model = result.model
+    sel = (frf.freq_hz >= result.band[0]) & (frf.freq_hz <= result.band[1])
+    shapes = result.mode_shapes
+    if shapes is None:
+        shapes = model.residues[:, 0, :]
+    write_uff55(path, model.poles, np.asarray(shapes), list(model.outputs), overwrite=True)
+    synth = synthesize(model, frf.freq_hz[sel])
+    with tempfile.TemporaryDirectory(dir=str(Path(path).resolve().parent)) as tmp:
+        part = Path(tmp) / "frf58.uff"
+        write_uff58(part, synth, id_lines=("impactlab LSFD synthesised FRF", "model", "synthesis"))
+        with open(path, "ab") as out, open(part, "rb") as src:
+            out.write(src.read())
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the command; returns the exit code (0 done, 2 bad input)."""
+    from .inputs import InputError, load_input, parse_band_text, parse_float_list
+
+    parser = build_parser()
+    try:
+        args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    except _UsageError as exc:
+        print(f"{exc}\n(see --help)", file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    try:
+        band = parse_band_text(args.band)
+        for name in ("modes", "order", "max_iter"):
+            v = getattr(args, name)
+            if v is not None and v < 1:
+                raise InputError(f"--{name.replace('_', '-')} must be >= 1; got {v}")
+        freqs = parse_float_list(args.poles) if args.poles else None
+        for path, what in ((args.json, "JSON"), (args.plot, "plot"), (args.uff, "UFF file")):
+            _check_out(path, what)
+        frf = load_input(args.input, estimator=args.estimator)
+        if band is not None:
+            f = frf.freq_hz
+            if band[1] <= f[0] or band[0] >= f[-1]:
+                raise InputError(f"band {args.band} Hz lies outside the data ({f[0]:.6g}..{f[-1]:.6g} Hz)")
+        rms = np.sqrt(np.nanmean(np.abs(frf.H) ** 2, axis=2))  # (n_out, n_ref)
+        if args.frf is not None:
+            if args.frf not in frf.outputs:
+                raise InputError(f"--frf {args.frf!r} is not an output of {args.input}; outputs: {', '.join(frf.outputs)}")
+            row = frf.outputs.index(args.frf)
+            shown = (row, int(np.argmax(rms[row])))
+        else:  # the strongest FRF (usually the driving point); never an all-zero one
+            shown = tuple(int(i) for i in np.unravel_index(int(np.argmax(rms)), rms.shape))
+    except (InputError, _UsageError) as exc:
+        print(f"analysis fit: {exc}", file=sys.stderr)
+        return 2
+
+    from .pipeline import fit_auto
+    from .report import format_table, result_to_dict, write_json
+
+    caught: list[str] = []
+    try:
+        with warnings.catch_warnings(record=True) as wlist:
+            warnings.simplefilter("always")
+            result, stab = fit_auto(
+                frf, band=band, max_modes=args.order, n_modes=args.modes, method=args.method,
+                residual_form=args.residuals, initial=freqs if freqs is not None else args.initial,
+                per_frf=args.per_frf, max_iter=args.max_iter,
+            )
+        caught = [str(w.message) for w in wlist]
+    except ValueError as exc:
+        print(f"analysis fit: {exc}", file=sys.stderr)
+        return 2
+    notes = list(stab.meta.get("warnings", [])) if stab is not None else []
+    for msg in notes + [c for c in caught if c not in notes]:
+        print(f"warning: {msg}", file=sys.stderr)
+    initial = stab.meta.get("selected_poles") if stab is not None else None
+    label = (stab.method.split("+")[0].upper() if stab is not None else "initial")
+    print(format_table(result, frf, output=shown[0], reference=shown[1], initial=initial, initial_label=label))
+    doc = result_to_dict(result, frf, stab, extra={"input": str(args.input), "warnings": notes + caught})
+    try:
+        write_json(args.json, doc)
+        print(f"results written to {args.json}")
+        if args.plot:
+            from .plots import plot_fit
+
+            order = [tuple(int(i) for i in np.unravel_index(k, rms.shape)) for k in np.argsort(-rms, axis=None)]
+            rows = [shown] + [p for p in order if p != shown and rms[p] > 0]
+            plot_fit(frf, result.model, args.plot, pairs=rows[:4], band=result.band)
+            print(f"plot written to {args.plot}")
+        if args.uff:
+            _write_uff(args.uff, frf, result)
+            print(f"mode shapes (UFF 55) and synthesised FRFs (UFF 58) written to {args.uff}")
+    except (OSError, ValueError) as exc:
+        print(f"analysis fit: cannot write the outputs: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,110 @@
+"""``python -m analysis stabilization INPUT --png OUT.png [options]``: draw a stabilization diagram.
+
+Prints the automatically selected poles; ``--json`` writes every order's physical poles with
+their stability class. Exit codes: 0 done, 2 bad input (message on stderr).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+__all__ = ["main", "build_parser"]
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:
+        raise _UsageError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="python -m analysis stabilization",
+                description="Stabilization diagram (paper Fig. 8) of LSCF or LSCE poles, optionally LSFD-refined.")
+    p.add_argument("input", metavar="INPUT", help="recording (.h5) or UFF file with dataset-58 FRFs")
+    p.add_argument("--png", metavar="OUT.png", required=True, help="write the diagram")
+    p.add_argument("--json", metavar="OUT.json", help="write the poles of every order and the selected poles")
+    p.add_argument("--max-order", type=int, metavar="N", help="largest model order in modes (default: automatic)")
+    p.add_argument("--method", choices=("lsce", "lscf"), default="lsce", help="initial-pole method (default lsce)")
+    p.add_argument("--lsfd", action="store_true", help="refine every order with a few LSFD iterations")
+    p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: automatic)")
+    p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the command; returns the exit code (0 done, 2 bad input)."""
+    from .inputs import InputError, load_input, parse_band_text
+
+    try:
+        args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    except _UsageError as exc:
+        print(f"{exc}\n(see --help)", file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    try:
+        band = parse_band_text(args.band)
+        if args.max_order is not None and args.max_order < 1:
+            raise InputError(f"--max-order must be >= 1; got {args.max_order}")
+        for path in (args.png, args.json):
+            if path is not None and not Path(path).resolve().parent.is_dir():
+                raise InputError(f"cannot write {path}: its folder does not exist")
+        frf = load_input(args.input, estimator=args.estimator)
+    except InputError as exc:
+        print(f"analysis stabilization: {exc}", file=sys.stderr)
+        return 2
+
+    from .lscf import parse_band
+    from .modal import damping_ratio, natural_freq_hz
+    from .pipeline import default_band, default_max_modes
+    from .plots import plot_stabilization
+    from .report import write_json
+    from .selection import select_clusters
+    from .stabilization import stabilization
+
+    try:
+        with warnings.catch_warnings(record=True) as wlist:
+            warnings.simplefilter("always")
+            b = parse_band(band, frf.freq_hz) if band is not None else default_band(frf)
+            n = args.max_order or default_max_modes(frf, b)
+            stab = stabilization(frf, n, method=args.method, band=b, refine_lsfd=args.lsfd)
+            clusters = select_clusters(stab)
+    except ValueError as exc:
+        print(f"analysis stabilization: {exc}", file=sys.stderr)
+        return 2
+    for w in wlist:
+        print(f"warning: {w.message}", file=sys.stderr)
+    poles = np.array([c.pole for c in clusters], dtype=complex)
+    print(f"stabilization ({stab.method}) in {stab.band[0]:.6g}..{stab.band[1]:.6g} Hz, orders 1..{n}")
+    print(f"{'':4s} {'f [Hz]':>10s} {'zeta [%]':>9s} {'orders':>7s}")
+    for k in np.argsort(natural_freq_hz(poles)) if poles.size else []:
+        c = clusters[k]
+        print(f"{k + 1:4d} {natural_freq_hz(c.pole):10.4f} {100 * damping_ratio(c.pole):9.3f} {c.n_orders:7d}")
+    try:
+        plot_stabilization(stab, frf, args.png, selected=poles)
+        print(f"diagram written to {args.png}")
+        if args.json:
+            doc = stab.to_dict()
+            doc["selected"] = [
+                {"freq_hz": float(natural_freq_hz(c.pole)), "damping": float(damping_ratio(c.pole)),
+                 "n_orders": int(c.n_orders)} for c in clusters
+            ]
+            doc["input"] = str(args.input)
+            write_json(args.json, doc)
+            print(f"poles written to {args.json}")
+    except (OSError, ValueError) as exc:
+        print(f"analysis stabilization: cannot write the outputs: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

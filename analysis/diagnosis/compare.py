@@ -1,0 +1,223 @@
+"""What the simulation gets wrong: errors per band and channel, paired modes, lone peaks, doubtful lines.
+
+Error measure (used throughout the diagnosis). Every line of every FRF gets the weight
+
+    w_ork = 1 / (|H_meas,ork|^2 + floor_or^2),   floor_or = FLOOR_FRACTION * median_k |H_meas,ork|
+
+so that ``sum w |H_meas - H_model|^2 / n`` is a mean squared *relative* error: each line counts
+alike whether it lies at a resonance or far below it (a sensor roll-off at 2 Hz matters as much as
+a peak), and the floor keeps antiresonance lines (where the measurement is mostly noise) from
+dominating. ``error_db = 10 log10(mean w |e|^2)``; a 1 % complex noise gives about -40 dB.
+
+Noise level without a model: the second difference along frequency ``d_k = H_{k-1} - 2 H_k + H_{k+1}``
+removes the smooth FRF and keeps white noise with variance ``6 sigma^2``; the median over lines of
+``w |d|^2 / 6`` divided by ln 2 (median of an exponential variable) estimates ``mean w |noise|^2``.
+With coherence, the H1 variance ``(1 - g^2) / (2 n_avg g^2) |H|^2`` gives a second estimate.
+"""
+from __future__ import annotations
+
+from typing import Optional, Sequence
+
+import numpy as np
+from scipy.signal import find_peaks
+
+from ..frf import FRFSet
+
+__all__ = [
+    "FLOOR_FRACTION",
+    "line_weights",
+    "error_db",
+    "noise_level",
+    "band_errors",
+    "channel_errors",
+    "pick_peaks",
+    "pair_modes",
+    "doubtful_coherence",
+    "compare",
+    "common_points",
+]
+
+FLOOR_FRACTION = 0.01
+
+
+def line_weights(measured: FRFSet, floor_fraction: float = FLOOR_FRACTION) -> np.ndarray:
+    """Weights (n_out, n_ref, n_freq) of the relative squared error (module docstring)."""
+    mag2 = np.abs(measured.H) ** 2
+    floor = floor_fraction * np.median(np.abs(measured.H), axis=2, keepdims=True)
+    w = 1.0 / (mag2 + floor ** 2 + 1e-300)
+    w[~np.isfinite(measured.H)] = 0.0
+    return w
+
+
+def _db(x: float) -> float:
+    return float(10 * np.log10(max(x, 1e-30)))
+
+
+def error_db(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray, lines: Optional[np.ndarray] = None) -> float:
+    """10 log10 of the mean weighted squared error over ``lines`` (boolean mask, default all)."""
+    sel = np.ones(measured.freq_hz.size, bool) if lines is None else lines
+    e = measured.H[..., sel] - model_H[..., sel]
+    return _db(float(np.mean(weights[..., sel] * np.abs(e) ** 2)))
+
+
+def noise_level(measured: FRFSet, weights: np.ndarray) -> dict:
+    """Noise estimates (dB, same scale as :func:`error_db`): ``"difference"`` always, ``"coherence"``
+    when the data carry coherence (``meta["averages"]`` or 5 averages assumed)."""
+    H = measured.H
+    d2 = H[..., :-2] - 2 * H[..., 1:-1] + H[..., 2:]
+    q = weights[..., 1:-1] * np.abs(d2) ** 2 / 6.0
+    out = {"difference": _db(float(np.median(q)) / np.log(2))}
+    if measured.coherence is not None and np.all(np.isfinite(measured.coherence)):
+        g2 = np.clip(measured.coherence, 1e-6, 1.0)
+        n_avg = float(measured.meta.get("averages", 5) or 5)
+        rel = (1 - g2) / (2 * n_avg * g2)
+        out["coherence"] = _db(float(np.mean(weights * rel * np.abs(H) ** 2)))
+    return out
+
+
+def band_errors(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray, n_bands: int = 8) -> list[dict]:
+    """Error (dB) in ``n_bands`` log-spaced bands (linear when the band starts at 0 Hz)."""
+    f = measured.freq_hz
+    if f[0] > 0:
+        edges = np.geomspace(f[0], f[-1], n_bands + 1)
+    else:
+        edges = np.linspace(f[0], f[-1], n_bands + 1)
+    out = []
+    for i in range(n_bands):
+        sel = (f >= edges[i]) & ((f < edges[i + 1]) | (i == n_bands - 1))
+        if sel.sum() == 0:
+            continue
+        out.append({"lo_hz": float(edges[i]), "hi_hz": float(edges[i + 1]),
+                    "error_db": error_db(measured, model_H, weights, sel)})
+    return out
+
+
+def channel_errors(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray) -> list[dict]:
+    """Error (dB) per (output, reference) FRF."""
+    out = []
+    for o, lo in enumerate(measured.outputs):
+        for r, lr in enumerate(measured.references):
+            e = measured.H[o, r] - model_H[o, r]
+            out.append({"output": lo, "reference": lr,
+                        "error_db": _db(float(np.mean(weights[o, r] * np.abs(e) ** 2)))})
+    return out
+
+
+def pick_peaks(frf: FRFSet, prominence_db: float = 6.0) -> list[dict]:
+    """Resonance peaks of the summed magnitude: frequency (Hz, parabolic interpolation), half-power
+    damping ratio, peak magnitude and the complex FRF vector at the peak (for MAC)."""
+    f = frf.freq_hz
+    s = np.sqrt(np.sum(np.abs(frf.H) ** 2, axis=(0, 1)))
+    sdb = 20 * np.log10(s + 1e-300)
+    idx, _ = find_peaks(sdb, prominence=prominence_db)
+    peaks = []
+    for k in idx:
+        if 0 < k < f.size - 1:
+            y0, y1, y2 = sdb[k - 1], sdb[k], sdb[k + 1]
+            den = y0 - 2 * y1 + y2
+            dk = 0.5 * (y0 - y2) / den if den != 0 else 0.0
+            fk = float(f[k] + dk * (f[k + 1] - f[k - 1]) / 2)
+        else:
+            fk = float(f[k])
+        half = s[k] / np.sqrt(2)
+        i = k
+        while i > 0 and s[i] > half:
+            i -= 1
+        j = k
+        while j < f.size - 1 and s[j] > half:
+            j += 1
+        zeta = float((f[j] - f[i]) / (2 * fk)) if fk > 0 else float("nan")
+        peaks.append({"freq_hz": fk, "damping": zeta, "magnitude": float(s[k]),
+                      "vector": frf.H[..., k].ravel().copy()})
+    return peaks
+
+
+def _mac(a: np.ndarray, b: np.ndarray) -> float:
+    den = np.vdot(a, a).real * np.vdot(b, b).real
+    return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
+
+
+def pair_modes(measured: FRFSet, simulated: FRFSet, max_rel_df: float = 0.15, min_mac: float = 0.5) -> dict:
+    """Pair the peaks of both FRF sets by frequency and MAC (greedy on MAC x frequency closeness).
+
+    Returns ``{"pairs": [...], "only_measured": [...], "only_simulated": [...]}``; a pair holds both
+    frequencies, ``df_percent`` (simulated vs measured), damping ratios, ``amplitude_db``
+    (simulated / measured peak), ``phase_deg`` (mean phase of the simulated vector against the measured)
+    and ``mac``.
+    """
+    pm, ps = pick_peaks(measured), pick_peaks(simulated)
+    cand = []
+    for i, a in enumerate(pm):
+        for j, b in enumerate(ps):
+            rel = abs(b["freq_hz"] - a["freq_hz"]) / a["freq_hz"]
+            if rel <= max_rel_df:
+                mac = _mac(a["vector"], b["vector"])
+                if mac >= min_mac:
+                    cand.append((mac * (1 - rel / max_rel_df), i, j, mac))
+    cand.sort(reverse=True)
+    used_m, used_s, pairs = set(), set(), []
+    for _, i, j, mac in cand:
+        if i in used_m or j in used_s:
+            continue
+        used_m.add(i)
+        used_s.add(j)
+        a, b = pm[i], ps[j]
+        phase = float(np.degrees(np.angle(np.vdot(a["vector"], b["vector"]))))
+        pairs.append({
+            "measured_hz": a["freq_hz"], "simulated_hz": b["freq_hz"],
+            "df_percent": 100 * (b["freq_hz"] - a["freq_hz"]) / a["freq_hz"],
+            "measured_damping": a["damping"], "simulated_damping": b["damping"],
+            "amplitude_db": float(20 * np.log10(b["magnitude"] / a["magnitude"])),
+            "phase_deg": phase, "mac": mac,
+        })
+    pairs.sort(key=lambda p: p["measured_hz"])
+    only_m = [{"freq_hz": pm[i]["freq_hz"], "damping": pm[i]["damping"]} for i in range(len(pm)) if i not in used_m]
+    only_s = [{"freq_hz": ps[j]["freq_hz"], "damping": ps[j]["damping"]} for j in range(len(ps)) if j not in used_s]
+    return {"pairs": pairs, "only_measured": only_m, "only_simulated": only_s}
+
+
+def doubtful_coherence(measured: FRFSet, threshold: float = 0.9, min_lines: int = 1) -> list[dict]:
+    """Frequency ranges where the median coherence over the FRFs is below ``threshold``."""
+    if measured.coherence is None:
+        return []
+    c = np.median(measured.coherence.reshape(-1, measured.freq_hz.size), axis=0)
+    bad = c < threshold
+    out, k, f = [], 0, measured.freq_hz
+    while k < bad.size:
+        if bad[k]:
+            j = k
+            while j + 1 < bad.size and bad[j + 1]:
+                j += 1
+            if j - k + 1 >= min_lines:
+                out.append({"lo_hz": float(f[k]), "hi_hz": float(f[j]), "min_coherence": float(c[k:j + 1].min())})
+            k = j + 1
+        else:
+            k += 1
+    return out
+
+
+def compare(measured: FRFSet, simulated: FRFSet, weights: Optional[np.ndarray] = None,
+            n_bands: int = 8) -> dict:
+    """All the comparisons as one JSON-able dict: ``bands``, ``channels``, ``modes``, ``coherence``."""
+    w = line_weights(measured) if weights is None else weights
+    return {
+        "bands": band_errors(measured, simulated.H, w, n_bands),
+        "channels": channel_errors(measured, simulated.H, w),
+        "modes": pair_modes(measured, simulated),
+        "doubtful_coherence": doubtful_coherence(measured),
+        "error_db": error_db(measured, simulated.H, w),
+        "noise_db": noise_level(measured, w),
+    }
+
+
+def common_points(measured: FRFSet, simulated: FRFSet) -> tuple[Sequence[str], Sequence[str]]:
+    """Outputs and references present in both (in the measured order); error when none."""
+    outs = [o for o in measured.outputs if o in simulated.outputs]
+    refs = [r for r in measured.references if r in simulated.references]
+    if not outs or not refs:
+        raise ValueError(
+            f"measured and simulated FRFs share no points: measured outputs {list(measured.outputs)}, "
+            f"references {list(measured.references)}; simulated outputs {list(simulated.outputs)}, "
+            f"references {list(simulated.references)}. Label the points alike (component:node:direction)."
+        )
+    return outs, refs

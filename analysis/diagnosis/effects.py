@@ -1,0 +1,610 @@
+"""The catalogue of physical effects: model extensions with physical parameters.
+
+Each effect is a small pure function pair over plain containers:
+
+* ``apply``: the effect on the simulation. Effects of kind ``"modal"`` act on the
+  :class:`analysis.modal.ModalModel` before synthesis (pole and residue changes); effects of
+  kind ``"frf"`` act on the synthesised :class:`analysis.frf.FRFSet` (factors or added terms).
+* ``fit``: the effect's parameters fitted to measured FRFs by weighted least squares,
+  ``S(theta) = sum_{o,r,k in lines} w_ork |H_meas - H_ext(theta)|^2``, on a subset of lines
+  (so that a verdict can score them on other lines; see :mod:`analysis.diagnosis.verdict`).
+
+Effects and parameters (SI units; ``omega = 2 pi f`` rad/s; ``p`` = 0, 1, 2 for receptance,
+mobility, accelerance of the model):
+
+=======================  =====  ==============================================================
+name                     kind   model extension
+=======================  =====  ==============================================================
+``stiffness_shift``      modal  every natural frequency times ``factor`` (stiffness times
+                                factor^2), damping ratios kept; residues times factor^(p-1)
+``damping_change``       modal  every damping ratio times ``factor``
+``exponential_window``   modal  every pole's decay rate plus ``1/tau_s`` (an exponential window
+                                ``exp(-t/tau)`` on the response), residues kept
+``mass_loading``         modal  a mass ``mass_kg`` at each output sensor: omega_r^2 / (1 + mu_r),
+                                ``mu_r = m sum_o phi_or^2`` (mass-normalised shapes at the
+                                outputs, first-order Rayleigh quotient), residues / sqrt(1+mu)^(1+p)
+``missing_mode``         modal  an extra mode ``freq_hz``, ``zeta``, complex ``residue[o][r]``
+                                (``[re, im]`` pairs, model units x rad/s)
+``residual_modes``       frf    ``H += UR (j w)^q + LR (j w)^q / w^2`` (q of the FRF): the modes
+                                outside the band; ``upper`` m/N, ``lower`` m/N (rad/s)^2
+``sensor_highpass``      frf    ``H *= (j w / w_c / (1 + j w / w_c))^order``, ``corner_hz``
+``time_delay``           frf    ``H *= exp(-j w delay_s)``
+``sensitivity_error``    frf    ``H[o] *= gains[o]`` (a wrong calibration of output channel o)
+``mains_hum``            frf    ``H += sum_k A_ok / (1 + j (f - k f0) / width_hz)``, lines at the
+                                harmonics of ``base_hz`` (50 or 60 Hz)
+=======================  =====  ==============================================================
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, replace
+from typing import Callable, Mapping, Optional, Sequence
+
+import numpy as np
+from scipy.optimize import least_squares, minimize_scalar
+
+from ..frf import FRFSet, convert_quantity
+from ..modal import ModalModel, pole_from_fz, residual_basis, synthesize
+
+__all__ = [
+    "Effect",
+    "EFFECTS",
+    "EffectError",
+    "FitContext",
+    "predict",
+    "effect_names",
+]
+
+log = logging.getLogger(__name__)
+
+_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+HUM_BASES_HZ = (50.0, 60.0)
+
+
+class EffectError(ValueError):
+    """An effect name or parameter set that cannot be applied (the message says what is expected)."""
+
+
+# --------------------------------------------------------------------------- containers
+@dataclass(frozen=True)
+class FitContext:
+    """What every fitter needs: the measured FRFs, the base model, the line weights and the
+    base prediction (synthesised once).
+
+    measured : FRFSet of the measurement (the band to analyse).
+    base : the simulation as a :class:`ModalModel` (any quantity; converted to the measured one).
+    weights : (n_out, n_ref, n_freq) float >= 0, per-line weights of the squared error.
+    sim : FRFSet, the base prediction at the measured lines, in the measured quantity.
+    """
+
+    measured: FRFSet
+    base: ModalModel
+    weights: np.ndarray
+    sim: FRFSet
+
+    def cost(self, H: np.ndarray, lines: np.ndarray) -> float:
+        """Weighted squared error ``sum w |H_meas - H|^2`` over the boolean mask ``lines``."""
+        e = self.measured.H[..., lines] - H[..., lines]
+        return float(np.sum(self.weights[..., lines] * (e.real ** 2 + e.imag ** 2)))
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One catalogue entry: ``apply(container, params) -> container`` and ``fit(ctx, lines) -> params``.
+
+    kind : "modal" (apply takes/returns a ModalModel) or "frf" (an FRFSet).
+    primary : name of the parameter a test checks (the effect's physical size).
+    needs : meta keys the base model must carry for the effect to be fitted (e.g. shapes).
+    """
+
+    name: str
+    kind: str
+    apply: Callable
+    fit: Callable
+    primary: str
+    description: str
+    needs: tuple = ()
+
+
+# --------------------------------------------------------------------------- helpers
+def _model_power(model: ModalModel) -> int:
+    return _POWER[model.quantity]
+
+
+def _replace_poles(model: ModalModel, poles: np.ndarray, scale: np.ndarray) -> ModalModel:
+    """Model with new poles and residues scaled per mode (scale shape (n_modes,))."""
+    return replace(model, poles=np.asarray(poles, complex), residues=model.residues * scale[None, None, :])
+
+
+def _check_positive(name: str, value: float, what: str) -> float:
+    v = float(value)
+    if not np.isfinite(v) or v <= 0:
+        raise EffectError(f"{what}: parameter {name} must be a positive number, got {value!r}")
+    return v
+
+
+def _fit_scalar(cost: Callable[[float], float], grid: np.ndarray) -> float:
+    """Minimise a 1-D cost: best grid point, then bounded Brent between its neighbours."""
+    vals = np.array([cost(x) for x in grid])
+    i = int(np.nanargmin(vals))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    if hi <= lo:
+        return float(grid[i])
+    res = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6 * max(abs(hi), 1e-12)})
+    return float(res.x) if res.fun <= vals[i] else float(grid[i])
+
+
+def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = False) -> Callable[[dict], float]:
+    """Cost of a modal effect's parameters on ``lines``. The model is synthesised at those lines only;
+    with ``coarse=True`` the modes far outside the band (below f_lo/1.5, above 1.5 f_hi) are a fixed
+    background taken from the base model (fast grid searches; the final refinement is exact)."""
+    f = ctx.measured.freq_hz[lines]
+    Hm, W = ctx.measured.H[..., lines], ctx.weights[..., lines]
+    base = ctx.base
+    background = 0.0
+    if coarse:
+        near = (base.freq_hz >= f[0] / 1.5) & (base.freq_hz <= f[-1] * 1.5)
+        if near.any() and not near.all():
+            far = replace(base, poles=base.poles[~near], residues=base.residues[..., ~near])
+            background = predict(far, f, ctx.measured.quantity).H
+            meta = dict(base.meta)
+            if "output_shapes" in meta:
+                meta["output_shapes"] = np.asarray(meta["output_shapes"])[:, near]
+            base = replace(base, poles=base.poles[near], residues=base.residues[..., near], meta=meta)
+
+    def cost(params: dict) -> float:
+        H = predict(base, f, ctx.measured.quantity, [{"effect": effect, **params}]).H + background
+        e = Hm - H
+        return float(np.sum(W * (e.real ** 2 + e.imag ** 2)))
+    return cost
+
+
+def _summed_log_magnitude(H: np.ndarray) -> np.ndarray:
+    return np.log(np.sum(np.abs(H), axis=(0, 1)) + 1e-300)
+
+
+def _log_shift_candidates(ctx: FitContext, lines: np.ndarray, max_ratio: float = 1.25, n: int = 3) -> list[float]:
+    """Frequency ratios that best align the measured and simulated peaks: the ``n`` best local maxima
+    of the cross-correlation of the summed log-magnitudes on a log-frequency axis."""
+    f = ctx.measured.freq_hz
+    sel = lines & (f > 0)
+    fl = f[sel]
+    npts = 4096
+    u = np.linspace(np.log(fl[0]), np.log(fl[-1]), npts)
+    a = np.interp(u, np.log(fl), _summed_log_magnitude(ctx.measured.H[..., sel]))
+    b = np.interp(u, np.log(fl), _summed_log_magnitude(ctx.sim.H[..., sel]))
+    du = u[1] - u[0]
+    # keep the peaks, drop the trend (mass and stiffness lines): subtract a 10 % moving average
+    k = max(3, int(np.log(1.1) / du) | 1)
+    kern = np.ones(k) / k
+    a = a - np.convolve(np.pad(a, k // 2, mode="edge"), kern, mode="valid")
+    b = b - np.convolve(np.pad(b, k // 2, mode="edge"), kern, mode="valid")
+    max_lag = int(np.ceil(np.log(max_ratio) / du))
+    lags = np.arange(-max_lag, max_lag + 1)
+    score = np.array([np.dot(a[max(0, L):npts + min(0, L)], b[max(0, -L):npts - max(0, L)]) / (npts - abs(L))
+                      for L in lags])
+    peaks = [i for i in range(1, score.size - 1) if score[i] >= score[i - 1] and score[i] >= score[i + 1]]
+    peaks = sorted(peaks, key=lambda i: score[i], reverse=True)[:n] or [int(np.argmax(score))]
+    return [float(np.exp(lags[i] * du)) for i in peaks]
+
+
+# --------------------------------------------------------------------------- modal effects
+def apply_stiffness_shift(model: ModalModel, params: Mapping) -> ModalModel:
+    """All natural frequencies times ``factor`` (stiffness times factor^2), damping ratios kept."""
+    a = _check_positive("factor", params.get("factor"), "stiffness_shift")
+    p = _model_power(model)
+    out = _replace_poles(model, model.poles * a, np.full(model.poles.size, a ** (p - 1)))
+    if out.upper_residual is not None:
+        out = replace(out, upper_residual=out.upper_residual / a ** 2)
+    return out
+
+
+def fit_stiffness_shift(ctx: FitContext, lines: np.ndarray) -> dict:
+    coarse = _modal_cost(ctx, lines, "stiffness_shift", coarse=True)
+    cost = _modal_cost(ctx, lines, "stiffness_shift")
+    grid = np.unique(np.concatenate([a0 * np.exp(np.linspace(-0.006, 0.006, 13))
+                                     for a0 in _log_shift_candidates(ctx, lines) + [1.0]]))
+    vals = [coarse({"factor": x}) for x in grid]
+    i = int(np.argmin(vals))
+    a = _fit_scalar(lambda x: cost({"factor": x}), grid[max(i - 1, 0):i + 2])
+    return {"factor": a, "stiffness_factor": a ** 2}
+
+
+def apply_damping_change(model: ModalModel, params: Mapping) -> ModalModel:
+    """Every damping ratio times ``factor`` (natural frequencies kept)."""
+    c = _check_positive("factor", params.get("factor"), "damping_change")
+    wn = np.abs(model.poles)
+    z = np.clip(-model.poles.real / wn * c, 0.0, 0.99)
+    new = -z * wn + 1j * wn * np.sqrt(1 - z ** 2)
+    return _replace_poles(model, new, model.poles.imag / new.imag)
+
+
+def fit_damping_change(ctx: FitContext, lines: np.ndarray) -> dict:
+    coarse = _modal_cost(ctx, lines, "damping_change", coarse=True)
+    cost = _modal_cost(ctx, lines, "damping_change")
+    grid = np.linspace(np.log(0.1), np.log(10.0), 47)
+    i = int(np.argmin([coarse({"factor": float(np.exp(x))}) for x in grid]))
+    g = _fit_scalar(lambda x: cost({"factor": float(np.exp(x))}), grid[max(i - 1, 0):i + 2])
+    return {"factor": float(np.exp(g))}
+
+
+def apply_exponential_window(model: ModalModel, params: Mapping) -> ModalModel:
+    """Decay rates plus ``1/tau_s`` (rad/s): an exponential window exp(-t/tau) on the response."""
+    tau = float(params.get("tau_s", np.inf))
+    if not tau > 0:
+        raise EffectError(f"exponential_window: tau_s must be > 0 (s), got {tau!r}")
+    return _replace_poles(model, model.poles - 1.0 / tau, np.ones(model.poles.size))
+
+
+def fit_exponential_window(ctx: FitContext, lines: np.ndarray) -> dict:
+    coarse = _modal_cost(ctx, lines, "exponential_window", coarse=True)
+    cost = _modal_cost(ctx, lines, "exponential_window")
+    f = ctx.measured.freq_hz[lines]
+    # added decay up to 5 % damping of a mode at the lowest analysed line
+    smax = 2 * np.pi * max(f[0], f[-1] / 50) * 0.05
+    grid = np.linspace(0.0, smax, 41)
+    i = int(np.argmin([coarse({"tau_s": 1.0 / max(x, 1e-9)}) for x in grid]))
+    s = _fit_scalar(lambda x: cost({"tau_s": 1.0 / max(x, 1e-9)}), grid[max(i - 1, 0):i + 2])
+    s = max(s, 1e-9)
+    return {"tau_s": 1.0 / s, "added_decay_per_s": s}
+
+
+def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
+    """A mass ``mass_kg`` at each output sensor (needs ``model.meta["output_shapes"]``, the
+    mass-normalised mode shapes (1/sqrt(kg)) at the outputs, shape (n_out, n_modes))."""
+    m = float(params.get("mass_kg", 0.0))
+    if not m >= 0:
+        raise EffectError(f"mass_loading: mass_kg must be >= 0 (kg), got {m!r}")
+    shapes = model.meta.get("output_shapes")
+    if shapes is None:
+        raise EffectError("mass_loading needs the mode shapes at the outputs (model.meta['output_shapes']); "
+                          "simulate from a frame configuration (TOML) instead of an FRF file")
+    phi = np.asarray(shapes, float)
+    mu = m * np.sum(phi ** 2, axis=0)
+    p = _model_power(model)
+    return _replace_poles(model, model.poles / np.sqrt(1 + mu), (1 + mu) ** (-(1 + p) / 2))
+
+
+def fit_mass_loading(ctx: FitContext, lines: np.ndarray) -> dict:
+    coarse = _modal_cost(ctx, lines, "mass_loading", coarse=True)
+    cost = _modal_cost(ctx, lines, "mass_loading")
+    phi = np.asarray(ctx.base.meta["output_shapes"], float)
+    f = ctx.measured.freq_hz[lines]
+    inband = (ctx.base.freq_hz >= f[0]) & (ctx.base.freq_hz <= f[-1])
+    smax = float(np.max(np.sum(phi ** 2, axis=0)[inband])) if inband.any() else float(np.max(np.sum(phi ** 2, axis=0)))
+    # step: at most 0.1 % frequency change of the most loaded mode; up to 30 % change
+    step = 0.002 / smax
+    mmax = 0.7 / smax
+    grid = np.arange(0.0, mmax + step, step)
+    vals = np.array([coarse({"mass_kg": x}) for x in grid])
+    i = int(np.argmin(vals))
+    m = _fit_scalar(lambda x: cost({"mass_kg": max(x, 0.0)}), grid[max(i - 1, 0):i + 2])
+    return {"mass_kg": max(m, 0.0)}
+
+
+def apply_missing_mode(model: ModalModel, params: Mapping) -> ModalModel:
+    """Add one mode: ``freq_hz`` (Hz), ``zeta``, ``residue`` [[ [re, im] per reference ] per output]."""
+    f = _check_positive("freq_hz", params.get("freq_hz"), "missing_mode")
+    z = float(params.get("zeta", 0.01))
+    if not 0 < z < 1:
+        raise EffectError(f"missing_mode: zeta must be in (0, 1), got {z!r}")
+    R = np.asarray(params.get("residue"), float)
+    shape = model.residues.shape[:2] + (2,)
+    if R.shape != shape:
+        raise EffectError(f"missing_mode: residue must be [re, im] pairs of shape {shape}, got {R.shape}")
+    Rc = (R[..., 0] + 1j * R[..., 1])[..., None]
+    return replace(model, poles=np.append(model.poles, pole_from_fz(f, z)),
+                   residues=np.concatenate([model.residues, Rc], axis=2))
+
+
+def _mode_kernels(ctx: FitContext, freq_hz: float, zeta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Measured-quantity response of a unit real and a unit imaginary residue (model units)."""
+    f = ctx.measured.freq_hz
+    jw = 2j * np.pi * f
+    lam = complex(pole_from_fz(freq_hz, zeta))
+    k1 = 1 / (jw - lam)
+    k2 = 1 / (jw - np.conj(lam))
+    conv = convert_quantity(np.ones_like(f, dtype=complex), f, ctx.base.quantity, ctx.measured.quantity)
+    return (k1 + k2) * conv, (1j * k1 - 1j * k2) * conv
+
+
+def _missing_mode_residuals(ctx: FitContext, lines: np.ndarray, fz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted residual vector and best residues (variable projection: the residues of each FRF are
+    linear, solved in closed form) for a mode (f Hz, zeta); residues shape (n_out, n_ref, 2)."""
+    a, b = _mode_kernels(ctx, fz[0], fz[1])
+    a, b = a[lines], b[lines]
+    E = ctx.measured.H[..., lines] - ctx.sim.H[..., lines]
+    W = ctx.weights[..., lines]
+    # normal equations per FRF: [[aa, ab], [ab, bb]] x = [ae, be] (real inner products, weighted)
+    aa = np.sum(W * np.abs(a) ** 2, axis=-1)
+    bb = np.sum(W * np.abs(b) ** 2, axis=-1)
+    ab = np.sum(W * np.real(np.conj(a) * b), axis=-1)
+    ae = np.sum(W * np.real(np.conj(a) * E), axis=-1)
+    be = np.sum(W * np.real(np.conj(b) * E), axis=-1)
+    det = aa * bb - ab ** 2
+    det = np.where(det == 0, 1e-300, det)
+    x1 = (bb * ae - ab * be) / det
+    x2 = (aa * be - ab * ae) / det
+    r = (E - x1[..., None] * a - x2[..., None] * b) * np.sqrt(W)
+    return np.concatenate([r.real.ravel(), r.imag.ravel()]), np.stack([x1, x2], axis=-1)
+
+
+def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
+    f = ctx.measured.freq_hz
+    E = ctx.measured.H - ctx.sim.H
+    power = np.sum(ctx.weights * np.abs(E) ** 2, axis=(0, 1))
+    df = float(np.median(np.diff(f)))
+    # a resonance just past a band edge still shows inside the band: allow 5 % beyond the edges
+    lo, hi = f[lines][0] / 1.05, f[lines][-1] * 1.05
+    # candidates: the largest local maxima of the weighted residual power (all lines, smoothed)
+    sm = np.convolve(power, np.ones(3) / 3, mode="same")
+    order = np.argsort(sm)[::-1]
+    cands: list[float] = []
+    for k in order:
+        if len(cands) >= 3:
+            break
+        if all(abs(f[k] - c) > 10 * df for c in cands):
+            cands.append(float(f[k]))
+    best = None
+    for fc in cands:
+        zs = [(float(np.sum(_missing_mode_residuals(ctx, lines, np.array([fc, z]))[0] ** 2)), z)
+              for z in (0.002, 0.005, 0.01, 0.02, 0.05)]
+        z0 = min(zs)[1]
+        res = least_squares(lambda x: _missing_mode_residuals(ctx, lines, np.array([x[0], np.exp(x[1])]))[0],
+                            np.array([fc, np.log(z0)]), bounds=([lo, np.log(1e-4)], [hi, np.log(0.3)]),
+                            x_scale=[df, 0.3], method="trf", max_nfev=100)
+        r, R = _missing_mode_residuals(ctx, lines, np.array([res.x[0], np.exp(res.x[1])]))
+        c = float(np.sum(r ** 2))
+        if best is None or c < best[0]:
+            best = (c, float(res.x[0]), float(np.exp(res.x[1])), R)
+    _, fm, zm, R = best
+    return {"freq_hz": fm, "zeta": zm, "residue": R.tolist()}
+
+
+# --------------------------------------------------------------------------- FRF effects
+def apply_residual_modes(frf: FRFSet, params: Mapping) -> FRFSet:
+    """Add ``UR (jw)^q + LR (jw)^q / w^2`` per FRF (``upper`` m/N, ``lower`` m/N (rad/s)^2)."""
+    shape = frf.H.shape[:2]
+    UR = np.asarray(params.get("upper", np.zeros(shape)), float)
+    LR = np.asarray(params.get("lower", np.zeros(shape)), float)
+    if UR.shape != shape or LR.shape != shape:
+        raise EffectError(f"residual_modes: upper and lower must have shape {shape} (outputs x references)")
+    B = residual_basis(frf.omega, frf.quantity, "physical")
+    return replace(frf, H=frf.H + UR[..., None] * B[0] + LR[..., None] * B[1])
+
+
+def fit_residual_modes(ctx: FitContext, lines: np.ndarray) -> dict:
+    B = residual_basis(ctx.measured.omega, ctx.measured.quantity, "physical")[:, lines]
+    E = ctx.measured.H[..., lines] - ctx.sim.H[..., lines]
+    W = ctx.weights[..., lines]
+    no, nr = E.shape[:2]
+    UR, LR = np.zeros((no, nr)), np.zeros((no, nr))
+    for o in range(no):
+        for r in range(nr):
+            sw = np.sqrt(W[o, r])
+            A = (B * sw).T
+            A = np.vstack([A.real, A.imag])
+            y = np.concatenate([(E[o, r] * sw).real, (E[o, r] * sw).imag])
+            scale = np.linalg.norm(A, axis=0)
+            scale[scale == 0] = 1.0
+            x, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
+            UR[o, r], LR[o, r] = x / scale
+    return {"upper": UR.tolist(), "lower": LR.tolist()}
+
+
+def highpass_response(freq_hz: np.ndarray, corner_hz: float, order: int) -> np.ndarray:
+    """Butterworth-like cascade of ``order`` first-order high-passes: (s/wc / (1 + s/wc))^order."""
+    s = 1j * np.asarray(freq_hz, float) / corner_hz
+    return (s / (1 + s)) ** order
+
+
+def apply_sensor_highpass(frf: FRFSet, params: Mapping) -> FRFSet:
+    """Response-sensor low-frequency roll-off: ``corner_hz`` (Hz), ``order`` (1 or 2)."""
+    fc = _check_positive("corner_hz", params.get("corner_hz"), "sensor_highpass")
+    n = int(params.get("order", 1))
+    if n not in (1, 2, 3):
+        raise EffectError(f"sensor_highpass: order must be 1, 2 or 3, got {n!r}")
+    return replace(frf, H=frf.H * highpass_response(frf.freq_hz, fc, n))
+
+
+def fit_sensor_highpass(ctx: FitContext, lines: np.ndarray) -> dict:
+    f = ctx.measured.freq_hz
+    f0 = max(f[lines][0], 1e-3)
+    best = None
+    for n in (1, 2):
+        def cost(lfc: float) -> float:
+            return ctx.cost(ctx.sim.H * highpass_response(f, float(np.exp(lfc)), n), lines)
+        grid = np.linspace(np.log(f0 / 30), np.log(f0 * 10), 61)
+        x = _fit_scalar(cost, grid)
+        c = cost(x)
+        if best is None or c < best[0]:
+            best = (c, float(np.exp(x)), n)
+    return {"corner_hz": best[1], "order": best[2]}
+
+
+def apply_time_delay(frf: FRFSet, params: Mapping) -> FRFSet:
+    """A delay ``delay_s`` (s) of the responses against the force: ``H *= exp(-j w delay)``."""
+    d = float(params.get("delay_s", 0.0))
+    if not np.isfinite(d):
+        raise EffectError(f"time_delay: delay_s must be a finite number of seconds, got {d!r}")
+    return replace(frf, H=frf.H * np.exp(-1j * frf.omega * d))
+
+
+def fit_time_delay(ctx: FitContext, lines: np.ndarray) -> dict:
+    w = ctx.measured.omega
+    fmax = ctx.measured.freq_hz[lines][-1]
+
+    def cost(d: float) -> float:
+        return ctx.cost(ctx.sim.H * np.exp(-1j * w * d), lines)
+    span = 0.45 / fmax
+    d = _fit_scalar(cost, np.linspace(-span, span, 91))
+    return {"delay_s": d}
+
+
+def apply_sensitivity_error(frf: FRFSet, params: Mapping) -> FRFSet:
+    """Output channel o read with a calibration off by ``gains[o]`` (dict label -> gain, or a list)."""
+    g = params.get("gains", {})
+    gains = np.ones(frf.n_outputs)
+    if isinstance(g, Mapping):
+        for label, v in g.items():
+            if label not in frf.outputs:
+                raise EffectError(f"sensitivity_error: output {label!r} is not one of {list(frf.outputs)}")
+            gains[frf.outputs.index(label)] = float(v)
+    else:
+        gains = np.asarray(g, float).reshape(frf.n_outputs)
+    return replace(frf, H=frf.H * gains[:, None, None])
+
+
+def fit_sensitivity_error(ctx: FitContext, lines: np.ndarray) -> dict:
+    Hs, Hm, W = ctx.sim.H[..., lines], ctx.measured.H[..., lines], ctx.weights[..., lines]
+    num = np.sum(W * np.real(np.conj(Hs) * Hm), axis=(1, 2))
+    den = np.sum(W * np.abs(Hs) ** 2, axis=(1, 2))
+    g = np.where(den > 0, num / np.where(den > 0, den, 1), 1.0)
+    worst = int(np.argmax(np.abs(np.log(np.abs(g) + 1e-300))))
+    return {"gains": {lab: float(v) for lab, v in zip(ctx.measured.outputs, g)},
+            "channel": ctx.measured.outputs[worst], "gain": float(g[worst])}
+
+
+def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """(harmonic frequencies (Hz), kernels (n_harm, n_freq)) of the line shape 1/(1 + j (f - fk)/width)."""
+    f = np.asarray(freq_hz, float)
+    fk = base_hz * np.arange(1, int(f[-1] // base_hz) + 1)
+    fk = fk[fk >= f[0] - 2 * width_hz]
+    return fk, 1.0 / (1 + 1j * (f[None, :] - fk[:, None]) / width_hz)
+
+
+def default_hum_width(freq_hz: np.ndarray) -> float:
+    """Line width (Hz) of the hum model: two line spacings."""
+    return 2.0 * float(np.median(np.diff(freq_hz)))
+
+
+def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
+    """Add lines at the harmonics of ``base_hz``: ``amplitudes[o][r][k] = [re, im]`` (FRF units)."""
+    f0 = _check_positive("base_hz", params.get("base_hz"), "mains_hum")
+    width = float(params.get("width_hz") or default_hum_width(frf.freq_hz))
+    fk, K = hum_kernels(frf.freq_hz, f0, width)
+    A = np.asarray(params.get("amplitudes"), float)
+    if A.shape != frf.H.shape[:2] + (fk.size, 2):
+        raise EffectError(f"mains_hum: amplitudes must have shape {frf.H.shape[:2] + (fk.size, 2)} "
+                          f"(outputs, references, harmonics {list(fk)}, [re, im]); got {A.shape}")
+    Ac = A[..., 0] + 1j * A[..., 1]
+    return replace(frf, H=frf.H + np.einsum("ork,kf->orf", Ac, K))
+
+
+def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
+    f = ctx.measured.freq_hz
+    width = default_hum_width(f)
+    E = ctx.measured.H - ctx.sim.H
+    best = None
+    for f0 in HUM_BASES_HZ:
+        fk, K = hum_kernels(f, f0, width)
+        if fk.size == 0:
+            continue
+        Kl = K[:, lines]
+        no, nr = E.shape[:2]
+        A = np.zeros((no, nr, fk.size, 2))
+        total = 0.0
+        for o in range(no):
+            for r in range(nr):
+                sw = np.sqrt(ctx.weights[o, r, lines])
+                M = (Kl * sw).T
+                x, *_ = np.linalg.lstsq(M, E[o, r, lines] * sw, rcond=None)
+                A[o, r, :, 0], A[o, r, :, 1] = x.real, x.imag
+                total += float(np.sum(np.abs(E[o, r, lines] * sw - M @ x) ** 2))
+        if best is None or total < best[0]:
+            best = (total, f0, A)
+    if best is None:
+        return {"base_hz": 50.0, "width_hz": width, "amplitudes": np.zeros(ctx.measured.H.shape[:2] + (0, 2)).tolist()}
+    return {"base_hz": best[1], "width_hz": width, "amplitudes": best[2].tolist()}
+
+
+# --------------------------------------------------------------------------- registry
+EFFECTS: dict[str, Effect] = {e.name: e for e in (
+    Effect("residual_modes", "frf", apply_residual_modes, fit_residual_modes, "upper",
+           "modes outside the band (upper and lower residual terms)"),
+    Effect("sensor_highpass", "frf", apply_sensor_highpass, fit_sensor_highpass, "corner_hz",
+           "AC coupling / IEPE / piezo low-frequency roll-off of the response sensor"),
+    Effect("time_delay", "frf", apply_time_delay, fit_time_delay, "delay_s",
+           "a delay between force and response channels (e.g. different anti-alias filters)"),
+    Effect("mass_loading", "modal", apply_mass_loading, fit_mass_loading, "mass_kg",
+           "the accelerometers' mass lowers the frequencies in proportion to the mode shape at their points",
+           needs=("output_shapes",)),
+    Effect("missing_mode", "modal", apply_missing_mode, fit_missing_mode, "freq_hz",
+           "a mode the simulation lacks"),
+    Effect("stiffness_shift", "modal", apply_stiffness_shift, fit_stiffness_shift, "factor",
+           "all natural frequencies scaled alike (stiffness or material off)"),
+    Effect("damping_change", "modal", apply_damping_change, fit_damping_change, "factor",
+           "all damping ratios scaled alike"),
+    Effect("exponential_window", "modal", apply_exponential_window, fit_exponential_window, "tau_s",
+           "an exponential window added decay 1/tau to every mode"),
+    Effect("sensitivity_error", "frf", apply_sensitivity_error, fit_sensitivity_error, "gain",
+           "a channel's calibration (sensitivity) is wrong"),
+    Effect("mains_hum", "frf", apply_mains_hum, fit_mains_hum, "base_hz",
+           "lines at the mains frequency (50/60 Hz) and its harmonics"),
+)}
+
+
+def effect_names() -> tuple[str, ...]:
+    """Names of the catalogue, in its order."""
+    return tuple(EFFECTS)
+
+
+def _lookup(spec: Mapping) -> tuple[Effect, dict]:
+    if not isinstance(spec, Mapping) or "effect" not in spec:
+        raise EffectError(f"an effect is a dict {{'effect': NAME, ...parameters}}; got {spec!r}")
+    name = spec["effect"]
+    if name not in EFFECTS:
+        raise EffectError(f"unknown effect {name!r}; the catalogue has {', '.join(EFFECTS)}")
+    return EFFECTS[name], {k: v for k, v in spec.items() if k != "effect"}
+
+
+def _correction(corr: FRFSet, freq_hz: np.ndarray, quantity: str) -> np.ndarray:
+    """A fixed FRF term (``base.meta["frf_correction"]``) at ``freq_hz`` in ``quantity`` (linear
+    interpolation of real and imaginary parts between its lines; zero outside them)."""
+    H = convert_quantity(corr.H, corr.freq_hz, corr.quantity, quantity)
+    if corr.freq_hz.size == np.size(freq_hz) and np.allclose(corr.freq_hz, freq_hz):
+        return H
+    out = np.zeros(H.shape[:2] + (np.size(freq_hz),), complex)
+    for o in range(H.shape[0]):
+        for r in range(H.shape[1]):
+            out[o, r] = (np.interp(freq_hz, corr.freq_hz, H[o, r].real, left=0, right=0)
+                         + 1j * np.interp(freq_hz, corr.freq_hz, H[o, r].imag, left=0, right=0))
+    return out
+
+
+def predict(
+    base: ModalModel,
+    freq_hz: np.ndarray,
+    quantity: str,
+    effects: Sequence[Mapping] = (),
+    *,
+    outputs: Optional[Sequence[str]] = None,
+    references: Optional[Sequence[str]] = None,
+) -> FRFSet:
+    """The simulation extended by ``effects`` (list of ``{"effect": name, **params}``) at ``freq_hz``
+    (Hz) in ``quantity``: modal effects change the model, then it is synthesised (eq. 11), converted to
+    ``quantity`` and the FRF effects are applied, each in list order. Inputs are not modified.
+
+    A base built from measured-like simulated FRFs may carry ``meta["frf_correction"]``, an FRFSet
+    added after synthesis (the part of those FRFs its modal model does not reproduce), so that the
+    prediction without effects equals the simulated FRFs."""
+    model = base
+    for spec in effects:
+        eff, params = _lookup(spec)
+        if eff.kind == "modal":
+            model = eff.apply(model, params)
+    frf = synthesize(model, freq_hz)
+    corr = base.meta.get("frf_correction")
+    if corr is not None:
+        frf = replace(frf, H=frf.H + _correction(corr, frf.freq_hz, frf.quantity))
+    if frf.quantity != quantity:
+        frf = replace(frf, H=convert_quantity(frf.H, frf.freq_hz, frf.quantity, quantity), quantity=quantity)
+    if outputs is not None:
+        frf = replace(frf, outputs=tuple(outputs))
+    if references is not None:
+        frf = replace(frf, references=tuple(references))
+    for spec in effects:
+        eff, params = _lookup(spec)
+        if eff.kind == "frf":
+            frf = eff.apply(frf, params)
+    return frf

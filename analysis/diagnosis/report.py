@@ -1,0 +1,153 @@
+"""The diagnosis report: plots (measured, simulated, extended) and a short text an engineer can act on.
+
+Figures are :class:`matplotlib.figure.Figure` objects drawn with the Agg canvas (no pyplot state).
+"""
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .compare import band_errors
+from .verdict import Diagnosis
+
+__all__ = ["frf_figure", "band_figure", "report_text", "write_report", "ACTIONS"]
+
+log = logging.getLogger(__name__)
+
+# What to do about each verdict (first sentence of the report).
+ACTIONS = {
+    "residual_modes": "Add upper/lower residual terms (modes outside the band) to the model, or widen the "
+                      "simulated mode set; the in-band modes are fine.",
+    "sensor_highpass": "The response sensor rolls off at low frequency (AC coupling / IEPE / piezo): start the "
+                       "analysis band well above the corner, use DC coupling, or model the roll-off.",
+    "time_delay": "Force and response channels are delayed against each other (different anti-alias filters "
+                  "or sample skew): use matched channels or correct the phase by exp(j w delay).",
+    "mass_loading": "The accelerometers' mass lowers the frequencies: add the sensor masses at their nodes "
+                    "in the model, or use lighter sensors.",
+    "missing_mode": "The structure has a mode the model lacks: check the model's mode set (a component, "
+                    "a local mode, a support or joint degree of freedom) near the fitted frequency.",
+    "stiffness_shift": "All frequencies are off by the same factor: update the material stiffness or the "
+                       "section properties (stiffness scales by the square of the fitted factor).",
+    "damping_change": "The damping ratios are off by a common factor: update the model's damping.",
+    "exponential_window": "An exponential window added damping sigma = 1/tau: correct the fitted damping "
+                          "(or record exp_window_tau_s with the FRFs).",
+    "sensitivity_error": "A channel's calibration is wrong: recalibrate or correct the sensitivity of the "
+                         "named channel by the fitted gain.",
+    "mains_hum": "Mains hum at the named base frequency and harmonics: check grounding and cable routing; "
+                 "ignore those lines in fits.",
+    "none": "The simulation explains the measurement within its noise: nothing to fix.",
+    "unexplained": "No effect of the catalogue explains the difference: look at the named bands and modes.",
+}
+
+
+def _save(fig: Figure, path: Path) -> None:
+    FigureCanvasAgg(fig)
+    fig.savefig(path, dpi=110)
+
+
+def frf_figure(diag: Diagnosis, output: int = 0, reference: int = 0) -> Figure:
+    """Magnitude (dB) and phase (deg) of one FRF: measured, simulated and extended."""
+    fig = Figure(figsize=(8, 6))
+    ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
+    f = diag.measured.freq_hz
+    for frf, label, style in ((diag.measured, "measured", "k-"), (diag.simulated, "simulated", "b--"),
+                              (diag.extended, f"extended ({diag.verdict})", "r:")):
+        h = frf.H[output, reference]
+        ax1.plot(f, 20 * np.log10(np.abs(h) + 1e-300), style, lw=1, label=label)
+        ax2.plot(f, np.degrees(np.angle(h)), style, lw=1)
+    ax1.set_ylabel(f"|H| dB re 1 {diag.measured.unit or diag.measured.quantity}")
+    ax1.set_title(f"{diag.measured.outputs[output]} / {diag.measured.references[reference]}")
+    ax1.legend(fontsize=8)
+    ax2.set_ylabel("phase (deg)")
+    ax2.set_xlabel("frequency (Hz)")
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def band_figure(diag: Diagnosis) -> Figure:
+    """Error per band (dB) of the simulation and of the extension, with the noise level."""
+    from .compare import line_weights
+
+    w = line_weights(diag.measured)
+    before = band_errors(diag.measured, diag.simulated.H, w)
+    after = band_errors(diag.measured, diag.extended.H, w)
+    fig = Figure(figsize=(8, 4))
+    ax = fig.add_subplot(1, 1, 1)
+    x = np.arange(len(before))
+    ax.bar(x - 0.2, [b["error_db"] for b in before], 0.4, label="simulation")
+    ax.bar(x + 0.2, [b["error_db"] for b in after], 0.4, label=f"extended ({diag.verdict})")
+    ax.axhline(diag.noise_db["difference"], color="k", ls="--", lw=1, label="noise level")
+    ax.set_xticks(x)
+    ax.set_xticklabels([f"{b['lo_hz']:.3g}-{b['hi_hz']:.3g}" for b in before], rotation=30, fontsize=7)
+    ax.set_ylabel("error (dB)")
+    ax.set_xlabel("band (Hz)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def report_text(diag: Diagnosis) -> str:
+    """The ``report.md`` text: verdict, action, evidence, mode table, bands, coherence."""
+    L = [f"# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {ACTIONS.get(diag.verdict, '')}", ""]
+    L.append(f"Held-out error of the simulation {diag.error_before_db:.1f} dB, after the extension "
+             f"{diag.error_after_db:.1f} dB; noise level {diag.noise_db['difference']:.1f} dB "
+             f"(relative squared error, see docs/diagnosis.md).")
+    L += ["", "## Causes (cross-validated gain)", "", "| effect | gain dB | z | significant | evidence |",
+          "|---|---|---|---|---|"]
+    for c in diag.causes:
+        L.append(f"| {c['effect']} | {c['gain_db']:.2f} | {c['z']:.1f} | {'yes' if c['significant'] else 'no'} "
+                 f"| {c['evidence']} |")
+    if diag.skipped:
+        L += ["", "Not tried: " + "; ".join(f"{k} ({v})" for k, v in diag.skipped.items())]
+    modes = diag.comparison["modes"]
+    L += ["", "## Modes (simulation vs measurement)", "",
+          "| measured Hz | simulated Hz | df % | zeta meas | zeta sim | amplitude dB | phase deg | MAC |",
+          "|---|---|---|---|---|---|---|---|"]
+    for p in modes["pairs"]:
+        L.append(f"| {p['measured_hz']:.3f} | {p['simulated_hz']:.3f} | {p['df_percent']:+.2f} | "
+                 f"{p['measured_damping']:.4f} | {p['simulated_damping']:.4f} | {p['amplitude_db']:+.1f} | "
+                 f"{p['phase_deg']:+.0f} | {p['mac']:.2f} |")
+    if modes["only_measured"]:
+        L.append("\nPeaks only in the measurement: " + ", ".join(f"{m['freq_hz']:.2f} Hz" for m in modes["only_measured"]))
+    if modes["only_simulated"]:
+        L.append("\nPeaks only in the simulation: " + ", ".join(f"{m['freq_hz']:.2f} Hz" for m in modes["only_simulated"]))
+    L += ["", "## Error per band and channel (simulation)", ""]
+    L += [f"- {b['lo_hz']:.3g}-{b['hi_hz']:.3g} Hz: {b['error_db']:.1f} dB" for b in diag.comparison["bands"]]
+    L += [f"- {c['output']} / {c['reference']}: {c['error_db']:.1f} dB" for c in diag.comparison["channels"]]
+    if diag.unexplained:
+        L += ["", "Bands still above the noise after the extension: "
+              + ", ".join(f"{b['lo_hz']:.3g}-{b['hi_hz']:.3g} Hz ({b['error_db']:.1f} dB)" for b in diag.unexplained)]
+    if diag.comparison["doubtful_coherence"]:
+        L += ["", "Coherence below 0.9 (the measurement itself is doubtful there): "
+              + ", ".join(f"{r['lo_hz']:.2f}-{r['hi_hz']:.2f} Hz (min {r['min_coherence']:.2f})"
+                          for r in diag.comparison["doubtful_coherence"][:20])]
+    return "\n".join(L) + "\n"
+
+
+def write_report(diag: Diagnosis, outdir: "str | Path", max_frf_plots: int = 6) -> Path:
+    """Write ``report.md``, ``diagnosis.json``, ``bands.png`` and ``frf_<o>_<r>.png`` into ``outdir``."""
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    n = 0
+    images = []
+    for o in range(diag.measured.n_outputs):
+        for r in range(diag.measured.n_references):
+            if n >= max_frf_plots:
+                break
+            name = f"frf_{o}_{r}.png"
+            _save(frf_figure(diag, o, r), out / name)
+            images.append(name)
+            n += 1
+    _save(band_figure(diag), out / "bands.png")
+    text = report_text(diag) + "\n## Plots\n\n![bands](bands.png)\n\n" + "\n\n".join(f"![{i}]({i})" for i in images) + "\n"
+    (out / "report.md").write_text(text)
+    (out / "diagnosis.json").write_text(json.dumps(diag.to_json(), indent=1))
+    log.info("report written to %s", out)
+    return out / "report.md"

@@ -1,0 +1,349 @@
+"""Nonlinear least-squares frequency-domain (LSFD) modal fit: Gauss-Newton and Levenberg-Marquardt.
+
+The model is the paper's eq. (10)/(11)::
+
+    H_ij(w) = sum_r [ R_ijr / (jw - lambda_r) + conj(R_ijr) / (jw - conj(lambda_r)) ] + residual terms
+
+with poles ``lambda_r`` (rad/s) shared by every FRF of the set, residues ``R_ijr`` free per
+FRF, and the residual terms of :func:`analysis.modal.residual_basis` (``"paper"``:
+``UR + LR / w^2``). The sum of squared errors (eq. (14), summed over all FRFs)
+
+    S = sum_ij sum_k |H_ij(w_k) - G_ij(w_k)|^2
+
+is minimised over the poles by Gauss-Newton (eq. (7)) or Levenberg-Marquardt (eq. (9));
+the residues and residual terms are solved exactly at each iterate (variable projection,
+see :mod:`analysis._lsfd_kernels`). The mathematics, mu update and stopping rules are in
+``docs/lsfd.md``.
+
+Exponential window
+------------------
+A window ``w(t) = exp(-t / tau)`` on the responses turns every mode ``R e^{lambda t}`` into
+``R e^{(lambda - 1/tau) t}``: each pole is shifted by ``-1/tau`` (rad/s) and the residues are
+unchanged. The fit sees the shifted poles (``poles_raw``); with ``correct_exp_window`` the
+reported poles are ``lambda = lambda_raw + 1/tau``. ``initial_poles`` are taken as seen in the
+data (raw), as LSCE/LSCF on the same FRFs return them.
+"""
+from __future__ import annotations
+
+import logging
+import warnings
+from dataclasses import dataclass, field, replace
+from typing import Optional
+
+import numpy as np
+
+from ._gn import run_gn
+from ._lm import run_lm
+from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, poles_to_theta, theta_to_poles
+from .frf import FRFSet
+from .modal import RESIDUAL_FORMS, ModalModel, damped_freq_hz, damping_ratio, natural_freq_hz
+from .uncertainty import covariance_from_normal, fz_std
+
+__all__ = ["fit_lsfd", "LSFDResult", "LSFDConvergenceWarning", "rank_one_split", "METHODS", "Status"]
+
+log = logging.getLogger(__name__)
+
+METHODS = ("lm", "gn")
+
+
+class LSFDConvergenceWarning(RuntimeWarning):
+    """The LSFD iteration stopped at ``max_iter`` before meeting its tolerances."""
+
+
+@dataclass(frozen=True)
+class LSFDResult:
+    """Outcome of :func:`fit_lsfd`.
+
+    poles : (m,) complex rad/s, after exponential-window correction (Im > 0).
+    poles_raw : (m,) as fitted to the data (window damping included).
+    freq_hz, damping, damped_freq_hz : natural frequency (Hz), damping ratio, damped frequency (Hz) of ``poles``.
+    freq_hz_std, damping_std : standard deviations from the Jacobian and the residual variance.
+    model : the fitted :class:`ModalModel` (``poles`` corrected; residues in FRF units x rad/s).
+    mode_shapes : (n_out, m) complex psi; participation : (m, n_ref) complex L; ``R[:, :, r] ~ psi_r L_r``
+        (each L_r scaled so that its largest entry is 1; single reference: L = 1, psi = residues).
+    sse : final S (weighted when weights are given); history : S per iteration (first = initial S).
+    iterations, nfev : iterations done, model evaluations.
+    status, message, success : see :class:`analysis._lsfd_kernels.Status` (> 0 is success).
+    method : "lm" or "gn"; band : (lo, hi) Hz of the lines used.
+    noise_var : estimated ``E|e|^2`` per line, ``2 S / (2 N n_frf - n_params)`` (N: lines of non-zero weight).
+    cov_poles : (2m, 2m) covariance of (Re lambda_1, Im lambda_1, Re lambda_2, ...) (rad/s)^2.
+    per_frf : with ``per_frf=True``, one result per (output, reference) FRF (C order), else None.
+    initial_poles : the poles the iteration started from (raw).
+    """
+
+    poles: np.ndarray
+    poles_raw: np.ndarray
+    freq_hz: np.ndarray
+    damping: np.ndarray
+    damped_freq_hz: np.ndarray
+    freq_hz_std: np.ndarray
+    damping_std: np.ndarray
+    model: ModalModel
+    mode_shapes: Optional[np.ndarray]
+    participation: Optional[np.ndarray]
+    sse: float
+    history: list
+    iterations: int
+    nfev: int
+    status: int
+    message: str
+    success: bool
+    method: str
+    band: tuple
+    noise_var: float
+    cov_poles: np.ndarray
+    per_frf: Optional[list] = None
+    initial_poles: Optional[np.ndarray] = field(default=None, repr=False)
+
+
+def rank_one_split(residues: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split ``R[:, :, r]`` (n_out x n_ref) per mode into ``psi_r L_r`` by its leading singular pair.
+
+    Returns ``psi`` (n_out, m), ``L`` (m, n_ref) with the largest-magnitude entry of each ``L_r``
+    equal to 1, and the ratio ``s_2 / s_1`` per mode (0 for an exact rank-one residue matrix).
+    """
+    R = np.asarray(residues, dtype=complex)
+    n_out, n_ref, m = R.shape
+    psi = np.zeros((n_out, m), dtype=complex)
+    L = np.zeros((m, n_ref), dtype=complex)
+    ratio = np.zeros(m)
+    for r in range(m):
+        U, s, Vh = np.linalg.svd(R[:, :, r], full_matrices=False)
+        if s[0] == 0:
+            L[r] = 1.0
+            continue
+        lr = Vh[0]
+        k = int(np.argmax(np.abs(lr)))
+        c = lr[k]
+        L[r] = lr / c
+        psi[:, r] = U[:, 0] * s[0] * c
+        ratio[r] = s[1] / s[0] if s.size > 1 else 0.0
+    return psi, L, ratio
+
+
+# --------------------------------------------------------------------------- input checks
+def _check_poles(initial_poles: np.ndarray) -> np.ndarray:
+    p = np.atleast_1d(np.asarray(initial_poles))
+    if p.ndim != 1 or p.size == 0:
+        raise ValueError("initial_poles must be a non-empty 1-D array of complex poles (rad/s)")
+    if not np.iscomplexobj(p):
+        raise ValueError(
+            "initial_poles must be complex poles sigma + j omega_d in rad/s; "
+            "build them from (f_n Hz, zeta) with analysis.modal.pole_from_fz"
+        )
+    p = p.astype(complex)
+    if not np.all(np.isfinite(p)):
+        raise ValueError("initial_poles contain NaN or infinity")
+    if np.any(p.imag <= 0):
+        raise ValueError(
+            "initial_poles must lie in the upper half plane (Im lambda > 0, one pole per mode); "
+            "drop the conjugates / real poles"
+        )
+    if np.any(p.real >= 0):
+        raise ValueError("initial_poles must be stable (Re lambda < 0); drop or fix the unstable poles")
+    d = np.abs(p[:, None] - p[None, :])
+    np.fill_diagonal(d, np.inf)
+    if np.any(d <= 1e-9 * np.abs(p)[:, None]):
+        raise ValueError("initial_poles contain duplicates; give each mode once")
+    return p
+
+
+def _check_weights(weights, n_out: int, n_ref: int, n_freq: int) -> tuple[Optional[np.ndarray], Optional[np.ndarray]]:
+    if weights is None:
+        return None, None
+    w = np.asarray(weights, dtype=float)
+    if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+        raise ValueError("weights must be finite, >= 0 and not all zero")
+    if w.shape == (n_freq,):
+        return w, None
+    if w.shape == (n_out, n_ref):
+        if np.any(w == 0):
+            raise ValueError("FRF weights must be > 0; drop an FRF with FRFSet.select instead of weighting it 0")
+        return None, w.reshape(-1)
+    raise ValueError(
+        f"weights must have shape (n_freq,) = ({n_freq},) for per-line weights or (n_out, n_ref) = "
+        f"({n_out}, {n_ref}) for per-FRF weights; got {w.shape}"
+    )
+
+
+# --------------------------------------------------------------------------- main entry
+def fit_lsfd(
+    frf: FRFSet,
+    initial_poles: np.ndarray,
+    *,
+    method: str = "lm",
+    band: tuple[float, float] | None = None,
+    residual_form: str = "physical",
+    per_frf: bool = False,
+    max_iter: int = 100,
+    ftol: float = 1e-12,
+    xtol: float = 1e-10,
+    mu0: float | None = None,
+    correct_exp_window: bool = True,
+    weights: np.ndarray | None = None,
+) -> LSFDResult:
+    """Fit global poles, residues and residual terms to an FRF set by nonlinear least squares.
+
+    Parameters
+    ----------
+    frf : the FRFs (any quantity; the residual basis follows ``frf.quantity``).
+    initial_poles : (m,) complex rad/s, Im > 0, Re < 0, as seen in the data (e.g. from LSCE).
+    method : "lm" (Levenberg-Marquardt, eq. (9)) or "gn" (Gauss-Newton, eq. (7)).
+    band : (lo_hz, hi_hz) lines to use, or None for all.
+    residual_form : "physical", "paper" (UR + LR/w^2) or "none"; see :mod:`analysis.modal`.
+    per_frf : also fit every (output, reference) FRF alone with its own poles (``result.per_frf``).
+    max_iter : iteration cap (reaching it gives status 0 and an :class:`LSFDConvergenceWarning`).
+    ftol : stop when the relative decrease of S on an accepted step is <= ftol.
+    xtol : stop when ``max_r |d lambda_r| / |lambda_r| <= xtol``.
+    mu0 : initial LM damping relative to the diagonal of J^T J (default 1e-3); ignored by GN.
+    correct_exp_window : remove ``1/frf.exp_window_tau_s`` from every pole's decay rate.
+    weights : (n_freq,) per-line or (n_out, n_ref) per-FRF amplitude weights: S = sum |w e|^2.
+
+    Returns
+    -------
+    :class:`LSFDResult`. Non-convergence, divergence of GN, unstable or collapsing poles are
+    reported in ``status`` / ``message`` / ``success``, never raised.
+    """
+    if not isinstance(frf, FRFSet):
+        raise TypeError(f"frf must be an analysis.frf.FRFSet; got {type(frf).__name__}")
+    method = str(method).lower()
+    if method not in METHODS:
+        raise ValueError(f"method {method!r} is not one of {METHODS}")
+    if residual_form not in RESIDUAL_FORMS:
+        raise ValueError(f"residual_form {residual_form!r} is not one of {RESIDUAL_FORMS}")
+    if int(max_iter) < 1:
+        raise ValueError(f"max_iter must be >= 1; got {max_iter}")
+    if not (ftol >= 0 and xtol >= 0):
+        raise ValueError(f"ftol and xtol must be >= 0; got ftol={ftol}, xtol={xtol}")
+    if mu0 is not None and not mu0 > 0:
+        raise ValueError(f"mu0 must be > 0 (or None for the default); got {mu0}")
+    lam0 = _check_poles(initial_poles)
+    full_weights = weights
+    if band is not None:
+        lo, hi = float(band[0]), float(band[1])
+        if not lo < hi:
+            raise ValueError(f"band must be (lo_hz, hi_hz) with lo < hi; got {band}")
+        if weights is not None and np.ndim(weights) == 1:
+            sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
+            if np.shape(weights)[0] != frf.freq_hz.size:
+                raise ValueError(f"per-line weights must have the FRF's {frf.freq_hz.size} lines before the band")
+            full_weights = np.asarray(weights)[sel]
+        frf = frf.band(lo, hi)
+    if np.any(frf.freq_hz <= 0) and residual_form != "none":
+        raise ValueError(
+            "the band includes f <= 0 Hz where the residual terms are undefined; start the band above 0 Hz"
+        )
+    if not np.all(np.isfinite(frf.H)):
+        raise ValueError("the FRFs contain NaN or infinite values; restrict the band or drop those FRFs")
+    n_out, n_ref, N = frf.H.shape
+    line_w, frf_w = _check_weights(full_weights, n_out, n_ref, N)
+    outcome, prob = _run(frf, lam0, method, residual_form, line_w, frf_w, int(max_iter), ftol, xtol, mu0)
+    sub = None
+    if per_frf:
+        sub = []
+        for o in range(n_out):
+            for r in range(n_ref):
+                coh = None if frf.coherence is None else frf.coherence[o:o + 1, r:r + 1]
+                one = replace(frf, H=frf.H[o:o + 1, r:r + 1], outputs=(frf.outputs[o],),
+                              references=(frf.references[r],), coherence=coh)
+                oc, pb = _run(one, lam0, method, residual_form, line_w, None, int(max_iter), ftol, xtol, mu0)
+                sub.append(_result(one, pb, oc, method, residual_form, correct_exp_window, lam0, None))
+    return _result(frf, prob, outcome, method, residual_form, correct_exp_window, lam0, sub)
+
+
+def _n_lines(prob: ProjectedProblem) -> int:
+    """Lines that count as observations (non-zero line weight)."""
+    return prob.N if prob.line_w is None else int(np.count_nonzero(prob.line_w))
+
+
+def _run(frf, lam0, method, residual_form, line_w, frf_w, max_iter, ftol, xtol,
+         mu0) -> tuple[NLSOutcome, ProjectedProblem]:
+    n_out, n_ref, N = frf.H.shape
+    prob = ProjectedProblem(frf.omega, frf.H.reshape(n_out * n_ref, N), frf.quantity, residual_form, line_w, frf_w)
+    m = lam0.size
+    dof = 2 * _n_lines(prob) * n_out * n_ref - 2 * m - n_out * n_ref * prob.n_linear(m)
+    if dof <= 0:
+        raise ValueError(
+            f"{N} lines are too few for {m} modes with residual form {residual_form!r}: "
+            f"{2 * N * n_out * n_ref} real equations for {2 * m + n_out * n_ref * prob.n_linear(m)} parameters; "
+            "widen the band or use fewer modes"
+        )
+    theta0 = poles_to_theta(lam0)
+    if method == "gn":
+        oc = run_gn(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol)
+    else:
+        oc = run_lm(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, mu0=mu0)
+    if oc.status == Status.MAX_ITER:
+        warnings.warn(
+            f"LSFD ({method}) stopped at max_iter={max_iter} before converging (S = {oc.evaluation.S:.6g}); "
+            "raise max_iter, loosen ftol/xtol or improve the initial poles",
+            LSFDConvergenceWarning,
+            stacklevel=3,
+        )
+    log.debug("LSFD %s: status %d after %d iterations: %s", method, oc.status, oc.iterations, oc.message)
+    return oc, prob
+
+
+def _result(frf: FRFSet, prob: ProjectedProblem, oc: NLSOutcome, method: str, residual_form: str,
+            correct_exp_window: bool, lam0: np.ndarray, sub) -> LSFDResult:
+    n_out, n_ref, _ = frf.H.shape
+    m = lam0.size
+    ev = oc.evaluation
+    poles_raw = theta_to_poles(oc.theta)
+    shift = 0.0
+    if correct_exp_window and frf.exp_window_tau_s:
+        shift = 1.0 / float(frf.exp_window_tau_s)
+    poles = poles_raw + shift
+    n_frf = n_out * n_ref
+    n_par = 2 * m + n_frf * prob.n_linear(m)
+    dof = 2 * _n_lines(prob) * n_frf - n_par
+    real_var = ev.S / dof
+    if ev.rank_ok:
+        R, T = prob.linear_parameters(ev)
+        JtJ, _ = prob.normal_equations(ev)
+        cov = covariance_from_normal(JtJ, real_var)
+    else:
+        R = np.full((n_frf, m), np.nan + 0j)
+        T = np.full((n_frf, prob.n_res), np.nan + 0j)
+        cov = np.full((2 * m, 2 * m), np.nan)
+    residues = R.reshape(n_out, n_ref, m)
+    ur = T[:, 0].reshape(n_out, n_ref) if prob.n_res else None
+    lr = T[:, 1].reshape(n_out, n_ref) if prob.n_res else None
+    if np.all(np.isfinite(residues)):
+        psi, L, ratio = rank_one_split(residues)
+    else:
+        psi, L, ratio = None, None, np.full(m, np.nan)
+    meta = {"fit": "lsfd", "method": method, "status": oc.status, "rank_one_ratio": ratio,
+            "exp_window_shift_rad_s": shift}
+    model = ModalModel(poles=poles, residues=residues, quantity=frf.quantity, residual_form=residual_form,
+                       upper_residual=ur, lower_residual=lr, outputs=frf.outputs, references=frf.references,
+                       meta=meta)
+    if np.all(np.isfinite(cov)):
+        f_std, z_std = fz_std(poles, cov)
+    else:
+        f_std = z_std = np.full(m, np.nan)
+    return LSFDResult(
+        poles=poles,
+        poles_raw=poles_raw,
+        freq_hz=natural_freq_hz(poles),
+        damping=damping_ratio(poles),
+        damped_freq_hz=damped_freq_hz(poles),
+        freq_hz_std=f_std,
+        damping_std=z_std,
+        model=model,
+        mode_shapes=psi,
+        participation=L,
+        sse=float(ev.S),
+        history=[float(s) for s in oc.history],
+        iterations=int(oc.iterations),
+        nfev=int(oc.nfev),
+        status=int(oc.status),
+        message=oc.message,
+        success=bool(oc.status > 0),
+        method=method,
+        band=(float(frf.freq_hz[0]), float(frf.freq_hz[-1])),
+        noise_var=float(2.0 * real_var),
+        cov_poles=cov,
+        per_frf=sub,
+        initial_poles=lam0.copy(),
+    )

@@ -1,0 +1,232 @@
+"""The whole fit: band selection, stabilization, automatic pole selection, nonlinear LSFD.
+
+This is the paper's Fig. 1 flow with the choices made automatically:
+
+1. **Band** (paper sec. 3.1). Default: from the lowest reliable line to the top line. The
+   lowest ``LOW_LINES`` lines (f < LOW_LINES * df: the record is too short there, and an
+   IEPE sensor rolls off) are skipped; with coherence available, leading lines where the
+   median coherence over the FRFs is below ``MIN_COHERENCE`` are skipped too. A user band
+   is used as given (checked against the data).
+2. **Stabilization** up to ``max_modes`` (default ``2 * peaks + 8``, from the peaks of the
+   summed FRF magnitude, capped to ``[12, 60]``) with LSCF or LSCE.
+3. **Selection** (:mod:`analysis.selection`), or the user's poles / frequencies.
+4. **Band edges**: a selected pole within ``EDGE_BANDWIDTHS`` half-power bandwidths
+   (``2 zeta f``) of a band edge sits on the edge; the paper (sec. 3.1, Fig. 4) shows the
+   fit then suffers. An automatic edge is moved outwards (as far as the data and the
+   low-line limit allow) so the resonance is inside with its margin; if it cannot be, or
+   the band was the user's, a warning is logged and kept in ``stab.meta["warnings"]``.
+5. **LSFD** (:func:`analysis.lsfd.fit_lsfd`, Gauss-Newton or Levenberg-Marquardt) from the
+   selected poles, with residual terms for the modes outside the band.
+6. **Check**: poles the LSFD moved out of the band or to damping outside ``(0, MAX_DAMPING)``
+   came from spurious initial poles; they are dropped and the LSFD repeated once from the
+   remaining fitted poles (noted in ``stab.meta["warnings"]``).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from typing import Optional, Sequence, Union
+
+import numpy as np
+from scipy.signal import find_peaks
+
+from .frf import FRFSet
+from .lscf import parse_band
+from .modal import damping_ratio, natural_freq_hz
+from .selection import poles_from_frequencies, select_poles
+from .stabilization import StabilizationResult, stabilization
+
+__all__ = ["fit_auto", "default_band", "default_max_modes", "check_band_edges", "FitError"]
+
+log = logging.getLogger(__name__)
+
+LOW_LINES = 5
+MIN_COHERENCE = 0.8
+EDGE_BANDWIDTHS = 3.0
+MAX_DAMPING = 0.2
+
+
+class FitError(ValueError):
+    """The automatic fit cannot go on (no stable poles, band too narrow...); the message says what to do."""
+
+
+def default_band(frf: FRFSet) -> tuple[float, float]:
+    """Default band (Hz): skip the lowest ``LOW_LINES`` lines and leading low-coherence lines."""
+    f = frf.freq_hz
+    if f.size < 16:
+        raise FitError(f"the FRFs hold only {f.size} lines; at least 16 are needed")
+    df = float(np.median(np.diff(f)))
+    lo = max(float(f[0]), LOW_LINES * df)
+    if frf.coherence is not None and np.any(np.isfinite(frf.coherence)):
+        c = np.nanmedian(frf.coherence.reshape(-1, f.size), axis=0)
+        head = np.flatnonzero(f <= f[0] + 0.1 * (f[-1] - f[0]))
+        ok = head[c[head] >= MIN_COHERENCE]
+        # a leading run of low coherence (within the lowest 10 % of the span) moves the edge
+        if ok.size and ok[0] > 0:
+            lo = max(lo, float(f[ok[0]]))
+    lo_line = f[f >= lo - 1e-9 * abs(lo)][0]
+    return float(lo_line), float(f[-1])
+
+
+def default_max_modes(frf: FRFSet, band: tuple[float, float]) -> int:
+    """Largest model size for the stabilization: ``2 * peaks + 8`` clipped to [12, 60], where
+    ``peaks`` counts the peaks of the summed FRF magnitude (dB) with 3 dB prominence."""
+    sel = (frf.freq_hz >= band[0]) & (frf.freq_hz <= band[1])
+    s = np.sqrt(np.nansum(np.abs(frf.H[..., sel].reshape(-1, int(sel.sum()))) ** 2, axis=0))
+    s = 20 * np.log10(np.maximum(s, np.max(s) * 1e-12 + 1e-300))
+    peaks, _ = find_peaks(s, prominence=3.0)
+    return int(np.clip(2 * peaks.size + 8, 12, 60))
+
+
+def check_band_edges(
+    poles: np.ndarray, band: tuple[float, float], limits: tuple[float, float], movable: tuple[bool, bool]
+) -> tuple[tuple[float, float], list[str]]:
+    """Move band edges away from resonances (see module docstring, step 4).
+
+    poles : rad/s; band : current (lo, hi) Hz; limits : how far each edge may go (Hz);
+    movable : whether each edge may move. Returns the new band and the warnings.
+    """
+    lo, hi = band
+    warn: list[str] = []
+    f = natural_freq_hz(poles)
+    bw = 2.0 * damping_ratio(poles) * f
+    for fi, b in zip(f, bw):
+        margin = EDGE_BANDWIDTHS * b
+        if fi - lo < margin:
+            want = fi - margin
+            if movable[0] and want >= limits[0]:
+                lo = want
+            else:
+                warn.append(
+                    f"the mode at {fi:.4g} Hz lies within {EDGE_BANDWIDTHS:g} half-power bandwidths of the lower "
+                    f"band edge {lo:.4g} Hz; its estimate may be biased (lower the edge below {want:.4g} Hz if the "
+                    "data allow, or raise it above the mode)"
+                )
+        if hi - fi < margin:
+            want = fi + margin
+            if movable[1] and want <= limits[1]:
+                hi = want
+            else:
+                warn.append(
+                    f"the mode at {fi:.4g} Hz lies within {EDGE_BANDWIDTHS:g} half-power bandwidths of the upper "
+                    f"band edge {hi:.4g} Hz; its estimate may be biased (raise the edge above {want:.4g} Hz if the "
+                    "data allow, or lower it below the mode)"
+                )
+    return (lo, hi), warn
+
+
+def fit_auto(
+    frf: FRFSet,
+    *,
+    band: Optional[Sequence[float]] = None,
+    max_modes: Optional[int] = None,
+    n_modes: Optional[int] = None,
+    method: str = "lm",
+    residual_form: str = "physical",
+    initial: Union[str, Sequence[complex], Sequence[float], np.ndarray] = "lscf",
+    per_frf: bool = False,
+    max_iter: int = 100,
+    refine_lsfd: bool = False,
+    selection_options: Optional[dict] = None,
+):
+    """Automatic modal fit of an FRF set; returns ``(LSFDResult, StabilizationResult)``.
+
+    Parameters
+    ----------
+    frf : the FRFs.
+    band : (lo_hz, hi_hz) or None for :func:`default_band`.
+    max_modes : largest model size of the stabilization (None: :func:`default_max_modes`).
+    n_modes : keep the n_modes most persistent pole clusters (None: all that pass the rule).
+    method : LSFD iteration, "lm" or "gn".
+    residual_form : "physical", "paper" or "none" (see :mod:`analysis.modal`).
+    initial : "lscf" or "lsce" (stabilization method), or the user's poles: complex (rad/s,
+        used as they are) or real natural frequencies (Hz, damping taken from the
+        stabilization diagram, see :func:`analysis.selection.poles_from_frequencies`).
+    per_frf, max_iter : passed to :func:`analysis.lsfd.fit_lsfd`.
+    refine_lsfd : build the stabilization diagram from LSFD-refined poles (slower).
+    selection_options : keyword options of :func:`analysis.selection.select_clusters`.
+
+    Returns
+    -------
+    (LSFDResult, StabilizationResult or None): the stabilization is None when complex poles
+    were given. ``stab.meta`` holds ``"band"`` (the fitted band), ``"warnings"`` and
+    ``"selected_poles"``.
+    """
+    from .lsfd import fit_lsfd  # lazy import: keeps this module importable on its own
+
+    if not isinstance(frf, FRFSet):
+        raise TypeError(f"frf must be an analysis.frf.FRFSet; got {type(frf).__name__}")
+    user_band = band is not None
+    if user_band:
+        lo, hi = parse_band(band, frf.freq_hz)
+    else:
+        lo, hi = default_band(frf)
+    # how far an automatic edge may move: down to the lowest reliable line, up to the last line
+    limits = (default_band(frf)[0] if not user_band else lo, float(frf.freq_hz[-1]))
+    warnings_out: list[str] = []
+
+    given_complex = None
+    given_freqs = None
+    if isinstance(initial, str):
+        stab_method = initial.lower()
+        if stab_method not in ("lsce", "lscf"):
+            raise ValueError(f"initial must be 'lsce', 'lscf' or an array of poles/frequencies; got {initial!r}")
+    else:
+        arr = np.atleast_1d(np.asarray(initial))
+        if arr.size == 0:
+            raise ValueError("no initial poles given: pass poles (rad/s), frequencies (Hz) or 'lsce'/'lscf'")
+        if np.iscomplexobj(arr) and np.any(arr.imag != 0):
+            given_complex = arr.astype(complex)
+        else:
+            given_freqs = arr.real.astype(float)
+        stab_method = "lscf"
+
+    stab: Optional[StabilizationResult] = None
+    if given_complex is None:
+        mm = int(max_modes) if max_modes is not None else default_max_modes(frf, (lo, hi))
+        if n_modes is not None:
+            mm = max(mm, int(n_modes) + 4)
+        stab = stabilization(frf, mm, method=stab_method, band=(lo, hi), refine_lsfd=refine_lsfd)
+        if given_freqs is not None:
+            poles = poles_from_frequencies(given_freqs, stab)
+        else:
+            poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
+        if poles.size == 0:
+            raise FitError(
+                f"no stable physical poles found in {lo:.6g}..{hi:.6g} Hz up to {mm} modes: raise --order, "
+                "change the band, or give the poles (--poles F1,F2,...)"
+            )
+    else:
+        poles = given_complex
+
+    (lo2, hi2), warn = check_band_edges(poles, (lo, hi), limits, (not user_band, not user_band))
+    warnings_out += warn
+    for w in warn:
+        log.warning(w)
+    if (lo2, hi2) != (lo, hi):
+        log.info("band moved from %.6g..%.6g Hz to %.6g..%.6g Hz to keep resonances off its edges", lo, hi, lo2, hi2)
+    sel = (frf.freq_hz >= lo2) & (frf.freq_hz <= hi2)
+    lo2, hi2 = float(frf.freq_hz[sel][0]), float(frf.freq_hz[sel][-1])
+    selected = np.asarray(poles)
+    result = fit_lsfd(frf, poles, method=method, band=(lo2, hi2), residual_form=residual_form,
+                      per_frf=per_frf, max_iter=max_iter)
+    # 6. poles the LSFD pushed out of the physical range (a spurious initial pole the data do not
+    #    support wanders off or takes huge damping) are dropped and the fit repeated once
+    fd = result.poles.imag / (2 * np.pi)
+    z = result.damping
+    bad = ~((fd >= lo2) & (fd <= hi2) & (z > 0) & (z < MAX_DAMPING))
+    if np.any(bad) and np.any(~bad) and given_complex is None:
+        msg = (f"dropped {int(bad.sum())} pole(s) the LSFD moved out of the band or to unphysical damping "
+               f"({', '.join(f'{a:.4g} Hz/{100 * b:.3g} %' for a, b in zip(result.freq_hz[bad], z[bad]))})")
+        log.info(msg)
+        warnings_out.append(msg)
+        poles = result.poles_raw[~bad]
+        result = fit_lsfd(frf, poles, method=method, band=(lo2, hi2), residual_form=residual_form,
+                          per_frf=per_frf, max_iter=max_iter)
+    if not result.success:
+        warnings_out.append(f"LSFD did not converge: {result.message}")
+        log.warning("LSFD did not converge: %s", result.message)
+    info = {"band": (lo2, hi2), "warnings": warnings_out, "selected_poles": selected}
+    if stab is not None:
+        stab = replace(stab, meta={**stab.meta, **info})
+    return result, stab

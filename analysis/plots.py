@@ -1,0 +1,150 @@
+"""Figures of the fit: measured vs synthesised FRFs (paper Fig. 7) and stabilization diagrams (Fig. 8).
+
+Matplotlib is used through :class:`matplotlib.figure.Figure` and the Agg canvas directly, never
+through pyplot's global state, so this module is safe in servers, tests and threads.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .frf import FRFSet
+from .modal import ModalModel, natural_freq_hz, synthesize
+
+__all__ = ["plot_fit", "plot_stabilization", "summed_magnitude_db"]
+
+_STYLE = {
+    # class: (marker, colour, size, label)
+    -1: ("x", "#bbbbbb", 10, "non-physical"),
+    0: ("o", "#999999", 10, "new"),
+    1: ("v", "#1f77b4", 16, "stable f"),
+    2: ("d", "#2ca02c", 18, "stable f, zeta"),
+    3: ("+", "#d62728", 40, "stable f, zeta, MAC"),
+}
+
+
+def _figure(width_in: float, height_in: float):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width_in, height_in), dpi=100)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, path: "str | Path") -> Path:
+    p = Path(path)
+    fig.savefig(str(p), format="png")
+    return p
+
+
+def _phase_deg(z: np.ndarray) -> np.ndarray:
+    """Phase in degrees with NaN at the +-180 deg wraps, so no vertical lines are drawn there."""
+    p = np.degrees(np.angle(z))
+    jump = np.abs(np.diff(p)) > 180.0
+    p[1:][jump] = np.nan
+    return p
+
+
+def summed_magnitude_db(frf: FRFSet) -> np.ndarray:
+    """20 log10 of the root-sum-square magnitude of all FRFs per line (a CMIF-like background)."""
+    s = np.sqrt(np.nansum(np.abs(frf.H.reshape(-1, frf.freq_hz.size)) ** 2, axis=0))
+    floor = max(float(np.max(s)) * 1e-12, 1e-300)
+    return 20 * np.log10(np.maximum(s, floor))
+
+
+def plot_stabilization(result, frf: FRFSet, path_png: "str | Path", *, title: Optional[str] = None,
+                       show_nonphysical: bool = False, selected: Optional[np.ndarray] = None) -> Path:
+    """Stabilization diagram (paper Fig. 8): poles by model order, one symbol per stability class,
+    over the summed FRF magnitude (right axis, dB). Optional ``selected`` poles (rad/s) are
+    drawn as vertical lines. Returns the path written."""
+    lo, hi = result.band
+    fig = _figure(10, 6)
+    ax = fig.add_subplot(1, 1, 1)
+    ax2 = ax.twinx()
+    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
+    ax2.plot(frf.freq_hz[sel], summed_magnitude_db(frf)[sel], color="#444444", lw=0.8, alpha=0.6)
+    ax2.set_ylabel("sum of |H| [dB]")
+    classes = [-1, 0, 1, 2, 3] if show_nonphysical else [0, 1, 2, 3]
+    for c in classes:
+        xs, ys = [], []
+        for n, p, st in zip(result.orders, result.poles, result.status):
+            k = st == c
+            if c == -1:
+                fd = p.imag / (2 * np.pi)
+                k = k & (fd >= lo) & (fd <= hi)
+            xs.append(natural_freq_hz(p[k]))
+            ys.append(np.full(int(k.sum()), n))
+        x, y = np.concatenate(xs) if xs else [], np.concatenate(ys) if ys else []
+        m, col, size, label = _STYLE[c]
+        ax.scatter(x, y, marker=m, c=col, s=size, label=f"{label} ({len(x)})", linewidths=1.0, zorder=3)
+    if selected is not None:
+        for f in natural_freq_hz(np.asarray(selected)):
+            ax.axvline(f, color="#d62728", lw=0.6, ls=":", zorder=1)
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(0, max(result.orders) + 1)
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("model order (number of modes)")
+    ax.set_zorder(ax2.get_zorder() + 1)
+    ax.patch.set_visible(False)
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.9)
+    ax.set_title(title or f"stabilization diagram ({result.method}), tolerances f {100 * result.tol_freq:g} %, "
+                 f"zeta {100 * result.tol_damp:g} %, MAC {100 * result.tol_mac:g} %")
+    fig.tight_layout()
+    return _save(fig, path_png)
+
+
+def plot_fit(frf: FRFSet, model: ModalModel, path_png: "str | Path", *,
+             pairs: Optional[Sequence[tuple[int, int]]] = None, max_panels: int = 4,
+             band: Optional[Sequence[float]] = None) -> Path:
+    """Measured vs synthesised FRFs in the manner of the paper's Fig. 7: magnitude (dB), phase
+    (deg) and the relative error ``|H - G| / |H|`` (dB) beneath, one column per FRF.
+
+    pairs : (output index, reference index) of the FRFs to draw; default: the first
+    ``max_panels`` FRFs. ``band`` (Hz) shades the fitted band. Returns the path written.
+    """
+    if pairs is None:
+        pairs = [(o, r) for o in range(frf.n_outputs) for r in range(frf.n_references)][:max_panels]
+    pairs = list(pairs)
+    if not pairs:
+        raise ValueError("no FRF to plot: give at least one (output, reference) pair")
+    f = frf.freq_hz
+    G = synthesize(model, f).H
+    n = len(pairs)
+    fig = _figure(4.2 * n + 1, 8)
+    gs = fig.add_gridspec(3, n, height_ratios=[3, 1.5, 1.5], hspace=0.08)
+    for c, (o, r) in enumerate(pairs):
+        H = frf.H[o, r]
+        g = G[min(o, G.shape[0] - 1), min(r, G.shape[1] - 1)]
+        axm = fig.add_subplot(gs[0, c])
+        axp = fig.add_subplot(gs[1, c], sharex=axm)
+        axe = fig.add_subplot(gs[2, c], sharex=axm)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            axm.plot(f, 20 * np.log10(np.abs(H)), "--", color="#555555", lw=1.0, label="measured")
+            axm.plot(f, 20 * np.log10(np.abs(g)), "-", color="#1f77b4", lw=1.0, label="LSFD model")
+            axp.plot(f, _phase_deg(H), "--", color="#555555", lw=0.8)
+            axp.plot(f, _phase_deg(g), "-", color="#1f77b4", lw=0.8)
+            rel = np.abs(H - g) / np.abs(H)
+            axe.plot(f, 20 * np.log10(rel), color="#d62728", lw=0.8)
+        for fr in model.freq_hz:
+            axm.axvline(fr, color="#2ca02c", lw=0.5, ls=":")
+        if band is not None:
+            for ax in (axm, axp, axe):
+                ax.axvspan(f[0], band[0], color="#eeeeee", zorder=0)
+                ax.axvspan(band[1], f[-1], color="#eeeeee", zorder=0)
+        axm.set_title(f"{frf.outputs[o]} / {frf.references[r]}", fontsize=9)
+        axm.tick_params(labelbottom=False)
+        axp.tick_params(labelbottom=False)
+        axp.set_ylim(-180, 180)
+        axp.set_yticks([-180, -90, 0, 90, 180])
+        axe.set_xlabel("frequency [Hz]")
+        if c == 0:
+            axm.set_ylabel(f"|H| [dB {frf.unit or frf.quantity}]")
+            axp.set_ylabel("phase [deg]")
+            axe.set_ylabel("rel. error [dB]")
+            axm.legend(fontsize=8)
+        axm.set_xlim(f[0], f[-1])
+    fig.subplots_adjust(left=0.08, right=0.98, top=0.94, bottom=0.07, wspace=0.25)
+    return _save(fig, path_png)

@@ -1,0 +1,210 @@
+"""Fit results for people and programs: the terminal table (paper Table 1) and the JSON document.
+
+Complex numbers are written as ``[re, im]`` pairs. Frequencies in Hz, damping as a ratio in
+the JSON (percent in the table), residues in the FRF unit times rad/s.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from .frf import FRFSet
+from .modal import damping_ratio, natural_freq_hz
+
+__all__ = ["roman", "format_table", "result_to_dict", "write_json", "complex_pair"]
+
+JSON_SCHEMA = "impactlab.fit/1"
+
+
+def roman(n: int) -> str:
+    """Roman numeral of a positive integer (pole I, pole II, ...)."""
+    if n < 1:
+        raise ValueError(f"roman numerals start at 1; got {n}")
+    out = []
+    for v, s in ((1000, "M"), (900, "CM"), (500, "D"), (400, "CD"), (100, "C"), (90, "XC"), (50, "L"),
+                 (40, "XL"), (10, "X"), (9, "IX"), (5, "V"), (4, "IV"), (1, "I")):
+        while n >= v:
+            out.append(s)
+            n -= v
+    return "".join(out)
+
+
+def complex_pair(z: complex) -> Optional[list]:
+    """``[re, im]`` of a complex number, None when it is not finite."""
+    z = complex(z)
+    if not (math.isfinite(z.real) and math.isfinite(z.imag)):
+        return None
+    return [float(z.real), float(z.imag)]
+
+
+def _fnum(x: float) -> Optional[float]:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _cstr(z: complex, digits: int = 4) -> str:
+    z = complex(z)
+    if not (math.isfinite(z.real) and math.isfinite(z.imag)):
+        return "n/a"
+    sign = "-" if z.imag < 0 else "+"
+    return f"{z.real:.{digits}g} {sign} {abs(z.imag):.{digits}g}i"
+
+
+def format_table(result, frf: Optional[FRFSet] = None, *, output: int = 0, reference: int = 0,
+                 title: Optional[str] = None, initial: Optional[np.ndarray] = None,
+                 initial_label: str = "initial") -> str:
+    """The paper's Table 1 for one FRF (``output``, ``reference`` indices) of an LSFD result.
+
+    Columns: pole | [initial f, zeta] | f [Hz] | zeta [%] | f std [Hz] | zeta std [%] | parameter |
+    value (residue R_r of that FRF), then S, UR and LR of that FRF. With ``initial`` poles (rad/s,
+    e.g. those selected from the stabilization diagram) their f and zeta are shown first, as
+    the paper's LSCE columns, each matched to the nearest fitted pole.
+    """
+    model = result.model
+    outs, refs = model.outputs, model.references
+    label = f"{outs[output]} / {refs[reference]}" if outs and refs else "FRF"
+    head = title or f"LSFD ({result.method}) fit, residues of {label}"
+    init = None if initial is None or np.size(initial) == 0 else np.asarray(initial, dtype=complex)
+    pre = (f"{initial_label} f", f"{initial_label} zeta") if init is not None else ()
+    rows = [("",) + pre + ("f [Hz]", "zeta [%]", "f std", "zeta std", "parameter", "value")]
+    order = np.argsort(result.freq_hz)
+    for k, r in enumerate(order, start=1):
+        extra: tuple = ()
+        if init is not None:
+            q = init[np.argmin(np.abs(init - result.poles[r]))]
+            extra = (f"{natural_freq_hz(q):.4f}", f"{100 * damping_ratio(q):.3f}")
+        rows.append((
+            f"pole {roman(k)}",) + extra + (
+            f"{result.freq_hz[r]:.4f}",
+            f"{100 * result.damping[r]:.3f}",
+            "n/a" if not np.isfinite(result.freq_hz_std[r]) else f"{result.freq_hz_std[r]:.2g}",
+            "n/a" if not np.isfinite(result.damping_std[r]) else f"{100 * result.damping_std[r]:.2g}",
+            f"R{k}",
+            _cstr(model.residues[output, reference, r]),
+        ))
+    widths = [max(len(row[c]) for row in rows) for c in range(len(rows[0]))]
+    lines = [head]
+    sep = "-+-".join("-" * w for w in widths)
+    left = {0, len(widths) - 2, len(widths) - 1}
+    for i, row in enumerate(rows):
+        lines.append(" | ".join(cell.ljust(w) if c in left else cell.rjust(w)
+                                for c, (cell, w) in enumerate(zip(row, widths))))
+        if i == 0:
+            lines.append(sep)
+    lines.append(sep)
+    lines.append(f"sum of square errors: S = {result.sse:.6g} (all FRFs, {result.iterations} iterations, "
+                 f"{'success' if result.success else 'NOT converged'}: {result.message})")
+    if model.upper_residual is not None:
+        lines.append(f"upper residual term UR: {_cstr(model.upper_residual[output, reference])}")
+    if model.lower_residual is not None:
+        lines.append(f"lower residual term LR: {_cstr(model.lower_residual[output, reference])}")
+    lines.append(f"band {result.band[0]:.6g}..{result.band[1]:.6g} Hz, quantity {model.quantity}, "
+                 f"residual form {model.residual_form}")
+    n_frf = len(outs) * len(refs)
+    if n_frf > 1:
+        lines.append(f"({n_frf} FRFs fitted with common poles; the residues of every FRF are in the JSON)")
+    return "\n".join(lines)
+
+
+def _labelled(values: np.ndarray, outs, refs, key: str) -> list:
+    out = []
+    for i, o in enumerate(outs):
+        for j, r in enumerate(refs):
+            v = values[i, j]
+            item: dict[str, Any] = {"output": o, "reference": r}
+            if np.ndim(v) == 0:
+                item[key] = complex_pair(v)
+            else:
+                item[key] = [complex_pair(x) for x in v]
+            out.append(item)
+    return out
+
+
+def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Optional[dict] = None) -> dict:
+    """JSON-ready dictionary of an LSFD result (schema ``impactlab.fit/1``).
+
+    Keys: poles (freq_hz, damping, freq_hz_std, damping_std, damped_freq_hz, pole [re, im] rad/s),
+    residues / upper_residual / lower_residual (per output/reference label), sse, iterations,
+    history, status, message, success, method, band, quantity, unit, residual_form, outputs,
+    references, noise_var, nfev, mode_shapes/participation when present, per_frf summaries,
+    and the stabilization summary when given.
+    """
+    model = result.model
+    outs, refs = list(model.outputs), list(model.references)
+    order = np.argsort(result.freq_hz)
+    poles = []
+    for k, r in enumerate(order, start=1):
+        poles.append({
+            "label": f"pole {roman(k)}",
+            "freq_hz": _fnum(result.freq_hz[r]),
+            "damping": _fnum(result.damping[r]),
+            "freq_hz_std": _fnum(result.freq_hz_std[r]),
+            "damping_std": _fnum(result.damping_std[r]),
+            "damped_freq_hz": _fnum(result.damped_freq_hz[r]),
+            "pole": complex_pair(result.poles[r]),
+        })
+    R = np.asarray(model.residues)[..., order]
+    doc: dict[str, Any] = {
+        "schema": JSON_SCHEMA,
+        "method": result.method,
+        "status": int(result.status),
+        "message": str(result.message),
+        "success": bool(result.success),
+        "band": [float(result.band[0]), float(result.band[1])],
+        "quantity": model.quantity,
+        "unit": frf.unit if frf is not None else "",
+        "residual_form": model.residual_form,
+        "outputs": outs,
+        "references": refs,
+        "poles": poles,
+        "residues": _labelled(R, outs, refs, "values"),
+        "upper_residual": None if model.upper_residual is None else _labelled(model.upper_residual, outs, refs, "value"),
+        "lower_residual": None if model.lower_residual is None else _labelled(model.lower_residual, outs, refs, "value"),
+        "sse": _fnum(result.sse),
+        "iterations": int(result.iterations),
+        "nfev": int(result.nfev),
+        "history": [_fnum(s) for s in result.history],
+        "noise_var": _fnum(result.noise_var),
+    }
+    if result.mode_shapes is not None:
+        doc["mode_shapes"] = [
+            {"output": o, "values": [complex_pair(x) for x in np.asarray(result.mode_shapes)[i, order]]}
+            for i, o in enumerate(outs)
+        ]
+    if result.participation is not None:
+        doc["participation"] = [
+            {"reference": r, "values": [complex_pair(x) for x in np.asarray(result.participation)[order, j]]}
+            for j, r in enumerate(refs)
+        ]
+    if result.per_frf:
+        doc["per_frf"] = [
+            {
+                "output": sub.model.outputs[0],
+                "reference": sub.model.references[0],
+                "freq_hz": [_fnum(x) for x in sub.freq_hz],
+                "damping": [_fnum(x) for x in sub.damping],
+                "sse": _fnum(sub.sse),
+                "success": bool(sub.success),
+            }
+            for sub in result.per_frf
+        ]
+    if stab is not None:
+        doc["stabilization"] = {
+            "method": stab.method,
+            "band": [float(stab.band[0]), float(stab.band[1])],
+            "max_modes": int(max(stab.orders)),
+            "selected_poles": [complex_pair(p) for p in np.asarray(stab.meta.get("selected_poles", []))],
+            "warnings": list(stab.meta.get("warnings", [])),
+        }
+    if extra:
+        doc.update(extra)
+    return doc
+
+
+def write_json(path: "str | Path", doc: dict) -> None:
+    """Write a JSON document (strict: no NaN; NaN values are written as null)."""
+    Path(path).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")

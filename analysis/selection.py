@@ -1,0 +1,155 @@
+"""Automatic, hint-free selection of the physical poles from a stabilization diagram.
+
+The rule
+--------
+1. Candidates: every pole of class >= ``min_class`` (default: stable in frequency and
+   damping) with damping ratio in ``(min_damping, max_damping)`` and damped frequency
+   inside the band.
+2. Clusters: complete-linkage clustering of the candidates with the distance
+
+       d(a, b) = max(|f_a - f_b| / (f_ab tol_freq),  |zeta_a - zeta_b| / (zeta_ab tol_damp_cluster))
+
+   (f_ab, zeta_ab the larger of the two), cut at d = 1. Complete linkage means every pair in
+   a cluster is within the tolerances, so two modes a few percent apart are never chained
+   together through scattered spurious poles.
+3. Persistence: a cluster counts the *distinct* model orders it holds; it is kept when it
+   holds at least ``min_fraction`` of the orders from its first appearance to the last
+   order, and at least ``min_orders`` orders.
+4. Representative: the pole with the median frequency and median damping of the cluster
+   (``pole_from_fz(median f, median zeta)``).
+5. Two kept clusters closer than ``tol_freq`` in frequency are merged (the more persistent
+   wins). With ``n_modes`` given, the ``n_modes`` most persistent clusters are returned.
+
+The user overrides the selection by giving poles (or frequencies, see
+:func:`poles_from_frequencies`) instead.
+"""
+from __future__ import annotations
+
+import logging
+from typing import NamedTuple, Optional, Sequence
+
+import numpy as np
+from scipy.cluster.hierarchy import fcluster, linkage
+
+from .modal import damping_ratio, natural_freq_hz, pole_from_fz
+from .stabilization import STABLE_DAMP, StabilizationResult
+
+__all__ = ["select_poles", "SelectedCluster", "select_clusters", "poles_from_frequencies"]
+
+log = logging.getLogger(__name__)
+
+
+class SelectedCluster(NamedTuple):
+    """A kept cluster: representative pole (rad/s), number of orders, spreads of f (Hz) and zeta."""
+
+    pole: complex
+    n_orders: int
+    freq_spread_hz: float
+    damping_spread: float
+
+
+def select_clusters(
+    stab: StabilizationResult,
+    *,
+    min_class: int = STABLE_DAMP,
+    tol_freq: Optional[float] = None,
+    tol_damp: float = 0.25,
+    min_damping: float = 0.0,
+    max_damping: Optional[float] = None,
+    min_orders: int = 3,
+    min_fraction: float = 0.5,
+) -> list[SelectedCluster]:
+    """The persistent clusters of stable poles, most persistent first (see module docstring)."""
+    tol_f = stab.tol_freq if tol_freq is None else float(tol_freq)
+    zmax = stab.max_damping if max_damping is None else float(max_damping)
+    p, orders = stab.stable_poles(min_class)
+    if p.size == 0:
+        return []
+    f, z = natural_freq_hz(p), damping_ratio(p)
+    fd = p.imag / (2 * np.pi)
+    lo, hi = stab.band
+    keep = (z > min_damping) & (z < zmax) & (fd >= lo) & (fd <= hi)
+    p, f, z, orders = p[keep], f[keep], z[keep], orders[keep]
+    if p.size == 0:
+        return []
+    if p.size == 1:
+        labels = np.array([1])
+    else:
+        # condensed distance matrix, in the order scipy's pdist uses
+        i, j = np.triu_indices(p.size, k=1)
+        dfm = np.abs(f[i] - f[j]) / (np.maximum(f[i], f[j]) * tol_f)
+        dzm = np.abs(z[i] - z[j]) / (np.maximum(z[i], z[j]) * tol_damp)
+        D = np.maximum(dfm, dzm)
+        Z = linkage(D, method="complete")
+        labels = fcluster(Z, t=1.0, criterion="distance")
+    last = max(stab.orders)
+    out: list[SelectedCluster] = []
+    for lab in np.unique(labels):
+        k = labels == lab
+        ords = np.unique(orders[k])
+        span = last - ords.min() + 1
+        if ords.size < min_orders or ords.size < min_fraction * span:
+            continue
+        fm, zm = float(np.median(f[k])), float(np.median(z[k]))
+        out.append(
+            SelectedCluster(complex(pole_from_fz(fm, zm)), int(ords.size), float(np.ptp(f[k])), float(np.ptp(z[k])))
+        )
+    out.sort(key=lambda c: (-c[1], c[2] / max(natural_freq_hz(c[0]), 1e-300)))
+    # merge survivors closer than tol_freq (keep the more persistent)
+    kept: list[SelectedCluster] = []
+    for c in out:
+        fc = natural_freq_hz(c[0])
+        if all(abs(fc - natural_freq_hz(k[0])) / fc >= tol_f for k in kept):
+            kept.append(c)
+    return kept
+
+
+def select_poles(
+    stab: StabilizationResult,
+    n_modes: Optional[int] = None,
+    **kwargs,
+) -> np.ndarray:
+    """Physical poles (rad/s, sorted by frequency) picked automatically from a stabilization result.
+
+    Parameters
+    ----------
+    stab : the stabilization diagram.
+    n_modes : if given, keep the n_modes most persistent clusters; otherwise all that pass.
+    kwargs : criteria of :func:`select_clusters` (min_class, tol_freq, tol_damp, min_damping,
+        max_damping, min_orders, min_fraction).
+    """
+    clusters = select_clusters(stab, **kwargs)
+    if n_modes is not None:
+        if int(n_modes) < 1:
+            raise ValueError(f"n_modes must be >= 1; got {n_modes}")
+        if len(clusters) < int(n_modes):
+            log.warning("asked for %d modes but only %d stable clusters were found", n_modes, len(clusters))
+        clusters = clusters[: int(n_modes)]
+    poles = np.array([c[0] for c in clusters], dtype=complex)
+    return poles[np.argsort(natural_freq_hz(poles))] if poles.size else poles
+
+
+def poles_from_frequencies(
+    freqs_hz: Sequence[float], stab: Optional[StabilizationResult] = None, *, default_damping: float = 0.01
+) -> np.ndarray:
+    """Poles for user-given natural frequencies (Hz).
+
+    With a stabilization result, each frequency takes the nearest stable pole (within 5 %)
+    so its damping is estimated from the data; otherwise ``default_damping`` is used.
+    """
+    fr = np.asarray([float(x) for x in freqs_hz], dtype=float)
+    if fr.size == 0 or np.any(~np.isfinite(fr)) or np.any(fr <= 0):
+        raise ValueError(f"frequencies must be positive numbers in Hz; got {list(freqs_hz)}")
+    out = pole_from_fz(fr, np.full(fr.size, default_damping))
+    if stab is not None:
+        p, _ = stab.stable_poles(STABLE_DAMP)
+        if p.size == 0:
+            p, _ = stab.stable_poles(1)
+        if p.size:
+            f = natural_freq_hz(p)
+            for i, x in enumerate(fr):
+                k = np.abs(f - x) / x < 0.05
+                if np.any(k):
+                    z = float(np.median(damping_ratio(p[k][np.argsort(np.abs(f[k] - x))[:10]])))
+                    out[i] = pole_from_fz(x, z)
+    return out

@@ -1,0 +1,107 @@
+"""Monte Carlo of the blind diagnosis: random hidden effects and null cases on the simulated frame.
+
+Each case: random band (lower edge 1-5 Hz, upper 150-400 Hz), line spacing 0.125 or 0.25 Hz, noise
+0.5-2 % relative (plus a 1e-3 floor), one effect of the catalogue with random physical parameters
+(``simulator.effects.draw_effect``) or none. The diagnosis runs blind; the table gives the confusion
+matrix, accuracy per effect, the false-alarm rate on null cases, the primary-parameter errors against
+``simulator.effects.TOLERANCES`` and the time per case.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_diagnosis.py [--per-effect 22] [--null 50]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from analysis.diagnosis import EFFECTS, diagnose  # noqa: E402
+from simulator.effects import (TOLERANCES, add_frf_noise, base_model, draw_effect, primary_error,  # noqa: E402
+                               simulate_with_effects)
+
+OUTS = ["left:9:Y", "top:4:X", "right:6:-X", "left:6:X"]
+REFS = ["right:6:-X"]
+
+
+def run(per_effect: int, n_null: int, seed: int) -> dict:
+    base = base_model(None, OUTS, REFS)
+    rng = np.random.default_rng(seed)
+    cases = [n for n in EFFECTS for _ in range(per_effect)] + ["null"] * n_null
+    rng.shuffle(cases)
+    rows = []
+    for i, name in enumerate(cases):
+        crng = np.random.default_rng([seed, i])
+        lo, hi = crng.uniform(1.0, 5.0), crng.uniform(150.0, 400.0)
+        df = float(crng.choice([0.125, 0.25]))
+        f = np.arange(lo, hi, df)
+        eff = [] if name == "null" else [draw_effect(name, crng, base, f)]
+        meas = add_frf_noise(simulate_with_effects(base, OUTS, REFS, f, "accelerance", eff), crng,
+                             relative=float(crng.uniform(0.005, 0.02)))
+        t = time.perf_counter()
+        d = diagnose(meas, base)
+        dt = time.perf_counter() - t
+        perr = float("nan")
+        if eff and d.causes:
+            fitted = next(c for c in d.causes if c["effect"] == name)["parameters"]
+            perr = primary_error(eff[0], fitted)
+        rows.append({"truth": "none" if name == "null" else name, "verdict": d.verdict, "param_error": perr,
+                     "time_s": dt, "gain_db": d.causes[0]["gain_db"] if d.causes else 0.0})
+    return {"rows": rows}
+
+
+def table(rows: list[dict]) -> str:
+    labels = list(EFFECTS) + ["none", "unexplained"]
+    truths = list(EFFECTS) + ["none"]
+    short = {n: n[:8] for n in labels}
+    L = ["confusion (rows: hidden effect, columns: verdict)", ""]
+    L.append(f"{'':20s}" + "".join(f"{short[c]:>9s}" for c in labels))
+    for t in truths:
+        sel = [r for r in rows if r["truth"] == t]
+        L.append(f"{t:20s}" + "".join(f"{sum(r['verdict'] == c for r in sel):9d}" for c in labels))
+    L += ["", f"{'effect':20s}{'cases':>6s}{'named':>7s}{'acc %':>7s}{'tol':>8s}{'in tol':>7s}"
+          f"{'med err':>10s}{'p95 err':>10s}{'t med s':>8s}"]
+    for t in truths:
+        sel = [r for r in rows if r["truth"] == t]
+        if not sel:
+            continue
+        ok = [r for r in sel if r["verdict"] == t]
+        errs = np.array([r["param_error"] for r in ok if np.isfinite(r["param_error"])])
+        tol = TOLERANCES.get(t, float("nan"))
+        intol = int(np.sum(errs <= tol)) if errs.size else 0
+        L.append(f"{t:20s}{len(sel):6d}{len(ok):7d}{100 * len(ok) / len(sel):7.1f}{tol:8.3g}"
+                 f"{intol if t != 'none' else len(ok):7d}"
+                 f"{(np.median(errs) if errs.size else float('nan')):10.2e}"
+                 f"{(np.percentile(errs, 95) if errs.size else float('nan')):10.2e}"
+                 f"{np.median([r['time_s'] for r in sel]):8.2f}")
+    eff_rows = [r for r in rows if r["truth"] != "none"]
+    null_rows = [r for r in rows if r["truth"] == "none"]
+    acc = np.mean([r["verdict"] == r["truth"] for r in eff_rows]) if eff_rows else float("nan")
+    fa = np.mean([r["verdict"] != "none" for r in null_rows]) if null_rows else float("nan")
+    L += ["", f"overall named right (effects): {100 * acc:.1f} % of {len(eff_rows)}; "
+          f"false alarms on null cases: {100 * fa:.1f} % of {len(null_rows)}; "
+          f"all cases named right: {100 * np.mean([r['verdict'] == r['truth'] for r in rows]):.1f} %; "
+          f"time per case: median {np.median([r['time_s'] for r in rows]):.2f} s, "
+          f"max {np.max([r['time_s'] for r in rows]):.2f} s"]
+    return "\n".join(L)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-effect", type=int, default=22)
+    ap.add_argument("--null", type=int, default=50)
+    ap.add_argument("--seed", type=int, default=2026)
+    args = ap.parse_args()
+    t = time.perf_counter()
+    res = run(args.per_effect, args.null, args.seed)
+    print(table(res["rows"]))
+    bad = [r for r in res["rows"] if r["verdict"] != r["truth"]]
+    for r in bad[:30]:
+        print(f"  wrong: hidden {r['truth']} -> {r['verdict']}")
+    print(f"total {time.perf_counter() - t:.0f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,475 @@
+"""Configuration of the simulated frame: ``simulator/frame.toml`` defaults, merged with a user file.
+
+The defaults file is also the schema: a user file may only use keys that exist there (except new
+named entries under ``[sections.*]`` and ``[components.*]``, which start from the first default
+entry of their table). Tables merge key by key; other values replace. Every section becomes a
+plain frozen dataclass; :attr:`FrameConfig.raw` keeps the merged dictionary.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+try:  # Python >= 3.11
+    import tomllib as _toml
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    try:
+        import tomli as _toml  # type: ignore[no-redef]
+    except ModuleNotFoundError:
+        _toml = None  # type: ignore[assignment]
+
+from analysis.points import PointLabelError, parse_point
+
+__all__ = [
+    "ConfigError",
+    "DEFAULT_CONFIG_PATH",
+    "FrameConfig",
+    "MaterialConfig",
+    "SectionConfig",
+    "ComponentConfig",
+    "SupportsConfig",
+    "JointsConfig",
+    "DampingConfig",
+    "ModesConfig",
+    "AccelerometerConfig",
+    "ForceSensorConfig",
+    "SensorsConfig",
+    "HammerConfig",
+    "FrontendConfig",
+    "SamplingConfig",
+    "TestPlanConfig",
+    "NoiseConfig",
+]
+
+DEFAULT_CONFIG_PATH = Path(__file__).with_name("frame.toml")
+_NAMED_TABLES = ("sections", "components")
+
+
+class ConfigError(ValueError):
+    """A configuration file or value that cannot be used; the message says where and what to do."""
+
+
+@dataclass(frozen=True)
+class MaterialConfig:
+    """Isotropic material: E (Pa), Poisson ratio (-), density (kg/m^3)."""
+
+    youngs_modulus_pa: float
+    poisson_ratio: float
+    density_kg_m3: float
+
+
+@dataclass(frozen=True)
+class SectionConfig:
+    """A cross section; see :func:`simulator.fem.section_properties` for the shapes."""
+
+    shape: str
+    width_m: float
+    depth_m: float
+    wall_m: float
+    area_m2: float
+    iy_m4: float
+    iz_m4: float
+    j_m4: float
+
+
+@dataclass(frozen=True)
+class ComponentConfig:
+    """A straight member from ``start_m`` to ``end_m`` (m), ``n_elements`` elements, section roll (deg)."""
+
+    section: str
+    start_m: tuple
+    end_m: tuple
+    n_elements: int
+    roll_deg: float
+
+
+@dataclass(frozen=True)
+class SupportsConfig:
+    """Ground springs at ``nodes`` (``component:node``): 3 x N/m, 3 x N m/rad."""
+
+    nodes: tuple
+    stiffness: tuple
+
+
+@dataclass(frozen=True)
+class JointsConfig:
+    """Springs joining node pairs: 3 x N/m, 3 x N m/rad."""
+
+    pairs: tuple
+    stiffness: tuple
+
+
+@dataclass(frozen=True)
+class DampingConfig:
+    """Proportional damping: per-mode list (``model="modal"``) or Rayleigh."""
+
+    model: str
+    zeta: tuple
+    zeta_default: float
+    rayleigh_alpha: float
+    rayleigh_beta: float
+
+    def ratios(self, freq_hz: np.ndarray) -> np.ndarray:
+        """Damping ratio of each mode (ascending ``freq_hz``, Hz). Rigid-body (0 Hz) modes get 0 and
+        do not use up an entry of the ``zeta`` list."""
+        f = np.asarray(freq_hz, dtype=float)
+        out = np.zeros(f.size)
+        flex = np.flatnonzero(f > 0)
+        if self.model == "rayleigh":
+            w = 2 * np.pi * f[flex]
+            out[flex] = self.rayleigh_alpha / (2 * w) + self.rayleigh_beta * w / 2
+        else:
+            z = list(self.zeta)
+            out[flex] = [z[i] if i < len(z) else self.zeta_default for i in range(flex.size)]
+        return out
+
+
+@dataclass(frozen=True)
+class ModesConfig:
+    """Modal truncation: keep modes up to ``max_freq_hz`` (Hz)."""
+
+    max_freq_hz: float
+
+
+@dataclass(frozen=True)
+class AccelerometerConfig:
+    """Accelerometer: mass (kg), sensitivity (mV/g), noise density (g/sqrt(Hz)), IEPE high-pass corner (Hz)."""
+
+    mass_kg: float
+    sensitivity_mv_per_g: float
+    noise_density_g_per_rthz: float
+    iepe_highpass_hz: float
+
+
+@dataclass(frozen=True)
+class ForceSensorConfig:
+    """Hammer force sensor: sensitivity (mV/N), noise density (N/sqrt(Hz)), IEPE high-pass corner (Hz)."""
+
+    sensitivity_mv_per_n: float
+    noise_density_n_per_rthz: float
+    iepe_highpass_hz: float
+
+
+@dataclass(frozen=True)
+class SensorsConfig:
+    mass_loading: bool
+    accelerometer: AccelerometerConfig
+    force: ForceSensorConfig
+
+
+@dataclass(frozen=True)
+class HammerConfig:
+    """Impact hammer; see ``[hammer]`` in frame.toml for the meaning of each field."""
+
+    tip: str
+    shape: str
+    amplitude_n: float
+    amplitude_scatter: float
+    width_scatter: float
+    neighbour_probability: float
+    double_hit_probability: float
+    double_hit_delay_s: tuple
+    double_hit_ratio: tuple
+    trigger_offset_samples: tuple
+    tips: Mapping[str, float]
+
+    @property
+    def width_s(self) -> float:
+        """Nominal pulse width (s) of the selected tip."""
+        return float(self.tips[self.tip])
+
+
+@dataclass(frozen=True)
+class FrontendConfig:
+    """Analyser front-end defaults (anti-alias filter, AC coupling, ADC)."""
+
+    anti_alias: str
+    anti_alias_order: int
+    anti_alias_passband_ripple_db: float
+    anti_alias_stopband_db: float
+    anti_alias_cutoff_fraction: float
+    ac_coupling_hz: float
+    adc_bits: int
+    ranges_v: tuple
+
+
+@dataclass(frozen=True)
+class SamplingConfig:
+    """The stand's sampling model (see ``[sampling]`` in frame.toml and :mod:`simulator.frontend`)."""
+
+    band_limit: bool
+    oversample: int
+    fir_half_length: int
+    stopband_db: float
+
+
+@dataclass(frozen=True)
+class TestPlanConfig:
+    """Default test plan: roving hammer or roving sensor."""
+
+    __test__ = False  # not a pytest test class
+
+    mode: str
+    reference: str
+    sensors: tuple
+    points: tuple
+    averages: int
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Master switch of the sensor noise (``TestStand.strike(noise=...)`` overrides it)."""
+
+    enabled: bool
+
+
+@dataclass(frozen=True)
+class FrameConfig:
+    """All parameters of the simulated frame (see ``simulator/frame.toml``)."""
+
+    material: MaterialConfig
+    sections: Mapping[str, SectionConfig]
+    components: Mapping[str, ComponentConfig]
+    supports: SupportsConfig
+    joints: JointsConfig
+    damping: DampingConfig
+    modes: ModesConfig
+    sensors: SensorsConfig
+    hammer: HammerConfig
+    frontend: FrontendConfig
+    sampling: SamplingConfig
+    test_plan: TestPlanConfig
+    noise: NoiseConfig
+    raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    source: str = "defaults"
+
+    @classmethod
+    def load(cls, path: "str | Path | None" = None) -> "FrameConfig":
+        """Defaults from frame.toml, merged with the TOML file ``path`` if given."""
+        if path is None:
+            return cls.from_dict(None)
+        user = _read_toml(Path(path))
+        return cls.from_dict(user, source=str(path))
+
+    @classmethod
+    def from_dict(cls, overrides: "Mapping[str, Any] | None" = None, source: str = "overrides") -> "FrameConfig":
+        """Defaults merged with a nested dictionary shaped like frame.toml."""
+        base = _defaults()
+        merged = _merge(base, copy.deepcopy(dict(overrides or {})), source, ())
+        return _build(merged, source if overrides else "defaults")
+
+    def with_overrides(self, overrides: Mapping[str, Any]) -> "FrameConfig":
+        """A new config: this one's values merged with ``overrides`` (same rules as a user file)."""
+        merged = _merge(copy.deepcopy(dict(self.raw)), copy.deepcopy(dict(overrides)), "overrides", ())
+        return _build(merged, self.source)
+
+
+# ---------------------------------------------------------------------------- reading and merging
+def _read_toml(path: Path) -> dict:
+    if _toml is None:  # pragma: no cover
+        raise ConfigError("reading TOML needs Python 3.11+ (tomllib) or the 'tomli' package: pip install tomli")
+    try:
+        with open(path, "rb") as fh:
+            return _toml.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"config file {path} not found: give the path of a TOML file like simulator/frame.toml") from None
+    except OSError as exc:
+        raise ConfigError(f"config file {path} cannot be read ({exc.strerror})") from None
+    except _toml.TOMLDecodeError as exc:
+        raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
+
+
+_DEFAULTS_CACHE: dict | None = None
+
+
+def _defaults() -> dict:
+    global _DEFAULTS_CACHE
+    if _DEFAULTS_CACHE is None:
+        _DEFAULTS_CACHE = _read_toml(DEFAULT_CONFIG_PATH)
+    return copy.deepcopy(_DEFAULTS_CACHE)
+
+
+def _merge(base: dict, user: Mapping[str, Any], source: str, path: tuple) -> dict:
+    if not isinstance(user, Mapping):
+        raise ConfigError(f"{source}: [{'.'.join(path)}] must be a table")
+    out = dict(base)
+    for key, val in user.items():
+        where = ".".join(path + (key,))
+        if key not in base:
+            if len(path) == 1 and path[0] in _NAMED_TABLES and isinstance(val, Mapping):
+                template = copy.deepcopy(next(iter(base.values())))
+                out[key] = _merge(template, val, source, path + (key,))
+                continue
+            known = ", ".join(sorted(base)) if base else "(none)"
+            raise ConfigError(f"{source}: unknown key '{where}'; known keys here: {known}")
+        if isinstance(base[key], dict):
+            out[key] = _merge(base[key], val, source, path + (key,))
+        else:
+            if isinstance(val, Mapping):
+                raise ConfigError(f"{source}: '{where}' must be a value, not a table")
+            out[key] = val
+    return out
+
+
+# ---------------------------------------------------------------------------- building and checks
+def _coerce(cls: type, d: Mapping[str, Any], where: str) -> Any:
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in d:
+            continue
+        v = d[f.name]
+        t = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
+        try:
+            if t == "float":
+                if isinstance(v, bool):
+                    raise TypeError
+                v = float(v)
+            elif t == "int":
+                if isinstance(v, bool) or int(v) != v:
+                    raise TypeError
+                v = int(v)
+            elif t == "bool":
+                if not isinstance(v, bool):
+                    raise TypeError
+            elif t == "str":
+                if not isinstance(v, str):
+                    raise TypeError
+            elif t == "tuple":
+                if not isinstance(v, (list, tuple)):
+                    raise TypeError
+                v = tuple(tuple(x) if isinstance(x, list) else x for x in v)
+        except (TypeError, ValueError):
+            raise ConfigError(f"'{where}.{f.name}' = {v!r} must be of type {t}") from None
+        kwargs[f.name] = v
+    return cls(**kwargs)
+
+
+def _bool(v: Any, where: str) -> bool:
+    if not isinstance(v, bool):
+        raise ConfigError(f"'{where}' = {v!r} must be true or false")
+    return v
+
+
+def _check(cond: bool, message: str) -> None:
+    if not cond:
+        raise ConfigError(message)
+
+
+def _build(d: dict, source: str) -> FrameConfig:
+    try:
+        cfg = FrameConfig(
+            material=_coerce(MaterialConfig, d["material"], "material"),
+            sections={k: _coerce(SectionConfig, v, f"sections.{k}") for k, v in d["sections"].items()},
+            components={k: _coerce(ComponentConfig, v, f"components.{k}") for k, v in d["components"].items()},
+            supports=_coerce(SupportsConfig, d["supports"], "supports"),
+            joints=_coerce(JointsConfig, d["joints"], "joints"),
+            damping=_coerce(DampingConfig, d["damping"], "damping"),
+            modes=_coerce(ModesConfig, d["modes"], "modes"),
+            sensors=SensorsConfig(
+                mass_loading=_bool(d["sensors"]["mass_loading"], "sensors.mass_loading"),
+                accelerometer=_coerce(AccelerometerConfig, d["sensors"]["accelerometer"], "sensors.accelerometer"),
+                force=_coerce(ForceSensorConfig, d["sensors"]["force"], "sensors.force"),
+            ),
+            hammer=_coerce(HammerConfig, {**d["hammer"], "tips": {k: float(v) for k, v in d["hammer"]["tips"].items()}},
+                           "hammer"),
+            frontend=_coerce(FrontendConfig, d["frontend"], "frontend"),
+            sampling=_coerce(SamplingConfig, d["sampling"], "sampling"),
+            test_plan=_coerce(TestPlanConfig, d["test_plan"], "test_plan"),
+            noise=_coerce(NoiseConfig, d["noise"], "noise"),
+            raw=d,
+            source=source,
+        )
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+    _validate(cfg, source)
+    return cfg
+
+
+def _validate(cfg: FrameConfig, source: str) -> None:
+    p = f"{source}:"
+    m = cfg.material
+    _check(m.youngs_modulus_pa > 0 and m.density_kg_m3 > 0 and -1 < m.poisson_ratio < 0.5,
+           f"{p} [material] needs youngs_modulus_pa > 0, density_kg_m3 > 0, -1 < poisson_ratio < 0.5")
+    for name, s in cfg.sections.items():
+        _check(s.shape in ("rect", "rhs", "explicit"),
+               f"{p} sections.{name}.shape = {s.shape!r}; use 'rect', 'rhs' or 'explicit'")
+        if s.shape in ("rect", "rhs"):
+            _check(s.width_m > 0 and s.depth_m > 0, f"{p} sections.{name}: width_m and depth_m must be > 0")
+        if s.shape == "rhs":
+            _check(0 < 2 * s.wall_m < min(s.width_m, s.depth_m),
+                   f"{p} sections.{name}: wall_m must be > 0 and less than half the width and depth")
+        if s.shape == "explicit":
+            _check(min(s.area_m2, s.iy_m4, s.iz_m4, s.j_m4) > 0,
+                   f"{p} sections.{name}: explicit sections need area_m2, iy_m4, iz_m4, j_m4 > 0")
+    for name, c in cfg.components.items():
+        _check(c.section in cfg.sections,
+               f"{p} components.{name}.section = {c.section!r} is not one of [sections.*]: {', '.join(cfg.sections)}")
+        _check(len(c.start_m) == 3 and len(c.end_m) == 3,
+               f"{p} components.{name}: start_m and end_m must be [x, y, z] in metres")
+        _check(c.n_elements >= 1, f"{p} components.{name}.n_elements must be >= 1")
+        _check(float(np.linalg.norm(np.subtract(c.end_m, c.start_m))) > 0,
+               f"{p} components.{name}: start_m and end_m coincide")
+
+    def node_ok(key: str, where: str) -> None:
+        parts = str(key).split(":")
+        ok = len(parts) == 2 and parts[0] in cfg.components and parts[1].isdigit()
+        ok = ok and int(parts[1]) <= cfg.components[parts[0]].n_elements
+        _check(ok, f"{p} {where}: node {key!r} must be 'component:node' with component in "
+                   f"{list(cfg.components)} and node within 0..n_elements")
+
+    for n in cfg.supports.nodes:
+        node_ok(n, "supports.nodes")
+    for pair in cfg.joints.pairs:
+        _check(len(pair) == 2, f"{p} joints.pairs: each entry must be [node_a, node_b]")
+        node_ok(pair[0], "joints.pairs")
+        node_ok(pair[1], "joints.pairs")
+    for where, k in (("supports.stiffness", cfg.supports.stiffness), ("joints.stiffness", cfg.joints.stiffness)):
+        _check(len(k) == 6 and all(isinstance(x, (int, float)) and x >= 0 for x in k),
+               f"{p} {where} must be 6 values >= 0: [kx, ky, kz] N/m, [krx, kry, krz] N m/rad")
+    d = cfg.damping
+    _check(d.model in ("modal", "rayleigh"), f"{p} damping.model = {d.model!r}; use 'modal' or 'rayleigh'")
+    _check(all(0 <= z < 1 for z in d.zeta) and 0 <= d.zeta_default < 1,
+           f"{p} damping ratios must be in [0, 1) (ratios, not percent)")
+    _check(d.rayleigh_alpha >= 0 and d.rayleigh_beta >= 0, f"{p} rayleigh_alpha and rayleigh_beta must be >= 0")
+    _check(cfg.modes.max_freq_hz > 0, f"{p} modes.max_freq_hz must be > 0")
+    a, fs = cfg.sensors.accelerometer, cfg.sensors.force
+    _check(a.mass_kg >= 0 and a.sensitivity_mv_per_g > 0 and a.noise_density_g_per_rthz >= 0 and a.iepe_highpass_hz >= 0,
+           f"{p} [sensors.accelerometer] values must be >= 0 (sensitivity > 0)")
+    _check(fs.sensitivity_mv_per_n > 0 and fs.noise_density_n_per_rthz >= 0 and fs.iepe_highpass_hz >= 0,
+           f"{p} [sensors.force] values must be >= 0 (sensitivity > 0)")
+    h = cfg.hammer
+    _check(h.tip in h.tips, f"{p} hammer.tip = {h.tip!r} is not one of hammer.tips: {', '.join(h.tips)}")
+    _check(all(w > 0 for w in h.tips.values()), f"{p} hammer.tips widths must be > 0 s")
+    _check(h.shape in ("half_sine", "hann"), f"{p} hammer.shape = {h.shape!r}; use 'half_sine' or 'hann'")
+    _check(h.amplitude_n > 0, f"{p} hammer.amplitude_n must be > 0 N")
+    _check(h.amplitude_scatter >= 0 and h.width_scatter >= 0, f"{p} hammer scatters must be >= 0")
+    for name in ("neighbour_probability", "double_hit_probability"):
+        _check(0 <= getattr(h, name) <= 1, f"{p} hammer.{name} must be a probability in [0, 1]")
+    for name in ("double_hit_delay_s", "double_hit_ratio", "trigger_offset_samples"):
+        v = getattr(h, name)
+        _check(len(v) == 2 and 0 <= v[0] <= v[1], f"{p} hammer.{name} must be [low, high] with 0 <= low <= high")
+    fe = cfg.frontend
+    _check(fe.anti_alias in ("elliptic", "butterworth"),
+           f"{p} frontend.anti_alias = {fe.anti_alias!r}; use 'elliptic' or 'butterworth'")
+    _check(0 < fe.anti_alias_cutoff_fraction < 1 and fe.anti_alias_order >= 1,
+           f"{p} frontend.anti_alias_cutoff_fraction must be in (0, 1) and anti_alias_order >= 1")
+    _check(2 <= fe.adc_bits <= 24 and len(fe.ranges_v) > 0 and all(r > 0 for r in fe.ranges_v),
+           f"{p} frontend.adc_bits must be 2..24 and ranges_v positive volts")
+    sm = cfg.sampling
+    _check(2 <= sm.oversample <= 64 and 1 <= sm.fir_half_length <= 256 and sm.stopband_db > 20,
+           f"{p} [sampling] needs 2 <= oversample <= 64, 1 <= fir_half_length <= 256, stopband_db > 20")
+    tp = cfg.test_plan
+    _check(tp.mode in ("roving_hammer", "roving_sensor"),
+           f"{p} test_plan.mode = {tp.mode!r}; use 'roving_hammer' or 'roving_sensor'")
+    try:
+        for lab in (tp.reference, *tp.sensors, *tp.points):
+            pt = parse_point(lab)
+            node_ok(f"{pt.component}:{pt.node}", "test_plan")
+    except PointLabelError as exc:
+        raise ConfigError(f"{p} test_plan: {exc}") from None
+    _check(tp.averages >= 1, f"{p} test_plan.averages must be >= 1")

@@ -1,0 +1,414 @@
+"""``python -m simulator serve``: the simulated analyser as its own process, over TCP or a pty.
+
+    python -m simulator serve --tcp 127.0.0.1:0 [--seed N] [--config FILE] [--noise on|off] [--option K=V ...]
+    python -m simulator serve --pty [same options]
+
+The first line printed on stdout (flushed at once) is where to connect:
+``socket://127.0.0.1:PORT`` (port 0 picks a free port) or the pseudo-terminal path
+(``/dev/pts/N``, which ``serial.Serial(path)`` or the device URL ``/dev/pts/N`` opens).
+Messages go to stderr through ``logging``.
+
+Connections are served one after another (a TCP listen backlog queues the next clients).
+**Each connection gets a fresh analyser**: a new ``Firmware`` from
+``simulator.firmware.create_analyser(options)``, i.e. the power-on state with the same seed, so
+the same commands give the same bytes to every client (the next one is built in the background
+while the current client is served, so nobody waits for the frame's eigen-solution). Over a pty there is no connect event: a
+client's first bytes after the previous client hung up (the master reads EIO while no one holds
+the slave open) start a new analyser; a client that reopens the tty within one tick (50 ms) of the
+last one closing may find the previous analyser's state (the driver's reset recovery copes).
+
+Robustness: garbage is the firmware's business (it answers or ignores per the bulk-only rules);
+a client that disconnects mid-command, stops reading for ``--send-timeout`` seconds, or trips an
+internal error only ends its own connection. Every wait is bounded (0.05 s ticks), so SIGTERM and
+SIGINT stop the server promptly and cleanly (exit status 0).
+"""
+from __future__ import annotations
+
+import argparse
+import errno
+import logging
+import os
+import select
+import signal
+import socket
+import sys
+import threading
+import time
+import tty
+from typing import Any, Callable, Optional, Sequence
+
+__all__ = ["main", "StopFlag", "Session", "Prebuilt", "serve_tcp", "serve_pty", "analyser_options"]
+
+_log = logging.getLogger("simulator.serve")
+
+#: largest chunk moved per call (bytes)
+CHUNK = 1 << 20
+#: wait granularity: how quickly a stop request or new data is noticed (s)
+TICK_S = 0.05
+
+
+class StopFlag:
+    """Set by SIGTERM/SIGINT (or by a test); every loop checks it at least every ``TICK_S``."""
+
+    def __init__(self) -> None:
+        self.stopped = False
+
+    def set(self, *_: Any) -> None:
+        self.stopped = True
+
+    def __bool__(self) -> bool:
+        return self.stopped
+
+
+class Session:
+    """One client's analyser: a fresh firmware fed with the client's bytes."""
+
+    def __init__(self, factory: Callable[[], Any], label: str) -> None:
+        self.firmware = factory()
+        self.label = label
+        self.bytes_in = 0
+        self.bytes_out = 0
+
+    def feed(self, data: bytes) -> None:
+        self.bytes_in += len(data)
+        self.firmware.write(data)
+
+    def pending(self) -> bytes:
+        """Everything the firmware has to send right now (may be b"")."""
+        parts = []
+        while True:
+            chunk = self.firmware.read(CHUNK)
+            if not chunk:
+                break
+            parts.append(chunk)
+        out = b"".join(parts)
+        self.bytes_out += len(out)
+        return out
+
+
+class Prebuilt:
+    """A firmware factory that always keeps the next fresh analyser built in the background.
+
+    Building one (the frame's eigen-solution) takes about a second; a client should not wait for
+    it. Calling the object returns the spare built earlier (waiting for it if needed) and starts
+    building the next. A build error is raised to the caller that would have received it.
+    """
+
+    def __init__(self, factory: Callable[[], Any]) -> None:
+        self._factory = factory
+        self._result: tuple[bool, Any] = (False, None)
+        self._thread: Optional[threading.Thread] = None
+        self._start()
+
+    def _start(self) -> None:
+        def build() -> None:
+            try:
+                self._result = (True, self._factory())
+            except Exception as exc:  # handed to the caller of __call__
+                self._result = (False, exc)
+
+        self._thread = threading.Thread(target=build, name="analyser-prebuild", daemon=True)
+        self._thread.start()
+
+    def ready(self) -> Any:
+        """Wait for the spare; raise its build error, if any (without consuming it)."""
+        assert self._thread is not None
+        self._thread.join()
+        ok, value = self._result
+        if not ok:
+            raise value
+        return value
+
+    def __call__(self) -> Any:
+        firmware = self.ready()
+        self._start()
+        return firmware
+
+
+def analyser_options(seed: Optional[int], config: Optional[str], noise: Optional[str],
+                     extra: Sequence[str]) -> dict:
+    """The ``create_analyser`` options (as a ``sim://`` URL query would give them)."""
+    options: dict = {}
+    for item in extra:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--option expects KEY=VALUE, got {item!r}")
+        if key == "packetized":
+            raise ValueError("--option packetized: the server is a byte stream (TCP, pty); drop it")
+        options[key] = value
+    if seed is not None:
+        options["seed"] = int(seed)
+    if config is not None:
+        options["config"] = config
+    if noise is not None:
+        options["noise"] = noise == "on"
+    return options
+
+
+def _firmware_factory(options: dict, precomputed: Optional[str] = None) -> Callable[[], Any]:
+    """A function building one fresh firmware; ``precomputed`` is an ``.npz`` with ``volts`` and ``fs_hz``."""
+    # the firmware imports its front end (scipy.signal) at the first strike; do it now so that a
+    # client's first ARM does not wait a second or two for an import
+    import simulator.frontend  # noqa: F401
+    from simulator.firmware import PrecomputedStand, create_analyser
+
+    stand = None
+    if precomputed is not None:
+        import numpy as np
+
+        with np.load(precomputed) as data:
+            if "volts" not in data or "fs_hz" not in data:
+                raise ValueError(f"{precomputed}: a precomputed stand file needs arrays 'volts' and 'fs_hz'")
+            stand = PrecomputedStand(data["volts"], float(data["fs_hz"]))
+
+    def make() -> Any:
+        return create_analyser(dict(options), stand=stand)
+
+    return make
+
+
+# --------------------------------------------------------------------------------- TCP
+def _send_all(conn: socket.socket, data: bytes, stop: StopFlag, send_timeout_s: float) -> bool:
+    """Send ``data`` on a non-blocking socket; False if the client is gone or stalled."""
+    view = memoryview(data)
+    deadline = time.monotonic() + send_timeout_s
+    while view:
+        try:
+            n = conn.send(view)
+            view = view[n:]
+            deadline = time.monotonic() + send_timeout_s  # progress restarts the clock
+            continue
+        except (BlockingIOError, InterruptedError):
+            pass
+        except OSError as exc:  # reset, broken pipe
+            _log.info("client went away while receiving: %s", exc)
+            return False
+        if stop or time.monotonic() > deadline:
+            _log.warning("client stopped reading for %.1f s (or shutdown); dropping it", send_timeout_s)
+            return False
+        select.select([], [conn], [], TICK_S)
+    return True
+
+
+def _serve_connection(conn: socket.socket, session: Session, stop: StopFlag, send_timeout_s: float,
+                      idle_timeout_s: float) -> None:
+    conn.setblocking(False)
+    last = time.monotonic()
+    while not stop:
+        ready, _, _ = select.select([conn], [], [], TICK_S)
+        if ready:
+            try:
+                data = conn.recv(CHUNK)
+            except (BlockingIOError, InterruptedError):
+                continue
+            except OSError as exc:
+                _log.info("%s: connection error: %s", session.label, exc)
+                return
+            if not data:
+                _log.info("%s: client hung up", session.label)
+                return
+            last = time.monotonic()
+            session.feed(data)
+        elif idle_timeout_s and time.monotonic() - last > idle_timeout_s:
+            _log.info("%s: idle for %.1f s; closing", session.label, idle_timeout_s)
+            return
+        out = session.pending()
+        if out and not _send_all(conn, out, stop, send_timeout_s):
+            return
+
+
+def _tcp_listener(host: str, port: int) -> socket.socket:
+    infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    family, socktype, proto, _, addr = infos[0]
+    srv = socket.socket(family, socktype, proto)
+    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    srv.bind(addr)
+    srv.listen(8)
+    srv.setblocking(False)
+    return srv
+
+
+def tcp_url(srv: socket.socket) -> str:
+    """``socket://HOST:PORT`` of a bound listening socket."""
+    host, port = srv.getsockname()[:2]
+    return f"socket://[{host}]:{port}" if ":" in host else f"socket://{host}:{port}"
+
+
+def serve_tcp(srv: socket.socket, factory: Callable[[], Any], stop: StopFlag, *, max_clients: int = 0,
+              send_timeout_s: float = 10.0, idle_timeout_s: float = 0.0) -> int:
+    """Accept and serve clients one after another until ``stop`` (or ``max_clients`` served)."""
+    served = 0
+    while not stop and not (max_clients and served >= max_clients):
+        ready, _, _ = select.select([srv], [], [], TICK_S)
+        if not ready:
+            continue
+        try:
+            conn, peer = srv.accept()
+        except (BlockingIOError, InterruptedError):
+            continue
+        served += 1
+        label = f"client {served} {peer[0]}:{peer[1]}"
+        _log.info("%s: connected; fresh analyser", label)
+        with conn:
+            try:
+                session = Session(factory, label)
+                _serve_connection(conn, session, stop, send_timeout_s, idle_timeout_s)
+            except Exception:  # a firmware fault ends this client only; the server stays up
+                _log.exception("%s: internal error; closing this connection", label)
+            else:
+                _log.info("%s: done (%d bytes in, %d out)", label, session.bytes_in, session.bytes_out)
+    return 0
+
+
+# --------------------------------------------------------------------------------- pty
+def open_pty() -> tuple[int, str]:
+    """A raw pseudo-terminal: (master fd, slave path). The slave fd is closed: clients open the path."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    os.close(slave)
+    os.set_blocking(master, False)
+    return master, path
+
+
+def _pty_write(master: int, data: bytes, stop: StopFlag, send_timeout_s: float) -> bool:
+    view = memoryview(data)
+    deadline = time.monotonic() + send_timeout_s
+    while view:
+        try:
+            n = os.write(master, view)
+            view = view[n:]
+            deadline = time.monotonic() + send_timeout_s
+            continue
+        except (BlockingIOError, InterruptedError):
+            pass
+        except OSError as exc:  # EIO: the client closed the tty
+            _log.info("pty client went away while receiving: %s", exc)
+            return False
+        if stop or time.monotonic() > deadline:
+            _log.warning("pty client stopped reading for %.1f s (or shutdown); dropping its output", send_timeout_s)
+            return False
+        select.select([], [master], [], TICK_S)
+    return True
+
+
+def serve_pty(master: int, factory: Callable[[], Any], stop: StopFlag, *, max_clients: int = 0,
+              send_timeout_s: float = 10.0) -> int:
+    """Serve the pty master until ``stop``; a client's first bytes after a hang-up start a fresh analyser."""
+    session: Optional[Session] = None
+    served = 0
+    while not stop:
+        ready, _, _ = select.select([master], [], [], TICK_S)
+        if not ready:
+            if session is not None:
+                out = session.pending()
+                if out and not _pty_write(master, out, stop, send_timeout_s):
+                    session = None
+            continue
+        try:
+            data = os.read(master, CHUNK)
+        except (BlockingIOError, InterruptedError):
+            continue
+        except OSError as exc:
+            if exc.errno != errno.EIO:
+                raise
+            data = b""
+        if not data:  # nobody holds the slave open
+            if session is not None:
+                _log.info("%s: client hung up (%d bytes in, %d out)", session.label, session.bytes_in,
+                          session.bytes_out)
+                session = None
+                if max_clients and served >= max_clients:
+                    break
+            time.sleep(TICK_S)
+            continue
+        if session is None:
+            served += 1
+            session = Session(factory, f"pty client {served}")
+            _log.info("%s: first bytes; fresh analyser", session.label)
+        try:
+            session.feed(data)
+            out = session.pending()
+        except Exception:  # a firmware fault ends this client's analyser only
+            _log.exception("%s: internal error; the next bytes start a fresh analyser", session.label)
+            session = None
+            continue
+        if out and not _pty_write(master, out, stop, send_timeout_s):
+            session = None
+    return 0
+
+
+# --------------------------------------------------------------------------------- CLI
+def _parse_hostport(text: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or not port.isdigit() or int(port) > 65535:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT (port 0..65535, 0 = any free port), got {text!r}")
+    return host, int(port)
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m simulator serve",
+        description="Run the simulated analyser as a TCP or pseudo-terminal server. The first line printed "
+                    "is the device URL (socket://HOST:PORT) or the pty path to connect to. Each connection "
+                    "gets a fresh analyser (same seed, power-on state).",
+    )
+    door = p.add_mutually_exclusive_group(required=True)
+    door.add_argument("--tcp", type=_parse_hostport, metavar="HOST:PORT",
+                      help="listen on HOST:PORT (PORT 0 = any free port); use 127.0.0.1 for local use")
+    door.add_argument("--pty", action="store_true", help="create a pseudo-terminal and print its path (POSIX)")
+    p.add_argument("--seed", type=int, default=None, help="random seed of the simulated frame/operator")
+    p.add_argument("--config", default=None, help="frame configuration TOML (defaults merged)")
+    p.add_argument("--noise", choices=("on", "off"), default=None, help="sensor noise on/off")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="any other create_analyser option, as in a sim:// URL query (repeatable)")
+    p.add_argument("--precomputed", default=None, metavar="FILE.npz",
+                   help="replay cached input volts (arrays volts[n_ch, n] and fs_hz) instead of simulating the "
+                        "frame (throughput benchmarks)")
+    p.add_argument("--max-clients", type=int, default=0, help="exit after serving this many clients (0 = never)")
+    p.add_argument("--send-timeout", type=float, default=10.0,
+                   help="drop a client that stops reading for this many seconds (default 10)")
+    p.add_argument("--idle-timeout", type=float, default=0.0,
+                   help="TCP: close a connection silent for this many seconds (0 = never, the default)")
+    p.add_argument("-v", "--verbose", action="store_true", help="log every connection (stderr)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m simulator serve``; returns the exit status."""
+    args = _build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
+                        format="serve: %(levelname)s %(message)s")
+    try:
+        options = analyser_options(args.seed, args.config, args.noise, args.option)
+        factory = Prebuilt(_firmware_factory(options, args.precomputed))
+        factory.ready()  # fail now, with a clear message, if the options are wrong
+    except (ValueError, OSError, KeyError, TypeError) as exc:
+        print(f"serve: cannot build the simulated analyser: {exc}", file=sys.stderr)
+        return 2
+
+    stop = StopFlag()
+    previous = {sig: signal.signal(sig, stop.set) for sig in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        if args.tcp is not None:
+            host, port = args.tcp
+            try:
+                srv = _tcp_listener(host, port)
+            except OSError as exc:
+                print(f"serve: cannot listen on {host}:{port}: {exc}", file=sys.stderr)
+                return 2
+            with srv:
+                print(tcp_url(srv), flush=True)
+                return serve_tcp(srv, factory, stop, max_clients=args.max_clients,
+                                 send_timeout_s=args.send_timeout, idle_timeout_s=args.idle_timeout)
+        master, path = open_pty()
+        try:
+            print(path, flush=True)
+            return serve_pty(master, factory, stop, max_clients=args.max_clients,
+                             send_timeout_s=args.send_timeout)
+        finally:
+            os.close(master)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -1,0 +1,178 @@
+"""``python -m analysis fit`` and ``python -m analysis stabilization`` on a UFF 58 file written with pyuff."""
+import gc
+import json
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis import cli_fit, cli_stabilization
+from analysis.modal import ModalModel, natural_freq_hz, pole_from_fz, synthesize
+from analysis.points import uff_direction, uff_node
+
+F_TRUE = np.array([30.0, 62.0, 64.5, 120.0, 175.0])
+Z_TRUE = np.array([0.008, 0.01, 0.012, 0.01, 0.015])
+OUTPUTS = ["left:9:Y", "left:4:Y", "top:4:X", "right:4:-Z", "right:9:Y"]
+REFERENCE = "right:6:-X"
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _write_uff58_with_pyuff(path: Path, noise: float = 0.005) -> None:
+    """A UFF file of accelerance FRFs (type 4, ordinate 12 acceleration / 13 force) by pyuff itself."""
+    import pyuff
+
+    rng = np.random.default_rng(7)
+    poles = pole_from_fz(F_TRUE, Z_TRUE)
+    phi = rng.standard_normal((len(OUTPUTS), poles.size))
+    R = phi[:, None, :] * poles.imag / 2j
+    model = ModalModel(poles, R, quantity="accelerance", residual_form="physical",
+                       upper_residual=1e-6 * np.ones((len(OUTPUTS), 1)), lower_residual=2.0 * np.ones((len(OUTPUTS), 1)))
+    f = np.arange(1, 1001) * 0.25
+    H = synthesize(model, f).H
+    H = H + noise * np.abs(H) * (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape)) / np.sqrt(2)
+    sets = []
+    for i, out in enumerate(OUTPUTS):
+        sets.append(pyuff.prepare_58(
+            binary=1, func_type=4, data=H[i, 0], x=f, abscissa_spacing=1, abscissa_spec_data_type=18,
+            abscissa_axis_units_lab="Hz", rsp_node=uff_node(out), rsp_dir=uff_direction(out),
+            ref_node=uff_node(REFERENCE), ref_dir=uff_direction(REFERENCE), rsp_ent_name="frame",
+            ref_ent_name="frame", ordinate_spec_data_type=12, orddenom_spec_data_type=13,
+            ordinate_axis_units_lab="m/s^2", orddenom_axis_units_lab="N", id1="synthetic FRF", id4=out,
+        ))
+    # pyuff's binary writer leaves a file handle to the garbage collector (a ResourceWarning,
+    # pyuff's own leak, after the data are complete): collect it here, inside this block only
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ResourceWarning)
+        pyuff.UFF(str(path)).write_sets(sets, "add", force_double=True)
+        gc.collect()
+
+
+@pytest.fixture(scope="module")
+def uff_file(tmp_path_factory) -> Path:
+    p = tmp_path_factory.mktemp("cli") / "frame.uff"
+    _write_uff58_with_pyuff(p)
+    return p
+
+
+def test_fit_writes_json_plot_and_uff(uff_file, tmp_path, capsys):
+    out_json, out_png, out_uff = tmp_path / "fit.json", tmp_path / "fit.png", tmp_path / "modes.uff"
+    rc = cli_fit.main([str(uff_file), "--json", str(out_json), "--plot", str(out_png), "--uff", str(out_uff),
+                       "--method", "gn"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    # the terminal table in the manner of the paper's Table 1
+    assert "pole I " in cap.out and "pole V " in cap.out and "sum of square errors: S =" in cap.out
+    assert "upper residual term UR" in cap.out and "lower residual term LR" in cap.out
+    doc = json.loads(out_json.read_text())
+    for key in ("poles", "residues", "upper_residual", "lower_residual", "sse", "iterations", "history", "status",
+                "message", "method", "band", "quantity", "residual_form", "outputs", "references"):
+        assert key in doc, key
+    assert doc["method"] == "gn" and doc["quantity"] == "accelerance" and doc["residual_form"] == "physical"
+    assert doc["outputs"] == OUTPUTS and doc["references"] == [REFERENCE]
+    freqs = [p["freq_hz"] for p in doc["poles"]]
+    np.testing.assert_allclose(freqs, F_TRUE, rtol=1e-4)
+    np.testing.assert_allclose([p["damping"] for p in doc["poles"]], Z_TRUE, rtol=0.05)
+    for p in doc["poles"]:
+        assert {"freq_hz", "damping", "freq_hz_std", "damping_std", "damped_freq_hz"} <= set(p)
+        assert 0 < p["freq_hz_std"] < 0.01
+    r0 = doc["residues"][0]
+    assert r0["output"] == OUTPUTS[0] and r0["reference"] == REFERENCE
+    assert len(r0["values"]) == F_TRUE.size and len(r0["values"][0]) == 2  # [re, im]
+    assert len(doc["upper_residual"][0]["value"]) == 2
+    assert doc["history"][0] >= doc["history"][-1] == pytest.approx(doc["sse"])
+    assert out_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # UFF 55 shapes and UFF 58 synthesised FRFs read back
+    from analysis.uff import read_uff55, read_uff58
+
+    lam, nodes, shapes = read_uff55(out_uff)
+    np.testing.assert_allclose(np.sort(natural_freq_hz(lam)), F_TRUE, rtol=1e-4)
+    synth = read_uff58(out_uff)
+    assert synth.outputs == tuple(OUTPUTS) and synth.H.shape[0] == len(OUTPUTS)
+
+
+def test_fit_user_poles_band_and_modes(uff_file, tmp_path, capsys):
+    out = tmp_path / "a.json"
+    rc = cli_fit.main([str(uff_file), "--json", str(out), "--poles", "30,62,64.5", "--band", "10:100",
+                       "--residuals", "paper"])
+    assert rc == 0, capsys.readouterr().err
+    doc = json.loads(out.read_text())
+    assert len(doc["poles"]) == 3 and doc["residual_form"] == "paper"
+    np.testing.assert_allclose([p["freq_hz"] for p in doc["poles"]], F_TRUE[:3], rtol=1e-4)
+    rc = cli_fit.main([str(uff_file), "--json", str(out), "--modes", "2", "--order", "12", "--initial", "lsce"])
+    assert rc == 0
+    assert len(json.loads(out.read_text())["poles"]) == 2
+
+
+def test_stabilization_command(uff_file, tmp_path, capsys):
+    png, js = tmp_path / "s.png", tmp_path / "s.json"
+    rc = cli_stabilization.main([str(uff_file), "--png", str(png), "--json", str(js), "--max-order", "14",
+                                 "--method", "lscf"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    doc = json.loads(js.read_text())
+    assert len(doc["orders"]) == 14
+    np.testing.assert_allclose(sorted(s["freq_hz"] for s in doc["selected"]), F_TRUE, rtol=1e-3)
+
+
+def _bad_cases(uff: Path, tmp: Path):
+    (tmp / "notes.json").write_text("{}")
+    (tmp / "broken.uff").write_text("    -1\n    58\ngarbage\n")
+    return [
+        ([str(tmp / "missing.uff"), "--json", str(tmp / "o.json")], "not found"),
+        ([str(tmp / "notes.json"), "--json", str(tmp / "o.json")], "cannot tell the format"),
+        ([str(tmp / "broken.uff"), "--json", str(tmp / "o.json")], "cannot read UFF"),
+        ([str(uff), "--json", str(tmp / "o.json"), "--band", "5-100"], "bad band"),
+        ([str(uff), "--json", str(tmp / "o.json"), "--band", "100:5"], "bad band"),
+        ([str(uff), "--json", str(tmp / "o.json"), "--band", "900:1000"], "outside the data"),
+        ([str(uff), "--json", str(tmp / "o.json"), "--poles", "30,abc"], "not a number"),
+        ([str(uff), "--json", str(tmp / "o.json"), "--modes", "0"], ">= 1"),
+        ([str(uff), "--json", str(tmp / "no" / "dir" / "o.json")], "does not exist"),
+        ([str(uff), "--json", str(tmp / "o.json"), "--method", "newton"], "invalid choice"),
+        ([str(uff)], "required"),
+    ]
+
+
+def test_fit_bad_inputs_exit_2_without_traceback(uff_file, tmp_path, capsys):
+    for argv, text in _bad_cases(uff_file, tmp_path):
+        rc = cli_fit.main(argv)
+        err = capsys.readouterr().err
+        assert rc == 2, argv
+        assert text in err, (argv, err)
+        assert "Traceback" not in err
+
+
+def test_stabilization_bad_inputs(uff_file, tmp_path, capsys):
+    cases = [
+        ([str(tmp_path / "missing.uff"), "--png", str(tmp_path / "s.png")], "not found"),
+        ([str(uff_file), "--png", str(tmp_path / "s.png"), "--band", "x:y"], "bad band"),
+        ([str(uff_file), "--png", str(tmp_path / "s.png"), "--max-order", "0"], ">= 1"),
+        ([str(uff_file)], "required"),
+    ]
+    for argv, text in cases:
+        assert cli_stabilization.main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert text in err and "Traceback" not in err
+
+
+def test_module_entry_point(uff_file, tmp_path):
+    """Through the dispatcher, as a user types it."""
+    r = subprocess.run([sys.executable, "-m", "analysis", "fit", str(uff_file), "--json", str(tmp_path / "x.json"),
+                        "--band", "abc"], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert r.returncode == 2 and "bad band" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "analysis", "fit", "--help"], capture_output=True, text=True, cwd=ROOT,
+                       timeout=120)
+    assert r.returncode == 0 and "--poles" in r.stdout
+
+
+def test_report_helpers():
+    from analysis.report import complex_pair, roman
+
+    assert [roman(k) for k in (1, 4, 5, 9, 14, 40, 90)] == ["I", "IV", "V", "IX", "XIV", "XL", "XC"]
+    with pytest.raises(ValueError):
+        roman(0)
+    assert complex_pair(1 - 2j) == [1.0, -2.0]
+    assert complex_pair(complex(np.nan, 0)) is None

@@ -1,0 +1,66 @@
+"""``python -m analysis diagnose``: files in, JSON and report out, clear errors."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.cli_diagnose import main
+from analysis.uff import write_uff58
+from simulator.effects import add_frf_noise, base_model, simulate_with_effects
+
+OUTS = ["left:9:Y", "top:4:X", "right:6:-X"]
+REFS = ["right:6:-X"]
+F = np.arange(2.0, 150.0, 0.25)
+TOML = str(Path(__file__).resolve().parents[1] / "simulator" / "frame.toml")
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("diag")
+    base = base_model(None, OUTS, REFS)
+    eff = [{"effect": "time_delay", "delay_s": 3e-4}]
+    meas = add_frf_noise(simulate_with_effects(base, OUTS, REFS, F, "accelerance", eff), np.random.default_rng(3))
+    write_uff58(d / "m.uff", meas, overwrite=True)
+    write_uff58(d / "s.uff", simulate_with_effects(base, OUTS, REFS, F, "accelerance"), overwrite=True)
+    return d
+
+
+def test_toml_simulation_json_and_report(files, capsys):
+    out = files / "out.json"
+    rep = files / "rep"
+    assert main(["--measured", str(files / "m.uff"), "--simulated", TOML, "--json", str(out),
+                 "--report", str(rep)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["verdict"] == "time_delay"
+    assert set(doc) >= {"verdict", "causes", "error_before_db", "error_after_db"}
+    gains = [c["gain_db"] for c in doc["causes"]]
+    assert gains == sorted(gains, reverse=True)
+    top = doc["causes"][0]
+    assert top["effect"] == "time_delay" and top["parameters"]["delay_s"] == pytest.approx(3e-4, rel=0.02)
+    assert doc["error_after_db"] < doc["error_before_db"] - 10
+    text = (rep / "report.md").read_text()
+    assert "Verdict: `time_delay`" in text
+    assert (rep / "bands.png").stat().st_size > 1000 and (rep / "frf_0_0.png").exists()
+    assert "verdict: time_delay" in capsys.readouterr().out
+
+
+def test_uff_simulation_gives_same_frf_effect(files):
+    out = files / "out2.json"
+    assert main(["--measured", str(files / "m.uff"), "--simulated", str(files / "s.uff"), "--json", str(out),
+                 "--effects", "time_delay,sensor_highpass,sensitivity_error,residual_modes"]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["verdict"] == "time_delay"
+    assert doc["causes"][0]["parameters"]["delay_s"] == pytest.approx(3e-4, rel=0.02)
+
+
+def test_bad_inputs_exit_2_with_message(files, capsys):
+    assert main(["--measured", str(files / "nope.uff"), "--simulated", TOML, "--json", str(files / "x.json")]) == 2
+    assert "not found" in capsys.readouterr().err
+    assert main(["--measured", str(files / "m.uff"), "--simulated", TOML, "--json", str(files / "x.json"),
+                 "--effects", "gremlins"]) == 2
+    assert "unknown effect" in capsys.readouterr().err
+    assert main(["--measured", str(files / "m.uff")]) == 2
+    assert "required" in capsys.readouterr().err

@@ -1,0 +1,103 @@
+"""The effect catalogue: each model extension against its analytic result."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analysis.diagnosis import EFFECTS, EffectError, predict
+from analysis.modal import ModalModel, natural_freq_hz, damping_ratio, pole_from_fz
+
+F = np.linspace(1.0, 100.0, 400)
+
+
+def _model(shapes=True) -> ModalModel:
+    fn, z = np.array([10.0, 30.0, 70.0]), np.array([0.01, 0.005, 0.02])
+    lam = pole_from_fz(fn, z)
+    phi = np.array([[0.3, -0.2, 0.1], [0.1, 0.25, -0.3]])       # 2 outputs
+    ref = phi[:1]                                                # reference = output 0
+    R = np.einsum("om,rm->orm", phi, ref) / (2j * lam.imag)
+    meta = {"output_shapes": phi} if shapes else {}
+    return ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none",
+                      outputs=("a:1:X", "a:2:X"), references=("a:1:X",), meta=meta)
+
+
+def test_catalogue_names_are_the_fixed_ten():
+    assert set(EFFECTS) == {"residual_modes", "sensor_highpass", "time_delay", "mass_loading", "missing_mode",
+                            "stiffness_shift", "damping_change", "exponential_window", "sensitivity_error",
+                            "mains_hum"}
+
+
+def test_stiffness_shift_scales_frequencies_and_matches_exact_receptance():
+    m = _model()
+    a = 1.05
+    out = EFFECTS["stiffness_shift"].apply(m, {"factor": a})
+    np.testing.assert_allclose(natural_freq_hz(out.poles), a * m.freq_hz, rtol=1e-12)
+    np.testing.assert_allclose(damping_ratio(out.poles), m.damping, rtol=1e-12)
+    # exact: receptance of stiffness a^2 K is H(w / a) / a^2
+    H0 = predict(m, F / a, "receptance").H
+    H1 = predict(m, F, "receptance", [{"effect": "stiffness_shift", "factor": a}]).H
+    np.testing.assert_allclose(H1, H0 / a ** 2, rtol=1e-10)
+    assert m.poles[0] == pole_from_fz(10.0, 0.01)  # input untouched
+
+
+def test_damping_and_window_change_decay_as_stated():
+    m = _model()
+    d = EFFECTS["damping_change"].apply(m, {"factor": 2.0})
+    np.testing.assert_allclose(damping_ratio(d.poles), 2 * m.damping, rtol=1e-12)
+    np.testing.assert_allclose(natural_freq_hz(d.poles), m.freq_hz, rtol=1e-12)
+    w = EFFECTS["exponential_window"].apply(m, {"tau_s": 0.5})
+    np.testing.assert_allclose(w.poles.real, m.poles.real - 2.0, rtol=1e-12)
+    np.testing.assert_allclose(w.poles.imag, m.poles.imag, rtol=1e-12)
+
+
+def test_mass_loading_rayleigh_shift():
+    m = _model()
+    out = EFFECTS["mass_loading"].apply(m, {"mass_kg": 0.5})
+    mu = 0.5 * np.sum(m.meta["output_shapes"] ** 2, axis=0)
+    np.testing.assert_allclose(natural_freq_hz(out.poles), m.freq_hz / np.sqrt(1 + mu), rtol=1e-12)
+    with pytest.raises(EffectError, match="output_shapes"):
+        EFFECTS["mass_loading"].apply(_model(shapes=False), {"mass_kg": 0.5})
+
+
+def test_frf_effects_analytic():
+    m = _model()
+    base = predict(m, F, "accelerance")
+    hp = predict(m, F, "accelerance", [{"effect": "sensor_highpass", "corner_hz": 5.0, "order": 1}])
+    k = np.argmin(np.abs(F - 5.0))
+    assert abs(hp.H[0, 0, k] / base.H[0, 0, k]) == pytest.approx(1 / np.sqrt(1 + (5.0 / F[k]) ** 2), rel=1e-12)
+    td = predict(m, F, "accelerance", [{"effect": "time_delay", "delay_s": 1e-3}])
+    np.testing.assert_allclose(td.H / base.H, np.broadcast_to(np.exp(-2j * np.pi * F * 1e-3), td.H.shape), rtol=1e-12)
+    se = predict(m, F, "accelerance", [{"effect": "sensitivity_error", "gains": {"a:2:X": 1.1}}])
+    np.testing.assert_allclose(se.H[1], 1.1 * base.H[1], rtol=1e-12)
+    np.testing.assert_allclose(se.H[0], base.H[0], rtol=1e-12)
+    rm = predict(m, F, "accelerance", [{"effect": "residual_modes", "upper": [[1e-6], [0.0]], "lower": [[0.0], [0.0]]}])
+    np.testing.assert_allclose(rm.H[0, 0] - base.H[0, 0], -(2 * np.pi * F) ** 2 * 1e-6, rtol=1e-9)
+
+
+def test_missing_mode_and_hum_add_terms():
+    m = _model()
+    base = predict(m, F, "receptance")
+    mm = predict(m, F, "receptance", [{"effect": "missing_mode", "freq_hz": 50.0, "zeta": 0.01,
+                                       "residue": [[[0.0, -1e-3]], [[0.0, 0.0]]]}])
+    lam = pole_from_fz(50.0, 0.01)
+    R = -1e-3j
+    jw = 2j * np.pi * F
+    np.testing.assert_allclose(mm.H[0, 0] - base.H[0, 0], R / (jw - lam) + np.conj(R) / (jw - np.conj(lam)), rtol=1e-9)
+    df = F[1] - F[0]
+    from analysis.diagnosis.effects import hum_kernels
+    fk, _ = hum_kernels(F, 50.0, 2 * df)
+    A = np.zeros((2, 1, fk.size, 2))
+    A[0, 0, 0] = [1e-6, 0.0]
+    hum = predict(m, F, "receptance", [{"effect": "mains_hum", "base_hz": 50.0, "amplitudes": A.tolist()}])
+    k = np.argmin(np.abs(F - 50.0))
+    assert abs(hum.H[0, 0, k] - base.H[0, 0, k]) == pytest.approx(1e-6 / abs(1 + 1j * (F[k] - 50) / (2 * df)), rel=1e-9)
+
+
+def test_bad_effect_specs_are_named():
+    m = _model()
+    with pytest.raises(EffectError, match="unknown effect"):
+        predict(m, F, "receptance", [{"effect": "gremlins"}])
+    with pytest.raises(EffectError, match="factor"):
+        predict(m, F, "receptance", [{"effect": "stiffness_shift", "factor": -1}])
+    with pytest.raises(EffectError, match="residue"):
+        predict(m, F, "receptance", [{"effect": "missing_mode", "freq_hz": 5.0, "zeta": 0.01, "residue": [1, 2]}])

@@ -1,0 +1,392 @@
+"""Tests of the nonlinear LSFD fitter (analysis.lsfd) against FRFs synthesised from known models."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from analysis._lsfd_kernels import ProjectedProblem, Status, poles_to_theta
+from analysis.frf import FRFSet
+from analysis.lsfd import LSFDConvergenceWarning, fit_lsfd, rank_one_split
+from analysis.modal import ModalModel, pole_from_fz, synthesize
+from analysis.uncertainty import crlb_poles
+
+FN = np.array([14.0, 31.0, 32.5, 57.0, 83.0])
+ZETA = np.array([0.012, 0.02, 0.015, 0.006, 0.01])
+FREQ = np.linspace(8.0, 100.0, 700)
+
+
+def make_model(n_out: int = 3, n_ref: int = 1, residual_form: str = "physical", quantity: str = "accelerance",
+               seed: int = 0, fn=FN, zeta=ZETA) -> ModalModel:
+    """Rank-one residues psi_r L_r (complex modes), random residual terms of a visible size."""
+    rng = np.random.default_rng(seed)
+    lam = pole_from_fz(fn, zeta)
+    m = lam.size
+    psi = rng.normal(size=(n_out, m)) + 0.2j * rng.normal(size=(n_out, m))
+    L = rng.normal(size=(m, n_ref)) + 0.1j * rng.normal(size=(m, n_ref))
+    scale = {"accelerance": 1.0, "mobility": 1e-2, "receptance": 1e-4}[quantity]
+    R = np.einsum("or,rj->ojr", psi, L) * 1j * np.abs(lam) * scale
+    if residual_form == "none":
+        ur = lr = None
+    elif residual_form == "paper":
+        ur = 0.05 * (rng.normal(size=(n_out, n_ref)) + 1j * rng.normal(size=(n_out, n_ref)))
+        lr = 2e3 * (rng.normal(size=(n_out, n_ref)) + 1j * rng.normal(size=(n_out, n_ref)))
+    else:
+        ur = 2e-6 * scale * (rng.normal(size=(n_out, n_ref)) + 1j * rng.normal(size=(n_out, n_ref)))
+        lr = 3e2 * scale * (rng.normal(size=(n_out, n_ref)) + 1j * rng.normal(size=(n_out, n_ref)))
+    return ModalModel(lam, R, quantity=quantity, residual_form=residual_form, upper_residual=ur, lower_residual=lr)
+
+
+def perturbed(fn=FN, zeta=ZETA, df: float = 0.01, dz: float = 0.3) -> np.ndarray:
+    sign = np.where(np.arange(fn.size) % 2 == 0, 1.0, -1.0)
+    return pole_from_fz(fn * (1 + df * sign), zeta * (1 + dz * sign[::-1]))
+
+
+def by_freq(p: np.ndarray) -> np.ndarray:
+    return p[np.argsort(p.imag)]
+
+
+def rel_err(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b) / np.abs(b)))
+
+
+# ----------------------------------------------------------------------------- noise-free recovery
+@pytest.mark.parametrize("method", ["gn", "lm"])
+@pytest.mark.parametrize("n_ref", [1, 2])
+def test_noise_free_recovery_from_perturbed_poles(method: str, n_ref: int) -> None:
+    model = make_model(n_out=3, n_ref=n_ref)
+    frf = synthesize(model, FREQ)
+    res = fit_lsfd(frf, perturbed(), method=method)
+    assert res.success, res.message
+    assert rel_err(res.poles, model.poles) < 1e-6
+    assert rel_err(res.model.residues.ravel(), model.residues.ravel()) < 1e-6
+    assert np.allclose(res.model.lower_residual, model.lower_residual, rtol=1e-6)
+    assert np.allclose(res.model.upper_residual, model.upper_residual, rtol=1e-5)
+    # S decreases monotonically from the initial value and reaches round-off
+    assert res.history[0] > 1e6 * res.history[-1]
+    assert all(b <= a for a, b in zip(res.history, res.history[1:]))
+    assert len(res.history) == res.iterations + 1
+    # rank-one split reproduces psi L per mode
+    recon = np.einsum("or,rj->ojr", res.mode_shapes, res.participation)
+    assert np.allclose(recon, res.model.residues, rtol=0, atol=1e-8 * np.abs(model.residues).max())
+    if n_ref == 1:
+        assert np.allclose(res.participation, 1.0)
+
+
+def test_noise_free_recovery_from_lsce_poles_hint_free() -> None:
+    """Start from LSCE poles (only the number of modes is given): the spurious LSCE poles are
+    dropped by ranking the candidate poles by their peak modal amplitude max |R| / |Re lambda|."""
+    lsce = pytest.importorskip("analysis.lsce")
+    model = make_model(n_out=3, n_ref=2, residual_form="physical")
+    frf = synthesize(model, FREQ)
+    cand = lsce.lsce_poles(frf, FN.size + 3)
+    cand = cand[(cand.real < 0) & (cand.imag > 0)]
+    assert cand.size >= FN.size
+    prob = ProjectedProblem(frf.omega, frf.H.reshape(-1, FREQ.size), frf.quantity, "physical")
+    ev = prob.evaluate(poles_to_theta(cand))
+    R, _ = prob.linear_parameters(ev)
+    peak = np.max(np.abs(R), axis=0) / np.abs(cand.real)
+    init = by_freq(cand[np.argsort(peak)[::-1][:FN.size]])
+    for method in ("gn", "lm"):
+        res = fit_lsfd(frf, init, method=method)
+        assert res.success, res.message
+        assert rel_err(by_freq(res.poles), model.poles) < 1e-6
+
+
+@pytest.mark.parametrize("form,quantity", [("paper", "accelerance"), ("physical", "mobility"),
+                                           ("physical", "receptance"), ("none", "accelerance")])
+def test_residual_forms_and_quantities(form: str, quantity: str) -> None:
+    model = make_model(n_out=2, residual_form=form, quantity=quantity, seed=3)
+    frf = synthesize(model, FREQ)
+    res = fit_lsfd(frf, perturbed(), residual_form=form)
+    assert res.success, res.message
+    assert rel_err(res.poles, model.poles) < 1e-6
+    assert res.model.residual_form == form and res.model.quantity == quantity
+    if form == "none":
+        assert res.model.upper_residual is None and res.model.lower_residual is None
+
+
+def test_lm_converges_from_far_poles_where_gn_may_not() -> None:
+    """3 % off in frequency and twice the damping: LM converges; GN's outcome is recorded."""
+    model = make_model(n_out=3, n_ref=1, seed=1)
+    frf = synthesize(model, FREQ)
+    sign = np.where(np.arange(FN.size) % 2 == 0, 1.0, -1.0)
+    p0 = pole_from_fz(FN * (1 + 0.03 * sign), 2 * ZETA)
+    lm = fit_lsfd(frf, p0, method="lm")
+    assert lm.success, lm.message
+    assert rel_err(lm.poles, model.poles) < 1e-6
+    gn = fit_lsfd(frf, p0, method="gn")
+    # what GN does from here (recorded; the assertion is that it is reported, not raised)
+    print(f"GN from 3 %/2x damping: status {gn.status}, success {gn.success}, {gn.iterations} it: {gn.message}; "
+          f"max pole error {rel_err(gn.poles, model.poles):.3g}")
+    assert gn.status in (Status.FTOL, Status.XTOL, Status.ROUNDOFF, Status.S_INCREASED, Status.UNSTABLE,
+                         Status.COLLAPSED)
+    if not gn.success:
+        assert gn.message and gn.sse <= gn.history[0]
+
+
+def test_gn_divergence_is_a_status_not_an_exception() -> None:
+    """Initial poles 15-20 % off with 5x damping: the first GN step throws pole 3 to Re > 0, which
+    is reported as status UNSTABLE with the last good poles; LM gets there."""
+    model = make_model(n_out=2, seed=2)
+    frf = synthesize(model, FREQ)
+    p0 = pole_from_fz(FN * np.array([1.15, 0.85, 1.2, 0.8, 1.1]), ZETA * 5)
+    gn = fit_lsfd(frf, p0, method="gn", max_iter=50)
+    assert gn.status == Status.UNSTABLE and not gn.success
+    assert "unstable" in gn.message
+    assert np.all(gn.poles.real < 0)
+    assert gn.sse <= gn.history[0]
+    lm = fit_lsfd(frf, p0, method="lm", max_iter=50)
+    assert lm.success, lm.message
+    assert rel_err(lm.poles, model.poles) < 1e-6
+
+
+def test_extra_pole_and_collapsed_basis_are_handled() -> None:
+    """One mode in the data, two initial poles around it: LM fits (the extra pole's residue goes to
+    zero); a basis with coincident poles is flagged rank deficient by the kernel."""
+    m1 = make_model(n_out=2, fn=np.array([30.0]), zeta=np.array([0.01]), residual_form="none")
+    frf = synthesize(m1, FREQ)
+    p0 = pole_from_fz(np.array([29.7, 30.3]), np.array([0.01, 0.012]))
+    lm = fit_lsfd(frf, p0, residual_form="none")
+    assert lm.success
+    k = int(np.argmin(np.abs(lm.poles - m1.poles[0])))
+    assert abs(lm.poles[k] - m1.poles[0]) / abs(m1.poles[0]) < 1e-6
+    assert np.all(np.abs(lm.model.residues[..., 1 - k]) < 1e-6 * np.abs(m1.residues).max())
+    prob = ProjectedProblem(frf.omega, frf.H.reshape(2, -1), frf.quantity, "none")
+    lam = m1.poles[0]
+    ev = prob.evaluate(poles_to_theta(np.array([lam, lam * (1 + 1e-15)])))
+    assert not ev.rank_ok
+
+
+# ----------------------------------------------------------------------------- stopping rules
+def test_max_iter_warns_and_reports_status() -> None:
+    model = make_model(n_out=2)
+    frf = synthesize(model, FREQ)
+    with pytest.warns(LSFDConvergenceWarning, match="max_iter=2"):
+        res = fit_lsfd(frf, perturbed(), method="lm", max_iter=2)
+    assert res.status == Status.MAX_ITER and not res.success
+    assert res.iterations == 2 and len(res.history) == 3
+    assert res.sse < res.history[0]
+
+
+def test_ftol_stops_noisy_fit_early() -> None:
+    model = make_model(n_out=2)
+    clean = synthesize(model, FREQ)
+    rng = np.random.default_rng(5)
+    sd = 0.01 * np.sqrt(np.mean(np.abs(clean.H) ** 2))
+    frf = replace(clean, H=clean.H + sd * (rng.normal(size=clean.H.shape) + 1j * rng.normal(size=clean.H.shape)))
+    res = fit_lsfd(frf, perturbed(), ftol=1e-3, xtol=0.0)
+    tight = fit_lsfd(frf, perturbed())
+    assert res.status == Status.FTOL and tight.success
+    assert res.iterations < tight.iterations
+    # stopped when S could decrease by at most ~ftol (actual decrease or Gauss-Newton prediction)
+    assert tight.sse <= res.sse <= (1 + 2e-3) * tight.sse
+
+
+# ----------------------------------------------------------------------------- exponential window
+def test_exponential_window_correction() -> None:
+    """The window exp(-t/tau) shifts every pole by -1/tau with unchanged residues; the fit undoes it."""
+    model = make_model(n_out=2, residual_form="none", seed=4)
+    tau = 0.5
+    windowed = replace(model, poles=model.poles - 1.0 / tau)
+    frf = replace(synthesize(windowed, FREQ), exp_window_tau_s=tau)
+    p0 = perturbed(FN, ZETA, 0.005, 0.1) - 1.0 / tau
+    res = fit_lsfd(frf, p0, residual_form="none")
+    assert res.success
+    assert rel_err(res.poles, model.poles) < 1e-6
+    assert rel_err(res.poles_raw, windowed.poles) < 1e-6
+    assert rel_err(res.model.poles, model.poles) < 1e-6
+    assert np.allclose(res.damping, model.damping, rtol=1e-5)
+    raw = fit_lsfd(frf, p0, residual_form="none", correct_exp_window=False)
+    assert np.allclose(raw.poles, raw.poles_raw)
+    assert rel_err(raw.poles, windowed.poles) < 1e-6
+
+
+def test_exponential_window_time_domain() -> None:
+    """FRF from the DFT of a sampled, exponentially windowed impulse response (receptance,
+    h(t) = sum 2 Re(R e^{lambda t}) times exp(-t/tau)): the corrected poles are the true ones.
+    The jump of h at t = 0 and the aliasing give a smooth offset absorbed by UR + LR/w^2."""
+    fn = np.array([22.0, 47.0, 71.0])
+    zeta = np.array([0.005, 0.008, 0.004])
+    lam = pole_from_fz(fn, zeta)
+    R = np.array([-20j, 15 - 30j, 5 + 20j])
+    fs, n, tau = 2048.0, 8192, 0.5
+    t = np.arange(n) / fs
+    h = 2 * np.real(np.exp(np.outer(t, lam)) @ R) * np.exp(-t / tau)
+    H = np.fft.rfft(h) / fs
+    f = np.fft.rfftfreq(n, 1 / fs)
+    sel = (f >= 10) & (f <= 100)
+    frf = FRFSet(f[sel], H[sel], quantity="receptance", exp_window_tau_s=tau)
+    p0 = pole_from_fz(fn * 1.005, (zeta + 1 / (tau * 2 * np.pi * fn)) * 1.2)   # as LSCE would see them
+    res = fit_lsfd(frf, p0, residual_form="paper")
+    assert res.success, res.message
+    assert rel_err(res.poles, lam) < 5e-6
+    assert np.allclose(res.poles_raw, lam - 1 / tau, rtol=5e-6)
+    assert np.all(np.abs(res.damping - zeta) < 1e-5)
+    assert np.all(res.model.damping > 0)
+    assert np.allclose(res.model.residues[0, 0], R, rtol=1e-3)
+
+
+# ----------------------------------------------------------------------------- options
+def test_band_and_line_weights() -> None:
+    model = make_model(n_out=2, seed=6)
+    clean = synthesize(model, FREQ)
+    H = clean.H.copy()
+    bad = (FREQ > 40) & (FREQ < 45)          # corrupted lines between the modes
+    H[..., bad] += 10.0
+    frf = replace(clean, H=H)
+    w = np.where(bad, 0.0, 1.0)
+    res = fit_lsfd(frf, perturbed(), weights=w)
+    assert rel_err(res.poles, model.poles) < 1e-6
+    res_b = fit_lsfd(clean, perturbed()[:3], band=(8.0, 45.0))
+    assert res_b.band[0] >= 8.0 and res_b.band[1] <= 45.0
+    assert rel_err(res_b.poles, model.poles[:3]) < 1e-3   # modes above the band act through the residuals
+
+
+def test_frf_weights_do_not_change_noise_free_answer() -> None:
+    model = make_model(n_out=3, seed=7)
+    frf = synthesize(model, FREQ)
+    res = fit_lsfd(frf, perturbed(), weights=np.array([[1.0], [5.0], [0.2]]))
+    assert res.success
+    assert rel_err(res.poles, model.poles) < 1e-6
+    assert rel_err(res.model.residues.ravel(), model.residues.ravel()) < 1e-6
+
+
+def test_per_frf_fits() -> None:
+    model = make_model(n_out=2, n_ref=2, seed=8)
+    frf = synthesize(model, FREQ)
+    res = fit_lsfd(frf, perturbed(), per_frf=True)
+    assert res.per_frf is not None and len(res.per_frf) == 4
+    for k, sub in enumerate(res.per_frf):
+        o, r = divmod(k, 2)
+        assert sub.model.outputs == (frf.outputs[o],) and sub.model.references == (frf.references[r],)
+        assert rel_err(sub.poles, model.poles) < 1e-6
+        assert np.allclose(sub.model.residues[0, 0], model.residues[o, r], rtol=1e-5)
+
+
+def test_rank_one_split_recovers_shapes() -> None:
+    rng = np.random.default_rng(9)
+    psi = rng.normal(size=(4, 3)) + 1j * rng.normal(size=(4, 3))
+    L = rng.normal(size=(3, 2)) + 1j * rng.normal(size=(3, 2))
+    R = np.einsum("or,rj->ojr", psi, L)
+    p, l, ratio = rank_one_split(R)
+    assert np.allclose(np.einsum("or,rj->ojr", p, l), R)
+    assert np.all(ratio < 1e-12)
+    assert np.allclose(np.max(np.abs(l), axis=1), 1.0)
+    for r in range(3):   # psi is proportional to the true shape
+        c = np.vdot(psi[:, r], p[:, r]) / np.vdot(psi[:, r], psi[:, r])
+        assert np.allclose(p[:, r], c * psi[:, r])
+
+
+# ----------------------------------------------------------------------------- kernels
+def test_kaufman_gradient_matches_finite_difference_of_S() -> None:
+    """At any point the variable-projection gradient dS/dtheta = 2 J^T r is exact (r is orthogonal
+    to the basis, so Kaufman's simplification drops nothing from the gradient)."""
+    model = make_model(n_out=2, n_ref=2, seed=10)
+    frf = synthesize(model, FREQ)
+    prob = ProjectedProblem(frf.omega, frf.H.reshape(-1, FREQ.size), frf.quantity, "physical")
+    theta = poles_to_theta(perturbed(FN, ZETA, 0.003, 0.1))
+    ev = prob.evaluate(theta)
+    _, g = prob.normal_equations(ev)
+    for k in range(theta.size):
+        h = 1e-6 * abs(theta[k])
+        tp, tm = theta.copy(), theta.copy()
+        tp[k] += h
+        tm[k] -= h
+        fd = (prob.evaluate(tp).S - prob.evaluate(tm).S) / (2 * h)
+        assert fd == pytest.approx(2 * g[k], rel=1e-5)
+
+
+def test_fast_and_precise_evaluations_agree() -> None:
+    model = make_model(n_out=20, n_ref=3, seed=11)
+    clean = synthesize(model, np.linspace(8.0, 100.0, 4000))
+    rng = np.random.default_rng(12)
+    H = clean.H + 0.01 * (rng.normal(size=clean.H.shape) + 1j * rng.normal(size=clean.H.shape))
+    prob = ProjectedProblem(clean.omega, H.reshape(-1, 4000), "accelerance", "physical")
+    assert prob.fast_ok
+    theta = poles_to_theta(perturbed(FN, ZETA, 0.002, 0.05))
+    a, b = prob.evaluate(theta), prob.evaluate(theta, fast=True)
+    assert a.precise and not b.precise
+    assert b.S == pytest.approx(a.S, rel=1e-9)
+    assert np.allclose(b.coef, a.coef, rtol=1e-8, atol=1e-10 * np.abs(a.coef).max())
+    Ja, ga = prob.normal_equations(a)
+    Jb, gb = prob.normal_equations(b)
+    assert np.allclose(Jb, Ja, rtol=1e-8, atol=1e-12 * np.abs(Ja).max())
+    assert np.allclose(gb, ga, rtol=1e-6, atol=1e-9 * np.abs(ga).max())
+
+
+def test_fit_with_fast_evaluations_matches_precise_fit(monkeypatch) -> None:
+    """A problem big enough for fast evaluations ends at the same poles as with precise ones only."""
+    model = make_model(n_out=20, n_ref=3, seed=15)
+    freq = np.linspace(8.0, 100.0, 4000)
+    clean = synthesize(model, freq)
+    rng = np.random.default_rng(16)
+    sd = 0.01 * np.sqrt(np.mean(np.abs(clean.H) ** 2))
+    frf = replace(clean, H=clean.H + sd * (rng.normal(size=clean.H.shape) + 1j * rng.normal(size=clean.H.shape)))
+    p0 = perturbed(FN, ZETA, 0.003, 0.1)
+    fast = fit_lsfd(frf, p0)
+    monkeypatch.setattr(ProjectedProblem, "FAST_MIN_SIZE", 10 ** 12)
+    precise = fit_lsfd(frf, p0)
+    assert fast.success and precise.success
+    assert np.all(np.abs(fast.freq_hz - precise.freq_hz) < 1e-3 * precise.freq_hz_std)
+    assert np.all(np.abs(fast.damping - precise.damping) < 1e-3 * precise.damping_std)
+    assert fast.sse == pytest.approx(precise.sse, rel=1e-12)
+
+
+# ----------------------------------------------------------------------------- uncertainty beside the poles
+def test_reported_std_matches_crlb_for_a_noisy_fit() -> None:
+    model = make_model(n_out=4, n_ref=1, seed=13)
+    clean = synthesize(model, FREQ)
+    rng = np.random.default_rng(14)
+    sd = 0.02 * np.sqrt(np.mean(np.abs(clean.H) ** 2))
+    noise = sd / np.sqrt(2) * (rng.normal(size=clean.H.shape) + 1j * rng.normal(size=clean.H.shape))
+    frf = replace(clean, H=clean.H + noise)
+    res = fit_lsfd(frf, perturbed())
+    assert res.success, res.message
+    assert res.noise_var == pytest.approx(sd ** 2, rel=0.05)
+    bound = crlb_poles(model, FREQ, sd ** 2)
+    assert np.allclose(res.freq_hz_std, bound.freq_hz_std, rtol=0.1)
+    assert np.allclose(res.damping_std, bound.damping_std, rtol=0.1)
+    # the true values lie within 5 standard deviations
+    assert np.all(np.abs(res.freq_hz - model.freq_hz) < 5 * res.freq_hz_std)
+    assert np.all(np.abs(res.damping - model.damping) < 5 * res.damping_std)
+    assert res.cov_poles.shape == (10, 10)
+
+
+# ----------------------------------------------------------------------------- bad input
+def _frf() -> FRFSet:
+    return synthesize(make_model(n_out=1), FREQ)
+
+
+@pytest.mark.parametrize("poles,match", [
+    (np.array([100.0, 200.0]), "complex"),
+    (np.array([-1 - 100j]), "upper half plane"),
+    (np.array([1 + 100j]), "stable"),
+    (np.array([-1 + 100j, -1 + 100j]), "duplicates"),
+    (np.array([np.nan + 1j]), "NaN"),
+])
+def test_bad_initial_poles_raise_clear_errors(poles, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        fit_lsfd(_frf(), poles)
+
+
+def test_bad_arguments_raise_clear_errors() -> None:
+    frf = _frf()
+    p0 = perturbed()
+    with pytest.raises(ValueError, match="method"):
+        fit_lsfd(frf, p0, method="newton")
+    with pytest.raises(ValueError, match="residual_form"):
+        fit_lsfd(frf, p0, residual_form="both")
+    with pytest.raises(ValueError, match="weights must have shape"):
+        fit_lsfd(frf, p0, weights=np.ones(3))
+    with pytest.raises(ValueError, match="too few"):
+        fit_lsfd(frf, p0, band=(8.0, 8.5))
+    with pytest.raises(TypeError, match="FRFSet"):
+        fit_lsfd(frf.H, p0)
+    with pytest.raises(ValueError, match="max_iter"):
+        fit_lsfd(frf, p0, max_iter=0)
+    H = frf.H.copy()
+    H[0, 0, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        fit_lsfd(replace(frf, H=H), p0)

@@ -1,0 +1,156 @@
+"""The whole automatic fit: default band, stabilization, selection, nonlinear LSFD (paper Fig. 1)."""
+import logging
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from analysis.frf import FRFSet
+from analysis.modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz, synthesize
+from analysis.pipeline import FitError, check_band_edges, default_band, default_max_modes, fit_auto
+
+F_TRUE = np.array([40.0, 75.0, 78.0, 130.0, 180.0, 240.0, 310.0, 390.0])
+Z_TRUE = np.linspace(0.005, 0.02, F_TRUE.size)
+
+
+def make_frf(freqs=F_TRUE, zetas=Z_TRUE, *, n_out=10, n_f=2000, fmax=500.0, f0=None, noise=0.0, seed=0,
+             coherence=None) -> tuple[FRFSet, np.ndarray]:
+    """Accelerance FRFs exactly of the LSFD model: modes plus physical residual terms."""
+    rng = np.random.default_rng(seed)
+    poles = pole_from_fz(freqs, zetas)
+    phi = rng.standard_normal((n_out, poles.size))
+    R = phi[:, None, :] * np.exp(0.05j * rng.standard_normal(poles.size)) * poles.imag / 2j
+    model = ModalModel(poles, R, quantity="accelerance", residual_form="physical",
+                       upper_residual=1e-6 * rng.standard_normal((n_out, 1)),
+                       lower_residual=5.0 * rng.standard_normal((n_out, 1)))
+    f = np.linspace(fmax / n_f if f0 is None else f0, fmax, n_f)
+    frf = synthesize(model, f)
+    if noise:
+        n = (rng.standard_normal(frf.H.shape) + 1j * rng.standard_normal(frf.H.shape)) / np.sqrt(2)
+        frf = replace(frf, H=frf.H + noise * np.abs(frf.H) * n)
+    if coherence is not None:
+        frf = replace(frf, coherence=np.broadcast_to(coherence, frf.H.shape))
+    return frf, poles
+
+
+@pytest.mark.parametrize("method", ["gn", "lm"])
+@pytest.mark.parametrize("initial", ["lscf", "lsce"])
+def test_fit_auto_exact_on_noise_free_data(method, initial):
+    frf, truth = make_frf()
+    res, st = fit_auto(frf, method=method, initial=initial)
+    assert res.success, res.message
+    assert res.poles.size == truth.size
+    p = res.poles[np.argsort(natural_freq_hz(res.poles))]
+    assert np.max(np.abs(p - truth) / np.abs(truth)) < 1e-6
+    np.testing.assert_allclose(damping_ratio(p), Z_TRUE, rtol=1e-5)
+    lo, hi = st.meta["band"]
+    assert lo == pytest.approx(frf.freq_hz[4])  # first line at or above 5 df
+    assert hi == frf.freq_hz[-1]
+    assert st.meta["warnings"] == []
+
+
+def test_fit_auto_one_percent_noise_finds_all_modes():
+    frf, truth = make_frf(noise=0.01, seed=4)
+    res, st = fit_auto(frf)
+    p = res.poles[np.argsort(natural_freq_hz(res.poles))]
+    assert p.size == truth.size
+    np.testing.assert_allclose(natural_freq_hz(p), F_TRUE, rtol=1e-4)
+    np.testing.assert_allclose(damping_ratio(p), Z_TRUE, rtol=0.02)
+    # LSFD improves the damping of the selected (stabilization) poles
+    sel = np.sort_complex(st.meta["selected_poles"])
+    sel = sel[np.argsort(natural_freq_hz(sel))]
+    err_sel = np.median(np.abs(damping_ratio(sel) / Z_TRUE - 1))
+    err_fit = np.median(np.abs(damping_ratio(p) / Z_TRUE - 1))
+    assert err_fit < err_sel
+
+
+def test_default_band_skips_low_lines_and_low_coherence():
+    frf, _ = make_frf(n_out=2, f0=0.0, n_f=2001)
+    df = frf.freq_hz[1] - frf.freq_hz[0]
+    assert default_band(frf) == (pytest.approx(5 * df), frf.freq_hz[-1])
+    coh = np.ones(frf.freq_hz.size)
+    coh[:40] = 0.3  # leading low-coherence lines (IEPE roll-off)
+    frf2 = replace(frf, coherence=np.broadcast_to(coh, frf.H.shape))
+    assert default_band(frf2)[0] == pytest.approx(frf.freq_hz[40])
+
+
+def test_default_max_modes_counts_peaks():
+    frf, _ = make_frf(n_out=3)
+    n = default_max_modes(frf, (1.25, 500.0))
+    assert 2 * 8 + 8 - 4 <= n <= 2 * 8 + 8  # 7 or 8 peaks (75/78 may merge), 2 * peaks + 8
+
+
+def test_band_edges_move_or_warn():
+    lam = pole_from_fz([100.0, 200.0], [0.01, 0.01])  # half-power bandwidths 2 and 4 Hz
+    band, warn = check_band_edges(lam, (99.0, 205.0), (10.0, 400.0), (True, True))
+    assert band == (pytest.approx(100.0 - 3 * 2.0), pytest.approx(200.0 + 3 * 4.0))
+    assert warn == []
+    band, warn = check_band_edges(lam, (99.0, 205.0), (98.0, 400.0), (True, False))
+    assert band == (99.0, 205.0)
+    assert len(warn) == 2 and "lower band edge" in warn[0] and "upper band edge" in warn[1]
+
+
+def test_user_band_edge_warning_and_automatic_move(caplog):
+    frf, truth = make_frf(n_out=4)
+    with caplog.at_level(logging.WARNING, logger="analysis.pipeline"):
+        res, st = fit_auto(frf, band=(20.0, 400.0))
+    assert any("390" in w and "upper band edge" in w for w in st.meta["warnings"])
+    assert "upper band edge" in caplog.text
+    # near the end of the data the automatic edge cannot move out either: warned too
+    res2, st2 = fit_auto(frf.band(1.0, 400.0))
+    assert any("upper band edge" in w for w in st2.meta["warnings"])
+    assert st2.meta["band"][1] <= 400.0
+
+
+def test_user_frequencies_and_poles():
+    frf, truth = make_frf(n_out=4)
+    res, st = fit_auto(frf, initial=F_TRUE * (1 + 2e-3))
+    assert res.poles.size == F_TRUE.size and st is not None
+    np.testing.assert_allclose(np.sort(natural_freq_hz(res.poles)), F_TRUE, rtol=1e-8)
+    res2, st2 = fit_auto(frf, initial=truth * (1 + 1e-3), method="gn")
+    assert st2 is None
+    np.testing.assert_allclose(np.sort(natural_freq_hz(res2.poles)), F_TRUE, rtol=1e-8)
+
+
+def test_n_modes_limits_the_selection():
+    frf, truth = make_frf(n_out=4)
+    res, st = fit_auto(frf, n_modes=3)
+    assert res.poles.size == 3
+
+
+def test_no_modes_is_a_clear_error():
+    rng = np.random.default_rng(0)
+    f = np.linspace(1, 500, 1000)
+    noise = FRFSet(f, rng.standard_normal((2, 1, f.size)) + 1j * rng.standard_normal((2, 1, f.size)))
+    with pytest.raises(FitError, match="no stable physical poles"):
+        fit_auto(noise, max_modes=6)
+    with pytest.raises(ValueError, match="initial"):
+        fit_auto(noise, initial="era")
+    with pytest.raises(TypeError, match="FRFSet"):
+        fit_auto(np.zeros(10))
+
+
+@pytest.mark.realdata
+def test_real_uff_three_frfs(shared_data):
+    """Real measured data: ladisk/pyuff ``data/measurement.uff`` (MIT), 3 accelerance FRFs, df 1 Hz.
+
+    No truth is known: the automatic fit must converge, find one pole per visible resonance
+    (the summed magnitude has 6 clear peaks below 1 kHz) and reproduce the measured FRFs
+    (median relative error below -20 dB on every FRF).
+    """
+    from analysis.inputs import load_input
+    from analysis.modal import synthesize
+    from scipy.signal import find_peaks
+
+    frf = load_input(shared_data / "pyuff_3frf" / "measurement.uff")
+    res, st = fit_auto(frf)
+    assert res.success, res.message
+    lo, hi = res.band
+    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
+    s = 20 * np.log10(np.sqrt(np.sum(np.abs(frf.H[..., sel].reshape(-1, sel.sum())) ** 2, axis=0)))
+    peaks, _ = find_peaks(s, prominence=20.0)
+    assert res.poles.size == peaks.size == 6
+    np.testing.assert_allclose(np.sort(res.freq_hz), frf.freq_hz[sel][peaks], atol=1.0)  # within a line
+    G = synthesize(res.model, frf.freq_hz[sel]).H
+    rel = np.abs(frf.H[..., sel] - G) / np.abs(frf.H[..., sel])
+    assert np.all(20 * np.log10(np.median(rel, axis=-1)) < -20)

@@ -1,0 +1,206 @@
+"""acquisition.recording: schema v1 round trip, crash safety (SIGKILL), and every kind of bad file."""
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from acquisition.errors import RecordingError
+from acquisition.recording import (
+    SCHEMA_VERSION,
+    Recording,
+    RecordingWriter,
+    counts_crc32,
+    load_frfset,
+    scale_counts,
+)
+from analysis.spectra import WindowSettings
+
+CHANNELS = [
+    {"name": "force", "point": "right:6:-X", "direction": "-X", "quantity": "force", "sensitivity": 2.25,
+     "sensitivity_unit": "mV/N", "unit": "N", "range_v": 5.0, "coupling": "AC", "iepe": True},
+    {"name": "acc1", "point": "left:9:Y", "direction": "Y", "quantity": "acceleration", "sensitivity": 100.0,
+     "sensitivity_unit": "mV/g", "unit": "m/s^2", "range_v": 5.0, "coupling": "AC", "iepe": True},
+]
+WIN = WindowSettings(force_width_s=0.01, force_taper_s=0.002, exp_tau_s=0.4)
+
+
+def write_example(path: Path, n_hits: int = 3, seed: int = 0) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    counts = []
+    with RecordingWriter(path, instrument={"vendor": "sim", "model": "SL-4", "serial": "0001"},
+                         setup={"sample_rate_hz": 1000.0, "block_size": 256}, channels=CHANNELS, windows=WIN,
+                         plan={"mode": "roving_hammer", "points": ["right:6:-X"]}) as w:
+        for i in range(n_hits):
+            c = rng.integers(-32768, 32767, size=(2, 256), endpoint=True).astype(np.int16)
+            counts.append(c)
+            w.write_hit(counts=c, eu_per_count=[0.01, 0.002], volts_per_count=[2.2e-5, 1.5e-4], trigger_index=16,
+                        sample_rate_hz=1000.0, sequence=100 + i, timestamp=1.5 + i, measurement=0, point="right:6:-X",
+                        reference="right:6:-X", outputs=["left:9:Y"], force_channel=0, response_channels=[1],
+                        overload=[False, i == 1], accepted=i != 1, reasons=["overload on channel 2"] if i == 1 else [],
+                        check={"force_peak_n": 100.0 + i})
+            w.log("INFO", f"hit {i}")
+        f = np.linspace(0, 500, 129)
+        H = (np.arange(129) + 1j)[None, :] * np.array([[1.0]])
+        w.write_frf(0, point="right:6:-X", freq_hz=f, H1=H, H2=2 * H, coherence=np.full((1, 129), 0.9),
+                    Gff=np.ones(129), Gxx=np.ones((1, 129)), Gfx=H, outputs=["left:9:Y"], reference="right:6:-X",
+                    n_averages=2, hits=[0, 2], quantity="accelerance", unit="(m/s^2)/N", windows=WIN,
+                    exp_window_tau_s=0.4)
+    return counts
+
+
+def test_round_trip(tmp_path):
+    p = tmp_path / "rec.h5"
+    counts = write_example(p)
+    with h5py.File(p, "r") as f:
+        assert f.attrs["schema"] == "impactlab-recording" and f.attrs["schema_version"] == SCHEMA_VERSION
+    with Recording(p) as rec:
+        assert rec.instrument["model"] == "SL-4"
+        assert rec.setup["block_size"] == 256
+        assert rec.channels[1]["point"] == "left:9:Y" and rec.channels[0]["sensitivity"] == 2.25
+        assert rec.channels[0]["iepe"] is True
+        assert rec.windows == WIN
+        assert rec.plan["mode"] == "roving_hammer"
+        hits = list(rec.hits())
+        assert len(hits) == 3 and [h.accepted for h in hits] == [True, False, True]
+        assert hits[1].reasons == ["overload on channel 2"] and hits[1].overload.tolist() == [False, True]
+        for h, c in zip(hits, counts):
+            assert h.counts.dtype == np.int16 and np.array_equal(h.counts, c)
+            assert np.array_equal(h.data, scale_counts(c, np.array([0.01, 0.002])))
+            assert h.trigger_index == 16 and h.crc_ok
+        assert hits[2].sequence == 102 and hits[2].timestamp == 3.5 and hits[0].check["force_peak_n"] == 100.0
+        assert [h.index for h in rec.hits(accepted_only=True)] == [0, 2]
+        assert [e[2] for e in rec.events()] == ["hit 0", "hit 1", "hit 2"]
+        assert rec.closed_cleanly
+    s = load_frfset(p, "H2")
+    assert s.H.shape == (1, 1, 129) and s.exp_window_tau_s == 0.4
+    assert np.array_equal(s.H[0, 0], 2 * (np.arange(129) + 1j))
+    assert s.outputs == ("left:9:Y",) and s.references == ("right:6:-X",) and s.meta["estimator"] == "H2"
+
+
+def test_writer_refuses_to_overwrite(tmp_path):
+    p = tmp_path / "rec.h5"
+    write_example(p, 1)
+    with pytest.raises(RecordingError, match="exists"):
+        write_example(p, 1)
+
+
+def test_not_hdf5(tmp_path):
+    p = tmp_path / "x.h5"
+    p.write_text("hello, not HDF5")
+    with pytest.raises(RecordingError, match="not an HDF5 file"):
+        Recording(p)
+    with pytest.raises(RecordingError, match="not found"):
+        Recording(tmp_path / "missing.h5")
+
+
+def test_other_schema_version(tmp_path):
+    p = tmp_path / "rec.h5"
+    write_example(p, 1)
+    with h5py.File(p, "a") as f:
+        f.attrs["schema_version"] = 2
+    with pytest.raises(RecordingError, match="schema version 2"):
+        Recording(p)
+
+
+def test_foreign_hdf5(tmp_path):
+    p = tmp_path / "other.h5"
+    with h5py.File(p, "w") as f:
+        f["data"] = np.zeros(3)
+    with pytest.raises(RecordingError, match="not an impactlab recording"):
+        Recording(p)
+
+
+def test_truncated_file(tmp_path):
+    p = tmp_path / "rec.h5"
+    write_example(p, 3)
+    data = p.read_bytes()
+    q = tmp_path / "cut.h5"
+    q.write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecordingError, match="damaged|truncated"):
+        with Recording(q) as rec:
+            list(rec.hits())
+
+
+def test_damaged_counts_fail_crc(tmp_path):
+    p = tmp_path / "rec.h5"
+    write_example(p, 2)
+    with h5py.File(p, "a") as f:
+        c = f["hits/000001/counts"]
+        c[0, 0] = c[0, 0] ^ 1
+    with Recording(p) as rec:
+        assert rec.hit(0).crc_ok
+        with pytest.raises(RecordingError, match="CRC-32"):
+            rec.hit(1)
+        assert [h.index for h in rec.hits(skip_damaged=True)] == [0]
+
+
+def test_missing_group_is_damage(tmp_path):
+    p = tmp_path / "rec.h5"
+    write_example(p, 1)
+    with h5py.File(p, "a") as f:
+        del f["setup"]
+    with pytest.raises(RecordingError, match="'/setup' is missing"):
+        Recording(p)
+
+
+def test_crc32_known_value():
+    # zlib CRC-32 of the little-endian int16 bytes 01 00 02 00
+    import zlib
+
+    assert counts_crc32(np.array([[1, 2]], np.int16)) == zlib.crc32(b"\x01\x00\x02\x00")
+
+
+WRITER = textwrap.dedent("""
+    import sys, numpy as np
+    from acquisition.recording import RecordingWriter
+    from analysis.spectra import WindowSettings
+    rng = np.random.default_rng(int(sys.argv[2]))
+    with RecordingWriter(sys.argv[1], instrument={"model": "x"}, setup={}, channels=[{"name": "f", "point": "n:1:Z"}],
+                         windows=WindowSettings()) as w:
+        i = 0
+        while True:
+            c = rng.integers(-30000, 30000, size=(4, 8192)).astype(np.int16)
+            idx = w.write_hit(counts=c, eu_per_count=[1.0] * 4, volts_per_count=[1.0] * 4, trigger_index=10,
+                              sample_rate_hz=1000.0, sequence=i, timestamp=0.0, measurement=0, point="n:1:Z",
+                              reference="n:1:Z", outputs=["n:2:Z"] * 3, force_channel=0, response_channels=[1, 2, 3],
+                              overload=[False] * 4, accepted=True)
+            w.log("INFO", f"hit {idx}")
+            print(idx, int(c.sum()), flush=True)
+            i += 1
+""")
+
+
+@pytest.mark.parametrize("seed,n_before_kill", [(1, 4), (2, 9)])
+def test_sigkill_mid_session_loses_no_hit(tmp_path, seed, n_before_kill):
+    """A writer killed with SIGKILL (while busy writing) leaves a file that opens with every reported hit."""
+    p = tmp_path / "killed.h5"
+    script = tmp_path / "writer.py"
+    script.write_text(WRITER)
+    proc = subprocess.Popen([sys.executable, str(script), str(p), str(seed)], stdout=subprocess.PIPE, text=True)
+    reported = {}
+    try:
+        for line in proc.stdout:
+            idx, total = map(int, line.split())
+            reported[idx] = total
+            if len(reported) >= n_before_kill:
+                break
+        time.sleep(0.002 * seed)  # the writer is now in the middle of the next hit
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        proc.stdout.close()
+    assert proc.returncode == -signal.SIGKILL
+    with Recording(p) as rec:
+        assert not rec.closed_cleanly
+        hits = {h.index: h for h in rec.hits(skip_damaged=True)}
+        for idx, total in reported.items():
+            assert idx in hits and int(hits[idx].counts.sum()) == total
+        assert len(rec.events()) >= len(reported)
