@@ -210,7 +210,8 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
     Everything the operator typed is checked before the analyser is opened.
     """
     from .recording import Recording, RecordingWriter
-    from .session import CaptureSession, SessionError, auto_accept, channel_table, terminal_decider
+    from .session import (CaptureSession, SessionError, auto_accept, channel_table, retry_on_link_fault,
+                          terminal_decider)
     from .setup import AcquisitionSetup, default_setup, load_setup
     from .urls import SimURL, parse_device_url
 
@@ -237,7 +238,7 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
     measurements = plan.measurements(setup)  # checks the set-up has a force channel and responses
     analyser = open_analyser(url)
     with analyser:
-        identity = analyser.identify()
+        identity = retry_on_link_fault(analyser.identify)
         instrument = identity.as_dict() if hasattr(identity, "as_dict") else dict(vars(identity))
         say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
         say(f"analyser: {identity}; {len(measurements)} point(s) x {plan.hits_per_point} hits, {plan.mode}")

@@ -123,8 +123,39 @@ def _num(text: str, decimal: str) -> float:
     return float(t)
 
 
+#: what malformed content makes the parsing code raise; readers turn it into ImportDataError
+_MALFORMED = (KeyError, IndexError, ValueError, TypeError, ZeroDivisionError, OverflowError, AttributeError, EOFError)
+
+
+def _checked(test: ImportedTest) -> ImportedTest:
+    """``test`` after the consistency checks every importer's output must pass."""
+    if not (isinstance(test.fs_hz, (int, float)) and math.isfinite(test.fs_hz) and test.fs_hz > 0):
+        raise ImportDataError(f"{test.source}: the sample rate {test.fs_hz!r} Hz is not a positive number; check "
+                              "the sample interval / rate in the file or the description")
+    if not test.hits:
+        raise ImportDataError(f"{test.source}: no hit (no time data) found")
+    n_ch = len(test.channels)
+    for k, h in enumerate(test.hits):
+        if h.ndim != 2 or h.shape[0] != n_ch or h.shape[1] < 2 or h.shape != test.hits[0].shape:
+            raise ImportDataError(f"{test.source}: hit {k + 1} has shape {h.shape}; expected ({n_ch} channels, "
+                                  f">= 2 samples), the same for every hit")
+    return test
+
+
 def read_lvm(path: "str | Path") -> ImportedTest:
-    """Read a LabVIEW measurement file; each segment is one hit (see module doc)."""
+    """Read a LabVIEW measurement file; each segment is one hit (see module doc).
+
+    Raises :class:`ImportDataError` for anything that is not a well-formed .lvm file."""
+    try:
+        return _checked(_read_lvm(path))
+    except ImportDataError:
+        raise
+    except _MALFORMED as exc:
+        raise ImportDataError(f"{path} is not a well-formed .lvm file ({type(exc).__name__}: {exc}); "
+                              "export it again from LabVIEW (Write To Measurement File)") from None
+
+
+def _read_lvm(path: "str | Path") -> ImportedTest:
     p = Path(path)
     try:
         lines = p.read_text(encoding="latin-1").splitlines()
@@ -196,20 +227,38 @@ def read_lvm(path: "str | Path") -> ImportedTest:
 
 
 def read_dataphysics_mat(path: "str | Path", windowed: bool = False) -> ImportedTest:
-    """Read a DataPhysics SignalCalc ``.mat`` export: ``Xk`` (or ``Wk`` with ``windowed``) blocks."""
+    """Read a DataPhysics SignalCalc ``.mat`` export: ``Xk`` (or ``Wk`` with ``windowed``) blocks
+    of two columns (time s, value). Raises :class:`ImportDataError` for anything else."""
     import scipy.io
 
     p = Path(path)
     try:
         m = scipy.io.loadmat(str(p))
-    except (OSError, ValueError, NotImplementedError) as exc:
-        raise ImportDataError(f"{p} is not a readable MATLAB file ({exc})") from None
+    except Exception as exc:  # scipy.io raises many types (struct, zlib, Unicode, MatReadError...) on damaged files
+        raise ImportDataError(f"{p} is not a readable MATLAB file ({type(exc).__name__}: {exc})") from None
+    try:
+        return _checked(_dataphysics_from(p, m, windowed))
+    except ImportDataError:
+        raise
+    except _MALFORMED as exc:
+        raise ImportDataError(f"{p} does not hold DataPhysics time blocks of two columns (time, value) "
+                              f"({type(exc).__name__}: {exc}); export the time data again") from None
+
+
+def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:
     key = "W" if windowed else "X"
     ks = sorted(int(k[1:]) for k in m if re.fullmatch(key + r"\d+", k))
     if not ks:
         raise ImportDataError(f"{p} holds no '{key}1..{key}n' time blocks: is it a DataPhysics time export?")
     blocks = [np.asarray(m[f"{key}{k}"], float) for k in ks]
+    for k, b in zip(ks, blocks):
+        if b.ndim != 2 or b.shape[1] != 2 or b.shape[0] < 2 or b.shape != blocks[0].shape:
+            raise ImportDataError(f"{p}: block {key}{k} has shape {b.shape}; each block must be (n >= 2, 2) columns "
+                                  "time and value, all of the same length")
     t = blocks[0][:, 0]
+    dt = np.diff(t)
+    if not (np.all(np.isfinite(t)) and np.all(dt > 0)):
+        raise ImportDataError(f"{p}: the time column of {key}{ks[0]} is not strictly increasing")
     data = np.stack([b[:, 1] for b in blocks])
     fs = 1.0 / float(np.median(np.diff(t)))
     sens = np.asarray(m.get("Sensitivity", np.full(len(ks), np.nan)), float).ravel()
@@ -231,18 +280,39 @@ def load_description(path: "str | Path") -> dict:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise ImportDataError(f"cannot read description {p}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise ImportDataError(f"description {p} is not UTF-8 text ({exc})") from None
     try:
         if p.suffix.lower() == ".toml":
             import tomllib
 
-            return tomllib.loads(text)
-        return json.loads(text)
-    except ValueError as exc:
+            out = tomllib.loads(text)
+        else:
+            out = json.loads(text)
+    except (ValueError, RecursionError) as exc:
         raise ImportDataError(f"description {p} is not valid {p.suffix.lstrip('.') or 'JSON'}: {exc}") from None
+    if not isinstance(out, dict):
+        raise ImportDataError(f"description {p} must be a JSON object / TOML table with 'channels', got "
+                              f"{type(out).__name__}")
+    return out
 
 
 def read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTest:
-    """Read ``.npy`` hits (one file per hit) described by ``description`` (see module doc)."""
+    """Read ``.npy`` hits (one file per hit) described by ``description`` (see module doc).
+
+    Raises :class:`ImportDataError` for unreadable arrays or a description that does not fit them."""
+    if not isinstance(description, dict):
+        raise ImportDataError(f"the description must be a mapping with 'channels', got {type(description).__name__}")
+    try:
+        return _checked(_read_numpy(paths, description))
+    except ImportDataError:
+        raise
+    except _MALFORMED as exc:
+        raise ImportDataError(f"the arrays do not fit the description ({type(exc).__name__}: {exc}); check "
+                              "channels, layout, time_row and sample_rate_hz") from None
+
+
+def _read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTest:
     if not paths:
         raise ImportDataError("no .npy file given")
     chans = description.get("channels")
@@ -257,8 +327,11 @@ def read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTest
     for path in paths:
         try:
             a = np.load(str(path), allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise ImportDataError(f"cannot read {path} as a numpy array ({exc})") from None
+        except (OSError, ValueError, EOFError) as exc:
+            raise ImportDataError(f"cannot read {path} as a numpy array ({type(exc).__name__}: {exc})") from None
+        if not isinstance(a, np.ndarray) or a.dtype.kind not in "biuf":
+            raise ImportDataError(f"{path}: expected a real numeric array, got "
+                                  f"{getattr(a, 'dtype', type(a).__name__)}")
         a = np.asarray(a, float)
         if a.ndim != 2:
             raise ImportDataError(f"{path}: expected a 2-D array (channels x samples), got shape {a.shape}")

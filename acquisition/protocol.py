@@ -759,4 +759,7 @@ SIGLAB_2042 = CapabilitiesData(
     block_sizes=tuple(2 ** k for k in range(8, 17)),
     max_pretrigger=32768,
 )
-__all__ += ["SIGLAB_2042", "decode_block_image", "capabilities_size", "setup_size"]
+__all__ += ["SIGLAB_2042", "decode_block_image", "capabilities_size", "setup_size",
+            "ASC_INVALID_OPCODE", "ASC_INVALID_FIELD_CDB", "ASC_INVALID_FIELD_PARAM", "ASC_PARAMETER_LENGTH",
+            "ASC_LUN_NOT_SUPPORTED", "ASC_POWER_ON_RESET", "ASC_INTERNAL_FAILURE", "ASC_NOT_READY_SETUP_REQUIRED",
+            "ASC_NOT_READY_NO_BLOCK", "ASC_NOT_READY_ARMED"]

@@ -52,6 +52,8 @@ __all__ = [
     "channel_table",
     "eu_per_count_for",
     "process_hit",
+    "retry_on_link_fault",
+    "LINK_FAULTS",
 ]
 
 log = logging.getLogger(__name__)
@@ -65,6 +67,7 @@ FRF_QUANTITY = {
 PLAN_MODES = ("roving_hammer", "roving_accelerometer")
 #: errors after which the session recovers (abort, set up again, re-arm) instead of ending
 LINK_FAULTS = (ProtocolError, TransportError, CommandFailed)
+ILLEGAL_REQUEST = 0x5  # SCSI sense key: the request itself is wrong (not a link fault)
 
 
 class OperatorQuit(ImpactlabError):
@@ -73,6 +76,21 @@ class OperatorQuit(ImpactlabError):
 
 class SessionError(ImpactlabError, RuntimeError):
     """The session cannot go on (no triggers, every hit rejected...); the message says why."""
+
+
+def retry_on_link_fault(fn: Callable[[], Any], attempts: int = 5) -> Any:
+    """``fn()`` retried up to ``attempts`` times while it fails with a link fault (phase error,
+    timeout, transient CHECK CONDITION: :data:`LINK_FAULTS`; the bulk-only layer has already reset
+    the link); the last error is raised when every attempt failed. For idempotent calls only
+    (identify, capabilities, configure)."""
+    for k in range(max(1, attempts)):
+        try:
+            return fn()
+        except LINK_FAULTS as exc:
+            if k + 1 >= attempts or (isinstance(exc, CommandFailed) and exc.sense_key == ILLEGAL_REQUEST):
+                raise
+            log.warning("link fault (%s: %s); trying again (%d/%d)", type(exc).__name__, exc, k + 1, attempts)
+    raise AssertionError("unreachable")  # pragma: no cover
 
 
 # -- plan ---------------------------------------------------------------------------------------
@@ -377,7 +395,10 @@ class CaptureSession:
         return result
 
     def _measure(self, m: Measurement, avg: MeasurementAverage, result: SessionResult) -> None:
-        self.analyser.configure(m.setup)
+        try:
+            self.analyser.configure(m.setup)
+        except LINK_FAULTS as exc:
+            self._link_fault(m, exc, 1)
         self._event("INFO", f"point {m.index + 1}/{len(self.measurements)}: {self.plan.mode} at {m.point} "
                             f"(reference {m.reference}, outputs {', '.join(m.outputs)})")
         attempts = 0
@@ -468,6 +489,8 @@ class CaptureSession:
         whole block arrived), so nothing accepted is lost. After ``max_link_failures`` failures in a
         row the session ends with :class:`SessionError` saying why; every accepted hit stays in the
         recording."""
+        if isinstance(exc, CommandFailed) and exc.sense_key == ILLEGAL_REQUEST:
+            raise exc  # the analyser refuses the request itself: retrying cannot help
         self.link_faults += 1
         self._event("WARNING", f"link fault at {m.point} ({type(exc).__name__}: {exc}); recovering "
                                f"({failures}/{self.max_link_failures})")

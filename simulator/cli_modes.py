@@ -52,14 +52,21 @@ def main(argv: Sequence[str] | None = None) -> int:
             "damping": float(-poles[r].real / abs(poles[r])) if abs(poles[r]) > 0 else 0.0,
             "shape": {p: float(shapes[i, r]) for i, p in enumerate(args.points)},
         })
+    try:
+        _print(rows, args, cfg.source)
+    except BrokenPipeError:  # e.g. piped into `head`
+        return 0
+    return 0
+
+
+def _print(rows: list, args: argparse.Namespace, source: str) -> None:
     if args.json:
         print(json.dumps({"modes": rows}, indent=2))
-        return 0
-    print(f"modes of the simulated frame ({cfg.source}); shapes mass-normalised (1/sqrt(kg))")
+        return
+    print(f"modes of the simulated frame ({source}); shapes mass-normalised (1/sqrt(kg))")
     head = f"{'#':>3} {'f [Hz]':>9} {'zeta [%]':>8}  " + " ".join(f"{p:>11}" for p in args.points)
     print(head)
     print("-" * len(head))
     for r, row in enumerate(rows, 1):
         vals = " ".join(f"{row['shape'][p]:>11.4f}" for p in args.points)
         print(f"{r:>3} {row['freq_hz']:>9.3f} {100 * row['damping']:>8.3f}  {vals}")
-    return 0

@@ -150,7 +150,8 @@ def _firmware_factory(options: dict, precomputed: Optional[str] = None) -> Calla
     # the firmware imports its front end (scipy.signal) at the first strike; do it now so that a
     # client's first ARM does not wait a second or two for an import
     import simulator.frontend  # noqa: F401
-    from simulator.firmware import PrecomputedStand, create_analyser
+    from simulator.faults import create_analyser  # the firmware, wrapped when faults=... is given
+    from simulator.firmware import PrecomputedStand
 
     stand = None
     if precomputed is not None:

@@ -221,14 +221,20 @@ class TestStand:
         return frozenset(nodes)
 
     def _model(self, layout: frozenset) -> FrameModel:
-        if layout not in self._models:
-            m = self.config.sensors.accelerometer.mass_kg
-            try:
-                self._models[layout] = FrameModel.from_config(self.config, {n: m for n in sorted(layout)})
-            except ModelError as exc:
-                raise StandError(str(exc)) from None
-            self._models[layout].modes()
-        return self._models[layout]
+        """The frame with accelerometer masses at ``layout`` nodes; the 16 most recent layouts are kept."""
+        if layout in self._models:
+            self._models[layout] = self._models.pop(layout)  # most recently used last
+            return self._models[layout]
+        m = self.config.sensors.accelerometer.mass_kg
+        try:
+            model = FrameModel.from_config(self.config, {n: m for n in sorted(layout)})
+        except ModelError as exc:
+            raise StandError(str(exc)) from None
+        model.modes()
+        self._models[layout] = model
+        while len(self._models) > 16:
+            self._models.pop(next(iter(self._models)))
+        return model
 
     @property
     def model(self) -> FrameModel:

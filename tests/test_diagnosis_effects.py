@@ -101,3 +101,18 @@ def test_bad_effect_specs_are_named():
         predict(m, F, "receptance", [{"effect": "stiffness_shift", "factor": -1}])
     with pytest.raises(EffectError, match="residue"):
         predict(m, F, "receptance", [{"effect": "missing_mode", "freq_hz": 5.0, "zeta": 0.01, "residue": [1, 2]}])
+
+
+def test_stiffness_shift_warps_a_fixed_frf_term_exactly():
+    """A simulation given as FRFs only (no modes, all in meta["frf_correction"]) is warped like a model."""
+    from analysis.frf import FRFSet
+    m = _model()
+    fine = np.linspace(0.5, 120.0, 20000)
+    acc = predict(m, fine, "accelerance")
+    empty = ModalModel(poles=np.zeros(0, complex), residues=np.zeros((2, 1, 0)), quantity="accelerance",
+                       residual_form="none", outputs=m.outputs, references=m.references,
+                       meta={"frf_correction": FRFSet(freq_hz=fine, H=acc.H, quantity="accelerance")})
+    a = 1.03
+    got = predict(empty, F, "accelerance", [{"effect": "stiffness_shift", "factor": a}]).H
+    want = predict(m, F, "accelerance", [{"effect": "stiffness_shift", "factor": a}]).H
+    np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-3 * np.abs(want).max())

@@ -1,6 +1,7 @@
 """Every error path of the host side: envelope faults, sense errors, timeouts, stalls, device gone."""
 from __future__ import annotations
 
+import dataclasses
 import struct
 
 import pytest
@@ -8,8 +9,12 @@ import pytest
 from acquisition import protocol as P
 from acquisition.bot import BulkOnly
 from acquisition.driver import Analyser
-from acquisition.errors import CommandFailed, DeviceGone, EndpointStalled, ProtocolError, TransportTimeout
+from acquisition.errors import CommandFailed, DeviceGone, EndpointStalled, ProtocolError, SetupError, TransportTimeout
+from acquisition.setup import (AcquisitionSetup, Capabilities, TriggerSetup, default_setup, load_setup,
+                               setup_from_wire, setup_to_wire, validate_setup)
+from acquisition.loopback import LoopbackTransport
 from scripted_transport import CLEAR_IN, RESET, ScriptedTransport
+from simulator.firmware import Firmware
 from test_driver import INQUIRY_DATA, cbw, csw
 
 TUR = "000000000000"
@@ -124,9 +129,6 @@ def test_device_gone_between_block_chunks_names_read_block():
 
 
 def test_a_closed_loopback_is_a_gone_device():
-    from acquisition.loopback import LoopbackTransport
-    from simulator.firmware import Firmware
-
     t = LoopbackTransport(Firmware(None))
     an = Analyser(t)
     an.close()
@@ -200,11 +202,7 @@ def test_tags_increment_and_wrap():
 
 
 # ---------------------------------------------------------------------- set-up validation
-import dataclasses  # noqa: E402
 
-from acquisition.errors import SetupError  # noqa: E402
-from acquisition.setup import (AcquisitionSetup, Capabilities, TriggerSetup,  # noqa: E402
-                               default_setup, load_setup, setup_from_wire, setup_to_wire, validate_setup)
 
 CAPS = Capabilities.from_wire(P.SIGLAB_2042)
 
@@ -267,9 +265,6 @@ def test_setup_files_json_and_toml(tmp_path):
 
 # ---------------------------------------------------------------------- resynchronisation with the real firmware
 def test_stream_resync_after_line_noise():
-    from acquisition.loopback import LoopbackTransport
-    from simulator.firmware import Firmware
-
     fw = Firmware(None, packetized=False)
     an = Analyser(LoopbackTransport(fw), timeout_s=0.5)
     assert an.identify().vendor == "IMPACTLB"
@@ -282,9 +277,6 @@ def test_stream_resync_after_line_noise():
 
 
 def test_packetized_invalid_cbw_is_recovered_and_an_idempotent_command_retried():
-    from acquisition.loopback import LoopbackTransport
-    from simulator.firmware import Firmware
-
     fw = Firmware(None, packetized=True)
     an = Analyser(LoopbackTransport(fw), timeout_s=0.5)
     fw.write(b"\x00" * 30)  # a transfer that is not a CBW: both endpoints stall

@@ -3,10 +3,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from acquisition import protocol as P
 from acquisition.setup import default_setup, setup_to_wire
 from simulator.firmware import Firmware, PrecomputedStand, _find_trigger, create_analyser
+from test_driver import PulseStand
 
 INQ_CDB = bytes.fromhex("120000002400")  # INQUIRY, allocation length 36
 
@@ -261,7 +264,6 @@ def test_find_trigger_rising_and_falling():
 
 
 # ---------------------------------------------------------------------- capture state machine
-from test_driver import PulseStand  # noqa: E402
 
 STATUS_CDB = bytes.fromhex("c4010010000000000000")
 
@@ -385,8 +387,6 @@ def test_short_cdb_and_other_lun_are_illegal_requests(fw):
 
 
 # ---------------------------------------------------------------------- robustness
-from hypothesis import given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)

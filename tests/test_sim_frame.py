@@ -158,8 +158,8 @@ def test_paper_points_exist_and_respond(model):
     for p in PAPER_POINTS:
         dof, sign = model.dof(p)
         assert 0 <= dof < model.n_dof and sign in (1, -1)
-    S = np.abs(model.shape_at(PAPER_POINTS)[:, model.modes().freq_hz < 200])
-    # the lateral points move in several of the modes below 200 Hz; right:4:-Z is the column's axial
+    S = np.abs(model.shape_at(PAPER_POINTS)[:, model.modes().freq_hz < 250])
+    # the lateral points move in several of the modes below 250 Hz; right:4:-Z is the column's axial
     # direction (Z is vertical): it moves, but little
     assert np.all(np.sum(S[[0, 1, 3]] > 1e-2, axis=1) >= 3)
     assert S[2].max() > 1e-3

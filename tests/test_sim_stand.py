@@ -93,7 +93,7 @@ def test_frf_from_stand_voltages_matches_analytic_frf():
         peaks, _ = scipy.signal.find_peaks(mag)
         peaks = peaks[(freq[peaks] > 5) & (freq[peaks] < 200) & (mag[peaks] > 1e-2 * mag.max())]
         assert peaks.size >= 2
-        np.testing.assert_allclose(H[o, peaks], truth[o, peaks], rtol=0.01)
+        np.testing.assert_allclose(H[o, peaks], truth[o, peaks], rtol=1e-3)  # spec: 1 %; measured ~3e-5
 
 
 @pytest.mark.parametrize("band_limit,tol", [(True, 0.01), (False, None)])

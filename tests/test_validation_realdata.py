@@ -9,6 +9,8 @@ live in ``benchmarks/validation`` (``python -m benchmarks.validation.run_all``).
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +18,12 @@ import pytest
 from analysis.lsfd import fit_lsfd
 from analysis.modal import ModalModel, pole_from_fz, synthesize
 
-from benchmarks.validation.common import consistency_table, match_poles, synthesis_error
+# benchmarks/ is not an installed package: make the project root importable under plain `pytest` too
+_ROOT = str(Path(__file__).resolve().parents[1])
+if _ROOT not in sys.path:
+    sys.path.insert(0, _ROOT)
+
+from benchmarks.validation.common import consistency_table, match_poles, synthesis_error  # noqa: E402
 
 realdata = pytest.mark.realdata
 
@@ -61,6 +68,17 @@ def test_uliege_window_constant_and_raw_h1(shared_data):
     rel = np.abs(raw.H - frf.H) / np.abs(frf.H)
     assert good.sum() > 10000
     assert np.median(rel[good]) < 0.08
+
+
+@realdata
+def test_uliege_first_lab_window_and_dataphysics_importer(shared_data):
+    from benchmarks.validation import uliege_plane as u
+
+    lab1, tau1 = u.first_lab(shared_data)
+    # 16 s blocks in the first lab: the same 0.329 end value gives twice the second lab's tau
+    assert tau1 == pytest.approx(16.0 / math.log(1 / 0.329), rel=2e-3)
+    assert lab1.H.shape == (3, 3, 3201)
+    assert u.importer_check(shared_data) < 1e-12
 
 
 @realdata

@@ -7,7 +7,8 @@ Error measure (used throughout the diagnosis). Every line of every FRF gets the 
 so that ``sum w |H_meas - H_model|^2 / n`` is a mean squared *relative* error: each line counts
 alike whether it lies at a resonance or far below it (a sensor roll-off at 2 Hz matters as much as
 a peak), and the floor keeps antiresonance lines (where the measurement is mostly noise) from
-dominating. ``error_db = 10 log10(mean w |e|^2)``; a 1 % complex noise gives about -40 dB.
+dominating. With coherence, lines whose H1 variance ``(1 - g^2)/(2 n_avg g^2)`` exceeds 1 % are
+down-weighted in proportion (see :func:`line_weights`). ``error_db = 10 log10(mean w |e|^2)``; a 1 % complex noise gives about -40 dB.
 
 Noise level without a model: the second difference along frequency ``d_k = H_{k-1} - 2 H_k + H_{k+1}``
 removes the smooth FRF and keeps white noise with variance ``6 sigma^2``; the median over lines of
@@ -26,6 +27,7 @@ from ..frf import FRFSet
 __all__ = [
     "FLOOR_FRACTION",
     "line_weights",
+    "coherence_variance",
     "error_db",
     "noise_level",
     "band_errors",
@@ -38,13 +40,31 @@ __all__ = [
 ]
 
 FLOOR_FRACTION = 0.01
+REFERENCE_NOISE = 0.01
 
 
-def line_weights(measured: FRFSet, floor_fraction: float = FLOOR_FRACTION) -> np.ndarray:
-    """Weights (n_out, n_ref, n_freq) of the relative squared error (module docstring)."""
+def coherence_variance(measured: FRFSet) -> Optional[np.ndarray]:
+    """Relative variance of the H1 estimate from the coherence, ``(1 - g^2) / (2 n_avg g^2)``
+    (``n_avg`` from ``meta["averages"]``, else 5), or None without coherence."""
+    if measured.coherence is None or not np.all(np.isfinite(measured.coherence)):
+        return None
+    g2 = np.clip(measured.coherence, 1e-6, 1.0)
+    n_avg = float(measured.meta.get("averages", 5) or 5)
+    return (1 - g2) / (2 * n_avg * g2)
+
+
+def line_weights(measured: FRFSet, floor_fraction: float = FLOOR_FRACTION,
+                 reference_noise: float = REFERENCE_NOISE) -> np.ndarray:
+    """Weights (n_out, n_ref, n_freq) of the relative squared error (module docstring).
+
+    With coherence, a line whose H1 relative variance ``v`` exceeds ``reference_noise^2`` is
+    down-weighted in proportion: ``w = 1 / (|H|^2 (1 + v / reference_noise^2) + floor^2)``
+    (inverse-variance weighting where the measurement is doubtful)."""
     mag2 = np.abs(measured.H) ** 2
     floor = floor_fraction * np.median(np.abs(measured.H), axis=2, keepdims=True)
-    w = 1.0 / (mag2 + floor ** 2 + 1e-300)
+    v = coherence_variance(measured)
+    scale = 1.0 if v is None else 1.0 + v / reference_noise ** 2
+    w = 1.0 / (mag2 * scale + floor ** 2 + 1e-300)
     w[~np.isfinite(measured.H)] = 0.0
     return w
 
@@ -67,11 +87,9 @@ def noise_level(measured: FRFSet, weights: np.ndarray) -> dict:
     d2 = H[..., :-2] - 2 * H[..., 1:-1] + H[..., 2:]
     q = weights[..., 1:-1] * np.abs(d2) ** 2 / 6.0
     out = {"difference": _db(float(np.median(q)) / np.log(2))}
-    if measured.coherence is not None and np.all(np.isfinite(measured.coherence)):
-        g2 = np.clip(measured.coherence, 1e-6, 1.0)
-        n_avg = float(measured.meta.get("averages", 5) or 5)
-        rel = (1 - g2) / (2 * n_avg * g2)
-        out["coherence"] = _db(float(np.mean(weights * rel * np.abs(H) ** 2)))
+    v = coherence_variance(measured)
+    if v is not None:
+        out["coherence"] = _db(float(np.mean(weights * v * np.abs(H) ** 2)))
     return out
 
 

@@ -74,13 +74,19 @@ class FitContext:
     measured : FRFSet of the measurement (the band to analyse).
     base : the simulation as a :class:`ModalModel` (any quantity; converted to the measured one).
     weights : (n_out, n_ref, n_freq) float >= 0, per-line weights of the squared error.
-    sim : FRFSet, the base prediction at the measured lines, in the measured quantity.
+    sim : FRFSet, the base prediction at the measured lines, in the measured quantity (with ``prior``).
+    prior : effects already accepted (a second diagnosis stage fits a further effect on top of them).
     """
 
     measured: FRFSet
     base: ModalModel
     weights: np.ndarray
     sim: FRFSet
+    prior: tuple = ()
+
+    def effects(self, spec: Mapping) -> list:
+        """The effects already accepted (``prior``) followed by ``spec``."""
+        return [dict(e) for e in self.prior] + [dict(spec)]
 
     def cost(self, H: np.ndarray, lines: np.ndarray) -> float:
         """Weighted squared error ``sum w |H_meas - H|^2`` over the boolean mask ``lines``."""
@@ -145,15 +151,20 @@ def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = 
     if coarse:
         near = (base.freq_hz >= f[0] / 1.5) & (base.freq_hz <= f[-1] * 1.5)
         if near.any() and not near.all():
-            far = replace(base, poles=base.poles[~near], residues=base.residues[..., ~near])
-            background = predict(far, f, ctx.measured.quantity).H
+            far_meta = {k: v for k, v in base.meta.items() if k != "frf_correction"}
+            if "output_shapes" in far_meta:
+                far_meta["output_shapes"] = np.asarray(far_meta["output_shapes"])[:, ~near]
+            far = replace(base, poles=base.poles[~near], residues=base.residues[..., ~near], meta=far_meta,
+                          upper_residual=None, lower_residual=None)
+            prior_modal = [e for e in ctx.prior if EFFECTS[e["effect"]].kind == "modal"]
+            background = predict(far, f, ctx.measured.quantity, prior_modal).H
             meta = dict(base.meta)
             if "output_shapes" in meta:
                 meta["output_shapes"] = np.asarray(meta["output_shapes"])[:, near]
             base = replace(base, poles=base.poles[near], residues=base.residues[..., near], meta=meta)
 
     def cost(params: dict) -> float:
-        H = predict(base, f, ctx.measured.quantity, [{"effect": effect, **params}]).H + background
+        H = predict(base, f, ctx.measured.quantity, ctx.effects({"effect": effect, **params})).H + background
         e = Hm - H
         return float(np.sum(W * (e.real ** 2 + e.imag ** 2)))
     return cost
@@ -196,7 +207,10 @@ def apply_stiffness_shift(model: ModalModel, params: Mapping) -> ModalModel:
     out = _replace_poles(model, model.poles * a, np.full(model.poles.size, a ** (p - 1)))
     if out.upper_residual is not None:
         out = replace(out, upper_residual=out.upper_residual / a ** 2)
-    return out
+    # a fixed FRF term (meta["frf_correction"]) is warped alike: H_q'(f) = a^(q-2) H_q(f / a)
+    meta = dict(out.meta)
+    meta["frequency_warp"] = float(meta.get("frequency_warp", 1.0)) * a
+    return replace(out, meta=meta)
 
 
 def fit_stiffness_shift(ctx: FitContext, lines: np.ndarray) -> dict:
@@ -558,18 +572,23 @@ def _lookup(spec: Mapping) -> tuple[Effect, dict]:
     return EFFECTS[name], {k: v for k, v in spec.items() if k != "effect"}
 
 
-def _correction(corr: FRFSet, freq_hz: np.ndarray, quantity: str) -> np.ndarray:
-    """A fixed FRF term (``base.meta["frf_correction"]``) at ``freq_hz`` in ``quantity`` (linear
-    interpolation of real and imaginary parts between its lines; zero outside them)."""
-    H = convert_quantity(corr.H, corr.freq_hz, corr.quantity, quantity)
-    if corr.freq_hz.size == np.size(freq_hz) and np.allclose(corr.freq_hz, freq_hz):
-        return H
-    out = np.zeros(H.shape[:2] + (np.size(freq_hz),), complex)
-    for o in range(H.shape[0]):
-        for r in range(H.shape[1]):
-            out[o, r] = (np.interp(freq_hz, corr.freq_hz, H[o, r].real, left=0, right=0)
-                         + 1j * np.interp(freq_hz, corr.freq_hz, H[o, r].imag, left=0, right=0))
-    return out
+def _correction(corr: FRFSet, freq_hz: np.ndarray, quantity: str, warp: float = 1.0) -> np.ndarray:
+    """A fixed FRF term (``base.meta["frf_correction"]``) at ``freq_hz`` in ``quantity``.
+
+    With a stiffness warp ``a`` (all frequencies times a) the term is ``a^(q-2) H_q(f / a)`` in its
+    own form q, exact for any sum of modes and residual terms. Between its lines the real and imaginary
+    parts are interpolated linearly (edge values held outside)."""
+    f = np.asarray(freq_hz, float)
+    fe = f / warp
+    if corr.freq_hz.size == f.size and np.allclose(corr.freq_hz, fe):
+        H = corr.H.copy()
+    else:
+        H = np.zeros(corr.H.shape[:2] + (f.size,), complex)
+        for o in range(H.shape[0]):
+            for r in range(H.shape[1]):
+                H[o, r] = np.interp(fe, corr.freq_hz, corr.H[o, r].real) + 1j * np.interp(fe, corr.freq_hz, corr.H[o, r].imag)
+    H = H * warp ** (_POWER[corr.quantity] - 2)
+    return convert_quantity(H, f, corr.quantity, quantity) if corr.quantity != quantity else H
 
 
 def predict(
@@ -596,7 +615,8 @@ def predict(
     frf = synthesize(model, freq_hz)
     corr = base.meta.get("frf_correction")
     if corr is not None:
-        frf = replace(frf, H=frf.H + _correction(corr, frf.freq_hz, frf.quantity))
+        frf = replace(frf, H=frf.H + _correction(corr, frf.freq_hz, frf.quantity,
+                                                 float(model.meta.get("frequency_warp", 1.0))))
     if frf.quantity != quantity:
         frf = replace(frf, H=convert_quantity(frf.H, frf.freq_hz, frf.quantity, quantity), quantity=quantity)
     if outputs is not None:

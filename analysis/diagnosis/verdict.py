@@ -11,7 +11,7 @@ Rule (documented in ``docs/diagnosis.md``):
    about zero or negative.
 2. **Significance.** The paired differences ``d_i = before_i - after_i`` give
    ``z = mean(d) / (std(d) / sqrt(N))``. An effect's gain is significant when
-   ``gain_db >= MIN_GAIN_DB`` (0.5 dB, an 11 % smaller held-out error) *and* either ``z >= Z_MIN`` (5)
+   ``gain_db >= MIN_GAIN_DB`` (0.5 dB, an 11 % smaller held-out error) *and* either ``z >= Z_MIN`` (3)
    or ``gain_db >= STRONG_GAIN_DB`` (3 dB: the held-out error halved; an effect that acts on a few
    lines only, e.g. one missing mode, gives heavy-tailed ``d`` and a modest ``z`` although its gain
    is tens of dB). Under noise alone the held-out gain is a few hundredths of a dB (measured in the
@@ -19,8 +19,9 @@ Rule (documented in ``docs/diagnosis.md``):
 3. **Verdict.** The significant effect with the largest gain. With none significant: ``none`` when
    the typical error of the simulation (median over lines of ``w |e|^2`` / ln 2, robust to a few
    antiresonance lines) is within ``NONE_MARGIN_DB`` (3 dB) of the noise level estimated from the
-   data by the same statistic of second differences along frequency, else ``unexplained`` with the
-   bands where the error stands above the noise.
+   data by the same statistic of second differences along frequency (with coherence: the larger of
+   that and the coherence estimate), else ``unexplained`` with the bands where the error stands above
+   the noise.
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ __all__ = ["Diagnosis", "diagnose", "Z_MIN", "MIN_GAIN_DB", "STRONG_GAIN_DB", "N
 
 log = logging.getLogger(__name__)
 
-Z_MIN = 5.0
+Z_MIN = 3.0
 MIN_GAIN_DB = 0.5
 STRONG_GAIN_DB = 3.0
 NONE_MARGIN_DB = 3.0
@@ -55,7 +56,9 @@ class Diagnosis:
     error_before_db, error_after_db : held-out error of the simulation and of the verdict's extension.
     noise_db : noise level estimates (dB). comparison : :func:`analysis.diagnosis.compare.compare`.
     unexplained : bands where the best model's error stays above the noise.
-    measured, simulated, extended : the FRF sets (extended = simulation with the verdict's effect).
+    combined : the accepted effects stage by stage (verdict first), each with its held-out gain on top
+        of the previous ones; ``error_after_db`` is the last stage's.
+    measured, simulated, extended : the FRF sets (extended = simulation with the accepted effects).
     """
 
     verdict: str
@@ -69,6 +72,7 @@ class Diagnosis:
     simulated: FRFSet
     extended: FRFSet
     skipped: dict = field(default_factory=dict)
+    combined: list = field(default_factory=list)
 
     def to_json(self) -> dict:
         """The JSON document of ``python -m analysis diagnose``."""
@@ -81,6 +85,7 @@ class Diagnosis:
             "noise_db": self.noise_db,
             "unexplained": self.unexplained,
             "skipped": self.skipped,
+            "combined": self.combined,
             "comparison": _jsonable(self.comparison),
         }
 
@@ -110,7 +115,7 @@ def _held_out(ctx: FitContext, name: str) -> tuple[np.ndarray, np.ndarray]:
     m = ctx.measured
     for train, test in _folds(m.freq_hz.size):
         params = eff.fit(ctx, train)
-        Hx = predict(ctx.base, m.freq_hz, m.quantity, [{"effect": name, **params}],
+        Hx = predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **params}),
                      outputs=m.outputs, references=m.references).H
         w = ctx.weights[..., test]
         before.append((w * np.abs(m.H[..., test] - ctx.sim.H[..., test]) ** 2).ravel())
@@ -136,6 +141,45 @@ def _evidence(name: str, params: dict, before_db: float, after_db: float, z: flo
     return (f"{name} ({ps}): held-out error {before_db:.1f} -> {after_db:.1f} dB, z = {z:.1f}{where}")
 
 
+def _typical_db(measured: FRFSet, H: np.ndarray, w: np.ndarray) -> float:
+    """Median over lines of ``w |e|^2`` / ln 2 (dB): the error of a typical line, robust to a few."""
+    return _db(float(np.median(w * np.abs(measured.H - H) ** 2)) / np.log(2))
+
+
+def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: float) -> tuple[list, dict]:
+    """Fit every effect in ``names`` on top of ``ctx.prior`` with cross-validation; causes sorted by gain."""
+    m, w = ctx.measured, ctx.weights
+    causes, skipped = [], {}
+    for name in names:
+        eff = EFFECTS[name]
+        missing = [k for k in eff.needs if k not in ctx.base.meta]
+        if missing:
+            skipped[name] = f"needs {', '.join(missing)} in the simulation (simulate from a TOML configuration)"
+            continue
+        try:
+            before, after = _held_out(ctx, name)
+            params = eff.fit(ctx, np.ones(m.freq_hz.size, bool))
+        except (EffectError, np.linalg.LinAlgError, ValueError) as exc:
+            skipped[name] = f"fit failed: {exc}"
+            log.info("effect %s skipped: %s", name, exc)
+            continue
+        b_db, a_db = _db(float(np.mean(before))), _db(float(np.mean(after)))
+        gain = b_db - a_db
+        z = _z(before, after)
+        ext = predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **params}),
+                      outputs=m.outputs, references=m.references)
+        bb = band_errors(m, ctx.sim.H, w)
+        ba = band_errors(m, ext.H, w)
+        band_gain = [(x["lo_hz"], x["hi_hz"], x["error_db"] - y["error_db"]) for x, y in zip(bb, ba)]
+        causes.append({
+            "effect": name, "parameters": params, "gain_db": gain, "error_before_db": b_db,
+            "error_after_db": a_db, "z": z, "significant": bool(gain >= min_gain_db and (z >= z_min or gain >= STRONG_GAIN_DB)),
+            "evidence": _evidence(name, params, b_db, a_db, z, band_gain), "_extended": ext,
+        })
+    causes.sort(key=lambda c: c["gain_db"], reverse=True)
+    return causes, skipped
+
+
 def diagnose(
     measured: FRFSet,
     base: ModalModel,
@@ -144,10 +188,16 @@ def diagnose(
     z_min: float = Z_MIN,
     min_gain_db: float = MIN_GAIN_DB,
     none_margin_db: float = NONE_MARGIN_DB,
+    max_stages: int = 3,
 ) -> Diagnosis:
     """Compare ``measured`` with the simulation ``base`` (a :class:`ModalModel` at the measured points,
     any quantity), fit every catalogue effect with cross-validation and give the verdict (module
     docstring). Neither input is modified.
+
+    Further stages: while the extended model still leaves the typical error more than
+    ``none_margin_db`` above the noise, the remaining effects are fitted on top of the accepted ones
+    (up to ``max_stages`` effects in all); each accepted effect is listed in ``Diagnosis.combined``
+    with its own held-out gain. The verdict is the first stage's (the largest single cause).
     """
     names = list(EFFECTS) if effects is None else list(effects)
     for n in names:
@@ -163,50 +213,38 @@ def diagnose(
                   references=measured.references)
     ctx = FitContext(measured=measured, base=base, weights=w, sim=sim)
     noise = noise_level(measured, w)
+    noise_db = max(noise.values())   # with coherence, the larger of the two estimates
     comparison = compare(measured, sim, w)
-    causes, skipped = [], {}
-    error_before = comparison["error_db"]
-    for name in names:
-        eff = EFFECTS[name]
-        missing = [k for k in eff.needs if k not in base.meta]
-        if missing:
-            skipped[name] = f"needs {', '.join(missing)} in the simulation (simulate from a TOML configuration)"
-            continue
-        try:
-            before, after = _held_out(ctx, name)
-            params = eff.fit(ctx, np.ones(measured.freq_hz.size, bool))
-        except (EffectError, np.linalg.LinAlgError, ValueError) as exc:
-            skipped[name] = f"fit failed: {exc}"
-            log.info("effect %s skipped: %s", name, exc)
-            continue
-        b_db, a_db = _db(float(np.mean(before))), _db(float(np.mean(after)))
-        error_before = b_db
-        gain = b_db - a_db
-        z = _z(before, after)
-        ext = predict(base, measured.freq_hz, measured.quantity, [{"effect": name, **params}],
-                      outputs=measured.outputs, references=measured.references)
-        bb = band_errors(measured, sim.H, w)
-        ba = band_errors(measured, ext.H, w)
-        band_gain = [(x["lo_hz"], x["hi_hz"], x["error_db"] - y["error_db"]) for x, y in zip(bb, ba)]
-        causes.append({
-            "effect": name, "parameters": params, "gain_db": gain, "error_before_db": b_db,
-            "error_after_db": a_db, "z": z, "significant": bool(gain >= min_gain_db and (z >= z_min or gain >= STRONG_GAIN_DB)),
-            "evidence": _evidence(name, params, b_db, a_db, z, band_gain), "_extended": ext,
-        })
-    causes.sort(key=lambda c: c["gain_db"], reverse=True)
+    causes, skipped = _stage(ctx, names, z_min, min_gain_db)
+    error_before = causes[0]["error_before_db"] if causes else comparison["error_db"]
     sig = [c for c in causes if c["significant"]]
-    noise_db = noise["difference"]
+    combined = []
     if sig:
         best = sig[0]
         verdict, extended, after_db = best["effect"], best["_extended"], best["error_after_db"]
+        accepted = [{"effect": best["effect"], **best["parameters"]}]
+        combined.append({"effect": best["effect"], "parameters": best["parameters"], "gain_db": best["gain_db"],
+                         "error_after_db": after_db})
+        left = [n for n in names if n != best["effect"]]
+        while (len(accepted) < max_stages and left
+               and _typical_db(measured, extended.H, w) - noise_db > none_margin_db):
+            ctx2 = FitContext(measured=measured, base=base, weights=w, sim=extended, prior=tuple(accepted))
+            more, _ = _stage(ctx2, left, z_min, min_gain_db)
+            more = [c for c in more if c["significant"]]
+            if not more:
+                break
+            nxt = more[0]
+            accepted.append({"effect": nxt["effect"], **nxt["parameters"]})
+            extended, after_db = nxt["_extended"], nxt["error_after_db"]
+            combined.append({"effect": nxt["effect"], "parameters": nxt["parameters"], "gain_db": nxt["gain_db"],
+                             "error_after_db": after_db})
+            left.remove(nxt["effect"])
     else:
         extended, after_db = sim, error_before
-        q = w * np.abs(measured.H - sim.H) ** 2
-        typical_db = _db(float(np.median(q)) / np.log(2))
-        verdict = "none" if typical_db - noise_db <= none_margin_db else "unexplained"
+        verdict = "none" if _typical_db(measured, sim.H, w) - noise_db <= none_margin_db else "unexplained"
     unexplained = [b for b in band_errors(measured, extended.H, w) if b["error_db"] - noise_db > none_margin_db]
     for c in causes:
         c.pop("_extended")
     return Diagnosis(verdict=verdict, causes=causes, error_before_db=error_before, error_after_db=after_db,
                      noise_db=noise, comparison=comparison, unexplained=unexplained, measured=measured,
-                     simulated=sim, extended=extended, skipped=skipped)
+                     simulated=sim, extended=extended, skipped=skipped, combined=combined)

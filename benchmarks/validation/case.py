@@ -9,7 +9,7 @@ import numpy as np
 
 from analysis.frf import FRFSet
 
-from .common import CaseReport, OurFit, fit_ours, fmt, md_table, plot_case, pole_table
+from .common import OurFit, fit_ours, fmt, md_table, plot_case, pole_table
 from .peer import PeerFit, fit_peer
 
 log = logging.getLogger(__name__)

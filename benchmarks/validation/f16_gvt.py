@@ -107,11 +107,11 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         "",
         block,
         "",
-        md_table(["noise variance per line E|e|^2", "value"], [
+        md_table(["noise variance per line, E abs(e)^2", "value"], [
             ["from the period-to-period scatter (mean over lines and FRFs)", f"{noise_pp:.3g}"],
             ["from the LSFD residual (`noise_var`)", f"{res.noise_var:.3g}"],
             ["ratio fit / scatter", fmt(res.noise_var / noise_pp, 3)],
-            ["mean |H|^2 / scatter noise (SNR)", f"{snr:.3g}"]]),
+            ["mean abs(H)^2 / scatter noise (SNR)", f"{snr:.3g}"]]),
         "",
         "A fit/scatter ratio near 1 means the model leaves only noise; well above 1 means model error "
         "(unmodelled modes, nonlinearity: the F-16 benchmark has nonlinear wing-payload joints) dominates the residual, "

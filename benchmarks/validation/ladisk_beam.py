@@ -23,7 +23,7 @@ from analysis.frf import FRFSet
 from analysis.spectra import WindowSettings
 
 from .case import compare, peer_repeats, scatter_table
-from .common import CaseReport, consistency_table, fit_ours_from_poles, fmt, md_table
+from .common import CaseReport, consistency_table, fit_ours_from_poles
 from .timedata import impact_frf, per_hit_frfs
 
 NAME = "ladisk_beam_impact"

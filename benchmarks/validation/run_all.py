@@ -48,6 +48,23 @@ def _defects_section() -> str:
 
     r = reproduce()
     return "\n".join([
+        "1. **Pole bookkeeping.** `select_closest_poles` reports `nat_freq`/`nat_xi` from column c of its "
+        "stabilization matrix, which `_stabilization` fills with the poles of model `all_poles[c + 1]`, but stores "
+        "`pole_ind = [c, k]`, so `get_constants` (LSFD and reconstruction) uses the nearest pole of the previous "
+        "model order. The reported and the used poles differ (every case above notes the largest difference); "
+        "when the previous order lacks the mode the used pole is another mode's or unstable (ULiege with a 39 Hz "
+        "search window: reported 0.022 Hz, used 100.47 Hz with negative damping). Repairing `pole_ind` "
+        "(`peer.fit_peer(..., repair=True)`) changes the synthesis error by up to about 1 point (summary table).",
+        "2. **Hint search drifts.** With a wide `f_window` (default 50 Hz) the least-squares walk of "
+        "`select_closest_poles` moves hints to dense clusters of stable poles: on ULiege (39 Hz window) 5 of 10 "
+        "hints ended on 89.64 Hz and one on 0 Hz; on the F-16 band (2-15 Hz) every hint came back as 0 Hz and the LSFD used "
+        "poles with negative damping. The scripts use `f_window=4` (a +-2 Hz search), after which it takes the "
+        "nearest stable LSCF pole. Not reduced to a synthetic reproduction.",
+        "3. **Silent progress bar.** `select_closest_poles` prints a tqdm bar to stderr even after "
+        "`get_poles(show_progress=False)` (`_stabilization` wraps its loop in tqdm unconditionally).",
+        "4. **Scope, not defects:** no exponential-window correction (we shifted its poles by 1/tau), no "
+        "automatic pole selection, and a linear LSFD (its damping is LSCF's).",
+        "",
         "Reproduction (`python -m benchmarks.validation.peer_defects`, two exactly known modes at 40 Hz / 1 % and "
         "95 Hz / 2 %, noise-free accelerance, `pol_order_high=12`, hints 40 and 95 Hz):",
         "",

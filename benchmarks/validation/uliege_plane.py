@@ -87,6 +87,48 @@ def load(data_dir: Path, band: tuple[float, float] | None = BAND, tau_s: float =
     return frf.band(*band) if band else frf
 
 
+def _mat_tau(m: dict) -> float:
+    """Exponential-window tau (s) from a DataPhysics export's raw (X) and windowed (W) response blocks."""
+    taus = []
+    for c in (2, 3, 4):
+        t, x = m[f"X{c}"][:, 0], m[f"X{c}"][:, 1]
+        w = m[f"W{c}"][:, 1]
+        k = (np.abs(x) > 1e-3 * np.abs(x).max()) & (w / np.where(x == 0, 1, x) > 0)
+        taus.append(-1.0 / np.polyfit(t[k], np.log(w[k] / x[k]), 1)[0])
+    return float(np.median(taus))
+
+
+def first_lab(data_dir: Path) -> tuple[FRFSet, float]:
+    """The first lab's analyser H1 (3 files x 3 accelerometers, 16 s blocks, df 0.0625 Hz), (m/s^2)/N,
+    and the exponential-window tau (s) measured from its raw/windowed blocks."""
+    import scipy.io
+
+    Hs, Cs, taus = [], [], []
+    for k in (1, 2, 3):
+        m = scipy.io.loadmat(str(Path(data_dir) / NAME / "first_lab" / f"DPsv0000{k}.mat"))
+        f = np.real(m["H1_2"][:, 0])
+        Hs.append(np.stack([m[f"H1_{c}"][:, 1] for c in (2, 3, 4)]) * G)
+        Cs.append(np.stack([np.real(m[f"C1_{c}"][:, 1]) for c in (2, 3, 4)]))
+        taus.append(_mat_tau(m))
+    tau = float(np.median(taus))
+    frf = FRFSet(freq_hz=f, H=np.stack(Hs, axis=1), quantity="accelerance", outputs=("acc:1:Z", "acc:2:Z", "acc:3:Z"),
+                 references=("lab1:1:Z", "lab1:2:Z", "lab1:3:Z"), unit="(m/s^2)/N",
+                 coherence=np.clip(np.stack(Cs, axis=1), 0, 1), exp_window_tau_s=tau,
+                 meta={"source": SOURCE + ", first_lab/DPsv0000{1,2,3}.mat"})
+    return frf, tau
+
+
+def importer_check(data_dir: Path) -> float:
+    """Max |difference| between ``read_dataphysics_mat`` on ``sec_lab_original/DPsv00001.mat`` and the packed
+    ``x_last_block`` of file 1, relative to the block's peak (0 when the packing and the importer agree)."""
+    from acquisition.importers import read_dataphysics_mat
+
+    t = read_dataphysics_mat(Path(data_dir) / NAME / "sec_lab_original" / "DPsv00001.mat")
+    d = _npz(data_dir)
+    x = d["x_last_block"][list(d["file_id"]).index(1)]
+    return float(np.max(np.abs(t.hits[0] - x)) / np.max(np.abs(x)))
+
+
 def raw_h1(data_dir: Path, tau_s: float, force_end_s: float, band: tuple[float, float] | None = BAND) -> FRFSet:
     """H1 of the stored last hit of every impact point, by :mod:`analysis.spectra` with the analyser's windows.
 
@@ -99,14 +141,13 @@ def raw_h1(data_dir: Path, tau_s: float, force_end_s: float, band: tuple[float, 
     fs = 1.0 / (t[1] - t[0])
     win = WindowSettings(force_width_s=force_end_s - t[0], force_taper_s=0.0, exp_tau_s=tau_s, exp_on_force=True)
     blocks = d["x_last_block"]  # read once: every NpzFile item access re-reads the array
-    Hs, Cs = [], []
+    Hs = []
     for k in IMPACT_FILES:
         x = blocks[ids.index(k)]
         acc = FRFAccumulator(("acc:1:Z", "acc:2:Z", "acc:3:Z"), "plane:0:Z", "accelerance", "(m/s^2)/N")
         acc.add(hit_spectra(x[0], x[1:] * G, fs, trigger_index=0, windows=win))
         fr = acc.frfset("H1")
         Hs.append(fr.H[:, 0])
-        Cs.append(fr.coherence[:, 0])
     H = np.stack(Hs, axis=1)
     refs = tuple(f"plane:{k + 1}:{'Z' if k < 68 else 'X'}" for k in range(74))
     frf = FRFSet(freq_hz=fr.freq_hz, H=H, quantity="accelerance", outputs=("acc:1:Z", "acc:2:Z", "acc:3:Z"),
@@ -225,6 +266,21 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         f"Synthesis error of the reported (window-corrected) model against the windowed data: {err_struct:.3g} % "
         f"(against {ours.synth_err_pct:.3g} % for the model with the window's decay kept, `poles_raw`): a plot or "
         "export that overlays `result.model` on exponentially windowed FRFs compares two different things.",
+    ]
+    # the first lab (another day, 16 s blocks, its own window), fitted from the second lab's poles
+    lab1, tau1 = first_lab(data_dir)
+    r1 = fit_ours_from_poles(lab1, res.poles - 1.0 / tau1, ours.band)
+    tab1, _ = consistency_table(["second lab (74 points)", "first lab (3 files)"], [res, r1.result], res.freq_hz)
+    md += [
+        "",
+        f"Across labs: the first lab's analyser H1 (`first_lab/DPsv0000{{1,2,3}}.mat`, 16 s blocks, df 0.0625 Hz, "
+        f"exponential window measured tau = {tau1:.4g} s = 16 s / ln(1/0.329) = {16 / math.log(1 / DECAY_AT_END):.4g} s) "
+        f"fitted by LSFD from the second lab's poles (synthesis error {r1.synth_err_pct:.3g} %):",
+        "",
+        tab1,
+        "",
+        f"Importer check: `acquisition.importers.read_dataphysics_mat` on `sec_lab_original/DPsv00001.mat` reproduces "
+        f"the packed raw block of file 1 to {importer_check(data_dir):.2g} of its peak.",
     ]
     summary["extra"] = {"tau_s": tau, "consistency": arr}
     return CaseReport(NAME, "ULiege MECA0062 plane, 74 points x 3 accelerometers", SOURCE, "\n".join(md), summary, plots)

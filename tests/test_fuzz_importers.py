@@ -1,0 +1,220 @@
+"""Fuzzing the importers (LabVIEW .lvm text, numpy + description, DataPhysics-like .mat).
+
+Whatever the file holds, a reader either returns a consistent :class:`ImportedTest` (finite
+positive sample rate, every hit ``(n_channels, n)``) or raises :class:`ImportDataError` with a
+message; never a KeyError/IndexError/ZeroDivisionError/numpy error. Cases per test:
+``IMPACTLAB_FUZZ_EXAMPLES`` (default 200).
+"""
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from acquisition.importers import ImportDataError, load_description, read_dataphysics_mat, read_lvm, read_numpy
+
+N = int(os.environ.get("IMPACTLAB_FUZZ_EXAMPLES", "200"))
+FUZZ = settings(max_examples=N, derandomize=True, deadline=None, database=None,
+                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+
+
+def _check(test) -> None:
+    assert math.isfinite(test.fs_hz) and test.fs_hz > 0
+    assert test.hits, "an import with no hit"
+    for h in test.hits:
+        assert h.ndim == 2 and h.shape[0] == len(test.channels) and h.shape == test.hits[0].shape
+
+
+def _valid_lvm(decimal: str = ",", n: int = 6) -> str:
+    lines = ["LabVIEW Measurement\t", "Writer_Version\t2", "Separator\tTab", f"Decimal_Separator\t{decimal}",
+             "Multi_Headings\tYes", "X_Columns\tNo", "***End_of_Header***\t", "\t"]
+    for seg in range(2):
+        dx = "1.5625E-4".replace(".", decimal)
+        lines += ["Channels\t2\t\t", f"Samples\t{n}\t{n}\t", "Y_Unit_Label\tNewtons\tg\t", "X_Dimension\tTime\tTime\t",
+                  f"Delta_X\t{dx}\t{dx}\t", "***End_of_Header***\t\t\t", "X_Value\tForce\tAcceleration\tComment"]
+        for k in range(n):
+            lines.append(f"\t{k * 0.5 + seg:.4f}\t{-k * 0.25:.4f}".replace(".", decimal))
+        lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+LVM_LINES = _valid_lvm().splitlines()
+TOKENS = ["\t", ",", ".", "0", "-1", "nan", "inf", "1e309", "Channels", "X_Value", "***End_of_Header***",
+          "Delta_X", "Y_Unit_Label", "Separator", "Decimal_Separator", "Comma", "Space", "X_Columns", "Multi",
+          "", "abc", "\u00e9"]
+
+
+@st.composite
+def lvm_texts(draw) -> str:
+    lines = list(LVM_LINES)
+    for _ in range(draw(st.integers(1, 6))):
+        op = draw(st.sampled_from(("drop", "dup", "edit", "cut", "swap")))
+        k = draw(st.integers(0, len(lines) - 1)) if lines else 0
+        if not lines:
+            break
+        if op == "drop":
+            del lines[k]
+        elif op == "dup":
+            lines.insert(k, lines[k])
+        elif op == "cut":
+            lines = lines[:k]
+        elif op == "swap":
+            j = draw(st.integers(0, len(lines) - 1))
+            lines[k], lines[j] = lines[j], lines[k]
+        else:
+            cells = lines[k].split("\t")
+            c = draw(st.integers(0, len(cells) - 1))
+            cells[c] = draw(st.sampled_from(TOKENS) | st.text(max_size=6))
+            lines[k] = "\t".join(cells)
+    return "\n".join(lines) + "\n"
+
+
+def _write(tmp: Path, name: str, data: "str | bytes") -> Path:
+    p = tmp / name
+    if isinstance(data, str):
+        p.write_text(data, encoding="latin-1", errors="replace")
+    else:
+        p.write_bytes(data)
+    return p
+
+
+@FUZZ
+@given(text=lvm_texts())
+def test_lvm_mutated_text(text):
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), "x.lvm", text)
+        try:
+            _check(read_lvm(p))
+        except ImportDataError as exc:
+            assert str(exc)
+
+
+@FUZZ
+@given(raw=st.binary(max_size=400))
+def test_lvm_random_bytes_after_the_magic_line(raw):
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), "x.lvm", b"LabVIEW Measurement\t\n" + raw)
+        try:
+            _check(read_lvm(p))
+        except ImportDataError as exc:
+            assert str(exc)
+
+
+# ---------------------------------------------------------------------- numpy + description
+JSONISH = st.recursive(st.none() | st.booleans() | st.integers(-3, 5) | st.floats(allow_nan=True) | st.text(max_size=5),
+                       lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3),
+                       max_leaves=6)
+CHANNEL = st.fixed_dictionaries({}, optional={
+    "name": JSONISH | st.text(max_size=5), "unit": st.sampled_from(["N", "g", "m/s^2", "V", ""]) | JSONISH,
+    "quantity": st.sampled_from(["force", "acceleration"]) | JSONISH, "point": st.text(max_size=8) | JSONISH,
+    "sensitivity": st.floats(allow_nan=True) | JSONISH})
+DESCRIPTION = st.fixed_dictionaries({}, optional={
+    "channels": st.lists(CHANNEL | JSONISH, max_size=4) | JSONISH,
+    "layout": st.sampled_from(["channels_first", "samples_first", "sideways"]) | JSONISH,
+    "time_row": st.integers(-3, 4) | JSONISH,
+    "sample_rate_hz": st.floats(allow_nan=True, allow_infinity=True) | st.integers(-5, 10000) | JSONISH})
+
+
+@FUZZ
+@given(description=DESCRIPTION,
+       shapes=st.lists(st.tuples(st.integers(0, 4), st.integers(0, 6)), min_size=1, max_size=3),
+       ndim=st.sampled_from([1, 2, 3]), dtype=st.sampled_from(["f8", "i2", "c16", "U3"]),
+       as_file=st.booleans())
+def test_numpy_with_random_descriptions(description, shapes, ndim, dtype, as_file):
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = []
+        rng = np.random.default_rng(len(paths))
+        for k, (a, b) in enumerate(shapes):
+            shape = {1: (a * b,), 2: (a, b), 3: (a, b, 2)}[ndim]
+            arr = (rng.standard_normal(shape) * 10).astype(dtype) if dtype != "U3" else np.full(shape, "ab")
+            paths.append(Path(tmp) / f"h{k}.npy")
+            np.save(paths[-1], arr)
+        try:
+            if as_file:
+                d = _write(Path(tmp), "d.json", json.dumps(description, allow_nan=True))
+                description = load_description(d)
+            _check(read_numpy(paths, description))
+        except ImportDataError as exc:
+            assert str(exc)
+
+
+@FUZZ
+@given(raw=st.binary(max_size=200))
+def test_numpy_garbage_files_and_descriptions(raw):
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), "h.npy", raw)
+        d = _write(Path(tmp), "d.json", raw)
+        t = _write(Path(tmp), "d.toml", raw)
+        for attempt in (lambda: load_description(d), lambda: load_description(t),
+                        lambda: read_numpy([p], {"channels": [{"unit": "N"}], "sample_rate_hz": 100.0})):
+            try:
+                out = attempt()
+                if hasattr(out, "hits"):
+                    _check(out)
+            except ImportDataError as exc:
+                assert str(exc)
+
+
+# ---------------------------------------------------------------------- DataPhysics-like .mat
+ARRAYS = st.sampled_from(["good", "1d", "3col", "empty", "one_row", "const_t", "nan_t", "str", "bad_dt"])
+
+
+def _block(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
+    t = (np.arange(n) - 2) / 1000.0
+    x = rng.standard_normal(n)
+    return {"good": np.column_stack([t, x]), "1d": x, "3col": np.column_stack([t, x, x]), "empty": np.zeros((0, 2)),
+            "one_row": np.column_stack([t, x])[:1], "const_t": np.column_stack([np.zeros(n), x]),
+            "nan_t": np.column_stack([t * np.nan, x]), "str": np.array(["abc"]),
+            "bad_dt": np.column_stack([-t, x])}[kind]
+
+
+@FUZZ
+@given(kinds=st.lists(ARRAYS, min_size=1, max_size=3), n=st.integers(1, 12), windowed=st.booleans(),
+       sens=st.sampled_from([None, "short", "ok", "str"]), unit=st.sampled_from([None, "ok", "num", "long"]),
+       gap=st.booleans())
+def test_mat_files_with_odd_blocks(kinds, n, windowed, sens, unit, gap):
+    rng = np.random.default_rng(n)
+    content = {}
+    for k, kind in enumerate(kinds):
+        content[f"X{k + 1 + (2 if gap and k else 0)}"] = _block(kind, n, rng)
+        content[f"W{k + 1}"] = _block(kinds[-1 - k], n, rng)
+    if sens is not None:
+        content["Sensitivity"] = {"short": np.array([1.0]), "ok": np.ones(len(kinds)), "str": np.array(["x"])}[sens]
+    if unit is not None:
+        content["Unit"] = {"ok": np.array(["N"] * len(kinds)), "num": np.arange(3.0), "long": np.array(["g"] * 9)}[unit]
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / "x.mat"
+        scipy.io.savemat(p, content)
+        try:
+            _check(read_dataphysics_mat(p, windowed=windowed))
+        except ImportDataError as exc:
+            assert str(exc)
+
+
+@FUZZ
+@given(data=st.data())
+def test_mat_mutated_bytes(data):
+    buf = io.BytesIO()
+    t = np.arange(8) / 100.0
+    scipy.io.savemat(buf, {"X1": np.column_stack([t, np.sin(t)]), "X2": np.column_stack([t, np.cos(t)]),
+                           "Sensitivity": np.array([2.25, 100.0]), "Unit": np.array(["N", "g"])})
+    raw = bytearray(buf.getvalue())
+    for _ in range(data.draw(st.integers(1, 6))):
+        k = data.draw(st.integers(0, len(raw) - 1))
+        raw[k] = data.draw(st.integers(0, 255))
+    if data.draw(st.booleans()):
+        raw = raw[:data.draw(st.integers(0, len(raw)))]
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), "x.mat", bytes(raw))
+        try:
+            _check(read_dataphysics_mat(p))
+        except ImportDataError as exc:
+            assert str(exc)
