@@ -3,6 +3,7 @@
     python -m acquisition capture --device URL --out REC.h5 [--points P1,P2,...] [--reference POINT]
         [--mode roving-hammer|roving-accelerometer] [--hits N] [--auto] [--seed N] [--setup FILE]
         [--force-window WIDTH[,TAPER]|none] [--exp-window TAU|PCT%|none] [--timeout S] [--overwrite]
+    python -m acquisition capture --resume REC.h5 [--device URL] [--auto] [--timeout S]
 
 Without ``--points`` the plan is one measurement with the set-up's own points (the default set-up:
 hammer at ``right:6:-X``, accelerometers at ``left:9:Y``, ``top:4:X``, ``right:4:-Z``). With
@@ -84,8 +85,11 @@ def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[floa
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m acquisition capture", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--device", required=True, help="device URL, e.g. sim://?seed=1, socket://HOST:PORT, usb://VID:PID")
-    p.add_argument("--out", required=True, help="recording to write (HDF5)")
+    p.add_argument("--device", help="device URL, e.g. sim://?seed=1, socket://HOST:PORT, usb://VID:PID "
+                                    "(with --resume: default, the recording's device)")
+    p.add_argument("--out", help="recording to write (HDF5)")
+    p.add_argument("--resume", metavar="REC.h5",
+                   help="continue an interrupted capture: same set-up, plan and windows, appending to REC.h5")
     p.add_argument("--points", help="comma-separated measurement points (component:node:direction)")
     p.add_argument("--reference", help="hammer point of a roving-accelerometer test")
     p.add_argument("--mode", choices=("roving-hammer", "roving-accelerometer"),
@@ -215,6 +219,10 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
     from .setup import AcquisitionSetup, default_setup, load_setup
     from .urls import SimURL, parse_device_url
 
+    if args.resume:
+        return run_resume(args, out_stream)
+    if not args.device or not args.out:
+        raise UsageError("give --device URL and --out REC.h5 (or --resume REC.h5 to continue a capture)")
     url = _with_seed(args.device, args.seed)
     out = Path(args.out)
     if out.exists() and not args.overwrite:
@@ -260,6 +268,56 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
     return 0, result
 
 
+def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, Any]:
+    """``capture --resume REC.h5``: continue an interrupted capture with the recording's set-up, plan,
+    windows and device (``--device`` overrides it), appending to the same file. The accepted hits
+    already recorded (complete, CRC-checked) count towards each point's average."""
+    from .recording import Recording, RecordingWriter
+    from .session import CaptureSession, SessionError, TestPlan, auto_accept, retry_on_link_fault, terminal_decider
+    from .setup import AcquisitionSetup
+
+    if args.out or args.points or args.reference or args.mode or args.setup or args.hits is not None:
+        raise UsageError("--resume continues the recorded test as it was planned: drop --out, --points, --reference, "
+                         "--mode, --hits and --setup")
+    path = Path(args.resume)
+    with Recording(path) as rec:
+        try:
+            setup = AcquisitionSetup.from_dict(rec.setup)
+            planned = dict(rec.plan)
+            device = planned.pop("device", None)
+            plan = TestPlan(**{k: (tuple(v) if k == "points" else v) for k, v in planned.items()
+                               if k in ("mode", "points", "hits_per_point", "reference")})
+        except (SetupError, TypeError, ValueError) as exc:
+            raise UsageError(f"{path} does not hold a capture plan and set-up to resume ({exc})") from None
+        windows = rec.windows
+        hits = list(rec.hits(skip_damaged=True))
+    url = args.device or device
+    if not url:
+        raise UsageError(f"{path} does not name its device: give --device URL")
+    url = _with_seed(url, args.seed) if args.seed is not None else url
+    analyser = open_analyser(url)
+    say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
+    with analyser:
+        identity = retry_on_link_fault(analyser.identify)
+        n_acc = sum(1 for h in hits if h.accepted)
+        say(f"analyser: {identity}; resuming {path}: {n_acc} accepted hit(s) recorded, "
+            f"{len(plan.measurements(setup))} point(s) x {plan.hits_per_point} hits, {plan.mode}")
+        decide = auto_accept if args.auto else terminal_decider()
+        with RecordingWriter.resume(path) as writer:
+            writer.log("INFO", f"capture resumed on {url} with {n_acc} accepted hits recorded")
+            session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
+                                     progress=say, timeout_s=args.timeout, resume_hits=hits)
+            try:
+                result = session.run()
+            except SessionError as exc:
+                writer.log("ERROR", str(exc))
+                print(f"capture: {exc}", file=sys.stderr)
+                return 1, None
+    print(summary_text(result), file=out_stream)
+    print(f"recording completed: {path}", file=out_stream)
+    return 0, result
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
@@ -275,8 +333,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(f"capture: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"capture: interrupted; {args.out} keeps every hit written so far "
-              "(recompute its FRFs with 'python -m acquisition replay')", file=sys.stderr)
+        print(f"capture: interrupted; {args.out or args.resume} keeps every hit written so far "
+              "(continue with 'python -m acquisition capture --resume FILE', or recompute its FRFs with "
+              "'python -m acquisition replay')", file=sys.stderr)
         return 130
     except OSError as exc:
         print(f"capture: {exc}", file=sys.stderr)

@@ -38,7 +38,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -229,13 +229,8 @@ def _read_lvm(path: "str | Path") -> ImportedTest:
 def read_dataphysics_mat(path: "str | Path", windowed: bool = False) -> ImportedTest:
     """Read a DataPhysics SignalCalc ``.mat`` export: ``Xk`` (or ``Wk`` with ``windowed``) blocks
     of two columns (time s, value). Raises :class:`ImportDataError` for anything else."""
-    import scipy.io
-
     p = Path(path)
-    try:
-        m = scipy.io.loadmat(str(p))
-    except Exception as exc:  # scipy.io raises many types (struct, zlib, Unicode, MatReadError...) on damaged files
-        raise ImportDataError(f"{p} is not a readable MATLAB file ({type(exc).__name__}: {exc})") from None
+    m = _loadmat_isolated(p)
     try:
         return _checked(_dataphysics_from(p, m, windowed))
     except ImportDataError:
@@ -243,6 +238,60 @@ def read_dataphysics_mat(path: "str | Path", windowed: bool = False) -> Imported
     except _MALFORMED as exc:
         raise ImportDataError(f"{p} does not hold DataPhysics time blocks of two columns (time, value) "
                               f"({type(exc).__name__}: {exc}); export the time data again") from None
+
+
+#: longest a damaged MATLAB file may keep the reader busy (s)
+LOADMAT_TIMEOUT_S = 60.0
+
+
+def _loadmat_child(path: str, conn: Any) -> None:
+    """Child process: ``scipy.io.loadmat`` and send ``("ok", dict)`` or ``("error", text)``."""
+    import scipy.io
+
+    try:
+        m = scipy.io.loadmat(path)
+        conn.send(("ok", {k: v for k, v in m.items() if not k.startswith("__")}))
+    except Exception as exc:  # scipy.io raises many types (struct, zlib, Unicode, MatReadError...) on damaged files
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+    finally:
+        conn.close()
+
+
+def _loadmat_isolated(p: Path) -> dict:
+    """``scipy.io.loadmat`` in a child process: some damaged .mat files crash scipy's reader with a
+    segmentation fault (found by fuzzing, scipy 1.x ``_mio5.read_var_array``); in a child that
+    becomes an :class:`ImportDataError` instead of killing the program. Bounded by
+    :data:`LOADMAT_TIMEOUT_S`. Uses ``fork`` when this process runs a single thread (fast), else ``spawn``."""
+    import multiprocessing
+    import threading
+
+    if not p.is_file():
+        raise ImportDataError(f"{p} not found: check the path")
+    method = "fork" if ("fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1) \
+        else "spawn"
+    ctx = multiprocessing.get_context(method)
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_loadmat_child, args=(str(p), send), daemon=True)
+    proc.start()
+    send.close()
+    try:
+        if not recv.poll(LOADMAT_TIMEOUT_S):
+            raise ImportDataError(f"{p}: reading the MATLAB file took over {LOADMAT_TIMEOUT_S:g} s; the file is "
+                                  "damaged or not a MATLAB file")
+        kind, payload = recv.recv()
+    except (EOFError, OSError):
+        proc.join(5.0)
+        raise ImportDataError(f"{p} is not a readable MATLAB file (the reader crashed, exit code {proc.exitcode}); "
+                              "the file is damaged: export it again") from None
+    finally:
+        recv.close()
+        proc.join(5.0)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
+    if kind != "ok":
+        raise ImportDataError(f"{p} is not a readable MATLAB file ({payload})")
+    return payload
 
 
 def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:

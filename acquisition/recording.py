@@ -50,6 +50,10 @@ CHANNEL_FIELDS = ("name", "point", "direction", "quantity", "sensitivity", "sens
                   "range_v", "coupling", "iepe")
 
 
+#: what h5py, json and numpy raise on damaged file content; the reader turns it into RecordingError
+_DAMAGE = (OSError, KeyError, ValueError, TypeError, RuntimeError, IndexError, AttributeError, OverflowError)
+
+
 def _h5py():
     import h5py  # local import keeps module import cheap and side-effect free
 
@@ -143,6 +147,41 @@ class RecordingWriter:
         ev.create_dataset("message", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
         self._n_hits = 0
         f.flush()
+
+    @classmethod
+    def resume(cls, path: "str | Path") -> "RecordingWriter":
+        """Reopen an existing recording to append to it (``capture --resume``).
+
+        Hits cut short by a crash (no ``complete`` attribute) are removed; new hits are numbered
+        after the last complete one. Raises :class:`RecordingError` when the file is not a
+        recording this version writes or cannot be opened for writing."""
+        h5py = _h5py()
+        with Recording(path):  # validates the schema (raises RecordingError)
+            pass
+        self = cls.__new__(cls)
+        self.path = Path(path)
+        try:
+            self._f = h5py.File(self.path, "r+")
+        except OSError as exc:
+            raise RecordingError(f"cannot open {self.path} for appending ({exc}); copy it and resume the copy, or "
+                                 "start a new recording") from None
+        try:
+            hits = self._f["hits"]
+            last = -1
+            for name in sorted(hits.keys()):
+                if not hits[name].attrs.get("complete", False):
+                    log.warning("%s: removing hit %s cut short by the crash", self.path, name)
+                    del hits[name]
+                else:
+                    last = max(last, int(name))
+            self._n_hits = last + 1
+            if "closed_utc" in self._f.attrs:
+                del self._f.attrs["closed_utc"]
+            self._f.flush()
+        except _DAMAGE as exc:
+            self._f.close()
+            raise RecordingError(f"{self.path} is damaged and cannot be resumed ({type(exc).__name__}: {exc})") from None
+        return self
 
     # -- writing -------------------------------------------------------------------------------
     @property
@@ -334,7 +373,7 @@ class Recording:
         except RecordingError:
             self._f.close()
             raise
-        except (OSError, KeyError, ValueError, TypeError) as exc:
+        except _DAMAGE as exc:
             self._f.close()
             raise RecordingError(f"{self.path} is damaged ({type(exc).__name__}: {exc}); use a backup or re-run the test") from None
 
@@ -368,8 +407,15 @@ class Recording:
         self.closed_cleanly = "closed_utc" in a
 
     # -- hits ----------------------------------------------------------------------------------
+    def _damaged(self, what: str, exc: BaseException) -> RecordingError:
+        return RecordingError(f"{self.path}: {what} is damaged ({type(exc).__name__}: {exc}); use a backup or "
+                              "re-run the test")
+
     def hit_names(self) -> list[str]:
-        return sorted(self._f["hits"].keys())
+        try:
+            return sorted(self._f["hits"].keys())
+        except _DAMAGE as exc:
+            raise self._damaged("the hit index", exc) from None
 
     @property
     def n_hits(self) -> int:
@@ -378,7 +424,7 @@ class Recording:
     def hit(self, index: int) -> RecordedHit:
         """One hit by index; raises RecordingError when it is incomplete or its checksum fails."""
         name = f"{int(index):06d}"
-        if name not in self._f["hits"]:
+        if name not in self.hit_names():
             raise RecordingError(f"{self.path} has no hit {index} (it holds {self.n_hits})")
         try:
             g = self._f["hits"][name]
@@ -405,7 +451,7 @@ class Recording:
             )
         except RecordingError:
             raise
-        except (OSError, KeyError, ValueError, TypeError) as exc:
+        except _DAMAGE as exc:
             raise RecordingError(f"hit {index} in {self.path} is damaged ({type(exc).__name__}: {exc})") from None
 
     def hits(self, accepted_only: bool = False, skip_damaged: bool = False) -> Iterator[RecordedHit]:
@@ -424,15 +470,21 @@ class Recording:
 
     # -- events and FRFs -----------------------------------------------------------------------
     def events(self) -> list[tuple[float, str, str]]:
-        ev = self._f["events"]
-        t = ev["time_unix_s"][()]
-        lv = [_as_str(x) for x in ev["level"][()]]
-        ms = [_as_str(x) for x in ev["message"][()]]
-        n = min(len(t), len(lv), len(ms))
-        return [(float(t[i]), lv[i], ms[i]) for i in range(n)]
+        try:
+            ev = self._f["events"]
+            t = ev["time_unix_s"][()]
+            lv = [_as_str(x) for x in ev["level"][()]]
+            ms = [_as_str(x) for x in ev["message"][()]]
+            n = min(len(t), len(lv), len(ms))
+            return [(float(t[i]), lv[i], ms[i]) for i in range(n)]
+        except _DAMAGE as exc:
+            raise self._damaged("the event log", exc) from None
 
     def measurement_names(self) -> list[str]:
-        return sorted(self._f["frf"].keys())
+        try:
+            return sorted(self._f["frf"].keys())
+        except _DAMAGE as exc:
+            raise self._damaged("the FRF index", exc) from None
 
     def frf_group(self, name: str) -> dict:
         """All stored arrays and attributes of one measurement's FRF results."""
@@ -446,8 +498,9 @@ class Recording:
             tau = float(out["exp_window_tau_s"])
             out["exp_window_tau_s"] = None if np.isnan(tau) else tau
             return out
-        except KeyError as exc:
-            raise RecordingError(f"FRF results {name!r} in {self.path} are missing or damaged ({exc})") from None
+        except _DAMAGE as exc:
+            raise RecordingError(f"FRF results {name!r} in {self.path} are missing or damaged "
+                                 f"({type(exc).__name__}: {exc})") from None
 
     def frfsets(self, estimator: str = "H1") -> list[FRFSet]:
         """One FRF set per measurement point (one reference each)."""
@@ -457,14 +510,21 @@ class Recording:
         sets = []
         for name in self.measurement_names():
             g = self.frf_group(name)
-            sets.append(FRFSet(
-                freq_hz=g["freq_hz"], H=g[est][:, None, :], quantity=g["quantity"], outputs=tuple(g["outputs"]),
-                references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
-                exp_window_tau_s=g["exp_window_tau_s"],
-                meta={"estimator": est, "n_averages": int(g["n_averages"]), "source": str(self.path),
-                      "measurement": name, "point": g["point"]},
-            ))
+            try:
+                sets.append(self._frfset(name, g, est))
+            except _DAMAGE as exc:
+                raise RecordingError(f"FRF results {name!r} in {self.path} are damaged ({type(exc).__name__}: {exc}); "
+                                     "recompute them with 'python -m acquisition replay'") from None
         return sets
+
+    def _frfset(self, name: str, g: dict, est: str) -> FRFSet:
+        return FRFSet(
+            freq_hz=g["freq_hz"], H=g[est][:, None, :], quantity=g["quantity"], outputs=tuple(g["outputs"]),
+            references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
+            exp_window_tau_s=g["exp_window_tau_s"],
+            meta={"estimator": est, "n_averages": int(g["n_averages"]), "source": str(self.path),
+                  "measurement": name, "point": g["point"]},
+        )
 
     def close(self) -> None:
         if self._f.id.valid:

@@ -348,6 +348,7 @@ class CaptureSession:
         max_attempts_factor: int = 10,
         max_timeouts: int = 3,
         max_link_failures: int = 8,
+        resume_hits: Sequence[Any] = (),
     ) -> None:
         self.analyser = analyser
         self.setup = setup
@@ -369,6 +370,11 @@ class CaptureSession:
             raise SessionError(f"response channels must share one motion quantity; got {sorted(qs)}")
         self.frf_quantity, self.frf_unit = FRF_QUANTITY[next(iter(qs))]
         self.measurements = plan.measurements(setup)
+        self.resume_hits = [h for h in resume_hits if h.accepted]
+        for h in self.resume_hits:
+            if not 0 <= h.measurement < len(self.measurements) or h.point != self.measurements[h.measurement].point:
+                raise SessionError(f"recorded hit {h.index} (measurement {h.measurement}, point {h.point}) does not "
+                                   "belong to this test plan: resume with the plan the recording was made with")
 
     def _event(self, level: str, message: str) -> None:
         getattr(log, level.lower() if level.lower() in ("info", "warning", "error") else "info")(message)
@@ -385,6 +391,9 @@ class CaptureSession:
                 avg = MeasurementAverage(m.index, m.point, m.reference, m.outputs, self.frf_quantity,
                                          self.frf_unit, self.windows)
                 result.averages.append(avg)
+                done = self._resume_into(m, avg, result)
+                if done:
+                    continue
                 self._measure(m, avg, result)
         except OperatorQuit as exc:
             result.aborted = True
@@ -393,6 +402,24 @@ class CaptureSession:
                 result.averages[-1].write(self.writer)
         self._event("INFO", f"session done: {result.accepted} hits accepted, {len(result.rejected)} rejected")
         return result
+
+    def _resume_into(self, m: Measurement, avg: MeasurementAverage, result: SessionResult) -> bool:
+        """Add the recorded accepted hits of ``m`` to its average (resume); True when it is complete
+        (its FRF results are then written again, so a crash between the last hit and the FRF loses nothing)."""
+        mine = [h for h in self.resume_hits if h.measurement == m.index][: self.plan.hits_per_point]
+        for h in mine:
+            spectra = process_hit(h.data, h.sample_rate_hz, h.trigger_index, h.force_channel, h.response_channels,
+                                  self.windows)
+            avg.acc.add(spectra)
+            avg.hits.append(h.index)
+            result.accepted += 1
+        if mine:
+            self._event("INFO", f"resumed point {m.point}: {len(mine)} accepted hit(s) from the recording")
+        if avg.n_averages >= self.plan.hits_per_point:
+            if self.writer is not None:
+                avg.write(self.writer)
+            return True
+        return False
 
     def _measure(self, m: Measurement, avg: MeasurementAverage, result: SessionResult) -> None:
         try:

@@ -31,6 +31,14 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(f"{self.prog}: {message}")
 
 
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"{type(x).__name__} is not JSON serialisable")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="python -m analysis diagnose",
                 description="Compare a measurement with a simulation, name the physical cause of the "
@@ -92,6 +100,37 @@ def model_with_correction(model, sim):
     return replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references), meta=meta)
 
 
+def time_data_causes(path: str, band: tuple) -> list:
+    """Time-data causes (:mod:`analysis.diagnosis.timedata`) of a recording's hits, per reference point;
+    [] when the file is not a recording or holds no hits."""
+    from .inputs import detect_format
+    from .diagnosis.timedata import diagnose_hits
+
+    if detect_format(path) != "recording":
+        return []
+    from acquisition.recording import Recording, RecordingError
+
+    groups: dict = {}
+    try:
+        with Recording(path) as rec:
+            for h in rec.hits(skip_damaged=True):
+                groups.setdefault((h.reference, h.sample_rate_hz, h.data.shape), []).append(h)
+    except (RecordingError, OSError) as exc:
+        log.warning("time data of %s not read: %s", path, exc)
+        return []
+    out = []
+    for (ref, fs, _), hits in groups.items():
+        if len(hits) < 2:
+            continue
+        force = np.array([h.data[h.force_channel] for h in hits])
+        resp = np.array([h.data[h.response_channels] for h in hits])
+        flags = np.array([h.overload for h in hits])
+        for c in diagnose_hits(force, resp, fs, band, overload_flags=flags):
+            c["reference"] = ref
+            out.append(c)
+    return sorted(out, key=lambda c: not c["present"])
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .inputs import InputError, load_input, parse_band_text
@@ -132,14 +171,28 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except (InputError, EffectError, ValueError) as exc:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2
-    Path(args.json).write_text(json.dumps(diag.to_json(), indent=1))
+    doc = diag.to_json()
+    try:
+        timed = time_data_causes(args.measured, (float(measured.freq_hz[0]), float(measured.freq_hz[-1])))
+    except ValueError as exc:
+        timed = []
+        log.warning("time data not analysed: %s", exc)
+    if timed:
+        doc["time_data"] = timed
+        present = [c for c in timed if c["present"]]
+        if doc["verdict"] == "unexplained" and any(c["effect"] == "amplitude_nonlinearity" for c in present):
+            doc["verdict"] = "amplitude_nonlinearity"
+    Path(args.json).write_text(json.dumps(doc, indent=1, default=_json_default))
     if args.report:
         from .diagnosis.report import write_report
 
         write_report(diag, args.report)
-    print(f"verdict: {diag.verdict}")
+    for c in timed:
+        if c["present"]:
+            print(f"  time data ({c['reference']}): {c['evidence']}")
+    print(f"verdict: {doc['verdict']}")
     print(f"error before {diag.error_before_db:.1f} dB, after {diag.error_after_db:.1f} dB "
-          f"(noise {diag.noise_db['difference']:.1f} dB)")
+          f"(noise {max(diag.noise_db.values()):.1f} dB)")
     for c in diag.causes[:5]:
         print(f"  {'*' if c['significant'] else ' '} {c['evidence']}")
     return 0

@@ -10,6 +10,7 @@ import argparse
 import sys
 import tempfile
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -64,7 +65,9 @@ def _check_out(path: Optional[str], what: str) -> None:
 
 
 def _write_uff(path: str, frf, result) -> None:
-    """UFF 55 mode shapes, then UFF 58 synthesised FRFs appended in the same file."""
+    """UFF 55 mode shapes (the structure: window-corrected poles), then UFF 58 synthesised FRFs
+    appended in the same file. The FRFs are synthesised *as measured* (raw poles, the exponential
+    window's damping included, comparable with the input FRFs); their ID line 2 says which."""
     from .modal import synthesize
     from .uff import write_uff55, write_uff58
 
@@ -74,10 +77,13 @@ def _write_uff(path: str, frf, result) -> None:
     if shapes is None:
         shapes = model.residues[:, 0, :]
     write_uff55(path, model.poles, np.asarray(shapes), list(model.outputs), overwrite=True)
-    synth = synthesize(model, frf.freq_hz[sel])
+    synth = synthesize(result.model_raw, frf.freq_hz[sel])
+    which = (f"exp. window tau {frf.exp_window_tau_s:.6g} s: raw poles, as measured" if frf.exp_window_tau_s
+             else "no window: model poles")
+    synth = replace(synth, exp_window_tau_s=frf.exp_window_tau_s)
     with tempfile.TemporaryDirectory(dir=str(Path(path).resolve().parent)) as tmp:
         part = Path(tmp) / "frf58.uff"
-        write_uff58(part, synth, id_lines=("impactlab LSFD synthesised FRF", "model", "synthesis"))
+        write_uff58(part, synth, id_lines=("impactlab LSFD synthesised FRF", which, "synthesis"))
         with open(path, "ab") as out, open(part, "rb") as src:
             out.write(src.read())
 
@@ -151,7 +157,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
             order = [tuple(int(i) for i in np.unravel_index(k, rms.shape)) for k in np.argsort(-rms, axis=None)]
             rows = [shown] + [p for p in order if p != shown and rms[p] > 0]
-            plot_fit(frf, result.model, args.plot, pairs=rows[:4], band=result.band)
+            plot_fit(frf, result, args.plot, pairs=rows[:4], band=result.band)
             print(f"plot written to {args.plot}")
         if args.uff:
             _write_uff(args.uff, frf, result)

@@ -39,7 +39,8 @@ from .frf import FRFSet
 from .modal import RESIDUAL_FORMS, ModalModel, damped_freq_hz, damping_ratio, natural_freq_hz
 from .uncertainty import covariance_from_normal, fz_std
 
-__all__ = ["fit_lsfd", "LSFDResult", "LSFDConvergenceWarning", "rank_one_split", "METHODS", "Status"]
+__all__ = ["fit_lsfd", "LSFDResult", "LSFDConvergenceWarning", "rank_one_split", "METHODS", "Status",
+           "seen_through_window"]
 
 log = logging.getLogger(__name__)
 
@@ -94,6 +95,25 @@ class LSFDResult:
     cov_poles: np.ndarray
     per_frf: Optional[list] = None
     initial_poles: Optional[np.ndarray] = field(default=None, repr=False)
+
+    @property
+    def model_raw(self) -> ModalModel:
+        """The fitted model *as measured*: ``model`` with the raw poles (the exponential window's
+        damping included). Compare this one with the (windowed) data; ``model`` is the structure."""
+        return replace(self.model, poles=np.asarray(self.poles_raw, dtype=complex).copy())
+
+
+def seen_through_window(model: ModalModel, exp_window_tau_s: Optional[float]) -> ModalModel:
+    """The model as seen through an exponential window ``exp(-t / tau)``: every pole shifted by
+    ``-1/tau`` (rad/s), residues and residual terms unchanged (see the module docstring).
+    ``model`` describes the structure (window-corrected poles, as ``LSFDResult.model``);
+    ``None`` or 0 for ``exp_window_tau_s`` returns the model unchanged."""
+    if not exp_window_tau_s:
+        return model
+    tau = float(exp_window_tau_s)
+    if not (np.isfinite(tau) and tau > 0):
+        raise ValueError(f"exp_window_tau_s must be a positive time in seconds; got {exp_window_tau_s!r}")
+    return replace(model, poles=np.asarray(model.poles, dtype=complex) - 1.0 / tau)
 
 
 def rank_one_split(residues: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

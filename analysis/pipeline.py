@@ -17,9 +17,24 @@ This is the paper's Fig. 1 flow with the choices made automatically:
    the band was the user's, a warning is logged and kept in ``stab.meta["warnings"]``.
 5. **LSFD** (:func:`analysis.lsfd.fit_lsfd`, Gauss-Newton or Levenberg-Marquardt) from the
    selected poles, with residual terms for the modes outside the band.
-6. **Check**: poles the LSFD moved out of the band or to damping outside ``(0, MAX_DAMPING)``
-   came from spurious initial poles; they are dropped and the LSFD repeated once from the
-   remaining fitted poles (noted in ``stab.meta["warnings"]``).
+6. **Check** (:mod:`analysis.fit_checks`): poles the LSFD moved out of the band or to
+   damping outside ``(0, MAX_DAMPING)``, poles that *migrated* more than
+   ``MIGRATE_BANDWIDTHS`` half-power bandwidths from their start (a weak initial pole the
+   data do not support slides onto a strong neighbour instead of vanishing), and poles that
+   *duplicate* another (within its half-bandwidth with a residue MAC > 0.8) came from
+   spurious initial poles; they are dropped and the LSFD repeated from the remaining fitted
+   poles (up to ``MAX_CHECK_ROUNDS`` times; each drop is noted in ``stab.meta["warnings"]``).
+7. **Missing resonances**: the misfit of every FRF, scaled by that FRF's RMS in the band
+   (so weak-but-clean FRFs count like strong ones), is averaged over the FRFs:
+   ``e(f) = sqrt(mean_o |H_o - G_o|^2 / rms_o^2)``, and likewise ``d(f)`` for the data.
+   Peaks of ``e`` above ``MISSING_MEDIAN_FACTOR`` times its median and above
+   ``MISSING_DATA_FRACTION`` of ``d`` are resonances the model misses (modes the
+   stabilization did not stabilise, or a close pair fitted as one pole). The strongest is
+   tried first: a pole at that frequency (damping: the median of the fitted ones) is added
+   and the LSFD repeated; the new model is kept when the scaled cost ``sum e^2`` falls by at
+   least ``MISSING_MIN_GAIN`` and step 6 finds nothing wrong with the new pole. Repeated
+   until no candidate is left (at most ``MAX_ADDED`` poles). ``G`` is synthesised from the
+   raw poles (window damping included), as the data were measured.
 """
 from __future__ import annotations
 
@@ -32,7 +47,8 @@ from scipy.signal import find_peaks
 
 from .frf import FRFSet
 from .lscf import parse_band
-from .modal import damping_ratio, natural_freq_hz
+from .fit_checks import MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles, migrated_poles
+from .modal import damping_ratio, natural_freq_hz, pole_from_fz, synthesize
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 
@@ -44,6 +60,11 @@ LOW_LINES = 5
 MIN_COHERENCE = 0.8
 EDGE_BANDWIDTHS = 3.0
 MAX_DAMPING = 0.2
+MAX_CHECK_ROUNDS = 4
+MISSING_MEDIAN_FACTOR = 4.0
+MISSING_DATA_FRACTION = 0.25
+MISSING_MIN_GAIN = 0.01
+MAX_ADDED = 8
 
 
 class FitError(ValueError):
@@ -128,6 +149,7 @@ def fit_auto(
     max_iter: int = 100,
     refine_lsfd: bool = False,
     selection_options: Optional[dict] = None,
+    add_missing: bool = True,
 ):
     """Automatic modal fit of an FRF set; returns ``(LSFDResult, StabilizationResult)``.
 
@@ -145,6 +167,9 @@ def fit_auto(
     per_frf, max_iter : passed to :func:`analysis.lsfd.fit_lsfd`.
     refine_lsfd : build the stabilization diagram from LSFD-refined poles (slower).
     selection_options : keyword options of :func:`analysis.selection.select_clusters`.
+    add_missing : after the fit, look for resonances the model misses (step 7 of the module
+        docstring) and add poles for them; not done when ``n_modes`` or frequencies are given
+        (the user chose the model size).
 
     Returns
     -------
@@ -210,19 +235,11 @@ def fit_auto(
     selected = np.asarray(poles)
     result = fit_lsfd(frf, poles, method=method, band=(lo2, hi2), residual_form=residual_form,
                       per_frf=per_frf, max_iter=max_iter)
-    # 6. poles the LSFD pushed out of the physical range (a spurious initial pole the data do not
-    #    support wanders off or takes huge damping) are dropped and the fit repeated once
-    fd = result.poles.imag / (2 * np.pi)
-    z = result.damping
-    bad = ~((fd >= lo2) & (fd <= hi2) & (z > 0) & (z < MAX_DAMPING))
-    if np.any(bad) and np.any(~bad) and given_complex is None:
-        msg = (f"dropped {int(bad.sum())} pole(s) the LSFD moved out of the band or to unphysical damping "
-               f"({', '.join(f'{a:.4g} Hz/{100 * b:.3g} %' for a, b in zip(result.freq_hz[bad], z[bad]))})")
-        log.info(msg)
-        warnings_out.append(msg)
-        poles = result.poles_raw[~bad]
-        result = fit_lsfd(frf, poles, method=method, band=(lo2, hi2), residual_form=residual_form,
-                          per_frf=per_frf, max_iter=max_iter)
+    fit_kw = dict(method=method, band=(lo2, hi2), residual_form=residual_form, per_frf=per_frf, max_iter=max_iter)
+    if given_complex is None:
+        result = _drop_bad_poles(frf, result, fit_kw, warnings_out)
+        if add_missing and n_modes is None and given_freqs is None:
+            result = _add_missing_modes(frf, result, fit_kw, warnings_out)
     if not result.success:
         warnings_out.append(f"LSFD did not converge: {result.message}")
         log.warning("LSFD did not converge: %s", result.message)
@@ -230,3 +247,106 @@ def fit_auto(
     if stab is not None:
         stab = replace(stab, meta={**stab.meta, **info})
     return result, stab
+
+
+def _line_spacing(frf: FRFSet) -> float:
+    return float(np.median(np.diff(frf.freq_hz))) if frf.freq_hz.size > 1 else 0.0
+
+
+def _bad_poles(result, start: np.ndarray, df: float) -> tuple[np.ndarray, list[str]]:
+    """Mask of fitted poles to drop (step 6) and the reasons."""
+    lo, hi = result.band
+    fd = result.poles_raw.imag / (2 * np.pi)
+    z = result.damping
+    out_of_range = ~((fd >= lo) & (fd <= hi) & (z > 0) & (z < MAX_DAMPING))
+    migrated = migrated_poles(start, result.poles_raw, df) & ~out_of_range
+    moved = np.abs(natural_freq_hz(result.poles_raw) - natural_freq_hz(start)) / bandwidth_hz(start, df)
+    dup = duplicate_poles(result.poles_raw, result.model.residues, df, moved=moved) & ~out_of_range & ~migrated
+    why = []
+    for mask, text in ((out_of_range, "moved out of the band or to unphysical damping"),
+                       (migrated, f"migrated more than {MIGRATE_BANDWIDTHS:g} half-power bandwidths from its start"),
+                       (dup, "duplicates a neighbour (same resonance, same shape)")):
+        for k in np.flatnonzero(mask):
+            why.append(f"{natural_freq_hz(start[k]):.4g} Hz -> {result.freq_hz[k]:.4g} Hz/{100 * z[k]:.3g} %: {text}")
+    return out_of_range | migrated | dup, why
+
+
+
+
+def _drop_bad_poles(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
+    """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring)."""
+    from .lsfd import fit_lsfd
+
+    df = _line_spacing(frf)
+    for _ in range(MAX_CHECK_ROUNDS):
+        start = np.asarray(result.initial_poles if result.initial_poles is not None else result.poles_raw)
+        bad, why = _bad_poles(result, start, df)
+        if not np.any(bad) or np.all(bad):
+            break
+        msg = f"dropped {int(bad.sum())} pole(s) and refitted: " + "; ".join(why)
+        log.info(msg)
+        warnings_out.append(msg)
+        result = fit_lsfd(frf, result.poles_raw[~bad], **fit_kw)
+    return result
+
+
+def _scaled_misfit(frf: FRFSet, result) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(freq_hz, e, d) of step 7: RMS-scaled misfit and data over the FRFs, per line of the band."""
+    lo, hi = result.band
+    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
+    f = frf.freq_hz[sel]
+    H = frf.H[..., sel].reshape(-1, f.size)
+    G = synthesize(replace(result.model, poles=result.poles_raw), f).H.reshape(-1, f.size)
+    rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=1))
+    live = np.isfinite(rms) & (rms > 0)
+    H, G, rms = H[live], G[live], rms[live]
+    e = np.sqrt(np.mean(np.abs(H - G) ** 2 / rms[:, None] ** 2, axis=0))
+    d = np.sqrt(np.mean(np.abs(H) ** 2 / rms[:, None] ** 2, axis=0))
+    return f, e, d
+
+
+def _missing_candidates(f: np.ndarray, e: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Frequencies (Hz) of the misfit peaks of step 7, strongest first."""
+    level = MISSING_MEDIAN_FACTOR * float(np.median(e))
+    pk, _ = find_peaks(e)
+    pk = pk[(e[pk] > level) & (e[pk] > MISSING_DATA_FRACTION * d[pk])]
+    return f[pk[np.argsort(-e[pk])]]
+
+
+def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
+    """Step 7: add poles at the resonances the model misses (see module docstring)."""
+    from .lsfd import fit_lsfd
+
+    df = _line_spacing(frf)
+    tried: list[float] = []
+    added = 0
+    f, e, d = _scaled_misfit(frf, result)
+    cost = float(np.sum(e ** 2))
+    while added < MAX_ADDED:
+        cands = [c for c in _missing_candidates(f, e, d) if all(abs(c - t) > 2 * df for t in tried)]
+        if not cands:
+            break
+        c = float(cands[0])
+        tried.append(c)
+        z0 = float(np.median(damping_ratio(result.poles_raw)))
+        new = pole_from_fz(c, z0)
+        start = np.concatenate([result.poles_raw, [new]])
+        try:
+            trial = fit_lsfd(frf, start, **fit_kw)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            log.info("adding a pole at %.6g Hz failed (%s)", c, exc)
+            continue
+        bad, _ = _bad_poles(trial, start, df)
+        f2, e2, d2 = _scaled_misfit(frf, trial)
+        cost2 = float(np.sum(e2 ** 2))
+        if np.any(bad) or cost2 > (1.0 - MISSING_MIN_GAIN) * cost:
+            log.info("pole at %.6g Hz not added (cost %.4g -> %.4g, rejected poles: %d)", c, cost, cost2,
+                     int(np.sum(bad)))
+            continue
+        msg = (f"added a pole at {trial.freq_hz[-1]:.5g} Hz/{100 * trial.damping[-1]:.3g} % for a resonance the "
+               f"model missed (scaled misfit peak at {c:.5g} Hz; cost {cost:.4g} -> {cost2:.4g})")
+        log.info(msg)
+        warnings_out.append(msg)
+        result, f, e, d, cost = trial, f2, e2, d2, cost2
+        added += 1
+    return result

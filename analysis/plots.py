@@ -96,22 +96,37 @@ def plot_stabilization(result, frf: FRFSet, path_png: "str | Path", *, title: Op
     return _save(fig, path_png)
 
 
-def plot_fit(frf: FRFSet, model: ModalModel, path_png: "str | Path", *,
+def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
              pairs: Optional[Sequence[tuple[int, int]]] = None, max_panels: int = 4,
              band: Optional[Sequence[float]] = None) -> Path:
     """Measured vs synthesised FRFs in the manner of the paper's Fig. 7: magnitude (dB), phase
     (deg) and the relative error ``|H - G| / |H|`` (dB) beneath, one column per FRF.
 
+    model : an :class:`analysis.lsfd.LSFDResult` (its raw poles are drawn: the model as
+        measured) or a :class:`ModalModel` of the structure (window-corrected poles, like
+        ``LSFDResult.model``). When the FRFs were exponentially windowed
+        (``frf.exp_window_tau_s``) the overlay is the model *as measured through the window*
+        (poles shifted by ``-1/tau``), so that it is compared like with like; the green lines
+        mark the structure's natural frequencies.
     pairs : (output index, reference index) of the FRFs to draw; default: the first
-    ``max_panels`` FRFs. ``band`` (Hz) shades the fitted band. Returns the path written.
+        ``max_panels`` FRFs. ``band`` (Hz) shades the fitted band. Returns the path written.
     """
+    from .lsfd import LSFDResult, seen_through_window
+
+    if isinstance(model, LSFDResult):
+        seen = model.model_raw
+        model = model.model
+    elif isinstance(model, ModalModel):
+        seen = seen_through_window(model, frf.exp_window_tau_s)
+    else:
+        raise TypeError(f"model must be an LSFDResult or a ModalModel; got {type(model).__name__}")
     if pairs is None:
         pairs = [(o, r) for o in range(frf.n_outputs) for r in range(frf.n_references)][:max_panels]
     pairs = list(pairs)
     if not pairs:
         raise ValueError("no FRF to plot: give at least one (output, reference) pair")
     f = frf.freq_hz
-    G = synthesize(model, f).H
+    G = synthesize(seen, f).H
     n = len(pairs)
     fig = _figure(4.2 * n + 1, 8)
     gs = fig.add_gridspec(3, n, height_ratios=[3, 1.5, 1.5], hspace=0.08)
@@ -123,7 +138,7 @@ def plot_fit(frf: FRFSet, model: ModalModel, path_png: "str | Path", *,
         axe = fig.add_subplot(gs[2, c], sharex=axm)
         with np.errstate(divide="ignore", invalid="ignore"):
             axm.plot(f, 20 * np.log10(np.abs(H)), "--", color="#555555", lw=1.0, label="measured")
-            axm.plot(f, 20 * np.log10(np.abs(g)), "-", color="#1f77b4", lw=1.0, label="LSFD model")
+            axm.plot(f, 20 * np.log10(np.abs(g)), "-", color="#1f77b4", lw=1.0, label="LSFD model" + (" (as windowed)" if frf.exp_window_tau_s else ""))
             axp.plot(f, _phase_deg(H), "--", color="#555555", lw=0.8)
             axp.plot(f, _phase_deg(g), "-", color="#1f77b4", lw=0.8)
             rel = np.abs(H - g) / np.abs(H)

@@ -15,7 +15,7 @@ import numpy as np
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
 
-__all__ = ["roman", "format_table", "result_to_dict", "write_json", "complex_pair"]
+__all__ = ["roman", "format_table", "result_to_dict", "write_json", "complex_pair", "synthesis_error"]
 
 JSON_SCHEMA = "impactlab.fit/1"
 
@@ -62,7 +62,9 @@ def format_table(result, frf: Optional[FRFSet] = None, *, output: int = 0, refer
     Columns: pole | [initial f, zeta] | f [Hz] | zeta [%] | f std [Hz] | zeta std [%] | parameter |
     value (residue R_r of that FRF), then S, UR and LR of that FRF. With ``initial`` poles (rad/s,
     e.g. those selected from the stabilization diagram) their f and zeta are shown first, as
-    the paper's LSCE columns, each matched to the nearest fitted pole.
+    the paper's LSCE columns: each initial pole is matched to at most one fitted pole (nearest
+    pairs first, within 3 half-power bandwidths of the fitted pole or 1 % in frequency); a fitted
+    pole without a match (added by the pipeline for a missed resonance) shows "-".
     """
     model = result.model
     outs, refs = model.outputs, model.references
@@ -72,11 +74,23 @@ def format_table(result, frf: Optional[FRFSet] = None, *, output: int = 0, refer
     pre = (f"{initial_label} f", f"{initial_label} zeta") if init is not None else ()
     rows = [("",) + pre + ("f [Hz]", "zeta [%]", "f std", "zeta std", "parameter", "value")]
     order = np.argsort(result.freq_hz)
+    match: dict = {}
+    if init is not None:
+        fi, ff = natural_freq_hz(init), np.asarray(result.freq_hz)
+        tol = np.maximum(3 * 2 * np.abs(np.asarray(result.damping)) * ff, 0.01 * ff)
+        dist = np.abs(fi[:, None] - ff[None, :])
+        for flat in np.argsort(dist, axis=None):
+            a, b = np.unravel_index(flat, dist.shape)
+            if dist[a, b] <= tol[b] and a not in match.values() and b not in match:
+                match[b] = a
     for k, r in enumerate(order, start=1):
         extra: tuple = ()
         if init is not None:
-            q = init[np.argmin(np.abs(init - result.poles[r]))]
-            extra = (f"{natural_freq_hz(q):.4f}", f"{100 * damping_ratio(q):.3f}")
+            if r in match:
+                q = init[match[r]]
+                extra = (f"{natural_freq_hz(q):.4f}", f"{100 * damping_ratio(q):.3f}")
+            else:
+                extra = ("-", "-")
         rows.append((
             f"pole {roman(k)}",) + extra + (
             f"{result.freq_hz[r]:.4f}",
@@ -170,6 +184,8 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
         "history": [_fnum(s) for s in result.history],
         "noise_var": _fnum(result.noise_var),
     }
+    if frf is not None and frf.H.shape[:2] == np.asarray(model.residues).shape[:2]:
+        doc["synthesis_error"] = synthesis_error(result, frf)
     if result.mode_shapes is not None:
         doc["mode_shapes"] = [
             {"output": o, "values": [complex_pair(x) for x in np.asarray(result.mode_shapes)[i, order]]}
@@ -203,6 +219,23 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
     if extra:
         doc.update(extra)
     return doc
+
+
+def synthesis_error(result, frf: FRFSet) -> dict:
+    """Relative RMS misfit ``||H - G|| / ||H||`` over the fitted band and all FRFs, with ``G``
+    synthesised from the model *as measured* (``result.model_raw``: raw poles, the exponential
+    window's damping included), so windowed data are compared like with like."""
+    from .modal import synthesize
+
+    lo, hi = result.band
+    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
+    H = frf.H[..., sel]
+    G = synthesize(result.model_raw, frf.freq_hz[sel]).H
+    ok = np.isfinite(H)
+    den = float(np.sqrt(np.sum(np.abs(H[ok]) ** 2)))
+    rel = float(np.sqrt(np.sum(np.abs((H - G)[ok]) ** 2))) / den if den > 0 else float("nan")
+    return {"relative_rms": _fnum(rel), "poles": "raw (as measured)",
+            "exp_window_tau_s": _fnum(frf.exp_window_tau_s) if frf.exp_window_tau_s else None}
 
 
 def write_json(path: "str | Path", doc: dict) -> None:

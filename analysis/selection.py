@@ -7,9 +7,12 @@ The rule
    inside the band.
 2. Clusters: complete-linkage clustering of the candidates with the distance
 
-       d(a, b) = max(|f_a - f_b| / (f_ab tol_freq),  |zeta_a - zeta_b| / (zeta_ab tol_damp_cluster))
+       d(a, b) = max(|f_a - f_b| / (f_ab tol_freq),
+                     |zeta_a - zeta_b| / max(zeta_ab tol_damp, abs_tol_damp))
 
-   (f_ab, zeta_ab the larger of the two), cut at d = 1. Complete linkage means every pair in
+   (f_ab, zeta_ab the larger of the two), cut at d = 1. The damping part is
+   relative-plus-absolute (``abs_tol_damp`` default 0.1 % of critical): the damping estimate
+   of a very lightly damped mode scatters by more than its own size from order to order. Complete linkage means every pair in
    a cluster is within the tolerances, so two modes a few percent apart are never chained
    together through scattered spurious poles.
 3. Persistence: a cluster counts the *distinct* model orders it holds; it is kept when it
@@ -38,6 +41,9 @@ __all__ = ["select_poles", "SelectedCluster", "select_clusters", "poles_from_fre
 
 log = logging.getLogger(__name__)
 
+#: absolute damping-ratio tolerance of the clustering (0.1 % of critical)
+ABS_TOL_DAMP_CLUSTER = 1e-3
+
 
 class SelectedCluster(NamedTuple):
     """A kept cluster: representative pole (rad/s), number of orders, spreads of f (Hz) and zeta."""
@@ -58,8 +64,10 @@ def select_clusters(
     max_damping: Optional[float] = None,
     min_orders: int = 3,
     min_fraction: float = 0.5,
+    abs_tol_damp: float = ABS_TOL_DAMP_CLUSTER,
 ) -> list[SelectedCluster]:
-    """The persistent clusters of stable poles, most persistent first (see module docstring)."""
+    """The persistent clusters of stable poles, most persistent first (ties: the smaller relative
+    frequency spread first); see the module docstring for the rule and the criteria."""
     tol_f = stab.tol_freq if tol_freq is None else float(tol_freq)
     zmax = stab.max_damping if max_damping is None else float(max_damping)
     p, orders = stab.stable_poles(min_class)
@@ -78,7 +86,7 @@ def select_clusters(
         # condensed distance matrix, in the order scipy's pdist uses
         i, j = np.triu_indices(p.size, k=1)
         dfm = np.abs(f[i] - f[j]) / (np.maximum(f[i], f[j]) * tol_f)
-        dzm = np.abs(z[i] - z[j]) / (np.maximum(z[i], z[j]) * tol_damp)
+        dzm = np.abs(z[i] - z[j]) / np.maximum(np.maximum(z[i], z[j]) * tol_damp, abs_tol_damp)
         D = np.maximum(dfm, dzm)
         Z = linkage(D, method="complete")
         labels = fcluster(Z, t=1.0, criterion="distance")
@@ -116,7 +124,7 @@ def select_poles(
     stab : the stabilization diagram.
     n_modes : if given, keep the n_modes most persistent clusters; otherwise all that pass.
     kwargs : criteria of :func:`select_clusters` (min_class, tol_freq, tol_damp, min_damping,
-        max_damping, min_orders, min_fraction).
+        max_damping, min_orders, min_fraction, abs_tol_damp).
     """
     clusters = select_clusters(stab, **kwargs)
     if n_modes is not None:

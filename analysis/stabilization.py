@@ -10,9 +10,13 @@ class  name       condition (all relative to the previous-order pole)
 ====== ========== =================================================================
 0      new        no previous pole within ``tol_freq``
 1      freq       ``|f - f'| / f' < tol_freq``
-2      damp       freq and ``|zeta - zeta'| / zeta' < tol_damp``
+2      damp       freq and ``|zeta - zeta'| < max(tol_damp zeta', abs_tol_damp)``
 3      mac        damp and ``1 - MAC(psi, psi') < tol_mac``
 ====== ========== =================================================================
+
+The damping test is relative-plus-absolute: a very lightly damped mode (zeta ~ 0.05 %) has
+a damping estimate that scatters by more than 5 % of itself from order to order while its
+frequency is rock-stable; ``abs_tol_damp`` (default 0.05 % of critical) keeps it.
 
 The mode shapes ``psi`` come from a quick linear least-squares residue fit at each order
 (:func:`quick_residues`): with the poles fixed, the FRFs are linear in the residues. To
@@ -49,6 +53,7 @@ __all__ = [
     "STABLE_FREQ",
     "STABLE_DAMP",
     "STABLE_MAC",
+    "ABS_TOL_DAMP",
 ]
 
 log = logging.getLogger(__name__)
@@ -57,6 +62,8 @@ NEW, STABLE_FREQ, STABLE_DAMP, STABLE_MAC = 0, 1, 2, 3
 CLASS_NAMES = ("new", "freq", "freq+damp", "freq+damp+mac")
 METHODS = ("lsce", "lscf")
 MAX_SHAPE_LINES = 1024
+#: absolute damping-ratio tolerance of the damping-stability test (0.05 % of critical)
+ABS_TOL_DAMP = 5e-4
 
 
 @dataclass(frozen=True)
@@ -71,7 +78,7 @@ class StabilizationResult:
     mac : per order, MAC with the matched pole of the previous order (NaN when unmatched).
     method : "lsce" or "lscf" (+ "+lsfd" when refined).
     band : (lo_hz, hi_hz) used.
-    tol_freq, tol_damp, tol_mac, max_damping : the criteria used.
+    tol_freq, tol_damp, tol_mac, max_damping, abs_tol_damp : the criteria used.
     """
 
     orders: tuple
@@ -86,6 +93,7 @@ class StabilizationResult:
     tol_mac: float
     max_damping: float
     meta: dict = field(default_factory=dict)
+    abs_tol_damp: float = 0.0
 
     def stable_poles(self, min_class: int = STABLE_DAMP) -> tuple[np.ndarray, np.ndarray]:
         """All poles of class >= min_class over all orders: (poles rad/s, order of each)."""
@@ -120,7 +128,8 @@ class StabilizationResult:
         return {
             "method": self.method,
             "band_hz": [float(self.band[0]), float(self.band[1])],
-            "tolerances": {"freq": self.tol_freq, "damping": self.tol_damp, "mac": self.tol_mac},
+            "tolerances": {"freq": self.tol_freq, "damping": self.tol_damp, "mac": self.tol_mac,
+                           "damping_abs": self.abs_tol_damp},
             "max_damping": self.max_damping,
             "orders": rows,
         }
@@ -225,6 +234,7 @@ def stabilization(
     tol_mac: float = 0.02,
     max_damping: float = 0.2,
     min_modes: int = 1,
+    abs_tol_damp: float = ABS_TOL_DAMP,
 ) -> StabilizationResult:
     """Stabilization diagram of models with n = min_modes..max_modes modes.
 
@@ -236,6 +246,8 @@ def stabilization(
     band : (lo_hz, hi_hz) or None for all lines.
     refine_lsfd : refine each order's physical poles with ``refine_iterations`` LSFD steps.
     tol_freq, tol_damp, tol_mac : relative frequency, relative damping and 1 - MAC tolerances.
+    abs_tol_damp : absolute damping-ratio tolerance (a damping change below it always counts
+        as stable; default 5e-4 = 0.05 % of critical).
     max_damping : damping ratios at or above this are not physical.
 
     Returns
@@ -250,6 +262,8 @@ def stabilization(
     for name, v in (("tol_freq", tol_freq), ("tol_damp", tol_damp), ("tol_mac", tol_mac)):
         if not (v > 0):
             raise ValueError(f"{name} must be > 0; got {v}")
+    if not (abs_tol_damp >= 0):
+        raise ValueError(f"abs_tol_damp must be >= 0; got {abs_tol_damp}")
     bd = prepare_band(frf, band)
     lo, hi = bd.band
     all_poles = _initial_poles(bd, max_modes, method)
@@ -280,7 +294,7 @@ def stabilization(
             rel = np.abs(fn[:, None] - fp[None, :]) / fp[None, :]
             j = np.argmin(rel, axis=1)
             ok_f = rel[np.arange(p_phys.size), j] < tol_freq
-            ok_d = ok_f & (np.abs(zn - zp[j]) / zp[j] < tol_damp)
+            ok_d = ok_f & (np.abs(zn - zp[j]) < np.maximum(tol_damp * zp[j], abs_tol_damp))
             if shapes.shape[0] == prev_shapes.shape[0]:
                 M = mac_matrix(shapes, prev_shapes)
                 mac_phys = M[np.arange(p_phys.size), j]
@@ -307,5 +321,6 @@ def stabilization(
         tol_damp=float(tol_damp),
         tol_mac=float(tol_mac),
         max_damping=float(max_damping),
+        abs_tol_damp=float(abs_tol_damp),
         meta={"quantity": frf.quantity, "n_frf": int(frf.H.shape[0] * frf.H.shape[1])},
     )

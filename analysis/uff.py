@@ -168,7 +168,17 @@ def read_uff58(path: "str | Path") -> FRFSet:
     Outputs are the response node/directions, references the reference node/directions, in the
     order of first appearance; missing combinations are NaN. All FRFs must share the frequency axis.
     """
-    sets = [s for s in _read_sets(path) if s.get("type") == 58]
+    sets = [s for s in _read_sets(path) if isinstance(s, dict) and s.get("type") == 58]
+    try:
+        return _frfset_from_sets(path, sets)
+    except UFFError:
+        raise
+    except (KeyError, IndexError, ValueError, TypeError, OverflowError, AttributeError) as exc:
+        raise UFFError(f"{path}: a dataset 58 record is damaged or incomplete ({type(exc).__name__}: {exc}); "
+                       "export the file again") from None
+
+
+def _frfset_from_sets(path: "str | Path", sets: list) -> FRFSet:
     frfs = [s for s in sets if int(s.get("func_type", -1)) == 4]
     if not frfs:
         raise UFFError(f"{path} holds no dataset-58 FRF (function type 4)")

@@ -192,10 +192,19 @@ def _send_all(conn: socket.socket, data: bytes, stop: StopFlag, send_timeout_s: 
 
 
 def _serve_connection(conn: socket.socket, session: Session, stop: StopFlag, send_timeout_s: float,
-                      idle_timeout_s: float) -> None:
+                      idle_timeout_s: float, waiting: Optional[Callable[[], bool]] = None,
+                      yield_after_s: float = 0.0) -> None:
+    """Serve one client until it hangs up, errs, stalls, or (``yield_after_s`` > 0) has been silent
+    that long while ``waiting()`` says another client is queued: a stalled client cannot keep the
+    next one out."""
     conn.setblocking(False)
     last = time.monotonic()
     while not stop:
+        if (yield_after_s > 0 and waiting is not None and time.monotonic() - last > yield_after_s
+                and waiting()):
+            _log.warning("%s: silent for %.1f s while another client waits; closing it", session.label,
+                         yield_after_s)
+            return
         ready, _, _ = select.select([conn], [], [], TICK_S)
         if ready:
             try:
@@ -236,8 +245,17 @@ def tcp_url(srv: socket.socket) -> str:
 
 
 def serve_tcp(srv: socket.socket, factory: Callable[[], Any], stop: StopFlag, *, max_clients: int = 0,
-              send_timeout_s: float = 10.0, idle_timeout_s: float = 0.0) -> int:
-    """Accept and serve clients one after another until ``stop`` (or ``max_clients`` served)."""
+              send_timeout_s: float = 10.0, idle_timeout_s: float = 0.0, yield_after_s: float = 5.0) -> int:
+    """Accept and serve clients one after another until ``stop`` (or ``max_clients`` served).
+
+    A client silent for ``yield_after_s`` seconds while another one is queued is closed (0: never)."""
+
+    def waiting() -> bool:
+        try:
+            return bool(select.select([srv], [], [], 0)[0])
+        except (OSError, ValueError):
+            return False
+
     served = 0
     while not stop and not (max_clients and served >= max_clients):
         ready, _, _ = select.select([srv], [], [], TICK_S)
@@ -253,7 +271,7 @@ def serve_tcp(srv: socket.socket, factory: Callable[[], Any], stop: StopFlag, *,
         with conn:
             try:
                 session = Session(factory, label)
-                _serve_connection(conn, session, stop, send_timeout_s, idle_timeout_s)
+                _serve_connection(conn, session, stop, send_timeout_s, idle_timeout_s, waiting, yield_after_s)
             except Exception:  # a firmware fault ends this client only; the server stays up
                 _log.exception("%s: internal error; closing this connection", label)
             else:
@@ -372,6 +390,9 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="drop a client that stops reading for this many seconds (default 10)")
     p.add_argument("--idle-timeout", type=float, default=0.0,
                    help="TCP: close a connection silent for this many seconds (0 = never, the default)")
+    p.add_argument("--yield-after", type=float, default=5.0,
+                   help="TCP: close a client silent for this many seconds while another client waits (default 5; "
+                        "0 = never)")
     p.add_argument("-v", "--verbose", action="store_true", help="log every connection (stderr)")
     return p
 
@@ -402,7 +423,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             with srv:
                 print(tcp_url(srv), flush=True)
                 return serve_tcp(srv, factory, stop, max_clients=args.max_clients,
-                                 send_timeout_s=args.send_timeout, idle_timeout_s=args.idle_timeout)
+                                 send_timeout_s=args.send_timeout, idle_timeout_s=args.idle_timeout,
+                                 yield_after_s=args.yield_after)
         master, path = open_pty()
         try:
             print(path, flush=True)

@@ -64,3 +64,24 @@ def test_bad_inputs_exit_2_with_message(files, capsys):
     assert "unknown effect" in capsys.readouterr().err
     assert main(["--measured", str(files / "m.uff")]) == 2
     assert "required" in capsys.readouterr().err
+
+
+def test_recording_with_hits_adds_time_data(tmp_path):
+    from acquisition.cli_capture import main as capture_main
+
+    rec = tmp_path / "rec.h5"
+    assert capture_main(["--device", "sim://", "--seed", "3", "--out", str(rec), "--points", "right:6:-X",
+                         "--hits", "4", "--auto", "-q"]) == 0
+    out = tmp_path / "d.json"
+    assert main(["--measured", str(rec), "--simulated", TOML, "--json", str(out), "--band", "3:400",
+                 "--effects", "stiffness_shift,sensitivity_error"]) == 0
+    doc = json.loads(out.read_text())
+    names = {c["effect"] for c in doc["time_data"]}
+    assert names == {"double_hit", "overload", "input_noise", "amplitude_nonlinearity"}
+    amp = next(c for c in doc["time_data"] if c["effect"] == "amplitude_nonlinearity")
+    assert not amp["present"] and "two levels" in amp["evidence"]     # one force level: untestable, said so
+    noise = next(c for c in doc["time_data"] if c["effect"] == "input_noise")
+    assert noise["parameters"]["noise_rms_n"] > 0
+    # the simulated frame and the simulated capture agree in frequency: no stiffness shift above 0.5 %
+    st = next(c for c in doc["causes"] if c["effect"] == "stiffness_shift")
+    assert abs(st["parameters"]["factor"] - 1) < 0.005

@@ -50,13 +50,17 @@ def _save(fig: Figure, path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
+def _extension_name(diag: Diagnosis) -> str:
+    return " + ".join(c["effect"] for c in diag.combined) or "none"
+
+
 def frf_figure(diag: Diagnosis, output: int = 0, reference: int = 0) -> Figure:
     """Magnitude (dB) and phase (deg) of one FRF: measured, simulated and extended."""
     fig = Figure(figsize=(8, 6))
     ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
     f = diag.measured.freq_hz
     for frf, label, style in ((diag.measured, "measured", "k-"), (diag.simulated, "simulated", "b--"),
-                              (diag.extended, f"extended ({diag.verdict})", "r:")):
+                              (diag.extended, f"extended ({_extension_name(diag)})", "r:")):
         h = frf.H[output, reference]
         ax1.plot(f, 20 * np.log10(np.abs(h) + 1e-300), style, lw=1, label=label)
         ax2.plot(f, np.degrees(np.angle(h)), style, lw=1)
@@ -82,8 +86,8 @@ def band_figure(diag: Diagnosis) -> Figure:
     ax = fig.add_subplot(1, 1, 1)
     x = np.arange(len(before))
     ax.bar(x - 0.2, [b["error_db"] for b in before], 0.4, label="simulation")
-    ax.bar(x + 0.2, [b["error_db"] for b in after], 0.4, label=f"extended ({diag.verdict})")
-    ax.axhline(diag.noise_db["difference"], color="k", ls="--", lw=1, label="noise level")
+    ax.bar(x + 0.2, [b["error_db"] for b in after], 0.4, label=f"extended ({_extension_name(diag)})")
+    ax.axhline(max(diag.noise_db.values()), color="k", ls="--", lw=1, label="noise level")
     ax.set_xticks(x)
     ax.set_xticklabels([f"{b['lo_hz']:.3g}-{b['hi_hz']:.3g}" for b in before], rotation=30, fontsize=7)
     ax.set_ylabel("error (dB)")
@@ -97,8 +101,11 @@ def report_text(diag: Diagnosis) -> str:
     """The ``report.md`` text: verdict, action, evidence, mode table, bands, coherence."""
     L = [f"# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {ACTIONS.get(diag.verdict, '')}", ""]
     L.append(f"Held-out error of the simulation {diag.error_before_db:.1f} dB, after the extension "
-             f"{diag.error_after_db:.1f} dB; noise level {diag.noise_db['difference']:.1f} dB "
+             f"{diag.error_after_db:.1f} dB; noise level {max(diag.noise_db.values()):.1f} dB "
              f"(relative squared error, see docs/diagnosis.md).")
+    if len(diag.combined) > 1:
+        L += ["", "Accepted effects, stage by stage (each on top of the previous): "
+              + "; ".join(f"{c['effect']} (+{c['gain_db']:.2f} dB -> {c['error_after_db']:.1f} dB)" for c in diag.combined)]
     L += ["", "## Causes (cross-validated gain)", "", "| effect | gain dB | z | significant | evidence |",
           "|---|---|---|---|---|"]
     for c in diag.causes:

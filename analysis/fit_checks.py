@@ -1,0 +1,120 @@
+"""Checks of an LSFD result against its starting poles: migrated poles, duplicates, hidden pairs.
+
+All tests are measured in half-power bandwidths ``b = 2 zeta f_n`` (Hz) of the poles *as
+fitted to the data* (``poles_raw``: the exponential window's damping included, because that
+is the width the data show), floored at two spectral lines (``2 df``) so a pole sharper than
+the frequency resolution still gets a sensible scale.
+
+Migrated pole
+    ``|f_end - f_start| > MIGRATE_BANDWIDTHS * max(b_start, b_end, 2 df)``. A weak initial
+    pole that the data do not support is not pushed to zero residue by the nonlinear fit: it
+    slides down the cost surface onto a strong neighbour and shares its resonance. A physical
+    pole refined by LSFD moves by a small fraction of its bandwidth.
+
+Duplicate pair
+    two fitted poles closer than ``DUPLICATE_BANDWIDTHS`` of the larger half-bandwidth
+    (``|f_a - f_b| < DUPLICATE_BANDWIDTHS * max(b_a, b_b) / 2``) *and* with residue vectors
+    (all output/reference pairs, flattened) of MAC > ``DUPLICATE_MAC``: one resonance
+    described twice. Two genuine close modes have different shapes (low MAC) and are kept.
+
+Hidden pair (:func:`split_candidates`)
+    with several references, one mode's residue matrix ``R_r`` (n_out x n_ref) is rank one
+    (``psi_r L_r^T``). A large second singular value ``s_2 / s_1 > SPLIT_RATIO`` says the pole
+    describes two close modes with different shapes: the pipeline then tries two poles there
+    (see :func:`analysis.pipeline.fit_auto`).
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from .modal import damping_ratio, natural_freq_hz
+
+__all__ = [
+    "bandwidth_hz",
+    "migrated_poles",
+    "duplicate_poles",
+    "split_candidates",
+    "MIGRATE_BANDWIDTHS",
+    "DUPLICATE_BANDWIDTHS",
+    "DUPLICATE_MAC",
+    "SPLIT_RATIO",
+]
+
+MIGRATE_BANDWIDTHS = 3.0
+DUPLICATE_BANDWIDTHS = 1.0
+DUPLICATE_MAC = 0.8
+SPLIT_RATIO = 0.2
+
+
+def bandwidth_hz(poles: np.ndarray, df_hz: float = 0.0) -> np.ndarray:
+    """Half-power bandwidth ``2 zeta f_n`` (Hz) of each pole (rad/s), at least ``2 df_hz``."""
+    p = np.asarray(poles, dtype=complex)
+    return np.maximum(2.0 * np.abs(damping_ratio(p)) * natural_freq_hz(p), 2.0 * float(df_hz))
+
+
+def migrated_poles(start: np.ndarray, end: np.ndarray, df_hz: float = 0.0,
+                   n_bandwidths: float = MIGRATE_BANDWIDTHS) -> np.ndarray:
+    """Mask of poles that moved more than ``n_bandwidths`` half-power bandwidths.
+
+    start, end : (m,) complex poles (rad/s), the same mode at the same index (raw poles, as
+    fitted to the data). df_hz : line spacing (Hz) of the data. Returns (m,) bool.
+    """
+    s = np.asarray(start, dtype=complex)
+    e = np.asarray(end, dtype=complex)
+    if s.shape != e.shape:
+        raise ValueError(f"start and end poles must have the same shape; got {s.shape} and {e.shape}")
+    scale = np.maximum(bandwidth_hz(s, df_hz), bandwidth_hz(e, df_hz))
+    return np.abs(natural_freq_hz(e) - natural_freq_hz(s)) > n_bandwidths * scale
+
+
+def _mac_vectors(a: np.ndarray, b: np.ndarray) -> float:
+    den = float(np.vdot(a, a).real * np.vdot(b, b).real)
+    return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
+
+
+def duplicate_poles(poles: np.ndarray, residues: np.ndarray, df_hz: float = 0.0,
+                    moved: Optional[np.ndarray] = None) -> np.ndarray:
+    """Mask of poles that duplicate another one (see module docstring); the other is kept.
+
+    poles : (m,) complex rad/s (raw); residues : (n_out, n_ref, m); moved : (m,) how far each
+    pole moved during the fit (in bandwidths, any consistent measure): of a duplicate pair the
+    one that moved more is flagged; without it the one with the smaller residue norm.
+    Returns (m,) bool.
+    """
+    p = np.asarray(poles, dtype=complex)
+    R = np.asarray(residues, dtype=complex).reshape(-1, p.size)
+    f = natural_freq_hz(p)
+    b = bandwidth_hz(p, df_hz)
+    norm = np.linalg.norm(R, axis=0)
+    out = np.zeros(p.size, dtype=bool)
+    for i in np.argsort(f):
+        for j in range(p.size):
+            if j == i or out[i] or out[j]:
+                continue
+            if abs(f[i] - f[j]) >= DUPLICATE_BANDWIDTHS * 0.5 * max(b[i], b[j]):
+                continue
+            if _mac_vectors(R[:, i], R[:, j]) <= DUPLICATE_MAC:
+                continue
+            if moved is not None and moved[i] != moved[j]:
+                drop = i if moved[i] > moved[j] else j
+            else:
+                drop = i if norm[i] < norm[j] else j
+            out[drop] = True
+    return out
+
+
+def split_candidates(residues: np.ndarray, ratio_min: float = SPLIT_RATIO) -> np.ndarray:
+    """Indices of the modes whose residue matrix is far from rank one (``s_2 / s_1 > ratio_min``),
+    largest ratio first. residues : (n_out, n_ref, m); with one reference or one output nothing
+    can be said and the answer is empty."""
+    R = np.asarray(residues, dtype=complex)
+    if R.ndim != 3 or min(R.shape[0], R.shape[1]) < 2:
+        return np.zeros(0, dtype=int)
+    ratios = np.zeros(R.shape[2])
+    for r in range(R.shape[2]):
+        s = np.linalg.svd(R[:, :, r], compute_uv=False)
+        ratios[r] = s[1] / s[0] if s[0] > 0 else 0.0
+    idx = np.flatnonzero(ratios > ratio_min)
+    return idx[np.argsort(-ratios[idx])]
