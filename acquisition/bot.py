@@ -14,7 +14,8 @@ Status handling:
 
 * **1 (failed)**: REQUEST SENSE, then :class:`CommandFailed` with the sense key, ASC and ASCQ and
   a message naming them and what to do. A UNIT ATTENTION (the device was reset or powered on;
-  the command was *not* executed) is retried once, as SCSI hosts do.
+  the command was *not* executed) is retried once, as SCSI hosts do; so is an idempotent command
+  that met a transient condition (ABORTED COMMAND, NOT READY "becoming ready" 0x04/0x01).
 * **2 (phase error)**, bad signature, wrong tag, impossible residue: reset recovery
   (``transport.reset_recovery()``), then one retry when the command is *idempotent*
   (``CommandSpec.idempotent``: TEST UNIT READY, INQUIRY, GET CAPABILITIES, SET UP, GET SET-UP,
@@ -57,6 +58,13 @@ class _Retry(Exception):
     def __init__(self, error: Exception) -> None:
         super().__init__(str(error))
         self.error = error
+
+
+def _transient(exc: CommandFailed) -> bool:
+    """A CHECK CONDITION that says "not run this time, try again": ABORTED COMMAND (any ASC) or
+    NOT READY with ASC/ASCQ 0x04/0x01 (becoming ready)."""
+    return exc.sense_key == P.SenseKey.ABORTED_COMMAND or (
+        exc.sense_key == P.SenseKey.NOT_READY and (exc.asc, exc.ascq) == (0x04, 0x01))
 
 
 class BulkOnly:
@@ -103,6 +111,7 @@ class BulkOnly:
         budget = self.timeout_s if timeout_s is None else float(timeout_s)
         retries_phase = 1 if spec.idempotent else 0
         retries_ua = 1 if self.retry_unit_attention else 0
+        retries_transient = 1
         while True:
             try:
                 return self._attempt(spec, cdb, host_len, data_out, budget)
@@ -116,6 +125,10 @@ class BulkOnly:
                 if exc.sense_key == P.SenseKey.UNIT_ATTENTION and retries_ua > 0:
                     retries_ua -= 1
                     _log.info("%s: %s met a unit attention (device reset); retrying once", self.url, spec.name)
+                    continue
+                if spec.idempotent and retries_transient > 0 and _transient(exc):
+                    retries_transient -= 1
+                    _log.info("%s: %s was not run (%s); retrying once", self.url, spec.name, exc)
                     continue
                 raise
 

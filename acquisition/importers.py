@@ -244,54 +244,34 @@ def read_dataphysics_mat(path: "str | Path", windowed: bool = False) -> Imported
 LOADMAT_TIMEOUT_S = 60.0
 
 
-def _loadmat_child(path: str, conn: Any) -> None:
-    """Child process: ``scipy.io.loadmat`` and send ``("ok", dict)`` or ``("error", text)``."""
+def _loadmat(path: str) -> dict:
+    """``scipy.io.loadmat`` without the ``__header__``-style entries (runs in the child process)."""
     import scipy.io
 
     try:
         m = scipy.io.loadmat(path)
-        conn.send(("ok", {k: v for k, v in m.items() if not k.startswith("__")}))
     except Exception as exc:  # scipy.io raises many types (struct, zlib, Unicode, MatReadError...) on damaged files
-        conn.send(("error", f"{type(exc).__name__}: {exc}"))
-    finally:
-        conn.close()
+        raise ImportDataError(f"{path} is not a readable MATLAB file ({type(exc).__name__}: {exc})") from None
+    return {k: v for k, v in m.items() if not k.startswith("__")}
 
 
 def _loadmat_isolated(p: Path) -> dict:
     """``scipy.io.loadmat`` in a child process: some damaged .mat files crash scipy's reader with a
     segmentation fault (found by fuzzing, scipy 1.x ``_mio5.read_var_array``); in a child that
     becomes an :class:`ImportDataError` instead of killing the program. Bounded by
-    :data:`LOADMAT_TIMEOUT_S`. Uses ``fork`` when this process runs a single thread (fast), else ``spawn``."""
-    import multiprocessing
-    import threading
+    :data:`LOADMAT_TIMEOUT_S`."""
+    from ._isolated import ChildCrashed, ChildTimeout, run_isolated
 
     if not p.is_file():
         raise ImportDataError(f"{p} not found: check the path")
-    method = "fork" if ("fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1) \
-        else "spawn"
-    ctx = multiprocessing.get_context(method)
-    recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_loadmat_child, args=(str(p), send), daemon=True)
-    proc.start()
-    send.close()
     try:
-        if not recv.poll(LOADMAT_TIMEOUT_S):
-            raise ImportDataError(f"{p}: reading the MATLAB file took over {LOADMAT_TIMEOUT_S:g} s; the file is "
-                                  "damaged or not a MATLAB file")
-        kind, payload = recv.recv()
-    except (EOFError, OSError):
-        proc.join(5.0)
-        raise ImportDataError(f"{p} is not a readable MATLAB file (the reader crashed, exit code {proc.exitcode}); "
+        return run_isolated(_loadmat, (str(p),), LOADMAT_TIMEOUT_S)
+    except ChildCrashed as exc:
+        raise ImportDataError(f"{p} is not a readable MATLAB file (the reader crashed, exit code {exc.exitcode}); "
                               "the file is damaged: export it again") from None
-    finally:
-        recv.close()
-        proc.join(5.0)
-        if proc.is_alive():
-            proc.kill()
-            proc.join(1.0)
-    if kind != "ok":
-        raise ImportDataError(f"{p} is not a readable MATLAB file ({payload})")
-    return payload
+    except ChildTimeout:
+        raise ImportDataError(f"{p}: reading the MATLAB file took over {LOADMAT_TIMEOUT_S:g} s; the file is "
+                              "damaged or not a MATLAB file") from None
 
 
 def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:
@@ -389,6 +369,9 @@ def _read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTes
         if time_row is not None:
             t = a[int(time_row)]
             if fs is None:
+                if t.size < 2:
+                    raise ImportDataError(f"{path}: the time row has {t.size} sample(s); at least 2 are needed for "
+                                          "the sample rate")
                 fs = 1.0 / float(np.median(np.diff(t)))
             a = np.delete(a, int(time_row), axis=0)
         if a.shape[0] != len(chans):

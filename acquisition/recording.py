@@ -38,6 +38,7 @@ __all__ = [
     "RecordedHit",
     "Recording",
     "open_recording",
+    "verify_recording",
     "load_frfset",
     "merge_frfsets",
 ]
@@ -156,8 +157,7 @@ class RecordingWriter:
         after the last complete one. Raises :class:`RecordingError` when the file is not a
         recording this version writes or cannot be opened for writing."""
         h5py = _h5py()
-        with Recording(path):  # validates the schema (raises RecordingError)
-            pass
+        verify_recording(path)  # in a child process: damage (even a libhdf5 crash) becomes RecordingError
         self = cls.__new__(cls)
         self.path = Path(path)
         try:
@@ -541,6 +541,44 @@ def _as_str(v: Any) -> str:
     if isinstance(v, bytes):
         return v.decode("utf-8", "replace")
     return str(v)
+
+
+#: longest :func:`verify_recording` lets the reading child work (s)
+VERIFY_TIMEOUT_S = 300.0
+
+
+def _read_all(path: str) -> int:
+    """Read everything a tool may read (runs in the child of :func:`verify_recording`); number of hits."""
+    with Recording(path) as rec:
+        n = sum(1 for _ in rec.hits(skip_damaged=True))
+        rec.events()
+        for name in rec.measurement_names():
+            rec.frf_group(name)
+        rec.frfsets()
+    return n
+
+
+def verify_recording(path: "str | Path", timeout_s: float = VERIFY_TIMEOUT_S) -> int:
+    """Read the whole recording in a child process; returns the number of complete hits.
+
+    libhdf5 can crash the process (segmentation fault) on some damaged files, which no Python code
+    can catch (found by fuzzing ``tests/test_fuzz_recording.py``). Call this before opening a file
+    of unknown integrity in-process (``capture --resume`` does): a crash, a timeout or any damage
+    becomes :class:`RecordingError`. Hits cut short by a crash are skipped, as by
+    ``Recording.hits(skip_damaged=True)``."""
+    from ._isolated import ChildCrashed, ChildTimeout, run_isolated
+
+    p = Path(path)
+    if not p.is_file():
+        raise RecordingError(f"recording {p} not found: check the path")
+    try:
+        return int(run_isolated(_read_all, (str(p),), timeout_s))
+    except ChildCrashed as exc:
+        raise RecordingError(f"{p} is damaged: reading it crashed the HDF5 library (exit code {exc.exitcode}); use a "
+                             "backup or re-run the test") from None
+    except ChildTimeout:
+        raise RecordingError(f"{p}: reading it took over {timeout_s:g} s; the file is damaged or on a stalled "
+                             "drive") from None
 
 
 def open_recording(path: "str | Path") -> Recording:

@@ -422,15 +422,16 @@ class CaptureSession:
         return False
 
     def _measure(self, m: Measurement, avg: MeasurementAverage, result: SessionResult) -> None:
+        link_faults_here = 0
         try:
             self.analyser.configure(m.setup)
         except LINK_FAULTS as exc:
-            self._link_fault(m, exc, 1)
+            link_faults_here = 1
+            self._link_fault(m, exc, link_faults_here)
         self._event("INFO", f"point {m.index + 1}/{len(self.measurements)}: {self.plan.mode} at {m.point} "
                             f"(reference {m.reference}, outputs {', '.join(m.outputs)})")
         attempts = 0
         timeouts = 0
-        link_failures = 0
         n_channels = len(m.setup.channels)
         names = [f"{ch.name} {ch.point}" for ch in m.setup.channels]
         while avg.n_averages < self.plan.hits_per_point:
@@ -445,10 +446,9 @@ class CaptureSession:
                     triggered = False
                 block = None if triggered is False else self.analyser.read_block()
             except LINK_FAULTS as exc:
-                link_failures += 1
-                self._link_fault(m, exc, link_failures)
+                link_faults_here += 1
+                self._link_fault(m, exc, link_faults_here)
                 continue
-            link_failures = 0
             if triggered is False:
                 timeouts += 1
                 self._event("WARNING", f"no trigger within {self.timeout_s:g} s at {m.point}")
@@ -460,8 +460,8 @@ class CaptureSession:
                     try:
                         abort()
                     except LINK_FAULTS as exc:
-                        link_failures += 1
-                        self._link_fault(m, exc, link_failures)
+                        link_faults_here += 1
+                        self._link_fault(m, exc, link_faults_here)
                 continue
             timeouts = 0
             attempts += 1
@@ -509,19 +509,28 @@ class CaptureSession:
             avg.write(self.writer)
         self._event("INFO", f"point {m.point} done: {avg.n_averages} averages")
 
-    def _link_fault(self, m: Measurement, exc: Exception, failures: int) -> None:
+    def _link_fault(self, m: Measurement, exc: Exception, faults_here: int) -> None:
         """A command failed on the link (phase error, timeout, device gone and back, transient CHECK
         CONDITION...): log it, and bring the analyser back to a known state (abort, set-up again) so
         the next pass re-arms. The hit in flight was not accepted (a hit is accepted only after its
-        whole block arrived), so nothing accepted is lost. After ``max_link_failures`` failures in a
-        row the session ends with :class:`SessionError` saying why; every accepted hit stays in the
-        recording."""
+        whole block arrived), so nothing accepted is lost.
+
+        The session ends with :class:`SessionError` saying why (every accepted hit stays in the
+        recording) when ``max_link_failures`` recovery attempts in a row fail (the link is dead) or
+        the point has met more than ``max_attempts_factor * hits_per_point`` link faults (the link
+        is too poor to finish)."""
         if isinstance(exc, CommandFailed) and exc.sense_key == ILLEGAL_REQUEST:
             raise exc  # the analyser refuses the request itself: retrying cannot help
         self.link_faults += 1
-        self._event("WARNING", f"link fault at {m.point} ({type(exc).__name__}: {exc}); recovering "
-                               f"({failures}/{self.max_link_failures})")
-        while failures <= self.max_link_failures:
+        budget = self.max_attempts_factor * self.plan.hits_per_point
+        self._event("WARNING", f"link fault {faults_here}/{budget} at {m.point} ({type(exc).__name__}: {exc}); "
+                               "recovering")
+        if faults_here > budget:
+            raise SessionError(f"the analyser link failed {faults_here} times at {m.point} (last: "
+                               f"{type(exc).__name__}: {exc}); the recording keeps every accepted hit: check the "
+                               "cable or server and resume the test (capture --resume)")
+        failures = 0
+        while True:
             try:
                 abort = getattr(self.analyser, "abort", None)
                 if abort is not None:
@@ -531,10 +540,13 @@ class CaptureSession:
             except LINK_FAULTS as again:
                 exc = again
                 failures += 1
-                self._event("WARNING", f"recovery at {m.point} failed ({type(again).__name__}: {again})")
-        raise SessionError(f"the analyser link keeps failing at {m.point} ({failures} faults in a row, last: "
-                           f"{type(exc).__name__}: {exc}); the recording keeps every accepted hit: check the cable "
-                           "or server and resume the test")
+                self._event("WARNING", f"recovery {failures}/{self.max_link_failures} at {m.point} failed "
+                                       f"({type(again).__name__}: {again})")
+                if failures >= self.max_link_failures:
+                    break
+        raise SessionError(f"the analyser link keeps failing at {m.point} ({failures} recovery attempts in a row "
+                           f"failed, last: {type(exc).__name__}: {exc}); the recording keeps every accepted hit: "
+                           "check the cable or server and resume the test (capture --resume)")
 
     def _write_hit(self, block: Any, counts: np.ndarray, eu: np.ndarray, m: Measurement, accepted: bool,
                    reasons: list, check: HitCheck) -> int:

@@ -18,11 +18,14 @@ Stopping rules (shared with LM, :mod:`analysis._lm`):
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
 
-__all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
+__all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "project_to_bounds", "freeze_active",
+           "SWITCH_TO_PRECISE", "PRED_FLOOR"]
 
 
 def roundoff_floor(problem: ProjectedProblem) -> float:
@@ -44,6 +47,41 @@ def check_poles(theta: np.ndarray) -> str:
     return ""
 
 
+def project_to_bounds(theta: np.ndarray, bounds: Optional[tuple]) -> np.ndarray:
+    """Clip every pole's damped frequency ``Im lambda_r`` (rad/s) into ``[lo_r, hi_r]`` (the
+    frequency trust region); ``bounds`` None returns ``theta`` unchanged (a copy)."""
+    t = np.array(theta, dtype=float)
+    if bounds is not None:
+        t[1::2] = np.clip(t[1::2], bounds[0], bounds[1])
+    return t
+
+
+def freeze_active(theta: np.ndarray, JtJ: np.ndarray, g: np.ndarray,
+                  bounds: Optional[tuple]) -> tuple[np.ndarray, np.ndarray]:
+    """Normal equations with the *active* bound coordinates frozen: a damped frequency sitting on
+    its bound whose gradient pushes it outwards gets a decoupled unit row/column and zero
+    gradient, so the step leaves it where it is and the convergence tests (predicted decrease,
+    relative step) see only the free parameters. ``g`` is the gradient ``J^T r`` (the step is
+    ``-(J^T J)^-1 g``). Without bounds the inputs are returned unchanged."""
+    if bounds is None:
+        return JtJ, g
+    im = np.asarray(theta, dtype=float)[1::2]
+    lo, hi = bounds
+    tol = 1e-12 * np.maximum(np.abs(hi), 1.0)
+    gi = g[1::2]
+    active = ((im <= lo + tol) & (gi > 0)) | ((im >= hi - tol) & (gi < 0))
+    if not np.any(active):
+        return JtJ, g
+    idx = 2 * np.flatnonzero(active) + 1
+    A = np.array(JtJ, dtype=float, copy=True)
+    b = np.array(g, dtype=float, copy=True)
+    A[idx, :] = 0.0
+    A[:, idx] = 0.0
+    A[idx, idx] = np.maximum(np.diag(JtJ)[idx], 1e-300)
+    b[idx] = 0.0
+    return A, b
+
+
 def relative_step(theta: np.ndarray, d: np.ndarray) -> float:
     """``max_r |d lambda_r| / |lambda_r|``."""
     lam = theta_to_poles(theta)
@@ -58,8 +96,12 @@ PRED_FLOOR = 1e-13
 SWITCH_TO_PRECISE = 1e-6
 
 
-def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float) -> NLSOutcome:
+def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
+           bounds: Optional[tuple] = None) -> NLSOutcome:
     """Gauss-Newton from ``theta0`` (see the module docstring); never raises on non-convergence.
+
+    ``bounds`` (lo, hi), each (m,) rad/s: every step is projected so that each pole's damped
+    frequency stays in its trust region (see :func:`project_to_bounds`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
@@ -88,7 +130,11 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                                   f"GN stopped: poles collapsed (basis rcond {ev.rcond:.2g})")
         elif verdict is not None:
             return NLSOutcome(theta, ev, history, it - 1, nfev, *verdict)
-        JtJ, g = problem.normal_equations(ev)
+        JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+        if not (np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g))):
+            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
+                              "GN stopped: the fit became non-finite (poles nearly coincide or the basis is "
+                              "ill-conditioned); drop near-duplicate initial poles")
         D = np.sqrt(np.diag(JtJ))
         D[D == 0] = 1.0
         d, _ = solve_scaled(JtJ, g, D)
@@ -101,8 +147,9 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 continue
             return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL,
                               f"converged: predicted decrease of S {pred / ev.S:.2g} S <= ftol")
+        trial = project_to_bounds(theta + d, bounds)
+        d = trial - theta
         step = relative_step(theta, d)
-        trial = theta + d
         reason = check_poles(trial)
         if reason:
             history.append(ev.S)

@@ -32,7 +32,8 @@ from typing import Optional
 
 import numpy as np
 
-from ._gn import PRED_FLOOR, SWITCH_TO_PRECISE, check_poles, relative_step, roundoff_floor
+from ._gn import (PRED_FLOOR, SWITCH_TO_PRECISE, check_poles, freeze_active, project_to_bounds, relative_step,
+                  roundoff_floor)
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
 
 __all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
@@ -43,8 +44,11 @@ MU0_DEFAULT = 1e-3
 
 
 def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           mu0: Optional[float] = None) -> NLSOutcome:
+           mu0: Optional[float] = None, bounds: Optional[tuple] = None) -> NLSOutcome:
     """Levenberg-Marquardt from ``theta0`` (see the module docstring); never raises on non-convergence.
+
+    ``bounds`` (lo, hi), each (m,) rad/s: every trial step is projected so that each pole's damped
+    frequency stays in its trust region (:func:`analysis._gn.project_to_bounds`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
@@ -63,7 +67,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     mu = MU0_DEFAULT if mu0 is None else float(mu0)
     mu = min(max(mu, MU_MIN), MU_MAX)
     nu = 2.0
-    JtJ, g = problem.normal_equations(ev)
+    JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
     D = np.sqrt(np.diag(JtJ))
     D[D == 0] = 1.0
     fail_status, fail_reason = Status.NO_PROGRESS, ""
@@ -78,10 +82,14 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             fast, verdict = False, None
             ev = problem.evaluate(theta)
             nfev += 1
-            JtJ, g = problem.normal_equations(ev)
+            JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
             check_pred = True
             mu = min(mu, 1.0)
             nu = 2.0
+        if not (np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g))):
+            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
+                              "LM stopped: the fit became non-finite (poles nearly coincide or the basis is "
+                              "ill-conditioned); drop near-duplicate initial poles")
         if check_pred:
             # Gauss-Newton predicted decrease at a new point: a stationary point to round-off?
             check_pred = False
@@ -95,9 +103,9 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 verdict = (Status.FTOL, msg)
                 continue
         d, x = solve_scaled(JtJ, g, D, mu)
-        step = relative_step(theta, d)
         pred = float(x @ (mu * x - g / D))
-        trial = theta + d
+        trial = project_to_bounds(theta + d, bounds)
+        step = relative_step(theta, trial - theta)
         reason = check_poles(trial)
         new = None
         if reason:
@@ -127,7 +135,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 ev = problem.evaluate(theta)
                 nfev += 1
             if verdict is None:
-                JtJ, g = problem.normal_equations(ev)
+                JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
                 D = np.maximum(D, np.sqrt(np.diag(JtJ)))
                 check_pred = True
             continue

@@ -329,14 +329,24 @@ def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0)
     """Solve ``(J^T J + mu D^2) d = -g`` through the scaled system.
 
     With ``M = D^-1 J^T J D^-1`` and ``x = D d``: ``(M + mu I) x = -D^-1 g``. Cholesky when
-    positive definite, least squares otherwise. Returns ``(d, x)``.
+    positive definite, least squares otherwise; NaN when no step can be computed (the
+    iterations then reject it). Returns ``(d, x)``.
     """
-    M = JtJ / np.outer(D, D)
-    rhs = -g / D
-    Mm = M + mu * np.eye(M.shape[0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        M = JtJ / np.outer(D, D)
+        rhs = -g / D
+        Mm = M + mu * np.eye(M.shape[0])
+    if not (np.all(np.isfinite(Mm)) and np.all(np.isfinite(rhs))):
+        # no step can be computed (overflow, non-finite Jacobian): a NaN step, which the
+        # iterations reject as "poles became non-finite" instead of raising
+        x = np.full(rhs.shape, np.nan)
+        return x, x
     try:
         c = sla.cho_factor(Mm, lower=True, check_finite=True)
         x = sla.cho_solve(c, rhs)
     except (np.linalg.LinAlgError, ValueError):
-        x = np.linalg.lstsq(Mm, rhs, rcond=None)[0]
+        try:
+            x = np.linalg.lstsq(Mm, rhs, rcond=None)[0]
+        except np.linalg.LinAlgError:
+            x = np.full(rhs.shape, np.nan)
     return x / D, x

@@ -50,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-iter", type=int, default=100, metavar="N", help="LSFD iteration cap (default 100)")
     p.add_argument("--plot", metavar="PNG", help="measured vs synthesised FRFs with the relative error (paper Fig. 7)")
     p.add_argument("--uff", metavar="OUT.uff", help="write UFF 55 mode shapes and UFF 58 synthesised FRFs")
+    p.add_argument("--scatter-std", action="store_true",
+                   help="also estimate the pole spread from refits of each reference's FRFs (or output groups); "
+                        "costs one LSFD per group, see docs/fitting.md")
     p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
     p.add_argument("--frf", metavar="OUTPUT",
                    help="output point shown in the terminal table (default: the strongest FRF)")
@@ -148,7 +151,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     initial = stab.meta.get("selected_poles") if stab is not None else None
     label = (stab.method.split("+")[0].upper() if stab is not None else "initial")
     print(format_table(result, frf, output=shown[0], reference=shown[1], initial=initial, initial_label=label))
-    doc = result_to_dict(result, frf, stab, extra={"input": str(args.input), "warnings": notes + caught})
+    scatter = None
+    if args.scatter_std:
+        from .scatter import subset_scatter
+
+        try:
+            scatter = subset_scatter(frf, result)
+        except ValueError as exc:
+            print(f"warning: no scatter estimate: {exc}", file=sys.stderr)
+    doc = result_to_dict(result, frf, stab, extra={"input": str(args.input), "warnings": notes + caught},
+                         scatter=scatter)
     try:
         write_json(args.json, doc)
         print(f"results written to {args.json}")

@@ -1,4 +1,4 @@
-"""Checks of an LSFD result against its starting poles: migrated poles, duplicates, hidden pairs.
+"""Checks of an LSFD result against its starting poles: migrated poles and duplicates.
 
 All tests are measured in half-power bandwidths ``b = 2 zeta f_n`` (Hz) of the poles *as
 fitted to the data* (``poles_raw``: the exponential window's damping included, because that
@@ -17,11 +17,8 @@ Duplicate pair
     (all output/reference pairs, flattened) of MAC > ``DUPLICATE_MAC``: one resonance
     described twice. Two genuine close modes have different shapes (low MAC) and are kept.
 
-Hidden pair (:func:`split_candidates`)
-    with several references, one mode's residue matrix ``R_r`` (n_out x n_ref) is rank one
-    (``psi_r L_r^T``). A large second singular value ``s_2 / s_1 > SPLIT_RATIO`` says the pole
-    describes two close modes with different shapes: the pipeline then tries two poles there
-    (see :func:`analysis.pipeline.fit_auto`).
+Hidden close pairs and weak modes missed by the stabilization are found from the misfit
+(:mod:`analysis.pipeline`, step 7).
 """
 from __future__ import annotations
 
@@ -35,17 +32,14 @@ __all__ = [
     "bandwidth_hz",
     "migrated_poles",
     "duplicate_poles",
-    "split_candidates",
     "MIGRATE_BANDWIDTHS",
     "DUPLICATE_BANDWIDTHS",
     "DUPLICATE_MAC",
-    "SPLIT_RATIO",
 ]
 
 MIGRATE_BANDWIDTHS = 3.0
 DUPLICATE_BANDWIDTHS = 1.0
 DUPLICATE_MAC = 0.8
-SPLIT_RATIO = 0.2
 
 
 def bandwidth_hz(poles: np.ndarray, df_hz: float = 0.0) -> np.ndarray:
@@ -103,18 +97,3 @@ def duplicate_poles(poles: np.ndarray, residues: np.ndarray, df_hz: float = 0.0,
                 drop = i if norm[i] < norm[j] else j
             out[drop] = True
     return out
-
-
-def split_candidates(residues: np.ndarray, ratio_min: float = SPLIT_RATIO) -> np.ndarray:
-    """Indices of the modes whose residue matrix is far from rank one (``s_2 / s_1 > ratio_min``),
-    largest ratio first. residues : (n_out, n_ref, m); with one reference or one output nothing
-    can be said and the answer is empty."""
-    R = np.asarray(residues, dtype=complex)
-    if R.ndim != 3 or min(R.shape[0], R.shape[1]) < 2:
-        return np.zeros(0, dtype=int)
-    ratios = np.zeros(R.shape[2])
-    for r in range(R.shape[2]):
-        s = np.linalg.svd(R[:, :, r], compute_uv=False)
-        ratios[r] = s[1] / s[0] if s[0] > 0 else 0.0
-    idx = np.flatnonzero(ratios > ratio_min)
-    return idx[np.argsort(-ratios[idx])]

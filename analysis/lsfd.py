@@ -201,6 +201,7 @@ def fit_lsfd(
     mu0: float | None = None,
     correct_exp_window: bool = True,
     weights: np.ndarray | None = None,
+    freq_window_hz: "float | np.ndarray | None" = None,
 ) -> LSFDResult:
     """Fit global poles, residues and residual terms to an FRF set by nonlinear least squares.
 
@@ -218,6 +219,11 @@ def fit_lsfd(
     mu0 : initial LM damping relative to the diagonal of J^T J (default 1e-3); ignored by GN.
     correct_exp_window : remove ``1/frf.exp_window_tau_s`` from every pole's decay rate.
     weights : (n_freq,) per-line or (n_out, n_ref) per-FRF amplitude weights: S = sum |w e|^2.
+    freq_window_hz : frequency trust region, a scalar or (m,) half-widths in Hz: every step is
+        projected so that pole r's damped frequency stays within ``freq_window_hz[r]`` of its
+        initial value (a bound constraint). A pole that ends on its bound wanted to go
+        elsewhere (typically a weak spurious pole drawn to a strong neighbour); see
+        :mod:`analysis.pipeline`. None: no bound.
 
     Returns
     -------
@@ -257,7 +263,8 @@ def fit_lsfd(
         raise ValueError("the FRFs contain NaN or infinite values; restrict the band or drop those FRFs")
     n_out, n_ref, N = frf.H.shape
     line_w, frf_w = _check_weights(full_weights, n_out, n_ref, N)
-    outcome, prob = _run(frf, lam0, method, residual_form, line_w, frf_w, int(max_iter), ftol, xtol, mu0)
+    bounds = _freq_bounds(lam0, freq_window_hz)
+    outcome, prob = _run(frf, lam0, method, residual_form, line_w, frf_w, int(max_iter), ftol, xtol, mu0, bounds)
     sub = None
     if per_frf:
         sub = []
@@ -266,7 +273,8 @@ def fit_lsfd(
                 coh = None if frf.coherence is None else frf.coherence[o:o + 1, r:r + 1]
                 one = replace(frf, H=frf.H[o:o + 1, r:r + 1], outputs=(frf.outputs[o],),
                               references=(frf.references[r],), coherence=coh)
-                oc, pb = _run(one, lam0, method, residual_form, line_w, None, int(max_iter), ftol, xtol, mu0)
+                oc, pb = _run(one, lam0, method, residual_form, line_w, None, int(max_iter), ftol, xtol, mu0,
+                              bounds)
                 sub.append(_result(one, pb, oc, method, residual_form, correct_exp_window, lam0, None))
     return _result(frf, prob, outcome, method, residual_form, correct_exp_window, lam0, sub)
 
@@ -276,8 +284,21 @@ def _n_lines(prob: ProjectedProblem) -> int:
     return prob.N if prob.line_w is None else int(np.count_nonzero(prob.line_w))
 
 
+def _freq_bounds(lam0: np.ndarray, freq_window_hz) -> Optional[tuple[np.ndarray, np.ndarray]]:
+    """(lo, hi) bounds (rad/s) of each pole's damped frequency, or None."""
+    if freq_window_hz is None:
+        return None
+    w = np.broadcast_to(np.asarray(freq_window_hz, dtype=float), lam0.shape) if np.ndim(freq_window_hz) == 0 \
+        else np.asarray(freq_window_hz, dtype=float)
+    if w.shape != lam0.shape or not np.all(np.isfinite(w)) or np.any(w <= 0):
+        raise ValueError(f"freq_window_hz must be a positive number or {lam0.size} positive numbers (Hz); "
+                         f"got {freq_window_hz!r}")
+    half = 2 * np.pi * w
+    return np.maximum(lam0.imag - half, 1e-6 * lam0.imag), lam0.imag + half
+
+
 def _run(frf, lam0, method, residual_form, line_w, frf_w, max_iter, ftol, xtol,
-         mu0) -> tuple[NLSOutcome, ProjectedProblem]:
+         mu0, bounds=None) -> tuple[NLSOutcome, ProjectedProblem]:
     n_out, n_ref, N = frf.H.shape
     prob = ProjectedProblem(frf.omega, frf.H.reshape(n_out * n_ref, N), frf.quantity, residual_form, line_w, frf_w)
     m = lam0.size
@@ -290,9 +311,9 @@ def _run(frf, lam0, method, residual_form, line_w, frf_w, max_iter, ftol, xtol,
         )
     theta0 = poles_to_theta(lam0)
     if method == "gn":
-        oc = run_gn(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol)
+        oc = run_gn(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, bounds=bounds)
     else:
-        oc = run_lm(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, mu0=mu0)
+        oc = run_lm(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, mu0=mu0, bounds=bounds)
     if oc.status == Status.MAX_ITER:
         warnings.warn(
             f"LSFD ({method}) stopped at max_iter={max_iter} before converging (S = {oc.evaluation.S:.6g}); "
@@ -321,7 +342,8 @@ def _result(frf: FRFSet, prob: ProjectedProblem, oc: NLSOutcome, method: str, re
     if ev.rank_ok:
         R, T = prob.linear_parameters(ev)
         JtJ, _ = prob.normal_equations(ev)
-        cov = covariance_from_normal(JtJ, real_var)
+        finite = np.all(np.isfinite(JtJ)) and np.isfinite(real_var)
+        cov = covariance_from_normal(JtJ, real_var) if finite else np.full((2 * m, 2 * m), np.nan)
     else:
         R = np.full((n_frf, m), np.nan + 0j)
         T = np.full((n_frf, prob.n_res), np.nan + 0j)

@@ -138,7 +138,8 @@ def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
         axe = fig.add_subplot(gs[2, c], sharex=axm)
         with np.errstate(divide="ignore", invalid="ignore"):
             axm.plot(f, 20 * np.log10(np.abs(H)), "--", color="#555555", lw=1.0, label="measured")
-            axm.plot(f, 20 * np.log10(np.abs(g)), "-", color="#1f77b4", lw=1.0, label="LSFD model" + (" (as windowed)" if frf.exp_window_tau_s else ""))
+            axm.plot(f, 20 * np.log10(np.abs(g)), "-", color="#1f77b4", lw=1.0,
+                     label="LSFD model" + (" (as windowed)" if frf.exp_window_tau_s else ""))
             axp.plot(f, _phase_deg(H), "--", color="#555555", lw=0.8)
             axp.plot(f, _phase_deg(g), "-", color="#1f77b4", lw=0.8)
             rel = np.abs(H - g) / np.abs(H)

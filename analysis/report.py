@@ -138,14 +138,24 @@ def _labelled(values: np.ndarray, outs, refs, key: str) -> list:
     return out
 
 
-def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Optional[dict] = None) -> dict:
+STD_NOTE = ("freq_hz_std/damping_std assume white noise of equal variance on every line and a perfect model "
+            "(Jacobian and residual variance); on real data model error dominates and they are lower bounds. "
+            "freq_hz_scatter_std/damping_scatter_std, when present, are the spread of refits on independent FRF "
+            "groups divided by sqrt(number of groups) (see docs/fitting.md, section 9).")
+
+
+def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Optional[dict] = None,
+                   scatter=None) -> dict:
     """JSON-ready dictionary of an LSFD result (schema ``impactlab.fit/1``).
 
     Keys: poles (freq_hz, damping, freq_hz_std, damping_std, damped_freq_hz, pole [re, im] rad/s),
     residues / upper_residual / lower_residual (per output/reference label), sse, iterations,
     history, status, message, success, method, band, quantity, unit, residual_form, outputs,
     references, noise_var, nfev, mode_shapes/participation when present, per_frf summaries,
-    and the stabilization summary when given.
+    and the stabilization summary when given; ``std_note`` says what the standard deviations
+    assume; with ``scatter`` (:class:`analysis.scatter.SubsetScatter` of this result) every pole
+    also gets ``freq_hz_scatter_std`` and ``damping_scatter_std`` and ``scatter_groups`` lists the
+    groups.
     """
     model = result.model
     outs, refs = list(model.outputs), list(model.references)
@@ -161,6 +171,9 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
             "damped_freq_hz": _fnum(result.damped_freq_hz[r]),
             "pole": complex_pair(result.poles[r]),
         })
+        if scatter is not None:
+            poles[-1]["freq_hz_scatter_std"] = _fnum(scatter.freq_hz_std[r])
+            poles[-1]["damping_scatter_std"] = _fnum(scatter.damping_std[r])
     R = np.asarray(model.residues)[..., order]
     doc: dict[str, Any] = {
         "schema": JSON_SCHEMA,
@@ -183,7 +196,10 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
         "nfev": int(result.nfev),
         "history": [_fnum(s) for s in result.history],
         "noise_var": _fnum(result.noise_var),
+        "std_note": STD_NOTE,
     }
+    if scatter is not None:
+        doc["scatter_groups"] = list(scatter.groups)
     if frf is not None and frf.H.shape[:2] == np.asarray(model.residues).shape[:2]:
         doc["synthesis_error"] = synthesis_error(result, frf)
     if result.mode_shapes is not None:

@@ -12,16 +12,17 @@ The rule
 
    (f_ab, zeta_ab the larger of the two), cut at d = 1. The damping part is
    relative-plus-absolute (``abs_tol_damp`` default 0.1 % of critical): the damping estimate
-   of a very lightly damped mode scatters by more than its own size from order to order. Complete linkage means every pair in
-   a cluster is within the tolerances, so two modes a few percent apart are never chained
-   together through scattered spurious poles.
+   of a very lightly damped mode scatters by more than its own size from order to order.
+   Complete linkage means every pair in a cluster is within the tolerances, so two modes a
+   few percent apart are never chained together through scattered spurious poles.
 3. Persistence: a cluster counts the *distinct* model orders it holds; it is kept when it
    holds at least ``min_fraction`` of the orders from its first appearance to the last
    order, and at least ``min_orders`` orders.
 4. Representative: the pole with the median frequency and median damping of the cluster
    (``pole_from_fz(median f, median zeta)``).
-5. Two kept clusters closer than ``tol_freq`` in frequency are merged (the more persistent
-   wins). With ``n_modes`` given, the ``n_modes`` most persistent clusters are returned.
+5. Ranking: by presence (distinct orders), ties by the smaller relative frequency spread.
+   Two kept clusters closer than ``tol_freq`` in frequency are merged (the higher ranked
+   wins). With ``n_modes`` given, the ``n_modes`` first clusters are returned.
 
 The user overrides the selection by giving poles (or frequencies, see
 :func:`poles_from_frequencies`) instead.

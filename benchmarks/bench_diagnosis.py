@@ -62,7 +62,7 @@ def table(rows: list[dict]) -> str:
         sel = [r for r in rows if r["truth"] == t]
         L.append(f"{t:20s}" + "".join(f"{sum(r['verdict'] == c for r in sel):9d}" for c in labels))
     L += ["", f"{'effect':20s}{'cases':>6s}{'named':>7s}{'acc %':>7s}{'tol':>8s}{'in tol':>7s}"
-          f"{'med err':>10s}{'p95 err':>10s}{'t med s':>8s}"]
+          f"{'med err':>10s}{'p95 err':>10s}{'max err':>10s}{'t med s':>8s}"]
     for t in truths:
         sel = [r for r in rows if r["truth"] == t]
         if not sel:
@@ -75,11 +75,16 @@ def table(rows: list[dict]) -> str:
                  f"{intol if t != 'none' else len(ok):7d}"
                  f"{(np.median(errs) if errs.size else float('nan')):10.2e}"
                  f"{(np.percentile(errs, 95) if errs.size else float('nan')):10.2e}"
+                 f"{(np.max(errs) if errs.size else float('nan')):10.2e}"
                  f"{np.median([r['time_s'] for r in sel]):8.2f}")
     eff_rows = [r for r in rows if r["truth"] != "none"]
     null_rows = [r for r in rows if r["truth"] == "none"]
     acc = np.mean([r["verdict"] == r["truth"] for r in eff_rows]) if eff_rows else float("nan")
     fa = np.mean([r["verdict"] != "none" for r in null_rows]) if null_rows else float("nan")
+    if null_rows:
+        g = np.array([r["gain_db"] for r in null_rows])
+        L += ["", f"null cases: best held-out gain of any effect: median {np.median(g):.3f} dB, max {np.max(g):.3f} dB "
+              f"(significance needs >= 0.5 dB)"]
     L += ["", f"overall named right (effects): {100 * acc:.1f} % of {len(eff_rows)}; "
           f"false alarms on null cases: {100 * fa:.1f} % of {len(null_rows)}; "
           f"all cases named right: {100 * np.mean([r['verdict'] == r['truth'] for r in rows]):.1f} %; "

@@ -56,14 +56,14 @@ import logging
 import time
 import zlib
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping
 
 import numpy as np
 
 from acquisition import protocol as P
 
 __all__ = ["FAULT_KINDS", "TRANSIENT_SENSES", "FaultPlan", "parse_faults", "FaultyFirmware", "FaultyStand",
-           "create_analyser"]
+           "create_analyser", "cbw_bytes"]
 
 _log = logging.getLogger(__name__)
 
@@ -203,6 +203,7 @@ class FaultyFirmware:
     ``firmware``: the real firmware (its stand is wrapped in :class:`FaultyStand` when a stand
     fault has a non-zero rate); ``plan``: :class:`FaultPlan`. ``injected`` counts the faults by
     kind; ``block_crc`` maps block sequence -> CRC-32 of the counts the firmware produced.
+    The wrapper owns ``firmware`` from then on (its stand is replaced by a :class:`FaultyStand`).
     """
 
     def __init__(self, firmware: Any, plan: "FaultPlan | Mapping[str, float] | str") -> None:

@@ -725,10 +725,16 @@ def create_analyser(options: "Mapping[str, Any] | None" = None, stand: "StandLik
     ``noise`` (bool, default True: sensor and ADC noise on), ``plan`` (ignored by the firmware;
     the stand uses it), ``replay`` (path of a recording: ``simulator.replay_stand.ReplayStand``
     plays its hits back instead of simulating), ``packetized`` (bool), ``serial`` (str), ``polls`` (GET STATUS polls
-    before the strike, default 1), ``max_strikes`` (default 3). ``stand`` injects a ready stand
+    before the strike, default 1), ``max_strikes`` (default 3); ``faults``, ``fault_seed``,
+    ``fault_gone_calls``, ``fault_slow_s``: fault injection, the firmware comes wrapped in
+    :class:`simulator.faults.FaultyFirmware` (same interface). ``stand`` injects a ready stand
     (e.g. a :class:`PrecomputedStand`); otherwise ``simulator.stand.TestStand`` is built.
     """
     opts = dict(options or {})
+    if any(k in opts for k in ("faults", "fault_seed", "fault_gone_calls", "fault_slow_s")):
+        from simulator.faults import create_analyser as create_faulty  # wraps this firmware (fault injection)
+
+        return create_faulty(opts, stand=stand)
     known = {"seed", "config", "noise", "plan", "packetized", "serial", "polls", "max_strikes", "replay"}
     unknown = set(opts) - known
     if unknown:

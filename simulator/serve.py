@@ -19,7 +19,8 @@ last one closing may find the previous analyser's state (the driver's reset reco
 
 Robustness: garbage is the firmware's business (it answers or ignores per the bulk-only rules);
 a client that disconnects mid-command, stops reading for ``--send-timeout`` seconds, or trips an
-internal error only ends its own connection. Every wait is bounded (0.05 s ticks), so SIGTERM and
+internal error only ends its own connection; a TCP client silent for ``--yield-after`` seconds
+while another client waits is closed. Every wait is bounded (0.05 s ticks), so SIGTERM and
 SIGINT stop the server promptly and cleanly (exit status 0).
 """
 from __future__ import annotations
@@ -150,8 +151,7 @@ def _firmware_factory(options: dict, precomputed: Optional[str] = None) -> Calla
     # the firmware imports its front end (scipy.signal) at the first strike; do it now so that a
     # client's first ARM does not wait a second or two for an import
     import simulator.frontend  # noqa: F401
-    from simulator.faults import create_analyser  # the firmware, wrapped when faults=... is given
-    from simulator.firmware import PrecomputedStand
+    from simulator.firmware import PrecomputedStand, create_analyser
 
     stand = None
     if precomputed is not None:

@@ -481,6 +481,6 @@ class SimUsbBackend(usb.backend.IBackend):
 
 def _make_packetized_firmware(options: dict) -> Any:
     """A packetized firmware from ``usbsim://`` options (through ``create_analyser``)."""
-    from simulator.faults import create_analyser
+    from simulator.firmware import create_analyser
 
     return create_analyser(dict(options, packetized=True))

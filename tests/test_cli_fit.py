@@ -176,3 +176,39 @@ def test_report_helpers():
         roman(0)
     assert complex_pair(1 - 2j) == [1.0, -2.0]
     assert complex_pair(complex(np.nan, 0)) is None
+
+
+def test_fit_scatter_std_and_std_note(uff_file, tmp_path, capsys):
+    out = tmp_path / "s.json"
+    rc = cli_fit.main([str(uff_file), "--json", str(out), "--scatter-std"])
+    assert rc == 0, capsys.readouterr().err
+    doc = json.loads(out.read_text())
+    assert "perfect model" in doc["std_note"]
+    # one reference: the five outputs are split into three interleaved groups
+    assert doc["scatter_groups"] == ["outputs left:9:Y, right:4:-Z", "outputs left:4:Y, right:9:Y", "outputs top:4:X"]
+    for p in doc["poles"]:
+        assert p["freq_hz_scatter_std"] is not None and 0 <= p["freq_hz_scatter_std"] < 0.05 * p["freq_hz"]
+    # the synthesis error against the data uses the poles as measured
+    assert doc["synthesis_error"]["poles"].startswith("raw") and doc["synthesis_error"]["relative_rms"] < 0.05
+
+
+def test_uff_export_of_windowed_data_is_synthesised_as_measured(tmp_path):
+    """Regression: the exported synthesised FRFs used the window-corrected poles, so they did not
+    match the (exponentially windowed) FRFs they were fitted to."""
+    from dataclasses import replace
+
+    from analysis.lsfd import fit_lsfd
+    from analysis.uff import read_uff58
+
+    tau = 1.5
+    lam = pole_from_fz(F_TRUE[:2], Z_TRUE[:2])
+    R = np.array([[[1.0 - 1j, 0.5 + 0.2j]], [[-0.3 + 1j, 1.0]]]) * lam.imag / 2j
+    f = np.arange(40, 401) * 0.25
+    frf = synthesize(ModalModel(lam - 1 / tau, R, "accelerance", "none"), f)
+    frf = replace(frf, outputs=tuple(OUTPUTS[:2]), references=(REFERENCE,), exp_window_tau_s=tau)
+    res = fit_lsfd(frf, lam - 1 / tau, residual_form="none")
+    np.testing.assert_allclose(res.poles, lam, rtol=1e-9)  # the structure
+    path = tmp_path / "w.uff"
+    cli_fit._write_uff(str(path), frf, res)
+    synth = read_uff58(path)
+    np.testing.assert_allclose(synth.H, frf.H, rtol=1e-6, atol=1e-9 * np.abs(frf.H).max())

@@ -37,3 +37,28 @@ def test_resume_refuses_a_changed_plan(tmp_path, capsys):
     assert "drop --out, --points" in capsys.readouterr().err
     assert main(["--resume", str(tmp_path / "none.h5")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_resume_removes_a_hit_cut_short_and_appends_after_the_last_complete_one(tmp_path):
+    import h5py
+    import numpy as np
+
+    from acquisition.recording import Recording, RecordingWriter
+    from analysis.spectra import WindowSettings
+
+    p = tmp_path / "rec.h5"
+    hit = dict(eu_per_count=[0.01, 0.02], volts_per_count=[3e-5, 1.5e-4], trigger_index=8, sample_rate_hz=6400.0,
+               timestamp=1.0, measurement=0, point="right:6:-X", reference="right:6:-X", outputs=["left:9:Y"],
+               force_channel=0, response_channels=[1], overload=[False, False], accepted=True)
+    counts = [np.full((2, 16), k, dtype=np.int16) for k in range(3)]
+    with RecordingWriter(p, instrument={}, setup={}, channels=[], windows=WindowSettings()) as w:
+        for k in range(3):
+            w.write_hit(counts=counts[k], sequence=k + 1, **hit)
+    with h5py.File(p, "r+") as f:  # as if the writer died while writing hit 2
+        del f["hits/000002"].attrs["complete"]
+    with RecordingWriter.resume(p) as w:
+        assert w.n_hits == 2
+        assert w.write_hit(counts=counts[0] + 7, sequence=9, **hit) == 2
+    with Recording(p) as rec:
+        hits = list(rec.hits())
+        assert [h.sequence for h in hits] == [1, 2, 9] and np.all(hits[2].counts == 7)

@@ -140,10 +140,24 @@ def _fit_scalar(cost: Callable[[float], float], grid: np.ndarray) -> float:
     return float(res.x) if res.fun <= vals[i] else float(grid[i])
 
 
+_MOVES_FAR_MODES = ("stiffness_shift", "mass_loading")
+COARSE_LINES = 600
+
+
 def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = False) -> Callable[[dict], float]:
-    """Cost of a modal effect's parameters on ``lines``. The model is synthesised at those lines only;
-    with ``coarse=True`` the modes far outside the band (below f_lo/1.5, above 1.5 f_hi) are a fixed
-    background taken from the base model (fast grid searches; the final refinement is exact)."""
+    """Cost of a modal effect's parameters on ``lines``. The model is synthesised at those lines only.
+    With ``coarse=True`` (fast grid searches; the final refinement is exact): for effects that move
+    every mode alike (stiffness, mass) every ``k``-th line is used (at most ``COARSE_LINES``); for the
+    others the modes far outside the band (below f_lo/1.5, above 1.5 f_hi) are a fixed background
+    taken from the base model (damping and window changes leave their quasi-static part alone)."""
+    if coarse and effect in _MOVES_FAR_MODES:
+        # these effects change the quasi-static part of the modes far outside the band too: keep every
+        # mode, thin the lines instead (at most COARSE_LINES)
+        idx = np.flatnonzero(lines)
+        stride = max(1, int(np.ceil(idx.size / COARSE_LINES)))
+        lines = np.zeros_like(lines)
+        lines[idx[::stride]] = True
+        coarse = False
     f = ctx.measured.freq_hz[lines]
     Hm, W = ctx.measured.H[..., lines], ctx.weights[..., lines]
     base = ctx.base
@@ -216,8 +230,8 @@ def apply_stiffness_shift(model: ModalModel, params: Mapping) -> ModalModel:
 def fit_stiffness_shift(ctx: FitContext, lines: np.ndarray) -> dict:
     coarse = _modal_cost(ctx, lines, "stiffness_shift", coarse=True)
     cost = _modal_cost(ctx, lines, "stiffness_shift")
-    grid = np.unique(np.concatenate([a0 * np.exp(np.linspace(-0.006, 0.006, 13))
-                                     for a0 in _log_shift_candidates(ctx, lines) + [1.0]]))
+    grid = np.unique(np.concatenate([a0 * np.exp(np.linspace(-0.008, 0.008, 17))
+                                     for a0 in _log_shift_candidates(ctx, lines, n=6) + [1.0]]))
     vals = [coarse({"factor": x}) for x in grid]
     i = int(np.argmin(vals))
     a = _fit_scalar(lambda x: cost({"factor": x}), grid[max(i - 1, 0):i + 2])
@@ -254,9 +268,12 @@ def fit_exponential_window(ctx: FitContext, lines: np.ndarray) -> dict:
     coarse = _modal_cost(ctx, lines, "exponential_window", coarse=True)
     cost = _modal_cost(ctx, lines, "exponential_window")
     f = ctx.measured.freq_hz[lines]
-    # added decay up to 5 % damping of a mode at the lowest analysed line
-    smax = 2 * np.pi * max(f[0], f[-1] / 50) * 0.05
-    grid = np.linspace(0.0, smax, 41)
+    # added decay up to 5 % damping of the lowest simulated mode in the band (or of f_max / 10)
+    fn = ctx.base.freq_hz
+    inband = fn[(fn >= f[0]) & (fn <= f[-1])]
+    f1 = float(inband.min()) if inband.size else f[-1] / 10
+    smax = 2 * np.pi * f1 * 0.05
+    grid = np.linspace(0.0, smax, 61)
     i = int(np.argmin([coarse({"tau_s": 1.0 / max(x, 1e-9)}) for x in grid]))
     s = _fit_scalar(lambda x: cost({"tau_s": 1.0 / max(x, 1e-9)}), grid[max(i - 1, 0):i + 2])
     s = max(s, 1e-9)
