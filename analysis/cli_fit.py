@@ -50,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-iter", type=int, default=100, metavar="N", help="LSFD iteration cap (default 100)")
     p.add_argument("--plot", metavar="PNG", help="measured vs synthesised FRFs with the relative error (paper Fig. 7)")
     p.add_argument("--uff", metavar="OUT.uff", help="write UFF 55 mode shapes and UFF 58 synthesised FRFs")
+    p.add_argument("--frf-weights", choices=("rms", "none"), default="rms",
+                   help="LSFD weight of each FRF: 1/noise level from coherence or RMS (default), or none "
+                        "(the paper's unweighted S); see docs/fitting.md")
     p.add_argument("--scatter-std", action="store_true",
                    help="also estimate the pole spread from refits of each reference's FRFs (or output groups); "
                         "costs one LSFD per group, see docs/fitting.md")
@@ -139,7 +142,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             result, stab = fit_auto(
                 frf, band=band, max_modes=args.order, n_modes=args.modes, method=args.method,
                 residual_form=args.residuals, initial=freqs if freqs is not None else args.initial,
-                per_frf=args.per_frf, max_iter=args.max_iter,
+                per_frf=args.per_frf, max_iter=args.max_iter, frf_weighting=args.frf_weights,
             )
         caught = [str(w.message) for w in wlist]
     except ValueError as exc:

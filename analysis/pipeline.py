@@ -48,11 +48,13 @@ This is the paper's Fig. 1 flow with the choices made automatically:
    tried first: a pole at that frequency (damping: the median of the fitted ones) is added
    and the LSFD repeated; the new model is kept when the scaled cost ``sum e^2`` falls by at
    least ``MISSING_MIN_GAIN``, step 6 finds nothing wrong with the new poles, and the new
-   pole is not a broad pole under a much sharper one (within the larger half-bandwidth,
-   bandwidths more than ``MISSING_BANDWIDTH_RATIO`` apart: that absorbs the misfit of a sharp
-   peak, e.g. leakage, it is not a mode; two genuine close modes have similar damping). Repeated
-   until no candidate is left (at most ``MAX_ADDED`` poles, and at most ``MAX_FAILED_TRIES``
-   rejected candidates in a row: each try is a full LSFD). ``G`` is synthesised from the
+   pole is a mode of its own: not a broad pole under a much sharper one (within the larger
+   half-bandwidth, bandwidths more than ``MISSING_BANDWIDTH_RATIO`` apart: that absorbs the
+   misfit of a sharp peak, e.g. leakage; two genuine close modes have similar damping), and
+   not closer to a neighbour than ``MISSING_MIN_LINES`` lines or a quarter of the smaller
+   bandwidth (the data cannot separate them). Repeated until no candidate is left (at most
+   ``MAX_ADDED`` poles, and at most ``MAX_FAILED_TRIES`` rejected candidates in a row: each
+   try is a full LSFD, capped at ``MISSING_TRIAL_ITER`` iterations). ``G`` is synthesised from the
    raw poles (window damping included), as the data were measured.
 """
 from __future__ import annotations
@@ -86,7 +88,9 @@ MISSING_DATA_FRACTION = 0.25
 MISSING_MIN_GAIN = 0.01
 MAX_ADDED = 8
 MISSING_BANDWIDTH_RATIO = 4.0
-MAX_FAILED_TRIES = 3
+MAX_FAILED_TRIES = 2
+MISSING_MIN_LINES = 3
+MISSING_TRIAL_ITER = 40
 
 
 class FitError(ValueError):
@@ -410,15 +414,19 @@ def _missing_candidates(f: np.ndarray, e: np.ndarray, d: np.ndarray) -> np.ndarr
     return f[pk[np.argsort(-e[pk])]]
 
 
-def _under_sharp_pole(poles_raw: np.ndarray, df: float) -> bool:
-    """Whether the last pole is a broad pole under a much sharper neighbour (within the larger
-    half-bandwidth, bandwidths more than ``MISSING_BANDWIDTH_RATIO`` apart): it absorbs the misfit
-    of the sharp peak (leakage, a slightly non-modal peak shape), it is not a mode."""
+def _not_a_new_mode(poles_raw: np.ndarray, df: float) -> bool:
+    """Whether the last (added) pole is no mode of its own: a broad pole under a much sharper
+    neighbour (within the larger half-bandwidth, bandwidths more than
+    ``MISSING_BANDWIDTH_RATIO`` apart), which absorbs the misfit of the sharp peak (leakage, a
+    slightly non-modal peak shape), or a pole the data cannot separate from a neighbour
+    (closer than ``MISSING_MIN_LINES`` lines or a quarter of the smaller bandwidth)."""
     b = bandwidth_hz(poles_raw, df)
     f = natural_freq_hz(poles_raw)
-    near = np.abs(f[:-1] - f[-1]) < 0.5 * np.maximum(b[:-1], b[-1])
+    gap = np.abs(f[:-1] - f[-1])
+    near = gap < 0.5 * np.maximum(b[:-1], b[-1])
     ratio = np.maximum(b[:-1], b[-1]) / np.minimum(b[:-1], b[-1])
-    return bool(np.any(near & (ratio > MISSING_BANDWIDTH_RATIO)))
+    unresolved = gap < np.maximum(MISSING_MIN_LINES * df, 0.25 * np.minimum(b[:-1], b[-1]))
+    return bool(np.any(near & (ratio > MISSING_BANDWIDTH_RATIO)) or np.any(unresolved))
 
 
 def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
@@ -443,7 +451,7 @@ def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", LSFDConvergenceWarning)
-                trial = _fit_bounded(frf, start, fit_kw)
+                trial = _fit_bounded(frf, start, {**fit_kw, "max_iter": min(fit_kw["max_iter"], MISSING_TRIAL_ITER)})
         except (ValueError, np.linalg.LinAlgError) as exc:
             log.info("adding a pole at %.6g Hz failed (%s)", c, exc)
             failures += 1
@@ -453,7 +461,7 @@ def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str
             failures += 1
             continue
         bad, _ = _bad_poles(trial, start, df)
-        bad[-1] |= _under_sharp_pole(trial.poles_raw, df)
+        bad[-1] |= _not_a_new_mode(trial.poles_raw, df)
         f2, e2, d2 = _scaled_misfit(frf, trial)
         cost2 = float(np.sum(e2 ** 2))
         if np.any(bad) or cost2 > (1.0 - MISSING_MIN_GAIN) * cost:

@@ -212,3 +212,15 @@ def test_uff_export_of_windowed_data_is_synthesised_as_measured(tmp_path):
     cli_fit._write_uff(str(path), frf, res)
     synth = read_uff58(path)
     np.testing.assert_allclose(synth.H, frf.H, rtol=1e-6, atol=1e-9 * np.abs(frf.H).max())
+
+
+def test_fit_frf_weights_option(uff_file, tmp_path, capsys):
+    docs = {}
+    for w in ("rms", "none"):
+        out = tmp_path / f"{w}.json"
+        assert cli_fit.main([str(uff_file), "--json", str(out), "--frf-weights", w]) == 0, capsys.readouterr().err
+        docs[w] = json.loads(out.read_text())
+        np.testing.assert_allclose([p["freq_hz"] for p in docs[w]["poles"]], F_TRUE, rtol=1e-4)
+    # weighted and unweighted are different problems: S differs (the weights are 1/RMS scaled to max 1)
+    assert docs["rms"]["sse"] != pytest.approx(docs["none"]["sse"], rel=1e-3)
+    assert cli_fit.main([str(uff_file), "--json", str(tmp_path / "x.json"), "--frf-weights", "snr"]) == 2
