@@ -52,7 +52,8 @@ CHANNEL_FIELDS = ("name", "point", "direction", "quantity", "sensitivity", "sens
 
 
 #: what h5py, json and numpy raise on damaged file content; the reader turns it into RecordingError
-_DAMAGE = (OSError, KeyError, ValueError, TypeError, RuntimeError, IndexError, AttributeError, OverflowError)
+_DAMAGE = (OSError, KeyError, ValueError, TypeError, RuntimeError, IndexError, AttributeError, OverflowError,
+           MemoryError)
 
 
 def _h5py():
@@ -361,6 +362,7 @@ class Recording:
                 f"{self.path} is not an HDF5 file: give an impactlab recording (.h5) written by "
                 "'python -m acquisition capture' or 'python -m acquisition import'"
             )
+        self._file_bytes = self.path.stat().st_size
         try:
             self._f = h5py.File(self.path, "r")
         except OSError as exc:
@@ -396,7 +398,7 @@ class Recording:
                 raise RecordingError(f"{self.path} is damaged: group '/{g}' is missing")
         self.instrument = json.loads(_as_str(self._f["instrument"].attrs["json"]))
         self.setup = json.loads(_as_str(self._f["setup"].attrs["json"]))
-        table = self._f["setup/channels"][()]
+        table = self._read(self._f["setup/channels"])
         self.channels = [
             {k: (_as_str(row[k]) if isinstance(row[k], (bytes, str)) else row[k].item()) for k in table.dtype.names}
             for row in table
@@ -407,6 +409,15 @@ class Recording:
         self.closed_cleanly = "closed_utc" in a
 
     # -- hits ----------------------------------------------------------------------------------
+    def _read(self, ds: Any) -> Any:
+        """A dataset's values, after checking that its declared size fits in the file (a damaged
+        shape can claim billions of elements; reading it would exhaust memory)."""
+        n = int(np.prod(ds.shape, dtype=np.float64)) if ds.shape else 1
+        if n > self._file_bytes:
+            raise RecordingError(f"{self.path} is damaged: dataset {ds.name} claims {n} elements in a file of "
+                                 f"{self._file_bytes} bytes; use a backup or re-run the test")
+        return ds[()]
+
     def _damaged(self, what: str, exc: BaseException) -> RecordingError:
         return RecordingError(f"{self.path}: {what} is damaged ({type(exc).__name__}: {exc}); use a backup or "
                               "re-run the test")
@@ -431,7 +442,7 @@ class Recording:
             a = g.attrs
             if not a.get("complete", False):
                 raise RecordingError(f"hit {index} in {self.path} is incomplete (the writer stopped mid-hit)")
-            counts = g["counts"][()]
+            counts = self._read(g["counts"])
             crc_ok = counts_crc32(counts) == int(a["crc32"])
             if not crc_ok:
                 raise RecordingError(
@@ -472,9 +483,9 @@ class Recording:
     def events(self) -> list[tuple[float, str, str]]:
         try:
             ev = self._f["events"]
-            t = ev["time_unix_s"][()]
-            lv = [_as_str(x) for x in ev["level"][()]]
-            ms = [_as_str(x) for x in ev["message"][()]]
+            t = self._read(ev["time_unix_s"])
+            lv = [_as_str(x) for x in self._read(ev["level"])]
+            ms = [_as_str(x) for x in self._read(ev["message"])]
             n = min(len(t), len(lv), len(ms))
             return [(float(t[i]), lv[i], ms[i]) for i in range(n)]
         except _DAMAGE as exc:
@@ -490,7 +501,7 @@ class Recording:
         """All stored arrays and attributes of one measurement's FRF results."""
         try:
             g = self._f["frf"][name]
-            out: dict[str, Any] = {k: g[k][()] for k in g.keys()}
+            out: dict[str, Any] = {k: self._read(g[k]) for k in g.keys()}
             for k, v in g.attrs.items():
                 out[k] = _as_str(v) if isinstance(v, (bytes, str)) else v
             out["outputs"] = json.loads(out["outputs"])
@@ -579,6 +590,10 @@ def verify_recording(path: "str | Path", timeout_s: float = VERIFY_TIMEOUT_S) ->
     except ChildTimeout:
         raise RecordingError(f"{p}: reading it took over {timeout_s:g} s; the file is damaged or on a stalled "
                              "drive") from None
+    except RecordingError:
+        raise
+    except Exception as exc:  # anything else the reading child met is damage of this file too
+        raise RecordingError(f"{p} is damaged ({type(exc).__name__}: {exc}); use a backup or re-run the test") from None
 
 
 def open_recording(path: "str | Path") -> Recording:

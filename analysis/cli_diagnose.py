@@ -100,9 +100,12 @@ def model_with_correction(model, sim):
     return replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references), meta=meta)
 
 
-def time_data_causes(path: str, band: tuple) -> list:
+def time_data_causes(path: str, band: tuple, base=None) -> list:
     """Time-data causes (:mod:`analysis.diagnosis.timedata`) of a recording's hits, per reference point;
-    [] when the file is not a recording or holds no hits."""
+    [] when the file is not a recording or holds no hits. With ``base`` (the simulation as a receptance
+    pole-residue model holding the hits' points), each cause also gets its held-out ``gain_db``,
+    ``error_before_db``, ``error_after_db``, ``significant`` and ``counts`` from
+    :func:`analysis.diagnosis.timedata.diagnose_time_effects` (re-simulated or hits excluded)."""
     from .inputs import detect_format
     from .diagnosis.timedata import diagnose_hits
 
@@ -125,10 +128,30 @@ def time_data_causes(path: str, band: tuple) -> list:
         force = np.array([h.data[h.force_channel] for h in hits])
         resp = np.array([h.data[h.response_channels] for h in hits])
         flags = np.array([h.overload for h in hits])
+        gains = _time_gains(force, resp, fs, band, base, hits[0].outputs, ref, flags) if base is not None else {}
         for c in diagnose_hits(force, resp, fs, band, overload_flags=flags):
             c["reference"] = ref
+            c.update(gains.get(c["effect"], {}))
             out.append(c)
-    return sorted(out, key=lambda c: not c["present"])
+    return sorted(out, key=lambda c: (not c["present"], -c.get("gain_db", 0.0)))
+
+
+def _time_gains(force, resp, fs, band, base, outputs, ref, flags) -> dict:
+    """Held-out gains of the time-data effects per effect name ({} when the simulation cannot be used)."""
+    from dataclasses import replace
+
+    from .diagnosis.timedata import diagnose_time_effects
+
+    try:
+        oi = [list(base.outputs).index(o) for o in outputs]
+        ri = list(base.references).index(ref)
+        sub = replace(base, residues=base.residues[oi][:, [ri]], outputs=tuple(outputs), references=(ref,))
+        d = diagnose_time_effects(force, resp, fs, sub, band, overload_flags=flags, outputs=outputs, reference=ref)
+    except (ValueError, IndexError) as exc:
+        log.info("time-data gains of %s not measured: %s", ref, exc)
+        return {}
+    keys = ("gain_db", "error_before_db", "error_after_db", "z", "significant", "counts", "kind")
+    return {c["effect"]: {k: c[k] for k in keys} for c in d["causes"]}
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -173,14 +196,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     doc = diag.to_json()
     try:
-        timed = time_data_causes(args.measured, (float(measured.freq_hz[0]), float(measured.freq_hz[-1])))
+        timed = time_data_causes(args.measured, (float(measured.freq_hz[0]), float(measured.freq_hz[-1])), base)
     except ValueError as exc:
         timed = []
         log.warning("time data not analysed: %s", exc)
     if timed:
         doc["time_data"] = timed
         present = [c for c in timed if c["present"]]
-        if doc["verdict"] == "unexplained" and any(c["effect"] == "amplitude_nonlinearity" for c in present):
+        counted = sorted((c for c in present if c.get("counts")), key=lambda c: -c.get("gain_db", 0.0))
+        doc["time_data_verdict"] = counted[0]["effect"] if counted else "none"
+        if doc["verdict"] == "unexplained" and counted:
+            doc["verdict"] = counted[0]["effect"]
+        elif doc["verdict"] == "unexplained" and any(c["effect"] == "amplitude_nonlinearity" for c in present):
             doc["verdict"] = "amplitude_nonlinearity"
     Path(args.json).write_text(json.dumps(doc, indent=1, default=_json_default))
     if args.report:

@@ -14,7 +14,7 @@ from .peer import PeerFit, fit_peer
 
 log = logging.getLogger(__name__)
 
-__all__ = ["compare", "crlb_of", "summary_row_header", "summary_row", "peer_repeats", "scatter_table"]
+__all__ = ["compare", "crlb_of", "agreement", "summary_row_header", "summary_row", "peer_repeats", "scatter_table"]
 
 #: above this many real observations the Cramer-Rao bound is not evaluated (dense Jacobian)
 _CRLB_MAX_OBS = 4_000_000
@@ -56,13 +56,14 @@ def correct_peer_window(peer: PeerFit, tau_s: float) -> PeerFit:
 def compare(name: str, frf: FRFSet, out_dir: Path, *, band: Optional[Sequence[float]] = None,
             max_modes: Optional[int] = None, n_modes: Optional[int] = None, pair: Optional[tuple] = None,
             title: str = "", with_peer: bool = True, with_crlb: bool = True,
-            selection_options: Optional[dict] = None, plot_name: Optional[str] = None, initial="lscf") -> tuple[OurFit, PeerFit, str, dict, list]:
+            selection_options: Optional[dict] = None, plot_name: Optional[str] = None, initial="lscf",
+            frf_weighting: str = "rms") -> tuple[OurFit, PeerFit, str, dict, list]:
     """Fit ``frf`` with impactlab (automatic) and with sdypy-EMA (hinted by our frequencies).
 
     Returns (our fit, peer fit, markdown block, summary dict, plot paths relative to ``out_dir.parent``).
     """
     ours = fit_ours(frf, band=band, max_modes=max_modes, n_modes=n_modes, selection_options=selection_options,
-                    initial=initial)
+                    initial=initial, frf_weighting=frf_weighting)
     res = ours.result
     mm = max(ours.stab.orders) if ours.stab is not None else (max_modes or 2 * res.poles.size + 8)
     peer = fit_peer(frf, ours.band, mm, res.freq_hz) if with_peer else PeerFit(False, "not run for this case")
@@ -117,8 +118,25 @@ def compare(name: str, frf: FRFSet, out_dir: Path, *, band: Optional[Sequence[fl
                "band": ours.band, "modes_ours": res.poles.size, "modes_peer": peer.freq_hz.size if peer.ok else None,
                "err_ours": ours.synth_err_pct, "err_peer": peer.synth_err_pct if peer.ok else None,
                "err_peer_fixed": fixed.synth_err_pct if fixed is not None and fixed.ok else None,
-               "t_ours": ours.time_s, "t_peer": peer.time_s if peer.ok else None}
+               "t_ours": ours.time_s, "t_peer": peer.time_s if peer.ok else None,
+               "figures": agreement(res, peer) if peer.ok else {}}
     return ours, peer, "\n".join(lines), summary, plots
+
+
+def agreement(res, peer: PeerFit, tol: float = 0.03) -> dict:
+    """How far the peer's poles are from ours over the modes both have (paired by frequency within
+    ``tol``, relative): ``max_df_pct`` = max |f_peer - f_ours| / f_ours (percent), ``max_dzeta_pct`` and
+    ``median_dzeta_pct`` = max and median |zeta_peer - zeta_ours| / zeta_ours (percent), ``n_paired``."""
+    from .common import match_poles
+
+    pairs = [(i, j) for i, j in match_poles(res.freq_hz, peer.freq_hz, tol) if i is not None and j is not None]
+    if not pairs:
+        return {"n_paired": 0}
+    i, j = np.array(pairs).T
+    df = np.abs(peer.freq_hz[j] - res.freq_hz[i]) / res.freq_hz[i]
+    dz = np.abs(peer.damping[j] - res.damping[i]) / res.damping[i]
+    return {"n_paired": len(pairs), "max_df_pct": float(100 * df.max()), "max_dzeta_pct": float(100 * dz.max()),
+            "median_dzeta_pct": float(100 * np.median(dz))}
 
 
 def summary_row_header() -> list[str]:

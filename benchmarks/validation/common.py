@@ -97,8 +97,11 @@ def _model_error(frf: FRFSet, result, band: Sequence[float]) -> float:
 
 def fit_ours(frf: FRFSet, *, band: Optional[Sequence[float]] = None, max_modes: Optional[int] = None,
              n_modes: Optional[int] = None, method: str = "lm", initial="lscf",
-             selection_options: Optional[dict] = None, max_iter: int = 100) -> OurFit:
-    """Run :func:`analysis.pipeline.fit_auto` (LSCF stabilization, automatic selection, LSFD), timed."""
+             selection_options: Optional[dict] = None, max_iter: int = 100, frf_weighting: str = "rms") -> OurFit:
+    """Run :func:`analysis.pipeline.fit_auto` (LSCF stabilization, automatic selection, LSFD), timed.
+
+    ``frf_weighting`` is passed on: "rms" (the pipeline's default, each FRF weighted by 1 / its
+    noise level) or "none" (unweighted least squares)."""
     from analysis.lsfd import LSFDConvergenceWarning
     from analysis.pipeline import fit_auto
 
@@ -106,7 +109,8 @@ def fit_ours(frf: FRFSet, *, band: Optional[Sequence[float]] = None, max_modes: 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LSFDConvergenceWarning)
         res, stab = fit_auto(frf, band=band, max_modes=max_modes, n_modes=n_modes, method=method,
-                             initial=initial, selection_options=selection_options, max_iter=max_iter)
+                             initial=initial, selection_options=selection_options, max_iter=max_iter,
+                             frf_weighting=frf_weighting)
     dt = time.perf_counter() - t0
     used = tuple(stab.meta["band"]) if stab is not None else tuple(res.band)
     notes = list(stab.meta.get("warnings", [])) if stab is not None else []

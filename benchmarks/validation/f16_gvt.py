@@ -128,4 +128,9 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         "",
         stab_tab,
     ]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.nanmedian(arr["f_std"], axis=0) / np.nanstd(arr["f"], axis=0, ddof=1)
+    summary["figures"] = {**summary.get("figures", {}), "noise_fit": float(res.noise_var), "noise_scatter": noise_pp,
+                          "std_over_scatter_min": float(np.nanmin(ratio)), "std_over_scatter_max": float(np.nanmax(ratio)),
+                          "std_over_scatter_median": float(np.nanmedian(ratio))}
     return CaseReport(NAME, "F-16 GVT, multisine", SOURCE, "\n".join(md), summary, plots)

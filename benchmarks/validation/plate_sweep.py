@@ -156,4 +156,14 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         "the whole record is not, but the force dips at the resonances (negative dB) and the coherence there is "
         "what limits it: those modes have the largest run-to-run scatter and the largest fit standard deviations.",
     ]
+    i0 = int(order[0])
+    k0 = int(np.argmin(np.abs(frf.freq_hz - res.freq_hz[i0])))
+    j0 = int(np.argmin(np.abs(peer.freq_hz - res.freq_hz[i0]))) if peer.ok and peer.freq_hz.size else None
+    with np.errstate(invalid="ignore"):
+        sc0 = float(np.nanstd(arr["f"][:, 0], ddof=1))
+    summary["figures"] = {**summary.get("figures", {}), "f1": float(res.freq_hz[i0]), "coh1": float(coh_all[k0]),
+                          "std_f1": float(res.freq_hz_std[i0]), "std_z1": float(100 * res.damping_std[i0]),
+                          "scatter_f1": sc0, "n_modes": int(res.poles.size),
+                          "df1_pct": (float(100 * abs(peer.freq_hz[j0] - res.freq_hz[i0]) / res.freq_hz[i0])
+                                      if j0 is not None else None)}
     return CaseReport(NAME, "LADISK plate, swept sine", SOURCE, "\n".join(md), summary, plots)

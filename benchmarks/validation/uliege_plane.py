@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -28,9 +29,10 @@ from analysis.frf import FRFSet
 from analysis.spectra import FRFAccumulator, WindowSettings, hit_spectra
 
 from .case import compare, peer_repeats, scatter_table
-from analysis.modal import synthesize
+from analysis.modal import natural_freq_hz, synthesize
 
-from .common import CaseReport, consistency_table, data_model, fit_ours_from_poles, fmt, md_table, synthesis_error
+from .common import (CaseReport, consistency_table, data_model, fit_ours, fit_ours_from_poles, fmt, match_poles,
+                     md_table, synthesis_error)
 
 NAME = "uliege_meca0062_plane_hammer"
 SOURCE = ("GitHub VictorRenkin/MECA0062-1_vibration_testing (commit a22f8821), University of Liege MECA0062 "
@@ -179,6 +181,80 @@ def per_reference_poles(frf: FRFSet, f_hz: float, zeta: float, half_width_hz: fl
     return np.asarray(out)
 
 
+def per_frf_errors(frf: FRFSet, result) -> tuple[float, float]:
+    """Each FRF's own relative misfit ``e_o = ||H_o - G_o|| / ||H_o||`` over the fitted band (``G`` from
+    ``poles_raw``, as the data were measured): returns (RMS over the FRFs of e_o, median of e_o), as
+    fractions. Unlike the Frobenius synthesis error, a weak FRF counts as much as a strong one."""
+    sub = frf.band(*result.band)
+    H = sub.H.reshape(-1, sub.freq_hz.size)
+    G = synthesize(data_model(result), sub.freq_hz).H.reshape(H.shape)
+    e = np.sqrt(np.sum(np.abs(H - G) ** 2, axis=1) / np.sum(np.abs(H) ** 2, axis=1))
+    return float(np.sqrt(np.mean(e ** 2))), float(np.median(e))
+
+
+def subsets(frf: FRFSet) -> dict:
+    """Independent subsets of the 222 FRFs: each accelerometer alone, three blocks of hammer points
+    (measured one after the other) and the odd/even hammer points."""
+    out = {f"acc {o + 1}": frf.select(outputs=[frf.outputs[o]]) for o in range(frf.n_outputs)}
+    n = frf.n_references
+    for name, idx in ((f"points 1-{n // 3}", range(0, n // 3)), (f"points {n // 3 + 1}-{2 * n // 3}", range(n // 3, 2 * n // 3)),
+                      (f"points {2 * n // 3 + 1}-{n}", range(2 * n // 3, n)), ("odd points", range(0, n, 2)),
+                      ("even points", range(1, n, 2))):
+        out[name] = frf.select(references=[frf.references[k] for k in idx])
+    return out
+
+
+def close_pair_check(sets: dict, poles_raw: np.ndarray, pair_hz: tuple[float, float], margin_hz: float = 2.5,
+                     auto: Optional[dict] = None) -> tuple[list, dict]:
+    """Is a close pair of global poles (one of them possibly added by the pipeline's misfit step) a pair of
+    modes in every subset? For each subset: LSFD on ``pair - margin .. pair + margin`` Hz from the global
+    poles there (and within 3 Hz of that band), with and without the lower pole of the pair; the pair's
+    frequencies, damping, residue-norm ratio |R_low| / |R_high| and residue MAC, the local synthesis error
+    without -> with the lower pole, and (``auto``: subset name -> its independent hint-free ``fit_auto``
+    result) the automatic fit's poles within the band. Returns markdown rows and arrays (f_low, f_high,
+    found_by_auto)."""
+    from analysis.lsfd import fit_lsfd
+
+    f_all = natural_freq_hz(poles_raw)
+    i_lo = int(np.argmin(np.abs(f_all - pair_hz[0])))
+    i_hi = int(np.argmin(np.abs(f_all - pair_hz[1])))
+    band = (min(pair_hz) - margin_hz, max(pair_hz) + margin_hz)
+    near = np.flatnonzero((f_all > band[0] - 3.0) & (f_all < band[1] + 3.0))
+    without = near[near != i_lo]
+    rows, f_lo, f_hi, n_auto = [], [], [], []
+    for name, fr in sets.items():
+        r2 = fit_lsfd(fr, poles_raw[near], band=band)
+        r1 = fit_lsfd(fr, poles_raw[without], band=band)
+        sub = fr.band(*band)
+        e2 = synthesis_error(sub.H, synthesize(data_model(r2), sub.freq_hz).H)
+        e1 = synthesis_error(sub.H, synthesize(data_model(r1), sub.freq_hz).H)
+        a = int(np.flatnonzero(near == i_lo)[0])
+        b = int(np.flatnonzero(near == i_hi)[0])
+        R = r2.model.residues.reshape(-1, near.size)
+        ra, rb = R[:, a], R[:, b]
+        mac = abs(np.vdot(ra, rb)) ** 2 / (np.vdot(ra, ra).real * np.vdot(rb, rb).real)
+        f_lo.append(r2.freq_hz[a])
+        f_hi.append(r2.freq_hz[b])
+        found = "-"
+        if auto is not None and name in auto:
+            fa = np.sort(auto[name].freq_hz)
+            fa = fa[(fa > band[0]) & (fa < band[1])]
+            n_auto.append(fa.size)
+            found = ", ".join(f"{x:.2f}" for x in fa) or "none"
+        rows.append([name, f"{r2.freq_hz[a]:.3f} / {100 * r2.damping[a]:.3g}", f"{r2.freq_hz[b]:.3f} / {100 * r2.damping[b]:.3g}",
+                     fmt(np.linalg.norm(ra) / np.linalg.norm(rb), 2), fmt(mac, 2), f"{e1:.3g} -> {e2:.3g}", found])
+    return rows, {"f_lo": np.array(f_lo), "f_hi": np.array(f_hi), "n_auto": np.array(n_auto), "band": band}
+
+
+def _paired(ref_f: np.ndarray, f: np.ndarray, x: np.ndarray, target_hz: float) -> float:
+    """Value ``x`` of the pole of ``f`` paired with the reference pole nearest ``target_hz`` (NaN if none)."""
+    i0 = int(np.argmin(np.abs(ref_f - target_hz)))
+    for i, j in match_poles(ref_f, f, 0.03):
+        if i == i0 and j is not None:
+            return float(x[j])
+    return float("nan")
+
+
 def run(data_dir: Path, out_dir: Path) -> CaseReport:
     wt = window_tau(data_dir)
     tau = wt["tau_s"]
@@ -199,6 +275,34 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         "damping in the table was corrected the same way by us (sdypy has no window correction).",
         "",
         block,
+    ]
+    # the same automatic fit without the per-FRF weighting
+    uw = fit_ours(frf, band=BAND, frf_weighting="none")
+    w_rows, frf_err = [], {}
+    for label, fit in (("1 / noise level (`frf_weighting=\"rms\"`, default)", ours),
+                       ("none (`frf_weighting=\"none\"`)", uw)):
+        rms_e, med_e = per_frf_errors(frf, fit.result)
+        frf_err[id(fit)] = (rms_e, med_e)
+        fs = np.sort(fit.result.freq_hz)
+        w_rows.append([label, str(fs.size), f"{fit.synth_err_pct:.3g} %", fmt(rms_e, 2), fmt(med_e, 2),
+                       f"{fit.time_s:.3g} s", ", ".join(f"{x:.2f}" for x in fs)])
+    lost = [f for f in np.sort(res.freq_hz)
+            if not any(i is not None and j is not None and res.freq_hz[i] == f
+                       for i, j in match_poles(res.freq_hz, uw.result.freq_hz, 0.01))]
+    md += [
+        "",
+        "FRF weighting: the default fit weights every FRF by 1 / its noise level (estimated from the analyser's "
+        "coherence, `analysis.pipeline.rms_weights`), the unweighted fit minimises the plain "
+        "Frobenius error. \"per-FRF error\" is each FRF's own relative misfit ||H_o - G_o|| / ||H_o||, summarised "
+        "over the 222 FRFs (RMS and median): it counts a weak FRF as much as a strong one, where the Frobenius "
+        "synthesis error is dominated by the few strongest FRFs.",
+        "",
+        md_table(["FRF weighting", "modes", "synthesis error (Frobenius)", "per-FRF error, RMS", "per-FRF error, median",
+                  "time", "natural frequencies [Hz]"], w_rows),
+        "",
+        f"Modes of the weighted fit the unweighted one does not have (within 1 %): "
+        f"{', '.join(f'{x:.2f}' for x in lost) or 'none'} Hz."
+        + (f" Unweighted fit notes: {'; '.join(uw.warnings)}" if uw.warnings else ""),
     ]
     # consistency across the three accelerometers (each fitted alone from the global poles)
     labels, per = [], []
@@ -238,7 +342,7 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         f"{synthesis_error(Bq.H, synthesize(data_model(res), Bq.freq_hz).H):.3g} %.",
     ]
     # is the pole global? one mode at a time, per hammer point
-    rows = []
+    rows, per_point = [], {}
     for i in np.argsort(res.freq_hz):
         f0, z0 = float(res.freq_hz[i]), float(res.damping[i])
         others = np.delete(np.arange(res.freq_hz.size), i)
@@ -249,8 +353,11 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         if pr.shape[0] < 10:
             continue
         q75, q25 = np.percentile(pr[:, 0], [75, 25])
+        per_point[round(f0)] = {"scatter": (q75 - q25) / 1.349, "claimed": float(np.median(pr[:, 2])),
+                                "global": float(res.freq_hz_std[i]), "zeta_median": float(np.median(pr[:, 1]))}
         rows.append([fmt(f0, 6), fmt(100 * z0, 3), str(pr.shape[0]), fmt(np.median(pr[:, 0]), 6),
-                     fmt((q75 - q25) / 1.349, 2), fmt(np.median(pr[:, 2]), 2), fmt(res.freq_hz_std[i], 2)])
+                     fmt(100 * np.median(pr[:, 1]), 3), fmt((q75 - q25) / 1.349, 2), fmt(np.median(pr[:, 2]), 2),
+                     fmt(res.freq_hz_std[i], 2)])
     sub = frf.band(*ours.band)
     err_struct = synthesis_error(sub.H, synthesize(res.model, sub.freq_hz).H)
     md += [
@@ -260,7 +367,7 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         "each single fit claims, and the standard deviation the global fit claims (modes with another lightly damped "
         "mode within 3 Hz are left out):",
         "",
-        md_table(["f global [Hz]", "zeta [%]", "points fitted", "median f [Hz]", "scatter f [Hz]",
+        md_table(["f global [Hz]", "zeta [%]", "points fitted", "median f [Hz]", "median zeta [%]", "scatter f [Hz]",
                   "median per-point std f [Hz]", "global-fit std f [Hz]"], rows),
         "",
         f"Synthesis error of the reported (window-corrected) model against the windowed data: {err_struct:.3g} % "
@@ -282,5 +389,55 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         f"Importer check: `acquisition.importers.read_dataphysics_mat` on `sec_lab_original/DPsv00001.mat` reproduces "
         f"the packed raw block of file 1 to {importer_check(data_dir):.2g} of its peak.",
     ]
+    # the close pairs the misfit step completed: are they in every subset of the data?
+    sets = subsets(frf.band(BAND[0] - 5.0, BAND[1] + 5.0))
+    auto = {name: fit_ours(fr, band=BAND).result for name, fr in sets.items()}
+    added = [w for w in ours.warnings if w.startswith("added a pole")]
+    pair_figs = {}
+    fsorted = np.sort(res.freq_hz)
+    close = [(a, b) for a, b in zip(fsorted[:-1], fsorted[1:]) if b - a < 1.0]
+    md += ["", "Close pairs: the global fit has " + (", ".join(f"{a:.2f} / {b:.2f} Hz" for a, b in close) or "none")
+           + ". The misfit step: " + ("; ".join(added) if added else "added no pole") + ". Is each pair two modes in "
+           "every independent part of the data? Each subset fitted by LSFD in the pair's band from the global poles "
+           "(with and without the lower pole of the pair), and fitted again independently, hint-free, by `fit_auto` "
+           "(its poles in the band in the last column):"]
+    for k, (a, b) in enumerate(close):
+        prow, parr = close_pair_check(sets, res.poles_raw, (a, b), auto=auto)
+        md += ["", md_table(["subset", "lower pole f [Hz] / zeta [%]", "upper pole f [Hz] / zeta [%]",
+                             "abs(R low) / abs(R high)", "residue MAC", "local synthesis error, 1 -> 2 poles [%]",
+                             f"independent automatic fit, poles in {parr['band'][0]:.4g}..{parr['band'][1]:.4g} Hz"], prow)]
+        pair_figs[k] = {"lo": a, "hi": b, "lo_min": float(parr["f_lo"].min()), "lo_max": float(parr["f_lo"].max()),
+                        "hi_min": float(parr["f_hi"].min()), "hi_max": float(parr["f_hi"].max()),
+                        "n_sets": len(sets), "n_two": int(np.sum(parr["n_auto"] >= 2)),
+                        "n_lo_auto": int(sum(np.any(np.abs(auto[nm].freq_hz - a) < 0.15) for nm in sets))}
+    # figures quoted by the discussion
+    peer_f = peer.freq_hz if peer.ok else np.array([])
+    peer_z = peer.damping if peer.ok else np.array([])
+
+    def z_of(target, result):
+        return 100 * _paired(res.freq_hz, np.asarray(result.freq_hz), np.asarray(result.damping), target)
+
+    figs = {
+        "f105": float(res.freq_hz[np.argmin(np.abs(res.freq_hz - 105.2))]),
+        "z105": z_of(105.2, res), "z105_peer": 100 * _paired(res.freq_hz, peer_f, peer_z, 105.2),
+        "z105_accs": ", ".join(f"{z_of(105.2, r):.2g}" for r in per[:3]), "z105_raw": z_of(105.2, per[3]),
+        "z105_points": 100 * per_point.get(105, {}).get("zeta_median", np.nan), "z105_lab1": z_of(105.2, r1.result),
+        "z97": z_of(97.1, res), "z97_peer": 100 * _paired(res.freq_hz, peer_f, peer_z, 97.1),
+        "z97_accs": ", ".join(f"{z_of(97.1, r):.2g}" for r in per[:3]),
+        "pp97_scatter": per_point.get(97, {}).get("scatter", np.nan), "pp105_scatter": per_point.get(105, {}).get("scatter", np.nan),
+        "pp105_claimed": per_point.get(105, {}).get("claimed", np.nan), "pp105_global": per_point.get(105, {}).get("global", np.nan),
+        "tau": tau, "inv_tau": 1 / tau, "zwin19": 100 / (tau * 2 * np.pi * 18.85), "zwin105": 100 / (tau * 2 * np.pi * 105.2),
+        "lab1_err": r1.synth_err_pct, "err_model_vs_raw": err_struct,
+        "w_rms": frf_err[id(ours)][0], "w_med": frf_err[id(ours)][1], "uw_rms": frf_err[id(uw)][0],
+        "uw_med": frf_err[id(uw)][1],
+        "uw_err": uw.synth_err_pct, "uw_modes": int(uw.result.poles.size), "uw_lost": ", ".join(f"{x:.1f}" for x in lost),
+    }
+    for k, d in pair_figs.items():
+        figs.update({f"pair{k + 1}_{n}": v for n, v in d.items()})
+    summary["figures"] = {**summary.get("figures", {}), **figs}
     summary["extra"] = {"tau_s": tau, "consistency": arr}
-    return CaseReport(NAME, "ULiege MECA0062 plane, 74 points x 3 accelerometers", SOURCE, "\n".join(md), summary, plots)
+    s_uw = {"case": NAME + " (unweighted)", "n_frf": summary["n_frf"], "lines": summary["lines"], "band": uw.band,
+            "modes_ours": int(uw.result.poles.size), "modes_peer": None, "err_ours": uw.synth_err_pct, "err_peer": None,
+            "t_ours": uw.time_s, "t_peer": None}
+    return CaseReport(NAME, "ULiege MECA0062 plane, 74 points x 3 accelerometers", SOURCE, "\n".join(md),
+                      [summary, s_uw], plots)
