@@ -56,6 +56,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scatter-std", action="store_true",
                    help="also estimate the pole spread from refits of each reference's FRFs (or output groups); "
                         "costs one LSFD per group, see docs/fitting.md")
+    p.add_argument("--exclude-lines", metavar="F1,F2,...",
+                   help="leave the lines within 2 lines of these frequencies (Hz) out of the LSFD (zero weight)")
+    p.add_argument("--mains", metavar="50|60|none", default="50,60",
+                   help="mains frequencies (Hz, comma separated) whose narrow harmonic lines the misfit step never "
+                        "fits as modes (default 50,60; none: no guard)")
+    p.add_argument("--exclude-mains", metavar="HZ", type=float,
+                   help="leave every harmonic of this mains frequency (Hz) in the band out of the LSFD")
     p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
     p.add_argument("--frf", metavar="OUTPUT",
                    help="output point shown in the terminal table (default: the strongest FRF)")
@@ -113,6 +120,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             if v is not None and v < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be >= 1; got {v}")
         freqs = parse_float_list(args.poles) if args.poles else None
+        exclude = parse_float_list(args.exclude_lines) if args.exclude_lines else []
+        mains = () if str(args.mains).strip().lower() == "none" else tuple(parse_float_list(args.mains))
+        if any(m <= 0 for m in mains) or (args.exclude_mains is not None and not args.exclude_mains > 0):
+            raise InputError("mains frequencies must be > 0 Hz (or --mains none)")
         for path, what in ((args.json, "JSON"), (args.plot, "plot"), (args.uff, "UFF file")):
             _check_out(path, what)
         frf = load_input(args.input, estimator=args.estimator)
@@ -135,6 +146,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from .pipeline import fit_auto
     from .report import format_table, result_to_dict, write_json
 
+    if args.exclude_mains is not None:
+        from .pipeline import mains_harmonics
+
+        exclude = list(exclude) + mains_harmonics(args.exclude_mains, band or (frf.freq_hz[0], frf.freq_hz[-1]))
     caught: list[str] = []
     try:
         with warnings.catch_warnings(record=True) as wlist:
@@ -143,6 +158,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 frf, band=band, max_modes=args.order, n_modes=args.modes, method=args.method,
                 residual_form=args.residuals, initial=freqs if freqs is not None else args.initial,
                 per_frf=args.per_frf, max_iter=args.max_iter, frf_weighting=args.frf_weights,
+                mains_hz=mains, exclude_hz=exclude or None,
             )
         caught = [str(w.message) for w in wlist]
     except ValueError as exc:

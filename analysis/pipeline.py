@@ -50,9 +50,15 @@ This is the paper's Fig. 1 flow with the choices made automatically:
    least ``MISSING_MIN_GAIN``, step 6 finds nothing wrong with the new poles, and the new
    pole is a mode of its own: not a broad pole under a much sharper one (within the larger
    half-bandwidth, bandwidths more than ``MISSING_BANDWIDTH_RATIO`` apart: that absorbs the
-   misfit of a sharp peak, e.g. leakage; two genuine close modes have similar damping), and
-   not closer to a neighbour than ``MISSING_MIN_LINES`` lines or a quarter of the smaller
-   bandwidth (the data cannot separate them). Repeated until no candidate is left (at most
+   misfit of a sharp peak, e.g. leakage; two genuine close modes have similar damping). A new
+   pole closer to a neighbour than ``MISSING_MIN_LINES`` lines or a quarter of the smaller
+   bandwidth, or a duplicate of it (step 6), is kept only on clear evidence: at least a line
+   apart, the local cost over the pair's lines falls by ``MISSING_LOCAL_GAIN`` and both keep
+   distinct residues (:func:`_pair_is_resolved`). A candidate on a mains harmonic (``mains_hz``)
+   much narrower than a mode at the median damping is not tried (reported in the warnings,
+   :func:`_mains_line`). The step also runs with the user's frequencies/poles (they are kept,
+   poles are only added). Lines given in ``exclude_hz`` are left out of the LSFD and of this
+   misfit (:func:`exclude_lines`). Repeated until no candidate is left (at most
    ``MAX_ADDED`` poles, and at most ``MAX_FAILED_TRIES`` rejected candidates in a row: each
    try is a full LSFD, capped at ``MISSING_TRIAL_ITER`` iterations). ``G`` is synthesised from the
    raw poles (window damping included), as the data were measured.
@@ -69,12 +75,14 @@ from scipy.signal import find_peaks
 
 from .frf import FRFSet
 from .lscf import parse_band
-from .fit_checks import MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles, migrated_poles
+from .fit_checks import (DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles,
+                         migrated_poles)
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz, residual_basis
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 
-__all__ = ["fit_auto", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights"]
+__all__ = ["fit_auto", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
+           "exclude_lines", "mains_harmonics"]
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +99,14 @@ MISSING_BANDWIDTH_RATIO = 4.0
 MAX_FAILED_TRIES = 2
 MISSING_MIN_LINES = 3
 MISSING_TRIAL_ITER = 40
+MISSING_LOCAL_GAIN = 0.3
+MISSING_MIN_RESIDUE_RATIO = 0.05
+MISSING_CANCEL_RATIO = 0.2
+MAINS_HZ = (50.0, 60.0)
+MAINS_LINES = 2.0
+MAINS_DEVIATION_HZ = 0.1
+MAINS_WIDTH_FRACTION = 0.5
+EXCLUDE_LINES = 2.0
 
 
 class FitError(ValueError):
@@ -177,6 +193,8 @@ def fit_auto(
     selection_options: Optional[dict] = None,
     add_missing: bool = True,
     frf_weighting: str = "rms",
+    mains_hz: Optional[Sequence[float]] = MAINS_HZ,
+    exclude_hz: Optional[Sequence[float]] = None,
 ):
     """Automatic modal fit of an FRF set; returns ``(LSFDResult, StabilizationResult)``.
 
@@ -198,8 +216,15 @@ def fit_auto(
         the band (from the coherence, else its RMS; :func:`rms_weights`, step 5); "none":
         unweighted (the paper's S).
     add_missing : after the fit, look for resonances the model misses (step 7 of the module
-        docstring) and add poles for them; not done when ``n_modes`` or frequencies are given
-        (the user chose the model size).
+        docstring) and add poles for them. Also done with the user's frequencies or poles: their
+        poles are kept and poles are only added (``add_missing=False``: the user's model as
+        given); not done when ``n_modes`` is given (the user chose the model size).
+    mains_hz : mains frequencies (Hz) of the guard of step 7: a misfit peak on a harmonic of one
+        of them that is much narrower than a mode is not fitted as a mode (reported in the
+        warnings). None or () disables the guard.
+    exclude_hz : frequencies (Hz) whose lines (within ``EXCLUDE_LINES`` lines) are left out of
+        the LSFD and of the misfit of step 7 altogether (zero weight), e.g. mains harmonics;
+        see :func:`mains_harmonics`. The stabilization still sees all lines.
 
     Returns
     -------
@@ -214,6 +239,9 @@ def fit_auto(
     weighting = str(frf_weighting).lower()
     if weighting not in ("rms", "none"):
         raise ValueError(f"frf_weighting must be 'rms' or 'none'; got {frf_weighting!r}")
+    mains = tuple(float(m) for m in (mains_hz or ()))
+    if any(not np.isfinite(m) or m <= 0 for m in mains):
+        raise ValueError(f"mains_hz must hold positive frequencies in Hz (or be None); got {mains_hz!r}")
     user_band = band is not None
     if user_band:
         lo, hi = parse_band(band, frf.freq_hz)
@@ -266,15 +294,22 @@ def fit_auto(
     sel = (frf.freq_hz >= lo2) & (frf.freq_hz <= hi2)
     lo2, hi2 = float(frf.freq_hz[sel][0]), float(frf.freq_hz[sel][-1])
     selected = np.asarray(poles)
+    fit_frf = frf
+    if exclude_hz is not None and len(exclude_hz):
+        fit_frf, n_out_lines = exclude_lines(frf, exclude_hz)
+        warnings_out.append(f"{n_out_lines} line(s) around {', '.join(f'{x:.6g}' for x in sorted(exclude_hz))} Hz "
+                            "left out of the fit (zero weight)")
+        log.info(warnings_out[-1])
     fit_kw = dict(method=method, band=(lo2, hi2), residual_form=residual_form, per_frf=per_frf, max_iter=max_iter,
-                  weights=rms_weights(frf, (lo2, hi2)) if weighting == "rms" else None)
+                  weights=rms_weights(fit_frf, (lo2, hi2)) if weighting == "rms" else None)
     if given_complex is not None:
-        result = fit_lsfd(frf, poles, **fit_kw)
+        result = fit_lsfd(fit_frf, poles, **fit_kw)
     else:
-        result = _fit_bounded(frf, poles, fit_kw)
-        result = _drop_bad_poles(frf, result, fit_kw, warnings_out)
-        if add_missing and n_modes is None and given_freqs is None:
-            result = _add_missing_modes(frf, result, fit_kw, warnings_out)
+        result = _fit_bounded(fit_frf, poles, fit_kw)
+        result = _drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
+    if add_missing and n_modes is None:
+        # the user's poles/frequencies are kept: step 7 only adds (it never drops a pole)
+        result = _add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=_line_spacing(frf))
     if not result.success:
         warnings_out.append(f"LSFD did not converge: {result.message}")
         log.warning("LSFD did not converge: %s", result.message)
@@ -282,6 +317,37 @@ def fit_auto(
     if stab is not None:
         stab = replace(stab, meta={**stab.meta, **info})
     return result, stab
+
+
+def mains_harmonics(mains_hz: float, band: Sequence[float]) -> list[float]:
+    """Multiples ``k * mains_hz`` (Hz, k >= 1) inside ``band`` = (lo, hi) Hz."""
+    m = float(mains_hz)
+    if not np.isfinite(m) or m <= 0:
+        raise ValueError(f"the mains frequency must be > 0 Hz; got {mains_hz!r}")
+    lo, hi = float(band[0]), float(band[1])
+    k0 = max(1, int(np.ceil(lo / m)))
+    return [k * m for k in range(k0, int(np.floor(hi / m)) + 1)]
+
+
+def exclude_lines(frf: FRFSet, freqs_hz: Sequence[float], n_lines: float = EXCLUDE_LINES) -> tuple[FRFSet, int]:
+    """The FRFs without the lines within ``n_lines`` line spacings of any of ``freqs_hz`` (Hz),
+    and how many lines were left out. Dropping a line is the same as weighting it zero in the
+    least-squares cost (``sum_k |w_k e_k|^2``); it also keeps the per-FRF weights usable."""
+    x = np.asarray(freqs_hz, dtype=float).ravel()
+    if x.size and not np.all(np.isfinite(x)):
+        raise ValueError(f"frequencies to exclude must be finite (Hz); got {list(freqs_hz)!r}")
+    f = frf.freq_hz
+    tol = (n_lines + 1e-6) * _line_spacing(frf)
+    drop = np.zeros(f.size, dtype=bool)
+    for v in x:
+        drop |= np.abs(f - v) <= tol
+    if not np.any(drop):
+        return frf, 0
+    keep = ~drop
+    if int(keep.sum()) < 16:
+        raise FitError(f"excluding the lines around {list(x)} Hz leaves only {int(keep.sum())} lines; exclude fewer")
+    coh = None if frf.coherence is None else np.asarray(frf.coherence)[..., keep]
+    return replace(frf, freq_hz=f[keep], H=frf.H[..., keep], coherence=coh), int(drop.sum())
 
 
 def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
@@ -331,8 +397,9 @@ def _fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict):
     return fit_lsfd(frf, start, freq_window_hz=_trust_window_hz(start, _line_spacing(frf)), **fit_kw)
 
 
-def _bad_poles(result, start: np.ndarray, df: float) -> tuple[np.ndarray, list[str]]:
-    """Mask of fitted poles to drop (step 6) and the reasons."""
+def _bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
+    """Mask of fitted poles to drop (step 6) and the reasons (``duplicates=False``: without the
+    duplicate check; step 7 judges its new pole's neighbours itself)."""
     lo, hi = result.band
     fd = result.poles_raw.imag / (2 * np.pi)
     z = result.damping
@@ -341,6 +408,8 @@ def _bad_poles(result, start: np.ndarray, df: float) -> tuple[np.ndarray, list[s
     migrated = (migrated_poles(start, result.poles_raw, df) | on_bound) & ~out_of_range
     moved = np.abs(natural_freq_hz(result.poles_raw) - natural_freq_hz(start)) / bandwidth_hz(start, df)
     dup = duplicate_poles(result.poles_raw, result.model.residues, df, moved=moved) & ~out_of_range & ~migrated
+    if not duplicates:
+        dup = np.zeros_like(dup)
     why = []
     edge = f"pulled to its trust-region edge ({MIGRATE_BANDWIDTHS:g} half-power bandwidths from its start)"
     for mask, text in ((out_of_range, "moved out of the band or to unphysical damping"),
@@ -414,26 +483,98 @@ def _missing_candidates(f: np.ndarray, e: np.ndarray, d: np.ndarray) -> np.ndarr
     return f[pk[np.argsort(-e[pk])]]
 
 
-def _not_a_new_mode(poles_raw: np.ndarray, df: float) -> bool:
-    """Whether the last (added) pole is no mode of its own: a broad pole under a much sharper
-    neighbour (within the larger half-bandwidth, bandwidths more than
-    ``MISSING_BANDWIDTH_RATIO`` apart), which absorbs the misfit of the sharp peak (leakage, a
-    slightly non-modal peak shape), or a pole the data cannot separate from a neighbour
-    (closer than ``MISSING_MIN_LINES`` lines or a quarter of the smaller bandwidth)."""
+def _new_pole_relation(poles_raw: np.ndarray, residues: np.ndarray, df: float) -> tuple[bool, np.ndarray]:
+    """How the last (added) pole relates to the others: ``(broad, close)``.
+
+    broad : a broad pole under a much sharper neighbour (within the larger half-bandwidth,
+        bandwidths more than ``MISSING_BANDWIDTH_RATIO`` apart): it absorbs the misfit of the
+        sharp peak (leakage, a slightly non-modal peak shape), not a mode.
+    close : indices of the neighbours it is hard to tell from: closer than ``MISSING_MIN_LINES``
+        lines or a quarter of the smaller bandwidth, or a duplicate in the sense of
+        :func:`analysis.fit_checks.duplicate_poles` (within half the larger bandwidth, residue
+        MAC > ``DUPLICATE_MAC``). Such a pole is kept only on clear evidence
+        (:func:`_pair_is_resolved`).
+    """
     b = bandwidth_hz(poles_raw, df)
     f = natural_freq_hz(poles_raw)
     gap = np.abs(f[:-1] - f[-1])
     near = gap < 0.5 * np.maximum(b[:-1], b[-1])
     ratio = np.maximum(b[:-1], b[-1]) / np.minimum(b[:-1], b[-1])
+    broad = bool(np.any(near & (ratio > MISSING_BANDWIDTH_RATIO)))
     unresolved = gap < np.maximum(MISSING_MIN_LINES * df, 0.25 * np.minimum(b[:-1], b[-1]))
-    return bool(np.any(near & (ratio > MISSING_BANDWIDTH_RATIO)) or np.any(unresolved))
+    R = np.asarray(residues, dtype=complex).reshape(-1, f.size)
+    same_shape = np.array([_mac(R[:, k], R[:, -1]) > DUPLICATE_MAC for k in range(f.size - 1)], dtype=bool)
+    dup = (gap < DUPLICATE_BANDWIDTHS * 0.5 * np.maximum(b[:-1], b[-1])) & same_shape
+    return broad, np.flatnonzero(unresolved | dup)
 
 
-def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
+def _mac(a: np.ndarray, b: np.ndarray) -> float:
+    den = float(np.vdot(a, a).real * np.vdot(b, b).real)
+    return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
+
+
+def _pair_is_resolved(trial, k: int, f: np.ndarray, e_old: np.ndarray, e_new: np.ndarray, df: float) -> tuple[bool, str]:
+    """Whether the added (last) pole and its close neighbour ``k`` are two modes (step 7).
+
+    The data must say so: the pair is at least a line apart; over the pair's lines (the two
+    frequencies +- the larger half-power bandwidth, at least ``MISSING_MIN_LINES`` lines) the
+    scaled misfit ``sum e^2`` fell by at least ``MISSING_LOCAL_GAIN`` (the total gain of
+    ``MISSING_MIN_GAIN`` is checked by the caller); and both poles keep distinct residues:
+    neither is negligible (the smaller residue norm >= ``MISSING_MIN_RESIDUE_RATIO`` of the
+    larger) and they do not cancel (``|R_a + R_b| >= MISSING_CANCEL_RATIO (|R_a| + |R_b|)``,
+    two large opposite residues fitting a noise wiggle). Returns (verdict, reason)."""
+    p = trial.poles_raw
+    fa, fb = natural_freq_hz(p[k]), natural_freq_hz(p[-1])
+    if abs(fa - fb) < df:
+        return False, f"closer than a line to {fa:.5g} Hz"
+    b = float(np.max(bandwidth_hz(p[[k, -1]], df)))
+    half = max(b, MISSING_MIN_LINES * df)
+    loc = (f >= min(fa, fb) - half) & (f <= max(fa, fb) + half)
+    c_old, c_new = float(np.sum(e_old[loc] ** 2)), float(np.sum(e_new[loc] ** 2))
+    if not c_new <= (1.0 - MISSING_LOCAL_GAIN) * c_old:
+        return False, f"next to {fa:.5g} Hz, local cost {c_old:.3g} -> {c_new:.3g} (less than {100 * MISSING_LOCAL_GAIN:g} % gain)"
+    R = np.asarray(trial.model_raw.residues, dtype=complex).reshape(-1, p.size)
+    ra, rb = R[:, k], R[:, -1]
+    na, nb = float(np.linalg.norm(ra)), float(np.linalg.norm(rb))
+    if min(na, nb) < MISSING_MIN_RESIDUE_RATIO * max(na, nb):
+        return False, f"next to {fa:.5g} Hz, one residue of the pair is negligible"
+    if float(np.linalg.norm(ra + rb)) < MISSING_CANCEL_RATIO * (na + nb):
+        return False, f"next to {fa:.5g} Hz, the pair's residues cancel"
+    return True, f"a close pair with {fa:.5g} Hz (local cost {c_old:.3g} -> {c_new:.3g})"
+
+
+def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, mains: Sequence[float]) -> Optional[str]:
+    """Why the misfit peak at ``c`` Hz is a mains line (step 7), or None.
+
+    On a harmonic ``k m`` of a mains frequency ``m`` (within ``MAINS_LINES`` lines or the grid's
+    frequency deviation ``k MAINS_DEVIATION_HZ``) *and* narrower than a mode would be: its
+    half-power width (of ``e^2``) is below ``MAINS_WIDTH_FRACTION`` of ``2 zeta c`` with zeta the
+    median damping of the fitted poles, and at most ``MAINS_LINES`` lines wider than one line.
+    A structural mode at that damping has a measurable half-power bandwidth; an electrical line
+    is one or two lines wide."""
+    from scipy.signal import peak_widths
+
+    for m in mains:
+        k = int(round(c / m))
+        if k < 1 or abs(c - k * m) > max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ):
+            continue
+        i = int(np.argmin(np.abs(f - c)))
+        width = float(peak_widths(e ** 2, [i], rel_height=0.5)[0][0]) * df
+        mode = 2.0 * z0 * c
+        if width < MAINS_WIDTH_FRACTION * mode and width <= (1.0 + MAINS_LINES) * df:
+            return (f"the misfit peak at {c:.6g} Hz lies on the mains line {k} x {m:g} Hz and is {width:.3g} Hz wide "
+                    f"(a mode at {100 * z0:.3g} % damping would be {mode:.3g} Hz wide): not fitted as a mode (leave "
+                    "such lines out with --exclude-lines/--exclude-mains, fit_auto(exclude_hz=...))")
+    return None
+
+
+def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str],
+                       mains: Sequence[float] = MAINS_HZ, df: Optional[float] = None):
     """Step 7: add poles at the resonances the model misses (see module docstring). A trial fit
-    that does not converge is a rejected candidate (its convergence warning is not passed on)."""
+    that does not converge is a rejected candidate (its convergence warning is not passed on).
+    The poles of ``result`` are kept; poles are only added."""
     from .lsfd import LSFDConvergenceWarning
-    df = _line_spacing(frf)
+    df = _line_spacing(frf) if df is None else float(df)
     tried: list[float] = []
     added = 0
     f, e, d = _scaled_misfit(frf, result)
@@ -446,6 +587,11 @@ def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str
         c = float(cands[0])
         tried.append(c)
         z0 = float(np.median(damping_ratio(result.poles_raw)))
+        mains_why = _mains_line(c, f, e, df, z0, mains)
+        if mains_why is not None:
+            log.info(mains_why)
+            warnings_out.append(mains_why)
+            continue
         new = pole_from_fz(c, z0)
         start = np.concatenate([result.poles_raw, [new]])
         try:
@@ -460,17 +606,41 @@ def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str
             log.info("adding a pole at %.6g Hz: the LSFD did not converge; not added", c)
             failures += 1
             continue
-        bad, _ = _bad_poles(trial, start, df)
-        bad[-1] |= _not_a_new_mode(trial.poles_raw, df)
+        bad, _ = _bad_poles(trial, start, df, duplicates=False)
+        broad, close = _new_pole_relation(trial.poles_raw, trial.model_raw.residues, df)
         f2, e2, d2 = _scaled_misfit(frf, trial)
         cost2 = float(np.sum(e2 ** 2))
-        if np.any(bad) or cost2 > (1.0 - MISSING_MIN_GAIN) * cost:
-            log.info("pole at %.6g Hz not added (cost %.4g -> %.4g, rejected poles: %d)", c, cost, cost2,
-                     int(np.sum(bad)))
+        why = ""
+        if broad:
+            why = "a broad pole under a sharper one"
+        elif np.any(bad):
+            why = f"{int(np.sum(bad))} pole(s) fail the checks"
+        elif cost2 > (1.0 - MISSING_MIN_GAIN) * cost:
+            why = f"cost {cost:.4g} -> {cost2:.4g}"
+        else:
+            for k in close:
+                ok, text = _pair_is_resolved(trial, int(k), f, e, e2, df)
+                if not ok:
+                    why = text
+                    break
+        if why:
+            log.info("pole at %.6g Hz not added: %s", c, why)
             failures += 1
             continue
-        msg = (f"added a pole at {trial.freq_hz[-1]:.5g} Hz/{100 * trial.damping[-1]:.3g} % for a resonance the "
+        f_new = trial.freq_hz[-1]
+        on_line = any(k >= 1 and abs(f_new - k * m) <= max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ)
+                      for m in mains for k in [int(round(f_new / m))])
+        if on_line and 2.0 * trial.damping[-1] * f_new < MAINS_WIDTH_FRACTION * 2.0 * z0 * f_new:
+            msg = (f"a pole tried at {f_new:.6g} Hz ({100 * trial.damping[-1]:.3g} %) sits on a mains line and is much "
+                   f"sharper than the modes ({100 * z0:.3g} %): not added")
+            log.info(msg)
+            warnings_out.append(msg)
+            failures += 1
+            continue
+        msg = (f"added a pole at {f_new:.5g} Hz/{100 * trial.damping[-1]:.3g} % for a resonance the "
                f"model missed (scaled misfit peak at {c:.5g} Hz; cost {cost:.4g} -> {cost2:.4g})")
+        if len(close):
+            msg += "; " + _pair_is_resolved(trial, int(close[0]), f, e, e2, df)[1]
         log.info(msg)
         warnings_out.append(msg)
         result, f, e, d, cost = trial, f2, e2, d2, cost2

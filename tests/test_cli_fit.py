@@ -224,3 +224,16 @@ def test_fit_frf_weights_option(uff_file, tmp_path, capsys):
     # weighted and unweighted are different problems: S differs (the weights are 1/RMS scaled to max 1)
     assert docs["rms"]["sse"] != pytest.approx(docs["none"]["sse"], rel=1e-3)
     assert cli_fit.main([str(uff_file), "--json", str(tmp_path / "x.json"), "--frf-weights", "snr"]) == 2
+
+
+def test_fit_exclude_lines_and_mains_options(uff_file, tmp_path, capsys):
+    out = tmp_path / "x.json"
+    rc = cli_fit.main([str(uff_file), "--json", str(out), "--exclude-lines", "50", "--exclude-mains", "60",
+                       "--mains", "none"])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert "left out of the fit" in err
+    doc = json.loads(out.read_text())
+    assert len(doc["poles"]) >= 1
+    rc = cli_fit.main([str(uff_file), "--json", str(out), "--mains", "-5"])
+    assert rc == 2 and "-5" in capsys.readouterr().err

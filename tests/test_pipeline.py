@@ -154,3 +154,59 @@ def test_real_uff_three_frfs(shared_data):
     G = synthesize(res.model, frf.freq_hz[sel]).H
     rel = np.abs(frf.H[..., sel] - G) / np.abs(frf.H[..., sel])
     assert np.all(20 * np.log10(np.median(rel, axis=-1)) < -20)
+
+
+def _mains_frf(n_out=3, seed=1):
+    """Modes at 1 % damping plus a narrow electrical line at 300 Hz (5 x 60 Hz) on every FRF."""
+    frf, poles = make_frf(np.array([120.0, 210.0, 380.0]), np.array([0.01, 0.01, 0.01]), n_out=n_out, seed=seed,
+                          noise=0.002)
+    f = frf.freq_hz
+    df = f[1] - f[0]
+    line = np.exp(-0.5 * ((f - 300.0) / (0.4 * df)) ** 2)  # one line wide
+    H = frf.H + 0.5 * np.max(np.abs(frf.H)) * line * np.exp(1j * np.arange(n_out))[:, None, None]
+    return replace(frf, H=H), poles
+
+
+def test_misfit_step_does_not_fit_a_mains_line_as_a_mode():
+    frf, truth = _mains_frf()
+    res, st = fit_auto(frf)
+    assert not np.any(np.abs(res.freq_hz - 300.0) < 2.0), res.freq_hz
+    np.testing.assert_allclose(np.sort(res.freq_hz), natural_freq_hz(truth), rtol=1e-3)
+    assert any("mains line" in w and "300 Hz" in w for w in st.meta["warnings"]), st.meta["warnings"]
+    # the guard off: the line is fitted as a (very sharp) pole
+    res_off, _ = fit_auto(frf, mains_hz=None)
+    assert np.any(np.abs(res_off.freq_hz - 300.0) < 1.0)
+    # or leave the line out of the fit altogether: the modes fit better
+    res_x, st_x = fit_auto(frf, exclude_hz=[300.0])
+    assert res_x.poles.size == 3 and any("left out of the fit" in w for w in st_x.meta["warnings"])
+    np.testing.assert_allclose(np.sort(res_x.freq_hz), natural_freq_hz(truth), rtol=1e-4)
+
+
+def test_misfit_step_runs_with_given_frequencies_and_keeps_them():
+    frf, truth = make_frf(n_out=4)
+    given = np.delete(F_TRUE, 2)  # the close neighbour 78 Hz of 75 Hz is not given
+    res, st = fit_auto(frf, initial=given)
+    assert res.poles.size == F_TRUE.size
+    np.testing.assert_allclose(np.sort(res.freq_hz), F_TRUE, rtol=1e-6)
+    assert any("added a pole at 78" in w for w in st.meta["warnings"])
+    res_old, _ = fit_auto(frf, initial=given, add_missing=False)  # the old behaviour: the user's model as given
+    assert res_old.poles.size == given.size
+    res_c, _ = fit_auto(frf, initial=np.delete(truth, 2) * (1 + 1e-4))  # complex poles too
+    np.testing.assert_allclose(np.sort(res_c.freq_hz), F_TRUE, rtol=1e-6)
+
+
+def test_fit_auto_finds_two_modes_two_lines_apart():
+    """One FRF (every residue MAC is 1), 230 / 230.5 Hz at 0.08 %: 2 lines apart, half-power
+    bandwidths ~0.37 Hz (1.5 lines). The stabilization sees one pole; the misfit step adds the
+    other because it clearly lowers the local cost and both keep distinct residues (before:
+    rejected as closer than 3 lines)."""
+    df = 0.25
+    f2 = 230.0 + 2 * df
+    frf, truth = make_frf(np.array([120.0, 230.0, f2, 380.0]), np.array([0.002, 0.0008, 0.0008, 0.002]),
+                          n_out=1, n_f=2000, fmax=500.0, noise=0.002, seed=3)
+    assert frf.freq_hz[1] - frf.freq_hz[0] == pytest.approx(df)
+    res, st = fit_auto(frf)
+    fr = np.sort(res.freq_hz)
+    assert res.poles.size == 4, (fr, st.meta["warnings"])
+    np.testing.assert_allclose(fr, natural_freq_hz(truth), atol=0.02)
+    assert any("close pair" in w for w in st.meta["warnings"])

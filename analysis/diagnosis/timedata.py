@@ -2,9 +2,11 @@
 ``amplitude_nonlinearity``.
 
 Pure functions over arrays: ``force[n_hits, n]`` (N), ``responses[n_hits, n_out, n]`` (EU), sample rate
-``fs_hz``. Each returns a cause dict ``{"effect", "parameters", "present", "evidence"}``; these causes
-are detected and measured from the hits themselves (no frequency-line cross-validation: their evidence
-is a count or a shift against its own scatter, stated in each function).
+``fs_hz``. The ``detect_*`` functions return a cause dict ``{"effect", "parameters", "present",
+"evidence"}`` measured from the hits themselves (a count, or a shift against its own scatter).
+:func:`diagnose_time_effects` adds, for each effect, the error of the linear simulation before and after
+re-simulating the effect (nonlinearity, input noise) or excluding the affected hits (overload, double
+hit), and the gain on held-out frequency lines, as the FRF effects (``docs/diagnosis.md``).
 
 Definitions
 -----------
@@ -41,6 +43,8 @@ __all__ = ["pulse_bounds", "detect_double_hit", "detect_overload", "detect_input
 PULSE_LEVEL = 0.1
 NOISE_GUARD = 32
 DOUBLE_HIT_MAX_DELAY_S = 0.05
+FORCE_WINDOW_S = 0.0015       # force window after the pulse start used to judge double hits (s)
+FORCE_TAPER_S = 0.0005        # its cosine taper (s)
 
 
 def pulse_bounds(force: np.ndarray, level: float = PULSE_LEVEL) -> tuple[int, int, int]:
@@ -536,9 +540,6 @@ def diagnose_time_effects(
     return {"verdict": verdict, "causes": causes, "error_before_db": before, "error_after_db": after,
             "tau_s": spec.tau_s, "n_hits": n_hits, "band_hz": [float(band[0]), float(band[1])]}
 
-
-FORCE_WINDOW_S = 0.0015
-FORCE_TAPER_S = 0.0005
 
 
 def _exclusion(H_all: np.ndarray, spec: HitSpectraSet, bad: np.ndarray, sim: np.ndarray, w: np.ndarray) -> dict:
