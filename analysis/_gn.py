@@ -96,6 +96,26 @@ PRED_FLOOR = 1e-13
 SWITCH_TO_PRECISE = 1e-6
 
 
+def start_iteration(problem: ProjectedProblem, theta0: np.ndarray):
+    """The common start of GN and LM: copy ``theta0``, evaluate once (fast where allowed).
+
+    Returns ``(theta, fast, ev, history, floor, early)``; ``early`` is an :class:`NLSOutcome`
+    when the start already decides the result (rank-deficient basis, fit at round-off level).
+    """
+    theta = np.array(theta0, dtype=float)
+    fast = problem.fast_ok
+    ev = problem.evaluate(theta, fast=fast)
+    history = [ev.S]
+    floor = roundoff_floor(problem)
+    early = None
+    if not ev.rank_ok:
+        early = NLSOutcome(theta, ev, history, 0, 1, Status.COLLAPSED,
+                           f"initial poles give a rank-deficient basis (rcond {ev.rcond:.2g})")
+    elif ev.S <= floor:
+        early = NLSOutcome(theta, ev, history, 0, 1, Status.ROUNDOFF, "initial fit already at round-off level")
+    return theta, fast, ev, history, floor, early
+
+
 def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
            bounds: Optional[tuple] = None) -> NLSOutcome:
     """Gauss-Newton from ``theta0`` (see the module docstring); never raises on non-convergence.
@@ -106,17 +126,10 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
     """
-    theta = np.array(theta0, dtype=float)
-    fast = problem.fast_ok
-    ev = problem.evaluate(theta, fast=fast)
+    theta, fast, ev, history, floor, early = start_iteration(problem, theta0)
     nfev = 1
-    history = [ev.S]
-    floor = roundoff_floor(problem)
-    if not ev.rank_ok:
-        return NLSOutcome(theta, ev, history, 0, nfev, Status.COLLAPSED,
-                          f"initial poles give a rank-deficient basis (rcond {ev.rcond:.2g})")
-    if ev.S <= floor:
-        return NLSOutcome(theta, ev, history, 0, nfev, Status.ROUNDOFF, "initial fit already at round-off level")
+    if early is not None:
+        return early
     verdict = None
     for it in range(1, max_iter + 1):
         if verdict is not None and fast:

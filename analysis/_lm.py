@@ -33,7 +33,7 @@ from typing import Optional
 import numpy as np
 
 from ._gn import (PRED_FLOOR, SWITCH_TO_PRECISE, check_poles, freeze_active, project_to_bounds, relative_step,
-                  roundoff_floor)
+                  start_iteration)
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
 
 __all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
@@ -53,17 +53,10 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
     """
-    theta = np.array(theta0, dtype=float)
-    fast = problem.fast_ok
-    ev = problem.evaluate(theta, fast=fast)
+    theta, fast, ev, history, floor, early = start_iteration(problem, theta0)
     nfev = 1
-    history = [ev.S]
-    floor = roundoff_floor(problem)
-    if not ev.rank_ok:
-        return NLSOutcome(theta, ev, history, 0, nfev, Status.COLLAPSED,
-                          f"initial poles give a rank-deficient basis (rcond {ev.rcond:.2g})")
-    if ev.S <= floor:
-        return NLSOutcome(theta, ev, history, 0, nfev, Status.ROUNDOFF, "initial fit already at round-off level")
+    if early is not None:
+        return early
     mu = MU0_DEFAULT if mu0 is None else float(mu0)
     mu = min(max(mu, MU_MIN), MU_MAX)
     nu = 2.0

@@ -22,13 +22,7 @@ __all__ = ["main", "build_parser", "load_simulation"]
 log = logging.getLogger(__name__)
 
 
-class _UsageError(Exception):
-    pass
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:
-        raise _UsageError(f"{self.prog}: {message}")
+from ._cli_dispatch import Parser as _Parser, parse_args
 
 
 def _json_default(x):
@@ -161,13 +155,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from .diagnosis.compare import common_points
 
     parser = build_parser()
-    try:
-        args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
-    except _UsageError as exc:
-        print(f"{exc}\n(see --help)", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
+    args = parse_args(parser, argv)
+    if isinstance(args, int):
+        return args
     try:
         out_dir = Path(args.json).resolve().parent
         if not out_dir.is_dir():

@@ -19,13 +19,7 @@ import numpy as np
 __all__ = ["main", "build_parser"]
 
 
-class _UsageError(Exception):
-    pass
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # argparse would sys.exit(2); main() reports instead
-        raise _UsageError(f"{self.prog}: {message}")
+from ._cli_dispatch import Parser as _Parser, UsageError as _UsageError, parse_args
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -106,13 +100,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from .inputs import InputError, load_input, parse_band_text, parse_float_list
 
     parser = build_parser()
-    try:
-        args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
-    except _UsageError as exc:
-        print(f"{exc}\n(see --help)", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
+    args = parse_args(parser, argv)
+    if isinstance(args, int):
+        return args
     try:
         band = parse_band_text(args.band)
         for name in ("modes", "order", "max_iter"):

@@ -16,13 +16,7 @@ import numpy as np
 __all__ = ["main", "build_parser"]
 
 
-class _UsageError(Exception):
-    pass
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:
-        raise _UsageError(f"{self.prog}: {message}")
+from ._cli_dispatch import Parser as _Parser, parse_args
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,13 +37,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .inputs import InputError, load_input, parse_band_text
 
-    try:
-        args = build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
-    except _UsageError as exc:
-        print(f"{exc}\n(see --help)", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
+    args = parse_args(build_parser(), argv)
+    if isinstance(args, int):
+        return args
     try:
         band = parse_band_text(args.band)
         if args.max_order is not None and args.max_order < 1:

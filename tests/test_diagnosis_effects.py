@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from analysis.diagnosis import EFFECTS, EffectError, predict
+from analysis.diagnosis.effects import WINDOW_DECAY_KEY
 from analysis.modal import ModalModel, natural_freq_hz, damping_ratio, pole_from_fz
 
 F = np.linspace(1.0, 100.0, 400)
@@ -46,8 +47,15 @@ def test_damping_and_window_change_decay_as_stated():
     np.testing.assert_allclose(damping_ratio(d.poles), 2 * m.damping, rtol=1e-12)
     np.testing.assert_allclose(natural_freq_hz(d.poles), m.freq_hz, rtol=1e-12)
     w = EFFECTS["exponential_window"].apply(m, {"tau_s": 0.5})
-    np.testing.assert_allclose(w.poles.real, m.poles.real - 2.0, rtol=1e-12)
-    np.testing.assert_allclose(w.poles.imag, m.poles.imag, rtol=1e-12)
+    assert w.meta[WINDOW_DECAY_KEY] == 2.0 and WINDOW_DECAY_KEY not in m.meta    # input untouched
+    w2 = EFFECTS["exponential_window"].apply(w, {"tau_s": 0.25})                 # windows compound
+    assert w2.meta[WINDOW_DECAY_KEY] == 6.0
+    # in its own form, the window moves every pole by -1/tau with the same residues
+    shifted = ModalModel(poles=m.poles - 2.0, residues=m.residues, quantity="receptance", residual_form="none")
+    np.testing.assert_allclose(predict(m, F, "receptance", [{"effect": "exponential_window", "tau_s": 0.5}]).H,
+                               predict(shifted, F, "receptance").H, rtol=1e-12)
+    with pytest.raises(EffectError, match="tau_s"):
+        EFFECTS["exponential_window"].apply(m, {"tau_s": -1.0})
 
 
 def test_mass_loading_rayleigh_shift():
@@ -116,3 +124,53 @@ def test_stiffness_shift_warps_a_fixed_frf_term_exactly():
     got = predict(empty, F, "accelerance", [{"effect": "stiffness_shift", "factor": a}]).H
     want = predict(m, F, "accelerance", [{"effect": "stiffness_shift", "factor": a}]).H
     np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-3 * np.abs(want).max())
+
+
+def _two_modes():
+    """A physical 2-mode receptance model (13 and 41 Hz, 1 % damping, mass-normalised shapes)."""
+    lam = pole_from_fz(np.array([13.0, 41.0]), np.array([0.01, 0.01]))
+    phi = np.array([[0.4, -0.3], [0.2, 0.5]])
+    R = np.einsum("om,rm->orm", phi, phi[:1]) / (2j * lam.imag)
+    return lam, R
+
+
+def test_exponential_window_is_exact_for_accelerance_and_mobility():
+    """A window exp(-t/tau) on the measured acceleration: the FRF is the FFT of the windowed acceleration
+    impulse response, h_a(t) = sum_r N_r exp(lambda_r t) + c.c. + D delta(t) (N = R lambda^2,
+    D = sum 2 Re(R lambda)), i.e. H_acc(j w + 1/tau); tau = 0.5 s gives 2 / (w tau) = 4.9 % at 13 Hz."""
+    lam, R = _two_modes()
+    tau = 0.5
+    a = 1.0 / tau
+    rec = ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none",
+                     outputs=("a:1:X", "a:2:X"), references=("a:1:X",))
+    N = R * lam ** 2
+    D = np.sum(2 * np.real(R * lam), axis=2)
+    # the same structure as an accelerance pole-residue model: the feed-through D is the physical
+    # accelerance lower residual (basis -1)
+    acc = ModalModel(poles=lam, residues=N, quantity="accelerance", residual_form="physical",
+                     lower_residual=-D, outputs=rec.outputs, references=rec.references)
+    fpk = np.abs(lam) / (2 * np.pi) * np.sqrt(1 - 2 * 0.01 ** 2)     # near the peaks
+    fs, T = 65536.0, 8.0        # exp(-T / tau) = 1e-7 of the start, discretisation ~ (w dt)^2 / 12
+    t = np.arange(int(fs * T)) / fs
+    w = np.exp(-t / tau)
+    h = np.real(np.einsum("orm,mn->orn", 2 * N, np.exp(np.outer(lam, t)))) * w
+    # trapezoidal Fourier integral of the windowed response (the jump at t = 0 counted half), plus the delta
+    E = np.exp(-2j * np.pi * np.outer(t, fpk))
+    want = (h @ E - 0.5 * h[..., :1]) / fs + D[..., None]
+    spec = [{"effect": "exponential_window", "tau_s": tau}]
+    for model in (rec, acc):
+        got = predict(model, fpk, "accelerance", spec).H
+        np.testing.assert_allclose(got, want, rtol=1e-6)
+    # the direct form: H_acc(j w + a) of the accelerance pole-residue model
+    s = 2j * np.pi * F + a
+    direct = (np.einsum("orm,mk->ork", N, 1 / (s - lam[:, None])) +
+              np.einsum("orm,mk->ork", np.conj(N), 1 / (s - np.conj(lam)[:, None])) + D[..., None])
+    np.testing.assert_allclose(predict(rec, F, "accelerance", spec).H, direct, rtol=1e-9, atol=1e-12 * np.abs(direct).max())
+    # mobility: H_mob(j w + a) = s H_rec(s) at s = j w + a
+    mob = s * (np.einsum("orm,mk->ork", R, 1 / (s - lam[:, None])) +
+               np.einsum("orm,mk->ork", np.conj(R), 1 / (s - np.conj(lam)[:, None])))
+    np.testing.assert_allclose(predict(rec, F, "mobility", spec).H, mob, rtol=1e-9, atol=1e-12 * np.abs(mob).max())
+    # the former shortcut (window in receptance form, then times (j w)^2) misses by ~2 / (w tau) at 13 Hz
+    shifted = ModalModel(poles=lam - a, residues=R, quantity="receptance", residual_form="none")
+    old = predict(shifted, fpk, "accelerance").H
+    assert abs(old[0, 0, 0] / want[0, 0, 0] - 1) > 0.03

@@ -18,8 +18,9 @@ name                     kind   model extension
 ``stiffness_shift``      modal  every natural frequency times ``factor`` (stiffness times
                                 factor^2), damping ratios kept; residues times factor^(p-1)
 ``damping_change``       modal  every damping ratio times ``factor``
-``exponential_window``   modal  every pole's decay rate plus ``1/tau_s`` (an exponential window
-                                ``exp(-t/tau)`` on the response), residues kept
+``exponential_window``   modal  an exponential window ``exp(-t/tau_s)`` on the measured impulse
+                                response: ``H_q,w(w) = H_q(j w + 1/tau_s)`` exactly, in the
+                                measured quantity q (see :func:`synthesize_windowed`)
 ``mass_loading``         modal  a mass ``mass_kg`` at each output sensor: omega_r^2 / (1 + mu_r),
                                 ``mu_r = m sum_o phi_or^2`` (mass-normalised shapes at the
                                 outputs, first-order Rayleigh quotient), residues / sqrt(1+mu)^(1+p)
@@ -53,11 +54,14 @@ __all__ = [
     "FitContext",
     "predict",
     "effect_names",
+    "synthesize_windowed",
+    "WINDOW_DECAY_KEY",
 ]
 
 log = logging.getLogger(__name__)
 
 _POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+WINDOW_DECAY_KEY = "window_decay_per_s"   # model.meta key: summed 1/tau of the exponential windows (1/s)
 HUM_BASES_HZ = (50.0, 60.0)
 
 
@@ -257,11 +261,70 @@ def fit_damping_change(ctx: FitContext, lines: np.ndarray) -> dict:
 
 
 def apply_exponential_window(model: ModalModel, params: Mapping) -> ModalModel:
-    """Decay rates plus ``1/tau_s`` (rad/s): an exponential window exp(-t/tau) on the response."""
+    """An exponential window ``exp(-t/tau_s)`` (s) on the measured responses.
+
+    The window multiplies the impulse response of the *measured* quantity, so its effect depends on
+    the quantity the model is synthesised in; the model's poles and residues are therefore left as
+    they are and the added decay ``1/tau_s`` (1/s) is recorded in ``meta[WINDOW_DECAY_KEY]`` (several
+    windows add their decays). :func:`predict` then synthesises the exact windowed FRF with
+    :func:`synthesize_windowed`."""
     tau = float(params.get("tau_s", np.inf))
-    if not tau > 0:
-        raise EffectError(f"exponential_window: tau_s must be > 0 (s), got {tau!r}")
-    return _replace_poles(model, model.poles - 1.0 / tau, np.ones(model.poles.size))
+    if not (tau > 0 and np.isfinite(tau)):
+        raise EffectError(f"exponential_window: tau_s must be a finite number > 0 (s), got {tau!r}")
+    meta = dict(model.meta)
+    meta[WINDOW_DECAY_KEY] = float(meta.get(WINDOW_DECAY_KEY, 0.0)) + 1.0 / tau
+    return replace(model, meta=meta)
+
+
+def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
+                        decay_per_s: Optional[float] = None) -> FRFSet:
+    """FRFs of ``model`` in ``quantity`` as measured through an exponential window ``exp(-a t)``,
+    ``a = decay_per_s`` (1/s; default ``model.meta[WINDOW_DECAY_KEY]``, 0 without a window).
+
+    Multiplying the impulse response ``h_q(t)`` of the measured quantity q by ``exp(-a t)`` shifts its
+    Laplace transform: ``H_q,w(j w) = H_q(j w + a)``. With the model in form p,
+    ``H_q(s) = s^(q-p) H_p(s)`` and ``H_p(s) = sum_r [R_r / (s - lambda_r) + c.c.] + UR b_U(s) + LR b_L(s)``,
+    so the exact windowed FRF is
+
+        H_q,w(w) = (j w + a)^(q-p) H_p(j w + a).
+
+    Equivalently every pole of the measured quantity's pole-residue model moves by ``-a`` with the same
+    residues (e.g. accelerance from receptance: ``N_r = R_r lambda_r^2`` over ``s - lambda_r``), a
+    constant (feed-through, a delta at t = 0) is unchanged and a term ``c s`` (delta') becomes
+    ``c (s + a)``. Converting the shifted receptance by ``(j w)^(q-p)`` instead errs by about
+    ``(q-p) a / w`` relative. Residual terms are continued as the functions of s they are on the
+    j w axis and shifted alike: ``"physical"`` basis ``(s^p, -s^(p-2))``, ``"paper"`` ``(1, -1/s^2)``
+    (a constant UR is unchanged; LR, a rigid-body/mass line, becomes its windowed version).
+    A fixed FRF term (``meta["frf_correction"]``) is not part of this (see :func:`predict`).
+    Returns an :class:`FRFSet` in ``quantity``; with ``a = 0`` this is plain synthesis and conversion."""
+    if quantity not in _POWER:
+        raise EffectError(f"quantity {quantity!r} is not one of {tuple(_POWER)}")
+    a = float(model.meta.get(WINDOW_DECAY_KEY, 0.0)) if decay_per_s is None else float(decay_per_s)
+    if not (np.isfinite(a) and a >= 0):
+        raise EffectError(f"exponential window decay must be a finite number >= 0 (1/s), got {a!r}")
+    f = np.asarray(freq_hz, float)
+    if a == 0.0:
+        frf = synthesize(model, f)
+        if frf.quantity != quantity:
+            frf = replace(frf, H=convert_quantity(frf.H, f, frf.quantity, quantity), quantity=quantity)
+        return frf
+    s = 2j * np.pi * f + a
+    lam = model.poles
+    R = model.residues
+    H = (np.einsum("orm,mk->ork", R, 1.0 / (s[None, :] - lam[:, None]))
+         + np.einsum("orm,mk->ork", np.conj(R), 1.0 / (s[None, :] - np.conj(lam)[:, None])))
+    p = _POWER[model.quantity]
+    if model.residual_form == "physical":
+        basis = (s ** p, -s ** (p - 2.0))
+    elif model.residual_form == "paper":
+        basis = (np.ones_like(s), -1.0 / s ** 2)
+    else:
+        basis = ()
+    for term, b in zip((model.upper_residual, model.lower_residual), basis):
+        if term is not None:
+            H = H + term[..., None] * b
+    H = H * s ** float(_POWER[quantity] - p)
+    return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=model.outputs, references=model.references)
 
 
 def fit_exponential_window(ctx: FitContext, lines: np.ndarray) -> dict:
@@ -620,22 +683,23 @@ def predict(
     """The simulation extended by ``effects`` (list of ``{"effect": name, **params}``) at ``freq_hz``
     (Hz) in ``quantity``: modal effects change the model, then it is synthesised (eq. 11), converted to
     ``quantity`` and the FRF effects are applied, each in list order. Inputs are not modified.
+    An ``exponential_window`` is exact in the measured ``quantity`` (:func:`synthesize_windowed`),
+    whatever the model's form, and acts on the structure after the other modal effects.
 
     A base built from measured-like simulated FRFs may carry ``meta["frf_correction"]``, an FRFSet
     added after synthesis (the part of those FRFs its modal model does not reproduce), so that the
-    prediction without effects equals the simulated FRFs."""
+    prediction without effects equals the simulated FRFs. That term is not windowed by an
+    ``exponential_window`` (it is a fixed FRF, not a pole-residue model)."""
     model = base
     for spec in effects:
         eff, params = _lookup(spec)
         if eff.kind == "modal":
             model = eff.apply(model, params)
-    frf = synthesize(model, freq_hz)
+    frf = synthesize_windowed(model, freq_hz, quantity)
     corr = base.meta.get("frf_correction")
     if corr is not None:
-        frf = replace(frf, H=frf.H + _correction(corr, frf.freq_hz, frf.quantity,
+        frf = replace(frf, H=frf.H + _correction(corr, frf.freq_hz, quantity,
                                                  float(model.meta.get("frequency_warp", 1.0))))
-    if frf.quantity != quantity:
-        frf = replace(frf, H=convert_quantity(frf.H, frf.freq_hz, frf.quantity, quantity), quantity=quantity)
     if outputs is not None:
         frf = replace(frf, outputs=tuple(outputs))
     if references is not None:

@@ -99,7 +99,7 @@ def band_figure(diag: Diagnosis) -> Figure:
 
 def report_text(diag: Diagnosis) -> str:
     """The ``report.md`` text: verdict, action, evidence, mode table, bands, coherence."""
-    L = [f"# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {ACTIONS.get(diag.verdict, '')}", ""]
+    L = ["# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {ACTIONS.get(diag.verdict, '')}", ""]
     L.append(f"Held-out error of the simulation {diag.error_before_db:.1f} dB, after the extension "
              f"{diag.error_after_db:.1f} dB; noise level {max(diag.noise_db.values()):.1f} dB "
              f"(relative squared error, see docs/diagnosis.md).")

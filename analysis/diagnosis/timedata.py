@@ -25,7 +25,7 @@ Definitions
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional, Sequence
 
 import numpy as np
@@ -34,6 +34,7 @@ from scipy.signal import find_peaks
 
 from ..frf import FRFSet
 from ..modal import ModalModel
+from .effects import synthesize_windowed
 from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_decay
 
 __all__ = ["pulse_bounds", "detect_double_hit", "detect_overload", "detect_input_noise",
@@ -246,28 +247,20 @@ def windowed_accelerance(base: ModalModel, freq_hz: np.ndarray, tau_s: Optional[
 
     Mode r with receptance residue ``R_r`` and pole ``lambda_r`` has the acceleration impulse response
     ``R_r lambda_r^2 exp(lambda_r t) + c.c.`` plus the direct term ``delta(t) sum_r 2 Re(R_r lambda_r)``
-    (the jump of the velocity, ``phi_o phi_r`` per mode). The window ``exp(-t/tau)`` shifts every pole to
-    ``lambda_r - 1/tau`` and leaves the numerators and the direct term alone:
-
-        H(w) = sum_r [N_r / (j w - lambda_r') + conj(N_r) / (j w - conj(lambda_r'))] + D,
-        N_r = R_r lambda_r^2,  lambda_r' = a lambda_r - 1/tau,  D = sum_r 2 Re(R_r lambda_r).
-
-    (Converting the shifted receptance by (j w)^2 instead errs by about 2 / (w tau) relative.) With
+    (and ``delta'(t) sum_r 2 Re(R_r)``, zero for a physical model). The window ``exp(-t/tau)`` shifts
+    every pole of that accelerance model to ``lambda_r - 1/tau`` with the same numerators, i.e.
+    ``H(w) = H_acc(j w + 1/tau)``; this is :func:`analysis.diagnosis.effects.synthesize_windowed`
+    (converting the shifted receptance by (j w)^2 instead errs by about 2 / (w tau) relative). With
     ``factor`` a: ``lambda -> a lambda``, ``R -> R / a`` (masses and shapes kept). Returns
     (n_out, n_ref, n_freq) complex.
     """
     if base.quantity != "receptance" or base.residual_form not in ("none", None):
         raise ValueError("windowed_accelerance needs a receptance pole-residue model without residual terms "
                          "(e.g. simulator FrameModel.modal_model(..., 'receptance'))")
-    lam = np.asarray(base.poles) * factor
-    R = np.asarray(base.residues) / factor
-    num = R * lam ** 2
-    direct = np.sum(2 * np.real(R * lam), axis=2)
-    shift = 0.0 if tau_s is None else 1.0 / tau_s
-    jw = 2j * np.pi * np.asarray(freq_hz, float)[:, None]
-    k1 = 1.0 / (jw - (lam - shift)[None, :])
-    k2 = 1.0 / (jw - (np.conj(lam) - shift)[None, :])
-    return np.einsum("orm,km->ork", num, k1) + np.einsum("orm,km->ork", np.conj(num), k2) + direct[..., None]
+    model = replace(base, poles=np.asarray(base.poles) * factor, residues=np.asarray(base.residues) / factor,
+                    meta={})
+    decay = 0.0 if tau_s is None else 1.0 / tau_s
+    return synthesize_windowed(model, freq_hz, "accelerance", decay).H
 
 
 @dataclass(frozen=True)
