@@ -214,7 +214,7 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
     Everything the operator typed is checked before the analyser is opened.
     """
     from .recording import Recording, RecordingWriter
-    from .session import (CaptureSession, SessionError, auto_accept, channel_table, retry_on_link_fault,
+    from .session import (CaptureSession, auto_accept, channel_table, retry_on_link_fault,
                           terminal_decider)
     from .setup import AcquisitionSetup, default_setup, load_setup
     from .urls import SimURL, parse_device_url
@@ -257,15 +257,8 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
                              plan={**plan.to_dict(), "device": url}, overwrite=args.overwrite) as writer:
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
                                      progress=say, timeout_s=args.timeout)
-            try:
-                result = session.run()
-            except SessionError as exc:
-                writer.log("ERROR", str(exc))
-                print(f"capture: {exc}", file=sys.stderr)
-                return 1, None
-    print(summary_text(result), file=out_stream)
-    print(f"recording written: {out}", file=out_stream)
-    return 0, result
+            result = _run_session(session, writer)
+    return _finish(result, f"recording written: {out}", out_stream)
 
 
 def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, Any]:
@@ -273,7 +266,7 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
     windows and device (``--device`` overrides it), appending to the same file. The accepted hits
     already recorded (complete, CRC-checked) count towards each point's average."""
     from .recording import Recording, RecordingWriter
-    from .session import CaptureSession, SessionError, TestPlan, auto_accept, retry_on_link_fault, terminal_decider
+    from .session import CaptureSession, TestPlan, auto_accept, retry_on_link_fault, terminal_decider
     from .setup import AcquisitionSetup
 
     if args.out or args.points or args.reference or args.mode or args.setup or args.hits is not None:
@@ -307,15 +300,8 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
             writer.log("INFO", f"capture resumed on {url} with {n_acc} accepted hits recorded")
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
                                      progress=say, timeout_s=args.timeout, resume_hits=hits)
-            try:
-                result = session.run()
-            except SessionError as exc:
-                writer.log("ERROR", str(exc))
-                print(f"capture: {exc}", file=sys.stderr)
-                return 1, None
-    print(summary_text(result), file=out_stream)
-    print(f"recording completed: {path}", file=out_stream)
-    return 0, result
+            result = _run_session(session, writer)
+    return _finish(result, f"recording completed: {path}", out_stream)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -340,3 +326,25 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except OSError as exc:
         print(f"capture: {exc}", file=sys.stderr)
         return 1
+
+
+def _run_session(session, writer):
+    """Run a capture session; a :class:`SessionError` is logged in the recording, shown, and gives None
+    (every accepted hit is already on disk)."""
+    from .session import SessionError
+
+    try:
+        return session.run()
+    except SessionError as exc:
+        writer.log("ERROR", str(exc))
+        print(f"capture: {exc}", file=sys.stderr)
+        return None
+
+
+def _finish(result, done_line: str, out_stream):
+    """Exit code and result of a capture: the summary and ``done_line`` when the session completed."""
+    if result is None:
+        return 1, None
+    print(summary_text(result), file=out_stream)
+    print(done_line, file=out_stream)
+    return 0, result

@@ -161,7 +161,7 @@ def plot(out: dict, path: str, title: str) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(8, 4))
+    fig = Figure(figsize=(10, 4))
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     ax.plot(PAPER_HZ, 100 * out["err0"], "ko-", label="nominal frame")
@@ -175,7 +175,7 @@ def plot(out: dict, path: str, title: str) -> None:
     ax.set_xlabel("measured natural frequency (Hz)")
     ax.set_ylabel("frame - measured (%)")
     ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
