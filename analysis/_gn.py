@@ -96,6 +96,20 @@ PRED_FLOOR = 1e-13
 SWITCH_TO_PRECISE = 1e-6
 
 
+def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: float, ftol: float):
+    """The stopping rules after an accepted step: ``(status, message)`` or None to go on.
+
+    S at the round-off floor, relative step <= xtol, or relative decrease of S <= ftol.
+    """
+    if S <= floor:
+        return (Status.ROUNDOFF, "converged: S at round-off level")
+    if step <= xtol:
+        return (Status.XTOL, f"converged: relative step {step:.2g} <= xtol")
+    if rel <= ftol:
+        return (Status.FTOL, f"converged: relative change of S {rel:.2g} <= ftol")
+    return None
+
+
 def start_iteration(problem: ProjectedProblem, theta0: np.ndarray):
     """The common start of GN and LM: copy ``theta0``, evaluate once (fast where allowed).
 
@@ -186,13 +200,8 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         rel = (ev.S - new.S) / ev.S if ev.S > 0 else 0.0
         theta, ev = trial, new
         history.append(ev.S)
-        if ev.S <= floor:
-            verdict = (Status.ROUNDOFF, "converged: S at round-off level")
-        elif step <= xtol:
-            verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol")
-        elif rel <= ftol:
-            verdict = (Status.FTOL, f"converged: relative change of S {rel:.2g} <= ftol")
-        elif fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
+        verdict = convergence_verdict(ev.S, floor, step, xtol, rel, ftol)
+        if verdict is None and fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
             fast = False
             ev = problem.evaluate(theta)
             nfev += 1

@@ -33,7 +33,7 @@ from typing import Optional
 import numpy as np
 
 from ._gn import (PRED_FLOOR, SWITCH_TO_PRECISE, check_poles, freeze_active, project_to_bounds, relative_step,
-                  start_iteration)
+                  start_iteration, convergence_verdict)
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
 
 __all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
@@ -117,13 +117,8 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             mu = max(mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), MU_MIN)
             nu = 2.0
             fail_status, fail_reason = Status.NO_PROGRESS, ""
-            if ev.S <= floor:
-                verdict = (Status.ROUNDOFF, "converged: S at round-off level")
-            elif step <= xtol:
-                verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol")
-            elif rel <= ftol:
-                verdict = (Status.FTOL, f"converged: relative change of S {rel:.2g} <= ftol")
-            elif fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
+            verdict = convergence_verdict(ev.S, floor, step, xtol, rel, ftol)
+            if verdict is None and fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
                 fast = False
                 ev = problem.evaluate(theta)
                 nfev += 1
