@@ -31,7 +31,6 @@ is known (NaN otherwise).
 """
 from __future__ import annotations
 
-import json
 import logging
 import math
 import re
@@ -46,6 +45,7 @@ from analysis.points import parse_point, PointLabelError
 from analysis.spectra import WindowSettings
 
 from .errors import ImpactlabError
+from .textdoc import read_document
 from .hitcheck import HitCheckSettings, check_hit
 from .recording import RecordedHit, RecordingWriter
 
@@ -305,21 +305,7 @@ def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:
 def load_description(path: "str | Path") -> dict:
     """Read a JSON or TOML channel description (see module doc)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ImportDataError(f"cannot read description {p}: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise ImportDataError(f"description {p} is not UTF-8 text ({exc})") from None
-    try:
-        if p.suffix.lower() == ".toml":
-            import tomllib
-
-            out = tomllib.loads(text)
-        else:
-            out = json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        raise ImportDataError(f"description {p} is not valid {p.suffix.lstrip('.') or 'JSON'}: {exc}") from None
+    out = read_document(p, "description", ImportDataError)
     if not isinstance(out, dict):
         raise ImportDataError(f"description {p} must be a JSON object / TOML table with 'channels', got "
                               f"{type(out).__name__}")

@@ -12,7 +12,6 @@ SI: N and m/s^2. Bandwidth = fs / 2.56.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -267,17 +266,7 @@ def default_setup() -> AcquisitionSetup:
 
 def load_setup(path: "str | Path") -> AcquisitionSetup:
     """Read a set-up from a ``.json`` or ``.toml`` file (the layout of :meth:`AcquisitionSetup.to_dict`)."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SetupError(f"cannot read set-up file {p}: {exc.strerror}") from None
-    try:
-        if p.suffix.lower() == ".toml":
-            import tomllib
-            data = tomllib.loads(text)
-        else:
-            data = json.loads(text)
-    except ValueError as exc:
-        raise SetupError(f"set-up file {p} is not valid {p.suffix.lstrip('.') or 'JSON'}: {exc}") from None
+    from .textdoc import read_document
+
+    data = read_document(path, "set-up file", SetupError)
     return AcquisitionSetup.from_dict(data)
