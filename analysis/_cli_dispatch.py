@@ -10,6 +10,8 @@ import importlib
 import sys
 from typing import Mapping, Sequence
 
+from .errors import UsageError
+
 
 def dispatch(prog: str, commands: Mapping[str, tuple[str, str]], argv: Sequence[str] | None = None) -> int:
     """Run ``prog SUBCOMMAND ...``; ``commands`` maps a name to (module, one-line help)."""
@@ -26,10 +28,6 @@ def dispatch(prog: str, commands: Mapping[str, tuple[str, str]], argv: Sequence[
         return 2
     module = importlib.import_module(commands[name][0])
     return int(module.main(args[1:]) or 0)
-
-
-class UsageError(Exception):
-    """A command line that the parser rejects (reported by ``main`` with exit code 2)."""
 
 
 class Parser(argparse.ArgumentParser):

@@ -73,7 +73,7 @@ def one_trial(index: int, tmp: Path, rng: random.Random, *, hits: int = 30, resu
               start_timeout_s: float = 120.0) -> KillTrial:
     """Run, kill and check one capture (see the module docstring)."""
     from acquisition.errors import RecordingError
-    from acquisition.recording import Recording
+    from analysis.recording import Recording
 
     out = tmp / f"kill{index:03d}.h5"
     cmd = [sys.executable, "-m", "acquisition", "capture", "--device", f"sim://?seed={index}&faults={FAULTS}",
@@ -133,7 +133,7 @@ def one_trial(index: int, tmp: Path, rng: random.Random, *, hits: int = 30, resu
 
 
 def _resume_ok(out: Path, index: int, hits: int, trial: KillTrial) -> bool:
-    from acquisition.recording import Recording
+    from analysis.recording import Recording
 
     proc = subprocess.run([sys.executable, "-m", "acquisition", "capture", "--resume", str(out), "--device",
                            f"sim://?seed={index + 5000}", "--auto", "--timeout", "3"], cwd=ROOT, capture_output=True,

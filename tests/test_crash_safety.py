@@ -46,7 +46,7 @@ def test_resume_removes_a_hit_cut_short_and_appends_after_the_last_complete_one(
     import h5py
     import numpy as np
 
-    from acquisition.recording import Recording, RecordingWriter
+    from analysis.recording import Recording, RecordingWriter
     from analysis.spectra import WindowSettings
 
     p = tmp_path / "rec.h5"
