@@ -27,7 +27,7 @@ import numpy as np
 
 from analysis.spectra import WindowSettings, parse_duration
 
-from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError
+from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
 
 __all__ = ["main", "build_parser", "parse_windows", "open_analyser", "summary_text", "DEFAULT_FORCE_WINDOW",
            "DEFAULT_EXP_WINDOW"]
@@ -36,10 +36,6 @@ log = logging.getLogger(__name__)
 
 DEFAULT_FORCE_WINDOW = "20ms,5ms"
 DEFAULT_EXP_WINDOW = "none"
-
-
-class UsageError(ValueError):
-    """Bad command-line input (exit 2)."""
 
 
 def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[float],
@@ -213,7 +209,7 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
 
     Everything the operator typed is checked before the analyser is opened.
     """
-    from .recording import Recording, RecordingWriter
+    from analysis.recording import Recording, RecordingWriter
     from .session import (CaptureSession, auto_accept, channel_table, retry_on_link_fault,
                           terminal_decider)
     from .setup import AcquisitionSetup, default_setup, load_setup
@@ -265,7 +261,7 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
     """``capture --resume REC.h5``: continue an interrupted capture with the recording's set-up, plan,
     windows and device (``--device`` overrides it), appending to the same file. The accepted hits
     already recorded (complete, CRC-checked) count towards each point's average."""
-    from .recording import Recording, RecordingWriter
+    from analysis.recording import Recording, RecordingWriter
     from .session import CaptureSession, TestPlan, auto_accept, retry_on_link_fault, terminal_decider
     from .setup import AcquisitionSetup
 

@@ -88,13 +88,13 @@ class DemoContext:
 
 def capture_step(ctx: DemoContext) -> None:
     """The session on the simulated frame (loopback link to the simulated firmware)."""
-    from simulator.firmware import create_analyser
+    from simulator.analyser import create_analyser
     from simulator.config import FrameConfig
     from simulator.stand import TestStand
 
     from .driver import Analyser
     from .loopback import LoopbackTransport
-    from .recording import RecordingWriter
+    from analysis.recording import RecordingWriter
     from .session import CaptureSession, TestPlan, auto_accept, channel_table
     from .cli_capture import DEFAULT_FORCE_WINDOW, parse_windows
     from .setup import default_setup

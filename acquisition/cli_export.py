@@ -22,7 +22,7 @@ def export(rec_path: "str | Path", uff_path: "str | Path", *, time_data: bool = 
     """Write the UFF file; returns the number of datasets written."""
     from analysis.uff import time_records, write_uff58
 
-    from .recording import Recording, merge_frfsets
+    from analysis.recording import Recording, merge_frfsets
 
     with Recording(rec_path) as rec:
         frf = merge_frfsets(rec.frfsets(estimator))

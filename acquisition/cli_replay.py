@@ -64,7 +64,7 @@ def _split_window(text: str) -> tuple[Optional[str], Optional[str]]:
 def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSettings] = None,
            exclude: Sequence[int] = (), estimator: str = "H1", overwrite: bool = False) -> list:
     """Recompute the FRFs of ``src`` into a new recording ``out``; returns the new averages."""
-    from .recording import Recording, RecordingWriter
+    from analysis.recording import Recording, RecordingWriter
     from .session import average_recorded_hits
 
     src, out = Path(src), Path(out)
@@ -109,7 +109,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     args = p.parse_args(argv)
     try:
-        from .recording import Recording
+        from analysis.recording import Recording
 
         force, exp = args.force_window, args.exp_window
         if args.window:

@@ -1,8 +1,11 @@
-"""Exceptions of the acquisition layer. Each subclasses a built-in so callers may catch broadly.
+"""Exceptions of the acquisition layer (device, link, set-up). Each subclasses the impactlab root
+:class:`analysis.errors.ImpactlabError` and a built-in so callers may catch broadly.
 
 Every message names the problem and what to do about it.
 """
 from __future__ import annotations
+
+from analysis.errors import ImpactlabError, RecordingError, UsageError
 
 __all__ = [
     "ImpactlabError",
@@ -16,11 +19,8 @@ __all__ = [
     "CommandFailed",
     "SetupError",
     "RecordingError",
+    "UsageError",
 ]
-
-
-class ImpactlabError(Exception):
-    """Base of all impactlab errors."""
 
 
 class InvalidDeviceURL(ImpactlabError, ValueError):
@@ -51,11 +51,11 @@ class EndpointStalled(TransportError):
     """A USB bulk endpoint answered STALL (the host must clear the halt)."""
 
 
-class ProtocolError(ImpactlabError):
+class ProtocolError(ImpactlabError, OSError):
     """The device broke the bulk-only envelope: bad signature, wrong tag, phase error, bad length."""
 
 
-class CommandFailed(ImpactlabError):
+class CommandFailed(ImpactlabError, OSError):
     """A command ended with CHECK CONDITION; carries the sense data the device reported."""
 
     def __init__(self, message: str, *, opcode: int = -1, sense_key: int = 0, asc: int = 0, ascq: int = 0):
@@ -64,7 +64,3 @@ class CommandFailed(ImpactlabError):
         self.sense_key = sense_key
         self.asc = asc
         self.ascq = ascq
-
-
-class RecordingError(ImpactlabError, OSError):
-    """A recording file that cannot be read or written (damaged, wrong schema version...)."""

@@ -47,7 +47,7 @@ from analysis.spectra import WindowSettings
 from .errors import ImpactlabError
 from .textdoc import read_document
 from .hitcheck import HitCheckSettings, check_hit
-from .recording import RecordedHit, RecordingWriter
+from analysis.recording import RecordedHit, RecordingWriter
 
 __all__ = [
     "ImportDataError",
@@ -260,18 +260,16 @@ def _loadmat_isolated(p: Path) -> dict:
     segmentation fault (found by fuzzing, scipy 1.x ``_mio5.read_var_array``); in a child that
     becomes an :class:`ImportDataError` instead of killing the program. Bounded by
     :data:`LOADMAT_TIMEOUT_S`."""
-    from ._isolated import ChildCrashed, ChildTimeout, run_isolated
+    from analysis._isolated import call_isolated
 
     if not p.is_file():
         raise ImportDataError(f"{p} not found: check the path")
-    try:
-        return run_isolated(_loadmat, (str(p),), LOADMAT_TIMEOUT_S)
-    except ChildCrashed as exc:
-        raise ImportDataError(f"{p} is not a readable MATLAB file (the reader crashed, exit code {exc.exitcode}); "
-                              "the file is damaged: export it again") from None
-    except ChildTimeout:
-        raise ImportDataError(f"{p}: reading the MATLAB file took over {LOADMAT_TIMEOUT_S:g} s; the file is "
-                              "damaged or not a MATLAB file") from None
+    return call_isolated(
+        _loadmat, (str(p),), LOADMAT_TIMEOUT_S,
+        crashed=lambda code: ImportDataError(f"{p} is not a readable MATLAB file (the reader crashed, exit code "
+                                             f"{code}); the file is damaged: export it again"),
+        timed_out=lambda: ImportDataError(f"{p}: reading the MATLAB file took over {LOADMAT_TIMEOUT_S:g} s; the "
+                                          "file is damaged or not a MATLAB file"))
 
 
 def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:

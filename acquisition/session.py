@@ -11,7 +11,7 @@ roving channel's point changes), then collects ``hits_per_point`` accepted hits:
     written to the recording and flushed -> next arm.
 
 Spectra are computed from the raw counts times the recorded scaling
-(:func:`acquisition.recording.scale_counts`), exactly as a replay of the recording does, so a
+(:func:`analysis.recording.scale_counts`), exactly as a replay of the recording does, so a
 replay with the same windows reproduces the FRFs bit for bit.
 
 Plans: ``roving_hammer``: the hammer (force channel) moves over the points, the accelerometers
@@ -34,7 +34,7 @@ from analysis.spectra import FRFAccumulator, HitSpectra, WindowSettings, hit_spe
 
 from .errors import CommandFailed, ImpactlabError, ProtocolError, TransportError, TriggerTimeout
 from .hitcheck import HitCheck, HitCheckSettings, check_hit
-from .recording import RecordingWriter, merge_frfsets, scale_counts
+from analysis.recording import RecordingWriter, merge_frfsets, scale_counts
 
 __all__ = [
     "FRF_QUANTITY",
@@ -565,7 +565,7 @@ class CaptureSession:
 def average_recorded_hits(
     hits: Sequence[Any], windows: WindowSettings, channels: Sequence[dict],
 ) -> list[MeasurementAverage]:
-    """Recompute the averages of recorded hits (``acquisition.recording.RecordedHit``), grouped by
+    """Recompute the averages of recorded hits (``analysis.recording.RecordedHit``), grouped by
     measurement in order, with ``windows`` (a decay-fraction exponential is resolved from the first
     hit's block layout). ``channels`` is the recording's channel table (for quantity and unit)."""
     hits = list(hits)

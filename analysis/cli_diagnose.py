@@ -105,7 +105,7 @@ def time_data_causes(path: str, band: tuple, base=None) -> list:
 
     if detect_format(path) != "recording":
         return []
-    from acquisition.recording import Recording, RecordingError
+    from analysis.recording import Recording, RecordingError
 
     groups: dict = {}
     try:

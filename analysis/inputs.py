@@ -1,7 +1,7 @@
 """Load the INPUT of the fit commands: a recording (HDF5) or a UFF file with dataset-58 FRFs.
 
 The format is chosen from the file's first bytes (HDF5 signature) and, failing that, its
-suffix: ``.h5``/``.hdf5``/``.hdf`` -> :func:`acquisition.recording.load_frfset`;
+suffix: ``.h5``/``.hdf5``/``.hdf`` -> :func:`analysis.recording.load_frfset`;
 ``.uff``/``.unv``/``.uf``/``.txt`` (or any other text file) -> :func:`analysis.uff.read_uff58`
 (FRFs matched by node/direction labels). Every failure becomes :class:`InputError` with a
 message that names the file, the problem and what to do.
@@ -14,6 +14,7 @@ from typing import Optional
 import numpy as np
 
 from .frf import FRFSet
+from .errors import ImpactlabError
 
 __all__ = ["InputError", "load_input", "detect_format", "parse_band_text", "parse_float_list"]
 
@@ -22,7 +23,7 @@ _H5_SUFFIXES = {".h5", ".hdf5", ".hdf"}
 _UFF_SUFFIXES = {".uff", ".unv", ".uf", ".txt", ".asc"}
 
 
-class InputError(ValueError):
+class InputError(ImpactlabError, ValueError):
     """An input file or option that cannot be used; the message says what to do."""
 
 
@@ -55,9 +56,9 @@ def load_input(path: "str | Path", *, estimator: str = "H1") -> FRFSet:
     fmt = detect_format(path)
     if fmt == "recording":
         try:
-            from acquisition.recording import load_frfset
+            from analysis.recording import load_frfset
         except ImportError as exc:  # pragma: no cover - depends on the installed tree
-            raise InputError(f"reading recordings needs acquisition.recording ({exc})") from None
+            raise InputError(f"reading recordings needs analysis.recording ({exc})") from None
         try:
             frf = load_frfset(path, estimator=estimator)
         except (OSError, ValueError, KeyError) as exc:

@@ -80,6 +80,7 @@ from .fit_checks import (DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, MIGRATE_BANDWIDTHS
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz, residual_basis
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
+from .errors import ImpactlabError
 
 __all__ = ["fit_auto", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -109,7 +110,7 @@ MAINS_WIDTH_FRACTION = 0.5
 EXCLUDE_LINES = 2.0
 
 
-class FitError(ValueError):
+class FitError(ImpactlabError, ValueError):
     """The automatic fit cannot go on (no stable poles, band too narrow...); the message says what to do."""
 
 

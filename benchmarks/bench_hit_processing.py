@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from acquisition.hitcheck import check_hit
-from acquisition.recording import counts_crc32, scale_counts
+from analysis.recording import counts_crc32, scale_counts
 from analysis.spectra import FRFAccumulator, WindowSettings, hit_spectra
 
 FS = 6400.0
@@ -29,7 +29,7 @@ def bench_write(blocks: list, eu: np.ndarray) -> np.ndarray:
     import tempfile
     from pathlib import Path
 
-    from acquisition.recording import RecordingWriter
+    from analysis.recording import RecordingWriter
 
     times = []
     with tempfile.TemporaryDirectory() as d:

@@ -1,23 +1,28 @@
-"""Crash safety: SIGKILL the capture process at random moments; the recording keeps every hit.
+"""Crash safety: SIGKILL the capture process at points the trial controls; the recording keeps every hit.
 
     .venv/bin/python benchmarks/crash_kill.py [--kills 50] [--resume-every 5] [--seed N] [--json]
 
-Each trial starts ``python -m acquisition capture --auto`` on a simulated analyser (with light
-link faults), reads its progress log line by line from stdout (the session prints
-``progress: ... N accepted ...`` after a hit is written and flushed, before the next arm), and
-kills it with SIGKILL at a random moment: mostly a random 0..1 s after the first hit (while
-hits are being written), sometimes a random 0..4 s after start (during start-up). Then:
+Each trial starts ``python -m acquisition capture`` (operator mode, answers read from standard
+input) on a simulated analyser with light link faults and feeds it the answers for exactly ``k``
+hits (``k`` drawn from the trial's seeded generator; ``k = 0`` is a kill during start-up). The
+capture cannot finish on its own: after the ``k``-th accepted hit it arms, captures the next hit and
+waits for an answer that never comes. The trial reads the progress log line by line from stdout
+(the session prints ``progress: ... N accepted ...`` after a hit is written and flushed, before the
+next arm) and, once ``k`` accepted hits are reported, kills the process with SIGKILL after a short
+random delay, so the kill lands inside the next hit's transfers or at the operator prompt. Nothing
+depends on how fast the machine is: every trial is a kill. Then:
 
 * when at least one accepted hit was reported, the recording must open and hold at least that
   many complete accepted hits, each passing its CRC-32 check (a hit cut short by the kill may be
   missing or incomplete: it was never reported);
-* every ``--resume-every``-th trial runs ``capture --resume`` on the killed recording, which must
-  finish the plan (every point's average complete) and keep the hits from before the kill.
+* every ``--resume-every``-th trial runs ``capture --resume --auto`` on the killed recording, which
+  must finish the plan (every point's average complete) and keep the hits from before the kill.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import random
 import re
 import signal
@@ -68,29 +73,35 @@ def one_trial(index: int, tmp: Path, rng: random.Random, *, hits: int = 30, resu
               start_timeout_s: float = 120.0) -> KillTrial:
     """Run, kill and check one capture (see the module docstring)."""
     from acquisition.errors import RecordingError
-    from acquisition.recording import Recording
+    from analysis.recording import Recording
 
     out = tmp / f"kill{index:03d}.h5"
     cmd = [sys.executable, "-m", "acquisition", "capture", "--device", f"sim://?seed={index}&faults={FAULTS}",
-           "--out", str(out), "--hits", str(hits), "--points", "right:6:-X,top:4:X", "--auto", "--timeout", "3"]
-    startup = rng.random() < 0.2
-    trial = KillTrial(index, 0.0, "start-up" if startup else "capture")
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+           "--out", str(out), "--hits", str(hits), "--points", "right:6:-X,top:4:X", "--timeout", "3"]
+    # k answers, then the capture waits at the prompt of hit k+1: it can never finish by itself
+    k = 0 if rng.random() < 0.2 else rng.randint(1, min(2 * hits - 1, 8))
+    trial = KillTrial(index, 0.0, "start-up" if k == 0 else f"after hit {k}")
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True, env=env)
+    assert proc.stdin is not None
+    proc.stdin.write("a\n" * k)
+    proc.stdin.flush()
     lines: list = []
     th = threading.Thread(target=_reader, args=(proc.stdout, lines), daemon=True)
     th.start()
     t0 = time.monotonic()
     try:
-        if startup:
-            delay = rng.uniform(0.0, 4.0)
-            time.sleep(delay)
-        else:
-            while not any("progress:" in ln for _, ln in lines) and proc.poll() is None:
-                if time.monotonic() - t0 > start_timeout_s:
-                    trial.problems.append("no hit within the start-up time limit")
-                    break
-                time.sleep(0.01)
+        if k == 0:
+            # start-up: the device is opened, configured and the first hit captured in this window
             time.sleep(rng.uniform(0.0, 1.0))
+        else:
+            while _reported(list(lines)) < k and proc.poll() is None:
+                if time.monotonic() - t0 > start_timeout_s:
+                    trial.problems.append(f"{k} accepted hits not reported within {start_timeout_s:.0f} s")
+                    break
+                time.sleep(0.005)
+            time.sleep(rng.uniform(0.0, 0.05))  # inside the next hit's transfers, or at its prompt
         trial.kill_after_s = time.monotonic() - t0
     finally:
         if proc.poll() is None:
@@ -98,8 +109,10 @@ def one_trial(index: int, tmp: Path, rng: random.Random, *, hits: int = 30, resu
         proc.wait(30)
         th.join(10)
         proc.stdout.close()
+        proc.stdin.close()
     if proc.returncode != -signal.SIGKILL:
-        trial.phase += " (finished before the kill)"
+        trial.phase += f" (ended by itself with exit code {proc.returncode})"
+        trial.problems.append(f"the capture ended by itself (exit {proc.returncode}) before the kill")
     trial.reported_accepted = _reported(lines)
     try:
         with Recording(out) as rec:
@@ -120,7 +133,7 @@ def one_trial(index: int, tmp: Path, rng: random.Random, *, hits: int = 30, resu
 
 
 def _resume_ok(out: Path, index: int, hits: int, trial: KillTrial) -> bool:
-    from acquisition.recording import Recording
+    from analysis.recording import Recording
 
     proc = subprocess.run([sys.executable, "-m", "acquisition", "capture", "--resume", str(out), "--device",
                            f"sim://?seed={index + 5000}", "--auto", "--timeout", "3"], cwd=ROOT, capture_output=True,
@@ -173,7 +186,7 @@ def main(argv: "list[str] | None" = None) -> int:
             print(f"| {t.index} | {t.phase} | {t.kill_after_s:.2f} | {t.reported_accepted} | {t.recorded_accepted} | "
                   f"{'-' if t.resumed is None else t.resumed} | {'yes' if t.ok else 'NO: ' + '; '.join(t.problems)} |")
     survived = sum(t.ok for t in trials)
-    killed = sum("finished" not in t.phase for t in trials)
+    killed = sum("ended by itself" not in t.phase for t in trials)
     print(f"kills: {killed}, trials passed: {survived}/{len(trials)}, hits reported before the kills: "
           f"{sum(t.reported_accepted for t in trials)}, lost: "
           f"{sum(max(0, t.reported_accepted - t.recorded_accepted) for t in trials)}, "

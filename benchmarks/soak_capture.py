@@ -96,11 +96,11 @@ def run_soak(hits: int, out: "str | Path", *, door: str = "sim", faults: str = D
     """Capture ``hits`` accepted hits (spread over ``points``) through ``door`` with ``faults``
     injected, write the recording ``out``, and check it against the firmware's ground truth."""
     from acquisition.driver import Analyser
-    from acquisition.recording import Recording, RecordingWriter
+    from analysis.recording import Recording, RecordingWriter
     from acquisition.session import CaptureSession, TestPlan, channel_table, retry_on_link_fault
     from acquisition.setup import default_setup
     from analysis.spectra import WindowSettings
-    from simulator.faults import create_analyser
+    from simulator.analyser import create_analyser
 
     n_points = max(1, min(len(points), hits))
     per_point = max(1, hits // n_points)
@@ -152,7 +152,7 @@ def run_soak(hits: int, out: "str | Path", *, door: str = "sim", faults: str = D
             report.recorded_accepted += 1
             seen[h.sequence] += 1
             truth = fw.block_crc.get(h.sequence)
-            from acquisition.recording import counts_crc32
+            from analysis.recording import counts_crc32
 
             if truth is None or counts_crc32(h.counts) != truth:
                 report.corrupted += 1

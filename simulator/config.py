@@ -24,6 +24,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
         _toml = None  # type: ignore[assignment]
 
 from analysis.points import PointLabelError, parse_point
+from analysis.errors import ImpactlabError
 
 __all__ = [
     "ConfigError",
@@ -50,7 +51,7 @@ DEFAULT_CONFIG_PATH = Path(__file__).with_name("frame.toml")
 _NAMED_TABLES = ("sections", "components")
 
 
-class ConfigError(ValueError):
+class ConfigError(ImpactlabError, ValueError):
     """A configuration file or value that cannot be used; the message says where and what to do."""
 
 

@@ -44,6 +44,7 @@ from analysis.modal import ModalModel, pole_from_fz
 from analysis.points import Point, parse_point
 
 from .config import FrameConfig, SectionConfig
+from analysis.errors import ImpactlabError
 
 __all__ = [
     "SectionProperties",
@@ -63,7 +64,7 @@ _POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
 _UNITS = {"receptance": "m/N", "mobility": "(m/s)/N", "accelerance": "(m/s^2)/N"}
 
 
-class ModelError(ValueError):
+class ModelError(ImpactlabError, ValueError):
     """A frame model request that cannot be served (unknown point, bad quantity...)."""
 
 

@@ -38,7 +38,7 @@ class ReplayStand:
     """Replay the hits of a recording (``accepted_only``: skip the rejected ones)."""
 
     def __init__(self, path: "str | Path", accepted_only: bool = True) -> None:
-        from acquisition.recording import Recording  # the reader validates the file
+        from analysis.recording import Recording  # the reader validates the file
 
         with Recording(path) as rec:
             self.hits = list(rec.hits(accepted_only=accepted_only, skip_damaged=True))

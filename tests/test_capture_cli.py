@@ -12,7 +12,7 @@ from acquisition.cli_capture import main as capture_main
 from acquisition.cli_demo import main as demo_main
 from acquisition.cli_export import main as export_main
 from acquisition.cli_replay import main as replay_main
-from acquisition.recording import Recording, load_frfset
+from analysis.recording import Recording, load_frfset
 from analysis.uff import read_uff58
 
 

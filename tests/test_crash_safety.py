@@ -1,6 +1,8 @@
-"""Crash safety: the capture process killed (SIGKILL) at random moments keeps every reported hit,
-and ``capture --resume`` finishes the plan from the killed recording (benchmarks/crash_kill.py
-runs the same with 50+ kills)."""
+"""Crash safety: the capture process killed (SIGKILL) at points the test controls (after hit k, inside
+the next hit's transfers or at its prompt, or during start-up) keeps every reported hit, and
+``capture --resume`` finishes the plan from the killed recording (benchmarks/crash_kill.py runs the
+same with 50+ kills). No outcome depends on the machine's speed: the capture cannot finish before
+the kill because it waits for operator answers that the trial withholds."""
 from __future__ import annotations
 
 import importlib.util
@@ -23,8 +25,9 @@ def test_five_random_kills_lose_no_reported_hit_and_resume_completes(tmp_path):
     trials = crash.run_kills(5, tmp_path, seed=7, resume_every=5, hits=30, workers=3)
     problems = [(t.index, t.problems) for t in trials if not t.ok]
     assert not problems
-    killed = [t for t in trials if "finished" not in t.phase]
-    assert len(killed) >= 4  # (a trial whose capture finished first still checks its recording)
+    assert all("ended by itself" not in t.phase for t in trials)  # every trial is a kill
+    after_hits = [t for t in trials if t.phase.startswith("after hit")]
+    assert after_hits and all(t.reported_accepted >= int(t.phase.split()[2]) for t in after_hits)
     assert sum(t.reported_accepted for t in trials) > 0
     assert all(t.recorded_accepted >= t.reported_accepted for t in trials)
     assert trials[0].resumed is True or not trials[0].file_opened
@@ -43,7 +46,7 @@ def test_resume_removes_a_hit_cut_short_and_appends_after_the_last_complete_one(
     import h5py
     import numpy as np
 
-    from acquisition.recording import Recording, RecordingWriter
+    from analysis.recording import Recording, RecordingWriter
     from analysis.spectra import WindowSettings
 
     p = tmp_path / "rec.h5"

@@ -12,10 +12,11 @@ from acquisition import protocol as P
 from acquisition.driver import Analyser
 from acquisition.errors import CommandFailed, InvalidDeviceURL
 from acquisition.loopback import LoopbackTransport
-from acquisition.recording import Recording, counts_crc32
+from analysis.recording import Recording, counts_crc32
 from acquisition.session import CaptureSession, TestPlan
 from acquisition.setup import default_setup
-from simulator.faults import (FAULT_KINDS, TRANSIENT_SENSES, FaultPlan, FaultyFirmware, create_analyser,
+from simulator.analyser import create_analyser
+from simulator.faults import (FAULT_KINDS, TRANSIENT_SENSES, FaultPlan, FaultyFirmware,
                               parse_faults)
 from simulator.firmware import Firmware
 
@@ -156,7 +157,7 @@ def test_stand_faults_miss_and_overload():
 def test_session_recovers_from_each_fault_kind(kind, packetized, tmp_path):
     """10 hits with one kind of fault (15 % per strike, 5 % per command or read): all accepted hits
     recorded, intact and equal to the firmware's own blocks."""
-    from acquisition.recording import RecordingWriter
+    from analysis.recording import RecordingWriter
     from acquisition.session import channel_table
     from analysis.spectra import WindowSettings
 
@@ -216,7 +217,7 @@ def test_block_truth_matches_what_the_driver_reads():
 
 
 def test_device_gone_for_good_ends_the_session_saying_why_and_keeps_every_hit(tmp_path):
-    from acquisition.recording import RecordingWriter
+    from analysis.recording import RecordingWriter
     from acquisition.session import SessionError, channel_table
     from analysis.spectra import WindowSettings
 

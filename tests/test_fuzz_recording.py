@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from acquisition.errors import RecordingError
-from acquisition.recording import Recording, RecordingWriter, counts_crc32, load_frfset, verify_recording
+from analysis.recording import Recording, RecordingWriter, counts_crc32, load_frfset, verify_recording
 from analysis.spectra import WindowSettings
 
 N = int(os.environ.get("IMPACTLAB_FUZZ_EXAMPLES", "100"))  # each case forks a verifying child

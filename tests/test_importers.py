@@ -18,7 +18,7 @@ from acquisition.importers import (
     read_numpy,
     write_imported,
 )
-from acquisition.recording import Recording, load_frfset
+from analysis.recording import Recording, load_frfset
 
 FS = 2048.0
 N = 2048

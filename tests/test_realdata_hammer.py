@@ -11,7 +11,7 @@ import pytest
 
 from acquisition.hitcheck import check_hit
 from acquisition.importers import read_dataphysics_mat, read_lvm, read_numpy, write_imported
-from acquisition.recording import Recording, load_frfset
+from analysis.recording import Recording, load_frfset
 from analysis.spectra import WindowSettings, hit_spectra
 
 pytestmark = pytest.mark.realdata

@@ -1,4 +1,4 @@
-"""acquisition.recording: schema v1 round trip, crash safety (SIGKILL), and every kind of bad file."""
+"""analysis.recording: schema v1 round trip, crash safety (SIGKILL), and every kind of bad file."""
 from __future__ import annotations
 
 import signal
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from acquisition.errors import RecordingError
-from acquisition.recording import (
+from analysis.recording import (
     SCHEMA_VERSION,
     Recording,
     RecordingWriter,
@@ -160,7 +160,7 @@ def test_crc32_known_value():
 
 WRITER = textwrap.dedent("""
     import sys, numpy as np
-    from acquisition.recording import RecordingWriter
+    from analysis.recording import RecordingWriter
     from analysis.spectra import WindowSettings
     rng = np.random.default_rng(int(sys.argv[2]))
     with RecordingWriter(sys.argv[1], instrument={"model": "x"}, setup={}, channels=[{"name": "f", "point": "n:1:Z"}],

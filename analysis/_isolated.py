@@ -1,6 +1,6 @@
 """Run a file parser in a child process, so a crash of a C library on a damaged file (a
 segmentation fault in libhdf5 or in scipy's MATLAB reader, both found by fuzzing) cannot kill the
-calling program. Used by :mod:`acquisition.importers` and :func:`acquisition.recording.verify_recording`.
+calling program. Used by :mod:`acquisition.importers` and :func:`analysis.recording.verify_recording`.
 """
 from __future__ import annotations
 
@@ -66,3 +66,15 @@ def run_isolated(target: Callable[..., Any], args: tuple, timeout_s: float) -> A
     if kind == "error":
         raise payload
     return payload
+
+
+def call_isolated(target: Callable[..., Any], args: tuple, timeout_s: float, *,
+                  crashed: Callable[[int], Exception], timed_out: Callable[[], Exception]) -> Any:
+    """:func:`run_isolated`, with a crash or a timeout of the child turned into the caller's own
+    error: ``crashed(exitcode)`` and ``timed_out()`` build the exception raised instead."""
+    try:
+        return run_isolated(target, args, timeout_s)
+    except ChildCrashed as exc:
+        raise crashed(exc.exitcode) from None
+    except ChildTimeout:
+        raise timed_out() from None
