@@ -188,7 +188,15 @@ def fit_step(ctx: DemoContext) -> None:
     ctx.say(f"fit: {ctx.out_dir / 'fit.json'}, plots: fit.png, stabilization.png")
 
 
-STEPS: list[Callable[[DemoContext], None]] = [capture_step, summary_step, export_step, fit_step]
+def report_step(ctx: DemoContext) -> None:
+    """The HTML test report of the demo (issue 12), with the fit above and the frame's wireframe."""
+    from analysis.report_html import make_report
+    from simulator.geometry import frame_geometry
+
+    ctx.say(f"report: {make_report(ctx.recording, ctx.out_dir / 'report', fit_json=ctx.out_dir / 'fit.json', geometry=frame_geometry())}")
+
+
+STEPS: list[Callable[[DemoContext], None]] = [capture_step, summary_step, export_step, fit_step, report_step]
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -7,6 +7,7 @@ COMMANDS = {
     "fit": ("analysis.cli_fit", "fit a modal model (LSFD, Gauss-Newton or Levenberg-Marquardt)"),
     "stabilization": ("analysis.cli_stabilization", "draw a stabilization diagram"),
     "diagnose": ("analysis.cli_diagnose", "compare measurement and simulation, name the cause"),
+    "report": ("analysis.cli_report", "write a self-contained HTML test report (FRFs, modes, animated shapes)"),
 }
 
 if __name__ == "__main__":

@@ -1,0 +1,168 @@
+"""Test geometry: labelled nodes (xyz in m) and trace lines, for drawing and animating mode shapes.
+
+Node labels are ``component:node`` (the first two parts of a point label ``component:node:direction``,
+see :mod:`analysis.points`). Files: UFF data set 15 (nodes) and 82 (trace lines) through pyuff; a
+UFF node number maps to a label with :func:`analysis.points.point_from_uff` and back with
+:func:`analysis.points.uff_node`. Without a geometry, :func:`points_on_a_line` puts the measured
+points on a line, 0.1 m apart, joined in order.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .errors import ImpactlabError
+from .points import PointLabelError, parse_point, point_from_uff, uff_node
+
+__all__ = ["Geometry", "GeometryError", "node_label", "points_on_a_line", "read_uff_geometry",
+           "write_uff_geometry"]
+
+
+class GeometryError(ImpactlabError, ValueError):
+    """A geometry that cannot be read or does not fit the data; the message says what to do."""
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Nodes and trace lines of a test structure.
+
+    labels : node labels ``component:node``, one per row of ``xyz``.
+    xyz : (n_nodes, 3) float, m.
+    lines : pairs of node labels joined by a trace line.
+    name : a short description (where the geometry came from).
+    """
+
+    labels: tuple
+    xyz: np.ndarray
+    lines: tuple = ()
+    name: str = ""
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        labels = tuple(str(s) for s in self.labels)
+        xyz = np.asarray(self.xyz, dtype=float).reshape(-1, 3)
+        if len(labels) != xyz.shape[0]:
+            raise GeometryError(f"{len(labels)} node labels for {xyz.shape[0]} node coordinates")
+        if len(set(labels)) != len(labels):
+            raise GeometryError("node labels must be unique")
+        if not np.all(np.isfinite(xyz)):
+            raise GeometryError("node coordinates must be finite numbers (m)")
+        known = set(labels)
+        lines = tuple((str(a), str(b)) for a, b in self.lines)
+        bad = [f"{a}-{b}" for a, b in lines if a not in known or b not in known]
+        if bad:
+            raise GeometryError(f"trace lines name unknown nodes: {', '.join(bad[:5])}")
+        xyz.setflags(write=False)
+        object.__setattr__(self, "labels", labels)
+        object.__setattr__(self, "xyz", xyz)
+        object.__setattr__(self, "lines", lines)
+
+    def index(self, label: str) -> int:
+        """Row of node ``label`` in ``xyz``; GeometryError when absent."""
+        try:
+            return self.labels.index(label)
+        except ValueError:
+            raise GeometryError(f"node {label!r} is not in the geometry {self.name!r}") from None
+
+    def covers(self, points: Iterable[str]) -> list[str]:
+        """The point labels whose node is *not* in the geometry (empty: all are drawn)."""
+        known = set(self.labels)
+        return [p for p in points if node_label(p) not in known]
+
+    def to_dict(self) -> dict:
+        """JSON-ready: labels, xyz (m, rounded to 0.1 mm), lines as index pairs, name."""
+        idx = {s: i for i, s in enumerate(self.labels)}
+        return {"name": self.name, "labels": list(self.labels),
+                "xyz": np.round(self.xyz, 4).tolist(),
+                "lines": [[idx[a], idx[b]] for a, b in self.lines]}
+
+
+def node_label(point: str) -> str:
+    """``component:node`` of a point label ``component:node:direction`` (or of a node label)."""
+    parts = str(point).split(":")
+    return ":".join(parts[:2])
+
+
+def points_on_a_line(points: Sequence[str], spacing_m: float = 0.1) -> Geometry:
+    """The measured points' nodes on the X axis, ``spacing_m`` apart in order, joined in order."""
+    nodes: list[str] = []
+    for p in points:
+        n = node_label(p)
+        if n not in nodes:
+            nodes.append(n)
+    xyz = np.zeros((len(nodes), 3))
+    xyz[:, 0] = spacing_m * np.arange(len(nodes))
+    return Geometry(tuple(nodes), xyz, tuple(zip(nodes[:-1], nodes[1:])), name="points on a line")
+
+
+def _label_of_uff(node: int) -> str:
+    p = point_from_uff(int(node), 3)
+    return f"{p.component}:{p.node}"
+
+
+def _uff_of_label(label: str) -> int:
+    try:
+        return uff_node(f"{label}:Z")
+    except PointLabelError as exc:
+        raise GeometryError(f"node {label!r} has no UFF node number: {exc}") from None
+
+
+def read_uff_geometry(path: "str | Path") -> Geometry:
+    """Nodes (data set 15, coordinates converted to m with the file's units when given) and trace
+    lines (data set 82) of a UFF file; GeometryError when the file holds no data set 15."""
+    import pyuff
+
+    p = Path(path)
+    if not p.is_file():
+        raise GeometryError(f"geometry file {p} not found: check the path")
+    try:
+        sets = pyuff.UFF(str(p)).read_sets()
+    except Exception as exc:  # pyuff raises many kinds on foreign files
+        raise GeometryError(f"cannot read UFF file {p}: {exc}") from None
+    if isinstance(sets, dict):
+        sets = [sets]
+    scale = 1.0
+    for s in sets:
+        if s.get("type") == 164 and s.get("length"):
+            scale = float(s["length"])  # units data set: metres per file length unit
+    labels: list[str] = []
+    xyz: list = []
+    lines: list = []
+    for s in sets:
+        if s.get("type") == 15:
+            for n, x, y, z in zip(s["node_nums"], s["x"], s["y"], s["z"]):
+                labels.append(_label_of_uff(int(n)))
+                xyz.append((float(x) / scale, float(y) / scale, float(z) / scale))
+    for s in sets:
+        if s.get("type") == 82:
+            nodes = [int(n) for n in s["nodes"]]
+            for a, b in zip(nodes[:-1], nodes[1:]):
+                if a != 0 and b != 0:  # 0 lifts the pen
+                    lines.append((_label_of_uff(a), _label_of_uff(b)))
+    if not labels:
+        raise GeometryError(f"{p} holds no node coordinates (UFF data set 15): give a geometry file with nodes")
+    return Geometry(tuple(labels), np.asarray(xyz), tuple(lines), name=p.name)
+
+
+def write_uff_geometry(path: "str | Path", geometry: Geometry, *, overwrite: bool = True) -> Path:
+    """Write data set 15 (nodes, m) and one data set 82 per trace line of ``geometry``."""
+    import pyuff
+
+    p = Path(path)
+    if p.exists() and overwrite:
+        p.unlink()
+    nums = [_uff_of_label(s) for s in geometry.labels]
+    uff = pyuff.UFF(str(p))
+    x = geometry.xyz
+    uff.write_sets(pyuff.prepare_15(node_nums=nums, def_cs=[0] * len(nums), disp_cs=[0] * len(nums),
+                                    color=[1] * len(nums), x=x[:, 0].tolist(), y=x[:, 1].tolist(),
+                                    z=x[:, 2].tolist()), mode="add")
+    for k, (a, b) in enumerate(geometry.lines, start=1):
+        uff.write_sets(pyuff.prepare_82(trace_num=k, n_nodes=2, color=1, id=f"line {k}",
+                                        nodes=np.array([_uff_of_label(a), _uff_of_label(b)])), mode="add")
+    return p
+
+

@@ -1,0 +1,11 @@
+"""Self-contained HTML test report (issue 12): ``python -m analysis report``.
+
+:func:`build_document` collects the content, :func:`write_report` writes the folder
+(``index.html`` and its assets; opens from ``file://`` with no network).
+"""
+from .build import build_document, make_report, write_report
+from .sources import (FitData, ReportInputError, TestRecord, load_diagnosis, load_fit_json, read_test_record,
+                      recording_device, run_fit)
+
+__all__ = ["build_document", "make_report", "write_report", "recording_device", "FitData", "ReportInputError", "TestRecord", "load_diagnosis",
+           "load_fit_json", "read_test_record", "run_fit"]

@@ -1,0 +1,101 @@
+"""Assemble and write the report folder: ``index.html``, ``report-data.js``, ``report.js``,
+``report.css`` and ``plotly.min.js`` (copied from the plotly package: no network needed)."""
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from importlib import resources
+from pathlib import Path
+from typing import Optional
+
+from ..frf import FRFSet
+from ..geometry import Geometry, points_on_a_line
+from ..web_assets import plotly_js_path
+from .collect import shape_vectors, frf_section, modal_section, points_section, shapes_section, test_section
+from .page import render_page, written_stamp
+from .sources import (FitData, ReportInputError, TestRecord, load_diagnosis, load_fit_json, read_test_record,
+                      run_fit)
+
+__all__ = ["build_document", "write_report", "make_report"]
+
+log = logging.getLogger(__name__)
+_OWN_ASSETS = ("report.js", "report.css")
+
+
+def build_document(frf: FRFSet, fit: FitData, *, geometry: Optional[Geometry] = None,
+                   record: Optional[TestRecord] = None, diagnosis: Optional[dict] = None,
+                   input_name: str = "", title: str = "") -> dict:
+    """The report's content as one JSON-able dict (see :mod:`analysis.report_html.collect`)."""
+    notes = []
+    labels, _ = shape_vectors(fit.model)
+    geo = geometry
+    if geo is not None and geo.covers(labels):
+        missing = geo.covers(labels)
+        notes.append(f"geometry {geo.name!r} lacks the nodes of {', '.join(missing[:5])}"
+                     f"{'...' if len(missing) > 5 else ''}: the shapes are drawn on the points on a line")
+        log.warning(notes[-1])
+        geo = None
+    if geo is None:
+        geo = points_on_a_line(labels)
+    doc = {
+        "meta": {"title": title or Path(input_name).name or "FRFs", "input": input_name,
+                 "frf_count": f"{frf.n_outputs} x {frf.n_references} FRFs, {frf.freq_hz.size} lines "
+                              f"{frf.freq_hz[0]:.4g}-{frf.freq_hz[-1]:.4g} Hz",
+                 "written": written_stamp(), "notes": notes},
+        "test": test_section(record) if record is not None else None,
+        "points": points_section(record) if record is not None else None,
+        "frf": frf_section(frf),
+        "modal": modal_section(frf, fit),
+        "shapes": shapes_section(fit, geo),
+        "diagnosis": diagnosis,
+    }
+    return doc
+
+
+def write_report(out_dir: "str | Path", doc: dict) -> Path:
+    """Write the report folder for ``doc`` (from :func:`build_document`); returns ``index.html``."""
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ReportInputError(f"cannot create the report folder {out}: {exc.strerror}") from None
+    src = plotly_js_path()
+    dst = out / "plotly.min.js"
+    if not dst.exists() or dst.stat().st_size != src.stat().st_size:
+        shutil.copyfile(src, dst)
+    pkg = resources.files(__package__)
+    for name in _OWN_ASSETS:
+        (out / name).write_text(pkg.joinpath(name).read_text(encoding="utf-8"), encoding="utf-8")
+    payload = json.dumps(doc, separators=(",", ":"), allow_nan=False, default=_default)
+    (out / "report-data.js").write_text("window.REPORT_DATA = " + payload + ";\n", encoding="utf-8")
+    index = out / "index.html"
+    index.write_text(render_page(doc), encoding="utf-8")
+    return index
+
+
+def _default(x):
+    import numpy as np
+
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"{type(x).__name__} is not JSON serialisable")
+
+
+def make_report(input_path: "str | Path", out_dir: "str | Path", *, fit_json: "Optional[str | Path]" = None,
+                diagnosis: "Optional[str | Path]" = None, geometry: Optional[Geometry] = None,
+                estimator: str = "H1") -> Path:
+    """Write the report of a recording or UFF file into ``out_dir``; returns ``index.html``.
+
+    Without ``fit_json`` the automatic fit runs here; ``geometry`` None puts the points on a line.
+    """
+    from ..inputs import detect_format, load_input
+
+    frf = load_input(input_path, estimator=estimator)
+    record = read_test_record(input_path) if detect_format(input_path) == "recording" else None
+    diag = load_diagnosis(diagnosis)
+    fit = load_fit_json(fit_json, frf) if fit_json else run_fit(frf)
+    doc = build_document(frf, fit, geometry=geometry, record=record, diagnosis=diag, input_name=str(input_path))
+    return write_report(out_dir, doc)

@@ -1,0 +1,174 @@
+"""The report page: HTML tables written here, plots drawn in the browser by ``report.js`` from
+``report-data.js`` (``window.REPORT_DATA = {...}``; a script, not a fetched JSON, so the page works
+from ``file://``)."""
+from __future__ import annotations
+
+import datetime as _dt
+from html import escape
+from typing import Any, Optional, Sequence
+
+__all__ = ["render_page", "written_stamp"]
+
+
+def _num(x: Any, fmt: str = "{:.4g}") -> str:
+    if x is None:
+        return "&ndash;"
+    try:
+        return fmt.format(float(x))
+    except (TypeError, ValueError):
+        return escape(str(x))
+
+
+def _table(head: Sequence[str], rows: Sequence[Sequence[str]], attrs: str = "") -> str:
+    th = "".join(f"<th>{h}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table{attrs}><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _plot(name: str, caption: str, height: int = 380) -> str:
+    return (f'<figure><div class="plot" data-plot="{name}" style="height:{height}px"></div>'
+            f"<figcaption>{escape(caption)}</figcaption></figure>")
+
+
+def _dl(items: Sequence[tuple[str, str]]) -> str:
+    return "<dl>" + "".join(f"<dt>{escape(k)}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
+
+
+def _test_html(test: Optional[dict], meta: dict) -> str:
+    if test is None:
+        return ("<section id='test'><h2>1. The test</h2><p class='note'>The input is a UFF file of FRFs: it holds "
+                "no record of the test (channels, windows, hits). Give the recording (.h5) for this section.</p>"
+                + _dl([("input", escape(meta["input"])), ("FRFs", escape(meta["frf_count"]))]) + "</section>")
+    trig = test["trigger"]
+    win = test["windows"]
+    exp = (f"tau {_num(win.get('exp_tau_s'))} s" if win.get("exp_tau_s") else
+           (f"to {_num(100 * win['exp_decay'], '{:.3g}')} % at the block end" if win.get("exp_decay") else "none"))
+    force = (f"{_num(1e3 * win['force_width_s'], '{:.3g}')} ms + {_num(1e3 * win.get('force_taper_s', 0), '{:.3g}')}"
+             " ms cosine taper" if win.get("force_width_s") else "none")
+    items = [("device", escape(test["device"] or "unknown")), ("date (UTC)", escape(test["date"] or "unknown")),
+             ("instrument", escape(", ".join(f"{k} {v}" for k, v in test["instrument"].items()))),
+             ("sampling", f"{_num(test['sample_rate_hz'])} Hz, blocks of {escape(str(test['block_size']))} samples"),
+             ("trigger", escape(", ".join(f"{k} {v}" for k, v in trig.items())) if trig else "&ndash;"),
+             ("force window", force), ("exponential window", exp),
+             ("plan", escape(", ".join(f"{k} {v}" for k, v in test["plan"].items() if k != "points"))),
+             ("points", escape(", ".join(test["points"]))),
+             ("hits", f"{test['accepted']} accepted, {test['rejected']} rejected")]
+    ch_rows = [[escape(str(c.get("name", ""))), escape(str(c.get("point", ""))), escape(str(c.get("direction", ""))),
+                escape(str(c.get("quantity", ""))),
+                f"{_num(c.get('sensitivity'))} {escape(str(c.get('sensitivity_unit', '')))}",
+                f"{_num(c.get('range_v'))} V", escape(str(c.get("coupling", ""))),
+                "yes" if c.get("iepe") else "no"] for c in test["channels"]]
+    hit_rows = [[str(h["index"]), escape(h["point"]), "accepted" if h["accepted"] else "<b>rejected</b>",
+                 _num(h["peak_n"], "{:.1f}"), escape("; ".join(h["reasons"])) or "&ndash;"] for h in test["hits"]]
+    return ("<section id='test'><h2>1. The test</h2>" + _dl(items) + "<h3>Channels</h3>"
+            + _table(["channel", "point", "direction", "quantity", "sensitivity", "range", "coupling", "IEPE"],
+                     ch_rows, " id='channels'")
+            + "<h3>Hits</h3>" + _table(["hit", "point", "decision", "peak force [N]", "reason"], hit_rows, " id='hits'")
+            + "</section>")
+
+
+def _points_html(points: Optional[list]) -> str:
+    if not points:
+        return ("<section id='points'><h2>2. Excitation and responses</h2><p class='note'>No time data in the input "
+                "(UFF FRFs): the force spectra and time histories need the recording.</p></section>")
+    return ("<section id='points'><h2>2. Excitation and responses</h2>"
+            "<p>Force autospectrum of each point (mean of the accepted hits, force window applied) with the "
+            "excitation band marked where it has fallen 10 dB (dashed) and 20 dB (dotted) below its low-frequency "
+            "level; the force pulse and the response time histories of the last accepted hit (click the legend to "
+            "show another point's).</p>"
+            + _plot("force-spectrum", "Force autospectrum per point, dB re 1 N\u00b2/Hz, with the -10/-20 dB marks")
+            + _plot("force-time", "Force pulse per point (last accepted hit)", 300)
+            + _plot("response-time", "Response time histories (last accepted hit of each point)", 320)
+            + "</section>")
+
+
+def _modes_html(modal: dict) -> str:
+    rows = [[str(m["n"]), _num(m["freq_hz"], "{:.3f}"), _num(m["freq_std_hz"], "{:.2g}"),
+             _num(m["damping_pct"], "{:.3f}"), _num(m["damping_std_pct"], "{:.2g}"), _num(m["mpc"], "{:.3f}"),
+             _num(m["complexity_pct"], "{:.1f}")] for m in modal["modes"]]
+    head = ["mode", "f [Hz]", "&sigma;<sub>f</sub> [Hz]", "&zeta; [%]", "&sigma;<sub>&zeta;</sub> [%]", "MPC",
+            "complexity [%]"]
+    warn = "".join(f"<li>{escape(w)}</li>" for w in modal["warnings"])
+    rel = modal["synthesis"]["rel_rms"]
+    stab = _plot("stabilization", "Stabilization diagram: poles per model order by stability class over the summed "
+                 "FRF; vertical lines: the fitted modes" if modal["stabilization"]["classes"] is not None else
+                 "The fitted modes (vertical lines) over the summed FRF; no stabilization diagram: the fit was read "
+                 "from a file (--fit)", 420)
+    return ("<section id='modal'><h2>4. Modal parameters</h2>"
+            f"<p>Fit: {escape(modal['source'])}; band {modal['band_hz'][0]:.4g}&ndash;{modal['band_hz'][1]:.4g} Hz; "
+            f"{len(modal['modes'])} modes; relative RMS misfit of the synthesis "
+            f"{_num(None if rel is None else 100 * rel, '{:.2f}')} %.</p>"
+            + stab + "<h3>Mode table</h3>" + _table(head, rows, " id='modes'")
+            + "<p class='note'>&sigma;: standard deviations of the fit (white-noise, perfect-model lower bounds). "
+              "MPC: modal phase collinearity of the shape (1: real mode); complexity = 1 - MPC.</p>"
+            + (f"<details><summary>fit warnings ({len(modal['warnings'])})</summary><ul>{warn}</ul></details>"
+               if warn else "")
+            + _plot("synthesis", "Measured vs synthesised FRFs (top) and the relative error over all FRFs (bottom)",
+                    480)
+            + _plot("automac", "AutoMAC of the mode shapes", 420)
+            + "</section>")
+
+
+def _shapes_html() -> str:
+    return ("<section id='shapes'><h2>5. Mode shapes</h2><div class='controls'>"
+            "<label>mode <select id='mode-select'></select></label>"
+            "<button id='play' type='button'>pause</button>"
+            "<label>amplitude <input id='amplitude' type='range' min='0' max='1' step='0.01' value='0.5'></label>"
+            "<label>speed <input id='speed' type='range' min='0.1' max='3' step='0.1' value='1'></label>"
+            "<span class='note'>drag to rotate</span></div>"
+            "<figure><canvas class='plot' data-plot='mode-shapes' width='960' height='520'></canvas>"
+            "<figcaption id='shape-caption'>Mode shape on the test geometry (grey: undeformed; red: measured points; nodes without a measurement stay still)</figcaption></figure>"
+            "</section>")
+
+
+def _diagnosis_html(diag: Optional[dict]) -> str:
+    if diag is None:
+        return ""
+    rows = [[escape(str(c.get("effect", ""))), _num(c.get("gain_db"), "{:.1f}"), _num(c.get("error_before_db"), "{:.1f}"),
+             _num(c.get("error_after_db"), "{:.1f}"), "yes" if c.get("significant") else "no",
+             escape(str(c.get("evidence", "")))[:300]] for c in diag.get("causes", [])]
+    return ("<section id='diagnosis'><h2>6. Diagnosis: what the simulation gets wrong</h2>"
+            + _dl([("verdict", f"<b>{escape(str(diag.get('verdict')))}</b>"),
+                   ("error before", f"{_num(diag.get('error_before_db'), '{:.1f}')} dB"),
+                   ("error after", f"{_num(diag.get('error_after_db'), '{:.1f}')} dB"),
+                   ("noise floor", f"{_num(diag.get('noise_db'), '{:.1f}')} dB")])
+            + _table(["cause", "gain [dB]", "error before [dB]", "error after [dB]", "significant", "evidence"], rows,
+                     " id='causes'")
+            + _plot("diagnosis", "Model error before and after each cause is applied (dB, lower is better)", 320)
+            + "</section>")
+
+
+def render_page(data: dict, *, plotly_src: str = "plotly.min.js") -> str:
+    """The whole ``index.html``; ``data`` is the report document (see :mod:`analysis.report_html.build`)."""
+    meta = data["meta"]
+    title = f"Impact test report: {escape(meta['title'])}"
+    frf = data["frf"]
+    parts = [
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
+        "<meta http-equiv='Content-Security-Policy' content=\"default-src 'self' 'unsafe-inline' 'unsafe-eval' "
+        "data: blob:; connect-src 'none'\">",
+        f"<title>{title}</title><link rel='stylesheet' href='report.css'></head><body>",
+        f"<header><h1>{title}</h1><p>input <code>{escape(meta['input'])}</code> &middot; {escape(meta['frf_count'])}"
+        f" &middot; written {escape(meta['written'])} by impactlab</p>",
+        "<nav><a href='#test'>test</a> <a href='#points'>excitation</a> <a href='#frf'>FRFs</a> "
+        "<a href='#modal'>modes</a> <a href='#shapes'>shapes</a>"
+        + (" <a href='#diagnosis'>diagnosis</a>" if data.get("diagnosis") else "") + "</nav></header><main>",
+        _test_html(data.get("test"), meta),
+        _points_html(data.get("points")),
+        "<section id='frf'><h2>3. FRFs</h2><p>Click a legend entry to show or hide an FRF (the coherence follows); "
+        "drag to zoom, double-click to reset. The strongest FRFs are shown first.</p>",
+        _plot("frf", f"FRF magnitude and phase, {frf['quantity']} in {frf['unit']}", 560),
+        _plot("coherence", "Coherence", 260) if frf["has_coherence"] else
+        '<div class="plot empty" data-plot="coherence"><p class="note">The input holds no coherence.</p></div>',
+        "</section>",
+        _modes_html(data["modal"]),
+        _shapes_html(),
+        _diagnosis_html(data.get("diagnosis")),
+        f"</main><script src='{plotly_src}'></script><script src='report-data.js'></script>"
+        "<script src='report.js'></script></body></html>",
+    ]
+    return "\n".join(parts)
+
+
+def written_stamp() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")

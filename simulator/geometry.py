@@ -1,0 +1,36 @@
+"""The simulated frame's wireframe as an :class:`analysis.geometry.Geometry`.
+
+Nodes are the finite-element nodes ``component:node`` of every component of a
+:class:`simulator.config.FrameConfig` (xyz in m, evenly spaced from ``start_m`` to ``end_m``),
+lines join consecutive nodes of a component and the node pairs of ``[joints]``.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from analysis.geometry import Geometry
+
+from .config import FrameConfig
+
+__all__ = ["frame_geometry"]
+
+
+def frame_geometry(config: Optional[FrameConfig] = None) -> Geometry:
+    """Wireframe of the frame of ``config`` (default: ``FrameConfig.load()``)."""
+    cfg = config if config is not None else FrameConfig.load()
+    labels: list[str] = []
+    xyz: list[np.ndarray] = []
+    lines: list[tuple[str, str]] = []
+    for name, comp in cfg.components.items():
+        start, end = np.asarray(comp.start_m, float), np.asarray(comp.end_m, float)
+        n = int(comp.n_elements)
+        for i in range(n + 1):
+            labels.append(f"{name}:{i}")
+            xyz.append(start + (i / n) * (end - start))
+            if i:
+                lines.append((f"{name}:{i - 1}", f"{name}:{i}"))
+    for a, b in cfg.joints.pairs:
+        lines.append((str(a), str(b)))
+    return Geometry(tuple(labels), np.asarray(xyz), tuple(lines), name=f"simulated frame ({cfg.source})")
