@@ -1,0 +1,45 @@
+"""Shared data of the report tests: one small simulated test (the demo's roving-hammer session on the
+simulated frame, two accepted hits per point), its fit, a diagnosis document and the report folder.
+Made once per session (a few seconds)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+#: a diagnosis document in the schema of ``python -m analysis diagnose --json`` (verdict.to_json)
+DIAGNOSIS = {
+    "verdict": "support_flexibility",
+    "causes": [
+        {"effect": "support_flexibility", "parameters": {"scale": 0.4}, "gain_db": 25.7, "evidence": "modes 1-2 shift",
+         "error_before_db": -3.0, "error_after_db": -28.7, "z": 9.1, "significant": True},
+        {"effect": "sensor_mass", "parameters": {"kg": 0.006}, "gain_db": 0.4, "evidence": "small",
+         "error_before_db": -3.0, "error_after_db": -3.4, "z": 0.5, "significant": False},
+    ],
+    "error_before_db": -3.0, "error_after_db": -28.7, "noise_db": -40.0, "unexplained": False, "skipped": [],
+    "combined": None, "comparison": {},
+}
+
+
+@pytest.fixture(scope="session")
+def report_case(tmp_path_factory) -> dict:
+    """{"dir", "recording", "uff", "fit", "diagnosis", "report" (index.html with the diagnosis), "n_modes"}."""
+    from acquisition import cli_demo
+    from analysis import cli_report
+
+    out = tmp_path_factory.mktemp("report_case")
+    assert cli_demo.main(["--out", str(out), "--hits", "2"]) == 0
+    diag = out / "diag.json"
+    diag.write_text(json.dumps(DIAGNOSIS))
+    code = cli_report.main([str(out / "demo.h5"), "--out", str(out / "full"), "--fit", str(out / "fit.json"),
+                            "--diagnosis", str(diag), "--geometry", "frame"])
+    assert code == 0
+    fit = json.loads((out / "fit.json").read_text())
+    return {"dir": out, "recording": out / "demo.h5", "uff": out / "demo.uff", "fit": out / "fit.json",
+            "diagnosis": diag, "report": out / "full" / "index.html", "demo_report": out / "report" / "index.html",
+            "n_modes": len(fit["poles"]), "fit_doc": fit}
+
+
+def page_root(index: Path) -> Path:
+    return Path(index).parent
