@@ -1,0 +1,165 @@
+"""The HTML test report in a real headless Chromium (selenium + Debian's chromium/chromium-driver):
+no console errors, the mode table's rows equal the fitted modes, every ``data-plot`` element has
+drawn content, the mode-shape animation advances, no request leaves ``file://``.
+
+Outside CI the tests skip (with how to install the browser) when chromium, chromedriver or selenium
+is missing; with ``CI=true`` they fail instead, so CI cannot skip them silently.
+"""
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from report_data import report_case  # noqa: F401  (session fixture)
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMEDRIVER = "/usr/bin/chromedriver"
+INSTALL = ("install the browser for these tests: apt-get install chromium chromium-driver, and pip install "
+           "selenium (in the test extra: pip install -e '.[test,report]')")
+PLOTS = ("frf", "coherence", "force-spectrum", "stabilization", "synthesis", "automac", "mode-shapes", "diagnosis")
+LOAD_TIMEOUT_S = 60
+
+
+def _missing() -> list[str]:
+    missing = [p for p in (CHROMIUM, CHROMEDRIVER) if not (Path(p).exists() or shutil.which(Path(p).name))]
+    try:
+        import selenium  # noqa: F401
+    except ImportError:
+        missing.append("selenium (Python package)")
+    return missing
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    missing = _missing()
+    if missing:
+        message = f"browser tests need {', '.join(missing)}: {INSTALL}"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail("CI=true: " + message)
+        pytest.skip(message)
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM if Path(CHROMIUM).exists() else shutil.which("chromium")
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                "--disable-component-update", "--no-first-run", "--window-size=1280,1000",
+                f"--user-data-dir={tmp_path_factory.mktemp('chromium-profile')}"):
+        opts.add_argument(arg)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL", "performance": "ALL"})
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER if Path(CHROMEDRIVER).exists()
+                                              else shutil.which("chromedriver")), options=opts)
+    driver.set_page_load_timeout(LOAD_TIMEOUT_S)
+    yield driver
+    driver.quit()
+
+
+@pytest.fixture(scope="module")
+def loaded(browser, report_case):
+    """The report (with a diagnosis) loaded and drawn; the browser log and network log of the load."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    browser.get_log("browser")
+    browser.get_log("performance")
+    browser.get(report_case["report"].resolve().as_uri())
+    WebDriverWait(browser, LOAD_TIMEOUT_S).until(lambda d: d.execute_script("return document.body.dataset.ready"))
+    return {"driver": browser, "ready": browser.execute_script("return document.body.dataset.ready"),
+            "console": browser.get_log("browser"), "network": browser.get_log("performance")}
+
+
+def test_no_console_errors(loaded):
+    assert loaded["ready"] == "1"
+    errors = [e for e in loaded["console"] if e["level"] in ("SEVERE", "ERROR")]
+    assert not errors, f"console errors: {errors}"
+
+
+def test_mode_table_rows_equal_the_fitted_modes(loaded, report_case):
+    n = loaded["driver"].execute_script("return document.querySelectorAll('table#modes tbody tr').length")
+    assert n == report_case["n_modes"] > 0
+
+
+def test_every_plot_has_drawn_content(loaded):
+    script = """
+    const out = {};
+    for (const el of document.querySelectorAll('[data-plot]')) {
+      const name = el.dataset.plot;
+      if (el.tagName === 'CANVAS') {
+        const px = el.getContext('2d').getImageData(0, 0, el.width, el.height).data;
+        let ink = 0;
+        for (let i = 0; i < px.length; i += 4) { if (px[i] < 200 || px[i + 1] < 200 || px[i + 2] < 200) ink++; }
+        out[name] = {traces: 1, marks: ink};
+      } else {
+        const traces = (el._fullData || []).filter(t => t.visible === true).length;
+        const marks = el.querySelectorAll('.cartesianlayer .trace path, .heatmaplayer image, .barlayer path, '
+                                          + '.cartesianlayer .point').length;
+        out[name] = {traces: traces, marks: marks};
+      }
+    }
+    return out;"""
+    drawn = loaded["driver"].execute_script(script)
+    for name in PLOTS:
+        assert name in drawn, f"no data-plot={name!r} element"
+        assert drawn[name]["traces"] > 0 and drawn[name]["marks"] > 0, f"{name} is empty: {drawn[name]}"
+    assert drawn["mode-shapes"]["marks"] > 1000  # the wireframe and its nodes, not a few stray pixels
+
+
+def _canvas_png(driver) -> np.ndarray:
+    from PIL import Image
+
+    el = driver.find_element("css selector", "[data-plot='mode-shapes']")
+    return np.asarray(Image.open(io.BytesIO(el.screenshot_as_png)).convert("L"), dtype=int)
+
+
+def test_animation_advances_and_pauses(loaded):
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    d = loaded["driver"]
+    d.execute_script("document.querySelector('[data-plot=\"mode-shapes\"]').scrollIntoView()")
+    first = _canvas_png(d)
+    # poll (no fixed sleep): the picture must change while playing
+    WebDriverWait(d, 20, poll_frequency=0.2).until(lambda drv: np.count_nonzero(_canvas_png(drv) != first) > 200)
+    d.find_element("id", "play").click()  # pause
+    assert d.find_element("id", "play").text == "play"
+    frames = d.execute_script("return Number(document.querySelector('[data-plot=\"mode-shapes\"]').dataset.frames)")
+    a = _canvas_png(d)
+    WebDriverWait(d, 5).until(lambda drv: drv.execute_script("return 1"))
+    b = _canvas_png(d)
+    assert np.array_equal(a, b), "the picture changes while paused"
+    assert frames == d.execute_script("return Number(document.querySelector('[data-plot=\"mode-shapes\"]').dataset.frames)")
+    # another mode, larger amplitude: the picture changes although paused
+    d.execute_script("const s = document.getElementById('mode-select'); s.value = '1';"
+                     "s.dispatchEvent(new Event('change'));")
+    WebDriverWait(d, 5, poll_frequency=0.1).until(lambda drv: np.count_nonzero(_canvas_png(drv) != b) > 200)
+    d.find_element("id", "play").click()  # play again
+    assert d.find_element("id", "play").text == "pause"
+
+
+def test_no_request_leaves_file_urls(loaded):
+    urls = []
+    for entry in loaded["network"]:
+        msg = json.loads(entry["message"])["message"]
+        # requests made by the report's documents (the browser's own new-tab page is not ours)
+        if msg.get("method") == "Network.requestWillBeSent" and \
+                str(msg["params"].get("documentURL", "")).startswith("file://"):
+            urls.append(msg["params"]["request"]["url"])
+    assert any(u.endswith("plotly.min.js") for u in urls), f"the network log saw no page assets: {urls}"
+    outside = [u for u in urls if not u.startswith(("file://", "data:", "blob:"))]
+    assert not outside, f"requests outside file://: {outside}"
+    resources = loaded["driver"].execute_script(
+        "return performance.getEntriesByType('resource').map(e => e.name)")
+    assert all(u.startswith(("file://", "data:", "blob:")) for u in resources), resources
+
+
+def test_legend_click_hides_the_coherence_too(loaded):
+    d = loaded["driver"]
+    hidden = d.execute_script("""
+      const frf = document.querySelector('[data-plot="frf"]');
+      const coh = document.querySelector('[data-plot="coherence"]');
+      return Plotly.restyle(frf, {visible: 'legendonly'}, [0, 1]).then(() => coh._fullData[0].visible);""")
+    assert hidden == "legendonly"
