@@ -157,9 +157,26 @@ def test_no_request_leaves_file_urls(loaded):
 
 
 def test_legend_click_hides_the_coherence_too(loaded):
+    from selenium.webdriver.support.ui import WebDriverWait
+
     d = loaded["driver"]
     hidden = d.execute_script("""
       const frf = document.querySelector('[data-plot="frf"]');
       const coh = document.querySelector('[data-plot="coherence"]');
       return Plotly.restyle(frf, {visible: 'legendonly'}, [0, 1]).then(() => coh._fullData[0].visible);""")
     assert hidden == "legendonly"
+    WebDriverWait(d, 10, poll_frequency=0.1).until(lambda drv: drv.execute_script(
+        "return document.querySelector('[data-plot=coherence]')._fullData[0].visible") == "legendonly")
+
+
+def test_frf_picker_shows_an_frf_and_its_coherence(loaded):
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    d = loaded["driver"]
+    get = """const frf = document.querySelector('[data-plot="frf"]');
+             const coh = document.querySelector('[data-plot="coherence"]');
+             return [frf._fullData[10].visible, frf._fullData[11].visible, coh._fullData[5].visible];"""
+    assert d.execute_script(get) == ["legendonly"] * 3
+    d.execute_script("const p = document.getElementById('frf-picker'); p.value = '5';"
+                     "p.dispatchEvent(new Event('change'));")
+    WebDriverWait(d, 10, poll_frequency=0.1).until(lambda drv: drv.execute_script(get) == [True, True, True])

@@ -36,8 +36,8 @@ def _dl(items: Sequence[tuple[str, str]]) -> str:
 
 def _test_html(test: Optional[dict], meta: dict) -> str:
     if test is None:
-        return ("<section id='test'><h2>1. The test</h2><p class='note'>The input is a UFF file of FRFs: it holds "
-                "no record of the test (channels, windows, hits). Give the recording (.h5) for this section.</p>"
+        return ("<section id='test'><h2>1. The test</h2><p class='note'>The input holds FRFs only (a UFF file): no "
+                "record of the test (channels, windows, hits). Give the recording (.h5) for this section.</p>"
                 + _dl([("input", escape(meta["input"])), ("FRFs", escape(meta["frf_count"]))]) + "</section>")
     trig = test["trigger"]
     win = test["windows"]
@@ -70,7 +70,7 @@ def _test_html(test: Optional[dict], meta: dict) -> str:
 def _points_html(points: Optional[list]) -> str:
     if not points:
         return ("<section id='points'><h2>2. Excitation and responses</h2><p class='note'>No time data in the input "
-                "(UFF FRFs): the force spectra and time histories need the recording.</p></section>")
+                "(FRFs only): the force spectra and time histories need the recording.</p></section>")
     return ("<section id='points'><h2>2. Excitation and responses</h2>"
             "<p>Force autospectrum of each point (mean of the accepted hits, force window applied) with the "
             "excitation band marked where it has fallen 10 dB (dashed) and 20 dB (dotted) below its low-frequency "
@@ -155,8 +155,10 @@ def render_page(data: dict, *, plotly_src: str = "plotly.min.js") -> str:
         + (" <a href='#diagnosis'>diagnosis</a>" if data.get("diagnosis") else "") + "</nav></header><main>",
         _test_html(data.get("test"), meta),
         _points_html(data.get("points")),
-        "<section id='frf'><h2>3. FRFs</h2><p>Click a legend entry to show or hide an FRF (the coherence follows); "
-        "drag to zoom, double-click to reset. The strongest FRFs are shown first.</p>",
+        "<section id='frf'><h2>3. FRFs</h2><p>The strongest FRFs are drawn first. Click a legend entry to show or "
+        "hide an FRF (the coherence follows), or add any FRF with the list; drag to zoom, double-click to reset.</p>"
+        "<div class='controls'><label>add an FRF <select id='frf-picker'><option value='' disabled selected>"
+        f"{frf['n_outputs'] * frf['n_references']} FRFs (output / reference)</option></select></label></div>",
         _plot("frf", f"FRF magnitude and phase, {frf['quantity']} in {frf['unit']}", 560),
         _plot("coherence", "Coherence", 260) if frf["has_coherence"] else
         '<div class="plot empty" data-plot="coherence"><p class="note">The input holds no coherence.</p></div>',

@@ -28,35 +28,59 @@
   }
   var FREQ = "frequency [Hz]";
 
+  /* FRFs: the plot holds the first IN_PLOT FRFs (the strongest, VISIBLE of them drawn); the picker adds any
+     other one. Trace 2k and 2k+1 of the FRF plot (magnitude, phase) go with trace k of the coherence. */
+  var IN_PLOT = 16;
+  function frfTraces(t, i, vis) {
+    return [{ x: D.frf.freq_hz, y: t.mag_db, name: t.name, legendgroup: t.name, visible: vis, type: "scatter",
+              mode: "lines", line: { width: 1.2, color: color(i) }, xaxis: "x", yaxis: "y" },
+            { x: D.frf.freq_hz, y: t.phase_deg, name: t.name, legendgroup: t.name, showlegend: false, visible: vis,
+              type: "scatter", mode: "lines", line: { width: 1, color: color(i) }, xaxis: "x", yaxis: "y2" }];
+  }
+  function cohTrace(t, i, vis) {
+    return { x: D.frf.freq_hz, y: t.coh, name: t.name, visible: vis, type: "scatter", mode: "lines",
+             line: { width: 1, color: color(i) } };
+  }
   function drawFRF() {
-    var F = D.frf, data = [], coh = [];
+    var F = D.frf, data = [], coh = [], shown = [];
     var unit = F.unit ? " re 1 " + F.unit : "";
-    F.traces.forEach(function (t, i) {
+    F.traces.slice(0, IN_PLOT).forEach(function (t, i) {
       var vis = t.visible ? true : "legendonly";
-      data.push({ x: F.freq_hz, y: t.mag_db, name: t.name, legendgroup: t.name, visible: vis, type: "scatter",
-                  mode: "lines", line: { width: 1.2, color: color(i) }, xaxis: "x", yaxis: "y" });
-      data.push({ x: F.freq_hz, y: t.phase_deg, name: t.name, legendgroup: t.name, showlegend: false, visible: vis,
-                  type: "scatter", mode: "lines", line: { width: 1, color: color(i) }, xaxis: "x", yaxis: "y2" });
-      if (F.has_coherence) {
-        coh.push({ x: F.freq_hz, y: t.coh, name: t.name, visible: vis, type: "scatter", mode: "lines",
-                   line: { width: 1, color: color(i) } });
-      }
+      data = data.concat(frfTraces(t, i, vis));
+      if (F.has_coherence) { coh.push(cohTrace(t, i, vis)); }
+      shown.push(i);
     });
     var frfDiv = el("frf");
+    var picker = document.getElementById("frf-picker");
+    F.traces.forEach(function (t, i) {
+      var o = document.createElement("option");
+      o.value = String(i); o.textContent = t.name + (i < IN_PLOT ? " (in the legend)" : "");
+      picker.appendChild(o);
+    });
     var p = Plotly.newPlot(frfDiv, data, layout({
       xaxis: axis(FREQ, { anchor: "y2", range: D.modal.band_hz }),
       yaxis: axis("magnitude [dB" + unit + "]", { domain: [0.38, 1] }),
       yaxis2: axis("phase [deg]", { domain: [0, 0.3], range: [-185, 185], tickvals: [-180, -90, 0, 90, 180] }),
       legend: { font: { size: 11 }, title: { text: "FRF (output / reference)" } }
     }), CONFIG);
-    if (!F.has_coherence) { return [p]; }
     var cohDiv = el("coherence");
-    var q = Plotly.newPlot(cohDiv, coh, layout({ xaxis: axis(FREQ, { range: D.modal.band_hz }), yaxis: axis("coherence [-]", { range: [0, 1.05] }),
-                                                 showlegend: false }), CONFIG);
-    return [p, q.then(function () {
+    var q = F.has_coherence ? Plotly.newPlot(cohDiv, coh, layout({ xaxis: axis(FREQ, { range: D.modal.band_hz }),
+        yaxis: axis("coherence [-]", { range: [0, 1.05] }), showlegend: false }), CONFIG) : Promise.resolve();
+    return [p, Promise.all([p, q]).then(function () {
+      picker.addEventListener("change", function () {
+        var i = Number(picker.value), k = shown.indexOf(i);
+        if (k >= 0) {
+          Plotly.restyle(frfDiv, { visible: true }, [2 * k, 2 * k + 1]);
+        } else {
+          Plotly.addTraces(frfDiv, frfTraces(F.traces[i], i, true));
+          if (F.has_coherence) { Plotly.addTraces(cohDiv, cohTrace(F.traces[i], i, true)); }
+          shown.push(i);
+        }
+      });
+      if (!F.has_coherence) { return; }
       frfDiv.on("plotly_restyle", function (ev) {   // legend clicks: the coherence follows the FRFs
         var upd = ev[0], idx = ev[1];
-        if (!upd || !("visible" in upd)) { return; }
+        if (!upd || !("visible" in upd) || !idx) { return; }
         var vis = [], tr = [];
         idx.forEach(function (k, j) {
           if (k % 2 === 0) { tr.push(k / 2); vis.push(Array.isArray(upd.visible) ? upd.visible[j % upd.visible.length] : upd.visible); }
@@ -206,6 +230,8 @@
       g.lines.forEach(function (l) { ctx.beginPath(); ctx.moveTo(und[l[0]][0], und[l[0]][1]); ctx.lineTo(und[l[1]][0], und[l[1]][1]); ctx.stroke(); });
       ctx.lineWidth = 2.5; ctx.strokeStyle = "#1f5fa8";
       g.lines.forEach(function (l) { ctx.beginPath(); ctx.moveTo(def[l[0]][0], def[l[0]][1]); ctx.lineTo(def[l[1]][0], def[l[1]][1]); ctx.stroke(); });
+      ctx.fillStyle = "#c8c8c8";
+      for (var j = 0; j < n; j++) { ctx.beginPath(); ctx.arc(und[j][0], und[j][1], 2, 0, 2 * Math.PI); ctx.fill(); }
       for (var i = 0; i < n; i++) {
         ctx.fillStyle = measured[i] ? "#d62728" : "#1f5fa8";
         ctx.beginPath(); ctx.arc(def[i][0], def[i][1], measured[i] ? 4 : 2, 0, 2 * Math.PI); ctx.fill();
@@ -280,6 +306,9 @@
   attempt("AutoMAC", drawMAC);
   attempt("diagnosis", drawDiagnosis);
   attempt("mode shapes", setupShapes);
-  Promise.all(jobs).then(function () { document.body.dataset.ready = "1"; },
+  Promise.all(jobs).then(function () {
+    document.body.dataset.drawnMs = String(Math.round(performance.now()));  // for benchmarks
+    document.body.dataset.ready = "1";
+  },
                          function (err) { console.error("report: a plot failed: " + err); document.body.dataset.ready = "error"; });
 })();

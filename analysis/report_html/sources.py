@@ -99,11 +99,12 @@ def recording_device(path: "str | Path") -> str:
         return str(r.plan.get("device") or r.instrument.get("url") or r.instrument.get("model") or "")
 
 
-def run_fit(frf: FRFSet) -> FitData:
-    """The automatic fit (:func:`analysis.pipeline.fit_auto`) as :class:`FitData`."""
+def run_fit(frf: FRFSet, **options: Any) -> FitData:
+    """The automatic fit (:func:`analysis.pipeline.fit_auto` with ``options``, e.g. ``band``) as
+    :class:`FitData`."""
     from ..pipeline import fit_auto
 
-    out = fit_auto(frf)
+    out = fit_auto(frf, **options)
     result, stab = out if isinstance(out, tuple) else (out, getattr(out, "stabilization", None))
     warnings = tuple(stab.meta.get("warnings", ())) if stab is not None else ()
     return FitData(model=result.model, model_raw=result.model_raw, freq_hz_std=np.asarray(result.freq_hz_std, float),
