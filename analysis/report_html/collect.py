@@ -132,7 +132,7 @@ def modal_section(frf: FRFSet, fit: FitData) -> dict:
     return {"band_hz": [float(lo), float(hi)], "modes": modes, "source": fit.source, "warnings": list(fit.warnings),
             "synthesis": {"freq_hz": _r(fb, 4), "frfs": synth, "rel_error_db": _r(20 * np.log10(
                 np.maximum(rel, 1e-6)), 2), "rel_rms": _finite(total)},
-            "automac": _r(mac, 3), "stabilization": stabilization_data(frf, fit)}
+            "automac": _r(mac, 3), "shape_points": len(labels), "stabilization": stabilization_data(frf, fit)}
 
 
 def _finite(x: float) -> Optional[float]:

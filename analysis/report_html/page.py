@@ -105,7 +105,8 @@ def _modes_html(modal: dict) -> str:
                if warn else "")
             + _plot("synthesis", "Measured vs synthesised FRFs (top) and the relative error over all FRFs (bottom)",
                     480)
-            + _plot("automac", "AutoMAC of the mode shapes", 420)
+            + _plot("automac", f"AutoMAC of the mode shapes over the {modal['shape_points']} points they are "
+                    "measured at (few points cannot tell every pair of modes apart)", 420)
             + "</section>")
 
 

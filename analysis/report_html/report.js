@@ -143,7 +143,7 @@
     var lay = { shapes: shapes, xaxis: axis(FREQ), legend: { orientation: "h", y: 1.1 } };
     if (S.classes) {
       lay.yaxis = axis("model order [modes]");
-      lay.yaxis2 = axis("summed FRF [dB]", { overlaying: "y", side: "right", showgrid: false });
+      lay.yaxis2 = axis("summed FRF [dB]", { overlaying: "y", side: "right", showgrid: false, tickmode: "auto" });
       lay.margin = { l: 70, r: 70, t: 30, b: 50 };
     } else {
       lay.yaxis = axis("summed FRF [dB]");

@@ -8,6 +8,7 @@ with the FRF set's outputs/references.
 from __future__ import annotations
 
 import json
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -20,6 +21,9 @@ from ..modal import ModalModel
 
 __all__ = ["ReportInputError", "FitData", "TestRecord", "read_test_record", "run_fit", "load_fit_json",
            "load_diagnosis", "recording_device"]
+
+
+log = logging.getLogger(__name__)
 
 
 class ReportInputError(ImpactlabError, ValueError):
@@ -147,8 +151,24 @@ def load_fit_json(path: "str | Path", frf: FRFSet) -> FitData:
         raise ReportInputError(f"{p} is not a fit of this input ({type(exc).__name__}: {exc}); write it with "
                                "'python -m analysis fit INPUT --json FIT.json' on the same INPUT") from None
     return FitData(model=model, model_raw=seen_through_window(model, frf.exp_window_tau_s), freq_hz_std=fstd,
-                   damping_std=zstd, band=band, stab=None, source=str(p),
+                   damping_std=zstd, band=band, stab=_redo_stabilization(frf, doc.get("stabilization")), source=str(p),
                    warnings=tuple(doc.get("warnings", ()) or ()))
+
+
+def _redo_stabilization(frf: FRFSet, info: Optional[dict]):
+    """The fit's stabilization diagram again, from the settings its JSON records (method, band,
+    largest model size): a deterministic function of the FRFs. None when the JSON has none."""
+    from ..stabilization import stabilization
+
+    if not info:
+        return None
+    try:
+        method = str(info["method"])
+        return stabilization(frf, int(info["max_modes"]), method=method.split("+")[0],
+                             band=(float(info["band"][0]), float(info["band"][1])), refine_lsfd="+lsfd" in method)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        log.warning("no stabilization diagram: the fit file's stabilization settings cannot be used (%s)", exc)
+        return None
 
 
 def load_diagnosis(path: "Optional[str | Path]") -> Optional[dict]:
