@@ -16,7 +16,7 @@ from typing import Optional, Sequence
 from ._cli_dispatch import Parser, parse_args
 from .errors import ImpactlabError
 
-__all__ = ["main", "build_parser", "choose_geometry"]
+__all__ = ["build_parser", "choose_geometry", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -15,7 +15,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .errors import ImpactlabError
-from .points import PointLabelError, parse_point, point_from_uff, uff_node
+from .points import PointLabelError, point_from_uff, uff_node
 
 __all__ = ["Geometry", "GeometryError", "node_label", "points_on_a_line", "read_uff_geometry",
            "write_uff_geometry"]
@@ -120,7 +120,7 @@ def read_uff_geometry(path: "str | Path") -> Geometry:
         raise GeometryError(f"geometry file {p} not found: check the path")
     try:
         sets = pyuff.UFF(str(p)).read_sets()
-    except Exception as exc:  # pyuff raises many kinds on foreign files
+    except (OSError, ValueError, KeyError, IndexError, TypeError, UnicodeDecodeError, AttributeError) as exc:
         raise GeometryError(f"cannot read UFF file {p}: {exc}") from None
     if isinstance(sets, dict):
         sets = [sets]

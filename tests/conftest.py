@@ -20,3 +20,11 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real measured data not found at {SHARED_DATA} (only present in the workplace)")
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def report_case(tmp_path_factory) -> dict:
+    """The report tests' small simulated test, its fit and report folders (tests/report_data.py)."""
+    from report_data import make_report_case
+
+    return make_report_case(tmp_path_factory)

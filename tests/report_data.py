@@ -1,12 +1,10 @@
 """Shared data of the report tests: one small simulated test (the demo's roving-hammer session on the
 simulated frame, two accepted hits per point), its fit, a diagnosis document and the report folder.
-Made once per session (a few seconds)."""
+Made once per session (a few seconds) by the ``report_case`` fixture of tests/conftest.py."""
 from __future__ import annotations
 
 import json
 from pathlib import Path
-
-import pytest
 
 #: a diagnosis document in the schema of ``python -m analysis diagnose --json`` (verdict.to_json)
 DIAGNOSIS = {
@@ -22,8 +20,7 @@ DIAGNOSIS = {
 }
 
 
-@pytest.fixture(scope="session")
-def report_case(tmp_path_factory) -> dict:
+def make_report_case(tmp_path_factory) -> dict:
     """{"dir", "recording", "uff", "fit", "diagnosis", "report" (index.html with the diagnosis), "n_modes"}."""
     from acquisition import cli_demo
     from analysis import cli_report

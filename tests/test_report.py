@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 from html.parser import HTMLParser
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,7 +13,6 @@ from analysis import cli_report
 from analysis.geometry import Geometry, GeometryError, points_on_a_line, read_uff_geometry, write_uff_geometry
 from analysis.modal import ModalModel, pole_from_fz
 from analysis.report_html.collect import excitation_band, mpc, shape_vectors
-from report_data import report_case  # noqa: F401  (session fixture)
 
 PLOTS = ("frf", "coherence", "force-spectrum", "stabilization", "synthesis", "automac", "mode-shapes")
 

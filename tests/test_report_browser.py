@@ -16,8 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from report_data import report_case  # noqa: F401  (session fixture)
-
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 INSTALL = ("install the browser for these tests: apt-get install chromium chromium-driver, and pip install "

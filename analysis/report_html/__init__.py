@@ -4,8 +4,27 @@
 (``index.html`` and its assets; opens from ``file://`` with no network).
 """
 from .build import build_document, make_report, write_report
-from .sources import (FitData, ReportInputError, TestRecord, load_diagnosis, load_fit_json, read_test_record,
-                      recording_device, run_fit)
+from .sources import (
+                      FitData,
+                      ReportInputError,
+                      TestRecord,
+                      load_diagnosis,
+                      load_fit_json,
+                      read_test_record,
+                      recording_device,
+                      run_fit,
+)
 
-__all__ = ["build_document", "make_report", "write_report", "recording_device", "FitData", "ReportInputError", "TestRecord", "load_diagnosis",
-           "load_fit_json", "read_test_record", "run_fit"]
+__all__ = [
+                      "FitData",
+                      "ReportInputError",
+                      "TestRecord",
+                      "build_document",
+                      "load_diagnosis",
+                      "load_fit_json",
+                      "make_report",
+                      "read_test_record",
+                      "recording_device",
+                      "run_fit",
+                      "write_report",
+]

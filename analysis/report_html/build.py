@@ -12,12 +12,11 @@ from typing import Optional
 from ..frf import FRFSet
 from ..geometry import Geometry, points_on_a_line
 from ..web_assets import plotly_js_path
-from .collect import shape_vectors, frf_section, modal_section, points_section, shapes_section, test_section
+from .collect import frf_section, modal_section, points_section, shape_vectors, shapes_section, test_section
 from .page import render_page, written_stamp
-from .sources import (FitData, ReportInputError, TestRecord, load_diagnosis, load_fit_json, read_test_record,
-                      run_fit)
+from .sources import FitData, ReportInputError, TestRecord, load_diagnosis, load_fit_json, read_test_record, run_fit
 
-__all__ = ["build_document", "write_report", "make_report"]
+__all__ = ["build_document", "make_report", "write_report"]
 
 log = logging.getLogger(__name__)
 _OWN_ASSETS = ("report.js", "report.css")

@@ -4,7 +4,7 @@ Units: frequencies Hz, magnitudes dB re 1 (FRF unit), phases deg, times ms, forc
 """
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+from typing import Any, Optional
 
 import numpy as np
 
@@ -17,8 +17,18 @@ from ..spectra import hit_spectra
 from ..stabilization import CLASS_NAMES, mac_matrix
 from .sources import FitData, TestRecord
 
-__all__ = ["frf_section", "modal_section", "shapes_section", "test_section", "points_section", "mpc",
-           "shape_vectors", "excitation_band", "MAX_TIME_POINTS", "VISIBLE_FRFS"]
+__all__ = [
+    "MAX_TIME_POINTS",
+    "VISIBLE_FRFS",
+    "excitation_band",
+    "frf_section",
+    "modal_section",
+    "mpc",
+    "points_section",
+    "shape_vectors",
+    "shapes_section",
+    "test_section",
+]
 
 #: time histories are reduced to at most this many points (min/max envelope)
 MAX_TIME_POINTS = 1600
@@ -51,7 +61,8 @@ def _fmt(x: float, digits: int = 4) -> str:
 def _pairs(frf: FRFSet) -> list[tuple[int, int]]:
     """(output, reference) indices, strongest RMS first."""
     rms = np.sqrt(np.nanmean(np.abs(frf.H) ** 2, axis=2))
-    return [tuple(int(i) for i in np.unravel_index(k, rms.shape)) for k in np.argsort(-rms, axis=None)]
+    rows, cols = np.unravel_index(np.argsort(-rms, axis=None), rms.shape)
+    return [(int(o), int(r)) for o, r in zip(rows, cols)]
 
 
 def frf_section(frf: FRFSet) -> dict:
@@ -205,7 +216,7 @@ def excitation_band(freq_hz: np.ndarray, gff_db: np.ndarray) -> dict:
 def points_section(rec: TestRecord) -> list[dict]:
     """Per point: force and response time histories (ms, EU) and the force autospectrum (dB re 1 N^2/Hz)."""
     out = []
-    units = {}
+    units: dict[str, str] = {}
     for c in rec.channels:
         d = str(c.get("direction", ""))
         for key in (str(c.get("point", "")), f"{c.get('point', '')}:{d}", str(c.get("name", ""))):

@@ -146,20 +146,20 @@ def render_page(data: dict, *, plotly_src: str = "plotly.min.js") -> str:
     frf = data["frf"]
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
-        "<meta http-equiv='Content-Security-Policy' content=\"default-src 'self' 'unsafe-inline' 'unsafe-eval' "
-        "data: blob:; connect-src 'none'\">",
+        ("<meta http-equiv='Content-Security-Policy' content=\"default-src 'self' 'unsafe-inline' 'unsafe-eval' "
+         "data: blob:; connect-src 'none'\">"),
         f"<title>{title}</title><link rel='stylesheet' href='report.css'></head><body>",
-        f"<header><h1>{title}</h1><p>input <code>{escape(meta['input'])}</code> &middot; {escape(meta['frf_count'])}"
-        f" &middot; written {escape(meta['written'])} by impactlab</p>",
+        (f"<header><h1>{title}</h1><p>input <code>{escape(meta['input'])}</code> &middot; {escape(meta['frf_count'])}"
+         f" &middot; written {escape(meta['written'])} by impactlab</p>"),
         "<nav><a href='#test'>test</a> <a href='#points'>excitation</a> <a href='#frf'>FRFs</a> "
         "<a href='#modal'>modes</a> <a href='#shapes'>shapes</a>"
         + (" <a href='#diagnosis'>diagnosis</a>" if data.get("diagnosis") else "") + "</nav></header><main>",
         _test_html(data.get("test"), meta),
         _points_html(data.get("points")),
-        "<section id='frf'><h2>3. FRFs</h2><p>The strongest FRFs are drawn first. Click a legend entry to show or "
-        "hide an FRF (the coherence follows), or add any FRF with the list; drag to zoom, double-click to reset.</p>"
-        "<div class='controls'><label>add an FRF <select id='frf-picker'><option value='' disabled selected>"
-        f"{frf['n_outputs'] * frf['n_references']} FRFs (output / reference)</option></select></label></div>",
+        ("<section id='frf'><h2>3. FRFs</h2><p>The strongest FRFs are drawn first. Click a legend entry to show or "
+         "hide an FRF (the coherence follows), or add any FRF with the list; drag to zoom, double-click to reset.</p>"
+         "<div class='controls'><label>add an FRF <select id='frf-picker'><option value='' disabled selected>"
+         f"{frf['n_outputs'] * frf['n_references']} FRFs (output / reference)</option></select></label></div>"),
         _plot("frf", f"FRF magnitude and phase, {frf['quantity']} in {frf['unit']}", 560),
         _plot("coherence", "Coherence", 260) if frf["has_coherence"] else
         '<div class="plot empty" data-plot="coherence"><p class="note">The input holds no coherence.</p></div>',
@@ -167,8 +167,8 @@ def render_page(data: dict, *, plotly_src: str = "plotly.min.js") -> str:
         _modes_html(data["modal"]),
         _shapes_html(),
         _diagnosis_html(data.get("diagnosis")),
-        f"</main><script src='{plotly_src}'></script><script src='report-data.js'></script>"
-        "<script src='report.js'></script></body></html>",
+        (f"</main><script src='{plotly_src}'></script><script src='report-data.js'></script>"
+         "<script src='report.js'></script></body></html>"),
     ]
     return "\n".join(parts)
 

@@ -19,8 +19,16 @@ from ..errors import ImpactlabError
 from ..frf import FRFSet
 from ..modal import ModalModel
 
-__all__ = ["ReportInputError", "FitData", "TestRecord", "read_test_record", "run_fit", "load_fit_json",
-           "load_diagnosis", "recording_device"]
+__all__ = [
+    "FitData",
+    "ReportInputError",
+    "TestRecord",
+    "load_diagnosis",
+    "load_fit_json",
+    "read_test_record",
+    "recording_device",
+    "run_fit",
+]
 
 
 log = logging.getLogger(__name__)
@@ -134,7 +142,7 @@ def load_fit_json(path: "str | Path", frf: FRFSet) -> FitData:
         for item in doc["residues"]:
             o, r = frf.outputs.index(item["output"]), frf.references.index(item["reference"])
             R[o, r] = [_cpx(v) for v in item["values"]]
-        resid = {}
+        resid: dict[str, Any] = {}
         for key in ("upper_residual", "lower_residual"):
             if doc.get(key):
                 a = np.zeros((frf.n_outputs, frf.n_references), complex)
