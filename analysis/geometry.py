@@ -33,6 +33,7 @@ class Geometry:
     xyz : (n_nodes, 3) float, m.
     lines : pairs of node labels joined by a trace line.
     name : a short description (where the geometry came from).
+    supports : labels of nodes held still (a drawing's interpolation of unmeasured nodes keeps them at rest).
     """
 
     labels: tuple
@@ -40,6 +41,7 @@ class Geometry:
     lines: tuple = ()
     name: str = ""
     meta: dict = field(default_factory=dict)
+    supports: tuple = ()
 
     def __post_init__(self) -> None:
         labels = tuple(str(s) for s in self.labels)
@@ -55,7 +57,12 @@ class Geometry:
         bad = [f"{a}-{b}" for a, b in lines if a not in known or b not in known]
         if bad:
             raise GeometryError(f"trace lines name unknown nodes: {', '.join(bad[:5])}")
+        supports = tuple(str(x) for x in self.supports)
+        bad = [x for x in supports if x not in known]
+        if bad:
+            raise GeometryError(f"supports name unknown nodes: {', '.join(bad[:5])}")
         xyz.setflags(write=False)
+        object.__setattr__(self, "supports", supports)
         object.__setattr__(self, "labels", labels)
         object.__setattr__(self, "xyz", xyz)
         object.__setattr__(self, "lines", lines)
@@ -73,11 +80,12 @@ class Geometry:
         return [p for p in points if node_label(p) not in known]
 
     def to_dict(self) -> dict:
-        """JSON-ready: labels, xyz (m, rounded to 0.1 mm), lines as index pairs, name."""
+        """JSON-ready: labels, xyz (m, rounded to 0.1 mm), lines as index pairs, name, supports as indices."""
         idx = {s: i for i, s in enumerate(self.labels)}
         return {"name": self.name, "labels": list(self.labels),
                 "xyz": np.round(self.xyz, 4).tolist(),
-                "lines": [[idx[a], idx[b]] for a, b in self.lines]}
+                "lines": [[idx[a], idx[b]] for a, b in self.lines],
+                "supports": [idx[s] for s in self.supports]}
 
 
 def node_label(point: str) -> str:

@@ -2,7 +2,8 @@
 
 Nodes are the finite-element nodes ``component:node`` of every component of a
 :class:`simulator.config.FrameConfig` (xyz in m, evenly spaced from ``start_m`` to ``end_m``),
-lines join consecutive nodes of a component and the node pairs of ``[joints]``.
+lines join consecutive nodes of a component and the node pairs of ``[joints]``; the nodes of
+``[supports]`` are the geometry's supports.
 """
 from __future__ import annotations
 
@@ -33,4 +34,5 @@ def frame_geometry(config: Optional[FrameConfig] = None) -> Geometry:
                 lines.append((f"{name}:{i - 1}", f"{name}:{i}"))
     for a, b in cfg.joints.pairs:
         lines.append((str(a), str(b)))
-    return Geometry(tuple(labels), np.asarray(xyz), tuple(lines), name=f"simulated frame ({cfg.source})")
+    return Geometry(tuple(labels), np.asarray(xyz), tuple(lines), name=f"simulated frame ({cfg.source})",
+                    supports=tuple(str(n) for n in cfg.supports.nodes))

@@ -160,6 +160,7 @@ def test_uff_geometry_round_trip(tmp_path):
     g = frame_geometry()
     assert {"left:9", "top:4", "right:6"} <= set(g.labels)
     assert len(g.lines) == 10 + 10 + 8 + 2  # elements of the three members and the two joints
+    assert g.supports == ("left:0", "right:0")
     path = write_uff_geometry(tmp_path / "frame.uff", g)
     h = read_uff_geometry(path)
     assert h.labels == g.labels

@@ -33,14 +33,28 @@ def _missing() -> list[str]:
     return missing
 
 
-@pytest.fixture(scope="module")
-def browser(tmp_path_factory):
-    missing = _missing()
+def require_browser(missing: list[str]) -> None:
+    """Skip (outside CI) or fail (``CI=true``) when something the browser tests need is missing."""
     if missing:
         message = f"browser tests need {', '.join(missing)}: {INSTALL}"
         if os.environ.get("CI", "").lower() == "true":
             pytest.fail("CI=true: " + message)
         pytest.skip(message)
+
+
+def test_missing_browser_skips_outside_ci_and_fails_under_ci(monkeypatch):
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="apt-get install chromium chromium-driver"):
+        require_browser(["/usr/bin/chromium"])
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="CI=true: browser tests need /usr/bin/chromedriver"):
+        require_browser(["/usr/bin/chromedriver"])
+    require_browser([])  # all there: no skip, no failure
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    require_browser(_missing())
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -134,6 +148,11 @@ def test_animation_advances_and_pauses(loaded):
     d.execute_script("const s = document.getElementById('mode-select'); s.value = '1';"
                      "s.dispatchEvent(new Event('change'));")
     WebDriverWait(d, 5, poll_frequency=0.1).until(lambda drv: np.count_nonzero(_canvas_png(drv) != b) > 200)
+    # the interpolation of unmeasured nodes moves the rest of the wireframe
+    c = _canvas_png(d)
+    d.find_element("id", "interpolate").click()
+    WebDriverWait(d, 5, poll_frequency=0.1).until(lambda drv: np.count_nonzero(_canvas_png(drv) != c) > 200)
+    d.find_element("id", "interpolate").click()
     d.find_element("id", "play").click()  # play again
     assert d.find_element("id", "play").text == "pause"
 

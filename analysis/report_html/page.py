@@ -116,9 +116,14 @@ def _shapes_html() -> str:
             "<button id='play' type='button'>pause</button>"
             "<label>amplitude <input id='amplitude' type='range' min='0' max='1' step='0.01' value='0.5'></label>"
             "<label>speed <input id='speed' type='range' min='0.1' max='3' step='0.1' value='1'></label>"
+            "<label title='unmeasured nodes take the mean motion of their neighbours along the trace lines'>"
+            "<input id='interpolate' type='checkbox'> interpolate unmeasured nodes</label>"
             "<span class='note'>drag to rotate</span></div>"
             "<figure><canvas class='plot' data-plot='mode-shapes' width='960' height='520'></canvas>"
-            "<figcaption id='shape-caption'>Mode shape on the test geometry (grey: undeformed; red: measured points; nodes without a measurement stay still)</figcaption></figure>"
+            "<figcaption id='shape-caption'>Mode shape on the test geometry (grey: undeformed; red: measured points). "
+            "As measured, a node moves only along its measured directions and unmeasured nodes stay still; the "
+            "interpolation (an illustration, not data) gives every other direction the mean motion of the "
+            "neighbours along the trace lines.</figcaption></figure>"
             "</section>")
 
 

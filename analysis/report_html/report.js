@@ -202,7 +202,8 @@
     var size = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) || 1;
     var measured = {};
     S.dofs.forEach(function (d) { measured[d.node] = true; });
-    var st = { mode: 0, phase: 0.6, playing: true, amp: 0.5, speed: 1, az: -0.6, el: 0.45, last: null, frames: 0 };
+    var st = { mode: 0, phase: 0.6, playing: true, amp: 0.5, speed: 1, az: -0.6, el: 0.45, last: null, frames: 0,
+               interpolate: false };
     this.state = st;
     var ctx = canvas.getContext("2d");
 
@@ -214,13 +215,46 @@
       var s = 0.75 * Math.min(canvas.width, canvas.height) / size;
       return [canvas.width / 2 + s * u, canvas.height / 2 - s * sy];
     }
-    function displaced(c) {
-      var m = S.modes[st.mode], out = xyz.map(function (p) { return p.slice(); });
+    /* per node and axis the complex displacement [re, im] of mode k; measured node axes are fixed, with
+       st.interpolate every other one becomes the mean of its neighbours along the trace lines (harmonic
+       interpolation, Jacobi sweeps), so the wireframe follows the measured points */
+    var neighbours = xyz.map(function () { return []; });
+    g.lines.forEach(function (l) { neighbours[l[0]].push(l[1]); neighbours[l[1]].push(l[0]); });
+    var cache = {};
+    function nodeShape(k) {
+      var key = k + (st.interpolate ? "i" : "");
+      if (cache[key]) { return cache[key]; }
+      var m = S.modes[k], u = xyz.map(function () { return [[0, 0], [0, 0], [0, 0]]; });
+      var fixed = xyz.map(function () { return [false, false, false]; });
+      (g.supports || []).forEach(function (n) { fixed[n] = [true, true, true]; });
       S.dofs.forEach(function (d, i) {
-        var q = m.re[i] * c.cos - m.im[i] * c.sin;
-        out[d.node][d.axis] += d.sign * q * st.amp * 0.3 * size;
+        u[d.node][d.axis] = [d.sign * m.re[i], d.sign * m.im[i]];
+        fixed[d.node][d.axis] = true;
       });
-      return out;
+      if (st.interpolate) {
+        for (var sweep = 0; sweep < 400; sweep++) {
+          var next = u.map(function (row) { return row.map(function (c) { return c.slice(); }); });
+          for (var n = 0; n < u.length; n++) {
+            var nb = neighbours[n];
+            if (!nb.length) { continue; }
+            for (var a = 0; a < 3; a++) {
+              if (fixed[n][a]) { continue; }
+              var re = 0, im = 0;
+              nb.forEach(function (j) { re += u[j][a][0]; im += u[j][a][1]; });
+              next[n][a] = [re / nb.length, im / nb.length];
+            }
+          }
+          u = next;
+        }
+      }
+      cache[key] = u;
+      return u;
+    }
+    function displaced(c) {
+      var u = nodeShape(st.mode), k = st.amp * 0.3 * size;
+      return xyz.map(function (p, n) {
+        return [0, 1, 2].map(function (a) { return p[a] + k * (u[n][a][0] * c.cos - u[n][a][1] * c.sin); });
+      });
     }
     function draw() {
       ctx.fillStyle = "#fff"; ctx.fillRect(0, 0, canvas.width, canvas.height);
@@ -293,6 +327,7 @@
     });
     document.getElementById("amplitude").addEventListener("input", function (e) { view.set("amp", Number(e.target.value)); });
     document.getElementById("speed").addEventListener("input", function (e) { view.set("speed", Number(e.target.value)); });
+    document.getElementById("interpolate").addEventListener("change", function (e) { view.set("interpolate", e.target.checked); });
   }
 
   var jobs = [];
