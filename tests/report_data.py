@@ -16,7 +16,13 @@ DIAGNOSIS = {
          "error_before_db": -3.0, "error_after_db": -3.4, "z": 0.5, "significant": False},
     ],
     "error_before_db": -3.0, "error_after_db": -28.7, "noise_db": -40.0, "unexplained": False, "skipped": [],
-    "combined": None, "comparison": {},
+    "combined": None,
+    "comparison": {"bands": [{"lo_hz": 4.0, "hi_hz": 60.0, "error_db": -2.5}, {"lo_hz": 60.0, "hi_hz": 215.0,
+                                                                                 "error_db": -9.0}],
+                   "modes": {"pairs": [{"measured_hz": 12.9, "simulated_hz": 11.2, "df_percent": -13.2,
+                                        "measured_damping": 0.0086, "simulated_damping": 0.006, "amplitude_db": 3.1,
+                                        "phase_deg": 4.0, "mac": 0.97}],
+                             "only_measured": [], "only_simulated": []}},
 }
 
 

@@ -69,6 +69,7 @@ def test_page_holds_the_dom_contract(report_case):
     assert set(PLOTS) <= set(page.plots), f"missing data-plot elements: {set(PLOTS) - set(page.plots)}"
     assert page.ids.get("modes") == "table"
     assert page.ids.get("diagnosis") == "section"
+    assert page.ids.get("diagnosis-modes") == "table" and "diagnosis-bands" in page.plots
     assert len(page.mode_rows) == report_case["n_modes"] > 0
     # the table shows the fitted frequencies (sorted, as in the fit JSON)
     fitted = [p["freq_hz"] for p in report_case["fit_doc"]["poles"]]

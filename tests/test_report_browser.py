@@ -20,7 +20,8 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 INSTALL = ("install the browser for these tests: apt-get install chromium chromium-driver, and pip install "
            "selenium (in the test extra: pip install -e '.[test,report]')")
-PLOTS = ("frf", "coherence", "force-spectrum", "stabilization", "synthesis", "automac", "mode-shapes", "diagnosis")
+PLOTS = ("frf", "coherence", "force-spectrum", "force-time", "response-time", "stabilization", "synthesis", "automac",
+         "mode-shapes", "diagnosis", "diagnosis-bands")
 LOAD_TIMEOUT_S = 60
 
 

@@ -133,14 +133,26 @@ def _diagnosis_html(diag: Optional[dict]) -> str:
     rows = [[escape(str(c.get("effect", ""))), _num(c.get("gain_db"), "{:.1f}"), _num(c.get("error_before_db"), "{:.1f}"),
              _num(c.get("error_after_db"), "{:.1f}"), "yes" if c.get("significant") else "no",
              escape(str(c.get("evidence", "")))[:300]] for c in diag.get("causes", [])]
+    comparison = diag.get("comparison") or {}
+    pairs = (comparison.get("modes") or {}).get("pairs") or []
+    mode_rows = [[_num(q.get("measured_hz"), "{:.3f}"), _num(q.get("simulated_hz"), "{:.3f}"),
+                  _num(q.get("df_percent"), "{:+.2f}"), _num(q.get("amplitude_db"), "{:+.1f}"),
+                  _num(q.get("mac"), "{:.2f}")] for q in pairs]
+    bands = comparison.get("bands") or []
     return ("<section id='diagnosis'><h2>6. Diagnosis: what the simulation gets wrong</h2>"
             + _dl([("verdict", f"<b>{escape(str(diag.get('verdict')))}</b>"),
                    ("error before", f"{_num(diag.get('error_before_db'), '{:.1f}')} dB"),
                    ("error after", f"{_num(diag.get('error_after_db'), '{:.1f}')} dB"),
                    ("noise floor", f"{_num(diag.get('noise_db'), '{:.1f}')} dB")])
+            + "<h3>Causes</h3>"
             + _table(["cause", "gain [dB]", "error before [dB]", "error after [dB]", "significant", "evidence"], rows,
                      " id='causes'")
             + _plot("diagnosis", "Model error before and after each cause is applied (dB, lower is better)", 320)
+            + ("<h3>Modes: simulation vs measurement</h3>"
+               + _table(["measured f [Hz]", "simulated f [Hz]", "&Delta;f [%]", "amplitude [dB]", "MAC"], mode_rows,
+                        " id='diagnosis-modes'") if mode_rows else "")
+            + (_plot("diagnosis-bands", "Error of the simulation per frequency band (dB re the measurement)", 300)
+               if bands else "")
             + "</section>")
 
 

@@ -190,7 +190,18 @@
     return [Plotly.newPlot(div, [
       { x: names, y: causes.map(function (c) { return c.error_before_db; }), name: "before", type: "bar", marker: { color: "#999" } },
       { x: names, y: causes.map(function (c) { return c.error_after_db; }), name: "after the cause is applied", type: "bar", marker: { color: "#1f77b4" } }
-    ], layout({ xaxis: axis("cause", { type: "category" }), yaxis: axis("model error [dB]"), barmode: "group" }), CONFIG)];
+    ], layout({ xaxis: axis("cause", { type: "category" }), yaxis: axis("model error [dB]"), barmode: "group" }), CONFIG)]
+      .concat(drawDiagnosisBands(G));
+  }
+
+  function drawDiagnosisBands(G) {
+    var div = el("diagnosis-bands"), bands = (G.comparison || {}).bands || [];
+    if (!div || !bands.length) { return []; }
+    var x = [], y = [];
+    bands.forEach(function (b) { x.push(b.lo_hz, b.hi_hz, null); y.push(b.error_db, b.error_db, null); });
+    return [Plotly.newPlot(div, [{ x: x, y: y, type: "scatter", mode: "lines", name: "error per band",
+                                   line: { color: "#d62728", width: 3 } }],
+                           layout({ xaxis: axis(FREQ), yaxis: axis("simulation error [dB]"), showlegend: false }), CONFIG)];
   }
 
   /* ---- mode shapes: a small orthographic 3-D view on a canvas (no WebGL needed) ---- */
