@@ -70,6 +70,7 @@ def test_page_holds_the_dom_contract(report_case):
     assert page.ids.get("modes") == "table"
     assert page.ids.get("diagnosis") == "section"
     assert page.ids.get("diagnosis-modes") == "table" and "diagnosis-bands" in page.plots
+    assert "difference -42.5 dB, coherence -40.9 dB" in report_case["report"].read_text()
     assert len(page.mode_rows) == report_case["n_modes"] > 0
     # the table shows the fitted frequencies (sorted, as in the fit JSON)
     fitted = [p["freq_hz"] for p in report_case["fit_doc"]["poles"]]

@@ -127,6 +127,13 @@ def _shapes_html() -> str:
             "</section>")
 
 
+def _noise(x: Any) -> str:
+    """The noise level(s) of a diagnosis, dB: one number or a dict of estimates."""
+    if isinstance(x, dict):
+        return ", ".join(f"{escape(str(k))} {_num(v, '{:.1f}')} dB" for k, v in x.items()) or "&ndash;"
+    return f"{_num(x, '{:.1f}')} dB"
+
+
 def _diagnosis_html(diag: Optional[dict]) -> str:
     if diag is None:
         return ""
@@ -143,11 +150,13 @@ def _diagnosis_html(diag: Optional[dict]) -> str:
             + _dl([("verdict", f"<b>{escape(str(diag.get('verdict')))}</b>"),
                    ("error before", f"{_num(diag.get('error_before_db'), '{:.1f}')} dB"),
                    ("error after", f"{_num(diag.get('error_after_db'), '{:.1f}')} dB"),
-                   ("noise floor", f"{_num(diag.get('noise_db'), '{:.1f}')} dB")])
+                   ("noise floor", _noise(diag.get("noise_db")))]
+                  + ([("time data", escape(str(diag["time_data_verdict"])))] if "time_data_verdict" in diag else []))
             + "<h3>Causes</h3>"
             + _table(["cause", "gain [dB]", "error before [dB]", "error after [dB]", "significant", "evidence"], rows,
                      " id='causes'")
-            + _plot("diagnosis", "Model error before and after each cause is applied (dB, lower is better)", 320)
+            + _plot("diagnosis", "Gain of each cause: how much the held-out model error falls when the cause is "
+                    "applied (dB; blue: significant)", 90 + 28 * max(len(rows), 4))
             + ("<h3>Modes: simulation vs measurement</h3>"
                + _table(["measured f [Hz]", "simulated f [Hz]", "&Delta;f [%]", "amplitude [dB]", "MAC"], mode_rows,
                         " id='diagnosis-modes'") if mode_rows else "")

@@ -185,12 +185,13 @@
   function drawDiagnosis() {
     var G = D.diagnosis, div = el("diagnosis");
     if (!G || !div) { return []; }
-    var causes = G.causes || [];
-    var names = causes.map(function (c) { return c.effect; });
+    var causes = (G.causes || []).slice().reverse();  // the largest gain on top
     return [Plotly.newPlot(div, [
-      { x: names, y: causes.map(function (c) { return c.error_before_db; }), name: "before", type: "bar", marker: { color: "#999" } },
-      { x: names, y: causes.map(function (c) { return c.error_after_db; }), name: "after the cause is applied", type: "bar", marker: { color: "#1f77b4" } }
-    ], layout({ xaxis: axis("cause", { type: "category" }), yaxis: axis("model error [dB]"), barmode: "group" }), CONFIG)]
+      { y: causes.map(function (c) { return c.effect; }), x: causes.map(function (c) { return c.gain_db; }),
+        type: "bar", orientation: "h", name: "gain",
+        marker: { color: causes.map(function (c) { return c.significant ? "#1f77b4" : "#aaaaaa"; }) } }
+    ], layout({ yaxis: axis("", { type: "category", automargin: true }), xaxis: axis("gain [dB]"), showlegend: false,
+                margin: { l: 150, r: 20, t: 10, b: 50 } }), CONFIG)]
       .concat(drawDiagnosisBands(G));
   }
 
@@ -198,10 +199,12 @@
     var div = el("diagnosis-bands"), bands = (G.comparison || {}).bands || [];
     if (!div || !bands.length) { return []; }
     var x = [], y = [];
-    bands.forEach(function (b) { x.push(b.lo_hz, b.hi_hz, null); y.push(b.error_db, b.error_db, null); });
+    bands.forEach(function (b) {  // log axis: a band from 0 Hz starts at a hundredth of its top
+      x.push(b.lo_hz > 0 ? b.lo_hz : b.hi_hz / 100, b.hi_hz, null); y.push(b.error_db, b.error_db, null);
+    });
     return [Plotly.newPlot(div, [{ x: x, y: y, type: "scatter", mode: "lines", name: "error per band",
                                    line: { color: "#d62728", width: 3 } }],
-                           layout({ xaxis: axis(FREQ), yaxis: axis("simulation error [dB]"), showlegend: false }), CONFIG)];
+                           layout({ xaxis: axis(FREQ, { type: "log" }), yaxis: axis("simulation error [dB]"), showlegend: false }), CONFIG)];
   }
 
   /* ---- mode shapes: a small orthographic 3-D view on a canvas (no WebGL needed) ---- */
