@@ -206,3 +206,22 @@ def test_excitation_band_marks_the_10_and_20_db_drops():
     assert band["f10_hz"] == pytest.approx(200 * 3.0, abs=1.0)   # 10^(10/10) - 1 = 9 -> f = 3 fc
     assert band["f20_hz"] is None or band["f20_hz"] > 990  # 20 dB needs f = 9.95 fc: out of the span
     assert excitation_band(f, np.full(f.size, 5.0))["f10_hz"] is None
+
+
+@pytest.mark.realdata
+def test_report_of_the_uliege_plane(shared_data, tmp_path):
+    """The ULiege plane (222 FRFs, 74 hammer points on node_shock.csv): every mode in the table, the shapes
+    on the measured geometry (timings: benchmarks/bench_report.py)."""
+    from analysis.report_html import build_document, run_fit, write_report
+    from benchmarks.bench_report import uliege_geometry
+    from benchmarks.validation import uliege_plane
+
+    frf = uliege_plane.load(shared_data)
+    fit = run_fit(frf, band=uliege_plane.BAND)
+    doc = build_document(frf, fit, geometry=uliege_geometry(), input_name="uliege")
+    index = write_report(tmp_path / "uliege", doc)
+    page = Page(index.read_text())
+    assert len(page.mode_rows) == fit.model.poles.size >= 10
+    assert doc["shapes"]["geometry"]["name"].startswith("ULiege") and not doc["meta"]["notes"]
+    assert len(doc["frf"]["traces"]) == 222
+    assert doc["test"] is None and doc["points"] is None  # FRFs only: no test record, no time data
