@@ -39,13 +39,11 @@ SYNTHESIS_FRFS = 3
 
 
 def _r(a: Any, decimals: int) -> list:
-    """Rounded list; non-finite values become None (JSON null)."""
+    """Rounded nested list; non-finite values become None (JSON null)."""
     x = np.round(np.asarray(a, dtype=float), decimals)
-    out = x.tolist()
-    if not np.all(np.isfinite(x)):
-        return [None if not np.isfinite(v) else v for v in x.ravel().tolist()] if x.ndim == 1 else \
-            [[None if not np.isfinite(v) else v for v in row] for row in x.tolist()]
-    return out
+    if np.all(np.isfinite(x)):
+        return x.tolist()
+    return np.where(np.isfinite(x), x, None).tolist()
 
 
 def _db(z: np.ndarray) -> np.ndarray:
