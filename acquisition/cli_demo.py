@@ -193,7 +193,8 @@ def report_step(ctx: DemoContext) -> None:
     from analysis.report_html import make_report
     from simulator.geometry import frame_geometry
 
-    ctx.say(f"report: {make_report(ctx.recording, ctx.out_dir / 'report', fit_json=ctx.out_dir / 'fit.json', geometry=frame_geometry())}")
+    index = make_report(ctx.recording, ctx.out_dir / "report", fit_json=ctx.out_dir / "fit.json", geometry=frame_geometry())
+    ctx.say(f"report: {index} (open {index.resolve().as_uri()} in a browser)")
 
 
 STEPS: list[Callable[[DemoContext], None]] = [capture_step, summary_step, export_step, fit_step, report_step]
