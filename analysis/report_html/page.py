@@ -172,7 +172,7 @@ def render_page(data: dict, *, plotly_src: str = "plotly.min.js") -> str:
     frf = data["frf"]
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
-        ("<meta http-equiv='Content-Security-Policy' content=\"default-src 'self' 'unsafe-inline' 'unsafe-eval' "
+        ("<meta http-equiv='Content-Security-Policy' content=\"default-src 'self' file: 'unsafe-inline' 'unsafe-eval' "
          "data: blob:; connect-src 'none'\">"),
         f"<title>{title}</title><link rel='stylesheet' href='report.css'></head><body>",
         (f"<header><h1>{title}</h1><p>input <code>{escape(meta['input'])}</code> &middot; {escape(meta['frf_count'])}"
