@@ -170,6 +170,15 @@ def test_uff_geometry_round_trip(tmp_path):
     assert set(h.lines) == set(g.lines)
 
 
+def test_a_geometry_without_the_measured_nodes_falls_back_to_a_line(report_case, tmp_path):
+    other = write_uff_geometry(tmp_path / "other.uff", points_on_a_line(["n:1:Z", "n:2:Z"]))
+    out = tmp_path / "r"
+    assert cli_report.main([str(report_case["recording"]), "--out", str(out), "--fit", str(report_case["fit"]),
+                            "--geometry", str(other)]) == 0
+    text = (out / "index.html").read_text()
+    assert "lacks the nodes of" in text and "the shapes are drawn on the points on a line" in text
+
+
 def test_geometry_errors(tmp_path):
     with pytest.raises(GeometryError, match="not found"):
         read_uff_geometry(tmp_path / "none.uff")

@@ -177,6 +177,7 @@ def render_page(data: dict, *, plotly_src: str = "plotly.min.js") -> str:
         f"<title>{title}</title><link rel='stylesheet' href='report.css'></head><body>",
         (f"<header><h1>{title}</h1><p>input <code>{escape(meta['input'])}</code> &middot; {escape(meta['frf_count'])}"
          f" &middot; written {escape(meta['written'])} by impactlab</p>"),
+        "".join(f"<p class='warn'>note: {escape(n)}</p>" for n in meta.get("notes", [])),
         "<nav><a href='#test'>test</a> <a href='#points'>excitation</a> <a href='#frf'>FRFs</a> "
         "<a href='#modal'>modes</a> <a href='#shapes'>shapes</a>"
         + (" <a href='#diagnosis'>diagnosis</a>" if data.get("diagnosis") else "") + "</nav></header><main>",
