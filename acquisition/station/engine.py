@@ -1,0 +1,380 @@
+"""The station's engine: the capture session (:class:`acquisition.session.CaptureSession`, the same
+loop as ``capture``) run in a thread, steered by the page's actions through the session's hooks.
+
+Phases (``state["phase"]``) and the actions each allows:
+
+=============  ==================================================================================
+``setup``      before the first hit: ``setup`` (change the set-up), ``arm`` (starts the test)
+``ready``      before each arm: ``arm``, ``undo``, ``remeasure``, ``next-point`` (skip), ``finish``
+``armed``      waiting for the hit (nothing to decide; ``finish`` ends after it)
+``decide``     a hit that passed the checks: ``accept``, ``reject``, ``finish``
+``complete``   the point has its hits: ``next-point``, ``undo``, ``remeasure``, ``finish``
+``finished``   the plan is done or ended; ``error``: the session stopped (message says why)
+=============  ==================================================================================
+
+``pause``/``resume`` and ``auto`` (on/off) are allowed in every running phase. Auto mode arms,
+accepts every hit that passed the checks and moves to the next point; pause holds it before the
+next arm. One tab controls at a time (:class:`acquisition.station.state.Lease`).
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any, Callable, Optional, Sequence
+
+from analysis.spectra import WindowSettings
+
+from ..errors import ImpactlabError, SetupError
+from ..session import CaptureSession, HitSummary, OperatorQuit, SessionError, TestPlan
+from ..setup import AcquisitionSetup, validate_setup
+from . import payloads
+from .state import StationState
+
+__all__ = ["StationEngine", "ACTIONS", "ActionRefused"]
+
+log = logging.getLogger(__name__)
+
+ACTIONS = ("arm", "accept", "reject", "undo", "remeasure", "next-point", "finish", "pause", "resume", "auto",
+           "setup")
+_ANYTIME = ("pause", "resume", "auto")
+_ALLOWED = {
+    "setup": ("setup", "arm", "finish"),
+    "ready": ("arm", "undo", "remeasure", "next-point", "finish"),
+    "armed": ("finish",),
+    "decide": ("accept", "reject", "finish"),
+    "complete": ("next-point", "undo", "remeasure", "finish"),
+    "finished": (),
+    "error": (),
+    "starting": ("finish",),
+}
+
+
+class ActionRefused(ImpactlabError, ValueError):
+    """An action the session cannot take now (HTTP 409) or a malformed one (HTTP 400); ``status`` says which."""
+
+    def __init__(self, message: str, status: int = 409) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+class _LogToPage(logging.Handler):
+    """Session events (link faults, rejections, resumes) as page messages."""
+
+    def __init__(self, state: StationState) -> None:
+        super().__init__(logging.INFO)
+        self.state = state
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self.state.message(record.levelname, record.getMessage())
+        except Exception:  # a log handler must never break the session
+            self.handleError(record)
+
+
+class StationEngine:
+    """Drive a test plan from the page.
+
+    ``open_writer(setup, windows)`` returns the recording writer (a new file, or the resumed one)
+    once the test starts; the engine closes it when the session ends. ``capabilities``: the
+    analyser's (``acquisition.setup.Capabilities``), for validating set-up changes.
+    ``check_windows(force, exp, fs)``: turns the window texts of the set-up panel into
+    :class:`WindowSettings` (raising ValueError with the problem).
+    """
+
+    def __init__(self, analyser: Any, setup: AcquisitionSetup, plan: TestPlan, *, capabilities: Any,
+                 windows: WindowSettings, open_writer: Callable[[AcquisitionSetup, WindowSettings], Any],
+                 resume_hits: Sequence[Any] = (), setup_editable: bool = True, timeout_s: float = 10.0,
+                 geometry: Optional[dict] = None, auto: bool = False,
+                 parse_windows: Optional[Callable[[Optional[str], Optional[str], float], WindowSettings]] = None,
+                 ) -> None:
+        self.analyser = analyser
+        self.setup = setup
+        self.plan = plan
+        self.caps = capabilities
+        self.windows = windows
+        self.open_writer = open_writer
+        self.resume_hits = list(resume_hits)
+        self.setup_editable = bool(setup_editable)
+        self.timeout_s = float(timeout_s)
+        self.parse_windows = parse_windows
+        self.state = StationState()
+        self.session: Optional[CaptureSession] = None
+        self._cond = self.state.cond
+        self._cmds: list[tuple[str, dict]] = []
+        self._quit = False
+        self._auto = bool(auto)
+        self._paused = False
+        self._thread: Optional[threading.Thread] = None
+        self._log_handler = _LogToPage(self.state)
+        self._pending_hit: Optional[HitSummary] = None
+        self.hit_times: dict[int, float] = {}  # hit sequence -> time.time() when its block arrived
+        self._block_time = 0.0
+        self.geometry = geometry or {"nodes": {}, "lines": []}
+        self.state.update(phase="setup", auto=self._auto, paused=False, plan=self._plan_rows(),
+                          current=0, mode=plan.mode, hits_per_point=plan.hits_per_point)
+        self._publish_setup()
+
+    # -- life cycle ------------------------------------------------------------------------------
+    def start(self) -> None:
+        session_log = logging.getLogger("acquisition.session")
+        if session_log.level == logging.NOTSET or session_log.level > logging.INFO:
+            session_log.setLevel(logging.INFO)  # the page shows the session's events
+        session_log.addHandler(self._log_handler)
+        self._thread = threading.Thread(target=self._run, name="station-session", daemon=True)
+        self._thread.start()
+
+    def join(self, timeout: Optional[float] = None) -> None:
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def stop(self) -> None:
+        """End the session (as the finish action) and wait for it."""
+        with self._cond:
+            self._quit = True
+            self._cond.notify_all()
+        self.join(30.0)
+
+    @property
+    def done(self) -> bool:
+        return self.state.get("phase") in ("finished", "error")
+
+    def _run(self) -> None:
+        try:
+            if not self._wait_start():
+                self.state.update(phase="finished", summary="ended before the first hit; nothing recorded")
+                return
+            self.state.update(phase="starting")
+            self._publish_setup()
+            writer = self.open_writer(self.setup, self.windows)
+            try:
+                self.session = CaptureSession(
+                    _Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=self.windows,
+                    decide=self._decide, gate=self._gate, on_hit=self._on_hit, timeout_s=self.timeout_s,
+                    resume_hits=self.resume_hits)
+                result = self.session.run()
+                self.state.update(phase="finished", summary=f"{result.accepted} hits accepted, "
+                                  f"{len(result.rejected)} rejected; recording {getattr(writer, 'path', '')}"
+                                  + (" (ended early)" if result.aborted else ""), plan=self._plan_rows())
+                self.state.message("INFO", "test finished: the recording is complete")
+            finally:
+                writer.close()
+        except SessionError as exc:
+            self.state.message("ERROR", str(exc))
+            self.state.update(phase="error", error=str(exc))
+        except (ImpactlabError, OSError, ValueError) as exc:
+            self.state.message("ERROR", f"{type(exc).__name__}: {exc}")
+            self.state.update(phase="error", error=f"{type(exc).__name__}: {exc}; every accepted hit is in the "
+                                                   "recording: restart the station to resume it")
+        finally:
+            logging.getLogger("acquisition.session").removeHandler(self._log_handler)
+
+    def _wait_start(self) -> bool:
+        """The set-up phase: wait for arm (start) or finish, applying set-up changes meanwhile."""
+        while True:
+            with self._cond:
+                while not self._cmds and not self._quit and not (self._auto and not self._paused):
+                    self._cond.wait()
+                if self._quit:
+                    return False
+                if not self._cmds:  # auto mode starts at once
+                    return True
+                action, params = self._cmds[0]
+                if action == "arm":
+                    return True  # left queued: the first gate arms at once
+                self._cmds.pop(0)
+
+    # -- actions (HTTP threads) -------------------------------------------------------------------
+    def allowed(self) -> tuple:
+        phase = self.state.get("phase")
+        base = _ALLOWED.get(phase, ())
+        return base + (_ANYTIME if phase not in ("finished", "error") else ())
+
+    def submit(self, action: str, params: Optional[dict] = None) -> str:
+        """Queue or apply an action; raises :class:`ActionRefused` when it is unknown (400) or not
+        possible in the current phase (409). Returns a short description for the page."""
+        params = dict(params or {})
+        if action not in ACTIONS:
+            raise ActionRefused(f"unknown action {action!r}; known: {', '.join(ACTIONS)}", 400)
+        with self._cond:
+            allowed = self.allowed()
+            if action not in allowed:
+                raise ActionRefused(f"{action} is not possible now (phase {self.state.get('phase')}; possible: "
+                                    f"{', '.join(allowed) or 'nothing'})")
+            if action == "pause":
+                self._paused = True
+            elif action == "resume":
+                self._paused = False
+            elif action == "auto":
+                on = params.get("on", not self._auto)
+                if not isinstance(on, bool):
+                    raise ActionRefused("auto needs {\"on\": true|false}", 400)
+                self._auto = on
+            elif action == "setup":
+                self._apply_setup(params)
+            elif action == "finish":
+                self._quit = True
+            else:
+                if action in ("undo", "remeasure") and not self.state.get("point_hits"):
+                    raise ActionRefused(f"{action}: this point has no accepted hit")
+                self._cmds.append((action, params))
+            self.state.update(auto=self._auto, paused=self._paused)
+            self._cond.notify_all()
+        return action
+
+    # -- set-up ------------------------------------------------------------------------------------
+    def check_setup(self, params: dict) -> tuple[AcquisitionSetup, WindowSettings]:
+        """The set-up and windows a set-up panel asks for, validated against the analyser's
+        capabilities (raises :class:`ActionRefused` 422 naming the problem)."""
+        try:
+            setup = AcquisitionSetup.from_dict(params.get("setup", self.setup.to_dict()))
+            validate_setup(setup, self.caps)
+            self.plan.measurements(setup)  # one force channel, responses of one quantity
+            windows = self.windows
+            w = params.get("windows")
+            if w is not None:
+                if not isinstance(w, dict) or self.parse_windows is None:
+                    raise SetupError("windows must be {\"force\": TEXT, \"exp\": TEXT}")
+                windows = self.parse_windows(w.get("force"), w.get("exp"), setup.sample_rate_hz)
+        except (SetupError, ValueError, TypeError) as exc:
+            raise ActionRefused(str(exc), 422) from None
+        return setup, windows
+
+    def _apply_setup(self, params: dict) -> None:
+        if not self.setup_editable:
+            raise ActionRefused("a resumed recording keeps its set-up")
+        self.setup, self.windows = self.check_setup(params)
+        self.state.update(plan=self._plan_rows())
+        self._publish_setup()
+        self.state.message("INFO", "set-up changed: " + ", ".join(f"{c.name} {c.range_v:g} V" for c in self.setup.channels)
+                           + f"; trigger {self.setup.trigger.level:g} at channel {self.setup.trigger.channel}, "
+                           f"pre-trigger {self.setup.trigger.pretrigger_samples}; windows {self.windows.describe()}")
+
+    def _publish_setup(self) -> None:
+        self.state.set_blob("setup", payloads.setup_payload(self.setup, self.caps, self.windows,
+                                                            self.setup_editable and self.state.get("phase") == "setup"))
+
+    # -- session hooks (session thread) -----------------------------------------------------------
+    def _next_command(self, wanted: tuple, auto_answer: Optional[str]) -> tuple[str, dict]:
+        with self._cond:
+            while True:
+                if self._quit:
+                    raise OperatorQuit("finished from the station page")
+                if self._cmds:
+                    action, params = self._cmds.pop(0)
+                    if action in wanted:
+                        return action, params
+                    self.state.message("WARNING", f"{action} ignored: not possible now")
+                    continue
+                if auto_answer is not None and self._auto and not self._paused:
+                    return auto_answer, {}
+                self._cond.wait()
+
+    def _gate(self, m: Any, avg: Any, result: Any, complete: bool) -> bool:
+        session = self.session
+        assert session is not None
+        while True:
+            complete = avg.n_averages >= self.plan.hits_per_point
+            self._publish_point(m, avg, result, "complete" if complete else "ready")
+            if complete:
+                action, _ = self._next_command(("next-point", "undo", "remeasure"), "next-point")
+            else:
+                action, _ = self._next_command(("arm", "undo", "remeasure", "next-point"), "arm")
+            if action == "arm":
+                self.state.update(phase="armed")
+                return True
+            if action == "next-point":
+                if not complete:
+                    session._event("INFO", f"point {m.point} skipped by the operator with {avg.n_averages} "
+                                           f"of {self.plan.hits_per_point} hits")
+                return False
+            if action == "undo" and avg.hits:
+                session.withdraw_last(avg, result, "withdrawn by the operator (undo)")
+            elif action == "remeasure" and avg.hits:
+                session.withdraw_point(avg, result, "point measured again by the operator")
+            self.state.set_blob("frf", payloads.frf_payload(avg, self.setup.bandwidth_hz))
+
+    def _decide(self, summary: HitSummary) -> bool:
+        self._publish_hit(summary, pending=True)
+        action, _ = self._next_command(("accept", "reject"), "accept")
+        return action == "accept"
+
+    def _on_hit(self, summary: HitSummary) -> None:
+        self._publish_hit(summary, pending=False)
+
+    # -- publishing ---------------------------------------------------------------------------------
+    def _plan_rows(self) -> list[dict]:
+        try:
+            ms = self.plan.measurements(self.setup)
+        except ImpactlabError:
+            return []
+        old = {r["point"]: r for r in (self.state.get("plan") or [])}
+        return [{"index": m.index, "point": m.point, "reference": m.reference, "outputs": list(m.outputs),
+                 "accepted": old.get(m.point, {}).get("accepted", 0),
+                 "done": old.get(m.point, {}).get("done", False)} for m in ms]
+
+    def _publish_point(self, m: Any, avg: Any, result: Any, phase: str) -> None:
+        rows = self.state.get("plan") or self._plan_rows()
+        rows = [dict(r) for r in rows]
+        for r in rows:
+            if r["index"] == m.index:
+                r["accepted"] = avg.n_averages
+                r["done"] = avg.n_averages >= self.plan.hits_per_point
+            elif r["index"] < m.index and r["accepted"] >= self.plan.hits_per_point:
+                r["done"] = True
+        self.state.update(phase=phase, current=m.index, current_point=m.point, point_hits=avg.n_averages,
+                          total_accepted=result.accepted, total_rejected=len(result.rejected), plan=rows,
+                          reference=m.reference, outputs=list(m.outputs))
+
+    def _publish_hit(self, summary: HitSummary, pending: bool) -> None:
+        setup = self.setup
+        chans = setup.channels
+        session = self.session
+        assert session is not None
+        if pending or self._pending_hit is not summary:
+            t_block = self._block_time
+            seq = self.state.next_hit_seq()
+            self.hit_times[seq] = t_block
+            names = [f"{c.name} {c.point}" for c in chans]
+            units = [c.unit for c in chans]
+            hit = payloads.hit_payload(summary.data, summary.sample_rate_hz, summary.trigger_index,
+                                       setup.trigger.pretrigger_samples, session.force_channel,
+                                       session.response_channels, names, units, session.windows.force_width_s)
+            hit["seq"] = seq
+            hit["t_block"] = t_block
+            hit["point"] = summary.point
+            self.state.set_blob("hit", hit)
+            self._pending_hit = summary
+        advice = payloads.range_advice(summary.check, setup, self.caps.ranges_v, summary.data)
+        verdict = payloads.verdict_payload(summary, pending, advice)
+        hits_here = summary.average.n_averages if summary.average is not None else 0
+        if summary.average is not None:
+            self.state.set_blob("frf", payloads.frf_payload(summary.average, setup.bandwidth_hz))
+        phase = "decide" if pending else self.state.get("phase")
+        self.state.update(verdict=verdict, hit_seq=self.state.hit_seq, phase=phase, point_hits=hits_here)
+        if not pending:
+            self._pending_hit = None
+            for a in advice:
+                self.state.message("WARNING", a)
+
+    def mark_block(self) -> None:
+        self._block_time = time.time()
+
+
+class _Timed:
+    """The analyser with the arrival time of each block noted (for the latency figures)."""
+
+    def __init__(self, analyser: Any, engine: StationEngine) -> None:
+        self._a = analyser
+        self._engine = engine
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._a, name)
+
+    def read_block(self, *args: Any, **kwargs: Any) -> Any:
+        block = self._a.read_block(*args, **kwargs)
+        self._engine.mark_block()
+        return block
+
+    def configure(self, setup: Any) -> Any:
+        return self._a.configure(setup)
