@@ -8,6 +8,7 @@ Phases (``state["phase"]``) and the actions each allows:
 ``ready``      before each arm: ``arm``, ``undo``, ``remeasure``, ``next-point`` (skip), ``finish``
 ``armed``      waiting for the hit (nothing to decide; ``finish`` ends after it)
 ``decide``     a hit that passed the checks: ``accept``, ``reject``, ``finish``
+``busy``       the hit is being written (``finish``)
 ``complete``   the point has its hits: ``next-point``, ``undo``, ``remeasure``, ``finish``
 ``finished``   the plan is done or ended; ``error``: the session stopped (message says why)
 =============  ==================================================================================
@@ -47,6 +48,7 @@ _ALLOWED = {
     "finished": (),
     "error": (),
     "starting": ("finish",),
+    "busy": ("finish",),
 }
 
 
@@ -111,8 +113,16 @@ class StationEngine:
         self.hit_times: dict[int, float] = {}  # hit sequence -> time.time() when its block arrived
         self._block_time = 0.0
         self.geometry = geometry or {"nodes": {}, "lines": []}
-        self.state.update(phase="setup", auto=self._auto, paused=False, plan=self._plan_rows(),
-                          current=0, mode=plan.mode, hits_per_point=plan.hits_per_point)
+        rows = self._plan_rows()
+        for r in rows:  # a resumed recording's hits
+            r["accepted"] = min(plan.hits_per_point, sum(1 for h in self.resume_hits
+                                                          if h.accepted and h.measurement == r["index"]))
+            r["done"] = r["accepted"] >= plan.hits_per_point
+        first = next((r for r in rows if not r["done"]), rows[-1] if rows else None)
+        self.state.update(phase="setup", auto=self._auto, paused=False, plan=rows, mode=plan.mode,
+                          hits_per_point=plan.hits_per_point, current=first["index"] if first else 0,
+                          current_point=first["point"] if first else "", point_hits=first["accepted"] if first else 0,
+                          total_accepted=sum(r["accepted"] for r in rows), total_rejected=0)
         self._publish_setup()
 
     # -- life cycle ------------------------------------------------------------------------------
@@ -347,10 +357,10 @@ class StationEngine:
             self._pending_hit = summary
         advice = payloads.range_advice(summary.check, setup, self.caps.ranges_v, summary.data)
         verdict = payloads.verdict_payload(summary, pending, advice)
-        hits_here = summary.average.n_averages if summary.average is not None else 0
+        hits_here = (summary.average.n_averages - (1 if pending else 0)) if summary.average is not None else 0
         if summary.average is not None:
             self.state.set_blob("frf", payloads.frf_payload(summary.average, setup.bandwidth_hz))
-        phase = "decide" if pending else self.state.get("phase")
+        phase = "decide" if pending else "busy"
         self.state.update(verdict=verdict, hit_seq=self.state.hit_seq, phase=phase, point_hits=hits_here)
         if not pending:
             self._pending_hit = None
