@@ -159,9 +159,9 @@
 
   // -- plots --------------------------------------------------------------------------------------
   const layoutBase = (title, x, y) => ({
-    title: { text: title, font: { size: 13 } }, margin: { l: 55, r: 12, t: 30, b: 70 },
-    xaxis: { title: { text: x } }, yaxis: { title: { text: y } }, showlegend: true,
-    legend: { orientation: "h", y: -0.32, font: { size: 10 } }, uirevision: title,
+    title: { text: title, font: { size: 13 }, x: 0.01, xanchor: "left", y: 0.98, yanchor: "top" }, margin: { l: 55, r: 12, t: 46, b: 42 },
+    xaxis: { title: { text: x, standoff: 4 } }, yaxis: { title: { text: y } }, showlegend: true,
+    legend: { orientation: "h", x: 1, xanchor: "right", y: 1.0, yanchor: "bottom", font: { size: 10 } }, uirevision: title,
   });
   const vline = (x, color, dash) => ({ type: "line", x0: x, x1: x, yref: "paper", y0: 0, y1: 1, line: { color: color, dash: dash || "dot", width: 1.5 } });
   const hline = (y, color) => ({ type: "line", y0: y, y1: y, xref: "paper", x0: 0, x1: 1, line: { color: color, dash: "dot", width: 1 } });
