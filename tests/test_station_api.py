@@ -137,3 +137,18 @@ def test_hits_undo_and_the_recording(station):
     assert per_point == [2, 2]
     assert [s.meta["n_averages"] for s in frfs] == [2, 2]
     assert [s.references[0] for s in frfs] == POINTS.split(",")
+
+
+def test_link_faults_show_as_messages_and_the_test_goes_on(tmp_path):
+    s = StationProcess(["--device", "sim://?seed=4&faults=phase_error:0.2,garbage:0.05&fault_seed=2", "--out",
+                        str(tmp_path / "rec.h5"), "--points", "right:6:-X", "--hits", "3", "--auto"], tmp_path)
+    try:
+        api = Api(s)
+        st = api.wait(lambda x: x["phase"] in ("finished", "error"), "the auto-mode test to end")
+        assert st["phase"] == "finished", st.get("error")
+        texts = [m["text"] for m in st["messages"]]
+        assert any("link fault" in t for t in texts), texts
+        assert any(m["level"] == "WARNING" for m in st["messages"])
+    finally:
+        code, out, err = s.stop()
+    assert code == 0, err
