@@ -9,9 +9,10 @@ COMMANDS = {
     "export": ("acquisition.cli_export", "write a recording's FRFs (and time data) as UFF 58"),
     "import": ("acquisition.cli_import", "turn .lvm, DataPhysics .mat or numpy time data into a recording"),
     "identify": ("acquisition.cli_identify", "open a device URL and print identity and capabilities"),
+    "devices": ("acquisition.cli_devices", "list what can be opened: USB analysers, serial ports, simulated doors"),
     "station": ("acquisition.cli_station", "serve the operator's capture page (browser) for an impact test"),
     "demo": ("acquisition.cli_demo", "the make-demo job: capture on the simulated frame, fit, summarise"),
 }
 
 if __name__ == "__main__":
-    sys.exit(dispatch("acquisition", COMMANDS))
+    sys.exit(dispatch("python -m acquisition", COMMANDS))

@@ -21,7 +21,7 @@ from __future__ import annotations
 import re
 import urllib.parse
 from dataclasses import dataclass, field
-from typing import Union
+from typing import Any, Union
 
 from acquisition.errors import DeviceGone, InvalidDeviceURL, TransportError
 from acquisition.transport import Transport
@@ -60,7 +60,7 @@ class SimURL:
     """``sim://?...``: an in-process simulated analyser reached through pyserial (stream).
 
     ``options`` holds the query (``seed`` as int, ``noise`` as bool, everything else as str)
-    handed to ``simulator.firmware.create_analyser``.
+    handed to ``simulator.analyser.create_analyser``.
     """
 
     options: dict = field(default_factory=dict)
@@ -229,12 +229,35 @@ def parse_device_url(url: str) -> DeviceURL:
     raise _bad(url, f"unknown scheme {scheme + '://'!r}")
 
 
-def register_url_handlers() -> None:
-    """Let ``serial.serial_for_url`` find the ``sim://`` handler (idempotent)."""
-    import serial
+#: entry-point group in which installed packages register doors by URL scheme (see simulator.doors)
+DOOR_GROUP = "impactlab.doors"
 
-    if "acquisition.urlhandlers" not in serial.protocol_handler_packages:
-        serial.protocol_handler_packages.append("acquisition.urlhandlers")
+
+def find_door(scheme: str, url: str = "") -> Any:
+    """The door registered for ``scheme`` in the entry-point group :data:`DOOR_GROUP`.
+
+    The simulated doors (``sim``, ``usbsim``) are registered by the simulator package in
+    ``pyproject.toml``, so the driver never imports the simulator. Raises
+    :class:`InvalidDeviceURL` naming the scheme when nothing is installed for it."""
+    from importlib.metadata import entry_points
+
+    found = [ep for ep in entry_points(group=DOOR_GROUP) if ep.name == scheme]
+    if not found:
+        raise _bad(url or f"{scheme}://", f"no door is installed for {scheme}:// (entry-point group {DOOR_GROUP!r}); "
+                   "install impactlab with its simulator: pip install -e . in the checkout")
+    return found[0].load()
+
+
+def register_url_handlers() -> None:
+    """Let ``serial.serial_for_url`` find the handlers of every installed pyserial door (idempotent)."""
+    import serial
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group=DOOR_GROUP):
+        door = ep.load()
+        package = getattr(door, "handler_package", None)
+        if getattr(door, "kind", "") == "pyserial" and package and package not in serial.protocol_handler_packages:
+            serial.protocol_handler_packages.append(package)
 
 
 def _open_stream(pyserial_url: str, target: DeviceURL, timeout_s: float) -> Transport:
@@ -275,6 +298,7 @@ def open_transport(url: Union[str, DeviceURL], timeout_s: float = 2.0) -> Transp
         query = urllib.parse.urlencode(
             {k: ("on" if v is True else "off" if v is False else v) for k, v in target.options.items()}
         )
+        find_door("sim", target.url)  # a clear error when the simulator is not installed
         return _open_stream("sim://" + (f"?{query}" if query else ""), target, timeout_s)
     if isinstance(target, SocketURL):
         host = f"[{target.host}]" if ":" in target.host else target.host
@@ -283,10 +307,10 @@ def open_transport(url: Union[str, DeviceURL], timeout_s: float = 2.0) -> Transp
         return _open_stream(target.path, target, timeout_s)
     if isinstance(target, UsbSimURL):
         from acquisition.usb_transport import UsbTransport
-        from simulator.usb_backend import SimUsbBackend
 
+        door = find_door("usbsim", target.url)
         try:
-            backend = SimUsbBackend(options=dict(target.options))
+            backend = door.backend(dict(target.options))
         except InvalidDeviceURL:
             raise
         except ValueError as exc:

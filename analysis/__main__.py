@@ -10,4 +10,4 @@ COMMANDS = {
 }
 
 if __name__ == "__main__":
-    sys.exit(dispatch("analysis", COMMANDS))
+    sys.exit(dispatch("python -m analysis", COMMANDS))

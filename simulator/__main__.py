@@ -9,4 +9,4 @@ COMMANDS = {
 }
 
 if __name__ == "__main__":
-    sys.exit(dispatch("simulator", COMMANDS))
+    sys.exit(dispatch("python -m simulator", COMMANDS))

@@ -71,7 +71,7 @@ import numpy as np
 
 from acquisition import protocol as P
 
-__all__ = ["Firmware", "Reply", "StandLike", "StandChannel", "PrecomputedStand", "create_analyser", "IDENTITY"]
+__all__ = ["Firmware", "Reply", "StandLike", "StandChannel", "PrecomputedStand", "IDENTITY"]
 
 _log = logging.getLogger(__name__)
 
@@ -718,62 +718,3 @@ def _find_trigger(x: np.ndarray, level: float, slope: str, pre: int, n: int) -> 
 
 
 # ---------------------------------------------------------------------- factory
-def create_analyser(options: "Mapping[str, Any] | None" = None, stand: "StandLike | None" = None) -> Firmware:
-    """A firmware from URL query options.
-
-    Options (all optional): ``seed`` (int, default 0), ``config`` (path of a frame TOML file),
-    ``noise`` (bool, default True: sensor and ADC noise on), ``plan`` (ignored by the firmware;
-    the stand uses it), ``replay`` (path of a recording: ``simulator.replay_stand.ReplayStand``
-    plays its hits back instead of simulating), ``packetized`` (bool), ``serial`` (str), ``polls`` (GET STATUS polls
-    before the strike, default 1), ``max_strikes`` (default 3); ``faults``, ``fault_seed``,
-    ``fault_gone_calls``, ``fault_slow_s``: fault injection, the firmware comes wrapped in
-    :class:`simulator.faults.FaultyFirmware` (same interface). ``stand`` injects a ready stand
-    (e.g. a :class:`PrecomputedStand`); otherwise ``simulator.stand.TestStand`` is built.
-    """
-    opts = dict(options or {})
-    if any(k in opts for k in ("faults", "fault_seed", "fault_gone_calls", "fault_slow_s")):
-        from simulator.faults import create_analyser as create_faulty  # wraps this firmware (fault injection)
-
-        return create_faulty(opts, stand=stand)
-    known = {"seed", "config", "noise", "plan", "packetized", "serial", "polls", "max_strikes", "replay"}
-    unknown = set(opts) - known
-    if unknown:
-        raise ValueError(f"unknown simulator option(s) {sorted(unknown)}; known: {', '.join(sorted(known))}")
-    if stand is None:
-        stand = _build_stand(opts)
-    try:
-        polls = int(opts.get("polls", 1))
-        max_strikes = int(opts.get("max_strikes", 3))
-    except (TypeError, ValueError):
-        raise ValueError("simulator options 'polls' and 'max_strikes' must be integers") from None
-    fw = Firmware(stand, packetized=_as_bool(opts.get("packetized", False), "packetized"),
-                  serial=str(opts.get("serial", DEFAULT_SERIAL)), strike_after_polls=polls,
-                  max_strikes=max_strikes)
-    fw.prepare()
-    return fw
-
-
-def _as_bool(value: Any, name: str) -> bool:
-    if isinstance(value, str):
-        if value.lower() in ("1", "on", "true", "yes"):
-            return True
-        if value.lower() in ("0", "off", "false", "no"):
-            return False
-        raise ValueError(f"simulator option {name}={value!r}: use on or off")
-    return bool(value)
-
-
-def _build_stand(opts: Mapping[str, Any]) -> StandLike:
-    if opts.get("replay"):
-        from simulator.replay_stand import ReplayStand
-
-        return ReplayStand(str(opts["replay"]))
-    import dataclasses
-
-    from simulator.config import FrameConfig
-    from simulator.stand import TestStand
-
-    cfg = FrameConfig.load(opts.get("config") or None)
-    if "noise" in opts:
-        cfg = dataclasses.replace(cfg, noise=dataclasses.replace(cfg.noise, enabled=_as_bool(opts["noise"], "noise")))
-    return TestStand(config=cfg, seed=int(opts.get("seed", 0)))

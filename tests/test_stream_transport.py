@@ -11,7 +11,7 @@ import serial
 from acquisition.errors import DeviceGone, TransportTimeout
 from acquisition.protocol import STREAM_RESET
 from acquisition.stream_transport import StreamTransport
-from acquisition.urlhandlers.protocol_sim import Serial as SimSerial
+from simulator.urlhandlers.protocol_sim import Serial as SimSerial
 
 
 class StreamEcho:

@@ -105,7 +105,7 @@ def test_invalid_url_is_a_value_error() -> None:
 def test_register_is_idempotent() -> None:
     register_url_handlers()
     register_url_handlers()
-    assert serial.protocol_handler_packages.count("acquisition.urlhandlers") == 1
+    assert serial.protocol_handler_packages.count("simulator.urlhandlers") == 1
 
 
 def test_socket_to_closed_port_is_device_gone() -> None:

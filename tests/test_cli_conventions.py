@@ -1,0 +1,84 @@
+"""Command-line conventions: one installed ``impactlab`` command, ``--version``, ``devices``, and
+output into a closed pipe (``... | head``) that neither fails the command nor stops it writing files."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from acquisition.discovery import list_doors, list_usb
+from analysis.cli_impactlab import COMMANDS, main
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+
+def test_impactlab_has_every_subcommand_of_the_three_packages(capsys) -> None:
+    from acquisition.__main__ import COMMANDS as ACQ
+    from analysis.__main__ import COMMANDS as ANA
+    from simulator.__main__ import COMMANDS as SIM
+
+    assert set(COMMANDS) == set(ACQ) | set(ANA) | set(SIM)
+    assert len(COMMANDS) == len(ACQ) + len(ANA) + len(SIM)  # no name hides another
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in COMMANDS)
+    assert main(["nonsense"]) == 2
+
+
+def test_the_installed_console_script_runs_and_prints_its_version() -> None:
+    exe = BIN / "impactlab"
+    if not exe.exists():
+        pytest.skip(f"{exe} not installed (pip install -e . creates it)")
+    out = subprocess.run([str(exe), "--version"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.startswith("impactlab (impactlab) ")
+    for pkg in ("acquisition", "analysis", "simulator"):
+        res = subprocess.run([sys.executable, "-m", pkg, "--version"], capture_output=True, text=True, timeout=60)
+        assert res.returncode == 0 and "impactlab" in res.stdout
+
+
+def test_devices_lists_the_simulated_doors_and_a_usb_analyser_through_pyusb() -> None:
+    from simulator.usb_backend import SimUsbBackend
+
+    urls = [e.url for e in list_doors()]
+    assert "sim://" in urls and "usbsim://" in urls
+    entries, note = list_usb(SimUsbBackend(options={"seed": 1}))
+    assert note is None
+    assert [e.url.split("/")[2] for e in entries] == ["1209:0001"] and entries[0].kind == "usb"
+
+
+def test_devices_json(capsys) -> None:
+    from acquisition.cli_devices import main as devices
+
+    assert devices(["--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert {"sim://", "usbsim://"} <= {d["url"] for d in doc["devices"]}
+
+
+def _closed_pipe_run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """Run a command whose stdout reader has gone before it writes anything (as ``| head`` after
+    its lines): every write meets EPIPE, whatever the timing."""
+    proc = subprocess.Popen(args, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    proc.stdout.close()
+    _, err = proc.communicate(timeout=300)
+    return subprocess.CompletedProcess(args, proc.returncode, "", err)
+
+
+def test_output_into_a_closed_pipe_still_writes_the_json_and_exits_0(tmp_path: Path) -> None:
+    rec = tmp_path / "rec.h5"
+    made = subprocess.run([sys.executable, "-m", "acquisition", "capture", "--device", "sim://?seed=2", "--out",
+                           str(rec), "--hits", "2", "--points", "right:6:-X", "--auto", "-q"],
+                          capture_output=True, text=True, timeout=300)
+    assert made.returncode == 0, made.stderr
+    res = _closed_pipe_run([sys.executable, "-m", "analysis", "fit", str(rec), "--json", str(tmp_path / "f.json"),
+                            "--band", "4:215"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "BrokenPipe" not in res.stderr and "Traceback" not in res.stderr
+    assert json.loads((tmp_path / "f.json").read_text())["poles"]
+    ident = _closed_pipe_run([sys.executable, "-m", "acquisition", "identify", "--device", "sim://?seed=1", "--json"],
+                             tmp_path)
+    assert ident.returncode == 0 and "Traceback" not in ident.stderr, ident.stderr
