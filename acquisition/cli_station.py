@@ -176,6 +176,9 @@ def run_station(args: argparse.Namespace, out_stream=sys.stdout, ready: Optional
         print(server.url, file=out_stream, flush=True)
         print(f"station: {identity}; recording {job['out']}; open the URL above in a browser (Ctrl-C stops)",
               file=out_stream, flush=True)
+        if args.host not in ("127.0.0.1", "localhost", "::1"):
+            print(f"station: serving on {args.host}: anyone who can reach this address and has the URL (token) can "
+                  "steer the test; the link is plain HTTP", file=sys.stderr, flush=True)
         stop = threading.Event()
 
         def _term(signum: int, frame: Any) -> None:

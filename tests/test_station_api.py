@@ -152,3 +152,49 @@ def test_link_faults_show_as_messages_and_the_test_goes_on(tmp_path):
     finally:
         code, out, err = s.stop()
     assert code == 0, err
+
+
+def test_overload_advice_pause_remeasure_and_skip(tmp_path):
+    from analysis.recording import Recording
+
+    rec = tmp_path / "rec.h5"
+    s = StationProcess(["--device", "sim://?seed=6&faults=overload:0.6&fault_seed=1", "--out", str(rec),
+                        "--points", POINTS, "--hits", "2"], tmp_path)
+    try:
+        api = Api(s)
+        assert api.lease() == 200
+        advice = None
+        while advice is None or api.state()["point_hits"] < 1:
+            st = api.state()
+            assert st["phase"] in ("setup", "decide", "ready"), st["phase"]
+            if st["phase"] == "decide":
+                assert api.act("reject" if st["point_hits"] else "accept")[0] == 200
+                api.wait(lambda x: x["phase"] == "ready", "the decision")
+                continue
+            seq = st["hit_seq"]
+            assert api.act("arm")[0] == 200
+            st = api.wait(lambda x, q=seq: x["hit_seq"] > q and x["phase"] in ("decide", "ready"), "a hit")
+            if st["verdict"]["state"] == "rejected" and any(st["verdict"]["overload"]):
+                assert "overload" in " ".join(st["verdict"]["reasons"])
+                advice = st["verdict"]["advice"]
+        assert advice and "set its range to" in advice[0] and "force" in advice[0]
+        assert api.act("pause")[0] == 200
+        assert api.act("arm")[0] == 409 and api.state()["paused"] is True
+        assert api.act("resume")[0] == 200
+        assert api.act("remeasure")[0] == 200
+        api.wait(lambda x: x["point_hits"] == 0 and x["phase"] == "ready", "the point cleared")
+        assert api.act("next-point")[0] == 200  # skip it
+        api.wait(lambda x: x["current"] == 1 and x["phase"] == "ready", "the second point")
+        assert api.act("auto", on=True)[0] == 200
+        api.wait(lambda x: x["phase"] == "finished", "the end")
+    finally:
+        code, out, err = s.stop()
+    assert code == 0, err
+    with Recording(rec) as r:
+        hits = list(r.hits())
+        assert r.measurement_names() == ["m001"]  # the skipped point has no FRF
+    again = [h for h in hits if "point measured again by the operator" in h.reasons]
+    assert len(again) == 1 and not again[0].accepted and again[0].measurement == 0
+    assert not any(h.accepted for h in hits if h.measurement == 0)
+    assert sum(h.accepted for h in hits if h.measurement == 1) == 2
+    assert any(any("overload" in x for x in h.reasons) for h in hits)

@@ -15,7 +15,7 @@ Phases (``state["phase"]``) and the actions each allows:
 
 ``pause``/``resume`` and ``auto`` (on/off) are allowed in every running phase. Auto mode arms,
 accepts every hit that passed the checks and moves to the next point; pause holds it before the
-next arm. One tab controls at a time (:class:`acquisition.station.state.Lease`).
+next arm (the arm action too, until resume). One tab controls at a time (:class:`acquisition.station.state.Lease`).
 """
 from __future__ import annotations
 
@@ -197,7 +197,7 @@ class StationEngine:
     # -- actions (HTTP threads) -------------------------------------------------------------------
     def allowed(self) -> tuple:
         phase = self.state.get("phase")
-        base = _ALLOWED.get(phase, ())
+        base = tuple(a for a in _ALLOWED.get(phase, ()) if not (self._paused and a == "arm"))
         return base + (_ANYTIME if phase not in ("finished", "error") else ())
 
     def submit(self, action: str, params: Optional[dict] = None) -> str:
