@@ -255,8 +255,8 @@ class RecordingWriter:
         if name not in self._f["hits"]:
             raise RecordingError(f"{self.path} has no hit {index} to withdraw")
         a = self._f["hits"][name].attrs
+        a["accepted"] = False  # first: a crash between the two writes leaves the hit out, not in
         a["reasons"] = json.dumps(json.loads(_as_str(a["reasons"])) + [str(reason)])
-        a["accepted"] = False
         self._f.flush()
 
     def write_frf(
