@@ -18,13 +18,22 @@ import logging
 import signal
 import sys
 import threading
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Optional
 
-from .cli_capture import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, _plan, _with_seed, open_analyser, parse_windows
+from .cli_capture import (
+    DEFAULT_EXP_WINDOW,
+    DEFAULT_FORCE_WINDOW,
+    _plan,
+    _with_seed,
+    open_analyser,
+    parse_windows,
+    recorded_test,
+)
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
 
-__all__ = ["main", "build_parser", "frame_geometry"]
+__all__ = ["build_parser", "frame_geometry", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -88,38 +97,25 @@ def _geometry(url: str) -> dict:
 
 def _prepare(args: argparse.Namespace) -> dict:
     """Everything checked and loaded before the analyser is opened."""
-    from analysis.recording import Recording, RecordingWriter
+    from analysis.recording import RecordingWriter
 
-    from .session import TestPlan, channel_table
-    from .setup import AcquisitionSetup, default_setup, load_setup
+    from .session import channel_table
+    from .setup import default_setup, load_setup
 
     if args.resume:
-        if args.out or args.points or args.reference or args.mode or args.setup or args.hits is not None:
-            raise UsageError("--resume continues the recorded test as it was planned: drop --out, --points, "
-                             "--reference, --mode, --hits and --setup")
         path = Path(args.resume)
-        with Recording(path) as rec:
-            try:
-                setup = AcquisitionSetup.from_dict(rec.setup)
-                planned = dict(rec.plan)
-                device = planned.pop("device", None)
-                plan = TestPlan(**{k: (tuple(v) if k == "points" else v) for k, v in planned.items()
-                                   if k in ("mode", "points", "hits_per_point", "reference")})
-            except (SetupError, TypeError, ValueError) as exc:
-                raise UsageError(f"{path} does not hold a capture plan and set-up to resume ({exc})") from None
-            windows = rec.windows
-            hits = list(rec.hits(skip_damaged=True))
+        setup, plan, windows, hits, device = recorded_test(args)
         url = args.device or device
         if not url:
             raise UsageError(f"{path} does not name its device: give --device URL")
 
-        def open_writer(setup: Any, win: Any) -> Any:
+        def reopen(setup: Any, win: Any) -> Any:
             w = RecordingWriter.resume(path)
             w.log("INFO", f"station resumed on {url} with {sum(1 for h in hits if h.accepted)} accepted hits recorded")
             return w
 
         return dict(url=_with_seed(url, args.seed), setup=setup, plan=plan, windows=windows, resume_hits=hits,
-                    open_writer=open_writer, editable=False, out=path)
+                    open_writer=reopen, editable=False, out=path)
     if not args.device or not args.out:
         raise UsageError("give --device URL and --out REC.h5 (or --resume REC.h5 to continue a recording)")
     url = _with_seed(args.device, args.seed)

@@ -107,7 +107,7 @@ def chrome(tmp_path: Path):
     """A headless Chromium driven by selenium; skips with an install hint when missing (fails under CI=true)."""
     missing = []
     try:
-        from selenium import webdriver  # noqa: F401
+        from selenium import webdriver
     except ModuleNotFoundError:
         missing.append("selenium (pip install -e '.[test]')")
     for exe in (CHROMIUM, CHROMEDRIVER):

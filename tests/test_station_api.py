@@ -3,7 +3,6 @@ session survives), set-up validation, undo, and the recording it writes (the rea
 from __future__ import annotations
 
 import pytest
-
 from station_support import Api, StationProcess
 
 POINTS = "right:6:-X,top:4:Z"
@@ -115,7 +114,7 @@ def test_hits_undo_and_the_recording(station):
         seq = st["hit_seq"]
         st = api.wait(lambda s, q=seq: s["hit_seq"] > q and s["phase"] in ("decide", "ready"), "a hit")
     for name in ("hit", "frf"):
-        status, blob = api.request("GET", f"/api/blob/{name}")
+        status, _blob = api.request("GET", f"/api/blob/{name}")
         assert status == 200
     assert api.act("accept")[0] == 200
     st = api.wait(lambda s: s["phase"] == "ready" and s["point_hits"] == 1, "the accepted hit")
@@ -124,7 +123,7 @@ def test_hits_undo_and_the_recording(station):
     assert api.act("undo")[0] == 409  # nothing left to undo
     assert api.act("auto", on=True)[0] == 200
     st = api.wait(lambda s: s["phase"] == "finished", "the plan to finish in auto mode")
-    code, out, err = station.stop()
+    code, _out, err = station.stop()
     assert code == 0, err
     with Recording(station.rec) as rec:
         hits = list(rec.hits())
@@ -150,7 +149,7 @@ def test_link_faults_show_as_messages_and_the_test_goes_on(tmp_path):
         assert any("link fault" in t for t in texts), texts
         assert any(m["level"] == "WARNING" for m in st["messages"])
     finally:
-        code, out, err = s.stop()
+        code, _out, err = s.stop()
     assert code == 0, err
 
 
@@ -188,7 +187,7 @@ def test_overload_advice_pause_remeasure_and_skip(tmp_path):
         assert api.act("auto", on=True)[0] == 200
         api.wait(lambda x: x["phase"] == "finished", "the end")
     finally:
-        code, out, err = s.stop()
+        code, _out, err = s.stop()
     assert code == 0, err
     with Recording(rec) as r:
         hits = list(r.hits())

@@ -50,14 +50,14 @@ def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
         seen_double = []
         rejected_by_me = 0
         for k, point in enumerate(POINTS):
-            wait.until(lambda d: driver.find_element(By.ID, "current-point").text == point)
+            wait.until(lambda d, p=point: d.find_element(By.ID, "current-point").text == p)
             while True:
                 n_before = int(driver.find_element(By.ID, "accepted-count").text)
                 if n_before == HITS:
                     break
                 seq = int(verdict.get_attribute("data-seq"))
                 click("arm")
-                wait.until(lambda d: int(verdict.get_attribute("data-seq")) > seq
+                wait.until(lambda d, q=seq: int(verdict.get_attribute("data-seq")) > q
                            and verdict.get_attribute("data-state") in ("decide", "rejected"))
                 if verdict.get_attribute("data-state") == "rejected":
                     assert "double hit" in verdict.text
@@ -91,7 +91,7 @@ def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
         assert not [e for e in logs if "Uncaught" in e["message"]], logs
     finally:
         driver.quit()
-        code, out, err = s.stop()
+        code, _out, err = s.stop()
     assert code == 0, err
 
     from analysis.recording import Recording

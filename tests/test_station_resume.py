@@ -68,7 +68,7 @@ def test_killed_station_resumes_in_the_station_then_in_capture(tmp_path):
     assert _recorded(rec) == ([3, 1], ["m000"])
 
     done = subprocess.run([sys.executable, "-m", "acquisition", "capture", "--resume", str(rec), "--auto", "-q"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=WAIT_S)
+                          cwd=tmp_path, capture_output=True, text=True, timeout=WAIT_S, check=False)
     assert done.returncode == 0, done.stderr
     assert _recorded(rec) == ([3, 3], ["m000", "m001"])
 
@@ -77,14 +77,14 @@ def test_station_continues_a_capture(tmp_path):
     rec = tmp_path / "cap.h5"
     cap = subprocess.run([sys.executable, "-m", "acquisition", "capture", "--device", "sim://?seed=2", "--out", str(rec),
                           "--points", POINTS, "--hits", "2", "-q"], input="a\n", cwd=tmp_path, capture_output=True,
-                         text=True, timeout=WAIT_S)  # one hit accepted, then the input ends: the test stops early
+                         text=True, timeout=WAIT_S, check=False)  # one hit accepted, then the input ends: the test stops early
     assert cap.returncode == 0, cap.stderr
     accepted, _ = _recorded(rec)
     assert accepted[1] == 0 and accepted[0] <= 1
     s = StationProcess(["--resume", str(rec), "--auto"], tmp_path)
     try:
         Api(s).wait(lambda st: st["phase"] == "finished", "the resumed plan to finish in auto mode")
-        code, out, err = s.stop()
+        code, _out, err = s.stop()
         assert code == 0, err
     finally:
         if s.proc.poll() is None:

@@ -22,7 +22,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any, Callable, Optional, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any, Optional
 
 from analysis.spectra import WindowSettings
 
@@ -32,7 +33,7 @@ from ..setup import AcquisitionSetup, validate_setup
 from . import payloads
 from .state import StationState
 
-__all__ = ["StationEngine", "ACTIONS", "ActionRefused"]
+__all__ = ["ACTIONS", "ActionRefused", "StationEngine"]
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +71,7 @@ class _LogToPage(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         try:
             self.state.message(record.levelname, record.getMessage())
-        except Exception:  # a log handler must never break the session
+        except Exception:  # noqa: BLE001 - a log handler must never break the session
             self.handleError(record)
 
 
@@ -110,6 +111,7 @@ class StationEngine:
         self._thread: Optional[threading.Thread] = None
         self._log_handler = _LogToPage(self.state)
         self._pending_hit: Optional[HitSummary] = None
+        self._shown_seq = 0
         self.hit_times: dict[int, float] = {}  # hit sequence -> time.time() when its block arrived
         self._block_time = 0.0
         self.geometry = geometry or {"nodes": {}, "lines": []}
@@ -189,7 +191,7 @@ class StationEngine:
                     return False
                 if not self._cmds:  # auto mode starts at once
                     return True
-                action, params = self._cmds[0]
+                action = self._cmds[0][0]
                 if action == "arm":
                     return True  # left queued: the first gate arms at once
                 self._cmds.pop(0)
@@ -340,7 +342,7 @@ class StationEngine:
         setup = self.setup
         chans = setup.channels
         session = self.session
-        assert session is not None
+        assert session is not None and summary.data is not None
         if pending or self._pending_hit is not summary:
             t_block = self._block_time
             seq = self.state.next_hit_seq()
@@ -351,17 +353,19 @@ class StationEngine:
                                        setup.trigger.pretrigger_samples, session.force_channel,
                                        session.response_channels, names, units, session.windows.force_width_s)
             hit["seq"] = seq
+            self._shown_seq = seq
             hit["t_block"] = t_block
             hit["point"] = summary.point
             self.state.set_blob("hit", hit)
             self._pending_hit = summary
         advice = payloads.range_advice(summary.check, setup, self.caps.ranges_v, summary.data)
         verdict = payloads.verdict_payload(summary, pending, advice)
+        verdict["seq"] = self._shown_seq
         hits_here = (summary.average.n_averages - (1 if pending else 0)) if summary.average is not None else 0
         if summary.average is not None:
             self.state.set_blob("frf", payloads.frf_payload(summary.average, setup.bandwidth_hz))
         phase = "decide" if pending else "busy"
-        self.state.update(verdict=verdict, hit_seq=self.state.hit_seq, phase=phase, point_hits=hits_here)
+        self.state.update(verdict=verdict, hit_seq=self._shown_seq, phase=phase, point_hits=hits_here)
         if not pending:
             self._pending_hit = None
             for a in advice:

@@ -7,11 +7,13 @@ Units: time ms, frequency Hz, force N, acceleration m/s^2, spectra and FRF magni
 """
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+import itertools
+from collections.abc import Sequence
+from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["hit_payload", "frf_payload", "verdict_payload", "setup_payload", "range_advice", "band_edges"]
+__all__ = ["band_edges", "frf_payload", "hit_payload", "range_advice", "setup_payload", "verdict_payload"]
 
 #: most samples of a time trace sent to the page (min/max pairs keep the peaks when decimating)
 MAX_TRACE_POINTS = 2400
@@ -37,7 +39,7 @@ def _envelope(t: np.ndarray, y: np.ndarray, n_max: int) -> tuple[np.ndarray, np.
     buckets = n_max // 2
     edges = np.linspace(0, n, buckets + 1).astype(int)
     tt, yy = [], []
-    for a, b in zip(edges[:-1], edges[1:]):
+    for a, b in itertools.pairwise(edges):
         seg = y[a:b]
         i, j = int(np.argmin(seg)), int(np.argmax(seg))
         for k in sorted((i, j)):

@@ -22,15 +22,16 @@ import json
 import logging
 import secrets
 import threading
+from collections.abc import Callable
 from http.cookies import CookieError, SimpleCookie
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Optional
 from urllib.parse import parse_qs, urlsplit
 
 from .engine import ActionRefused, StationEngine
 
-__all__ = ["StationServer", "STATIC_DIR", "new_token"]
+__all__ = ["STATIC_DIR", "StationServer", "new_token"]
 
 log = logging.getLogger(__name__)
 
@@ -64,8 +65,8 @@ class StationServer(ThreadingHTTPServer):
 
     @property
     def url(self) -> str:
-        host, port = self.server_address[:2]
-        shown = f"[{host}]" if ":" in str(host) else host
+        host, port = str(self.server_address[0]), int(self.server_address[1])
+        shown = f"[{host}]" if ":" in host else host
         return f"http://{shown}:{port}/?token={self.token}"
 
     def shutdown(self) -> None:
@@ -184,7 +185,7 @@ class _Handler(BaseHTTPRequestHandler):
             return
         if parts.path == "/api/lease":
             take = body.get("take", False)
-            if not client or not isinstance(take, bool):
+            if not isinstance(client, str) or not client or not isinstance(take, bool):
                 self._error(400, "give {\"client\": ID, \"take\": false|true}")
                 return
             with eng.state.cond:
@@ -197,7 +198,7 @@ class _Handler(BaseHTTPRequestHandler):
                 self._error(400, "give {\"client\": ID, \"action\": NAME}")
                 return
             with eng.state.cond:
-                if not eng.state.lease.holds(client):
+                if not isinstance(client, str) or not eng.state.lease.holds(client):
                     self._error(409, "another tab controls the session (or this tab's control lapsed): take control "
                                      "first")
                     return

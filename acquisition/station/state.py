@@ -13,7 +13,7 @@ import threading
 import time
 from typing import Any, Optional
 
-__all__ = ["StationState", "Lease"]
+__all__ = ["Lease", "StationState"]
 
 #: messages kept for the page
 MAX_MESSAGES = 200
@@ -96,7 +96,7 @@ class StationState:
         with self.cond:
             out = dict(self._fields)
             out["version"] = self.version
-            out["hit_seq"] = self.hit_seq
+            out.setdefault("hit_seq", 0)  # published with its verdict (never ahead of it)
             out["messages"] = list(self._messages)[-50:]
             out["blobs"] = {k: v for k, (v, _) in self._blobs.items()}
             out["controller"] = self.lease.holder
