@@ -49,12 +49,18 @@ def _envelope(t: np.ndarray, y: np.ndarray, n_max: int) -> tuple[np.ndarray, np.
 
 
 def band_edges(freq_hz: np.ndarray, gff_db: np.ndarray) -> dict:
-    """Highest frequency where the force autospectrum (dB re max) is still above -10 and -20 dB:
-    the usable excitation band of the hit."""
+    """Where the force autospectrum (dB re max) first falls below -10 and -20 dB, Hz (linear
+    interpolation between lines; None when it never does): the usable excitation band of the hit."""
     out = {}
     for level in (10, 20):
-        above = np.nonzero(gff_db >= -level)[0]
-        out[f"minus{level}_hz"] = float(freq_hz[above[-1]]) if above.size else None
+        below = np.nonzero(gff_db < -level)[0]
+        below = below[below > 0]
+        if not below.size:
+            out[f"minus{level}_hz"] = None
+            continue
+        k = int(below[0])
+        f0, f1, d0, d1 = freq_hz[k - 1], freq_hz[k], gff_db[k - 1], gff_db[k]
+        out[f"minus{level}_hz"] = float(f0 + (f1 - f0) * (-level - d0) / (d1 - d0)) if d1 != d0 else float(f1)
     return out
 
 
@@ -95,7 +101,7 @@ def hit_payload(data: np.ndarray, fs_hz: float, trigger_index: int, pretrigger: 
         "pretrigger_ms": -pretrigger / fs_hz * 1e3,
         "force_window_ms": None if force_window_s is None else force_window_s * 1e3,
         "spectrum": {"f_hz": _round(freq[idx]), "db": _round(gff_db[idx]),
-                     **band_edges(freq[idx], np.nan_to_num(gff_db[idx], nan=-999.0))},
+                     **band_edges(freq, np.nan_to_num(gff_db, nan=-999.0))},
     }
 
 

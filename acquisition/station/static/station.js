@@ -292,7 +292,10 @@
       state = JSON.parse(ev.data);
       render();
     });
-    es.onerror = () => { $("#link").textContent = "link lost: reconnecting"; $("#link").className = "badge bad"; };
+    es.onerror = () => {
+      $("#link").textContent = "link lost: reconnecting"; $("#link").className = "badge bad";
+      if (state) { state.allowed = []; render(); }  // nothing can be sent until the link is back
+    };
   }
   api("/api/blob/geometry").then((g) => { geometry = g; drawGeometry(); }).catch(() => {});
   lease(false);
