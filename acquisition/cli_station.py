@@ -197,6 +197,9 @@ def run_station(args: argparse.Namespace, out_stream=sys.stdout, ready: Optional
             server.server_close()
             engine.stop()
         finished = engine.state.get("phase") == "finished"
+        if not Path(job["out"]).exists():
+            print("station stopped before the first hit: nothing was recorded", file=out_stream, flush=True)
+            return 0
         print(f"station stopped; {job['out']} keeps every hit written"
               + ("" if finished else " (continue with 'python -m acquisition station --resume FILE' or "
                                      "'python -m acquisition capture --resume FILE')"), file=out_stream, flush=True)

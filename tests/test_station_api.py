@@ -197,3 +197,54 @@ def test_overload_advice_pause_remeasure_and_skip(tmp_path):
     assert not any(h.accepted for h in hits if h.measurement == 0)
     assert sum(h.accepted for h in hits if h.measurement == 1) == 2
     assert any(any("overload" in x for x in h.reasons) for h in hits)
+
+
+def test_an_earlier_point_is_measured_again_during_and_after_the_test(tmp_path):
+    from analysis.recording import Recording
+
+    rec = tmp_path / "rec.h5"
+    s = StationProcess(["--device", "sim://?seed=8", "--out", str(rec), "--points", POINTS, "--hits", "1"], tmp_path)
+
+    def one_hit(api: Api) -> None:
+        """Arm (again after a rejected hit) and accept until the point is complete."""
+        while True:
+            st = api.state()
+            if st["phase"] == "complete":
+                return
+            if st["phase"] == "decide":
+                assert api.act("accept")[0] == 200
+                api.wait(lambda x: x["phase"] in ("ready", "complete"), "the accept")
+            else:
+                assert api.act("arm")[0] == 200
+                api.wait(lambda x, q=st["hit_seq"]: x["hit_seq"] > q and x["phase"] in ("decide", "ready"), "a hit")
+
+    try:
+        api = Api(s)
+        assert api.lease() == 200
+        one_hit(api)
+        assert api.act("next-point")[0] == 200
+        api.wait(lambda x: x["current"] == 1 and x["phase"] == "ready", "point 2")
+        one_hit(api)
+        assert api.act("remeasure", point=5)[0] == 400
+        assert api.act("remeasure", point=0)[0] == 200          # back to point 1 before moving on
+        api.wait(lambda x: x["current"] == 0 and x["phase"] == "ready" and x["point_hits"] == 0, "point 1 again")
+        one_hit(api)
+        assert api.act("next-point")[0] == 200
+        st = api.wait(lambda x: x["phase"] == "finished", "the end (point 2 kept its hit)")
+        assert api.act("remeasure", point=1)[0] == 200          # and point 2 after the end
+        api.wait(lambda x: x["current"] == 1 and x["phase"] == "ready" and x["point_hits"] == 0, "point 2 again")
+        one_hit(api)
+        assert api.act("next-point")[0] == 200
+        api.wait(lambda x: x["phase"] == "finished", "the end")
+    finally:
+        code, _out, err = s.stop()
+    assert code == 0, err
+    with Recording(rec) as r:
+        hits = list(r.hits())
+        groups = {name: r.frf_group(name) for name in r.measurement_names()}
+        assert r.closed_cleanly
+    again = [h for h in hits if "point measured again by the operator" in h.reasons]
+    assert sorted(h.measurement for h in again) == [0, 1] and not any(h.accepted for h in again)
+    accepted = [h for h in hits if h.accepted]
+    assert sorted(h.measurement for h in accepted) == [0, 1]
+    assert {int(g["measurement"]): list(g["hits"]) for g in groups.values()} == {h.measurement: [h.index] for h in accepted}

@@ -23,6 +23,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any, Optional
 
 from analysis.spectra import WindowSettings
@@ -30,7 +31,7 @@ from analysis.spectra import WindowSettings
 from ..errors import ImpactlabError, SetupError
 from ..session import CaptureSession, HitSummary, OperatorQuit, SessionError, TestPlan
 from ..setup import AcquisitionSetup, validate_setup
-from . import payloads
+from .publish import PagePublisher
 from .state import StationState
 
 __all__ = ["ACTIONS", "ActionRefused", "StationEngine"]
@@ -46,7 +47,7 @@ _ALLOWED = {
     "armed": ("finish",),
     "decide": ("accept", "reject", "finish"),
     "complete": ("next-point", "undo", "remeasure", "finish"),
-    "finished": (),
+    "finished": ("remeasure",),
     "error": (),
     "starting": ("finish",),
     "busy": ("finish",),
@@ -75,7 +76,7 @@ class _LogToPage(logging.Handler):
             self.handleError(record)
 
 
-class StationEngine:
+class StationEngine(PagePublisher):
     """Drive a test plan from the page.
 
     ``open_writer(setup, windows)`` returns the recording writer (a new file, or the resumed one)
@@ -112,6 +113,8 @@ class StationEngine:
         self._log_handler = _LogToPage(self.state)
         self._pending_hit: Optional[HitSummary] = None
         self._shown_seq = 0
+        self._accepted: dict[int, Any] = {}  # recording index -> accepted hit (for a pass that goes back)
+        self._redo: Optional[int] = None
         self.hit_times: dict[int, float] = {}  # hit sequence -> time.time() when its block arrived
         self._block_time = 0.0
         self.geometry = geometry or {"nodes": {}, "lines": []}
@@ -160,15 +163,23 @@ class StationEngine:
             self._publish_setup()
             writer = self.open_writer(self.setup, self.windows)
             try:
-                self.session = CaptureSession(
-                    _Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=self.windows,
-                    decide=self._decide, gate=self._gate, on_hit=self._on_hit, timeout_s=self.timeout_s,
-                    resume_hits=self.resume_hits)
-                result = self.session.run()
-                self.state.update(phase="finished", summary=f"{result.accepted} hits accepted, "
-                                  f"{len(result.rejected)} rejected; recording {getattr(writer, 'path', '')}"
-                                  + (" (ended early)" if result.aborted else ""), plan=self._plan_rows())
-                self.state.message("INFO", "test finished: the recording is complete")
+                self._accepted = {h.index: h for h in self.resume_hits if h.accepted}
+                while True:
+                    self._redo = None
+                    self.session = CaptureSession(
+                        _Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=self.windows,
+                        decide=self._decide, gate=self._gate, on_hit=self._on_hit, timeout_s=self.timeout_s,
+                        resume_hits=sorted(self._accepted.values(), key=lambda h: h.index))
+                    result = self.session.run()
+                    if self._redo is None:
+                        self.state.update(phase="finished", summary=f"{result.accepted} hits accepted, "
+                                          f"{len(result.rejected)} rejected; recording {getattr(writer, 'path', '')}"
+                                          + (" (ended early)" if result.aborted else ""), plan=self._plan_rows())
+                        self.state.message("INFO", "test finished: the recording is complete")
+                        self._redo = self._wait_redo()
+                        if self._redo is None:
+                            break
+                    self._withdraw_measurement(writer, self._redo)
             finally:
                 writer.close()
         except SessionError as exc:
@@ -195,6 +206,29 @@ class StationEngine:
                 if action == "arm":
                     return True  # left queued: the first gate arms at once
                 self._cmds.pop(0)
+
+    def _wait_redo(self) -> Optional[int]:
+        """After the plan: wait for a point to measure again (its index) or the end (None)."""
+        with self._cond:
+            while True:
+                if self._quit:
+                    return None
+                if self._cmds:
+                    action, params = self._cmds.pop(0)
+                    if action == "remeasure" and isinstance(params.get("point"), int):
+                        return int(params["point"])
+
+                self._cond.wait()
+
+    def _withdraw_measurement(self, writer: Any, index: int) -> None:
+        """Take every accepted hit of measurement ``index`` out (the session then measures it again)."""
+        mine = sorted(i for i, h in self._accepted.items() if h.measurement == index)
+        for i in mine:
+            writer.withdraw_hit(i, "point measured again by the operator")
+            del self._accepted[i]
+        rows = [dict(r, accepted=0, done=False) if r["index"] == index else r for r in self.state.get("plan") or []]
+        self.state.update(plan=rows)
+        self.state.message("INFO", f"measuring point {index + 1} again ({len(mine)} hits withdrawn)")
 
     # -- actions (HTTP threads) -------------------------------------------------------------------
     def allowed(self) -> tuple:
@@ -226,6 +260,9 @@ class StationEngine:
                 self._apply_setup(params)
             elif action == "finish":
                 self._quit = True
+            elif action == "remeasure" and ("point" in params or self.state.get("phase") == "finished"):
+                self._check_redo(params.get("point"))
+                self._cmds.append((action, params))
             else:
                 if action in ("undo", "remeasure") and not self.state.get("point_hits"):
                     raise ActionRefused(f"{action}: this point has no accepted hit")
@@ -233,6 +270,11 @@ class StationEngine:
             self.state.update(auto=self._auto, paused=self._paused)
             self._cond.notify_all()
         return action
+
+    def _check_redo(self, point: Any) -> None:
+        n = len(self.state.get("plan") or [])
+        if not isinstance(point, int) or isinstance(point, bool) or not 0 <= point < n:
+            raise ActionRefused(f"remeasure: point must be an index 0..{n - 1}", 400)
 
     # -- set-up ------------------------------------------------------------------------------------
     def check_setup(self, params: dict) -> tuple[AcquisitionSetup, WindowSettings]:
@@ -262,10 +304,6 @@ class StationEngine:
                            + f"; trigger {self.setup.trigger.level:g} at channel {self.setup.trigger.channel}, "
                            f"pre-trigger {self.setup.trigger.pretrigger_samples}; windows {self.windows.describe()}")
 
-    def _publish_setup(self) -> None:
-        self.state.set_blob("setup", payloads.setup_payload(self.setup, self.caps, self.windows,
-                                                            self.setup_editable and self.state.get("phase") == "setup"))
-
     # -- session hooks (session thread) -----------------------------------------------------------
     def _next_command(self, wanted: tuple, auto_answer: Optional[str]) -> tuple[str, dict]:
         with self._cond:
@@ -289,9 +327,9 @@ class StationEngine:
             complete = avg.n_averages >= self.plan.hits_per_point
             self._publish_point(m, avg, result, "complete" if complete else "ready")
             if complete:
-                action, _ = self._next_command(("next-point", "undo", "remeasure"), "next-point")
+                action, params = self._next_command(("next-point", "undo", "remeasure"), "next-point")
             else:
-                action, _ = self._next_command(("arm", "undo", "remeasure", "next-point"), "arm")
+                action, params = self._next_command(("arm", "undo", "remeasure", "next-point"), "arm")
             if action == "arm":
                 self.state.update(phase="armed")
                 return True
@@ -300,11 +338,16 @@ class StationEngine:
                     session._event("INFO", f"point {m.point} skipped by the operator with {avg.n_averages} "
                                            f"of {self.plan.hits_per_point} hits")
                 return False
+            if action == "remeasure" and "point" in params and params["point"] != m.index:
+                self._redo = int(params["point"])  # ends this pass; the next one resumes and measures it
+                raise OperatorQuit(f"going back to point {self._redo + 1}")
             if action == "undo" and avg.hits:
-                session.withdraw_last(avg, result, "withdrawn by the operator (undo)")
+                self._accepted.pop(session.withdraw_last(avg, result, "withdrawn by the operator (undo)"), None)
             elif action == "remeasure" and avg.hits:
                 session.withdraw_point(avg, result, "point measured again by the operator")
-            self.state.set_blob("frf", payloads.frf_payload(avg, self.setup.bandwidth_hz))
+                for i in [i for i, h in self._accepted.items() if h.measurement == m.index]:
+                    del self._accepted[i]
+            self._publish_frf(avg)
 
     def _decide(self, summary: HitSummary) -> bool:
         self._publish_hit(summary, pending=True)
@@ -312,67 +355,30 @@ class StationEngine:
         return action == "accept"
 
     def _on_hit(self, summary: HitSummary) -> None:
+        if summary.accepted_now and self.session is not None:
+            s = self.session
+            self._accepted[summary.hit_index] = _Hit(
+                summary.hit_index, True, summary.measurement, summary.point, summary.data, summary.sample_rate_hz,
+                summary.trigger_index, s.force_channel, list(s.response_channels))
         self._publish_hit(summary, pending=False)
-
-    # -- publishing ---------------------------------------------------------------------------------
-    def _plan_rows(self) -> list[dict]:
-        try:
-            ms = self.plan.measurements(self.setup)
-        except ImpactlabError:
-            return []
-        old = {r["point"]: r for r in (self.state.get("plan") or [])}
-        return [{"index": m.index, "point": m.point, "reference": m.reference, "outputs": list(m.outputs),
-                 "accepted": old.get(m.point, {}).get("accepted", 0),
-                 "done": old.get(m.point, {}).get("done", False)} for m in ms]
-
-    def _publish_point(self, m: Any, avg: Any, result: Any, phase: str) -> None:
-        rows = self.state.get("plan") or self._plan_rows()
-        rows = [dict(r) for r in rows]
-        for r in rows:
-            if r["index"] == m.index:
-                r["accepted"] = avg.n_averages
-                r["done"] = avg.n_averages >= self.plan.hits_per_point
-            elif r["index"] < m.index and r["accepted"] >= self.plan.hits_per_point:
-                r["done"] = True
-        self.state.update(phase=phase, current=m.index, current_point=m.point, point_hits=avg.n_averages,
-                          total_accepted=result.accepted, total_rejected=len(result.rejected), plan=rows,
-                          reference=m.reference, outputs=list(m.outputs))
-
-    def _publish_hit(self, summary: HitSummary, pending: bool) -> None:
-        setup = self.setup
-        chans = setup.channels
-        session = self.session
-        assert session is not None and summary.data is not None
-        if pending or self._pending_hit is not summary:
-            t_block = self._block_time
-            seq = self.state.next_hit_seq()
-            self.hit_times[seq] = t_block
-            names = [f"{c.name} {c.point}" for c in chans]
-            units = [c.unit for c in chans]
-            hit = payloads.hit_payload(summary.data, summary.sample_rate_hz, summary.trigger_index,
-                                       setup.trigger.pretrigger_samples, session.force_channel,
-                                       session.response_channels, names, units, session.windows.force_width_s)
-            hit["seq"] = seq
-            self._shown_seq = seq
-            hit["t_block"] = t_block
-            hit["point"] = summary.point
-            self.state.set_blob("hit", hit)
-            self._pending_hit = summary
-        advice = payloads.range_advice(summary.check, setup, self.caps.ranges_v, summary.data)
-        verdict = payloads.verdict_payload(summary, pending, advice)
-        verdict["seq"] = self._shown_seq
-        hits_here = (summary.average.n_averages - (1 if pending else 0)) if summary.average is not None else 0
-        if summary.average is not None:
-            self.state.set_blob("frf", payloads.frf_payload(summary.average, setup.bandwidth_hz))
-        phase = "decide" if pending else "busy"
-        self.state.update(verdict=verdict, hit_seq=self._shown_seq, phase=phase, point_hits=hits_here)
-        if not pending:
-            self._pending_hit = None
-            for a in advice:
-                self.state.message("WARNING", a)
 
     def mark_block(self) -> None:
         self._block_time = time.time()
+
+
+@dataclass
+class _Hit:
+    """An accepted hit as the session's resume needs it (the fields of ``RecordedHit`` it reads)."""
+
+    index: int
+    accepted: bool
+    measurement: int
+    point: str
+    data: Any
+    sample_rate_hz: float
+    trigger_index: int
+    force_channel: int
+    response_channels: list
 
 
 class _Timed:

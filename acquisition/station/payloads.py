@@ -51,7 +51,7 @@ def _envelope(t: np.ndarray, y: np.ndarray, n_max: int) -> tuple[np.ndarray, np.
 def band_edges(freq_hz: np.ndarray, gff_db: np.ndarray) -> dict:
     """Where the force autospectrum (dB re max) first falls below -10 and -20 dB, Hz (linear
     interpolation between lines; None when it never does): the usable excitation band of the hit."""
-    out = {}
+    out: dict[str, Optional[float]] = {}
     for level in (10, 20):
         below = np.nonzero(gff_db < -level)[0]
         below = below[below > 0]

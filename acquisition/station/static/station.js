@@ -128,7 +128,7 @@
 
   function renderPlan(s) {
     const rows = s.plan || [];
-    const key = JSON.stringify([rows, s.current, s.point_hits, s.phase]);
+    const key = JSON.stringify([rows, s.current, s.point_hits, s.phase, inControl]);
     if (key === seen.planKey) return;
     seen.planKey = key;
     const tb = $("#plan tbody");
@@ -141,6 +141,16 @@
       [r.index + 1, r.point, `${n} / ${s.hits_per_point}`, ""].forEach((t) => {
         const td = document.createElement("td"); td.textContent = t; tr.appendChild(td);
       });
+      const canRedo = (r.done || r.index < s.current || s.phase === "finished") && r.index !== s.current
+        || (s.phase === "finished" && r.index === s.current);
+      if (canRedo && ["ready", "complete", "finished"].includes(s.phase)) {
+        const b = document.createElement("button");
+        b.type = "button"; b.textContent = "again"; b.dataset.redo = String(r.index);
+        b.title = "measure this point again (its hits are withdrawn)";
+        b.disabled = !inControl;
+        b.addEventListener("click", () => act("remeasure", { point: r.index }));
+        tr.children[3].appendChild(b);
+      }
       tb.appendChild(tr);
     });
     drawGeometry();
