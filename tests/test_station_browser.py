@@ -16,7 +16,7 @@ DEVICE = "sim://?seed=1&faults=double_hit:0.25&fault_seed=4"  # strike 2 is a do
 def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
-    from selenium.webdriver.support.ui import WebDriverWait
+    from selenium.webdriver.support.ui import Select, WebDriverWait
 
     driver = chrome(tmp_path)
     rec = tmp_path / "rec.h5"
@@ -41,6 +41,21 @@ def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
         driver.switch_to.window(first)
         body = driver.find_element(By.TAG_NAME, "body")
         verdict = driver.find_element(By.ID, "hit-verdict")
+
+        # the set-up panel: a change is checked against the analyser before it can be applied
+        driver.find_element(By.CSS_SELECTOR, "#setup-panel summary").click()
+        status = driver.find_element(By.ID, "setup-status")
+        apply = driver.find_element(By.ID, "setup-apply")
+        level = driver.find_element(By.ID, "trig-level")
+        level.clear()
+        level.send_keys("900")  # 2 V at the force input: beyond its 1 V range
+        wait.until(lambda d: "outside the 1 V range" in status.text and not apply.is_enabled())
+        level.clear()
+        level.send_keys("20")
+        Select(driver.find_element(By.CSS_SELECTOR, 'select[data-ch="0"]')).select_by_visible_text("2")
+        wait.until(lambda d: status.text.startswith("valid") and apply.is_enabled())
+        apply.click()
+        wait.until(lambda d: status.text == "set-up applied")
 
         def click(action: str) -> None:
             button = driver.find_element(By.CSS_SELECTOR, f'button[data-action="{action}"]')
@@ -100,6 +115,7 @@ def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
         hits = list(r.hits())
         frfs = r.frfsets()
         assert r.closed_cleanly
+        assert r.setup["channels"][0]["range_v"] == 2.0  # the set-up applied on the page
     accepted = [h for h in hits if h.accepted]
     assert [sum(1 for h in accepted if h.point == p) for p in POINTS] == [HITS, HITS]
     reasons = [h.reasons for h in hits if not h.accepted]

@@ -127,7 +127,8 @@ class StationEngine(PagePublisher):
         self.state.update(phase="setup", auto=self._auto, paused=False, plan=rows, mode=plan.mode,
                           hits_per_point=plan.hits_per_point, current=first["index"] if first else 0,
                           current_point=first["point"] if first else "", point_hits=first["accepted"] if first else 0,
-                          total_accepted=sum(r["accepted"] for r in rows), total_rejected=0)
+                          total_accepted=sum(r["accepted"] for r in rows), total_rejected=0,
+                          outputs=first["outputs"] if first else [], reference=first["reference"] if first else "")
         self._publish_setup()
 
     # -- life cycle ------------------------------------------------------------------------------

@@ -67,7 +67,8 @@ class PagePublisher:
             t_block = self._block_time
             seq = self.state.next_hit_seq()
             self.hit_times[seq] = t_block
-            names = [f"{c.name} {c.point}" for c in chans]
+            here = session.measurements[summary.measurement].setup.channels  # the roving channel's point moves
+            names = [f"{c.name} {c.point}" for c in here]
             units = [c.unit for c in chans]
             hit = payloads.hit_payload(summary.data, summary.sample_rate_hz, summary.trigger_index,
                                        setup.trigger.pretrigger_samples, session.force_channel,

@@ -93,6 +93,7 @@
     document.querySelectorAll("button[data-action]").forEach((b) => {
       let ok = inControl && allowed.has(b.dataset.action);
       if ((b.dataset.action === "undo" || b.dataset.action === "remeasure") && !(s.point_hits > 0)) ok = false;
+      if (b.dataset.action === "remeasure" && s.phase === "finished") ok = false;  // the plan rows' "again" buttons
       if (b.dataset.action === "pause" && s.paused) ok = false;
       if (b.dataset.action === "resume" && !s.paused) ok = false;
       b.disabled = !ok;
@@ -264,7 +265,10 @@
       `<p class="muted">${d.setup.sample_rate_hz} Hz, ${d.setup.block_size} samples; windows now: ${d.windows_text}` +
       (d.editable ? "" : ". The set-up is fixed once the test has started.") + "</p>";
     body.innerHTML = html;
-    body.querySelectorAll("input,select").forEach((el) => el.addEventListener("input", checkSetup));
+    body.querySelectorAll("input,select").forEach((el) => {
+      el.addEventListener("input", checkSetup);
+      el.addEventListener("change", checkSetup);
+    });
     $("#setup-apply").disabled = true;
   }
   function setupRequest() {
@@ -280,13 +284,19 @@
     if (wf || we) req.windows = { force: wf || null, exp: we || null };
     return req;
   }
+  let checkSeq = 0;
   function checkSetup() {
     const st = $("#setup-status");
+    const mine = ++checkSeq;  // answers can overtake each other: only the latest one counts
     api("/api/setup/check", setupRequest()).then((r) => {
+      if (mine !== checkSeq) return;
       st.textContent = `valid for this analyser (bandwidth ${r.bandwidth_hz.toFixed(0)} Hz; windows ${r.windows_text})`;
       st.className = "muted";
       $("#setup-apply").disabled = !(inControl && setupData.editable);
-    }).catch((e) => { st.textContent = e.message; st.className = "bad"; $("#setup-apply").disabled = true; });
+    }).catch((e) => {
+      if (mine !== checkSeq) return;
+      st.textContent = e.message; st.className = "bad"; $("#setup-apply").disabled = true;
+    });
   }
   $("#setup-apply").addEventListener("click", () => {
     api("/api/action", Object.assign({ action: "setup" }, setupRequest()))
