@@ -230,7 +230,7 @@ def test_an_earlier_point_is_measured_again_during_and_after_the_test(tmp_path):
         api.wait(lambda x: x["current"] == 0 and x["phase"] == "ready" and x["point_hits"] == 0, "point 1 again")
         one_hit(api)
         assert api.act("next-point")[0] == 200
-        st = api.wait(lambda x: x["phase"] == "finished", "the end (point 2 kept its hit)")
+        api.wait(lambda x: x["phase"] == "finished", "the end (point 2 kept its hit)")
         assert api.act("remeasure", point=1)[0] == 200          # and point 2 after the end
         api.wait(lambda x: x["current"] == 1 and x["phase"] == "ready" and x["point_hits"] == 0, "point 2 again")
         one_hit(api)

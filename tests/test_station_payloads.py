@@ -30,7 +30,7 @@ def test_envelope_keeps_the_peaks_and_the_size_bound():
 def test_force_band_of_a_half_sine_pulse_matches_its_analytic_spectrum():
     fs, n, width = 51200.0, 16384, 2e-3
     data = np.zeros((2, n))
-    k = np.arange(int(round(width * fs)) + 1)
+    k = np.arange(round(width * fs) + 1)
     data[0, 128:128 + k.size] = 100 * np.sin(np.pi * k / (k.size - 1))
     data[1] = np.random.default_rng(0).normal(size=n)
     p = hit_payload(data, fs, 128, 128, 0, [1], ["force", "acc"], ["N", "m/s^2"], 0.02)
