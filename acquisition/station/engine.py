@@ -54,6 +54,11 @@ _ALLOWED = {
 }
 
 
+#: triggers missed in a row before the session gives up: none here (the operator at the page sees each
+#: "no trigger" message and decides; ``capture`` without an operator stops after a few)
+NO_TRIGGER_LIMIT = 1_000_000
+
+
 class ActionRefused(ImpactlabError, ValueError):
     """An action the session cannot take now (HTTP 409) or a malformed one (HTTP 400); ``status`` says which."""
 
@@ -115,7 +120,6 @@ class StationEngine(PagePublisher):
         self._shown_seq = 0
         self._accepted: dict[int, Any] = {}  # recording index -> accepted hit (for a pass that goes back)
         self._redo: Optional[int] = None
-        self.hit_times: dict[int, float] = {}  # hit sequence -> time.time() when its block arrived
         self._block_time = 0.0
         self.geometry = geometry or {"nodes": {}, "lines": []}
         rows = self._plan_rows()
@@ -170,6 +174,7 @@ class StationEngine(PagePublisher):
                     self.session = CaptureSession(
                         _Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=self.windows,
                         decide=self._decide, gate=self._gate, on_hit=self._on_hit, timeout_s=self.timeout_s,
+                        max_timeouts=NO_TRIGGER_LIMIT,
                         resume_hits=sorted(self._accepted.values(), key=lambda h: h.index))
                     result = self.session.run()
                     if self._redo is None:
@@ -397,5 +402,3 @@ class _Timed:
         self._engine.mark_block()
         return block
 
-    def configure(self, setup: Any) -> Any:
-        return self._a.configure(setup)

@@ -23,7 +23,6 @@ class PagePublisher:
     session: Any
     setup_editable: bool
     resume_hits: list
-    hit_times: dict
     _pending_hit: Any
     _shown_seq: int
     _block_time: float
@@ -66,7 +65,6 @@ class PagePublisher:
         if pending or self._pending_hit is not summary:
             t_block = self._block_time
             seq = self.state.next_hit_seq()
-            self.hit_times[seq] = t_block
             here = session.measurements[summary.measurement].setup.channels  # the roving channel's point moves
             names = [f"{c.name} {c.point}" for c in here]
             units = [c.unit for c in chans]

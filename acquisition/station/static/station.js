@@ -75,7 +75,9 @@
     document.body.dataset.phase = s.phase;
     $("#device").textContent = s.device || "";
     $("#recording").textContent = s.recording ? "recording " + s.recording : "";
-    $("#phase").textContent = s.phase + (s.phase === "error" && s.error ? ": " + s.error : "");
+    const phaseText = { armed: `armed: strike at ${s.current_point || "the point"}`, ready: "ready: arm for the next hit",
+      decide: "accept or reject the hit", complete: "point complete: next point (or undo, again)", setup: "set-up: arm to start" };
+    $("#phase").textContent = (phaseText[s.phase] || s.phase) + (s.phase === "error" && s.error ? ": " + s.error : "");
     $("#paused").hidden = !s.paused;
     $("#current-point").textContent = s.current_point || (s.plan && s.plan[s.current] ? s.plan[s.current].point : "-");
     $("#point-of").textContent = s.plan ? `(${(s.current || 0) + 1} of ${s.plan.length})` : "";
