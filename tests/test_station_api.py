@@ -248,3 +248,24 @@ def test_an_earlier_point_is_measured_again_during_and_after_the_test(tmp_path):
     accepted = [h for h in hits if h.accepted]
     assert sorted(h.measurement for h in accepted) == [0, 1]
     assert {int(g["measurement"]): list(g["hits"]) for g in groups.values()} == {h.measurement: [h.index] for h in accepted}
+
+
+def test_a_test_hit_is_shown_with_range_advice_and_not_recorded(tmp_path):
+    rec = tmp_path / "rec.h5"
+    s = StationProcess(["--device", "sim://?seed=9&faults=overload:1&fault_seed=1", "--out", str(rec),
+                        "--points", POINTS, "--hits", "2"], tmp_path)
+    try:
+        api = Api(s)
+        assert api.lease() == 200
+        assert api.act("test-hit")[0] == 200
+        st = api.wait(lambda x: x["hit_seq"] >= 1 and x["phase"] == "setup", "the test hit")
+        v = st["verdict"]
+        assert v["state"] == "test" and v["overload"][0] and "test hit: not recorded" in v["reasons"]
+        assert any("overloaded at 1 V" in a for a in v["advice"])
+        assert api.request("GET", "/api/blob/hit")[0] == 200
+        assert api.state()["blobs"].get("frf") is None  # nothing averaged
+        assert not rec.exists()  # nothing recorded before the test starts
+    finally:
+        code, out, err = s.stop()
+    assert code == 0, err
+    assert "nothing was recorded" in out

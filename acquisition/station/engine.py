@@ -4,7 +4,8 @@ loop as ``capture``) run in a thread, steered by the page's actions through the 
 Phases (``state["phase"]``) and the actions each allows:
 
 =============  ==================================================================================
-``setup``      before the first hit: ``setup`` (change the set-up), ``arm`` (starts the test)
+``setup``      before the first hit: ``setup`` (change the set-up), ``test-hit`` (one hit shown, not
+               recorded: set ranges and trigger), ``arm`` (starts the test)
 ``ready``      before each arm: ``arm``, ``undo``, ``remeasure``, ``next-point`` (skip), ``finish``
 ``armed``      waiting for the hit (nothing to decide; ``finish`` ends after it)
 ``decide``     a hit that passed the checks: ``accept``, ``reject``, ``finish``
@@ -23,7 +24,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any, Optional
 
 from analysis.spectra import WindowSettings
@@ -31,18 +31,20 @@ from analysis.spectra import WindowSettings
 from ..errors import ImpactlabError, SetupError
 from ..session import CaptureSession, HitSummary, OperatorQuit, SessionError, TestPlan
 from ..setup import AcquisitionSetup, validate_setup
+from .adapters import LogToPage, RecalledHit, Timed
 from .publish import PagePublisher
 from .state import StationState
+from .testhit import take_test_hit
 
 __all__ = ["ACTIONS", "ActionRefused", "StationEngine"]
 
 log = logging.getLogger(__name__)
 
 ACTIONS = ("arm", "accept", "reject", "undo", "remeasure", "next-point", "finish", "pause", "resume", "auto",
-           "setup")
+           "setup", "test-hit")
 _ANYTIME = ("pause", "resume", "auto")
 _ALLOWED = {
-    "setup": ("setup", "arm", "finish"),
+    "setup": ("setup", "test-hit", "arm", "finish"),
     "ready": ("arm", "undo", "remeasure", "next-point", "finish"),
     "armed": ("finish",),
     "decide": ("accept", "reject", "finish"),
@@ -65,20 +67,6 @@ class ActionRefused(ImpactlabError, ValueError):
     def __init__(self, message: str, status: int = 409) -> None:
         super().__init__(message)
         self.status = status
-
-
-class _LogToPage(logging.Handler):
-    """Session events (link faults, rejections, resumes) as page messages."""
-
-    def __init__(self, state: StationState) -> None:
-        super().__init__(logging.INFO)
-        self.state = state
-
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            self.state.message(record.levelname, record.getMessage())
-        except Exception:  # noqa: BLE001 - a log handler must never break the session
-            self.handleError(record)
 
 
 class StationEngine(PagePublisher):
@@ -115,7 +103,7 @@ class StationEngine(PagePublisher):
         self._auto = bool(auto)
         self._paused = False
         self._thread: Optional[threading.Thread] = None
-        self._log_handler = _LogToPage(self.state)
+        self._log_handler = LogToPage(self.state)
         self._pending_hit: Optional[HitSummary] = None
         self._shown_seq = 0
         self._accepted: dict[int, Any] = {}  # recording index -> accepted hit (for a pass that goes back)
@@ -172,7 +160,7 @@ class StationEngine(PagePublisher):
                 while True:
                     self._redo = None
                     self.session = CaptureSession(
-                        _Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=self.windows,
+                        Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=self.windows,
                         decide=self._decide, gate=self._gate, on_hit=self._on_hit, timeout_s=self.timeout_s,
                         max_timeouts=NO_TRIGGER_LIMIT,
                         resume_hits=sorted(self._accepted.values(), key=lambda h: h.index))
@@ -212,6 +200,17 @@ class StationEngine(PagePublisher):
                 if action == "arm":
                     return True  # left queued: the first gate arms at once
                 self._cmds.pop(0)
+            if action == "test-hit":
+                self._test_hit()
+
+    def _test_hit(self) -> None:
+        self.state.update(phase="armed")
+        got = take_test_hit(Timed(self.analyser, self), self.setup, self.plan, self.timeout_s)
+        if isinstance(got, str):
+            self.state.message("WARNING", got)
+        else:
+            self._publish_hit(got, pending=False)
+        self.state.update(phase="setup")
 
     def _wait_redo(self) -> Optional[int]:
         """After the plan: wait for a point to measure again (its index) or the end (None)."""
@@ -363,42 +362,10 @@ class StationEngine(PagePublisher):
     def _on_hit(self, summary: HitSummary) -> None:
         if summary.accepted_now and self.session is not None:
             s = self.session
-            self._accepted[summary.hit_index] = _Hit(
+            self._accepted[summary.hit_index] = RecalledHit(
                 summary.hit_index, True, summary.measurement, summary.point, summary.data, summary.sample_rate_hz,
                 summary.trigger_index, s.force_channel, list(s.response_channels))
         self._publish_hit(summary, pending=False)
 
     def mark_block(self) -> None:
         self._block_time = time.time()
-
-
-@dataclass
-class _Hit:
-    """An accepted hit as the session's resume needs it (the fields of ``RecordedHit`` it reads)."""
-
-    index: int
-    accepted: bool
-    measurement: int
-    point: str
-    data: Any
-    sample_rate_hz: float
-    trigger_index: int
-    force_channel: int
-    response_channels: list
-
-
-class _Timed:
-    """The analyser with the arrival time of each block noted (for the latency figures)."""
-
-    def __init__(self, analyser: Any, engine: StationEngine) -> None:
-        self._a = analyser
-        self._engine = engine
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._a, name)
-
-    def read_block(self, *args: Any, **kwargs: Any) -> Any:
-        block = self._a.read_block(*args, **kwargs)
-        self._engine.mark_block()
-        return block
-

@@ -151,13 +151,16 @@ def verdict_payload(summary: Any, pending: bool, advice: Sequence[str] = ()) -> 
     if pending:
         state = "decide"
         reasons: list = []
+    elif summary.reasons and str(summary.reasons[0]).startswith("test hit"):
+        state = "test"
+        reasons = list(summary.check.verdict.reasons) + list(summary.reasons)
     else:
         state = "accepted" if summary.accepted_now else "rejected"
         reasons = list(summary.reasons)
     auto_rejected = c.verdict.accept is False
     return {
-        "state": "rejected" if auto_rejected else state,
-        "reasons": list(c.verdict.reasons) if auto_rejected else reasons,
+        "state": "rejected" if auto_rejected and state != "test" else state,
+        "reasons": list(c.verdict.reasons) if auto_rejected and state != "test" else reasons,
         "double_hit": bool(c.double_hit),
         "overload": [bool(o) for o in c.overload],
         "force_peak_n": round(float(c.force_peak_n), 2),

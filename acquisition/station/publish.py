@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..errors import ImpactlabError
-from ..session import HitSummary
+from ..session import HitSummary, force_channel_of
 from . import payloads
 
 __all__ = ["PagePublisher"]
@@ -60,17 +60,18 @@ class PagePublisher:
     def _publish_hit(self, summary: HitSummary, pending: bool) -> None:
         setup = self.setup
         chans = setup.channels
-        session = self.session
-        assert session is not None and summary.data is not None
+        assert summary.data is not None
         if pending or self._pending_hit is not summary:
             t_block = self._block_time
             seq = self.state.next_hit_seq()
-            here = session.measurements[summary.measurement].setup.channels  # the roving channel's point moves
+            here = self.plan.measurements(setup)[summary.measurement].setup.channels  # the roving point moves
             names = [f"{c.name} {c.point}" for c in here]
             units = [c.unit for c in chans]
+            fch = force_channel_of(setup)
             hit = payloads.hit_payload(summary.data, summary.sample_rate_hz, summary.trigger_index,
-                                       setup.trigger.pretrigger_samples, session.force_channel,
-                                       session.response_channels, names, units, session.windows.force_width_s)
+                                       setup.trigger.pretrigger_samples, fch,
+                                       [i for i in range(len(chans)) if i != fch], names, units,
+                                       self.windows.force_width_s)
             hit["seq"] = seq
             self._shown_seq = seq
             hit["t_block"] = t_block

@@ -76,7 +76,7 @@
     $("#device").textContent = s.device || "";
     $("#recording").textContent = s.recording ? "recording " + s.recording : "";
     const phaseText = { armed: `armed: strike at ${s.current_point || "the point"}`, ready: "ready: arm for the next hit",
-      decide: "accept or reject the hit", complete: "point complete: next point (or undo, again)", setup: "set-up: arm to start" };
+      decide: "accept or reject the hit", complete: "point complete: next point (or undo, again)", setup: "set-up: test hits, then arm to start" };
     $("#phase").textContent = (phaseText[s.phase] || s.phase) + (s.phase === "error" && s.error ? ": " + s.error : "");
     $("#paused").hidden = !s.paused;
     $("#current-point").textContent = s.current_point || (s.plan && s.plan[s.current] ? s.plan[s.current].point : "-");
@@ -117,8 +117,8 @@
     el.dataset.seq = String(s.hit_seq || 0);
     if (!v) { el.dataset.state = "none"; el.textContent = "no hit yet"; ul.innerHTML = ""; return; }
     el.dataset.state = v.state;
-    const words = { accepted: "ACCEPTED", rejected: "REJECTED", decide: "accept or reject?" };
-    el.textContent = `hit ${v.attempt}: ${words[v.state] || v.state}` + (v.reasons.length ? " - " + v.reasons.join("; ") : "");
+    const words = { accepted: "ACCEPTED", rejected: "REJECTED", decide: "accept or reject?", test: "TEST HIT" };
+    el.textContent = (v.state === "test" ? "" : `hit ${v.attempt}: `) + `${words[v.state] || v.state}` + (v.reasons.length ? " - " + v.reasons.join("; ") : "");
     const items = [
       `force peak ${v.force_peak_n} N, pulse ${v.pulse_width_ms} ms`,
       `double hit: ${v.double_hit ? "YES" : "no"} (second peak ${v.second_peak_pct} %)`,
