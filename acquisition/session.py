@@ -259,8 +259,8 @@ class HitSummary:
     sample_rate_hz: float = 0.0
     trigger_index: int = 0
     average: Optional["MeasurementAverage"] = None  # the point's running average (this hit included while deciding)
-    accepted_now: Optional[bool] = None  # the outcome, set once the hit is written
-    reasons: tuple = ()
+    decision: Optional[bool] = None  # the outcome, set once the hit is written: True accepted, False rejected
+    reasons: list = field(default_factory=list)
     hit_index: int = -1  # index in the recording
 
     def text(self) -> str:
@@ -523,7 +523,7 @@ class CaptureSession:
             else:
                 result.rejected.append((m.index, m.point, idx, reasons))
                 self._event("INFO", f"hit {idx} at {m.point} rejected: {'; '.join(reasons)}")
-            summary.accepted_now, summary.reasons, summary.hit_index = accepted, tuple(reasons), idx
+            summary.decision, summary.reasons, summary.hit_index = accepted, reasons, idx
             if self.on_hit is not None:
                 self.on_hit(summary)
             self.progress(f"  progress: point {m.index + 1}/{len(self.measurements)}, "

@@ -360,7 +360,7 @@ class StationEngine(PagePublisher):
         return action == "accept"
 
     def _on_hit(self, summary: HitSummary) -> None:
-        if summary.accepted_now and self.session is not None:
+        if summary.decision and self.session is not None:
             s = self.session
             self._accepted[summary.hit_index] = RecalledHit(
                 summary.hit_index, True, summary.measurement, summary.point, summary.data, summary.sample_rate_hz,

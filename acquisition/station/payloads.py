@@ -155,7 +155,7 @@ def verdict_payload(summary: Any, pending: bool, advice: Sequence[str] = ()) -> 
         state = "test"
         reasons = list(summary.check.verdict.reasons) + list(summary.reasons)
     else:
-        state = "accepted" if summary.accepted_now else "rejected"
+        state = "accepted" if summary.decision else "rejected"
         reasons = list(summary.reasons)
     auto_rejected = c.verdict.accept is False
     return {

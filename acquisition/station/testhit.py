@@ -47,5 +47,5 @@ def take_test_hit(analyser: Any, setup: Any, plan: Any, timeout_s: float) -> Hit
     overload = [bool(o) for o in np.asarray(block.overload).ravel()]
     check = check_hit(data[force_channel_of(m.setup)], fs, overload, names, HitCheckSettings())
     return HitSummary(m.index, len(plan.measurements(setup)), m.point, 0, 0, plan.hits_per_point, 0, check,
-                      data=data, sample_rate_hz=fs, trigger_index=int(block.trigger_index), accepted_now=False,
-                      reasons=("test hit: not recorded",))
+                      data=data, sample_rate_hz=fs, trigger_index=int(block.trigger_index), decision=False,
+                      reasons=["test hit: not recorded"])
