@@ -39,6 +39,37 @@ def test_every_request_without_the_token_is_refused(station, method, path):
     assert api.request(method, path + "?token=nope", body, token=None)[0] == 403
 
 
+def test_the_event_stream_sends_the_state_at_once_and_on_each_change(station):
+    import http.client
+    import json
+
+    conn = http.client.HTTPConnection(station.host, station.port, timeout=60)
+    conn.request("GET", f"/api/events?token={station.token}")
+    r = conn.getresponse()
+    assert r.status == 200 and r.getheader("Content-Type") == "text/event-stream"
+
+    def next_event() -> dict:
+        lines = []
+        while True:
+            line = r.fp.readline().decode()
+            if line == "\n" and lines:
+                break
+            if line.startswith("data: "):
+                lines.append(line[6:])
+        return json.loads("".join(lines))
+
+    first = next_event()
+    assert first["phase"] == "setup" and "allowed" in first
+    api = Api(station, "sse-tab")
+    assert api.lease(take=True) == 200
+    assert api.act("pause")[0] == 200
+    while not (ev := next_event())["paused"]:
+        pass
+    assert ev["version"] > first["version"]
+    assert api.act("resume")[0] == 200
+    conn.close()
+
+
 def test_bad_requests_get_4xx_and_change_nothing(station):
     api = Api(station, "bad-requests")
     assert api.lease(take=True) == 200
