@@ -170,6 +170,10 @@ def run_station(args: argparse.Namespace, out_stream=sys.stdout, ready: Optional
         except OSError as exc:
             raise UsageError(f"cannot serve on {args.host}:{args.port}: {exc}") from None
         print(server.url, file=out_stream, flush=True)
+        try:
+            plotly_js_path()
+        except ModuleNotFoundError as exc:
+            print(f"station: {exc}; the page works without plots until then", file=sys.stderr, flush=True)
         print(f"station: {identity}; recording {job['out']}; open the URL above in a browser (Ctrl-C stops)",
               file=out_stream, flush=True)
         if args.host not in ("127.0.0.1", "localhost", "::1"):

@@ -14,6 +14,10 @@
   let state = null;
   let geometry = null;
   let inControl = false;
+  if (typeof window.Plotly === "undefined") {  // plotly not installed: the page works, without plots
+    window.Plotly = { react: () => Promise.resolve() };
+    setTimeout(() => note("plots unavailable: install plotly on the station computer (pip install -e '.[station]')", "ERROR"), 0);
+  }
   // for tests and the latency benchmark: hit sequence -> Date.now() when its plots were drawn
   window.stationStats = { shown: {}, errors: 0 };
 
