@@ -172,7 +172,7 @@ def run_station(args: argparse.Namespace, out_stream=sys.stdout, ready: Optional
         print(server.url, file=out_stream, flush=True)
         try:
             plotly_js_path()
-        except ModuleNotFoundError as exc:
+        except (ImportError, OSError) as exc:  # analysis.web_assets.MissingAssetError: plotly is not installed
             print(f"station: {exc}; the page works without plots until then", file=sys.stderr, flush=True)
         print(f"station: {identity}; recording {job['out']}; open the URL above in a browser (Ctrl-C stops)",
               file=out_stream, flush=True)

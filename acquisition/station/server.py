@@ -224,7 +224,7 @@ class _Handler(BaseHTTPRequestHandler):
         if name == "plotly.min.js" and self.server.plotly_js is not None:
             try:
                 path = self.server.plotly_js()
-            except ModuleNotFoundError as exc:
+            except (ImportError, OSError) as exc:  # plotly missing (analysis.web_assets.MissingAssetError)
                 self._error(404, str(exc))
                 return
         else:
