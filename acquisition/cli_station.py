@@ -63,7 +63,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def frame_geometry(config_path: Optional[str] = None) -> dict:
     """The simulated frame's wireframe as plain data: ``{"nodes": {"left:0": [x, y, z], ...},
-    "lines": [["left:0", "left:1"], ...]}`` (m)."""
+    "lines": [["left:0", "left:1"], ...]}`` (m).
+
+    Stand-in until ``simulator.geometry.frame_geometry`` (issue 12) is on main: then this becomes a
+    conversion of its ``analysis.geometry.Geometry`` (labels, xyz, lines) to the page's dict."""
     import numpy as np
 
     from simulator.config import FrameConfig
