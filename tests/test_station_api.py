@@ -39,6 +39,16 @@ def test_every_request_without_the_token_is_refused(station, method, path):
     assert api.request(method, path + "?token=nope", body, token=None)[0] == 403
 
 
+def test_the_page_cookie_opens_the_static_files_but_not_the_api(station):
+    api = Api(station)
+    status, _ = api.request("GET", f"/?token={station.token}", token=None)
+    assert status == 200
+    cookie = {"Cookie": f"impactlab_station={station.token}"}
+    assert api.request("GET", "/static/station.js", token=None, headers=cookie)[0] == 200
+    assert api.request("GET", "/api/state", token=None, headers=cookie)[0] == 403
+    assert api.request("POST", "/api/action", {"client": "x", "action": "finish"}, token=None, headers=cookie)[0] == 403
+
+
 def test_the_event_stream_sends_the_state_at_once_and_on_each_change(station):
     import http.client
     import json

@@ -1,7 +1,8 @@
 """The station's HTTP face: the page, its static files, a JSON API and server-sent events.
 
-Every request carries the session token (query ``token=`` or header ``X-Station-Token``); without
-it the answer is 403 and nothing else is looked at. Routes:
+Every request carries the session token (query ``token=`` or header ``X-Station-Token``; the
+page's own files may come with the HttpOnly SameSite cookie set with the page instead); without it
+the answer is 403 and nothing else is looked at. Routes:
 
 ==========================  ====================================================================
 ``GET /``                   the page
@@ -103,8 +104,12 @@ class _Handler(BaseHTTPRequestHandler):
     def _error(self, status: int, message: str) -> None:
         self._json(status, {"error": message})
 
-    def _authorised(self, query: dict) -> bool:
-        given = self.headers.get("X-Station-Token") or (query.get("token") or [""])[0] or self._cookie_token()
+    def _authorised(self, query: dict, cookie_ok: bool = False) -> bool:
+        """The token from the header or the query; the cookie counts only for the page's own files
+        (``cookie_ok``), so another page on this host cannot make the browser send API requests."""
+        given = self.headers.get("X-Station-Token") or (query.get("token") or [""])[0]
+        if not given and cookie_ok:
+            given = self._cookie_token()
         return hmac.compare_digest(given.encode(), self.server.token.encode())
 
     def _cookie_token(self) -> str:
@@ -142,7 +147,7 @@ class _Handler(BaseHTTPRequestHandler):
     def do_GET(self) -> None:
         parts = urlsplit(self.path)
         query = parse_qs(parts.query)
-        if not self._authorised(query):
+        if not self._authorised(query, cookie_ok=parts.path == "/" or parts.path.startswith("/static/")):
             self._error(403, "missing or wrong token: open the URL the station printed")
             return
         path = parts.path
