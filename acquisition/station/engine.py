@@ -161,7 +161,7 @@ class StationEngine(PagePublisher):
                     self._redo = None
                     self.session = CaptureSession(
                         Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=self.windows,
-                        decide=self._decide, gate=self._gate, on_hit=self._on_hit, timeout_s=self.timeout_s,
+                        decide=self.decide, gate=self.gate, on_hit=self.on_hit, progress=self.progress, timeout_s=self.timeout_s,
                         max_timeouts=NO_TRIGGER_LIMIT,
                         resume_hits=sorted(self._accepted.values(), key=lambda h: h.index))
                     result = self.session.run()
@@ -309,7 +309,7 @@ class StationEngine(PagePublisher):
                            + f"; trigger {self.setup.trigger.level:g} at channel {self.setup.trigger.channel}, "
                            f"pre-trigger {self.setup.trigger.pretrigger_samples}; windows {self.windows.describe()}")
 
-    # -- session hooks (session thread) -----------------------------------------------------------
+    # -- the session's operator (session thread): decide, progress, on_hit, gate ----------------------
     def _next_command(self, wanted: tuple, auto_answer: Optional[str]) -> tuple[str, dict]:
         with self._cond:
             while True:
@@ -325,7 +325,7 @@ class StationEngine(PagePublisher):
                     return auto_answer, {}
                 self._cond.wait()
 
-    def _gate(self, m: Any, avg: Any, result: Any, complete: bool) -> bool:
+    def gate(self, m: Any, avg: Any, result: Any, complete: bool) -> bool:
         session = self.session
         assert session is not None
         while True:
@@ -354,12 +354,15 @@ class StationEngine(PagePublisher):
                     del self._accepted[i]
             self._publish_frf(avg)
 
-    def _decide(self, summary: HitSummary) -> bool:
+    def progress(self, text: str) -> None:
+        """The session's terminal lines: the page shows the same facts from the state instead."""
+
+    def decide(self, summary: HitSummary) -> bool:
         self._publish_hit(summary, pending=True)
         action, _ = self._next_command(("accept", "reject"), "accept")
         return action == "accept"
 
-    def _on_hit(self, summary: HitSummary) -> None:
+    def on_hit(self, summary: HitSummary) -> None:
         if summary.decision and self.session is not None:
             s = self.session
             self._accepted[summary.hit_index] = RecalledHit(
