@@ -10,6 +10,7 @@ COMMANDS = {
     "import": ("acquisition.cli_import", "turn .lvm, DataPhysics .mat or numpy time data into a recording"),
     "identify": ("acquisition.cli_identify", "open a device URL and print identity and capabilities"),
     "devices": ("acquisition.cli_devices", "list what can be opened: USB analysers, serial ports, simulated doors"),
+    "station": ("acquisition.cli_station", "serve the operator's capture page (browser) for an impact test"),
     "demo": ("acquisition.cli_demo", "the make-demo job: capture on the simulated frame, fit, summarise"),
 }
 

@@ -257,12 +257,12 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
     return _finish(result, f"recording written: {out}", out_stream)
 
 
-def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, Any]:
-    """``capture --resume REC.h5``: continue an interrupted capture with the recording's set-up, plan,
-    windows and device (``--device`` overrides it), appending to the same file. The accepted hits
-    already recorded (complete, CRC-checked) count towards each point's average."""
-    from analysis.recording import Recording, RecordingWriter
-    from .session import CaptureSession, TestPlan, auto_accept, retry_on_link_fault, terminal_decider
+def recorded_test(args: argparse.Namespace) -> tuple:
+    """What ``--resume REC.h5`` continues: (set-up, plan, windows, recorded hits, device URL or None),
+    after checking that no option tries to change the recorded plan (capture and station alike)."""
+    from analysis.recording import Recording
+
+    from .session import TestPlan
     from .setup import AcquisitionSetup
 
     if args.out or args.points or args.reference or args.mode or args.setup or args.hits is not None:
@@ -280,6 +280,19 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
             raise UsageError(f"{path} does not hold a capture plan and set-up to resume ({exc})") from None
         windows = rec.windows
         hits = list(rec.hits(skip_damaged=True))
+    return setup, plan, windows, hits, device
+
+
+def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, Any]:
+    """``capture --resume REC.h5``: continue an interrupted capture with the recording's set-up, plan,
+    windows and device (``--device`` overrides it), appending to the same file. The accepted hits
+    already recorded (complete, CRC-checked) count towards each point's average."""
+    from analysis.recording import RecordingWriter
+
+    from .session import CaptureSession, auto_accept, retry_on_link_fault, terminal_decider
+
+    path = Path(args.resume)
+    setup, plan, windows, hits, device = recorded_test(args)
     url = args.device or device
     if not url:
         raise UsageError(f"{path} does not name its device: give --device URL")

@@ -254,6 +254,14 @@ class HitSummary:
     rejected: int
     check: HitCheck
     coherence_so_far: Optional[float] = None
+    # for a non-terminal front end (the station page): the hit itself and its outcome
+    data: Optional[np.ndarray] = None  # (n_channels, n) in engineering units
+    sample_rate_hz: float = 0.0
+    trigger_index: int = 0
+    average: Optional["MeasurementAverage"] = None  # the point's running average (this hit included while deciding)
+    decision: Optional[bool] = None  # the outcome, set once the hit is written: True accepted, False rejected
+    reasons: list = field(default_factory=list)
+    hit_index: int = -1  # index in the recording
 
     def text(self) -> str:
         c = self.check
@@ -349,6 +357,8 @@ class CaptureSession:
         max_timeouts: int = 3,
         max_link_failures: int = 8,
         resume_hits: Sequence[Any] = (),
+        gate: Optional[Callable[[Measurement, "MeasurementAverage", SessionResult, bool], bool]] = None,
+        on_hit: Optional[Callable[[HitSummary], None]] = None,
     ) -> None:
         self.analyser = analyser
         self.setup = setup
@@ -358,6 +368,11 @@ class CaptureSession:
         self.decide = decide
         self.check_settings = check_settings
         self.progress = progress or (lambda text: None)
+        # front-end hooks: gate(measurement, average, result, complete) -> go on measuring (False: end the
+        # point now); called before each arm and once the point has its hits (it may block, undo or restart
+        # through withdraw_last/withdraw_point, raise OperatorQuit). on_hit(summary) after each hit is written.
+        self.gate = gate
+        self.on_hit = on_hit
         self.timeout_s = timeout_s
         self.max_attempts_factor = max_attempts_factor
         self.max_timeouts = max_timeouts
@@ -434,7 +449,12 @@ class CaptureSession:
         timeouts = 0
         n_channels = len(m.setup.channels)
         names = [f"{ch.name} {ch.point}" for ch in m.setup.channels]
-        while avg.n_averages < self.plan.hits_per_point:
+        while True:
+            complete = avg.n_averages >= self.plan.hits_per_point
+            if self.gate is not None and not self.gate(m, avg, result, complete):
+                break
+            if avg.n_averages >= self.plan.hits_per_point:
+                break
             if attempts >= self.max_attempts_factor * self.plan.hits_per_point:
                 raise SessionError(f"point {m.point}: {attempts} hits without {self.plan.hits_per_point} accepted; "
                                    "check the set-up (ranges, trigger level) and the hammer")
@@ -476,7 +496,8 @@ class CaptureSession:
             overload = [bool(o) for o in np.asarray(block.overload).ravel()]
             check = check_hit(data[self.force_channel], fs, overload, names, self.check_settings)
             summary = HitSummary(m.index, len(self.measurements), m.point, attempts, avg.n_averages,
-                                 self.plan.hits_per_point, sum(1 for r in result.rejected if r[0] == m.index), check)
+                                 self.plan.hits_per_point, sum(1 for r in result.rejected if r[0] == m.index), check,
+                                 data=data, sample_rate_hz=fs, trigger_index=trig, average=avg)
             accepted = False
             reasons = list(check.verdict.reasons)
             if check.verdict.accept is not False:
@@ -502,12 +523,34 @@ class CaptureSession:
             else:
                 result.rejected.append((m.index, m.point, idx, reasons))
                 self._event("INFO", f"hit {idx} at {m.point} rejected: {'; '.join(reasons)}")
+            summary.decision, summary.reasons, summary.hit_index = accepted, reasons, idx
+            if self.on_hit is not None:
+                self.on_hit(summary)
             self.progress(f"  progress: point {m.index + 1}/{len(self.measurements)}, "
                           f"{avg.n_averages}/{self.plan.hits_per_point} accepted here, "
                           f"{result.accepted} accepted and {len(result.rejected)} rejected in total")
-        if self.writer is not None:
+        if self.writer is not None and avg.n_averages > 0:
             avg.write(self.writer)
         self._event("INFO", f"point {m.point} done: {avg.n_averages} averages")
+
+    def withdraw_last(self, avg: MeasurementAverage, result: SessionResult, reason: str) -> int:
+        """Undo the last accepted hit of ``avg`` (a front end's "undo"): out of the average, marked not
+        accepted in the recording with ``reason``; returns its index."""
+        if not avg.hits:
+            raise SessionError(f"point {avg.point} has no accepted hit to undo")
+        idx = avg.hits.pop()
+        avg.acc.rollback()
+        result.accepted -= 1
+        result.rejected.append((avg.index, avg.point, idx, [reason]))
+        if self.writer is not None:
+            self.writer.withdraw_hit(idx, reason)
+        self._event("INFO", f"hit {idx} at {avg.point} withdrawn: {reason}")
+        return idx
+
+    def withdraw_point(self, avg: MeasurementAverage, result: SessionResult, reason: str) -> None:
+        """Withdraw every accepted hit of ``avg`` (measure the point again)."""
+        while avg.hits:
+            self.withdraw_last(avg, result, reason)
 
     def _link_fault(self, m: Measurement, exc: Exception, faults_here: int) -> None:
         """A command failed on the link (phase error, timeout, device gone and back, transient CHECK

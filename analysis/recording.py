@@ -249,6 +249,16 @@ class RecordingWriter:
         self._f.flush()
         return idx
 
+    def withdraw_hit(self, index: int, reason: str) -> None:
+        """Mark an accepted hit as not accepted after all (an operator's undo), adding ``reason``; flush."""
+        name = f"{int(index):06d}"
+        if name not in self._f["hits"]:
+            raise RecordingError(f"{self.path} has no hit {index} to withdraw")
+        a = self._f["hits"][name].attrs
+        a["accepted"] = False  # first: a crash between the two writes leaves the hit out, not in
+        a["reasons"] = json.dumps(json.loads(_as_str(a["reasons"])) + [str(reason)])
+        self._f.flush()
+
     def write_frf(
         self,
         measurement: int,

@@ -1,0 +1,268 @@
+"""The station's HTTP face: the page, its static files, a JSON API and server-sent events.
+
+Every request carries the session token (query ``token=`` or header ``X-Station-Token``; the
+page's own files may come with the HttpOnly SameSite cookie set with the page instead); without it
+the answer is 403 and nothing else is looked at. Routes:
+
+==========================  ====================================================================
+``GET /``                   the page
+``GET /static/NAME``        the page's files (``plotly.min.js`` from the installed plotly)
+``GET /api/state``          the small state (phase, point, counts, verdict, messages, versions)
+``GET /api/blob/NAME``      plot data: ``hit``, ``frf``, ``setup``, ``geometry``
+``GET /api/events``         server-sent events: ``state`` on every change, a comment every 10 s
+``POST /api/lease``         ``{"client": ID, "take": bool}``: ask for (or take) control
+``POST /api/action``        ``{"client": ID, "action": NAME, ...}``: 409 when not possible now or
+                            another tab controls, 400 unknown action or malformed request
+``POST /api/setup/check``   ``{"setup": {...}, "windows": {...}}``: 200 or 422 with the problem
+==========================  ====================================================================
+"""
+from __future__ import annotations
+
+import hmac
+import json
+import logging
+import secrets
+import threading
+from collections.abc import Callable
+from http.cookies import CookieError, SimpleCookie
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from typing import Any, Optional
+from urllib.parse import parse_qs, urlsplit
+
+from .engine import ActionRefused, StationEngine
+
+__all__ = ["STATIC_DIR", "StationServer", "new_token"]
+
+log = logging.getLogger(__name__)
+
+STATIC_DIR = Path(__file__).resolve().parent / "static"
+MAX_BODY = 64 * 1024
+_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
+          ".css": "text/css; charset=utf-8", ".png": "image/png", ".svg": "image/svg+xml"}
+#: the page's own files come with this cookie (set with the page), the API with the token header
+_COOKIE = "impactlab_station"
+#: seconds between keep-alive comments on an idle event stream
+SSE_KEEPALIVE_S = 10.0
+
+
+def new_token() -> str:
+    return secrets.token_urlsafe(24)
+
+
+class StationServer(ThreadingHTTPServer):
+    """``StationServer((host, port), engine, token, plotly_js)``; ``url`` is the page's address."""
+
+    daemon_threads = True
+    allow_reuse_address = True
+
+    def __init__(self, address: tuple, engine: StationEngine, token: str,
+                 plotly_js: Optional[Callable[[], Path]] = None) -> None:
+        self.engine = engine
+        self.token = token
+        self.plotly_js = plotly_js
+        self.closing = threading.Event()
+        super().__init__(address, _Handler)
+
+    @property
+    def url(self) -> str:
+        host, port = str(self.server_address[0]), int(self.server_address[1])
+        shown = f"[{host}]" if ":" in host else host
+        return f"http://{shown}:{port}/?token={self.token}"
+
+    def shutdown(self) -> None:
+        self.closing.set()
+        with self.engine.state.cond:
+            self.engine.state.cond.notify_all()
+        super().shutdown()
+
+
+class _Handler(BaseHTTPRequestHandler):
+    server: StationServer
+    protocol_version = "HTTP/1.1"
+
+    def log_message(self, fmt: str, *args: Any) -> None:  # quiet: the station prints only its URL
+        log.debug("%s - %s", self.address_string(), fmt % args)
+
+    # -- plumbing ----------------------------------------------------------------------------------
+    def _send(self, status: int, body: bytes, ctype: str = "application/json", extra: Optional[dict] = None) -> None:
+        self.send_response(status)
+        self.send_header("Content-Type", ctype)
+        self.send_header("Content-Length", str(len(body)))
+        extra = dict(extra or {})
+        self.send_header("Cache-Control", extra.pop("Cache-Control", "no-store"))
+        self.send_header("X-Content-Type-Options", "nosniff")
+        for k, v in extra.items():
+            self.send_header(k, v)
+        self.end_headers()
+        if self.command != "HEAD":
+            self.wfile.write(body)
+
+    def _json(self, status: int, obj: Any) -> None:
+        self._send(status, json.dumps(obj, allow_nan=False).encode())
+
+    def _error(self, status: int, message: str) -> None:
+        self._json(status, {"error": message})
+
+    def _authorised(self, query: dict, cookie_ok: bool = False) -> bool:
+        """The token from the header or the query; the cookie counts only for the page's own files
+        (``cookie_ok``), so another page on this host cannot make the browser send API requests."""
+        given = self.headers.get("X-Station-Token") or (query.get("token") or [""])[0]
+        if not given and cookie_ok:
+            given = self._cookie_token()
+        return hmac.compare_digest(given.encode(), self.server.token.encode())
+
+    def _cookie_token(self) -> str:
+        cookie = SimpleCookie()
+        try:
+            cookie.load(self.headers.get("Cookie", ""))
+        except CookieError:
+            return ""
+        morsel = cookie.get(_COOKIE)
+        return morsel.value if morsel is not None else ""
+
+    def _body(self) -> Optional[dict]:
+        """The JSON object of a POST, or None after answering 4xx."""
+        try:
+            n = int(self.headers.get("Content-Length", "0"))
+        except ValueError:
+            self._error(400, "bad Content-Length")
+            return None
+        if n > MAX_BODY:
+            self.close_connection = True
+            self._error(413, f"request body over {MAX_BODY} bytes")
+            return None
+        raw = self.rfile.read(n) if n > 0 else b""
+        try:
+            data = json.loads(raw.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            self._error(400, f"malformed JSON: {exc}")
+            return None
+        if not isinstance(data, dict):
+            self._error(400, "the request body must be a JSON object")
+            return None
+        return data
+
+    # -- verbs -------------------------------------------------------------------------------------
+    def do_GET(self) -> None:
+        parts = urlsplit(self.path)
+        query = parse_qs(parts.query)
+        if not self._authorised(query, cookie_ok=parts.path == "/" or parts.path.startswith("/static/")):
+            self._error(403, "missing or wrong token: open the URL the station printed")
+            return
+        path = parts.path
+        eng = self.server.engine
+        if path in ("/", "/index.html"):
+            self._static("index.html", {"Set-Cookie": f"{_COOKIE}={self.server.token}; HttpOnly; SameSite=Strict; Path=/"})
+        elif path.startswith("/static/"):
+            self._static(path[len("/static/"):])
+        elif path == "/api/state":
+            self._json(200, eng.state.snapshot() | {"allowed": list(eng.allowed())})
+        elif path.startswith("/api/blob/"):
+            name = path[len("/api/blob/"):]
+            if name == "geometry":
+                self._json(200, eng.geometry)
+                return
+            data = eng.state.blob(name) if name in ("hit", "frf", "setup") else None
+            if data is None:
+                self._error(404, f"no {name!r} data (yet)")
+            else:
+                self._send(200, data)
+        elif path == "/api/events":
+            self._events()
+        else:
+            self._error(404, f"no such page {path!r}")
+
+    do_HEAD = do_GET
+
+    def do_POST(self) -> None:
+        parts = urlsplit(self.path)
+        if not self._authorised(parse_qs(parts.query)):
+            self._error(403, "missing or wrong token: open the URL the station printed")
+            return
+        body = self._body()
+        if body is None:
+            return
+        eng = self.server.engine
+        client = body.get("client")
+        if client is not None and not isinstance(client, str):
+            self._error(400, "client must be a string")
+            return
+        if parts.path == "/api/lease":
+            take = body.get("take", False)
+            if not isinstance(client, str) or not client or not isinstance(take, bool):
+                self._error(400, "give {\"client\": ID, \"take\": false|true}")
+                return
+            with eng.state.cond:
+                ok = eng.state.lease.acquire(client, take)
+                eng.state.update()  # tabs learn who controls
+            self._json(200 if ok else 409, {"control": ok, "controller": eng.state.lease.holder})
+        elif parts.path == "/api/action":
+            action = body.get("action")
+            if not isinstance(action, str):
+                self._error(400, "give {\"client\": ID, \"action\": NAME}")
+                return
+            with eng.state.cond:
+                if not isinstance(client, str) or not eng.state.lease.holds(client):
+                    self._error(409, "another tab controls the session (or this tab's control lapsed): take control "
+                                     "first")
+                    return
+                eng.state.lease.acquire(client)  # an action renews the lease
+            try:
+                eng.submit(action, {k: v for k, v in body.items() if k not in ("client", "action")})
+            except ActionRefused as exc:
+                self._error(exc.status, str(exc))
+                return
+            self._json(200, {"ok": True, "action": action})
+        elif parts.path == "/api/setup/check":
+            try:
+                setup, windows = eng.check_setup(body)
+            except ActionRefused as exc:
+                self._error(exc.status, str(exc))
+                return
+            self._json(200, {"ok": True, "bandwidth_hz": setup.bandwidth_hz, "windows_text": windows.describe()})
+        else:
+            self._error(404, f"no such API {parts.path!r}")
+
+    # -- pieces ------------------------------------------------------------------------------------
+    def _static(self, name: str, extra: Optional[dict] = None) -> None:
+        if name == "plotly.min.js" and self.server.plotly_js is not None:
+            try:
+                path = self.server.plotly_js()
+            except (ImportError, OSError) as exc:  # plotly missing (analysis.web_assets.MissingAssetError)
+                self._error(404, str(exc))
+                return
+        else:
+            path = (STATIC_DIR / name).resolve()
+            if STATIC_DIR not in path.parents or not path.is_file():
+                self._error(404, f"no static file {name!r}")
+                return
+        headers = dict(extra or {})
+        if name.endswith(".min.js"):
+            headers["Cache-Control"] = "max-age=3600"
+        self._send(200, path.read_bytes(), _TYPES.get(path.suffix, "application/octet-stream"), headers)
+
+    def _events(self) -> None:
+        """Server-sent events: the state on connect and on every change until the client goes."""
+        state = self.server.engine.state
+        self.send_response(200)
+        self.send_header("Content-Type", "text/event-stream")
+        self.send_header("Cache-Control", "no-store")
+        self.send_header("Connection", "close")
+        self.end_headers()
+        self.close_connection = True
+        if self.command == "HEAD":
+            return
+        seen = -1
+        try:
+            while not self.server.closing.is_set():
+                version = state.wait_change(seen, SSE_KEEPALIVE_S)
+                if version == seen:
+                    self.wfile.write(b": keep-alive\n\n")
+                else:
+                    seen = version
+                    snap = state.snapshot() | {"allowed": list(self.server.engine.allowed())}
+                    self.wfile.write(b"event: state\ndata: " + json.dumps(snap, allow_nan=False).encode() + b"\n\n")
+                self.wfile.flush()
+        except (BrokenPipeError, ConnectionResetError, TimeoutError):
+            return

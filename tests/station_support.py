@@ -1,0 +1,131 @@
+"""Helpers for the station tests: the station as a real process, a small JSON client, headless Chromium."""
+from __future__ import annotations
+
+import http.client
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Optional
+from urllib.parse import urlsplit
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM = "/usr/bin/chromium"
+CHROMEDRIVER = "/usr/bin/chromedriver"
+#: generous bound for every condition wait (the suite shares two cores with other work)
+WAIT_S = 90.0
+
+
+class StationProcess:
+    """``python -m acquisition station ARGS`` in a child process; ``url``, ``base``, ``token``."""
+
+    def __init__(self, args: list, cwd: Path) -> None:
+        env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+        self.proc = subprocess.Popen([sys.executable, "-m", "acquisition", "station", *args], cwd=cwd,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        line = self.proc.stdout.readline().strip()  # the URL is the first line (blocks until printed)
+        if not line.startswith("http://"):
+            self.proc.kill()
+            out, err = self.proc.communicate(timeout=WAIT_S)
+            raise AssertionError(f"station did not print its URL: {line!r} {out!r} {err!r}")
+        self.url = line
+        parts = urlsplit(line)
+        self.host, self.port = parts.hostname, parts.port
+        self.base = f"http://{parts.hostname}:{parts.port}"
+        self.token = parts.query.split("token=", 1)[1]
+
+    def kill(self) -> None:
+        """SIGKILL: no clean-up at all (as a power cut of the laptop's process)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL)
+        self.proc.communicate(timeout=WAIT_S)
+
+    def stop(self) -> tuple[int, str, str]:
+        """SIGTERM (as Ctrl-C): the station closes the recording and exits."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        out, err = self.proc.communicate(timeout=WAIT_S)
+        return self.proc.returncode, out, err
+
+
+class Api:
+    """JSON requests to a station (token in the header unless ``token=None``)."""
+
+    def __init__(self, station: StationProcess, client: str = "test-client") -> None:
+        self.s = station
+        self.client = client
+
+    def request(self, method: str, path: str, body: Any = None, token: Optional[str] = "", raw: Optional[bytes] = None,
+                headers: Optional[dict] = None) -> tuple[int, Any]:
+        conn = http.client.HTTPConnection(self.s.host, self.s.port, timeout=WAIT_S)
+        h = dict(headers or {})
+        if token is not None:
+            h["X-Station-Token"] = token or self.s.token
+        data = raw if raw is not None else (None if body is None else json.dumps(body).encode())
+        if data is not None:
+            h["Content-Type"] = "application/json"
+        conn.request(method, path, body=data, headers=h)
+        r = conn.getresponse()
+        payload = r.read()
+        conn.close()
+        try:
+            return r.status, json.loads(payload)
+        except ValueError:
+            return r.status, payload
+
+    def state(self) -> dict:
+        status, st = self.request("GET", "/api/state")
+        assert status == 200, st
+        return st
+
+    def lease(self, take: bool = False) -> int:
+        return self.request("POST", "/api/lease", {"client": self.client, "take": take})[0]
+
+    def act(self, action: str, **extra: Any) -> tuple[int, Any]:
+        return self.request("POST", "/api/action", {"client": self.client, "action": action, **extra})
+
+    def wait(self, pred, what: str, timeout_s: float = WAIT_S) -> dict:
+        """Poll the state until ``pred(state)``: a condition, never a fixed delay."""
+        end = time.monotonic() + timeout_s
+        while True:
+            st = self.state()
+            if pred(st):
+                return st
+            if time.monotonic() > end:
+                raise AssertionError(f"timed out waiting for {what}; state phase={st.get('phase')} "
+                                     f"messages={st.get('messages', [])[-5:]}")
+            time.sleep(0.05)
+
+
+def chrome(tmp_path: Path):
+    """A headless Chromium driven by selenium; skips with an install hint when missing (fails under CI=true)."""
+    missing = []
+    try:
+        from selenium import webdriver
+    except ModuleNotFoundError:
+        missing.append("selenium (pip install -e '.[test]')")
+    for exe in (CHROMIUM, CHROMEDRIVER):
+        if not (Path(exe).exists() or shutil.which(Path(exe).name)):
+            missing.append(f"{exe} (apt-get install -y chromium chromium-driver)")
+    if missing:
+        msg = "browser test needs " + ", ".join(missing)
+        if os.environ.get("CI") == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+              "--disable-component-update", "--no-first-run", f"--user-data-dir={tmp_path / 'chromium-profile'}",
+              "--window-size=1500,1100"):
+        opts.add_argument(a)
+    opts.binary_location = CHROMIUM if Path(CHROMIUM).exists() else shutil.which("chromium")
+    return webdriver.Chrome(service=Service(CHROMEDRIVER if Path(CHROMEDRIVER).exists() else shutil.which("chromedriver")),
+                            options=opts)
