@@ -88,7 +88,7 @@ class DemoContext:
 
 def capture_step(ctx: DemoContext) -> None:
     """The session on the simulated frame (loopback link to the simulated firmware)."""
-    from simulator.firmware import create_analyser
+    from simulator.analyser import create_analyser
     from simulator.config import FrameConfig
     from simulator.stand import TestStand
 

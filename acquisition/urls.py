@@ -60,7 +60,7 @@ class SimURL:
     """``sim://?...``: an in-process simulated analyser reached through pyserial (stream).
 
     ``options`` holds the query (``seed`` as int, ``noise`` as bool, everything else as str)
-    handed to ``simulator.firmware.create_analyser``.
+    handed to ``simulator.analyser.create_analyser``.
     """
 
     options: dict = field(default_factory=dict)

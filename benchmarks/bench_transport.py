@@ -45,7 +45,8 @@ from acquisition.stream_transport import StreamTransport  # noqa: E402
 from acquisition.urlhandlers.protocol_sim import Serial as SimSerial  # noqa: E402
 from acquisition.urls import open_transport  # noqa: E402
 from acquisition.usb_transport import UsbTransport  # noqa: E402
-from simulator.firmware import PrecomputedStand, create_analyser  # noqa: E402
+from simulator.analyser import create_analyser  # noqa: E402
+from simulator.firmware import PrecomputedStand  # noqa: E402
 from simulator.usb_backend import SimUsbBackend  # noqa: E402
 
 FS = 51200.0

@@ -100,7 +100,7 @@ def run_soak(hits: int, out: "str | Path", *, door: str = "sim", faults: str = D
     from acquisition.session import CaptureSession, TestPlan, channel_table, retry_on_link_fault
     from acquisition.setup import default_setup
     from analysis.spectra import WindowSettings
-    from simulator.faults import create_analyser
+    from simulator.analyser import create_analyser
 
     n_points = max(1, min(len(points), hits))
     per_point = max(1, hits // n_points)

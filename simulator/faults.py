@@ -41,9 +41,9 @@ bulk-only envelope detects; an in-place bit flip inside a block would go unnotic
 
 URL form: ``sim://?seed=1&faults=short_transfer:0.05,garbage:0.02&fault_seed=7`` (any simulator
 door: ``sim://``, ``usbsim://``, ``python -m simulator serve --option faults=...``).
-``faults=all:P`` sets every kind to P. :func:`create_analyser` reads the options ``faults``,
+``faults=all:P`` sets every kind to P. :func:`simulator.analyser.create_analyser` reads the options ``faults``,
 ``fault_seed``, ``fault_gone_calls``, ``fault_slow_s`` and hands the rest to
-:func:`simulator.firmware.create_analyser`.
+builds the firmware from the rest.
 
 Ground truth for tests: :attr:`FaultyFirmware.block_crc` maps each block sequence number the
 firmware produced to the CRC-32 of its counts (the same checksum a recording stores), and
@@ -63,7 +63,7 @@ import numpy as np
 from acquisition import protocol as P
 
 __all__ = ["FAULT_KINDS", "TRANSIENT_SENSES", "FaultPlan", "parse_faults", "FaultyFirmware", "FaultyStand",
-           "create_analyser", "cbw_bytes"]
+           "cbw_bytes", "FAULT_OPTION_KEYS"]
 
 _log = logging.getLogger(__name__)
 
@@ -83,7 +83,7 @@ TRANSIENT_SENSES = (
 
 #: peak force factor of an injected overload (the default hammer saturates the force channel)
 OVERLOAD_SCALE = 40.0
-_OPTION_KEYS = ("faults", "fault_seed", "fault_gone_calls", "fault_slow_s")
+FAULT_OPTION_KEYS = ("faults", "fault_seed", "fault_gone_calls", "fault_slow_s")
 
 
 def parse_faults(text: "str | Mapping[str, float]") -> dict[str, float]:
@@ -467,23 +467,3 @@ class FaultyFirmware:
 def cbw_bytes(cbw: P.Cbw) -> bytes:
     """The wire bytes of a decoded CBW."""
     return P.encode_cbw(cbw.tag, cbw.data_length, cbw.data_in, cbw.cdb, cbw.lun)
-
-
-def create_analyser(options: "Mapping[str, Any] | None" = None, stand: Any = None) -> Any:
-    """:func:`simulator.firmware.create_analyser` plus the fault options (``faults``, ``fault_seed``,
-    ``fault_gone_calls``, ``fault_slow_s``): a :class:`FaultyFirmware` when ``faults`` is given and
-    not empty, else the plain firmware."""
-    from simulator import firmware as fwmod
-
-    opts = dict(options or {})
-    fault_opts = {k: opts.pop(k) for k in _OPTION_KEYS if k in opts}
-    fw = fwmod.create_analyser(opts, stand=stand)
-    if not fault_opts.get("faults"):
-        if fault_opts:
-            extra = sorted(set(fault_opts) - {"faults"})
-            if extra:
-                raise ValueError(f"simulator option(s) {extra} need faults=KIND:P,... as well")
-        return fw
-    if "seed" in opts and "fault_seed" not in fault_opts:
-        fault_opts["seed"] = opts["seed"]
-    return FaultyFirmware(fw, FaultPlan.from_options(fault_opts))

@@ -10,7 +10,7 @@ Messages go to stderr through ``logging``.
 
 Connections are served one after another (a TCP listen backlog queues the next clients).
 **Each connection gets a fresh analyser**: a new ``Firmware`` from
-``simulator.firmware.create_analyser(options)``, i.e. the power-on state with the same seed, so
+``simulator.analyser.create_analyser(options)``, i.e. the power-on state with the same seed, so
 the same commands give the same bytes to every client (the next one is built in the background
 while the current client is served, so nobody waits for the frame's eigen-solution). Over a pty there is no connect event: a
 client's first bytes after the previous client hung up (the master reads EIO while no one holds
@@ -151,7 +151,8 @@ def _firmware_factory(options: dict, precomputed: Optional[str] = None) -> Calla
     # the firmware imports its front end (scipy.signal) at the first strike; do it now so that a
     # client's first ARM does not wait a second or two for an import
     import simulator.frontend  # noqa: F401
-    from simulator.firmware import PrecomputedStand, create_analyser
+    from simulator.analyser import create_analyser
+    from simulator.firmware import PrecomputedStand
 
     stand = None
     if precomputed is not None:

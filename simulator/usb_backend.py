@@ -185,7 +185,7 @@ class SimUsbBackend(usb.backend.IBackend):
     """pyusb backend presenting one simulated analyser on bus 1.
 
     ``firmware``: a packetized ``simulator.firmware.Firmware``; when omitted one is built with
-    ``simulator.firmware.create_analyser(options)`` (``options`` as in a ``usbsim://`` URL).
+    ``simulator.analyser.create_analyser(options)`` (``options`` as in a ``usbsim://`` URL).
     ``vid``/``pid``/``serial``/``manufacturer``/``product`` set the descriptors.
     """
 
@@ -481,6 +481,6 @@ class SimUsbBackend(usb.backend.IBackend):
 
 def _make_packetized_firmware(options: dict) -> Any:
     """A packetized firmware from ``usbsim://`` options (through ``create_analyser``)."""
-    from simulator.firmware import create_analyser
+    from simulator.analyser import create_analyser
 
     return create_analyser(dict(options, packetized=True))

@@ -14,7 +14,8 @@ from acquisition.errors import CommandFailed, SetupError, TriggerTimeout
 from acquisition.loopback import LoopbackTransport
 from acquisition.setup import AcquisitionSetup, ChannelSetup, TriggerSetup, default_setup
 from scripted_transport import ScriptedTransport
-from simulator.firmware import Firmware, create_analyser
+from simulator.analyser import create_analyser
+from simulator.firmware import Firmware
 
 
 def cbw(tag: int, length: int, data_in: bool, cdb_hex: str) -> bytes:

@@ -15,8 +15,8 @@ from acquisition.loopback import LoopbackTransport
 from acquisition.recording import Recording, counts_crc32
 from acquisition.session import CaptureSession, TestPlan
 from acquisition.setup import default_setup
-from simulator.faults import (FAULT_KINDS, TRANSIENT_SENSES, FaultPlan, FaultyFirmware, create_analyser,
-                              parse_faults)
+from simulator.analyser import create_analyser
+from simulator.faults import FAULT_KINDS, TRANSIENT_SENSES, FaultPlan, FaultyFirmware, parse_faults
 from simulator.firmware import Firmware
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -55,7 +55,7 @@ class Serial(SerialBase):
         if self.is_open:
             raise SerialException("Port is already open.")
         self.options = self.from_url(self.portstr)
-        from simulator.firmware import create_analyser
+        from simulator.analyser import create_analyser
 
         self._firmware = create_analyser(dict(self.options))
         self._rx = bytearray()
