@@ -170,26 +170,34 @@ def _firmware_factory(options: dict, precomputed: Optional[str] = None) -> Calla
 
 
 # --------------------------------------------------------------------------------- TCP
-def _send_all(conn: socket.socket, data: bytes, stop: StopFlag, send_timeout_s: float) -> bool:
-    """Send ``data`` on a non-blocking socket; False if the client is gone or stalled."""
+def _write_all(write: Callable[[memoryview], int], fd: Any, data: bytes, stop: StopFlag,
+               send_timeout_s: float, who: str, dropped: str) -> bool:
+    """Write ``data`` to a non-blocking ``fd`` through ``write`` (returns the bytes taken); False
+    when the peer is gone (``OSError``) or took nothing for ``send_timeout_s`` (then ``dropped``
+    says what is dropped; ``who`` names the peer in the log)."""
     view = memoryview(data)
     deadline = time.monotonic() + send_timeout_s
     while view:
         try:
-            n = conn.send(view)
+            n = write(view)
             view = view[n:]
             deadline = time.monotonic() + send_timeout_s  # progress restarts the clock
             continue
         except (BlockingIOError, InterruptedError):
             pass
-        except OSError as exc:  # reset, broken pipe
-            _log.info("client went away while receiving: %s", exc)
+        except OSError as exc:  # reset, broken pipe; EIO: the client closed the tty
+            _log.info("%s went away while receiving: %s", who, exc)
             return False
         if stop or time.monotonic() > deadline:
-            _log.warning("client stopped reading for %.1f s (or shutdown); dropping it", send_timeout_s)
+            _log.warning("%s stopped reading for %.1f s (or shutdown); dropping %s", who, send_timeout_s, dropped)
             return False
-        select.select([], [conn], [], TICK_S)
+        select.select([], [fd], [], TICK_S)
     return True
+
+
+def _send_all(conn: socket.socket, data: bytes, stop: StopFlag, send_timeout_s: float) -> bool:
+    """Send ``data`` on a non-blocking socket; False if the client is gone or stalled."""
+    return _write_all(conn.send, conn, data, stop, send_timeout_s, "client", "it")
 
 
 def _serve_connection(conn: socket.socket, session: Session, stop: StopFlag, send_timeout_s: float,
@@ -292,24 +300,8 @@ def open_pty() -> tuple[int, str]:
 
 
 def _pty_write(master: int, data: bytes, stop: StopFlag, send_timeout_s: float) -> bool:
-    view = memoryview(data)
-    deadline = time.monotonic() + send_timeout_s
-    while view:
-        try:
-            n = os.write(master, view)
-            view = view[n:]
-            deadline = time.monotonic() + send_timeout_s
-            continue
-        except (BlockingIOError, InterruptedError):
-            pass
-        except OSError as exc:  # EIO: the client closed the tty
-            _log.info("pty client went away while receiving: %s", exc)
-            return False
-        if stop or time.monotonic() > deadline:
-            _log.warning("pty client stopped reading for %.1f s (or shutdown); dropping its output", send_timeout_s)
-            return False
-        select.select([], [master], [], TICK_S)
-    return True
+    return _write_all(lambda view: os.write(master, view), master, data, stop, send_timeout_s,
+                      "pty client", "its output")
 
 
 def serve_pty(master: int, factory: Callable[[], Any], stop: StopFlag, *, max_clients: int = 0,

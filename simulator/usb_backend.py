@@ -32,7 +32,7 @@ import logging
 import struct
 import time
 from dataclasses import dataclass, field
-from typing import Any, Iterator, Optional
+from typing import Any, ClassVar, Iterator, Optional
 
 import usb.backend
 import usb.core
@@ -74,8 +74,19 @@ def _usb_error(text: str, err: int) -> usb.core.USBError:
 
 
 # -- descriptors (plain attribute bags, as pyusb's _set_attr reads them) ----------------------
+
+class _Packed:
+    """A USB descriptor laid out by ``_FORMAT`` from the attributes named in ``_FIELDS``."""
+
+    _FORMAT: ClassVar[str]
+    _FIELDS: ClassVar[tuple[str, ...]]
+
+    def pack(self) -> bytes:
+        return struct.pack(self._FORMAT, *(getattr(self, name) for name in self._FIELDS))
+
+
 @dataclass
-class _DeviceDescriptor:
+class _DeviceDescriptor(_Packed):
     idVendor: int
     idProduct: int
     bus: int
@@ -97,16 +108,15 @@ class _DeviceDescriptor:
     bNumConfigurations: int = 1
     extra_descriptors: list = field(default_factory=list)
 
-    def pack(self) -> bytes:
-        return struct.pack(
-            "<BBHBBBBHHHBBBB", self.bLength, self.bDescriptorType, self.bcdUSB, self.bDeviceClass,
-            self.bDeviceSubClass, self.bDeviceProtocol, self.bMaxPacketSize0, self.idVendor, self.idProduct,
-            self.bcdDevice, self.iManufacturer, self.iProduct, self.iSerialNumber, self.bNumConfigurations,
-        )
+    _FORMAT: ClassVar[str] = "<BBHBBBBHHHBBBB"
+    _FIELDS: ClassVar[tuple[str, ...]] = (
+        "bLength", "bDescriptorType", "bcdUSB", "bDeviceClass", "bDeviceSubClass",
+        "bDeviceProtocol", "bMaxPacketSize0", "idVendor", "idProduct", "bcdDevice", "iManufacturer",
+        "iProduct", "iSerialNumber", "bNumConfigurations")
 
 
 @dataclass
-class _ConfigurationDescriptor:
+class _ConfigurationDescriptor(_Packed):
     bLength: int = 9
     bDescriptorType: int = usb.util.DESC_TYPE_CONFIG
     wTotalLength: int = 9 + 9 + 7 + 7
@@ -117,15 +127,14 @@ class _ConfigurationDescriptor:
     bMaxPower: int = 50  # 100 mA in 2 mA units
     extra_descriptors: list = field(default_factory=list)
 
-    def pack(self) -> bytes:
-        return struct.pack(
-            "<BBHBBBBB", self.bLength, self.bDescriptorType, self.wTotalLength, self.bNumInterfaces,
-            self.bConfigurationValue, self.iConfiguration, self.bmAttributes, self.bMaxPower,
-        )
+    _FORMAT: ClassVar[str] = "<BBHBBBBB"
+    _FIELDS: ClassVar[tuple[str, ...]] = (
+        "bLength", "bDescriptorType", "wTotalLength", "bNumInterfaces", "bConfigurationValue",
+        "iConfiguration", "bmAttributes", "bMaxPower")
 
 
 @dataclass
-class _InterfaceDescriptor:
+class _InterfaceDescriptor(_Packed):
     bLength: int = 9
     bDescriptorType: int = usb.util.DESC_TYPE_INTERFACE
     bInterfaceNumber: int = 0
@@ -137,16 +146,14 @@ class _InterfaceDescriptor:
     iInterface: int = 0
     extra_descriptors: list = field(default_factory=list)
 
-    def pack(self) -> bytes:
-        return struct.pack(
-            "<BBBBBBBBB", self.bLength, self.bDescriptorType, self.bInterfaceNumber, self.bAlternateSetting,
-            self.bNumEndpoints, self.bInterfaceClass, self.bInterfaceSubClass, self.bInterfaceProtocol,
-            self.iInterface,
-        )
+    _FORMAT: ClassVar[str] = "<BBBBBBBBB"
+    _FIELDS: ClassVar[tuple[str, ...]] = (
+        "bLength", "bDescriptorType", "bInterfaceNumber", "bAlternateSetting", "bNumEndpoints",
+        "bInterfaceClass", "bInterfaceSubClass", "bInterfaceProtocol", "iInterface")
 
 
 @dataclass
-class _EndpointDescriptor:
+class _EndpointDescriptor(_Packed):
     bEndpointAddress: int
     bLength: int = 7
     bDescriptorType: int = usb.util.DESC_TYPE_ENDPOINT
@@ -157,11 +164,10 @@ class _EndpointDescriptor:
     bSynchAddress: int = 0
     extra_descriptors: list = field(default_factory=list)
 
-    def pack(self) -> bytes:
-        return struct.pack(
-            "<BBBBHB", self.bLength, self.bDescriptorType, self.bEndpointAddress, self.bmAttributes,
-            self.wMaxPacketSize, self.bInterval,
-        )
+    _FORMAT: ClassVar[str] = "<BBBBHB"
+    _FIELDS: ClassVar[tuple[str, ...]] = (
+        "bLength", "bDescriptorType", "bEndpointAddress", "bmAttributes", "wMaxPacketSize",
+        "bInterval")
 
 
 @dataclass(frozen=True)
