@@ -21,13 +21,15 @@ import argparse
 import logging
 import sys
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence, TextIO
 
 import numpy as np
 
 from analysis.spectra import WindowSettings, parse_duration
 
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError
+from .operator import HitSummary
+from .session_errors import OperatorQuit
 
 __all__ = ["main", "build_parser", "parse_windows", "open_analyser", "summary_text", "DEFAULT_FORCE_WINDOW",
            "DEFAULT_EXP_WINDOW"]
@@ -185,7 +187,7 @@ def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8) -> str:
     for a in avgs:
         s = a.frfset(estimator)
         f = s.freq_hz
-        hi = f[-1] / 1.28  # alias-free band (fs / 2.56)
+        hi = a.sample_rate_hz / 2.56  # alias-free band, from the acquisition's sample rate
         band = (f > 2.0) & (f <= hi)
         mag = np.abs(s.H[:, 0, :])
         live = [i for i in range(s.n_outputs) if np.any(a.acc.spectra()[1][i] > 0)]  # outputs with any signal
@@ -214,8 +216,7 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
     Everything the operator typed is checked before the analyser is opened.
     """
     from .recording import Recording, RecordingWriter
-    from .session import (CaptureSession, auto_accept, channel_table, retry_on_link_fault,
-                          terminal_decider)
+    from .session import CaptureSession, auto_accept, channel_table, retry_on_link_fault
     from .setup import AcquisitionSetup, default_setup, load_setup
     from .urls import SimURL, parse_device_url
 
@@ -266,7 +267,7 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
     windows and device (``--device`` overrides it), appending to the same file. The accepted hits
     already recorded (complete, CRC-checked) count towards each point's average."""
     from .recording import Recording, RecordingWriter
-    from .session import CaptureSession, TestPlan, auto_accept, retry_on_link_fault, terminal_decider
+    from .session import CaptureSession, TestPlan, auto_accept, retry_on_link_fault
     from .setup import AcquisitionSetup
 
     if args.out or args.points or args.reference or args.mode or args.setup or args.hits is not None:
@@ -348,3 +349,46 @@ def _finish(result, done_line: str, out_stream):
     print(summary_text(result), file=out_stream)
     print(done_line, file=out_stream)
     return 0, result
+
+
+# -- the operator at a terminal -------------------------------------------------------------------
+def read_key(prompt: str) -> str:
+    """One key press at a terminal (no Enter needed); a whole line when stdin is not a terminal."""
+    if not sys.stdin.isatty():
+        return input(prompt)
+    import termios
+    import tty
+
+    print(prompt, end="", flush=True)
+    fd = sys.stdin.fileno()
+    old = termios.tcgetattr(fd)
+    try:
+        tty.setcbreak(fd)
+        key = sys.stdin.read(1)
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, old)
+    print(key)
+    if key in ("\x03", "\x04"):  # Ctrl-C, Ctrl-D
+        raise EOFError
+    return key
+
+
+def terminal_decider(input_fn: Callable[[str], str] = read_key, out: TextIO = sys.stdout) -> Callable[[HitSummary], bool]:
+    """An operator at a terminal (the capture CLI's ``decide``): key ``a`` (or Enter) accept, ``r`` reject, ``q`` quit (raises
+    :class:`OperatorQuit`). ``input_fn(prompt) -> str`` reads the answer (default :func:`read_key`)."""
+
+    def decide(summary: HitSummary) -> bool:
+        while True:
+            try:
+                key = input_fn("accept (a), reject (r), quit (q)? ").strip().lower()
+            except EOFError:
+                raise OperatorQuit("input closed: ending the test") from None
+            if key in ("a", "", "\n", "\r"):
+                return True
+            if key == "r":
+                return False
+            if key == "q":
+                raise OperatorQuit("operator pressed q")
+            print("please press a, r or q", file=out)
+
+    return decide
