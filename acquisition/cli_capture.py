@@ -25,6 +25,7 @@ from typing import Any, Callable, Optional, Sequence, TextIO
 
 import numpy as np
 
+from analysis.cli_common import add_overwrite, cli_entry, exit_on
 from analysis.spectra import WindowSettings, parse_duration
 
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError
@@ -105,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exp-window", default=DEFAULT_EXP_WINDOW,
                    help="exponential window: PCT%% at block end, TAU (s/ms/samples), or none (default none)")
     p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for each trigger (default 10)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    add_overwrite(p, "replace an existing --out file")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the final summary")
     return p
 
@@ -305,28 +306,21 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
     return _finish(result, f"recording completed: {path}", out_stream)
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        code, _ = run_capture(args)
-        return code
-    except (UsageError, InvalidDeviceURL, SetupError, RecordingError) as exc:
-        print(f"capture: {exc}", file=sys.stderr)
-        return 2
-    except ImpactlabError as exc:
-        print(f"capture: device or session failure: {exc}", file=sys.stderr)
-        return 1
-    except ValueError as exc:  # bad values reaching the library (file contents, options)
-        print(f"capture: {exc}", file=sys.stderr)
-        return 2
+        with exit_on("capture", ((UsageError, InvalidDeviceURL, SetupError, RecordingError), 2),
+                     (ImpactlabError, 1, "device or session failure: "),
+                     (ValueError, 2),  # bad values reaching the library (file contents, options)
+                     (OSError, 1)):
+            code, _ = run_capture(args)
+            return code
     except KeyboardInterrupt:
         print(f"capture: interrupted; {args.out or args.resume} keeps every hit written so far "
               "(continue with 'python -m acquisition capture --resume FILE', or recompute its FRFs with "
               "'python -m acquisition replay')", file=sys.stderr)
         return 130
-    except OSError as exc:
-        print(f"capture: {exc}", file=sys.stderr)
-        return 1
 
 
 def _run_session(session, writer):

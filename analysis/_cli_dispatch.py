@@ -5,10 +5,13 @@ dispatcher imports only the one asked for.
 """
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
 from typing import Mapping, Sequence
+
+from .cli_common import Parser, UsageError, parse_args
+
+__all__ = ["dispatch", "Parser", "UsageError", "parse_args"]
 
 
 def dispatch(prog: str, commands: Mapping[str, tuple[str, str]], argv: Sequence[str] | None = None) -> int:
@@ -26,26 +29,3 @@ def dispatch(prog: str, commands: Mapping[str, tuple[str, str]], argv: Sequence[
         return 2
     module = importlib.import_module(commands[name][0])
     return int(module.main(args[1:]) or 0)
-
-
-class UsageError(Exception):
-    """A command line that the parser rejects (reported by ``main`` with exit code 2)."""
-
-
-class Parser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` that raises :class:`UsageError` instead of exiting, so ``main`` reports."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise UsageError(f"{self.prog}: {message}")
-
-
-def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> "argparse.Namespace | int":
-    """Parse ``argv`` (default ``sys.argv[1:]``); an ``int`` is the exit code to return at once
-    (2 after printing a usage error on stderr, 0 after ``--help``)."""
-    try:
-        return parser.parse_args(list(sys.argv[1:] if argv is None else argv))
-    except UsageError as exc:
-        print(f"{exc}\n(see --help)", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
