@@ -1,5 +1,5 @@
 """Crash safety: the capture process killed (SIGKILL) at random moments keeps every reported hit,
-and ``capture --resume`` finishes the plan from the killed recording (benchmarks/crash_kill.py
+and ``capture --resume`` finishes the plan from the killed recording (benchmarks/reliability/crash_kill.py
 runs the same with 50+ kills)."""
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _crash_module():
-    spec = importlib.util.spec_from_file_location("crash_kill", ROOT / "benchmarks" / "crash_kill.py")
+    spec = importlib.util.spec_from_file_location("crash_kill", ROOT / "benchmarks" / "reliability" / "crash_kill.py")
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod
     spec.loader.exec_module(mod)

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _soak_module():
-    spec = importlib.util.spec_from_file_location("soak_capture", ROOT / "benchmarks" / "soak_capture.py")
+    spec = importlib.util.spec_from_file_location("soak_capture", ROOT / "benchmarks" / "reliability" / "soak_capture.py")
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod  # dataclasses look their module up
     spec.loader.exec_module(mod)
