@@ -21,7 +21,7 @@ test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
 
 bench: $(STAMP)
-	for b in benchmarks/bench_*.py; do MPLBACKEND=Agg $(PY) $$b || exit 1; done
+	for b in benchmarks/*/bench_*.py; do MPLBACKEND=Agg $(PY) $$b || exit 1; done
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache

@@ -21,13 +21,16 @@ import argparse
 import logging
 import sys
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence, TextIO
 
 import numpy as np
 
+from analysis.command_line import add_overwrite, cli_entry, exit_on
 from analysis.spectra import WindowSettings, parse_duration
 
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
+from .operator import HitSummary
+from .session_errors import OperatorQuit
 
 __all__ = ["main", "build_parser", "parse_windows", "open_analyser", "summary_text", "DEFAULT_FORCE_WINDOW",
            "DEFAULT_EXP_WINDOW"]
@@ -36,6 +39,7 @@ log = logging.getLogger(__name__)
 
 DEFAULT_FORCE_WINDOW = "20ms,5ms"
 DEFAULT_EXP_WINDOW = "none"
+
 
 
 def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[float],
@@ -99,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exp-window", default=DEFAULT_EXP_WINDOW,
                    help="exponential window: PCT%% at block end, TAU (s/ms/samples), or none (default none)")
     p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for each trigger (default 10)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    add_overwrite(p, "replace an existing --out file")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the final summary")
     return p
 
@@ -181,7 +185,7 @@ def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8) -> str:
     for a in avgs:
         s = a.frfset(estimator)
         f = s.freq_hz
-        hi = f[-1] / 1.28  # alias-free band (fs / 2.56)
+        hi = a.sample_rate_hz / 2.56  # alias-free band, from the acquisition's sample rate
         band = (f > 2.0) & (f <= hi)
         mag = np.abs(s.H[:, 0, :])
         live = [i for i in range(s.n_outputs) if np.any(a.acc.spectra()[1][i] > 0)]  # outputs with any signal
@@ -210,8 +214,7 @@ def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, A
     Everything the operator typed is checked before the analyser is opened.
     """
     from analysis.recording import Recording, RecordingWriter
-    from .session import (CaptureSession, auto_accept, channel_table, retry_on_link_fault,
-                          terminal_decider)
+    from .session import CaptureSession, auto_accept, channel_table, retry_on_link_fault
     from .setup import AcquisitionSetup, default_setup, load_setup
     from .urls import SimURL, parse_device_url
 
@@ -289,7 +292,7 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
     already recorded (complete, CRC-checked) count towards each point's average."""
     from analysis.recording import RecordingWriter
 
-    from .session import CaptureSession, auto_accept, retry_on_link_fault, terminal_decider
+    from .session import CaptureSession, auto_accept, retry_on_link_fault
 
     path = Path(args.resume)
     setup, plan, windows, hits, device = recorded_test(args)
@@ -313,28 +316,21 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
     return _finish(result, f"recording completed: {path}", out_stream)
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        code, _ = run_capture(args)
-        return code
-    except (UsageError, InvalidDeviceURL, SetupError, RecordingError) as exc:
-        print(f"capture: {exc}", file=sys.stderr)
-        return 2
-    except ImpactlabError as exc:
-        print(f"capture: device or session failure: {exc}", file=sys.stderr)
-        return 1
-    except ValueError as exc:  # bad values reaching the library (file contents, options)
-        print(f"capture: {exc}", file=sys.stderr)
-        return 2
+        with exit_on("capture", ((UsageError, InvalidDeviceURL, SetupError, RecordingError), 2),
+                     (ImpactlabError, 1, "device or session failure: "),
+                     (ValueError, 2),  # bad values reaching the library (file contents, options)
+                     (OSError, 1)):
+            code, _ = run_capture(args)
+            return code
     except KeyboardInterrupt:
         print(f"capture: interrupted; {args.out or args.resume} keeps every hit written so far "
               "(continue with 'python -m acquisition capture --resume FILE', or recompute its FRFs with "
               "'python -m acquisition replay')", file=sys.stderr)
         return 130
-    except OSError as exc:
-        print(f"capture: {exc}", file=sys.stderr)
-        return 1
 
 
 def _run_session(session, writer):
@@ -357,3 +353,46 @@ def _finish(result, done_line: str, out_stream):
     print(summary_text(result), file=out_stream)
     print(done_line, file=out_stream)
     return 0, result
+
+
+# -- the operator at a terminal -------------------------------------------------------------------
+def read_key(prompt: str) -> str:
+    """One key press at a terminal (no Enter needed); a whole line when stdin is not a terminal."""
+    if not sys.stdin.isatty():
+        return input(prompt)
+    import termios
+    import tty
+
+    print(prompt, end="", flush=True)
+    fd = sys.stdin.fileno()
+    old = termios.tcgetattr(fd)
+    try:
+        tty.setcbreak(fd)
+        key = sys.stdin.read(1)
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, old)
+    print(key)
+    if key in ("\x03", "\x04"):  # Ctrl-C, Ctrl-D
+        raise EOFError
+    return key
+
+
+def terminal_decider(input_fn: Callable[[str], str] = read_key, out: TextIO = sys.stdout) -> Callable[[HitSummary], bool]:
+    """An operator at a terminal (the capture CLI's ``decide``): key ``a`` (or Enter) accept, ``r`` reject, ``q`` quit (raises
+    :class:`OperatorQuit`). ``input_fn(prompt) -> str`` reads the answer (default :func:`read_key`)."""
+
+    def decide(summary: HitSummary) -> bool:
+        while True:
+            try:
+                key = input_fn("accept (a), reject (r), quit (q)? ").strip().lower()
+            except EOFError:
+                raise OperatorQuit("input closed: ending the test") from None
+            if key in ("a", "", "\n", "\r"):
+                return True
+            if key == "r":
+                return False
+            if key == "q":
+                raise OperatorQuit("operator pressed q")
+            print("please press a, r or q", file=out)
+
+    return decide

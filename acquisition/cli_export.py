@@ -10,9 +10,10 @@ windows. Read back with ``analysis.uff.read_uff58``.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Optional, Sequence
+
+from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
 
 __all__ = ["main", "export"]
 
@@ -44,22 +45,20 @@ def export(rec_path: "str | Path", uff_path: "str | Path", *, time_data: bool = 
                        extra_sets=extra, overwrite=overwrite)
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition export", description=__doc__.split("\n\n")[0])
     p.add_argument("recording")
     p.add_argument("--uff", required=True, help="UFF file to write")
     p.add_argument("--time", action="store_true", help="also write the accepted hits' time histories")
     p.add_argument("--estimator", choices=("H1", "H2", "h1", "h2"), default="H1")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --uff file")
+    add_overwrite(p, "replace an existing --uff file")
     args = p.parse_args(argv)
     from analysis.uff import UFFError
 
     from .errors import RecordingError
 
-    try:
+    with errors_to_exit("export", (RecordingError, UFFError, ValueError)):
         n = export(args.recording, args.uff, time_data=args.time, estimator=args.estimator, overwrite=args.overwrite)
-    except (RecordingError, UFFError, ValueError) as exc:
-        print(f"export: {exc}", file=sys.stderr)
-        return 2
     print(f"wrote {n} UFF 58 datasets to {args.uff}")
     return 0

@@ -3,11 +3,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
-import sys
 from typing import Sequence
 
 from acquisition.errors import ImpactlabError
+from analysis.command_line import add_json_flag, add_verbose, cli_entry, errors_to_exit, set_verbosity
 
 __all__ = ["main"]
 
@@ -18,23 +17,21 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--device", required=True, help="device URL, e.g. sim://?seed=1, socket://127.0.0.1:5025, "
                                                    "/dev/ttyUSB0, usb://1209:4c41, usbsim://")
     p.add_argument("--timeout", type=float, default=2.0, help="seconds allowed per command (default 2)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
-    p.add_argument("-v", "--verbose", action="count", default=0, help="log more (-v info, -vv debug)")
+    add_json_flag(p)
+    add_verbose(p)
     return p
 
 
+@cli_entry
 def main(argv: "Sequence[str] | None" = None) -> int:
     args = _parser().parse_args(argv)
-    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
+    set_verbosity(args.verbose)
     from acquisition.driver import Analyser
 
-    try:
+    with errors_to_exit("identify", (ImpactlabError, OSError), code=1):
         with Analyser(args.device, timeout_s=args.timeout) as an:
             ident = an.identify()
             caps = an.capabilities()
-    except (ImpactlabError, OSError) as exc:
-        print(f"identify: {exc}", file=sys.stderr)
-        return 1
     if args.json:
         out = {"identity": ident.as_dict(), "capabilities": {
             "inputs": caps.n_inputs, "sample_rates_hz": list(caps.sample_rates_hz),

@@ -11,9 +11,10 @@ Formats (by extension unless ``--format``): LabVIEW ``.lvm`` (segments = hits), 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Optional, Sequence
+
+from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
 
 from .cli_capture import UsageError, parse_windows
 from .errors import RecordingError
@@ -21,6 +22,7 @@ from .errors import RecordingError
 __all__ = ["main"]
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition import", description=__doc__.split("\n\n")[0])
     p.add_argument("files", nargs="+")
@@ -34,12 +36,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--windowed", action="store_true", help="DataPhysics: import the analyser-windowed blocks Wk")
     p.add_argument("--force-window", default="none")
     p.add_argument("--exp-window", default="none")
-    p.add_argument("--overwrite", action="store_true")
+    add_overwrite(p)
     args = p.parse_args(argv)
     from .importers import ImportDataError, load_description, read_dataphysics_mat, read_lvm, read_numpy, \
         write_imported
 
-    try:
+    with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
         if fmt == "lvm":
             tests = [read_lvm(f) for f in args.files]
@@ -64,9 +66,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
         averages = write_imported(test, args.out, windows=windows, reference=args.reference, outputs=outs,
                                   force_channel=fch, response_channels=rch, overwrite=args.overwrite)
-    except (UsageError, ImportDataError, RecordingError, ValueError) as exc:
-        print(f"import: {exc}", file=sys.stderr)
-        return 2
     for a in averages:
         print(f"imported {a.n_averages} accepted hit(s): reference {a.reference}, outputs {', '.join(a.outputs)}")
     print(f"recording written: {args.out}")

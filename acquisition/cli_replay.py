@@ -12,10 +12,10 @@ exclusions the FRFs equal the original ones bit for bit.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Optional, Sequence
 
+from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
 from analysis.spectra import WindowSettings
 
 from .cli_capture import UsageError, parse_windows
@@ -97,6 +97,7 @@ def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSett
     return averages
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition replay", description=__doc__.split("\n\n")[0])
     p.add_argument("recording", help="the recording to read (never modified)")
@@ -106,9 +107,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--window", help="shorthand 'force=10ms,2ms;exp=1%%'")
     p.add_argument("--exclude-hits", help="hit indices to leave out, e.g. 3,7-9")
     p.add_argument("--estimator", choices=("H1", "H2", "h1", "h2"), default="H1")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    add_overwrite(p, "replace an existing --out file")
     args = p.parse_args(argv)
-    try:
+    with errors_to_exit("replay", (UsageError, RecordingError, ValueError)):
         from analysis.recording import Recording
 
         force, exp = args.force_window, args.exp_window
@@ -123,9 +124,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         windows = parse_windows(force, exp, fs, base) if (force is not None or exp is not None) else None
         averages = replay(args.recording, args.out, windows=windows, exclude=parse_hit_list(args.exclude_hits),
                           estimator=args.estimator, overwrite=args.overwrite)
-    except (UsageError, RecordingError, ValueError) as exc:
-        print(f"replay: {exc}", file=sys.stderr)
-        return 2
     for a in averages:
         print(f"point {a.index + 1} ({a.point}): {a.n_averages} averages, windows {a.windows.describe()}")
     print(f"recording written: {args.out}")

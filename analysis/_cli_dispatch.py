@@ -5,7 +5,6 @@ dispatcher imports only the one asked for.
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import importlib
 import io
@@ -13,7 +12,9 @@ import os
 import sys
 from typing import Any, Iterator, Mapping, Sequence, TextIO
 
-from .errors import UsageError
+from .command_line import Parser, UsageError, parse_args
+
+__all__ = ["dispatch", "version", "pipe_safe_stdout", "Parser", "UsageError", "parse_args"]
 
 
 def version() -> str:
@@ -99,21 +100,3 @@ def pipe_safe_stdout() -> Iterator[None]:
             except (OSError, ValueError, io.UnsupportedOperation):  # not a real file (captured in tests)
                 pass
 
-
-class Parser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` that raises :class:`UsageError` instead of exiting, so ``main`` reports."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise UsageError(f"{self.prog}: {message}")
-
-
-def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> "argparse.Namespace | int":
-    """Parse ``argv`` (default ``sys.argv[1:]``); an ``int`` is the exit code to return at once
-    (2 after printing a usage error on stderr, 0 after ``--help``)."""
-    try:
-        return parser.parse_args(list(sys.argv[1:] if argv is None else argv))
-    except UsageError as exc:
-        print(f"{exc}\n(see --help)", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)

@@ -22,7 +22,7 @@ __all__ = ["main", "build_parser", "load_simulation"]
 log = logging.getLogger(__name__)
 
 
-from ._cli_dispatch import Parser as _Parser, parse_args
+from .command_line import Parser as _Parser, check_out_dir, parse_args
 
 
 def _json_default(x):
@@ -159,9 +159,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if isinstance(args, int):
         return args
     try:
-        out_dir = Path(args.json).resolve().parent
-        if not out_dir.is_dir():
-            raise InputError(f"cannot write {args.json}: folder {out_dir} does not exist")
+        check_out_dir(args.json, error=InputError)
         effects = None
         if args.effects:
             effects = [e.strip() for e in args.effects.split(",") if e.strip()]

@@ -19,7 +19,7 @@ import numpy as np
 __all__ = ["main", "build_parser"]
 
 
-from ._cli_dispatch import Parser as _Parser, UsageError as _UsageError, parse_args
+from .command_line import Parser as _Parser, UsageError as _UsageError, check_out_dir, cli_entry, errors_to_exit, parse_args
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -63,14 +63,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _check_out(path: Optional[str], what: str) -> None:
-    if path is None:
-        return
-    d = Path(path).resolve().parent
-    if not d.is_dir():
-        raise _UsageError(f"cannot write the {what} {path}: folder {d} does not exist")
-
-
 def _write_uff(path: str, frf, result) -> None:
     """UFF 55 mode shapes (the structure: window-corrected poles), then UFF 58 synthesised FRFs
     appended in the same file. The FRFs are synthesised *as measured* (raw poles, the exponential
@@ -95,6 +87,7 @@ def _write_uff(path: str, frf, result) -> None:
             out.write(src.read())
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .inputs import InputError, load_input, parse_band_text, parse_float_list
@@ -103,7 +96,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(parser, argv)
     if isinstance(args, int):
         return args
-    try:
+    with errors_to_exit("analysis fit", (InputError, _UsageError)):
         band = parse_band_text(args.band)
         for name in ("modes", "order", "max_iter"):
             v = getattr(args, name)
@@ -115,7 +108,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if any(m <= 0 for m in mains) or (args.exclude_mains is not None and not args.exclude_mains > 0):
             raise InputError("mains frequencies must be > 0 Hz (or --mains none)")
         for path, what in ((args.json, "JSON"), (args.plot, "plot"), (args.uff, "UFF file")):
-            _check_out(path, what)
+            check_out_dir(path, what)
         frf = load_input(args.input, estimator=args.estimator)
         if band is not None:
             f = frf.freq_hz
@@ -129,9 +122,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             shown = (row, int(np.argmax(rms[row])))
         else:  # the strongest FRF (usually the driving point); never an all-zero one
             shown = tuple(int(i) for i in np.unravel_index(int(np.argmax(rms)), rms.shape))
-    except (InputError, _UsageError) as exc:
-        print(f"analysis fit: {exc}", file=sys.stderr)
-        return 2
 
     from .pipeline import fit_auto
     from .report import format_table, result_to_dict, write_json
@@ -141,7 +131,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
         exclude = list(exclude) + mains_harmonics(args.exclude_mains, band or (frf.freq_hz[0], frf.freq_hz[-1]))
     caught: list[str] = []
-    try:
+    with errors_to_exit("analysis fit", ValueError):
         with warnings.catch_warnings(record=True) as wlist:
             warnings.simplefilter("always")
             result, stab = fit_auto(
@@ -151,9 +141,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 mains_hz=mains, exclude_hz=exclude or None,
             )
         caught = [str(w.message) for w in wlist]
-    except ValueError as exc:
-        print(f"analysis fit: {exc}", file=sys.stderr)
-        return 2
     notes = list(stab.meta.get("warnings", [])) if stab is not None else []
     for msg in notes + [c for c in caught if c not in notes]:
         print(f"warning: {msg}", file=sys.stderr)
@@ -170,7 +157,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             print(f"warning: no scatter estimate: {exc}", file=sys.stderr)
     doc = result_to_dict(result, frf, stab, extra={"input": str(args.input), "warnings": notes + caught},
                          scatter=scatter)
-    try:
+    with errors_to_exit("analysis fit", (OSError, ValueError), prefix="cannot write the outputs: "):
         write_json(args.json, doc)
         print(f"results written to {args.json}")
         if args.plot:
@@ -183,9 +170,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.uff:
             _write_uff(args.uff, frf, result)
             print(f"mode shapes (UFF 55) and synthesised FRFs (UFF 58) written to {args.uff}")
-    except (OSError, ValueError) as exc:
-        print(f"analysis fit: cannot write the outputs: {exc}", file=sys.stderr)
-        return 2
     return 0
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
-from pathlib import Path
 from typing import Optional, Sequence
 
 import numpy as np
@@ -16,7 +15,7 @@ import numpy as np
 __all__ = ["main", "build_parser"]
 
 
-from ._cli_dispatch import Parser as _Parser, parse_args
+from .command_line import Parser as _Parser, check_out_dir, cli_entry, errors_to_exit, parse_args
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -33,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .inputs import InputError, load_input, parse_band_text
@@ -40,17 +40,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
-    try:
+    with errors_to_exit("analysis stabilization", InputError):
         band = parse_band_text(args.band)
         if args.max_order is not None and args.max_order < 1:
             raise InputError(f"--max-order must be >= 1; got {args.max_order}")
         for path in (args.png, args.json):
-            if path is not None and not Path(path).resolve().parent.is_dir():
-                raise InputError(f"cannot write {path}: its folder does not exist")
+            check_out_dir(path, error=InputError, message="cannot write {label}: its folder does not exist")
         frf = load_input(args.input, estimator=args.estimator)
-    except InputError as exc:
-        print(f"analysis stabilization: {exc}", file=sys.stderr)
-        return 2
 
     from .lscf import parse_band
     from .modal import damping_ratio, natural_freq_hz
@@ -60,16 +56,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from .selection import select_clusters
     from .stabilization import stabilization
 
-    try:
+    with errors_to_exit("analysis stabilization", ValueError):
         with warnings.catch_warnings(record=True) as wlist:
             warnings.simplefilter("always")
             b = parse_band(band, frf.freq_hz) if band is not None else default_band(frf)
             n = args.max_order or default_max_modes(frf, b)
             stab = stabilization(frf, n, method=args.method, band=b, refine_lsfd=args.lsfd)
             clusters = select_clusters(stab)
-    except ValueError as exc:
-        print(f"analysis stabilization: {exc}", file=sys.stderr)
-        return 2
     for w in wlist:
         print(f"warning: {w.message}", file=sys.stderr)
     poles = np.array([c.pole for c in clusters], dtype=complex)
@@ -78,7 +71,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for k in np.argsort(natural_freq_hz(poles)) if poles.size else []:
         c = clusters[k]
         print(f"{k + 1:4d} {natural_freq_hz(c.pole):10.4f} {100 * damping_ratio(c.pole):9.3f} {c.n_orders:7d}")
-    try:
+    with errors_to_exit("analysis stabilization", (OSError, ValueError), prefix="cannot write the outputs: "):
         plot_stabilization(stab, frf, args.png, selected=poles)
         print(f"diagram written to {args.png}")
         if args.json:
@@ -90,9 +83,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             doc["input"] = str(args.input)
             write_json(args.json, doc)
             print(f"poles written to {args.json}")
-    except (OSError, ValueError) as exc:
-        print(f"analysis stabilization: cannot write the outputs: {exc}", file=sys.stderr)
-        return 2
     return 0
 
 

@@ -5,7 +5,7 @@ from analysis._cli_dispatch import dispatch
 
 COMMANDS = {
     "modes": ("simulator.cli_modes", "print the simulated frame's modes (natural frequency, damping, shapes)"),
-    "serve": ("simulator.serve", "run the simulated analyser as a TCP or pty server"),
+    "serve": ("simulator.cli_serve", "run the simulated analyser as a TCP or pty server"),
 }
 
 if __name__ == "__main__":

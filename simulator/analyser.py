@@ -1,49 +1,50 @@
-"""The one factory of simulated analysers: firmware + stand (+ fault injection) from URL options.
+"""The one factory of the simulated analyser: :func:`create_analyser` builds the firmware from URL
+query options (``sim://``, ``usbsim://``) and wraps it with fault injection when asked."""
 
-Every simulator door (``sim://``, ``usbsim://``, ``python -m simulator serve``) builds its device
-here, so a URL's options mean the same thing whatever the door.
-"""
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Mapping
 
-from simulator.faults import FaultPlan, FaultyFirmware
-from simulator.firmware import DEFAULT_SERIAL, Firmware, StandLike
+from simulator.capture import StandLike
+from simulator.commands import DEFAULT_SERIAL
+from simulator.faults import FAULT_OPTION_KEYS, FaultPlan, FaultyFirmware
+from simulator.firmware import Firmware
 
-__all__ = ["create_analyser", "FIRMWARE_OPTIONS", "FAULT_OPTIONS"]
-
-#: options the plain firmware understands
-FIRMWARE_OPTIONS = frozenset({"seed", "config", "noise", "plan", "packetized", "serial", "polls", "max_strikes",
-                              "replay"})
-#: options of the fault injection (``simulator.faults``)
-FAULT_OPTIONS = ("faults", "fault_seed", "fault_gone_calls", "fault_slow_s")
+__all__ = ["create_analyser"]
 
 
-def create_analyser(options: "Mapping[str, Any] | None" = None, stand: "StandLike | None" = None) -> Any:
-    """A simulated analyser from URL query options: a :class:`~simulator.firmware.Firmware`, wrapped
-    in a :class:`~simulator.faults.FaultyFirmware` (same interface) when ``faults`` is given.
+def create_analyser(options: "Mapping[str, Any] | None" = None,
+                    stand: "StandLike | None" = None) -> "Firmware | FaultyFirmware":
+    """A firmware from URL query options.
 
     Options (all optional): ``seed`` (int, default 0), ``config`` (path of a frame TOML file),
     ``noise`` (bool, default True: sensor and ADC noise on), ``plan`` (ignored by the firmware;
     the stand uses it), ``replay`` (path of a recording: ``simulator.replay_stand.ReplayStand``
-    plays its hits back instead of simulating), ``packetized`` (bool), ``serial`` (str), ``polls``
-    (GET STATUS polls before the strike, default 1), ``max_strikes`` (default 3); ``faults``,
-    ``fault_seed``, ``fault_gone_calls``, ``fault_slow_s``: fault injection
-    (``docs/reliability.md``). ``stand`` injects a ready stand (e.g. a
-    :class:`~simulator.firmware.PrecomputedStand`); otherwise ``simulator.stand.TestStand`` is built.
-    Raises ``ValueError`` naming an unknown option or a bad value.
+    plays its hits back instead of simulating), ``packetized`` (bool), ``serial`` (str), ``polls`` (GET STATUS polls
+    before the strike, default 1), ``max_strikes`` (default 3); ``faults``, ``fault_seed``,
+    ``fault_gone_calls``, ``fault_slow_s``: fault injection, the firmware comes wrapped in
+    :class:`simulator.faults.FaultyFirmware` (same interface). ``stand`` injects a ready stand
+    (e.g. a :class:`PrecomputedStand`); otherwise ``simulator.stand.TestStand`` is built.
     """
     opts = dict(options or {})
-    fault_opts = {k: opts.pop(k) for k in FAULT_OPTIONS if k in opts}
-    if fault_opts and not fault_opts.get("faults"):
+    fault_opts = {k: opts.pop(k) for k in FAULT_OPTION_KEYS if k in opts}
+    fw = _create_firmware(opts, stand)
+    if not fault_opts.get("faults"):
         extra = sorted(set(fault_opts) - {"faults"})
         if extra:
             raise ValueError(f"simulator option(s) {extra} need faults=KIND:P,... as well")
-    unknown = set(opts) - FIRMWARE_OPTIONS
+        return fw
+    if "seed" in opts and "fault_seed" not in fault_opts:
+        fault_opts["seed"] = opts["seed"]
+    return FaultyFirmware(fw, FaultPlan.from_options(fault_opts))
+
+
+def _create_firmware(opts: Mapping[str, Any], stand: "StandLike | None") -> Firmware:
+    """The plain firmware from the options without the fault keys."""
+    known = {"seed", "config", "noise", "plan", "packetized", "serial", "polls", "max_strikes", "replay"}
+    unknown = set(opts) - known
     if unknown:
-        raise ValueError(f"unknown simulator option(s) {sorted(unknown)}; known: "
-                         f"{', '.join(sorted(FIRMWARE_OPTIONS | set(FAULT_OPTIONS)))}")
+        raise ValueError(f"unknown simulator option(s) {sorted(unknown)}; known: {', '.join(sorted(known))}")
     if stand is None:
         stand = _build_stand(opts)
     try:
@@ -55,11 +56,7 @@ def create_analyser(options: "Mapping[str, Any] | None" = None, stand: "StandLik
                   serial=str(opts.get("serial", DEFAULT_SERIAL)), strike_after_polls=polls,
                   max_strikes=max_strikes)
     fw.prepare()
-    if not fault_opts.get("faults"):
-        return fw
-    if "seed" in opts and "fault_seed" not in fault_opts:
-        fault_opts["seed"] = opts["seed"]
-    return FaultyFirmware(fw, FaultPlan.from_options(fault_opts))
+    return fw
 
 
 def _as_bool(value: Any, name: str) -> bool:
@@ -77,6 +74,8 @@ def _build_stand(opts: Mapping[str, Any]) -> StandLike:
         from simulator.replay_stand import ReplayStand
 
         return ReplayStand(str(opts["replay"]))
+    import dataclasses
+
     from simulator.config import FrameConfig
     from simulator.stand import TestStand
 

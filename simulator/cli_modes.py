@@ -12,6 +12,8 @@ import json
 import sys
 from typing import Sequence
 
+from analysis.command_line import add_json_flag, cli_entry, errors_to_exit
+
 from .config import ConfigError, FrameConfig
 from .fem import FrameModel, ModelError
 
@@ -21,7 +23,7 @@ PAPER_POINTS = ("left:9:Y", "top:4:X", "right:4:-Z", "right:6:-X")
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m simulator modes", description=__doc__.splitlines()[0])
     ap.add_argument("--config", metavar="F", help="TOML file merged over simulator/frame.toml")
-    ap.add_argument("--json", action="store_true", help="print JSON: {\"modes\": [{freq_hz, damping, shape}, ...]}")
+    add_json_flag(ap, "print JSON: {\"modes\": [{freq_hz, damping, shape}, ...]}")
     ap.add_argument("--max-freq", type=float, default=None, metavar="HZ",
                     help="list modes up to HZ (default: [modes] max_freq_hz of the config)")
     ap.add_argument("--points", nargs="+", default=list(PAPER_POINTS), metavar="P",
@@ -30,9 +32,10 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+@cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
-    try:
+    with errors_to_exit("simulator modes", (ConfigError, ModelError, ValueError)):
         cfg = FrameConfig.load(args.config)
         masses = {}
         if cfg.sensors.mass_loading and not args.bare:
@@ -41,9 +44,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         model = FrameModel.from_config(cfg, masses)
         modes = model.modes(args.max_freq)
         shapes = model.shape_at(args.points, modes)
-    except (ConfigError, ModelError, ValueError) as exc:
-        print(f"simulator modes: {exc}", file=sys.stderr)
-        return 2
     poles = modes.poles
     rows = []
     for r in range(modes.freq_hz.size):

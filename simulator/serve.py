@@ -25,20 +25,18 @@ SIGINT stop the server promptly and cleanly (exit status 0).
 """
 from __future__ import annotations
 
-import argparse
 import errno
 import logging
 import os
 import select
-import signal
 import socket
-import sys
 import threading
 import time
 import tty
 from typing import Any, Callable, Optional, Sequence
 
-__all__ = ["main", "StopFlag", "Session", "Prebuilt", "serve_tcp", "serve_pty", "analyser_options"]
+__all__ = ["StopFlag", "Session", "Prebuilt", "serve_tcp", "serve_pty", "analyser_options", "firmware_factory",
+           "tcp_listener", "tcp_url", "open_pty"]
 
 _log = logging.getLogger("simulator.serve")
 
@@ -146,7 +144,7 @@ def analyser_options(seed: Optional[int], config: Optional[str], noise: Optional
     return options
 
 
-def _firmware_factory(options: dict, precomputed: Optional[str] = None) -> Callable[[], Any]:
+def firmware_factory(options: dict, precomputed: Optional[str] = None) -> Callable[[], Any]:
     """A function building one fresh firmware; ``precomputed`` is an ``.npz`` with ``volts`` and ``fs_hz``."""
     # the firmware imports its front end (scipy.signal) at the first strike; do it now so that a
     # client's first ARM does not wait a second or two for an import
@@ -170,26 +168,34 @@ def _firmware_factory(options: dict, precomputed: Optional[str] = None) -> Calla
 
 
 # --------------------------------------------------------------------------------- TCP
-def _send_all(conn: socket.socket, data: bytes, stop: StopFlag, send_timeout_s: float) -> bool:
-    """Send ``data`` on a non-blocking socket; False if the client is gone or stalled."""
+def _write_all(write: Callable[[memoryview], int], fd: Any, data: bytes, stop: StopFlag,
+               send_timeout_s: float, who: str, dropped: str) -> bool:
+    """Write ``data`` to a non-blocking ``fd`` through ``write`` (returns the bytes taken); False
+    when the peer is gone (``OSError``) or took nothing for ``send_timeout_s`` (then ``dropped``
+    says what is dropped; ``who`` names the peer in the log)."""
     view = memoryview(data)
     deadline = time.monotonic() + send_timeout_s
     while view:
         try:
-            n = conn.send(view)
+            n = write(view)
             view = view[n:]
             deadline = time.monotonic() + send_timeout_s  # progress restarts the clock
             continue
         except (BlockingIOError, InterruptedError):
             pass
-        except OSError as exc:  # reset, broken pipe
-            _log.info("client went away while receiving: %s", exc)
+        except OSError as exc:  # reset, broken pipe; EIO: the client closed the tty
+            _log.info("%s went away while receiving: %s", who, exc)
             return False
         if stop or time.monotonic() > deadline:
-            _log.warning("client stopped reading for %.1f s (or shutdown); dropping it", send_timeout_s)
+            _log.warning("%s stopped reading for %.1f s (or shutdown); dropping %s", who, send_timeout_s, dropped)
             return False
-        select.select([], [conn], [], TICK_S)
+        select.select([], [fd], [], TICK_S)
     return True
+
+
+def _send_all(conn: socket.socket, data: bytes, stop: StopFlag, send_timeout_s: float) -> bool:
+    """Send ``data`` on a non-blocking socket; False if the client is gone or stalled."""
+    return _write_all(conn.send, conn, data, stop, send_timeout_s, "client", "it")
 
 
 def _serve_connection(conn: socket.socket, session: Session, stop: StopFlag, send_timeout_s: float,
@@ -228,7 +234,7 @@ def _serve_connection(conn: socket.socket, session: Session, stop: StopFlag, sen
             return
 
 
-def _tcp_listener(host: str, port: int) -> socket.socket:
+def tcp_listener(host: str, port: int) -> socket.socket:
     infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
     family, socktype, proto, _, addr = infos[0]
     srv = socket.socket(family, socktype, proto)
@@ -292,24 +298,8 @@ def open_pty() -> tuple[int, str]:
 
 
 def _pty_write(master: int, data: bytes, stop: StopFlag, send_timeout_s: float) -> bool:
-    view = memoryview(data)
-    deadline = time.monotonic() + send_timeout_s
-    while view:
-        try:
-            n = os.write(master, view)
-            view = view[n:]
-            deadline = time.monotonic() + send_timeout_s
-            continue
-        except (BlockingIOError, InterruptedError):
-            pass
-        except OSError as exc:  # EIO: the client closed the tty
-            _log.info("pty client went away while receiving: %s", exc)
-            return False
-        if stop or time.monotonic() > deadline:
-            _log.warning("pty client stopped reading for %.1f s (or shutdown); dropping its output", send_timeout_s)
-            return False
-        select.select([], [master], [], TICK_S)
-    return True
+    return _write_all(lambda view: os.write(master, view), master, data, stop, send_timeout_s,
+                      "pty client", "its output")
 
 
 def serve_pty(master: int, factory: Callable[[], Any], stop: StopFlag, *, max_clients: int = 0,
@@ -356,83 +346,3 @@ def serve_pty(master: int, factory: Callable[[], Any], stop: StopFlag, *, max_cl
         if out and not _pty_write(master, out, stop, send_timeout_s):
             session = None
     return 0
-
-
-# --------------------------------------------------------------------------------- CLI
-def _parse_hostport(text: str) -> tuple[str, int]:
-    host, sep, port = text.rpartition(":")
-    host = host.strip("[]")
-    if not sep or not host or not port.isdigit() or int(port) > 65535:
-        raise argparse.ArgumentTypeError(f"expected HOST:PORT (port 0..65535, 0 = any free port), got {text!r}")
-    return host, int(port)
-
-
-def _build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m simulator serve",
-        description="Run the simulated analyser as a TCP or pseudo-terminal server. The first line printed "
-                    "is the device URL (socket://HOST:PORT) or the pty path to connect to. Each connection "
-                    "gets a fresh analyser (same seed, power-on state).",
-    )
-    door = p.add_mutually_exclusive_group(required=True)
-    door.add_argument("--tcp", type=_parse_hostport, metavar="HOST:PORT",
-                      help="listen on HOST:PORT (PORT 0 = any free port); use 127.0.0.1 for local use")
-    door.add_argument("--pty", action="store_true", help="create a pseudo-terminal and print its path (POSIX)")
-    p.add_argument("--seed", type=int, default=None, help="random seed of the simulated frame/operator")
-    p.add_argument("--config", default=None, help="frame configuration TOML (defaults merged)")
-    p.add_argument("--noise", choices=("on", "off"), default=None, help="sensor noise on/off")
-    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                   help="any other create_analyser option, as in a sim:// URL query (repeatable)")
-    p.add_argument("--precomputed", default=None, metavar="FILE.npz",
-                   help="replay cached input volts (arrays volts[n_ch, n] and fs_hz) instead of simulating the "
-                        "frame (throughput benchmarks)")
-    p.add_argument("--max-clients", type=int, default=0, help="exit after serving this many clients (0 = never)")
-    p.add_argument("--send-timeout", type=float, default=10.0,
-                   help="drop a client that stops reading for this many seconds (default 10)")
-    p.add_argument("--idle-timeout", type=float, default=0.0,
-                   help="TCP: close a connection silent for this many seconds (0 = never, the default)")
-    p.add_argument("--yield-after", type=float, default=5.0,
-                   help="TCP: close a client silent for this many seconds while another client waits (default 5; "
-                        "0 = never)")
-    p.add_argument("-v", "--verbose", action="store_true", help="log every connection (stderr)")
-    return p
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m simulator serve``; returns the exit status."""
-    args = _build_parser().parse_args(list(sys.argv[1:] if argv is None else argv))
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
-                        format="serve: %(levelname)s %(message)s")
-    try:
-        options = analyser_options(args.seed, args.config, args.noise, args.option)
-        factory = Prebuilt(_firmware_factory(options, args.precomputed))
-        factory.ready()  # fail now, with a clear message, if the options are wrong
-    except (ValueError, OSError, KeyError, TypeError) as exc:
-        print(f"serve: cannot build the simulated analyser: {exc}", file=sys.stderr)
-        return 2
-
-    stop = StopFlag()
-    previous = {sig: signal.signal(sig, stop.set) for sig in (signal.SIGTERM, signal.SIGINT)}
-    try:
-        if args.tcp is not None:
-            host, port = args.tcp
-            try:
-                srv = _tcp_listener(host, port)
-            except OSError as exc:
-                print(f"serve: cannot listen on {host}:{port}: {exc}", file=sys.stderr)
-                return 2
-            with srv:
-                print(tcp_url(srv), flush=True)
-                return serve_tcp(srv, factory, stop, max_clients=args.max_clients,
-                                 send_timeout_s=args.send_timeout, idle_timeout_s=args.idle_timeout,
-                                 yield_after_s=args.yield_after)
-        master, path = open_pty()
-        try:
-            print(path, flush=True)
-            return serve_pty(master, factory, stop, max_clients=args.max_clients,
-                             send_timeout_s=args.send_timeout)
-        finally:
-            os.close(master)
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)

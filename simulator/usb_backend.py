@@ -31,28 +31,23 @@ import errno
 import logging
 import struct
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Iterator, Optional
 
 import usb.backend
 import usb.core
 import usb.util
 
+from .usb_descriptors import CONFIG_VALUE, EP_IN, EP_OUT, LANGID_EN_US, MAX_PACKET, SIM_PID, SIM_VID
+from .usb_descriptors import ConfigurationDescriptor as _ConfigurationDescriptor
+from .usb_descriptors import DeviceDescriptor as _DeviceDescriptor
+from .usb_descriptors import EndpointDescriptor as _EndpointDescriptor
+from .usb_descriptors import InterfaceDescriptor as _InterfaceDescriptor
+
 __all__ = ["SimUsbBackend", "SIM_VID", "SIM_PID", "EP_OUT", "EP_IN", "MAX_PACKET"]
 
 _log = logging.getLogger(__name__)
 
-#: pid.codes vendor ID and its test product ID
-SIM_VID = 0x1209
-SIM_PID = 0x0001
-EP_OUT = 0x01
-EP_IN = 0x81
-MAX_PACKET = 512
-INTERFACE_CLASS = 0xFF
-INTERFACE_SUBCLASS = 0x06
-INTERFACE_PROTOCOL = 0x50
-CONFIG_VALUE = 1
-LANGID_EN_US = 0x0409
 
 # control requests
 _GET_STATUS = 0x00
@@ -71,97 +66,6 @@ _POLL_MAX_S = 0.005
 
 def _usb_error(text: str, err: int) -> usb.core.USBError:
     return usb.core.USBError(f"{text} [{errno.errorcode.get(err, err)}]", None, err)
-
-
-# -- descriptors (plain attribute bags, as pyusb's _set_attr reads them) ----------------------
-@dataclass
-class _DeviceDescriptor:
-    idVendor: int
-    idProduct: int
-    bus: int
-    address: int
-    port_number: int
-    port_numbers: tuple
-    speed: int = usb.util.SPEED_HIGH
-    bLength: int = 18
-    bDescriptorType: int = usb.util.DESC_TYPE_DEVICE
-    bcdUSB: int = 0x0200
-    bDeviceClass: int = 0x00  # class defined by the interface
-    bDeviceSubClass: int = 0x00
-    bDeviceProtocol: int = 0x00
-    bMaxPacketSize0: int = 64
-    bcdDevice: int = 0x0100
-    iManufacturer: int = 1
-    iProduct: int = 2
-    iSerialNumber: int = 3
-    bNumConfigurations: int = 1
-    extra_descriptors: list = field(default_factory=list)
-
-    def pack(self) -> bytes:
-        return struct.pack(
-            "<BBHBBBBHHHBBBB", self.bLength, self.bDescriptorType, self.bcdUSB, self.bDeviceClass,
-            self.bDeviceSubClass, self.bDeviceProtocol, self.bMaxPacketSize0, self.idVendor, self.idProduct,
-            self.bcdDevice, self.iManufacturer, self.iProduct, self.iSerialNumber, self.bNumConfigurations,
-        )
-
-
-@dataclass
-class _ConfigurationDescriptor:
-    bLength: int = 9
-    bDescriptorType: int = usb.util.DESC_TYPE_CONFIG
-    wTotalLength: int = 9 + 9 + 7 + 7
-    bNumInterfaces: int = 1
-    bConfigurationValue: int = CONFIG_VALUE
-    iConfiguration: int = 0
-    bmAttributes: int = 0xC0  # self powered
-    bMaxPower: int = 50  # 100 mA in 2 mA units
-    extra_descriptors: list = field(default_factory=list)
-
-    def pack(self) -> bytes:
-        return struct.pack(
-            "<BBHBBBBB", self.bLength, self.bDescriptorType, self.wTotalLength, self.bNumInterfaces,
-            self.bConfigurationValue, self.iConfiguration, self.bmAttributes, self.bMaxPower,
-        )
-
-
-@dataclass
-class _InterfaceDescriptor:
-    bLength: int = 9
-    bDescriptorType: int = usb.util.DESC_TYPE_INTERFACE
-    bInterfaceNumber: int = 0
-    bAlternateSetting: int = 0
-    bNumEndpoints: int = 2
-    bInterfaceClass: int = INTERFACE_CLASS
-    bInterfaceSubClass: int = INTERFACE_SUBCLASS
-    bInterfaceProtocol: int = INTERFACE_PROTOCOL
-    iInterface: int = 0
-    extra_descriptors: list = field(default_factory=list)
-
-    def pack(self) -> bytes:
-        return struct.pack(
-            "<BBBBBBBBB", self.bLength, self.bDescriptorType, self.bInterfaceNumber, self.bAlternateSetting,
-            self.bNumEndpoints, self.bInterfaceClass, self.bInterfaceSubClass, self.bInterfaceProtocol,
-            self.iInterface,
-        )
-
-
-@dataclass
-class _EndpointDescriptor:
-    bEndpointAddress: int
-    bLength: int = 7
-    bDescriptorType: int = usb.util.DESC_TYPE_ENDPOINT
-    bmAttributes: int = usb.util.ENDPOINT_TYPE_BULK
-    wMaxPacketSize: int = MAX_PACKET
-    bInterval: int = 0
-    bRefresh: int = 0
-    bSynchAddress: int = 0
-    extra_descriptors: list = field(default_factory=list)
-
-    def pack(self) -> bytes:
-        return struct.pack(
-            "<BBBBHB", self.bLength, self.bDescriptorType, self.bEndpointAddress, self.bmAttributes,
-            self.wMaxPacketSize, self.bInterval,
-        )
 
 
 @dataclass(frozen=True)

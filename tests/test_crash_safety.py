@@ -1,6 +1,6 @@
 """Crash safety: the capture process killed (SIGKILL) at points the test controls (after hit k, inside
 the next hit's transfers or at its prompt, or during start-up) keeps every reported hit, and
-``capture --resume`` finishes the plan from the killed recording (benchmarks/crash_kill.py runs the
+``capture --resume`` finishes the plan from the killed recording (benchmarks/reliability/crash_kill.py runs the
 same with 50+ kills). No outcome depends on the machine's speed: the capture cannot finish before
 the kill because it waits for operator answers that the trial withholds."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _crash_module():
-    spec = importlib.util.spec_from_file_location("crash_kill", ROOT / "benchmarks" / "crash_kill.py")
+    spec = importlib.util.spec_from_file_location("crash_kill", ROOT / "benchmarks" / "reliability" / "crash_kill.py")
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod
     spec.loader.exec_module(mod)

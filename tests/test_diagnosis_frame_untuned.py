@@ -1,5 +1,5 @@
 """The untuned frame (support/joint rotational stiffness 1e6/1e5 N m/rad) against the paper's measured
-poles: the leave-one-out catalogue of ``benchmarks/diagnosis_frame_vs_paper.py`` names support/joint
+poles: the leave-one-out catalogue of ``benchmarks/studies/diagnosis_frame_vs_paper.py`` names support/joint
 flexibility as the cause, and the fitted support stiffness comes back near the tuned default."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _load():
     spec = importlib.util.spec_from_file_location("diagnosis_frame_vs_paper",
-                                                  ROOT / "benchmarks" / "diagnosis_frame_vs_paper.py")
+                                                  ROOT / "benchmarks" / "studies" / "diagnosis_frame_vs_paper.py")
     mod = importlib.util.module_from_spec(spec)
     sys.modules.setdefault(spec.name, mod)
     spec.loader.exec_module(mod)

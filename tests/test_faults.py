@@ -16,15 +16,14 @@ from analysis.recording import Recording, counts_crc32
 from acquisition.session import CaptureSession, TestPlan
 from acquisition.setup import default_setup
 from simulator.analyser import create_analyser
-from simulator.faults import (FAULT_KINDS, TRANSIENT_SENSES, FaultPlan, FaultyFirmware,
-                              parse_faults)
+from simulator.faults import FAULT_KINDS, TRANSIENT_SENSES, FaultPlan, FaultyFirmware, parse_faults
 from simulator.firmware import Firmware
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _soak_module():
-    spec = importlib.util.spec_from_file_location("soak_capture", ROOT / "benchmarks" / "soak_capture.py")
+    spec = importlib.util.spec_from_file_location("soak_capture", ROOT / "benchmarks" / "reliability" / "soak_capture.py")
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod  # dataclasses look their module up
     spec.loader.exec_module(mod)

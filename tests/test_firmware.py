@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 from acquisition import protocol as P
 from acquisition.setup import default_setup, setup_to_wire
 from simulator.analyser import create_analyser
-from simulator.firmware import Firmware, PrecomputedStand, _find_trigger
+from simulator.capture import find_trigger as _find_trigger
+from simulator.firmware import Firmware, PrecomputedStand
 from test_driver import PulseStand
 
 INQ_CDB = bytes.fromhex("120000002400")  # INQUIRY, allocation length 36

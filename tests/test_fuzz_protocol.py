@@ -2,7 +2,7 @@
 
 Only :class:`acquisition.errors.ProtocolError` (with a message) may come out of a decoder; the
 firmware never raises on any input and always keeps its bulk-only invariants. The number of
-cases per test is ``IMPACTLAB_FUZZ_EXAMPLES`` (default 200; ``benchmarks/fuzz_long.py`` runs 10 000).
+cases per test is ``IMPACTLAB_FUZZ_EXAMPLES`` (default 200; ``benchmarks/reliability/fuzz_long.py`` runs 10 000).
 """
 from __future__ import annotations
 

@@ -220,10 +220,10 @@ def test_excitation_band_marks_the_10_and_20_db_drops():
 @pytest.mark.realdata
 def test_report_of_the_uliege_plane(shared_data, tmp_path):
     """The ULiege plane (222 FRFs, 74 hammer points on node_shock.csv): every mode in the table, the shapes
-    on the measured geometry (timings: benchmarks/bench_report.py)."""
+    on the measured geometry (timings: benchmarks/speed/bench_report.py)."""
     from analysis.report_html import build_document, run_fit, write_report
-    from benchmarks.bench_report import uliege_geometry
-    from benchmarks.validation import uliege_plane
+    from benchmarks.speed.bench_report import uliege_geometry
+    from benchmarks.accuracy.validation import uliege_plane
 
     frf = uliege_plane.load(shared_data)
     fit = run_fit(frf, band=uliege_plane.BAND)

@@ -46,7 +46,7 @@ class TaggedEcho:
 
 @pytest.fixture
 def tcp_server():
-    srv = serve._tcp_listener("127.0.0.1", 0)
+    srv = serve.tcp_listener("127.0.0.1", 0)
     stop = serve.StopFlag()
     made: list[TaggedEcho] = []
 
@@ -133,7 +133,7 @@ def test_prebuilt_hands_out_fresh_instances_and_errors() -> None:
 
 
 def test_max_clients_ends_the_server() -> None:
-    srv = serve._tcp_listener("127.0.0.1", 0)
+    srv = serve.tcp_listener("127.0.0.1", 0)
     with srv:
         th = threading.Thread(target=serve.serve_tcp, args=(srv, TaggedEcho, serve.StopFlag()),
                               kwargs={"max_clients": 1}, daemon=True)

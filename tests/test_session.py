@@ -23,8 +23,8 @@ from acquisition.session import (
     TestPlan,
     average_recorded_hits,
     channel_table,
-    terminal_decider,
 )
+from acquisition.cli_capture import terminal_decider
 from acquisition.setup import AcquisitionSetup, ChannelSetup, TriggerSetup
 from analysis.spectra import WindowSettings
 
@@ -354,3 +354,47 @@ def test_sim_noisy_channels_h1_h2_bracket_truth_and_coherence_dips_at_antiresona
     # over the band (medians: the magnitude of a noisy estimate is biased up where |H| ~ noise)
     assert np.median(np.abs(H2[band]) / np.abs(H[band])) > 1.05
     assert np.median(coh[troughs]) < np.median(coh[peaks]) - 0.1
+
+
+class RecordingOperator:
+    """A non-terminal front end (as a browser station would be): decides from the event it gets and
+    keeps every per-hit event."""
+
+    def __init__(self, reject_attempts=()):
+        self.reject_attempts = set(reject_attempts)
+        self.events: list = []
+        self.lines: list[str] = []
+
+    def decide(self, summary):
+        return summary.attempt not in self.reject_attempts
+
+    def progress(self, text):
+        self.lines.append(text)
+
+    def on_hit(self, summary):
+        self.events.append(summary)
+
+
+def test_operator_callbacks_get_each_hit_with_data_verdict_and_reasons_after_it_is_written(tmp_path):
+    stand = ResonatorStand(seed=3, double=[3])
+    setup = small_setup()
+    op = RecordingOperator(reject_attempts=[2])
+    order: list = []
+    with make_analyser(stand) as an, RecordingWriter(tmp_path / "op.h5", instrument=an.identify().as_dict(),
+                                                     setup=setup.to_dict(), channels=channel_table(setup),
+                                                     windows=WIN) as w:
+        arm = an.arm
+        an.arm = lambda: (order.append("arm"), arm())[1]
+        real_on_hit = op.on_hit
+        op.on_hit = lambda s: (order.append(("hit", s.hit_index)), real_on_hit(s))
+        result = CaptureSession(an, setup, TestPlan(hits_per_point=2), writer=w, windows=WIN, operator=op).run()
+    assert result.accepted == 2 and len(op.events) == 4
+    assert [e.decision for e in op.events] == [True, False, False, True]
+    assert op.events[1].reasons == ["rejected by the operator"] and "double hit" in op.events[2].reasons[0]
+    assert [e.hit_index for e in op.events] == [0, 1, 2, 3]
+    assert all(e.sample_rate_hz == FS and e.data.shape == (4, N) for e in op.events)
+    # every hit is written and reported before the next arm
+    assert order == ["arm", ("hit", 0), "arm", ("hit", 1), "arm", ("hit", 2), "arm", ("hit", 3)]
+    assert any("REJECTED: double hit" in line for line in op.lines)
+    with Recording(tmp_path / "op.h5") as rec:
+        assert [h.accepted for h in rec.hits()] == [True, False, False, True]

@@ -1,10 +1,10 @@
-"""Real measured data through the project's importers, spectra and LSFD (``benchmarks/validation``).
+"""Real measured data through the project's importers, spectra and LSFD (``benchmarks/accuracy/validation``).
 
 Each test reads one dataset of ``../shared/data`` (skipped when the folder is absent) and checks a fact
 known independently of the fitter: the analyser's window constant, a free-free beam's frequency ratios,
 a driving point's residue phase, the import path against the direct spectra, the window correction of
 the poles, the softening of a bolted joint. The heavy comparisons (sdypy-EMA, stabilization, all modes)
-live in ``benchmarks/validation`` (``python -m benchmarks.validation.run_all``).
+live in ``benchmarks/accuracy/validation`` (``python -m benchmarks.accuracy.validation.run_all``).
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ _ROOT = str(Path(__file__).resolve().parents[1])
 if _ROOT not in sys.path:
     sys.path.insert(0, _ROOT)
 
-from benchmarks.validation.common import consistency_table, match_poles, synthesis_error  # noqa: E402
+from benchmarks.accuracy.validation.common import consistency_table, match_poles, synthesis_error  # noqa: E402
 
 realdata = pytest.mark.realdata
 
@@ -55,7 +55,7 @@ def test_consistency_table_recovers_the_repeated_poles():
 # ------------------------------------------------------------------ real data
 @realdata
 def test_uliege_window_constant_and_raw_h1(shared_data):
-    from benchmarks.validation import uliege_plane as u
+    from benchmarks.accuracy.validation import uliege_plane as u
 
     wt = u.window_tau(shared_data)
     # the analyser's exponential decays to 0.329 over the 8 s block: tau = 8 / ln(1/0.329)
@@ -72,7 +72,7 @@ def test_uliege_window_constant_and_raw_h1(shared_data):
 
 @realdata
 def test_uliege_first_lab_window_and_dataphysics_importer(shared_data):
-    from benchmarks.validation import uliege_plane as u
+    from benchmarks.accuracy.validation import uliege_plane as u
 
     lab1, tau1 = u.first_lab(shared_data)
     # 16 s blocks in the first lab: the same 0.329 end value gives twice the second lab's tau
@@ -83,7 +83,7 @@ def test_uliege_first_lab_window_and_dataphysics_importer(shared_data):
 
 @realdata
 def test_uliege_exponential_window_is_removed_from_every_pole(shared_data):
-    from benchmarks.validation import uliege_plane as u
+    from benchmarks.accuracy.validation import uliege_plane as u
 
     tau = 8.0 / math.log(1 / 0.329)
     frf = u.load(shared_data, band=(37.0, 43.0), tau_s=tau)
@@ -98,7 +98,7 @@ def test_uliege_exponential_window_is_removed_from_every_pole(shared_data):
 
 @realdata
 def test_ladisk_beam_bending_ratios_match_free_free_theory(shared_data):
-    from benchmarks.validation import ladisk_beam as lb
+    from benchmarks.accuracy.validation import ladisk_beam as lb
 
     frf = lb.load_single(shared_data)
     f = []
@@ -112,7 +112,7 @@ def test_ladisk_beam_bending_ratios_match_free_free_theory(shared_data):
 
 @realdata
 def test_modelab_driving_point_residue_is_imaginary(shared_data):
-    from benchmarks.validation import modelab_beam as mb
+    from benchmarks.accuracy.validation import modelab_beam as mb
 
     frf = mb.load(shared_data, band=(108.0, 116.0))
     assert frf.H.shape[:2] == (1, 9)
@@ -125,7 +125,7 @@ def test_modelab_driving_point_residue_is_imaginary(shared_data):
 
 @realdata
 def test_pyfrf_import_path_and_close_modes(shared_data):
-    from benchmarks.validation import pyfrf_5impacts as p
+    from benchmarks.accuracy.validation import pyfrf_5impacts as p
 
     frf = p.load(shared_data)
     rec = p.recording_frf(shared_data)
@@ -144,7 +144,7 @@ def test_pyfrf_import_path_and_close_modes(shared_data):
 
 @realdata
 def test_f16_first_period_is_the_transient_one(shared_data):
-    from benchmarks.validation import f16_gvt as f16
+    from benchmarks.accuracy.validation import f16_gvt as f16
 
     force, acc, fs = f16.read_f16_csv(shared_data / f16.NAME / "F16Data_FullMSine_Level1.csv")
     assert fs == 400.0 and force.size == 9 * f16.N_PER
@@ -158,7 +158,7 @@ def test_f16_first_period_is_the_transient_one(shared_data):
 
 @realdata
 def test_plate_sweep_spans_60_to_500_hz_within_the_record(shared_data):
-    from benchmarks.validation import plate_sweep as ps
+    from benchmarks.accuracy.validation import plate_sweep as ps
 
     force, acc, fs = ps.read_plate_hdf5(shared_data / ps.NAME / "view_0.hdf5")
     assert fs == 25600.0 and force.size == 51200
@@ -170,7 +170,7 @@ def test_plate_sweep_spans_60_to_500_hz_within_the_record(shared_data):
 
 @realdata
 def test_pyuff_reader_matches_text_copies(shared_data):
-    from benchmarks.validation import pyuff_3frf as pu
+    from benchmarks.accuracy.validation import pyuff_3frf as pu
 
     frf = pu.load(shared_data)
     txt = pu.load_text(shared_data)
@@ -180,7 +180,7 @@ def test_pyuff_reader_matches_text_copies(shared_data):
 
 @realdata
 def test_unesp_bolted_joint_softens_at_the_higher_level(shared_data):
-    from benchmarks.validation import unesp_boltedbeam as ub
+    from benchmarks.accuracy.validation import unesp_boltedbeam as ub
 
     f = {}
     for level in ("0p05", "0p30"):
@@ -195,7 +195,7 @@ def test_unesp_bolted_joint_softens_at_the_higher_level(shared_data):
 @realdata
 def test_peer_pole_bookkeeping_defect(shared_data):
     pytest.importorskip("sdypy.EMA")
-    from benchmarks.validation.peer_defects import reproduce
+    from benchmarks.accuracy.validation.peer_defects import reproduce
 
     r = reproduce()
     # the reported poles come from the model order after the one get_constants uses
@@ -206,7 +206,7 @@ def test_peer_pole_bookkeeping_defect(shared_data):
 def test_discussion_placeholders_are_known_case_figures_with_valid_formats():
     import string
 
-    from benchmarks.validation.run_all import CASE_KEYS, DISCUSSION, Figures, fill_discussion
+    from benchmarks.accuracy.validation.run_all import CASE_KEYS, DISCUSSION, Figures, fill_discussion
 
     text = DISCUSSION.read_text(encoding="utf-8")
     fields = [(name, spec) for _, name, spec, _ in string.Formatter().parse(text) if name is not None]
@@ -228,7 +228,7 @@ def test_discussion_placeholders_are_known_case_figures_with_valid_formats():
 
 @realdata
 def test_pyfrf_has_a_905_hz_mode_the_peak_list_misses(shared_data):
-    from benchmarks.validation import pyfrf_5impacts as p
+    from benchmarks.accuracy.validation import pyfrf_5impacts as p
 
     frf = p.load(shared_data)
     peaks = p.peak_frequencies(frf, p.BAND)
@@ -249,7 +249,7 @@ def test_pyfrf_has_a_905_hz_mode_the_peak_list_misses(shared_data):
 
 @realdata
 def test_uliege_weak_39_7_hz_mode_is_in_every_accelerometer(shared_data):
-    from benchmarks.validation import uliege_plane as u
+    from benchmarks.accuracy.validation import uliege_plane as u
 
     tau = 8.0 / math.log(1 / 0.329)
     band = (37.2, 42.7)

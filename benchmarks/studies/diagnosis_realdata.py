@@ -8,9 +8,9 @@
   responses) against the Samcef FE mode shapes at the impact points, see the function's docstring.
 
 The data are converted to UFF 58 files in a temporary folder and ``python -m analysis diagnose`` is
-run on them (the real command-line path); reports go to ``docs/diagnosis/<name>/``.
+run on them (the real command-line path); reports go to ``docs/diagnosis/diagnosis_realdata_<name>/``.
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/diagnosis_realdata.py unesp [--band 10:300]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/diagnosis_realdata.py unesp [--band 10:300]
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from analysis.cli_diagnose import main as diagnose_main  # noqa: E402
 from analysis.frf import FRFSet  # noqa: E402
 from analysis.uff import write_uff58  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data"
 
 
@@ -132,7 +132,7 @@ def main() -> None:
     ap.add_argument("case", choices=("unesp", "uliege"))
     ap.add_argument("--band", default=None)
     args = ap.parse_args()
-    out = ROOT / "docs" / "diagnosis" / args.case
+    out = ROOT / "docs" / "diagnosis" / f"diagnosis_realdata_{args.case}"
     out.mkdir(parents=True, exist_ok=True)
     if args.case == "unesp":
         raise SystemExit(run_unesp(args.band or "10:300", out))

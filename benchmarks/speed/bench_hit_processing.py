@@ -1,7 +1,7 @@
 """Per-hit processing time: hit checks + windows + spectra + accumulator update (+ coherence so far).
 
 4 channels (1 force + 3 responses) x 8192 samples, int16 counts scaled to engineering units as the
-capture session does. Requirement: under 20 ms per hit. Run: .venv/bin/python benchmarks/bench_hit_processing.py
+capture session does. Requirement: under 20 ms per hit. Run: .venv/bin/python benchmarks/speed/bench_hit_processing.py
 """
 from __future__ import annotations
 

@@ -29,10 +29,10 @@ The sdypy venv (never a dependency of impactlab)
     python3 -m venv /tmp/bench-venv
     /tmp/bench-venv/bin/pip install sdypy-EMA numpy scipy matplotlib
     /tmp/bench-venv/bin/pip install -e /work/main
-    /tmp/bench-venv/bin/python benchmarks/bench_vs_sdypy.py
+    /tmp/bench-venv/bin/python benchmarks/speed/bench_vs_sdypy.py
 
 Without sdypy importable, the sdypy rows are skipped with a message and the rest still runs
-(``.venv/bin/python benchmarks/bench_vs_sdypy.py``).
+(``.venv/bin/python benchmarks/speed/bench_vs_sdypy.py``).
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ Each case: random band (lower edge 1-5 Hz, upper 150-400 Hz), line spacing 0.125
 matrix, accuracy per effect, the false-alarm rate on null cases, the primary-parameter errors against
 ``simulator.effects.TOLERANCES`` and the time per case.
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_diagnosis.py [--per-effect 22] [--null 50]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_diagnosis.py [--per-effect 22] [--null 50]
 
 ``--timedata [N]``: instead, the time-data effects (``simulator.time_effects``): N cases per effect plus
 N clean ones, each a fresh set of 6, 8 or 10 hits at two force levels (fs 2048 Hz, 4096 samples,

@@ -1,6 +1,6 @@
 """Soak test: a long capture with faults injected at random loses no accepted hit.
 
-    .venv/bin/python benchmarks/soak_capture.py [--hits 1000] [--door sim|usbsim|loopback]
+    .venv/bin/python benchmarks/reliability/soak_capture.py [--hits 1000] [--door sim|usbsim|loopback]
         [--faults KIND:P,...] [--seed N] [--out DIR] [--json]
 
 The capture session runs in this process against a :class:`simulator.faults.FaultyFirmware`

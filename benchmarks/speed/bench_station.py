@@ -1,7 +1,7 @@
 """Station latency and idle cost: time from a hit arriving from the analyser to the page showing its
 plots (p50/p95 over N hits, target p95 < 250 ms), and the server's CPU while the page is open and idle.
 
-    .venv/bin/python benchmarks/bench_station.py [--hits 100] [--idle-s 10]
+    .venv/bin/python benchmarks/speed/bench_station.py [--hits 100] [--idle-s 10]
 
 A station process on ``sim://`` and a headless Chromium page. Each hit: the script arms through the
 API (as a second tab holding control), the page receives the state by server-sent events, fetches
@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from tempfile import TemporaryDirectory
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests"))
 
 from station_support import Api, StationProcess, chrome

@@ -1,6 +1,6 @@
 """Sustained block throughput through each door, as a multiple of real time.
 
-    .venv/bin/python benchmarks/bench_transport.py [--block 65536] [--seconds 3] [--doors sim,socket,...]
+    .venv/bin/python benchmarks/speed/bench_transport.py [--block 65536] [--seconds 3] [--doors sim,socket,...]
                                                    [--profile DOOR]
 
 Set-up: 4 channels at 51.2 kS/s (the default test plan's channels, rate raised to 51 200 Hz),
@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 

@@ -14,8 +14,8 @@ Two cases (``--case both``, the default): the tuned frame (frame.toml defaults) 
 (the earlier defaults, support and joint rotational stiffness 1e6 and 1e5 N m/rad), where the catalogue
 has a real discrepancy to name (part 1b of the doc).
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/diagnosis_frame_vs_paper.py [--case both] \
-        [--plot docs/diagnosis/frame_vs_paper.png] [--plot-untuned docs/diagnosis/frame_untuned_vs_paper.png]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/diagnosis_frame_vs_paper.py [--case both] \
+        [--plot docs/diagnosis/diagnosis_frame_vs_paper.png] [--plot-untuned docs/diagnosis/diagnosis_frame_vs_paper_untuned.png]
 """
 from __future__ import annotations
 

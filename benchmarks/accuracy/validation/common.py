@@ -183,7 +183,7 @@ def md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 def pole_table(ours, peer=None, crlb=None) -> str:
     """Our poles (f, std, zeta %, std) next to the peer's (f, zeta %), paired by frequency.
 
-    ours : an LSFDResult; peer : a :class:`benchmarks.validation.peer.PeerFit` or None;
+    ours : an LSFDResult; peer : a :class:`benchmarks.accuracy.validation.peer.PeerFit` or None;
     crlb : optional :class:`analysis.uncertainty.CRLB` of our model (bounds shown next to the std).
     """
     fo = np.asarray(ours.freq_hz)

@@ -12,7 +12,7 @@ CRLB (``analysis.uncertainty.crlb_poles`` with the true model and noise variance
 and the mean reported standard deviation over the CRLB. Pooled ratio = sqrt(mean(ratio^2))
 over modes and (f, zeta). Target: pooled RMS/CRLB <= 1.1.
 
-Run: ``.venv/bin/python benchmarks/bench_lsfd_crlb.py [--runs 100] [--levels 0.01 0.05] [--case close table1]``
+Run: ``.venv/bin/python benchmarks/accuracy/bench_lsfd_crlb.py [--runs 100] [--levels 0.01 0.05] [--case close table1]``
 """
 from __future__ import annotations
 

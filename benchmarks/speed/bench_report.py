@@ -7,7 +7,7 @@ to the page's "drawn" mark). Needs ../shared/data, plotly (the report extra), an
 column selenium + chromium + chromium-driver. Prints a table; writes the reports to --out
 (default: a temporary folder, removed).
 
-    .venv/bin/python benchmarks/bench_report.py [--out DIR]
+    .venv/bin/python benchmarks/speed/bench_report.py [--out DIR]
 """
 from __future__ import annotations
 
@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 DATA = ROOT.parent / "shared" / "data"
 
 from analysis.geometry import Geometry
 from analysis.report_html import build_document, run_fit, write_report
-from benchmarks.validation import modelab_beam, uliege_plane
+from benchmarks.accuracy.validation import modelab_beam, uliege_plane
 
 TARGET_WRITE_S, TARGET_MB, TARGET_DRAW_S = 5.0, 15.0, 3.0
 

@@ -34,7 +34,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FAULTS = "phase_error:0.01,garbage:0.005,check_condition:0.01,double_hit:0.02"
 _ACCEPTED = re.compile(r"progress: .* (\d+) accepted and (\d+) rejected in total")
 

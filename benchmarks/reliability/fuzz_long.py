@@ -1,6 +1,6 @@
 """Long fuzzing run: every ``tests/test_fuzz_*.py`` test with 10 000 cases (hypothesis).
 
-    .venv/bin/python benchmarks/fuzz_long.py [--examples 10000] [--files tests/test_fuzz_uff.py ...]
+    .venv/bin/python benchmarks/reliability/fuzz_long.py [--examples 10000] [--files tests/test_fuzz_uff.py ...]
 
 Runs pytest once per fuzz file with ``IMPACTLAB_FUZZ_EXAMPLES`` set and hypothesis statistics
 on, then prints a table: test, cases run (hypothesis "passing examples"), failures, seconds.
@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 _STAT = re.compile(r"^(tests/\S+::\S+):\s*$")
 _PASS = re.compile(r"(\d+) passing(?: examples?)?, (\d+) failing")
 

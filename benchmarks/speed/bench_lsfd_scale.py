@@ -8,7 +8,7 @@ peak memory is traced by ``tracemalloc`` over the fit (numpy allocations are tra
 OpenBLAS runs single-threaded unless ``OPENBLAS_NUM_THREADS`` is set: on the shared 2-core
 machine threaded BLAS under contention was 20x slower (8 s instead of 0.4 s).
 
-Run: ``.venv/bin/python benchmarks/bench_lsfd_scale.py [--outputs 100 --refs 3 --lines 8000 --modes 20]
+Run: ``.venv/bin/python benchmarks/speed/bench_lsfd_scale.py [--outputs 100 --refs 3 --lines 8000 --modes 20]
 [--method lm|gn] [--precise-only]``
 """
 from __future__ import annotations

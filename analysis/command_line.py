@@ -1,0 +1,139 @@
+"""The argument boilerplate every ``cli_*.py`` module of the three packages shares.
+
+- :class:`Parser` / :func:`parse_args`: an ``ArgumentParser`` whose usage errors become exit code 2
+  with a message instead of ``SystemExit`` from deep inside argparse.
+- :func:`add_overwrite`, :func:`add_json_flag`, :func:`add_verbose`, :func:`set_verbosity`: the
+  common options (``--overwrite``, ``--json``, ``-v``) with each command's own help text.
+- :func:`check_out_dir`: an output path whose folder does not exist is bad input, found before
+  any work is done.
+- :func:`errors_to_exit` + :func:`cli_entry`: "these errors end the command with this exit code
+  and the message ``PROG: [prefix]ERROR`` on stderr", written once; ``cli_entry`` also makes
+  ``main`` safe against a closed stdout pipe (``... | head``).
+
+This module is in ``analysis`` (the bottom layer) so that all three packages may import it.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import functools
+import logging
+import os
+import sys
+from pathlib import Path
+from typing import Callable, Iterator, Optional, Sequence, TypeVar
+
+from .errors import UsageError
+
+__all__ = ["UsageError", "Parser", "parse_args", "add_overwrite", "add_json_flag", "add_verbose",
+           "set_verbosity", "check_out_dir", "CliExit", "exit_on", "errors_to_exit", "cli_entry"]
+
+F = TypeVar("F", bound=Callable[..., int])
+
+
+class Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` that raises :class:`UsageError` instead of exiting, so ``main`` reports."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def parse_args(parser: argparse.ArgumentParser, argv: "Sequence[str] | None") -> "argparse.Namespace | int":
+    """Parse ``argv`` (default ``sys.argv[1:]``); an ``int`` is the exit code to return at once
+    (2 after printing a usage error on stderr, 0 after ``--help``)."""
+    try:
+        return parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    except UsageError as exc:
+        print(f"{exc}\n(see --help)", file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+
+
+def add_overwrite(parser: argparse.ArgumentParser, help: Optional[str] = None) -> None:
+    """``--overwrite``: replace an existing output file."""
+    parser.add_argument("--overwrite", action="store_true", help=help)
+
+
+def add_json_flag(parser: argparse.ArgumentParser, help: str = "print one JSON object instead of text") -> None:
+    """``--json`` as a switch: print JSON on stdout instead of text."""
+    parser.add_argument("--json", action="store_true", help=help)
+
+
+def add_verbose(parser: argparse.ArgumentParser) -> None:
+    """``-v/--verbose`` (repeatable): log more."""
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="log more (-v info, -vv debug)")
+
+
+def set_verbosity(verbose: int) -> None:
+    """Logging level from the ``-v`` count: warnings, info (-v), debug (-vv)."""
+    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(max(verbose, 0), 2)])
+
+
+def check_out_dir(path: "str | os.PathLike[str] | None", what: str = "", error: type[Exception] = UsageError,
+                  message: str = "cannot write {label}: folder {folder} does not exist") -> None:
+    """Raise ``error`` when the folder of the output ``path`` does not exist (None: nothing to check).
+    ``what`` names the output in the message (``cannot write the JSON out.json: ...``); ``message``
+    may use ``{label}`` and ``{folder}``."""
+    if path is None:
+        return
+    folder = Path(path).resolve().parent
+    if not folder.is_dir():
+        label = f"the {what} {path}" if what else f"{path}"
+        raise error(message.format(label=label, folder=folder))
+
+
+class CliExit(Exception):
+    """End the command with exit code ``code`` (the message is already on stderr)."""
+
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = int(code)
+
+
+Rule = "tuple[type[BaseException] | tuple[type[BaseException], ...], int] | tuple[type[BaseException] | tuple[type[BaseException], ...], int, str]"
+
+
+@contextlib.contextmanager
+def exit_on(prog: str, *rules: Rule) -> Iterator[None]:
+    """Inside the block, an error matching a rule ``(errors, code[, prefix])`` (the first that
+    matches, in order) prints ``PROG: PREFIXERROR`` on stderr and ends the command with ``code``
+    (raises :class:`CliExit`, which :func:`cli_entry` turns into the return value)."""
+    try:
+        yield
+    except CliExit:
+        raise
+    except BaseException as exc:
+        for rule in rules:
+            if isinstance(exc, rule[0]):
+                prefix = rule[2] if len(rule) > 2 else ""  # type: ignore[misc]
+                print(f"{prog}: {prefix}{exc}", file=sys.stderr)
+                raise CliExit(rule[1]) from None
+        raise
+
+
+def errors_to_exit(prog: str, errors: "type[BaseException] | tuple[type[BaseException], ...]", code: int = 2,
+                   prefix: str = "") -> "contextlib.AbstractContextManager[None]":
+    """:func:`exit_on` with one rule: ``errors`` -> ``PROG: PREFIXERROR`` on stderr, exit ``code``."""
+    return exit_on(prog, (errors, code, prefix))
+
+
+def cli_entry(main: F) -> F:
+    """Decorate a ``main(argv) -> int``: a :class:`CliExit` returns its code; a closed stdout pipe
+    (``| head``) ends quietly with exit code 0 as the reader wanted no more."""
+
+    @functools.wraps(main)
+    def run(*args: object, **kwargs: object) -> int:
+        try:
+            return main(*args, **kwargs)
+        except CliExit as done:
+            return done.code
+        except BrokenPipeError:
+            try:  # no flush of the rest at exit into the closed pipe
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, sys.stdout.fileno())
+            except (OSError, ValueError):
+                pass
+            return 0
+
+    return run  # type: ignore[return-value]
