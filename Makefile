@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test venv bench clean
+.PHONY: demo test lint venv bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -18,7 +18,13 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m acquisition demo --out demo-output
 
 test: $(STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m mypy
 	MPLBACKEND=Agg $(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m mypy
 
 bench: $(STAMP)
 	for b in benchmarks/*/bench_*.py; do MPLBACKEND=Agg $(PY) $$b || exit 1; done

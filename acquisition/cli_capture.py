@@ -277,8 +277,9 @@ def recorded_test(args: argparse.Namespace) -> tuple:
             setup = AcquisitionSetup.from_dict(rec.setup)
             planned = dict(rec.plan)
             device = planned.pop("device", None)
-            plan = TestPlan(**{k: (tuple(v) if k == "points" else v) for k, v in planned.items()
-                               if k in ("mode", "points", "hits_per_point", "reference")})
+            fields: dict[str, Any] = {k: (tuple(v) if k == "points" else v) for k, v in planned.items()
+                                      if k in ("mode", "points", "hits_per_point", "reference")}
+            plan = TestPlan(**fields)
         except (SetupError, TypeError, ValueError) as exc:
             raise UsageError(f"{path} does not hold a capture plan and set-up to resume ({exc})") from None
         windows = rec.windows

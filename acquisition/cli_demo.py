@@ -133,6 +133,7 @@ def summary_step(ctx: DemoContext) -> None:
 def export_step(ctx: DemoContext) -> None:
     from .cli_export import export
 
+    assert ctx.recording is not None, "the capture step comes first"
     ctx.uff = ctx.out_dir / "demo.uff"
     n = export(ctx.recording, ctx.uff, overwrite=True)
     ctx.say(f"recording: {ctx.recording}   UFF 58 export: {ctx.uff} ({n} datasets)")
@@ -193,6 +194,7 @@ def report_step(ctx: DemoContext) -> None:
     from analysis.report_html import make_report
     from simulator.geometry import frame_geometry
 
+    assert ctx.recording is not None, "the capture step comes first"
     index = make_report(ctx.recording, ctx.out_dir / "report", fit_json=ctx.out_dir / "fit.json", geometry=frame_geometry())
     ctx.say(f"report: {index} (open {index.resolve().as_uri()} in a browser)")
 

@@ -62,7 +62,7 @@ def _split_window(text: str) -> tuple[Optional[str], Optional[str]]:
 
 
 def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSettings] = None,
-           exclude: Sequence[int] = (), estimator: str = "H1", overwrite: bool = False) -> list:
+           exclude: "Sequence[int] | set[int]" = (), estimator: str = "H1", overwrite: bool = False) -> list:
     """Recompute the FRFs of ``src`` into a new recording ``out``; returns the new averages."""
     from analysis.recording import Recording, RecordingWriter
     from .session import average_recorded_hits

@@ -35,7 +35,7 @@ class HitSummary:
 
     #: the hit's data (``[n_channels, n]`` in EU) and its sample rate (from the acquisition set-up)
     data: Any = field(default=None, repr=False)
-    sample_rate_hz: Optional[float] = None
+    sample_rate_hz: float = 0.0
     trigger_index: int = 0
     #: the point's running average (``acquisition.averaging.MeasurementAverage``; this hit included while deciding)
     average: Any = field(default=None, repr=False)

@@ -12,6 +12,8 @@ import numpy as np
 
 from analysis.points import parse_point
 
+from .session_errors import SessionError
+
 __all__ = ["FRF_QUANTITY", "PLAN_MODES", "Measurement", "TestPlan", "force_channel_of", "channel_table",
            "eu_per_count_for"]
 

@@ -236,6 +236,7 @@ class CaptureSession:
                 continue
             timeouts = 0
             attempts += 1
+            assert block is not None  # triggered
             counts = np.asarray(block.counts)
             if counts.dtype != np.int16 or counts.shape[0] != n_channels:
                 raise SessionError(f"block has counts {counts.dtype} {counts.shape}; expected int16 "

@@ -135,12 +135,12 @@ class StreamTransport(Transport):
         except (serial.SerialException, OSError, ValueError) as exc:
             raise self._gone("read", exc) from exc
         if len(data) < n:
-            exc = TransportTimeout(
+            short = TransportTimeout(
                 f"read from {self.url}: {len(data)} of {n} bytes arrived within {timeout_s:g} s; "
                 "the device is silent or out of step: do reset recovery (or check it is running)"
             )
-            exc.received = len(data)  # type: ignore[attr-defined]
-            raise exc
+            short.received = len(data)  # type: ignore[attr-defined]
+            raise short
         return data
 
     def reset_recovery(self, timeout_s: float = 1.0) -> None:

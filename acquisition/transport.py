@@ -40,7 +40,7 @@ class Transport(abc.ABC):
     def reset_recovery(self, timeout_s: float = 1.0) -> None:
         """Bulk-only reset recovery: the device abandons any command and both directions are clear."""
 
-    def clear_halt(self, direction_in: bool) -> None:  # pragma: no cover - streams have no halt
+    def clear_halt(self, direction_in: bool) -> None:  # noqa: B027  (optional hook)  # pragma: no cover
         """Clear a stalled endpoint (USB only; a no-op on streams)."""
 
     @abc.abstractmethod

@@ -1,5 +1,58 @@
-"""impactlab.analysis: FRF estimation, initial poles, nonlinear LSFD fitting, stabilization, diagnosis.
+"""impactlab.analysis: FRF containers, the recording format, FRF estimation, initial poles, the
+nonlinear LSFD fitter, stabilization, diagnosis and the test report.
 
-The package is pure numerics over plain containers (:class:`analysis.frf.FRFSet`,
-:class:`analysis.modal.ModalModel`); nothing here touches an instrument.
+The bottom layer: pure numerics and file formats over plain containers (:class:`FRFSet`,
+:class:`ModalModel`); nothing here touches an instrument or the simulator. The common names are
+exported here (``from analysis import FRFSet, fit_auto``); each lives in a small module of its own.
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ._lazy import lazy_exports
+
+#: public name -> the module that defines it (imported on first use)
+_EXPORTS = {
+    "FRFSet": ".frf",
+    "QUANTITIES": ".frf",
+    "convert_quantity": ".frf",
+    "ModalModel": ".modal",
+    "synthesize": ".modal",
+    "fit_lsfd": ".lsfd",
+    "LSFDResult": ".lsfd",
+    "fit_auto": ".pipeline",
+    "default_band": ".pipeline",
+    "stabilization": ".stabilization",
+    "StabilizationResult": ".stabilization",
+    "lscf_poles": ".lscf",
+    "lsce_poles": ".lsce",
+    "WindowSettings": ".spectra",
+    "Recording": ".recording",
+    "RecordingWriter": ".recording",
+    "load_input": ".inputs",
+    "read_uff58": ".uff",
+    "write_uff58": ".uff",
+    "read_uff55": ".uff",
+    "write_uff55": ".uff",
+    "Geometry": ".geometry",
+    "ImpactlabError": ".errors",
+    "RecordingError": ".errors",
+    "UsageError": ".errors",
+}
+__all__ = list(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily
+    from .frf import FRFSet, QUANTITIES, convert_quantity  # noqa: F401
+    from .modal import ModalModel, synthesize  # noqa: F401
+    from .lsfd import fit_lsfd, LSFDResult  # noqa: F401
+    from .pipeline import fit_auto, default_band  # noqa: F401
+    from .stabilization import stabilization, StabilizationResult  # noqa: F401
+    from .lscf import lscf_poles  # noqa: F401
+    from .lsce import lsce_poles  # noqa: F401
+    from .spectra import WindowSettings  # noqa: F401
+    from .recording import Recording, RecordingWriter  # noqa: F401
+    from .inputs import load_input  # noqa: F401
+    from .uff import read_uff58, write_uff58, read_uff55, write_uff55  # noqa: F401
+    from .geometry import Geometry  # noqa: F401
+    from .errors import ImpactlabError, RecordingError, UsageError  # noqa: F401

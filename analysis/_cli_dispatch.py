@@ -86,7 +86,7 @@ def pipe_safe_stdout() -> Iterator[None]:
     does not complain either."""
     original = sys.stdout
     safe = _PipeSafeStream(original)
-    sys.stdout = safe  # type: ignore[assignment]
+    sys.stdout = safe
     try:
         yield
     finally:

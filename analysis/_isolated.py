@@ -44,7 +44,7 @@ def run_isolated(target: Callable[..., Any], args: tuple, timeout_s: float) -> A
 
     single = threading.active_count() == 1
     method = "fork" if single and "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    ctx = multiprocessing.get_context(method)
+    ctx: Any = multiprocessing.get_context(method)
     recv, send = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(target, args, send), daemon=True)
     proc.start()
@@ -69,7 +69,7 @@ def run_isolated(target: Callable[..., Any], args: tuple, timeout_s: float) -> A
 
 
 def call_isolated(target: Callable[..., Any], args: tuple, timeout_s: float, *,
-                  crashed: Callable[[int], Exception], timed_out: Callable[[], Exception]) -> Any:
+                  crashed: "Callable[[int | None], Exception]", timed_out: Callable[[], Exception]) -> Any:
     """:func:`run_isolated`, with a crash or a timeout of the child turned into the caller's own
     error: ``crashed(exitcode)`` and ``timed_out()`` build the exception raised instead."""
     try:

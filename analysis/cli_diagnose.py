@@ -17,12 +17,12 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .command_line import Parser as _Parser, check_out_dir, parse_args
+
 __all__ = ["main", "build_parser", "load_simulation"]
 
 log = logging.getLogger(__name__)
 
-
-from .command_line import Parser as _Parser, check_out_dir, parse_args
 
 
 def _json_default(x):

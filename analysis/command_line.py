@@ -21,7 +21,7 @@ import logging
 import os
 import sys
 from pathlib import Path
-from typing import Callable, Iterator, Optional, Sequence, TypeVar
+from typing import Callable, Iterator, Optional, Sequence, TypeVar, Union
 
 from .errors import UsageError
 
@@ -91,7 +91,8 @@ class CliExit(Exception):
         self.code = int(code)
 
 
-Rule = "tuple[type[BaseException] | tuple[type[BaseException], ...], int] | tuple[type[BaseException] | tuple[type[BaseException], ...], int, str]"
+Errors = Union[type[BaseException], tuple[type[BaseException], ...]]
+Rule = Union[tuple[Errors, int], tuple[Errors, int, str]]
 
 
 @contextlib.contextmanager
@@ -106,7 +107,7 @@ def exit_on(prog: str, *rules: Rule) -> Iterator[None]:
     except BaseException as exc:
         for rule in rules:
             if isinstance(exc, rule[0]):
-                prefix = rule[2] if len(rule) > 2 else ""  # type: ignore[misc]
+                prefix = rule[2] if len(rule) > 2 else ""
                 print(f"{prog}: {prefix}{exc}", file=sys.stderr)
                 raise CliExit(rule[1]) from None
         raise

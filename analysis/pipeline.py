@@ -533,7 +533,8 @@ def _pair_is_resolved(trial, k: int, f: np.ndarray, e_old: np.ndarray, e_new: np
     loc = (f >= min(fa, fb) - half) & (f <= max(fa, fb) + half)
     c_old, c_new = float(np.sum(e_old[loc] ** 2)), float(np.sum(e_new[loc] ** 2))
     if not c_new <= (1.0 - MISSING_LOCAL_GAIN) * c_old:
-        return False, f"next to {fa:.5g} Hz, local cost {c_old:.3g} -> {c_new:.3g} (less than {100 * MISSING_LOCAL_GAIN:g} % gain)"
+        return False, (f"next to {fa:.5g} Hz, local cost {c_old:.3g} -> {c_new:.3g} "
+                       f"(less than {100 * MISSING_LOCAL_GAIN:g} % gain)")
     R = np.asarray(trial.model_raw.residues, dtype=complex).reshape(-1, p.size)
     ra, rb = R[:, k], R[:, -1]
     na, nb = float(np.linalg.norm(ra)), float(np.linalg.norm(rb))

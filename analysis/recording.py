@@ -202,8 +202,8 @@ class RecordingWriter:
         self,
         *,
         counts: np.ndarray,
-        eu_per_count: Sequence[float],
-        volts_per_count: Sequence[float],
+        eu_per_count: "Sequence[float] | np.ndarray",
+        volts_per_count: "Sequence[float] | np.ndarray",
         trigger_index: int,
         sample_rate_hz: float,
         sequence: int,
@@ -214,7 +214,7 @@ class RecordingWriter:
         outputs: Sequence[str],
         force_channel: int,
         response_channels: Sequence[int],
-        overload: Sequence[bool],
+        overload: "Sequence[bool] | np.ndarray",
         accepted: bool,
         reasons: Sequence[str] = (),
         check: Optional[dict] = None,
@@ -387,7 +387,8 @@ class Recording:
             raise
         except _DAMAGE as exc:
             self._f.close()
-            raise RecordingError(f"{self.path} is damaged ({type(exc).__name__}: {exc}); use a backup or re-run the test") from None
+            raise RecordingError(f"{self.path} is damaged ({type(exc).__name__}: {exc}); "
+                                 "use a backup or re-run the test") from None
 
     def _validate(self) -> None:
         a = self._f.attrs

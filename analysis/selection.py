@@ -46,6 +46,11 @@ log = logging.getLogger(__name__)
 ABS_TOL_DAMP_CLUSTER = 1e-3
 
 
+def _f_hz(pole: complex) -> float:
+    """Natural frequency (Hz) of one pole (rad/s)."""
+    return float(natural_freq_hz(np.asarray(pole)))
+
+
 class SelectedCluster(NamedTuple):
     """A kept cluster: representative pole (rad/s), number of orders, spreads of f (Hz) and zeta."""
 
@@ -103,12 +108,12 @@ def select_clusters(
         out.append(
             SelectedCluster(complex(pole_from_fz(fm, zm)), int(ords.size), float(np.ptp(f[k])), float(np.ptp(z[k])))
         )
-    out.sort(key=lambda c: (-c[1], c[2] / max(natural_freq_hz(c[0]), 1e-300)))
+    out.sort(key=lambda c: (-c.n_orders, c.freq_spread_hz / max(_f_hz(c.pole), 1e-300)))
     # merge survivors closer than tol_freq (keep the more persistent)
     kept: list[SelectedCluster] = []
     for c in out:
-        fc = natural_freq_hz(c[0])
-        if all(abs(fc - natural_freq_hz(k[0])) / fc >= tol_f for k in kept):
+        fc = _f_hz(c.pole)
+        if all(abs(fc - _f_hz(k.pole)) / fc >= tol_f for k in kept):
             kept.append(c)
     return kept
 

@@ -193,7 +193,7 @@ class CaptureEngine:
         ranges = np.array([ch.range_mv / 1000.0 for ch in s.channels])
         t = s.trigger_channel
         counts_t, _ = frontend.quantize(filtered[t], ranges[t])
-        level_counts = s.trigger_level_v / frontend.volts_per_count(ranges[t])
+        level_counts = float(s.trigger_level_v / frontend.volts_per_count(ranges[t]))
         k = find_trigger(counts_t, level_counts, s.trigger_slope, pre, n)
         if k is None:
             return None

@@ -9,11 +9,12 @@ link (framing, phases, stalls) and leaves the capture physics (the strike, the A
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
 from acquisition import protocol as P
+from simulator.capture import CaptureEngine
 from simulator.link import GOOD_SENSE, UA_RESET_SENSE, Reply, fail
 
 __all__ = ["ScsiCommands", "IDENTITY", "DEFAULT_SERIAL"]
@@ -25,7 +26,7 @@ IDENTITY = P.Inquiry(P.DEVICE_TYPE_PROCESSOR, "IMPACTLB", "SIGLAB-SIM 2042", "01
 DEFAULT_SERIAL = "SL2042-0000001"
 
 
-class ScsiCommands:
+class ScsiCommands(CaptureEngine):
     """Command handlers over the device state that :class:`simulator.firmware.Firmware` holds.
 
     Needs the attributes ``capabilities``, ``serial``, ``stand``, the acquisition state
@@ -35,9 +36,13 @@ class ScsiCommands:
 
     capabilities: P.CapabilitiesData
     serial: str
-    stand: Any
+    strike_after_polls: int
+    max_strikes: int
     _sense: P.Sense
     _unit_attention: bool
+    _handlers: "dict[int, Callable[[Mapping[str, int], bytes], Reply]]"
+    _inquiry_bytes: bytes
+    _caps_bytes: bytes
 
     def _command_table(self) -> "dict[int, Callable[[Mapping[str, int], bytes], Reply]]":
         return {

@@ -8,6 +8,7 @@ plain frozen dataclass; :attr:`FrameConfig.raw` keeps the merged dictionary.
 from __future__ import annotations
 
 import copy
+import sys
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,16 +16,18 @@ from typing import Any, Mapping
 
 import numpy as np
 
-try:  # Python >= 3.11
-    import tomllib as _toml
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    try:
-        import tomli as _toml  # type: ignore[no-redef]
-    except ModuleNotFoundError:
-        _toml = None  # type: ignore[assignment]
-
-from analysis.points import PointLabelError, parse_point
 from analysis.errors import ImpactlabError
+from analysis.points import PointLabelError, parse_point
+
+_toml: Any
+if sys.version_info >= (3, 11):
+    import tomllib as _toml
+else:  # pragma: no cover - Python 3.10
+    try:
+        import tomli as _toml
+    except ModuleNotFoundError:
+        _toml = None
+
 
 __all__ = [
     "ConfigError",

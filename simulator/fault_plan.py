@@ -39,7 +39,7 @@ def parse_faults(text: "str | Mapping[str, float]") -> dict[str, float]:
     Each probability lies in [0, 1]; ``all:P`` sets every kind. Raises ValueError naming the bad
     entry and the known kinds."""
     if isinstance(text, Mapping):
-        items = [(str(k), v) for k, v in text.items()]
+        items: "list[tuple[str, object]]" = [(str(k), v) for k, v in text.items()]
     else:
         items = []
         for part in str(text).split(","):
@@ -52,11 +52,11 @@ def parse_faults(text: "str | Mapping[str, float]") -> dict[str, float]:
                                  f"(kinds: {', '.join(FAULT_KINDS)}, or all)")
             items.append((name.strip(), value.strip()))
     rates: dict[str, float] = {}
-    for name, value in items:
+    for name, raw in items:
         try:
-            p = float(value)
+            p = float(raw)  # type: ignore[arg-type]  # checked: a non-number raises below
         except (TypeError, ValueError):
-            raise ValueError(f"fault {name}: probability {value!r} is not a number; give a value in [0, 1]") from None
+            raise ValueError(f"fault {name}: probability {raw!r} is not a number; give a value in [0, 1]") from None
         if not 0.0 <= p <= 1.0:
             raise ValueError(f"fault {name}: probability {p} is outside [0, 1]")
         if name == "all":

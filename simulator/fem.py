@@ -307,7 +307,7 @@ class FrameModel:
         return self.node_index[(comp, node)]
 
     def _node_help(self) -> str:
-        comps = {}
+        comps: "dict[str, int]" = {}
         for (c, i) in self.node_index:
             comps[c] = max(comps.get(c, 0), i)
         return "nodes are " + ", ".join(f"{c}:0..{n}" for c, n in comps.items())

@@ -69,14 +69,14 @@ Speed: block images are built once per strike with ``numpy.tobytes`` and served 
 from __future__ import annotations
 
 from acquisition import protocol as P
-from simulator.capture import CaptureEngine, PrecomputedStand, StandChannel, StandLike
+from simulator.capture import PrecomputedStand, StandChannel, StandLike
 from simulator.commands import DEFAULT_SERIAL, IDENTITY, ScsiCommands
 from simulator.link import BulkOnlyLink, Reply
 
 __all__ = ["Firmware", "Reply", "StandLike", "StandChannel", "PrecomputedStand", "IDENTITY", "DEFAULT_SERIAL"]
 
 
-class Firmware(ScsiCommands, CaptureEngine, BulkOnlyLink):
+class Firmware(ScsiCommands, BulkOnlyLink):
     """The analyser's firmware (see the module docstring for the behaviour).
 
     ``stand``: the simulated operator + frame (``set_channels``, ``strike``); ``packetized``: USB

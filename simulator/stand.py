@@ -144,7 +144,7 @@ class TestStand:
         self._rng = np.random.default_rng(self.seed)
         self._models: dict[frozenset, FrameModel] = {}
         bare = self._model(frozenset())
-        self._max_node = {}
+        self._max_node: "dict[str, int]" = {}
         for (comp, node) in bare.node_index:
             self._max_node[comp] = max(self._max_node.get(comp, 0), node)
         self._pending: dict[str, Any] = {}

@@ -149,8 +149,8 @@ def simulate_hits(
     """``n_hits`` hits (force levels cycling through ``levels`` x the nominal amplitude) with one
     time-data ``effect`` (module docstring), in engineering units. ``stand`` may be a ready linear
     :class:`TestStand` (reused to save the model build; its generator advances)."""
-    eff = dict(effect) if effect else None
-    name = eff["effect"] if eff else None
+    eff: dict = dict(effect) if effect else {}
+    name = eff.get("effect")
     if name is not None and name not in TIME_EFFECTS:
         raise ValueError(f"unknown time-data effect {name!r}; known: {', '.join(TIME_EFFECTS)}")
     if n_hits < 3:
@@ -196,7 +196,7 @@ def simulate_hits(
     reference = chans[0].point
     base = st.model.modal_model(list(outputs), [reference], "receptance")
     return HitRecord(force=F, responses=X, fs_hz=float(fs_hz), pretrigger=int(pretrigger), outputs=outputs,
-                     reference=reference, full_scale=full_scale, overload=over, base=base, effect=eff, info=info)
+                     reference=reference, full_scale=full_scale, overload=over, base=base, effect=eff or None, info=info)
 
 
 def draw_time_effect(name: str, rng: np.random.Generator, nominal_n: float = 100.0) -> dict:

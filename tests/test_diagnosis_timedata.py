@@ -13,7 +13,6 @@ PRE = 200
 
 
 def _pulse(amp: float, width_s: float = 1e-3, at: int = PRE) -> np.ndarray:
-    t = np.arange(N) / FS
     x = np.zeros(N)
     k = int(round(width_s * FS))
     x[at:at + k] = amp * np.sin(np.pi * np.arange(k) / k)

@@ -145,7 +145,7 @@ def test_selection_keeps_a_very_lightly_damped_mode():
     by +-30 % of itself (but < 0.05 % absolute)."""
     rng = np.random.default_rng(1)
     poles, status = [], []
-    for n in range(1, 21):
+    for _n in range(1, 21):
         z = 0.0005 * (1 + 0.3 * rng.uniform(-1, 1))
         poles.append(np.array([pole_from_fz(40.0, 0.01), pole_from_fz(105.24 * (1 + 1e-5 * rng.standard_normal()), z)]))
         status.append(np.array([3, 3]))

@@ -270,10 +270,10 @@ def test_rank_one_split_recovers_shapes() -> None:
     psi = rng.normal(size=(4, 3)) + 1j * rng.normal(size=(4, 3))
     L = rng.normal(size=(3, 2)) + 1j * rng.normal(size=(3, 2))
     R = np.einsum("or,rj->ojr", psi, L)
-    p, l, ratio = rank_one_split(R)
-    assert np.allclose(np.einsum("or,rj->ojr", p, l), R)
+    p, lam, ratio = rank_one_split(R)
+    assert np.allclose(np.einsum("or,rj->ojr", p, lam), R)
     assert np.all(ratio < 1e-12)
-    assert np.allclose(np.max(np.abs(l), axis=1), 1.0)
+    assert np.allclose(np.max(np.abs(lam), axis=1), 1.0)
     for r in range(3):   # psi is proportional to the true shape
         c = np.vdot(psi[:, r], p[:, r]) / np.vdot(psi[:, r], psi[:, r])
         assert np.allclose(p[:, r], c * psi[:, r])

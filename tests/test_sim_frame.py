@@ -57,8 +57,8 @@ def _analytic_cantilever(L: float = 1.0) -> np.ndarray:
     # roots of cos(bL) cosh(bL) = -1; beyond the fourth, (2n - 1) pi / 2 to double precision
     beta_L = np.r_[1.8751040687, 4.6940911330, 7.8547574382, 10.9955407349, (2 * np.arange(5, 9) - 1) * np.pi / 2]
     f = []
-    for I in (sp.Iy, sp.Iz):
-        f += list(beta_L ** 2 / (2 * np.pi) * np.sqrt(E * I / (RHO * sp.A * L ** 4)))
+    for inertia in (sp.Iy, sp.Iz):
+        f += list(beta_L ** 2 / (2 * np.pi) * np.sqrt(E * inertia / (RHO * sp.A * L ** 4)))
     k = 2 * np.arange(1, 3) - 1
     f += list(k / (4 * L) * np.sqrt(E / RHO))                      # axial
     f += list(k / (4 * L) * np.sqrt(G * sp.J / (RHO * sp.Ip)))     # torsion (St-Venant, polar inertia)

@@ -71,24 +71,24 @@ def test_fisher_jacobian_matches_finite_differences_of_synthesis() -> None:
     for r in range(m):
         for dp in (1.0, 1.0j):
             h = 1e-7 * abs(lam[r])
-            cols.append(fd(lambda e: synth(lam + np.eye(m)[r] * e * dp, model.residues, model.upper_residual,
+            cols.append(fd(lambda e, r=r, dp=dp: synth(lam + np.eye(m)[r] * e * dp, model.residues, model.upper_residual,
                                            model.lower_residual), 0.0, h))
     for o in range(2):
         for r in range(m):
             for dp in (1.0, 1.0j):
                 E = np.zeros_like(model.residues)
                 E[o, 0, r] = dp
-                cols.append(fd(lambda e: synth(lam, model.residues + e * E, model.upper_residual,
+                cols.append(fd(lambda e, E=E: synth(lam, model.residues + e * E, model.upper_residual,
                                                model.lower_residual), 0.0, 1.0))
         for which in ("ur", "lr"):
             for dp in (1.0, 1.0j):
                 E = np.zeros((2, 1), dtype=complex)
                 E[o, 0] = dp
                 if which == "ur":
-                    cols.append(fd(lambda e: synth(lam, model.residues, model.upper_residual + e * E,
+                    cols.append(fd(lambda e, E=E: synth(lam, model.residues, model.upper_residual + e * E,
                                                    model.lower_residual), 0.0, 1e-6))
                 else:
-                    cols.append(fd(lambda e: synth(lam, model.residues, model.upper_residual,
+                    cols.append(fd(lambda e, E=E: synth(lam, model.residues, model.upper_residual,
                                                    model.lower_residual + e * E), 0.0, 1.0))
     J = np.column_stack(cols)
     F_fd = J.T @ J / (noise_var / 2)

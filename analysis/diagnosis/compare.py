@@ -8,7 +8,8 @@ so that ``sum w |H_meas - H_model|^2 / n`` is a mean squared *relative* error: e
 alike whether it lies at a resonance or far below it (a sensor roll-off at 2 Hz matters as much as
 a peak), and the floor keeps antiresonance lines (where the measurement is mostly noise) from
 dominating. With coherence, lines whose H1 variance ``(1 - g^2)/(2 n_avg g^2)`` exceeds 1 % are
-down-weighted in proportion (see :func:`line_weights`). ``error_db = 10 log10(mean w |e|^2)``; a 1 % complex noise gives about -40 dB.
+down-weighted in proportion (see :func:`line_weights`).
+``error_db = 10 log10(mean w |e|^2)``; a 1 % complex noise gives about -40 dB.
 
 Noise level without a model: the second difference along frequency ``d_k = H_{k-1} - 2 H_k + H_{k+1}``
 removes the smooth FRF and keeps white noise with variance ``6 sigma^2``; the median over lines of

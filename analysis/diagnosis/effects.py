@@ -507,7 +507,7 @@ def fit_sensor_highpass(ctx: FitContext, lines: np.ndarray) -> dict:
     f0 = max(f[lines][0], 1e-3)
     best = None
     for n in (1, 2):
-        def cost(lfc: float) -> float:
+        def cost(lfc: float, n: int = n) -> float:
             return ctx.cost(ctx.sim.H * highpass_response(f, float(np.exp(lfc)), n), lines)
         grid = np.linspace(np.log(f0 / 30), np.log(f0 * 10), 61)
         x = _fit_scalar(cost, grid)

@@ -32,7 +32,6 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.signal import find_peaks
 
-from ..frf import FRFSet
 from ..modal import ModalModel
 from .effects import synthesize_windowed
 from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_decay
@@ -460,9 +459,6 @@ def diagnose_time_effects(
     spec = hit_spectra_set(f, x, fs_hz, band, decay=decay)
     Hm = spec.h1()[:, None, :]
     sim = windowed_accelerance(base, spec.freq_hz, spec.tau_s)
-    frf = FRFSet(freq_hz=spec.freq_hz, H=Hm, quantity="accelerance",
-                 outputs=tuple(outputs) if outputs else tuple(f"o{i}" for i in range(x.shape[1])),
-                 references=(reference or "ref",))
     w = noise_weights(spec, Hm, n, fs_hz)
     causes = []
 

@@ -43,7 +43,9 @@ def _r(a: Any, decimals: int) -> list:
     x = np.round(np.asarray(a, dtype=float), decimals)
     if np.all(np.isfinite(x)):
         return x.tolist()
-    return np.where(np.isfinite(x), x, None).tolist()
+    out = x.astype(object)
+    out[~np.isfinite(x)] = None
+    return out.tolist()
 
 
 def _db(z: np.ndarray) -> np.ndarray:

@@ -64,8 +64,8 @@ def main() -> None:
     ms = 1e3 * np.array(times[10:])
     wms = bench_write(blocks, eu)
     print("per-hit processing, 4 ch x 8192 samples (scale + checks + CRC + windows + spectra + average + coherence)")
-    print(f"| hits | median ms | p95 ms | max ms | requirement |")
-    print(f"|-----:|----------:|-------:|-------:|------------:|")
+    print("| hits | median ms | p95 ms | max ms | requirement |")
+    print("|-----:|----------:|-------:|-------:|------------:|")
     print(f"| {ms.size} | {np.median(ms):.2f} | {np.percentile(ms, 95):.2f} | {ms.max():.2f} | < 20 ms |")
     print(f"\nwriting one hit to the recording (HDF5, int16 counts + attributes + flush): median "
           f"{np.median(wms):.2f} ms, p95 {np.percentile(wms, 95):.2f} ms")

@@ -71,7 +71,7 @@ def main(argv=None) -> int:
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}, "
           f"{'precise evaluations only' if a.precise_only else 'fast evaluations first'}")
     times = []
-    for k in range(a.repeat):
+    for _k in range(a.repeat):
         t0 = time.perf_counter()
         res = fit_lsfd(frf, p0, method=a.method)
         times.append(time.perf_counter() - t0)

@@ -24,9 +24,9 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 DATA = ROOT.parent / "shared" / "data"
 
-from analysis.geometry import Geometry
-from analysis.report_html import build_document, run_fit, write_report
-from benchmarks.accuracy.validation import modelab_beam, uliege_plane
+from analysis.geometry import Geometry  # noqa: E402
+from analysis.report_html import build_document, run_fit, write_report  # noqa: E402
+from benchmarks.accuracy.validation import modelab_beam, uliege_plane  # noqa: E402
 
 TARGET_WRITE_S, TARGET_MB, TARGET_DRAW_S = 5.0, 15.0, 3.0
 

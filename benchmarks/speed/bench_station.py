@@ -21,7 +21,7 @@ from tempfile import TemporaryDirectory
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from station_support import Api, StationProcess, chrome
+from station_support import Api, StationProcess, chrome  # noqa: E402
 
 
 def _cpu_s(pid: int) -> float:

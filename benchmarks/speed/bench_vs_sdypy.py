@@ -211,7 +211,7 @@ def part_two(repeat, seed):
     z20 = np.linspace(0.004, 0.015, f20.size)
     frf, truth = make_data(f20, z20, [], 100, 3, 8000, 2000.0, 0.01, seed)
     band = (20.0, 2000.0)
-    print(f"\n300 FRFs (100 outputs x 3 references) x 8000 lines, 20 modes, 1 % noise: impactlab pipeline")
+    print("\n300 FRFs (100 outputs x 3 references) x 8000 lines, 20 modes, 1 % noise: impactlab pipeline")
 
     def run():
         res, st = fit_auto(frf, band=band, method="lm")

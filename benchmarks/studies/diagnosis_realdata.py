@@ -94,7 +94,7 @@ def run_uliege(band: str, out: Path) -> int:
     lo, hi = parse_band_text(band)
     lines = []
     best = None
-    for k, o in enumerate(frf.outputs):
+    for o in frf.outputs:
         r, _ = fit_auto(frf.select([o]).band(lo, hi))
         R = r.model.residues[0]
         mac = np.array([[abs(np.vdot(R[:, m], phi[:, j])) ** 2 / (np.vdot(R[:, m], R[:, m]).real * phi[:, j] @ phi[:, j])

@@ -30,6 +30,7 @@ class Serial(SerialBase):
     """A pyserial port whose far end is an in-process simulated analyser (stream mode)."""
 
     BAUDRATES = SerialBase.BAUDRATES
+    is_open: bool
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self._firmware: Any = None
