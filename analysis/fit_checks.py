@@ -26,6 +26,7 @@ from typing import Optional
 
 import numpy as np
 
+from .mac import mac
 from .modal import damping_ratio, natural_freq_hz
 
 __all__ = [
@@ -63,11 +64,6 @@ def migrated_poles(start: np.ndarray, end: np.ndarray, df_hz: float = 0.0,
     return np.abs(natural_freq_hz(e) - natural_freq_hz(s)) > n_bandwidths * scale
 
 
-def _mac_vectors(a: np.ndarray, b: np.ndarray) -> float:
-    den = float(np.vdot(a, a).real * np.vdot(b, b).real)
-    return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
-
-
 def duplicate_poles(poles: np.ndarray, residues: np.ndarray, df_hz: float = 0.0,
                     moved: Optional[np.ndarray] = None) -> np.ndarray:
     """Mask of poles that duplicate another one (see module docstring); the other is kept.
@@ -89,7 +85,7 @@ def duplicate_poles(poles: np.ndarray, residues: np.ndarray, df_hz: float = 0.0,
                 continue
             if abs(f[i] - f[j]) >= DUPLICATE_BANDWIDTHS * 0.5 * max(b[i], b[j]):
                 continue
-            if _mac_vectors(R[:, i], R[:, j]) <= DUPLICATE_MAC:
+            if mac(R[:, i], R[:, j]) <= DUPLICATE_MAC:
                 continue
             if moved is not None and moved[i] != moved[j]:
                 drop = i if moved[i] > moved[j] else j

@@ -26,10 +26,11 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-__all__ = ["FRFSet", "QUANTITIES", "convert_quantity"]
+__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "convert_quantity"]
 
 QUANTITIES = ("receptance", "mobility", "accelerance")
-_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+#: the power p of (j omega) that turns a receptance (m/N) into each quantity: H_q = (j omega)^p H_receptance
+QUANTITY_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
 
 
 @dataclass(frozen=True)
@@ -144,7 +145,7 @@ def convert_quantity(H: np.ndarray, freq_hz: np.ndarray, src: str, dst: str) -> 
     for q in (src, dst):
         if q not in QUANTITIES:
             raise ValueError(f"quantity {q!r} is not one of {QUANTITIES}")
-    p = _POWER[dst] - _POWER[src]
+    p = QUANTITY_POWER[dst] - QUANTITY_POWER[src]
     jw = 1j * 2 * np.pi * np.asarray(freq_hz, dtype=float)
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = jw ** p if p >= 0 else np.where(jw == 0, np.nan, 1.0 / np.where(jw == 0, 1, jw) ** (-p))

@@ -31,13 +31,14 @@ from typing import Optional
 
 import numpy as np
 
-from .frf import FRFSet, QUANTITIES
+from .frf import QUANTITIES, QUANTITY_POWER, FRFSet
 
 __all__ = [
     "ModalModel",
     "RESIDUAL_FORMS",
     "residual_basis",
     "synthesize",
+    "transfer",
     "pole_from_fz",
     "natural_freq_hz",
     "damping_ratio",
@@ -45,7 +46,7 @@ __all__ = [
 ]
 
 RESIDUAL_FORMS = ("physical", "paper", "none")
-_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+_POWER = QUANTITY_POWER
 
 
 def pole_from_fz(freq_hz: "np.ndarray | float", zeta: "np.ndarray | float") -> np.ndarray:
@@ -138,20 +139,43 @@ class ModalModel:
         return damping_ratio(self.poles)
 
 
-def synthesize(model: ModalModel, freq_hz: np.ndarray) -> FRFSet:
-    """FRFs of a modal model at ``freq_hz`` (Hz), eq. (11); returns an :class:`FRFSet`."""
-    f = np.asarray(freq_hz, dtype=float)
-    jw = 1j * 2 * np.pi * f
-    lam = model.poles
-    # (n_modes, n_freq) pole kernels
-    K = 1.0 / (jw[None, :] - lam[:, None])
-    Kc = 1.0 / (jw[None, :] - np.conj(lam)[:, None])
-    R = model.residues
-    H = np.einsum("orm,mk->ork", R, K) + np.einsum("orm,mk->ork", np.conj(R), Kc)
-    B = residual_basis(2 * np.pi * f, model.quantity, model.residual_form)
-    if B.shape[0] == 2:
+def transfer(model: ModalModel, s: np.ndarray) -> np.ndarray:
+    """The model's transfer function at complex frequencies ``s`` (rad/s), shape (n_out, n_ref, n_s):
+    the one synthesis kernel of the package (eq. 11 continued off the j omega axis)::
+
+        H(s) = sum_r [ R_r / (s - lambda_r) + conj(R_r) / (s - conj(lambda_r)) ] + UR b_U(s) + LR b_L(s)
+
+    with the residual bases as functions of s: ``"physical"`` ``(s^p, -s^(p-2))`` (p the quantity's
+    power of s), ``"paper"`` ``(1, -1/s^2)``; on ``s = j omega`` these are :func:`residual_basis`.
+    At ``s = 0`` the second basis term is set to 0, as :func:`residual_basis` does at omega = 0.
+    ``s = j omega`` gives the FRF (:func:`synthesize`); ``s = j omega + a`` the FRF seen through an
+    exponential window ``exp(-a t)``."""
+    s = np.asarray(s, dtype=complex).ravel()
+    lam = np.asarray(model.poles, dtype=complex)
+    R = np.asarray(model.residues, dtype=complex)
+    n_out, n_ref = R.shape[:2]
+    Rf = R.reshape(n_out * n_ref, lam.size)
+    # (n_modes, n_s) pole kernels, summed by matrix products (BLAS)
+    G = Rf @ (1.0 / (s[None, :] - lam[:, None])) + np.conj(Rf) @ (1.0 / (s[None, :] - np.conj(lam)[:, None]))
+    if model.residual_form != "none":
+        p = _POWER[model.quantity]
+        zero = s == 0
+        s_safe = np.where(zero, 1.0, s)
+        if model.residual_form == "physical":
+            upper, lower = s ** p, -(s_safe ** (p - 2.0))
+        else:
+            upper, lower = np.ones_like(s), -1.0 / s_safe ** 2
+        lower = np.where(zero, 0.0, lower)
         if model.upper_residual is not None:
-            H = H + model.upper_residual[..., None] * B[0]
+            G = G + np.asarray(model.upper_residual).reshape(-1, 1) * upper
         if model.lower_residual is not None:
-            H = H + model.lower_residual[..., None] * B[1]
+            G = G + np.asarray(model.lower_residual).reshape(-1, 1) * lower
+    return G.reshape(n_out, n_ref, s.size)
+
+
+def synthesize(model: ModalModel, freq_hz: np.ndarray) -> FRFSet:
+    """FRFs of a modal model at ``freq_hz`` (Hz), eq. (11): :func:`transfer` on ``s = j 2 pi f``;
+    returns an :class:`FRFSet` in the model's quantity."""
+    f = np.asarray(freq_hz, dtype=float)
+    H = transfer(model, 2j * np.pi * f)
     return FRFSet(freq_hz=f, H=H, quantity=model.quantity, outputs=model.outputs, references=model.references)

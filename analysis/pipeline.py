@@ -74,10 +74,11 @@ import numpy as np
 from scipy.signal import find_peaks
 
 from .frf import FRFSet
+from .mac import mac
 from .lscf import parse_band
 from .fit_checks import (DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles,
                          migrated_poles)
-from .modal import damping_ratio, natural_freq_hz, pole_from_fz, residual_basis
+from .modal import damping_ratio, natural_freq_hz, pole_from_fz, transfer
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .errors import ImpactlabError
@@ -443,19 +444,7 @@ def _drop_bad_poles(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
 def _synthesize_flat(model, f: np.ndarray) -> np.ndarray:
     """``synthesize(model, f).H`` flattened to (n_frf, n_f), by matrix products (BLAS): the same
     sum (eq. 11), several times faster than the general einsum on big sets."""
-    jw = 1j * 2 * np.pi * f
-    lam = np.asarray(model.poles, dtype=complex)
-    R = np.asarray(model.residues, dtype=complex).reshape(-1, lam.size)
-    K = 1.0 / (jw[None, :] - lam[:, None])
-    Kc = 1.0 / (jw[None, :] - np.conj(lam)[:, None])
-    G = R @ K + np.conj(R) @ Kc
-    B = residual_basis(2 * np.pi * f, model.quantity, model.residual_form)
-    if B.shape[0] == 2:
-        if model.upper_residual is not None:
-            G += model.upper_residual.reshape(-1, 1) * B[0]
-        if model.lower_residual is not None:
-            G += model.lower_residual.reshape(-1, 1) * B[1]
-    return G
+    return transfer(model, 2j * np.pi * f).reshape(-1, f.size)
 
 
 def _scaled_misfit(frf: FRFSet, result) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -504,14 +493,9 @@ def _new_pole_relation(poles_raw: np.ndarray, residues: np.ndarray, df: float) -
     broad = bool(np.any(near & (ratio > MISSING_BANDWIDTH_RATIO)))
     unresolved = gap < np.maximum(MISSING_MIN_LINES * df, 0.25 * np.minimum(b[:-1], b[-1]))
     R = np.asarray(residues, dtype=complex).reshape(-1, f.size)
-    same_shape = np.array([_mac(R[:, k], R[:, -1]) > DUPLICATE_MAC for k in range(f.size - 1)], dtype=bool)
+    same_shape = np.array([mac(R[:, k], R[:, -1]) > DUPLICATE_MAC for k in range(f.size - 1)], dtype=bool)
     dup = (gap < DUPLICATE_BANDWIDTHS * 0.5 * np.maximum(b[:-1], b[-1])) & same_shape
     return broad, np.flatnonzero(unresolved | dup)
-
-
-def _mac(a: np.ndarray, b: np.ndarray) -> float:
-    den = float(np.vdot(a, a).real * np.vdot(b, b).real)
-    return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
 
 
 def _pair_is_resolved(trial, k: int, f: np.ndarray, e_old: np.ndarray, e_new: np.ndarray, df: float) -> tuple[bool, str]:

@@ -40,6 +40,7 @@ from typing import Optional
 import numpy as np
 
 from .frf import FRFSet
+from .mac import mac_matrix
 from .modal import damping_ratio, natural_freq_hz, residual_basis
 from .lscf import BandData, prepare_band
 
@@ -47,7 +48,6 @@ __all__ = [
     "StabilizationResult",
     "stabilization",
     "quick_residues",
-    "mac_matrix",
     "CLASS_NAMES",
     "NEW",
     "STABLE_FREQ",
@@ -133,14 +133,6 @@ class StabilizationResult:
             "max_damping": self.max_damping,
             "orders": rows,
         }
-
-
-def mac_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """MAC between the columns of a (N, p) and b (N, q): |a^H b|^2 / (|a|^2 |b|^2), (p, q)."""
-    num = np.abs(a.conj().T @ b) ** 2
-    den = np.outer(np.sum(np.abs(a) ** 2, axis=0), np.sum(np.abs(b) ** 2, axis=0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
 
 
 def quick_residues(

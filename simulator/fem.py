@@ -39,7 +39,7 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
-from analysis.frf import QUANTITIES, FRFSet
+from analysis.frf import QUANTITIES, QUANTITY_POWER, FRFSet
 from analysis.modal import ModalModel, pole_from_fz
 from analysis.points import Point, parse_point
 
@@ -60,7 +60,7 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+_POWER = QUANTITY_POWER
 _UNITS = {"receptance": "m/N", "mobility": "(m/s)/N", "accelerance": "(m/s^2)/N"}
 
 

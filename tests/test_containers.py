@@ -44,3 +44,19 @@ def test_pole_helpers_and_synthesis_single_mode():
     np.testing.assert_allclose(synthesize(model, f).H[0, 0], exact, rtol=1e-12)
     acc = convert_quantity(exact, f, "receptance", "accelerance")
     np.testing.assert_allclose(acc, -(w**2) * exact, rtol=1e-12)
+
+
+def test_transfer_is_the_one_synthesis_kernel_on_and_off_the_frequency_axis() -> None:
+    from analysis.modal import ModalModel, synthesize, transfer
+
+    lam = np.array([-0.8 + 2 * np.pi * 30j])
+    R = np.array([[[0.3 - 0.7j]]])
+    model = ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none")
+    f = np.linspace(1.0, 60.0, 50)
+    jw = 2j * np.pi * f
+    by_hand = R[0, 0, 0] / (jw - lam[0]) + np.conj(R[0, 0, 0]) / (jw - np.conj(lam[0]))
+    assert np.allclose(synthesize(model, f).H[0, 0], by_hand, rtol=1e-14, atol=0)
+    # off the axis: H(j w + a) is the model with every pole moved by -a (an exponential window)
+    a = 3.0
+    shifted = ModalModel(poles=lam - a, residues=R, quantity="receptance", residual_form="none")
+    assert np.allclose(transfer(model, jw + a), synthesize(shifted, f).H, rtol=1e-13, atol=0)

@@ -9,13 +9,13 @@ from analysis.frf import FRFSet
 from analysis.modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz, synthesize
 from analysis.plots import plot_stabilization
 from analysis.selection import poles_from_frequencies, select_clusters, select_poles
+from analysis.mac import mac, mac_matrix
 from analysis.stabilization import (
     NEW,
     STABLE_DAMP,
     STABLE_FREQ,
     STABLE_MAC,
     StabilizationResult,
-    mac_matrix,
     quick_residues,
     stabilization,
 )
@@ -185,3 +185,15 @@ def test_bad_arguments():
         stabilization(frf, 5, tol_freq=0)
     with pytest.raises(ValueError, match="n_modes"):
         select_poles(stabilization(frf, 5, method="lscf"), n_modes=0)
+
+
+def test_mac_is_scale_and_phase_blind_and_zero_for_orthogonal_or_zero_vectors() -> None:
+    a = np.array([1.0, 2.0 - 1j, -0.5j])
+    assert mac(a, (3 - 4j) * a) == pytest.approx(1.0, abs=1e-15)
+    b = np.array([2.0 + 1j, -1.0, 0.0])  # a^H b = 0
+    assert abs(np.vdot(a, b)) < 1e-15 and mac(a, b) == 0.0
+    assert mac(a, np.zeros(3)) == 0.0
+    # the same number the matrix form gives, and by the formula written out
+    c = np.array([1.0, 1j, 1.0])
+    expected = abs(np.vdot(a, c)) ** 2 / (np.vdot(a, a).real * np.vdot(c, c).real)
+    assert mac(a, c) == pytest.approx(expected) == pytest.approx(mac_matrix(a[:, None], c[:, None])[0, 0])

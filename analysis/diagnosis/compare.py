@@ -24,6 +24,7 @@ import numpy as np
 from scipy.signal import find_peaks
 
 from ..frf import FRFSet
+from ..mac import mac as mac_of
 
 __all__ = [
     "FLOOR_FRACTION",
@@ -151,11 +152,6 @@ def pick_peaks(frf: FRFSet, prominence_db: float = 6.0) -> list[dict]:
     return peaks
 
 
-def _mac(a: np.ndarray, b: np.ndarray) -> float:
-    den = np.vdot(a, a).real * np.vdot(b, b).real
-    return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
-
-
 def pair_modes(measured: FRFSet, simulated: FRFSet, max_rel_df: float = 0.15, min_mac: float = 0.5) -> dict:
     """Pair the peaks of both FRF sets by frequency and MAC (greedy on MAC x frequency closeness).
 
@@ -170,7 +166,7 @@ def pair_modes(measured: FRFSet, simulated: FRFSet, max_rel_df: float = 0.15, mi
         for j, b in enumerate(ps):
             rel = abs(b["freq_hz"] - a["freq_hz"]) / a["freq_hz"]
             if rel <= max_rel_df:
-                mac = _mac(a["vector"], b["vector"])
+                mac = mac_of(a["vector"], b["vector"])
                 if mac >= min_mac:
                     cand.append((mac * (1 - rel / max_rel_df), i, j, mac))
     cand.sort(reverse=True)

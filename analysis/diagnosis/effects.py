@@ -44,8 +44,8 @@ from typing import Callable, Mapping, Optional, Sequence
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
-from ..frf import FRFSet, convert_quantity
-from ..modal import ModalModel, pole_from_fz, residual_basis, synthesize
+from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
+from ..modal import ModalModel, pole_from_fz, residual_basis, synthesize, transfer
 from ..errors import ImpactlabError
 
 __all__ = [
@@ -61,7 +61,7 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+_POWER = QUANTITY_POWER
 WINDOW_DECAY_KEY = "window_decay_per_s"   # model.meta key: summed 1/tau of the exponential windows (1/s)
 HUM_BASES_HZ = (50.0, 60.0)
 
@@ -310,21 +310,7 @@ def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
             frf = replace(frf, H=convert_quantity(frf.H, f, frf.quantity, quantity), quantity=quantity)
         return frf
     s = 2j * np.pi * f + a
-    lam = model.poles
-    R = model.residues
-    H = (np.einsum("orm,mk->ork", R, 1.0 / (s[None, :] - lam[:, None]))
-         + np.einsum("orm,mk->ork", np.conj(R), 1.0 / (s[None, :] - np.conj(lam)[:, None])))
-    p = _POWER[model.quantity]
-    if model.residual_form == "physical":
-        basis = (s ** p, -s ** (p - 2.0))
-    elif model.residual_form == "paper":
-        basis = (np.ones_like(s), -1.0 / s ** 2)
-    else:
-        basis = ()
-    for term, b in zip((model.upper_residual, model.lower_residual), basis):
-        if term is not None:
-            H = H + term[..., None] * b
-    H = H * s ** float(_POWER[quantity] - p)
+    H = transfer(model, s) * s ** float(_POWER[quantity] - _POWER[model.quantity])
     return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=model.outputs, references=model.references)
 
 

@@ -14,7 +14,8 @@ from ..modal import damping_ratio, natural_freq_hz, synthesize
 from ..plots import summed_magnitude_db
 from ..points import parse_point
 from ..spectra import hit_spectra
-from ..stabilization import CLASS_NAMES, mac_matrix
+from ..mac import mac_matrix
+from ..stabilization import CLASS_NAMES
 from .sources import FitData, TestRecord
 
 __all__ = [

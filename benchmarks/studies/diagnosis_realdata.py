@@ -25,6 +25,7 @@ import numpy as np  # noqa: E402
 
 from analysis.cli_diagnose import main as diagnose_main  # noqa: E402
 from analysis.frf import FRFSet  # noqa: E402
+from analysis.mac import mac_matrix  # noqa: E402
 from analysis.uff import write_uff58  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -97,8 +98,7 @@ def run_uliege(band: str, out: Path) -> int:
     for o in frf.outputs:
         r, _ = fit_auto(frf.select([o]).band(lo, hi))
         R = r.model.residues[0]
-        mac = np.array([[abs(np.vdot(R[:, m], phi[:, j])) ** 2 / (np.vdot(R[:, m], R[:, m]).real * phi[:, j] @ phi[:, j])
-                         for j in range(phi.shape[1])] for m in range(R.shape[1])])
+        mac = mac_matrix(R, phi.astype(complex))
         lines.append(f"accelerometer {o}: measured modes (Hz) and best FE mode by MAC")
         for m in range(R.shape[1]):
             j = int(np.argmax(mac[m]))

@@ -29,6 +29,7 @@ from analysis.frf import FRFSet
 from analysis.spectra import FRFAccumulator, WindowSettings, hit_spectra
 
 from .case import compare, peer_repeats, scatter_table
+from analysis.mac import mac
 from analysis.modal import natural_freq_hz, synthesize
 
 from .common import (CaseReport, consistency_table, data_model, fit_ours, fit_ours_from_poles, fmt, match_poles,
@@ -232,7 +233,7 @@ def close_pair_check(sets: dict, poles_raw: np.ndarray, pair_hz: tuple[float, fl
         b = int(np.flatnonzero(near == i_hi)[0])
         R = r2.model.residues.reshape(-1, near.size)
         ra, rb = R[:, a], R[:, b]
-        mac = abs(np.vdot(ra, rb)) ** 2 / (np.vdot(ra, ra).real * np.vdot(rb, rb).real)
+        mac_ab = mac(ra, rb)
         f_lo.append(r2.freq_hz[a])
         f_hi.append(r2.freq_hz[b])
         found = "-"
@@ -242,7 +243,7 @@ def close_pair_check(sets: dict, poles_raw: np.ndarray, pair_hz: tuple[float, fl
             n_auto.append(fa.size)
             found = ", ".join(f"{x:.2f}" for x in fa) or "none"
         rows.append([name, f"{r2.freq_hz[a]:.3f} / {100 * r2.damping[a]:.3g}", f"{r2.freq_hz[b]:.3f} / {100 * r2.damping[b]:.3g}",
-                     fmt(np.linalg.norm(ra) / np.linalg.norm(rb), 2), fmt(mac, 2), f"{e1:.3g} -> {e2:.3g}", found])
+                     fmt(np.linalg.norm(ra) / np.linalg.norm(rb), 2), fmt(mac_ab, 2), f"{e1:.3g} -> {e2:.3g}", found])
     return rows, {"f_lo": np.array(f_lo), "f_hi": np.array(f_hi), "n_auto": np.array(n_auto), "band": band}
 
 
