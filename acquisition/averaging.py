@@ -53,7 +53,8 @@ class MeasurementAverage:
 
     def frfset(self, estimator: str = "H1") -> FRFSet:
         return self.acc.frfset(estimator, meta={"measurement": f"m{self.index:03d}", "point": self.point,
-                                                "windows": self.windows.to_dict()})
+                                                "windows": self.windows.to_dict()},
+                               sample_rate_hz=self.sample_rate_hz)
 
     def mean_coherence(self, lo_hz: float = 0.0, hi_hz: float = np.inf) -> Optional[float]:
         """Mean coherence over lo..hi Hz and the outputs that carry a signal (None before two hits:
@@ -74,6 +75,7 @@ class MeasurementAverage:
             coherence=self.acc.coherence(), Gff=Gff, Gxx=Gxx, Gfx=Gfx, outputs=self.outputs,
             reference=self.reference, n_averages=self.n_averages, hits=self.hits, quantity=self.quantity,
             unit=self.unit, windows=self.windows, exp_window_tau_s=self.acc.tau_s,
+            sample_rate_hz=self.sample_rate_hz,
         )
 
 

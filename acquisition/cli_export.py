@@ -13,12 +13,12 @@ import argparse
 from pathlib import Path
 from typing import Optional, Sequence
 
-from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
+from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, add_estimator
 
 __all__ = ["main", "export"]
 
 
-def export(rec_path: "str | Path", uff_path: "str | Path", *, time_data: bool = False, estimator: str = "H1",
+def export(rec_path: "str | Path", uff_path: "str | Path", *, time_data: bool = False, estimator: "str | None" = None,
            overwrite: bool = False) -> int:
     """Write the UFF file; returns the number of datasets written."""
     from analysis.uff import time_records, write_uff58
@@ -51,7 +51,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("recording")
     p.add_argument("--uff", required=True, help="UFF file to write")
     p.add_argument("--time", action="store_true", help="also write the accepted hits' time histories")
-    p.add_argument("--estimator", choices=("H1", "H2", "h1", "h2"), default="H1")
+    add_estimator(p)
     add_overwrite(p, "replace an existing --uff file")
     args = p.parse_args(argv)
     from analysis.uff import UFFError

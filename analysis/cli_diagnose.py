@@ -17,7 +17,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .command_line import Parser as _Parser, check_out_dir, parse_args
+from .command_line import Parser as _Parser, check_out_dir, parse_args, add_estimator
 
 __all__ = ["main", "build_parser", "load_simulation"]
 
@@ -44,11 +44,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="DIR", help="write report.md and plots into DIR")
     p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: all lines above 0 Hz)")
     p.add_argument("--effects", metavar="A,B,...", help="only these effects of the catalogue")
-    p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
+    add_estimator(p)
     return p
 
 
-def load_simulation(path: str, measured, estimator: str = "H1"):
+def load_simulation(path: str, measured, estimator: Optional[str] = None):
     """The simulation as a :class:`ModalModel` at the measured points (outputs, references order)."""
     from .inputs import InputError, load_input
     from .diagnosis.compare import common_points

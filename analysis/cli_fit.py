@@ -19,7 +19,8 @@ import numpy as np
 __all__ = ["main", "build_parser"]
 
 
-from .command_line import Parser as _Parser, UsageError as _UsageError, check_out_dir, cli_entry, errors_to_exit, parse_args
+from .command_line import Parser as _Parser, UsageError as _UsageError, add_estimator, check_out_dir, cli_entry
+from .command_line import errors_to_exit, parse_args
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -57,7 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "fits as modes (default 50,60; none: no guard)")
     p.add_argument("--exclude-mains", metavar="HZ", type=float,
                    help="leave every harmonic of this mains frequency (Hz) in the band out of the LSFD")
-    p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
+    add_estimator(p)
     p.add_argument("--frf", metavar="OUTPUT",
                    help="output point shown in the terminal table (default: the strongest FRF)")
     return p

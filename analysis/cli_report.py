@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 from typing import Optional, Sequence
 
+from .command_line import add_estimator
 from ._cli_dispatch import Parser, parse_args
 from .errors import ImpactlabError
 
@@ -30,7 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--geometry", metavar="G",
                    help="UFF file with nodes (15) and trace lines (82), 'frame' or a simulator config .toml "
                         "(default: the simulated frame for simulator recordings, else the points on a line)")
-    p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
+    add_estimator(p)
     return p
 
 

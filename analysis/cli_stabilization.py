@@ -15,7 +15,7 @@ import numpy as np
 __all__ = ["main", "build_parser"]
 
 
-from .command_line import Parser as _Parser, check_out_dir, cli_entry, errors_to_exit, parse_args
+from .command_line import Parser as _Parser, check_out_dir, cli_entry, errors_to_exit, parse_args, add_estimator
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("lsce", "lscf"), default="lsce", help="initial-pole method (default lsce)")
     p.add_argument("--lsfd", action="store_true", help="refine every order with a few LSFD iterations")
     p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: automatic)")
-    p.add_argument("--estimator", choices=("H1", "H2"), default="H1", help="FRF estimate of a recording")
+    add_estimator(p)
     return p
 
 

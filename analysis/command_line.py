@@ -25,7 +25,7 @@ from typing import Callable, Iterator, Optional, Sequence, TypeVar, Union
 
 from .errors import UsageError
 
-__all__ = ["UsageError", "Parser", "parse_args", "add_overwrite", "add_json_flag", "add_verbose",
+__all__ = ["UsageError", "Parser", "parse_args", "add_overwrite", "add_estimator", "add_json_flag", "add_verbose",
            "set_verbosity", "check_out_dir", "CliExit", "exit_on", "errors_to_exit", "cli_entry"]
 
 F = TypeVar("F", bound=Callable[..., int])
@@ -53,6 +53,14 @@ def parse_args(parser: argparse.ArgumentParser, argv: "Sequence[str] | None") ->
 def add_overwrite(parser: argparse.ArgumentParser, help: Optional[str] = None) -> None:
     """``--overwrite``: replace an existing output file."""
     parser.add_argument("--overwrite", action="store_true", help=help)
+
+
+def add_estimator(parser: argparse.ArgumentParser) -> None:
+    """``--estimator H1|H2``: which FRF estimate of a recording to use (default: the recording's own
+    preference, set by ``replay --estimator``, else H1)."""
+    parser.add_argument("--estimator", choices=("H1", "H2"), default=None,
+                        help="FRF estimate of a recording: H1 (noise on the response) or H2 (noise on the force); "
+                             "default: the one the recording prefers (set by 'replay --estimator'), else H1")
 
 
 def add_json_flag(parser: argparse.ArgumentParser, help: str = "print one JSON object instead of text") -> None:

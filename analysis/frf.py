@@ -47,6 +47,11 @@ class FRFSet:
     coherence : optional (n_out, n_ref, n_freq) float in [0, 1].
     exp_window_tau_s : optional time constant (s) of an exponential window on the responses.
     meta : free-form provenance (estimator, number of averages, source file...).
+    sample_rate_hz : the acquisition's sample rate (Hz) when known (recordings, captures): the
+        analyser's flat band ends at ``sample_rate_hz / 2.56``. None for FRFs of unknown origin
+        (a UFF file); consumers then fall back to the frequency axis.
+
+    The line spacing is :attr:`line_spacing_hz` (one formula for every consumer).
     """
 
     freq_hz: np.ndarray
@@ -58,6 +63,7 @@ class FRFSet:
     coherence: Optional[np.ndarray] = None
     exp_window_tau_s: Optional[float] = None
     meta: dict = field(default_factory=dict)
+    sample_rate_hz: Optional[float] = None
 
     def __post_init__(self) -> None:
         f = np.asarray(self.freq_hz, dtype=float)
@@ -81,6 +87,11 @@ class FRFSet:
             raise ValueError(
                 f"{len(outs)} output and {len(refs)} reference labels for H of shape {H.shape}"
             )
+        if self.sample_rate_hz is not None:
+            fs = float(self.sample_rate_hz)
+            if not (np.isfinite(fs) and fs > 0):
+                raise ValueError(f"sample_rate_hz must be a positive number of Hz; got {self.sample_rate_hz!r}")
+            object.__setattr__(self, "sample_rate_hz", fs)
         coh = None
         if self.coherence is not None:
             coh = np.asarray(self.coherence, dtype=float).reshape(H.shape)
@@ -93,6 +104,17 @@ class FRFSet:
         object.__setattr__(self, "outputs", outs)
         object.__setattr__(self, "references", refs)
         object.__setattr__(self, "coherence", coh)
+
+    @property
+    def line_spacing_hz(self) -> float:
+        """Frequency resolution (Hz): the median spacing of the lines (0 for a single line)."""
+        return float(np.median(np.diff(self.freq_hz))) if self.freq_hz.size > 1 else 0.0
+
+    @property
+    def analyser_band_hz(self) -> Optional[float]:
+        """Upper end of the analyser's flat (alias-free) band, ``sample_rate_hz / 2.56`` (Hz), when
+        the sample rate is known."""
+        return None if self.sample_rate_hz is None else self.sample_rate_hz / 2.56
 
     @property
     def omega(self) -> np.ndarray:

@@ -46,7 +46,7 @@ def detect_format(path: "str | Path") -> str:
     )
 
 
-def load_input(path: "str | Path", *, estimator: str = "H1") -> FRFSet:
+def load_input(path: "str | Path", *, estimator: Optional[str] = None) -> FRFSet:
     """The FRFs of a recording or a UFF 58 file as one :class:`FRFSet`.
 
     ``estimator`` chooses the recording's FRF estimate ("H1" or "H2"). FRFs that are entirely

@@ -120,7 +120,7 @@ def default_band(frf: FRFSet) -> tuple[float, float]:
     f = frf.freq_hz
     if f.size < 16:
         raise FitError(f"the FRFs hold only {f.size} lines; at least 16 are needed")
-    df = float(np.median(np.diff(f)))
+    df = frf.line_spacing_hz
     lo = max(float(f[0]), LOW_LINES * df)
     if frf.coherence is not None and np.any(np.isfinite(frf.coherence)):
         c = np.nanmedian(frf.coherence.reshape(-1, f.size), axis=0)
@@ -311,7 +311,7 @@ def fit_auto(
         result = _drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
     if add_missing and n_modes is None:
         # the user's poles/frequencies are kept: step 7 only adds (it never drops a pole)
-        result = _add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=_line_spacing(frf))
+        result = _add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz)
     if not result.success:
         warnings_out.append(f"LSFD did not converge: {result.message}")
         log.warning("LSFD did not converge: %s", result.message)
@@ -339,7 +339,7 @@ def exclude_lines(frf: FRFSet, freqs_hz: Sequence[float], n_lines: float = EXCLU
     if x.size and not np.all(np.isfinite(x)):
         raise ValueError(f"frequencies to exclude must be finite (Hz); got {list(freqs_hz)!r}")
     f = frf.freq_hz
-    tol = (n_lines + 1e-6) * _line_spacing(frf)
+    tol = (n_lines + 1e-6) * frf.line_spacing_hz
     drop = np.zeros(f.size, dtype=bool)
     for v in x:
         drop |= np.abs(f - v) <= tol
@@ -382,10 +382,6 @@ def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
     return w / float(np.max(w[ok]))
 
 
-def _line_spacing(frf: FRFSet) -> float:
-    return float(np.median(np.diff(frf.freq_hz))) if frf.freq_hz.size > 1 else 0.0
-
-
 def _trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
     """Half-width (Hz) of each pole's frequency trust region: MIGRATE_BANDWIDTHS bandwidths."""
     return MIGRATE_BANDWIDTHS * bandwidth_hz(start, df)
@@ -396,7 +392,7 @@ def _fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict):
     bandwidths of its start (the trust region, steps 5-7)."""
     from .lsfd import fit_lsfd
 
-    return fit_lsfd(frf, start, freq_window_hz=_trust_window_hz(start, _line_spacing(frf)), **fit_kw)
+    return fit_lsfd(frf, start, freq_window_hz=_trust_window_hz(start, frf.line_spacing_hz), **fit_kw)
 
 
 def _bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
@@ -426,7 +422,7 @@ def _bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) ->
 
 def _drop_bad_poles(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
     """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring)."""
-    df = _line_spacing(frf)
+    df = frf.line_spacing_hz
     anchor = np.asarray(result.initial_poles if result.initial_poles is not None else result.poles_raw)
     for _ in range(MAX_CHECK_ROUNDS):
         bad, why = _bad_poles(result, anchor, df)
@@ -560,7 +556,7 @@ def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str
     that does not converge is a rejected candidate (its convergence warning is not passed on).
     The poles of ``result`` are kept; poles are only added."""
     from .lsfd import LSFDConvergenceWarning
-    df = _line_spacing(frf) if df is None else float(df)
+    df = frf.line_spacing_hz if df is None else float(df)
     tried: list[float] = []
     added = 0
     f, e, d = _scaled_misfit(frf, result)

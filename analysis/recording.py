@@ -279,10 +279,12 @@ class RecordingWriter:
         unit: str,
         windows: WindowSettings,
         exp_window_tau_s: Optional[float],
+        sample_rate_hz: Optional[float] = None,
     ) -> None:
         """Write (or replace) the FRF results of one measurement point and flush.
 
-        H1, H2, coherence, Gxx, Gfx: (n_out, n_freq); Gff: (n_freq,).
+        H1, H2, coherence, Gxx, Gfx: (n_out, n_freq); Gff: (n_freq,); ``sample_rate_hz`` (Hz) of the
+        hits they come from (stored so that readers never recompute it).
         """
         grp = self._f["frf"]
         name = f"m{int(measurement):03d}"
@@ -303,6 +305,7 @@ class RecordingWriter:
         a["unit"] = str(unit)
         a["windows_json"] = json.dumps(windows.to_dict())
         a["exp_window_tau_s"] = float("nan") if exp_window_tau_s is None else float(exp_window_tau_s)
+        a["sample_rate_hz"] = float("nan") if sample_rate_hz is None else float(sample_rate_hz)
         self._f.flush()
 
     def set_attr(self, key: str, value: Any) -> None:
@@ -476,6 +479,15 @@ class Recording:
         except _DAMAGE as exc:
             raise RecordingError(f"hit {index} in {self.path} is damaged ({type(exc).__name__}: {exc})") from None
 
+    def _hit_sample_rate(self) -> Optional[float]:
+        """The sample rate (Hz) stored with the first hit (for FRFs written before the FRF group
+        stored its own), or None for a recording without hits (imported FRFs)."""
+        try:
+            names = self.hit_names()
+            return float(self._f["hits"][names[0]].attrs["sample_rate_hz"]) if names else None
+        except (RecordingError, *_DAMAGE):
+            return None
+
     def hits(self, accepted_only: bool = False, skip_damaged: bool = False) -> Iterator[RecordedHit]:
         """All hits in order (``accepted_only``: only accepted ones; ``skip_damaged``: drop incomplete ones)."""
         for name in self.hit_names():
@@ -519,14 +531,25 @@ class Recording:
             out["windows"] = WindowSettings.from_dict(json.loads(out.pop("windows_json")))
             tau = float(out["exp_window_tau_s"])
             out["exp_window_tau_s"] = None if np.isnan(tau) else tau
+            fs = float(out.get("sample_rate_hz", float("nan")))  # absent in files written before it was stored
+            out["sample_rate_hz"] = None if np.isnan(fs) else fs
             return out
         except _DAMAGE as exc:
             raise RecordingError(f"FRF results {name!r} in {self.path} are missing or damaged "
                                  f"({type(exc).__name__}: {exc})") from None
 
-    def frfsets(self, estimator: str = "H1") -> list[FRFSet]:
-        """One FRF set per measurement point (one reference each)."""
-        est = estimator.upper()
+    @property
+    def preferred_estimator(self) -> str:
+        """The FRF estimate this recording's FRFs are read as by default: the one chosen at replay
+        (``replay --estimator H2``), else "H1"."""
+        value = self._f.attrs.get("preferred_estimator", "H1")
+        est = _as_str(value).upper() if isinstance(value, (bytes, str)) else "H1"
+        return est if est in ("H1", "H2") else "H1"
+
+    def frfsets(self, estimator: Optional[str] = None) -> list[FRFSet]:
+        """One FRF set per measurement point (one reference each); ``estimator`` "H1" or "H2"
+        (default: :attr:`preferred_estimator`)."""
+        est = (estimator or self.preferred_estimator).upper()
         if est not in ("H1", "H2"):
             raise ValueError(f"estimator {estimator!r} is not H1 or H2")
         sets = []
@@ -543,7 +566,7 @@ class Recording:
         return FRFSet(
             freq_hz=g["freq_hz"], H=g[est][:, None, :], quantity=g["quantity"], outputs=tuple(g["outputs"]),
             references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
-            exp_window_tau_s=g["exp_window_tau_s"],
+            exp_window_tau_s=g["exp_window_tau_s"], sample_rate_hz=g["sample_rate_hz"] or self._hit_sample_rate(),
             meta={"estimator": est, "n_averages": int(g["n_averages"]), "source": str(self.path),
                   "measurement": name, "point": g["point"]},
         )
@@ -640,18 +663,29 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
                 if s.coherence is not None:
                     C[outs.index(o), refs.index(r)] = s.coherence[i, j]
     taus = {s.exp_window_tau_s for s in sets}
-    tau = sets[0].exp_window_tau_s if len(taus) == 1 else None
+    if len(taus) > 1:
+        raise RecordingError(
+            "measurement points were processed with different exponential windows (tau "
+            + ", ".join("none" if s.exp_window_tau_s is None else f"{s.exp_window_tau_s:.6g} s" for s in sets)
+            + "): the fit cannot remove one window from all of them; recompute the FRFs with one window "
+            "('python -m acquisition replay REC.h5 --out NEW.h5 --exp-window ...')")
+    rates = {s.sample_rate_hz for s in sets if s.sample_rate_hz is not None}
+    if len(rates) > 1:
+        raise RecordingError(f"measurement points were sampled at different rates {sorted(rates)} Hz and cannot be "
+                             "combined into one FRF set")
+    ests = {s.meta.get("estimator") for s in sets}
     meta = dict(sets[0].meta)
     meta.pop("measurement", None)
     meta.pop("point", None)
     meta["n_averages"] = [s.meta.get("n_averages") for s in sets]
-    if len(taus) > 1:
-        meta["exp_window_tau_s_per_measurement"] = [s.exp_window_tau_s for s in sets]
+    if len(ests) > 1:
+        meta["estimator"] = "mixed"
     return FRFSet(freq_hz=f0, H=H, quantity=sets[0].quantity, outputs=tuple(outs), references=tuple(refs),
-                  unit=sets[0].unit, coherence=C, exp_window_tau_s=tau, meta=meta)
+                  unit=sets[0].unit, coherence=C, exp_window_tau_s=sets[0].exp_window_tau_s, meta=meta,
+                  sample_rate_hz=next(iter(rates)) if rates else None)
 
 
-def load_frfset(path: "str | Path", estimator: str = "H1") -> FRFSet:
+def load_frfset(path: "str | Path", estimator: Optional[str] = None) -> FRFSet:
     """All FRF results of a recording as one :class:`FRFSet` (see :func:`merge_frfsets`)."""
     with Recording(path) as rec:
         return merge_frfsets(rec.frfsets(estimator))

@@ -74,7 +74,7 @@ def subset_scatter(frf: FRFSet, result, *, max_iter: int = 50) -> SubsetScatter:
     if not isinstance(frf, FRFSet):
         raise TypeError(f"frf must be an analysis.frf.FRFSet; got {type(frf).__name__}")
     start = np.asarray(result.poles_raw, dtype=complex)
-    df = float(np.median(np.diff(frf.freq_hz))) if frf.freq_hz.size > 1 else 0.0
+    df = frf.line_spacing_hz
     window = MIGRATE_BANDWIDTHS * bandwidth_hz(start, df)
     groups = _groups(frf)
     F = np.full((len(groups), start.size), np.nan)

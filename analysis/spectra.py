@@ -352,8 +352,10 @@ class FRFAccumulator:
             c = np.where(ok, (Sfx.real ** 2 + Sfx.imag ** 2) / np.where(ok, den, 1.0), 0.0)
         return np.clip(c, 0.0, 1.0)
 
-    def frfset(self, estimator: str = "H1", meta: Optional[dict] = None) -> FRFSet:
-        """The averaged FRFs as an :class:`FRFSet` with one reference (``H[n_out, 1, n_freq]``)."""
+    def frfset(self, estimator: str = "H1", meta: Optional[dict] = None,
+               sample_rate_hz: Optional[float] = None) -> FRFSet:
+        """The averaged FRFs as an :class:`FRFSet` with one reference (``H[n_out, 1, n_freq]``);
+        ``sample_rate_hz``: the acquisition's sample rate, carried by the set."""
         est = estimator.upper()
         if est not in ("H1", "H2"):
             raise ValueError(f"estimator {estimator!r} is not H1 or H2")
@@ -370,4 +372,5 @@ class FRFAccumulator:
             coherence=self.coherence()[:, None, :],
             exp_window_tau_s=self.tau_s,
             meta=m,
+            sample_rate_hz=sample_rate_hz,
         )

@@ -204,3 +204,44 @@ def test_sigkill_mid_session_loses_no_hit(tmp_path, seed, n_before_kill):
         for idx, total in reported.items():
             assert idx in hits and int(hits[idx].counts.sum()) == total
         assert len(rec.events()) >= len(reported)
+
+
+def test_frfs_carry_sample_rate_and_the_preferred_estimator(tmp_path) -> None:
+    """The FRF set carries the sample rate it was measured at, and a recording replayed with H2 is
+    read as H2 by every consumer unless told otherwise (issue 11, item 3)."""
+    from analysis.recording import RecordingWriter, load_frfset
+    from analysis.spectra import WindowSettings
+
+    f = np.linspace(0.0, 200.0, 129)
+    H = np.ones((1, 129), complex)
+    path = tmp_path / "r.h5"
+    with RecordingWriter(path, instrument={}, setup={}, channels=[], windows=WindowSettings(), plan={}) as w:
+        w.write_frf(0, point="right:6:-X", freq_hz=f, H1=H, H2=2 * H, coherence=np.full((1, 129), 0.9),
+                    Gff=np.ones(129), Gxx=np.ones((1, 129)), Gfx=np.ones((1, 129), complex), outputs=["left:9:Y"],
+                    reference="right:6:-X", n_averages=3, hits=[0, 1, 2], quantity="accelerance", unit="(m/s^2)/N",
+                    windows=WindowSettings(), exp_window_tau_s=None, sample_rate_hz=512.0)
+    frf = load_frfset(path)
+    assert frf.sample_rate_hz == 512.0 and frf.analyser_band_hz == pytest.approx(200.0)
+    assert frf.line_spacing_hz == pytest.approx(200.0 / 128)
+    assert frf.meta["estimator"] == "H1" and np.allclose(frf.H, 1.0)
+    with RecordingWriter.resume(path) as w:
+        w.set_attr("preferred_estimator", "H2")
+    frf2 = load_frfset(path)
+    assert frf2.meta["estimator"] == "H2" and np.allclose(frf2.H, 2.0)
+    assert np.allclose(load_frfset(path, estimator="H1").H, 1.0)
+
+
+def test_merging_points_with_different_exponential_windows_is_refused_not_silently_dropped() -> None:
+    from analysis.frf import FRFSet
+    from analysis.recording import RecordingError, merge_frfsets
+
+    f = np.linspace(1.0, 100.0, 50)
+    a = FRFSet(freq_hz=f, H=np.ones((1, 1, 50)), outputs=("left:9:Y",), references=("right:6:-X",),
+               exp_window_tau_s=0.5)
+    b = FRFSet(freq_hz=f, H=np.ones((1, 1, 50)), outputs=("left:9:Y",), references=("top:4:Z",),
+               exp_window_tau_s=0.25)
+    with pytest.raises(RecordingError, match="different exponential windows.*replay"):
+        merge_frfsets([a, b])
+    same = merge_frfsets([a, FRFSet(freq_hz=f, H=np.ones((1, 1, 50)), outputs=("left:9:Y",),
+                                    references=("top:4:Z",), exp_window_tau_s=0.5)])
+    assert same.exp_window_tau_s == 0.5 and same.H.shape == (1, 2, 50)

@@ -414,7 +414,7 @@ def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
     f = ctx.measured.freq_hz
     E = ctx.measured.H - ctx.sim.H
     power = np.sum(ctx.weights * np.abs(E) ** 2, axis=(0, 1))
-    df = float(np.median(np.diff(f)))
+    df = ctx.measured.line_spacing_hz
     # a resonance just past a band edge still shows inside the band: allow 5 % beyond the edges
     lo, hi = f[lines][0] / 1.05, f[lines][-1] * 1.05
     # candidates: the largest local maxima of the weighted residual power (all lines, smoothed)

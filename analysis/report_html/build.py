@@ -85,7 +85,7 @@ def _default(x):
 
 def make_report(input_path: "str | Path", out_dir: "str | Path", *, fit_json: "Optional[str | Path]" = None,
                 diagnosis: "Optional[str | Path]" = None, geometry: Optional[Geometry] = None,
-                estimator: str = "H1") -> Path:
+                estimator: Optional[str] = None) -> Path:
     """Write the report of a recording or UFF file into ``out_dir``; returns ``index.html``.
 
     Without ``fit_json`` the automatic fit runs here; ``geometry`` None puts the points on a line.
