@@ -147,13 +147,14 @@ def fit_step(ctx: DemoContext) -> None:
     from analysis.plots import plot_fit, plot_stabilization
     from analysis.report import format_table, result_to_dict, write_json
     frf = ctx.frf
-    result, stab = fit_auto(frf, band=DEMO_FIT_BAND_HZ, method="lm")
+    fit = fit_auto(frf, band=DEMO_FIT_BAND_HZ, method="lm")
+    result, stab = fit.lsfd, fit.stabilization
     live = [(i, j) for i in range(frf.n_outputs) for j in range(frf.n_references)
             if np.all(np.isfinite(frf.H[i, j])) and np.any(frf.H[i, j] != 0)]
     oi, rj = max(live, key=lambda ij: float(np.max(np.abs(frf.band(*DEMO_FIT_BAND_HZ).H[ij[0], ij[1]]))))
     ctx.say("")
     ctx.say(format_table(result, frf, output=oi, reference=rj,
-                         initial=None if stab is None else stab.meta.get("selected_poles")))
+                         initial=None if stab is None else fit.selected_poles))
     f_true, z_true, _ = ctx.true_model.modes()  # the frame with the accelerometers' mass on it
     f_true, z_true = np.asarray(f_true), np.asarray(z_true)
     lo, hi = DEMO_FIT_BAND_HZ
@@ -182,7 +183,7 @@ def fit_step(ctx: DemoContext) -> None:
     extra = [f"{result.freq_hz[i]:.3f}" for i in range(result.freq_hz.size) if i not in used]
     ctx.say(f"{matched} of {in_band.size} true modes matched"
             + (f"; unmatched fitted poles at {', '.join(extra)} Hz" if extra else ""))
-    write_json(ctx.out_dir / "fit.json", result_to_dict(result, frf, stab))
+    write_json(ctx.out_dir / "fit.json", result_to_dict(fit, frf))
     plot_fit(frf, result, ctx.out_dir / "fit.png", pairs=[(oi, rj)], band=DEMO_FIT_BAND_HZ)
     if stab is not None:
         plot_stabilization(stab, frf, ctx.out_dir / "stabilization.png", selected=result.poles)

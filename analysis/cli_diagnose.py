@@ -72,7 +72,7 @@ def load_simulation(path: str, measured, estimator: Optional[str] = None):
     from .pipeline import FitError, fit_auto
 
     try:
-        result, _ = fit_auto(sim)
+        result = fit_auto(sim).lsfd
     except FitError as exc:
         raise InputError(f"cannot build a modal model of the simulated FRFs in {p}: {exc}") from None
     return model_with_correction(result.model, sim)

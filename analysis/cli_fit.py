@@ -135,17 +135,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     with errors_to_exit("analysis fit", ValueError):
         with warnings.catch_warnings(record=True) as wlist:
             warnings.simplefilter("always")
-            result, stab = fit_auto(
+            fit = fit_auto(
                 frf, band=band, max_modes=args.order, n_modes=args.modes, method=args.method,
                 residual_form=args.residuals, initial=freqs if freqs is not None else args.initial,
                 per_frf=args.per_frf, max_iter=args.max_iter, frf_weighting=args.frf_weights,
                 mains_hz=mains, exclude_hz=exclude or None,
             )
         caught = [str(w.message) for w in wlist]
-    notes = list(stab.meta.get("warnings", [])) if stab is not None else []
+    result, stab = fit.lsfd, fit.stabilization
+    notes = list(fit.warnings)
     for msg in notes + [c for c in caught if c not in notes]:
         print(f"warning: {msg}", file=sys.stderr)
-    initial = stab.meta.get("selected_poles") if stab is not None else None
+    initial = fit.selected_poles if stab is not None else None
     label = (stab.method.split("+")[0].upper() if stab is not None else "initial")
     print(format_table(result, frf, output=shown[0], reference=shown[1], initial=initial, initial_label=label))
     scatter = None
@@ -156,7 +157,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             scatter = subset_scatter(frf, result)
         except ValueError as exc:
             print(f"warning: no scatter estimate: {exc}", file=sys.stderr)
-    doc = result_to_dict(result, frf, stab, extra={"input": str(args.input), "warnings": notes + caught},
+    doc = result_to_dict(fit, frf, extra={"input": str(args.input), "warnings": notes + caught},
                          scatter=scatter)
     with errors_to_exit("analysis fit", (OSError, ValueError), prefix="cannot write the outputs: "):
         write_json(args.json, doc)

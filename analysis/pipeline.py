@@ -2,6 +2,9 @@
 
 This is the paper's Fig. 1 flow with the choices made automatically:
 
+Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6),
+:mod:`analysis.missing_modes` (7), :mod:`analysis.fit_result` (the verdict); this module runs them.
+
 1. **Band** (paper sec. 3.1). Default: from the lowest reliable line to the top line. The
    lowest ``LOW_LINES`` lines (f < LOW_LINES * df: the record is too short there, and an
    IEPE sensor rolls off) are skipped; with coherence available, leading lines where the
@@ -14,7 +17,7 @@ This is the paper's Fig. 1 flow with the choices made automatically:
    (``2 zeta f``) of a band edge sits on the edge; the paper (sec. 3.1, Fig. 4) shows the
    fit then suffers. An automatic edge is moved outwards (as far as the data and the
    low-line limit allow) so the resonance is inside with its margin; if it cannot be, or
-   the band was the user's, a warning is logged and kept in ``stab.meta["warnings"]``.
+   the band was the user's, a warning is logged and kept in the result's ``warnings``.
 5. **LSFD** (:func:`analysis.lsfd.fit_lsfd`, Gauss-Newton or Levenberg-Marquardt) from the
    selected poles, with residual terms for the modes outside the band. Each FRF is weighted
    by ``1 / its noise level`` in the band (``frf_weighting="rms"``, the default,
@@ -38,7 +41,7 @@ This is the paper's Fig. 1 flow with the choices made automatically:
    *duplicate* another (within its half-bandwidth with a residue MAC > 0.8) came from
    spurious initial poles; they are dropped and the LSFD repeated from the starts of the
    remaining poles (same trust regions), up to ``MAX_CHECK_ROUNDS`` times; each drop is
-   noted in ``stab.meta["warnings"]``.
+   noted in the result's ``warnings``.
 7. **Missing resonances**: the misfit of every FRF, scaled by that FRF's RMS in the band
    (so weak-but-clean FRFs count like strong ones), is averaged over the FRFs:
    ``e(f) = sqrt(mean_o |H_o - G_o|^2 / rms_o^2)``, and likewise ``d(f)`` for the data.
@@ -66,118 +69,24 @@ This is the paper's Fig. 1 flow with the choices made automatically:
 from __future__ import annotations
 
 import logging
-import warnings
-from dataclasses import replace
 from typing import Optional, Sequence, Union
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from .frf import FRFSet
-from .mac import mac
+
+from .bands import FitError, check_band_edges, default_band, default_max_modes, exclude_lines, mains_harmonics
+from .bounded_fit import drop_bad_poles, fit_bounded
+from .fit_result import FitResult, assess_fit
 from .lscf import parse_band
-from .fit_checks import (DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles,
-                         migrated_poles)
-from .modal import damping_ratio, natural_freq_hz, pole_from_fz, transfer
+from .missing_modes import MAINS_HZ, add_missing_modes
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
-from .errors import ImpactlabError
 
-__all__ = ["fit_auto", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
+__all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
 
 log = logging.getLogger(__name__)
-
-LOW_LINES = 5
-MIN_COHERENCE = 0.8
-EDGE_BANDWIDTHS = 3.0
-MAX_DAMPING = 0.2
-MAX_CHECK_ROUNDS = 4
-MISSING_MEDIAN_FACTOR = 4.0
-MISSING_DATA_FRACTION = 0.25
-MISSING_MIN_GAIN = 0.01
-MAX_ADDED = 8
-MISSING_BANDWIDTH_RATIO = 4.0
-MAX_FAILED_TRIES = 2
-MISSING_MIN_LINES = 3
-MISSING_TRIAL_ITER = 40
-MISSING_LOCAL_GAIN = 0.3
-MISSING_MIN_RESIDUE_RATIO = 0.05
-MISSING_CANCEL_RATIO = 0.2
-MAINS_HZ = (50.0, 60.0)
-MAINS_LINES = 2.0
-MAINS_DEVIATION_HZ = 0.1
-MAINS_WIDTH_FRACTION = 0.5
-EXCLUDE_LINES = 2.0
-
-
-class FitError(ImpactlabError, ValueError):
-    """The automatic fit cannot go on (no stable poles, band too narrow...); the message says what to do."""
-
-
-def default_band(frf: FRFSet) -> tuple[float, float]:
-    """Default band (Hz): skip the lowest ``LOW_LINES`` lines and leading low-coherence lines."""
-    f = frf.freq_hz
-    if f.size < 16:
-        raise FitError(f"the FRFs hold only {f.size} lines; at least 16 are needed")
-    df = frf.line_spacing_hz
-    lo = max(float(f[0]), LOW_LINES * df)
-    if frf.coherence is not None and np.any(np.isfinite(frf.coherence)):
-        c = np.nanmedian(frf.coherence.reshape(-1, f.size), axis=0)
-        head = np.flatnonzero(f <= f[0] + 0.1 * (f[-1] - f[0]))
-        ok = head[c[head] >= MIN_COHERENCE]
-        # a leading run of low coherence (within the lowest 10 % of the span) moves the edge
-        if ok.size and ok[0] > 0:
-            lo = max(lo, float(f[ok[0]]))
-    lo_line = f[f >= lo - 1e-9 * abs(lo)][0]
-    return float(lo_line), float(f[-1])
-
-
-def default_max_modes(frf: FRFSet, band: tuple[float, float]) -> int:
-    """Largest model size for the stabilization: ``2 * peaks + 8`` clipped to [12, 60], where
-    ``peaks`` counts the peaks of the summed FRF magnitude (dB) with 3 dB prominence."""
-    sel = (frf.freq_hz >= band[0]) & (frf.freq_hz <= band[1])
-    s = np.sqrt(np.nansum(np.abs(frf.H[..., sel].reshape(-1, int(sel.sum()))) ** 2, axis=0))
-    s = 20 * np.log10(np.maximum(s, np.max(s) * 1e-12 + 1e-300))
-    peaks, _ = find_peaks(s, prominence=3.0)
-    return int(np.clip(2 * peaks.size + 8, 12, 60))
-
-
-def check_band_edges(
-    poles: np.ndarray, band: tuple[float, float], limits: tuple[float, float], movable: tuple[bool, bool]
-) -> tuple[tuple[float, float], list[str]]:
-    """Move band edges away from resonances (see module docstring, step 4).
-
-    poles : rad/s; band : current (lo, hi) Hz; limits : how far each edge may go (Hz);
-    movable : whether each edge may move. Returns the new band and the warnings.
-    """
-    lo, hi = band
-    warn: list[str] = []
-    f = natural_freq_hz(poles)
-    bw = 2.0 * damping_ratio(poles) * f
-    for fi, b in zip(f, bw):
-        margin = EDGE_BANDWIDTHS * b
-        if fi - lo < margin:
-            want = fi - margin
-            if movable[0] and want >= limits[0]:
-                lo = want
-            else:
-                warn.append(
-                    f"the mode at {fi:.4g} Hz lies within {EDGE_BANDWIDTHS:g} half-power bandwidths of the lower "
-                    f"band edge {lo:.4g} Hz; its estimate may be biased (lower the edge below {want:.4g} Hz if the "
-                    "data allow, or raise it above the mode)"
-                )
-        if hi - fi < margin:
-            want = fi + margin
-            if movable[1] and want <= limits[1]:
-                hi = want
-            else:
-                warn.append(
-                    f"the mode at {fi:.4g} Hz lies within {EDGE_BANDWIDTHS:g} half-power bandwidths of the upper "
-                    f"band edge {hi:.4g} Hz; its estimate may be biased (raise the edge above {want:.4g} Hz if the "
-                    "data allow, or lower it below the mode)"
-                )
-    return (lo, hi), warn
 
 
 def fit_auto(
@@ -198,7 +107,7 @@ def fit_auto(
     mains_hz: Optional[Sequence[float]] = MAINS_HZ,
     exclude_hz: Optional[Sequence[float]] = None,
 ):
-    """Automatic modal fit of an FRF set; returns ``(LSFDResult, StabilizationResult)``.
+    """Automatic modal fit of an FRF set; returns a :class:`~analysis.fit_result.FitResult`.
 
     Parameters
     ----------
@@ -230,9 +139,10 @@ def fit_auto(
 
     Returns
     -------
-    (LSFDResult, StabilizationResult or None): the stabilization is None when complex poles
-    were given. ``stab.meta`` holds ``"band"`` (the fitted band), ``"warnings"`` and
-    ``"selected_poles"``.
+    :class:`analysis.fit_result.FitResult`: ``.lsfd`` (the LSFD result), ``.stabilization``
+    (None when complex poles were given), ``.band`` (the fitted band), ``.selected_poles``,
+    ``.warnings``, and the verdict ``.success`` (converged *and* physically sensible), ``.status``,
+    ``.problems``, ``.message``. Non-convergence is a status, never an exception.
     """
     from .lsfd import fit_lsfd  # lazy import: keeps this module importable on its own
 
@@ -307,49 +217,23 @@ def fit_auto(
     if given_complex is not None:
         result = fit_lsfd(fit_frf, poles, **fit_kw)
     else:
-        result = _fit_bounded(fit_frf, poles, fit_kw)
-        result = _drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
+        result = fit_bounded(fit_frf, poles, fit_kw)
+        result = drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
     if add_missing and n_modes is None:
         # the user's poles/frequencies are kept: step 7 only adds (it never drops a pole)
-        result = _add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz)
+        result = add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz)
     if not result.success:
         warnings_out.append(f"LSFD did not converge: {result.message}")
         log.warning("LSFD did not converge: %s", result.message)
-    info = {"band": (lo2, hi2), "warnings": warnings_out, "selected_poles": selected}
-    if stab is not None:
-        stab = replace(stab, meta={**stab.meta, **info})
-    return result, stab
-
-
-def mains_harmonics(mains_hz: float, band: Sequence[float]) -> list[float]:
-    """Multiples ``k * mains_hz`` (Hz, k >= 1) inside ``band`` = (lo, hi) Hz."""
-    m = float(mains_hz)
-    if not np.isfinite(m) or m <= 0:
-        raise ValueError(f"the mains frequency must be > 0 Hz; got {mains_hz!r}")
-    lo, hi = float(band[0]), float(band[1])
-    k0 = max(1, int(np.ceil(lo / m)))
-    return [k * m for k in range(k0, int(np.floor(hi / m)) + 1)]
-
-
-def exclude_lines(frf: FRFSet, freqs_hz: Sequence[float], n_lines: float = EXCLUDE_LINES) -> tuple[FRFSet, int]:
-    """The FRFs without the lines within ``n_lines`` line spacings of any of ``freqs_hz`` (Hz),
-    and how many lines were left out. Dropping a line is the same as weighting it zero in the
-    least-squares cost (``sum_k |w_k e_k|^2``); it also keeps the per-FRF weights usable."""
-    x = np.asarray(freqs_hz, dtype=float).ravel()
-    if x.size and not np.all(np.isfinite(x)):
-        raise ValueError(f"frequencies to exclude must be finite (Hz); got {list(freqs_hz)!r}")
-    f = frf.freq_hz
-    tol = (n_lines + 1e-6) * frf.line_spacing_hz
-    drop = np.zeros(f.size, dtype=bool)
-    for v in x:
-        drop |= np.abs(f - v) <= tol
-    if not np.any(drop):
-        return frf, 0
-    keep = ~drop
-    if int(keep.sum()) < 16:
-        raise FitError(f"excluding the lines around {list(x)} Hz leaves only {int(keep.sum())} lines; exclude fewer")
-    coh = None if frf.coherence is None else np.asarray(frf.coherence)[..., keep]
-    return replace(frf, freq_hz=f[keep], H=frf.H[..., keep], coherence=coh), int(drop.sum())
+    n_avg = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    if n_avg.size and np.all(n_avg == 1):
+        warnings_out.append("one average per point: the coherence is 1 everywhere and says nothing about the noise; "
+                            "the standard deviations and weights rest on the misfit alone (take several hits per point)")
+    problems = assess_fit(result, (lo2, hi2))
+    for p in problems:
+        log.warning("implausible fit: %s", p)
+    return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
+                     warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
 
 
 def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
@@ -380,252 +264,3 @@ def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
     w = np.full(rms.shape, float(np.median(1.0 / sigma[ok])))
     w[ok] = 1.0 / sigma[ok]
     return w / float(np.max(w[ok]))
-
-
-def _trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
-    """Half-width (Hz) of each pole's frequency trust region: MIGRATE_BANDWIDTHS bandwidths."""
-    return MIGRATE_BANDWIDTHS * bandwidth_hz(start, df)
-
-
-def _fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict):
-    """LSFD with each pole's damped frequency held within ``MIGRATE_BANDWIDTHS`` half-power
-    bandwidths of its start (the trust region, steps 5-7)."""
-    from .lsfd import fit_lsfd
-
-    return fit_lsfd(frf, start, freq_window_hz=_trust_window_hz(start, frf.line_spacing_hz), **fit_kw)
-
-
-def _bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
-    """Mask of fitted poles to drop (step 6) and the reasons (``duplicates=False``: without the
-    duplicate check; step 7 judges its new pole's neighbours itself)."""
-    lo, hi = result.band
-    fd = result.poles_raw.imag / (2 * np.pi)
-    z = result.damping
-    out_of_range = ~((fd >= lo) & (fd <= hi) & (z > 0) & (z < MAX_DAMPING))
-    on_bound = np.abs(result.poles_raw.imag - start.imag) / (2 * np.pi) >= 0.99 * _trust_window_hz(start, df)
-    migrated = (migrated_poles(start, result.poles_raw, df) | on_bound) & ~out_of_range
-    moved = np.abs(natural_freq_hz(result.poles_raw) - natural_freq_hz(start)) / bandwidth_hz(start, df)
-    dup = duplicate_poles(result.poles_raw, result.model.residues, df, moved=moved) & ~out_of_range & ~migrated
-    if not duplicates:
-        dup = np.zeros_like(dup)
-    why = []
-    edge = f"pulled to its trust-region edge ({MIGRATE_BANDWIDTHS:g} half-power bandwidths from its start)"
-    for mask, text in ((out_of_range, "moved out of the band or to unphysical damping"),
-                       (migrated, edge),
-                       (dup, "duplicates a neighbour (same resonance, same shape)")):
-        for k in np.flatnonzero(mask):
-            why.append(f"{natural_freq_hz(start[k]):.4g} Hz -> {result.freq_hz[k]:.4g} Hz/{100 * z[k]:.3g} %: {text}")
-    return out_of_range | migrated | dup, why
-
-
-
-
-def _drop_bad_poles(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
-    """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring)."""
-    df = frf.line_spacing_hz
-    anchor = np.asarray(result.initial_poles if result.initial_poles is not None else result.poles_raw)
-    for _ in range(MAX_CHECK_ROUNDS):
-        bad, why = _bad_poles(result, anchor, df)
-        if not np.any(bad) or np.all(bad):
-            break
-        msg = f"dropped {int(bad.sum())} pole(s) and refitted: " + "; ".join(why)
-        log.info(msg)
-        warnings_out.append(msg)
-        # the kept poles restart from their own starts, with the same trust regions
-        anchor = anchor[~bad]
-        result = _fit_bounded(frf, anchor, fit_kw)
-    return result
-
-
-def _synthesize_flat(model, f: np.ndarray) -> np.ndarray:
-    """``synthesize(model, f).H`` flattened to (n_frf, n_f), by matrix products (BLAS): the same
-    sum (eq. 11), several times faster than the general einsum on big sets."""
-    return transfer(model, 2j * np.pi * f).reshape(-1, f.size)
-
-
-def _scaled_misfit(frf: FRFSet, result) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(freq_hz, e, d) of step 7: RMS-scaled misfit and data over the FRFs, per line of the band."""
-    lo, hi = result.band
-    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
-    f = frf.freq_hz[sel]
-    H = frf.H[..., sel].reshape(-1, f.size)
-    G = _synthesize_flat(result.model_raw, f)
-    rms = np.sqrt(np.mean(H.real ** 2 + H.imag ** 2, axis=1))
-    live = np.isfinite(rms) & (rms > 0)
-    if not np.all(live):
-        H, G, rms = H[live], G[live], rms[live]
-    w = (1.0 / rms ** 2)[:, None]
-    E = H - G
-    e = np.sqrt(np.mean((E.real ** 2 + E.imag ** 2) * w, axis=0))
-    d = np.sqrt(np.mean((H.real ** 2 + H.imag ** 2) * w, axis=0))
-    return f, e, d
-
-
-def _missing_candidates(f: np.ndarray, e: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Frequencies (Hz) of the misfit peaks of step 7, strongest first."""
-    level = MISSING_MEDIAN_FACTOR * float(np.median(e))
-    pk, _ = find_peaks(e)
-    pk = pk[(e[pk] > level) & (e[pk] > MISSING_DATA_FRACTION * d[pk])]
-    return f[pk[np.argsort(-e[pk])]]
-
-
-def _new_pole_relation(poles_raw: np.ndarray, residues: np.ndarray, df: float) -> tuple[bool, np.ndarray]:
-    """How the last (added) pole relates to the others: ``(broad, close)``.
-
-    broad : a broad pole under a much sharper neighbour (within the larger half-bandwidth,
-        bandwidths more than ``MISSING_BANDWIDTH_RATIO`` apart): it absorbs the misfit of the
-        sharp peak (leakage, a slightly non-modal peak shape), not a mode.
-    close : indices of the neighbours it is hard to tell from: closer than ``MISSING_MIN_LINES``
-        lines or a quarter of the smaller bandwidth, or a duplicate in the sense of
-        :func:`analysis.fit_checks.duplicate_poles` (within half the larger bandwidth, residue
-        MAC > ``DUPLICATE_MAC``). Such a pole is kept only on clear evidence
-        (:func:`_pair_is_resolved`).
-    """
-    b = bandwidth_hz(poles_raw, df)
-    f = natural_freq_hz(poles_raw)
-    gap = np.abs(f[:-1] - f[-1])
-    near = gap < 0.5 * np.maximum(b[:-1], b[-1])
-    ratio = np.maximum(b[:-1], b[-1]) / np.minimum(b[:-1], b[-1])
-    broad = bool(np.any(near & (ratio > MISSING_BANDWIDTH_RATIO)))
-    unresolved = gap < np.maximum(MISSING_MIN_LINES * df, 0.25 * np.minimum(b[:-1], b[-1]))
-    R = np.asarray(residues, dtype=complex).reshape(-1, f.size)
-    same_shape = np.array([mac(R[:, k], R[:, -1]) > DUPLICATE_MAC for k in range(f.size - 1)], dtype=bool)
-    dup = (gap < DUPLICATE_BANDWIDTHS * 0.5 * np.maximum(b[:-1], b[-1])) & same_shape
-    return broad, np.flatnonzero(unresolved | dup)
-
-
-def _pair_is_resolved(trial, k: int, f: np.ndarray, e_old: np.ndarray, e_new: np.ndarray, df: float) -> tuple[bool, str]:
-    """Whether the added (last) pole and its close neighbour ``k`` are two modes (step 7).
-
-    The data must say so: the pair is at least a line apart; over the pair's lines (the two
-    frequencies +- the larger half-power bandwidth, at least ``MISSING_MIN_LINES`` lines) the
-    scaled misfit ``sum e^2`` fell by at least ``MISSING_LOCAL_GAIN`` (the total gain of
-    ``MISSING_MIN_GAIN`` is checked by the caller); and both poles keep distinct residues:
-    neither is negligible (the smaller residue norm >= ``MISSING_MIN_RESIDUE_RATIO`` of the
-    larger) and they do not cancel (``|R_a + R_b| >= MISSING_CANCEL_RATIO (|R_a| + |R_b|)``,
-    two large opposite residues fitting a noise wiggle). Returns (verdict, reason)."""
-    p = trial.poles_raw
-    fa, fb = natural_freq_hz(p[k]), natural_freq_hz(p[-1])
-    if abs(fa - fb) < df:
-        return False, f"closer than a line to {fa:.5g} Hz"
-    b = float(np.max(bandwidth_hz(p[[k, -1]], df)))
-    half = max(b, MISSING_MIN_LINES * df)
-    loc = (f >= min(fa, fb) - half) & (f <= max(fa, fb) + half)
-    c_old, c_new = float(np.sum(e_old[loc] ** 2)), float(np.sum(e_new[loc] ** 2))
-    if not c_new <= (1.0 - MISSING_LOCAL_GAIN) * c_old:
-        return False, (f"next to {fa:.5g} Hz, local cost {c_old:.3g} -> {c_new:.3g} "
-                       f"(less than {100 * MISSING_LOCAL_GAIN:g} % gain)")
-    R = np.asarray(trial.model_raw.residues, dtype=complex).reshape(-1, p.size)
-    ra, rb = R[:, k], R[:, -1]
-    na, nb = float(np.linalg.norm(ra)), float(np.linalg.norm(rb))
-    if min(na, nb) < MISSING_MIN_RESIDUE_RATIO * max(na, nb):
-        return False, f"next to {fa:.5g} Hz, one residue of the pair is negligible"
-    if float(np.linalg.norm(ra + rb)) < MISSING_CANCEL_RATIO * (na + nb):
-        return False, f"next to {fa:.5g} Hz, the pair's residues cancel"
-    return True, f"a close pair with {fa:.5g} Hz (local cost {c_old:.3g} -> {c_new:.3g})"
-
-
-def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, mains: Sequence[float]) -> Optional[str]:
-    """Why the misfit peak at ``c`` Hz is a mains line (step 7), or None.
-
-    On a harmonic ``k m`` of a mains frequency ``m`` (within ``MAINS_LINES`` lines or the grid's
-    frequency deviation ``k MAINS_DEVIATION_HZ``) *and* narrower than a mode would be: its
-    half-power width (of ``e^2``) is below ``MAINS_WIDTH_FRACTION`` of ``2 zeta c`` with zeta the
-    median damping of the fitted poles, and at most ``MAINS_LINES`` lines wider than one line.
-    A structural mode at that damping has a measurable half-power bandwidth; an electrical line
-    is one or two lines wide."""
-    from scipy.signal import peak_widths
-
-    for m in mains:
-        k = int(round(c / m))
-        if k < 1 or abs(c - k * m) > max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ):
-            continue
-        i = int(np.argmin(np.abs(f - c)))
-        width = float(peak_widths(e ** 2, [i], rel_height=0.5)[0][0]) * df
-        mode = 2.0 * z0 * c
-        if width < MAINS_WIDTH_FRACTION * mode and width <= (1.0 + MAINS_LINES) * df:
-            return (f"the misfit peak at {c:.6g} Hz lies on the mains line {k} x {m:g} Hz and is {width:.3g} Hz wide "
-                    f"(a mode at {100 * z0:.3g} % damping would be {mode:.3g} Hz wide): not fitted as a mode (leave "
-                    "such lines out with --exclude-lines/--exclude-mains, fit_auto(exclude_hz=...))")
-    return None
-
-
-def _add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str],
-                       mains: Sequence[float] = MAINS_HZ, df: Optional[float] = None):
-    """Step 7: add poles at the resonances the model misses (see module docstring). A trial fit
-    that does not converge is a rejected candidate (its convergence warning is not passed on).
-    The poles of ``result`` are kept; poles are only added."""
-    from .lsfd import LSFDConvergenceWarning
-    df = frf.line_spacing_hz if df is None else float(df)
-    tried: list[float] = []
-    added = 0
-    f, e, d = _scaled_misfit(frf, result)
-    cost = float(np.sum(e ** 2))
-    failures = 0
-    while added < MAX_ADDED and failures < MAX_FAILED_TRIES:
-        cands = [c for c in _missing_candidates(f, e, d) if all(abs(c - t) > 2 * df for t in tried)]
-        if not cands:
-            break
-        c = float(cands[0])
-        tried.append(c)
-        z0 = float(np.median(damping_ratio(result.poles_raw)))
-        mains_why = _mains_line(c, f, e, df, z0, mains)
-        if mains_why is not None:
-            log.info(mains_why)
-            warnings_out.append(mains_why)
-            continue
-        new = pole_from_fz(c, z0)
-        start = np.concatenate([result.poles_raw, [new]])
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", LSFDConvergenceWarning)
-                trial = _fit_bounded(frf, start, {**fit_kw, "max_iter": min(fit_kw["max_iter"], MISSING_TRIAL_ITER)})
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            log.info("adding a pole at %.6g Hz failed (%s)", c, exc)
-            failures += 1
-            continue
-        if any(issubclass(w.category, LSFDConvergenceWarning) for w in caught):
-            log.info("adding a pole at %.6g Hz: the LSFD did not converge; not added", c)
-            failures += 1
-            continue
-        bad, _ = _bad_poles(trial, start, df, duplicates=False)
-        broad, close = _new_pole_relation(trial.poles_raw, trial.model_raw.residues, df)
-        f2, e2, d2 = _scaled_misfit(frf, trial)
-        cost2 = float(np.sum(e2 ** 2))
-        why = ""
-        if broad:
-            why = "a broad pole under a sharper one"
-        elif np.any(bad):
-            why = f"{int(np.sum(bad))} pole(s) fail the checks"
-        elif cost2 > (1.0 - MISSING_MIN_GAIN) * cost:
-            why = f"cost {cost:.4g} -> {cost2:.4g}"
-        else:
-            for k in close:
-                ok, text = _pair_is_resolved(trial, int(k), f, e, e2, df)
-                if not ok:
-                    why = text
-                    break
-        if why:
-            log.info("pole at %.6g Hz not added: %s", c, why)
-            failures += 1
-            continue
-        f_new = trial.freq_hz[-1]
-        on_line = any(k >= 1 and abs(f_new - k * m) <= max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ)
-                      for m in mains for k in [int(round(f_new / m))])
-        if on_line and 2.0 * trial.damping[-1] * f_new < MAINS_WIDTH_FRACTION * 2.0 * z0 * f_new:
-            msg = (f"a pole tried at {f_new:.6g} Hz ({100 * trial.damping[-1]:.3g} %) sits on a mains line and is much "
-                   f"sharper than the modes ({100 * z0:.3g} %): not added")
-            log.info(msg)
-            warnings_out.append(msg)
-            failures += 1
-            continue
-        msg = (f"added a pole at {f_new:.5g} Hz/{100 * trial.damping[-1]:.3g} % for a resonance the "
-               f"model missed (scaled misfit peak at {c:.5g} Hz; cost {cost:.4g} -> {cost2:.4g})")
-        if len(close):
-            msg += "; " + _pair_is_resolved(trial, int(close[0]), f, e, e2, df)[1]
-        log.info(msg)
-        warnings_out.append(msg)
-        result, f, e, d, cost = trial, f2, e2, d2, cost2
-        added += 1
-        failures = 0
-    return result

@@ -156,7 +156,15 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
     assume; with ``scatter`` (:class:`analysis.scatter.SubsetScatter` of this result) every pole
     also gets ``freq_hz_scatter_std`` and ``damping_scatter_std`` and ``scatter_groups`` lists the
     groups.
+
+    ``result`` may be the :class:`analysis.fit_result.FitResult` of :func:`analysis.pipeline.fit_auto`
+    (then ``stab`` comes from it): ``success`` is then the fit's verdict, *converged and physically
+    sensible*, with ``converged``, ``fit_status`` and ``problems`` beside it.
     """
+    fit = None
+    if hasattr(result, "lsfd"):  # a FitResult
+        fit, result = result, result.lsfd
+        stab = fit.stabilization if stab is None else stab
     model = result.model
     outs, refs = list(model.outputs), list(model.references)
     order = np.argsort(result.freq_hz)
@@ -198,6 +206,13 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
         "noise_var": _fnum(result.noise_var),
         "std_note": STD_NOTE,
     }
+    if fit is not None:
+        doc["converged"] = bool(result.success)
+        doc["success"] = bool(fit.success)
+        doc["fit_status"] = fit.status
+        doc["problems"] = list(fit.problems)
+        if not fit.success:
+            doc["message"] = fit.message
     if scatter is not None:
         doc["scatter_groups"] = list(scatter.groups)
     if frf is not None and frf.H.shape[:2] == np.asarray(model.residues).shape[:2]:
@@ -229,8 +244,9 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
             "method": stab.method,
             "band": [float(stab.band[0]), float(stab.band[1])],
             "max_modes": int(max(stab.orders)),
-            "selected_poles": [complex_pair(p) for p in np.asarray(stab.meta.get("selected_poles", []))],
-            "warnings": list(stab.meta.get("warnings", [])),
+            "selected_poles": [complex_pair(p) for p in np.asarray(
+                fit.selected_poles if fit is not None else stab.meta.get("selected_poles", []))],
+            "warnings": list(fit.warnings if fit is not None else stab.meta.get("warnings", [])),
         }
     if extra:
         doc.update(extra)

@@ -37,27 +37,29 @@ def make_frf(freqs=F_TRUE, zetas=Z_TRUE, *, n_out=10, n_f=2000, fmax=500.0, f0=N
 @pytest.mark.parametrize("initial", ["lscf", "lsce"])
 def test_fit_auto_exact_on_noise_free_data(method, initial):
     frf, truth = make_frf()
-    res, st = fit_auto(frf, method=method, initial=initial)
+    fit_st = fit_auto(frf, method=method, initial=initial)
+    res, st = fit_st
     assert res.success, res.message
     assert res.poles.size == truth.size
     p = res.poles[np.argsort(natural_freq_hz(res.poles))]
     assert np.max(np.abs(p - truth) / np.abs(truth)) < 1e-6
     np.testing.assert_allclose(damping_ratio(p), Z_TRUE, rtol=1e-5)
-    lo, hi = st.meta["band"]
+    lo, hi = fit_st.band
     assert lo == pytest.approx(frf.freq_hz[4])  # first line at or above 5 df
     assert hi == frf.freq_hz[-1]
-    assert st.meta["warnings"] == []
+    assert fit_st.warnings == ()
 
 
 def test_fit_auto_one_percent_noise_finds_all_modes():
     frf, truth = make_frf(noise=0.01, seed=4)
-    res, st = fit_auto(frf)
+    fit_st = fit_auto(frf)
+    res, st = fit_st
     p = res.poles[np.argsort(natural_freq_hz(res.poles))]
     assert p.size == truth.size
     np.testing.assert_allclose(natural_freq_hz(p), F_TRUE, rtol=1e-4)
     np.testing.assert_allclose(damping_ratio(p), Z_TRUE, rtol=0.02)
     # LSFD improves the damping of the selected (stabilization) poles
-    sel = np.sort_complex(st.meta["selected_poles"])
+    sel = np.sort_complex(fit_st.selected_poles)
     sel = sel[np.argsort(natural_freq_hz(sel))]
     err_sel = np.median(np.abs(damping_ratio(sel) / Z_TRUE - 1))
     err_fit = np.median(np.abs(damping_ratio(p) / Z_TRUE - 1))
@@ -93,28 +95,33 @@ def test_band_edges_move_or_warn():
 def test_user_band_edge_warning_and_automatic_move(caplog):
     frf, truth = make_frf(n_out=4)
     with caplog.at_level(logging.WARNING, logger="analysis.pipeline"):
-        res, st = fit_auto(frf, band=(20.0, 400.0))
-    assert any("390" in w and "upper band edge" in w for w in st.meta["warnings"])
+        fit_st = fit_auto(frf, band=(20.0, 400.0))
+        res, st = fit_st
+    assert any("390" in w and "upper band edge" in w for w in fit_st.warnings)
     assert "upper band edge" in caplog.text
     # near the end of the data the automatic edge cannot move out either: warned too
-    res2, st2 = fit_auto(frf.band(1.0, 400.0))
-    assert any("upper band edge" in w for w in st2.meta["warnings"])
-    assert st2.meta["band"][1] <= 400.0
+    fit_st2 = fit_auto(frf.band(1.0, 400.0))
+    res2, st2 = fit_st2
+    assert any("upper band edge" in w for w in fit_st2.warnings)
+    assert fit_st2.band[1] <= 400.0
 
 
 def test_user_frequencies_and_poles():
     frf, truth = make_frf(n_out=4)
-    res, st = fit_auto(frf, initial=F_TRUE * (1 + 2e-3))
+    fit_st = fit_auto(frf, initial=F_TRUE * (1 + 2e-3))
+    res, st = fit_st
     assert res.poles.size == F_TRUE.size and st is not None
     np.testing.assert_allclose(np.sort(natural_freq_hz(res.poles)), F_TRUE, rtol=1e-8)
-    res2, st2 = fit_auto(frf, initial=truth * (1 + 1e-3), method="gn")
+    fit_st2 = fit_auto(frf, initial=truth * (1 + 1e-3), method="gn")
+    res2, st2 = fit_st2
     assert st2 is None
     np.testing.assert_allclose(np.sort(natural_freq_hz(res2.poles)), F_TRUE, rtol=1e-8)
 
 
 def test_n_modes_limits_the_selection():
     frf, truth = make_frf(n_out=4)
-    res, st = fit_auto(frf, n_modes=3)
+    fit_st = fit_auto(frf, n_modes=3)
+    res, st = fit_st
     assert res.poles.size == 3
 
 
@@ -143,7 +150,8 @@ def test_real_uff_three_frfs(shared_data):
     from scipy.signal import find_peaks
 
     frf = load_input(shared_data / "pyuff_3frf" / "measurement.uff")
-    res, st = fit_auto(frf)
+    fit_st = fit_auto(frf)
+    res, st = fit_st
     assert res.success, res.message
     lo, hi = res.band
     sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
@@ -169,26 +177,29 @@ def _mains_frf(n_out=3, seed=1):
 
 def test_misfit_step_does_not_fit_a_mains_line_as_a_mode():
     frf, truth = _mains_frf()
-    res, st = fit_auto(frf)
+    fit_st = fit_auto(frf)
+    res, st = fit_st
     assert not np.any(np.abs(res.freq_hz - 300.0) < 2.0), res.freq_hz
     np.testing.assert_allclose(np.sort(res.freq_hz), natural_freq_hz(truth), rtol=1e-3)
-    assert any("mains line" in w and "300 Hz" in w for w in st.meta["warnings"]), st.meta["warnings"]
+    assert any("mains line" in w and "300 Hz" in w for w in fit_st.warnings), fit_st.warnings
     # the guard off: the line is fitted as a (very sharp) pole
     res_off, _ = fit_auto(frf, mains_hz=None)
     assert np.any(np.abs(res_off.freq_hz - 300.0) < 1.0)
     # or leave the line out of the fit altogether: the modes fit better
-    res_x, st_x = fit_auto(frf, exclude_hz=[300.0])
-    assert res_x.poles.size == 3 and any("left out of the fit" in w for w in st_x.meta["warnings"])
+    fit_st_x = fit_auto(frf, exclude_hz=[300.0])
+    res_x, st_x = fit_st_x
+    assert res_x.poles.size == 3 and any("left out of the fit" in w for w in fit_st_x.warnings)
     np.testing.assert_allclose(np.sort(res_x.freq_hz), natural_freq_hz(truth), rtol=1e-4)
 
 
 def test_misfit_step_runs_with_given_frequencies_and_keeps_them():
     frf, truth = make_frf(n_out=4)
     given = np.delete(F_TRUE, 2)  # the close neighbour 78 Hz of 75 Hz is not given
-    res, st = fit_auto(frf, initial=given)
+    fit_st = fit_auto(frf, initial=given)
+    res, st = fit_st
     assert res.poles.size == F_TRUE.size
     np.testing.assert_allclose(np.sort(res.freq_hz), F_TRUE, rtol=1e-6)
-    assert any("added a pole at 78" in w for w in st.meta["warnings"])
+    assert any("added a pole at 78" in w for w in fit_st.warnings)
     res_old, _ = fit_auto(frf, initial=given, add_missing=False)  # the old behaviour: the user's model as given
     assert res_old.poles.size == given.size
     res_c, _ = fit_auto(frf, initial=np.delete(truth, 2) * (1 + 1e-4))  # complex poles too
@@ -205,8 +216,38 @@ def test_fit_auto_finds_two_modes_two_lines_apart():
     frf, truth = make_frf(np.array([120.0, 230.0, f2, 380.0]), np.array([0.002, 0.0008, 0.0008, 0.002]),
                           n_out=1, n_f=2000, fmax=500.0, noise=0.002, seed=3)
     assert frf.freq_hz[1] - frf.freq_hz[0] == pytest.approx(df)
-    res, st = fit_auto(frf)
+    fit_st = fit_auto(frf)
+    res, st = fit_st
     fr = np.sort(res.freq_hz)
-    assert res.poles.size == 4, (fr, st.meta["warnings"])
+    assert res.poles.size == 4, (fr, fit_st.warnings)
     np.testing.assert_allclose(fr, natural_freq_hz(truth), atol=0.02)
-    assert any("close pair" in w for w in st.meta["warnings"])
+    assert any("close pair" in w for w in fit_st.warnings)
+
+
+def test_success_means_converged_and_physically_sensible() -> None:
+    """Issue 11, item 2: a fit that stops with implausible poles is not a success, in the result and
+    in the JSON document; a single average is flagged."""
+    from analysis.fit_result import FitResult, assess_fit
+    from analysis.report import result_to_dict
+
+    frf, _ = make_frf(noise=0.01)
+    frf = replace(frf, meta={**frf.meta, "n_averages": 1})
+    fit = fit_auto(frf)
+    assert fit.success and fit.status == "converged" and fit.problems == ()
+    assert any("one average per point" in w for w in fit.warnings)
+    doc = result_to_dict(fit, frf)
+    assert doc["success"] is True and doc["converged"] is True and doc["problems"] == []
+    # the same LSFD result judged on a band that leaves its poles outside, with a 73 % damping pole
+    lsfd = replace(fit.lsfd, damping=np.r_[fit.lsfd.damping[:-1], 0.73])
+    problems = assess_fit(lsfd, (0.0, 200.0))
+    assert any("outside the fitted band" in p for p in problems)
+    assert any("damping ratio of 73 %" in p for p in problems)
+    bad = FitResult(lsfd=lsfd, stabilization=fit.stabilization, band=(0.0, 200.0), selected_poles=fit.selected_poles,
+                    problems=tuple(problems))
+    assert bad.converged and not bad.success and bad.status == "implausible"
+    doc = result_to_dict(bad, frf)
+    assert doc["success"] is False and doc["converged"] is True and doc["fit_status"] == "implausible"
+    assert "not physically sensible" in doc["message"]
+    # an undetermined frequency (standard deviation of the order of the frequency) is a problem too
+    lsfd2 = replace(fit.lsfd, freq_hz_std=np.r_[fit.lsfd.freq_hz_std[:-1], 1.7e3])
+    assert any("not determined by the data" in p for p in assess_fit(lsfd2, fit.band))

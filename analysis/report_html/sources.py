@@ -116,9 +116,9 @@ def run_fit(frf: FRFSet, **options: Any) -> FitData:
     :class:`FitData`."""
     from ..pipeline import fit_auto
 
-    out = fit_auto(frf, **options)
-    result, stab = out if isinstance(out, tuple) else (out, getattr(out, "stabilization", None))
-    warnings = tuple(stab.meta.get("warnings", ())) if stab is not None else ()
+    fit = fit_auto(frf, **options)
+    result, stab = fit.lsfd, fit.stabilization
+    warnings = tuple(fit.warnings) + tuple(fit.problems)
     return FitData(model=result.model, model_raw=result.model_raw, freq_hz_std=np.asarray(result.freq_hz_std, float),
                    damping_std=np.asarray(result.damping_std, float), band=tuple(result.band), stab=stab,
                    source="automatic fit (analysis.pipeline.fit_auto)", warnings=warnings)

@@ -110,7 +110,8 @@ def best_time(fn, repeat):
 
 
 def run_impactlab(frf, method, max_modes):
-    res, st = fit_auto(frf, band=BAND, method=method, max_modes=max_modes)
+    fit_st = fit_auto(frf, band=BAND, method=method, max_modes=max_modes)
+    res, st = fit_st
     return res.freq_hz, res.damping, res
 
 
@@ -214,7 +215,8 @@ def part_two(repeat, seed):
     print("\n300 FRFs (100 outputs x 3 references) x 8000 lines, 20 modes, 1 % noise: impactlab pipeline")
 
     def run():
-        res, st = fit_auto(frf, band=band, method="lm")
+        fit_st = fit_auto(frf, band=band, method="lm")
+        res, st = fit_st
         return res
 
     run()  # warm-up (imports, caches)

@@ -108,12 +108,13 @@ def fit_ours(frf: FRFSet, *, band: Optional[Sequence[float]] = None, max_modes: 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", LSFDConvergenceWarning)
-        res, stab = fit_auto(frf, band=band, max_modes=max_modes, n_modes=n_modes, method=method,
+        fit_stab = fit_auto(frf, band=band, max_modes=max_modes, n_modes=n_modes, method=method,
                              initial=initial, selection_options=selection_options, max_iter=max_iter,
                              frf_weighting=frf_weighting)
+        res, stab = fit_stab
     dt = time.perf_counter() - t0
-    used = tuple(stab.meta["band"]) if stab is not None else tuple(res.band)
-    notes = list(stab.meta.get("warnings", [])) if stab is not None else []
+    used = tuple(fit_stab.band) if stab is not None else tuple(res.band)
+    notes = list(fit_stab.warnings) if stab is not None else []
     notes += [str(w.message) for w in caught]
     return OurFit(res, stab, dt, used, _model_error(frf, res, res.band), notes)
 

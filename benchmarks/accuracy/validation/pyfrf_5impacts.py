@@ -102,10 +102,11 @@ def hint_regression(frf: FRFSet, band, peaks: list, auto_result, local=(1500.0, 
 
     out, figs = [], {}
     mm = max(22, 2 * len(peaks) + 8)
-    r, st = fit_auto(frf, band=band, initial=peaks, max_modes=mm)
-    out.append(("hints, as run", start_of(st.meta["selected_poles"]), r))
+    fit_st = fit_auto(frf, band=band, initial=peaks, max_modes=mm)
+    r, st = fit_st
+    out.append(("hints, as run", start_of(fit_st.selected_poles), r))
     r_nw, _ = fit_auto(frf, band=band, initial=peaks, max_modes=mm, frf_weighting="none")
-    out.append(("hints, `frf_weighting=\"none\"`", start_of(st.meta["selected_poles"]), r_nw))
+    out.append(("hints, `frf_weighting=\"none\"`", start_of(fit_st.selected_poles), r_nw))
     st0 = stabilization(frf, mm, method="lscf", band=band, abs_tol_damp=0.0)
     p_old = poles_from_frequencies(peaks, st0)
     r_old, _ = fit_auto(frf, band=band, initial=p_old)
@@ -114,9 +115,10 @@ def hint_regression(frf: FRFSet, band, peaks: list, auto_result, local=(1500.0, 
     extra = [f for f in fa if np.min(np.abs(np.asarray(peaks) - f)) > 3.0]
     missing_hint = [f for f in extra if 880.0 < f < 950.0] or extra[:1]
     if missing_hint:
-        r_plus, st_plus = fit_auto(frf, band=band, initial=list(peaks) + missing_hint, max_modes=mm)
+        fit_st_plus = fit_auto(frf, band=band, initial=list(peaks) + missing_hint, max_modes=mm)
+        r_plus, st_plus = fit_st_plus
         out.append((f"hints + {', '.join(f'{x:.1f}' for x in missing_hint)} Hz (from the automatic fit)",
-                    start_of(st_plus.meta["selected_poles"]), r_plus))
+                    start_of(fit_st_plus.selected_poles), r_plus))
     out.append(("automatic (for reference)", "-", auto_result))
     rows = []
     for label, start, res in out:
@@ -130,7 +132,7 @@ def hint_regression(frf: FRFSet, band, peaks: list, auto_result, local=(1500.0, 
     figs["missing_hint"] = ", ".join(f"{x:.1f}" for x in missing_hint) or "none"
     if missing_hint:
         figs["plus_err"], figs["plus_local"] = errs(r_plus)
-    z_new = damping_ratio(st.meta["selected_poles"])
+    z_new = damping_ratio(fit_st.selected_poles)
     z_old = damping_ratio(p_old)
     figs["z_start_new_top"] = 100 * float(z_new[-1])
     figs["z_start_old_top"] = 100 * float(z_old[-1])

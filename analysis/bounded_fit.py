@@ -1,0 +1,73 @@
+"""Steps 5-6 of :mod:`analysis.pipeline`: the LSFD with a frequency trust region per pole, and the
+check that drops out-of-range, migrated and duplicate poles and refits."""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from .fit_checks import (MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles,
+                         migrated_poles)
+from .fit_result import MAX_DAMPING
+from .frf import FRFSet
+from .modal import natural_freq_hz
+
+__all__ = ["fit_bounded", "bad_poles", "drop_bad_poles", "trust_window_hz", "MAX_DAMPING"]
+
+log = logging.getLogger(__name__)
+
+
+MAX_CHECK_ROUNDS = 4
+
+
+def trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
+    """Half-width (Hz) of each pole's frequency trust region: MIGRATE_BANDWIDTHS bandwidths."""
+    return MIGRATE_BANDWIDTHS * bandwidth_hz(start, df)
+
+
+def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict):
+    """LSFD with each pole's damped frequency held within ``MIGRATE_BANDWIDTHS`` half-power
+    bandwidths of its start (the trust region, steps 5-7)."""
+    from .lsfd import fit_lsfd
+
+    return fit_lsfd(frf, start, freq_window_hz=trust_window_hz(start, frf.line_spacing_hz), **fit_kw)
+
+
+def bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
+    """Mask of fitted poles to drop (step 6) and the reasons (``duplicates=False``: without the
+    duplicate check; step 7 judges its new pole's neighbours itself)."""
+    lo, hi = result.band
+    fd = result.poles_raw.imag / (2 * np.pi)
+    z = result.damping
+    out_of_range = ~((fd >= lo) & (fd <= hi) & (z > 0) & (z < MAX_DAMPING))
+    on_bound = np.abs(result.poles_raw.imag - start.imag) / (2 * np.pi) >= 0.99 * trust_window_hz(start, df)
+    migrated = (migrated_poles(start, result.poles_raw, df) | on_bound) & ~out_of_range
+    moved = np.abs(natural_freq_hz(result.poles_raw) - natural_freq_hz(start)) / bandwidth_hz(start, df)
+    dup = duplicate_poles(result.poles_raw, result.model.residues, df, moved=moved) & ~out_of_range & ~migrated
+    if not duplicates:
+        dup = np.zeros_like(dup)
+    why = []
+    edge = f"pulled to its trust-region edge ({MIGRATE_BANDWIDTHS:g} half-power bandwidths from its start)"
+    for mask, text in ((out_of_range, "moved out of the band or to unphysical damping"),
+                       (migrated, edge),
+                       (dup, "duplicates a neighbour (same resonance, same shape)")):
+        for k in np.flatnonzero(mask):
+            why.append(f"{natural_freq_hz(start[k]):.4g} Hz -> {result.freq_hz[k]:.4g} Hz/{100 * z[k]:.3g} %: {text}")
+    return out_of_range | migrated | dup, why
+
+
+def drop_bad_poles(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
+    """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring)."""
+    df = frf.line_spacing_hz
+    anchor = np.asarray(result.initial_poles if result.initial_poles is not None else result.poles_raw)
+    for _ in range(MAX_CHECK_ROUNDS):
+        bad, why = bad_poles(result, anchor, df)
+        if not np.any(bad) or np.all(bad):
+            break
+        msg = f"dropped {int(bad.sum())} pole(s) and refitted: " + "; ".join(why)
+        log.info(msg)
+        warnings_out.append(msg)
+        # the kept poles restart from their own starts, with the same trust regions
+        anchor = anchor[~bad]
+        result = fit_bounded(frf, anchor, fit_kw)
+    return result

@@ -1,0 +1,119 @@
+"""The outcome of the automatic fit (:func:`analysis.pipeline.fit_auto`): the LSFD result, the
+stabilization diagram, the band, the warnings, and an honest verdict.
+
+``success`` means *converged and physically sensible*, not just "the iteration stopped":
+
+- converged: the LSFD met its tolerances (``LSFDResult.success``);
+- sensible (:func:`assess_fit`): every pole's natural frequency lies in the fitted band, every
+  damping ratio in ``(0, MAX_DAMPING)``, and every frequency is determined by the data (a
+  finite standard deviation smaller than ``MAX_FREQ_STD_FRACTION`` of the frequency).
+
+Anything else is reported in ``problems`` and ``success`` is False. FRFs of a single average are
+flagged in the warnings: their coherence is 1 everywhere and says nothing about the noise.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Iterator
+
+import numpy as np
+
+__all__ = ["FitResult", "assess_fit", "MAX_DAMPING", "MAX_FREQ_STD_FRACTION"]
+
+#: largest damping ratio taken as a structural mode (above it a pole is noise or a fitting artefact)
+MAX_DAMPING = 0.2
+#: a frequency whose standard deviation exceeds this fraction of it is not determined by the data
+MAX_FREQ_STD_FRACTION = 0.1
+
+
+def assess_fit(lsfd: Any, band: "tuple[float, float]") -> list[str]:
+    """Reasons why a fitted model is not physically sensible (empty: it is). ``lsfd`` is an
+    :class:`analysis.lsfd.LSFDResult`; ``band`` (lo, hi) Hz the fitted band."""
+    problems = []
+    f = np.asarray(lsfd.freq_hz, float)
+    z = np.asarray(lsfd.damping, float)
+    fstd = np.asarray(lsfd.freq_hz_std, float)
+    lo, hi = float(band[0]), float(band[1])
+    if f.size == 0:
+        return ["no mode was fitted"]
+    for i in range(f.size):
+        name = f"mode {i + 1} ({f[i]:.5g} Hz)"
+        if not lo <= f[i] <= hi:
+            problems.append(f"{name} lies outside the fitted band {lo:.5g}..{hi:.5g} Hz")
+        if not 0.0 < z[i] < MAX_DAMPING:
+            problems.append(f"{name} has a damping ratio of {100 * z[i]:.3g} %, outside 0..{100 * MAX_DAMPING:g} %")
+        if not (np.isfinite(fstd[i]) and fstd[i] < MAX_FREQ_STD_FRACTION * f[i]):
+            problems.append(f"{name} is not determined by the data (standard deviation {fstd[i]:.3g} Hz)")
+    return problems
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """What :func:`analysis.pipeline.fit_auto` found.
+
+    lsfd : the :class:`analysis.lsfd.LSFDResult` (poles, model, standard deviations...).
+    stabilization : the :class:`analysis.stabilization.StabilizationResult`, or None when the
+        poles were given.
+    band : (lo, hi) Hz of the lines fitted (after moving the edges off resonances).
+    selected_poles : (m,) complex rad/s, the poles the LSFD started from.
+    warnings : what the user should know (band edges, dropped or added poles, non-convergence,
+        a single average), each once.
+    problems : why the model is not physically sensible (:func:`assess_fit`); empty when it is.
+
+    ``success`` = converged and no problems; ``status`` "converged", "not converged" or
+    "implausible"; ``message`` says why in words. The result unpacks as
+    ``lsfd, stabilization = fit_auto(...)`` for scripts written against the former pair.
+    """
+
+    lsfd: Any
+    stabilization: Any
+    band: tuple
+    selected_poles: np.ndarray
+    warnings: tuple = ()
+    problems: tuple = field(default=())
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.lsfd.success)
+
+    @property
+    def success(self) -> bool:
+        return self.converged and not self.problems
+
+    @property
+    def status(self) -> str:
+        if not self.converged:
+            return "not converged"
+        return "implausible" if self.problems else "converged"
+
+    @property
+    def message(self) -> str:
+        if not self.converged:
+            return f"the LSFD did not converge: {self.lsfd.message}"
+        if self.problems:
+            return "the fit converged but is not physically sensible: " + "; ".join(self.problems)
+        return f"converged ({self.lsfd.message}); {self.lsfd.freq_hz.size} mode(s) in {self.band[0]:.5g}.." \
+               f"{self.band[1]:.5g} Hz"
+
+    @property
+    def model(self) -> Any:
+        """The fitted :class:`analysis.modal.ModalModel` (window-corrected poles)."""
+        return self.lsfd.model
+
+    @property
+    def freq_hz(self) -> np.ndarray:
+        return self.lsfd.freq_hz
+
+    @property
+    def damping(self) -> np.ndarray:
+        return self.lsfd.damping
+
+    def __iter__(self) -> Iterator[Any]:
+        yield self.lsfd
+        yield self.stabilization
+
+    def summary(self) -> dict:
+        """The verdict as plain data (for JSON documents)."""
+        return {"success": self.success, "status": self.status, "message": self.message,
+                "converged": self.converged, "problems": list(self.problems), "warnings": list(self.warnings),
+                "band_hz": [float(self.band[0]), float(self.band[1])]}
