@@ -26,7 +26,7 @@ from typing import Any, Callable, Optional, Sequence, TextIO
 import numpy as np
 
 from analysis.command_line import add_overwrite, cli_entry, exit_on
-from analysis.spectra import WindowSettings, parse_duration
+from analysis.spectra import WindowSettings, excitation_band, parse_duration
 
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
 from .operator import HitSummary
@@ -205,6 +205,16 @@ def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8) -> str:
         coh = ", ".join(f"{o} {np.mean(s.coherence[i, 0, band]):.3f}" if i in live else f"{o} no signal (below 1 LSB)"
                         for i, o in enumerate(s.outputs))
         lines.append(f"  mean coherence 2..{hi:.0f} Hz: {coh}")
+        gff = a.acc.spectra()[0]
+        edges = excitation_band(f, 10 * np.log10(np.maximum(gff, max(float(np.max(gff)), 1e-300) * 1e-30)))
+        e10, e20 = edges[10.0], edges[20.0]
+        lines.append("  excitation band (force spectrum): "
+                     + ", ".join(f"-{d:g} dB at {'beyond ' + format(hi, '.0f') if e is None or e > hi else format(e, '.0f')} Hz"
+                                 for d, e in ((10, e10), (20, e20))))
+        if e20 is not None and e20 < hi:
+            lines.append(f"  warning: the hammer excites this point only up to {e20:.0f} Hz of the analyser's "
+                         f"0..{hi:.0f} Hz band: modes above it are not measured well (fit below {e20:.0f} Hz, "
+                         "or use a harder tip)")
     return "\n".join(lines)
 
 

@@ -2,7 +2,9 @@
 edges kept off resonances, and lines left out (mains harmonics).
 
 The default band runs from the lowest reliable line (past the lowest ``LOW_LINES`` lines and any
-leading low-coherence lines) to the top of what the data support (:func:`default_band`).
+leading low-coherence lines) to the top of what the data support (:func:`default_band`): the
+analyser's flat band ``fs / 2.56``, the hammer's excitation band (force spectrum 20 dB down) and
+the coherence (:func:`upper_limits`), so no pole is fitted to lines the data cannot support.
 """
 from __future__ import annotations
 
@@ -17,7 +19,8 @@ from .errors import ImpactlabError
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
 
-__all__ = ["FitError", "default_band", "default_max_modes", "check_band_edges", "mains_harmonics", "exclude_lines"]
+__all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges", "mains_harmonics",
+           "exclude_lines"]
 
 log = logging.getLogger(__name__)
 
@@ -30,10 +33,50 @@ LOW_LINES = 5
 MIN_COHERENCE = 0.8
 EDGE_BANDWIDTHS = 3.0
 EXCLUDE_LINES = 2.0
+#: lines of the band per mode of the stabilization's largest model (LSCE needs more than 10)
+LINES_PER_MODE = 11
+#: median coherence below which the top of the band is no longer supported (after smoothing)
+TAIL_COHERENCE = 0.5
+#: running-mean length of the coherence, as a fraction of the lines
+COHERENCE_SMOOTH_FRACTION = 0.02
+
+
+def upper_limits(frf: FRFSet) -> "dict[str, float]":
+    """What bounds the band from above, from the data (Hz per reason):
+
+    - ``"data"``: the top line;
+    - ``"analyser"``: the analyser's flat, alias-free band ``sample_rate_hz / 2.56`` (when the FRF
+      set carries its sample rate);
+    - ``"excitation"``: where the force spectrum has fallen ``EXCITATION_DROP_DB`` below its
+      low-frequency level (the lowest over the measurement points; from the recording's force
+      autospectra, :func:`analysis.spectra.excitation_limit_hz`);
+    - ``"coherence"``: where the median coherence over the FRFs (a running mean over
+      ``COHERENCE_SMOOTH_FRACTION`` of the lines) falls below ``TAIL_COHERENCE`` for good.
+    """
+    f = frf.freq_hz
+    out = {"data": float(f[-1])}
+    if frf.analyser_band_hz is not None:
+        out["analyser"] = float(frf.analyser_band_hz)
+    exc = [float(x) for x in np.atleast_1d(np.asarray(frf.meta.get("excitation_limit_hz") or [], dtype=object))
+           if x is not None and np.isfinite(float(x))]
+    if exc:
+        out["excitation"] = min(exc)
+    if frf.coherence is not None and np.any(np.isfinite(frf.coherence)) and f.size >= 16:
+        c = np.nanmedian(frf.coherence.reshape(-1, f.size), axis=0)
+        if np.nanmin(c) < 1.0 - 1e-9:  # one average: coherence 1 everywhere says nothing
+            n = max(5, int(COHERENCE_SMOOTH_FRACTION * f.size))
+            smooth = np.convolve(np.nan_to_num(c), np.ones(n) / n, mode="same")
+            good = np.flatnonzero(smooth >= TAIL_COHERENCE)
+            if good.size and good[-1] < f.size - 1:
+                out["coherence"] = float(f[good[-1]])
+    return out
 
 
 def default_band(frf: FRFSet) -> tuple[float, float]:
-    """Default band (Hz): skip the lowest ``LOW_LINES`` lines and leading low-coherence lines."""
+    """Default band (Hz) from what the data support: from the lowest reliable line (past the lowest
+    ``LOW_LINES`` lines and leading low-coherence lines) to the lowest of :func:`upper_limits`
+    (the analyser's band, the hammer's excitation band, the coherence), never narrower than 16
+    lines."""
     f = frf.freq_hz
     if f.size < 16:
         raise FitError(f"the FRFs hold only {f.size} lines; at least 16 are needed")
@@ -46,18 +89,24 @@ def default_band(frf: FRFSet) -> tuple[float, float]:
         # a leading run of low coherence (within the lowest 10 % of the span) moves the edge
         if ok.size and ok[0] > 0:
             lo = max(lo, float(f[ok[0]]))
-    lo_line = f[f >= lo - 1e-9 * abs(lo)][0]
-    return float(lo_line), float(f[-1])
+    lo_line = float(f[f >= lo - 1e-9 * abs(lo)][0])
+    hi = min(upper_limits(frf).values())
+    i_lo = int(np.searchsorted(f, lo_line))
+    hi = max(hi, float(f[min(i_lo + 15, f.size - 1)]))
+    hi_line = float(f[f <= hi + 1e-9 * abs(hi)][-1])
+    return lo_line, hi_line
 
 
 def default_max_modes(frf: FRFSet, band: tuple[float, float]) -> int:
     """Largest model size for the stabilization: ``2 * peaks + 8`` clipped to [12, 60], where
-    ``peaks`` counts the peaks of the summed FRF magnitude (dB) with 3 dB prominence."""
+    ``peaks`` counts the peaks of the summed FRF magnitude (dB) with 3 dB prominence in ``band``,
+    and never more than the band's lines support (``lines // LINES_PER_MODE``: LSCE's Hankel
+    matrix needs more than ten lines per mode)."""
     sel = (frf.freq_hz >= band[0]) & (frf.freq_hz <= band[1])
     s = np.sqrt(np.nansum(np.abs(frf.H[..., sel].reshape(-1, int(sel.sum()))) ** 2, axis=0))
     s = 20 * np.log10(np.maximum(s, np.max(s) * 1e-12 + 1e-300))
     peaks, _ = find_peaks(s, prominence=3.0)
-    return int(np.clip(2 * peaks.size + 8, 12, 60))
+    return int(max(1, min(np.clip(2 * peaks.size + 8, 12, 60), int(sel.sum()) // LINES_PER_MODE)))
 
 
 def check_band_edges(

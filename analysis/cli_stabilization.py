@@ -25,7 +25,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--png", metavar="OUT.png", required=True, help="write the diagram")
     p.add_argument("--json", metavar="OUT.json", help="write the poles of every order and the selected poles")
     p.add_argument("--max-order", type=int, metavar="N", help="largest model order in modes (default: automatic)")
-    p.add_argument("--method", choices=("lsce", "lscf"), default="lsce", help="initial-pole method (default lsce)")
+    p.add_argument("--method", choices=("lsce", "lscf"), default="lscf",
+                   help="initial-pole method (default lscf, as 'analysis fit')")
     p.add_argument("--lsfd", action="store_true", help="refine every order with a few LSFD iterations")
     p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: automatic)")
     add_estimator(p)

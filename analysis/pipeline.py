@@ -159,8 +159,8 @@ def fit_auto(
         lo, hi = parse_band(band, frf.freq_hz)
     else:
         lo, hi = default_band(frf)
-    # how far an automatic edge may move: down to the lowest reliable line, up to the last line
-    limits = (default_band(frf)[0] if not user_band else lo, float(frf.freq_hz[-1]))
+    # how far an automatic edge may move: within what the data support (default_band)
+    limits = default_band(frf) if not user_band else (lo, float(frf.freq_hz[-1]))
     warnings_out: list[str] = []
 
     given_complex = None

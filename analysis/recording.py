@@ -24,7 +24,7 @@ from typing import Any, Iterator, Optional, Sequence
 import numpy as np
 
 from analysis.frf import FRFSet
-from analysis.spectra import WindowSettings
+from analysis.spectra import WindowSettings, excitation_limit_hz
 
 from analysis.errors import RecordingError
 
@@ -568,6 +568,7 @@ class Recording:
             references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
             exp_window_tau_s=g["exp_window_tau_s"], sample_rate_hz=g["sample_rate_hz"] or self._hit_sample_rate(),
             meta={"estimator": est, "n_averages": int(g["n_averages"]), "source": str(self.path),
+                  "excitation_limit_hz": excitation_limit_hz(g["freq_hz"], g["Gff"]) if "Gff" in g else None,
                   "measurement": name, "point": g["point"]},
         )
 
@@ -678,6 +679,7 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
     meta.pop("measurement", None)
     meta.pop("point", None)
     meta["n_averages"] = [s.meta.get("n_averages") for s in sets]
+    meta["excitation_limit_hz"] = [s.meta.get("excitation_limit_hz") for s in sets]
     if len(ests) > 1:
         meta["estimator"] = "mixed"
     return FRFSet(freq_hz=f0, H=H, quantity=sets[0].quantity, outputs=tuple(outs), references=tuple(refs),

@@ -39,6 +39,9 @@ import numpy as np
 from .frf import FRFSet
 
 __all__ = [
+    "excitation_band",
+    "excitation_limit_hz",
+    "EXCITATION_DROP_DB",
     "WindowSettings",
     "tau_from_decay",
     "force_window",
@@ -360,7 +363,8 @@ class FRFAccumulator:
         if est not in ("H1", "H2"):
             raise ValueError(f"estimator {estimator!r} is not H1 or H2")
         H = self.h1() if est == "H1" else self.h2()
-        m = {"estimator": est, "n_averages": self.n_averages}
+        m = {"estimator": est, "n_averages": self.n_averages,
+             "excitation_limit_hz": excitation_limit_hz(self.freq_hz, self.spectra()[0])}
         m.update(meta or {})
         return FRFSet(
             freq_hz=self.freq_hz,
@@ -374,3 +378,48 @@ class FRFAccumulator:
             meta=m,
             sample_rate_hz=sample_rate_hz,
         )
+
+
+def excitation_band(freq_hz: np.ndarray, gff_db: np.ndarray, drops_db: Sequence[float] = (10.0, 20.0)
+                    ) -> "dict[float, Optional[float]]":
+    """Where the force autospectrum has fallen ``drop`` dB below its low-frequency level, for each
+    drop (Hz; None when it never falls that far): the usable excitation band of a hammer hit.
+
+    ``gff_db``: the force autospectrum in dB (any reference) at ``freq_hz``. The low-frequency level
+    is the largest value over the lowest 2 % of the lines (at least 3, DC included: a hammer's
+    spectrum is flat from DC, an AC-coupled channel may lose the DC line itself). The edge is the
+    first line below ``level - drop``, refined by linear interpolation in dB with the line before.
+    """
+    f = np.asarray(freq_hz, dtype=float)
+    g = np.asarray(gff_db, dtype=float)
+    g = np.where(np.isfinite(g), g, -np.inf)
+    level = float(np.max(g[:max(3, int(0.02 * f.size))]))
+    out: dict[float, Optional[float]] = {}
+    for drop in drops_db:
+        below = np.flatnonzero(g < level - drop)
+        below = below[below > 0]
+        if not below.size:
+            out[drop] = None
+            continue
+        k = int(below[0])
+        d0, d1 = g[k - 1], g[k]
+        frac = (level - drop - d0) / (d1 - d0) if np.isfinite(d1) and d1 != d0 else 1.0
+        out[drop] = float(f[k - 1] + (f[k] - f[k - 1]) * frac)
+    return out
+
+
+#: the force spectrum's fall (dB below its low-frequency level) taken as the end of the band a fit may use
+EXCITATION_DROP_DB = 20.0
+
+
+def excitation_limit_hz(freq_hz: np.ndarray, gff: np.ndarray, drop_db: float = EXCITATION_DROP_DB) -> Optional[float]:
+    """Upper end (Hz) of the excitation band of a force autospectrum ``gff`` (linear, e.g. N^2/Hz)
+    at ``freq_hz``: where it has fallen ``drop_db`` below its low-frequency level
+    (:func:`excitation_band`); None when it never falls that far (the hammer excites every line)."""
+    g = np.asarray(gff, dtype=float)
+    peak = float(np.nanmax(g)) if g.size else 0.0
+    if not peak > 0:
+        return None
+    db = 10.0 * np.log10(np.maximum(g, peak * 1e-30))
+    return excitation_band(freq_hz, db, (drop_db,))[drop_db]
+

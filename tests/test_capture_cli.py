@@ -185,3 +185,21 @@ def test_capture_asks_the_operator(tmp_path, monkeypatch, capsys):
             (True, []), (False, ["rejected by the operator"]), (False, ["test ended by the operator"])]
         assert any("ended early" in e[2] for e in r.events())
     assert load_frfset(rec).meta["n_averages"] == [1]
+
+
+def test_capture_reports_each_points_excitation_band_and_warns_when_narrow(captured):
+    """Issue 11, item 1: the medium tip's force spectrum is 20 dB down near 1.1 kHz, well inside the
+    analyser's 2.5 kHz band: the summary says so per point and warns."""
+    from acquisition.averaging import average_recorded_hits
+    from acquisition.cli_capture import summary_text
+    from acquisition.session import SessionResult
+    from analysis.recording import Recording
+
+    with Recording(captured) as rec:
+        avgs = average_recorded_hits(list(rec.hits(accepted_only=True)), rec.windows, rec.channels)
+    text = summary_text(SessionResult(averages=avgs, accepted=sum(a.n_averages for a in avgs)))
+    bands = [line for line in text.splitlines() if "excitation band (force spectrum)" in line]
+    assert len(bands) == 2
+    e20 = [float(line.split("-20 dB at ")[1].split()[0]) for line in bands]
+    assert all(900.0 < e < 1400.0 for e in e20), e20
+    assert text.count("warning: the hammer excites this point only up to") == 2

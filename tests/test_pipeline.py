@@ -251,3 +251,37 @@ def test_success_means_converged_and_physically_sensible() -> None:
     # an undetermined frequency (standard deviation of the order of the frequency) is a problem too
     lsfd2 = replace(fit.lsfd, freq_hz_std=np.r_[fit.lsfd.freq_hz_std[:-1], 1.7e3])
     assert any("not determined by the data" in p for p in assess_fit(lsfd2, fit.band))
+
+
+def test_default_band_comes_from_the_analyser_the_hammer_and_the_coherence() -> None:
+    """Issue 11, item 1: the automatic band ends where the data stop supporting a fit."""
+    from analysis.bands import upper_limits
+
+    frf, _ = make_frf(n_f=2000, fmax=500.0)
+    assert default_band(frf)[1] == pytest.approx(500.0)  # nothing known: the top line
+    # a 1000 Hz sample rate: the analyser's flat band ends at 1000 / 2.56 = 390.6 Hz
+    with_fs = replace(frf, sample_rate_hz=1000.0)
+    assert upper_limits(with_fs)["analyser"] == pytest.approx(390.625)
+    assert default_band(with_fs)[1] <= 390.625 and default_band(with_fs)[1] > 390.0
+    # a soft hammer whose force spectrum is 20 dB down at 250 Hz (two points, the lower counts)
+    soft = replace(with_fs, meta={"excitation_limit_hz": [300.0, 250.0]})
+    assert default_band(soft)[1] == pytest.approx(250.0, abs=frf.line_spacing_hz)
+    # coherence that falls for good above 200 Hz
+    f = frf.freq_hz
+    coh = np.where(f < 200.0, 0.98, 0.2)
+    noisy = replace(frf, coherence=np.broadcast_to(coh, frf.H.shape))
+    assert upper_limits(noisy)["coherence"] == pytest.approx(200.0, abs=10.0)
+    # one average: coherence 1 everywhere says nothing and does not cut the band
+    assert "coherence" not in upper_limits(replace(frf, coherence=np.ones(frf.H.shape)))
+
+
+def test_stabilization_order_respects_the_band_it_is_given() -> None:
+    """Issue 11, item 8: a narrow band of a noisy FRF no longer asks for more modes than its lines hold."""
+    frf, _ = make_frf(n_out=1, noise=0.2, n_f=2000, fmax=500.0)  # noise peaks: the old rule asked for 50 modes
+    band = (4.0, 70.0)  # 265 lines
+    n = default_max_modes(frf, band)
+    assert n <= 265 // 11
+    from analysis.stabilization import stabilization
+
+    stab = stabilization(frf, n, method="lsce", band=band)  # raised "too few lines" before
+    assert max(stab.orders) == n

@@ -13,6 +13,8 @@ from typing import Any, Optional
 
 import numpy as np
 
+from analysis.spectra import excitation_band
+
 __all__ = ["band_edges", "frf_payload", "hit_payload", "range_advice", "setup_payload", "verdict_payload"]
 
 #: most samples of a time trace sent to the page (min/max pairs keep the peaks when decimating)
@@ -49,19 +51,10 @@ def _envelope(t: np.ndarray, y: np.ndarray, n_max: int) -> tuple[np.ndarray, np.
 
 
 def band_edges(freq_hz: np.ndarray, gff_db: np.ndarray) -> dict:
-    """Where the force autospectrum (dB re max) first falls below -10 and -20 dB, Hz (linear
-    interpolation between lines; None when it never does): the usable excitation band of the hit."""
-    out: dict[str, Optional[float]] = {}
-    for level in (10, 20):
-        below = np.nonzero(gff_db < -level)[0]
-        below = below[below > 0]
-        if not below.size:
-            out[f"minus{level}_hz"] = None
-            continue
-        k = int(below[0])
-        f0, f1, d0, d1 = freq_hz[k - 1], freq_hz[k], gff_db[k - 1], gff_db[k]
-        out[f"minus{level}_hz"] = float(f0 + (f1 - f0) * (-level - d0) / (d1 - d0)) if d1 != d0 else float(f1)
-    return out
+    """The hit's excitation band (:func:`analysis.spectra.excitation_band`) as the page shows it:
+    ``minus10_hz`` and ``minus20_hz`` (Hz, None when the spectrum never falls that far)."""
+    edges = excitation_band(freq_hz, gff_db, (10.0, 20.0))
+    return {"minus10_hz": edges[10.0], "minus20_hz": edges[20.0]}
 
 
 def _lines(freq_hz: np.ndarray, bandwidth_hz: float) -> np.ndarray:

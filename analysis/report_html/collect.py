@@ -13,7 +13,7 @@ from ..geometry import Geometry, node_label
 from ..modal import damping_ratio, natural_freq_hz, synthesize
 from ..plots import summed_magnitude_db
 from ..points import parse_point
-from ..spectra import hit_spectra
+from ..spectra import excitation_band as spectra_excitation_band, hit_spectra
 from ..mac import mac_matrix
 from ..stabilization import CLASS_NAMES
 from .sources import FitData, TestRecord
@@ -203,15 +203,10 @@ def _envelope(t: np.ndarray, y: np.ndarray, n_max: int) -> tuple[np.ndarray, np.
 
 
 def excitation_band(freq_hz: np.ndarray, gff_db: np.ndarray) -> dict:
-    """Frequencies (Hz) where the force autospectrum first falls 10 and 20 dB below its low-frequency
-    level (median of the lines up to 2 % of the span, DC excluded); None when it never does."""
-    low = gff_db[1:max(3, int(0.02 * freq_hz.size))]
-    ref = float(np.median(low))
-    out: dict[str, Any] = {"level_db": ref}
-    for drop in (10, 20):
-        k = np.flatnonzero(gff_db[1:] < ref - drop)
-        out[f"f{drop}_hz"] = float(freq_hz[1 + k[0]]) if k.size else None
-    return out
+    """The excitation band (:func:`analysis.spectra.excitation_band`) as the page draws it:
+    ``f10_hz`` and ``f20_hz`` (Hz, None when the force spectrum never falls that far)."""
+    edges = spectra_excitation_band(freq_hz, gff_db, (10.0, 20.0))
+    return {"f10_hz": edges[10.0], "f20_hz": edges[20.0]}
 
 
 def points_section(rec: TestRecord) -> list[dict]:
