@@ -275,10 +275,13 @@ class ProjectedProblem:
         if not ev.rank_ok:
             raise ValueError("normal equations need a full-rank evaluation")
         m = ev.theta.size // 2
+        assert ev.coef is not None
         if ev.precise:
+            assert ev.Q is not None and ev.E is not None and ev.resid is not None
             JtJ, Gam = projected_gram(ev.Q, ev.E, ev.coef[:2 * m])
             EtR = ev.E.T @ ev.resid
         else:
+            assert ev.G is not None and ev.EtR is not None
             JtJ, Gam = gram_from_G(ev.G, ev.coef[:2 * m])
             EtR = ev.EtR
         g = -np.einsum("rpif,rpf->ri", Gam, EtR.reshape(m, 2, -1)).reshape(2 * m)
@@ -289,6 +292,7 @@ class ProjectedProblem:
         """Residues (n_frf, m) and residual terms (n_frf, n_res), complex, unweighted."""
         m = ev.theta.size // 2
         c = ev.coef
+        assert c is not None, "linear parameters of a rank-deficient evaluation"
         if self.frf_w is not None:
             c = c / self.frf_w[None, :]
         R = (c[0:2 * m:2] + 1j * c[1:2 * m:2]).T

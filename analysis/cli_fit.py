@@ -122,7 +122,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             row = frf.outputs.index(args.frf)
             shown = (row, int(np.argmax(rms[row])))
         else:  # the strongest FRF (usually the driving point); never an all-zero one
-            shown = tuple(int(i) for i in np.unravel_index(int(np.argmax(rms)), rms.shape))
+            i_out, i_ref = np.unravel_index(int(np.argmax(rms)), rms.shape)
+            shown = (int(i_out), int(i_ref))
 
     from .pipeline import fit_auto
     from .report import format_table, result_to_dict, write_json
@@ -165,7 +166,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.plot:
             from .plots import plot_fit
 
-            order = [tuple(int(i) for i in np.unravel_index(k, rms.shape)) for k in np.argsort(-rms, axis=None)]
+            order = [(int(k // rms.shape[1]), int(k % rms.shape[1])) for k in np.argsort(-rms, axis=None)]
             rows = [shown] + [p for p in order if p != shown and rms[p] > 0]
             plot_fit(frf, result, args.plot, pairs=rows[:4], band=result.band)
             print(f"plot written to {args.plot}")

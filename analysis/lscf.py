@@ -131,6 +131,7 @@ def _toeplitz_sums(f: np.ndarray, H: np.ndarray, ts: float, p: int) -> tuple[np.
         and 2 * idx[-1] > 2 * p + 1
     )
     if on_grid:
+        assert idx is not None
         n_fft = int(2 * idx[-1])
         cols = np.mod(m, n_fft)
 

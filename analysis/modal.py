@@ -56,19 +56,20 @@ def pole_from_fz(freq_hz: "np.ndarray | float", zeta: "np.ndarray | float") -> n
     return -z * wn + 1j * wn * np.sqrt(1 - z ** 2)
 
 
-def natural_freq_hz(poles: np.ndarray) -> np.ndarray:
-    """|lambda| / 2 pi (Hz)."""
-    return np.abs(poles) / (2 * np.pi)
+def natural_freq_hz(poles: "np.ndarray | complex") -> np.ndarray:
+    """|lambda| / 2 pi (Hz); ``poles`` in rad/s (an array or one pole)."""
+    return np.abs(np.asarray(poles)) / (2 * np.pi)
 
 
-def damping_ratio(poles: np.ndarray) -> np.ndarray:
+def damping_ratio(poles: "np.ndarray | complex") -> np.ndarray:
     """-Re(lambda) / |lambda| (dimensionless)."""
-    return -np.real(poles) / np.abs(poles)
+    p = np.asarray(poles)
+    return -np.real(p) / np.abs(p)
 
 
-def damped_freq_hz(poles: np.ndarray) -> np.ndarray:
+def damped_freq_hz(poles: "np.ndarray | complex") -> np.ndarray:
     """Im(lambda) / 2 pi (Hz)."""
-    return np.imag(poles) / (2 * np.pi)
+    return np.imag(np.asarray(poles)) / (2 * np.pi)
 
 
 def residual_basis(omega: np.ndarray, quantity: str, residual_form: str) -> np.ndarray:

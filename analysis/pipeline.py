@@ -69,7 +69,7 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
 from __future__ import annotations
 
 import logging
-from typing import Optional, Sequence, Union
+from typing import Any, Optional, Sequence, Union
 
 import numpy as np
 
@@ -212,7 +212,7 @@ def fit_auto(
         warnings_out.append(f"{n_out_lines} line(s) around {', '.join(f'{x:.6g}' for x in sorted(exclude_hz))} Hz "
                             "left out of the fit (zero weight)")
         log.info(warnings_out[-1])
-    fit_kw = dict(method=method, band=(lo2, hi2), residual_form=residual_form, per_frf=per_frf, max_iter=max_iter,
+    fit_kw: dict[str, Any] = dict(method=method, band=(lo2, hi2), residual_form=residual_form, per_frf=per_frf, max_iter=max_iter,
                   weights=rms_weights(fit_frf, (lo2, hi2)) if weighting == "rms" else None)
     if given_complex is not None:
         result = fit_lsfd(fit_frf, poles, **fit_kw)

@@ -77,7 +77,8 @@ def plot_stabilization(result, frf: FRFSet, path_png: "str | Path", *, title: Op
                 k = k & (fd >= lo) & (fd <= hi)
             xs.append(natural_freq_hz(p[k]))
             ys.append(np.full(int(k.sum()), n))
-        x, y = np.concatenate(xs) if xs else [], np.concatenate(ys) if ys else []
+        x = np.concatenate(xs) if xs else np.zeros(0)
+        y = np.concatenate(ys) if ys else np.zeros(0)
         m, col, size, label = _STYLE[c]
         ax.scatter(x, y, marker=m, c=col, s=size, label=f"{label} ({len(x)})", linewidths=1.0, zorder=3)
     if selected is not None:

@@ -144,7 +144,7 @@ def select_poles(
 
 
 def poles_from_frequencies(
-    freqs_hz: Sequence[float], stab: Optional[StabilizationResult] = None, *, default_damping: float = 0.01
+    freqs_hz: "Sequence[float] | np.ndarray", stab: Optional[StabilizationResult] = None, *, default_damping: float = 0.01
 ) -> np.ndarray:
     """Poles for user-given natural frequencies (Hz).
 

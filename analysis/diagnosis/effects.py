@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, replace
-from typing import Callable, Mapping, Optional, Sequence
+from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
@@ -127,7 +127,7 @@ def _replace_poles(model: ModalModel, poles: np.ndarray, scale: np.ndarray) -> M
     return replace(model, poles=np.asarray(poles, complex), residues=model.residues * scale[None, None, :])
 
 
-def _check_positive(name: str, value: float, what: str) -> float:
+def _check_positive(name: str, value: Any, what: str) -> float:
     v = float(value)
     if not np.isfinite(v) or v <= 0:
         raise EffectError(f"{what}: parameter {name} must be a positive number, got {value!r}")
@@ -166,7 +166,7 @@ def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = 
     f = ctx.measured.freq_hz[lines]
     Hm, W = ctx.measured.H[..., lines], ctx.weights[..., lines]
     base = ctx.base
-    background = 0.0
+    background: "float | np.ndarray" = 0.0
     if coarse:
         near = (base.freq_hz >= f[0] / 1.5) & (base.freq_hz <= f[-1] * 1.5)
         if near.any() and not near.all():
@@ -212,7 +212,7 @@ def _log_shift_candidates(ctx: FitContext, lines: np.ndarray, max_ratio: float =
     max_lag = int(np.ceil(np.log(max_ratio) / du))
     lags = np.arange(-max_lag, max_lag + 1)
     score = np.array([np.dot(a[max(0, L):npts + min(0, L)], b[max(0, -L):npts - max(0, L)]) / (npts - abs(L))
-                      for L in lags])
+                      for L in lags.tolist()])
     peaks = [i for i in range(1, score.size - 1) if score[i] >= score[i - 1] and score[i] >= score[i + 1]]
     peaks = sorted(peaks, key=lambda i: score[i], reverse=True)[:n] or [int(np.argmax(score))]
     return [float(np.exp(lags[i] * du)) for i in peaks]
@@ -426,7 +426,7 @@ def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
             break
         if all(abs(f[k] - c) > 10 * df for c in cands):
             cands.append(float(f[k]))
-    best = None
+    best: "tuple[float, float, float, np.ndarray] | None" = None
     for fc in cands:
         zs = [(float(np.sum(_missing_mode_residuals(ctx, lines, np.array([fc, z]))[0] ** 2)), z)
               for z in (0.002, 0.005, 0.01, 0.02, 0.05)]
@@ -438,6 +438,8 @@ def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
         c = float(np.sum(r ** 2))
         if best is None or c < best[0]:
             best = (c, float(res.x[0]), float(np.exp(res.x[1])), R)
+    if best is None:
+        raise EffectError("missing_mode: no candidate frequency in the band")
     _, fm, zm, R = best
     return {"freq_hz": fm, "zeta": zm, "residue": R.tolist()}
 
@@ -491,7 +493,7 @@ def apply_sensor_highpass(frf: FRFSet, params: Mapping) -> FRFSet:
 def fit_sensor_highpass(ctx: FitContext, lines: np.ndarray) -> dict:
     f = ctx.measured.freq_hz
     f0 = max(f[lines][0], 1e-3)
-    best = None
+    best: "tuple[float, float, int] | None" = None
     for n in (1, 2):
         def cost(lfc: float, n: int = n) -> float:
             return ctx.cost(ctx.sim.H * highpass_response(f, float(np.exp(lfc)), n), lines)
@@ -500,6 +502,7 @@ def fit_sensor_highpass(ctx: FitContext, lines: np.ndarray) -> dict:
         c = cost(x)
         if best is None or c < best[0]:
             best = (c, float(np.exp(x)), n)
+    assert best is not None
     return {"corner_hz": best[1], "order": best[2]}
 
 
@@ -650,7 +653,7 @@ def _correction(corr: FRFSet, freq_hz: np.ndarray, quantity: str, warp: float = 
     if corr.freq_hz.size == f.size and np.allclose(corr.freq_hz, fe):
         H = corr.H.copy()
     else:
-        H = np.zeros(corr.H.shape[:2] + (f.size,), complex)
+        H = np.zeros((corr.H.shape[0], corr.H.shape[1], f.size), complex)
         for o in range(H.shape[0]):
             for r in range(H.shape[1]):
                 H[o, r] = np.interp(fe, corr.freq_hz, corr.H[o, r].real) + 1j * np.interp(fe, corr.freq_hz, corr.H[o, r].imag)

@@ -318,8 +318,7 @@ def hit_spectra_set(force: np.ndarray, responses: np.ndarray, fs_hz: float, band
         gains.append(float(np.sum(w ** 2)))
     if freq is None or freq.size < 8:
         raise ValueError(f"the band {band} Hz holds fewer than 8 lines of these hits; widen it")
-    pre = [x[i, :, :max(int(starts[i]) - NOISE_GUARD, 0)] for i in range(f.shape[0])]
-    pre = np.concatenate(pre, axis=1)
+    pre = np.concatenate([x[i, :, :max(int(starts[i]) - NOISE_GUARD, 0)] for i in range(f.shape[0])], axis=1)
     rn = np.std(pre, axis=1) if pre.shape[1] >= 8 else np.zeros(x.shape[1])
     return HitSpectraSet(freq, np.array(Gff), np.array(Gfx), starts, tau, np.array(gains), rn,
                          np.array(rgains), force_width_s)
@@ -360,18 +359,19 @@ def _db(x: float) -> float:
     return float(10 * np.log10(max(x, 1e-30)))
 
 
-def _score(measured: np.ndarray, before: np.ndarray, after_of, weights: np.ndarray) -> dict:
+def _score(measured: "np.ndarray | tuple[np.ndarray, np.ndarray]", before: np.ndarray, after_of,
+           weights: np.ndarray) -> dict:
     """Held-out errors: ``after_of(train_mask) -> (model H, params)`` is fitted on one fold of lines and
     scored on the other, both ways (as :mod:`analysis.diagnosis.verdict`). ``measured``/``before`` may be
     one array or a (before-measured, after-measured) pair for the exclusion effects."""
     m_b, m_a = measured if isinstance(measured, tuple) else (measured, measured)
-    b, a = [], []
+    bs, as_ = [], []
     for train, test in _folds(m_b.shape[-1]):
         Hx, _ = after_of(train)
         w = weights[..., test]
-        b.append((w * np.abs(m_b[..., test] - before[..., test]) ** 2).ravel())
-        a.append((w * np.abs(m_a[..., test] - Hx[..., test]) ** 2).ravel())
-    b, a = np.concatenate(b), np.concatenate(a)
+        bs.append((w * np.abs(m_b[..., test] - before[..., test]) ** 2).ravel())
+        as_.append((w * np.abs(m_a[..., test] - Hx[..., test]) ** 2).ravel())
+    b, a = np.concatenate(bs), np.concatenate(as_)
     d = b - a
     sd = float(np.std(d, ddof=1))
     z = float(np.mean(d) / (sd / np.sqrt(d.size))) if sd > 0 else 0.0
