@@ -44,7 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--per-frf", action="store_true", help="also fit every FRF alone (results in the JSON)")
     p.add_argument("--max-iter", type=int, default=100, metavar="N", help="LSFD iteration cap (default 100)")
     p.add_argument("--plot", metavar="PNG", help="measured vs synthesised FRFs with the relative error (paper Fig. 7)")
-    p.add_argument("--uff", metavar="OUT.uff", help="write UFF 55 mode shapes and UFF 58 synthesised FRFs")
+    p.add_argument("--uff", metavar="OUT.uff",
+                   help="write the test geometry (UFF 15 nodes, 82 trace lines), UFF 55 mode shapes (in order of "
+                        "frequency) and UFF 58 synthesised FRFs: other tools can animate the shapes")
+    p.add_argument("--geometry", metavar="frame|CONFIG.toml|GEOMETRY.uff",
+                   help="geometry written with --uff (default: the simulated frame for recordings made on sim:// "
+                        "or usbsim://, else the measured points on a line)")
     p.add_argument("--frf-weights", choices=("rms", "none"), default="rms",
                    help="LSFD weight of each FRF: 1/noise level from coherence or RMS (default), or none "
                         "(the paper's unweighted S); see docs/fitting.md")
@@ -64,10 +69,23 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _write_uff(path: str, frf, result) -> None:
-    """UFF 55 mode shapes (the structure: window-corrected poles), then UFF 58 synthesised FRFs
+def _geometry(args: argparse.Namespace):
+    """The geometry for ``--uff`` (``--geometry``, else the simulated frame for a simulated test,
+    else None: the points on a line)."""
+    from .cli_report import choose_geometry
+    from .inputs import detect_format
+    from .report_html import recording_device
+
+    device = recording_device(args.input) if detect_format(args.input) == "recording" else ""
+    return choose_geometry(args.geometry, device)
+
+
+def _write_uff(path: str, frf, result, geometry=None) -> None:
+    """UFF 55 mode shapes (the structure: window-corrected poles), then the geometry (UFF 15 nodes
+    and 82 trace lines; ``geometry`` or the measured points on a line), then UFF 58 synthesised FRFs
     appended in the same file. The FRFs are synthesised *as measured* (raw poles, the exponential
     window's damping included, comparable with the input FRFs); their ID line 2 says which."""
+    from .geometry import points_on_a_line, write_uff_geometry
     from .modal import synthesize
     from .uff import write_uff55, write_uff58
 
@@ -81,11 +99,17 @@ def _write_uff(path: str, frf, result) -> None:
     which = (f"exp. window tau {frf.exp_window_tau_s:.6g} s: raw poles, as measured" if frf.exp_window_tau_s
              else "no window: model poles")
     synth = replace(synth, exp_window_tau_s=frf.exp_window_tau_s)
+    points = list(dict.fromkeys(list(model.outputs) + list(model.references)))
+    if geometry is None or geometry.covers(points):
+        geometry = points_on_a_line(points)
     with tempfile.TemporaryDirectory(dir=str(Path(path).resolve().parent)) as tmp:
+        geo = Path(tmp) / "geometry.uff"
+        write_uff_geometry(geo, geometry)
         part = Path(tmp) / "frf58.uff"
         write_uff58(part, synth, id_lines=("impactlab LSFD synthesised FRF", which, "synthesis"))
-        with open(path, "ab") as out, open(part, "rb") as src:
-            out.write(src.read())
+        with open(path, "ab") as out:
+            for piece in (geo, part):
+                out.write(piece.read_bytes())
 
 
 @cli_entry
@@ -171,7 +195,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             plot_fit(frf, result, args.plot, pairs=rows[:4], band=result.band)
             print(f"plot written to {args.plot}")
         if args.uff:
-            _write_uff(args.uff, frf, result)
+            _write_uff(args.uff, frf, result, _geometry(args))
             print(f"mode shapes (UFF 55) and synthesised FRFs (UFF 58) written to {args.uff}")
     return 0
 

@@ -40,7 +40,7 @@ from .modal import RESIDUAL_FORMS, ModalModel, damped_freq_hz, damping_ratio, na
 from .uncertainty import covariance_from_normal, fz_std
 
 __all__ = ["fit_lsfd", "LSFDResult", "LSFDConvergenceWarning", "rank_one_split", "METHODS", "Status",
-           "seen_through_window"]
+           "seen_through_window", "sorted_by_frequency"]
 
 log = logging.getLogger(__name__)
 
@@ -389,3 +389,31 @@ def _result(frf: FRFSet, prob: ProjectedProblem, oc: NLSOutcome, method: str, re
         per_frf=sub,
         initial_poles=lam0.copy(),
     )
+
+
+def sorted_by_frequency(result: LSFDResult) -> LSFDResult:
+    """The same result with its modes in order of natural frequency (poles, residues, shapes,
+    participation, standard deviations, the pole covariance and the initial poles permuted
+    alike), so that "mode k" means the same mode in every table, file and plot."""
+    order = np.argsort(np.asarray(result.freq_hz, dtype=float), kind="stable")
+    if np.array_equal(order, np.arange(order.size)):
+        return result
+    o2 = np.stack([2 * order, 2 * order + 1], axis=1).ravel()
+    model = replace(result.model, poles=np.asarray(result.model.poles)[order],
+                    residues=np.asarray(result.model.residues)[..., order])
+    meta = dict(model.meta)
+    if isinstance(meta.get("rank_one_ratio"), np.ndarray) and meta["rank_one_ratio"].size == order.size:
+        meta["rank_one_ratio"] = meta["rank_one_ratio"][order]
+    model = replace(model, meta=meta)
+    cov = np.asarray(result.cov_poles)
+    return replace(
+        result, poles=result.poles[order], poles_raw=result.poles_raw[order], freq_hz=result.freq_hz[order],
+        damping=result.damping[order], damped_freq_hz=result.damped_freq_hz[order],
+        freq_hz_std=result.freq_hz_std[order], damping_std=result.damping_std[order], model=model,
+        mode_shapes=None if result.mode_shapes is None else result.mode_shapes[:, order],
+        participation=None if result.participation is None else result.participation[order],
+        cov_poles=cov[np.ix_(o2, o2)] if cov.shape == (o2.size, o2.size) else cov,
+        initial_poles=None if result.initial_poles is None else np.asarray(result.initial_poles)[order]
+        if np.asarray(result.initial_poles).size == order.size else result.initial_poles,
+    )
+

@@ -144,7 +144,7 @@ def fit_auto(
     ``.warnings``, and the verdict ``.success`` (converged *and* physically sensible), ``.status``,
     ``.problems``, ``.message``. Non-convergence is a status, never an exception.
     """
-    from .lsfd import fit_lsfd  # lazy import: keeps this module importable on its own
+    from .lsfd import fit_lsfd, sorted_by_frequency  # lazy import: keeps this module importable on its own
 
     if not isinstance(frf, FRFSet):
         raise TypeError(f"frf must be an analysis.frf.FRFSet; got {type(frf).__name__}")
@@ -229,6 +229,7 @@ def fit_auto(
     if n_avg.size and np.all(n_avg == 1):
         warnings_out.append("one average per point: the coherence is 1 everywhere and says nothing about the noise; "
                             "the standard deviations and weights rest on the misfit alone (take several hits per point)")
+    result = sorted_by_frequency(result)
     problems = assess_fit(result, (lo2, hi2))
     for p in problems:
         log.warning("implausible fit: %s", p)

@@ -6,14 +6,14 @@ through pyplot's global state, so this module is safe in servers, tests and thre
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
 from .frf import FRFSet
 from .modal import ModalModel, natural_freq_hz, synthesize
 
-__all__ = ["plot_fit", "plot_stabilization", "summed_magnitude_db"]
+__all__ = ["plot_fit", "fit_figure", "plot_stabilization", "summed_magnitude_db"]
 
 _STYLE = {
     # class: (marker, colour, size, label)
@@ -100,6 +100,12 @@ def plot_stabilization(result, frf: FRFSet, path_png: "str | Path", *, title: Op
 def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
              pairs: Optional[Sequence[tuple[int, int]]] = None, max_panels: int = 4,
              band: Optional[Sequence[float]] = None) -> Path:
+    """:func:`fit_figure` written to ``path_png`` (PNG); returns the path."""
+    return _save(fit_figure(frf, model, pairs=pairs, max_panels=max_panels, band=band), path_png)
+
+
+def fit_figure(frf: FRFSet, model, *, pairs: Optional[Sequence[tuple[int, int]]] = None, max_panels: int = 4,
+               band: Optional[Sequence[float]] = None) -> Any:
     """Measured vs synthesised FRFs in the manner of the paper's Fig. 7: magnitude (dB), phase
     (deg) and the relative error ``|H - G| / |H|`` (dB) beneath, one column per FRF.
 
@@ -110,7 +116,10 @@ def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
         (poles shifted by ``-1/tau``), so that it is compared like with like; the green lines
         mark the structure's natural frequencies.
     pairs : (output index, reference index) of the FRFs to draw; default: the first
-        ``max_panels`` FRFs. ``band`` (Hz) shades the fitted band. Returns the path written.
+        ``max_panels`` FRFs. ``band`` (Hz): the fitted band; the frequency axis spans it with a
+        10 % margin each side (the lines outside are shaded). The fitted modes are marked and
+        numbered in order of frequency (as in the tables); when not every FRF is drawn the title
+        says how many are. Returns the matplotlib ``Figure``.
     """
     from .lsfd import LSFDResult, seen_through_window
 
@@ -129,7 +138,19 @@ def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
     f = frf.freq_hz
     G = synthesize(seen, f).H
     n = len(pairs)
-    fig = _figure(4.2 * n + 1, 8)
+    width_in = 4.2 * n + 1.2
+    fig = _figure(width_in, 8)
+    if band is not None:
+        span = float(band[1]) - float(band[0])
+        x_lo, x_hi = max(float(f[0]), band[0] - 0.1 * span), min(float(f[-1]), band[1] + 0.1 * span)
+    else:
+        x_lo, x_hi = float(f[0]), float(f[-1])
+    modes_hz = np.sort(np.asarray(model.freq_hz, dtype=float))
+    live = [(o, r) for o in range(frf.n_outputs) for r in range(frf.n_references)
+            if np.any(np.isfinite(frf.H[o, r]) & (frf.H[o, r] != 0))]
+    if len(pairs) < len(live):
+        fig.suptitle(f"{len(pairs)} of {len(live)} FRFs shown (the strongest first); the fit used all of them",
+                     fontsize=10)
     gs = fig.add_gridspec(3, n, height_ratios=[3, 1.5, 1.5], hspace=0.08)
     for c, (o, r) in enumerate(pairs):
         H = frf.H[o, r]
@@ -145,13 +166,20 @@ def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
             axp.plot(f, _phase_deg(g), "-", color="#1f77b4", lw=0.8)
             rel = np.abs(H - g) / np.abs(H)
             axe.plot(f, 20 * np.log10(rel), color="#d62728", lw=0.8)
-        for fr in model.freq_hz:
-            axm.axvline(fr, color="#2ca02c", lw=0.5, ls=":")
+        last, level = -np.inf, 0
+        for k, fr in enumerate(modes_hz, start=1):
+            if x_lo <= fr <= x_hi:
+                axm.axvline(fr, color="#2ca02c", lw=0.6, ls=":")
+                # close modes: stagger their numbers upwards so that they stay legible
+                level = (level + 1) % 3 if fr - last < 0.03 * (x_hi - x_lo) else 0
+                last = fr
+                axm.text(fr, 1.005 + 0.045 * level, str(k), transform=axm.get_xaxis_transform(), ha="center",
+                         va="bottom", fontsize=7, color="#2ca02c")
         if band is not None:
             for ax in (axm, axp, axe):
                 ax.axvspan(f[0], band[0], color="#eeeeee", zorder=0)
                 ax.axvspan(band[1], f[-1], color="#eeeeee", zorder=0)
-        axm.set_title(f"{frf.outputs[o]} / {frf.references[r]}", fontsize=9)
+        axm.set_title(f"{frf.outputs[o]} / {frf.references[r]}", fontsize=9, pad=34)
         axm.tick_params(labelbottom=False)
         axp.tick_params(labelbottom=False)
         axp.set_ylim(-180, 180)
@@ -162,6 +190,8 @@ def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
             axp.set_ylabel("phase [deg]")
             axe.set_ylabel("rel. error [dB]")
             axm.legend(fontsize=8)
-        axm.set_xlim(f[0], f[-1])
-    fig.subplots_adjust(left=0.08, right=0.98, top=0.94, bottom=0.07, wspace=0.25)
-    return _save(fig, path_png)
+        axm.set_xlim(x_lo, x_hi)
+    # margins in inches, so that a single narrow column keeps its axis labels
+    fig.subplots_adjust(left=0.95 / width_in, right=1 - 0.2 / width_in, top=0.88, bottom=0.07,
+                        wspace=0.9 / 4.2)
+    return fig

@@ -88,9 +88,18 @@ def test_fit_writes_json_plot_and_uff(uff_file, tmp_path, capsys):
     from analysis.uff import read_uff55, read_uff58
 
     lam, nodes, shapes = read_uff55(out_uff)
-    np.testing.assert_allclose(np.sort(natural_freq_hz(lam)), F_TRUE, rtol=1e-4)
+    # issue 11, item 7: modes in order of frequency in the file, as in the table and the JSON
+    np.testing.assert_allclose(natural_freq_hz(lam), F_TRUE, rtol=1e-4)
+    assert np.all(np.diff(natural_freq_hz(lam)) > 0) and np.all(np.diff(freqs) > 0)
     synth = read_uff58(out_uff)
     assert synth.outputs == tuple(OUTPUTS) and synth.H.shape[0] == len(OUTPUTS)
+    # the geometry beside the shapes (UFF 15 nodes, 82 trace lines) holds every shape's node
+    from analysis.geometry import read_uff_geometry
+    from analysis.points import uff_node
+
+    geo = read_uff_geometry(out_uff)
+    assert geo.covers(OUTPUTS + [REFERENCE]) == [] and len(geo.lines) >= 1
+    assert {uff_node(o) for o in OUTPUTS} <= {int(n) for n in np.atleast_1d(nodes)}
 
 
 def test_fit_user_poles_band_and_modes(uff_file, tmp_path, capsys):

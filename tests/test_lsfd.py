@@ -390,3 +390,23 @@ def test_bad_arguments_raise_clear_errors() -> None:
     H[0, 0, 3] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         fit_lsfd(replace(frf, H=H), p0)
+
+
+def test_sorted_by_frequency_permutes_every_per_mode_quantity_alike() -> None:
+    """Issue 11, item 7: a fit started from poles out of order (as the missing-mode step appends
+    them) comes out in order of frequency, with residues, shapes and deviations following."""
+    from analysis.lsfd import sorted_by_frequency
+    from analysis.modal import natural_freq_hz
+
+    f = np.linspace(5.0, 200.0, 800)
+    poles = pole_from_fz(np.array([40.0, 90.0, 150.0]), np.array([0.01, 0.02, 0.015]))
+    R = np.array([[[1.0, 2.0, 0.5]], [[0.3, -1.0, 2.0]]], dtype=complex) * poles.imag / 2j
+    frf = synthesize(ModalModel(poles, R, quantity="accelerance", residual_form="none"), f)
+    res = fit_lsfd(frf, poles[::-1] * (1 + 1e-3), residual_form="none")
+    assert np.all(np.diff(res.freq_hz) < 0)  # as started
+    s = sorted_by_frequency(res)
+    assert np.all(np.diff(s.freq_hz) > 0) and np.all(np.diff(natural_freq_hz(s.model.poles)) > 0)
+    np.testing.assert_allclose(s.freq_hz_std, res.freq_hz_std[::-1])
+    np.testing.assert_allclose(synthesize(s.model, f).H, synthesize(res.model, f).H, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(s.model.residues, res.model.residues[..., ::-1])
+    assert s.cov_poles[0, 0] == res.cov_poles[4, 4] and s.cov_poles[1, 3] == res.cov_poles[5, 3]

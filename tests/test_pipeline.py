@@ -285,3 +285,23 @@ def test_stabilization_order_respects_the_band_it_is_given() -> None:
 
     stab = stabilization(frf, n, method="lsce", band=band)  # raised "too few lines" before
     assert max(stab.orders) == n
+
+
+def test_fit_figure_spans_the_band_numbers_the_modes_and_says_what_it_leaves_out() -> None:
+    """Issue 11, item 4: the x axis spans the fitted band (10 % margin), the modes are numbered in
+    order of frequency, a single column keeps its y labels, and a partial set says so."""
+    from analysis.plots import fit_figure
+
+    frf, _ = make_frf(n_out=3, noise=0.01, n_f=2000, fmax=500.0)
+    fit = fit_auto(frf, band=(30.0, 200.0))
+    fig = fit_figure(frf, fit.lsfd, pairs=[(0, 0)], band=fit.band)
+    axm = fig.axes[0]
+    lo, hi = fit.band
+    assert axm.get_xlim() == pytest.approx((lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)))
+    numbers = [t.get_text() for t in axm.texts]
+    in_view = [f for f in np.sort(fit.freq_hz) if lo - 0.1 * (hi - lo) <= f <= hi + 0.1 * (hi - lo)]
+    assert len(numbers) == len(in_view) and numbers == sorted(numbers, key=int)
+    assert axm.get_ylabel().startswith("|H| [dB") and fig.axes[1].get_ylabel() == "phase [deg]"
+    assert fig._suptitle is not None and fig._suptitle.get_text().startswith("1 of 3 FRFs shown")
+    full = fit_figure(frf, fit.lsfd, pairs=[(0, 0), (1, 0), (2, 0)], band=fit.band)
+    assert full._suptitle is None
