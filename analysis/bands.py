@@ -20,7 +20,7 @@ from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
 
 __all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges", "mains_harmonics",
-           "exclude_lines"]
+           "exclude_lines", "mains_harmonic_index", "MAINS_HZ"]
 
 log = logging.getLogger(__name__)
 
@@ -33,6 +33,11 @@ LOW_LINES = 5
 MIN_COHERENCE = 0.8
 EDGE_BANDWIDTHS = 3.0
 EXCLUDE_LINES = 2.0
+#: mains frequencies (Hz) whose harmonics may carry electrical lines
+MAINS_HZ = (50.0, 60.0)
+#: a frequency within this many lines (or k x MAINS_DEVIATION_HZ at harmonic k) of a harmonic is on it
+MAINS_LINES = 2.0
+MAINS_DEVIATION_HZ = 0.1
 #: lines of the band per mode of the stabilization's largest model (LSCE needs more than 10)
 LINES_PER_MODE = 11
 #: median coherence below which the top of the band is no longer supported (after smoothing)
@@ -175,3 +180,14 @@ def exclude_lines(frf: FRFSet, freqs_hz: Sequence[float], n_lines: float = EXCLU
         raise FitError(f"excluding the lines around {list(x)} Hz leaves only {int(keep.sum())} lines; exclude fewer")
     coh = None if frf.coherence is None else np.asarray(frf.coherence)[..., keep]
     return replace(frf, freq_hz=f[keep], H=frf.H[..., keep], coherence=coh), int(drop.sum())
+
+
+def mains_harmonic_index(freq_hz: float, mains: Sequence[float], df: float) -> "tuple[int, float] | None":
+    """``(k, m)`` when ``freq_hz`` lies on the k-th harmonic of the mains frequency ``m`` (Hz): within
+    ``MAINS_LINES`` line spacings ``df`` or the grid's deviation ``k MAINS_DEVIATION_HZ``; else None."""
+    for m in mains:
+        k = int(round(float(freq_hz) / m))
+        if k >= 1 and abs(freq_hz - k * m) <= max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ):
+            return k, float(m)
+    return None
+

@@ -15,6 +15,7 @@ from .frf import FRFSet
 from .mac import mac
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz, transfer
 
+from .bands import MAINS_DEVIATION_HZ, MAINS_HZ, MAINS_LINES, mains_harmonic_index
 from .bounded_fit import bad_poles, fit_bounded
 
 __all__ = ["add_missing_modes", "MAINS_HZ"]
@@ -33,9 +34,6 @@ MISSING_TRIAL_ITER = 40
 MISSING_LOCAL_GAIN = 0.3
 MISSING_MIN_RESIDUE_RATIO = 0.05
 MISSING_CANCEL_RATIO = 0.2
-MAINS_HZ = (50.0, 60.0)
-MAINS_LINES = 2.0
-MAINS_DEVIATION_HZ = 0.1
 MAINS_WIDTH_FRACTION = 0.5
 
 
@@ -160,6 +158,7 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
     from .lsfd import LSFDConvergenceWarning
     df = frf.line_spacing_hz if df is None else float(df)
     tried: list[float] = []
+    on_mains: list[tuple[float, str]] = []  # reported once at the end, with a count
     added = 0
     f, e, d = _scaled_misfit(frf, result)
     cost = float(np.sum(e ** 2))
@@ -173,8 +172,8 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
         z0 = float(np.median(damping_ratio(result.poles_raw)))
         mains_why = _mains_line(c, f, e, df, z0, mains)
         if mains_why is not None:
-            log.info(mains_why)
-            warnings_out.append(mains_why)
+            log.debug(mains_why)
+            on_mains.append((c, mains_why))
             continue
         new = pole_from_fz(c, z0)
         start = np.concatenate([result.poles_raw, [new]])
@@ -212,8 +211,7 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
             failures += 1
             continue
         f_new = trial.freq_hz[-1]
-        on_line = any(k >= 1 and abs(f_new - k * m) <= max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ)
-                      for m in mains for k in [int(round(f_new / m))])
+        on_line = mains_harmonic_index(f_new, mains, df) is not None
         if on_line and 2.0 * trial.damping[-1] * f_new < MAINS_WIDTH_FRACTION * 2.0 * z0 * f_new:
             msg = (f"a pole tried at {f_new:.6g} Hz ({100 * trial.damping[-1]:.3g} %) sits on a mains line and is much "
                    f"sharper than the modes ({100 * z0:.3g} %): not added")
@@ -230,4 +228,12 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
         result, f, e, d, cost = trial, f2, e2, d2, cost2
         added += 1
         failures = 0
+    if on_mains:
+        msg = on_mains[0][1]
+        if len(on_mains) > 1:
+            rest = sorted(c for c, _ in on_mains[1:])
+            shown = ", ".join(f"{c:.6g}" for c in rest[:10]) + (", ..." if len(rest) > 10 else "")
+            msg += f"; and {len(rest)} more misfit peak(s) on mains lines, not fitted as modes either: {shown} Hz"
+        log.info(msg)
+        warnings_out.append(msg)
     return result

@@ -386,18 +386,20 @@ def excitation_band(freq_hz: np.ndarray, gff_db: np.ndarray, drops_db: Sequence[
     drop (Hz; None when it never falls that far): the usable excitation band of a hammer hit.
 
     ``gff_db``: the force autospectrum in dB (any reference) at ``freq_hz``. The low-frequency level
-    is the largest value over the lowest 2 % of the lines (at least 3, DC included: a hammer's
-    spectrum is flat from DC, an AC-coupled channel may lose the DC line itself). The edge is the
-    first line below ``level - drop``, refined by linear interpolation in dB with the line before.
+    is the largest value over the lowest 2 % of the lines (at least 3) without the DC line: a
+    hammer's spectrum is flat from DC, but a DC offset on the force channel puts a spike there (and
+    an AC-coupled channel loses it). The edge is the first line below ``level - drop``, refined by
+    linear interpolation in dB with the line before.
     """
     f = np.asarray(freq_hz, dtype=float)
     g = np.asarray(gff_db, dtype=float)
     g = np.where(np.isfinite(g), g, -np.inf)
-    level = float(np.max(g[:max(3, int(0.02 * f.size))]))
+    first = 1 if f.size > 3 and f[0] == 0.0 else 0
+    level = float(np.max(g[first:first + max(3, int(0.02 * f.size))]))
     out: dict[float, Optional[float]] = {}
     for drop in drops_db:
         below = np.flatnonzero(g < level - drop)
-        below = below[below > 0]
+        below = below[below > first]
         if not below.size:
             out[drop] = None
             continue

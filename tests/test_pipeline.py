@@ -305,3 +305,19 @@ def test_fit_figure_spans_the_band_numbers_the_modes_and_says_what_it_leaves_out
     assert fig._suptitle is not None and fig._suptitle.get_text().startswith("1 of 3 FRFs shown")
     full = fit_figure(frf, fit.lsfd, pairs=[(0, 0), (1, 0), (2, 0)], band=fit.band)
     assert full._suptitle is None
+
+
+def test_many_mains_lines_give_one_warning_with_a_count() -> None:
+    """Issue 11, item 5: a misfit peak on every mains harmonic is reported once, with a count, not
+    once per line (227 lines on the LADISK beam before)."""
+    frf, truth = make_frf(np.array([120.0, 210.0, 380.0]), np.array([0.01, 0.01, 0.01]), n_out=3, seed=1,
+                          noise=0.002)
+    f = frf.freq_hz
+    df = f[1] - f[0]
+    lines = sum(np.exp(-0.5 * ((f - k * 50.0) / (0.4 * df)) ** 2) for k in range(2, 10))
+    frf = replace(frf, H=frf.H + 0.03 * np.max(np.abs(frf.H)) * lines * np.exp(1j * np.arange(3))[:, None, None])
+    fit = fit_auto(frf)
+    mains = [w for w in fit.warnings if "mains line" in w]
+    assert len(mains) == 1, fit.warnings
+    assert "more misfit peak(s) on mains lines" in mains[0]
+    assert not any(np.any(np.abs(fit.freq_hz - k * 50.0) < 1.0) for k in range(2, 10)), fit.freq_hz
