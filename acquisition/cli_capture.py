@@ -25,6 +25,7 @@ from typing import Any, Callable, Optional, Sequence, TextIO
 
 import numpy as np
 
+from analysis.command_line import with_examples
 from analysis.command_line import add_overwrite, cli_entry, exit_on
 from analysis.spectra import WindowSettings, excitation_band, parse_duration
 
@@ -85,6 +86,7 @@ def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[floa
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m acquisition capture", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    with_examples(p)
     p.add_argument("--device", help="device URL, e.g. sim://?seed=1, socket://HOST:PORT, usb://VID:PID "
                                     "(with --resume: default, the recording's device)")
     p.add_argument("--out", help="recording to write (HDF5)")

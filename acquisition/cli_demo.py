@@ -20,6 +20,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
+from analysis.command_line import with_examples
+
 __all__ = ["main", "DemoContext", "ScriptedStand", "STEPS", "DEMO_POINTS"]
 
 #: roving-hammer points of the demo (the frame's test plan, first three)
@@ -205,6 +207,7 @@ STEPS: list[Callable[[DemoContext], None]] = [capture_step, summary_step, export
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition demo", description=__doc__.split("\n\n")[0])
+    with_examples(p)
     p.add_argument("--out", default="demo-output", help="output folder (created)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--hits", type=int, default=5, help="accepted hits per point")

@@ -13,6 +13,7 @@ import argparse
 from pathlib import Path
 from typing import Optional, Sequence
 
+from analysis.command_line import with_examples
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, add_estimator
 
 __all__ = ["main", "export"]
@@ -48,6 +49,7 @@ def export(rec_path: "str | Path", uff_path: "str | Path", *, time_data: bool = 
 @cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition export", description=__doc__.split("\n\n")[0])
+    with_examples(p)
     p.add_argument("recording")
     p.add_argument("--uff", required=True, help="UFF file to write")
     p.add_argument("--time", action="store_true", help="also write the accepted hits' time histories")

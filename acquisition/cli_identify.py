@@ -5,6 +5,7 @@ import argparse
 import json
 from typing import Sequence
 
+from analysis.command_line import with_examples
 from acquisition.errors import ImpactlabError
 from analysis.command_line import add_json_flag, add_verbose, cli_entry, errors_to_exit, set_verbosity
 
@@ -14,6 +15,7 @@ __all__ = ["main"]
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m acquisition identify",
                                 description="Open a device URL and print the analyser's identity and capabilities.")
+    with_examples(p)
     p.add_argument("--device", required=True, help="device URL, e.g. sim://?seed=1, socket://127.0.0.1:5025, "
                                                    "/dev/ttyUSB0, usb://1209:4c41, usbsim://")
     p.add_argument("--timeout", type=float, default=2.0, help="seconds allowed per command (default 2)")

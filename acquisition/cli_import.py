@@ -14,6 +14,7 @@ import argparse
 from pathlib import Path
 from typing import Optional, Sequence
 
+from analysis.command_line import with_examples
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
 
 from .cli_capture import UsageError, parse_windows
@@ -25,6 +26,7 @@ __all__ = ["main"]
 @cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition import", description=__doc__.split("\n\n")[0])
+    with_examples(p)
     p.add_argument("files", nargs="+")
     p.add_argument("--out", required=True)
     p.add_argument("--format", choices=("lvm", "mat", "npy"))

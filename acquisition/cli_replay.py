@@ -15,6 +15,7 @@ import argparse
 from pathlib import Path
 from typing import Optional, Sequence
 
+from analysis.command_line import with_examples
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
 from analysis.spectra import WindowSettings
 
@@ -100,6 +101,7 @@ def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSett
 @cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition replay", description=__doc__.split("\n\n")[0])
+    with_examples(p)
     p.add_argument("recording", help="the recording to read (never modified)")
     p.add_argument("--out", required=True, help="the new recording to write")
     p.add_argument("--force-window", help="WIDTH[,TAPER] or none (default: the recording's)")

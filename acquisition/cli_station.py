@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Optional
 
+from analysis.command_line import with_examples
 from .cli_capture import (
     DEFAULT_EXP_WINDOW,
     DEFAULT_FORCE_WINDOW,
@@ -41,6 +42,7 @@ log = logging.getLogger(__name__)
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m acquisition station", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    with_examples(p)
     p.add_argument("--device", help="device URL, e.g. sim://?seed=1, socket://HOST:PORT, usb://VID:PID")
     p.add_argument("--out", help="recording to write (HDF5)")
     p.add_argument("--resume", metavar="REC.h5", help="continue an interrupted capture or station recording")

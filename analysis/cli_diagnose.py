@@ -17,6 +17,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .command_line import with_examples
 from .command_line import Parser as _Parser, check_out_dir, parse_args, add_estimator
 
 __all__ = ["main", "build_parser", "load_simulation"]
@@ -37,6 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="python -m analysis diagnose",
                 description="Compare a measurement with a simulation, name the physical cause of the "
                             "difference from a catalogue of effects, extend the model and measure the gain.")
+    with_examples(p)
     p.add_argument("--measured", required=True, metavar="M", help="recording (.h5) or UFF 58 file")
     p.add_argument("--simulated", required=True, metavar="S",
                    help="recording or UFF 58 file with the same points, or a simulator config (.toml)")

@@ -19,6 +19,7 @@ import numpy as np
 __all__ = ["main", "build_parser"]
 
 
+from .command_line import with_examples
 from .command_line import Parser as _Parser, UsageError as _UsageError, add_estimator, check_out_dir, cli_entry
 from .command_line import errors_to_exit, parse_args
 
@@ -29,8 +30,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Automatic modal fit: band, stabilization (LSCF/LSCE), pole selection, nonlinear LSFD "
                     "(Gauss-Newton or Levenberg-Marquardt).",
     )
+    with_examples(p)
     p.add_argument("input", metavar="INPUT", help="recording (.h5) or UFF file with dataset-58 FRFs")
-    p.add_argument("--json", metavar="OUT.json", required=True, help="write the fit results as JSON")
+    p.add_argument("--json", metavar="OUT.json",
+                   help="also write the fit results as JSON (the table is printed either way)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace existing --json/--plot/--uff files (without it an existing file stops the command)")
     p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: automatic, see docs/fitting.md)")
     p.add_argument("--modes", type=int, metavar="N", help="number of modes to keep (the N most stable clusters)")
     p.add_argument("--order", type=int, metavar="N",
@@ -134,6 +139,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             raise InputError("mains frequencies must be > 0 Hz (or --mains none)")
         for path, what in ((args.json, "JSON"), (args.plot, "plot"), (args.uff, "UFF file")):
             check_out_dir(path, what)
+            if path and Path(path).exists() and not args.overwrite:
+                raise InputError(f"{path} exists: choose another {what} file or add --overwrite")
         frf = load_input(args.input, estimator=args.estimator)
         if band is not None:
             f = frf.freq_hz
@@ -185,8 +192,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     doc = result_to_dict(fit, frf, extra={"input": str(args.input), "warnings": notes + caught},
                          scatter=scatter)
     with errors_to_exit("analysis fit", (OSError, ValueError), prefix="cannot write the outputs: "):
-        write_json(args.json, doc)
-        print(f"results written to {args.json}")
+        if args.json:
+            write_json(args.json, doc)
+            print(f"results written to {args.json}")
         if args.plot:
             from .plots import plot_fit
 

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 from typing import Optional, Sequence
 
+from .command_line import with_examples
 from .command_line import add_estimator
 from ._cli_dispatch import Parser, parse_args
 from .errors import ImpactlabError
@@ -24,6 +25,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = Parser(prog="python -m analysis report",
                description="Self-contained HTML report of an impact test: the test, FRFs, stabilization, modes, "
                            "animated mode shapes, diagnosis.")
+    with_examples(p)
     p.add_argument("input", metavar="INPUT", help="recording (.h5) or UFF file with dataset-58 FRFs")
     p.add_argument("--out", required=True, metavar="DIR", help="report folder (created; DIR/index.html)")
     p.add_argument("--fit", metavar="FIT.json", help="fit from 'python -m analysis fit --json' (default: fit here)")

@@ -15,12 +15,14 @@ import numpy as np
 __all__ = ["main", "build_parser"]
 
 
+from .command_line import with_examples
 from .command_line import Parser as _Parser, check_out_dir, cli_entry, errors_to_exit, parse_args, add_estimator
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="python -m analysis stabilization",
                 description="Stabilization diagram (paper Fig. 8) of LSCF or LSCE poles, optionally LSFD-refined.")
+    with_examples(p)
     p.add_argument("input", metavar="INPUT", help="recording (.h5) or UFF file with dataset-58 FRFs")
     p.add_argument("--png", metavar="OUT.png", required=True, help="write the diagram")
     p.add_argument("--json", metavar="OUT.json", help="write the poles of every order and the selected poles")

@@ -25,8 +25,8 @@ from typing import Callable, Iterator, Optional, Sequence, TypeVar, Union
 
 from .errors import UsageError
 
-__all__ = ["UsageError", "Parser", "parse_args", "add_overwrite", "add_estimator", "add_json_flag", "add_verbose",
-           "set_verbosity", "check_out_dir", "CliExit", "exit_on", "errors_to_exit", "cli_entry"]
+__all__ = ["UsageError", "Parser", "parse_args", "with_examples", "add_overwrite", "add_estimator", "add_json_flag",
+           "add_verbose", "set_verbosity", "check_out_dir", "CliExit", "exit_on", "errors_to_exit", "cli_entry"]
 
 F = TypeVar("F", bound=Callable[..., int])
 
@@ -48,6 +48,26 @@ def parse_args(parser: argparse.ArgumentParser, argv: "Sequence[str] | None") ->
         return 2
     except SystemExit as exc:  # --help
         return int(exc.code or 0)
+
+
+def with_examples(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Put the command's worked examples (:mod:`analysis.command_examples`, by ``parser.prog``) at
+    the end of its ``--help``, kept as written (line breaks and alignment)."""
+    import re
+
+    from .command_examples import examples_epilog
+
+    def plain(s: "str | None") -> "str | None":  # docstring markup (``x``, :func:`x`) reads as plain text
+        return None if s is None else re.sub(r"(:\w+:)?``?([^`]+)``?", r"\2", s)
+
+    parser.description = plain(parser.description)
+    for action in parser._actions:
+        action.help = plain(action.help)
+    text = examples_epilog(parser.prog)
+    if text:
+        parser.epilog = text if not parser.epilog else f"{parser.epilog}\n\n{text}"
+        parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    return parser
 
 
 def add_overwrite(parser: argparse.ArgumentParser, help: Optional[str] = None) -> None:

@@ -138,7 +138,7 @@ def write_uff58(
     p = Path(path)
     if p.exists():
         if not overwrite:
-            raise UFFError(f"{p} exists: choose another output file or delete it first")
+            raise UFFError(f"{p} exists: choose another output file, or replace it (--overwrite)")
         os.remove(p)
     sets = (_frf_set_dicts(frf, id_lines) if frf is not None else []) + list(extra_sets)
     if not sets:
@@ -249,7 +249,7 @@ def write_uff55(
     p = Path(path)
     if p.exists():
         if not overwrite:
-            raise UFFError(f"{p} exists: choose another output file or delete it first")
+            raise UFFError(f"{p} exists: choose another output file, or replace it (--overwrite)")
         os.remove(p)
     sets = []
     for r in range(lam.size):

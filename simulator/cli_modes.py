@@ -12,6 +12,7 @@ import json
 import sys
 from typing import Sequence
 
+from analysis.command_line import with_examples
 from analysis.command_line import add_json_flag, cli_entry, errors_to_exit
 
 from .config import ConfigError, FrameConfig
@@ -22,6 +23,7 @@ PAPER_POINTS = ("left:9:Y", "top:4:X", "right:4:-Z", "right:6:-X")
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m simulator modes", description=__doc__.splitlines()[0])
+    with_examples(ap)
     ap.add_argument("--config", metavar="F", help="TOML file merged over simulator/frame.toml")
     add_json_flag(ap, "print JSON: {\"modes\": [{freq_hz, damping, shape}, ...]}")
     ap.add_argument("--max-freq", type=float, default=None, metavar="HZ",

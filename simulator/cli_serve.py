@@ -9,6 +9,7 @@ import signal
 import sys
 from typing import Sequence
 
+from analysis.command_line import with_examples
 from .serve import (Prebuilt, StopFlag, analyser_options, firmware_factory, open_pty, serve_pty, serve_tcp,
                     tcp_listener, tcp_url)
 
@@ -30,6 +31,7 @@ def _build_parser() -> argparse.ArgumentParser:
                     "is the device URL (socket://HOST:PORT) or the pty path to connect to. Each connection "
                     "gets a fresh analyser (same seed, power-on state).",
     )
+    with_examples(p)
     door = p.add_mutually_exclusive_group(required=True)
     door.add_argument("--tcp", type=_parse_hostport, metavar="HOST:PORT",
                       help="listen on HOST:PORT (PORT 0 = any free port); use 127.0.0.1 for local use")

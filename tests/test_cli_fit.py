@@ -110,7 +110,11 @@ def test_fit_user_poles_band_and_modes(uff_file, tmp_path, capsys):
     doc = json.loads(out.read_text())
     assert len(doc["poles"]) == 3 and doc["residual_form"] == "paper"
     np.testing.assert_allclose([p["freq_hz"] for p in doc["poles"]], F_TRUE[:3], rtol=1e-4)
-    rc = cli_fit.main([str(uff_file), "--json", str(out), "--modes", "2", "--order", "12", "--initial", "lsce"])
+    # the same output again: refused without --overwrite (issue 11, item 10), replaced with it
+    assert cli_fit.main([str(uff_file), "--json", str(out), "--modes", "2"]) == 2
+    assert "add --overwrite" in capsys.readouterr().err and len(json.loads(out.read_text())["poles"]) == 3
+    rc = cli_fit.main([str(uff_file), "--json", str(out), "--modes", "2", "--order", "12", "--initial", "lsce",
+                       "--overwrite"])
     assert rc == 0
     assert len(json.loads(out.read_text())["poles"]) == 2
 
@@ -141,7 +145,7 @@ def _bad_cases(uff: Path, tmp: Path):
         ([str(uff), "--json", str(tmp / "o.json"), "--modes", "0"], ">= 1"),
         ([str(uff), "--json", str(tmp / "no" / "dir" / "o.json")], "does not exist"),
         ([str(uff), "--json", str(tmp / "o.json"), "--method", "newton"], "invalid choice"),
-        ([str(uff)], "required"),
+        ([str(uff), "--json", str(tmp / "notes.json")], "exists: choose another JSON file or add --overwrite"),
     ]
 
 
@@ -246,3 +250,36 @@ def test_fit_exclude_lines_and_mains_options(uff_file, tmp_path, capsys):
     assert len(doc["poles"]) >= 1
     rc = cli_fit.main([str(uff_file), "--json", str(out), "--mains", "-5"])
     assert rc == 2 and "-5" in capsys.readouterr().err
+
+
+def test_fit_prints_its_table_without_json(uff_file, tmp_path, capsys):
+    """Issue 11, item 10: the table on the terminal needs no --json."""
+    assert cli_fit.main([str(uff_file), "--modes", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "pole I " in out and "results written" not in out
+
+
+def test_every_subcommand_help_documents_its_options_with_an_example():
+    """Issue 11, item 10: each --help page ends with worked examples, every option has a help text,
+    and no raw reStructuredText markup leaks into the pages."""
+    import contextlib
+    import importlib
+    import io
+
+    from acquisition.__main__ import COMMANDS as ACQ
+    from analysis.__main__ import COMMANDS as ANA
+    from simulator.__main__ import COMMANDS as SIM
+
+    for name, (module, _) in {**ACQ, **ANA, **SIM}.items():
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            try:
+                code = importlib.import_module(module).main(["--help"])
+            except SystemExit as exc:  # plain argparse exits after --help
+                code = exc.code
+        assert code in (0, None), name
+        text = buf.getvalue()
+        assert "examples:\n  impactlab " + name in text, name
+        assert "``" not in text, (name, "raw markup")
+        options = [ln.split()[0] for ln in text.splitlines() if ln.startswith("  --")]
+        assert options, name
