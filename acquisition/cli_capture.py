@@ -120,6 +120,19 @@ def _with_seed(url: str, seed: Optional[int]) -> str:
     return url + ("&" if "?" in url else "?") + f"seed={seed}"
 
 
+def _continue_stream(url: str, n_recorded: int) -> str:
+    """A simulated device resumed after ``n_recorded`` hits continues its random stream instead of
+    playing the same strikes again: its seed moves on by the number of hits already recorded."""
+    if not url.startswith(("sim://", "usbsim://")) or n_recorded <= 0 or "replay=" in url:
+        return url
+    import re
+
+    m = re.search(r"([?&])seed=(-?\d+)", url)
+    if m is None:
+        return url + ("&" if "?" in url else "?") + f"seed={n_recorded}"
+    return url[:m.start()] + f"{m.group(1)}seed={int(m.group(2)) + n_recorded}" + url[m.end():]
+
+
 def open_analyser(url: str, timeout_s: float = 10.0) -> Any:
     """An ``Analyser`` on ``url`` (``sim://?replay=REC.h5``: the simulated analyser plays a recording back
     through :class:`simulator.replay_stand.ReplayStand`). ``timeout_s`` bounds each command."""
@@ -178,8 +191,8 @@ def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8) -> str:
     from scipy.signal import find_peaks
 
     lines = [f"hits accepted: {result.accepted}, rejected: {len(result.rejected)}"]
-    for m, point, idx, reasons in result.rejected:
-        lines.append(f"  rejected hit {idx} at point {m + 1} ({point}): {'; '.join(reasons)}")
+    for m, point, idx, reasons in sorted(result.rejected, key=lambda r: r[2]):
+        lines.append(f"  rejected hit #{idx + 1} at point {m + 1} ({point}): {'; '.join(reasons)}")
     avgs = [a for a in result.averages if a.n_averages > 0]
     if not avgs:
         lines.append("no FRF: no point has an accepted hit")
@@ -220,11 +233,12 @@ def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8) -> str:
     return "\n".join(lines)
 
 
-def run_capture(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, Any]:
+def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -> tuple[int, Any]:
     """The capture job behind :func:`main`. Returns (exit code, SessionResult or None).
 
     Everything the operator typed is checked before the analyser is opened.
     """
+    out_stream = sys.stdout if out_stream is None else out_stream  # resolved at call time (pipes, tests)
     from analysis.recording import Recording, RecordingWriter
     from .session import CaptureSession, auto_accept, channel_table, retry_on_link_fault
     from .setup import AcquisitionSetup, default_setup, load_setup
@@ -299,10 +313,11 @@ def recorded_test(args: argparse.Namespace) -> tuple:
     return setup, plan, windows, hits, device
 
 
-def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, Any]:
+def run_resume(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -> tuple[int, Any]:
     """``capture --resume REC.h5``: continue an interrupted capture with the recording's set-up, plan,
     windows and device (``--device`` overrides it), appending to the same file. The accepted hits
     already recorded (complete, CRC-checked) count towards each point's average."""
+    out_stream = sys.stdout if out_stream is None else out_stream  # resolved at call time (pipes, tests)
     from analysis.recording import RecordingWriter
 
     from .session import CaptureSession, auto_accept, retry_on_link_fault
@@ -313,6 +328,7 @@ def run_resume(args: argparse.Namespace, out_stream=sys.stdout) -> tuple[int, An
     if not url:
         raise UsageError(f"{path} does not name its device: give --device URL")
     url = _with_seed(url, args.seed) if args.seed is not None else url
+    url = _continue_stream(url, len(hits))
     analyser = open_analyser(url)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
     with analyser:
@@ -359,12 +375,22 @@ def _run_session(session, writer):
         return None
 
 
+#: exit code of a test the operator ended before its plan was complete ('q'): the recording keeps
+#: every hit and 'capture --resume' finishes it
+EXIT_INCOMPLETE = 3
+
+
 def _finish(result, done_line: str, out_stream):
-    """Exit code and result of a capture: the summary and ``done_line`` when the session completed."""
+    """Exit code and result of a capture: the summary and ``done_line`` when the session completed;
+    ``EXIT_INCOMPLETE`` when the operator ended it early."""
     if result is None:
         return 1, None
     print(summary_text(result), file=out_stream)
     print(done_line, file=out_stream)
+    if result.aborted:
+        print("capture: the test ended before every point had its hits; continue it with "
+              "'impactlab capture --resume FILE'", file=sys.stderr)
+        return EXIT_INCOMPLETE, result
     return 0, result
 
 

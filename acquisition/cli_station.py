@@ -20,7 +20,7 @@ import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Optional, TextIO
 
 from analysis.command_line import with_examples
 from .cli_capture import (
@@ -149,8 +149,9 @@ def _windows_parser(force: Optional[str], exp: Optional[str], fs_hz: float) -> A
     return parse_windows(force, exp, fs_hz)
 
 
-def run_station(args: argparse.Namespace, out_stream=sys.stdout, ready: Optional[threading.Event] = None) -> int:
+def run_station(args: argparse.Namespace, out_stream: Optional[TextIO] = None, ready: Optional[threading.Event] = None) -> int:
     """Serve the station until it is stopped (Ctrl-C / SIGTERM). Returns the exit code."""
+    out_stream = sys.stdout if out_stream is None else out_stream  # resolved at call time (pipes, tests)
     from analysis.web_assets import plotly_js_path
 
     from .session import retry_on_link_fault

@@ -55,6 +55,7 @@ __all__ = [
     "CallbackOperator",
     "OperatorQuit",
     "SessionError",
+    "where_to_strike",
     "MeasurementAverage",
     "SessionResult",
     "CaptureSession",
@@ -69,6 +70,16 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+
+def where_to_strike(mode: str, m: Measurement, n_points: int) -> str:
+    """The operator's instruction at the start of point ``m``: where the hammer (roving hammer) or
+    the accelerometer (roving accelerometer) goes, and where to strike."""
+    head = f"point {m.index + 1}/{n_points}: "
+    if mode == "roving_accelerometer":
+        return (head + f"move the accelerometer to {', '.join(m.outputs)}; strike at {m.reference} "
+                "(the hammer stays there)")
+    return head + f"move the hammer to {m.reference} and strike there (accelerometers at {', '.join(m.outputs)})"
 
 
 @dataclass
@@ -137,6 +148,10 @@ class CaptureSession:
         self.frf_quantity, self.frf_unit = FRF_QUANTITY[next(iter(qs))]
         self.measurements = plan.measurements(setup)
         self.resume_hits = [h for h in resume_hits if h.accepted]
+        # every recorded hit (accepted or not): the hit count goes on from them, and the earlier
+        # rejections stay in the result's list
+        self.resume_rejected = [h for h in resume_hits if not h.accepted]
+        self.hits_done = {i: sum(1 for h in resume_hits if h.measurement == i) for i in range(len(self.measurements))}
         for h in self.resume_hits:
             if not 0 <= h.measurement < len(self.measurements) or h.point != self.measurements[h.measurement].point:
                 raise SessionError(f"recorded hit {h.index} (measurement {h.measurement}, point {h.point}) does not "
@@ -150,6 +165,8 @@ class CaptureSession:
     def run(self) -> SessionResult:
         """Run the whole plan; returns the averages (also written to the recording)."""
         result = SessionResult()
+        for h in self.resume_rejected:
+            result.rejected.append((h.measurement, h.point, h.index, list(h.reasons)))
         self._event("INFO", f"test plan {self.plan.mode}: {len(self.measurements)} point(s), "
                             f"{self.plan.hits_per_point} hits each; windows: {self.windows.describe()}")
         try:
@@ -196,7 +213,8 @@ class CaptureSession:
             self._link_fault(m, exc, link_faults_here)
         self._event("INFO", f"point {m.index + 1}/{len(self.measurements)}: {self.plan.mode} at {m.point} "
                             f"(reference {m.reference}, outputs {', '.join(m.outputs)})")
-        attempts = 0
+        self.operator.progress(where_to_strike(self.plan.mode, m, len(self.measurements)))
+        attempts = self.hits_done.get(m.index, 0)
         timeouts = 0
         n_channels = len(m.setup.channels)
         names = [f"{ch.name} {ch.point}" for ch in m.setup.channels]
@@ -211,6 +229,7 @@ class CaptureSession:
                                    "check the set-up (ranges, trigger level) and the hammer")
             try:
                 self.analyser.arm()
+                self.operator.progress(f"  strike {m.reference} now (hit {attempts + 1} at this point)")
                 try:
                     triggered = self.analyser.wait_for_trigger(self.timeout_s)
                 except TriggerTimeout:

@@ -178,8 +178,15 @@ def test_capture_asks_the_operator(tmp_path, monkeypatch, capsys):
 
     monkeypatch.setattr("sys.stdin", io.StringIO("a\nr\nq\n"))
     rec = tmp_path / "asked.h5"
-    assert capture_main(["--device", "sim://?seed=8", "--out", str(rec), "--hits", "5"]) == 0
-    assert "accept (a), reject (r), quit (q)?" in capsys.readouterr().out
+    # q on an incomplete test: exit code 3 (issue 11, item 6), every hit kept
+    assert capture_main(["--device", "sim://?seed=8", "--out", str(rec), "--hits", "5"]) == 3
+    cap = capsys.readouterr()
+    assert "accept (a), reject (r), quit (q)?" in cap.out
+    # the operator is told where to go and when to strike
+    assert "point 1/1: move the hammer to right:6:-X and strike there" in cap.out
+    assert "strike right:6:-X now (hit 1 at this point)" in cap.out and "(hit 3 at this point)" in cap.out
+    assert "rejected hit #2 at point 1" in cap.out and "rejected hit #0" not in cap.out
+    assert "capture --resume" in cap.err
     with Recording(rec) as r:
         assert [(h.accepted, h.reasons) for h in r.hits()] == [
             (True, []), (False, ["rejected by the operator"]), (False, ["test ended by the operator"])]
@@ -203,3 +210,25 @@ def test_capture_reports_each_points_excitation_band_and_warns_when_narrow(captu
     e20 = [float(line.split("-20 dB at ")[1].split()[0]) for line in bands]
     assert all(900.0 < e < 1400.0 for e in e20), e20
     assert text.count("warning: the hammer excites this point only up to") == 2
+
+
+def test_resume_continues_the_hit_count_the_rejections_and_the_simulated_stream(tmp_path, monkeypatch, capsys):
+    """Issue 11, item 6: after 'q', --resume numbers its hits on from the recording's, lists the
+    earlier rejections, and the simulated device does not play the same strikes again."""
+    import io
+
+    rec = tmp_path / "r.h5"
+    monkeypatch.setattr("sys.stdin", io.StringIO("a\nr\nq\n"))
+    assert capture_main(["--device", "sim://?seed=8", "--out", str(rec), "--points", "right:6:-X", "--hits", "3"]) == 3
+    capsys.readouterr()
+    with Recording(rec) as r:
+        first = [h.counts.copy() for h in r.hits()]
+    assert capture_main(["--resume", str(rec), "--auto"]) == 0
+    out = capsys.readouterr().out
+    assert "strike right:6:-X now (hit 4 at this point)" in out  # three hits were recorded before
+    assert "rejected hit #2 at point 1" in out and "rejected hit #3 at point 1" in out
+    with Recording(rec) as r:
+        hits = list(r.hits())
+    assert sum(h.accepted for h in hits) == 3
+    for h in hits[3:]:
+        assert not any(np.array_equal(h.counts, c) for c in first), "the resumed device repeated a recorded strike"
