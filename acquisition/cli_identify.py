@@ -6,8 +6,8 @@ import json
 from typing import Sequence
 
 from analysis.command_line import with_examples
-from acquisition.errors import ImpactlabError
-from analysis.command_line import add_json_flag, add_verbose, cli_entry, errors_to_exit, set_verbosity
+from acquisition.errors import ImpactlabError, InvalidDeviceURL, UsageError
+from analysis.command_line import add_json_flag, add_verbose, cli_entry, exit_on, set_verbosity
 
 __all__ = ["main"]
 
@@ -30,7 +30,9 @@ def main(argv: "Sequence[str] | None" = None) -> int:
     set_verbosity(args.verbose)
     from acquisition.driver import Analyser
 
-    with errors_to_exit("identify", (ImpactlabError, OSError), code=1):
+    # the same code as every command for the same problem: a bad URL is a usage error (2), a device
+    # that does not answer is a device failure (1)
+    with exit_on("identify", ((InvalidDeviceURL, UsageError), 2), ((ImpactlabError, OSError), 1)):
         with Analyser(args.device, timeout_s=args.timeout) as an:
             ident = an.identify()
             caps = an.capabilities()

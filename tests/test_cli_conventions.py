@@ -82,3 +82,14 @@ def test_output_into_a_closed_pipe_still_writes_the_json_and_exits_0(tmp_path: P
     ident = _closed_pipe_run([sys.executable, "-m", "acquisition", "identify", "--device", "sim://?seed=1", "--json"],
                              tmp_path)
     assert ident.returncode == 0 and "Traceback" not in ident.stderr, ident.stderr
+
+
+def test_the_same_bad_url_gives_the_same_exit_code_everywhere(tmp_path, capsys):
+    """Issue 11, item 10: a bad device URL is a usage error (exit 2) in identify as in capture."""
+    from acquisition.cli_capture import main as capture_main
+    from acquisition.cli_identify import main as identify_main
+
+    assert identify_main(["--device", "bogus://x"]) == 2
+    assert capture_main(["--device", "bogus://x", "--out", str(tmp_path / "x.h5"), "--auto"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("invalid device URL 'bogus://x'") == 2
