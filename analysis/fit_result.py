@@ -108,6 +108,45 @@ class FitResult:
     def damping(self) -> np.ndarray:
         return self.lsfd.damping
 
+    def table(self) -> "list[dict[str, float]]":
+        """One row per mode in order of frequency: f (Hz), zeta (ratio) and their standard deviations."""
+        lf = self.lsfd
+        order = np.argsort(np.asarray(lf.freq_hz, dtype=float))
+        return [{"mode": i + 1, "freq_hz": float(lf.freq_hz[k]), "freq_hz_std": float(lf.freq_hz_std[k]),
+                 "damping": float(lf.damping[k]), "damping_std": float(lf.damping_std[k])}
+                for i, k in enumerate(order)]
+
+    def __str__(self) -> str:
+        lines = [f"{'mode':>4s} {'f [Hz]':>11s} {'+-':>9s} {'zeta [%]':>9s} {'+-':>8s}"]
+        for row in self.table():
+            lines.append(f"{row['mode']:4d} {row['freq_hz']:11.4f} {row['freq_hz_std']:9.2g} "
+                         f"{100 * row['damping']:9.3f} {100 * row['damping_std']:8.2g}")
+        lines.append(f"{self.status}: {self.message}")
+        if self.warnings:
+            lines.append(f"{len(self.warnings)} note(s): see .warnings")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return (f"FitResult({self.lsfd.freq_hz.size} modes in {self.band[0]:.5g}..{self.band[1]:.5g} Hz, "
+                f"status={self.status!r}, {len(self.warnings)} warning(s))")
+
+    def _repr_html_(self) -> str:
+        rows = "".join(f"<tr><td>{r['mode']}</td><td>{r['freq_hz']:.4f}</td><td>{r['freq_hz_std']:.2g}</td>"
+                       f"<td>{100 * r['damping']:.3f}</td><td>{100 * r['damping_std']:.2g}</td></tr>"
+                       for r in self.table())
+        import html
+
+        return (f"<p><b>{html.escape(self.status)}</b>: {html.escape(self.message)}</p>"
+                "<table><thead><tr><th>mode</th><th>f [Hz]</th><th>&sigma;<sub>f</sub> [Hz]</th>"
+                f"<th>&zeta; [%]</th><th>&sigma;<sub>&zeta;</sub> [%]</th></tr></thead><tbody>{rows}</tbody></table>")
+
+    def plot(self, frf: Any, **options: Any) -> Any:
+        """Measured vs synthesised FRFs of ``frf`` over the fitted band (:func:`analysis.plots.fit_figure`);
+        returns the matplotlib ``Figure``."""
+        from .plots import fit_figure
+
+        return fit_figure(frf, self.lsfd, band=self.band, **options)
+
     def __iter__(self) -> Iterator[Any]:
         yield self.lsfd
         yield self.stabilization

@@ -22,7 +22,7 @@ every pole's decay rate, which a fitter removes (apparent damping sigma_w/omega_
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -104,6 +104,45 @@ class FRFSet:
         object.__setattr__(self, "outputs", outs)
         object.__setattr__(self, "references", refs)
         object.__setattr__(self, "coherence", coh)
+
+    def __repr__(self) -> str:
+        fs = f", sample rate {self.sample_rate_hz:g} Hz" if self.sample_rate_hz else ""
+        win = f", exp. window tau {self.exp_window_tau_s:g} s" if self.exp_window_tau_s else ""
+        est = f", {self.meta['estimator']}" if isinstance(self.meta.get("estimator"), str) else ""
+        return (f"FRFSet({self.n_outputs} outputs x {self.n_references} references x {self.freq_hz.size} lines, "
+                f"{self.freq_hz[0]:.6g}..{self.freq_hz[-1]:.6g} Hz, {self.quantity} [{self.unit}]{est}{fs}{win})")
+
+    def _repr_html_(self) -> str:
+        import html
+
+        refs = ", ".join(html.escape(r) for r in self.references)
+        outs = ", ".join(html.escape(o) for o in self.outputs)
+        return (f"<p><b>FRFSet</b> {html.escape(repr(self))}</p>"
+                f"<table><tr><th>references</th><td>{refs}</td></tr><tr><th>outputs</th><td>{outs}</td></tr>"
+                f"<tr><th>coherence</th><td>{'yes' if self.coherence is not None else 'no'}</td></tr></table>")
+
+    def plot(self, max_frfs: int = 12) -> Any:
+        """Magnitude (dB) of up to ``max_frfs`` FRFs and their coherence; returns the matplotlib
+        ``Figure`` (notebooks show it)."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(9, 5.5))
+        axm, axc = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+        pairs = [(o, r) for o in range(self.n_outputs) for r in range(self.n_references)][:max_frfs]
+        for o, r in pairs:
+            with np.errstate(divide="ignore"):
+                axm.plot(self.freq_hz, 20 * np.log10(np.abs(self.H[o, r])), lw=0.8,
+                         label=f"{self.outputs[o]} / {self.references[r]}")
+            if self.coherence is not None:
+                axc.plot(self.freq_hz, self.coherence[o, r], lw=0.6)
+        axm.set_ylabel(f"|H| [dB re 1 {self.unit or self.quantity}]")
+        axc.set_ylabel("coherence")
+        axc.set_xlabel("frequency [Hz]")
+        axm.legend(fontsize=7, ncol=2)
+        total = self.n_outputs * self.n_references
+        axm.set_title(f"{len(pairs)} of {total} FRFs" if len(pairs) < total else f"{total} FRFs", fontsize=9)
+        fig.tight_layout()
+        return fig
 
     @property
     def line_spacing_hz(self) -> float:
