@@ -10,6 +10,7 @@ windows. Read back with ``analysis.uff.read_uff58``.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -46,21 +47,56 @@ def export(rec_path: "str | Path", uff_path: "str | Path", *, time_data: bool = 
                        extra_sets=extra, overwrite=overwrite)
 
 
+def export_sep005(rec_path: "str | Path", out_path: "str | Path", *, overwrite: bool = False,
+                  accepted_only: bool = False) -> int:
+    """Write the recording's hits as SEP005 channels (:mod:`analysis.sep005`, one group per hit, in
+    engineering units); returns the number of channels written."""
+    from analysis.recording import Recording
+    from analysis.sep005 import QUANTITY_CODES, write_sep005
+
+    channels = []
+    with Recording(rec_path) as rec:
+        for h in rec.hits(accepted_only=accepted_only, skip_damaged=True):
+            points = [str(c.get("point", "")) for c in rec.channels]
+            points[h.force_channel] = h.reference
+            for k, o in zip(h.response_channels, h.outputs):
+                points[k] = o
+            for i, c in enumerate(rec.channels):
+                channels.append({
+                    "name": str(c.get("name", f"ch{i + 1}")), "data": h.data[i], "fs": h.sample_rate_hz,
+                    "unit_str": str(c.get("unit", "")), "quantity": QUANTITY_CODES.get(str(c.get("quantity")), None),
+                    "group": f"hit-{h.index + 1}", "point": points[i], "trigger_index": h.trigger_index,
+                    "accepted": bool(h.accepted)})
+    write_sep005(out_path, channels, overwrite=overwrite)
+    return len(channels)
+
+
 @cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition export", description=__doc__.split("\n\n")[0])
     with_examples(p)
     p.add_argument("recording")
-    p.add_argument("--uff", required=True, help="UFF file to write")
-    p.add_argument("--time", action="store_true", help="also write the accepted hits' time histories")
+    p.add_argument("--uff", help="UFF file to write (FRFs as UFF 58)")
+    p.add_argument("--time", action="store_true", help="also write the accepted hits' time histories (UFF 58 type 1)")
+    p.add_argument("--sep005", metavar="OUT.json",
+                   help="write every recorded hit's time data as SEP005 channels (SDyPy's exchange format, JSON)")
     add_estimator(p)
-    add_overwrite(p, "replace an existing --uff file")
+    add_overwrite(p, "replace existing output files")
     args = p.parse_args(argv)
+    from analysis.sep005 import SEP005Error
     from analysis.uff import UFFError
 
     from .errors import RecordingError
 
-    with errors_to_exit("export", (RecordingError, UFFError, ValueError)):
-        n = export(args.recording, args.uff, time_data=args.time, estimator=args.estimator, overwrite=args.overwrite)
-    print(f"wrote {n} UFF 58 datasets to {args.uff}")
+    if not (args.uff or args.sep005):
+        print("export: give --uff OUT.uff and/or --sep005 OUT.json", file=sys.stderr)
+        return 2
+    with errors_to_exit("export", (RecordingError, UFFError, SEP005Error, ValueError)):
+        if args.uff:
+            n = export(args.recording, args.uff, time_data=args.time, estimator=args.estimator,
+                       overwrite=args.overwrite)
+            print(f"wrote {n} UFF 58 datasets to {args.uff}")
+        if args.sep005:
+            n = export_sep005(args.recording, args.sep005, overwrite=args.overwrite)
+            print(f"wrote {n} SEP005 channels to {args.sep005}")
     return 0

@@ -29,7 +29,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     with_examples(p)
     p.add_argument("files", nargs="+")
     p.add_argument("--out", required=True)
-    p.add_argument("--format", choices=("lvm", "mat", "npy"))
+    p.add_argument("--format", choices=("lvm", "mat", "npy", "sep005"),
+                   help="input format (default: from the extension; .json is SEP005)")
     p.add_argument("--describe", help="JSON/TOML channel description (needed for .npy)")
     p.add_argument("--force-channel", type=int, help="1-based index of the hammer channel")
     p.add_argument("--responses", help="1-based response channel indices, e.g. 2,3")
@@ -41,7 +42,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     add_overwrite(p)
     args = p.parse_args(argv)
     from .importers import ImportDataError, load_description, read_dataphysics_mat, read_lvm, read_numpy, \
-        write_imported
+        read_sep005_test, write_imported
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
@@ -49,12 +50,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             tests = [read_lvm(f) for f in args.files]
         elif fmt == "mat":
             tests = [read_dataphysics_mat(f, windowed=args.windowed) for f in args.files]
+        elif fmt in ("sep005", "json"):
+            tests = [read_sep005_test(f) for f in args.files]
         elif fmt == "npy":
             if not args.describe:
                 raise UsageError("numpy input needs --describe DESC.json|toml naming the channels and sample rate")
             tests = [read_numpy(args.files, load_description(args.describe))]
         else:
-            raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat or .npy (or --format)")
+            raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json (or --format)")
         test = tests[0]
         for t in tests[1:]:
             if t.fs_hz != test.fs_hz or t.hits[0].shape != test.hits[0].shape:

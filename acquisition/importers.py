@@ -54,6 +54,7 @@ __all__ = [
     "ImportedTest",
     "read_lvm",
     "read_dataphysics_mat",
+    "read_sep005_test",
     "read_numpy",
     "load_description",
     "quantize",
@@ -388,6 +389,44 @@ def detect_trigger(force: np.ndarray, level: float = 0.1) -> int:
     """First sample where |force| reaches ``level`` times its peak (the window origin of an import)."""
     f = np.abs(np.asarray(force, float))
     return int(np.argmax(f >= level * f.max())) if f.max() > 0 else 0
+
+
+def read_sep005_test(path: "str | Path") -> ImportedTest:
+    """An SEP005 JSON file (:mod:`analysis.sep005`) as a test: each ``group`` of channels is one hit
+    (no groups: the whole file is one hit); channel quantities from the SEP005 codes ('f' force,
+    'a' acceleration, ...), points from the ``point`` key (else the channel name), trigger samples
+    from ``trigger_index`` when every channel of a hit has it (else found on the force)."""
+    from analysis.sep005 import QUANTITY_CODES, SEP005Error, read_sep005
+
+    try:
+        channels = read_sep005(path)
+    except SEP005Error as exc:
+        raise ImportDataError(str(exc)) from None
+    by_code = {v: k for k, v in QUANTITY_CODES.items()}
+    groups: dict[str, list[dict]] = {}
+    for ch in channels:
+        groups.setdefault(str(ch.get("group", "")), []).append(ch)
+    first = next(iter(groups.values()))
+    names = [str(c["name"]) for c in first]
+    fs = float(first[0]["fs"])
+    hits, triggers = [], []
+    for g, chans in groups.items():
+        if len(chans) != len(first) or any(float(c["fs"]) != fs for c in chans):
+            raise ImportDataError(f"{path}: hit {g!r} has {len(chans)} channels at {[c['fs'] for c in chans]} Hz; "
+                                  f"every hit needs the {len(first)} channels of the first at {fs:g} Hz")
+        n = min(c["data"].size for c in chans)
+        hits.append(np.vstack([c["data"][:n] for c in chans]))
+        if all("trigger_index" in c for c in chans):
+            triggers.append(int(chans[0]["trigger_index"]))
+    meta_chans = []
+    for c, name in zip(first, names):
+        quantity = by_code.get(str(c.get("quantity", "")), None)
+        if quantity is None:
+            quantity, _ = _unit_info(str(c["unit_str"]))
+        meta_chans.append({"name": name, "quantity": quantity, "unit": str(c["unit_str"]),
+                           "sensitivity": float("nan"), "point": str(c.get("point", name))})
+    return ImportedTest(fs, meta_chans, hits, triggers if len(triggers) == len(hits) else [], str(path),
+                        {"format": "SEP005"})
 
 
 def write_imported(

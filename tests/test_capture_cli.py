@@ -232,3 +232,44 @@ def test_resume_continues_the_hit_count_the_rejections_and_the_simulated_stream(
     assert sum(h.accepted for h in hits) == 3
     for h in hits[3:]:
         assert not any(np.array_equal(h.counts, c) for c in first), "the resumed device repeated a recorded strike"
+
+
+def test_sep005_export_import_round_trip(captured, tmp_path, capsys):
+    """Issue 11: SEP005 (SDyPy's time-series exchange dicts) beside UFF: a recording's hits exported,
+    valid for SDyPy's own checker when it is installed, and imported back into the same FRFs."""
+    import json
+
+    from acquisition.cli_export import main as export_main
+    from acquisition.cli_import import main as import_main
+    from analysis.sep005 import SEP005Error, check_sep005
+
+    out = tmp_path / "hits.json"
+    assert export_main([str(captured), "--sep005", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    with Recording(captured) as rec:
+        n_hits, n_ch = rec.n_hits, len(rec.channels)
+    assert len(doc) == n_hits * n_ch and {"data", "name", "unit_str", "fs", "group"} <= set(doc[0])
+    try:
+        from sdypy_sep005.sep005 import assert_sep005
+    except ImportError:
+        pass
+    else:
+        assert_sep005(doc)
+    # only the accepted hits go back into a recording with the same averages
+    accepted = [c for c in doc if c["accepted"]]
+    (tmp_path / "acc.json").write_text(json.dumps(accepted))
+    back = tmp_path / "back.h5"
+    assert import_main([str(tmp_path / "acc.json"), "--out", str(back), "--reference", "right:6:-X",
+                        "--exp-window", "5%"]) == 0
+    with Recording(back) as r:
+        assert r.n_hits == sum(1 for c in accepted if c["name"] == accepted[0]["name"])
+    # malformed documents are named, never a traceback
+    with pytest.raises(SEP005Error, match="lacks unit_str"):
+        check_sep005([{"data": [1.0, 2.0], "name": "x", "fs": 10.0}])
+    with pytest.raises(SEP005Error, match="forbids the key 'timestamp'"):
+        check_sep005([{"data": [1.0, 2.0], "name": "x", "unit_str": "N", "fs": 10.0, "timestamp": 0}])
+    with pytest.raises(SEP005Error, match="give fs"):
+        check_sep005([{"data": [1.0, 2.0], "name": "x", "unit_str": "N"}])
+    (tmp_path / "bad.json").write_text("{not json")
+    assert import_main([str(tmp_path / "bad.json"), "--out", str(tmp_path / "b.h5")]) == 2
+    assert "not a JSON SEP005 file" in capsys.readouterr().err
