@@ -186,12 +186,18 @@ def _recorded_plan(rec: Any) -> dict:
     return plan
 
 
-def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8) -> str:
-    """Hits accepted/rejected with reasons, an FRF peak table and the mean coherence per FRF."""
+def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8, quiet: bool = False) -> str:
+    """Hits accepted/rejected with reasons (``quiet``: counted by reason), an FRF peak table and the
+    mean coherence per FRF."""
+    from collections import Counter
+
     from scipy.signal import find_peaks
 
     lines = [f"hits accepted: {result.accepted}, rejected: {len(result.rejected)}"]
-    for m, point, idx, reasons in sorted(result.rejected, key=lambda r: r[2]):
+    if quiet and result.rejected:
+        why = Counter(r.split(":")[0] for *_, reasons in result.rejected for r in reasons[:1])
+        lines.append("  rejected: " + ", ".join(f"{n} x {reason}" for reason, n in why.most_common()))
+    for m, point, idx, reasons in ([] if quiet else sorted(result.rejected, key=lambda r: r[2])):
         lines.append(f"  rejected hit #{idx + 1} at point {m + 1} ({point}): {'; '.join(reasons)}")
     avgs = [a for a in result.averages if a.n_averages > 0]
     if not avgs:
@@ -283,7 +289,7 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
                                      progress=say, timeout_s=args.timeout)
             result = _run_session(session, writer)
-    return _finish(result, f"recording written: {out}", out_stream)
+    return _finish(result, f"recording written: {out}", out_stream, quiet=args.quiet)
 
 
 def recorded_test(args: argparse.Namespace) -> tuple:
@@ -342,7 +348,7 @@ def run_resume(args: argparse.Namespace, out_stream: Optional[TextIO] = None) ->
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
                                      progress=say, timeout_s=args.timeout, resume_hits=hits)
             result = _run_session(session, writer)
-    return _finish(result, f"recording completed: {path}", out_stream)
+    return _finish(result, f"recording completed: {path}", out_stream, quiet=args.quiet)
 
 
 @cli_entry
@@ -380,12 +386,12 @@ def _run_session(session, writer):
 EXIT_INCOMPLETE = 3
 
 
-def _finish(result, done_line: str, out_stream):
+def _finish(result, done_line: str, out_stream, quiet: bool = False):
     """Exit code and result of a capture: the summary and ``done_line`` when the session completed;
     ``EXIT_INCOMPLETE`` when the operator ended it early."""
     if result is None:
         return 1, None
-    print(summary_text(result), file=out_stream)
+    print(summary_text(result, quiet=quiet), file=out_stream)
     print(done_line, file=out_stream)
     if result.aborted:
         print("capture: the test ended before every point had its hits; continue it with "

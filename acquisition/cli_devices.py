@@ -6,7 +6,7 @@ import json
 import sys
 from typing import Sequence
 
-from analysis._cli_dispatch import Parser, parse_args
+from analysis.command_line import Parser, parse_args, with_examples
 
 from .discovery import list_devices
 
@@ -21,6 +21,7 @@ then open one: impactlab identify --device URL
 def build_parser() -> argparse.ArgumentParser:
     p = Parser(prog="python -m acquisition devices", description=__doc__.split("\n")[0].split(": ", 1)[-1],
                epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    with_examples(p)
     p.add_argument("--json", action="store_true", help="print a JSON list instead of a table")
     p.add_argument("--all-usb", action="store_true", help="list every USB device, not only known analysers")
     return p

@@ -176,8 +176,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         caught = [str(w.message) for w in wlist]
     result, stab = fit.lsfd, fit.stabilization
     notes = list(fit.warnings)
-    for msg in notes + [c for c in caught if c not in notes]:
-        print(f"warning: {msg}", file=sys.stderr)
+    all_notes = notes + [c for c in caught if c not in notes]
+    if args.quiet and all_notes:
+        print(f"{len(all_notes)} note(s) about the fit: in the JSON's 'warnings', or run without -q", file=sys.stderr)
+    else:
+        for msg in all_notes:
+            print(f"note: {msg}", file=sys.stderr)
+    if not fit.success:
+        print(f"warning: {fit.message}", file=sys.stderr)
     initial = fit.selected_poles if stab is not None else None
     label = (stab.method.split("+")[0].upper() if stab is not None else "initial")
     print(format_table(result, frf, output=shown[0], reference=shown[1], initial=initial, initial_label=label))

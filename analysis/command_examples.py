@@ -26,10 +26,6 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         'identify --device "sim://?seed=1"',
         "identify --device usb://1209:0001 --json",
     ),
-    "python -m acquisition devices": (
-        "devices            # USB analysers, serial ports and the simulated doors",
-        "devices --json",
-    ),
     "python -m acquisition station": (
         'station --device "sim://?seed=1" --out rec.h5 --hits 5     # prints http://127.0.0.1:PORT/?token=...',
         "station --resume rec.h5",

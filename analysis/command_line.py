@@ -51,8 +51,20 @@ def parse_args(parser: argparse.ArgumentParser, argv: "Sequence[str] | None") ->
 
 
 def with_examples(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Put the command's worked examples (:mod:`analysis.command_examples`, by ``parser.prog``) at
-    the end of its ``--help``, kept as written (line breaks and alignment)."""
+    """The options and help every command shares: ``-v`` (more logging, repeatable) and ``-q``
+    (no progress, errors only) unless the command has its own, and the command's worked examples
+    (:mod:`analysis.command_examples`, by ``parser.prog``) at the end of its ``--help``, kept as
+    written (line breaks and alignment)."""
+    for container in [parser, *parser._action_groups]:  # a command's own -v/-q, defined later, replaces these
+        container.conflict_handler = "resolve"
+    have = {s for a in parser._actions for s in a.option_strings}
+    if "-v" not in have:
+        parser.add_argument("-v", "--verbose", action=_Verbosity, nargs=0, default=0,
+                            help="log more: -v info, -vv debug")
+    if "-q" not in have:
+        parser.add_argument("-q", "--quiet", action=_Verbosity, nargs=0, default=False,
+                            help="print no progress, only results and errors")
+    set_verbosity(0)
     import re
 
     from .command_examples import examples_epilog
@@ -93,9 +105,35 @@ def add_verbose(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log more (-v info, -vv debug)")
 
 
-def set_verbosity(verbose: int) -> None:
-    """Logging level from the ``-v`` count: warnings, info (-v), debug (-vv)."""
-    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(max(verbose, 0), 2)])
+def set_verbosity(verbose: int, quiet: bool = False) -> None:
+    """Logging from the ``-v`` count and ``-q``: warnings (default), info (-v), debug (-vv); the
+    progress of long steps (:mod:`analysis.progress`) on stderr unless ``quiet``."""
+    from .progress import PROGRESS_LOGGER
+
+    level = (logging.WARNING, logging.INFO, logging.DEBUG)[min(max(verbose, 0), 2)]
+    logging.basicConfig(level=logging.ERROR if quiet else level, format="%(levelname)s %(name)s: %(message)s")
+    logging.getLogger().setLevel(logging.ERROR if quiet else level)
+    plog = logging.getLogger(PROGRESS_LOGGER)
+    plog.propagate = False
+    plog.handlers = [h for h in plog.handlers if not getattr(h, "_impactlab", False)]
+    if not quiet:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("... %(message)s"))
+        handler._impactlab = True  # type: ignore[attr-defined]
+        plog.addHandler(handler)
+    plog.setLevel(logging.INFO if not quiet else logging.CRITICAL)
+
+
+class _Verbosity(argparse.Action):
+    """``-v`` / ``-q`` that set the logging levels as soon as they are parsed (every command alike)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: "str | None" = None) -> None:
+        if self.dest == "verbose":
+            namespace.verbose = int(getattr(namespace, "verbose", 0) or 0) + 1
+        else:
+            setattr(namespace, self.dest, True)
+        set_verbosity(int(getattr(namespace, "verbose", 0) or 0), bool(getattr(namespace, "quiet", False)))
 
 
 def check_out_dir(path: "str | os.PathLike[str] | None", what: str = "", error: type[Exception] = UsageError,

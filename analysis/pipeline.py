@@ -78,6 +78,7 @@ from .frf import FRFSet
 from .bands import FitError, check_band_edges, default_band, default_max_modes, exclude_lines, mains_harmonics
 from .bounded_fit import drop_bad_poles, fit_bounded
 from .fit_result import FitResult, assess_fit
+from .progress import progress
 from .lscf import parse_band
 from .missing_modes import MAINS_HZ, add_missing_modes
 from .selection import poles_from_frequencies, select_poles
@@ -179,11 +180,14 @@ def fit_auto(
             given_freqs = arr.real.astype(float)
         stab_method = "lscf"
 
+    progress("fit: band %.6g..%.6g Hz (%d lines, %d FRFs)", lo, hi,
+             int(np.sum((frf.freq_hz >= lo) & (frf.freq_hz <= hi))), frf.n_outputs * frf.n_references)
     stab: Optional[StabilizationResult] = None
     if given_complex is None:
         mm = int(max_modes) if max_modes is not None else default_max_modes(frf, (lo, hi))
         if n_modes is not None:
             mm = max(mm, int(n_modes) + 4)
+        progress("fit: stabilization (%s) up to %d modes", stab_method.upper(), mm)
         stab = stabilization(frf, mm, method=stab_method, band=(lo, hi), refine_lsfd=refine_lsfd)
         if given_freqs is not None:
             poles = poles_from_frequencies(given_freqs, stab)
@@ -214,6 +218,7 @@ def fit_auto(
         log.info(warnings_out[-1])
     fit_kw: dict[str, Any] = dict(method=method, band=(lo2, hi2), residual_form=residual_form, per_frf=per_frf, max_iter=max_iter,
                   weights=rms_weights(fit_frf, (lo2, hi2)) if weighting == "rms" else None)
+    progress("fit: LSFD (%s) from %d poles", method.upper(), np.asarray(poles).size)
     if given_complex is not None:
         result = fit_lsfd(fit_frf, poles, **fit_kw)
     else:
@@ -221,6 +226,7 @@ def fit_auto(
         result = drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
     if add_missing and n_modes is None:
         # the user's poles/frequencies are kept: step 7 only adds (it never drops a pole)
+        progress("fit: looking for resonances the model misses")
         result = add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz)
     if not result.success:
         warnings_out.append(f"LSFD did not converge: {result.message}")

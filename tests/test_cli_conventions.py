@@ -93,3 +93,37 @@ def test_the_same_bad_url_gives_the_same_exit_code_everywhere(tmp_path, capsys):
     assert capture_main(["--device", "bogus://x", "--out", str(tmp_path / "x.h5"), "--auto"]) == 2
     err = capsys.readouterr().err
     assert err.count("invalid device URL 'bogus://x'") == 2
+
+
+def test_every_command_takes_v_and_q_and_q_keeps_output_short(tmp_path, capsys):
+    """Issue 11, item 5/10: -v/-q on all commands; -q prints no progress and no per-note lines."""
+    import contextlib
+    import importlib
+    import io
+
+    from acquisition.__main__ import COMMANDS as ACQ
+    from analysis.__main__ import COMMANDS as ANA
+    from simulator.__main__ import COMMANDS as SIM
+
+    for name, (module, _) in {**ACQ, **ANA, **SIM}.items():
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            try:
+                importlib.import_module(module).main(["--help"])
+            except SystemExit:
+                pass
+        text = buf.getvalue()
+        assert "-v, --verbose" in text and "-q, --quiet" in text, name
+    from acquisition.cli_capture import main as capture_main
+    from analysis.cli_fit import main as fit_main
+
+    rec = tmp_path / "r.h5"
+    assert capture_main(["--device", "sim://?seed=4", "--out", str(rec), "--hits", "2", "--auto", "-q"]) == 0
+    capsys.readouterr()
+    assert fit_main([str(rec)]) == 0
+    loud = capsys.readouterr()
+    assert "... fit: stabilization" in loud.err and "note: " in loud.err
+    assert fit_main([str(rec), "-q"]) == 0
+    quiet = capsys.readouterr()
+    assert "... fit:" not in quiet.err and "note: " not in quiet.err
+    assert len(quiet.err.splitlines()) <= 2 and "pole I " in quiet.out

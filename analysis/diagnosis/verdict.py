@@ -31,6 +31,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from ..progress import progress
 from ..frf import FRFSet
 from ..modal import ModalModel
 from .compare import band_errors, compare, line_weights, noise_level
@@ -150,7 +151,8 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
     """Fit every effect in ``names`` on top of ``ctx.prior`` with cross-validation; causes sorted by gain."""
     m, w = ctx.measured, ctx.weights
     causes, skipped = [], {}
-    for name in names:
+    for i, name in enumerate(names, start=1):
+        progress("diagnosis: effect %d/%d, %s", i, len(names), name)
         eff = EFFECTS[name]
         missing = [k for k in eff.needs if k not in ctx.base.meta]
         if missing:
