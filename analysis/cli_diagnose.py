@@ -2,7 +2,9 @@
 
 M is a recording (``.h5``) or a UFF 58 file. S is a recording or UFF 58 file with the same points
 (matched by ``component:node:direction`` labels of outputs and references), or a simulator
-configuration (``.toml``), simulated on the fly at M's points and lines. A simulated FRF file is
+configuration (``.toml``), simulated on the fly at M's points and lines; then the physical causes
+(:mod:`simulator.physical`: added mass, support and joint stiffness, member mass and stiffness,
+accelerometer mass, modulus) are fitted by re-running the FE model. A simulated FRF file is
 first turned into a modal model by the automatic fit (:func:`analysis.pipeline.fit_auto`), so the
 modal effects can act on it. Exit codes: 0 done, 2 bad input (message on stderr).
 """
@@ -44,7 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="recording or UFF 58 file with the same points, or a simulator config (.toml)")
     p.add_argument("--json", required=True, metavar="OUT.json", help="write the diagnosis as JSON")
     p.add_argument("--report", metavar="DIR", help="write report.md and plots into DIR")
-    p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: all lines above 0 Hz)")
+    p.add_argument("--band", metavar="LO:HI",
+                   help="frequency band in Hz (default: from the data: the analyser's band, the hammer's "
+                        "excitation band and the coherence)")
     p.add_argument("--effects", metavar="A,B,...", help="only these effects of the catalogue")
     add_estimator(p)
     return p
@@ -52,17 +56,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 def load_simulation(path: str, measured, estimator: Optional[str] = None):
     """The simulation as a :class:`ModalModel` at the measured points (outputs, references order)."""
+    return load_simulations(path, measured, estimator)[0]
+
+
+def load_simulations(path: str, measured, estimator: Optional[str] = None):
+    """(model, physical): the simulation as a :class:`ModalModel` at the measured points, and for a
+    simulator config its FE model split by physical cause (:class:`simulator.physical.FrameVariants`,
+    None for an FRF file)."""
     from .inputs import InputError, load_input
     from .diagnosis.compare import common_points
 
     p = Path(path)
     if p.suffix.lower() == ".toml":
         from simulator.config import ConfigError
-        from simulator.effects import base_model
         from simulator.fem import ModelError
+        from simulator.physical import FrameVariants
 
         try:
-            return base_model(p, measured.outputs, measured.references)
+            variants = FrameVariants(p, measured.outputs, measured.references)
+            return variants.model(None, {}), variants
         except (ConfigError, ModelError, OSError) as exc:
             raise InputError(f"simulator config {p}: {exc}") from None
     sim = load_input(p, estimator=estimator)
@@ -77,7 +89,7 @@ def load_simulation(path: str, measured, estimator: Optional[str] = None):
         result = fit_auto(sim).lsfd
     except FitError as exc:
         raise InputError(f"cannot build a modal model of the simulated FRFs in {p}: {exc}") from None
-    return model_with_correction(result.model, sim)
+    return model_with_correction(result.model, sim), None
 
 
 def model_with_correction(model, sim):
@@ -152,6 +164,7 @@ def _time_gains(force, resp, fs, band, base, outputs, ref, flags) -> dict:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
+    from .bands import FitError, default_band
     from .inputs import InputError, load_input, parse_band_text
     from .diagnosis import EFFECTS, EffectError, diagnose
     from .diagnosis.compare import common_points
@@ -170,18 +183,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 raise InputError(f"unknown effect(s) {bad}; the catalogue has {', '.join(EFFECTS)}")
         measured = load_input(args.measured, estimator=args.estimator)
         band = parse_band_text(args.band)
-        f = measured.freq_hz
-        lo, hi = (band if band is not None else (f[f > 0][0], f[-1]))
+        lo, hi = band if band is not None else default_band(measured)
         measured = measured.band(lo, hi)
         finite = np.all(np.isfinite(measured.H), axis=(0, 1))
         if not finite.all():
             raise InputError(f"{args.measured} holds NaN/inf lines at {np.count_nonzero(~finite)} frequencies; "
                              "give --band to exclude them")
-        base = load_simulation(args.simulated, measured, args.estimator)
+        base, physical = load_simulations(args.simulated, measured, args.estimator)
         outs, refs = common_points(measured, base)
         measured = measured.select(outs, refs)
-        diag = diagnose(measured, base, effects=effects)
-    except (InputError, EffectError, ValueError) as exc:
+        diag = diagnose(measured, base, effects=effects, physical=physical)
+    except (InputError, EffectError, ValueError, FitError) as exc:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2
     doc = diag.to_json()
@@ -207,7 +219,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for c in timed:
         if c["present"]:
             print(f"  time data ({c['reference']}): {c['evidence']}")
-    print(f"verdict: {doc['verdict']}")
+    print(f"verdict: {doc['verdict']}" + (f" ({diag.reason})" if diag.reason else ""))
     print(f"error before {diag.error_before_db:.1f} dB, after {diag.error_after_db:.1f} dB "
           f"(noise {max(diag.noise_db.values()):.1f} dB)")
     for c in diag.causes[:5]:

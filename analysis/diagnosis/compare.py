@@ -29,8 +29,10 @@ from ..mac import mac as mac_of
 __all__ = [
     "FLOOR_FRACTION",
     "line_weights",
+    "averages",
     "coherence_variance",
     "error_db",
+    "typical_error_db",
     "noise_level",
     "band_errors",
     "channel_errors",
@@ -45,13 +47,25 @@ FLOOR_FRACTION = 0.01
 REFERENCE_NOISE = 0.01
 
 
+def averages(measured: FRFSet) -> float:
+    """Averages behind the measured FRFs: ``meta["n_averages"]`` as a recording stores it (a list per
+    point after a merge: the smallest counts), else ``meta["averages"]``, else 5."""
+    n = measured.meta.get("n_averages", measured.meta.get("averages"))
+    if isinstance(n, (list, tuple)):
+        n = min((float(x) for x in n if x), default=None)
+    try:
+        return float(n) if n and float(n) >= 1 else 5.0
+    except (TypeError, ValueError):
+        return 5.0
+
+
 def coherence_variance(measured: FRFSet) -> Optional[np.ndarray]:
     """Relative variance of the H1 estimate from the coherence, ``(1 - g^2) / (2 n_avg g^2)``
-    (``n_avg`` from ``meta["averages"]``, else 5), or None without coherence."""
+    (``n_avg`` from :func:`averages`), or None without coherence."""
     if measured.coherence is None or not np.all(np.isfinite(measured.coherence)):
         return None
     g2 = np.clip(measured.coherence, 1e-6, 1.0)
-    n_avg = float(measured.meta.get("averages", 5) or 5)
+    n_avg = averages(measured)
     return (1 - g2) / (2 * n_avg * g2)
 
 
@@ -82,9 +96,15 @@ def error_db(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray, lines: 
     return _db(float(np.mean(weights[..., sel] * np.abs(e) ** 2)))
 
 
+def typical_error_db(measured: FRFSet, H: np.ndarray, weights: np.ndarray) -> float:
+    """Median over lines of ``w |H_meas - H|^2`` / ln 2 (dB): the error of a typical line, robust to a
+    few antiresonance lines; comparable with :func:`noise_level`."""
+    return _db(float(np.median(weights * np.abs(measured.H - H) ** 2)) / np.log(2))
+
+
 def noise_level(measured: FRFSet, weights: np.ndarray) -> dict:
     """Noise estimates (dB, same scale as :func:`error_db`): ``"difference"`` always, ``"coherence"``
-    when the data carry coherence (``meta["averages"]`` or 5 averages assumed)."""
+    when the data carry coherence (:func:`averages`)."""
     H = measured.H
     d2 = H[..., :-2] - 2 * H[..., 1:-1] + H[..., 2:]
     q = weights[..., 1:-1] * np.abs(d2) ** 2 / 6.0

@@ -27,15 +27,18 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Any, Optional, Sequence
 
 import numpy as np
 
 from ..progress import progress
 from ..frf import FRFSet
 from ..modal import ModalModel
-from .compare import band_errors, compare, line_weights, noise_level
+from .compare import band_errors, compare, line_weights, noise_level, typical_error_db
 from .effects import EFFECTS, EffectError, FitContext, predict
+
+if TYPE_CHECKING:
+    from .physical import MeasuredModes, PhysicalSimulation
 
 __all__ = ["Diagnosis", "diagnose", "Z_MIN", "MIN_GAIN_DB", "STRONG_GAIN_DB", "NONE_MARGIN_DB"]
 
@@ -74,19 +77,24 @@ class Diagnosis:
     extended: FRFSet
     skipped: dict = field(default_factory=dict)
     combined: list = field(default_factory=list)
+    reason: str = ""
+    physical: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         """The JSON document of ``python -m analysis diagnose``."""
         return {
             "verdict": self.verdict,
             "causes": [{k: c[k] for k in ("effect", "parameters", "gain_db", "evidence", "error_before_db",
-                                          "error_after_db", "z", "significant")} for c in self.causes],
+                                          "error_after_db", "z", "significant")}
+                       | {k: c[k] for k in ("kind", "adequate", "description") if k in c} for c in self.causes],
             "error_before_db": self.error_before_db,
             "error_after_db": self.error_after_db,
             "noise_db": self.noise_db,
             "unexplained": self.unexplained,
             "skipped": self.skipped,
             "combined": self.combined,
+            "reason": self.reason,
+            "physical": _jsonable(self.physical),
             "comparison": _jsonable(self.comparison),
         }
 
@@ -142,11 +150,6 @@ def _evidence(name: str, params: dict, before_db: float, after_db: float, z: flo
     return (f"{name} ({ps}): held-out error {before_db:.1f} -> {after_db:.1f} dB, z = {z:.1f}{where}")
 
 
-def _typical_db(measured: FRFSet, H: np.ndarray, w: np.ndarray) -> float:
-    """Median over lines of ``w |e|^2`` / ln 2 (dB): the error of a typical line, robust to a few."""
-    return _db(float(np.median(w * np.abs(measured.H - H) ** 2)) / np.log(2))
-
-
 def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: float) -> tuple[list, dict]:
     """Fit every effect in ``names`` on top of ``ctx.prior`` with cross-validation; causes sorted by gain."""
     m, w = ctx.measured, ctx.weights
@@ -182,11 +185,20 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
     return causes, skipped
 
 
+def known_processing(measured: FRFSet) -> tuple:
+    """What the measurement's own processing does to the structure's FRFs, as effects applied to the
+    simulation before it is compared: the exponential window recorded with the FRFs."""
+    tau = measured.exp_window_tau_s
+    return ({"effect": "exponential_window", "tau_s": float(tau)},) if tau else ()
+
+
 def diagnose(
     measured: FRFSet,
     base: ModalModel,
     *,
     effects: Optional[Sequence[str]] = None,
+    physical: "Optional[PhysicalSimulation]" = None,
+    measured_modes: "Optional[MeasuredModes]" = None,
     z_min: float = Z_MIN,
     min_gain_db: float = MIN_GAIN_DB,
     none_margin_db: float = NONE_MARGIN_DB,
@@ -194,7 +206,15 @@ def diagnose(
 ) -> Diagnosis:
     """Compare ``measured`` with the simulation ``base`` (a :class:`ModalModel` at the measured points,
     any quantity), fit every catalogue effect with cross-validation and give the verdict (module
-    docstring). Neither input is modified.
+    docstring). Neither input is modified. The simulation is seen through the measurement's own
+    processing (:func:`known_processing`) before anything is compared.
+
+    With ``physical`` (the simulation's FE model, :mod:`analysis.diagnosis.physical`), the measured
+    modes (``measured_modes``, else the automatic fit of ``measured``) are first held against it: when
+    they do not pair, the verdict is ``unexplained`` (not the same structure); when their frequencies
+    differ beyond the model's accuracy, the physical causes are fitted and a cause is named only if it
+    is significant (held-out gain) and adequate (brings the FRF error near the noise); otherwise the
+    FRF-level catalogue is tried as without ``physical``.
 
     Further stages: while the extended model still leaves the typical error more than
     ``none_margin_db`` above the noise, the remaining effects are fitted on top of the accepted ones
@@ -211,12 +231,35 @@ def diagnose(
     if not np.all(np.isfinite(measured.H)):
         raise ValueError("the measured FRFs hold NaN/inf lines; restrict the band to finite lines")
     w = line_weights(measured)
-    sim = predict(base, measured.freq_hz, measured.quantity, outputs=measured.outputs,
+    prior = known_processing(measured)
+    sim = predict(base, measured.freq_hz, measured.quantity, prior, outputs=measured.outputs,
                   references=measured.references)
-    ctx = FitContext(measured=measured, base=base, weights=w, sim=sim)
+    ctx = FitContext(measured=measured, base=base, weights=w, sim=sim, prior=prior)
     noise = noise_level(measured, w)
     noise_db = max(noise.values())   # with coherence, the larger of the two estimates
     comparison = compare(measured, sim, w)
+    common: dict[str, Any] = dict(noise_db=noise, comparison=comparison, measured=measured, simulated=sim)
+    phys_doc: dict = {}
+    partial_reason = ""
+    if physical is not None:
+        from .physical_verdict import physical_verdict
+
+        outcome = physical_verdict(measured, physical, prior, w, noise_db, none_margin_db, measured_modes,
+                                   causes=effects)
+        phys_doc = outcome.doc
+        if outcome.decided and outcome.extended is not None:
+            return Diagnosis(verdict=outcome.verdict, causes=outcome.causes, error_before_db=outcome.error_before_db,
+                             error_after_db=outcome.error_after_db,
+                             unexplained=[b for b in band_errors(measured, outcome.extended.H, w)
+                                          if b["error_db"] - noise_db > none_margin_db],
+                             extended=outcome.extended, combined=outcome.combined, reason=outcome.reason,
+                             physical=phys_doc, **common)
+        partial_reason = outcome.reason
+        if outcome.causes:
+            # fitted, none named: listed with the physical stage, on its own (mode-level) gain scale, and
+            # their FRF-level versions are not tried again
+            phys_doc = {**phys_doc, "causes": outcome.causes}
+            names = [n for n in names if n not in ("stiffness_shift", "mass_loading")]
     causes, skipped = _stage(ctx, names, z_min, min_gain_db)
     error_before = causes[0]["error_before_db"] if causes else comparison["error_db"]
     sig = [c for c in causes if c["significant"]]
@@ -224,12 +267,12 @@ def diagnose(
     if sig:
         best = sig[0]
         verdict, extended, after_db = best["effect"], best["_extended"], best["error_after_db"]
-        accepted = [{"effect": best["effect"], **best["parameters"]}]
+        accepted = [*prior, {"effect": best["effect"], **best["parameters"]}]
         combined.append({"effect": best["effect"], "parameters": best["parameters"], "gain_db": best["gain_db"],
                          "error_after_db": after_db})
         left = [n for n in names if n != best["effect"]]
-        while (len(accepted) < max_stages and left
-               and _typical_db(measured, extended.H, w) - noise_db > none_margin_db):
+        while (len(combined) < max_stages and left
+               and typical_error_db(measured, extended.H, w) - noise_db > none_margin_db):
             ctx2 = FitContext(measured=measured, base=base, weights=w, sim=extended, prior=tuple(accepted))
             more, _ = _stage(ctx2, left, z_min, min_gain_db)
             more = [c for c in more if c["significant"]]
@@ -243,10 +286,13 @@ def diagnose(
             left.remove(nxt["effect"])
     else:
         extended, after_db = sim, error_before
-        verdict = "none" if _typical_db(measured, sim.H, w) - noise_db <= none_margin_db else "unexplained"
+        verdict = "none" if typical_error_db(measured, sim.H, w) - noise_db <= none_margin_db else "unexplained"
     unexplained = [b for b in band_errors(measured, extended.H, w) if b["error_db"] - noise_db > none_margin_db]
     for c in causes:
         c.pop("_extended")
+    reason = ("" if verdict != "unexplained" else partial_reason or
+              "no effect of the catalogue gains significantly on held-out lines, and the error stays "
+              f"{typical_error_db(measured, sim.H, w) - noise_db:.1f} dB above the noise")
     return Diagnosis(verdict=verdict, causes=causes, error_before_db=error_before, error_after_db=after_db,
-                     noise_db=noise, comparison=comparison, unexplained=unexplained, measured=measured,
-                     simulated=sim, extended=extended, skipped=skipped, combined=combined)
+                     unexplained=unexplained, extended=extended, skipped=skipped, combined=combined,
+                     reason=reason, physical=phys_doc, **common)

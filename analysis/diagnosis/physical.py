@@ -1,0 +1,360 @@
+"""Physical causes: re-run the simulation with a parameterised change and fit its parameters.
+
+The simulation is given as an object with the protocol :class:`PhysicalSimulation` (the frame's FE
+model in :class:`simulator.physical.FrameVariants`); this module knows only its answers: natural
+frequencies and shape products at the measured points for a cause and its parameters.
+
+Data. The measured modes come from the automatic LSFD fit of the measurement
+(:func:`analysis.pipeline.fit_auto`): natural frequencies ``f_k`` (Hz, the structure's: the
+exponential window's damping is removed by the fit), their standard deviations ``s_k`` and the
+residues ``R_k`` at the measured points (a vector over (output, reference)); the lowest ``MAX_MODES``
+modes whose frequency the data determine (``s_k <= MAX_STD_FRACTION f_k``).
+
+Residuals of a candidate (cause, parameters) with modes ``f_j``, shape products ``P_j``: measured and
+candidate modes are paired one to one (``scipy.optimize.linear_sum_assignment`` on
+``|ln(f_j / f_k)| / 0.1 + (1 - MAC(R_k, P_j))``) and each measured mode k gives
+
+    r_f,k = (f_j - f_k) / (f_k sigma_k),   sigma_k = sqrt((s_k / f_k)^2 + FREQ_FLOOR^2)
+    r_m,k = (1 - MAC(R_k, P_j)) / MAC_TOL
+
+``FREQ_FLOOR`` (0.2 %) is the accuracy of the model form (mesh, beam theory) below which a
+frequency difference is not a discrepancy; ``MAC_TOL`` (0.05) likewise for shapes. ``chi2 = sum r^2``.
+
+Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
+cause's search range); a choice (the node of an added mass, the member of a member change) by trying
+every option on a coarse grid of its parameter, the ``N_SCREEN`` best refined. A cause with two
+parameters is also fitted with each alone (the other at its nominal value): nested models, the one
+that predicts best (leave one mode out) wins.
+
+Cross-validation: leave one mode out. Each measured mode is predicted by the cause fitted to the
+other modes (the choice searched again inside the fold among the ``N_SCREEN`` best options of the
+full fit, and the parameters refitted), so a cause that only bends to fit some modes predicts the
+left-out mode badly. ``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal
+simulation's. A cause is significant when ``gain_db >= MIN_GAIN_DB``.
+
+Adequacy (before a name is given): the extended simulation's FRFs (after the measurement's own
+processing) must bring the typical FRF error within ``ADEQUATE_MARGIN_DB`` of the noise or remove at
+least ``ADEQUATE_FRACTION`` of the excess error in power, and its parameters must lie inside their
+search range (not at an edge).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import combinations
+from typing import Mapping, Optional, Protocol, Sequence
+
+import numpy as np
+from scipy.optimize import least_squares, linear_sum_assignment
+
+from ..mac import mac_matrix
+from ..modal import ModalModel
+from ..progress import progress
+
+__all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
+           "fit_cause", "physical_causes", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB", "N_SCREEN", "MAX_MODES",
+           "ADEQUATE_MARGIN_DB", "ADEQUATE_FRACTION", "DISCREPANCY_CHI2"]
+
+FREQ_FLOOR = 0.002
+MAC_TOL = 0.05
+MIN_GAIN_DB = 3.0
+N_SCREEN = 5
+#: The lowest modes used (the FE model's accuracy and the cost of the search both grow with the order).
+MAX_MODES = 10
+#: Modes whose frequency is not determined by the data (standard deviation above this fraction) are left out.
+MAX_STD_FRACTION = 0.01
+ADEQUATE_MARGIN_DB = 3.0
+ADEQUATE_FRACTION = 0.8
+#: Mean chi2 per measured mode of the nominal simulation above which the modes disagree (the
+#: frequencies are off by more than ~2 sigma on average): a physical cause is looked for.
+DISCREPANCY_CHI2 = 4.0
+#: Modes pair when the frequency ratio is within this and their MAC at least PAIR_MIN_MAC.
+PAIR_MAX_LOG_RATIO = 0.25
+PAIR_MIN_MAC = 0.5
+_EDGE = 0.01            # a parameter within 1 % of its (log) range from an edge is "at the edge"
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A continuous parameter: search range ``lo..hi`` (log scale when ``log``), nominal value (the
+    unchanged frame; None: the middle), unit."""
+
+    name: str
+    lo: float
+    hi: float
+    nominal: Optional[float] = 1.0
+    unit: str = ""
+    log: bool = True
+
+    def to_x(self, v: float) -> float:
+        return float(np.log(v)) if self.log else float(v)
+
+    def from_x(self, x: float) -> float:
+        return float(np.exp(x)) if self.log else float(x)
+
+    @property
+    def x_bounds(self) -> tuple[float, float]:
+        return self.to_x(self.lo), self.to_x(self.hi)
+
+    def start(self) -> float:
+        """Starting value: the nominal when inside the range, else the geometric (or plain) middle."""
+        if self.nominal is not None and self.lo < self.nominal < self.hi:
+            return float(self.nominal)
+        return float(np.sqrt(self.lo * self.hi)) if self.log else 0.5 * (self.lo + self.hi)
+
+    def at_edge(self, v: float) -> bool:
+        a, b = self.x_bounds
+        x = self.to_x(max(v, self.lo) if self.log else v)
+        return bool(x - a < _EDGE * (b - a) or b - x < _EDGE * (b - a))
+
+
+@dataclass(frozen=True)
+class CauseSpec:
+    """A physical cause: its continuous parameters and, optionally, a choice (``"point"``: a node,
+    ``"component"``: a member) among ``options``."""
+
+    name: str
+    params: tuple
+    choice: Optional[str] = None
+    options: tuple = ()
+    description: str = ""
+
+
+class PhysicalSimulation(Protocol):
+    """What the physical diagnosis needs of a simulation (see :class:`simulator.physical.FrameVariants`)."""
+
+    def causes(self) -> Sequence[CauseSpec]: ...
+
+    def modes(self, cause: Optional[str], params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def model(self, cause: Optional[str], params: Mapping) -> ModalModel: ...
+
+
+@dataclass(frozen=True)
+class MeasuredModes:
+    """Measured modes: natural frequencies (Hz), their standard deviations (Hz), residue vectors
+    ``shapes`` (n_out * n_ref, n_modes) complex, C order over (output, reference)."""
+
+    freq_hz: np.ndarray
+    freq_std_hz: np.ndarray
+    shapes: np.ndarray
+
+    @classmethod
+    def from_model(cls, model: ModalModel, freq_std_hz: Optional[np.ndarray] = None) -> "MeasuredModes":
+        f = np.asarray(model.freq_hz, float)
+        std = np.zeros_like(f) if freq_std_hz is None else np.asarray(freq_std_hz, float)
+        R = np.asarray(model.residues).reshape(-1, f.size)
+        keep = np.flatnonzero((f > 0) & np.isfinite(std) & (std <= MAX_STD_FRACTION * f))
+        keep = keep[np.argsort(f[keep])][:MAX_MODES]
+        return cls(freq_hz=f[keep], freq_std_hz=std[keep], shapes=R[:, keep])
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """Relative frequency uncertainty per mode (model-form floor included)."""
+        return np.hypot(self.freq_std_hz / self.freq_hz, FREQ_FLOOR)
+
+
+def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate mode index paired with each measured mode (-1: none) and the MAC of the pair."""
+    K = mm.freq_hz.size
+    idx = np.full(K, -1)
+    macs = np.zeros(K)
+    if f.size == 0:
+        return idx, macs
+    M = mac_matrix(mm.shapes, P.astype(complex))
+    C = np.abs(np.log(f[None, :] / mm.freq_hz[:, None])) / 0.1 + (1.0 - M)
+    rows, cols = linear_sum_assignment(C)
+    idx[rows] = cols
+    macs[rows] = M[rows, cols]
+    return idx, macs
+
+
+def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """(K, 2) residuals ``(r_f, r_m)`` per measured mode (module docstring); an unpaired mode gets
+    the residual of a 25 % frequency error and MAC 0."""
+    idx, macs = pair(mm, f, P)
+    r = np.empty((mm.freq_hz.size, 2))
+    ok = idx >= 0
+    r[ok, 0] = (f[idx[ok]] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
+    r[~ok, 0] = 0.25 / mm.sigma[~ok]
+    r[:, 1] = (1.0 - macs) / MAC_TOL
+    return r
+
+
+@dataclass
+class PhysicalFit:
+    """One cause (one nested variant) fitted: parameters (incl. the choice), chi2 on all modes,
+    leave-one-mode-out chi2 and per-mode held-out residuals, the free parameter names."""
+
+    cause: str
+    params: dict
+    free: tuple
+    chi2: float
+    chi2_cv: float = np.inf
+    cv_per_mode: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    at_edge: tuple = ()
+
+
+def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[ParamSpec], fixed: dict,
+                    mm: MeasuredModes, sel: np.ndarray, fmax: float, start: Optional[dict] = None) -> tuple[dict, float]:
+    """Least squares over the free parameters (log-factors) from ``start`` (else from the nominal and
+    from the best point of a 7-point-per-parameter grid)."""
+    def full(x: np.ndarray) -> dict:
+        p = dict(fixed)
+        for s, xi in zip(free, x):
+            p[s.name] = s.from_x(float(xi))
+        return p
+
+    def resid(x: np.ndarray) -> np.ndarray:
+        f, P = sim.modes(cause.name, full(x), fmax)
+        return residuals(mm, f, P)[sel].ravel()
+
+    lo = np.array([s.x_bounds[0] for s in free])
+    hi = np.array([s.x_bounds[1] for s in free])
+    first = start or {}
+    starts = [np.array([s.to_x(float(first.get(s.name, s.start()))) for s in free])]
+    if start is None:      # and the best point of a coarse grid over the range
+        grid = np.array(np.meshgrid(*[np.linspace(a, b, 9)[1:-1] for a, b in zip(lo, hi)])).reshape(len(free), -1).T
+        costs = [float(np.sum(resid(x) ** 2)) for x in grid]
+        starts.append(grid[int(np.argmin(costs))])
+    best: tuple[dict, float] = ({}, np.inf)
+    for x0 in starts:
+        x0 = np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
+        res = least_squares(resid, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=30 * len(free))
+        cost = float(2 * res.cost)
+        if cost < best[1]:
+            best = (full(res.x), cost)
+    return best
+
+
+def _nominal(cause: CauseSpec) -> dict:
+    return {s.name: s.nominal for s in cause.params if s.nominal is not None}
+
+
+def _screen(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict, mm: MeasuredModes,
+            sel: np.ndarray, fmax: float, options: Sequence[str]) -> list[tuple[float, str, dict]]:
+    """Each option on a coarse grid of its (single) parameter: [(chi2, option, params)] sorted."""
+    grid = [np.linspace(*s.x_bounds, 7)[1:-1] for s in specs]
+    out = []
+    for opt in options:
+        best: tuple[float, str, dict] = (np.inf, opt, {})
+        for xs in np.array(np.meshgrid(*grid)).reshape(len(specs), -1).T:
+            p = {**fixed, cause.choice: opt, **{s.name: s.from_x(float(x)) for s, x in zip(specs, xs)}}
+            f, P = sim.modes(cause.name, p, fmax)
+            c = float(np.sum(residuals(mm, f, P)[sel] ** 2))
+            if c < best[0]:
+                best = (c, opt, p)
+        out.append(best)
+    return sorted(out, key=lambda t: t[0])
+
+
+def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm: MeasuredModes,
+              sel: np.ndarray, fmax: float, options: Optional[Sequence[str]] = None,
+              start: Optional[dict] = None) -> tuple[dict, float, list]:
+    """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
+    With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted.
+    Returns (params, chi2, [(chi2, option)] of the fitted options, sorted)."""
+    specs = [s for s in cause.params if s.name in free]
+    fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
+    if cause.choice is None:
+        p, c = _fit_continuous(sim, cause, specs, fixed, mm, sel, fmax, start)
+        return p, c, []
+    screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, options if options is not None else cause.options)
+    ranked = []
+    best: tuple[dict, float] = ({}, np.inf)
+    for _, opt, p0 in screened[:N_SCREEN]:
+        p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: opt}, mm, sel, fmax, p0)
+        ranked.append((c, opt))
+        if c < best[1]:
+            best = (p, c)
+    ranked.sort()
+    return best[0], best[1], ranked
+
+
+def _variants(cause: CauseSpec) -> list[tuple[str, ...]]:
+    names = [s.name for s in cause.params]
+    out: list[tuple[str, ...]] = []
+    for k in range(1, len(names) + 1):
+        out += list(combinations(names, k))
+    return out
+
+
+def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
+                    options: Optional[Sequence[str]], start: dict) -> np.ndarray:
+    """Held-out chi2 of each measured mode (leave one mode out, everything refitted in the fold)."""
+    K = mm.freq_hz.size
+    out = np.empty(K)
+    for k in range(K):
+        sel = np.ones(K, bool)
+        sel[k] = False
+        p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, None if options else start)
+        f, P = sim.modes(cause.name, p, fmax)
+        out[k] = float(np.sum(residuals(mm, f, P)[k] ** 2))
+    return out
+
+
+def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
+                    names: Optional[Sequence[str]] = None) -> tuple[np.ndarray, list[PhysicalFit]]:
+    """Per-mode chi2 of the nominal simulation, and every cause (its best nested variant by
+    leave-one-mode-out chi2) fitted; sorted by held-out chi2 (best first)."""
+    f0, P0 = sim.modes(None, {}, fmax)
+    base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
+    allsel = np.ones(mm.freq_hz.size, bool)
+    fits: list[PhysicalFit] = []
+    causes = [c for c in sim.causes() if names is None or c.name in names]
+    for i, cause in enumerate(causes, start=1):
+        progress("diagnosis: physical cause %d/%d, %s", i, len(causes), cause.name)
+        best: Optional[PhysicalFit] = None
+        for free in _variants(cause):
+            p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
+            options = [o for _, o in ranked[:N_SCREEN]] if ranked else None
+            cv = _cross_validate(sim, cause, free, mm, fmax, options, p)
+            edge = tuple(s.name for s in cause.params if s.name in free and s.at_edge(float(p[s.name])))
+            fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
+                              cv_per_mode=cv, at_edge=edge)
+            if best is None or fit.chi2_cv < best.chi2_cv:
+                best = fit
+        if best is not None:
+            fits.append(best)
+    fits.sort(key=lambda x: x.chi2_cv)
+    return base, fits
+
+
+def same_structure(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[bool, str]:
+    """Do the measured modes pair with the simulation's by frequency and MAC? At least half of them
+    must (ratio within ``exp(PAIR_MAX_LOG_RATIO)``, MAC >= ``PAIR_MIN_MAC``)."""
+    idx, macs = pair(mm, f, P)
+    ok = idx >= 0
+    good = np.zeros(mm.freq_hz.size, bool)
+    good[ok] = (np.abs(np.log(f[idx[ok]] / mm.freq_hz[ok])) <= PAIR_MAX_LOG_RATIO) & (macs[ok] >= PAIR_MIN_MAC)
+    n = int(good.sum())
+    if 2 * n >= mm.freq_hz.size and n > 0:
+        return True, ""
+    return False, (f"not the same structure: only {n} of the {mm.freq_hz.size} measured modes pair with the "
+                   f"simulation's by frequency (within {100 * (np.exp(PAIR_MAX_LOG_RATIO) - 1):.0f} %) and MAC "
+                   f"(>= {PAIR_MIN_MAC}); check that the measured points are the simulation's points")
+
+
+def gain_db(base: np.ndarray, cv: np.ndarray) -> float:
+    """Held-out gain (dB) of a cause: 10 log10(sum base chi2 / sum held-out chi2)."""
+    return float(10 * np.log10(max(float(np.sum(base)), 1e-30) / max(float(np.sum(cv)), 1e-30)))
+
+
+def z_score(base: np.ndarray, cv: np.ndarray) -> float:
+    """Paired z of the per-mode chi2 differences (base - held out)."""
+    d = np.asarray(base) - np.asarray(cv)
+    sd = float(np.std(d, ddof=1)) if d.size > 1 else 0.0
+    return float(np.mean(d) / (sd / np.sqrt(d.size))) if sd > 0 else 0.0
+
+
+def shown_params(cause: CauseSpec, params: Mapping) -> dict:
+    """The parameters as reported: every parameter of the cause (the nominal for those not freed),
+    the choice, and derived values (``factor`` = sqrt(stiffness_factor) for ``stiffness_shift``)."""
+    out: dict = {}
+    if cause.choice is not None:
+        out[cause.choice] = params[cause.choice]
+    for s in cause.params:
+        out[s.name] = float(params.get(s.name, s.nominal if s.nominal is not None else np.nan))
+    if cause.name == "stiffness_shift":
+        out["factor"] = float(np.sqrt(out["stiffness_factor"]))
+    return out
+

@@ -1,0 +1,223 @@
+"""The frame's physical changes as parameters: the model the physical diagnosis fits.
+
+A physical change of the frame is a sum of scaled parts of its FE matrices, so the frame is assembled
+once, split into parts, and every candidate is ``K = sum_i a_i K_i``, ``M = sum_j b_j M_j`` plus lumped
+masses, followed by ``K phi = omega^2 M phi`` (:func:`scipy.linalg.eigh`, only the modes needed):
+
+* ``K_c`` axial + torsion and ``K_c,bend`` bending stiffness of each member ``c`` (``left``, ``right``,
+  ``top``), ``M_c`` its mass; the springs of the supports and joints split into their translational
+  (N/m) and rotational (N m/rad) parts.
+* the accelerometers of the channel set-up (mass ``[sensors.accelerometer] mass_kg`` at each output's
+  node, all three translations) when ``[sensors] mass_loading`` is on: known processing, part of the
+  simulation, not a discrepancy.
+
+The causes (names and parameters fixed: tests, the JSON and users key on them):
+
+=====================  ===========================================  =======================================
+name                   parameters                                   change
+=====================  ===========================================  =======================================
+``added_mass``         ``point`` (node ``component:node``),          lumped mass on the node's translations
+                       ``mass_kg``
+``support_stiffness``  ``factor_translational``, ``factor_rotational``  support springs x factor
+``joint_stiffness``    ``factor_translational``, ``factor_rotational``  column-beam joint springs x factor
+``member_mass``        ``component``, ``factor``                     density (mass) of one member x factor
+``member_stiffness``   ``component``, ``factor``                     bending stiffness EI of one member x factor
+``mass_loading``       ``mass_kg`` (each accelerometer)              accelerometer mass at every output node
+``stiffness_shift``    ``stiffness_factor`` (and ``factor`` =        Young's modulus x stiffness_factor (all
+                       its square root, the frequency ratio)         members; springs unchanged)
+=====================  ===========================================  =======================================
+
+:class:`FrameVariants` answers the protocol of :mod:`analysis.diagnosis.physical` (``causes``,
+``modes``, ``model``); it lives here because only the simulator knows the frame, and the diagnosis
+sees only containers.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import scipy.linalg
+
+from analysis.diagnosis.physical import CauseSpec, ParamSpec
+from analysis.modal import ModalModel, pole_from_fz
+from analysis.points import parse_point
+
+from .config import FrameConfig
+from .fem import FrameModel, ModelError, assemble_beam, section_properties
+
+__all__ = ["FrameVariants", "CAUSES"]
+
+#: The physical causes and their search ranges (factors are dimensionless, masses kg).
+CAUSES: tuple[CauseSpec, ...] = (
+    CauseSpec("added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),), choice="point",
+              description="a mass fixed on the frame at one node (all three translations)"),
+    CauseSpec("support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2),
+                                    ParamSpec("factor_rotational", 1e-2, 1e2)),
+              description="the base supports' springs, translational and rotational, scaled"),
+    CauseSpec("joint_stiffness", (ParamSpec("factor_translational", 1e-4, 1e2),
+                                  ParamSpec("factor_rotational", 1e-3, 1e2)),
+              description="the column-beam joints' springs, translational and rotational, scaled"),
+    CauseSpec("member_mass", (ParamSpec("factor", 0.5, 2.0),), choice="component",
+              description="the mass (density or area) of one member scaled"),
+    CauseSpec("member_stiffness", (ParamSpec("factor", 0.3, 2.0),), choice="component",
+              description="the bending stiffness EI of one member scaled"),
+    CauseSpec("mass_loading", (ParamSpec("mass_kg", 0.0, 1.0, nominal=None, unit="kg", log=False),),
+              description="the accelerometers' mass at every measured output (all three translations)"),
+    CauseSpec("stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6),),
+              description="the material's Young's modulus scaled (every member; springs unchanged)"),
+)
+
+
+def _config(config: "FrameConfig | str | Path | None") -> FrameConfig:
+    return config if isinstance(config, FrameConfig) else FrameConfig.load(config)
+
+
+class FrameVariants:
+    """The frame of ``config`` at the measured ``outputs`` / ``references``, split into parts.
+
+    ``modes(cause, params, max_freq_hz)`` gives the natural frequencies (Hz) and the shape products at
+    the measured points; ``model(cause, params)`` the receptance pole-residue model (m/N, all modes up
+    to ``[modes] max_freq_hz``) with ``meta["output_shapes"]``, like :func:`simulator.effects.base_model`
+    but with the channel set-up's accelerometer masses. ``cause=None`` is the frame as configured.
+    """
+
+    def __init__(self, config: "FrameConfig | str | Path | None", outputs: Sequence[str],
+                 references: Sequence[str]) -> None:
+        cfg = _config(config)
+        self.config = cfg
+        self.outputs = tuple(map(str, outputs))
+        self.references = tuple(map(str, references))
+        self.frame = FrameModel.from_config(cfg, supports=False)   # node map; its K, M are not used
+        self._out = [self.frame.dof(p) for p in self.outputs]      # validates the points
+        self._ref = [self.frame.dof(p) for p in self.references]
+        n = self.frame.n_dof
+        mat = cfg.material
+        G = mat.youngs_modulus_pa / (2.0 * (1.0 + mat.poisson_ratio))
+        self.components = tuple(cfg.components)
+        self._K_rest: dict[str, np.ndarray] = {}
+        self._K_bend: dict[str, np.ndarray] = {}
+        self._M: dict[str, np.ndarray] = {}
+        for name, comp in cfg.components.items():
+            sp = section_properties(cfg.sections[comp.section])
+            start, end = np.asarray(comp.start_m, float), np.asarray(comp.end_m, float)
+            t = np.linspace(0.0, 1.0, comp.n_elements + 1)
+            xyz = start[None, :] + t[:, None] * (end - start)[None, :]
+            k_all, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg)
+            k_rest, _ = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3,
+                                      replace(sp, Iy=0.0, Iz=0.0), comp.roll_deg)
+            first = 6 * self.frame.node_index[(name, 0)]
+            sl = slice(first, first + k_all.shape[0])
+            for store, block in ((self._K_rest, k_rest), (self._K_bend, k_all - k_rest), (self._M, m)):
+                full = np.zeros((n, n))
+                full[sl, sl] = block
+                store[name] = full
+        self._springs = {}
+        for kind, pairs, k6 in (("support", [(a, None) for a in cfg.supports.nodes], cfg.supports.stiffness),
+                                ("joint", list(cfg.joints.pairs), cfg.joints.stiffness)):
+            for part, axes in (("translational", slice(0, 3)), ("rotational", slice(3, 6))):
+                K = np.zeros((n, n))
+                k = np.zeros(6)
+                k[axes] = np.asarray(k6, float)[axes]
+                for a, b in pairs:
+                    da = 6 * self._node(a) + np.arange(6)
+                    K[da, da] += k
+                    if b is not None:
+                        db = 6 * self._node(b) + np.arange(6)
+                        K[db, db] += k
+                        K[da, db] -= k
+                        K[db, da] -= k
+                self._springs[(kind, part)] = K
+        index = self.frame.node_index
+        self.nodes = tuple(f"{c}:{i}" for (c, i) in sorted(index, key=lambda k: index[k]))
+        sens = cfg.sensors
+        self.sensor_nodes = tuple(dict.fromkeys(f"{q.component}:{q.node}" for q in map(parse_point, self.outputs)))
+        self.sensor_mass_kg = float(sens.accelerometer.mass_kg) if sens.mass_loading else 0.0
+
+    # ------------------------------------------------------------------ protocol of the diagnosis
+    def causes(self) -> tuple[CauseSpec, ...]:
+        """The physical causes with their choices filled in (every node, every member)."""
+        out = []
+        for c in CAUSES:
+            if c.choice == "point":
+                c = replace(c, options=self.nodes)
+            elif c.choice == "component":
+                c = replace(c, options=self.components)
+            elif c.name == "mass_loading":
+                c = replace(c, params=(replace(c.params[0], nominal=self.sensor_mass_kg),))
+            out.append(c)
+        return tuple(out)
+
+    def modes(self, cause: "str | None", params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        """Natural frequencies (Hz, flexible modes up to ``max_freq_hz``) and the shape products
+        ``phi_o phi_r`` (n_out * n_ref, n_modes) at the measured points (C order over (o, r))."""
+        K, M = self.matrices(cause, params)
+        w2, phi = scipy.linalg.eigh(K, M, subset_by_value=(1.0, (2 * np.pi * max_freq_hz) ** 2))
+        f = np.sqrt(w2) / (2 * np.pi)
+        return f, self._products(phi)
+
+    def model(self, cause: "str | None", params: Mapping) -> ModalModel:
+        """Receptance pole-residue model (m/N) of the changed frame, modes up to ``[modes] max_freq_hz``,
+        damping from ``[damping]`` of the config, ``meta["output_shapes"]`` at the outputs."""
+        K, M = self.matrices(cause, params)
+        fmax = self.config.modes.max_freq_hz
+        w2, phi = scipy.linalg.eigh(K, M, subset_by_value=(1.0, (2 * np.pi * fmax) ** 2))
+        f = np.sqrt(w2) / (2 * np.pi)
+        zeta = self.config.damping.ratios(f)
+        lam = pole_from_fz(f, zeta)
+        po = np.array([s * phi[d] for d, s in self._out])
+        pr = np.array([s * phi[d] for d, s in self._ref])
+        pp = np.einsum("om,rm->orm", po, pr)
+        R = pp / (2j * np.imag(lam))[None, None, :]
+        return ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none",
+                          outputs=self.outputs, references=self.references,
+                          meta={"source": "simulator.physical", "cause": cause, "parameters": dict(params),
+                                "output_shapes": po})
+
+    # ------------------------------------------------------------------ assembly
+    def matrices(self, cause: "str | None", params: Mapping) -> tuple[np.ndarray, np.ndarray]:
+        """K (N/m, N m/rad) and M (kg, kg m^2) of the frame changed by ``cause`` with ``params``."""
+        p = dict(params)
+        E = float(p.get("stiffness_factor", 1.0)) if cause == "stiffness_shift" else 1.0
+        K = sum((E * self._K_rest[c] + E * self._bend_factor(cause, p, c) * self._K_bend[c]) for c in self.components)
+        M = sum(self._mass_factor(cause, p, c) * self._M[c] for c in self.components)
+        for kind in ("support", "joint"):
+            ft, fr = 1.0, 1.0
+            if cause == f"{kind}_stiffness":
+                ft, fr = float(p.get("factor_translational", 1.0)), float(p.get("factor_rotational", 1.0))
+            K = K + ft * self._springs[(kind, "translational")] + fr * self._springs[(kind, "rotational")]
+        M = np.array(M, copy=True)
+        sensor_mass = float(p["mass_kg"]) if cause == "mass_loading" else self.sensor_mass_kg
+        for node in self.sensor_nodes:
+            self._lump(M, node, sensor_mass)
+        if cause == "added_mass":
+            self._lump(M, str(p["point"]), float(p["mass_kg"]))
+        return np.asarray(K), M
+
+    @staticmethod
+    def _bend_factor(cause: "str | None", p: dict, component: str) -> float:
+        return float(p["factor"]) if cause == "member_stiffness" and p.get("component") == component else 1.0
+
+    @staticmethod
+    def _mass_factor(cause: "str | None", p: dict, component: str) -> float:
+        return float(p["factor"]) if cause == "member_mass" and p.get("component") == component else 1.0
+
+    def _node(self, key: str) -> int:
+        parts = str(key).split(":")
+        try:
+            return self.frame.node_index[(parts[0], int(parts[1]))]
+        except (IndexError, ValueError, KeyError):
+            raise ModelError(f"node {key!r} is not on the frame; nodes are {', '.join(self.nodes)}") from None
+
+    def _lump(self, M: np.ndarray, node: str, mass_kg: float) -> None:
+        if mass_kg < 0:
+            raise ModelError(f"a mass of {mass_kg} kg at {node}: masses must be >= 0")
+        dofs = 6 * self._node(node) + np.arange(3)
+        M[dofs, dofs] += mass_kg
+
+    def _products(self, phi: np.ndarray) -> np.ndarray:
+        po = np.array([s * phi[d] for d, s in self._out])
+        pr = np.array([s * phi[d] for d, s in self._ref])
+        return np.einsum("om,rm->orm", po, pr).reshape(len(self._out) * len(self._ref), -1)
+
