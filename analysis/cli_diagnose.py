@@ -190,6 +190,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             raise InputError(f"{args.measured} holds NaN/inf lines at {np.count_nonzero(~finite)} frequencies; "
                              "give --band to exclude them")
         base, physical = load_simulations(args.simulated, measured, args.estimator)
+        if physical is not None and band is None:
+            top = physical.converged_below_hz()
+            if top < measured.freq_hz[-1]:
+                print(f"band {measured.freq_hz[0]:.4g}-{top:.4g} Hz: the simulation's mesh is converged only below "
+                      f"{top:.4g} Hz (give --band to override)", file=sys.stderr)
+                measured = measured.band(float(measured.freq_hz[0]), top)
         outs, refs = common_points(measured, base)
         measured = measured.select(outs, refs)
         diag = diagnose(measured, base, effects=effects, physical=physical)

@@ -17,7 +17,7 @@ The causes (names and parameters fixed: tests, the JSON and users key on them):
 name                   parameters                                   change
 =====================  ===========================================  =======================================
 ``added_mass``         ``point`` (node ``component:node``),          lumped mass on the node's translations
-                       ``mass_kg``
+                       ``mass_kg``                                  and a steel cube's rotary inertia
 ``support_stiffness``  ``factor_translational``, ``factor_rotational``  support springs x factor
 ``joint_stiffness``    ``factor_translational``, ``factor_rotational``  column-beam joint springs x factor
 ``member_mass``        ``component``, ``factor``                     density (mass) of one member x factor
@@ -175,6 +175,34 @@ class FrameVariants:
                           meta={"source": "simulator.physical", "cause": cause, "parameters": dict(params),
                                 "output_shapes": po})
 
+    def converged_below_hz(self, tolerance: float = 0.002, refine: int = 2) -> float:
+        """Frequency (Hz) below which the FE model's natural frequencies have converged with the mesh:
+        every mode of the frame with each member's elements ``refine`` times finer lies within
+        ``tolerance`` (relative) of this model's; the limit lies halfway between the last mode that does
+        and the first that does not. A measurement is compared with the simulation only below it."""
+        cfg = self.config
+        fine = cfg.with_overrides({
+            "components": {c: {"n_elements": refine * comp.n_elements} for c, comp in cfg.components.items()},
+            "supports": {"nodes": [self._refined(n, refine) for n in cfg.supports.nodes]},
+            "joints": {"pairs": [[self._refined(a, refine), self._refined(b, refine)] for a, b in cfg.joints.pairs]}})
+        top = 2 * cfg.modes.max_freq_hz
+        f0 = FrameVariants(cfg, self.outputs[:1], self.references[:1]).modes(None, {}, top)[0]
+        nodes = {f"{q.component}:{q.node}" for q in map(parse_point, self.outputs[:1])}
+        node = next(iter(nodes))
+        fine_out = [self._refined(node, refine) + ":" + self.outputs[0].split(":")[2]]
+        f1 = FrameVariants(fine, fine_out, fine_out).modes(None, {}, top)[0]
+        n = min(f0.size, f1.size)
+        bad = np.flatnonzero(np.abs(f1[:n] / f0[:n] - 1) > tolerance)
+        if not bad.size:
+            return float(f0[n - 1]) if n else top
+        k = int(bad[0])
+        return float(0.5 * (f0[k - 1] + f0[k])) if k > 0 else float(0.5 * f0[0])
+
+    @staticmethod
+    def _refined(node: str, refine: int) -> str:
+        c, i = str(node).split(":")[:2]
+        return f"{c}:{refine * int(i)}"
+
     # ------------------------------------------------------------------ assembly
     def matrices(self, cause: "str | None", params: Mapping) -> tuple[np.ndarray, np.ndarray]:
         """K (N/m, N m/rad) and M (kg, kg m^2) of the frame changed by ``cause`` with ``params``."""
@@ -192,7 +220,7 @@ class FrameVariants:
         for node in self.sensor_nodes:
             self._lump(M, node, sensor_mass)
         if cause == "added_mass":
-            self._lump(M, str(p["point"]), float(p["mass_kg"]))
+            self._lump(M, str(p["point"]), float(p["mass_kg"]), rotary=True)
         return np.asarray(K), M
 
     @staticmethod
@@ -210,11 +238,19 @@ class FrameVariants:
         except (IndexError, ValueError, KeyError):
             raise ModelError(f"node {key!r} is not on the frame; nodes are {', '.join(self.nodes)}") from None
 
-    def _lump(self, M: np.ndarray, node: str, mass_kg: float) -> None:
+    def _lump(self, M: np.ndarray, node: str, mass_kg: float, rotary: bool = False) -> None:
+        """A lumped mass (kg) on the node's translations; with ``rotary`` also the rotary inertia of a
+        compact steel block of that mass centred on the node, ``m a^2 / 6`` (kg m^2) about each axis
+        with ``a = (m / rho)^(1/3)`` the side of a cube of the frame's density."""
         if mass_kg < 0:
             raise ModelError(f"a mass of {mass_kg} kg at {node}: masses must be >= 0")
-        dofs = 6 * self._node(node) + np.arange(3)
+        first = 6 * self._node(node)
+        dofs = first + np.arange(3)
         M[dofs, dofs] += mass_kg
+        if rotary:
+            a = (mass_kg / self.config.material.density_kg_m3) ** (1.0 / 3.0)
+            rot = first + np.arange(3, 6)
+            M[rot, rot] += mass_kg * a * a / 6.0
 
     def _products(self, phi: np.ndarray) -> np.ndarray:
         po = np.array([s * phi[d] for d, s in self._out])

@@ -11,11 +11,13 @@ Steps, each one able to decide:
    is tried (not decided here).
 4. Causes: every physical cause fitted, nested variants and choices selected by leave-one-mode-out
    chi2. Named: the cause with the largest held-out gain among those that are significant
-   (gain >= ``MIN_GAIN_DB``, no parameter at the edge of its range) and adequate (the extended
-   simulation's FRFs, through the measurement's processing, leave the typical error within
-   ``ADEQUATE_MARGIN_DB`` of the noise or remove ``ADEQUATE_FRACTION`` of the excess error in power).
-   None named: not decided here; the FRF-level catalogue is tried, and the physical causes are
-   listed with it as partial causes (the reason says why none was named).
+   (gain >= ``MIN_GAIN_DB``, no parameter at the edge of its range) and adequate (the held-out modes
+   agree, mean chi2 per mode <= ``DISCREPANCY_CHI2``, and the extended simulation's FRFs, through the
+   measurement's processing, leave the typical error within ``ADEQUATE_MARGIN_DB`` of the noise or
+   remove ``ADEQUATE_FRACTION`` of the excess error in power). None named: when the modes differ,
+   ``unexplained`` with the best partial causes (no FRF-level effect moves natural frequencies);
+   when only the FRFs differ, not decided here: the FRF-level catalogue is tried, and the physical
+   causes are listed in ``Diagnosis.physical["causes"]``.
 """
 from __future__ import annotations
 
@@ -116,7 +118,8 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         removed = (_power(before_db) - _power(after_db)) / excess if excess > 0 else 0.0
         g = gain_db(base, fit.cv_per_mode)
         significant = bool(g >= MIN_GAIN_DB and not fit.at_edge)
-        adequate = bool(after_db - noise_db <= ADEQUATE_MARGIN_DB or removed >= ADEQUATE_FRACTION)
+        adequate = bool((after_db - noise_db <= ADEQUATE_MARGIN_DB or removed >= ADEQUATE_FRACTION)
+                        and fit.chi2_cv / base.size <= DISCREPANCY_CHI2)
         params = shown_params(spec, fit.params)
         shown = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in params.items())
         edge = f"; at the edge of its range: {', '.join(fit.at_edge)}" if fit.at_edge else ""
@@ -130,7 +133,8 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
                        "evidence": evidence, "_extended": ext, "_removed": removed})
     found.sort(key=lambda c: c["gain_db"], reverse=True)
     named = [c for c in found if c["significant"] and c["adequate"]]
-    out = PhysicalOutcome(decided=bool(named), error_before_db=before_db, doc=doc)
+    # frequencies that differ cannot be explained by an FRF-level effect: then unexplained is decided here
+    out = PhysicalOutcome(decided=bool(named) or modes_differ, error_before_db=before_db, doc=doc)
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]

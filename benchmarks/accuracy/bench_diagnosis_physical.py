@@ -1,0 +1,303 @@
+"""Physical diagnosis on data it was not made from: changed frames captured through the analyser.
+
+Every case writes a frame configuration that differs from ``simulator/frame.toml`` in ONE physical way,
+built the way a user would build it (a steel block as an extra member on joint springs, explicit
+sections, changed springs), captures the default test plan through ``sim://?config=...`` (hammer,
+sensors, anti-alias filter, ADC, H1 averaging: the time-domain chain), and diagnoses the recording
+against the unchanged ``frame.toml`` (:func:`analysis.diagnosis.diagnose` with
+:class:`simulator.physical.FrameVariants`). The diagnosis fits lumped masses and scaled matrices, so
+the data come from a different model than the one it fits.
+
+Families (``--per-family`` cases each, parameters drawn from a seeded generator):
+
+* ``added_mass``: a steel block (1-5 kg, a cube of two beam elements with consistent mass, its middle
+  on joint springs) on a random node of the beam or a column; right if the node is within one element and the mass within 25 %;
+* ``support_stiffness`` / ``joint_stiffness``: rotational springs x 0.03-0.6; right within 10 %;
+* ``member_mass``: one member's area x 1.15-1.4 (explicit section: its axial stiffness changes too);
+  right member, factor within 10 %;
+* ``member_stiffness``: one member's second moments x 0.65-0.9; right member, factor within 10 %;
+* ``mass_loading``: accelerometers of 50-300 g; within 25 %;
+* ``stiffness_shift``: Young's modulus x 0.88-0.95 or 1.05-1.12; within 10 %.
+
+Nulls (no change to find): other seeds, a finer mesh (every member's elements doubled, point labels
+mapped to the same places), captures with an exponential window (5 % at the block end). Out of the
+catalogue: the span 6 % longer, the right column's roll 20 -> 40 deg: ``unexplained`` is right.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_diagnosis_physical.py [--per-family 15] \
+        [--nulls 10] [--workers 2] [--json out.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import numpy as np  # noqa: E402
+
+POINTS = ("right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y")
+FAMILIES = ("added_mass", "support_stiffness", "joint_stiffness", "member_mass", "member_stiffness",
+            "mass_loading", "stiffness_shift")
+DEFAULT_JOINTS = [["left:10", "top:0"], ["right:10", "top:8"]]
+
+
+def _toml(d: dict) -> str:
+    """A small TOML writer for the override tables used here (tables of scalars and lists)."""
+    lines: list[str] = []
+
+    def val(v):
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        return repr(float(v)) if isinstance(v, float) else str(v)
+
+    def table(prefix: str, t: dict) -> None:
+        scalars = {k: v for k, v in t.items() if not isinstance(v, dict)}
+        if scalars:
+            lines.append(f"[{prefix}]")
+            lines.extend(f"{k} = {val(v)}" for k, v in scalars.items())
+        for k, v in t.items():
+            if isinstance(v, dict):
+                table(f"{prefix}.{k}" if prefix else k, v)
+
+    table("", d)
+    return "\n".join(x for x in lines if x != "[]") + "\n"
+
+
+def _explicit(sec, area=1.0, inertia=1.0) -> dict:
+    from simulator.fem import section_properties
+
+    sp = section_properties(sec)
+    return {"shape": "explicit", "area_m2": sp.A * area, "iy_m4": sp.Iy * inertia, "iz_m4": sp.Iz * inertia, "j_m4": sp.J}
+
+
+def make_case(family: str, rng: np.random.Generator) -> tuple[dict, dict]:
+    """(config overrides, truth) of one case of ``family``."""
+    from simulator.config import FrameConfig
+
+    cfg = FrameConfig.load()
+    if family == "added_mass":
+        comp = str(rng.choice(["top", "top", "left", "right"]))
+        n = cfg.components[comp].n_elements
+        node = int(rng.integers(1, n))
+        mass = float(rng.uniform(1.0, 5.0))
+        a = (mass / 7850.0) ** (1 / 3)                       # a steel cube of side a (m)
+        xyz = np.asarray(cfg.components[comp].start_m) + node / n * (
+            np.asarray(cfg.components[comp].end_m) - np.asarray(cfg.components[comp].start_m))
+        # the block: two beam elements across the member (along Y), its middle node on joint springs to the node
+        over = {"sections": {"block": {"shape": "explicit", "area_m2": a * a, "iy_m4": a ** 4 / 12, "iz_m4": a ** 4 / 12,
+                                       "j_m4": 0.141 * a ** 4}},
+                "components": {"block": {"section": "block", "start_m": list(map(float, xyz - [0.0, a / 2, 0.0])),
+                                         "end_m": list(map(float, xyz + [0.0, a / 2, 0.0])), "n_elements": 2,
+                                         "roll_deg": 0.0}},
+                "joints": {"pairs": DEFAULT_JOINTS + [[f"{comp}:{node}", "block:1"]]}}
+        return over, {"cause": family, "point": f"{comp}:{node}", "mass_kg": mass}
+    if family in ("support_stiffness", "joint_stiffness"):
+        f = float(np.exp(rng.uniform(np.log(0.2), np.log(0.6)))) if family == "support_stiffness" else \
+            float(np.exp(rng.uniform(np.log(0.03), np.log(0.3))))
+        key = "supports" if family == "support_stiffness" else "joints"
+        k = list(getattr(cfg, key).stiffness)
+        return {key: {"stiffness": k[:3] + [x * f for x in k[3:]]}}, {"cause": family, "factor_rotational": f}
+    if family in ("member_mass", "member_stiffness"):
+        comp = str(rng.choice(list(cfg.components)))
+        f = float(rng.uniform(1.15, 1.4)) if family == "member_mass" else float(rng.uniform(0.65, 0.9))
+        sec = cfg.sections[cfg.components[comp].section]
+        new = _explicit(sec, area=f) if family == "member_mass" else _explicit(sec, inertia=f)
+        return ({"sections": {"changed": new}, "components": {comp: {"section": "changed"}}},
+                {"cause": family, "component": comp, "factor": f})
+    if family == "mass_loading":
+        m = float(rng.uniform(0.05, 0.3))
+        return {"sensors": {"accelerometer": {"mass_kg": m}}}, {"cause": family, "mass_kg": m}
+    if family == "stiffness_shift":
+        f = float(rng.choice([-1, 1]) * rng.uniform(0.05, 0.12) + 1.0)
+        return ({"material": {"youngs_modulus_pa": cfg.material.youngs_modulus_pa * f}},
+                {"cause": family, "stiffness_factor": f})
+    raise ValueError(family)
+
+
+def null_case(kind: str, rng: np.random.Generator) -> tuple[dict, dict, list]:
+    """(overrides, truth, extra capture args) of a null or out-of-catalogue case."""
+    from simulator.config import FrameConfig
+
+    cfg = FrameConfig.load()
+    if kind == "seed":
+        return {}, {"cause": "none"}, []
+    if kind == "mesh":
+        return ({"components": {c: {"n_elements": 2 * comp.n_elements} for c, comp in cfg.components.items()},
+                 "supports": {"nodes": ["left:0", "right:0"]},
+                 "joints": {"pairs": [["left:20", "top:0"], ["right:20", "top:16"]]}},
+                {"cause": "none", "relabel": 2}, [])
+    if kind == "window":
+        return {}, {"cause": "none"}, ["--exp-window", "5%"]
+    if kind == "span":
+        s = 1.06
+        return ({"components": {"right": {"start_m": [1.7 * s, 0.0, 0.0], "end_m": [1.7 * s, 0.0, 0.668]},
+                                "top": {"end_m": [1.7 * s, 0.0, 0.668]}}}, {"cause": "unexplained"}, [])
+    if kind == "roll":
+        return {"components": {"right": {"roll_deg": 40.0}}}, {"cause": "unexplained"}, []
+    raise ValueError(kind)
+
+
+def _relabel(frf, factor: int):
+    from analysis.points import parse_point
+
+    def lab(p: str) -> str:
+        q = parse_point(p)
+        return str(p).replace(f"{q.component}:{q.node}:", f"{q.component}:{q.node // factor}:", 1)
+
+    return replace(frf, outputs=tuple(map(lab, frf.outputs)), references=tuple(map(lab, frf.references)))
+
+
+def run_case(spec: dict) -> dict:
+    """Capture and diagnose one case; returns the truth, the verdict, the fitted parameters, the time."""
+    from acquisition.cli_capture import main as capture
+    from analysis.bands import default_band
+    from analysis.diagnosis import diagnose
+    from analysis.inputs import load_input
+    from simulator.physical import FrameVariants
+
+    over, truth, extra = spec["overrides"], spec["truth"], spec.get("extra", [])
+    with tempfile.TemporaryDirectory() as tmp:
+        device = f"sim://?seed={spec['seed']}"
+        if over:
+            cfg = Path(tmp) / "frame.toml"
+            cfg.write_text(_toml(over))
+            device += f"&config={cfg}"
+        pts = POINTS
+        if truth.get("relabel"):
+            from analysis.points import parse_point
+
+            pts = tuple(str(p).replace(f"{q.component}:{q.node}:", f"{q.component}:{2 * q.node}:", 1)
+                        for p, q in ((p, parse_point(p)) for p in POINTS))
+        rec = Path(tmp) / "rec.h5"
+        import contextlib
+        import io
+
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            rc = capture(["--device", device, "--out", str(rec), "--points", ",".join(pts), "--hits", "3",
+                          "--auto", "-q", *extra])
+        if rc != 0:
+            return {**spec, "verdict": f"capture failed ({rc})", "right": False}
+        m = load_input(rec)
+        if truth.get("relabel"):
+            m = _relabel(m, truth["relabel"])
+        t0 = time.perf_counter()
+        lo, hi = default_band(m)
+        fv = FrameVariants(None, m.outputs, m.references)
+        m = m.band(lo, min(hi, fv.converged_below_hz()))
+        d = diagnose(m, fv.model(None, {}), physical=fv)
+        dt = time.perf_counter() - t0
+    params = next((c["parameters"] for c in d.causes if c["effect"] == d.verdict), {})
+    out = {"family": spec["family"], "seed": spec["seed"], "truth": truth, "verdict": d.verdict,
+           "parameters": params, "time_s": dt, "reason": d.reason}
+    out.update(score(truth, d.verdict, params))
+    return out
+
+
+def _node_xyz(label: str) -> np.ndarray:
+    from simulator.physical import FrameVariants
+
+    fv = _node_xyz.__dict__.setdefault("fv", FrameVariants(None, ["top:4:Z"], ["top:4:Z"]))
+    c, n = label.split(":")[:2]
+    return fv.frame.node_coords[fv.frame.node_index[(c, int(n))]]
+
+
+def score(truth: dict, verdict: str, p: dict) -> dict:
+    """right (cause named), and the parameter checks of the module docstring."""
+    cause = truth["cause"]
+    if verdict != cause:
+        return {"right": False, "params_ok": False}
+    ok = True
+    if cause == "added_mass":
+        from simulator.config import FrameConfig
+
+        cfg = FrameConfig.load()
+        comp = truth["point"].split(":")[0]
+        c = cfg.components[comp]
+        elem = float(np.linalg.norm(np.subtract(c.end_m, c.start_m))) / c.n_elements
+        dist = float(np.linalg.norm(_node_xyz(p["point"]) - _node_xyz(truth["point"])))
+        ok = dist <= 1.01 * elem and abs(p["mass_kg"] / truth["mass_kg"] - 1) <= 0.25
+    elif cause in ("support_stiffness", "joint_stiffness"):
+        ok = abs(p["factor_rotational"] / truth["factor_rotational"] - 1) <= 0.10
+    elif cause in ("member_mass", "member_stiffness"):
+        ok = p["component"] == truth["component"] and abs(p["factor"] / truth["factor"] - 1) <= 0.10
+    elif cause == "mass_loading":
+        ok = abs(p["mass_kg"] / truth["mass_kg"] - 1) <= 0.25
+    elif cause == "stiffness_shift":
+        ok = abs(p["stiffness_factor"] / truth["stiffness_factor"] - 1) <= 0.10
+    return {"right": True, "params_ok": bool(ok)}
+
+
+def cases(per_family: int, nulls: int, seed: int = 2026) -> list[dict]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for fam in FAMILIES:
+        for _ in range(per_family):
+            over, truth = make_case(fam, rng)
+            out.append({"family": fam, "overrides": over, "truth": truth, "seed": int(rng.integers(1, 10**6))})
+    for kind in ("seed", "mesh", "window"):
+        for _ in range(nulls):
+            over, truth, extra = null_case(kind, rng)
+            out.append({"family": f"null:{kind}", "overrides": over, "truth": truth, "extra": extra,
+                        "seed": int(rng.integers(1, 10**6))})
+    for kind in ("span", "roll"):
+        over, truth, extra = null_case(kind, rng)
+        out.append({"family": f"out-of-catalogue:{kind}", "overrides": over, "truth": truth, "extra": extra,
+                    "seed": int(rng.integers(1, 10**6))})
+    return out
+
+
+def table(results: list[dict]) -> str:
+    rows = ["| family | cases | named right | parameters right | median s | max s |", "|---|---|---|---|---|---|"]
+    fams = list(dict.fromkeys(r["family"] for r in results))
+    for fam in fams:
+        rs = [r for r in results if r["family"] == fam]
+        t = [r.get("time_s", np.nan) for r in rs]
+        rows.append(f"| {fam} | {len(rs)} | {sum(r['right'] for r in rs)} | {sum(r.get('params_ok', False) for r in rs)} | "
+                    f"{np.nanmedian(t):.1f} | {np.nanmax(t):.1f} |")
+    phys = [r for r in results if r["family"] in FAMILIES]
+    nul = [r for r in results if r["family"].startswith("null")]
+    if phys:
+        rows.append(f"\nphysical: {sum(r['right'] for r in phys)}/{len(phys)} named right "
+                    f"({100 * np.mean([r['right'] for r in phys]):.0f} %), parameters right "
+                    f"{sum(r.get('params_ok', False) for r in phys)}/{len(phys)}")
+    if nul:
+        rows.append(f"nulls: {sum(not r['right'] for r in nul)} false alarms in {len(nul)}")
+    return "\n".join(rows)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-family", type=int, default=15)
+    ap.add_argument("--nulls", type=int, default=10, help="cases of each null kind")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--json", help="write every case's result")
+    args = ap.parse_args()
+    todo = cases(args.per_family, args.nulls)
+    t0 = time.perf_counter()
+    results = []
+    with ProcessPoolExecutor(args.workers) as pool:
+        for r in pool.map(run_case, todo):
+            results.append(r)
+            mark = "ok " if r["right"] and r.get("params_ok", True) else ("~  " if r["right"] else "BAD")
+            shown = {k: v for k, v in (r.get("parameters") or {}).items() if not isinstance(v, (list, dict))}
+            print(f"{mark} {r['family']:28s} truth {r['truth']} -> {r['verdict']} {shown} "
+                  f"({r.get('time_s', 0):.1f} s)", flush=True)
+    print(table(results))
+    print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} cases, {args.workers} workers")
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1, default=str))
+
+
+if __name__ == "__main__":
+    main()
