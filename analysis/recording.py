@@ -569,8 +569,17 @@ class Recording:
             exp_window_tau_s=g["exp_window_tau_s"], sample_rate_hz=g["sample_rate_hz"] or self._hit_sample_rate(),
             meta={"estimator": est, "n_averages": int(g["n_averages"]), "source": str(self.path),
                   "excitation_limit_hz": excitation_limit_hz(g["freq_hz"], g["Gff"]) if "Gff" in g else None,
-                  "measurement": name, "point": g["point"]},
+                  "measurement": name, "point": g["point"], **self._record_meta()},
         )
+
+    def _record_meta(self) -> dict:
+        """``record_s`` (block length, s) and ``pretrigger_s`` (s) of the set-up, when recorded."""
+        try:
+            fs = float(self.setup["sample_rate_hz"])
+            return {"record_s": int(self.setup["block_size"]) / fs,
+                    "pretrigger_s": int(self.setup["trigger"]["pretrigger_samples"]) / fs}
+        except (AttributeError, KeyError, TypeError, ValueError, ZeroDivisionError):
+            return {}
 
     def close(self) -> None:
         if self._f.id.valid:

@@ -63,6 +63,7 @@ log = logging.getLogger(__name__)
 
 _POWER = QUANTITY_POWER
 WINDOW_DECAY_KEY = "window_decay_per_s"   # model.meta key: summed 1/tau of the exponential windows (1/s)
+RECORD_KEY = "record_after_pulse_s"       # model.meta key: response record length after the hammer pulse (s)
 HUM_BASES_HZ = (50.0, 60.0)
 
 
@@ -175,7 +176,7 @@ def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = 
                 far_meta["output_shapes"] = np.asarray(far_meta["output_shapes"])[:, ~near]
             far = replace(base, poles=base.poles[~near], residues=base.residues[..., ~near], meta=far_meta,
                           upper_residual=None, lower_residual=None)
-            prior_modal = [e for e in ctx.prior if EFFECTS[e["effect"]].kind == "modal"]
+            prior_modal = [e for e in ctx.prior if _lookup(e)[0].kind == "modal"]
             background = predict(far, f, ctx.measured.quantity, prior_modal).H
             meta = dict(base.meta)
             if "output_shapes" in meta:
@@ -277,6 +278,36 @@ def apply_exponential_window(model: ModalModel, params: Mapping) -> ModalModel:
     return replace(model, meta=meta)
 
 
+def apply_record_length(model: ModalModel, params: Mapping) -> ModalModel:
+    """The finite record of the measurement (known processing, not a catalogue effect): the response
+    is recorded for ``record_s`` (s) from ``pretrigger_s`` (s) before the hammer pulse, so only
+    ``T = record_s - pretrigger_s`` of each impulse response after the pulse is seen. Recorded in
+    ``meta[RECORD_KEY]``; :func:`synthesize_windowed` applies it."""
+    T = float(params.get("record_s", np.nan)) - float(params.get("pretrigger_s", 0.0))
+    if not (np.isfinite(T) and T > 0):
+        raise EffectError(f"record_length: record_s - pretrigger_s must be a positive time (s), got {params!r}")
+    return replace(model, meta={**model.meta, RECORD_KEY: T})
+
+
+def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: float) -> np.ndarray:
+    """What a record of ``record_s`` seconds after the pulse misses of each mode's impulse response
+    in the measured ``quantity``, at the Laplace points ``s`` (rad/s):
+
+        H_T(s) = sum_r N_r / (s - lambda_r) (1 - exp((lambda_r - s) T)) + c.c.,  N_r = R_r lambda_r^(q-p)
+
+    so the tail returned, ``exp(-s T) sum_r N_r exp(lambda_r T) / (s - lambda_r) + c.c.``, is
+    subtracted from the full FRF. At the DFT lines ``exp(-j w_k T_rec) = 1``; the residual terms (mass
+    and stiffness lines, deltas at t = 0) are not truncated. (n_out, n_ref, n_freq) complex."""
+    lam = np.asarray(model.poles, complex)
+    N = np.asarray(model.residues, complex) * (lam ** float(_POWER[quantity] - _POWER[model.quantity]))[None, None, :]
+    g = np.exp(lam * record_s)
+    a = N * g[None, None, :]
+    den = 1.0 / (s[None, :] - lam[:, None])
+    denc = 1.0 / (s[None, :] - np.conj(lam)[:, None])
+    tail = np.einsum("orm,mk->ork", a, den) + np.einsum("orm,mk->ork", np.conj(a), denc)
+    return tail * np.exp(-s * record_s)[None, None, :]
+
+
 def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
                         decay_per_s: Optional[float] = None) -> FRFSet:
     """FRFs of ``model`` in ``quantity`` as measured through an exponential window ``exp(-a t)``,
@@ -297,20 +328,30 @@ def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
     j w axis and shifted alike: ``"physical"`` basis ``(s^p, -s^(p-2))``, ``"paper"`` ``(1, -1/s^2)``
     (a constant UR is unchanged; LR, a rigid-body/mass line, becomes its windowed version).
     A fixed FRF term (``meta["frf_correction"]``) is not part of this (see :func:`predict`).
-    Returns an :class:`FRFSet` in ``quantity``; with ``a = 0`` this is plain synthesis and conversion."""
+    With ``meta[RECORD_KEY]`` (:func:`apply_record_length`) the finite record is applied too
+    (:func:`truncation_tail`, at the windowed ``s``: the window and the record act on the same response).
+    Returns an :class:`FRFSet` in ``quantity``; with ``a = 0`` and no record this is plain synthesis and
+    conversion."""
     if quantity not in _POWER:
         raise EffectError(f"quantity {quantity!r} is not one of {tuple(_POWER)}")
     a = float(model.meta.get(WINDOW_DECAY_KEY, 0.0)) if decay_per_s is None else float(decay_per_s)
     if not (np.isfinite(a) and a >= 0):
         raise EffectError(f"exponential window decay must be a finite number >= 0 (1/s), got {a!r}")
     f = np.asarray(freq_hz, float)
-    if a == 0.0:
+    record = model.meta.get(RECORD_KEY)
+    if a == 0.0 and not record:
         frf = synthesize(model, f)
         if frf.quantity != quantity:
             frf = replace(frf, H=convert_quantity(frf.H, f, frf.quantity, quantity), quantity=quantity)
         return frf
     s = 2j * np.pi * f + a
-    H = transfer(model, s) * s ** float(_POWER[quantity] - _POWER[model.quantity])
+    if a == 0.0:
+        frf = synthesize(model, f)
+        H = convert_quantity(frf.H, f, frf.quantity, quantity) if frf.quantity != quantity else frf.H
+    else:
+        H = transfer(model, s) * s ** float(_POWER[quantity] - _POWER[model.quantity])
+    if record:
+        H = H - truncation_tail(model, s, quantity, float(record))
     return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=model.outputs, references=model.references)
 
 
@@ -633,10 +674,19 @@ def effect_names() -> tuple[str, ...]:
     return tuple(EFFECTS)
 
 
+#: Known processing of a measurement (applied to the simulation before it is compared, never fitted as a cause).
+PROCESSING: dict[str, Effect] = {e.name: e for e in (
+    Effect("record_length", "modal", apply_record_length, lambda ctx, lines: {}, "record_s",
+           "the finite record: the response is seen for record_s - pretrigger_s after the pulse"),
+)}
+
+
 def _lookup(spec: Mapping) -> tuple[Effect, dict]:
     if not isinstance(spec, Mapping) or "effect" not in spec:
         raise EffectError(f"an effect is a dict {{'effect': NAME, ...parameters}}; got {spec!r}")
     name = spec["effect"]
+    if name in PROCESSING:
+        return PROCESSING[name], {k: v for k, v in spec.items() if k != "effect"}
     if name not in EFFECTS:
         raise EffectError(f"unknown effect {name!r}; the catalogue has {', '.join(EFFECTS)}")
     return EFFECTS[name], {k: v for k, v in spec.items() if k != "effect"}

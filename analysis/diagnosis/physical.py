@@ -18,7 +18,9 @@ candidate modes are paired one to one (``scipy.optimize.linear_sum_assignment`` 
     r_m,k = (1 - MAC(R_k, P_j)) / MAC_TOL
 
 ``FREQ_FLOOR`` (0.2 %) is the accuracy of the model form (mesh, beam theory) below which a
-frequency difference is not a discrepancy; ``MAC_TOL`` (0.05) likewise for shapes. ``chi2 = sum r^2``.
+frequency difference is not a discrepancy; ``MAC_TOL`` (0.1) likewise for shapes. Each residual is
+bounded smoothly, ``c tanh(r / c)`` with ``c = RESIDUAL_CAP`` (10), so one mode the fit could not
+resolve (a close pair merged, a spurious peak) counts as one large error; ``chi2 = sum r^2``.
 
 Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
 cause's search range); a choice (the node of an added mass, the member of a member change) by trying
@@ -51,17 +53,21 @@ from ..modal import ModalModel
 from ..progress import progress
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
-           "fit_cause", "physical_causes", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB", "N_SCREEN", "MAX_MODES",
+           "fit_cause", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB",
+           "N_SCREEN", "MAX_MODES",
            "ADEQUATE_MARGIN_DB", "ADEQUATE_FRACTION", "DISCREPANCY_CHI2"]
 
 FREQ_FLOOR = 0.002
-MAC_TOL = 0.05
+MAC_TOL = 0.1
+#: Residuals are bounded smoothly by this (``c tanh(r / c)``): one mode the fit could not resolve (a close
+#: pair merged by the window's damping, a spurious peak) counts as a large error, not as all of them.
+RESIDUAL_CAP = 10.0
 MIN_GAIN_DB = 3.0
 N_SCREEN = 5
 #: The lowest modes used (the FE model's accuracy and the cost of the search both grow with the order).
 MAX_MODES = 10
 #: Modes whose frequency is not determined by the data (standard deviation above this fraction) are left out.
-MAX_STD_FRACTION = 0.01
+MAX_STD_FRACTION = 0.001
 ADEQUATE_MARGIN_DB = 3.0
 ADEQUATE_FRACTION = 0.8
 #: Mean chi2 per measured mode of the nominal simulation above which the modes disagree (the
@@ -147,6 +153,10 @@ class MeasuredModes:
         keep = keep[np.argsort(f[keep])][:MAX_MODES]
         return cls(freq_hz=f[keep], freq_std_hz=std[keep], shapes=R[:, keep])
 
+    def subset(self, keep: np.ndarray) -> "MeasuredModes":
+        """The modes selected by the mask or indices ``keep``."""
+        return MeasuredModes(self.freq_hz[keep], self.freq_std_hz[keep], self.shapes[:, keep])
+
     @property
     def sigma(self) -> np.ndarray:
         """Relative frequency uncertainty per mode (model-form floor included)."""
@@ -169,15 +179,15 @@ def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, n
 
 
 def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """(K, 2) residuals ``(r_f, r_m)`` per measured mode (module docstring); an unpaired mode gets
-    the residual of a 25 % frequency error and MAC 0."""
+    """(K, 2) residuals ``(r_f, r_m)`` per measured mode (module docstring), each bounded smoothly by
+    ``RESIDUAL_CAP`` (``c tanh(r / c)``); an unpaired mode gets the cap and MAC 0."""
     idx, macs = pair(mm, f, P)
     r = np.empty((mm.freq_hz.size, 2))
     ok = idx >= 0
     r[ok, 0] = (f[idx[ok]] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
-    r[~ok, 0] = 0.25 / mm.sigma[~ok]
+    r[~ok, 0] = RESIDUAL_CAP
     r[:, 1] = (1.0 - macs) / MAC_TOL
-    return r
+    return RESIDUAL_CAP * np.tanh(r / RESIDUAL_CAP)
 
 
 @dataclass
@@ -319,13 +329,20 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
     return base, fits
 
 
-def same_structure(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[bool, str]:
-    """Do the measured modes pair with the simulation's by frequency and MAC? At least half of them
-    must (ratio within ``exp(PAIR_MAX_LOG_RATIO)``, MAC >= ``PAIR_MIN_MAC``)."""
+def paired_well(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Mask of the measured modes that pair with a mode of (f, P) by frequency (ratio within
+    ``exp(PAIR_MAX_LOG_RATIO)``) and MAC (>= ``PAIR_MIN_MAC``)."""
     idx, macs = pair(mm, f, P)
     ok = idx >= 0
     good = np.zeros(mm.freq_hz.size, bool)
     good[ok] = (np.abs(np.log(f[idx[ok]] / mm.freq_hz[ok])) <= PAIR_MAX_LOG_RATIO) & (macs[ok] >= PAIR_MIN_MAC)
+    return good
+
+
+def same_structure(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[bool, str]:
+    """Do the measured modes pair with the simulation's by frequency and MAC? At least half of them
+    must (:func:`paired_well`)."""
+    good = paired_well(mm, f, P)
     n = int(good.sum())
     if 2 * n >= mm.freq_hz.size and n > 0:
         return True, ""

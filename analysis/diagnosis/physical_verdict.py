@@ -4,7 +4,9 @@ Steps, each one able to decide:
 
 1. Measured modes: the automatic LSFD fit of the measurement (or the modes given).
 2. Same structure? Fewer than half of the measured modes pair with the simulation's by frequency
-   and MAC: ``unexplained``, with that reason, and nothing is fitted.
+   and MAC: ``unexplained``, with that reason, and nothing is fitted. Measured modes that pair with
+   no simulated mode (``unpaired_measured_hz``) or stand for a close pair the fit did not resolve
+   (``merged_measured_hz``, :func:`merged_pairs`) are reported and left out of the fit.
 3. Discrepancy? Mean chi2 per mode of the nominal simulation (frequency errors in units of their
    uncertainty with the model-form floor, and shape mismatch) at most ``DISCREPANCY_CHI2`` and the
    typical FRF error within the margin of the noise: nothing to explain here; the FRF-level catalogue
@@ -30,8 +32,8 @@ from ..frf import FRFSet
 from .compare import typical_error_db
 from .effects import predict
 from .physical import (ADEQUATE_FRACTION, ADEQUATE_MARGIN_DB, DISCREPANCY_CHI2, MIN_GAIN_DB, MeasuredModes,
-                       PhysicalSimulation, gain_db, pair, physical_causes, residuals, same_structure, shown_params,
-                       z_score)
+                       PhysicalSimulation, gain_db, pair, paired_well, physical_causes, residuals, same_structure,
+                       shown_params, z_score)
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes"]
 
@@ -62,6 +64,25 @@ def measure_modes(measured: FRFSet) -> MeasuredModes:
     res = fit_auto(measured)
     lf = res.lsfd
     return MeasuredModes.from_model(lf.model, lf.freq_hz_std)
+
+
+#: Simulated modes closer than this (relative) are a close pair that a fit may see as one mode.
+CLOSE_PAIR = 0.02
+
+
+def merged_pairs(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Mask of measured modes that stand for a close pair of simulated modes (within ``CLOSE_PAIR``)
+    of which the fit resolved only one: the other has no measured partner. Such a mode's frequency
+    and shape are a mixture of the two and are not compared."""
+    idx, _ = pair(mm, f, P)
+    used = set(int(j) for j in idx if j >= 0)
+    out = np.zeros(mm.freq_hz.size, bool)
+    for k, j in enumerate(idx):
+        if j < 0:
+            continue
+        near = np.flatnonzero(np.abs(f / f[j] - 1) < CLOSE_PAIR)
+        out[k] = any(int(i) not in used for i in near if i != j)
+    return out
 
 
 def _power(db: float) -> float:
@@ -98,6 +119,15 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     if not same:
         return PhysicalOutcome(decided=True, verdict="unexplained", extended=nominal, error_before_db=before_db,
                                error_after_db=before_db, reason=why, doc={**doc, "same_structure": False})
+    # a measured mode with no counterpart at all (a local mode of something not modelled, a spurious
+    # peak) is reported, not fitted: no change of the catalogue could bring a mode from nowhere
+    good = paired_well(mm, f0, P0)
+    doc["unpaired_measured_hz"] = mm.freq_hz[~good].tolist()
+    merged = merged_pairs(mm, f0, P0)
+    doc["merged_measured_hz"] = mm.freq_hz[merged & good].tolist()
+    mm = mm.subset(good & ~merged)
+    if mm.freq_hz.size < 3:
+        return PhysicalOutcome(decided=False, doc={**doc, "skipped": "fewer than 3 measured modes pair with the simulation's"})
     base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
     doc["chi2_per_mode"] = float(base.mean())
     modes_differ = bool(base.mean() > DISCREPANCY_CHI2)

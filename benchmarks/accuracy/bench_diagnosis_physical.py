@@ -198,8 +198,11 @@ def run_case(spec: dict) -> dict:
         d = diagnose(m, fv.model(None, {}), physical=fv)
         dt = time.perf_counter() - t0
     params = next((c["parameters"] for c in d.causes if c["effect"] == d.verdict), {})
+    phys = [{k: c[k] for k in ("effect", "parameters", "gain_db", "significant", "adequate")}
+            for c in (d.causes if d.causes and d.causes[0].get("kind") == "physical" else d.physical.get("causes", []))]
     out = {"family": spec["family"], "seed": spec["seed"], "truth": truth, "verdict": d.verdict,
-           "parameters": params, "time_s": dt, "reason": d.reason}
+           "parameters": params, "time_s": dt, "reason": d.reason,
+           "physical": {k: v for k, v in d.physical.items() if k != "causes"}, "physical_causes": phys}
     out.update(score(truth, d.verdict, params))
     return out
 
