@@ -242,3 +242,27 @@ def test_measured_points_not_on_the_frame_are_a_clear_error(tmp_path, capsys) ->
                      "--json", str(tmp_path / "d.json")]) == 2
     err = capsys.readouterr().err
     assert "top:42:Z" in err and "not on the frame" in err and "top:0..8" in err
+
+
+def test_another_structure_relabelled_with_frame_points_is_not_the_same_structure() -> None:
+    """A free-free beam's modes (other frequencies, other shapes) labelled with the frame's points: the
+    diagnosis says so and fits nothing, with an FRF-level simulation and with the FE model."""
+    from analysis.diagnosis import diagnose, predict
+
+    fv = FrameVariants(None, OUTS, REFS)
+    rng = np.random.default_rng(8)
+    fz = np.array([22.4, 61.7, 121.0, 200.0, 298.8, 417.3])          # free-free beam: (2n+1)^2 pattern
+    lam = pole_from_fz(fz, np.full(fz.size, 0.004))
+    phi_o, phi_r = rng.standard_normal((len(OUTS), fz.size)), rng.standard_normal((len(REFS), fz.size))
+    R = np.einsum("om,rm->orm", phi_o, phi_r) * 1e-3 / (2j * lam.imag)
+    beam = ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none", outputs=tuple(OUTS),
+                      references=tuple(REFS))
+    f = np.arange(10.0, 460.0, 0.25)
+    measured = predict(beam, f, "accelerance")
+    measured = FRFSet(freq_hz=f, H=measured.H, quantity="accelerance", outputs=tuple(OUTS), references=tuple(REFS))
+    d = diagnose(measured, fv.model(None, {}))
+    assert d.verdict == "unexplained" and d.reason.startswith("not the same structure") and d.causes == []
+    mm = MeasuredModes.from_model(beam)
+    d2 = diagnose(measured, fv.model(None, {}), physical=fv, measured_modes=mm)
+    assert d2.verdict == "unexplained" and d2.reason.startswith("not the same structure")
+    assert d2.physical["same_structure"] is False

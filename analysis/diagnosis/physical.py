@@ -138,7 +138,8 @@ class PhysicalSimulation(Protocol):
 @dataclass(frozen=True)
 class MeasuredModes:
     """Measured modes: natural frequencies (Hz), their standard deviations (Hz), residue vectors
-    ``shapes`` (n_out * n_ref, n_modes) complex, C order over (output, reference)."""
+    ``shapes`` (n_out * n_ref, n_modes) complex, C order over (output, reference); a zero column is a
+    mode known by its frequency only (e.g. a paper's table), paired and compared by frequency."""
 
     freq_hz: np.ndarray
     freq_std_hz: np.ndarray
@@ -171,6 +172,7 @@ def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, n
     if f.size == 0:
         return idx, macs
     M = mac_matrix(mm.shapes, P.astype(complex))
+    M[~np.any(mm.shapes != 0, axis=0)] = 1.0        # modes measured without shapes pair by frequency
     C = np.abs(np.log(f[None, :] / mm.freq_hz[:, None])) / 0.1 + (1.0 - M)
     rows, cols = linear_sum_assignment(C)
     idx[rows] = cols

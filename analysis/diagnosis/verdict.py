@@ -185,6 +185,19 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
     return causes, skipped
 
 
+def _other_structure(comparison: dict) -> str:
+    """A reason when the measured peaks do not pair with the simulation's (fewer than half of at least
+    three pair by frequency and MAC, :func:`analysis.diagnosis.compare.pair_modes`), else ""."""
+    modes = comparison.get("modes") or {}
+    pairs, only = modes.get("pairs", []), modes.get("only_measured", [])
+    n = len(pairs) + len(only)
+    if n >= 3 and 2 * len(pairs) < n:
+        return (f"not the same structure: only {len(pairs)} of the {n} measured resonance peaks pair with the "
+                "simulation's by frequency (within 15 %) and MAC (>= 0.5); check that the measured points are the "
+                "simulation's points and that both describe the same structure")
+    return ""
+
+
 def known_processing(measured: FRFSet) -> tuple:
     """What the measurement's own processing does to the structure's FRFs, as effects applied to the
     simulation before it is compared: the finite record (``meta["record_s"]``, ``meta["pretrigger_s"]``
@@ -248,6 +261,12 @@ def diagnose(
     common: dict[str, Any] = dict(noise_db=noise, comparison=comparison, measured=measured, simulated=sim)
     phys_doc: dict = {}
     partial_reason = ""
+    if physical is None:
+        other = _other_structure(comparison)
+        if other:
+            return Diagnosis(verdict="unexplained", causes=[], error_before_db=comparison["error_db"],
+                             error_after_db=comparison["error_db"], unexplained=[], extended=sim, reason=other,
+                             **common)
     if physical is not None:
         from .physical_verdict import physical_verdict
 

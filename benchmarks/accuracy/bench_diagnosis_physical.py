@@ -12,7 +12,9 @@ Families (``--per-family`` cases each, parameters drawn from a seeded generator)
 
 * ``added_mass``: a steel block (1-5 kg, a cube of two beam elements with consistent mass, its middle
   on joint springs) on a random node of the beam or a column; right if the node is within one element and the mass within 25 %;
-* ``support_stiffness`` / ``joint_stiffness``: rotational springs x 0.03-0.6; right within 10 %;
+* ``support_stiffness``: rotational springs x 0.2-0.6; ``joint_stiffness``: x 0.02-0.1 (the joints are
+  stiff: at x 0.16 no mode moves by more than 0.1 %, below the 0.2 % model-form floor, and such a
+  change is rightly ``none``); right within 10 %;
 * ``member_mass``: one member's area x 1.15-1.4 (explicit section: its axial stiffness changes too);
   right member, factor within 10 %;
 * ``member_stiffness``: one member's second moments x 0.65-0.9; right member, factor within 10 %;
@@ -104,7 +106,7 @@ def make_case(family: str, rng: np.random.Generator) -> tuple[dict, dict]:
         return over, {"cause": family, "point": f"{comp}:{node}", "mass_kg": mass}
     if family in ("support_stiffness", "joint_stiffness"):
         f = float(np.exp(rng.uniform(np.log(0.2), np.log(0.6)))) if family == "support_stiffness" else \
-            float(np.exp(rng.uniform(np.log(0.03), np.log(0.3))))
+            float(np.exp(rng.uniform(np.log(0.02), np.log(0.1))))
         key = "supports" if family == "support_stiffness" else "joints"
         k = list(getattr(cfg, key).stiffness)
         return {key: {"stiffness": k[:3] + [x * f for x in k[3:]]}}, {"cause": family, "factor_rotational": f}
@@ -241,19 +243,19 @@ def score(truth: dict, verdict: str, p: dict) -> dict:
     return {"right": True, "params_ok": bool(ok)}
 
 
-def cases(per_family: int, nulls: int, seed: int = 2026) -> list[dict]:
+def cases(per_family: int, nulls: int, seed: int = 2026, families=FAMILIES) -> list[dict]:
     rng = np.random.default_rng(seed)
     out = []
-    for fam in FAMILIES:
+    for fam in families:
         for _ in range(per_family):
             over, truth = make_case(fam, rng)
             out.append({"family": fam, "overrides": over, "truth": truth, "seed": int(rng.integers(1, 10**6))})
-    for kind in ("seed", "mesh", "window"):
+    for kind in ("seed", "mesh", "window") if nulls else ():
         for _ in range(nulls):
             over, truth, extra = null_case(kind, rng)
             out.append({"family": f"null:{kind}", "overrides": over, "truth": truth, "extra": extra,
                         "seed": int(rng.integers(1, 10**6))})
-    for kind in ("span", "roll"):
+    for kind in ("span", "roll") if nulls else ():
         over, truth, extra = null_case(kind, rng)
         out.append({"family": f"out-of-catalogue:{kind}", "overrides": over, "truth": truth, "extra": extra,
                     "seed": int(rng.integers(1, 10**6))})
@@ -285,8 +287,9 @@ def main() -> None:
     ap.add_argument("--nulls", type=int, default=10, help="cases of each null kind")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="write every case's result")
+    ap.add_argument("--families", default=",".join(FAMILIES), help="comma-separated families to run")
     args = ap.parse_args()
-    todo = cases(args.per_family, args.nulls)
+    todo = cases(args.per_family, args.nulls, families=[f for f in args.families.split(",") if f])
     t0 = time.perf_counter()
     results = []
     with ProcessPoolExecutor(args.workers) as pool:
