@@ -135,9 +135,16 @@ def null_case(kind: str, rng: np.random.Generator) -> tuple[dict, dict, list]:
     if kind == "seed":
         return {}, {"cause": "none"}, []
     if kind == "mesh":
+        def fine(p: str) -> str:
+            c, n, d = p.split(":")
+            return f"{c}:{2 * int(n)}:{d}"
+
+        plan = cfg.test_plan
         return ({"components": {c: {"n_elements": 2 * comp.n_elements} for c, comp in cfg.components.items()},
                  "supports": {"nodes": ["left:0", "right:0"]},
-                 "joints": {"pairs": [["left:20", "top:0"], ["right:20", "top:16"]]}},
+                 "joints": {"pairs": [["left:20", "top:0"], ["right:20", "top:16"]]},
+                 "test_plan": {"sensors": [fine(p) for p in plan.sensors], "reference": fine(plan.reference),
+                               "points": [fine(p) for p in plan.points]}},
                 {"cause": "none", "relabel": 2}, [])
     if kind == "window":
         return {}, {"cause": "none"}, ["--exp-window", "5%"]
