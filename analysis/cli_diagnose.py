@@ -109,8 +109,9 @@ def model_with_correction(model, sim):
 
 
 def time_data_causes(path: str, band: tuple, base=None) -> list:
-    """Time-data causes (:mod:`analysis.diagnosis.timedata`) of a recording's hits, per reference point;
-    [] when the file is not a recording or holds no hits. With ``base`` (the simulation as a receptance
+    """Time-data causes (:mod:`analysis.diagnosis.timedata`) of a recording's accepted hits (those its
+    FRFs were made from; rejected hits changed nothing), per reference point; [] when the file is not
+    a recording or holds no accepted hits. With ``base`` (the simulation as a receptance
     pole-residue model holding the hits' points), each cause also gets its held-out ``gain_db``,
     ``error_before_db``, ``error_after_db``, ``significant`` and ``counts`` from
     :func:`analysis.diagnosis.timedata.diagnose_time_effects` (re-simulated or hits excluded)."""
@@ -124,7 +125,7 @@ def time_data_causes(path: str, band: tuple, base=None) -> list:
     groups: dict = {}
     try:
         with Recording(path) as rec:
-            for h in rec.hits(skip_damaged=True):
+            for h in rec.hits(accepted_only=True, skip_damaged=True):
                 groups.setdefault((h.reference, h.sample_rate_hz, h.data.shape), []).append(h)
     except (RecordingError, OSError) as exc:
         log.warning("time data of %s not read: %s", path, exc)

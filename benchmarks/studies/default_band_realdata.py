@@ -1,0 +1,82 @@
+"""The automatic band (issue 11) on every real dataset of docs/validation.md: what bounds it, and
+whether the automatic fit keeps every pole inside it.
+
+For each dataset the FRFs are loaded over their whole recorded range (no hand-picked band), the
+default band is taken from the data (:func:`analysis.bands.default_band`: the analyser's flat band
+fs/2.56 when the sample rate is known, the hammer's excitation band when force spectra are recorded,
+the coherence when present) and :func:`analysis.pipeline.fit_auto` runs with it. Prints a markdown
+table (the one in docs/validation.md, section "The automatic band on real data").
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/default_band_realdata.py [--data ../shared/data]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from analysis.bands import default_band, upper_limits  # noqa: E402
+from analysis.pipeline import fit_auto  # noqa: E402
+
+
+def _cases(data: Path):
+    from benchmarks.accuracy.validation import (f16_gvt, ladisk_beam, modelab_beam, plate_sweep, pyfrf_5impacts,
+                                                 pyuff_3frf, uliege_plane, unesp_boltedbeam)
+
+    return [
+        ("uliege_meca0062_plane_hammer", lambda: uliege_plane.load(data, band=None)),
+        ("modelab_beam_roving_hammer", lambda: modelab_beam.load(data)),
+        ("ladisk_beam (1 hit)", lambda: ladisk_beam.load_single(data)),
+        ("ladisk_beam (4 hits)", lambda: ladisk_beam.load_multi(data)),
+        ("pyfrf_hammer_5impacts", lambda: pyfrf_5impacts.load(data)),
+        ("f16_gvt_multisine", lambda: f16_gvt.load(data)),
+        ("ladisk_plate_sweep", lambda: plate_sweep.load(data)),
+        ("pyuff_3frf", lambda: pyuff_3frf.load(data)),
+        ("unesp_bert_boltedbeam_subset (0.05 V)", lambda: unesp_boltedbeam.load(data)),
+    ]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
+    args = ap.parse_args()
+    data = Path(args.data)
+    if not data.is_dir():
+        print(f"no data folder {data}: nothing to do", file=sys.stderr)
+        return 2
+    print("| dataset | lines (range Hz) | upper limits from the data [Hz] | default band [Hz] | modes | poles [Hz] | "
+          "all inside | success | fit s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    bad = 0
+    for name, load in _cases(data):
+        try:
+            frf = load()
+        except (OSError, ValueError) as exc:
+            print(f"| {name} | not read: {exc} |")
+            continue
+        f = frf.freq_hz
+        lim = {k: v for k, v in upper_limits(frf).items()}
+        lo, hi = default_band(frf)
+        t0 = time.perf_counter()
+        res = fit_auto(frf)
+        dt = time.perf_counter() - t0
+        fz = np.sort(res.lsfd.freq_hz)
+        inside = bool(np.all((fz >= lo) & (fz <= hi)))
+        bad += not inside
+        lims = ", ".join(f"{k} {v:.4g}" for k, v in lim.items())
+        poles = f"{fz[0]:.4g} .. {fz[-1]:.4g}" if fz.size else "-"
+        print(f"| {name} | {f.size} ({f[0]:.4g}-{f[-1]:.4g}) | {lims} | {lo:.4g}-{hi:.4g} | {fz.size} | {poles} | "
+              f"{'yes' if inside else 'NO'} | {res.success} | {dt:.2f} |", flush=True)
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
