@@ -175,22 +175,26 @@ class FrameVariants:
                           meta={"source": "simulator.physical", "cause": cause, "parameters": dict(params),
                                 "output_shapes": po})
 
-    def converged_below_hz(self, tolerance: float = 0.002, refine: int = 2) -> float:
-        """Frequency (Hz) below which the FE model's natural frequencies have converged with the mesh:
-        every mode of the frame with each member's elements ``refine`` times finer lies within
-        ``tolerance`` (relative) of this model's; the limit lies halfway between the last mode that does
-        and the first that does not. A measurement is compared with the simulation only below it."""
+    def refined(self, refine: int = 2) -> "FrameVariants":
+        """The same frame with every member's elements ``refine`` times finer, at the same measured
+        points (their labels mapped to the finer mesh's nodes)."""
         cfg = self.config
         fine = cfg.with_overrides({
             "components": {c: {"n_elements": refine * comp.n_elements} for c, comp in cfg.components.items()},
             "supports": {"nodes": [self._refined(n, refine) for n in cfg.supports.nodes]},
             "joints": {"pairs": [[self._refined(a, refine), self._refined(b, refine)] for a, b in cfg.joints.pairs]}})
-        top = 2 * cfg.modes.max_freq_hz
-        f0 = FrameVariants(cfg, self.outputs[:1], self.references[:1]).modes(None, {}, top)[0]
-        nodes = {f"{q.component}:{q.node}" for q in map(parse_point, self.outputs[:1])}
-        node = next(iter(nodes))
-        fine_out = [self._refined(node, refine) + ":" + self.outputs[0].split(":")[2]]
-        f1 = FrameVariants(fine, fine_out, fine_out).modes(None, {}, top)[0]
+        return FrameVariants(fine, [self._refined(p, refine) for p in self.outputs],
+                             [self._refined(p, refine) for p in self.references])
+
+    def converged_below_hz(self, tolerance: float = 0.002, refine: int = 2) -> float:
+        """Frequency (Hz) below which the FE model's natural frequencies have converged with the mesh:
+        every mode of the frame with each member's elements ``refine`` times finer (:meth:`refined`)
+        lies within ``tolerance`` (relative) of this model's; the limit lies halfway between the last
+        mode that does and the first that does not. A measurement is compared with the simulation only
+        below it."""
+        top = 2 * self.config.modes.max_freq_hz
+        f0 = self.modes(None, {}, top)[0]
+        f1 = self.refined(refine).modes(None, {}, top)[0]
         n = min(f0.size, f1.size)
         bad = np.flatnonzero(np.abs(f1[:n] / f0[:n] - 1) > tolerance)
         if not bad.size:
@@ -198,10 +202,17 @@ class FrameVariants:
         k = int(bad[0])
         return float(0.5 * (f0[k - 1] + f0[k])) if k > 0 else float(0.5 * f0[0])
 
+    def refined_model(self, refine: int = 2) -> ModalModel:
+        """The receptance model of :meth:`refined` under this model's point labels: held against
+        :meth:`model` it shows the simulation's own discretisation error (the model-form floor below which
+        a measured difference is not evidence of a physical change)."""
+        m = self.refined(refine).model(None, {})
+        return replace(m, outputs=self.outputs, references=self.references)
+
     @staticmethod
     def _refined(node: str, refine: int) -> str:
-        c, i = str(node).split(":")[:2]
-        return f"{c}:{refine * int(i)}"
+        parts = str(node).split(":")
+        return ":".join([parts[0], str(refine * int(parts[1])), *parts[2:]])
 
     # ------------------------------------------------------------------ assembly
     def matrices(self, cause: "str | None", params: Mapping) -> tuple[np.ndarray, np.ndarray]:

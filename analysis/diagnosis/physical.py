@@ -134,6 +134,9 @@ class PhysicalSimulation(Protocol):
 
     def model(self, cause: Optional[str], params: Mapping) -> ModalModel: ...
 
+    # optional: ``refined_model() -> ModalModel``, the same simulation on a finer mesh: what it removes
+    # of the typical error is discretisation, added to the noise level (``noise_db["model_form"]``)
+
 
 @dataclass(frozen=True)
 class MeasuredModes:

@@ -184,10 +184,19 @@ def run_case(spec: dict) -> dict:
             device += f"&config={cfg}"
         pts = POINTS
         if truth.get("relabel"):
+            from acquisition.setup import default_setup
             from analysis.points import parse_point
 
-            pts = tuple(str(p).replace(f"{q.component}:{q.node}:", f"{q.component}:{2 * q.node}:", 1)
-                        for p, q in ((p, parse_point(p)) for p in POINTS))
+            def fine(p: str) -> str:
+                q = parse_point(p)
+                return str(p).replace(f"{q.component}:{q.node}:", f"{q.component}:{2 * q.node}:", 1)
+
+            pts = tuple(map(fine, POINTS))
+            setup = default_setup().to_dict()                 # the sensors at the same places on the finer mesh
+            for ch in setup["channels"]:
+                ch["point"] = fine(ch["point"])
+            (Path(tmp) / "setup.json").write_text(json.dumps(setup))
+            extra = [*extra, "--setup", str(Path(tmp) / "setup.json")]
         rec = Path(tmp) / "rec.h5"
         import contextlib
         import io
