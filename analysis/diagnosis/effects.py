@@ -34,94 +34,52 @@ name                     kind   model extension
 ``mains_hum``            frf    ``H += sum_k A_ok / (1 + j (f - k f0) / width_hz)``, lines at the
                                 harmonics of ``base_hz`` (50 or 60 Hz)
 =======================  =====  ==============================================================
+
+Modules: :mod:`.effect_types` (``Effect``, ``FitContext``, ``EffectError``), :mod:`.processing` (the
+exponential window and the finite record: exact synthesis as measured), :mod:`.mains` (mains lines
+and their cross-validation by harmonics); this module holds the other effects, the registry and
+:func:`predict`.
 """
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace
-from typing import Any, Callable, Mapping, Optional, Sequence
+from dataclasses import replace
+from typing import Callable, Mapping, Optional, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
-from ..modal import ModalModel, pole_from_fz, residual_basis, synthesize, transfer
-from ..errors import ImpactlabError
+from ..modal import ModalModel, pole_from_fz, residual_basis
+from .effect_types import Effect, EffectError, FitContext, check_positive as _check_positive
+from .mains import apply_mains_hum, default_hum_width, fit_mains_hum, held_out_mains_hum, hum_kernels
+from .processing import (RECORD_KEY, WINDOW_DECAY_KEY, apply_exponential_window, apply_record_length,
+                         synthesize_windowed, truncation_tail)
 
 __all__ = [
     "Effect",
     "EFFECTS",
+    "PROCESSING",
     "EffectError",
     "FitContext",
     "predict",
     "effect_names",
     "synthesize_windowed",
+    "truncation_tail",
+    "apply_record_length",
+    "apply_exponential_window",
+    "hum_kernels",
+    "default_hum_width",
+    "held_out_mains_hum",
     "WINDOW_DECAY_KEY",
+    "RECORD_KEY",
 ]
 
 log = logging.getLogger(__name__)
 
 _POWER = QUANTITY_POWER
-WINDOW_DECAY_KEY = "window_decay_per_s"   # model.meta key: summed 1/tau of the exponential windows (1/s)
-RECORD_KEY = "record_after_pulse_s"       # model.meta key: response record length after the hammer pulse (s)
-HUM_BASES_HZ = (50.0, 60.0)
 
 
-class EffectError(ImpactlabError, ValueError):
-    """An effect name or parameter set that cannot be applied (the message says what is expected)."""
-
-
-# --------------------------------------------------------------------------- containers
-@dataclass(frozen=True)
-class FitContext:
-    """What every fitter needs: the measured FRFs, the base model, the line weights and the
-    base prediction (synthesised once).
-
-    measured : FRFSet of the measurement (the band to analyse).
-    base : the simulation as a :class:`ModalModel` (any quantity; converted to the measured one).
-    weights : (n_out, n_ref, n_freq) float >= 0, per-line weights of the squared error.
-    sim : FRFSet, the base prediction at the measured lines, in the measured quantity (with ``prior``).
-    prior : effects already accepted (a second diagnosis stage fits a further effect on top of them).
-    """
-
-    measured: FRFSet
-    base: ModalModel
-    weights: np.ndarray
-    sim: FRFSet
-    prior: tuple = ()
-
-    def effects(self, spec: Mapping) -> list:
-        """The effects already accepted (``prior``) followed by ``spec``."""
-        return [dict(e) for e in self.prior] + [dict(spec)]
-
-    def cost(self, H: np.ndarray, lines: np.ndarray) -> float:
-        """Weighted squared error ``sum w |H_meas - H|^2`` over the boolean mask ``lines``."""
-        e = self.measured.H[..., lines] - H[..., lines]
-        return float(np.sum(self.weights[..., lines] * (e.real ** 2 + e.imag ** 2)))
-
-
-@dataclass(frozen=True)
-class Effect:
-    """One catalogue entry: ``apply(container, params) -> container`` and ``fit(ctx, lines) -> params``.
-
-    kind : "modal" (apply takes/returns a ModalModel) or "frf" (an FRFSet).
-    primary : name of the parameter a test checks (the effect's physical size).
-    needs : meta keys the base model must carry for the effect to be fitted (e.g. shapes).
-    held_out : optional ``held_out(ctx) -> (before, after)``, the effect's own cross-validation when
-        interleaved lines cannot test it (lines at the mains harmonics: see :func:`held_out_mains_hum`).
-    """
-
-    name: str
-    kind: str
-    apply: Callable
-    fit: Callable
-    primary: str
-    description: str
-    needs: tuple = ()
-    held_out: Optional[Callable] = None
-
-
-# --------------------------------------------------------------------------- helpers
 def _model_power(model: ModalModel) -> int:
     return _POWER[model.quantity]
 
@@ -129,13 +87,6 @@ def _model_power(model: ModalModel) -> int:
 def _replace_poles(model: ModalModel, poles: np.ndarray, scale: np.ndarray) -> ModalModel:
     """Model with new poles and residues scaled per mode (scale shape (n_modes,))."""
     return replace(model, poles=np.asarray(poles, complex), residues=model.residues * scale[None, None, :])
-
-
-def _check_positive(name: str, value: Any, what: str) -> float:
-    v = float(value)
-    if not np.isfinite(v) or v <= 0:
-        raise EffectError(f"{what}: parameter {name} must be a positive number, got {value!r}")
-    return v
 
 
 def _fit_scalar(cost: Callable[[float], float], grid: np.ndarray) -> float:
@@ -263,99 +214,6 @@ def fit_damping_change(ctx: FitContext, lines: np.ndarray) -> dict:
     i = int(np.argmin([coarse({"factor": float(np.exp(x))}) for x in grid]))
     g = _fit_scalar(lambda x: cost({"factor": float(np.exp(x))}), grid[max(i - 1, 0):i + 2])
     return {"factor": float(np.exp(g))}
-
-
-def apply_exponential_window(model: ModalModel, params: Mapping) -> ModalModel:
-    """An exponential window ``exp(-t/tau_s)`` (s) on the measured responses.
-
-    The window multiplies the impulse response of the *measured* quantity, so its effect depends on
-    the quantity the model is synthesised in; the model's poles and residues are therefore left as
-    they are and the added decay ``1/tau_s`` (1/s) is recorded in ``meta[WINDOW_DECAY_KEY]`` (several
-    windows add their decays). :func:`predict` then synthesises the exact windowed FRF with
-    :func:`synthesize_windowed`."""
-    tau = float(params.get("tau_s", np.inf))
-    if not (tau > 0 and np.isfinite(tau)):
-        raise EffectError(f"exponential_window: tau_s must be a finite number > 0 (s), got {tau!r}")
-    meta = dict(model.meta)
-    meta[WINDOW_DECAY_KEY] = float(meta.get(WINDOW_DECAY_KEY, 0.0)) + 1.0 / tau
-    return replace(model, meta=meta)
-
-
-def apply_record_length(model: ModalModel, params: Mapping) -> ModalModel:
-    """The finite record of the measurement (known processing, not a catalogue effect): the response
-    is recorded for ``record_s`` (s) from ``pretrigger_s`` (s) before the hammer pulse, so only
-    ``T = record_s - pretrigger_s`` of each impulse response after the pulse is seen. Recorded in
-    ``meta[RECORD_KEY]``; :func:`synthesize_windowed` applies it."""
-    T = float(params.get("record_s", np.nan)) - float(params.get("pretrigger_s", 0.0))
-    if not (np.isfinite(T) and T > 0):
-        raise EffectError(f"record_length: record_s - pretrigger_s must be a positive time (s), got {params!r}")
-    return replace(model, meta={**model.meta, RECORD_KEY: T})
-
-
-def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: float) -> np.ndarray:
-    """What a record of ``record_s`` seconds after the pulse misses of each mode's impulse response
-    in the measured ``quantity``, at the Laplace points ``s`` (rad/s):
-
-        H_T(s) = sum_r N_r / (s - lambda_r) (1 - exp((lambda_r - s) T)) + c.c.,  N_r = R_r lambda_r^(q-p)
-
-    so the tail returned, ``exp(-s T) sum_r N_r exp(lambda_r T) / (s - lambda_r) + c.c.``, is
-    subtracted from the full FRF. At the DFT lines ``exp(-j w_k T_rec) = 1``; the residual terms (mass
-    and stiffness lines, deltas at t = 0) are not truncated. (n_out, n_ref, n_freq) complex."""
-    lam = np.asarray(model.poles, complex)
-    N = np.asarray(model.residues, complex) * (lam ** float(_POWER[quantity] - _POWER[model.quantity]))[None, None, :]
-    g = np.exp(lam * record_s)
-    a = N * g[None, None, :]
-    den = 1.0 / (s[None, :] - lam[:, None])
-    denc = 1.0 / (s[None, :] - np.conj(lam)[:, None])
-    tail = np.einsum("orm,mk->ork", a, den) + np.einsum("orm,mk->ork", np.conj(a), denc)
-    return tail * np.exp(-s * record_s)[None, None, :]
-
-
-def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
-                        decay_per_s: Optional[float] = None) -> FRFSet:
-    """FRFs of ``model`` in ``quantity`` as measured through an exponential window ``exp(-a t)``,
-    ``a = decay_per_s`` (1/s; default ``model.meta[WINDOW_DECAY_KEY]``, 0 without a window).
-
-    Multiplying the impulse response ``h_q(t)`` of the measured quantity q by ``exp(-a t)`` shifts its
-    Laplace transform: ``H_q,w(j w) = H_q(j w + a)``. With the model in form p,
-    ``H_q(s) = s^(q-p) H_p(s)`` and ``H_p(s) = sum_r [R_r / (s - lambda_r) + c.c.] + UR b_U(s) + LR b_L(s)``,
-    so the exact windowed FRF is
-
-        H_q,w(w) = (j w + a)^(q-p) H_p(j w + a).
-
-    Equivalently every pole of the measured quantity's pole-residue model moves by ``-a`` with the same
-    residues (e.g. accelerance from receptance: ``N_r = R_r lambda_r^2`` over ``s - lambda_r``), a
-    constant (feed-through, a delta at t = 0) is unchanged and a term ``c s`` (delta') becomes
-    ``c (s + a)``. Converting the shifted receptance by ``(j w)^(q-p)`` instead errs by about
-    ``(q-p) a / w`` relative. Residual terms are continued as the functions of s they are on the
-    j w axis and shifted alike: ``"physical"`` basis ``(s^p, -s^(p-2))``, ``"paper"`` ``(1, -1/s^2)``
-    (a constant UR is unchanged; LR, a rigid-body/mass line, becomes its windowed version).
-    A fixed FRF term (``meta["frf_correction"]``) is not part of this (see :func:`predict`).
-    With ``meta[RECORD_KEY]`` (:func:`apply_record_length`) the finite record is applied too
-    (:func:`truncation_tail`, at the windowed ``s``: the window and the record act on the same response).
-    Returns an :class:`FRFSet` in ``quantity``; with ``a = 0`` and no record this is plain synthesis and
-    conversion."""
-    if quantity not in _POWER:
-        raise EffectError(f"quantity {quantity!r} is not one of {tuple(_POWER)}")
-    a = float(model.meta.get(WINDOW_DECAY_KEY, 0.0)) if decay_per_s is None else float(decay_per_s)
-    if not (np.isfinite(a) and a >= 0):
-        raise EffectError(f"exponential window decay must be a finite number >= 0 (1/s), got {a!r}")
-    f = np.asarray(freq_hz, float)
-    record = model.meta.get(RECORD_KEY)
-    if a == 0.0 and not record:
-        frf = synthesize(model, f)
-        if frf.quantity != quantity:
-            frf = replace(frf, H=convert_quantity(frf.H, f, frf.quantity, quantity), quantity=quantity)
-        return frf
-    s = 2j * np.pi * f + a
-    if a == 0.0:
-        frf = synthesize(model, f)
-        H = convert_quantity(frf.H, f, frf.quantity, quantity) if frf.quantity != quantity else frf.H
-    else:
-        H = transfer(model, s) * s ** float(_POWER[quantity] - _POWER[model.quantity])
-    if record:
-        H = H - truncation_tail(model, s, quantity, float(record))
-    return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=model.outputs, references=model.references)
 
 
 def fit_exponential_window(ctx: FitContext, lines: np.ndarray) -> dict:
@@ -591,141 +449,6 @@ def fit_sensitivity_error(ctx: FitContext, lines: np.ndarray) -> dict:
     worst = int(np.argmax(np.abs(np.log(np.abs(g) + 1e-300))))
     return {"gains": {lab: float(v) for lab, v in zip(ctx.measured.outputs, g)},
             "channel": ctx.measured.outputs[worst], "gain": float(g[worst])}
-
-
-def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """(harmonic frequencies (Hz), kernels (n_harm, n_freq)) of the line shape 1/(1 + j (f - fk)/width);
-    ``width_hz = 0``: interference synchronous with the record, on the one line nearest each harmonic
-    (kernel 1 there, 0 elsewhere; harmonics more than half a line outside the lines are dropped)."""
-    f = np.asarray(freq_hz, float)
-    fk = base_hz * np.arange(1, int(f[-1] // base_hz) + 1)
-    if width_hz == 0:
-        df = float(np.median(np.diff(f)))
-        fk = fk[(fk >= f[0] - df / 2) & (fk <= f[-1] + df / 2)]
-        K = np.zeros((fk.size, f.size), complex)
-        K[np.arange(fk.size), np.argmin(np.abs(f[None, :] - fk[:, None]), axis=1)] = 1.0
-        return fk, K
-    fk = fk[fk >= f[0] - 2 * width_hz]
-    return fk, 1.0 / (1 + 1j * (f[None, :] - fk[:, None]) / width_hz)
-
-
-def default_hum_width(freq_hz: np.ndarray) -> float:
-    """Line width (Hz) of the hum model: two line spacings."""
-    return 2.0 * float(np.median(np.diff(freq_hz)))
-
-
-def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
-    """Add lines at the harmonics of ``base_hz``: ``amplitudes[o][r][k] = [re, im]`` (FRF units)."""
-    f0 = _check_positive("base_hz", params.get("base_hz"), "mains_hum") + float(params.get("offset_hz", 0.0))
-    w = params.get("width_hz")
-    width = default_hum_width(frf.freq_hz) if w is None else float(w)
-    if not (np.isfinite(width) and width >= 0):
-        raise EffectError(f"mains_hum: width_hz must be >= 0 (0: single lines), got {w!r}")
-    fk, K = hum_kernels(frf.freq_hz, f0, width)
-    A = np.asarray(params.get("amplitudes"), float)
-    if A.shape != frf.H.shape[:2] + (fk.size, 2):
-        raise EffectError(f"mains_hum: amplitudes must have shape {frf.H.shape[:2] + (fk.size, 2)} "
-                          f"(outputs, references, harmonics {list(fk)}, [re, im]); got {A.shape}")
-    Ac = A[..., 0] + 1j * A[..., 1]
-    return replace(frf, H=frf.H + np.einsum("ork,kf->orf", Ac, K))
-
-
-def _hum_amplitudes(ctx: FitContext, E: np.ndarray, K: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, float]:
-    """Weighted least-squares amplitudes (n_out, n_ref, n_harm, [re, im]) of the kernels ``K`` fitted to
-    the error ``E`` on ``lines``, and the remaining weighted cost."""
-    no, nr = E.shape[:2]
-    A = np.zeros((no, nr, K.shape[0], 2))
-    total = 0.0
-    Kl = K[:, lines]
-    for o in range(no):
-        for r in range(nr):
-            sw = np.sqrt(ctx.weights[o, r, lines])
-            M = (Kl * sw).T
-            x, *_ = np.linalg.lstsq(M, E[o, r, lines] * sw, rcond=None)
-            A[o, r, :, 0], A[o, r, :, 1] = x.real, x.imag
-            total += float(np.sum(np.abs(E[o, r, lines] * sw - M @ x) ** 2))
-    return A, total
-
-
-def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float]]:
-    """(mains base Hz, offset Hz, width Hz) tried: 50 and 60 Hz, offsets up to +-0.5 Hz in eighths of a
-    line, single-line (synchronous, width 0) and leakage-broadened (two lines wide) line shapes."""
-    df = float(np.median(np.diff(f)))
-    offsets = np.arange(-0.5, 0.5 + 1e-9, df / 8) if df / 8 < 0.5 else np.zeros(1)
-    offsets = offsets[np.argsort(np.abs(offsets), kind="stable")]
-    return [(b, float(o), w) for b in HUM_BASES_HZ for w in (0.0, default_hum_width(f)) for o in offsets]
-
-
-def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
-    """Base (50/60 Hz), offset, line shape and per-harmonic amplitudes: the candidate of
-    :func:`_hum_candidates` with the least weighted cost on ``lines`` (the amplitudes are linear); an
-    offset or a line width must pay for itself (the cost of fitting noise with them)."""
-    f = ctx.measured.freq_hz
-    E = ctx.measured.H - ctx.sim.H
-    best = None
-    df = float(np.median(np.diff(f)))
-    # a candidate less simple than the best so far (offset, then line width) must lower the cost by more
-    # than fitting noise would: 4 x the typical line's cost per harmonic and FRF
-    line_cost = float(np.median(ctx.weights[..., lines] * np.abs(E[..., lines]) ** 2))
-    n_frf = E.shape[0] * E.shape[1]
-    for base, off, width in _hum_candidates(f):
-        fk, K = hum_kernels(f, base + off, width)
-        # a harmonic is fitted only where the lines next to it are given: its tails alone would fit noise
-        seen = np.array([np.any(lines & (np.abs(f - x) <= max(2 * width, df / 2))) for x in fk], bool)
-        if not seen.any():
-            continue
-        K = np.where(seen[:, None], K, 0.0)
-        A, total = _hum_amplitudes(ctx, E, K, lines)
-        complexity = (off != 0.0) + (width != 0.0)
-        if best is None or total + 4 * line_cost * n_frf * int(seen.sum()) * max(complexity - best[5], 0) < best[0]:
-            best = (total, base, off, width, A, complexity)
-    if best is None:
-        return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(f),
-                "amplitudes": np.zeros(ctx.measured.H.shape[:2] + (0, 2)).tolist()}
-    return {"base_hz": best[1], "offset_hz": best[2], "width_hz": best[3], "amplitudes": best[4].tolist()}
-
-
-def held_out_mains_hum(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
-    """Cross-validation of ``mains_hum`` by harmonics, not by interleaved lines (interference on single
-    lines is invisible to a fold that does not hold those lines, and its amplitudes are free per
-    harmonic): the harmonics are split into odd and even ones; the line shape, base and offset are
-    fitted with the lines near the other fold's harmonics left out, and must *predict where* the held-out
-    harmonics lie and their line shape; only their amplitudes are then fitted on the lines next to them
-    (the training harmonics' on the training lines), and the line shapes' tails are predicted on every
-    line. Every line is scored (before, after) in each fold: a model that only removes the noise of the
-    few lines it points at gains about ``4.34 n_harm / n_lines`` dB (hundredths), while interference at
-    the predicted lines gives tens of dB."""
-    m = ctx.measured
-    f = m.freq_hz
-    df = float(np.median(np.diff(f)))
-    E = m.H - ctx.sim.H
-    w_all = ctx.weights
-    before, after = [], []
-    for parity in (0, 1):
-        # the held-out harmonics' neighbourhoods (both mains bases) are left out of the fit
-        near = np.zeros(f.size, bool)
-        for b in HUM_BASES_HZ:
-            k = np.arange(1, int(f[-1] // b) + 2)
-            for fh in b * k[(k % 2) == parity]:
-                near |= np.abs(f - fh) <= 0.6 + 2 * df
-        params = fit_mains_hum(ctx, ~near)
-        fk, K = hum_kernels(f, params["base_hz"] + params["offset_hz"], params["width_hz"])
-        order = np.rint(fk / params["base_hz"]).astype(int)
-        test_k = (order % 2) == parity
-        if not test_k.any():
-            before.append((w_all * np.abs(E) ** 2).ravel())
-            after.append((w_all * np.abs(E) ** 2).ravel())
-            continue
-        R = E.copy()
-        # the training harmonics' amplitudes from the training lines, the held-out harmonics' from the
-        # lines next to them; each line shape's tails are then predicted on every line
-        for sel, on in ((~test_k, ~near), (test_k, np.any(np.abs(K[test_k]) > 1e-3, axis=0) & near)):
-            if sel.any() and on.any():
-                A, _ = _hum_amplitudes(ctx, E, K[sel], on)
-                R = R - np.einsum("ork,kf->orf", A[..., 0] + 1j * A[..., 1], K[sel])
-        before.append((w_all * np.abs(E) ** 2).ravel())
-        after.append((w_all * np.abs(R) ** 2).ravel())
-    return np.concatenate(before), np.concatenate(after)
 
 
 # --------------------------------------------------------------------------- registry

@@ -1,0 +1,77 @@
+"""What every effect of the catalogue shares: the entry type, the fitting context, the error."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Optional
+
+import numpy as np
+
+from ..errors import ImpactlabError
+from ..frf import FRFSet
+from ..modal import ModalModel
+
+__all__ = ["Effect", "EffectError", "FitContext", "check_positive"]
+
+
+class EffectError(ImpactlabError, ValueError):
+    """An effect name or parameter set that cannot be applied (the message says what is expected)."""
+
+
+# --------------------------------------------------------------------------- containers
+@dataclass(frozen=True)
+class FitContext:
+    """What every fitter needs: the measured FRFs, the base model, the line weights and the
+    base prediction (synthesised once).
+
+    measured : FRFSet of the measurement (the band to analyse).
+    base : the simulation as a :class:`ModalModel` (any quantity; converted to the measured one).
+    weights : (n_out, n_ref, n_freq) float >= 0, per-line weights of the squared error.
+    sim : FRFSet, the base prediction at the measured lines, in the measured quantity (with ``prior``).
+    prior : effects already accepted (a second diagnosis stage fits a further effect on top of them).
+    """
+
+    measured: FRFSet
+    base: ModalModel
+    weights: np.ndarray
+    sim: FRFSet
+    prior: tuple = ()
+
+    def effects(self, spec: Mapping) -> list:
+        """The effects already accepted (``prior``) followed by ``spec``."""
+        return [dict(e) for e in self.prior] + [dict(spec)]
+
+    def cost(self, H: np.ndarray, lines: np.ndarray) -> float:
+        """Weighted squared error ``sum w |H_meas - H|^2`` over the boolean mask ``lines``."""
+        e = self.measured.H[..., lines] - H[..., lines]
+        return float(np.sum(self.weights[..., lines] * (e.real ** 2 + e.imag ** 2)))
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One catalogue entry: ``apply(container, params) -> container`` and ``fit(ctx, lines) -> params``.
+
+    kind : "modal" (apply takes/returns a ModalModel) or "frf" (an FRFSet).
+    primary : name of the parameter a test checks (the effect's physical size).
+    needs : meta keys the base model must carry for the effect to be fitted (e.g. shapes).
+    held_out : optional ``held_out(ctx) -> (before, after)``, the effect's own cross-validation when
+        interleaved lines cannot test it (lines at the mains harmonics: see :func:`held_out_mains_hum`).
+    """
+
+    name: str
+    kind: str
+    apply: Callable
+    fit: Callable
+    primary: str
+    description: str
+    needs: tuple = ()
+    held_out: Optional[Callable] = None
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def check_positive(name: str, value: Any, what: str) -> float:
+    v = float(value)
+    if not np.isfinite(v) or v <= 0:
+        raise EffectError(f"{what}: parameter {name} must be a positive number, got {value!r}")
+    return v

@@ -1,0 +1,113 @@
+"""Known processing of a measurement, applied to a simulation so that it is seen as measured: the
+exponential window on the responses and the finite record after the pulse (exact, per mode, in the
+measured quantity)."""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Mapping, Optional
+
+import numpy as np
+
+from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
+from ..modal import ModalModel, synthesize, transfer
+from .effect_types import EffectError
+
+__all__ = ["WINDOW_DECAY_KEY", "RECORD_KEY", "apply_exponential_window", "apply_record_length", "truncation_tail",
+           "synthesize_windowed"]
+
+_POWER = QUANTITY_POWER
+WINDOW_DECAY_KEY = "window_decay_per_s"   # model.meta key: summed 1/tau of the exponential windows (1/s)
+RECORD_KEY = "record_after_pulse_s"       # model.meta key: response record length after the hammer pulse (s)
+
+
+def apply_exponential_window(model: ModalModel, params: Mapping) -> ModalModel:
+    """An exponential window ``exp(-t/tau_s)`` (s) on the measured responses.
+
+    The window multiplies the impulse response of the *measured* quantity, so its effect depends on
+    the quantity the model is synthesised in; the model's poles and residues are therefore left as
+    they are and the added decay ``1/tau_s`` (1/s) is recorded in ``meta[WINDOW_DECAY_KEY]`` (several
+    windows add their decays). :func:`predict` then synthesises the exact windowed FRF with
+    :func:`synthesize_windowed`."""
+    tau = float(params.get("tau_s", np.inf))
+    if not (tau > 0 and np.isfinite(tau)):
+        raise EffectError(f"exponential_window: tau_s must be a finite number > 0 (s), got {tau!r}")
+    meta = dict(model.meta)
+    meta[WINDOW_DECAY_KEY] = float(meta.get(WINDOW_DECAY_KEY, 0.0)) + 1.0 / tau
+    return replace(model, meta=meta)
+
+
+def apply_record_length(model: ModalModel, params: Mapping) -> ModalModel:
+    """The finite record of the measurement (known processing, not a catalogue effect): the response
+    is recorded for ``record_s`` (s) from ``pretrigger_s`` (s) before the hammer pulse, so only
+    ``T = record_s - pretrigger_s`` of each impulse response after the pulse is seen. Recorded in
+    ``meta[RECORD_KEY]``; :func:`synthesize_windowed` applies it."""
+    T = float(params.get("record_s", np.nan)) - float(params.get("pretrigger_s", 0.0))
+    if not (np.isfinite(T) and T > 0):
+        raise EffectError(f"record_length: record_s - pretrigger_s must be a positive time (s), got {params!r}")
+    return replace(model, meta={**model.meta, RECORD_KEY: T})
+
+
+def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: float) -> np.ndarray:
+    """What a record of ``record_s`` seconds after the pulse misses of each mode's impulse response
+    in the measured ``quantity``, at the Laplace points ``s`` (rad/s):
+
+        H_T(s) = sum_r N_r / (s - lambda_r) (1 - exp((lambda_r - s) T)) + c.c.,  N_r = R_r lambda_r^(q-p)
+
+    so the tail returned, ``exp(-s T) sum_r N_r exp(lambda_r T) / (s - lambda_r) + c.c.``, is
+    subtracted from the full FRF. At the DFT lines ``exp(-j w_k T_rec) = 1``; the residual terms (mass
+    and stiffness lines, deltas at t = 0) are not truncated. (n_out, n_ref, n_freq) complex."""
+    lam = np.asarray(model.poles, complex)
+    N = np.asarray(model.residues, complex) * (lam ** float(_POWER[quantity] - _POWER[model.quantity]))[None, None, :]
+    g = np.exp(lam * record_s)
+    a = N * g[None, None, :]
+    den = 1.0 / (s[None, :] - lam[:, None])
+    denc = 1.0 / (s[None, :] - np.conj(lam)[:, None])
+    tail = np.einsum("orm,mk->ork", a, den) + np.einsum("orm,mk->ork", np.conj(a), denc)
+    return tail * np.exp(-s * record_s)[None, None, :]
+
+
+def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
+                        decay_per_s: Optional[float] = None) -> FRFSet:
+    """FRFs of ``model`` in ``quantity`` as measured through an exponential window ``exp(-a t)``,
+    ``a = decay_per_s`` (1/s; default ``model.meta[WINDOW_DECAY_KEY]``, 0 without a window).
+
+    Multiplying the impulse response ``h_q(t)`` of the measured quantity q by ``exp(-a t)`` shifts its
+    Laplace transform: ``H_q,w(j w) = H_q(j w + a)``. With the model in form p,
+    ``H_q(s) = s^(q-p) H_p(s)`` and ``H_p(s) = sum_r [R_r / (s - lambda_r) + c.c.] + UR b_U(s) + LR b_L(s)``,
+    so the exact windowed FRF is
+
+        H_q,w(w) = (j w + a)^(q-p) H_p(j w + a).
+
+    Equivalently every pole of the measured quantity's pole-residue model moves by ``-a`` with the same
+    residues (e.g. accelerance from receptance: ``N_r = R_r lambda_r^2`` over ``s - lambda_r``), a
+    constant (feed-through, a delta at t = 0) is unchanged and a term ``c s`` (delta') becomes
+    ``c (s + a)``. Converting the shifted receptance by ``(j w)^(q-p)`` instead errs by about
+    ``(q-p) a / w`` relative. Residual terms are continued as the functions of s they are on the
+    j w axis and shifted alike: ``"physical"`` basis ``(s^p, -s^(p-2))``, ``"paper"`` ``(1, -1/s^2)``
+    (a constant UR is unchanged; LR, a rigid-body/mass line, becomes its windowed version).
+    A fixed FRF term (``meta["frf_correction"]``) is not part of this (see :func:`predict`).
+    With ``meta[RECORD_KEY]`` (:func:`apply_record_length`) the finite record is applied too
+    (:func:`truncation_tail`, at the windowed ``s``: the window and the record act on the same response).
+    Returns an :class:`FRFSet` in ``quantity``; with ``a = 0`` and no record this is plain synthesis and
+    conversion."""
+    if quantity not in _POWER:
+        raise EffectError(f"quantity {quantity!r} is not one of {tuple(_POWER)}")
+    a = float(model.meta.get(WINDOW_DECAY_KEY, 0.0)) if decay_per_s is None else float(decay_per_s)
+    if not (np.isfinite(a) and a >= 0):
+        raise EffectError(f"exponential window decay must be a finite number >= 0 (1/s), got {a!r}")
+    f = np.asarray(freq_hz, float)
+    record = model.meta.get(RECORD_KEY)
+    if a == 0.0 and not record:
+        frf = synthesize(model, f)
+        if frf.quantity != quantity:
+            frf = replace(frf, H=convert_quantity(frf.H, f, frf.quantity, quantity), quantity=quantity)
+        return frf
+    s = 2j * np.pi * f + a
+    if a == 0.0:
+        frf = synthesize(model, f)
+        H = convert_quantity(frf.H, f, frf.quantity, quantity) if frf.quantity != quantity else frf.H
+    else:
+        H = transfer(model, s) * s ** float(_POWER[quantity] - _POWER[model.quantity])
+    if record:
+        H = H - truncation_tail(model, s, quantity, float(record))
+    return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=model.outputs, references=model.references)
