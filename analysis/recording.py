@@ -12,11 +12,8 @@ the session and a replay compute FRFs from bit-identical inputs.
 """
 from __future__ import annotations
 
-import datetime as _dt
 import json
 import logging
-import time
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator, Optional, Sequence
@@ -27,6 +24,10 @@ from analysis.frf import FRFSet
 from analysis.spectra import WindowSettings, excitation_limit_hz
 
 from analysis.errors import RecordingError
+
+from .recording_schema import (CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _DAMAGE, _as_str, _h5py, counts_crc32,
+                               scale_counts)
+from .recording_writer import RecordingWriter
 
 __all__ = [
     "SCHEMA",
@@ -45,284 +46,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-SCHEMA = "impactlab-recording"
-SCHEMA_VERSION = 1
-CHANNEL_FIELDS = ("name", "point", "direction", "quantity", "sensitivity", "sensitivity_unit", "unit",
-                  "range_v", "coupling", "iepe")
-
-
-#: what h5py, json and numpy raise on damaged file content; the reader turns it into RecordingError
-_DAMAGE = (OSError, KeyError, ValueError, TypeError, RuntimeError, IndexError, AttributeError, OverflowError,
-           MemoryError)
-
-
-def _h5py():
-    import h5py  # local import keeps module import cheap and side-effect free
-
-    return h5py
-
-
-def scale_counts(counts: np.ndarray, eu_per_count: np.ndarray) -> np.ndarray:
-    """Engineering units from raw counts: ``counts[ch, n] * eu_per_count[ch]`` (float64, new array)."""
-    c = np.asarray(counts)
-    s = np.asarray(eu_per_count, dtype=float)
-    return c.astype(np.float64) * s[:, None]
-
-
-def counts_crc32(counts: np.ndarray) -> int:
-    """CRC-32 (zlib) of the counts as little-endian int16 in C order."""
-    return int(zlib.crc32(np.ascontiguousarray(counts, dtype="<i2").tobytes()) & 0xFFFFFFFF)
-
-
-def _now_iso() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
-
-
-def _channel_table(channels: Sequence[dict]):
-    h5py = _h5py()
-    s = h5py.string_dtype()
-    dt = np.dtype([("name", s), ("point", s), ("direction", s), ("quantity", s), ("sensitivity", "f8"),
-                   ("sensitivity_unit", s), ("unit", s), ("range_v", "f8"), ("coupling", s), ("iepe", "?")])
-    rows = []
-    for ch in channels:
-        rows.append((str(ch.get("name", "")), str(ch.get("point", "")), str(ch.get("direction", "")),
-                     str(ch.get("quantity", "")), float(ch.get("sensitivity", np.nan)),
-                     str(ch.get("sensitivity_unit", "")), str(ch.get("unit", "")),
-                     float(ch.get("range_v", np.nan)), str(ch.get("coupling", "")), bool(ch.get("iepe", False))))
-    return np.array(rows, dtype=dt)
-
-
-class RecordingWriter:
-    """Write a schema-v1 recording as the test goes (see module doc). Use as a context manager.
-
-    Parameters
-    ----------
-    path : output file (created; an existing file is replaced only with ``overwrite=True``).
-    instrument : the analyser's identity (vendor, model, serial, firmware...).
-    setup : ``AcquisitionSetup.to_dict()`` (stored as JSON).
-    channels : one dict per analyser channel with the keys of :data:`CHANNEL_FIELDS`.
-    windows : the window settings used for the FRFs.
-    plan : the test plan (kind "roving_hammer"/"roving_accelerometer", points...), stored as JSON.
-    """
-
-    def __init__(
-        self,
-        path: "str | Path",
-        *,
-        instrument: dict,
-        setup: dict,
-        channels: Sequence[dict],
-        windows: WindowSettings,
-        plan: Optional[dict] = None,
-        software: str = "impactlab",
-        overwrite: bool = False,
-    ) -> None:
-        h5py = _h5py()
-        self.path = Path(path)
-        if self.path.exists() and not overwrite:
-            raise RecordingError(f"{self.path} exists: choose another --out file or delete it first")
-        try:
-            self._f = h5py.File(self.path, "w")
-        except OSError as exc:
-            raise RecordingError(f"cannot create recording {self.path}: {exc}") from None
-        f = self._f
-        f.attrs["schema"] = SCHEMA
-        f.attrs["schema_version"] = SCHEMA_VERSION
-        f.attrs["created_utc"] = _now_iso()
-        f.attrs["software"] = software
-        g = f.create_group("instrument")
-        g.attrs["json"] = json.dumps(instrument, default=str)
-        for k, v in instrument.items():
-            if isinstance(v, (str, int, float, bool)):
-                g.attrs[k] = v
-        s = f.create_group("setup")
-        s.attrs["json"] = json.dumps(setup, default=str)
-        s.create_dataset("channels", data=_channel_table(channels))
-        f.create_group("windows").attrs["json"] = json.dumps(windows.to_dict())
-        f.attrs["plan_json"] = json.dumps(plan or {}, default=str)
-        f.create_group("hits")
-        f.create_group("frf")
-        ev = f.create_group("events")
-        sdt = h5py.string_dtype()
-        ev.create_dataset("time_unix_s", shape=(0,), maxshape=(None,), dtype="f8", chunks=(256,))
-        ev.create_dataset("level", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
-        ev.create_dataset("message", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
-        self._n_hits = 0
-        f.flush()
-
-    @classmethod
-    def resume(cls, path: "str | Path") -> "RecordingWriter":
-        """Reopen an existing recording to append to it (``capture --resume``).
-
-        Hits cut short by a crash (no ``complete`` attribute) are removed; new hits are numbered
-        after the last complete one. Raises :class:`RecordingError` when the file is not a
-        recording this version writes or cannot be opened for writing."""
-        h5py = _h5py()
-        verify_recording(path)  # in a child process: damage (even a libhdf5 crash) becomes RecordingError
-        self = cls.__new__(cls)
-        self.path = Path(path)
-        try:
-            self._f = h5py.File(self.path, "r+")
-        except OSError as exc:
-            raise RecordingError(f"cannot open {self.path} for appending ({exc}); copy it and resume the copy, or "
-                                 "start a new recording") from None
-        try:
-            hits = self._f["hits"]
-            last = -1
-            for name in sorted(hits.keys()):
-                if not hits[name].attrs.get("complete", False):
-                    log.warning("%s: removing hit %s cut short by the crash", self.path, name)
-                    del hits[name]
-                else:
-                    last = max(last, int(name))
-            self._n_hits = last + 1
-            if "closed_utc" in self._f.attrs:
-                del self._f.attrs["closed_utc"]
-            self._f.flush()
-        except _DAMAGE as exc:
-            self._f.close()
-            raise RecordingError(f"{self.path} is damaged and cannot be resumed ({type(exc).__name__}: {exc})") from None
-        return self
-
-    # -- writing -------------------------------------------------------------------------------
-    @property
-    def n_hits(self) -> int:
-        return self._n_hits
-
-    def log(self, level: str, message: str) -> None:
-        """Append an event (time, level, message) and flush."""
-        ev = self._f["events"]
-        n = ev["time_unix_s"].shape[0]
-        for name, value in (("time_unix_s", time.time()), ("level", str(level)), ("message", str(message))):
-            ev[name].resize((n + 1,))
-            ev[name][n] = value
-        self._f.flush()
-
-    def write_hit(
-        self,
-        *,
-        counts: np.ndarray,
-        eu_per_count: "Sequence[float] | np.ndarray",
-        volts_per_count: "Sequence[float] | np.ndarray",
-        trigger_index: int,
-        sample_rate_hz: float,
-        sequence: int,
-        timestamp: float,
-        measurement: int,
-        point: str,
-        reference: str,
-        outputs: Sequence[str],
-        force_channel: int,
-        response_channels: Sequence[int],
-        overload: "Sequence[bool] | np.ndarray",
-        accepted: bool,
-        reasons: Sequence[str] = (),
-        check: Optional[dict] = None,
-    ) -> int:
-        """Write one hit and flush; returns its index. ``counts`` int16 (n_ch, n)."""
-        c = np.asarray(counts)
-        if c.dtype != np.int16 or c.ndim != 2:
-            raise RecordingError(f"hit counts must be int16 of shape (n_channels, n); got {c.dtype} {c.shape}")
-        idx = self._n_hits
-        g = self._f["hits"].create_group(f"{idx:06d}")
-        g.create_dataset("counts", data=c)
-        a = g.attrs
-        a["eu_per_count"] = np.asarray(eu_per_count, dtype=float)
-        a["volts_per_count"] = np.asarray(volts_per_count, dtype=float)
-        a["trigger_index"] = int(trigger_index)
-        a["sample_rate_hz"] = float(sample_rate_hz)
-        a["sequence"] = int(sequence)
-        a["timestamp"] = float(timestamp)
-        a["measurement"] = int(measurement)
-        a["point"] = str(point)
-        a["reference"] = str(reference)
-        a["outputs"] = json.dumps([str(o) for o in outputs])
-        a["force_channel"] = int(force_channel)
-        a["response_channels"] = np.asarray(list(response_channels), dtype=np.int64)
-        a["overload"] = np.asarray(list(overload), dtype=bool)
-        a["accepted"] = bool(accepted)
-        a["reasons"] = json.dumps(list(reasons))
-        a["check_json"] = json.dumps(check or {}, default=float)
-        a["crc32"] = counts_crc32(c)
-        a["complete"] = True  # written last: a hit cut short by a crash lacks it
-        self._n_hits += 1
-        self._f.flush()
-        return idx
-
-    def withdraw_hit(self, index: int, reason: str) -> None:
-        """Mark an accepted hit as not accepted after all (an operator's undo), adding ``reason``; flush."""
-        name = f"{int(index):06d}"
-        if name not in self._f["hits"]:
-            raise RecordingError(f"{self.path} has no hit {index} to withdraw")
-        a = self._f["hits"][name].attrs
-        a["accepted"] = False  # first: a crash between the two writes leaves the hit out, not in
-        a["reasons"] = json.dumps(json.loads(_as_str(a["reasons"])) + [str(reason)])
-        self._f.flush()
-
-    def write_frf(
-        self,
-        measurement: int,
-        *,
-        point: str,
-        freq_hz: np.ndarray,
-        H1: np.ndarray,
-        H2: np.ndarray,
-        coherence: np.ndarray,
-        Gff: np.ndarray,
-        Gxx: np.ndarray,
-        Gfx: np.ndarray,
-        outputs: Sequence[str],
-        reference: str,
-        n_averages: int,
-        hits: Sequence[int],
-        quantity: str,
-        unit: str,
-        windows: WindowSettings,
-        exp_window_tau_s: Optional[float],
-        sample_rate_hz: Optional[float] = None,
-    ) -> None:
-        """Write (or replace) the FRF results of one measurement point and flush.
-
-        H1, H2, coherence, Gxx, Gfx: (n_out, n_freq); Gff: (n_freq,); ``sample_rate_hz`` (Hz) of the
-        hits they come from (stored so that readers never recompute it).
-        """
-        grp = self._f["frf"]
-        name = f"m{int(measurement):03d}"
-        if name in grp:
-            del grp[name]
-        g = grp.create_group(name)
-        for key, val in (("freq_hz", freq_hz), ("H1", H1), ("H2", H2), ("coherence", coherence),
-                         ("Gff", Gff), ("Gxx", Gxx), ("Gfx", Gfx)):
-            g.create_dataset(key, data=np.asarray(val))
-        a = g.attrs
-        a["measurement"] = int(measurement)
-        a["point"] = str(point)
-        a["outputs"] = json.dumps([str(o) for o in outputs])
-        a["reference"] = str(reference)
-        a["n_averages"] = int(n_averages)
-        a["hits"] = np.asarray(list(hits), dtype=np.int64)
-        a["quantity"] = str(quantity)
-        a["unit"] = str(unit)
-        a["windows_json"] = json.dumps(windows.to_dict())
-        a["exp_window_tau_s"] = float("nan") if exp_window_tau_s is None else float(exp_window_tau_s)
-        a["sample_rate_hz"] = float("nan") if sample_rate_hz is None else float(sample_rate_hz)
-        self._f.flush()
-
-    def set_attr(self, key: str, value: Any) -> None:
-        """Set a root attribute (str, number or bool) and flush."""
-        self._f.attrs[str(key)] = value
-        self._f.flush()
-
-    def close(self) -> None:
-        if self._f.id.valid:
-            self._f.attrs["closed_utc"] = _now_iso()
-            self._f.close()
-
-    def __enter__(self) -> "RecordingWriter":
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
 
 @dataclass
@@ -592,13 +315,6 @@ class Recording:
         self.close()
 
 
-def _as_str(v: Any) -> str:
-    if isinstance(v, bytes):
-        return v.decode("utf-8", "replace")
-    return str(v)
-
-
-#: longest :func:`verify_recording` lets the reading child work (s)
 VERIFY_TIMEOUT_S = 300.0
 
 

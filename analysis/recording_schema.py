@@ -1,0 +1,66 @@
+"""The recording's schema constants and the helpers its writer and reader share (``docs/recording-format.md``)."""
+from __future__ import annotations
+
+import datetime as _dt
+import zlib
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "CHANNEL_FIELDS", "scale_counts", "counts_crc32"]
+
+
+SCHEMA = "impactlab-recording"
+SCHEMA_VERSION = 1
+CHANNEL_FIELDS = ("name", "point", "direction", "quantity", "sensitivity", "sensitivity_unit", "unit",
+                  "range_v", "coupling", "iepe")
+
+
+#: what h5py, json and numpy raise on damaged file content; the reader turns it into RecordingError
+_DAMAGE = (OSError, KeyError, ValueError, TypeError, RuntimeError, IndexError, AttributeError, OverflowError,
+           MemoryError)
+
+
+def _h5py():
+    import h5py  # local import keeps module import cheap and side-effect free
+
+    return h5py
+
+
+def scale_counts(counts: np.ndarray, eu_per_count: np.ndarray) -> np.ndarray:
+    """Engineering units from raw counts: ``counts[ch, n] * eu_per_count[ch]`` (float64, new array)."""
+    c = np.asarray(counts)
+    s = np.asarray(eu_per_count, dtype=float)
+    return c.astype(np.float64) * s[:, None]
+
+
+def counts_crc32(counts: np.ndarray) -> int:
+    """CRC-32 (zlib) of the counts as little-endian int16 in C order."""
+    return int(zlib.crc32(np.ascontiguousarray(counts, dtype="<i2").tobytes()) & 0xFFFFFFFF)
+
+
+def _now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
+def _channel_table(channels: Sequence[dict]):
+    h5py = _h5py()
+    s = h5py.string_dtype()
+    dt = np.dtype([("name", s), ("point", s), ("direction", s), ("quantity", s), ("sensitivity", "f8"),
+                   ("sensitivity_unit", s), ("unit", s), ("range_v", "f8"), ("coupling", s), ("iepe", "?")])
+    rows = []
+    for ch in channels:
+        rows.append((str(ch.get("name", "")), str(ch.get("point", "")), str(ch.get("direction", "")),
+                     str(ch.get("quantity", "")), float(ch.get("sensitivity", np.nan)),
+                     str(ch.get("sensitivity_unit", "")), str(ch.get("unit", "")),
+                     float(ch.get("range_v", np.nan)), str(ch.get("coupling", "")), bool(ch.get("iepe", False))))
+    return np.array(rows, dtype=dt)
+
+
+def _as_str(v: Any) -> str:
+    if isinstance(v, bytes):
+        return v.decode("utf-8", "replace")
+    return str(v)
+
+
+#: longest :func:`verify_recording` lets the reading child work (s)
