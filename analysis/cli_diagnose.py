@@ -114,7 +114,7 @@ def time_data_causes(path: str, band: tuple, base=None) -> list:
     a recording or holds no accepted hits. With ``base`` (the simulation as a receptance
     pole-residue model holding the hits' points), each cause also gets its held-out ``gain_db``,
     ``error_before_db``, ``error_after_db``, ``significant`` and ``counts`` from
-    :func:`analysis.diagnosis.timedata.diagnose_time_effects` (re-simulated or hits excluded)."""
+    :func:`analysis.diagnosis.timedata_gain.diagnose_time_effects` (re-simulated or hits excluded)."""
     from .inputs import detect_format
     from .diagnosis.timedata import diagnose_hits
 
@@ -149,7 +149,7 @@ def _time_gains(force, resp, fs, band, base, outputs, ref, flags) -> dict:
     """Held-out gains of the time-data effects per effect name ({} when the simulation cannot be used)."""
     from dataclasses import replace
 
-    from .diagnosis.timedata import diagnose_time_effects
+    from .diagnosis.timedata_gain import diagnose_time_effects
 
     try:
         oi = [list(base.outputs).index(o) for o in outputs]

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from analysis.diagnosis.effects import predict
-from analysis.diagnosis.timedata import diagnose_time_effects, windowed_accelerance
+from analysis.diagnosis.timedata_gain import diagnose_time_effects, windowed_accelerance
 from simulator.stand import TestStand
 from simulator.time_effects import (TIME_EFFECTS, TIME_TOLERANCES, NonlinearStand, draw_time_effect, simulate_hits,
                                     time_primary_error)

@@ -100,7 +100,7 @@ def table(rows: list[dict]) -> str:
 
 def run_timedata(per_effect: int, seed: int) -> list[dict]:
     """Blind time-data cases (module docstring)."""
-    from analysis.diagnosis.timedata import diagnose_time_effects
+    from analysis.diagnosis.timedata_gain import diagnose_time_effects
     from simulator.stand import TestStand
     from simulator.time_effects import TIME_EFFECTS, draw_time_effect, simulate_hits, time_primary_error
 
