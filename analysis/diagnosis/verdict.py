@@ -200,6 +200,17 @@ def _other_structure(comparison: dict) -> str:
     return ""
 
 
+def _below_model_form(causes: list) -> None:
+    """With the FE model as simulation, a frequency scaling smaller than the model form's accuracy
+    (:data:`analysis.diagnosis.physical.FREQ_FLOOR`) is not evidence of a change: not significant."""
+    from .physical import FREQ_FLOOR
+
+    for c in causes:
+        if c["effect"] == "stiffness_shift" and c["significant"] and abs(float(c["parameters"]["factor"]) - 1) < FREQ_FLOOR:
+            c["significant"] = False
+            c["evidence"] += f"; a frequency change below the model's accuracy ({100 * FREQ_FLOOR:.1f} %)"
+
+
 def known_processing(measured: FRFSet) -> tuple:
     """What the measurement's own processing does to the structure's FRFs, as effects applied to the
     simulation before it is compared: the finite record (``meta["record_s"]``, ``meta["pretrigger_s"]``
@@ -291,12 +302,15 @@ def diagnose(
                              extended=outcome.extended, combined=outcome.combined, reason=outcome.reason,
                              physical=phys_doc, **common)
         partial_reason = outcome.reason
+        names = [n for n in names if n != "mass_loading"]     # the physical cause of that name covers it
         if outcome.causes:
             # fitted, none named: listed with the physical stage, on its own (mode-level) gain scale, and
             # their FRF-level versions are not tried again
             phys_doc = {**phys_doc, "causes": outcome.causes}
             names = [n for n in names if n not in ("stiffness_shift", "mass_loading")]
     causes, skipped = _stage(ctx, names, z_min, min_gain_db)
+    if physical is not None:
+        _below_model_form(causes)
     error_before = causes[0]["error_before_db"] if causes else comparison["error_db"]
     sig = [c for c in causes if c["significant"]]
     combined = []
