@@ -116,12 +116,13 @@ def test_mains_interference_not_made_by_the_catalogue_formula(base, base_hz, off
 
 def test_single_line_spikes_of_noise_are_not_mains() -> None:
     """The harmonic cross-validation gains nothing from noise: a null with the mains lines' noise only."""
-    from analysis.diagnosis.effects import FitContext, held_out_mains_hum, predict
     from analysis.diagnosis.compare import line_weights
+    from analysis.diagnosis.effects import FitContext, predict
+    from analysis.diagnosis.mains import held_out_by_harmonics
 
     bm = base_model(None, OUTS, REFS)
     m = _measure(bm, [], 61)
     w = line_weights(m)
     sim = predict(bm, m.freq_hz, m.quantity, outputs=m.outputs, references=m.references)
-    before, after = held_out_mains_hum(FitContext(measured=m, base=bm, weights=w, sim=sim))
+    before, after = held_out_by_harmonics(FitContext(measured=m, base=bm, weights=w, sim=sim))
     assert 10 * np.log10(before.mean() / after.mean()) < 0.1

@@ -11,7 +11,7 @@ from ..frf import FRFSet
 from .effect_types import EffectError, FitContext, check_positive as _check_positive
 
 __all__ = ["HUM_BASES_HZ", "hum_kernels", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
-           "held_out_mains_hum"]
+           "held_out_mains_hum", "held_out_by_harmonics"]
 
 HUM_BASES_HZ = (50.0, 60.0)
 
@@ -108,16 +108,25 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
     return {"base_hz": best[1], "offset_hz": best[2], "width_hz": best[3], "amplitudes": best[4].tolist()}
 
 
-def held_out_mains_hum(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
-    """Cross-validation of ``mains_hum`` by harmonics, not by interleaved lines (interference on single
+def held_out_mains_hum(ctx: FitContext) -> "tuple[np.ndarray, np.ndarray] | None":
+    """The cross-validation of ``mains_hum``: by harmonics (:func:`held_out_by_harmonics`) when the fit
+    on all lines chose single lines (width 0); None (the default interleaved folds) for lines with a
+    width, which neighbouring lines test well."""
+    if fit_mains_hum(ctx, np.ones(ctx.measured.freq_hz.size, bool))["width_hz"] != 0.0:
+        return None
+    return held_out_by_harmonics(ctx)
+
+
+def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
+    """Cross-validation of mains lines by harmonics, not by interleaved lines (interference on single
     lines is invisible to a fold that does not hold those lines, and its amplitudes are free per
     harmonic): the harmonics are split into odd and even ones; the line shape, base and offset are
-    fitted with the lines near the other fold's harmonics left out, and must *predict where* the held-out
-    harmonics lie and their line shape; only their amplitudes are then fitted on the lines next to them
-    (the training harmonics' on the training lines), and the line shapes' tails are predicted on every
-    line. Every line is scored (before, after) in each fold: a model that only removes the noise of the
-    few lines it points at gains about ``4.34 n_harm / n_lines`` dB (hundredths), while interference at
-    the predicted lines gives tens of dB."""
+    fitted with the lines near the other fold's harmonics left out, and must *predict where* the
+    held-out harmonics lie and their line shape; only their amplitudes are then fitted on the lines
+    next to them (the training harmonics' on the training lines), and the line shapes' tails are
+    predicted on every line. Every line is scored (before, after) in each fold: a model that only
+    removes the noise of the few lines it points at gains about ``4.34 n_harm / n_lines`` dB
+    (hundredths), while interference at the predicted lines gives tens of dB."""
     m = ctx.measured
     f = m.freq_hz
     df = float(np.median(np.diff(f)))

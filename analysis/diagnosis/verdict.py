@@ -120,8 +120,9 @@ def _folds(n: int) -> list[tuple[np.ndarray, np.ndarray]]:
 def _held_out(ctx: FitContext, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Per line/FRF weighted squared errors (before, after) on held-out lines, both folds."""
     eff = EFFECTS[name]
-    if eff.held_out is not None:
-        return eff.held_out(ctx)
+    own = eff.held_out(ctx) if eff.held_out is not None else None
+    if own is not None:
+        return own
     before, after = [], []
     m = ctx.measured
     for train, test in _folds(m.freq_hz.size):
