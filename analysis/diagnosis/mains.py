@@ -14,6 +14,9 @@ __all__ = ["HUM_BASES_HZ", "hum_kernels", "default_hum_width", "apply_mains_hum"
            "held_out_mains_hum", "held_out_by_harmonics"]
 
 HUM_BASES_HZ = (50.0, 60.0)
+#: Largest departure of the mains frequency from its nominal value that is looked for (Hz): grids hold
+#: their frequency within about +-0.2 Hz; a wider search would let a "mains line" sit on a structural mode.
+MAX_OFFSET_HZ = 0.2
 
 
 def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float) -> tuple[np.ndarray, np.ndarray]:
@@ -71,10 +74,11 @@ def _hum_amplitudes(ctx: FitContext, E: np.ndarray, K: np.ndarray, lines: np.nda
 
 
 def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float]]:
-    """(mains base Hz, offset Hz, width Hz) tried: 50 and 60 Hz, offsets up to +-0.5 Hz in eighths of a
-    line, single-line (synchronous, width 0) and leakage-broadened (two lines wide) line shapes."""
+    """(mains base Hz, offset Hz, width Hz) tried: 50 and 60 Hz, offsets up to +-``MAX_OFFSET_HZ`` in
+    eighths of a line, single-line (synchronous, width 0) and leakage-broadened (two lines wide) line
+    shapes."""
     df = float(np.median(np.diff(f)))
-    offsets = np.arange(-0.5, 0.5 + 1e-9, df / 8) if df / 8 < 0.5 else np.zeros(1)
+    offsets = np.arange(-MAX_OFFSET_HZ, MAX_OFFSET_HZ + 1e-9, df / 8) if df / 8 < MAX_OFFSET_HZ else np.zeros(1)
     offsets = offsets[np.argsort(np.abs(offsets), kind="stable")]
     return [(b, float(o), w) for b in HUM_BASES_HZ for w in (0.0, default_hum_width(f)) for o in offsets]
 
