@@ -163,6 +163,18 @@ def _time_gains(force, resp, fs, band, base, outputs, ref, flags) -> dict:
     return {c["effect"]: {k: c[k] for k in keys} for c in d["causes"]}
 
 
+def _hit_noise(path: str, measured) -> dict:
+    """``{"hits": dB}``: the noise of a recording's FRFs from the scatter of its hits ({} otherwise)."""
+    from .diagnosis.compare import line_weights
+    from .diagnosis.hit_noise import hit_scatter_noise_db
+    from .inputs import detect_format
+
+    if detect_format(path) != "recording":
+        return {}
+    level = hit_scatter_noise_db(path, measured, line_weights(measured))
+    return {} if level is None else {"hits": level}
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError, default_band
@@ -199,7 +211,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 measured = measured.band(float(measured.freq_hz[0]), top)
         outs, refs = common_points(measured, base)
         measured = measured.select(outs, refs)
-        diag = diagnose(measured, base, effects=effects, physical=physical)
+        diag = diagnose(measured, base, effects=effects, physical=physical,
+                        extra_noise_db=_hit_noise(args.measured, measured))
     except (InputError, EffectError, ValueError, FitError) as exc:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2

@@ -233,6 +233,7 @@ def diagnose(
     effects: Optional[Sequence[str]] = None,
     physical: "Optional[PhysicalSimulation]" = None,
     measured_modes: "Optional[MeasuredModes]" = None,
+    extra_noise_db: Optional[dict] = None,
     z_min: float = Z_MIN,
     min_gain_db: float = MIN_GAIN_DB,
     none_margin_db: float = NONE_MARGIN_DB,
@@ -249,6 +250,9 @@ def diagnose(
     differ beyond the model's accuracy, the physical causes are fitted and a cause is named only if it
     is significant (held-out gain) and adequate (brings the FRF error near the noise); otherwise the
     FRF-level catalogue is tried as without ``physical``.
+
+    ``extra_noise_db``: further noise estimates (dB, same scale), e.g. ``{"hits": ...}`` from the scatter
+    of a recording's hits (:func:`analysis.diagnosis.hit_noise.hit_scatter_noise_db`); the largest counts.
 
     Further stages: while the extended model still leaves the typical error more than
     ``none_margin_db`` above the noise, the remaining effects are fitted on top of the accepted ones
@@ -270,7 +274,8 @@ def diagnose(
                   references=measured.references)
     ctx = FitContext(measured=measured, base=base, weights=w, sim=sim, prior=prior)
     noise = noise_level(measured, w)
-    noise_db = max(noise.values())   # with coherence, the larger of the two estimates
+    noise.update({k: float(v) for k, v in (extra_noise_db or {}).items() if v is not None})
+    noise_db = max(noise.values())   # with coherence (or the hits' scatter), the largest estimate
     if physical is not None and hasattr(physical, "refined_model"):
         # the simulation's own discretisation error: what a finer mesh alone removes of the typical error
         # is not evidence of a physical change; the level is raised by it ("model_form")

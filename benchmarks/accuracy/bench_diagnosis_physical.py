@@ -213,7 +213,11 @@ def run_case(spec: dict) -> dict:
         lo, hi = default_band(m)
         fv = FrameVariants(None, m.outputs, m.references)
         m = m.band(lo, min(hi, fv.converged_below_hz()))
-        d = diagnose(m, fv.model(None, {}), physical=fv)
+        from analysis.diagnosis.compare import line_weights
+        from analysis.diagnosis.hit_noise import hit_scatter_noise_db
+
+        hits_db = hit_scatter_noise_db(rec, m, line_weights(m)) if not truth.get("relabel") else None
+        d = diagnose(m, fv.model(None, {}), physical=fv, extra_noise_db={"hits": hits_db})
         dt = time.perf_counter() - t0
     params = next((c["parameters"] for c in d.causes if c["effect"] == d.verdict), {})
     phys = [{k: c[k] for k in ("effect", "parameters", "gain_db", "significant", "adequate")}
