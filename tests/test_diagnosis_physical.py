@@ -220,6 +220,23 @@ def test_unchanged_frame_captured_with_an_exponential_window_is_none(tmp_path) -
     doc = _capture_and_diagnose(tmp_path, {}, seed=23, extra=("--exp-window", "5%"))
     assert doc["verdict"] == "none"
     assert doc["physical"]["discrepancy"] == {"modes": False, "frfs": False}
+    # the hits' own scatter is one of the noise estimates, on the same scale as the others
+    assert abs(doc["noise_db"]["hits"] - doc["noise_db"]["difference"]) < 6.0
+
+
+def test_hit_scatter_needs_two_hits_per_point(tmp_path) -> None:
+    """With one hit per point the scatter of the hits says nothing: no estimate."""
+    from acquisition.cli_capture import main as capture
+    from analysis.diagnosis.compare import line_weights
+    from analysis.diagnosis.hit_noise import hit_scatter_noise_db
+    from analysis.inputs import load_input
+
+    rec = tmp_path / "one.h5"
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert capture(["--device", "sim://?seed=5", "--out", str(rec), "--points", "right:6:-X,top:4:Z", "--hits", "1",
+                        "--auto", "-q"]) == 0
+    m = load_input(rec).band(10.0, 500.0)
+    assert hit_scatter_noise_db(rec, m, line_weights(m)) is None
 
 
 def test_a_change_outside_the_catalogue_is_unexplained(tmp_path) -> None:
