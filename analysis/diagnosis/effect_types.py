@@ -5,12 +5,13 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Optional
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from ..errors import ImpactlabError
 from ..frf import FRFSet
 from ..modal import ModalModel
 
-__all__ = ["Effect", "EffectError", "FitContext", "check_positive"]
+__all__ = ["Effect", "EffectError", "FitContext", "check_positive", "fit_scalar"]
 
 
 class EffectError(ImpactlabError, ValueError):
@@ -76,3 +77,14 @@ def check_positive(name: str, value: Any, what: str) -> float:
     if not np.isfinite(v) or v <= 0:
         raise EffectError(f"{what}: parameter {name} must be a positive number, got {value!r}")
     return v
+
+
+def fit_scalar(cost: Callable[[float], float], grid: np.ndarray) -> float:
+    """Minimise a 1-D cost: best grid point, then bounded Brent between its neighbours."""
+    vals = np.array([cost(x) for x in grid])
+    i = int(np.nanargmin(vals))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    if hi <= lo:
+        return float(grid[i])
+    res = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6 * max(abs(hi), 1e-12)})
+    return float(res.x) if res.fun <= vals[i] else float(grid[i])
