@@ -29,7 +29,7 @@ parameters is also fitted with each alone (the other at its nominal value): nest
 that predicts best (leave one mode out) wins.
 
 Cross-validation: leave one mode out. Each measured mode is predicted by the cause fitted to the
-other modes (the choice searched again inside the fold among the ``N_SCREEN`` best options of the
+other modes (the choice searched again inside the fold among the ``N_SCREEN_FOLD`` best options of the
 full fit, and the parameters refitted), so a cause that only bends to fit some modes predicts the
 left-out mode badly. ``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal
 simulation's. A cause is significant when ``gain_db >= MIN_GAIN_DB``.
@@ -54,7 +54,7 @@ from ..progress import progress
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
            "fit_cause", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB",
-           "N_SCREEN", "MAX_MODES",
+           "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
            "ADEQUATE_MARGIN_DB", "ADEQUATE_FRACTION", "DISCREPANCY_CHI2"]
 
 FREQ_FLOOR = 0.002
@@ -64,6 +64,8 @@ MAC_TOL = 0.1
 RESIDUAL_CAP = 10.0
 MIN_GAIN_DB = 3.0
 N_SCREEN = 5
+#: Options searched again inside each leave-one-mode-out fold (the best of the full fit).
+N_SCREEN_FOLD = 3
 #: The lowest modes used (the FE model's accuracy and the cost of the search both grow with the order).
 MAX_MODES = 10
 #: Modes whose frequency is not determined by the data (standard deviation above this fraction) are left out.
@@ -321,7 +323,7 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
         best: Optional[PhysicalFit] = None
         for free in _variants(cause):
             p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
-            options = [o for _, o in ranked[:N_SCREEN]] if ranked else None
+            options = [o for _, o in ranked[:N_SCREEN_FOLD]] if ranked else None
             cv = _cross_validate(sim, cause, free, mm, fmax, options, p)
             edge = tuple(s.name for s in cause.params if s.name in free and s.at_edge(float(p[s.name])))
             fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
