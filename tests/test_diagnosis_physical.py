@@ -283,3 +283,22 @@ def test_another_structure_relabelled_with_frame_points_is_not_the_same_structur
     d2 = diagnose(measured, fv.model(None, {}), physical=fv, measured_modes=mm)
     assert d2.verdict == "unexplained" and d2.reason.startswith("not the same structure")
     assert d2.physical["same_structure"] is False
+
+
+def test_a_mass_at_one_sensor_is_an_added_mass_at_its_node() -> None:
+    """FRFs made directly by the FE model with 0.3 kg more at ONE accelerometer (a lumped mass, no rotary
+    inertia: not the diagnosis' added-mass model), 0.5 % noise: named added_mass at that sensor's node."""
+    from analysis.diagnosis import diagnose
+    from simulator.effects import add_frf_noise
+
+    cfg = FrameConfig.load()
+    masses = _sensor_masses(cfg)
+    masses["top:4"] += 0.3
+    f = np.arange(8.0, 500.0, 0.25)
+    measured = add_frf_noise(FrameModel.from_config(cfg, masses).analytic_frf(OUTS, REFS, f), np.random.default_rng(3),
+                             relative=0.005)
+    fv = FrameVariants(cfg, OUTS, REFS)
+    d = diagnose(measured, fv.model(None, {}), physical=fv)
+    assert d.verdict == "added_mass", d.reason
+    p = d.causes[0]["parameters"]
+    assert p["point"] == "top:4" and p["mass_kg"] == pytest.approx(0.3, rel=0.05)
