@@ -78,8 +78,8 @@ def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float]]:
     eighths of a line, single-line (synchronous, width 0) and leakage-broadened (two lines wide) line
     shapes."""
     df = float(np.median(np.diff(f)))
-    offsets = np.arange(-MAX_OFFSET_HZ, MAX_OFFSET_HZ + 1e-9, df / 8) if df / 8 < MAX_OFFSET_HZ else np.zeros(1)
-    offsets = offsets[np.argsort(np.abs(offsets), kind="stable")]
+    steps = np.arange(df / 8, MAX_OFFSET_HZ + 1e-9, df / 8)
+    offsets = np.concatenate([[0.0], np.ravel(np.column_stack([steps, -steps]))])   # 0, +-1, +-2, ... eighths
     return [(b, float(o), w) for b in HUM_BASES_HZ for w in (0.0, default_hum_width(f)) for o in offsets]
 
 
