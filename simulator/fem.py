@@ -43,7 +43,7 @@ from analysis.frf import QUANTITIES, QUANTITY_POWER, FRFSet
 from analysis.modal import ModalModel, pole_from_fz
 from analysis.points import Point, parse_point
 
-from .config import FrameConfig, SectionConfig
+from .config import ComponentConfig, FrameConfig, SectionConfig
 from analysis.errors import ImpactlabError
 
 __all__ = [
@@ -53,6 +53,8 @@ __all__ = [
     "beam_mass_local",
     "rotation_matrix",
     "assemble_beam",
+    "member_nodes_xyz",
+    "stamp_spring",
     "FrameModel",
     "ModeSet",
     "ModelError",
@@ -209,6 +211,27 @@ def assemble_beam(
     return K, M
 
 
+def member_nodes_xyz(comp: ComponentConfig) -> np.ndarray:
+    """Coordinates (n_elements + 1, 3) m of a member's nodes, evenly from ``start_m`` to ``end_m``."""
+    start, end = np.asarray(comp.start_m, float), np.asarray(comp.end_m, float)
+    t = np.linspace(0.0, 1.0, comp.n_elements + 1)
+    return start[None, :] + t[:, None] * (end - start)[None, :]
+
+
+def stamp_spring(K: np.ndarray, node_a: int, node_b: "int | None", k6: "Sequence[float] | np.ndarray") -> None:
+    """Add six springs ``k6`` (3 x N/m, 3 x N m/rad) to ``K`` in place: from node ``node_a`` to ground
+    (``node_b`` None) or between nodes ``node_a`` and ``node_b`` (``+k`` on both diagonals, ``-k``
+    between them)."""
+    k = np.asarray(k6, float)
+    da = 6 * node_a + np.arange(6)
+    K[da, da] += k
+    if node_b is not None:
+        db = 6 * node_b + np.arange(6)
+        K[db, db] += k
+        K[da, db] -= k
+        K[db, da] -= k
+
+
 @dataclass(frozen=True)
 class ModeSet:
     """Modes of the frame: natural frequencies ``freq_hz`` (Hz), damping ratios ``damping`` (-),
@@ -274,9 +297,7 @@ class FrameModel:
         offset = 0
         for name, comp in cfg.components.items():
             sp = section_properties(cfg.sections[comp.section])
-            start, end = np.asarray(comp.start_m, float), np.asarray(comp.end_m, float)
-            t = np.linspace(0.0, 1.0, comp.n_elements + 1)
-            xyz = start[None, :] + t[:, None] * (end - start)[None, :]
+            xyz = member_nodes_xyz(comp)
             k, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg)
             blocks_K.append(k)
             blocks_M.append(m)
@@ -296,7 +317,8 @@ class FrameModel:
             model._add_lumped_mass(label, mass)
         return model
 
-    def _node(self, key: str) -> int:
+    def node(self, key: str) -> int:
+        """Index of the node ``component:node`` (a point label's direction, if any, is ignored)."""
         parts = str(key).split(":")
         try:
             comp, node = parts[0], int(parts[1])
@@ -313,22 +335,15 @@ class FrameModel:
         return "nodes are " + ", ".join(f"{c}:0..{n}" for c, n in comps.items())
 
     def _add_ground_spring(self, node: str, k6: Sequence[float]) -> None:
-        dofs = 6 * self._node(node) + np.arange(6)
-        self.K[dofs, dofs] += np.asarray(k6, float)
+        stamp_spring(self.K, self.node(node), None, k6)
 
     def _add_joint_spring(self, a: str, b: str, k6: Sequence[float]) -> None:
-        da = 6 * self._node(a) + np.arange(6)
-        db = 6 * self._node(b) + np.arange(6)
-        k = np.asarray(k6, float)
-        self.K[da, da] += k
-        self.K[db, db] += k
-        self.K[da, db] -= k
-        self.K[db, da] -= k
+        stamp_spring(self.K, self.node(a), self.node(b), k6)
 
     def _add_lumped_mass(self, label: str, mass_kg: float) -> None:
         if mass_kg < 0:
             raise ModelError(f"added mass at {label} is {mass_kg} kg; masses must be >= 0")
-        dofs = 6 * self._node(label) + np.arange(3)
+        dofs = 6 * self.node(label) + np.arange(3)
         self.M[dofs, dofs] += mass_kg
         self._modes = None
 

@@ -45,7 +45,7 @@ from analysis.modal import ModalModel, pole_from_fz
 from analysis.points import parse_point
 
 from .config import FrameConfig
-from .fem import FrameModel, ModelError, assemble_beam, section_properties
+from .fem import FrameModel, ModelError, assemble_beam, member_nodes_xyz, section_properties, stamp_spring
 
 __all__ = ["FrameVariants", "CAUSES"]
 
@@ -101,9 +101,7 @@ class FrameVariants:
         self._M: dict[str, np.ndarray] = {}
         for name, comp in cfg.components.items():
             sp = section_properties(cfg.sections[comp.section])
-            start, end = np.asarray(comp.start_m, float), np.asarray(comp.end_m, float)
-            t = np.linspace(0.0, 1.0, comp.n_elements + 1)
-            xyz = start[None, :] + t[:, None] * (end - start)[None, :]
+            xyz = member_nodes_xyz(comp)
             k_all, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg)
             k_rest, _ = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3,
                                       replace(sp, Iy=0.0, Iz=0.0), comp.roll_deg)
@@ -121,19 +119,14 @@ class FrameVariants:
                 k = np.zeros(6)
                 k[axes] = np.asarray(k6, float)[axes]
                 for a, b in pairs:
-                    da = 6 * self._node(a) + np.arange(6)
-                    K[da, da] += k
-                    if b is not None:
-                        db = 6 * self._node(b) + np.arange(6)
-                        K[db, db] += k
-                        K[da, db] -= k
-                        K[db, da] -= k
+                    stamp_spring(K, self.frame.node(a), None if b is None else self.frame.node(b), k)
                 self._springs[(kind, part)] = K
         index = self.frame.node_index
         self.nodes = tuple(f"{c}:{i}" for (c, i) in sorted(index, key=lambda k: index[k]))
         sens = cfg.sensors
         self.sensor_nodes = tuple(dict.fromkeys(f"{q.component}:{q.node}" for q in map(parse_point, self.outputs)))
         self.sensor_mass_kg = float(sens.accelerometer.mass_kg) if sens.mass_loading else 0.0
+        self._refined_frames: dict[int, FrameVariants] = {}
 
     # ------------------------------------------------------------------ protocol of the diagnosis
     def causes(self) -> tuple[CauseSpec, ...]:
@@ -166,8 +159,7 @@ class FrameVariants:
         f = np.sqrt(w2) / (2 * np.pi)
         zeta = self.config.damping.ratios(f)
         lam = pole_from_fz(f, zeta)
-        po = np.array([s * phi[d] for d, s in self._out])
-        pr = np.array([s * phi[d] for d, s in self._ref])
+        po, pr = self._shapes_at(phi)
         pp = np.einsum("om,rm->orm", po, pr)
         R = pp / (2j * np.imag(lam))[None, None, :]
         return ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none",
@@ -177,14 +169,18 @@ class FrameVariants:
 
     def refined(self, refine: int = 2) -> "FrameVariants":
         """The same frame with every member's elements ``refine`` times finer, at the same measured
-        points (their labels mapped to the finer mesh's nodes)."""
+        points (their labels mapped to the finer mesh's nodes); built once per ``refine``."""
+        if refine in self._refined_frames:
+            return self._refined_frames[refine]
         cfg = self.config
         fine = cfg.with_overrides({
             "components": {c: {"n_elements": refine * comp.n_elements} for c, comp in cfg.components.items()},
             "supports": {"nodes": [self._refined(n, refine) for n in cfg.supports.nodes]},
             "joints": {"pairs": [[self._refined(a, refine), self._refined(b, refine)] for a, b in cfg.joints.pairs]}})
-        return FrameVariants(fine, [self._refined(p, refine) for p in self.outputs],
-                             [self._refined(p, refine) for p in self.references])
+        frame = FrameVariants(fine, [self._refined(p, refine) for p in self.outputs],
+                              [self._refined(p, refine) for p in self.references])
+        self._refined_frames[refine] = frame
+        return frame
 
     def converged_below_hz(self, tolerance: float = 0.002, refine: int = 2) -> float:
         """Frequency (Hz) below which the FE model's natural frequencies have converged with the mesh:
@@ -219,20 +215,24 @@ class FrameVariants:
         """K (N/m, N m/rad) and M (kg, kg m^2) of the frame changed by ``cause`` with ``params``."""
         p = dict(params)
         E = float(p.get("stiffness_factor", 1.0)) if cause == "stiffness_shift" else 1.0
-        K = sum((E * self._K_rest[c] + E * self._bend_factor(cause, p, c) * self._K_bend[c]) for c in self.components)
-        M = sum(self._mass_factor(cause, p, c) * self._M[c] for c in self.components)
+        n = self.frame.n_dof
+        K, M = np.zeros((n, n)), np.zeros((n, n))
+        for c in self.components:
+            K += E * self._K_rest[c]
+            K += E * self._bend_factor(cause, p, c) * self._K_bend[c]
+            M += self._mass_factor(cause, p, c) * self._M[c]
         for kind in ("support", "joint"):
             ft, fr = 1.0, 1.0
             if cause == f"{kind}_stiffness":
                 ft, fr = float(p.get("factor_translational", 1.0)), float(p.get("factor_rotational", 1.0))
-            K = K + ft * self._springs[(kind, "translational")] + fr * self._springs[(kind, "rotational")]
-        M = np.array(M, copy=True)
+            K += ft * self._springs[(kind, "translational")]
+            K += fr * self._springs[(kind, "rotational")]
         sensor_mass = float(p["mass_kg"]) if cause == "mass_loading" else self.sensor_mass_kg
         for node in self.sensor_nodes:
             self._lump(M, node, sensor_mass)
         if cause == "added_mass":
             self._lump(M, str(p["point"]), float(p["mass_kg"]), rotary=True)
-        return np.asarray(K), M
+        return K, M
 
     @staticmethod
     def _bend_factor(cause: "str | None", p: dict, component: str) -> float:
@@ -242,20 +242,13 @@ class FrameVariants:
     def _mass_factor(cause: "str | None", p: dict, component: str) -> float:
         return float(p["factor"]) if cause == "member_mass" and p.get("component") == component else 1.0
 
-    def _node(self, key: str) -> int:
-        parts = str(key).split(":")
-        try:
-            return self.frame.node_index[(parts[0], int(parts[1]))]
-        except (IndexError, ValueError, KeyError):
-            raise ModelError(f"node {key!r} is not on the frame; nodes are {', '.join(self.nodes)}") from None
-
     def _lump(self, M: np.ndarray, node: str, mass_kg: float, rotary: bool = False) -> None:
         """A lumped mass (kg) on the node's translations; with ``rotary`` also the rotary inertia of a
         compact steel block of that mass centred on the node, ``m a^2 / 6`` (kg m^2) about each axis
         with ``a = (m / rho)^(1/3)`` the side of a cube of the frame's density."""
         if mass_kg < 0:
             raise ModelError(f"a mass of {mass_kg} kg at {node}: masses must be >= 0")
-        first = 6 * self._node(node)
+        first = 6 * self.frame.node(node)
         dofs = first + np.arange(3)
         M[dofs, dofs] += mass_kg
         if rotary:
@@ -263,8 +256,11 @@ class FrameVariants:
             rot = first + np.arange(3, 6)
             M[rot, rot] += mass_kg * a * a / 6.0
 
+    def _shapes_at(self, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed mode-shape values at the outputs (n_out, n_modes) and references (n_ref, n_modes)."""
+        return (np.array([s * phi[d] for d, s in self._out]), np.array([s * phi[d] for d, s in self._ref]))
+
     def _products(self, phi: np.ndarray) -> np.ndarray:
-        po = np.array([s * phi[d] for d, s in self._out])
-        pr = np.array([s * phi[d] for d, s in self._ref])
+        po, pr = self._shapes_at(phi)
         return np.einsum("om,rm->orm", po, pr).reshape(len(self._out) * len(self._ref), -1)
 

@@ -5,19 +5,11 @@ same with 50+ kills). No outcome depends on the machine's speed: the capture can
 the kill because it waits for operator answers that the trial withholds."""
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
+from benchmark_modules import load_benchmark
 
 
 def _crash_module():
-    spec = importlib.util.spec_from_file_location("crash_kill", ROOT / "benchmarks" / "reliability" / "crash_kill.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("reliability/crash_kill.py")
 
 
 def test_five_random_kills_lose_no_reported_hit_and_resume_completes(tmp_path):

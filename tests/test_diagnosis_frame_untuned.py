@@ -3,22 +3,13 @@ poles: the leave-one-out catalogue of ``benchmarks/studies/diagnosis_frame_vs_pa
 flexibility as the cause, and the fitted support stiffness comes back near the tuned default."""
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from benchmark_modules import load_benchmark
 
 
 def _load():
-    spec = importlib.util.spec_from_file_location("diagnosis_frame_vs_paper",
-                                                  ROOT / "benchmarks" / "studies" / "diagnosis_frame_vs_paper.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault(spec.name, mod)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("studies/diagnosis_frame_vs_paper.py")
 
 
 def test_untuned_frame_names_support_joint_flexibility(capsys) -> None:

@@ -9,10 +9,8 @@ than the one the diagnosis fits).
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import io
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +24,7 @@ from analysis.modal import ModalModel, pole_from_fz
 from simulator.config import FrameConfig
 from simulator.fem import FrameModel
 from simulator.physical import FrameVariants
+from benchmark_modules import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 OUTS = ["left:9:Y", "top:4:X", "right:4:-Z"]
@@ -33,12 +32,7 @@ REFS = ["right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y"
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_diagnosis_physical",
-                                                  ROOT / "benchmarks" / "accuracy" / "bench_diagnosis_physical.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault(spec.name, mod)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("accuracy/bench_diagnosis_physical.py")
 
 
 def _sensor_masses(cfg: FrameConfig) -> dict:
@@ -191,13 +185,7 @@ def _capture_and_diagnose(tmp_path: Path, overrides: dict, seed: int, extra=()) 
 def test_steel_block_on_the_beam_is_an_added_mass_at_its_node(tmp_path) -> None:
     """A 3 kg steel block (two beam elements with consistent mass on joint springs: not a lumped mass)
     at top:6, captured through sim://."""
-    a = (3.0 / 7850.0) ** (1 / 3)
-    x = 0.75 * 1.7
-    over = {"sections": {"block": {"shape": "explicit", "area_m2": a * a, "iy_m4": a ** 4 / 12, "iz_m4": a ** 4 / 12,
-                                   "j_m4": 0.141 * a ** 4}},
-            "components": {"block": {"section": "block", "start_m": [x, -a / 2, 0.668], "end_m": [x, a / 2, 0.668],
-                                     "n_elements": 2, "roll_deg": 0.0}},
-            "joints": {"pairs": [["left:10", "top:0"], ["right:10", "top:8"], ["top:6", "block:1"]]}}
+    over = _bench().steel_block(FrameConfig.load(), "top:6", 3.0)
     doc = _capture_and_diagnose(tmp_path, over, seed=21)
     assert doc["verdict"] == "added_mass", doc["reason"]
     best = doc["causes"][0]

@@ -1,10 +1,6 @@
 """Fault injection (simulator.faults) and the recovery of the driver and the capture session."""
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -18,16 +14,11 @@ from acquisition.setup import default_setup
 from simulator.analyser import create_analyser
 from simulator.faults import FAULT_KINDS, TRANSIENT_SENSES, FaultPlan, FaultyFirmware, parse_faults
 from simulator.firmware import Firmware
-
-ROOT = Path(__file__).resolve().parents[1]
+from benchmark_modules import load_benchmark
 
 
 def _soak_module():
-    spec = importlib.util.spec_from_file_location("soak_capture", ROOT / "benchmarks" / "reliability" / "soak_capture.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("reliability/soak_capture.py")
 
 
 # ---------------------------------------------------------------------- parsing

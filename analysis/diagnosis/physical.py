@@ -310,11 +310,9 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
 
 
 def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
-                    names: Optional[Sequence[str]] = None) -> tuple[np.ndarray, list[PhysicalFit]]:
-    """Per-mode chi2 of the nominal simulation, and every cause (its best nested variant by
-    leave-one-mode-out chi2) fitted; sorted by held-out chi2 (best first)."""
-    f0, P0 = sim.modes(None, {}, fmax)
-    base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
+                    names: Optional[Sequence[str]] = None) -> list[PhysicalFit]:
+    """Every cause (its best nested variant by leave-one-mode-out chi2) fitted; sorted by held-out
+    chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``)."""
     allsel = np.ones(mm.freq_hz.size, bool)
     fits: list[PhysicalFit] = []
     causes = [c for c in sim.causes() if names is None or c.name in names]
@@ -333,7 +331,7 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
         if best is not None:
             fits.append(best)
     fits.sort(key=lambda x: x.chi2_cv)
-    return base, fits
+    return fits
 
 
 def paired_well(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:

@@ -136,7 +136,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     if not (modes_differ or frfs_differ):
         return PhysicalOutcome(decided=False, doc=doc)
     specs = {c.name: c for c in sim.causes()}
-    _, fits = physical_causes(sim, mm, fmax, causes)
+    fits = physical_causes(sim, mm, fmax, causes)
     if not fits:
         return PhysicalOutcome(decided=False, doc=doc)
     excess = _power(before_db) - _power(noise_db)

@@ -47,7 +47,6 @@ import numpy as np  # noqa: E402
 POINTS = ("right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y")
 FAMILIES = ("added_mass", "support_stiffness", "joint_stiffness", "member_mass", "member_stiffness",
             "mass_loading", "stiffness_shift")
-DEFAULT_JOINTS = [["left:10", "top:0"], ["right:10", "top:8"]]
 
 
 def _toml(d: dict) -> str:
@@ -83,6 +82,23 @@ def _explicit(sec, area=1.0, inertia=1.0) -> dict:
     return {"shape": "explicit", "area_m2": sp.A * area, "iy_m4": sp.Iy * inertia, "iz_m4": sp.Iz * inertia, "j_m4": sp.J}
 
 
+def steel_block(cfg, node: str, mass_kg: float) -> dict:
+    """Config overrides that fix a steel cube of ``mass_kg`` on the frame at ``node`` (``component:node``):
+    two beam elements across the member (along Y) with their consistent mass and rotary inertia, the
+    cube's middle node joined to ``node`` by the frame's joint springs (not a lumped mass)."""
+    from simulator.fem import member_nodes_xyz
+
+    comp, i = node.split(":")
+    xyz = member_nodes_xyz(cfg.components[comp])[int(i)]
+    a = (mass_kg / 7850.0) ** (1 / 3)                       # the cube's side (m)
+    half = np.array([0.0, a / 2, 0.0])
+    return {"sections": {"block": {"shape": "explicit", "area_m2": a * a, "iy_m4": a ** 4 / 12, "iz_m4": a ** 4 / 12,
+                                   "j_m4": 0.141 * a ** 4}},
+            "components": {"block": {"section": "block", "start_m": list(map(float, xyz - half)),
+                                     "end_m": list(map(float, xyz + half)), "n_elements": 2, "roll_deg": 0.0}},
+            "joints": {"pairs": [list(p) for p in cfg.joints.pairs] + [[node, "block:1"]]}}
+
+
 def make_case(family: str, rng: np.random.Generator) -> tuple[dict, dict]:
     """(config overrides, truth) of one case of ``family``."""
     from simulator.config import FrameConfig
@@ -93,17 +109,7 @@ def make_case(family: str, rng: np.random.Generator) -> tuple[dict, dict]:
         n = cfg.components[comp].n_elements
         node = int(rng.integers(1, n))
         mass = float(rng.uniform(1.0, 5.0))
-        a = (mass / 7850.0) ** (1 / 3)                       # a steel cube of side a (m)
-        xyz = np.asarray(cfg.components[comp].start_m) + node / n * (
-            np.asarray(cfg.components[comp].end_m) - np.asarray(cfg.components[comp].start_m))
-        # the block: two beam elements across the member (along Y), its middle node on joint springs to the node
-        over = {"sections": {"block": {"shape": "explicit", "area_m2": a * a, "iy_m4": a ** 4 / 12, "iz_m4": a ** 4 / 12,
-                                       "j_m4": 0.141 * a ** 4}},
-                "components": {"block": {"section": "block", "start_m": list(map(float, xyz - [0.0, a / 2, 0.0])),
-                                         "end_m": list(map(float, xyz + [0.0, a / 2, 0.0])), "n_elements": 2,
-                                         "roll_deg": 0.0}},
-                "joints": {"pairs": DEFAULT_JOINTS + [[f"{comp}:{node}", "block:1"]]}}
-        return over, {"cause": family, "point": f"{comp}:{node}", "mass_kg": mass}
+        return steel_block(cfg, f"{comp}:{node}", mass), {"cause": family, "point": f"{comp}:{node}", "mass_kg": mass}
     if family in ("support_stiffness", "joint_stiffness"):
         f = float(np.exp(rng.uniform(np.log(0.2), np.log(0.6)))) if family == "support_stiffness" else \
             float(np.exp(rng.uniform(np.log(0.02), np.log(0.1))))

@@ -169,7 +169,7 @@ def physical_study(cfg: FrameConfig, label: str) -> dict:
     fmax = 1.5 * PAPER_HZ[-1]
     f0, P0 = fv.modes(None, {}, fmax)
     base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
-    _, fits = physical_causes(fv, mm, fmax)
+    fits = physical_causes(fv, mm, fmax)
     specs = {c.name: c for c in fv.causes()}
     print(f"=== physical causes (library), {label}: nominal chi2 per mode {base.mean():.1f} ===")
     out = []

@@ -7,7 +7,6 @@ plan's six points, 3 hits each) and diagnosed against the unchanged frame.toml w
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import io
 import json
 import os
@@ -19,31 +18,19 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks" / "accuracy"))
 
+import bench_diagnosis_physical as bench  # noqa: E402
 from simulator.config import FrameConfig  # noqa: E402
 from simulator.fem import section_properties  # noqa: E402
 
 POINTS = "right:6:-X,right:4:-X,left:6:X,top:4:Z,top:2:Z,left:9:Y"
 
 
-def _bench():
-    spec = importlib.util.spec_from_file_location("bench_diagnosis_physical",
-                                                  ROOT / "benchmarks" / "accuracy" / "bench_diagnosis_physical.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def cases() -> list[tuple[str, dict, list]]:
     cfg = FrameConfig.load()
     col, beam = section_properties(cfg.sections["column"]), section_properties(cfg.sections["beam"])
-    a = (3.0 / 7850.0) ** (1 / 3)
-    x = 0.5 * 1.7
-    block = {"sections": {"block": {"shape": "explicit", "area_m2": a * a, "iy_m4": a ** 4 / 12, "iz_m4": a ** 4 / 12,
-                                    "j_m4": 0.141 * a ** 4}},
-             "components": {"block": {"section": "block", "start_m": [x, -a / 2, 0.668], "end_m": [x, a / 2, 0.668],
-                                      "n_elements": 2, "roll_deg": 0.0}},
-             "joints": {"pairs": [["left:10", "top:0"], ["right:10", "top:8"], ["top:4", "block:1"]]}}
+    block = bench.steel_block(cfg, "top:4", 3.0)
     s, j = list(cfg.supports.stiffness), list(cfg.joints.stiffness)
     zeta = list(cfg.damping.zeta)
     return [
@@ -69,7 +56,6 @@ def main() -> None:
     from acquisition.cli_capture import main as capture
     from analysis.cli_diagnose import main as diagnose
 
-    bench = _bench()
     print("| change made to the frame | verdict | parameters | held-out gain dB | FRF error before -> after (noise) dB | s |")
     print("|---|---|---|---|---|---|")
     for i, (label, over, extra) in enumerate(cases()):
