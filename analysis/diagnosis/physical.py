@@ -344,10 +344,11 @@ def paired_well(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
     return good
 
 
-def same_structure(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[bool, str]:
+def same_structure(mm: MeasuredModes, f: np.ndarray, P: np.ndarray,
+                   good: Optional[np.ndarray] = None) -> tuple[bool, str]:
     """Do the measured modes pair with the simulation's by frequency and MAC? At least half of them
-    must (:func:`paired_well`)."""
-    good = paired_well(mm, f, P)
+    must (:func:`paired_well`; ``good`` is its mask when the caller has it)."""
+    good = paired_well(mm, f, P) if good is None else good
     n = int(good.sum())
     if 2 * n >= mm.freq_hz.size and n > 0:
         return True, ""

@@ -115,13 +115,13 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
 
     nominal = frf(None, {})
     before_db = typical_error_db(measured, nominal.H, weights)
-    same, why = same_structure(mm, f0, P0)
+    good = paired_well(mm, f0, P0)
+    same, why = same_structure(mm, f0, P0, good)
     if not same:
         return PhysicalOutcome(decided=True, verdict="unexplained", extended=nominal, error_before_db=before_db,
                                error_after_db=before_db, reason=why, doc={**doc, "same_structure": False})
     # a measured mode with no counterpart at all (a local mode of something not modelled, a spurious
     # peak) is reported, not fitted: no change of the catalogue could bring a mode from nowhere
-    good = paired_well(mm, f0, P0)
     doc["unpaired_measured_hz"] = mm.freq_hz[~good].tolist()
     merged = merged_pairs(mm, f0, P0)
     doc["merged_measured_hz"] = mm.freq_hz[merged & good].tolist()
