@@ -50,9 +50,16 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "report rec.h5 --out report/",
         "report rec.h5 --out report/ --fit fit.json --diagnosis diag.json --geometry frame",
     ),
+    "python -m analysis batch": (
+        "batch fleet/*.h5 --out results/                       # a local Dask cluster, one worker per core",
+        "batch fleet/*.h5 --out results/ --scheduler tcp://10.0.0.5:8786 --reference golden.json --band 4:1100",
+    ),
     "python -m simulator modes": (
         "modes",
         "modes --config my_frame.toml --json",
+    ),
+    "python -m simulator fleet": (
+        "fleet --units 200 --out fleet/ --scatter 2 --defects 10 --seed 1",
     ),
     "python -m simulator serve": (
         "serve --tcp 127.0.0.1:0     # prints socket://127.0.0.1:PORT",

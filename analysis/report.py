@@ -5,7 +5,6 @@ the JSON (percent in the table), residues in the FRF unit times rad/s.
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any, Optional
@@ -271,5 +270,7 @@ def synthesis_error(result, frf: FRFSet) -> dict:
 
 
 def write_json(path: "str | Path", doc: dict) -> None:
-    """Write a JSON document (strict: no NaN; NaN values are written as null)."""
-    Path(path).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+    """Write a JSON document (strict: no NaN; NaN values are written as null), atomically."""
+    from .atomic import write_json_atomic
+
+    write_json_atomic(path, doc)

@@ -38,6 +38,7 @@ __all__ = [
     "ComponentConfig",
     "SupportsConfig",
     "JointsConfig",
+    "DamageConfig",
     "DampingConfig",
     "ModesConfig",
     "AccelerometerConfig",
@@ -48,6 +49,7 @@ __all__ = [
     "SamplingConfig",
     "TestPlanConfig",
     "NoiseConfig",
+    "overrides_to_toml",
 ]
 
 DEFAULT_CONFIG_PATH = Path(__file__).with_name("frame.toml")
@@ -106,6 +108,38 @@ class JointsConfig:
 
     pairs: tuple
     stiffness: tuple
+
+
+@dataclass(frozen=True)
+class DamageConfig:
+    """Local damage: cracked elements (bending stiffness factor), soft joints and loose supports
+    (factor on their six springs); see ``[damage]`` in frame.toml."""
+
+    cracked_elements: tuple
+    crack_bending_factor: tuple
+    soft_joints: tuple
+    soft_joint_factor: tuple
+    loose_supports: tuple
+    loose_support_factor: tuple
+
+    def element_factor(self, component: str, element: int) -> float:
+        """Bending stiffness factor (-) of element ``element`` of ``component`` (1 when undamaged)."""
+        f = 1.0
+        for where, k in zip(self.cracked_elements, self.crack_bending_factor):
+            if where == f"{component}:{element}":
+                f *= float(k)
+        return f
+
+    def spring_factor(self, kind: str, nodes: "tuple[str, ...]") -> float:
+        """Factor (-) on the springs of a support (``kind="support"``, its node) or a joint
+        (``kind="joint"``, its two nodes)."""
+        places, factors = ((self.loose_supports, self.loose_support_factor) if kind == "support"
+                           else (self.soft_joints, self.soft_joint_factor))
+        f = 1.0
+        for where, k in zip(places, factors):
+            if where in nodes:
+                f *= float(k)
+        return f
 
 
 @dataclass(frozen=True)
@@ -241,6 +275,7 @@ class FrameConfig:
     components: Mapping[str, ComponentConfig]
     supports: SupportsConfig
     joints: JointsConfig
+    damage: DamageConfig
     damping: DampingConfig
     modes: ModesConfig
     sensors: SensorsConfig
@@ -271,6 +306,37 @@ class FrameConfig:
         """A new config: this one's values merged with ``overrides`` (same rules as a user file)."""
         merged = _merge(copy.deepcopy(dict(self.raw)), copy.deepcopy(dict(overrides)), "overrides", ())
         return _build(merged, self.source)
+
+
+def overrides_to_toml(overrides: Mapping[str, Any]) -> str:
+    """TOML text of an overrides dictionary shaped like frame.toml (nested tables of numbers,
+    strings, booleans and lists), readable by :meth:`FrameConfig.load`."""
+    import json
+
+    lines: list[str] = []
+
+    def val(v: Any) -> str:
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        if isinstance(v, (int, np.integer)):
+            return str(int(v))
+        return repr(float(v))
+
+    def table(prefix: str, t: Mapping[str, Any]) -> None:
+        scalars = {k: v for k, v in t.items() if not isinstance(v, Mapping)}
+        if scalars and prefix:
+            lines.append(f"[{prefix}]")
+        lines.extend(f"{k} = {val(v)}" for k, v in scalars.items())
+        for k, v in t.items():
+            if isinstance(v, Mapping):
+                table(f"{prefix}.{k}" if prefix else k, v)
+
+    table("", overrides)
+    return "\n".join(lines) + "\n"
 
 
 # ---------------------------------------------------------------------------- reading and merging
@@ -372,6 +438,7 @@ def _build(d: dict, source: str) -> FrameConfig:
             components={k: _coerce(ComponentConfig, v, f"components.{k}") for k, v in d["components"].items()},
             supports=_coerce(SupportsConfig, d["supports"], "supports"),
             joints=_coerce(JointsConfig, d["joints"], "joints"),
+            damage=_coerce(DamageConfig, d["damage"], "damage"),
             damping=_coerce(DampingConfig, d["damping"], "damping"),
             modes=_coerce(ModesConfig, d["modes"], "modes"),
             sensors=SensorsConfig(
@@ -435,6 +502,26 @@ def _validate(cfg: FrameConfig, source: str) -> None:
     for where, k in (("supports.stiffness", cfg.supports.stiffness), ("joints.stiffness", cfg.joints.stiffness)):
         _check(len(k) == 6 and all(isinstance(x, (int, float)) and x >= 0 for x in k),
                f"{p} {where} must be 6 values >= 0: [kx, ky, kz] N/m, [krx, kry, krz] N m/rad")
+    dm = cfg.damage
+    for places, factors, name, what in (
+        (dm.cracked_elements, dm.crack_bending_factor, "cracked_elements", "element"),
+        (dm.soft_joints, dm.soft_joint_factor, "soft_joints", "joint node"),
+        (dm.loose_supports, dm.loose_support_factor, "loose_supports", "support node"),
+    ):
+        _check(len(places) == len(factors),
+               f"{p} damage.{name} and its factor list must have the same length (one factor per {what})")
+        _check(all(isinstance(k, (int, float)) and 0 < k <= 10 for k in factors),
+               f"{p} damage: the factors of {name} must be numbers in (0, 10]")
+    for e in dm.cracked_elements:
+        comp, _, i = str(e).partition(":")
+        _check(comp in cfg.components and i.isdigit() and int(i) < cfg.components[comp].n_elements,
+               f"{p} damage.cracked_elements: {e!r} must be 'component:element' with element in 0..n_elements-1")
+    for n in dm.soft_joints:
+        _check(any(n in pair for pair in cfg.joints.pairs),
+               f"{p} damage.soft_joints: {n!r} is not a node of any [joints] pair ({list(cfg.joints.pairs)})")
+    for n in dm.loose_supports:
+        _check(n in cfg.supports.nodes,
+               f"{p} damage.loose_supports: {n!r} is not one of supports.nodes {list(cfg.supports.nodes)}")
     d = cfg.damping
     _check(d.model in ("modal", "rayleigh"), f"{p} damping.model = {d.model!r}; use 'modal' or 'rayleigh'")
     _check(all(0 <= z < 1 for z in d.zeta) and 0 <= d.zeta_default < 1,

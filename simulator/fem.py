@@ -33,7 +33,7 @@ and mobility/accelerance are ``(jw)^p H_ij`` (p = 1, 2). In pole-residue form,
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace as _replace
 from typing import Sequence
 
 import numpy as np
@@ -196,9 +196,13 @@ def _transform(R: np.ndarray) -> np.ndarray:
 
 
 def assemble_beam(
-    coords: np.ndarray, E: float, G: float, rho: float, sp: SectionProperties, roll_deg: float = 0.0
+    coords: np.ndarray, E: float, G: float, rho: float, sp: SectionProperties, roll_deg: float = 0.0,
+    bending_factors: "Sequence[float] | None" = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Global K, M (6 n_nodes square) of a straight chain of elements through ``coords`` (n_nodes, 3) m."""
+    """Global K, M (6 n_nodes square) of a straight chain of elements through ``coords`` (n_nodes, 3) m.
+
+    ``bending_factors`` (one per element, default all 1) scale each element's bending stiffness
+    E*Iy and E*Iz (local damage such as a crack); its mass is unchanged."""
     n = coords.shape[0]
     K = np.zeros((6 * n, 6 * n))
     M = np.zeros((6 * n, 6 * n))
@@ -206,7 +210,9 @@ def assemble_beam(
         L = float(np.linalg.norm(coords[e + 1] - coords[e]))
         T = _transform(rotation_matrix(coords[e], coords[e + 1], roll_deg))
         sl = slice(6 * e, 6 * e + 12)
-        K[sl, sl] += T.T @ beam_stiffness_local(E, G, sp, L) @ T
+        f = 1.0 if bending_factors is None else float(bending_factors[e])
+        sp_e = sp if f == 1.0 else _replace(sp, Iy=sp.Iy * f, Iz=sp.Iz * f)
+        K[sl, sl] += T.T @ beam_stiffness_local(E, G, sp_e, L) @ T
         M[sl, sl] += T.T @ beam_mass_local(rho, sp, L) @ T
     return K, M
 
@@ -298,7 +304,8 @@ class FrameModel:
         for name, comp in cfg.components.items():
             sp = section_properties(cfg.sections[comp.section])
             xyz = member_nodes_xyz(comp)
-            k, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg)
+            k, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg,
+                                 [cfg.damage.element_factor(name, e) for e in range(comp.n_elements)])
             blocks_K.append(k)
             blocks_M.append(m)
             for i in range(comp.n_elements + 1):
@@ -310,9 +317,11 @@ class FrameModel:
         model = cls(K, M, node_index, np.vstack(coords), cfg)
         if supports:
             for node in cfg.supports.nodes:
-                model._add_ground_spring(node, cfg.supports.stiffness)
+                f = cfg.damage.spring_factor("support", (node,))
+                model._add_ground_spring(node, [k * f for k in cfg.supports.stiffness])
         for a, b in cfg.joints.pairs:
-            model._add_joint_spring(a, b, cfg.joints.stiffness)
+            f = cfg.damage.spring_factor("joint", (a, b))
+            model._add_joint_spring(a, b, [k * f for k in cfg.joints.stiffness])
         for label, mass in (added_masses or {}).items():
             model._add_lumped_mass(label, mass)
         return model

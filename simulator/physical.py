@@ -102,7 +102,8 @@ class FrameVariants:
         for name, comp in cfg.components.items():
             sp = section_properties(cfg.sections[comp.section])
             xyz = member_nodes_xyz(comp)
-            k_all, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg)
+            k_all, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg,
+                                     [cfg.damage.element_factor(name, e) for e in range(comp.n_elements)])
             k_rest, _ = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3,
                                       replace(sp, Iy=0.0, Iz=0.0), comp.roll_deg)
             first = 6 * self.frame.node_index[(name, 0)]
@@ -119,7 +120,8 @@ class FrameVariants:
                 k = np.zeros(6)
                 k[axes] = np.asarray(k6, float)[axes]
                 for a, b in pairs:
-                    stamp_spring(K, self.frame.node(a), None if b is None else self.frame.node(b), k)
+                    f = cfg.damage.spring_factor(kind, (a,) if b is None else (a, b))
+                    stamp_spring(K, self.frame.node(a), None if b is None else self.frame.node(b), k * f)
                 self._springs[(kind, part)] = K
         index = self.frame.node_index
         self.nodes = tuple(f"{c}:{i}" for (c, i) in sorted(index, key=lambda k: index[k]))

@@ -50,29 +50,9 @@ FAMILIES = ("added_mass", "support_stiffness", "joint_stiffness", "member_mass",
 
 
 def _toml(d: dict) -> str:
-    """A small TOML writer for the override tables used here (tables of scalars and lists)."""
-    lines: list[str] = []
+    from simulator.config import overrides_to_toml
 
-    def val(v):
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, (list, tuple)):
-            return "[" + ", ".join(val(x) for x in v) + "]"
-        return repr(float(v)) if isinstance(v, float) else str(v)
-
-    def table(prefix: str, t: dict) -> None:
-        scalars = {k: v for k, v in t.items() if not isinstance(v, dict)}
-        if scalars:
-            lines.append(f"[{prefix}]")
-            lines.extend(f"{k} = {val(v)}" for k, v in scalars.items())
-        for k, v in t.items():
-            if isinstance(v, dict):
-                table(f"{prefix}.{k}" if prefix else k, v)
-
-    table("", d)
-    return "\n".join(x for x in lines if x != "[]") + "\n"
+    return overrides_to_toml(d)
 
 
 def _explicit(sec, area=1.0, inertia=1.0) -> dict:

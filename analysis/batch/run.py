@@ -1,0 +1,172 @@
+"""Run a batch of fits on Dask (``dask.distributed``) and keep exactly one result per input.
+
+- **Cluster.** :func:`open_client` gives a client of a ``LocalCluster`` of worker processes (one per
+  core, one thread each) by default, or of a running cluster by address (``tcp://HOST:PORT``) or
+  scheduler file (the JSON that ``dask scheduler --scheduler-file F`` writes). The scheduling,
+  the retries of tasks whose worker died and the placement are Dask's.
+- **Exactly one result.** Each input is one task keyed by its name and content hash. Results come
+  back to this process, which writes ``fits/<name>.json`` atomically as each arrives: a task run
+  twice (its worker died after finishing) writes the same file again, so no result is doubled, and
+  one that dies with its worker is run again elsewhere by Dask.
+- **Restartable.** Before submitting, an input whose ``fits/<name>.json`` holds a result for the same
+  content (SHA-256) and options is not fitted again. A crash (of this process, of a worker, of the
+  machine) loses at most the fits in flight.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Optional, Sequence
+
+from ..atomic import write_json_atomic
+from .task import fit_one, file_sha256, options_key, result_is_current
+
+__all__ = ["BatchInput", "BatchRun", "plan_inputs", "open_client", "run_batch", "run_serial"]
+
+
+@dataclass(frozen=True)
+class BatchInput:
+    """One input: its path, its unique result name (file name without suffix, made unique), content hash."""
+
+    path: Path
+    name: str
+    sha256: str
+
+    @property
+    def result_file(self) -> str:
+        return f"{self.name}.json"
+
+
+@dataclass
+class BatchRun:
+    """What a run did: every input's result document in input order, and the counts and times."""
+
+    results: list[dict[str, Any]]
+    reused: int = 0
+    fitted: int = 0
+    failed: int = 0
+    seconds: float = 0.0
+    fit_seconds: float = 0.0                  # the sum of the fits' own wall times (work done)
+    workers: int = 0
+    where: str = ""
+    lost: list[str] = field(default_factory=list)   # inputs whose task Dask gave up on (no result file)
+
+
+def plan_inputs(paths: Sequence["str | Path"]) -> list[BatchInput]:
+    """The inputs, sorted by path, with unique names (``unit-007``; a clash gets its folder's name:
+    ``lineB-unit-007``) and their SHA-256 (an unreadable input gets the hash of its path's text, so
+    it still gets its error row)."""
+    import hashlib
+
+    ps = sorted({Path(p).resolve() for p in paths})
+    stems: dict[str, int] = {}
+    for p in ps:
+        stems[p.stem] = stems.get(p.stem, 0) + 1
+    out = []
+    used: set[str] = set()
+    for p in ps:
+        name = p.stem if stems[p.stem] == 1 else f"{p.parent.name}-{p.stem}"
+        base, n = name, 2
+        while name in used:
+            name, n = f"{base}-{n}", n + 1
+        used.add(name)
+        try:
+            sha = file_sha256(p)
+        except OSError:
+            sha = "unreadable-" + hashlib.sha256(str(p).encode()).hexdigest()
+        out.append(BatchInput(p, name, sha))
+    return out
+
+
+def open_client(scheduler: Optional[str] = None, workers: Optional[int] = None) -> Any:
+    """A ``distributed.Client``: of the cluster at ``scheduler`` (``tcp://HOST:PORT`` or a scheduler
+    file), else of a new ``LocalCluster`` with ``workers`` processes (default: one per core) of one
+    thread each. The caller closes it (``client.close()``, and ``client.cluster.close()`` for a
+    local one)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ImportError("batch analysis needs Dask: pip install 'impactlab[batch]' "
+                          "(dask[distributed] and pyarrow)") from None
+    if scheduler:
+        if "://" not in scheduler and Path(scheduler).is_file():
+            return Client(scheduler_file=scheduler, timeout="20s")
+        return Client(scheduler, timeout="20s")
+    n = workers or os.cpu_count() or 1
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+    return Client(cluster)
+
+
+def _reuse(inputs: Sequence[BatchInput], fits_dir: Path, key: str) -> dict[str, dict[str, Any]]:
+    done = {}
+    for inp in inputs:
+        doc = result_is_current(fits_dir / inp.result_file, inp.sha256, key)
+        if doc is not None:
+            done[inp.name] = doc
+    return done
+
+
+def run_batch(inputs: Sequence[BatchInput], out_dir: "str | Path", client: Any, *,
+              band: Optional[Sequence[float]] = None, estimator: Optional[str] = None,
+              on_result: Optional[Callable[[dict[str, Any], int, int], None]] = None) -> BatchRun:
+    """Fit every input on the Dask ``client``'s cluster; results in ``out_dir/fits/``.
+
+    ``on_result(doc, done, total)`` is called after each new result is on disk (progress)."""
+    from distributed import as_completed
+
+    t0 = time.perf_counter()
+    fits_dir = Path(out_dir) / "fits"
+    fits_dir.mkdir(parents=True, exist_ok=True)
+    key = options_key(band, estimator)
+    have = _reuse(inputs, fits_dir, key)
+    todo = [i for i in inputs if i.name not in have]
+    run = BatchRun(results=[], reused=len(have), workers=len(client.scheduler_info().get("workers", {})),
+                   where=str(client.scheduler.address))
+    futures = {}
+    for inp in todo:
+        fut = client.submit(fit_one, str(inp.path), inp.name, inp.sha256, band, estimator,
+                            key=f"impactlab-fit-{inp.name}-{inp.sha256[:12]}-{key}", pure=False)
+        futures[fut] = inp
+    got: dict[str, dict[str, Any]] = dict(have)
+    done = 0
+    for fut in as_completed(list(futures)):
+        inp = futures[fut]
+        try:
+            doc = fut.result()
+        except Exception as exc:   # Dask gave up on the task (its workers kept dying): no result file, retried next run
+            doc = {"schema": "impactlab.batch-fit/1", "input": inp.name, "path": str(inp.path), "sha256": inp.sha256,
+                   "status": "error", "error": f"the task failed on the cluster ({type(exc).__name__}: {exc}); "
+                                               "run the same command again to retry it", "fit": None, "seconds": 0.0}
+            run.lost.append(inp.name)
+        else:
+            write_json_atomic(fits_dir / inp.result_file, doc)
+        got[inp.name] = doc
+        done += 1
+        if on_result is not None:
+            on_result(doc, done, len(todo))
+    run.results = [got[i.name] for i in inputs]
+    run.fitted = len(todo) - len(run.lost)
+    run.failed = sum(d.get("status") != "ok" for d in run.results)
+    run.fit_seconds = float(sum(float(got[i.name].get("seconds") or 0.0) for i in todo))
+    run.seconds = time.perf_counter() - t0
+    return run
+
+
+def run_serial(inputs: Sequence[BatchInput], out_dir: "str | Path", *, band: Optional[Sequence[float]] = None,
+               estimator: Optional[str] = None) -> BatchRun:
+    """The same work in a plain loop in this process (no Dask): the baseline of the benchmark."""
+    t0 = time.perf_counter()
+    fits_dir = Path(out_dir) / "fits"
+    fits_dir.mkdir(parents=True, exist_ok=True)
+    results = []
+    for inp in inputs:
+        doc = fit_one(str(inp.path), inp.name, inp.sha256, band, estimator)
+        write_json_atomic(fits_dir / inp.result_file, doc)
+        results.append(doc)
+    run = BatchRun(results=results, fitted=len(results), workers=1, where="serial loop")
+    run.failed = sum(d.get("status") != "ok" for d in results)
+    run.fit_seconds = float(sum(float(d.get("seconds") or 0.0) for d in results))
+    run.seconds = time.perf_counter() - t0
+    return run

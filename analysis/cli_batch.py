@@ -1,0 +1,154 @@
+"""``python -m analysis batch INPUTS... --out DIR``: fit many tests on Dask, flag the odd units.
+
+Every input (recordings or UFF 58 files; shell globs, or quoted patterns expanded here) gets the
+automatic fit of ``analysis fit`` on a Dask cluster: by default a ``LocalCluster`` of worker
+processes, one per core (``--workers N`` to choose); ``--scheduler tcp://HOST:PORT`` (or a scheduler
+file) uses a cluster started with Dask's own commands::
+
+    dask scheduler --host 10.0.0.5 --port 8786             # on one machine
+    dask worker tcp://10.0.0.5:8786 --nworkers 4 --nthreads 1   # on each machine (same impactlab installed,
+                                                            # the inputs and DIR on a shared file system)
+
+DIR gets ``fits/<unit>.json`` (the ``analysis fit --json`` document of each input, with its content
+hash), ``modes.parquet`` (one row per input and mode), ``fleet.json`` and ``fleet.png`` (modes
+paired across units, each mode's distribution, the flagged units with the reasons). ``--reference
+FIT.json`` pairs modes to a reference fit; without it the fleet's median unit is the reference.
+Running the same command again reuses every result whose input content and options are unchanged.
+Exit status: 0 every input has a result (a bad input's result is an error row), 1 some inputs
+have none (the cluster gave up on them; run again), 2 bad usage.
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+from .command_line import Parser, cli_entry, errors_to_exit, exit_on, parse_args, with_examples
+from .inputs import InputError, parse_band_text
+
+__all__ = ["main", "build_parser", "expand_inputs"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = Parser(prog="python -m analysis batch", description=__doc__.splitlines()[0])
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="recordings (.h5) or UFF 58 files; globs allowed")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="a running Dask scheduler: tcp://HOST:PORT, or the file of 'dask scheduler --scheduler-file'")
+    where.add_argument("--workers", type=int, metavar="N", help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--reference", metavar="FIT.json",
+                   help="pair modes to this fit ('analysis fit --json' of a good unit); default: the fleet's median unit")
+    p.add_argument("--band", metavar="LO:HI", help="fit band in Hz for every input (default: each input's own, from its data)")
+    p.add_argument("--estimator", choices=("H1", "H2"), default=None, help="FRF estimate of recordings (default: their own)")
+    p.add_argument("--z-limit", type=float, default=6.0,
+                   help="flag a mode shift beyond this many robust standard deviations (default 6)")
+    p.add_argument("--min-shift", type=float, default=0.5, metavar="PCT",
+                   help="... and beyond PCT %% (default 0.5): both must hold")
+    return with_examples(p)
+
+
+def expand_inputs(items: Sequence[str]) -> list[Path]:
+    """Paths of the inputs: each item a file or a glob pattern; a pattern that matches nothing and a
+    missing file are errors that name them."""
+    out: list[Path] = []
+    for item in items:
+        if any(ch in item for ch in "*?["):
+            found = sorted(glob.glob(item))
+            if not found:
+                raise InputError(f"no input matches {item!r}: check the pattern")
+            out.extend(Path(f) for f in found if Path(f).is_file())
+        elif Path(item).is_dir():
+            raise InputError(f"{item} is a folder: give its files, e.g. '{item}/*.h5'")
+        elif not Path(item).exists():
+            raise InputError(f"input {item} not found: check the path")
+        else:
+            out.append(Path(item))
+    if not out:
+        raise InputError("no input files: give recordings (.h5) or UFF 58 files")
+    return out
+
+
+def _progress(quiet: bool, t0: float):
+    failed = 0
+
+    def show(doc: dict[str, Any], done: int, total: int) -> None:
+        nonlocal failed
+        if doc.get("status") != "ok":
+            failed += 1
+            if not quiet:
+                print(f"... {doc.get('input')}: {doc.get('error')}", file=sys.stderr)
+        if not quiet and (done == total or done % max(1, total // 20) == 0):
+            print(f"... {done}/{total} fitted, {failed} failed ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
+
+    return show
+
+
+@cli_entry
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = parse_args(build_parser(), argv)
+    if isinstance(args, int):
+        return args
+    from .batch.unit_modes import ReferenceFitError, modes_from_fit, read_reference
+
+    with errors_to_exit("analysis batch", (InputError, ReferenceFitError)):
+        paths = expand_inputs(args.inputs)
+        band = parse_band_text(args.band) if args.band else None
+        reference = read_reference(args.reference) if args.reference else None
+        if args.workers is not None and args.workers < 1:
+            raise InputError("--workers must be at least 1")
+    from .batch.fleet import assess_fleet
+    from .batch.outputs import fleet_document, modes_rows, plot_fleet, write_fleet_json, write_modes_parquet
+    from .batch.run import open_client, plan_inputs, run_batch
+
+    # Dask's own log lines (worker start and stop) only with -v; workers inherit the setting
+    os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "info" if args.verbose else "error")
+    out = Path(args.out)
+    with errors_to_exit("analysis batch", OSError, prefix="cannot create the output folder: "):
+        out.mkdir(parents=True, exist_ok=True)
+    inputs = plan_inputs(paths)
+    t0 = time.perf_counter()
+    with exit_on("analysis batch", (ImportError, 2), (OSError, 1, "cannot reach the Dask scheduler: ")):
+        client = open_client(args.scheduler, args.workers)
+    try:
+        if not args.quiet:
+            n = len(client.scheduler_info().get("workers", {}))
+            print(f"... {len(inputs)} inputs on {n} Dask worker(s) at {client.scheduler.address}", file=sys.stderr)
+        run = run_batch(inputs, out, client, band=band, estimator=args.estimator, on_result=_progress(args.quiet, t0))
+    finally:
+        cluster = getattr(client, "cluster", None)
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    units = [modes_from_fit(d["fit"]) if d.get("status") == "ok" else None for d in run.results]
+    errors = [d.get("error") for d in run.results]
+    files = [i.path.name for i in inputs]
+    with errors_to_exit("analysis batch", ValueError, code=1):
+        fleet = assess_fleet(units, [i.name for i in inputs], files, reference=reference,
+                             reference_name=str(args.reference or ""), errors=errors,
+                             z_limit=args.z_limit, min_shift_pct=args.min_shift)
+    ref_f = reference.freq_hz if reference is not None else next(
+        u for u, f in zip(units, fleet.units) if f.name == fleet.reference).freq_hz   # type: ignore[union-attr]
+    wall = time.perf_counter() - t0
+    info = {"inputs": len(inputs), "fitted": run.fitted, "reused": run.reused, "failed": run.failed,
+            "flagged": sum(u.flagged for u in fleet.units), "seconds": round(wall, 3),
+            "fit_seconds": round(run.fit_seconds, 3), "workers": run.workers, "scheduler": run.where}
+    with errors_to_exit("analysis batch", (OSError, ValueError), code=1, prefix="cannot write the outputs: "):
+        write_modes_parquet(out / "modes.parquet", modes_rows(fleet, units, files, ref_f))
+        write_fleet_json(out / "fleet.json", fleet_document(fleet, info))
+        plot_fleet(out / "fleet.png", fleet)
+    for u in fleet.units:
+        if u.flagged:
+            print(f"flagged {u.name}: " + "; ".join(u.reasons[:3]) + (" ..." if len(u.reasons) > 3 else ""))
+    print(f"batch of {len(inputs)}: {len(inputs) - run.failed} done ({run.fitted} fitted, {run.reused} reused), "
+          f"{run.failed} failed, {info['flagged']} flagged; {wall:.1f} s on {run.workers} worker(s) "
+          f"(fits {run.fit_seconds:.1f} s of work); results in {out}/ (fits/, modes.parquet, fleet.json, fleet.png)")
+    if run.lost:
+        print(f"analysis batch: {len(run.lost)} input(s) have no result (the cluster gave up on them): "
+              f"{', '.join(run.lost[:5])}; run the same command again to retry them", file=sys.stderr)
+        return 1
+    return 0
