@@ -126,7 +126,7 @@ def pair_modes(ref: UnitModes, unit: UnitModes, tol: float = 0.05) -> Pairing:
         return Pairing(index, mac, float("nan"))
     L = np.log(unit.freq_hz[None, :] / ref.freq_hz[:, None])            # (n_ref, n_unit)
     nearest = L[np.arange(n_ref), np.argmin(np.abs(L), axis=1)]
-    close = nearest[np.abs(nearest) < tol]
+    close = nearest[np.abs(nearest) < 0.25]               # a first guess, wider than tol: a whole unit may be off
     c = float(np.median(close)) if close.size else 0.0
     sa, sb = _common_outputs(ref, unit)
     M = mac_matrix(sa, sb) if sa.shape[0] >= 2 else np.full(L.shape, np.nan)
@@ -225,7 +225,7 @@ def assess_fleet(units: Sequence[Optional[UnitModes]], names: Sequence[str], fil
                                shift_median_pct=100 * m, shift_spread_pct=100 * spread[k],
                                freq_median_hz=float(np.median(fk)) if fk else float("nan"),
                                damping_median=zm, damping_spread=zs))
-    cs = np.array([out[i].common_shift_pct for i in ok]) / 100.0
+    cs = np.nan_to_num(np.array([out[i].common_shift_pct for i in ok]) / 100.0)
     c_med, c_spread = robust_center_spread(cs)
     c_spread = max(c_spread if np.isfinite(c_spread) else 0.0, 1e-5)
     for i in ok:
@@ -242,6 +242,11 @@ def assess_fleet(units: Sequence[Optional[UnitModes]], names: Sequence[str], fil
             elif abs(f.z[k]) > z_limit and abs(f.shift_pct[k]) > min_shift_pct:
                 f.reasons.append(f"{where}: {f.shift_pct[k]:+.2f} % from the fleet beyond the unit's common shift "
                                  f"({abs(f.z[k]):.0f} robust sigma; fleet spread {100 * spread[k]:.3f} %)")
+        judged = [k for k, m in enumerate(modes) if m.assessed]
+        n_pair = sum(np.isfinite(D[i, k]) for k in judged)
+        if judged and n_pair < 0.5 * len(judged):
+            f.reasons.append(f"only {n_pair} of the fleet's {len(judged)} modes pair with the reference's "
+                             f"(within {100 * tol:g} % after the unit's common shift): a different structure?")
         zc = (cs[ok.index(i)] - c_med) / c_spread
         dc = 100.0 * (cs[ok.index(i)] - c_med)
         if abs(zc) > z_limit and abs(dc) > common_min_shift_pct:
