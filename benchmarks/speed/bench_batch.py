@@ -1,0 +1,78 @@
+"""Throughput of ``analysis batch``: a serial loop vs a Dask LocalCluster of 1 and 2 workers.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/speed/bench_batch.py [--units 200] [--fleet DIR]
+
+Makes a fleet with ``simulator fleet`` (timed: the fleet command's own throughput), then fits every
+unit three ways and prints a table: wall time, units per second, speed-up over the serial loop,
+the scheduling overhead (wall x workers - the fits' own summed time) / the fits' summed time,
+and the peak resident memory of each worker process (ru_maxrss). Every run starts from an empty
+results folder (no reuse). Run by hand on an otherwise idle machine; nothing here is a test.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MPLBACKEND", "Agg")
+os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")
+
+
+def _peak_rss_mb() -> float:
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--units", type=int, default=200)
+    ap.add_argument("--fleet", help="an existing fleet folder (default: make one in a temporary folder)")
+    args = ap.parse_args()
+
+    from distributed import Client, LocalCluster
+
+    from analysis.batch.run import plan_inputs, run_batch, run_serial
+
+    with tempfile.TemporaryDirectory() as tmp:
+        fleet = Path(args.fleet) if args.fleet else Path(tmp) / "fleet"
+        t0 = time.perf_counter()
+        if not args.fleet:
+            subprocess.run([sys.executable, "-m", "simulator", "fleet", "--units", str(args.units), "--defects",
+                            str(max(1, args.units // 20)), "--out", str(fleet), "--seed", "3", "-q"], check=True)
+        t_fleet = time.perf_counter() - t0
+        inputs = plan_inputs(sorted(fleet.glob("*.h5"))[: args.units])
+        rows = []
+        serial = run_serial(inputs, Path(tmp) / "serial")
+        rows.append(("serial loop", 1, serial.seconds, serial.fit_seconds, _peak_rss_mb()))
+        for n in (1, 2):
+            with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+                    Client(cluster) as client:
+                t0 = time.perf_counter()
+                run = run_batch(inputs, Path(tmp) / f"dask{n}", client)
+                wall = time.perf_counter() - t0
+                peaks = client.run(_peak_rss_mb)
+            rows.append((f"Dask LocalCluster, {n} worker{'s' if n > 1 else ''}", n, wall, run.fit_seconds,
+                         max(peaks.values())))
+    print(f"fleet of {len(inputs)} units made by 'simulator fleet' in {t_fleet:.1f} s "
+          f"({len(inputs) / max(t_fleet, 1e-9):.1f} units/s on {os.cpu_count()} cores)" if not args.fleet else
+          f"fleet {fleet}: {len(inputs)} units")
+    print(f"\n| run | workers | wall (s) | units/s | speed-up vs serial | fit time (s, summed) | overhead | "
+          "peak memory per process (MB) |")
+    print("|---|---|---|---|---|---|---|---|")
+    base = rows[0][2]
+    for name, n, wall, fit_s, mem in rows:
+        overhead = (wall * n - fit_s) / fit_s
+        print(f"| {name} | {n} | {wall:.1f} | {len(inputs) / wall:.2f} | {base / wall:.2f}x | {fit_s:.1f} | "
+              f"{100 * overhead:.1f} % | {mem:.0f} |")
+    per_fit = rows[0][3] / len(inputs)
+    print(f"\nmean fit time per unit (serial loop): {per_fit:.3f} s; cluster start-up is inside the Dask wall times")
+
+
+if __name__ == "__main__":
+    main()
