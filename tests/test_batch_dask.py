@@ -99,13 +99,15 @@ def test_local_cluster_batch_with_a_corrupt_input_then_restart(fleet_dir, tmp_pa
 
 
 def test_worker_killed_mid_batch_loses_and_doubles_nothing(fleet_dir, tmp_path):
+    import dask.config
     from distributed import Client, LocalCluster
 
-    from analysis.batch.run import plan_inputs, run_batch
+    from analysis.batch.run import dask_settings, plan_inputs, run_batch
 
     inputs = plan_inputs(_inputs(fleet_dir, tmp_path))
     killed: list[int] = []
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    with dask.config.set(dask_settings()), \
+            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
             Client(cluster) as client:
         def kill_a_busy_worker(doc, done, total):
             if killed:
@@ -142,7 +144,10 @@ def test_dask_scheduler_and_worker_processes_through_scheduler_option(fleet_dir,
         pytest.skip("the 'dask' command is not installed beside this Python")
     inputs = _inputs(fleet_dir, tmp_path)[:3]
     sfile = tmp_path / "scheduler.json"
-    env = {**os.environ, "DASK_LOGGING__DISTRIBUTED": "error"}
+    from analysis.batch.run import DASK_CONFIG_DIR
+
+    env = {**{k: v for k, v in os.environ.items() if k != "MALLOC_TRIM_THRESHOLD_"},   # a shell as docs/batch.md says
+           "DASK_LOGGING__DISTRIBUTED": "error", "DASK_CONFIG": str(DASK_CONFIG_DIR)}
     sched = subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                               "--scheduler-file", str(sfile)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                              text=True, env=env)
@@ -158,6 +163,8 @@ def test_dask_scheduler_and_worker_processes_through_scheduler_option(fleet_dir,
 
         with Client(address, timeout="30s") as c:
             c.wait_for_workers(1, timeout=60)
+            # the worker took impactlab's Dask settings (docs/batch.md): glibc's adaptive malloc kept
+            assert c.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_")) == {w: None for w in c.scheduler_info()["workers"]}
         out = tmp_path / "out"
         done = subprocess.run([sys.executable, "-m", "analysis", "batch", *inputs, "--out", str(out),
                                "--scheduler", address, "-q"], capture_output=True, text=True, timeout=240)

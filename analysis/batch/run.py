@@ -23,7 +23,29 @@ from typing import Any, Callable, Optional, Sequence
 from ..atomic import write_json_atomic
 from .task import fit_one, file_sha256, options_key, result_is_current
 
-__all__ = ["BatchInput", "BatchRun", "plan_inputs", "open_client", "run_batch", "run_serial"]
+__all__ = ["BatchInput", "BatchRun", "DASK_CONFIG_DIR", "dask_settings", "plan_inputs", "open_client", "run_batch",
+           "run_serial"]
+
+#: Dask settings for the workers (a YAML folder; for ``dask worker``: ``export DASK_CONFIG=<this folder>``)
+DASK_CONFIG_DIR = Path(__file__).with_name("dask-config")
+
+
+def dask_settings() -> dict[str, Any]:
+    """The settings of :data:`DASK_CONFIG_DIR` as dotted keys (for ``dask.config.set``, which would
+    replace a whole subtree given as a nested dictionary)."""
+    import dask.config
+
+    flat: dict[str, Any] = {}
+
+    def walk(prefix: str, d: Any) -> None:
+        if isinstance(d, dict) and d:
+            for k, v in d.items():
+                walk(f"{prefix}.{k}" if prefix else str(k), v)
+        else:
+            flat[prefix] = d
+
+    walk("", dask.config.collect(paths=[str(DASK_CONFIG_DIR)], env={}))
+    return flat
 
 
 @dataclass(frozen=True)
@@ -94,8 +116,11 @@ def open_client(scheduler: Optional[str] = None, workers: Optional[int] = None) 
         if "://" not in scheduler and Path(scheduler).is_file():
             return Client(scheduler_file=scheduler, timeout="20s")
         return Client(scheduler, timeout="20s")
+    import dask.config
+
     n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+    with dask.config.set(dask_settings()):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
     return Client(cluster)
 
 

@@ -17,12 +17,24 @@ HUM_BASES_HZ = (50.0, 60.0)
 #: Largest departure of the mains frequency from its nominal value that is looked for (Hz): grids hold
 #: their frequency within about +-0.2 Hz; a wider search would let a "mains line" sit on a structural mode.
 MAX_OFFSET_HZ = 0.2
+#: Line shapes of mains lines with a width (see :func:`hum_kernels`).
+LINE_SHAPES = ("lorentzian", "sinc")
+#: A line's kernel is cut off this many widths from its centre.
+TAIL_WIDTHS = 6.0
 
 
-def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """(harmonic frequencies (Hz), kernels (n_harm, n_freq)) of the line shape 1/(1 + j (f - fk)/width);
+def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float,
+                shape: str = "lorentzian") -> tuple[np.ndarray, np.ndarray]:
+    """(harmonic frequencies (Hz), kernels (n_harm, n_freq)) of the mains lines at the harmonics of
+    ``base_hz``.
+
     ``width_hz = 0``: interference synchronous with the record, on the one line nearest each harmonic
-    (kernel 1 there, 0 elsewhere; harmonics more than half a line outside the lines are dropped)."""
+    (kernel 1 there, 0 elsewhere; harmonics more than half a line outside the lines are dropped).
+    ``width_hz > 0``: a line with a width, of ``shape`` "lorentzian" ``1/(1 + j x)`` (a decaying or
+    drifting tone) or "sinc" ``sin(pi x)/(pi x)`` (a steady tone off the line grid, leaked by the
+    record's rectangular window), ``x = (f - fk)/width``; either is cut off beyond ``TAIL_WIDTHS``
+    widths from its centre, so a line's amplitude is fitted to the lines around it and not to the
+    broad structure of the whole band."""
     f = np.asarray(freq_hz, float)
     fk = base_hz * np.arange(1, int(f[-1] // base_hz) + 1)
     if width_hz == 0:
@@ -31,8 +43,12 @@ def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float) -> tuple[n
         K = np.zeros((fk.size, f.size), complex)
         K[np.arange(fk.size), np.argmin(np.abs(f[None, :] - fk[:, None]), axis=1)] = 1.0
         return fk, K
+    if shape not in LINE_SHAPES:
+        raise EffectError(f"mains_hum: shape must be one of {', '.join(LINE_SHAPES)}; got {shape!r}")
     fk = fk[fk >= f[0] - 2 * width_hz]
-    return fk, 1.0 / (1 + 1j * (f[None, :] - fk[:, None]) / width_hz)
+    x = (f[None, :] - fk[:, None]) / width_hz
+    K = 1.0 / (1 + 1j * x) if shape == "lorentzian" else np.sinc(x).astype(complex)
+    return fk, np.where(np.abs(x) <= TAIL_WIDTHS, K, 0.0)
 
 
 def default_hum_width(freq_hz: np.ndarray) -> float:
@@ -47,7 +63,7 @@ def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
     width = default_hum_width(frf.freq_hz) if w is None else float(w)
     if not (np.isfinite(width) and width >= 0):
         raise EffectError(f"mains_hum: width_hz must be >= 0 (0: single lines), got {w!r}")
-    fk, K = hum_kernels(frf.freq_hz, f0, width)
+    fk, K = hum_kernels(frf.freq_hz, f0, width, str(params.get("shape", "lorentzian")))
     A = np.asarray(params.get("amplitudes"), float)
     if A.shape != frf.H.shape[:2] + (fk.size, 2):
         raise EffectError(f"mains_hum: amplitudes must have shape {frf.H.shape[:2] + (fk.size, 2)} "
@@ -73,14 +89,15 @@ def _hum_amplitudes(ctx: FitContext, E: np.ndarray, K: np.ndarray, lines: np.nda
     return A, total
 
 
-def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float]]:
-    """(mains base Hz, offset Hz, width Hz) tried: 50 and 60 Hz, offsets up to +-``MAX_OFFSET_HZ`` in
-    eighths of a line, single-line (synchronous, width 0) and leakage-broadened (two lines wide) line
-    shapes."""
+def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
+    """(mains base Hz, offset Hz, width Hz, shape) tried: 50 and 60 Hz, offsets up to
+    +-``MAX_OFFSET_HZ`` in eighths of a line, single lines (synchronous, width 0) and lines two lines
+    wide of both shapes (Lorentzian, sinc)."""
     df = float(np.median(np.diff(f)))
     steps = np.arange(df / 8, MAX_OFFSET_HZ + 1e-9, df / 8)
     offsets = np.concatenate([[0.0], np.ravel(np.column_stack([steps, -steps]))])   # 0, +-1, +-2, ... eighths
-    return [(b, float(o), w) for b in HUM_BASES_HZ for w in (0.0, default_hum_width(f)) for o in offsets]
+    shapes = [(0.0, "line")] + [(default_hum_width(f), s) for s in LINE_SHAPES]
+    return [(b, float(o), w, s) for b in HUM_BASES_HZ for w, s in shapes for o in offsets]
 
 
 def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
@@ -95,29 +112,43 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
     # than fitting noise would: 4 x the typical line's cost per harmonic and FRF
     line_cost = float(np.median(ctx.weights[..., lines] * np.abs(E[..., lines]) ** 2))
     n_frf = E.shape[0] * E.shape[1]
-    for base, off, width in _hum_candidates(f):
-        fk, K = hum_kernels(f, base + off, width)
-        # a harmonic is fitted only where the lines next to it are given: its tails alone would fit noise
-        seen = np.array([np.any(lines & (np.abs(f - x) <= max(2 * width, df / 2))) for x in fk], bool)
+    tried: list[tuple[float, float, float, str, float]] = []
+    for base, off, width, shape in _hum_candidates(f):
+        fk, K = hum_kernels(f, base + off, width, shape)
+        # a harmonic is fitted only where lines within its width are given: its tails alone would fit noise
+        seen = np.array([np.any(lines & (np.abs(f - x) <= max(width, df / 2))) for x in fk], bool)
         if not seen.any():
             continue
         K = np.where(seen[:, None], K, 0.0)
         A, total = _hum_amplitudes(ctx, E, K, lines)
+        tried.append((base, off, width, shape, total))
         complexity = (off != 0.0) + (width != 0.0)
         if best is None or total + 4 * line_cost * n_frf * int(seen.sum()) * max(complexity - best[5], 0) < best[0]:
-            best = (total, base, off, width, A, complexity)
+            best = (total, base, off, width, A, complexity, shape)
     if best is None:
-        return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(f),
+        return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(f), "shape": "lorentzian",
                 "amplitudes": np.zeros(ctx.measured.H.shape[:2] + (0, 2)).tolist()}
-    return {"base_hz": best[1], "offset_hz": best[2], "width_hz": best[3], "amplitudes": best[4].tolist()}
+    off = best[2]
+    if best[3] == 0.0 and off != 0.0:
+        # single lines: the offsets that put the lines with interference on the same bins fit alike, up to
+        # noise (lines without interference that one offset reaches and another does not); take the middle
+        # of that run of offsets (the best guess of the true one), not the one nearest zero, so that the
+        # harmonics not fitted here are predicted on the right bins
+        tol = 2.0 * line_cost * n_frf
+        same = sorted(o for b, o, w, _, t in tried if b == best[1] and w == 0.0 and t <= best[0] + tol)
+        off = same[len(same) // 2]
+        fk, K = hum_kernels(f, best[1] + off, 0.0)
+        seen = np.array([np.any(lines & (np.abs(f - x) <= df / 2)) for x in fk], bool)
+        A, _ = _hum_amplitudes(ctx, E, np.where(seen[:, None], K, 0.0), lines)
+        best = best[:4] + (A,) + best[5:]
+    return {"base_hz": best[1], "offset_hz": off, "width_hz": best[3],
+            "shape": best[6] if best[3] else "line", "amplitudes": best[4].tolist()}
 
 
-def held_out_mains_hum(ctx: FitContext) -> "tuple[np.ndarray, np.ndarray] | None":
-    """The cross-validation of ``mains_hum``: by harmonics (:func:`held_out_by_harmonics`) when the fit
-    on all lines chose single lines (width 0); None (the default interleaved folds) for lines with a
-    width, which neighbouring lines test well."""
-    if fit_mains_hum(ctx, np.ones(ctx.measured.freq_hz.size, bool))["width_hz"] != 0.0:
-        return None
+def held_out_mains_hum(ctx: FitContext) -> "tuple[np.ndarray, np.ndarray]":
+    """The cross-validation of ``mains_hum``: by harmonics (:func:`held_out_by_harmonics`), for single
+    lines and lines with a width alike (neighbouring lines of a line with a width are not independent,
+    so interleaved folds would let a fold fit what it is scored on)."""
     return held_out_by_harmonics(ctx)
 
 
@@ -145,7 +176,7 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
             for fh in b * k[(k % 2) == parity]:
                 near |= np.abs(f - fh) <= 0.6 + 2 * df
         params = fit_mains_hum(ctx, ~near)
-        fk, K = hum_kernels(f, params["base_hz"] + params["offset_hz"], params["width_hz"])
+        fk, K = hum_kernels(f, params["base_hz"] + params["offset_hz"], params["width_hz"], params["shape"])
         order = np.rint(fk / params["base_hz"]).astype(int)
         test_k = (order % 2) == parity
         if not test_k.any():

@@ -5,6 +5,7 @@
 Makes a fleet with ``simulator fleet`` (timed: the fleet command's own throughput), then fits every
 unit three ways and prints a table: wall time, units per second, speed-up over the serial loop,
 the scheduling overhead (wall x workers - the fits' own summed time) / the fits' summed time,
+with the workers set up as ``analysis batch`` sets them (:func:`analysis.batch.run.dask_settings`),
 and the peak resident memory of each worker process (ru_maxrss). Every run starts from an empty
 results folder (no reuse). Run by hand on an otherwise idle machine; nothing here is a test.
 """
@@ -35,9 +36,10 @@ def main() -> None:
     ap.add_argument("--fleet", help="an existing fleet folder (default: make one in a temporary folder)")
     args = ap.parse_args()
 
+    import dask.config
     from distributed import Client, LocalCluster
 
-    from analysis.batch.run import plan_inputs, run_batch, run_serial
+    from analysis.batch.run import dask_settings, plan_inputs, run_batch, run_serial
 
     with tempfile.TemporaryDirectory() as tmp:
         fleet = Path(args.fleet) if args.fleet else Path(tmp) / "fleet"
@@ -51,7 +53,8 @@ def main() -> None:
         serial = run_serial(inputs, Path(tmp) / "serial")
         rows.append(("serial loop", 1, serial.seconds, serial.fit_seconds, _peak_rss_mb()))
         for n in (1, 2):
-            with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            with dask.config.set(dask_settings()), \
+                    LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
                     Client(cluster) as client:
                 t0 = time.perf_counter()
                 run = run_batch(inputs, Path(tmp) / f"dask{n}", client)
@@ -62,7 +65,7 @@ def main() -> None:
     print(f"fleet of {len(inputs)} units made by 'simulator fleet' in {t_fleet:.1f} s "
           f"({len(inputs) / max(t_fleet, 1e-9):.1f} units/s on {os.cpu_count()} cores)" if not args.fleet else
           f"fleet {fleet}: {len(inputs)} units")
-    print(f"\n| run | workers | wall (s) | units/s | speed-up vs serial | fit time (s, summed) | overhead | "
+    print("\n| run | workers | wall (s) | units/s | speed-up vs serial | fit time (s, summed) | overhead | "
           "peak memory per process (MB) |")
     print("|---|---|---|---|---|---|---|---|")
     base = rows[0][2]
