@@ -93,7 +93,7 @@ def test_paper_resonance_at_band_edge(base):
 @pytest.mark.parametrize("base_hz, offset_hz, width_hz", [
     (50.0, 0.0, 0.0), (60.0, 0.0, 0.0),                       # synchronous: one line at each harmonic
     (50.0, 0.0, 0.5), (60.0, 0.0, 0.5),                       # leaked by a rectangular window: a sinc
-    (50.0, 0.1, 0.5), (60.0, -0.15, 0.5), (50.0, 0.2, 0.5),   # ... and off the nominal frequency
+    (50.0, 0.1, 0.5), (60.0, -0.15, 0.5), (60.0, 0.2, 0.5),   # ... and off the nominal frequency
 ])
 def test_mains_interference_not_made_by_the_catalogue_formula(base, base_hz, offset_hz, width_hz) -> None:
     """Mains lines made here, not by the catalogue (whose lines are Lorentzians): synchronous

@@ -27,6 +27,8 @@ from ..frf import FRFSet
 from ..mac import mac as mac_of
 
 __all__ = [
+    "BLOCK_LINES",
+    "line_folds",
     "FLOOR_FRACTION",
     "line_weights",
     "averages",
@@ -275,3 +277,18 @@ def common_points(measured: FRFSet, simulated: FRFSet) -> tuple[Sequence[str], S
             f"references {list(simulated.references)}. Label the points alike (component:node:direction)."
         )
     return outs, refs
+
+
+#: Lines per block of the cross-validation folds (:func:`line_folds`).
+BLOCK_LINES = 4
+
+
+def line_folds(n: int, block: int = BLOCK_LINES) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The two cross-validation folds of ``n`` lines, (train, test) masks each way: blocks of
+    ``block`` contiguous lines, alternating between the folds. Blocks, not single interleaved lines:
+    neighbouring lines of a smooth FRF are not independent (their noise is correlated by the windows
+    and the leakage of the record), so an effect scored on the lines right beside the ones it was
+    fitted on would be scored on what it has seen. Every line is scored once."""
+    first = (np.arange(n) // max(int(block), 1)) % 2 == 0
+    return [(first, ~first), (~first, first)]
+

@@ -91,13 +91,19 @@ def _hum_amplitudes(ctx: FitContext, E: np.ndarray, K: np.ndarray, lines: np.nda
 
 def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
     """(mains base Hz, offset Hz, width Hz, shape) tried: 50 and 60 Hz, offsets up to
-    +-``MAX_OFFSET_HZ`` in eighths of a line, single lines (synchronous, width 0) and lines two lines
-    wide of both shapes (Lorentzian, sinc)."""
+    +-``MAX_OFFSET_HZ``, single lines (synchronous, width 0) and lines two lines wide of both shapes
+    (Lorentzian, sinc)."""
     df = float(np.median(np.diff(f)))
-    steps = np.arange(df / 8, MAX_OFFSET_HZ + 1e-9, df / 8)
-    offsets = np.concatenate([[0.0], np.ravel(np.column_stack([steps, -steps]))])   # 0, +-1, +-2, ... eighths
-    shapes = [(0.0, "line")] + [(default_hum_width(f), s) for s in LINE_SHAPES]
-    return [(b, float(o), w, s) for b in HUM_BASES_HZ for w, s in shapes for o in offsets]
+
+    def offsets(step: float) -> np.ndarray:     # 0, +-1, +-2, ... steps, up to and just past the limit
+        k = np.arange(1, int(np.ceil(MAX_OFFSET_HZ / step - 1e-9)) + 1) * step
+        return np.concatenate([[0.0], np.ravel(np.column_stack([k, -k]))])
+
+    # single lines sit on the bins nearest k (base + offset): finer steps (1/32 line) find the offset
+    # that puts every harmonic on its bin; a line with a width moves smoothly, 1/8 line is enough
+    out = [(b, float(o), 0.0, "line") for b in HUM_BASES_HZ for o in offsets(df / 32)]
+    width = default_hum_width(f)
+    return out + [(b, float(o), width, s) for b in HUM_BASES_HZ for s in LINE_SHAPES for o in offsets(df / 8)]
 
 
 def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:

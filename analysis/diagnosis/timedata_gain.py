@@ -11,6 +11,7 @@ from scipy.optimize import minimize_scalar
 
 from ..modal import ModalModel
 from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_decay
+from .compare import line_folds
 from .effects import synthesize_windowed
 from .timedata import (FORCE_TAPER_S, FORCE_WINDOW_S, NOISE_GUARD, _check_hits, detect_amplitude_nonlinearity,
                        detect_double_hit, detect_input_noise, detect_overload, pulse_bounds)
@@ -128,12 +129,6 @@ def _noise_psd(spec: HitSpectraSet, sigma_n: float, n: int, fs_hz: float) -> np.
     return (c[None, :] / (n * dt)) * dt ** 2 * sigma_n ** 2 * spec.noise_gain[:, None]
 
 
-def _folds(n: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    idx = np.arange(n)
-    even, odd = idx % 2 == 0, idx % 2 == 1
-    return [(even, odd), (odd, even)]
-
-
 def _db(x: float) -> float:
     return float(10 * np.log10(max(x, 1e-30)))
 
@@ -145,7 +140,7 @@ def _score(measured: "np.ndarray | tuple[np.ndarray, np.ndarray]", before: np.nd
     one array or a (before-measured, after-measured) pair for the exclusion effects."""
     m_b, m_a = measured if isinstance(measured, tuple) else (measured, measured)
     bs, as_ = [], []
-    for train, test in _folds(m_b.shape[-1]):
+    for train, test in line_folds(m_b.shape[-1]):
         Hx, _ = after_of(train)
         w = weights[..., test]
         bs.append((w * np.abs(m_b[..., test] - before[..., test]) ** 2).ravel())

@@ -2,8 +2,10 @@
 
 Rule (documented in ``docs/diagnosis.md``):
 
-1. **Cross-validation.** The lines of the band are split into two interleaved folds (even and odd
-   line numbers). Each effect is fitted on one fold and scored on the other, both ways, so every
+1. **Cross-validation.** The lines of the band are split into two folds of alternating blocks of
+   four contiguous lines (:func:`analysis.diagnosis.compare.line_folds`: not single interleaved
+   lines, whose noise is correlated with their neighbours'; mains lines are cross-validated by
+   harmonics instead). Each effect is fitted on one fold and scored on the other, both ways, so every
    line is scored once by a model that did not see it. ``before_i`` and ``after_i`` are the weighted
    squared errors (see :mod:`analysis.diagnosis.compare`) of the simulation and of the extended
    simulation on held-out line/FRF ``i``. ``gain_db = 10 log10(mean before / mean after)``.
@@ -34,7 +36,7 @@ import numpy as np
 from ..progress import progress
 from ..frf import FRFSet
 from ..modal import ModalModel
-from .compare import band_errors, compare, line_weights, noise_level, typical_error_db
+from .compare import band_errors, compare, line_folds, line_weights, noise_level, typical_error_db
 from .effects import EFFECTS, EffectError, FitContext, predict
 
 if TYPE_CHECKING:
@@ -111,12 +113,6 @@ def _jsonable(x):
     return x
 
 
-def _folds(n: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    idx = np.arange(n)
-    even, odd = idx % 2 == 0, idx % 2 == 1
-    return [(even, odd), (odd, even)]
-
-
 def _held_out(ctx: FitContext, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Per line/FRF weighted squared errors (before, after) on held-out lines, both folds."""
     eff = EFFECTS[name]
@@ -125,7 +121,7 @@ def _held_out(ctx: FitContext, name: str) -> tuple[np.ndarray, np.ndarray]:
         return own
     before, after = [], []
     m = ctx.measured
-    for train, test in _folds(m.freq_hz.size):
+    for train, test in line_folds(m.freq_hz.size):
         params = eff.fit(ctx, train)
         Hx = predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **params}),
                      outputs=m.outputs, references=m.references).H

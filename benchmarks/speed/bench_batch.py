@@ -3,7 +3,8 @@
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/speed/bench_batch.py [--units 200] [--fleet DIR]
 
 Makes a fleet with ``simulator fleet`` (timed: the fleet command's own throughput), then fits every
-unit three ways and prints a table: wall time, units per second, speed-up over the serial loop,
+unit four ways (a serial loop, a plain pool of 2 processes as the machine's ceiling, Dask with 1
+and 2 workers) and prints a table: wall time, units per second, speed-up over the serial loop,
 the scheduling overhead (wall x workers - the fits' own summed time) / the fits' summed time,
 with the workers set up as ``analysis batch`` sets them (:func:`analysis.batch.run.dask_settings`),
 and the peak resident memory of each worker process (ru_maxrss). Every run starts from an empty
@@ -24,7 +25,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")
 
 
-def _peak_rss_mb() -> float:
+def _peak_rss_mb(_: object = None) -> float:
     import resource
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -52,6 +53,18 @@ def main() -> None:
         rows = []
         serial = run_serial(inputs, Path(tmp) / "serial")
         rows.append(("serial loop", 1, serial.seconds, serial.fit_seconds, _peak_rss_mb()))
+        # the machine's own ceiling: the same fits in a plain pool of 2 processes, no scheduler at all
+        import concurrent.futures
+
+        from analysis.batch.task import fit_one
+
+        t0 = time.perf_counter()
+        with concurrent.futures.ProcessPoolExecutor(2) as pool:
+            docs = list(pool.map(fit_one, [str(i.path) for i in inputs], [i.name for i in inputs],
+                                 [i.sha256 for i in inputs], chunksize=4))
+            peak = max(pool.map(_peak_rss_mb, range(2)))   # type: ignore[arg-type]
+        rows.append(("process pool, 2 processes (no Dask)", 2, time.perf_counter() - t0,
+                     float(sum(d["seconds"] for d in docs)), peak))
         for n in (1, 2):
             with dask.config.set(dask_settings()), \
                     LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
