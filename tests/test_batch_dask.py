@@ -1,13 +1,16 @@
 """Batch analysis on Dask's own scheduler and workers: a LocalCluster of 2 processes, a worker
 killed mid-run, ``dask scheduler`` / ``dask worker`` started as separate processes, a corrupt
 input, restarts by content hash. The fleet is made by ``simulator fleet`` (FE frames with scatter
-and a physical defect, captured through the simulated analyser)."""
+and a physical defect, captured through the simulated analyser).
+
+Dask runs in child processes only (the commands, tests/dask_kill_driver.py): a process that has used
+a Dask client keeps its threads, and the rest of the session forks child processes for isolated
+readers (analysis._isolated), which it only does from a single-threaded process."""
 from __future__ import annotations
 
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import time
@@ -20,6 +23,13 @@ pq = pytest.importorskip("pyarrow.parquet")
 
 from analysis.cli_batch import main as batch  # noqa: E402
 from simulator.cli_fleet import main as fleet  # noqa: E402
+
+ENV = {**{k: v for k, v in os.environ.items() if k != "MALLOC_TRIM_THRESHOLD_"}, "DASK_LOGGING__DISTRIBUTED": "error"}
+
+
+def _batch_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "analysis", "batch", *args], capture_output=True, text=True,
+                          timeout=240, env=ENV)
 
 N_UNITS = 8
 
@@ -60,11 +70,12 @@ def test_fleet_command_writes_recordings_and_truth(fleet_dir, capsys):
     assert f"{N_UNITS} of {N_UNITS} units already on disk" in capsys.readouterr().err
 
 
-def test_local_cluster_batch_with_a_corrupt_input_then_restart(fleet_dir, tmp_path, capsys):
+def test_local_cluster_batch_with_a_corrupt_input_then_restart(fleet_dir, tmp_path):
     inputs = _inputs(fleet_dir, tmp_path, corrupt=True)
     out = tmp_path / "out"
-    assert batch([*inputs, "--out", str(out), "--workers", "2", "-q"]) == 0
-    text = capsys.readouterr().out
+    done = _batch_cli(*inputs, "--out", str(out), "--workers", "2", "-q")
+    assert done.returncode == 0, done.stderr
+    text = done.stdout
     assert f"batch of {N_UNITS + 1}: {N_UNITS} done ({N_UNITS + 1} fitted, 0 reused), 1 failed" in text
     fits = sorted(p.name for p in (out / "fits").glob("*.json"))
     assert fits == sorted(f"{Path(p).stem}.json" for p in inputs)        # exactly one result per input
@@ -88,44 +99,29 @@ def test_local_cluster_batch_with_a_corrupt_input_then_restart(fleet_dir, tmp_pa
     stamp = {p.name: p.stat().st_mtime_ns for p in (out / "fits").glob("*.json")}
 
     # again: nothing is refitted; then one input's content changes: only it is fitted again
-    assert batch([*inputs, "--out", str(out), "--workers", "1", "-q"]) == 0
-    assert f"(0 fitted, {N_UNITS + 1} reused)" in capsys.readouterr().out
+    again = _batch_cli(*inputs, "--out", str(out), "--workers", "1", "-q")
+    assert again.returncode == 0 and f"(0 fitted, {N_UNITS + 1} reused)" in again.stdout, again.stderr
     shutil.copy(inputs[1], inputs[0])
-    assert batch([*inputs, "--out", str(out), "--workers", "1", "-q"]) == 0
-    assert f"(1 fitted, {N_UNITS} reused)" in capsys.readouterr().out
+    changed_run = _batch_cli(*inputs, "--out", str(out), "--workers", "1", "-q")
+    assert changed_run.returncode == 0 and f"(1 fitted, {N_UNITS} reused)" in changed_run.stdout, changed_run.stderr
     changed = {p.name for p in (out / "fits").glob("*.json") if p.stat().st_mtime_ns != stamp[p.name]}
     assert changed == {f"{Path(inputs[0]).stem}.json"}
     assert not list((out / "fits").glob(".*.part")) and not list(out.glob(".*.part"))
 
 
 def test_worker_killed_mid_batch_loses_and_doubles_nothing(fleet_dir, tmp_path):
-    import dask.config
-    from distributed import Client, LocalCluster
-
-    from analysis.batch.run import dask_settings, plan_inputs, run_batch
-
-    inputs = plan_inputs(_inputs(fleet_dir, tmp_path))
-    killed: list[int] = []
-    with dask.config.set(dask_settings()), \
-            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
-        def kill_a_busy_worker(doc, done, total):
-            if killed:
-                return
-            busy = [w for w, keys in client.processing().items() if keys]
-            assert busy, "no task in flight to kill"
-            pid = client.run(os.getpid, workers=[busy[0]])[busy[0]]
-            os.kill(pid, signal.SIGKILL)
-            killed.append(pid)
-
-        run = run_batch(inputs, tmp_path / "out", client, on_result=kill_a_busy_worker)
-    assert killed
-    with pytest.raises(ProcessLookupError):
-        os.kill(killed[0], 0)                                         # that worker is really gone
-    assert [r["input"] for r in run.results] == [i.name for i in inputs]
-    assert all(r["status"] == "ok" for r in run.results) and not run.lost
-    assert sorted(p.name for p in (tmp_path / "out" / "fits").glob("*.json")) == sorted(i.result_file for i in inputs)
-    assert len({r["worker"] for r in run.results}) >= 2              # the work went on elsewhere
+    inputs = _inputs(fleet_dir, tmp_path)
+    out = tmp_path / "out"
+    driver = Path(__file__).with_name("dask_kill_driver.py")
+    done = subprocess.run([sys.executable, str(driver), str(out), *inputs], capture_output=True, text=True,
+                          timeout=240, env=ENV)
+    assert done.returncode == 0, done.stderr
+    rep = json.loads(done.stdout.strip().splitlines()[-1])
+    assert rep["killed"] and not rep["alive_after"]                   # that worker is really gone
+    assert [r[0] for r in rep["results"]] == rep["names"]
+    assert all(r[1] == "ok" for r in rep["results"]) and not rep["lost"]
+    assert sorted(p.name for p in (out / "fits").glob("*.json")) == sorted(rep["result_files"])
+    assert len({r[2] for r in rep["results"]}) >= 2                   # the work went on elsewhere
 
 
 def _wait_for(path: Path, proc: subprocess.Popen, what: str) -> None:
@@ -146,8 +142,7 @@ def test_dask_scheduler_and_worker_processes_through_scheduler_option(fleet_dir,
     sfile = tmp_path / "scheduler.json"
     from analysis.batch.run import DASK_CONFIG_DIR
 
-    env = {**{k: v for k, v in os.environ.items() if k != "MALLOC_TRIM_THRESHOLD_"},   # a shell as docs/batch.md says
-           "DASK_LOGGING__DISTRIBUTED": "error", "DASK_CONFIG": str(DASK_CONFIG_DIR)}
+    env = {**ENV, "DASK_CONFIG": str(DASK_CONFIG_DIR)}                # a shell as docs/batch.md says
     sched = subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                               "--scheduler-file", str(sfile)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                              text=True, env=env)
@@ -159,15 +154,14 @@ def test_dask_scheduler_and_worker_processes_through_scheduler_option(fleet_dir,
         worker = subprocess.Popen([str(dask), "worker", address, "--nworkers", "1", "--nthreads", "1",
                                    "--no-dashboard", "--name", "stand-1"],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
-        from distributed import Client
-
-        with Client(address, timeout="30s") as c:
-            c.wait_for_workers(1, timeout=60)
-            # the worker took impactlab's Dask settings (docs/batch.md): glibc's adaptive malloc kept
-            assert c.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_")) == {w: None for w in c.scheduler_info()["workers"]}
+        probe = ("import os, json; from distributed import Client\n"
+                 f"c = Client({address!r}, timeout='30s'); c.wait_for_workers(1, timeout=60)\n"
+                 "print(json.dumps(list(c.run(lambda: os.environ.get('MALLOC_TRIM_THRESHOLD_')).values()))); c.close()")
+        seen = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, env=ENV)
+        # the worker is up and took impactlab's Dask settings (docs/batch.md): glibc's adaptive malloc kept
+        assert seen.returncode == 0 and json.loads(seen.stdout.strip().splitlines()[-1]) == [None], seen.stderr
         out = tmp_path / "out"
-        done = subprocess.run([sys.executable, "-m", "analysis", "batch", *inputs, "--out", str(out),
-                               "--scheduler", address, "-q"], capture_output=True, text=True, timeout=240)
+        done = _batch_cli(*inputs, "--out", str(out), "--scheduler", address, "-q")
         assert done.returncode == 0, done.stderr
         assert "3 done (3 fitted, 0 reused), 0 failed" in done.stdout
         run = json.loads((out / "fleet.json").read_text())["run"]
