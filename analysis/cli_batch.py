@@ -131,8 +131,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         fleet = assess_fleet(units, [i.name for i in inputs], files, reference=reference,
                              reference_name=str(args.reference or ""), errors=errors,
                              z_limit=args.z_limit, min_shift_pct=args.min_shift)
-    ref_f = reference.freq_hz if reference is not None else next(
-        u for u, f in zip(units, fleet.units) if f.name == fleet.reference).freq_hz   # type: ignore[union-attr]
+    if reference is None:            # the fleet's median unit
+        reference = next(u for u, f in zip(units, fleet.units) if f.name == fleet.reference and u is not None)
+    ref_f = reference.freq_hz
     wall = time.perf_counter() - t0
     info = {"inputs": len(inputs), "fitted": run.fitted, "reused": run.reused, "failed": run.failed,
             "flagged": sum(u.flagged for u in fleet.units), "seconds": round(wall, 3),

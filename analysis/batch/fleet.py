@@ -186,12 +186,14 @@ def assess_fleet(units: Sequence[Optional[UnitModes]], names: Sequence[str], fil
     if reference is None:
         if not ok:
             raise ValueError("no unit has a usable fit: the fleet has no reference")
-        r = ok[median_unit([units[i] for i in ok])]   # type: ignore[misc]
+        usable = [u for u in units if u is not None and u.n_modes > 0]
+        r = ok[median_unit(usable)]
         reference, reference_name = units[r], names[r]
     assert reference is not None
     n_ref = reference.n_modes
     out: list[UnitFlags] = []
-    D = np.full((len(units), n_ref), np.nan)
+    D = np.full((len(units), n_ref), np.nan)        # pattern shift ln(f/f_ref) - c_u (-)
+    F, Z, S = (np.full((len(units), n_ref), np.nan) for _ in range(3))   # paired f (Hz), zeta, f std (Hz)
     for i, u in enumerate(units):
         flags = UnitFlags(name=names[i], file=files[i], status="ok" if i in ok else "error",
                           error=errs[i] if i not in ok else None)
@@ -204,6 +206,7 @@ def assess_fleet(units: Sequence[Optional[UnitModes]], names: Sequence[str], fil
             flags.common_shift_pct = 100.0 * p.common_shift
             got = p.index >= 0
             D[i, got] = np.log(u.freq_hz[p.index[got]] / reference.freq_hz[got]) - p.common_shift
+            F[i, got], Z[i, got], S[i, got] = (a[p.index[got]] for a in (u.freq_hz, u.damping, u.freq_std_hz))
         out.append(flags)
     n_ok = max(len(ok), 1)
     found = np.sum(np.isfinite(D), axis=0)
@@ -213,17 +216,15 @@ def assess_fleet(units: Sequence[Optional[UnitModes]], names: Sequence[str], fil
     spread = np.zeros(n_ref)
     for k in range(n_ref):
         m, s = robust_center_spread(D[:, k])
-        fits = [units[i].freq_std_hz[out[i].pairing.index[k]] / units[i].freq_hz[out[i].pairing.index[k]]   # type: ignore
-                for i in ok if out[i].pairing.index[k] >= 0]                                            # type: ignore
-        rel_std[k] = float(np.nanmedian(fits)) if fits and np.isfinite(fits).any() else 0.0
+        rel = S[:, k] / F[:, k]
+        rel_std[k] = float(np.nanmedian(rel)) if np.isfinite(rel).any() else 0.0
         centre[k], spread[k] = m, max(s if np.isfinite(s) else 0.0, rel_std[k], 1e-5)
-        fk = [units[i].freq_hz[out[i].pairing.index[k]] for i in ok if out[i].pairing.index[k] >= 0]   # type: ignore
-        zk = [units[i].damping[out[i].pairing.index[k]] for i in ok if out[i].pairing.index[k] >= 0]   # type: ignore
-        zm, zs = robust_center_spread(np.asarray(zk))
+        fk = F[np.isfinite(F[:, k]), k]
+        zm, zs = robust_center_spread(Z[:, k])
         modes.append(FleetMode(index=k, ref_freq_hz=float(reference.freq_hz[k]), found=int(found[k]),
                                found_fraction=float(found[k]) / n_ok, assessed=bool(found[k] >= min_found * n_ok),
                                shift_median_pct=100 * m, shift_spread_pct=100 * spread[k],
-                               freq_median_hz=float(np.median(fk)) if fk else float("nan"),
+                               freq_median_hz=float(np.median(fk)) if fk.size else float("nan"),
                                damping_median=zm, damping_spread=zs))
     cs = np.nan_to_num(np.array([out[i].common_shift_pct for i in ok]) / 100.0)
     c_med, c_spread = robust_center_spread(cs)
