@@ -112,7 +112,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         out.mkdir(parents=True, exist_ok=True)
     inputs = plan_inputs(paths)
     t0 = time.perf_counter()
-    with exit_on("analysis batch", (ImportError, 2), (OSError, 1, "cannot reach the Dask scheduler: ")):
+    unreachable = "cannot reach the Dask scheduler (check the address, and that 'dask scheduler' runs there): "
+    with exit_on("analysis batch", (ImportError, 2), (OSError, 1, unreachable)):
         client = open_client(args.scheduler, args.workers)
     try:
         if not args.quiet:
