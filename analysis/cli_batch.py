@@ -93,16 +93,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
-    from .batch.unit_modes import ReferenceFitError, modes_from_fit, read_reference
+    from .batch.unit_modes import modes_from_fit, read_reference
 
-    with errors_to_exit("analysis batch", (InputError, ReferenceFitError)):
+    with errors_to_exit("analysis batch", InputError):
         paths = expand_inputs(args.inputs)
         band = parse_band_text(args.band) if args.band else None
         reference = read_reference(args.reference) if args.reference else None
         if args.workers is not None and args.workers < 1:
             raise InputError("--workers must be at least 1")
     from .batch.fleet import assess_fleet
-    from .batch.outputs import fleet_document, modes_rows, plot_fleet, write_fleet_json, write_modes_parquet
+    from .atomic import write_json_atomic
+    from .batch.outputs import fleet_document, modes_rows, plot_fleet, write_modes_parquet
     from .batch.run import open_client, plan_inputs, run_batch
 
     # Dask's own log lines (worker start and stop) only with -v; workers inherit the setting
@@ -141,7 +142,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             "fit_seconds": round(run.fit_seconds, 3), "workers": run.workers, "scheduler": run.where}
     with errors_to_exit("analysis batch", (OSError, ValueError), code=1, prefix="cannot write the outputs: "):
         write_modes_parquet(out / "modes.parquet", modes_rows(fleet, units, files, ref_f))
-        write_fleet_json(out / "fleet.json", fleet_document(fleet, info))
+        write_json_atomic(out / "fleet.json", fleet_document(fleet, info))
         plot_fleet(out / "fleet.png", fleet)
     for u in fleet.units:
         if u.flagged:

@@ -49,9 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     return with_examples(p)
 
 
-def capture_unit(spec: UnitSpec, out_dir: str, hits: int) -> tuple[str, int, str]:
-    """Capture one unit into ``out_dir/<name>.h5`` (renamed into place when complete); returns
-    (name, exit code, the capture's messages when it failed)."""
+def capture_unit(spec: UnitSpec, out_dir: str, hits: int) -> None:
+    """Capture one unit into ``out_dir/<name>.h5`` (renamed into place when complete); a failed
+    capture raises :class:`_CaptureFailed` with the capture's exit code and messages."""
     from acquisition.cli_capture import main as capture
 
     out = Path(out_dir)
@@ -69,7 +69,6 @@ def capture_unit(spec: UnitSpec, out_dir: str, hits: int) -> tuple[str, int, str
             with contextlib.suppress(OSError):
                 os.unlink(f"{tmp}.h5")
             raise _CaptureFailed(spec.name, rc, err.getvalue())
-    return spec.name, rc, ""
 
 
 class _CaptureFailed(Exception):

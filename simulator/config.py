@@ -122,12 +122,13 @@ class DamageConfig:
     loose_supports: tuple
     loose_support_factor: tuple
 
-    def element_factor(self, component: str, element: int) -> float:
-        """Bending stiffness factor (-) of element ``element`` of ``component`` (1 when undamaged)."""
-        f = 1.0
+    def bending_factors(self, component: str, n_elements: int) -> list[float]:
+        """Bending stiffness factor (-) of each element of ``component`` (1 where undamaged)."""
+        f = [1.0] * n_elements
         for where, k in zip(self.cracked_elements, self.crack_bending_factor):
-            if where == f"{component}:{element}":
-                f *= float(k)
+            comp, _, e = str(where).partition(":")
+            if comp == component:
+                f[int(e)] *= float(k)
         return f
 
     def spring_factor(self, kind: str, nodes: "tuple[str, ...]") -> float:

@@ -305,7 +305,7 @@ class FrameModel:
             sp = section_properties(cfg.sections[comp.section])
             xyz = member_nodes_xyz(comp)
             k, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg,
-                                 [cfg.damage.element_factor(name, e) for e in range(comp.n_elements)])
+                                 cfg.damage.bending_factors(name, comp.n_elements))
             blocks_K.append(k)
             blocks_M.append(m)
             for i in range(comp.n_elements + 1):

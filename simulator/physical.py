@@ -103,7 +103,7 @@ class FrameVariants:
             sp = section_properties(cfg.sections[comp.section])
             xyz = member_nodes_xyz(comp)
             k_all, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg,
-                                     [cfg.damage.element_factor(name, e) for e in range(comp.n_elements)])
+                                     cfg.damage.bending_factors(name, comp.n_elements))
             k_rest, _ = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3,
                                       replace(sp, Iy=0.0, Iz=0.0), comp.roll_deg)
             first = 6 * self.frame.node_index[(name, 0)]

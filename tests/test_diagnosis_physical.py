@@ -21,7 +21,7 @@ from analysis.diagnosis.effects import RECORD_KEY, synthesize_windowed
 from analysis.diagnosis.physical import MeasuredModes, fit_cause, same_structure
 from analysis.frf import FRFSet
 from analysis.modal import ModalModel, pole_from_fz
-from simulator.config import FrameConfig
+from simulator.config import FrameConfig, overrides_to_toml
 from simulator.fem import FrameModel
 from simulator.physical import FrameVariants
 from benchmark_modules import load_benchmark
@@ -167,11 +167,10 @@ def _capture_and_diagnose(tmp_path: Path, overrides: dict, seed: int, extra=()) 
     from acquisition.cli_capture import main as capture
     from analysis.cli_diagnose import main as diagnose
 
-    bench = _bench()
     device = f"sim://?seed={seed}"
     if overrides:
         cfg = tmp_path / "changed.toml"
-        cfg.write_text(bench._toml(overrides))
+        cfg.write_text(overrides_to_toml(overrides))
         device += f"&config={cfg}"
     rec, out = tmp_path / "rec.h5", tmp_path / "diag.json"
     with contextlib.redirect_stdout(io.StringIO()):

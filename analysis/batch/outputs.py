@@ -20,11 +20,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..atomic import atomic_path, write_json_atomic
+from ..atomic import atomic_path
 from .fleet import FleetResult
 from .unit_modes import UnitModes
 
-__all__ = ["MODES_COLUMNS", "modes_rows", "write_modes_parquet", "fleet_document", "write_fleet_json",
+__all__ = ["MODES_COLUMNS", "modes_rows", "write_modes_parquet", "fleet_document",
            "plot_fleet"]
 
 MODES_COLUMNS = ("input", "unit", "status", "error", "mode", "f_hz", "zeta", "f_std_hz", "zeta_std", "ref_mode",
@@ -95,10 +95,6 @@ def fleet_document(fleet: FleetResult, run_info: dict[str, Any]) -> dict[str, An
                    "shift_spread_pct": _num(m.shift_spread_pct), "damping_median": _num(m.damping_median),
                    "damping_spread": _num(m.damping_spread)} for m in fleet.modes],
     }
-
-
-def write_fleet_json(path: "str | Path", doc: dict[str, Any]) -> None:
-    write_json_atomic(path, doc)
 
 
 def plot_fleet(path: "str | Path", fleet: FleetResult) -> None:

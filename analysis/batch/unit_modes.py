@@ -12,13 +12,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import ImpactlabError
+from ..inputs import InputError
 
-__all__ = ["ReferenceFitError", "UnitModes", "modes_from_fit", "read_reference"]
-
-
-class ReferenceFitError(ImpactlabError, ValueError):
-    """A reference fit file that cannot be used."""
+__all__ = ["UnitModes", "modes_from_fit", "read_reference"]
 
 
 @dataclass(frozen=True)
@@ -79,12 +75,12 @@ def read_reference(path: "str | Path") -> UnitModes:
     try:
         doc = json.loads(p.read_text())
     except FileNotFoundError:
-        raise ReferenceFitError(f"reference fit {p} not found: give the JSON of 'analysis fit --json' of a good unit") from None
+        raise InputError(f"reference fit {p} not found: give the JSON of 'analysis fit --json' of a good unit") from None
     except (OSError, ValueError) as exc:
-        raise ReferenceFitError(f"reference fit {p} is not readable JSON ({exc}): give the JSON of 'analysis fit --json'") \
+        raise InputError(f"reference fit {p} is not readable JSON ({exc}): give the JSON of 'analysis fit --json'") \
             from None
     if isinstance(doc, dict) and isinstance(doc.get("fit"), dict):
         doc = doc["fit"]
     if not isinstance(doc, dict) or not doc.get("poles"):
-        raise ReferenceFitError(f"reference fit {p} has no poles: give the JSON of 'analysis fit --json' of a good unit")
+        raise InputError(f"reference fit {p} has no poles: give the JSON of 'analysis fit --json' of a good unit")
     return modes_from_fit(doc)

@@ -106,6 +106,21 @@ def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
     return out + [(b, float(o), width, s) for b in HUM_BASES_HZ for s in LINE_SHAPES for o in offsets(df / 8)]
 
 
+def _fit_candidate(ctx: FitContext, E: np.ndarray, lines: np.ndarray, f0_hz: float, width_hz: float,
+                   shape: str) -> "tuple[np.ndarray, float, int] | None":
+    """Amplitudes, remaining weighted cost and number of harmonics fitted for mains lines at the
+    harmonics of ``f0_hz`` on ``lines``; None when no harmonic can be fitted there. A harmonic is
+    fitted only where lines within its width are given: its tails alone would fit noise."""
+    f = ctx.measured.freq_hz
+    df = float(np.median(np.diff(f)))
+    fk, K = hum_kernels(f, f0_hz, width_hz, shape)
+    seen = np.array([np.any(lines & (np.abs(f - x) <= max(width_hz, df / 2))) for x in fk], bool)
+    if not seen.any():
+        return None
+    A, total = _hum_amplitudes(ctx, E, np.where(seen[:, None], K, 0.0), lines)
+    return A, total, int(seen.sum())
+
+
 def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
     """Base (50/60 Hz), offset, line shape and per-harmonic amplitudes: the candidate of
     :func:`_hum_candidates` with the least weighted cost on ``lines`` (the amplitudes are linear); an
@@ -113,23 +128,19 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
     f = ctx.measured.freq_hz
     E = ctx.measured.H - ctx.sim.H
     best = None
-    df = float(np.median(np.diff(f)))
     # a candidate less simple than the best so far (offset, then line width) must lower the cost by more
     # than fitting noise would: 4 x the typical line's cost per harmonic and FRF
     line_cost = float(np.median(ctx.weights[..., lines] * np.abs(E[..., lines]) ** 2))
     n_frf = E.shape[0] * E.shape[1]
     tried: list[tuple[float, float, float, str, float]] = []
     for base, off, width, shape in _hum_candidates(f):
-        fk, K = hum_kernels(f, base + off, width, shape)
-        # a harmonic is fitted only where lines within its width are given: its tails alone would fit noise
-        seen = np.array([np.any(lines & (np.abs(f - x) <= max(width, df / 2))) for x in fk], bool)
-        if not seen.any():
+        fitted = _fit_candidate(ctx, E, lines, base + off, width, shape)
+        if fitted is None:
             continue
-        K = np.where(seen[:, None], K, 0.0)
-        A, total = _hum_amplitudes(ctx, E, K, lines)
+        A, total, n_seen = fitted
         tried.append((base, off, width, shape, total))
         complexity = (off != 0.0) + (width != 0.0)
-        if best is None or total + 4 * line_cost * n_frf * int(seen.sum()) * max(complexity - best[5], 0) < best[0]:
+        if best is None or total + 4 * line_cost * n_frf * n_seen * max(complexity - best[5], 0) < best[0]:
             best = (total, base, off, width, A, complexity, shape)
     if best is None:
         return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(f), "shape": "lorentzian",
@@ -143,10 +154,9 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
         tol = 2.0 * line_cost * n_frf
         same = sorted(o for b, o, w, _, t in tried if b == best[1] and w == 0.0 and t <= best[0] + tol)
         off = same[len(same) // 2]
-        fk, K = hum_kernels(f, best[1] + off, 0.0)
-        seen = np.array([np.any(lines & (np.abs(f - x) <= df / 2)) for x in fk], bool)
-        A, _ = _hum_amplitudes(ctx, E, np.where(seen[:, None], K, 0.0), lines)
-        best = best[:4] + (A,) + best[5:]
+        refit = _fit_candidate(ctx, E, lines, best[1] + off, 0.0, "line")
+        assert refit is not None          # the run holds the best offset, whose harmonics were seen
+        best = best[:4] + (refit[0],) + best[5:]
     return {"base_hz": best[1], "offset_hz": off, "width_hz": best[3],
             "shape": best[6] if best[3] else "line", "amplitudes": best[4].tolist()}
 

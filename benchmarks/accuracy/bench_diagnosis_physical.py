@@ -49,12 +49,6 @@ FAMILIES = ("added_mass", "support_stiffness", "joint_stiffness", "member_mass",
             "mass_loading", "stiffness_shift")
 
 
-def _toml(d: dict) -> str:
-    from simulator.config import overrides_to_toml
-
-    return overrides_to_toml(d)
-
-
 def _explicit(sec, area=1.0, inertia=1.0) -> dict:
     from simulator.fem import section_properties
 
@@ -159,6 +153,7 @@ def run_case(spec: dict) -> dict:
     from analysis.bands import default_band
     from analysis.diagnosis import diagnose
     from analysis.inputs import load_input
+    from simulator.config import overrides_to_toml
     from simulator.physical import FrameVariants
 
     over, truth, extra = spec["overrides"], spec["truth"], spec.get("extra", [])
@@ -166,7 +161,7 @@ def run_case(spec: dict) -> dict:
         device = f"sim://?seed={spec['seed']}"
         if over:
             cfg = Path(tmp) / "frame.toml"
-            cfg.write_text(_toml(over))
+            cfg.write_text(overrides_to_toml(over))
             device += f"&config={cfg}"
         pts = POINTS
         if truth.get("relabel"):

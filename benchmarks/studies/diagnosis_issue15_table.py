@@ -21,7 +21,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks" / "accuracy"))
 
 import bench_diagnosis_physical as bench  # noqa: E402
-from simulator.config import FrameConfig  # noqa: E402
+from simulator.config import FrameConfig, overrides_to_toml  # noqa: E402
 from simulator.fem import section_properties  # noqa: E402
 
 POINTS = "right:6:-X,right:4:-X,left:6:X,top:4:Z,top:2:Z,left:9:Y"
@@ -62,7 +62,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             device = f"sim://?seed={100 + i}"
             if over:
-                (Path(tmp) / "c.toml").write_text(bench._toml(over))
+                (Path(tmp) / "c.toml").write_text(overrides_to_toml(over))
                 device += f"&config={Path(tmp) / 'c.toml'}"
             rec, out = Path(tmp) / "r.h5", Path(tmp) / "d.json"
             with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
