@@ -18,6 +18,8 @@ _EXPORTS = {
     "convert_quantity": ".frf",
     "ModalModel": ".modal",
     "synthesize": ".modal",
+    "cmif": ".mif",
+    "mif": ".mif",
     "fit_lsfd": ".lsfd",
     "LSFDResult": ".lsfd",
     "fit_auto": ".pipeline",
@@ -45,6 +47,7 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily
     from .frf import FRFSet, QUANTITIES, convert_quantity  # noqa: F401
     from .modal import ModalModel, synthesize  # noqa: F401
+    from .mif import cmif, mif  # noqa: F401
     from .lsfd import fit_lsfd, LSFDResult  # noqa: F401
     from .pipeline import fit_auto, default_band  # noqa: F401
     from .stabilization import stabilization, StabilizationResult  # noqa: F401
