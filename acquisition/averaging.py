@@ -4,26 +4,26 @@ recomputation from a recording (:func:`average_recorded_hits`)."""
 
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
 from analysis.frf import FRFSet
+from analysis.hit import Hit
+from analysis.recording_writer import FRFPoint, RecordingWriter
 from analysis.spectra import FRFAccumulator, HitSpectra, WindowSettings, hit_spectra
 
 from .plan import FRF_QUANTITY
-from analysis.recording import RecordingWriter
 from .session_errors import SessionError
 
 __all__ = ["process_hit", "MeasurementAverage", "average_recorded_hits"]
 
 
-def process_hit(
-    data: np.ndarray, fs_hz: float, trigger_index: int, force_channel: int, response_channels: Sequence[int],
-    windows: WindowSettings,
-) -> HitSpectra:
-    """Windows and spectra of one hit (``data[n_ch, n]`` in EU): the one path used by capture, replay, import."""
-    return hit_spectra(data[force_channel], data[list(response_channels)], fs_hz, trigger_index, windows)
+def process_hit(hit: Hit, windows: WindowSettings) -> HitSpectra:
+    """Windows and spectra of one hit: the one path used by capture, station, replay and import."""
+    data = hit.data
+    return hit_spectra(data[hit.force_channel], data[hit.response_channels], hit.sample_rate_hz, hit.trigger_index,
+                       windows)
 
 
 # -- averaging per measurement --------------------------------------------------------------------
@@ -31,11 +31,13 @@ class MeasurementAverage:
     """The running average of one measurement point and the indices of its accepted hits.
 
     ``sample_rate_hz``: the acquisition's sample rate (Hz), carried from the set-up or the recorded
-    hits so that consumers (the alias-free band fs / 2.56) never recompute it from the frequency axis.
+    hits so that consumers (the analyser's band) never recompute it from the frequency axis;
+    ``record_s``, ``pretrigger_s``: the analyser's record length and pre-trigger (s) when known.
     """
 
     def __init__(self, index: int, point: str, reference: str, outputs: Sequence[str], quantity: str, unit: str,
-                 windows: WindowSettings, sample_rate_hz: Optional[float] = None) -> None:
+                 windows: WindowSettings, sample_rate_hz: Optional[float] = None, *,
+                 record_s: Optional[float] = None, pretrigger_s: Optional[float] = None) -> None:
         self.index = int(index)
         self.point = str(point)
         self.reference = str(reference)
@@ -44,6 +46,8 @@ class MeasurementAverage:
         self.unit = unit
         self.windows = windows
         self.sample_rate_hz = None if sample_rate_hz is None else float(sample_rate_hz)
+        self.record_s = record_s
+        self.pretrigger_s = pretrigger_s
         self.acc = FRFAccumulator(self.outputs, self.reference, quantity, unit)
         self.hits: list[int] = []
 
@@ -54,7 +58,14 @@ class MeasurementAverage:
     def frfset(self, estimator: str = "H1") -> FRFSet:
         return self.acc.frfset(estimator, meta={"measurement": f"m{self.index:03d}", "point": self.point,
                                                 "windows": self.windows.to_dict()},
-                               sample_rate_hz=self.sample_rate_hz)
+                               sample_rate_hz=self.sample_rate_hz, record_s=self.record_s,
+                               pretrigger_s=self.pretrigger_s)
+
+    def add(self, hit: Hit) -> None:
+        """Add ``hit`` to the average (its index, when written, to :attr:`hits`)."""
+        self.acc.add(process_hit(hit, self.windows))
+        if hit.index >= 0:
+            self.hits.append(hit.index)
 
     def mean_coherence(self, lo_hz: float = 0.0, hi_hz: float = np.inf) -> Optional[float]:
         """Mean coherence over lo..hi Hz and the outputs that carry a signal (None before two hits:
@@ -69,28 +80,24 @@ class MeasurementAverage:
         return float(np.mean(self.acc.coherence()[live][:, sel]))
 
     def write(self, writer: RecordingWriter) -> None:
-        Gff, Gxx, Gfx = self.acc.spectra()
-        writer.write_frf(
-            self.index, point=self.point, freq_hz=self.acc.freq_hz, H1=self.acc.h1(), H2=self.acc.h2(),
-            coherence=self.acc.coherence(), Gff=Gff, Gxx=Gxx, Gfx=Gfx, outputs=self.outputs,
-            reference=self.reference, n_averages=self.n_averages, hits=self.hits, quantity=self.quantity,
-            unit=self.unit, windows=self.windows, exp_window_tau_s=self.acc.tau_s,
-            sample_rate_hz=self.sample_rate_hz,
-        )
-
+        """Write the point's FRF results (H1, H2, coherence, spectra) to the recording."""
+        writer.write_frf(FRFPoint(self.index, self.point, tuple(self.hits)), self.frfset("H1"),
+                         self.acc.averaged(self.windows))
 
 
 def average_recorded_hits(
-    hits: Sequence[Any], windows: WindowSettings, channels: Sequence[dict],
+    hits: Sequence[Hit], windows: WindowSettings, channels: Sequence[dict], *,
+    record_s: Optional[float] = None, pretrigger_s: Optional[float] = None,
 ) -> list[MeasurementAverage]:
-    """Recompute the averages of recorded hits (``analysis.recording.RecordedHit``), grouped by
-    measurement in order, with ``windows`` (a decay-fraction exponential is resolved from the first
-    hit's block layout). ``channels`` is the recording's channel table (for quantity and unit)."""
+    """Recompute the averages of recorded hits, grouped by measurement in order, with ``windows``
+    (a decay-fraction exponential is resolved from the first hit's block layout). ``channels`` is
+    the recording's channel table (for quantity and unit); ``record_s``, ``pretrigger_s`` (s) the
+    analyser's record, carried by the FRF sets."""
     hits = list(hits)
     if not hits:
         raise SessionError("no accepted hits to average: the recording (after exclusions) holds none")
     h0 = hits[0]
-    win = windows.resolved(h0.counts.shape[1], h0.sample_rate_hz, h0.trigger_index)
+    win = windows.resolved(h0.n_samples, h0.sample_rate_hz, h0.trigger_index)
     qs = {str(channels[i]["quantity"]) for i in h0.response_channels} if channels else {"acceleration"}
     if len(qs) != 1 or next(iter(qs)) not in FRF_QUANTITY:
         raise SessionError(f"response channels must share one motion quantity; got {sorted(qs)}")
@@ -104,9 +111,7 @@ def average_recorded_hits(
         avg = groups.get(h.measurement)
         if avg is None:
             avg = MeasurementAverage(h.measurement, h.point, h.reference, h.outputs, quantity, unit, win,
-                                     h.sample_rate_hz)
+                                     h.sample_rate_hz, record_s=record_s, pretrigger_s=pretrigger_s)
             groups[h.measurement] = avg
-        spectra = process_hit(h.data, h.sample_rate_hz, h.trigger_index, h.force_channel, h.response_channels, win)
-        avg.acc.add(spectra)
-        avg.hits.append(h.index)
+        avg.add(h)
     return [groups[k] for k in sorted(groups)]

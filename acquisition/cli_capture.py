@@ -206,7 +206,7 @@ def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8, quiet: bo
     for a in avgs:
         s = a.frfset(estimator)
         f = s.freq_hz
-        hi = a.sample_rate_hz / 2.56  # alias-free band, from the acquisition's sample rate
+        hi = s.analyser_band_hz or np.inf  # alias-free band, from the acquisition's sample rate
         band = (f > 2.0) & (f <= hi)
         mag = np.abs(s.H[:, 0, :])
         live = [i for i in range(s.n_outputs) if np.any(a.acc.spectra()[1][i] > 0)]  # outputs with any signal
@@ -245,7 +245,8 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
     Everything the operator typed is checked before the analyser is opened.
     """
     out_stream = sys.stdout if out_stream is None else out_stream  # resolved at call time (pipes, tests)
-    from analysis.recording import Recording, RecordingWriter
+    from analysis.recording import Recording
+    from analysis.recording_writer import RecordingWriter
     from .session import CaptureSession, auto_accept, channel_table, retry_on_link_fault
     from .setup import AcquisitionSetup, default_setup, load_setup
     from .urls import SimURL, parse_device_url
@@ -324,7 +325,7 @@ def run_resume(args: argparse.Namespace, out_stream: Optional[TextIO] = None) ->
     windows and device (``--device`` overrides it), appending to the same file. The accepted hits
     already recorded (complete, CRC-checked) count towards each point's average."""
     out_stream = sys.stdout if out_stream is None else out_stream  # resolved at call time (pipes, tests)
-    from analysis.recording import RecordingWriter
+    from analysis.recording_writer import RecordingWriter
 
     from .session import CaptureSession, auto_accept, retry_on_link_fault
 

@@ -96,7 +96,7 @@ def capture_step(ctx: DemoContext) -> None:
 
     from .driver import Analyser
     from .loopback import LoopbackTransport
-    from analysis.recording import RecordingWriter
+    from analysis.recording_writer import RecordingWriter
     from .session import CaptureSession, TestPlan, auto_accept, channel_table
     from .cli_capture import DEFAULT_FORCE_WINDOW, parse_windows
     from .setup import default_setup

@@ -65,7 +65,9 @@ def _split_window(text: str) -> tuple[Optional[str], Optional[str]]:
 def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSettings] = None,
            exclude: "Sequence[int] | set[int]" = (), estimator: str = "H1", overwrite: bool = False) -> list:
     """Recompute the FRFs of ``src`` into a new recording ``out``; returns the new averages."""
-    from analysis.recording import Recording, RecordingWriter
+    from analysis.recording import Recording
+    from analysis.recording_writer import RecordingWriter
+
     from .session import average_recorded_hits
 
     src, out = Path(src), Path(out)
@@ -79,17 +81,14 @@ def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSett
             raise UsageError(f"--exclude-hits names hit(s) {sorted(unknown)} that {src} does not hold "
                              f"(it has 0..{len(all_hits) - 1})")
         keep = [h for h in all_hits if h.accepted and h.index not in set(exclude)]
-        averages = average_recorded_hits(keep, win, rec.channels)
+        averages = average_recorded_hits(keep, win, rec.channels, record_s=rec.record_s,
+                                         pretrigger_s=rec.pretrigger_s)
         with RecordingWriter(out, instrument=rec.instrument, setup=rec.setup, channels=rec.channels,
                              windows=averages[0].windows, plan=rec.plan, overwrite=overwrite) as w:
             for t, level, msg in rec.events():
                 w.log(level, f"[original {t:.3f}] {msg}")
             for h in all_hits:
-                w.write_hit(counts=h.counts, eu_per_count=h.eu_per_count, volts_per_count=h.volts_per_count,
-                            trigger_index=h.trigger_index, sample_rate_hz=h.sample_rate_hz, sequence=h.sequence,
-                            timestamp=h.timestamp, measurement=h.measurement, point=h.point, reference=h.reference,
-                            outputs=h.outputs, force_channel=h.force_channel, response_channels=h.response_channels,
-                            overload=h.overload, accepted=h.accepted, reasons=h.reasons, check=h.check)
+                w.write_hit(h)
             w.log("INFO", f"replayed from {src} with windows {averages[0].windows.describe()}; excluded hits "
                           f"{sorted(exclude) or 'none'}; preferred estimator {estimator}")
             for a in averages:

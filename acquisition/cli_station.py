@@ -102,7 +102,7 @@ def _geometry(url: str) -> dict:
 
 def _prepare(args: argparse.Namespace) -> dict:
     """Everything checked and loaded before the analyser is opened."""
-    from analysis.recording import RecordingWriter
+    from analysis.recording_writer import RecordingWriter
 
     from .session import channel_table
     from .setup import default_setup, load_setup

@@ -47,7 +47,8 @@ from analysis.spectra import WindowSettings
 from .errors import ImpactlabError
 from .textdoc import read_document
 from .hitcheck import HitCheckSettings, check_hit
-from analysis.recording import RecordedHit, RecordingWriter
+from analysis.hit import Hit
+from analysis.recording_writer import RecordingWriter
 
 __all__ = [
     "ImportDataError",
@@ -488,28 +489,22 @@ def write_imported(
     with RecordingWriter(out, instrument=instrument, setup=setup, channels=chans, windows=windows,
                          plan={"mode": "imported", "points": [ref]}, overwrite=overwrite) as w:
         w.log("INFO", f"imported {len(test.hits)} hit(s) from {test.source}")
-        kept: list[RecordedHit] = []
+        kept: list[Hit] = []
+        names = tuple(str(c["name"]) for c in chans)
+        sens = np.array([c["sensitivity"] for c in chans], float)
         for k, data in enumerate(test.hits):
             trig = test.trigger_indices[k] if k < len(test.trigger_indices) else detect_trigger(data[fch])
             counts, eu = quantize(data)
-            sens = np.array([c["sensitivity"] for c in chans], float)
-            vpc = eu * sens * 1e-3
-            chk = check_hit(counts[fch] * eu[fch], test.fs_hz, [False] * len(chans),
-                            [c["name"] for c in chans], check_settings)
-            accepted = chk.verdict.accept is not False
-            idx = w.write_hit(counts=counts, eu_per_count=eu, volts_per_count=vpc, trigger_index=trig,
-                        sample_rate_hz=test.fs_hz, sequence=k, timestamp=time.time(), measurement=0, point=ref,
-                        reference=ref, outputs=outs, force_channel=fch, response_channels=rch,
-                        overload=[False] * len(chans), accepted=accepted, reasons=chk.verdict.reasons,
-                        check=chk.to_dict())
-            if not accepted:
+            hit = Hit(counts=counts, eu_per_count=eu, volts_per_count=eu * sens * 1e-3, sample_rate_hz=test.fs_hz,
+                      trigger_index=trig, force_channel=fch, response_channels=rch, point=ref, reference=ref,
+                      outputs=outs, measurement=0, channel_names=names, timestamp=time.time(), sequence=k)
+            chk = check_hit(hit.force, hit.sample_rate_hz, [False] * len(chans), list(names), check_settings)
+            hit = hit.with_verdict(chk.verdict.accept is not False, chk.verdict.reasons, chk.to_dict())
+            hit = hit.with_index(w.write_hit(hit))
+            if not hit.accepted:
                 w.log("INFO", f"hit {k} rejected: {'; '.join(chk.verdict.reasons)}")
             else:
-                kept.append(RecordedHit(
-                    index=idx, counts=counts, eu_per_count=eu, volts_per_count=vpc, trigger_index=trig,
-                    sample_rate_hz=test.fs_hz, sequence=k, timestamp=0.0, measurement=0, point=ref, reference=ref,
-                    outputs=outs, force_channel=fch, response_channels=rch, overload=np.zeros(len(chans), bool),
-                    accepted=True, reasons=[]))
+                kept.append(hit)
         if not kept:
             raise ImportDataError(f"{test.source}: every hit failed the checks (double hits); nothing to average")
         averages = average_recorded_hits(kept, windows, chans)

@@ -43,6 +43,8 @@ class HitSummary:
     decision: Optional[bool] = None
     reasons: list = field(default_factory=list)
     hit_index: int = -1
+    #: the hit itself (``analysis.hit.Hit``, before its verdict; None for a test hit outside a session)
+    hit: Any = field(default=None, repr=False)
 
     def text(self) -> str:
         c = self.check

@@ -34,12 +34,14 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 
 from analysis.frf import FRFSet
-from analysis.recording import RecordingWriter, merge_frfsets, scale_counts
+from analysis.hit import Hit
+from analysis.recording import merge_frfsets
+from analysis.recording_writer import RecordingWriter
 from analysis.spectra import WindowSettings
 
 from .averaging import MeasurementAverage, average_recorded_hits, process_hit
 from .errors import CommandFailed, TriggerTimeout
-from .hitcheck import HitCheck, HitCheckSettings, check_hit
+from .hitcheck import HitCheckSettings, check_hit
 from .link_recovery import ILLEGAL_REQUEST, LINK_FAULTS, recover_link, retry_on_link_fault
 from .operator import CallbackOperator, HitSummary, Operator, auto_accept
 from .plan import FRF_QUANTITY, PLAN_MODES, Measurement, TestPlan, channel_table, eu_per_count_for, force_channel_of
@@ -56,6 +58,7 @@ __all__ = [
     "OperatorQuit",
     "SessionError",
     "where_to_strike",
+    "hit_from_block",
     "MeasurementAverage",
     "SessionResult",
     "CaptureSession",
@@ -80,6 +83,22 @@ def where_to_strike(mode: str, m: Measurement, n_points: int) -> str:
         return (head + f"move the accelerometer to {', '.join(m.outputs)}; strike at {m.reference} "
                 "(the hammer stays there)")
     return head + f"move the hammer to {m.reference} and strike there (accelerometers at {', '.join(m.outputs)})"
+
+
+def hit_from_block(block: Any, m: Measurement, force_channel: int, response_channels: Sequence[int]) -> Hit:
+    """The analyser's block (``acquisition.driver.Block``) as a :class:`~analysis.hit.Hit` of
+    measurement ``m``: the one place a block becomes a hit (scaling from the set-up's sensitivities)."""
+    counts = np.asarray(block.counts)
+    n_channels = len(m.setup.channels)
+    if counts.dtype != np.int16 or counts.ndim != 2 or counts.shape[0] != n_channels:
+        raise SessionError(f"block has counts {counts.dtype} {counts.shape}; expected int16 ({n_channels}, n)")
+    return Hit(counts=counts, eu_per_count=eu_per_count_for(m.setup, block.volts_per_count),
+               volts_per_count=np.asarray(block.volts_per_count, float), sample_rate_hz=float(block.sample_rate_hz),
+               trigger_index=int(block.trigger_index), force_channel=force_channel,
+               response_channels=list(response_channels), point=m.point, reference=m.reference, outputs=m.outputs,
+               measurement=m.index, channel_names=tuple(f"{ch.name} {ch.point}" for ch in m.setup.channels),
+               overload=np.asarray(block.overload, bool).ravel(), timestamp=float(block.timestamp),
+               sequence=int(block.sequence), accepted=False)
 
 
 @dataclass
@@ -172,7 +191,8 @@ class CaptureSession:
         try:
             for m in self.measurements:
                 avg = MeasurementAverage(m.index, m.point, m.reference, m.outputs, self.frf_quantity,
-                                         self.frf_unit, self.windows, self.setup.sample_rate_hz)
+                                         self.frf_unit, self.windows, self.setup.sample_rate_hz,
+                                         record_s=self.setup.record_s, pretrigger_s=self.setup.pretrigger_s)
                 result.averages.append(avg)
                 done = self._resume_into(m, avg, result)
                 if done:
@@ -191,10 +211,7 @@ class CaptureSession:
         (its FRF results are then written again, so a crash between the last hit and the FRF loses nothing)."""
         mine = [h for h in self.resume_hits if h.measurement == m.index][: self.plan.hits_per_point]
         for h in mine:
-            spectra = process_hit(h.data, h.sample_rate_hz, h.trigger_index, h.force_channel, h.response_channels,
-                                  self.windows)
-            avg.acc.add(spectra)
-            avg.hits.append(h.index)
+            avg.add(h)
             result.accepted += 1
         if mine:
             self._event("INFO", f"resumed point {m.point}: {len(mine)} accepted hit(s) from the recording")
@@ -216,8 +233,6 @@ class CaptureSession:
         self.operator.progress(where_to_strike(self.plan.mode, m, len(self.measurements)))
         attempts = self.hits_done.get(m.index, 0)
         timeouts = 0
-        n_channels = len(m.setup.channels)
-        names = [f"{ch.name} {ch.point}" for ch in m.setup.channels]
         while True:
             complete = avg.n_averages >= self.plan.hits_per_point
             if self.gate is not None and not self.gate(m, avg, result, complete):
@@ -256,38 +271,32 @@ class CaptureSession:
             timeouts = 0
             attempts += 1
             assert block is not None  # triggered
-            counts = np.asarray(block.counts)
-            if counts.dtype != np.int16 or counts.shape[0] != n_channels:
-                raise SessionError(f"block has counts {counts.dtype} {counts.shape}; expected int16 "
-                                   f"({n_channels}, n)")
-            eu = eu_per_count_for(m.setup, block.volts_per_count)
-            data = scale_counts(counts, eu)
-            fs = float(block.sample_rate_hz)
-            trig = int(block.trigger_index)
-            overload = [bool(o) for o in np.asarray(block.overload).ravel()]
-            check = check_hit(data[self.force_channel], fs, overload, names, self.check_settings)
+            hit = hit_from_block(block, m, self.force_channel, self.response_channels)
+            data = hit.data
+            check = check_hit(data[self.force_channel], hit.sample_rate_hz, [bool(o) for o in hit.overload],
+                              list(hit.channel_names), self.check_settings)
             summary = HitSummary(m.index, len(self.measurements), m.point, attempts, avg.n_averages,
                                  self.plan.hits_per_point, sum(1 for r in result.rejected if r[0] == m.index), check,
-                                 data=data, sample_rate_hz=fs, trigger_index=trig, average=avg)
+                                 data=data, sample_rate_hz=hit.sample_rate_hz, trigger_index=hit.trigger_index,
+                                 average=avg, hit=hit)
             accepted = False
             reasons = list(check.verdict.reasons)
             if check.verdict.accept is not False:
-                spectra = process_hit(data, fs, trig, self.force_channel, self.response_channels, self.windows)
-                avg.acc.add(spectra)
-                summary.coherence_so_far = avg.mean_coherence(hi_hz=fs / 2.56)
+                avg.acc.add(process_hit(hit, self.windows))
+                summary.coherence_so_far = avg.mean_coherence(hi_hz=self.setup.bandwidth_hz)
                 self.operator.progress(summary.text())
                 try:
                     accepted = bool(self.operator.decide(summary))
                 except OperatorQuit:
                     avg.acc.rollback()
-                    self._write_hit(block, counts, eu, m, False, ["test ended by the operator"], check)
+                    self._write_hit(hit.with_verdict(False, ["test ended by the operator"], check.to_dict()))
                     raise
                 if not accepted:
                     avg.acc.rollback()
                     reasons = ["rejected by the operator"]
             else:
                 self.operator.progress(summary.text())
-            idx = self._write_hit(block, counts, eu, m, accepted, reasons, check)
+            idx = self._write_hit(hit.with_verdict(accepted, reasons, check.to_dict()))
             summary.decision, summary.reasons, summary.hit_index = accepted, reasons, idx
             self.operator.on_hit(summary)
             if accepted:
@@ -331,15 +340,5 @@ class CaptureSession:
         recover_link(self.analyser, m.setup, m.point, exc, faults_here,
                      self.max_attempts_factor * self.plan.hits_per_point, self.max_link_failures, self._event)
 
-    def _write_hit(self, block: Any, counts: np.ndarray, eu: np.ndarray, m: Measurement, accepted: bool,
-                   reasons: list, check: HitCheck) -> int:
-        if self.writer is None:
-            return -1
-        return self.writer.write_hit(
-            counts=counts, eu_per_count=eu, volts_per_count=np.asarray(block.volts_per_count, float),
-            trigger_index=int(block.trigger_index), sample_rate_hz=float(block.sample_rate_hz),
-            sequence=int(block.sequence), timestamp=float(block.timestamp), measurement=m.index, point=m.point,
-            reference=m.reference, outputs=m.outputs, force_channel=self.force_channel,
-            response_channels=self.response_channels, overload=np.asarray(block.overload, bool).ravel(),
-            accepted=accepted, reasons=reasons, check=check.to_dict(),
-        )
+    def _write_hit(self, hit: Hit) -> int:
+        return -1 if self.writer is None else self.writer.write_hit(hit)

@@ -20,6 +20,7 @@ from typing import Any, Mapping
 from acquisition import protocol
 from acquisition.errors import SetupError
 from analysis.points import PointLabelError, parse_point
+from analysis.frf import analyser_band_hz
 
 __all__ = [
     "G", "ChannelSetup", "TriggerSetup", "AcquisitionSetup", "Capabilities", "validate_setup",
@@ -86,8 +87,18 @@ class AcquisitionSetup:
 
     @property
     def bandwidth_hz(self) -> float:
-        """Alias-free bandwidth fs / 2.56, Hz."""
-        return self.sample_rate_hz / 2.56
+        """Alias-free bandwidth (Hz): :func:`analysis.frf.analyser_band_hz` of the sample rate."""
+        return analyser_band_hz(self.sample_rate_hz)
+
+    @property
+    def record_s(self) -> float:
+        """Length of one record (block), s."""
+        return self.block_size / self.sample_rate_hz
+
+    @property
+    def pretrigger_s(self) -> float:
+        """Time recorded before the trigger, s."""
+        return self.trigger.pretrigger_samples / self.sample_rate_hz
 
     @property
     def duration_s(self) -> float:
@@ -160,8 +171,8 @@ class Capabilities:
                    caps.trigger_any_channel, caps.adc_bits, caps.max_pretrigger, caps.max_transfer)
 
     def bandwidths_hz(self) -> tuple[float, ...]:
-        """fs / 2.56 for each allowed rate."""
-        return tuple(fs / 2.56 for fs in self.sample_rates_hz)
+        """The alias-free bandwidth (Hz) of each allowed rate."""
+        return tuple(analyser_band_hz(fs) for fs in self.sample_rates_hz)
 
 
 def _fmt(values: Any) -> str:

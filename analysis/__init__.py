@@ -30,7 +30,7 @@ _EXPORTS = {
     "lsce_poles": ".lsce",
     "WindowSettings": ".spectra",
     "Recording": ".recording",
-    "RecordingWriter": ".recording",
+    "RecordingWriter": ".recording_writer",
     "load_input": ".inputs",
     "read_uff58": ".uff",
     "write_uff58": ".uff",
@@ -54,7 +54,8 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazi
     from .lscf import lscf_poles  # noqa: F401
     from .lsce import lsce_poles  # noqa: F401
     from .spectra import WindowSettings  # noqa: F401
-    from .recording import Recording, RecordingWriter  # noqa: F401
+    from .recording import Recording  # noqa: F401
+    from .recording_writer import RecordingWriter  # noqa: F401
     from .inputs import load_input  # noqa: F401
     from .uff import read_uff58, write_uff58, read_uff55, write_uff55  # noqa: F401
     from .geometry import Geometry  # noqa: F401

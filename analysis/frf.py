@@ -26,11 +26,17 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "convert_quantity"]
+__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "convert_quantity", "analyser_band_hz"]
 
 QUANTITIES = ("receptance", "mobility", "accelerance")
 #: the power p of (j omega) that turns a receptance (m/N) into each quantity: H_q = (j omega)^p H_receptance
 QUANTITY_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+
+
+def analyser_band_hz(sample_rate_hz: float) -> float:
+    """Upper end (Hz) of a dynamic signal analyser's flat, alias-free band at ``sample_rate_hz`` (Hz):
+    ``fs / 2.56``, the oversampling every such analyser uses (its anti-alias filter's roll-off)."""
+    return float(sample_rate_hz) / 2.56
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,9 @@ class FRFSet:
     sample_rate_hz : the acquisition's sample rate (Hz) when known (recordings, captures): the
         analyser's flat band ends at ``sample_rate_hz / 2.56``. None for FRFs of unknown origin
         (a UFF file); consumers then fall back to the frequency axis.
+    record_s : length of the time record each FRF was computed from (s), when known.
+    pretrigger_s : time recorded before the trigger (s), when known; the response after the hammer
+        pulse is seen for ``record_s - pretrigger_s``.
 
     The line spacing is :attr:`line_spacing_hz` (one formula for every consumer).
     """
@@ -64,6 +73,8 @@ class FRFSet:
     exp_window_tau_s: Optional[float] = None
     meta: dict = field(default_factory=dict)
     sample_rate_hz: Optional[float] = None
+    record_s: Optional[float] = None
+    pretrigger_s: Optional[float] = None
 
     def __post_init__(self) -> None:
         f = np.asarray(self.freq_hz, dtype=float)
@@ -92,6 +103,13 @@ class FRFSet:
             if not (np.isfinite(fs) and fs > 0):
                 raise ValueError(f"sample_rate_hz must be a positive number of Hz; got {self.sample_rate_hz!r}")
             object.__setattr__(self, "sample_rate_hz", fs)
+        for name in ("record_s", "pretrigger_s"):
+            value = getattr(self, name)
+            if value is not None:
+                t = float(value)
+                if not (np.isfinite(t) and t >= 0):
+                    raise ValueError(f"{name} must be a time >= 0 s; got {value!r}")
+                object.__setattr__(self, name, t)
         coh = None
         if self.coherence is not None:
             coh = np.asarray(self.coherence, dtype=float).reshape(H.shape)
@@ -153,7 +171,7 @@ class FRFSet:
     def analyser_band_hz(self) -> Optional[float]:
         """Upper end of the analyser's flat (alias-free) band, ``sample_rate_hz / 2.56`` (Hz), when
         the sample rate is known."""
-        return None if self.sample_rate_hz is None else self.sample_rate_hz / 2.56
+        return None if self.sample_rate_hz is None else analyser_band_hz(self.sample_rate_hz)
 
     @property
     def omega(self) -> np.ndarray:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator, Optional, Sequence
 
@@ -25,9 +24,10 @@ from analysis.spectra import WindowSettings, excitation_limit_hz
 
 from analysis.errors import RecordingError
 
+from analysis.hit import Hit
+
 from .recording_schema import (CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _DAMAGE, _as_str, _h5py, counts_crc32,
                                scale_counts)
-from .recording_writer import RecordingWriter
 
 __all__ = [
     "SCHEMA",
@@ -35,8 +35,6 @@ __all__ = [
     "CHANNEL_FIELDS",
     "scale_counts",
     "counts_crc32",
-    "RecordingWriter",
-    "RecordedHit",
     "Recording",
     "open_recording",
     "verify_recording",
@@ -46,39 +44,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-
-
-@dataclass
-class RecordedHit:
-    """One hit as stored. ``data`` (EU) = ``counts * eu_per_count`` per channel."""
-
-    index: int
-    counts: np.ndarray
-    eu_per_count: np.ndarray
-    volts_per_count: np.ndarray
-    trigger_index: int
-    sample_rate_hz: float
-    sequence: int
-    timestamp: float
-    measurement: int
-    point: str
-    reference: str
-    outputs: list
-    force_channel: int
-    response_channels: list
-    overload: np.ndarray
-    accepted: bool
-    reasons: list
-    check: dict = field(default_factory=dict)
-    crc_ok: bool = True
-
-    @property
-    def data(self) -> np.ndarray:
-        return scale_counts(self.counts, self.eu_per_count)
-
-    @property
-    def volts(self) -> np.ndarray:
-        return scale_counts(self.counts, self.volts_per_count)
 
 
 class Recording:
@@ -169,7 +134,7 @@ class Recording:
     def n_hits(self) -> int:
         return len(self.hit_names())
 
-    def hit(self, index: int) -> RecordedHit:
+    def hit(self, index: int) -> Hit:
         """One hit by index; raises RecordingError when it is incomplete or its checksum fails."""
         name = f"{int(index):06d}"
         if name not in self.hit_names():
@@ -185,7 +150,7 @@ class Recording:
                 raise RecordingError(
                     f"hit {index} in {self.path} fails its CRC-32 check: the raw data are damaged"
                 )
-            return RecordedHit(
+            return Hit(
                 index=int(index), counts=counts, eu_per_count=np.asarray(a["eu_per_count"], float),
                 volts_per_count=np.asarray(a["volts_per_count"], float), trigger_index=int(a["trigger_index"]),
                 sample_rate_hz=float(a["sample_rate_hz"]), sequence=int(a["sequence"]),
@@ -195,7 +160,7 @@ class Recording:
                 response_channels=[int(i) for i in np.atleast_1d(a["response_channels"])],
                 overload=np.asarray(a["overload"], bool), accepted=bool(a["accepted"]),
                 reasons=json.loads(_as_str(a["reasons"])), check=json.loads(_as_str(a.get("check_json", "{}"))),
-                crc_ok=crc_ok,
+                crc_ok=crc_ok, channel_names=self._channel_names(counts.shape[0]),
             )
         except RecordingError:
             raise
@@ -211,7 +176,11 @@ class Recording:
         except (RecordingError, *_DAMAGE):
             return None
 
-    def hits(self, accepted_only: bool = False, skip_damaged: bool = False) -> Iterator[RecordedHit]:
+    def _channel_names(self, n_channels: int) -> tuple:
+        names = tuple(str(c.get("name", "")) for c in self.channels)
+        return names if len(names) == n_channels else ()
+
+    def hits(self, accepted_only: bool = False, skip_damaged: bool = False) -> Iterator[Hit]:
         """All hits in order (``accepted_only``: only accepted ones; ``skip_damaged``: drop incomplete ones)."""
         for name in self.hit_names():
             try:
@@ -254,8 +223,9 @@ class Recording:
             out["windows"] = WindowSettings.from_dict(json.loads(out.pop("windows_json")))
             tau = float(out["exp_window_tau_s"])
             out["exp_window_tau_s"] = None if np.isnan(tau) else tau
-            fs = float(out.get("sample_rate_hz", float("nan")))  # absent in files written before it was stored
-            out["sample_rate_hz"] = None if np.isnan(fs) else fs
+            for key in ("sample_rate_hz", "record_s", "pretrigger_s"):  # absent in files written before them
+                value = float(out.get(key, float("nan")))
+                out[key] = None if np.isnan(value) else value
             return out
         except _DAMAGE as exc:
             raise RecordingError(f"FRF results {name!r} in {self.path} are missing or damaged "
@@ -286,23 +256,38 @@ class Recording:
         return sets
 
     def _frfset(self, name: str, g: dict, est: str) -> FRFSet:
+        record_s, pretrigger_s = g.get("record_s"), g.get("pretrigger_s")
+        if record_s is None:  # FRFs written before the FRF group stored them: the set-up's
+            record_s, pretrigger_s = self._setup_record()
         return FRFSet(
             freq_hz=g["freq_hz"], H=g[est][:, None, :], quantity=g["quantity"], outputs=tuple(g["outputs"]),
             references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
             exp_window_tau_s=g["exp_window_tau_s"], sample_rate_hz=g["sample_rate_hz"] or self._hit_sample_rate(),
+            record_s=record_s, pretrigger_s=pretrigger_s,
             meta={"estimator": est, "n_averages": int(g["n_averages"]), "source": str(self.path),
                   "excitation_limit_hz": excitation_limit_hz(g["freq_hz"], g["Gff"]) if "Gff" in g else None,
-                  "measurement": name, "point": g["point"], **self._record_meta()},
+                  "measurement": name, "point": g["point"]},
         )
 
-    def _record_meta(self) -> dict:
-        """``record_s`` (block length, s) and ``pretrigger_s`` (s) of the set-up, when recorded."""
+    def _setup_record(self) -> "tuple[Optional[float], Optional[float]]":
+        """Record length (s) and pre-trigger (s) of the analyser's set-up, when the recording holds
+        one with a trigger (a capture; an import has none): (None, None) otherwise."""
         try:
             fs = float(self.setup["sample_rate_hz"])
-            return {"record_s": int(self.setup["block_size"]) / fs,
-                    "pretrigger_s": int(self.setup["trigger"]["pretrigger_samples"]) / fs}
+            return (int(self.setup["block_size"]) / fs,
+                    int(self.setup["trigger"]["pretrigger_samples"]) / fs)
         except (AttributeError, KeyError, TypeError, ValueError, ZeroDivisionError):
-            return {}
+            return None, None
+
+    @property
+    def record_s(self) -> Optional[float]:
+        """The set-up's record length (s), None when the recording holds no analyser set-up."""
+        return self._setup_record()[0]
+
+    @property
+    def pretrigger_s(self) -> Optional[float]:
+        """The set-up's pre-trigger time (s), None when the recording holds no analyser set-up."""
+        return self._setup_record()[1]
 
     def close(self) -> None:
         if self._f.id.valid:
@@ -409,7 +394,8 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
         meta["estimator"] = "mixed"
     return FRFSet(freq_hz=f0, H=H, quantity=sets[0].quantity, outputs=tuple(outs), references=tuple(refs),
                   unit=sets[0].unit, coherence=C, exp_window_tau_s=sets[0].exp_window_tau_s, meta=meta,
-                  sample_rate_hz=next(iter(rates)) if rates else None)
+                  sample_rate_hz=next(iter(rates)) if rates else None, record_s=sets[0].record_s,
+                  pretrigger_s=sets[0].pretrigger_s)
 
 
 def load_frfset(path: "str | Path", estimator: Optional[str] = None) -> FRFSet:

@@ -7,6 +7,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from analysis.hit import scale_counts
+
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "CHANNEL_FIELDS", "scale_counts", "counts_crc32"]
 
 
@@ -25,13 +27,6 @@ def _h5py():
     import h5py  # local import keeps module import cheap and side-effect free
 
     return h5py
-
-
-def scale_counts(counts: np.ndarray, eu_per_count: np.ndarray) -> np.ndarray:
-    """Engineering units from raw counts: ``counts[ch, n] * eu_per_count[ch]`` (float64, new array)."""
-    c = np.asarray(counts)
-    s = np.asarray(eu_per_count, dtype=float)
-    return c.astype(np.float64) * s[:, None]
 
 
 def counts_crc32(counts: np.ndarray) -> int:

@@ -6,20 +6,33 @@ from __future__ import annotations
 import json
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
 import numpy as np
 
 from analysis.errors import RecordingError
-from analysis.spectra import WindowSettings
+from analysis.frf import FRFSet
+from analysis.hit import Hit
+from analysis.spectra import AveragedSpectra, WindowSettings
 
 from .recording_schema import (SCHEMA, SCHEMA_VERSION, _DAMAGE, _as_str, _channel_table, _h5py,
                                _now_iso, counts_crc32)
 
-__all__ = ["RecordingWriter"]
+__all__ = ["RecordingWriter", "FRFPoint"]
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FRFPoint:
+    """Where a measurement point's FRFs sit in the recording: its index in the test plan, its point
+    label and the indices of the hits averaged into them."""
+
+    measurement: int
+    label: str
+    hits: tuple = ()
 
 
 class RecordingWriter:
@@ -130,51 +143,30 @@ class RecordingWriter:
             ev[name][n] = value
         self._f.flush()
 
-    def write_hit(
-        self,
-        *,
-        counts: np.ndarray,
-        eu_per_count: "Sequence[float] | np.ndarray",
-        volts_per_count: "Sequence[float] | np.ndarray",
-        trigger_index: int,
-        sample_rate_hz: float,
-        sequence: int,
-        timestamp: float,
-        measurement: int,
-        point: str,
-        reference: str,
-        outputs: Sequence[str],
-        force_channel: int,
-        response_channels: Sequence[int],
-        overload: "Sequence[bool] | np.ndarray",
-        accepted: bool,
-        reasons: Sequence[str] = (),
-        check: Optional[dict] = None,
-    ) -> int:
-        """Write one hit and flush; returns its index. ``counts`` int16 (n_ch, n)."""
-        c = np.asarray(counts)
-        if c.dtype != np.int16 or c.ndim != 2:
-            raise RecordingError(f"hit counts must be int16 of shape (n_channels, n); got {c.dtype} {c.shape}")
+    def write_hit(self, hit: Hit) -> int:
+        """Write one :class:`~analysis.hit.Hit` (its counts, scaling, roles, place and verdict) and
+        flush; returns its index in the recording."""
+        c = hit.counts
         idx = self._n_hits
         g = self._f["hits"].create_group(f"{idx:06d}")
         g.create_dataset("counts", data=c)
         a = g.attrs
-        a["eu_per_count"] = np.asarray(eu_per_count, dtype=float)
-        a["volts_per_count"] = np.asarray(volts_per_count, dtype=float)
-        a["trigger_index"] = int(trigger_index)
-        a["sample_rate_hz"] = float(sample_rate_hz)
-        a["sequence"] = int(sequence)
-        a["timestamp"] = float(timestamp)
-        a["measurement"] = int(measurement)
-        a["point"] = str(point)
-        a["reference"] = str(reference)
-        a["outputs"] = json.dumps([str(o) for o in outputs])
-        a["force_channel"] = int(force_channel)
-        a["response_channels"] = np.asarray(list(response_channels), dtype=np.int64)
-        a["overload"] = np.asarray(list(overload), dtype=bool)
-        a["accepted"] = bool(accepted)
-        a["reasons"] = json.dumps(list(reasons))
-        a["check_json"] = json.dumps(check or {}, default=float)
+        a["eu_per_count"] = hit.eu_per_count
+        a["volts_per_count"] = hit.volts_per_count
+        a["trigger_index"] = hit.trigger_index
+        a["sample_rate_hz"] = hit.sample_rate_hz
+        a["sequence"] = hit.sequence
+        a["timestamp"] = hit.timestamp
+        a["measurement"] = hit.measurement
+        a["point"] = hit.point
+        a["reference"] = hit.reference
+        a["outputs"] = json.dumps(hit.outputs)
+        a["force_channel"] = hit.force_channel
+        a["response_channels"] = np.asarray(hit.response_channels, dtype=np.int64)
+        a["overload"] = hit.overload
+        a["accepted"] = hit.accepted
+        a["reasons"] = json.dumps(hit.reasons)
+        a["check_json"] = json.dumps(hit.check, default=float)
         a["crc32"] = counts_crc32(c)
         a["complete"] = True  # written last: a hit cut short by a crash lacks it
         self._n_hits += 1
@@ -191,53 +183,39 @@ class RecordingWriter:
         a["reasons"] = json.dumps(json.loads(_as_str(a["reasons"])) + [str(reason)])
         self._f.flush()
 
-    def write_frf(
-        self,
-        measurement: int,
-        *,
-        point: str,
-        freq_hz: np.ndarray,
-        H1: np.ndarray,
-        H2: np.ndarray,
-        coherence: np.ndarray,
-        Gff: np.ndarray,
-        Gxx: np.ndarray,
-        Gfx: np.ndarray,
-        outputs: Sequence[str],
-        reference: str,
-        n_averages: int,
-        hits: Sequence[int],
-        quantity: str,
-        unit: str,
-        windows: WindowSettings,
-        exp_window_tau_s: Optional[float],
-        sample_rate_hz: Optional[float] = None,
-    ) -> None:
+    def write_frf(self, point: FRFPoint, frfset: FRFSet, spectra: AveragedSpectra) -> None:
         """Write (or replace) the FRF results of one measurement point and flush.
 
-        H1, H2, coherence, Gxx, Gfx: (n_out, n_freq); Gff: (n_freq,); ``sample_rate_hz`` (Hz) of the
-        hits they come from (stored so that readers never recompute it).
+        ``frfset``: the point's H1 estimate with one reference (``H[n_out, 1, n_freq]``), its
+        coherence, window time constant, sample rate, record length and pre-trigger (all stored so
+        that readers never recompute them); ``spectra``: the averaged spectra, the H2 estimate and the
+        windows they were computed with.
         """
+        if frfset.n_references != 1:
+            raise RecordingError(f"write_frf takes the FRFs of one measurement point (one reference); got "
+                                 f"{frfset.n_references} references")
         grp = self._f["frf"]
-        name = f"m{int(measurement):03d}"
+        name = f"m{int(point.measurement):03d}"
         if name in grp:
             del grp[name]
         g = grp.create_group(name)
-        for key, val in (("freq_hz", freq_hz), ("H1", H1), ("H2", H2), ("coherence", coherence),
-                         ("Gff", Gff), ("Gxx", Gxx), ("Gfx", Gfx)):
+        coh = frfset.coherence[:, 0, :] if frfset.coherence is not None else np.ones(frfset.H.shape[::2])
+        for key, val in (("freq_hz", frfset.freq_hz), ("H1", frfset.H[:, 0, :]), ("H2", spectra.H2),
+                         ("coherence", coh), ("Gff", spectra.Gff), ("Gxx", spectra.Gxx), ("Gfx", spectra.Gfx)):
             g.create_dataset(key, data=np.asarray(val))
         a = g.attrs
-        a["measurement"] = int(measurement)
-        a["point"] = str(point)
-        a["outputs"] = json.dumps([str(o) for o in outputs])
-        a["reference"] = str(reference)
-        a["n_averages"] = int(n_averages)
-        a["hits"] = np.asarray(list(hits), dtype=np.int64)
-        a["quantity"] = str(quantity)
-        a["unit"] = str(unit)
-        a["windows_json"] = json.dumps(windows.to_dict())
-        a["exp_window_tau_s"] = float("nan") if exp_window_tau_s is None else float(exp_window_tau_s)
-        a["sample_rate_hz"] = float("nan") if sample_rate_hz is None else float(sample_rate_hz)
+        a["measurement"] = int(point.measurement)
+        a["point"] = str(point.label)
+        a["outputs"] = json.dumps(list(frfset.outputs))
+        a["reference"] = frfset.references[0]
+        a["n_averages"] = int(spectra.n_averages)
+        a["hits"] = np.asarray(list(point.hits), dtype=np.int64)
+        a["quantity"] = frfset.quantity
+        a["unit"] = frfset.unit
+        a["windows_json"] = json.dumps(spectra.windows.to_dict())
+        for key in ("exp_window_tau_s", "sample_rate_hz", "record_s", "pretrigger_s"):
+            value = getattr(frfset, key)
+            a[key] = float("nan") if value is None else float(value)
         self._f.flush()
 
     def set_attr(self, key: str, value: Any) -> None:

@@ -43,6 +43,7 @@ __all__ = [
     "excitation_limit_hz",
     "EXCITATION_DROP_DB",
     "WindowSettings",
+    "AveragedSpectra",
     "tau_from_decay",
     "force_window",
     "exponential_window",
@@ -207,6 +208,23 @@ class HitSpectra:
     tau_s: Optional[float]
 
 
+@dataclass(frozen=True)
+class AveragedSpectra:
+    """The averaged spectra of one measurement point, its H2 estimate and the windows used.
+
+    Gff : (n_freq,) N^2/Hz; Gxx : (n_out, n_freq) EU^2/Hz; Gfx : (n_out, n_freq) N*EU/Hz complex;
+    H2 : (n_out, n_freq) EU/N; n_averages : number of hits averaged; windows : the window settings
+    the hits were processed with.
+    """
+
+    Gff: np.ndarray
+    Gxx: np.ndarray
+    Gfx: np.ndarray
+    H2: np.ndarray
+    n_averages: int
+    windows: WindowSettings
+
+
 def _one_sided_factor(n: int) -> np.ndarray:
     c = np.full(n // 2 + 1, 2.0)
     c[0] = 1.0
@@ -332,6 +350,11 @@ class FRFAccumulator:
         n = len(self._hits)
         return Sff / n, Sxx / n, Sfx / n
 
+    def averaged(self, windows: WindowSettings) -> AveragedSpectra:
+        """The averaged spectra with H2 (``windows``: the settings the hits were processed with)."""
+        Gff, Gxx, Gfx = self.spectra()
+        return AveragedSpectra(Gff, Gxx, Gfx, self.h2(), self.n_averages, windows)
+
     def h1(self) -> np.ndarray:
         """H1 = Gfx / Gff, shape (n_resp, n_freq); NaN where Gff = 0."""
         Sff, _, Sfx = self._require()
@@ -356,9 +379,10 @@ class FRFAccumulator:
         return np.clip(c, 0.0, 1.0)
 
     def frfset(self, estimator: str = "H1", meta: Optional[dict] = None,
-               sample_rate_hz: Optional[float] = None) -> FRFSet:
+               sample_rate_hz: Optional[float] = None, record_s: Optional[float] = None,
+               pretrigger_s: Optional[float] = None) -> FRFSet:
         """The averaged FRFs as an :class:`FRFSet` with one reference (``H[n_out, 1, n_freq]``);
-        ``sample_rate_hz``: the acquisition's sample rate, carried by the set."""
+        ``sample_rate_hz`` (Hz), ``record_s`` and ``pretrigger_s`` (s): the acquisition's, carried by the set."""
         est = estimator.upper()
         if est not in ("H1", "H2"):
             raise ValueError(f"estimator {estimator!r} is not H1 or H2")
@@ -377,6 +401,8 @@ class FRFAccumulator:
             exp_window_tau_s=self.tau_s,
             meta=m,
             sample_rate_hz=sample_rate_hz,
+            record_s=record_s,
+            pretrigger_s=pretrigger_s,
         )
 
 

@@ -38,7 +38,9 @@ def test_resume_removes_a_hit_cut_short_and_appends_after_the_last_complete_one(
     import h5py
     import numpy as np
 
-    from analysis.recording import Recording, RecordingWriter
+    from analysis.hit import Hit
+    from analysis.recording import Recording
+    from analysis.recording_writer import RecordingWriter
     from analysis.spectra import WindowSettings
 
     p = tmp_path / "rec.h5"
@@ -48,12 +50,12 @@ def test_resume_removes_a_hit_cut_short_and_appends_after_the_last_complete_one(
     counts = [np.full((2, 16), k, dtype=np.int16) for k in range(3)]
     with RecordingWriter(p, instrument={}, setup={}, channels=[], windows=WindowSettings()) as w:
         for k in range(3):
-            w.write_hit(counts=counts[k], sequence=k + 1, **hit)
+            w.write_hit(Hit(counts=counts[k], sequence=k + 1, **hit))
     with h5py.File(p, "r+") as f:  # as if the writer died while writing hit 2
         del f["hits/000002"].attrs["complete"]
     with RecordingWriter.resume(p) as w:
         assert w.n_hits == 2
-        assert w.write_hit(counts=counts[0] + 7, sequence=9, **hit) == 2
+        assert w.write_hit(Hit(counts=counts[0] + 7, sequence=9, **hit)) == 2
     with Recording(p) as rec:
         hits = list(rec.hits())
         assert [h.sequence for h in hits] == [1, 2, 9] and np.all(hits[2].counts == 7)

@@ -147,7 +147,7 @@ def test_stand_faults_miss_and_overload():
 def test_session_recovers_from_each_fault_kind(kind, packetized, tmp_path):
     """10 hits with one kind of fault (15 % per strike, 5 % per command or read): all accepted hits
     recorded, intact and equal to the firmware's own blocks."""
-    from analysis.recording import RecordingWriter
+    from analysis.recording_writer import RecordingWriter
     from acquisition.session import channel_table
     from analysis.spectra import WindowSettings
 
@@ -207,7 +207,7 @@ def test_block_truth_matches_what_the_driver_reads():
 
 
 def test_device_gone_for_good_ends_the_session_saying_why_and_keeps_every_hit(tmp_path):
-    from analysis.recording import RecordingWriter
+    from analysis.recording_writer import RecordingWriter
     from acquisition.session import SessionError, channel_table
     from analysis.spectra import WindowSettings
 

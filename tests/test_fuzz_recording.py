@@ -22,7 +22,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from acquisition.errors import RecordingError
-from analysis.recording import Recording, RecordingWriter, counts_crc32, load_frfset, verify_recording
+from analysis.frf import FRFSet
+from analysis.hit import Hit
+from analysis.recording import Recording, counts_crc32, load_frfset, verify_recording
+from analysis.recording_writer import FRFPoint, RecordingWriter
+from analysis.spectra import AveragedSpectra
 from analysis.spectra import WindowSettings
 
 N = int(os.environ.get("IMPACTLAB_FUZZ_EXAMPLES", "100"))  # each case forks a verifying child
@@ -42,18 +46,19 @@ def _real_recording() -> bytes:
         with RecordingWriter(p, instrument={"vendor": "IMPACTLB", "serial": "X"}, setup={"block_size": 64},
                              channels=channels, windows=WindowSettings(), plan={"mode": "roving_hammer"}) as w:
             for k in range(2):
-                w.write_hit(counts=rng.integers(-3000, 3000, (2, 64)).astype(np.int16), eu_per_count=[0.01, 0.02],
-                            volts_per_count=[3e-5, 1.5e-4], trigger_index=8, sample_rate_hz=6400.0, sequence=k + 1,
-                            timestamp=1.0 + k, measurement=0, point="right:6:-X", reference="right:6:-X",
-                            outputs=["left:9:Y"], force_channel=0, response_channels=[1], overload=[False, False],
-                            accepted=bool(k == 0), reasons=[] if k == 0 else ["double hit"], check={"peak": 1.0})
+                w.write_hit(Hit(counts=rng.integers(-3000, 3000, (2, 64)).astype(np.int16), eu_per_count=[0.01, 0.02],
+                                volts_per_count=[3e-5, 1.5e-4], trigger_index=8, sample_rate_hz=6400.0, sequence=k + 1,
+                                timestamp=1.0 + k, measurement=0, point="right:6:-X", reference="right:6:-X",
+                                outputs=["left:9:Y"], force_channel=0, response_channels=[1], overload=[False, False],
+                                accepted=bool(k == 0), reasons=[] if k == 0 else ["double hit"], check={"peak": 1.0}))
             w.log("INFO", "fuzz base")
             f = np.arange(5) * 100.0
             ones = np.ones((1, 5))
-            w.write_frf(0, point="right:6:-X", freq_hz=f, H1=ones * (1 + 1j), H2=ones * (1 + 1j), coherence=ones,
-                        Gff=np.ones(5), Gxx=ones, Gfx=ones * (1 + 0j), outputs=["left:9:Y"], reference="right:6:-X",
-                        n_averages=1, hits=[0], quantity="accelerance", unit="(m/s^2)/N", windows=WindowSettings(),
-                        exp_window_tau_s=None)
+            w.write_frf(FRFPoint(0, "right:6:-X", (0,)),
+                        FRFSet(freq_hz=f, H=ones * (1 + 1j), quantity="accelerance", outputs=["left:9:Y"],
+                               references=["right:6:-X"], unit="(m/s^2)/N", coherence=ones),
+                        AveragedSpectra(Gff=np.ones(5), Gxx=ones, Gfx=ones * (1 + 0j), H2=ones * (1 + 1j), n_averages=1,
+                                        windows=WindowSettings()))
         return p.read_bytes()
 
 

@@ -13,15 +13,17 @@ import numpy as np
 import pytest
 
 from acquisition.errors import RecordingError
+from analysis.frf import FRFSet
+from analysis.hit import Hit
 from analysis.recording import (
     SCHEMA_VERSION,
     Recording,
-    RecordingWriter,
     counts_crc32,
     load_frfset,
     scale_counts,
 )
-from analysis.spectra import WindowSettings
+from analysis.recording_writer import FRFPoint, RecordingWriter
+from analysis.spectra import AveragedSpectra, WindowSettings
 
 CHANNELS = [
     {"name": "force", "point": "right:6:-X", "direction": "-X", "quantity": "force", "sensitivity": 2.25,
@@ -41,18 +43,19 @@ def write_example(path: Path, n_hits: int = 3, seed: int = 0) -> list[np.ndarray
         for i in range(n_hits):
             c = rng.integers(-32768, 32767, size=(2, 256), endpoint=True).astype(np.int16)
             counts.append(c)
-            w.write_hit(counts=c, eu_per_count=[0.01, 0.002], volts_per_count=[2.2e-5, 1.5e-4], trigger_index=16,
-                        sample_rate_hz=1000.0, sequence=100 + i, timestamp=1.5 + i, measurement=0, point="right:6:-X",
-                        reference="right:6:-X", outputs=["left:9:Y"], force_channel=0, response_channels=[1],
-                        overload=[False, i == 1], accepted=i != 1, reasons=["overload on channel 2"] if i == 1 else [],
-                        check={"force_peak_n": 100.0 + i})
+            w.write_hit(Hit(counts=c, eu_per_count=[0.01, 0.002], volts_per_count=[2.2e-5, 1.5e-4], trigger_index=16,
+                            sample_rate_hz=1000.0, sequence=100 + i, timestamp=1.5 + i, measurement=0,
+                            point="right:6:-X", reference="right:6:-X", outputs=["left:9:Y"], force_channel=0,
+                            response_channels=[1], overload=[False, i == 1], accepted=i != 1,
+                            reasons=["overload on channel 2"] if i == 1 else [], check={"force_peak_n": 100.0 + i}))
             w.log("INFO", f"hit {i}")
         f = np.linspace(0, 500, 129)
         H = (np.arange(129) + 1j)[None, :] * np.array([[1.0]])
-        w.write_frf(0, point="right:6:-X", freq_hz=f, H1=H, H2=2 * H, coherence=np.full((1, 129), 0.9),
-                    Gff=np.ones(129), Gxx=np.ones((1, 129)), Gfx=H, outputs=["left:9:Y"], reference="right:6:-X",
-                    n_averages=2, hits=[0, 2], quantity="accelerance", unit="(m/s^2)/N", windows=WIN,
-                    exp_window_tau_s=0.4)
+        w.write_frf(FRFPoint(0, "right:6:-X", (0, 2)),
+                    FRFSet(freq_hz=f, H=H, quantity="accelerance", outputs=["left:9:Y"], references=["right:6:-X"],
+                           unit="(m/s^2)/N", coherence=np.full((1, 129), 0.9), exp_window_tau_s=0.4),
+                    AveragedSpectra(Gff=np.ones(129), Gxx=np.ones((1, 129)), Gfx=H, H2=2 * H, n_averages=2,
+                                    windows=WIN))
     return counts
 
 
@@ -160,7 +163,8 @@ def test_crc32_known_value():
 
 WRITER = textwrap.dedent("""
     import sys, numpy as np
-    from analysis.recording import RecordingWriter
+    from analysis.hit import Hit
+    from analysis.recording_writer import RecordingWriter
     from analysis.spectra import WindowSettings
     rng = np.random.default_rng(int(sys.argv[2]))
     with RecordingWriter(sys.argv[1], instrument={"model": "x"}, setup={}, channels=[{"name": "f", "point": "n:1:Z"}],
@@ -168,10 +172,10 @@ WRITER = textwrap.dedent("""
         i = 0
         while True:
             c = rng.integers(-30000, 30000, size=(4, 8192)).astype(np.int16)
-            idx = w.write_hit(counts=c, eu_per_count=[1.0] * 4, volts_per_count=[1.0] * 4, trigger_index=10,
-                              sample_rate_hz=1000.0, sequence=i, timestamp=0.0, measurement=0, point="n:1:Z",
-                              reference="n:1:Z", outputs=["n:2:Z"] * 3, force_channel=0, response_channels=[1, 2, 3],
-                              overload=[False] * 4, accepted=True)
+            idx = w.write_hit(Hit(counts=c, eu_per_count=[1.0] * 4, volts_per_count=[1.0] * 4, trigger_index=10,
+                                  sample_rate_hz=1000.0, sequence=i, timestamp=0.0, measurement=0, point="n:1:Z",
+                                  reference="n:1:Z", outputs=["n:2:Z"] * 3, force_channel=0,
+                                  response_channels=[1, 2, 3], overload=[False] * 4, accepted=True))
             w.log("INFO", f"hit {idx}")
             print(idx, int(c.sum()), flush=True)
             i += 1
@@ -209,17 +213,19 @@ def test_sigkill_mid_session_loses_no_hit(tmp_path, seed, n_before_kill):
 def test_frfs_carry_sample_rate_and_the_preferred_estimator(tmp_path) -> None:
     """The FRF set carries the sample rate it was measured at, and a recording replayed with H2 is
     read as H2 by every consumer unless told otherwise (issue 11, item 3)."""
-    from analysis.recording import RecordingWriter, load_frfset
+    from analysis.recording import load_frfset
+    from analysis.recording_writer import RecordingWriter
     from analysis.spectra import WindowSettings
 
     f = np.linspace(0.0, 200.0, 129)
     H = np.ones((1, 129), complex)
     path = tmp_path / "r.h5"
     with RecordingWriter(path, instrument={}, setup={}, channels=[], windows=WindowSettings(), plan={}) as w:
-        w.write_frf(0, point="right:6:-X", freq_hz=f, H1=H, H2=2 * H, coherence=np.full((1, 129), 0.9),
-                    Gff=np.ones(129), Gxx=np.ones((1, 129)), Gfx=np.ones((1, 129), complex), outputs=["left:9:Y"],
-                    reference="right:6:-X", n_averages=3, hits=[0, 1, 2], quantity="accelerance", unit="(m/s^2)/N",
-                    windows=WindowSettings(), exp_window_tau_s=None, sample_rate_hz=512.0)
+        w.write_frf(FRFPoint(0, "right:6:-X", (0, 1, 2)),
+                    FRFSet(freq_hz=f, H=H, quantity="accelerance", outputs=["left:9:Y"], references=["right:6:-X"],
+                           unit="(m/s^2)/N", coherence=np.full((1, 129), 0.9), sample_rate_hz=512.0),
+                    AveragedSpectra(Gff=np.ones(129), Gxx=np.ones((1, 129)), Gfx=np.ones((1, 129), complex), H2=2 * H,
+                                    n_averages=3, windows=WindowSettings()))
     frf = load_frfset(path)
     assert frf.sample_rate_hz == 512.0 and frf.analyser_band_hz == pytest.approx(200.0)
     assert frf.line_spacing_hz == pytest.approx(200.0 / 128)

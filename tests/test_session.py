@@ -14,7 +14,8 @@ from scipy import signal
 
 from acquisition.driver import Analyser
 from acquisition.loopback import LoopbackTransport
-from analysis.recording import Recording, RecordingWriter, load_frfset
+from analysis.recording import Recording, load_frfset
+from analysis.recording_writer import RecordingWriter
 from acquisition.session import (
     CaptureSession,
     HitSummary,

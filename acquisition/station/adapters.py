@@ -1,12 +1,11 @@
 """Small adapters of the station engine: session log records as page messages, an analyser that notes
-when each block arrives, and an accepted hit kept in memory for a pass that goes back to a point."""
+when each block arrives."""
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["LogToPage", "RecalledHit", "Timed"]
+__all__ = ["LogToPage", "Timed"]
 
 
 class LogToPage(logging.Handler):
@@ -21,21 +20,6 @@ class LogToPage(logging.Handler):
             self.state.message(record.levelname, record.getMessage())
         except Exception:  # noqa: BLE001 - a log handler must never break the session
             self.handleError(record)
-
-
-@dataclass
-class RecalledHit:
-    """An accepted hit as the session's resume needs it (the fields of ``RecordedHit`` it reads)."""
-
-    index: int
-    accepted: bool
-    measurement: int
-    point: str
-    data: Any
-    sample_rate_hz: float
-    trigger_index: int
-    force_channel: int
-    response_channels: list
 
 
 class Timed:

@@ -31,7 +31,7 @@ from analysis.spectra import WindowSettings
 from ..errors import ImpactlabError, SetupError
 from ..session import CaptureSession, HitSummary, OperatorQuit, SessionError, TestPlan
 from ..setup import AcquisitionSetup, validate_setup
-from .adapters import LogToPage, RecalledHit, Timed
+from .adapters import LogToPage, Timed
 from .publish import PagePublisher
 from .state import StationState
 from .testhit import take_test_hit
@@ -364,10 +364,9 @@ class StationEngine(PagePublisher):
 
     def on_hit(self, summary: HitSummary) -> None:
         if summary.decision and self.session is not None:
-            s = self.session
-            self._accepted[summary.hit_index] = RecalledHit(
-                summary.hit_index, True, summary.measurement, summary.point, summary.data, summary.sample_rate_hz,
-                summary.trigger_index, s.force_channel, list(s.response_channels))
+            assert summary.hit is not None  # the session's summaries carry their hit
+            self._accepted[summary.hit_index] = summary.hit.with_verdict(True, summary.reasons).with_index(
+                summary.hit_index)
         self._publish_hit(summary, pending=False)
 
     def mark_block(self) -> None:

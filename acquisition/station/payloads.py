@@ -13,6 +13,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from analysis.frf import analyser_band_hz
 from analysis.spectra import excitation_band
 
 __all__ = ["band_edges", "frf_payload", "hit_payload", "range_advice", "setup_payload", "verdict_payload"]
@@ -86,7 +87,7 @@ def hit_payload(data: np.ndarray, fs_hz: float, trigger_index: int, pretrigger: 
     peak = float(np.max(spec)) if spec.size else 0.0
     with np.errstate(divide="ignore"):
         gff_db = 10 * np.log10(np.where(spec > 0, spec, np.nan) / peak) if peak > 0 else np.full(spec.shape, np.nan)
-    idx = _lines(freq, fs_hz / 2.56)
+    idx = _lines(freq, analyser_band_hz(fs_hz))
     return {
         "force": force,
         "responses": responses,

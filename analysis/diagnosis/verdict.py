@@ -210,10 +210,10 @@ def _below_model_form(causes: list) -> None:
 
 def known_processing(measured: FRFSet) -> tuple:
     """What the measurement's own processing does to the structure's FRFs, as effects applied to the
-    simulation before it is compared: the finite record (``meta["record_s"]``, ``meta["pretrigger_s"]``
+    simulation before it is compared: the finite record (``measured.record_s``, ``measured.pretrigger_s``
     as a recording stores them) and the exponential window recorded with the FRFs."""
     out: list = []
-    record, pre = measured.meta.get("record_s"), measured.meta.get("pretrigger_s", 0.0)
+    record, pre = measured.record_s, measured.pretrigger_s or 0.0
     if isinstance(record, (int, float)) and record > 0 and isinstance(pre, (int, float)):
         out.append({"effect": "record_length", "record_s": float(record), "pretrigger_s": float(pre)})
     tau = measured.exp_window_tau_s

@@ -96,7 +96,8 @@ def run_soak(hits: int, out: "str | Path", *, door: str = "sim", faults: str = D
     """Capture ``hits`` accepted hits (spread over ``points``) through ``door`` with ``faults``
     injected, write the recording ``out``, and check it against the firmware's ground truth."""
     from acquisition.driver import Analyser
-    from analysis.recording import Recording, RecordingWriter
+    from analysis.recording import Recording
+    from analysis.recording_writer import RecordingWriter
     from acquisition.session import CaptureSession, TestPlan, channel_table, retry_on_link_fault
     from acquisition.setup import default_setup
     from analysis.spectra import WindowSettings

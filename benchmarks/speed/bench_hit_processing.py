@@ -29,17 +29,19 @@ def bench_write(blocks: list, eu: np.ndarray) -> np.ndarray:
     import tempfile
     from pathlib import Path
 
-    from analysis.recording import RecordingWriter
+    from analysis.hit import Hit
+    from analysis.recording_writer import RecordingWriter
 
     times = []
     with tempfile.TemporaryDirectory() as d:
         with RecordingWriter(Path(d) / "bench.h5", instrument={}, setup={}, channels=[], windows=WindowSettings()) as w:
             for i in range(60):
+                hit = Hit(counts=blocks[i % len(blocks)], eu_per_count=eu, volts_per_count=eu, trigger_index=128,
+                          sample_rate_hz=FS, sequence=i, timestamp=0.0, measurement=0, point="n:1:Z",
+                          reference="n:1:Z", outputs=["n:2:Z"] * 3, force_channel=0, response_channels=[1, 2, 3],
+                          overload=[False] * 4, accepted=True)
                 t0 = time.perf_counter()
-                w.write_hit(counts=blocks[i % len(blocks)], eu_per_count=eu, volts_per_count=eu, trigger_index=128,
-                            sample_rate_hz=FS, sequence=i, timestamp=0.0, measurement=0, point="n:1:Z",
-                            reference="n:1:Z", outputs=["n:2:Z"] * 3, force_channel=0, response_channels=[1, 2, 3],
-                            overload=[False] * 4, accepted=True)
+                w.write_hit(hit)
                 times.append(time.perf_counter() - t0)
     return 1e3 * np.array(times[5:])
 
