@@ -141,6 +141,26 @@ def open_analyser(url: str, timeout_s: float = 10.0) -> Any:
     return Analyser(url, timeout_s=timeout_s)
 
 
+def check_points_on_device(parsed_url: Any, measurements: Sequence[Any]) -> None:
+    """Before anything is opened or written: every point of the plan must lie on the structure a
+    simulated device holds (the simulated frame of its ``config``); :class:`UsageError` names the
+    point and the frame's nodes. Real devices measure whatever they are attached to."""
+    from analysis.geometry import GeometryError
+
+    from .urls import SimURL, UsbSimURL
+
+    if not isinstance(parsed_url, (SimURL, UsbSimURL)) or parsed_url.options.get("replay"):
+        return
+    from simulator.config import FrameConfig  # a face wires the simulator in
+    from simulator.geometry import frame_geometry
+
+    try:
+        geometry = frame_geometry(FrameConfig.load(parsed_url.options.get("config")))
+        geometry.check_points(ch.point for m in measurements for ch in m.setup.channels)
+    except GeometryError as exc:
+        raise UsageError(f"{exc}: choose points on the frame (e.g. top:4:Z)") from None
+
+
 def _plan(args: argparse.Namespace, replay_plan: Optional[dict]):
     from .session import TestPlan
 
@@ -276,6 +296,7 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
     plan = _plan(args, replay_plan)
     windows = parse_windows(args.force_window, args.exp_window, setup.sample_rate_hz)
     measurements = plan.measurements(setup)  # checks the set-up has a force channel and responses
+    check_points_on_device(parsed, measurements)
     analyser = open_analyser(url)
     with analyser:
         identity = retry_on_link_fault(analyser.identify)
@@ -283,13 +304,20 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
         say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
         say(f"analyser: {identity}; {len(measurements)} point(s) x {plan.hits_per_point} hits, {plan.mode}")
         decide = auto_accept if args.auto else terminal_decider()
-        with RecordingWriter(out, instrument=instrument, setup=setup.to_dict(), channels=channel_table(setup),
-                             windows=windows.resolved(setup.block_size, setup.sample_rate_hz,
-                                                      setup.trigger.pretrigger_samples),
-                             plan={**plan.to_dict(), "device": url}, overwrite=args.overwrite) as writer:
+        writer = RecordingWriter(out, instrument=instrument, setup=setup.to_dict(), channels=channel_table(setup),
+                                 windows=windows.resolved(setup.block_size, setup.sample_rate_hz,
+                                                          setup.trigger.pretrigger_samples),
+                                 plan={**plan.to_dict(), "device": url}, overwrite=args.overwrite)
+        result = None
+        try:
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
                                      progress=say, timeout_s=args.timeout)
             result = _run_session(session, writer)
+        finally:
+            writer.close()
+            if result is None and writer.n_hits == 0:  # failed before its first hit: nothing to keep
+                out.unlink(missing_ok=True)
+                log.info("removed %s: the capture failed before its first hit (a retry needs no --overwrite)", out)
     return _finish(result, f"recording written: {out}", out_stream, quiet=args.quiet)
 
 

@@ -79,6 +79,30 @@ class Geometry:
         known = set(self.labels)
         return [p for p in points if node_label(p) not in known]
 
+    def describe_nodes(self) -> str:
+        """The nodes in a line for messages: ``top:0..12, left:0..9`` (ranges of each component)."""
+        comps: dict[str, list[str]] = {}
+        for label in self.labels:
+            comp, _, node = label.partition(":")
+            comps.setdefault(comp, []).append(node)
+        parts = []
+        for comp, nodes in comps.items():
+            nums = sorted(int(n) for n in nodes if n.isdigit())
+            if len(nums) == len(nodes) and nums == list(range(nums[0], nums[-1] + 1)):
+                parts.append(f"{comp}:{nums[0]}..{nums[-1]}" if len(nums) > 1 else f"{comp}:{nums[0]}")
+            else:
+                parts.append(", ".join(f"{comp}:{n}" for n in nodes))
+        return ", ".join(parts)
+
+    def check_points(self, points: Iterable[str]) -> None:
+        """Raise :class:`GeometryError` naming the first point whose node is not in the geometry and
+        the geometry's nodes."""
+        missing = self.covers(points)
+        if missing:
+            where = f" {self.name}" if self.name else " geometry"
+            raise GeometryError(f"point {missing[0]}: node {node_label(missing[0])} is not on the{where}; its "
+                                f"nodes are {self.describe_nodes()}")
+
     def to_dict(self) -> dict:
         """JSON-ready: labels, xyz (m, rounded to 0.1 mm), lines as index pairs, name, supports as indices."""
         idx = {s: i for i, s in enumerate(self.labels)}

@@ -273,3 +273,27 @@ def test_sep005_export_import_round_trip(captured, tmp_path, capsys):
     (tmp_path / "bad.json").write_text("{not json")
     assert import_main([str(tmp_path / "bad.json"), "--out", str(tmp_path / "b.h5")]) == 2
     assert "not a JSON SEP005 file" in capsys.readouterr().err
+
+
+def test_a_point_off_the_simulated_frame_is_refused_before_anything_is_written(tmp_path, capsys):
+    """``--points top:40:Z`` on the simulated frame: exit 2, the message names the point, its node and
+    the frame's nodes, and no recording is created (a retry needs no --overwrite)."""
+    rec = tmp_path / "off.h5"
+    assert capture_main(["--device", "sim://?seed=1", "--out", str(rec), "--points", "top:40:Z", "--auto"]) == 2
+    err = capsys.readouterr().err
+    assert "point top:40:Z: node top:40 is not on the simulated frame" in err
+    assert "top:0..8" in err and "left:0..10" in err and "Traceback" not in err
+    assert not rec.exists()
+
+
+def test_a_capture_that_fails_before_its_first_hit_leaves_no_empty_recording(tmp_path, capsys, monkeypatch):
+    from acquisition.session import CaptureSession, SessionError
+
+    def refused(self):
+        raise SessionError("the analyser refuses the set-up")
+
+    monkeypatch.setattr(CaptureSession, "run", refused)
+    rec = tmp_path / "failed.h5"
+    assert capture_main(["--device", "sim://?seed=1", "--out", str(rec), "--auto", "-q"]) == 1
+    assert "the analyser refuses the set-up" in capsys.readouterr().err
+    assert not rec.exists()
