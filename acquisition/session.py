@@ -199,12 +199,20 @@ class CaptureSession:
                     continue
                 self._measure(m, avg, result)
         except OperatorQuit as exc:
-            result.aborted = True
-            self._event("WARNING", f"test ended early: {exc}")
+            if self._plan_complete(result):
+                self._event("INFO", f"test finished with every point complete ({exc})")
+            else:
+                result.aborted = True
+                self._event("WARNING", f"test ended early: {exc}")
             if self.writer is not None and result.averages and result.averages[-1].n_averages > 0:
                 result.averages[-1].write(self.writer)
         self._event("INFO", f"session done: {result.accepted} hits accepted, {len(result.rejected)} rejected")
         return result
+
+    def _plan_complete(self, result: SessionResult) -> bool:
+        """Every point of the plan has its accepted hits (an operator who ends now ends nothing early)."""
+        return (len(result.averages) == len(self.measurements)
+                and all(a.n_averages >= self.plan.hits_per_point for a in result.averages))
 
     def _resume_into(self, m: Measurement, avg: MeasurementAverage, result: SessionResult) -> bool:
         """Add the recorded accepted hits of ``m`` to its average (resume); True when it is complete

@@ -310,3 +310,43 @@ def test_a_test_hit_is_shown_with_range_advice_and_not_recorded(tmp_path):
         code, out, err = s.stop()
     assert code == 0, err
     assert "nothing was recorded" in out
+
+
+def test_finish_on_a_complete_plan_is_not_an_early_end(tmp_path):
+    """Finish pressed once every point has its hits: the footer and the log say finished, never
+    "ended early"; Finish before the plan is complete says it ended early."""
+    from analysis.recording import Recording
+
+    def accept_one(api: Api) -> None:
+        while api.state()["phase"] != "complete":
+            st = api.state()
+            if st["phase"] == "decide":
+                assert api.act("accept")[0] == 200
+                api.wait(lambda x: x["phase"] in ("ready", "complete"), "the accept")
+            else:
+                assert api.act("arm")[0] == 200
+                api.wait(lambda x, q=st["hit_seq"]: x["hit_seq"] > q and x["phase"] in ("decide", "ready"), "a hit")
+
+    for points, complete in (("right:6:-X", True), ("right:6:-X,top:4:Z", False)):
+        rec = tmp_path / f"rec{int(complete)}.h5"
+        s = StationProcess(["--device", "sim://?seed=8", "--out", str(rec), "--points", points, "--hits", "1"],
+                           tmp_path)
+        try:
+            api = Api(s)
+            assert api.lease() == 200
+            accept_one(api)
+            assert api.act("finish")[0] == 200
+            st = api.wait(lambda x: x["phase"] == "finished", "the end")
+        finally:
+            code, _out, err = s.stop()
+        assert code == 0, err
+        texts = [m["text"] for m in st["messages"]]
+        if complete:
+            assert "ended early" not in st["summary"] and not any("ended early" in t for t in texts), texts
+            assert "test finished: the recording is complete" in texts
+        else:
+            assert "(ended early)" in st["summary"] and any("test ended early" in t for t in texts), texts
+            assert "test finished: the recording is complete" not in texts
+        with Recording(rec) as r:
+            assert any("ended early" in e[2] for e in r.events()) is not complete
+            assert r.measurement_names() == ["m000"]

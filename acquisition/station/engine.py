@@ -169,7 +169,9 @@ class StationEngine(PagePublisher):
                         self.state.update(phase="finished", summary=f"{result.accepted} hits accepted, "
                                           f"{len(result.rejected)} rejected; recording {getattr(writer, 'path', '')}"
                                           + (" (ended early)" if result.aborted else ""), plan=self._plan_rows())
-                        self.state.message("INFO", "test finished: the recording is complete")
+                        self.state.message(*(("WARNING", "test ended early: restart the station with --resume to "
+                                                      "measure the points still missing") if result.aborted else
+                                             ("INFO", "test finished: the recording is complete")))
                         self._redo = self._wait_redo()
                         if self._redo is None:
                             break
