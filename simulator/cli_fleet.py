@@ -8,7 +8,9 @@ DIR gets ``unit-007.h5`` per unit, ``configs/`` (each unit's frame config) and `
 (``{"units": [{"name", "file", "defect": null or {"kind", ...}}]}``).
 
 Each recording appears under its final name only when complete, so running the command again
-after a crash captures only the units that are missing. Units are captured in parallel by
+after a crash captures only the units that are missing. A folder that holds another fleet (made
+with other ``--units``, ``--scatter``, ``--defects`` or ``--seed``) is refused: its ``truth.json``
+must keep describing its recordings. Units are captured in parallel by
 ``--jobs`` processes (default: one per core).
 Exit status: 0 done, 1 a capture failed, 2 bad input.
 """
@@ -28,7 +30,7 @@ from analysis.atomic import atomic_path, write_json_atomic, write_text_atomic
 from analysis.command_line import Parser, cli_entry, errors_to_exit, parse_args, with_examples
 
 from .config import overrides_to_toml
-from .fleet import DEFECT_KINDS, UnitSpec, plan_fleet
+from .fleet import DEFECT_KINDS, UnitSpec, fleet_folder_conflict, plan_fleet, recorded_plan
 
 __all__ = ["main", "build_parser", "capture_unit"]
 
@@ -127,12 +129,20 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             raise ValueError("--hits and --jobs must be at least 1")
         specs = plan_fleet(args.units, args.scatter / 100.0, args.defects, args.seed)
     out = Path(args.out)
+    with errors_to_exit("simulator fleet", ValueError):
+        conflict = fleet_folder_conflict(out, specs)
+        if conflict:
+            made = recorded_plan(out)
+            raise ValueError(f"{out} holds another fleet ({conflict}): nothing captured, truth.json unchanged; "
+                             + (f"complete it with the options it was made with ({made}) " if made else
+                                "complete it with the options it was made with ")
+                             + "or give a new --out folder")
     with errors_to_exit("simulator fleet", OSError, prefix="cannot create the output folder: "):
         (out / "configs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     failed = _run(specs, out, args.hits, args.jobs, bool(args.quiet))
     truth = {"schema": "impactlab.fleet-truth/1", "scatter_pct": args.scatter, "seed": args.seed,
-             "units": [s.truth(f"{s.name}.h5") for s in specs]}
+             "defects": args.defects, "hits": args.hits, "units": [s.truth(f"{s.name}.h5") for s in specs]}
     write_json_atomic(out / "truth.json", truth)
     bad = sum(s.defect is not None for s in specs)
     print(f"fleet of {len(specs)} units ({bad} defective, scatter +-{args.scatter:g} %) in {out}: "

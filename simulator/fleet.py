@@ -20,14 +20,17 @@ simulated analyser.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
 
-from .config import FrameConfig
+from .config import FrameConfig, overrides_to_toml
 
-__all__ = ["DEFECT_KINDS", "UnitSpec", "plan_fleet", "unit_overrides"]
+__all__ = ["DEFECT_KINDS", "UnitSpec", "plan_fleet", "unit_overrides", "fleet_folder_conflict",
+           "recorded_plan"]
 
 #: defect kind -> (range of its factor, what it is)
 DEFECT_KINDS: dict[str, tuple[tuple[float, float], str]] = {
@@ -117,3 +120,37 @@ def plan_fleet(units: int, scatter: float = 0.02, defects: int = 0, seed: int = 
         out.append(UnitSpec(name=f"unit-{u + 1:0{width}d}", seed=int(rng.integers(1, 2 ** 31 - 1)), scatter=sc,
                             defect=defect, overrides=unit_overrides(sc, defect, cfg)))
     return out
+
+
+def fleet_folder_conflict(out_dir: "str | Path", specs: "list[UnitSpec]") -> Optional[str]:
+    """Why the recordings already in ``out_dir`` are not units of the fleet ``specs`` (None when
+    they all are): a unit recorded with another config (other ``--units``, ``--scatter``,
+    ``--defects`` or ``--seed``), or a recording the plan does not hold. Completing such a folder
+    would write a ``truth.json`` that does not describe its recordings."""
+    out = Path(out_dir)
+    planned = {s.name: s for s in specs}
+    for h5 in sorted(out.glob("unit-*.h5")):
+        name = h5.stem
+        spec = planned.get(name)
+        if spec is None:
+            return f"{h5.name} is not a unit of this fleet of {len(specs)}"
+        cfg = out / "configs" / f"{name}.toml"
+        try:
+            recorded = cfg.read_text(encoding="utf-8")
+        except OSError:
+            return f"{h5.name} has no config {cfg} to tell which unit it is"
+        if recorded != overrides_to_toml(spec.overrides):
+            return f"{h5.name} was recorded from another unit config than this plan's {name}"
+    return None
+
+
+def recorded_plan(out_dir: "str | Path") -> str:
+    """The options a fleet folder was made with, as its ``truth.json`` records them ('' when unknown)."""
+    try:
+        truth = json.loads((Path(out_dir) / "truth.json").read_text(encoding="utf-8"))
+        units = truth.get("units", [])
+        defects = truth.get("defects", sum(u.get("defect") is not None for u in units))
+        return (f"--units {len(units)} --defects {defects} --scatter {truth['scatter_pct']:g} "
+                f"--seed {truth['seed']}" + (f" --hits {truth['hits']}" if "hits" in truth else ""))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return ""
