@@ -61,6 +61,8 @@ __all__ = [
     "quantize",
     "detect_trigger",
     "write_imported",
+    "ChannelRoles",
+    "channel_roles",
 ]
 
 log = logging.getLogger(__name__)
@@ -430,25 +432,41 @@ def read_sep005_test(path: "str | Path") -> ImportedTest:
                         {"format": "SEP005"})
 
 
-def write_imported(
+@dataclass(frozen=True)
+class ChannelRoles:
+    """What an import makes of the file's channels: the channel table (quantities and point labels
+    as given or relabelled), the force channel and the response channels (0-based)."""
+
+    channels: list
+    force_channel: int
+    response_channels: list
+
+    @property
+    def reference(self) -> str:
+        return str(self.channels[self.force_channel]["point"])
+
+    @property
+    def outputs(self) -> list:
+        return [str(self.channels[i]["point"]) for i in self.response_channels]
+
+    def describe(self) -> list:
+        """One line per used channel: ``force: channel 2 'Force' [N] -> n:1:Z`` (1-based numbers)."""
+        def line(role: str, i: int) -> str:
+            c = self.channels[i]
+            return f"{role}: channel {i + 1} {c.get('name', '')!r} [{c.get('unit', '')}] -> {c['point']}"
+        return [line("force", self.force_channel)] + [line("response", i) for i in self.response_channels]
+
+
+def channel_roles(
     test: ImportedTest,
-    out: "str | Path",
     *,
-    windows: WindowSettings = WindowSettings(),
     reference: Optional[str] = None,
     outputs: Optional[Sequence[str]] = None,
     force_channel: Optional[int] = None,
     response_channels: Optional[Sequence[int]] = None,
-    check_settings: HitCheckSettings = HitCheckSettings(),
-    overwrite: bool = False,
-) -> "list":
-    """Write ``test`` as a recording (one measurement) and return its averages.
-
-    Hits failing the automatic checks (double hits) are stored as rejected with the reason.
-    ``reference``/``outputs`` relabel the force and response channels (point labels).
-    """
-    from .session import average_recorded_hits  # session imports this module's siblings; keep it local
-
+) -> ChannelRoles:
+    """The force and response channels of ``test`` and their point labels: from the file, or as
+    given (``force_channel``/``response_channels`` 0-based; ``reference``/``outputs`` relabel them)."""
     chans = [dict(c) for c in test.channels]
     if force_channel is not None:
         if not 0 <= force_channel < len(chans):
@@ -481,14 +499,38 @@ def write_imported(
         p = parse_point(c["point"])
         c.setdefault("direction", p.direction)
         c["direction"] = p.direction
-    ref = chans[fch]["point"]
-    outs = [chans[i]["point"] for i in rch]
+    return ChannelRoles(chans, fch, rch)
+
+
+def write_imported(
+    test: ImportedTest,
+    out: "str | Path",
+    *,
+    windows: WindowSettings = WindowSettings(),
+    reference: Optional[str] = None,
+    outputs: Optional[Sequence[str]] = None,
+    force_channel: Optional[int] = None,
+    response_channels: Optional[Sequence[int]] = None,
+    check_settings: HitCheckSettings = HitCheckSettings(),
+    overwrite: bool = False,
+) -> "list":
+    """Write ``test`` as a recording (one measurement) and return its averages.
+
+    Hits failing the automatic checks (double hits) are stored as rejected with the reason.
+    ``reference``/``outputs`` relabel the force and response channels (point labels).
+    """
+    from .session import average_recorded_hits  # session imports this module's siblings; keep it local
+
+    roles = channel_roles(test, reference=reference, outputs=outputs, force_channel=force_channel,
+                          response_channels=response_channels)
+    chans, fch, rch = roles.channels, roles.force_channel, roles.response_channels
+    ref, outs = roles.reference, roles.outputs
     setup = {"sample_rate_hz": test.fs_hz, "block_size": int(test.hits[0].shape[1]),
              "channels": chans, "imported_from": test.source, "format": test.meta.get("format")}
     instrument = {"vendor": "imported", "model": str(test.meta.get("format", "")), "source": test.source}
     with RecordingWriter(out, instrument=instrument, setup=setup, channels=chans, windows=windows,
                          plan={"mode": "imported", "points": [ref]}, overwrite=overwrite) as w:
-        w.log("INFO", f"imported {len(test.hits)} hit(s) from {test.source}")
+        w.log("INFO", f"imported {len(test.hits)} hit(s) from {test.source}; " + "; ".join(roles.describe()))
         kept: list[Hit] = []
         names = tuple(str(c["name"]) for c in chans)
         sens = np.array([c["sensitivity"] for c in chans], float)

@@ -20,7 +20,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     ),
     "python -m acquisition import": (
         "import ../shared/data/ladisk_beam_impact/acceleration.lvm --out beam.h5",
-        "import hits.mat --format dataphysics --out test.h5 --overwrite",
+        "import hits.mat --format mat --out test.h5 --overwrite",
     ),
     "python -m acquisition identify": (
         'identify --device "sim://?seed=1"',

@@ -173,3 +173,31 @@ def test_cli_import_lvm(tmp_path, capsys):
     with Recording(out) as rec:
         assert rec.windows.force_width_s == pytest.approx(0.01)
     assert import_main([str(p), "--out", str(out)]) == 2  # exists
+
+
+def test_import_help_examples_are_valid_and_every_option_is_explained(capsys):
+    import shlex
+
+    from acquisition.cli_import import build_parser
+    from analysis.command_examples import EXAMPLES
+
+    parser = build_parser()
+    assert all(a.help for a in parser._actions), [a.dest for a in parser._actions if not a.help]
+    examples = EXAMPLES["python -m acquisition import"]
+    assert examples
+    for line in examples:
+        args = parser.parse_args(shlex.split(line)[1:])  # an invalid --format choice would exit here
+        assert args.out
+
+
+def test_import_says_which_channel_became_the_force_and_the_labels(tmp_path, capsys):
+    hits, _ = synthetic_hits(2)
+    p = tmp_path / "hits.lvm"
+    write_lvm(p, hits)
+    out = tmp_path / "rec.h5"
+    assert import_main([str(p), "--out", str(out), "--reference", "n:7:Z", "--outputs", "n:8:Y"]) == 0
+    text = capsys.readouterr().out
+    assert "force: channel 1 'ch1' [N] -> n:7:Z" in text
+    assert "response: channel 2 'ch2' [g] -> n:8:Y" in text
+    with Recording(out) as rec:
+        assert any("force: channel 1" in e[2] for e in rec.events())
