@@ -21,66 +21,22 @@ import argparse
 import logging
 import sys
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence, TextIO
+from typing import Any, Optional, Sequence, TextIO
 
-import numpy as np
 
-from analysis.command_line import with_examples
-from analysis.command_line import add_overwrite, cli_entry, exit_on
-from analysis.spectra import WindowSettings, excitation_band, parse_duration
+from analysis.command_line import add_overwrite, cli_entry, exit_on, with_examples
 
+from .capture import capture_to_file, open_analyser
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
-from .operator import HitSummary
-from .session_errors import OperatorQuit
+from .terminal import summary_text, terminal_decider
+from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
 
-__all__ = ["main", "build_parser", "parse_windows", "open_analyser", "summary_text", "DEFAULT_FORCE_WINDOW",
-           "DEFAULT_EXP_WINDOW"]
+__all__ = ["main", "build_parser", "run_capture", "run_resume", "recorded_test", "check_points_on_device",
+           "EXIT_INCOMPLETE"]
 
 log = logging.getLogger(__name__)
 
-DEFAULT_FORCE_WINDOW = "20ms,5ms"
-DEFAULT_EXP_WINDOW = "none"
 
-
-
-def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[float],
-                  base: Optional[WindowSettings] = None) -> WindowSettings:
-    """Window settings from the ``--force-window`` and ``--exp-window`` texts (None: keep ``base``)."""
-    b = base or WindowSettings()
-    fw, ft = b.force_width_s, b.force_taper_s
-    tau, decay = b.exp_tau_s, b.exp_decay
-    try:
-        if force is not None:
-            t = force.strip().lower()
-            if t in ("none", "off", ""):
-                fw, ft = None, 0.0
-            else:
-                parts = [x for x in t.split(",")]
-                if len(parts) > 2:
-                    raise UsageError(f"--force-window {force!r}: give WIDTH or WIDTH,TAPER (e.g. 10ms,2ms)")
-                fw = parse_duration(parts[0], fs_hz)
-                ft = parse_duration(parts[1], fs_hz) if len(parts) == 2 else 0.0
-                if fw <= 0:
-                    raise UsageError(f"--force-window {force!r}: the width must be positive")
-        if exp is not None:
-            t = exp.strip().lower()
-            if t in ("none", "off", ""):
-                tau, decay = None, None
-            elif t.endswith("%"):
-                decay = float(t[:-1]) / 100.0
-                tau = None
-                if not 0 < decay < 1:
-                    raise UsageError(f"--exp-window {exp!r}: the end value must lie between 0 and 100 %")
-            else:
-                tau = parse_duration(t[4:] if t.startswith("tau=") else t, fs_hz)
-                decay = None
-                if tau <= 0:
-                    raise UsageError(f"--exp-window {exp!r}: tau must be positive")
-        return WindowSettings(fw, ft, tau, decay, b.exp_on_force)
-    except UsageError:
-        raise
-    except ValueError as exc:
-        raise UsageError(f"bad window option: {exc}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -131,14 +87,6 @@ def _continue_stream(url: str, n_recorded: int) -> str:
     if m is None:
         return url + ("&" if "?" in url else "?") + f"seed={n_recorded}"
     return url[:m.start()] + f"{m.group(1)}seed={int(m.group(2)) + n_recorded}" + url[m.end():]
-
-
-def open_analyser(url: str, timeout_s: float = 10.0) -> Any:
-    """An ``Analyser`` on ``url`` (``sim://?replay=REC.h5``: the simulated analyser plays a recording back
-    through :class:`simulator.replay_stand.ReplayStand`). ``timeout_s`` bounds each command."""
-    from .driver import Analyser
-
-    return Analyser(url, timeout_s=timeout_s)
 
 
 def check_points_on_device(parsed_url: Any, measurements: Sequence[Any]) -> None:
@@ -206,59 +154,6 @@ def _recorded_plan(rec: Any) -> dict:
     return plan
 
 
-def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8, quiet: bool = False) -> str:
-    """Hits accepted/rejected with reasons (``quiet``: counted by reason), an FRF peak table and the
-    mean coherence per FRF."""
-    from collections import Counter
-
-    from scipy.signal import find_peaks
-
-    lines = [f"hits accepted: {result.accepted}, rejected: {len(result.rejected)}"]
-    if quiet and result.rejected:
-        why = Counter(r.split(":")[0] for *_, reasons in result.rejected for r in reasons[:1])
-        lines.append("  rejected: " + ", ".join(f"{n} x {reason}" for reason, n in why.most_common()))
-    for m, point, idx, reasons in ([] if quiet else sorted(result.rejected, key=lambda r: r[2])):
-        lines.append(f"  rejected hit #{idx + 1} at point {m + 1} ({point}): {'; '.join(reasons)}")
-    avgs = [a for a in result.averages if a.n_averages > 0]
-    if not avgs:
-        lines.append("no FRF: no point has an accepted hit")
-        return "\n".join(lines)
-    for a in avgs:
-        s = a.frfset(estimator)
-        f = s.freq_hz
-        hi = s.analyser_band_hz or np.inf  # alias-free band, from the acquisition's sample rate
-        band = (f > 2.0) & (f <= hi)
-        mag = np.abs(s.H[:, 0, :])
-        live = [i for i in range(s.n_outputs) if np.any(a.acc.spectra()[1][i] > 0)]  # outputs with any signal
-        # peaks of the sum of the live outputs' magnitudes, each normalised to its own maximum
-        total = sum((np.where(band, mag[i], 0.0) / max(float(np.nanmax(np.where(band, mag[i], 0.0))), 1e-300)
-                     for i in live), np.zeros(f.size))
-        pk, prop = find_peaks(np.nan_to_num(total), prominence=0.02 * max(float(np.nanmax(total)), 1e-300))
-        top = np.sort(pk[np.argsort(prop["prominences"])[::-1][:n_peaks]])
-        tau = f"{s.exp_window_tau_s:.4g} s" if s.exp_window_tau_s else "none"
-        lines.append(f"point {a.index + 1}: reference {a.reference}, {a.n_averages} averages, {estimator} "
-                     f"[{s.unit}], exponential window tau {tau}")
-        lines.append("  peak Hz " + "".join(f"{o:>24s}" for o in s.outputs))
-        for k in top:
-            cells = "".join(f"{mag[i, k]:12.4g} (coh {s.coherence[i, 0, k]:.3f})" if i in live else f"{'-':>24s}"
-                            for i in range(s.n_outputs))
-            lines.append(f"  {f[k]:7.2f} {cells}")
-        coh = ", ".join(f"{o} {np.mean(s.coherence[i, 0, band]):.3f}" if i in live else f"{o} no signal (below 1 LSB)"
-                        for i, o in enumerate(s.outputs))
-        lines.append(f"  mean coherence 2..{hi:.0f} Hz: {coh}")
-        gff = a.acc.spectra()[0]
-        edges = excitation_band(f, 10 * np.log10(np.maximum(gff, max(float(np.max(gff)), 1e-300) * 1e-30)))
-        e10, e20 = edges[10.0], edges[20.0]
-        lines.append("  excitation band (force spectrum): "
-                     + ", ".join(f"-{d:g} dB at {'beyond ' + format(hi, '.0f') if e is None or e > hi else format(e, '.0f')} Hz"
-                                 for d, e in ((10, e10), (20, e20))))
-        if e20 is not None and e20 < hi:
-            lines.append(f"  warning: the hammer excites this point only up to {e20:.0f} Hz of the analyser's "
-                         f"0..{hi:.0f} Hz band: modes above it are not measured well (fit below {e20:.0f} Hz, "
-                         "or use a harder tip)")
-    return "\n".join(lines)
-
-
 def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -> tuple[int, Any]:
     """The capture job behind :func:`main`. Returns (exit code, SessionResult or None).
 
@@ -266,8 +161,8 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
     """
     out_stream = sys.stdout if out_stream is None else out_stream  # resolved at call time (pipes, tests)
     from analysis.recording import Recording
-    from analysis.recording_writer import RecordingWriter
-    from .session import CaptureSession, auto_accept, channel_table, retry_on_link_fault
+
+    from .session import SessionError, auto_accept
     from .setup import AcquisitionSetup, default_setup, load_setup
     from .urls import SimURL, parse_device_url
 
@@ -297,27 +192,13 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
     windows = parse_windows(args.force_window, args.exp_window, setup.sample_rate_hz)
     measurements = plan.measurements(setup)  # checks the set-up has a force channel and responses
     check_points_on_device(parsed, measurements)
-    analyser = open_analyser(url)
-    with analyser:
-        identity = retry_on_link_fault(analyser.identify)
-        instrument = identity.as_dict() if hasattr(identity, "as_dict") else dict(vars(identity))
-        say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
-        say(f"analyser: {identity}; {len(measurements)} point(s) x {plan.hits_per_point} hits, {plan.mode}")
-        decide = auto_accept if args.auto else terminal_decider()
-        writer = RecordingWriter(out, instrument=instrument, setup=setup.to_dict(), channels=channel_table(setup),
-                                 windows=windows.resolved(setup.block_size, setup.sample_rate_hz,
-                                                          setup.trigger.pretrigger_samples),
-                                 plan={**plan.to_dict(), "device": url}, overwrite=args.overwrite)
-        result = None
-        try:
-            session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
-                                     progress=say, timeout_s=args.timeout)
-            result = _run_session(session, writer)
-        finally:
-            writer.close()
-            if result is None and writer.n_hits == 0:  # failed before its first hit: nothing to keep
-                out.unlink(missing_ok=True)
-                log.info("removed %s: the capture failed before its first hit (a retry needs no --overwrite)", out)
+    say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
+    try:
+        result = capture_to_file(url, out, setup, plan, windows, decide=auto_accept if args.auto else terminal_decider(),
+                                 progress=say, timeout_s=args.timeout, overwrite=args.overwrite)
+    except SessionError as exc:
+        print(f"capture: {exc}", file=sys.stderr)
+        return 1, None
     return _finish(result, f"recording written: {out}", out_stream, quiet=args.quiet)
 
 
@@ -427,46 +308,3 @@ def _finish(result, done_line: str, out_stream, quiet: bool = False):
               "'impactlab capture --resume FILE'", file=sys.stderr)
         return EXIT_INCOMPLETE, result
     return 0, result
-
-
-# -- the operator at a terminal -------------------------------------------------------------------
-def read_key(prompt: str) -> str:
-    """One key press at a terminal (no Enter needed); a whole line when stdin is not a terminal."""
-    if not sys.stdin.isatty():
-        return input(prompt)
-    import termios
-    import tty
-
-    print(prompt, end="", flush=True)
-    fd = sys.stdin.fileno()
-    old = termios.tcgetattr(fd)
-    try:
-        tty.setcbreak(fd)
-        key = sys.stdin.read(1)
-    finally:
-        termios.tcsetattr(fd, termios.TCSADRAIN, old)
-    print(key)
-    if key in ("\x03", "\x04"):  # Ctrl-C, Ctrl-D
-        raise EOFError
-    return key
-
-
-def terminal_decider(input_fn: Callable[[str], str] = read_key, out: TextIO = sys.stdout) -> Callable[[HitSummary], bool]:
-    """An operator at a terminal (the capture CLI's ``decide``): key ``a`` (or Enter) accept, ``r`` reject, ``q`` quit (raises
-    :class:`OperatorQuit`). ``input_fn(prompt) -> str`` reads the answer (default :func:`read_key`)."""
-
-    def decide(summary: HitSummary) -> bool:
-        while True:
-            try:
-                key = input_fn("accept (a), reject (r), quit (q)? ").strip().lower()
-            except EOFError:
-                raise OperatorQuit("input closed: ending the test") from None
-            if key in ("a", "", "\n", "\r"):
-                return True
-            if key == "r":
-                return False
-            if key == "q":
-                raise OperatorQuit("operator pressed q")
-            print("please press a, r or q", file=out)
-
-    return decide

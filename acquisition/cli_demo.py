@@ -98,7 +98,7 @@ def capture_step(ctx: DemoContext) -> None:
     from .loopback import LoopbackTransport
     from analysis.recording_writer import RecordingWriter
     from .session import CaptureSession, TestPlan, auto_accept, channel_table
-    from .cli_capture import DEFAULT_FORCE_WINDOW, parse_windows
+    from .window_options import DEFAULT_FORCE_WINDOW, parse_windows
     from .setup import default_setup
 
     config = FrameConfig.load().with_overrides({"hammer": {"tip": DEMO_HAMMER_TIP, "double_hit_delay_s": [0.012, 0.02]}})
@@ -126,7 +126,7 @@ def capture_step(ctx: DemoContext) -> None:
 
 
 def summary_step(ctx: DemoContext) -> None:
-    from .cli_capture import summary_text
+    from .terminal import summary_text
 
     ctx.say("")
     ctx.say(summary_text(ctx.result))

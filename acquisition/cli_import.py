@@ -17,7 +17,8 @@ from typing import Optional, Sequence
 from analysis.command_line import with_examples
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
 
-from .cli_capture import UsageError, parse_windows
+from .errors import UsageError
+from .window_options import parse_windows
 from .errors import RecordingError
 
 __all__ = ["main", "build_parser", "FORMATS"]

@@ -23,18 +23,13 @@ from pathlib import Path
 from typing import Any, Optional, TextIO
 
 from analysis.command_line import with_examples
-from .cli_capture import (
-    DEFAULT_EXP_WINDOW,
-    DEFAULT_FORCE_WINDOW,
-    _plan,
-    _with_seed,
-    open_analyser,
-    parse_windows,
-    recorded_test,
-)
-from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
 
-__all__ = ["build_parser", "frame_geometry", "main"]
+from .capture import open_analyser
+from .cli_capture import _plan, _with_seed, check_points_on_device, recorded_test
+from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
+from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
+
+__all__ = ["build_parser", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -63,38 +58,20 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def frame_geometry(config_path: Optional[str] = None) -> dict:
-    """The simulated frame's wireframe as plain data: ``{"nodes": {"left:0": [x, y, z], ...},
-    "lines": [["left:0", "left:1"], ...]}`` (m).
-
-    Stand-in until ``simulator.geometry.frame_geometry`` (issue 12) is on main: then this becomes a
-    conversion of its ``analysis.geometry.Geometry`` (labels, xyz, lines) to the page's dict."""
-    import numpy as np
-
-    from simulator.config import FrameConfig
-
-    cfg = FrameConfig.load(config_path)
-    nodes: dict = {}
-    lines: list = []
-    for name, comp in cfg.components.items():
-        a, b = np.asarray(comp.start_m, float), np.asarray(comp.end_m, float)
-        n = int(comp.n_elements)
-        for i in range(n + 1):
-            nodes[f"{name}:{i}"] = [round(float(v), 5) for v in a + (b - a) * i / n]
-            if i:
-                lines.append([f"{name}:{i - 1}", f"{name}:{i}"])
-    for pair in cfg.joints.pairs:
-        lines.append([str(pair[0]), str(pair[1])])
-    return {"nodes": nodes, "lines": lines}
-
-
 def _geometry(url: str) -> dict:
+    """The test-plan view's wireframe: the simulated frame's (``simulator.geometry``) for a simulated
+    device, none for real hardware."""
+    from .station.payloads import geometry_payload
     from .urls import SimURL, UsbSimURL, parse_device_url
 
     parsed = parse_device_url(url)
-    config = parsed.options.get("config") if isinstance(parsed, (SimURL, UsbSimURL)) else None
+    if not isinstance(parsed, (SimURL, UsbSimURL)):
+        return geometry_payload(None)
+    from simulator.config import FrameConfig  # a face wires the simulator in
+    from simulator.geometry import frame_geometry
+
     try:
-        return frame_geometry(config)
+        return geometry_payload(frame_geometry(FrameConfig.load(parsed.options.get("config"))))
     except (ImpactlabError, OSError, ValueError) as exc:
         log.warning("no frame geometry for the test-plan view: %s", exc)
         return {"nodes": {}, "lines": []}
@@ -106,6 +83,7 @@ def _prepare(args: argparse.Namespace) -> dict:
 
     from .session import channel_table
     from .setup import default_setup, load_setup
+    from .urls import parse_device_url
 
     if args.resume:
         path = Path(args.resume)
@@ -130,23 +108,18 @@ def _prepare(args: argparse.Namespace) -> dict:
     setup = load_setup(args.setup) if args.setup else default_setup()
     plan = _plan(args, None)
     windows = parse_windows(args.force_window, args.exp_window, setup.sample_rate_hz)
-    plan.measurements(setup)  # a force channel and responses
+    check_points_on_device(parse_device_url(url), plan.measurements(setup))  # a force channel, responses, on the frame
 
     def open_writer(setup: Any, win: Any) -> Any:
         return RecordingWriter(out, instrument=identity_box["instrument"], setup=setup.to_dict(),
                                channels=channel_table(setup),
-                               windows=win.resolved(setup.block_size, setup.sample_rate_hz,
-                                                    setup.trigger.pretrigger_samples),
+                               windows=win,
                                plan={**plan.to_dict(), "device": url, "front_end": "station"},
                                overwrite=args.overwrite)
 
     identity_box: dict = {"instrument": {}}
     return dict(url=url, setup=setup, plan=plan, windows=windows, resume_hits=(), open_writer=open_writer,
                 editable=True, out=out, identity_box=identity_box)
-
-
-def _windows_parser(force: Optional[str], exp: Optional[str], fs_hz: float) -> Any:
-    return parse_windows(force, exp, fs_hz)
 
 
 def run_station(args: argparse.Namespace, out_stream: Optional[TextIO] = None, ready: Optional[threading.Event] = None) -> int:
@@ -169,7 +142,7 @@ def run_station(args: argparse.Namespace, out_stream: Optional[TextIO] = None, r
         engine = StationEngine(analyser, job["setup"], job["plan"], capabilities=caps, windows=job["windows"],
                                open_writer=job["open_writer"], resume_hits=job["resume_hits"],
                                setup_editable=job["editable"], timeout_s=args.timeout, geometry=geometry,
-                               auto=args.auto, parse_windows=_windows_parser)
+                               auto=args.auto)
         engine.state.update(device=str(identity), recording=str(job["out"]))
         try:
             server = StationServer((args.host, args.port), engine, new_token(), plotly_js_path)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import concurrent.futures
 import contextlib
-import io
 import os
 import sys
 import time
@@ -52,25 +51,30 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def capture_unit(spec: UnitSpec, out_dir: str, hits: int) -> None:
-    """Capture one unit into ``out_dir/<name>.h5`` (renamed into place when complete); a failed
-    capture raises :class:`_CaptureFailed` with the capture's exit code and messages."""
-    from acquisition.cli_capture import main as capture
+    """Capture one unit into ``out_dir/<name>.h5`` (renamed into place when complete) with the default
+    set-up and windows and every hit that passes the checks accepted; a failed capture raises
+    :class:`_CaptureFailed` with its message."""
+    from acquisition.capture import capture_to_file
+    from acquisition.plan import TestPlan
+    from acquisition.setup import default_setup
+    from acquisition.window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
+    from analysis.errors import ImpactlabError
 
     out = Path(out_dir)
     cfg = out / "configs" / f"{spec.name}.toml"
     write_text_atomic(cfg, overrides_to_toml(spec.overrides))
     final = out / f"{spec.name}.h5"
-    err = io.StringIO()
+    setup = default_setup()
+    windows = parse_windows(DEFAULT_FORCE_WINDOW, DEFAULT_EXP_WINDOW, setup.sample_rate_hz)
     with atomic_path(final) as tmp:
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-            rc = capture(["--device", f"sim://?seed={spec.seed}&config={cfg}", "--out", f"{tmp}.h5",
-                          "--hits", str(hits), "--auto", "-q"])
-        if rc == 0:
-            os.replace(f"{tmp}.h5", tmp)
-        else:
+        try:
+            capture_to_file(f"sim://?seed={spec.seed}&config={cfg}", f"{tmp}.h5", setup,
+                            TestPlan(mode="roving_hammer", hits_per_point=hits), windows)
+        except (ImpactlabError, OSError, ValueError) as exc:
             with contextlib.suppress(OSError):
                 os.unlink(f"{tmp}.h5")
-            raise _CaptureFailed(spec.name, rc, err.getvalue())
+            raise _CaptureFailed(spec.name, 1, f"{type(exc).__name__}: {exc}") from None
+        os.replace(f"{tmp}.h5", tmp)
 
 
 class _CaptureFailed(Exception):

@@ -198,7 +198,7 @@ def test_capture_reports_each_points_excitation_band_and_warns_when_narrow(captu
     """Issue 11, item 1: the medium tip's force spectrum is 20 dB down near 1.1 kHz, well inside the
     analyser's 2.5 kHz band: the summary says so per point and warns."""
     from acquisition.averaging import average_recorded_hits
-    from acquisition.cli_capture import summary_text
+    from acquisition.terminal import summary_text
     from acquisition.session import SessionResult
     from analysis.recording import Recording
 

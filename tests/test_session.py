@@ -25,7 +25,7 @@ from acquisition.session import (
     average_recorded_hits,
     channel_table,
 )
-from acquisition.cli_capture import terminal_decider
+from acquisition.terminal import terminal_decider
 from acquisition.setup import AcquisitionSetup, ChannelSetup, TriggerSetup
 from analysis.spectra import WindowSettings
 

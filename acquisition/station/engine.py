@@ -32,6 +32,7 @@ from ..errors import ImpactlabError, SetupError
 from ..session import CaptureSession, HitSummary, OperatorQuit, SessionError, TestPlan
 from ..setup import AcquisitionSetup, validate_setup
 from .adapters import LogToPage, Timed
+from ..window_options import parse_windows
 from .publish import PagePublisher
 from .state import StationState
 from .testhit import take_test_hit
@@ -75,16 +76,15 @@ class StationEngine(PagePublisher):
     ``open_writer(setup, windows)`` returns the recording writer (a new file, or the resumed one)
     once the test starts; the engine closes it when the session ends. ``capabilities``: the
     analyser's (``acquisition.setup.Capabilities``), for validating set-up changes.
-    ``check_windows(force, exp, fs)``: turns the window texts of the set-up panel into
-    :class:`WindowSettings` (raising ValueError with the problem).
+    ``windows``: the window settings (a set-up panel may change them, as texts); they are resolved
+    once for the set-up's block layout when the test starts, and the same settings go to the
+    recording and the session.
     """
 
     def __init__(self, analyser: Any, setup: AcquisitionSetup, plan: TestPlan, *, capabilities: Any,
                  windows: WindowSettings, open_writer: Callable[[AcquisitionSetup, WindowSettings], Any],
                  resume_hits: Sequence[Any] = (), setup_editable: bool = True, timeout_s: float = 10.0,
-                 geometry: Optional[dict] = None, auto: bool = False,
-                 parse_windows: Optional[Callable[[Optional[str], Optional[str], float], WindowSettings]] = None,
-                 ) -> None:
+                 geometry: Optional[dict] = None, auto: bool = False) -> None:
         self.analyser = analyser
         self.setup = setup
         self.plan = plan
@@ -94,7 +94,6 @@ class StationEngine(PagePublisher):
         self.resume_hits = list(resume_hits)
         self.setup_editable = bool(setup_editable)
         self.timeout_s = float(timeout_s)
-        self.parse_windows = parse_windows
         self.state = StationState()
         self.session: Optional[CaptureSession] = None
         self._cond = self.state.cond
@@ -154,13 +153,15 @@ class StationEngine(PagePublisher):
                 return
             self.state.update(phase="starting")
             self._publish_setup()
-            writer = self.open_writer(self.setup, self.windows)
+            windows = self.windows.resolved(self.setup.block_size, self.setup.sample_rate_hz,
+                                            self.setup.trigger.pretrigger_samples)
+            writer = self.open_writer(self.setup, windows)
             try:
                 self._accepted = {h.index: h for h in self.resume_hits if h.accepted}
                 while True:
                     self._redo = None
                     self.session = CaptureSession(
-                        Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=self.windows,
+                        Timed(self.analyser, self), self.setup, self.plan, writer=writer, windows=windows,
                         decide=self.decide, gate=self.gate, on_hit=self.on_hit, progress=self.progress, timeout_s=self.timeout_s,
                         max_timeouts=NO_TRIGGER_LIMIT,
                         resume_hits=sorted(self._accepted.values(), key=lambda h: h.index))
@@ -294,9 +295,9 @@ class StationEngine(PagePublisher):
             windows = self.windows
             w = params.get("windows")
             if w is not None:
-                if not isinstance(w, dict) or self.parse_windows is None:
+                if not isinstance(w, dict):
                     raise SetupError("windows must be {\"force\": TEXT, \"exp\": TEXT}")
-                windows = self.parse_windows(w.get("force"), w.get("exp"), setup.sample_rate_hz)
+                windows = parse_windows(w.get("force"), w.get("exp"), setup.sample_rate_hz)
         except (SetupError, ValueError, TypeError) as exc:
             raise ActionRefused(str(exc), 422) from None
         return setup, windows

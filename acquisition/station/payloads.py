@@ -14,9 +14,11 @@ from typing import Any, Optional
 import numpy as np
 
 from analysis.frf import analyser_band_hz
+from analysis.geometry import Geometry
 from analysis.spectra import excitation_band
 
-__all__ = ["band_edges", "frf_payload", "hit_payload", "range_advice", "setup_payload", "verdict_payload"]
+__all__ = ["band_edges", "frf_payload", "geometry_payload", "hit_payload", "range_advice", "setup_payload",
+           "verdict_payload"]
 
 #: most samples of a time trace sent to the page (min/max pairs keep the peaks when decimating)
 MAX_TRACE_POINTS = 2400
@@ -178,3 +180,12 @@ def setup_payload(setup: Any, caps: Any, windows: Any, editable: bool) -> dict:
                          "block_sizes": list(caps.block_sizes), "couplings": list(caps.couplings),
                          "max_pretrigger": int(caps.max_pretrigger), "n_inputs": int(caps.n_inputs)},
     }
+
+
+def geometry_payload(geometry: "Geometry | None") -> dict:
+    """The test-plan view's wireframe: ``{"nodes": {"left:0": [x, y, z], ...}, "lines": [["left:0",
+    "left:1"], ...]}`` (m, to 10 um); empty without a geometry."""
+    if geometry is None:
+        return {"nodes": {}, "lines": []}
+    return {"nodes": {label: [round(float(v), 5) for v in xyz] for label, xyz in zip(geometry.labels, geometry.xyz)},
+            "lines": [[a, b] for a, b in geometry.lines]}

@@ -1,0 +1,54 @@
+"""The window options of the capture, station, replay and import commands as settings: the texts
+``--force-window 10ms,2ms`` and ``--exp-window 1%`` (or ``0.3s``) and their defaults."""
+from __future__ import annotations
+
+from typing import Optional
+
+from analysis.spectra import WindowSettings, parse_duration
+
+from .errors import UsageError
+
+__all__ = ["parse_windows", "DEFAULT_FORCE_WINDOW", "DEFAULT_EXP_WINDOW"]
+
+DEFAULT_FORCE_WINDOW = "20ms,5ms"
+DEFAULT_EXP_WINDOW = "none"
+
+
+def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[float],
+                  base: Optional[WindowSettings] = None) -> WindowSettings:
+    """Window settings from the ``--force-window`` and ``--exp-window`` texts (None: keep ``base``)."""
+    b = base or WindowSettings()
+    fw, ft = b.force_width_s, b.force_taper_s
+    tau, decay = b.exp_tau_s, b.exp_decay
+    try:
+        if force is not None:
+            t = force.strip().lower()
+            if t in ("none", "off", ""):
+                fw, ft = None, 0.0
+            else:
+                parts = [x for x in t.split(",")]
+                if len(parts) > 2:
+                    raise UsageError(f"--force-window {force!r}: give WIDTH or WIDTH,TAPER (e.g. 10ms,2ms)")
+                fw = parse_duration(parts[0], fs_hz)
+                ft = parse_duration(parts[1], fs_hz) if len(parts) == 2 else 0.0
+                if fw <= 0:
+                    raise UsageError(f"--force-window {force!r}: the width must be positive")
+        if exp is not None:
+            t = exp.strip().lower()
+            if t in ("none", "off", ""):
+                tau, decay = None, None
+            elif t.endswith("%"):
+                decay = float(t[:-1]) / 100.0
+                tau = None
+                if not 0 < decay < 1:
+                    raise UsageError(f"--exp-window {exp!r}: the end value must lie between 0 and 100 %")
+            else:
+                tau = parse_duration(t[4:] if t.startswith("tau=") else t, fs_hz)
+                decay = None
+                if tau <= 0:
+                    raise UsageError(f"--exp-window {exp!r}: tau must be positive")
+        return WindowSettings(fw, ft, tau, decay, b.exp_on_force)
+    except UsageError:
+        raise
+    except ValueError as exc:
+        raise UsageError(f"bad window option: {exc}") from None
