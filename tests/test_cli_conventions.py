@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from acquisition.discovery import list_doors, list_usb
-from analysis.cli_impactlab import COMMANDS, main
+from impactlab import COMMANDS, main
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent

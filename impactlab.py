@@ -2,8 +2,8 @@
 
 Every subcommand of the three packages under one name (a console-script entry point in
 ``pyproject.toml``), e.g. ``impactlab capture --device sim:// --out rec.h5 --auto``,
-``impactlab fit rec.h5``, ``impactlab modes``, ``impactlab devices``. A wiring module: it only reads
-the three packages' command tables.
+``impactlab fit rec.h5``, ``impactlab modes``, ``impactlab devices``; ``python -m impactlab`` runs it
+too. A wiring module above the three packages' faces: it only reads their command tables.
 """
 from __future__ import annotations
 
