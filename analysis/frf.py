@@ -26,11 +26,23 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "convert_quantity", "analyser_band_hz"]
+__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "convert_quantity", "analyser_band_hz", "window_pole_shift"]
 
 QUANTITIES = ("receptance", "mobility", "accelerance")
 #: the power p of (j omega) that turns a receptance (m/N) into each quantity: H_q = (j omega)^p H_receptance
 QUANTITY_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+
+
+def window_pole_shift(exp_window_tau_s: Optional[float]) -> float:
+    """The decay rate (1/s) an exponential window ``exp(-t / tau)`` adds to every pole: ``1 / tau``;
+    0 without a window (None or 0). The one place windowed and structural poles are related (the
+    fitter removes it, the diagnosis adds it to a simulation)."""
+    if not exp_window_tau_s:
+        return 0.0
+    tau = float(exp_window_tau_s)
+    if not (np.isfinite(tau) and tau > 0):
+        raise ValueError(f"exp_window_tau_s must be a positive time in seconds; got {exp_window_tau_s!r}")
+    return 1.0 / tau
 
 
 def analyser_band_hz(sample_rate_hz: float) -> float:

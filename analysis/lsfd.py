@@ -35,7 +35,7 @@ import numpy as np
 from ._gn import run_gn
 from ._lm import run_lm
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, poles_to_theta, theta_to_poles
-from .frf import FRFSet
+from .frf import FRFSet, window_pole_shift
 from .modal import RESIDUAL_FORMS, ModalModel, damped_freq_hz, damping_ratio, natural_freq_hz
 from .uncertainty import covariance_from_normal, fz_std
 
@@ -110,10 +110,7 @@ def seen_through_window(model: ModalModel, exp_window_tau_s: Optional[float]) ->
     ``None`` or 0 for ``exp_window_tau_s`` returns the model unchanged."""
     if not exp_window_tau_s:
         return model
-    tau = float(exp_window_tau_s)
-    if not (np.isfinite(tau) and tau > 0):
-        raise ValueError(f"exp_window_tau_s must be a positive time in seconds; got {exp_window_tau_s!r}")
-    return replace(model, poles=np.asarray(model.poles, dtype=complex) - 1.0 / tau)
+    return replace(model, poles=np.asarray(model.poles, dtype=complex) - window_pole_shift(exp_window_tau_s))
 
 
 def rank_one_split(residues: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -331,9 +328,7 @@ def _result(frf: FRFSet, prob: ProjectedProblem, oc: NLSOutcome, method: str, re
     m = lam0.size
     ev = oc.evaluation
     poles_raw = theta_to_poles(oc.theta)
-    shift = 0.0
-    if correct_exp_window and frf.exp_window_tau_s:
-        shift = 1.0 / float(frf.exp_window_tau_s)
+    shift = window_pole_shift(frf.exp_window_tau_s) if correct_exp_window else 0.0
     poles = poles_raw + shift
     n_frf = n_out * n_ref
     n_par = 2 * m + n_frf * prob.n_linear(m)

@@ -185,12 +185,12 @@ def force_window(n: int, fs_hz: float, trigger_index: int, width_s: float, taper
     return w
 
 
-def exponential_window(n: int, fs_hz: float, trigger_index: int, tau_s: float) -> np.ndarray:
-    """``exp(-(t - t0)/tau)`` from the trigger on, 1 before it."""
-    if not tau_s > 0:
-        raise ValueError(f"exponential window tau {tau_s} s must be positive")
+def exponential_window(n: int, fs_hz: float, trigger_index: int, exp_window_tau_s: float) -> np.ndarray:
+    """``exp(-(t - t0)/tau)`` from the trigger on, 1 before it (``exp_window_tau_s``: tau, s)."""
+    if not exp_window_tau_s > 0:
+        raise ValueError(f"exponential window tau {exp_window_tau_s} s must be positive")
     k = np.arange(int(n)) - int(trigger_index)
-    return np.exp(-np.maximum(k, 0) / (tau_s * fs_hz))
+    return np.exp(-np.maximum(k, 0) / (exp_window_tau_s * fs_hz))
 
 
 @dataclass(frozen=True)
@@ -198,14 +198,14 @@ class HitSpectra:
     """One hit's one-sided spectra (see module doc for the scaling).
 
     Gff : (n_freq,) N^2/Hz; Gxx : (n_resp, n_freq); Gfx : (n_resp, n_freq) complex.
-    tau_s : exponential window time constant used (None when none).
+    exp_window_tau_s : exponential window time constant used (s; None when none).
     """
 
     freq_hz: np.ndarray
     Gff: np.ndarray
     Gxx: np.ndarray
     Gfx: np.ndarray
-    tau_s: Optional[float]
+    exp_window_tau_s: Optional[float]
 
 
 @dataclass(frozen=True)
@@ -307,9 +307,9 @@ class FRFAccumulator:
             first = self._hits[0]
             if hit.freq_hz.shape != first.freq_hz.shape or not np.array_equal(hit.freq_hz, first.freq_hz):
                 raise ValueError("hit spectra have a different frequency axis (block length or sample rate changed)")
-            if hit.tau_s != first.tau_s:
+            if hit.exp_window_tau_s != first.exp_window_tau_s:
                 raise ValueError(
-                    f"hit used exponential tau {hit.tau_s} s but earlier hits used {first.tau_s} s; "
+                    f"hit used exponential tau {hit.exp_window_tau_s} s but earlier hits used {first.exp_window_tau_s} s; "
                     "use one window per average (a fixed tau rather than a decay fraction with varying triggers)"
                 )
         self._hits.append(hit)
@@ -341,8 +341,9 @@ class FRFAccumulator:
         return self._hits[0].freq_hz
 
     @property
-    def tau_s(self) -> Optional[float]:
-        return self._hits[0].tau_s if self._hits else None
+    def exp_window_tau_s(self) -> Optional[float]:
+        """The exponential window's time constant (s) of the averaged hits (None: none)."""
+        return self._hits[0].exp_window_tau_s if self._hits else None
 
     def spectra(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Averaged (Gff, Gxx, Gfx) (sums divided by the number of hits)."""
@@ -398,7 +399,7 @@ class FRFAccumulator:
             references=(self.reference,),
             unit=self.unit,
             coherence=self.coherence()[:, None, :],
-            exp_window_tau_s=self.tau_s,
+            exp_window_tau_s=self.exp_window_tau_s,
             meta=m,
             sample_rate_hz=sample_rate_hz,
             record_s=record_s,

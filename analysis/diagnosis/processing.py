@@ -8,7 +8,7 @@ from typing import Mapping, Optional
 
 import numpy as np
 
-from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
+from ..frf import QUANTITY_POWER, FRFSet, convert_quantity, window_pole_shift
 from ..modal import ModalModel, synthesize, transfer
 from .effect_types import EffectError
 
@@ -32,7 +32,7 @@ def apply_exponential_window(model: ModalModel, params: Mapping) -> ModalModel:
     if not (tau > 0 and np.isfinite(tau)):
         raise EffectError(f"exponential_window: tau_s must be a finite number > 0 (s), got {tau!r}")
     meta = dict(model.meta)
-    meta[WINDOW_DECAY_KEY] = float(meta.get(WINDOW_DECAY_KEY, 0.0)) + 1.0 / tau
+    meta[WINDOW_DECAY_KEY] = float(meta.get(WINDOW_DECAY_KEY, 0.0)) + window_pole_shift(tau)
     return replace(model, meta=meta)
 
 

@@ -10,6 +10,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..modal import ModalModel
+from ..frf import window_pole_shift
 from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_decay
 from .compare import line_folds
 from .effects import synthesize_windowed
@@ -38,8 +39,7 @@ def windowed_accelerance(base: ModalModel, freq_hz: np.ndarray, tau_s: Optional[
                          "(e.g. simulator FrameModel.modal_model(..., 'receptance'))")
     model = replace(base, poles=np.asarray(base.poles) * factor, residues=np.asarray(base.residues) / factor,
                     meta={})
-    decay = 0.0 if tau_s is None else 1.0 / tau_s
-    return synthesize_windowed(model, freq_hz, "accelerance", decay).H
+    return synthesize_windowed(model, freq_hz, "accelerance", window_pole_shift(tau_s)).H
 
 
 @dataclass(frozen=True)
