@@ -19,7 +19,7 @@ import numpy as np
 
 from analysis.errors import UsageError
 
-__all__ = ["Hit", "scale_counts", "stack_hits"]
+__all__ = ["Hit", "scale_counts", "stack_hits", "group_hits"]
 
 
 def scale_counts(counts: np.ndarray, eu_per_count: np.ndarray) -> np.ndarray:
@@ -174,3 +174,12 @@ def stack_hits(hits: Iterable[Hit]) -> "tuple[np.ndarray, np.ndarray, float]":
         raise UsageError(f"hits differ in sample rate {sorted(rates)} Hz or shape {sorted(shapes)}; stack each "
                          "group on its own")
     return (np.array([h.force for h in hs]), np.array([h.responses for h in hs]), hs[0].sample_rate_hz)
+
+
+def group_hits(hits: Iterable[Hit]) -> "dict[tuple[str, float, int], list[Hit]]":
+    """Hits grouped by what lets them be stacked and compared: ``(reference, sample_rate_hz,
+    n_samples)``, in order of first appearance, each group in the order given."""
+    groups: dict[tuple[str, float, int], list[Hit]] = {}
+    for h in hits:
+        groups.setdefault((h.reference, h.sample_rate_hz, h.n_samples), []).append(h)
+    return groups
