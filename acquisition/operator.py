@@ -33,18 +33,27 @@ class HitSummary:
     check: HitCheck
     coherence_so_far: Optional[float] = None
 
-    #: the hit's data (``[n_channels, n]`` in EU) and its sample rate (from the acquisition set-up)
-    data: Any = field(default=None, repr=False)
-    sample_rate_hz: float = 0.0
-    trigger_index: int = 0
     #: the point's running average (``acquisition.averaging.MeasurementAverage``; this hit included while deciding)
     average: Any = field(default=None, repr=False)
     #: filled in when the hit is decided: True accepted, False rejected; why; its index in the recording
     decision: Optional[bool] = None
     reasons: list = field(default_factory=list)
     hit_index: int = -1
-    #: the hit itself (``analysis.hit.Hit``, before its verdict; None for a test hit outside a session)
+    #: the hit itself (``analysis.hit.Hit`` before its verdict): its data, sample rate and trigger
     hit: Any = field(default=None, repr=False)
+
+    @property
+    def data(self) -> Any:
+        """The hit's channels in engineering units, ``[n_channels, n]`` (None without a hit)."""
+        return None if self.hit is None else self.hit.data
+
+    @property
+    def sample_rate_hz(self) -> float:
+        return 0.0 if self.hit is None else float(self.hit.sample_rate_hz)
+
+    @property
+    def trigger_index(self) -> int:
+        return 0 if self.hit is None else int(self.hit.trigger_index)
 
     def text(self) -> str:
         c = self.check

@@ -285,7 +285,6 @@ class CaptureSession:
                               list(hit.channel_names), self.check_settings)
             summary = HitSummary(m.index, len(self.measurements), m.point, attempts, avg.n_averages,
                                  self.plan.hits_per_point, sum(1 for r in result.rejected if r[0] == m.index), check,
-                                 data=data, sample_rate_hz=hit.sample_rate_hz, trigger_index=hit.trigger_index,
                                  average=avg, hit=hit)
             accepted = False
             reasons = list(check.verdict.reasons)

@@ -8,13 +8,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
-from analysis.recording import scale_counts
-
 from ..errors import SetupError, TriggerTimeout
 from ..hitcheck import HitCheckSettings, check_hit
-from ..session import LINK_FAULTS, HitSummary, eu_per_count_for, force_channel_of
+from ..session import LINK_FAULTS, HitSummary, force_channel_of, hit_from_block
 
 __all__ = ["take_test_hit"]
 
@@ -40,12 +36,9 @@ def take_test_hit(analyser: Any, setup: Any, plan: Any, timeout_s: float) -> Hit
         return f"test hit: the analyser refuses the set-up: {exc}"
     except LINK_FAULTS as exc:
         return f"test hit: link fault ({type(exc).__name__}: {exc}); try again"
-    counts = np.asarray(block.counts)
-    data = scale_counts(counts, eu_per_count_for(m.setup, block.volts_per_count))
-    fs = float(block.sample_rate_hz)
-    names = [f"{ch.name} {ch.point}" for ch in m.setup.channels]
-    overload = [bool(o) for o in np.asarray(block.overload).ravel()]
-    check = check_hit(data[force_channel_of(m.setup)], fs, overload, names, HitCheckSettings())
+    fch = force_channel_of(m.setup)
+    hit = hit_from_block(block, m, fch, [i for i in range(len(m.setup.channels)) if i != fch])
+    check = check_hit(hit.force, hit.sample_rate_hz, [bool(o) for o in hit.overload], list(hit.channel_names),
+                      HitCheckSettings())
     return HitSummary(m.index, len(plan.measurements(setup)), m.point, 0, 0, plan.hits_per_point, 0, check,
-                      data=data, sample_rate_hz=fs, trigger_index=int(block.trigger_index), decision=False,
-                      reasons=["test hit: not recorded"])
+                      hit=hit, decision=False, reasons=["test hit: not recorded"])
