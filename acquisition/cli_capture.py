@@ -27,12 +27,12 @@ from typing import Any, Optional, Sequence, TextIO
 from analysis.command_line import add_overwrite, cli_entry, exit_on, with_examples
 
 from .capture import capture_to_file, open_analyser
+from .capture_options import continue_stream, plan_from_options, recorded_plan, recorded_test, with_seed
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
 from .terminal import summary_text, terminal_decider
 from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
 
-__all__ = ["main", "build_parser", "run_capture", "run_resume", "recorded_test", "check_points_on_device",
-           "EXIT_INCOMPLETE"]
+__all__ = ["main", "build_parser", "run_capture", "run_resume", "EXIT_INCOMPLETE"]
 
 log = logging.getLogger(__name__)
 
@@ -66,94 +66,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _with_seed(url: str, seed: Optional[int]) -> str:
-    if seed is None:
-        return url
-    if not url.startswith(("sim://", "usbsim://")):
-        raise UsageError(f"--seed applies to simulated devices (sim://, usbsim://), not {url!r}")
-    if "seed=" in url:
-        raise UsageError(f"the URL {url!r} already has a seed; drop --seed or the URL's seed")
-    return url + ("&" if "?" in url else "?") + f"seed={seed}"
-
-
-def _continue_stream(url: str, n_recorded: int) -> str:
-    """A simulated device resumed after ``n_recorded`` hits continues its random stream instead of
-    playing the same strikes again: its seed moves on by the number of hits already recorded."""
-    if not url.startswith(("sim://", "usbsim://")) or n_recorded <= 0 or "replay=" in url:
-        return url
-    import re
-
-    m = re.search(r"([?&])seed=(-?\d+)", url)
-    if m is None:
-        return url + ("&" if "?" in url else "?") + f"seed={n_recorded}"
-    return url[:m.start()] + f"{m.group(1)}seed={int(m.group(2)) + n_recorded}" + url[m.end():]
-
-
-def check_points_on_device(parsed_url: Any, measurements: Sequence[Any]) -> None:
-    """Before anything is opened or written: every point of the plan must lie on the structure a
-    simulated device holds (the simulated frame of its ``config``); :class:`UsageError` names the
-    point and the frame's nodes. Real devices measure whatever they are attached to."""
-    from analysis.geometry import GeometryError
-
-    from .urls import SimURL, UsbSimURL
-
-    if not isinstance(parsed_url, (SimURL, UsbSimURL)) or parsed_url.options.get("replay"):
-        return
-    from simulator.config import FrameConfig  # a face wires the simulator in
-    from simulator.geometry import frame_geometry
-
-    try:
-        geometry = frame_geometry(FrameConfig.load(parsed_url.options.get("config")))
-        geometry.check_points(ch.point for m in measurements for ch in m.setup.channels)
-    except GeometryError as exc:
-        raise UsageError(f"{exc}: choose points on the frame (e.g. top:4:Z)") from None
-
-
-def _plan(args: argparse.Namespace, replay_plan: Optional[dict]):
-    from .session import TestPlan
-
-    points: tuple = ()
-    if args.points:
-        points = tuple(p.strip() for p in args.points.split(",") if p.strip())
-    mode = args.mode.replace("-", "_") if args.mode else ("roving_accelerometer" if args.reference else "roving_hammer")
-    hits = args.hits if args.hits is not None else 5
-    reference = args.reference
-    if replay_plan and not args.points and not args.mode and not args.reference:
-        mode = replay_plan.get("mode", mode)
-        points = tuple(replay_plan.get("points", ()))
-        if args.hits is None:
-            hits = int(replay_plan.get("hits_per_point", hits))
-        if mode == "roving_accelerometer":
-            reference = replay_plan.get("reference")
-    if hits < 1:
-        raise UsageError(f"--hits {hits}: need at least one hit per point")
-    try:
-        return TestPlan(mode=mode, points=points, hits_per_point=hits, reference=reference)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-
-
-def _recorded_plan(rec: Any) -> dict:
-    """The plan of a recording to replay: as stored, completed from its accepted hits."""
-    plan = dict(rec.plan)
-    hits = list(rec.hits(accepted_only=True, skip_damaged=True))
-    order: list = []
-    for h in hits:
-        if h.measurement not in [m for m, _, _ in order]:
-            order.append((h.measurement, h.point, h.reference))
-    if plan.get("mode") not in ("roving_hammer", "roving_accelerometer"):
-        refs = {r for _, _, r in order}
-        plan["mode"] = "roving_hammer" if len(refs) > 1 or len(order) == 1 else "roving_accelerometer"
-        plan.pop("reference", None)
-        if plan["mode"] == "roving_accelerometer":
-            plan["reference"] = order[0][2]
-    if not plan.get("points"):
-        plan["points"] = [p for _, p, _ in order]
-    if "hits_per_point" not in plan and order:
-        plan["hits_per_point"] = min(sum(1 for h in hits if h.measurement == m) for m, _, _ in order)
-    return plan
-
-
 def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -> tuple[int, Any]:
     """The capture job behind :func:`main`. Returns (exit code, SessionResult or None).
 
@@ -164,13 +76,16 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
 
     from .session import SessionError, auto_accept
     from .setup import AcquisitionSetup, default_setup, load_setup
+    from analysis.geometry import GeometryError
+    from simulator.geometry import check_device_points  # a face wires the simulator in
+
     from .urls import SimURL, parse_device_url
 
     if args.resume:
         return run_resume(args, out_stream)
     if not args.device or not args.out:
         raise UsageError("give --device URL and --out REC.h5 (or --resume REC.h5 to continue a capture)")
-    url = _with_seed(args.device, args.seed)
+    url = with_seed(args.device, args.seed)
     out = Path(args.out)
     if out.exists() and not args.overwrite:
         raise UsageError(f"{out} exists: choose another --out file or add --overwrite")
@@ -185,13 +100,16 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
                 setup = AcquisitionSetup.from_dict(rec.setup)
             except SetupError as exc:
                 raise UsageError(f"{replay_path} holds no analyser set-up to replay ({exc}); give --setup") from None
-            replay_plan = _recorded_plan(rec)
+            replay_plan = recorded_plan(rec)
     else:
         setup = default_setup()
-    plan = _plan(args, replay_plan)
+    plan = plan_from_options(args, replay_plan)
     windows = parse_windows(args.force_window, args.exp_window, setup.sample_rate_hz)
     measurements = plan.measurements(setup)  # checks the set-up has a force channel and responses
-    check_points_on_device(parsed, measurements)
+    try:
+        check_device_points(url, (ch.point for m in measurements for ch in m.setup.channels))
+    except GeometryError as exc:  # bad input: a point the simulated frame does not have
+        raise UsageError(str(exc)) from None
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
     try:
         result = capture_to_file(url, out, setup, plan, windows, decide=auto_accept if args.auto else terminal_decider(),
@@ -200,33 +118,6 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
         print(f"capture: {exc}", file=sys.stderr)
         return 1, None
     return _finish(result, f"recording written: {out}", out_stream, quiet=args.quiet)
-
-
-def recorded_test(args: argparse.Namespace) -> tuple:
-    """What ``--resume REC.h5`` continues: (set-up, plan, windows, recorded hits, device URL or None),
-    after checking that no option tries to change the recorded plan (capture and station alike)."""
-    from analysis.recording import Recording
-
-    from .session import TestPlan
-    from .setup import AcquisitionSetup
-
-    if args.out or args.points or args.reference or args.mode or args.setup or args.hits is not None:
-        raise UsageError("--resume continues the recorded test as it was planned: drop --out, --points, --reference, "
-                         "--mode, --hits and --setup")
-    path = Path(args.resume)
-    with Recording(path) as rec:
-        try:
-            setup = AcquisitionSetup.from_dict(rec.setup)
-            planned = dict(rec.plan)
-            device = planned.pop("device", None)
-            fields: dict[str, Any] = {k: (tuple(v) if k == "points" else v) for k, v in planned.items()
-                                      if k in ("mode", "points", "hits_per_point", "reference")}
-            plan = TestPlan(**fields)
-        except (SetupError, TypeError, ValueError) as exc:
-            raise UsageError(f"{path} does not hold a capture plan and set-up to resume ({exc})") from None
-        windows = rec.windows
-        hits = list(rec.hits(skip_damaged=True))
-    return setup, plan, windows, hits, device
 
 
 def run_resume(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -> tuple[int, Any]:
@@ -243,8 +134,8 @@ def run_resume(args: argparse.Namespace, out_stream: Optional[TextIO] = None) ->
     url = args.device or device
     if not url:
         raise UsageError(f"{path} does not name its device: give --device URL")
-    url = _with_seed(url, args.seed) if args.seed is not None else url
-    url = _continue_stream(url, len(hits))
+    url = with_seed(url, args.seed) if args.seed is not None else url
+    url = continue_stream(url, len(hits))
     analyser = open_analyser(url)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=out_stream, flush=True))
     with analyser:

@@ -25,7 +25,7 @@ from typing import Any, Optional, TextIO
 from analysis.command_line import with_examples
 
 from .capture import open_analyser
-from .cli_capture import _plan, _with_seed, check_points_on_device, recorded_test
+from .capture_options import plan_from_options, recorded_test, with_seed
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
 from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
 
@@ -59,22 +59,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _geometry(url: str) -> dict:
-    """The test-plan view's wireframe: the simulated frame's (``simulator.geometry``) for a simulated
-    device, none for real hardware."""
-    from .station.payloads import geometry_payload
-    from .urls import SimURL, UsbSimURL, parse_device_url
+    """The test-plan view's wireframe: the simulated frame's for a simulated device, none otherwise."""
+    from simulator.geometry import device_geometry  # a face wires the simulator in
 
-    parsed = parse_device_url(url)
-    if not isinstance(parsed, (SimURL, UsbSimURL)):
-        return geometry_payload(None)
-    from simulator.config import FrameConfig  # a face wires the simulator in
-    from simulator.geometry import frame_geometry
+    from .station.payloads import geometry_payload
 
     try:
-        return geometry_payload(frame_geometry(FrameConfig.load(parsed.options.get("config"))))
+        return geometry_payload(device_geometry(url))
     except (ImpactlabError, OSError, ValueError) as exc:
         log.warning("no frame geometry for the test-plan view: %s", exc)
-        return {"nodes": {}, "lines": []}
+        return geometry_payload(None)
 
 
 def _prepare(args: argparse.Namespace) -> dict:
@@ -83,7 +77,6 @@ def _prepare(args: argparse.Namespace) -> dict:
 
     from .session import channel_table
     from .setup import default_setup, load_setup
-    from .urls import parse_device_url
 
     if args.resume:
         path = Path(args.resume)
@@ -97,18 +90,25 @@ def _prepare(args: argparse.Namespace) -> dict:
             w.log("INFO", f"station resumed on {url} with {sum(1 for h in hits if h.accepted)} accepted hits recorded")
             return w
 
-        return dict(url=_with_seed(url, args.seed), setup=setup, plan=plan, windows=windows, resume_hits=hits,
+        return dict(url=with_seed(url, args.seed), setup=setup, plan=plan, windows=windows, resume_hits=hits,
                     open_writer=reopen, editable=False, out=path)
     if not args.device or not args.out:
         raise UsageError("give --device URL and --out REC.h5 (or --resume REC.h5 to continue a recording)")
-    url = _with_seed(args.device, args.seed)
+    url = with_seed(args.device, args.seed)
     out = Path(args.out)
     if out.exists() and not args.overwrite:
         raise UsageError(f"{out} exists: choose another --out file or add --overwrite")
     setup = load_setup(args.setup) if args.setup else default_setup()
-    plan = _plan(args, None)
+    plan = plan_from_options(args)
     windows = parse_windows(args.force_window, args.exp_window, setup.sample_rate_hz)
-    check_points_on_device(parse_device_url(url), plan.measurements(setup))  # a force channel, responses, on the frame
+    from analysis.geometry import GeometryError
+    from simulator.geometry import check_device_points  # a face wires the simulator in
+
+    measurements = plan.measurements(setup)  # a force channel and responses
+    try:
+        check_device_points(url, (ch.point for m in measurements for ch in m.setup.channels))
+    except GeometryError as exc:  # bad input: a point the simulated frame does not have
+        raise UsageError(str(exc)) from None
 
     def open_writer(setup: Any, win: Any) -> Any:
         return RecordingWriter(out, instrument=identity_box["instrument"], setup=setup.to_dict(),

@@ -101,7 +101,7 @@ class Geometry:
         if missing:
             where = f" {self.name}" if self.name else " geometry"
             raise GeometryError(f"point {missing[0]}: node {node_label(missing[0])} is not on the{where}; its "
-                                f"nodes are {self.describe_nodes()}")
+                                f"nodes are {self.describe_nodes()}: choose points among them")
 
     def to_dict(self) -> dict:
         """JSON-ready: labels, xyz (m, rounded to 0.1 mm), lines as index pairs, name, supports as indices."""

@@ -7,7 +7,7 @@ lines join consecutive nodes of a component and the node pairs of ``[joints]``; 
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Iterable, Optional
 
 import numpy as np
 
@@ -15,7 +15,7 @@ from analysis.geometry import Geometry
 
 from .config import FrameConfig
 
-__all__ = ["frame_geometry"]
+__all__ = ["frame_geometry", "device_geometry", "check_device_points"]
 
 
 def frame_geometry(config: Optional[FrameConfig] = None) -> Geometry:
@@ -36,3 +36,22 @@ def frame_geometry(config: Optional[FrameConfig] = None) -> Geometry:
         lines.append((str(a), str(b)))
     return Geometry(tuple(labels), np.asarray(xyz), tuple(lines), name=f"simulated frame ({cfg.source})",
                     supports=tuple(str(n) for n in cfg.supports.nodes))
+
+
+def device_geometry(url: str) -> Optional[Geometry]:
+    """The frame a simulated device URL (``sim://``, ``usbsim://``, with its ``config=``) holds; None for
+    any other device and for a recording played back (``replay=``), which holds no frame of its own."""
+    from acquisition.urls import SimURL, UsbSimURL, parse_device_url
+
+    parsed = parse_device_url(url)
+    if not isinstance(parsed, (SimURL, UsbSimURL)) or parsed.options.get("replay"):
+        return None
+    return frame_geometry(FrameConfig.load(parsed.options.get("config")))
+
+
+def check_device_points(url: str, points: Iterable[str]) -> None:
+    """Raise :class:`analysis.geometry.GeometryError` naming the first of ``points`` that is not on the
+    frame of the simulated device ``url`` and the frame's nodes (nothing to check for other devices)."""
+    geometry = device_geometry(url)
+    if geometry is not None:
+        geometry.check_points(points)

@@ -284,6 +284,11 @@ def test_a_point_off_the_simulated_frame_is_refused_before_anything_is_written(t
     assert "point top:40:Z: node top:40 is not on the simulated frame" in err
     assert "top:0..8" in err and "left:0..10" in err and "Traceback" not in err
     assert not rec.exists()
+    from acquisition.cli_station import main as station_main
+
+    assert station_main(["--device", "sim://?seed=1", "--out", str(rec), "--points", "top:40:Z"]) == 2
+    assert "node top:40 is not on the simulated frame" in capsys.readouterr().err
+    assert not rec.exists()
 
 
 def test_a_capture_that_fails_before_its_first_hit_leaves_no_empty_recording(tmp_path, capsys, monkeypatch):
