@@ -12,18 +12,16 @@ exclusions the FRFs equal the original ones bit for bit.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Optional, Sequence
 
 from analysis.command_line import with_examples
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
-from analysis.spectra import WindowSettings
 
-from .errors import UsageError
+from .errors import RecordingError, UsageError
+from .replay import replay
 from .window_options import parse_windows
-from .errors import RecordingError
 
-__all__ = ["main", "replay", "parse_hit_list"]
+__all__ = ["main", "parse_hit_list"]
 
 
 def parse_hit_list(text: Optional[str]) -> set[int]:
@@ -61,41 +59,6 @@ def _split_window(text: str) -> tuple[Optional[str], Optional[str]]:
         else:
             raise UsageError(f"--window {text!r}: use force=WIDTH[,TAPER] and/or exp=TAU|PCT%, joined by ';'")
     return force, exp
-
-
-def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSettings] = None,
-           exclude: "Sequence[int] | set[int]" = (), estimator: str = "H1", overwrite: bool = False) -> list:
-    """Recompute the FRFs of ``src`` into a new recording ``out``; returns the new averages."""
-    from analysis.recording import Recording
-    from analysis.recording_writer import RecordingWriter
-
-    from .session import average_recorded_hits
-
-    src, out = Path(src), Path(out)
-    if src.resolve() == out.resolve():
-        raise UsageError("--out must differ from the input: replay never modifies the original")
-    with Recording(src) as rec:
-        win = windows or rec.windows
-        all_hits = list(rec.hits())
-        unknown = set(exclude) - {h.index for h in all_hits}
-        if unknown:
-            raise UsageError(f"--exclude-hits names hit(s) {sorted(unknown)} that {src} does not hold "
-                             f"(it has 0..{len(all_hits) - 1})")
-        keep = [h for h in all_hits if h.accepted and h.index not in set(exclude)]
-        averages = average_recorded_hits(keep, win, rec.channels, record_s=rec.record_s,
-                                         pretrigger_s=rec.pretrigger_s)
-        with RecordingWriter(out, instrument=rec.instrument, setup=rec.setup, channels=rec.channels,
-                             windows=averages[0].windows, plan=rec.plan, overwrite=overwrite) as w:
-            for t, level, msg in rec.events():
-                w.log(level, f"[original {t:.3f}] {msg}")
-            for h in all_hits:
-                w.write_hit(h)
-            w.log("INFO", f"replayed from {src} with windows {averages[0].windows.describe()}; excluded hits "
-                          f"{sorted(exclude) or 'none'}; preferred estimator {estimator}")
-            for a in averages:
-                a.write(w)
-            w.set_attr("preferred_estimator", estimator.upper())
-    return averages
 
 
 @cli_entry
