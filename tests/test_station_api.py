@@ -19,6 +19,20 @@ def station(tmp_path_factory):
         s.stop()
 
 
+def accept_until_complete(api: Api) -> None:
+    """Arm (again after a rejected hit) and accept until the point is complete."""
+    while True:
+        st = api.state()
+        if st["phase"] == "complete":
+            return
+        if st["phase"] == "decide":
+            assert api.act("accept")[0] == 200
+            api.wait(lambda x: x["phase"] in ("ready", "complete"), "the accept")
+        else:
+            assert api.act("arm")[0] == 200
+            api.wait(lambda x, q=st["hit_seq"]: x["hit_seq"] > q and x["phase"] in ("decide", "ready"), "a hit")
+
+
 def _key(st: dict) -> tuple:
     return (st["phase"], st.get("point_hits"), st["hit_seq"], st.get("total_accepted"), st.get("current"))
 
@@ -245,19 +259,7 @@ def test_an_earlier_point_is_measured_again_during_and_after_the_test(tmp_path):
 
     rec = tmp_path / "rec.h5"
     s = StationProcess(["--device", "sim://?seed=8", "--out", str(rec), "--points", POINTS, "--hits", "1"], tmp_path)
-
-    def one_hit(api: Api) -> None:
-        """Arm (again after a rejected hit) and accept until the point is complete."""
-        while True:
-            st = api.state()
-            if st["phase"] == "complete":
-                return
-            if st["phase"] == "decide":
-                assert api.act("accept")[0] == 200
-                api.wait(lambda x: x["phase"] in ("ready", "complete"), "the accept")
-            else:
-                assert api.act("arm")[0] == 200
-                api.wait(lambda x, q=st["hit_seq"]: x["hit_seq"] > q and x["phase"] in ("decide", "ready"), "a hit")
+    one_hit = accept_until_complete
 
     try:
         api = Api(s)
@@ -317,16 +319,6 @@ def test_finish_on_a_complete_plan_is_not_an_early_end(tmp_path):
     "ended early"; Finish before the plan is complete says it ended early."""
     from analysis.recording import Recording
 
-    def accept_one(api: Api) -> None:
-        while api.state()["phase"] != "complete":
-            st = api.state()
-            if st["phase"] == "decide":
-                assert api.act("accept")[0] == 200
-                api.wait(lambda x: x["phase"] in ("ready", "complete"), "the accept")
-            else:
-                assert api.act("arm")[0] == 200
-                api.wait(lambda x, q=st["hit_seq"]: x["hit_seq"] > q and x["phase"] in ("decide", "ready"), "a hit")
-
     for points, complete in (("right:6:-X", True), ("right:6:-X,top:4:Z", False)):
         rec = tmp_path / f"rec{int(complete)}.h5"
         s = StationProcess(["--device", "sim://?seed=8", "--out", str(rec), "--points", points, "--hits", "1"],
@@ -334,7 +326,7 @@ def test_finish_on_a_complete_plan_is_not_an_early_end(tmp_path):
         try:
             api = Api(s)
             assert api.lease() == 200
-            accept_one(api)
+            accept_until_complete(api)
             assert api.act("finish")[0] == 200
             st = api.wait(lambda x: x["phase"] == "finished", "the end")
         finally:
