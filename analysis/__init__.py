@@ -29,6 +29,7 @@ _EXPORTS = {
     "lscf_poles": ".lscf",
     "lsce_poles": ".lsce",
     "WindowSettings": ".spectra",
+    "Hit": ".hit",
     "Recording": ".recording",
     "RecordingWriter": ".recording_writer",
     "load_input": ".inputs",
@@ -54,6 +55,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazi
     from .lscf import lscf_poles  # noqa: F401
     from .lsce import lsce_poles  # noqa: F401
     from .spectra import WindowSettings  # noqa: F401
+    from .hit import Hit  # noqa: F401
     from .recording import Recording  # noqa: F401
     from .recording_writer import RecordingWriter  # noqa: F401
     from .inputs import load_input  # noqa: F401
