@@ -19,8 +19,7 @@ __all__ = [
     "CommandFailed",
     "SetupError",
     "RecordingError",
-    "UsageError",
-]
+    "UsageError", "ImportDataError"]
 
 
 class InvalidDeviceURL(ImpactlabError, ValueError):
@@ -64,3 +63,7 @@ class CommandFailed(ImpactlabError, OSError):
         self.sense_key = sense_key
         self.asc = asc
         self.ascq = ascq
+
+
+class ImportDataError(ImpactlabError, ValueError):
+    """Input data that cannot be imported; the message names the problem and the fix."""

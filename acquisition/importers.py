@@ -44,11 +44,11 @@ import numpy as np
 from analysis.points import parse_point, PointLabelError
 from analysis.spectra import WindowSettings
 
-from .errors import ImpactlabError
 from .textdoc import read_document
 from .hitcheck import HitCheckSettings, check_hit
 from analysis.hit import Hit
 from analysis.recording_writer import RecordingWriter
+from .errors import ImportDataError
 
 __all__ = [
     "ImportDataError",
@@ -73,10 +73,6 @@ _UNIT_QUANTITY = {
     "m/s/s": ("acceleration", "m/s^2"), "m/s": ("velocity", "m/s"), "m": ("displacement", "m"),
     "v": ("voltage", "V"), "volt": ("voltage", "V"), "volts": ("voltage", "V"),
 }
-
-
-class ImportDataError(ImpactlabError, ValueError):
-    """Input data that cannot be imported; the message names the problem and the fix."""
 
 
 @dataclass

@@ -5,20 +5,10 @@ calling program. Used by :mod:`acquisition.importers` and :func:`analysis.record
 from __future__ import annotations
 
 from typing import Any, Callable
+from .errors import ChildCrashed
+from .errors import ChildTimeout
 
 __all__ = ["ChildCrashed", "ChildTimeout", "run_isolated"]
-
-
-class ChildCrashed(RuntimeError):
-    """The child process died without an answer (``exitcode``: negative signal number or status)."""
-
-    def __init__(self, exitcode: "int | None") -> None:
-        super().__init__(f"the reader process died (exit code {exitcode})")
-        self.exitcode = exitcode
-
-
-class ChildTimeout(RuntimeError):
-    """The child process did not answer in time (it was killed)."""
 
 
 def _child(target: Callable[..., Any], args: tuple, conn: Any) -> None:

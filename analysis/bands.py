@@ -15,18 +15,14 @@ from typing import Sequence
 import numpy as np
 from scipy.signal import find_peaks
 
-from .errors import ImpactlabError
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
+from .errors import FitError
 
 __all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges", "mains_harmonics",
            "exclude_lines", "mains_harmonic_index", "MAINS_HZ"]
 
 log = logging.getLogger(__name__)
-
-
-class FitError(ImpactlabError, ValueError):
-    """The data cannot be fitted as asked (too few lines, nothing stable...)."""
 
 
 LOW_LINES = 5

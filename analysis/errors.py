@@ -3,12 +3,27 @@
 Every impactlab error derives from :class:`ImpactlabError` *and* from the matching built-in, so a
 caller may catch ``ImpactlabError`` (anything of ours) or the built-in (``ValueError``,
 ``OSError``) as usual. Every message names the problem and what to do about it. The device and
-transport errors live in :mod:`acquisition.errors`, the simulator's in its modules; all share this
-root.
+transport errors live in :mod:`acquisition.errors`, the simulator's in :mod:`simulator.errors`; all
+share this root.
 """
 from __future__ import annotations
 
-__all__ = ["ImpactlabError", "RecordingError", "UsageError"]
+__all__ = [
+    "ImpactlabError",
+    "RecordingError",
+    "UsageError",
+    "SEP005Error",
+    "ReportInputError",
+    "MissingAssetError",
+    "GeometryError",
+    "InputError",
+    "UFFError",
+    "EffectError",
+    "FitError",
+    "PointLabelError",
+    "ChildCrashed",
+    "ChildTimeout",
+]
 
 
 class ImpactlabError(Exception):
@@ -21,3 +36,51 @@ class RecordingError(ImpactlabError, OSError):
 
 class UsageError(ImpactlabError, ValueError):
     """A command line or call that asks for something impossible (wrong option, missing input)."""
+
+
+class SEP005Error(ImpactlabError, ValueError):
+    """A document that is not a valid SEP005 list of channels."""
+
+
+class ReportInputError(ImpactlabError, ValueError):
+    """An input of the report that cannot be used; the message says what to do."""
+
+
+class MissingAssetError(ImpactlabError, FileNotFoundError):
+    """A web asset whose package is not installed; the message names the extra to install."""
+
+
+class GeometryError(ImpactlabError, ValueError):
+    """A geometry that cannot be read or does not fit the data; the message says what to do."""
+
+
+class InputError(ImpactlabError, ValueError):
+    """An input file or option that cannot be used; the message says what to do."""
+
+
+class UFFError(ImpactlabError, ValueError):
+    """A UFF file that cannot be written or read as asked (the message says what to do)."""
+
+
+class EffectError(ImpactlabError, ValueError):
+    """An effect name or parameter set that cannot be applied (the message says what is expected)."""
+
+
+class FitError(ImpactlabError, ValueError):
+    """The data cannot be fitted as asked (too few lines, nothing stable...)."""
+
+
+class PointLabelError(ImpactlabError, ValueError):
+    """A point label that is not of the form ``component:node:direction``."""
+
+
+class ChildCrashed(ImpactlabError, RuntimeError):
+    """The child process died without an answer (``exitcode``: negative signal number or status)."""
+
+    def __init__(self, exitcode: "int | None") -> None:
+        super().__init__(f"the reader process died (exit code {exitcode})")
+        self.exitcode = exitcode
+
+
+class ChildTimeout(ImpactlabError, RuntimeError):
+    """The child process did not answer in time (it was killed)."""

@@ -14,15 +14,11 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .errors import ImpactlabError
 from .points import PointLabelError, point_from_uff, uff_node
+from .errors import GeometryError
 
 __all__ = ["Geometry", "GeometryError", "node_label", "points_on_a_line", "read_uff_geometry",
            "write_uff_geometry"]
-
-
-class GeometryError(ImpactlabError, ValueError):
-    """A geometry that cannot be read or does not fit the data; the message says what to do."""
 
 
 @dataclass(frozen=True)

@@ -14,17 +14,13 @@ from typing import Optional
 import numpy as np
 
 from .frf import FRFSet
-from .errors import ImpactlabError
+from .errors import InputError
 
 __all__ = ["InputError", "load_input", "detect_format", "parse_band_text", "parse_float_list"]
 
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _H5_SUFFIXES = {".h5", ".hdf5", ".hdf"}
 _UFF_SUFFIXES = {".uff", ".unv", ".uf", ".txt", ".asc"}
-
-
-class InputError(ImpactlabError, ValueError):
-    """An input file or option that cannot be used; the message says what to do."""
 
 
 def detect_format(path: "str | Path") -> str:

@@ -14,17 +14,13 @@ from __future__ import annotations
 import re
 import zlib
 from dataclasses import dataclass
-from .errors import ImpactlabError
+from .errors import PointLabelError
 
 __all__ = ["Point", "PointLabelError", "parse_point", "uff_node", "uff_direction", "point_from_uff"]
 
 _DIRECTIONS = {"X": 1, "Y": 2, "Z": 3}
 _COMPONENT_BASE = {"left": 1000, "top": 2000, "right": 3000}
 _PATTERN = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*:\s*(\d+)\s*:\s*([+-]?)([XYZxyz])\s*$")
-
-
-class PointLabelError(ImpactlabError, ValueError):
-    """A point label that is not of the form ``component:node:direction``."""
 
 
 @dataclass(frozen=True, order=True)

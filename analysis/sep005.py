@@ -19,16 +19,12 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .errors import ImpactlabError
+from .errors import SEP005Error
 
 __all__ = ["SEP005Error", "QUANTITY_CODES", "check_sep005", "read_sep005", "write_sep005"]
 
 #: impactlab channel quantity -> SEP005 quantity code
 QUANTITY_CODES = {"force": "f", "acceleration": "a", "velocity": "v", "displacement": "d"}
-
-
-class SEP005Error(ImpactlabError, ValueError):
-    """A document that is not a valid SEP005 list of channels."""
 
 
 def check_sep005(channels: Any, source: str = "SEP005 data") -> list[dict]:

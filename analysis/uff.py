@@ -29,7 +29,7 @@ import numpy as np
 
 from .frf import FRFSet
 from .points import parse_point, point_from_uff, uff_direction, uff_node
-from .errors import ImpactlabError
+from .errors import UFFError
 
 __all__ = ["write_uff58", "time_records", "read_uff58", "write_uff55", "read_uff55", "UFFError"]
 
@@ -38,10 +38,6 @@ log = logging.getLogger(__name__)
 _QUANTITY_TYPE = {"accelerance": 12, "mobility": 11, "receptance": 8}
 _TYPE_QUANTITY = {v: k for k, v in _QUANTITY_TYPE.items()}
 _UNIT_TYPE = {"N": 13, "m/s^2": 12, "m/s2": 12, "g": 12, "m/s": 11, "m": 8}
-
-
-class UFFError(ImpactlabError, ValueError):
-    """A UFF file that cannot be written or read as asked (the message says what to do)."""
 
 
 def _pyuff():

@@ -7,13 +7,9 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
-from .errors import ImpactlabError
+from .errors import MissingAssetError
 
 __all__ = ["MissingAssetError", "plotly_js_path"]
-
-
-class MissingAssetError(ImpactlabError, FileNotFoundError):
-    """A web asset whose package is not installed; the message names the extra to install."""
 
 
 def plotly_js_path() -> Path:

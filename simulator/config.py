@@ -16,8 +16,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from analysis.errors import ImpactlabError
 from analysis.points import PointLabelError, parse_point
+from .errors import ConfigError
 
 _toml: Any
 if sys.version_info >= (3, 11):
@@ -54,10 +54,6 @@ __all__ = [
 
 DEFAULT_CONFIG_PATH = Path(__file__).with_name("frame.toml")
 _NAMED_TABLES = ("sections", "components")
-
-
-class ConfigError(ImpactlabError, ValueError):
-    """A configuration file or value that cannot be used; the message says where and what to do."""
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ from analysis.modal import ModalModel, pole_from_fz
 from analysis.points import Point, parse_point
 
 from .config import ComponentConfig, FrameConfig, SectionConfig
-from analysis.errors import ImpactlabError
+from .errors import ModelError
 
 __all__ = [
     "SectionProperties",
@@ -64,10 +64,6 @@ logger = logging.getLogger(__name__)
 
 _POWER = QUANTITY_POWER
 _UNITS = {"receptance": "m/N", "mobility": "(m/s)/N", "accelerance": "(m/s^2)/N"}
-
-
-class ModelError(ImpactlabError, ValueError):
-    """A frame model request that cannot be served (unknown point, bad quantity...)."""
 
 
 @dataclass(frozen=True)

@@ -49,17 +49,13 @@ from .frontend import bandlimit_fir, highpass_cascade
 from .hammer import HammerHit, draw_hit, force_signal
 from .response import simulate_segment
 from .sensors import G_M_S2, SENSITIVITY_UNITS, sensitivity_v_per_eu
-from analysis.errors import ImpactlabError
+from .errors import StandError
 
 __all__ = ["TestStand", "StandEvent", "StandError", "ChannelSpec"]
 
 logger = logging.getLogger(__name__)
 
 _CHANNEL_KEYS = ("point", "quantity", "sensitivity", "sensitivity_unit", "iepe", "coupling")
-
-
-class StandError(ImpactlabError, ValueError):
-    """A request the test stand cannot carry out (bad channel set-up, point off the frame...)."""
 
 
 @dataclass(frozen=True)

@@ -10,14 +10,12 @@
 """
 from __future__ import annotations
 
-import ast
 import textwrap
 from pathlib import Path
 
 import pytest
+from import_graph import PACKAGES, ROOT, import_statements
 
-ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("analysis", "acquisition", "simulator")
 #: what a library (non-face) module of each package may import from the other two
 ALLOWED: dict[str, dict[str, "frozenset[str] | None"]] = {
     "analysis": {},
@@ -33,59 +31,31 @@ def is_face(module: str) -> bool:
     return last.startswith("cli_") or last == "__main__"
 
 
-def _module_name(root: Path, path: Path) -> str:
-    parts = list(path.relative_to(root).with_suffix("").parts)
-    if parts[-1] == "__init__":
-        parts = parts[:-1]
-    return ".".join(parts)
-
-
-def _imported(module: str, is_package: bool, node: ast.AST) -> list[str]:
-    """Absolute names of the modules an import statement reads."""
-    if isinstance(node, ast.Import):
-        return [a.name for a in node.names]
-    assert isinstance(node, ast.ImportFrom)
-    if node.level == 0:
-        base = node.module or ""
-    else:
-        pkg = module.split(".") if is_package else module.split(".")[:-1]
-        pkg = pkg[: len(pkg) - (node.level - 1)]
-        base = ".".join(pkg + ([node.module] if node.module else []))
-    # "from pkg import mod" may name submodules: count them as imports of pkg.mod
-    return [base] + [f"{base}.{a.name}" for a in node.names if a.name != "*"]
-
-
 def violations(root: Path) -> list[str]:
     """Every import in ``root``'s packages that breaks the rule, as ``file:line: what``."""
     found = []
-    for package in PACKAGES:
-        for path in sorted((root / package).rglob("*.py")):
-            module = _module_name(root, path)
-            if is_face(module):
+    for module, path, node, names in import_statements(root):
+        package = module.split(".")[0]
+        if is_face(module):
+            continue
+        where = f"{path.relative_to(root)}:{node.lineno}"
+        for name in names:
+            top = name.split(".")[0]
+            if top in PACKAGES and is_face(name):
+                found.append(f"{where}: library module {module} imports the face {name}")
+            if top not in PACKAGES or top == package:
                 continue
-            tree = ast.parse(path.read_text(), filename=str(path))
-            for node in ast.walk(tree):
-                if not isinstance(node, (ast.Import, ast.ImportFrom)):
-                    continue
-                for name in _imported(module, path.name == "__init__.py", node):
-                    top = name.split(".")[0]
-                    where = f"{path.relative_to(root)}:{node.lineno}"
-                    if top in PACKAGES and is_face(name):
-                        found.append(f"{where}: library module {module} imports the face {name}")
-                    if top not in PACKAGES or top == package:
-                        continue
-                    if top not in ALLOWED[package]:
-                        found.append(f"{where}: {package} may not import {top} ({name})")
-                        continue
-                    allowed = ALLOWED[package][top]
-                    parts = name.split(".")
-                    if allowed is not None and len(parts) > 1 and parts[1] not in allowed:
-                        found.append(f"{where}: {package} may import only {sorted(allowed)} of {top}, not {name}")
-                    elif allowed is not None and len(parts) == 1:
-                        names = [a.name for a in getattr(node, "names", [])]
-                        bad = [n for n in names if n not in allowed]
-                        if bad:
-                            found.append(f"{where}: {package} may import only {sorted(allowed)} of {top}, not {bad}")
+            if top not in ALLOWED[package]:
+                found.append(f"{where}: {package} may not import {top} ({name})")
+                continue
+            allowed = ALLOWED[package][top]
+            parts = name.split(".")
+            if allowed is not None and len(parts) > 1 and parts[1] not in allowed:
+                found.append(f"{where}: {package} may import only {sorted(allowed)} of {top}, not {name}")
+            elif allowed is not None and len(parts) == 1:
+                bad = [a.name for a in getattr(node, "names", []) if a.name not in allowed]
+                if bad:
+                    found.append(f"{where}: {package} may import only {sorted(allowed)} of {top}, not {bad}")
     return found
 
 

@@ -7,15 +7,11 @@ from typing import Any, Callable, Mapping, Optional
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..errors import ImpactlabError
 from ..frf import FRFSet
 from ..modal import ModalModel
+from ..errors import EffectError
 
 __all__ = ["Effect", "EffectError", "FitContext", "check_positive", "fit_scalar"]
-
-
-class EffectError(ImpactlabError, ValueError):
-    """An effect name or parameter set that cannot be applied (the message says what is expected)."""
 
 
 # --------------------------------------------------------------------------- containers

@@ -15,9 +15,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..errors import ImpactlabError
 from ..frf import FRFSet
 from ..modal import ModalModel
+from ..errors import ReportInputError
 
 __all__ = [
     "FitData",
@@ -32,10 +32,6 @@ __all__ = [
 
 
 log = logging.getLogger(__name__)
-
-
-class ReportInputError(ImpactlabError, ValueError):
-    """An input of the report that cannot be used; the message says what to do."""
 
 
 @dataclass(frozen=True)
