@@ -34,6 +34,11 @@ def dispatch(prog: str, commands: Mapping[str, tuple[str, str]], argv: Sequence[
     ``--version`` prints the version. Output into a closed pipe (``... | head``) does not stop the
     command: what it writes to files is still written, and it exits as if the output was read."""
     args = list(sys.argv[1:] if argv is None else argv)
+    with pipe_safe_stdout():
+        return _dispatch(prog, commands, args)
+
+
+def _dispatch(prog: str, commands: Mapping[str, tuple[str, str]], args: list[str]) -> int:
     if args and args[0] == "--version":
         print(f"{prog} (impactlab) {version()}")
         return 0
@@ -49,8 +54,7 @@ def dispatch(prog: str, commands: Mapping[str, tuple[str, str]], argv: Sequence[
         print(f"{prog}: unknown subcommand {name!r}; choose one of: {', '.join(commands)}", file=sys.stderr)
         return 2
     module = importlib.import_module(commands[name][0])
-    with pipe_safe_stdout():
-        return int(module.main(args[1:]) or 0)
+    return int(module.main(args[1:]) or 0)
 
 
 class _PipeSafeStream:

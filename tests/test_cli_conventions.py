@@ -84,8 +84,14 @@ def test_output_into_a_closed_pipe_still_writes_the_json_and_exits_0(tmp_path: P
     assert ident.returncode == 0 and "Traceback" not in ident.stderr, ident.stderr
 
 
+@pytest.mark.parametrize("command", [["impactlab", "--help"], ["analysis", "--help"], ["impactlab", "--version"]])
+def test_the_command_lists_into_a_closed_pipe_exit_cleanly(tmp_path: Path, command: list[str]) -> None:
+    res = _closed_pipe_run([sys.executable, "-m", *command], tmp_path)
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+
+
 def test_the_same_bad_url_gives_the_same_exit_code_everywhere(tmp_path, capsys):
-    """Issue 11, item 10: a bad device URL is a usage error (exit 2) in identify as in capture."""
+    """A bad device URL is a usage error (exit 2) in identify as in capture."""
     from acquisition.cli_capture import main as capture_main
     from acquisition.cli_identify import main as identify_main
 
