@@ -1,0 +1,227 @@
+"""Is the structure linear? FRFs at different excitation levels compared mode by mode.
+
+A linear structure has the same FRF at every force. The check fits one modal model at each level
+(the lowest level's automatic fit, then LSFD at every level from those poles, so modes pair by
+index) and compares, per mode, the natural frequency and the damping ratio from the lowest to the
+highest level against the fits' own standard deviations:
+
+    df %      = 100 (f_hi - f_lo) / f_lo,           sd = 100 sqrt(sd_f,lo^2 + sd_f,hi^2) / f_lo
+    dzeta %   = 100 (zeta_hi - zeta_lo) / zeta_lo,  sd likewise from sd_zeta
+
+A mode is ``significant`` when either change exceeds ``z`` standard deviations (default 3) *and* a
+floor of practical size (``min_df_percent``, ``min_dzeta_percent``); the verdict is "nonlinear" when
+any mode is, else "linear" (within the noise). Changes are also given per decade of excitation level
+(``df % / log10(level_hi / level_lo)``).
+
+Hits of one recording at different forces (the operator's soft and hard hits, or the natural spread)
+are grouped by their peak force (:func:`group_by_force`) and averaged to one H1 per group
+(:func:`level_frfsets`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from .frf import FRFSet
+
+__all__ = ["ModeShift", "LinearityResult", "LevelHit", "compare_levels", "group_by_force", "level_frfsets",
+           "Z_SIGNIFICANT", "MIN_DF_PERCENT", "MIN_DZETA_PERCENT", "MIN_LEVEL_RATIO"]
+
+Z_SIGNIFICANT = 3.0
+MIN_DF_PERCENT = 0.05
+MIN_DZETA_PERCENT = 3.0
+MIN_LEVEL_RATIO = 1.5  # hits whose peak forces span less than this ratio are one level
+
+
+@dataclass(frozen=True)
+class ModeShift:
+    """One mode from the lowest to the highest level: ``freq_hz`` (Hz) and ``zeta`` (ratio) at the lowest
+    level, changes in % with their standard deviations, per decade of level, and ``significant``."""
+
+    freq_hz: float
+    zeta: float
+    df_percent: float
+    df_std_percent: float
+    dzeta_percent: float
+    dzeta_std_percent: float
+    df_percent_per_decade: float
+    dzeta_percent_per_decade: float
+    significant: bool
+
+    def to_dict(self) -> dict:
+        return {k: (bool(v) if isinstance(v, (bool, np.bool_)) else float(v)) for k, v in self.__dict__.items()}
+
+
+@dataclass(frozen=True)
+class LinearityResult:
+    """The comparison: ``levels`` (ascending, the data's units: N, V...), ``modes`` (:class:`ModeShift`,
+    by frequency), ``verdict`` "linear" or "nonlinear", ``band`` (Hz), per-level frequencies and damping
+    ``freq_hz`` / ``zeta`` (n_levels, n_modes) with their standard deviations, ``notes``."""
+
+    levels: tuple
+    modes: tuple
+    verdict: str
+    band: tuple
+    freq_hz: np.ndarray
+    zeta: np.ndarray
+    freq_hz_std: np.ndarray
+    zeta_std: np.ndarray
+    z: float = Z_SIGNIFICANT
+    notes: tuple = field(default=())
+
+    @property
+    def nonlinear_modes(self) -> list[int]:
+        """Indices of the modes whose change is significant."""
+        return [i for i, m in enumerate(self.modes) if m.significant]
+
+    def summary(self) -> str:
+        """One line for a terminal: the verdict, and which modes move how much."""
+        if self.verdict == "linear":
+            return (f"linear within the noise: {len(self.modes)} mode(s) compared over levels "
+                    f"{self.levels[0]:.3g}..{self.levels[-1]:.3g}")
+        parts = [f"{m.freq_hz:.4g} Hz {m.df_percent:+.2f} % (+-{m.df_std_percent:.2f}), zeta {m.dzeta_percent:+.0f} %"
+                 for m in self.modes if m.significant]
+        return "nonlinear: " + "; ".join(parts) + f" (levels {self.levels[0]:.3g} -> {self.levels[-1]:.3g})"
+
+    def to_dict(self) -> dict:
+        """The JSON contract: verdict, modes (freq_hz, df_percent, df_std_percent, dzeta_percent, significant...),
+        levels, band, z, per-level frequencies and damping, notes."""
+        return {"verdict": self.verdict, "modes": [m.to_dict() for m in self.modes],
+                "levels": [float(v) for v in self.levels], "band_hz": [float(b) for b in self.band],
+                "z": float(self.z), "freq_hz_by_level": np.asarray(self.freq_hz).tolist(),
+                "zeta_by_level": np.asarray(self.zeta).tolist(), "notes": list(self.notes)}
+
+
+@dataclass(frozen=True)
+class LevelHit:
+    """One hit for :func:`level_frfsets`: ``force`` (n,) N, ``responses`` (n_out, n) EU, ``fs_hz`` (Hz),
+    ``trigger_index`` (sample), ``point`` (struck reference label), ``outputs`` (labels)."""
+
+    force: np.ndarray
+    responses: np.ndarray
+    fs_hz: float
+    trigger_index: int
+    point: str
+    outputs: tuple
+
+
+def _pct(a: float, b: float) -> float:
+    return 100.0 * (b - a) / a if a else float("nan")
+
+
+def compare_levels(
+    frfs: Sequence[FRFSet],
+    levels: Sequence[float],
+    *,
+    band: Optional[Sequence[float]] = None,
+    z: float = Z_SIGNIFICANT,
+    min_df_percent: float = MIN_DF_PERCENT,
+    min_dzeta_percent: float = MIN_DZETA_PERCENT,
+    fit_options: Optional[dict] = None,
+) -> LinearityResult:
+    """Compare FRF sets measured at excitation ``levels`` (any positive unit; one level per set).
+
+    The lowest level's set is fitted automatically (:func:`analysis.pipeline.fit_auto`, ``band`` or the
+    default band, ``fit_options`` passed on); every level is then fitted by LSFD from those poles in
+    the same band. Inputs are not modified. Raises ValueError on mismatched inputs.
+    """
+    from .lsfd import fit_lsfd
+    from .pipeline import fit_auto
+
+    if len(frfs) != len(levels) or len(frfs) < 2:
+        raise ValueError(f"need at least two FRF sets and one level each; got {len(frfs)} sets, {len(levels)} levels")
+    lv = np.asarray(levels, float)
+    if not np.all(np.isfinite(lv) & (lv > 0)):
+        raise ValueError(f"levels must be positive numbers; got {list(levels)}")
+    if len(set(lv.tolist())) < len(lv):
+        raise ValueError(f"levels must differ; got {list(levels)}")
+    order = np.argsort(lv)
+    sets = [frfs[i] for i in order]
+    lv = lv[order]
+    notes: list[str] = []
+    base = fit_auto(sets[0], band=band, **(fit_options or {}))
+    band_used = tuple(float(b) for b in base.band)
+    poles = base.lsfd.poles_raw
+    fits = [fit_lsfd(s, poles, band=band_used) for s in sets]
+    for lvl, r in zip(lv, fits):
+        if not r.success:
+            notes.append(f"the fit at level {lvl:.3g} did not converge ({r.message})")
+    f = np.array([r.freq_hz for r in fits])
+    zt = np.array([r.damping for r in fits])
+    fs = np.array([r.freq_hz_std for r in fits])
+    zs = np.array([r.damping_std for r in fits])
+    idx = np.argsort(f[0])
+    f, zt, fs, zs = f[:, idx], zt[:, idx], fs[:, idx], zs[:, idx]
+    decades = float(np.log10(lv[-1] / lv[0]))
+    modes = []
+    for r in range(f.shape[1]):
+        df = _pct(f[0, r], f[-1, r])
+        df_sd = 100.0 * float(np.hypot(fs[0, r], fs[-1, r])) / f[0, r]
+        dz = _pct(zt[0, r], zt[-1, r])
+        dz_sd = 100.0 * float(np.hypot(zs[0, r], zs[-1, r])) / zt[0, r] if zt[0, r] else float("nan")
+        sig_f = abs(df) > max(z * df_sd, min_df_percent)
+        sig_z = abs(dz) > max(z * dz_sd, min_dzeta_percent) if np.isfinite(dz_sd) else False
+        ok = all(r_.success for r_ in (fits[0], fits[-1])) and np.isfinite(df)
+        modes.append(ModeShift(freq_hz=float(f[0, r]), zeta=float(zt[0, r]), df_percent=df, df_std_percent=df_sd,
+                               dzeta_percent=dz, dzeta_std_percent=dz_sd, df_percent_per_decade=df / decades,
+                               dzeta_percent_per_decade=dz / decades, significant=bool(ok and (sig_f or sig_z))))
+    verdict = "nonlinear" if any(m.significant for m in modes) else "linear"
+    return LinearityResult(levels=tuple(float(v) for v in lv), modes=tuple(modes), verdict=verdict, band=band_used,
+                           freq_hz=f, zeta=zt, freq_hz_std=fs, zeta_std=zs, z=float(z), notes=tuple(notes))
+
+
+def group_by_force(peaks_n: Sequence[float], min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:
+    """Level group (0 = soft, 1 = hard) of each hit from its peak force (N): the hits are split at the
+    widest gap of their log peak forces when the groups' median forces differ by at least ``min_ratio``;
+    otherwise every hit is group 0 (one level: the natural spread is too narrow to compare)."""
+    p = np.asarray(peaks_n, float)
+    labels = np.zeros(p.size, int)
+    if p.size < 2 or not np.all(p > 0):
+        return labels
+    lp = np.log(p)
+    srt = np.sort(lp)
+    gaps = np.diff(srt)
+    cut = srt[int(np.argmax(gaps))] + 0.5 * float(np.max(gaps))
+    hi = lp > cut
+    if hi.all() or not hi.any():
+        return labels
+    if np.exp(np.median(lp[hi]) - np.median(lp[~hi])) < min_ratio:
+        return labels
+    labels[hi] = 1
+    return labels
+
+
+def level_frfsets(hits: Sequence[Any], windows: Any = None, quantity: str = "accelerance",
+                  unit: str = "") -> tuple[list[float], list[FRFSet]]:
+    """H1 per force level from hits of one or more points.
+
+    ``hits``: objects with ``force`` (n,) N, ``responses`` (n_out, n), ``fs_hz``, ``trigger_index``,
+    ``point`` (the struck reference) and ``outputs`` (e.g. adapters over
+    :class:`analysis.recording.RecordedHit`). Each point's hits are grouped by :func:`group_by_force`;
+    the groups' H1 are merged over points (:func:`analysis.recording.merge_frfsets`). Returns the
+    levels (median peak force per group, N) and one FRF set per level; one level when the forces do
+    not spread.
+    """
+    from .recording import merge_frfsets
+    from .spectra import FRFAccumulator, WindowSettings, hit_spectra
+
+    win = windows if windows is not None else WindowSettings()
+    by_point: dict[str, list[Any]] = {}
+    for h in hits:
+        by_point.setdefault(str(h.point), []).append(h)
+    per_level: dict[int, list[FRFSet]] = {}
+    peaks: dict[int, list[float]] = {}
+    for point, hs in by_point.items():
+        pk = [float(np.max(np.abs(h.force))) for h in hs]
+        labels = group_by_force(pk)
+        for g in sorted(set(labels.tolist())):
+            acc = FRFAccumulator(hs[0].outputs, point, quantity, unit)
+            for h, lab in zip(hs, labels):
+                if lab == g:
+                    acc.add(hit_spectra(h.force, h.responses, h.fs_hz, h.trigger_index, win))
+            per_level.setdefault(g, []).append(acc.frfset("H1", sample_rate_hz=hs[0].fs_hz))
+            peaks.setdefault(g, []).extend(p for p, lab in zip(pk, labels) if lab == g)
+    keys = sorted(per_level)
+    return [float(np.median(peaks[k])) for k in keys], [merge_frfsets(per_level[k]) for k in keys]
