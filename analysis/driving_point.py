@@ -1,0 +1,103 @@
+"""Is the driving-point FRF physical? Its mobility's phase and its antiresonances.
+
+At a driving point (response measured where and along which the force acts) a passive structure's
+mobility ``Y = v / F`` has a non-negative real part: its phase stays within -90..+90 degrees. Between
+every two resonances of a driving-point FRF lies an antiresonance (the mobility's phase rises again
+between them). A phase outside the range (beyond the noise) or a missing antiresonance
+points at a wrong sign, a sensor not at the struck point, or a mislabelled channel.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+import scipy.signal
+
+from .frf import FRFSet
+from .reciprocity import frf_error_variance, same_dof
+
+__all__ = ["DrivingPointCheck", "driving_points", "check_driving_point"]
+
+PHASE_TOLERANCE_DEG = 10.0
+PEAK_PROMINENCE_DB = 6.0
+ANTIRESONANCE_DEPTH_DB = 3.0
+MIN_PHASE_RISE_DEG = 20.0
+
+
+@dataclass(frozen=True)
+class DrivingPointCheck:
+    """One driving point: ``point`` label; ``phase_ok`` and the share of lines whose mobility phase is outside
+    +-(90 + tolerance) degrees beyond the noise (``phase_outside``); ``resonances_hz`` (the peaks),
+    ``antiresonances_hz`` (one per gap, NaN where missing) and ``missing`` (the gaps (f1, f2) Hz without one)."""
+
+    point: str
+    phase_ok: bool
+    phase_outside: float
+    resonances_hz: tuple
+    antiresonances_hz: tuple
+    missing: tuple
+
+    @property
+    def ok(self) -> bool:
+        return self.phase_ok and not self.missing
+
+    def to_dict(self) -> dict:
+        return {"point": self.point, "ok": self.ok, "phase_ok": self.phase_ok, "phase_outside": self.phase_outside,
+                "resonances_hz": list(self.resonances_hz), "antiresonances_hz": list(self.antiresonances_hz),
+                "missing": [list(m) for m in self.missing]}
+
+
+def driving_points(frf: FRFSet) -> list[tuple[int, int, int]]:
+    """(output, reference, sign) of every driving-point FRF of the set."""
+    out = []
+    for o, lab in enumerate(frf.outputs):
+        for r, rl in enumerate(frf.references):
+            s = same_dof(lab, rl)
+            if s and np.all(np.isfinite(frf.H[o, r])):
+                out.append((o, r, s))
+    return out
+
+
+def check_driving_point(frf: FRFSet, output: int, reference: int, sign: int = 1,
+                        band: Optional[Sequence[float]] = None,
+                        tolerance_deg: float = PHASE_TOLERANCE_DEG,
+                        prominence_db: float = PEAK_PROMINENCE_DB) -> DrivingPointCheck:
+    """Check one driving-point FRF ``H[output, reference]`` (times ``sign``) in ``band`` (Hz; default all
+    lines above 0). Inputs are not modified."""
+    f = frf.freq_hz
+    lo, hi = (float(band[0]), float(band[1])) if band is not None else (float(f[f > 0][0]), float(f[-1]))
+    sel = (f >= lo) & (f <= hi) & (f > 0)
+    mob = frf.as_quantity("mobility").H[output, reference, sel] * sign
+    fb = f[sel]
+    var = frf_error_variance(frf)
+    ph = np.degrees(np.angle(mob))
+    lim = 90.0 + tolerance_deg
+    if var is not None:
+        # noise of the phase (rad): sqrt(var / 2) / |H|, per line
+        sd = np.degrees(np.sqrt(var[output, reference, sel] / 2.0) / np.maximum(np.abs(frf.H[output, reference, sel]),
+                                                                                  1e-300))
+    else:
+        sd = np.zeros(fb.size)
+    outside = np.abs(ph) > lim + 3.0 * sd
+    share = float(np.mean(outside)) if fb.size else 0.0
+    mag = 20.0 * np.log10(np.maximum(np.abs(mob), 1e-300))
+    peaks, _ = scipy.signal.find_peaks(mag, prominence=prominence_db)
+    anti, missing = [], []
+    for p1, p2 in zip(peaks[:-1], peaks[1:]):
+        # the mobility's phase falls by up to 180 degrees through each resonance and rises again at the
+        # antiresonance between them (damping may keep it below zero when the two are close); without an
+        # antiresonance it keeps falling
+        seg = np.degrees(np.unwrap(np.angle(mob[p1:p2 + 1])))
+        rise = float(np.max(seg - np.minimum.accumulate(seg)))
+        dips = mag[p1:p2 + 1]
+        k = int(np.argmin(dips))
+        deep = dips[k] < min(mag[p1], mag[p2]) - ANTIRESONANCE_DEPTH_DB
+        if rise >= MIN_PHASE_RISE_DEG and deep:
+            anti.append(float(fb[p1 + k]))
+        else:
+            anti.append(float("nan"))
+            missing.append((float(fb[p1]), float(fb[p2])))
+    return DrivingPointCheck(point=frf.outputs[output], phase_ok=share <= 0.01, phase_outside=share,
+                             resonances_hz=tuple(float(x) for x in fb[peaks]), antiresonances_hz=tuple(anti),
+                             missing=tuple(missing))
