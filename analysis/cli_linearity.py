@@ -1,0 +1,126 @@
+"""``python -m analysis linearity INPUTS... [--levels 0.05,0.30] [--band LO:HI] [--json L.json]``.
+
+Is the structure linear? INPUTS are recordings (``.h5``) or UFF 58 files measured at different
+excitation levels, one level each (``--levels``, in the data's own unit: N, V...; a recording's level
+is otherwise the median peak force of its accepted hits), or one recording whose hits span force
+levels (grouped by peak force). Per mode: the frequency and damping change from the lowest to the
+highest level, its standard deviation from the fits and its significance
+(:func:`analysis.linearity.compare_levels`). ``--json`` contract::
+
+    {"verdict": "linear" | "nonlinear",
+     "modes": [{"freq_hz", "df_percent", "df_std_percent", "dzeta_percent", "significant", ...}],
+     "levels": [...], "band_hz": [lo, hi], ...}
+
+``freq_hz`` at the lowest level, changes from lowest to highest. Exit codes: 0 done, 2 bad input.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .command_line import Parser as _Parser, add_estimator, check_out_dir, parse_args, with_examples
+
+__all__ = ["main", "build_parser", "recording_levels"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="python -m analysis linearity",
+                description="Compare FRFs taken at different excitation levels mode by mode: frequency and "
+                            "damping change with their standard deviations, and a verdict (linear within the "
+                            "noise, or nonlinear: which modes, how much per decade of level).")
+    with_examples(p)
+    p.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="recordings (.h5) or UFF 58 files, one per level; or one recording whose hits span levels")
+    p.add_argument("--levels", metavar="L1,L2,...",
+                   help="excitation level of each input in its own unit (N, V...), in the order of the inputs")
+    p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: from the lowest level's data)")
+    p.add_argument("--z", type=float, default=3.0, help="significance in standard deviations (default 3)")
+    p.add_argument("--json", metavar="L.json", help="write the comparison as JSON")
+    add_estimator(p)
+    return p
+
+
+def recording_levels(path: str) -> "tuple[list[float], list] | None":
+    """(levels N, FRF sets) from a recording's accepted hits grouped by peak force; None when the file
+    is not a recording or holds no hits."""
+    from .inputs import detect_format
+    from .linearity import LevelHit, level_frfsets
+    from .recording import Recording
+
+    if detect_format(path) != "recording":
+        return None
+    with Recording(path) as rec:
+        hits = [LevelHit(force=h.data[h.force_channel], responses=h.data[h.response_channels], fs_hz=h.sample_rate_hz,
+                         trigger_index=h.trigger_index, point=h.reference, outputs=tuple(h.outputs))
+                for h in rec.hits(accepted_only=True, skip_damaged=True)]
+        if not hits:
+            return None
+        sets = rec.frfsets()
+        quantity, unit = (sets[0].quantity, sets[0].unit) if sets else ("accelerance", "")
+        return level_frfsets(hits, rec.windows, quantity, unit)
+
+
+def _levels(args: argparse.Namespace, n: int) -> Optional[list[float]]:
+    from .inputs import InputError, parse_float_list
+
+    if not args.levels:
+        return None
+    lv = parse_float_list(args.levels, "levels")
+    if len(lv) != n:
+        raise InputError(f"--levels gives {len(lv)} level(s) for {n} input(s): give one level per input")
+    return lv
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the command; returns the exit code (0 done, 2 bad input)."""
+    from .bands import FitError
+    from .inputs import InputError, load_input, parse_band_text
+    from .linearity import compare_levels
+    from .recording import RecordingError
+
+    args = parse_args(build_parser(), argv)
+    if isinstance(args, int):
+        return args
+    try:
+        check_out_dir(args.json, error=InputError)
+        band = parse_band_text(args.band)
+        levels = _levels(args, len(args.inputs))
+        if len(args.inputs) == 1:
+            if levels is not None:
+                raise InputError("--levels needs one input per level; one recording's hits are grouped by force")
+            got = recording_levels(args.inputs[0])
+            if got is None:
+                raise InputError(f"{args.inputs[0]}: one input must be a recording with hits (its hits are grouped "
+                                 "by force); otherwise give one input per level")
+            levels, sets = got
+            if len(sets) < 2:
+                raise InputError(f"{args.inputs[0]}: the hits' peak forces do not spread enough to compare levels "
+                                 "(strike soft and hard hits at each point)")
+        else:
+            sets = [load_input(p, estimator=args.estimator) for p in args.inputs]
+            if levels is None:
+                found = [recording_levels(p) for p in args.inputs]
+                if any(f is None for f in found):
+                    raise InputError("give --levels (one per input): the level cannot be read from every input")
+                levels = [float(np.median(f[0])) for f in found if f is not None]
+        result = compare_levels(sets, levels, band=band, z=args.z)
+    except (InputError, RecordingError, FitError, ValueError, OSError) as exc:
+        print(f"analysis linearity: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=1))
+    lv = result.levels
+    print(f"levels {', '.join(f'{v:.4g}' for v in lv)}; band {result.band[0]:.5g}-{result.band[1]:.5g} Hz")
+    print(f"{'f [Hz]':>10s} {'df [%]':>8s} {'+-':>6s} {'dzeta [%]':>9s} {'+-':>6s} {'df/dec':>7s}  significant")
+    for m in result.modes:
+        print(f"{m.freq_hz:10.4f} {m.df_percent:+8.3f} {m.df_std_percent:6.3f} {m.dzeta_percent:+9.1f} "
+              f"{m.dzeta_std_percent:6.1f} {m.df_percent_per_decade:+7.3f}  {'yes' if m.significant else 'no'}")
+    for note in result.notes:
+        print(f"note: {note}")
+    print(f"verdict: {result.summary()}")
+    return 0
