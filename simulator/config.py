@@ -287,7 +287,8 @@ class NonlinearConfig:
     cubic_nm_per_rad3 : k3 (N m/rad^3) of the cubic law (> 0 hardening, < 0 softening).
     stiffness_nm_per_rad : the spring's small-amplitude stiffness k0 (N m/rad), replacing the joint's or
         support's rotational stiffness about ``axis`` in the linear model; 0 keeps that stiffness.
-    substeps : integrator steps per output sample.
+    integration_rate_hz : the lowest rate (Hz) of the time integration: a record sampled at fs is
+        integrated with ``ceil(integration_rate_hz / fs)`` steps per sample.
     """
 
     law: str
@@ -298,7 +299,7 @@ class NonlinearConfig:
     n_sliders: int
     cubic_nm_per_rad3: float
     stiffness_nm_per_rad: float
-    substeps: int
+    integration_rate_hz: float
 
     @property
     def active(self) -> bool:
@@ -308,6 +309,10 @@ class NonlinearConfig:
     def axis_index(self) -> int:
         """0, 1 or 2: the rotation DOF (after the three translations) of ``axis``."""
         return _ROTATION_AXES.index(self.axis)
+
+    def substeps(self, fs_hz: float) -> int:
+        """Integration steps per sample at the sample rate ``fs_hz`` (Hz)."""
+        return max(1, int(np.ceil(self.integration_rate_hz / fs_hz - 1e-9)))
 
     def spring_stiffness(self, nodes: "tuple[str, ...]", k6: "tuple | list") -> list[float]:
         """The six stiffnesses of the support or joint at ``nodes``: ``k6`` with the rotational one about
@@ -628,7 +633,7 @@ def _validate_nonlinear(cfg: FrameConfig, p: str) -> None:
                                       "global X, Y or Z)")
     _check(nl.stiffness_nm_per_rad >= 0, f"{p} nonlinear.stiffness_nm_per_rad must be >= 0 N m/rad (0: keep the "
                                          "joint's own stiffness)")
-    _check(1 <= nl.substeps <= 64, f"{p} nonlinear.substeps must be 1..64 (integrator steps per sample)")
+    _check(nl.integration_rate_hz > 0, f"{p} nonlinear.integration_rate_hz must be > 0 Hz")
     if not nl.active:
         return
     joint_nodes = {str(n) for pair in cfg.joints.pairs for n in pair}

@@ -14,8 +14,8 @@ linear frame's exact response to the hammer (:func:`simulator.response.simulate_
 response to ``-delta m``; only ``theta`` and ``m`` need stepping. On a grid ``h = 1 / (substeps fs)``
 each mode's complex state is propagated exactly for an input linear between steps (the first-order
 hold of :mod:`simulator.response`), so with ``theta_nl[k] = P[k] - d1 m[k-1] - d0 m[k]`` the step is
-implicit in ``m[k]`` only: the scalar equation ``m = M(theta) - k0 theta`` is solved by Newton on the
-law's tangent stiffness (a few iterations; the Iwan law is piecewise linear). The joint's moment is
+implicit in ``m[k]`` only: the scalar equation ``m = M(theta) - k0 theta`` is solved by a Newton step on the
+law's tangent stiffness (exact for the piecewise-linear Iwan law unless a slider changes state within the step). The joint's moment is
 then exact up to its first-order hold between steps (second order in ``h``).
 
 Laws (``[nonlinear] law``):
@@ -49,7 +49,6 @@ from .stand import StandError, TestStand
 __all__ = ["JointLaw", "IwanJoint", "CubicJoint", "LinearJoint", "JointResult", "joint_law", "joint_dof_vector",
            "simulate_joint", "NonlinearJointStand", "make_stand"]
 
-_NEWTON_ITER = 6
 _BLOCK = 64
 
 
@@ -79,7 +78,8 @@ class JointLaw(Protocol):
 class IwanJoint:
     """Parallel Iwan bank (module docstring): ``k0`` N m/rad small-amplitude stiffness,
     ``slip_moment_nm`` N m carried by the sliders in full slip, ``residual_fraction`` of ``k0`` never
-    slips, ``n`` sliders."""
+    slips, ``n`` sliders. The state is each element's moment ``e_i`` (|e_i| <= M_i) at the rotation
+    ``theta_ref`` of the last commit."""
 
     def __init__(self, k0: float, slip_moment_nm: float, residual_fraction: float, n: int) -> None:
         if not (k0 > 0 and slip_moment_nm > 0 and 0 <= residual_fraction < 1 and n >= 1):
@@ -90,6 +90,7 @@ class IwanJoint:
         theta_full = 2.0 * slip_moment_nm / ((1.0 - residual_fraction) * self.k0)
         self.slip_rotation = theta_full * (np.arange(n) + 0.5) / n  # rad, at which each slider starts to slip
         self.m_i = self.k_i * self.slip_rotation                   # N m, each slider's slip moment
+        self._neg = -self.m_i
         self.reset()
 
     @property
@@ -98,36 +99,40 @@ class IwanJoint:
         return float(self.slip_rotation[0])
 
     def reset(self) -> None:
-        self.s = np.zeros(self.m_i.size)
+        self.e = np.zeros(self.m_i.size)
+        self.theta_ref = 0.0
         self._dissipated = 0.0
 
-    def _elements(self, theta: float) -> tuple[np.ndarray, np.ndarray]:
-        e = self.k_i * (theta - self.s)
-        return np.clip(e, -self.m_i, self.m_i), np.abs(e) < self.m_i
-
     def trial(self, theta: float) -> tuple[float, float]:
-        e, stuck = self._elements(theta)
-        return self.k_res * theta + float(e.sum()), self.k_res + self.k_i * float(np.count_nonzero(stuck))
+        raw = self.e + self.k_i * (theta - self.theta_ref)
+        e = np.minimum(np.maximum(raw, self._neg), self.m_i)
+        n_stuck = int(np.count_nonzero(raw == e))
+        return self.k_res * theta + float(e.sum()), self.k_res + self.k_i * n_stuck
 
     def commit(self, theta: float) -> bool:
-        e = self.k_i * (theta - self.s)
-        over = np.abs(e) > self.m_i
-        if not np.any(over):
-            return False
-        new = theta - np.sign(e[over]) * self.m_i[over] / self.k_i
-        self._dissipated += float(np.sum(self.m_i[over] * np.abs(new - self.s[over])))
-        self.s[over] = new
-        return True
+        raw = self.e + self.k_i * (theta - self.theta_ref)
+        e = np.minimum(np.maximum(raw, self._neg), self.m_i)
+        self.theta_ref = float(theta)
+        slipped = bool(np.any(raw != e))
+        if slipped:
+            self._dissipated += float(np.dot(self.m_i, np.abs(raw - e))) / self.k_i
+        self.e = e
+        return slipped
+
+    def moment(self) -> float:
+        """The committed moment (N m)."""
+        return self.k_res * self.theta_ref + float(self.e.sum())
 
     def stuck_interval(self) -> tuple[float, float, float]:
         """(lo, hi, m): no slider moves while lo <= theta <= hi (rad), and the correction moment
         ``M - k0 theta`` is then the constant m (N m)."""
-        reach = self.m_i / self.k_i
-        return (float(np.max(self.s - reach)), float(np.min(self.s + reach)),
-                float(-self.k_i * np.sum(self.s)))
+        lo = self.theta_ref + float(np.max(self._neg - self.e)) / self.k_i
+        hi = self.theta_ref + float(np.min(self.m_i - self.e)) / self.k_i
+        return lo, hi, float(self.e.sum()) - self.m_i.size * self.k_i * self.theta_ref
 
     def potential(self, theta: float) -> float:
-        return 0.5 * self.k_res * theta ** 2 + 0.5 * self.k_i * float(np.sum((theta - self.s) ** 2))
+        e = self.e + self.k_i * (theta - self.theta_ref)
+        return 0.5 * self.k_res * theta ** 2 + float(np.dot(e, e)) / (2.0 * self.k_i)
 
     @property
     def dissipated_j(self) -> float:
@@ -304,15 +309,12 @@ def simulate_joint(
                 k += j
             stuck = j == nb
             continue
-        base = theta_lin[k] + 2.0 * float(np.real(cE @ z)) - d1 * m_prev
-        m = m_prev
-        for _ in range(_NEWTON_ITER):
-            th = base - d0 * m
-            M, kt = law.trial(th)
-            g = m - (M - k0 * th)
-            if abs(g) <= 1e-13 * (abs(M) + 1e-30):
-                break
-            m -= g / (1.0 + d0 * (kt - k0))
+        base = theta_lin[k] + 2.0 * (cE @ z).real - d1 * m_prev
+        # one Newton step on the law's tangent from m[k-1] (exact while no slider changes state between
+        # the two rotations; d0 is of the order of h^2 / modal mass, so the step is small)
+        th = base - d0 * m_prev
+        M, kt = law.trial(th)
+        m = m_prev - (m_prev - (M - k0 * th)) / (1.0 + d0 * (kt - k0))
         th = base - d0 * m
         stuck = not law.commit(th) and stuck_interval is not None
         theta[k] = th
@@ -348,7 +350,7 @@ class NonlinearJointStand(TestStand):
         phi_in = model.shape_at([in_point], modes)[0, flex]
         delta = joint_dof_vector(model, self.config) @ modes.shapes[:, flex]
         res = simulate_joint(self.law, modes.poles[flex], delta, phi_out, phi_in, seg, seg_start, q, fs_hz,
-                             n_samples, self.config.nonlinear.substeps)
+                             n_samples, self.config.nonlinear.substeps(fs_hz))
         self._last = res
         return res.accel
 
