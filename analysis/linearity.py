@@ -9,7 +9,9 @@ highest level against the fits' own standard deviations:
     dzeta %   = 100 (zeta_hi - zeta_lo) / zeta_lo,  sd likewise from sd_zeta
 
 A mode is ``significant`` when either change exceeds ``z`` standard deviations (default 3) *and* a
-floor of practical size (``min_df_percent``, ``min_dzeta_percent``); the verdict is "nonlinear" when
+floor of practical size (``min_df_percent``, ``min_dzeta_percent``); a mode the fits leave poorly
+determined (standard deviation above ``MAX_DF_STD_PERCENT`` or ``MAX_DZETA_STD_PERCENT``, or a pole that
+ran to the edge of its ``MAX_SHIFT`` window at a higher level) is not judged; the verdict is "nonlinear" when
 any mode is, else "linear" (within the noise). Changes are also given per decade of excitation level
 (``df % / log10(level_hi / level_lo)``).
 
@@ -33,6 +35,9 @@ Z_SIGNIFICANT = 3.0
 MIN_DF_PERCENT = 0.05
 MIN_DZETA_PERCENT = 3.0
 MIN_LEVEL_RATIO = 1.5  # hits whose peak forces span less than this ratio are one level
+MAX_DF_STD_PERCENT = 0.5  # a mode whose frequency is less certain than this at a level is not judged
+MAX_DZETA_STD_PERCENT = 50.0
+MAX_SHIFT = 0.05  # relative frequency window of each level's pole around the lowest level's
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,7 @@ class ModeShift:
     df_percent_per_decade: float
     dzeta_percent_per_decade: float
     significant: bool
+    determined: bool = True
 
     def to_dict(self) -> dict:
         return {k: (bool(v) if isinstance(v, (bool, np.bool_)) else float(v)) for k, v in self.__dict__.items()}
@@ -144,7 +150,10 @@ def compare_levels(
     base = fit_auto(sets[0], band=band, **(fit_options or {}))
     band_used = tuple(float(b) for b in base.band)
     poles = base.lsfd.poles_raw
-    fits = [fit_lsfd(s, poles, band=band_used) for s in sets]
+    # every level's pole stays within MAX_SHIFT of the lowest level's: a pole that ends on that bound went
+    # to fit something else (a neighbour, distortion) and its mode is not judged
+    window = MAX_SHIFT * np.abs(poles)
+    fits = [fit_lsfd(s, poles, band=band_used, freq_window_hz=window / (2 * np.pi)) for s in sets]
     for lvl, r in zip(lv, fits):
         if not r.success:
             notes.append(f"the fit at level {lvl:.3g} did not converge ({r.message})")
@@ -163,10 +172,16 @@ def compare_levels(
         dz_sd = 100.0 * float(np.hypot(zs[0, r], zs[-1, r])) / zt[0, r] if zt[0, r] else float("nan")
         sig_f = abs(df) > max(z * df_sd, min_df_percent)
         sig_z = abs(dz) > max(z * dz_sd, min_dzeta_percent) if np.isfinite(dz_sd) else False
-        ok = all(r_.success for r_ in (fits[0], fits[-1])) and np.isfinite(df)
+        determined = bool(df_sd <= MAX_DF_STD_PERCENT and np.isfinite(dz_sd) and dz_sd <= MAX_DZETA_STD_PERCENT
+                          and abs(df) < 95.0 * MAX_SHIFT)
+        if not determined:
+            notes.append(f"the mode at {f[0, r]:.5g} Hz is poorly determined at some level (sd {df_sd:.2g} % in "
+                         f"frequency, {dz_sd:.2g} % in damping): not judged")
+        ok = all(r_.success for r_ in (fits[0], fits[-1])) and np.isfinite(df) and determined
         modes.append(ModeShift(freq_hz=float(f[0, r]), zeta=float(zt[0, r]), df_percent=df, df_std_percent=df_sd,
                                dzeta_percent=dz, dzeta_std_percent=dz_sd, df_percent_per_decade=df / decades,
-                               dzeta_percent_per_decade=dz / decades, significant=bool(ok and (sig_f or sig_z))))
+                               dzeta_percent_per_decade=dz / decades, significant=bool(ok and (sig_f or sig_z)),
+                               determined=determined))
     verdict = "nonlinear" if any(m.significant for m in modes) else "linear"
     return LinearityResult(levels=tuple(float(v) for v in lv), modes=tuple(modes), verdict=verdict, band=band_used,
                            freq_hz=f, zeta=zt, freq_hz_std=fs, zeta_std=zs, z=float(z), notes=tuple(notes))

@@ -36,3 +36,21 @@ def roving_test(stand: TestStand, points=SENSORS, sensors=SENSORS, n_hits: int =
             acc.add(hit_spectra(f, g[:, None] * x, fs_hz, 64, WindowSettings()))
         sets.append(acc.frfset("H1", sample_rate_hz=fs_hz))
     return merge_frfsets(sets)
+
+
+FRICTION_JOINT = {"law": "iwan", "joint": "right:10", "axis": "ry", "slip_moment_nm": 1.5,
+                  "stiffness_nm_per_rad": 2e4}
+
+
+def level_hits(config, seed: int, n_hits: int = 8, levels=(0.2, 4.0), fs_hz: float = 1024.0,
+               n_samples: int = 4096):
+    """Hits at the reference alternating between ``levels`` x the nominal force (20 and 400 N by default),
+    made by the stand of ``config`` (linear or with its nonlinear joint), as :class:`LevelHit`."""
+    from analysis.linearity import LevelHit
+    from simulator.nonlinear_joint import make_stand
+    from simulator.time_effects import simulate_hits
+
+    rec = simulate_hits(None, n_hits=n_hits, levels=levels, fs_hz=fs_hz, n_samples=n_samples, pretrigger=64,
+                        stand=make_stand(config, seed), seed=seed)
+    return [LevelHit(rec.force[i], rec.responses[i], rec.fs_hz, rec.pretrigger, rec.reference, rec.outputs)
+            for i in range(rec.n_hits)]
