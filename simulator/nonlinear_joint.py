@@ -47,7 +47,7 @@ from .response import foh_coefficients, simulate_segment
 from .stand import StandError, TestStand
 
 __all__ = ["JointLaw", "IwanJoint", "CubicJoint", "LinearJoint", "JointResult", "joint_law", "joint_dof_vector",
-           "simulate_joint", "NonlinearJointStand", "make_stand"]
+           "simulate_joint", "NonlinearJointStand", "JointModes", "make_stand"]
 
 _BLOCK = 64
 
@@ -186,17 +186,24 @@ class LinearJoint:
         return 0.0
 
 
+def _springs(cfg: FrameConfig) -> list[tuple[str, str, "str | None", list[float]]]:
+    """(kind, node a, node b or None, six stiffnesses as the FE model stamps them) of every joint and support."""
+    out: list[tuple[str, str, "str | None", list[float]]] = []
+    for a in cfg.supports.nodes:
+        f = cfg.damage.spring_factor("support", (a,))
+        out.append(("support", str(a), None, [k * f for k in cfg.nonlinear.spring_stiffness((a,), cfg.supports.stiffness)]))
+    for a, b in cfg.joints.pairs:
+        f = cfg.damage.spring_factor("joint", (a, b))
+        out.append(("joint", str(a), str(b), [k * f for k in cfg.nonlinear.spring_stiffness((a, b), cfg.joints.stiffness)]))
+    return out
+
+
 def _joint_places(cfg: FrameConfig) -> tuple[str, "str | None", float]:
     """(node a, node b or None for a support, linear rotational stiffness k0 N m/rad) of the nonlinear spring."""
     nl = cfg.nonlinear
-    ax = 3 + nl.axis_index
-    for a, b in cfg.joints.pairs:
-        if nl.joint in (a, b):
-            k6 = nl.spring_stiffness((a, b), cfg.joints.stiffness)
-            return str(a), str(b), k6[ax] * cfg.damage.spring_factor("joint", (a, b))
-    if nl.joint in cfg.supports.nodes:
-        k6 = nl.spring_stiffness((nl.joint,), cfg.supports.stiffness)
-        return nl.joint, None, k6[ax] * cfg.damage.spring_factor("support", (nl.joint,))
+    for kind, a, b, k6 in _springs(cfg):
+        if nl.joint in (a, b) and (kind == "joint" or b is None):
+            return a, b, k6[3 + nl.axis_index]
     raise ConfigError(f"nonlinear.joint {nl.joint!r} is neither a joint nor a support node")
 
 
@@ -361,6 +368,41 @@ class NonlinearJointStand(TestStand):
             ev.info["joint_peak_rotation_rad"] = float(np.max(np.abs(self._last.theta)))
             ev.info["joint_dissipated_j"] = self._last.dissipated_j
         return ev
+
+
+class JointModes:
+    """The frame's rotational springs as candidates of :mod:`analysis.diagnosis.joint_nonlinearity` (its
+    protocol ``JointSimulation``): for every joint and support and each rotation axis with a spring, the
+    share of each mode's strain energy in it. ``sensor_points``: accelerometer places (their masses load
+    the frame when the configuration's ``[sensors] mass_loading`` is on)."""
+
+    def __init__(self, config: "FrameConfig | str | Path | None" = None, sensor_points: Sequence[str] = ()) -> None:
+        self.config = config if isinstance(config, FrameConfig) else FrameConfig.load(config)
+        s = self.config.sensors
+        masses = ({f"{p.split(':')[0]}:{p.split(':')[1]}": s.accelerometer.mass_kg for p in sensor_points}
+                  if s.mass_loading else {})
+        self.model = FrameModel.from_config(self.config, masses)
+
+    def joint_candidates(self) -> "tuple[np.ndarray, list]":
+        from analysis.diagnosis.joint_nonlinearity import JointCandidate
+
+        ms = self.model.modes()
+        flex = ms.freq_hz > 0
+        shapes, w2 = ms.shapes[:, flex], ms.omega[flex] ** 2
+        out = []
+        for kind, a, b, k6 in _springs(self.config):
+            for i, axis in enumerate(("rx", "ry", "rz")):
+                k = float(k6[3 + i])
+                if not k > 0:
+                    continue
+                d = np.zeros(self.model.n_dof)
+                d[6 * self.model.node(a) + 3 + i] = 1.0
+                if b is not None:
+                    d[6 * self.model.node(b) + 3 + i] = -1.0
+                nodes = (a,) if b is None else (a, b)
+                out.append(JointCandidate(name=f"{kind} {'-'.join(nodes)} {axis}", kind=kind, nodes=nodes, axis=axis,
+                                          stiffness_nm_per_rad=k, shares=k * (d @ shapes) ** 2 / w2))
+        return ms.freq_hz[flex], out
 
 
 def make_stand(config: "FrameConfig | str | Path | None" = None, seed: int = 0) -> TestStand:

@@ -43,14 +43,25 @@ FRICTION_JOINT = {"law": "iwan", "joint": "right:10", "axis": "ry", "slip_moment
 
 
 def level_hits(config, seed: int, n_hits: int = 8, levels=(0.2, 4.0), fs_hz: float = 1024.0,
-               n_samples: int = 4096):
-    """Hits at the reference alternating between ``levels`` x the nominal force (20 and 400 N by default),
-    made by the stand of ``config`` (linear or with its nonlinear joint), as :class:`LevelHit`."""
+               n_samples: int = 4096, points=("right:6:-X",)):
+    """Hits at each of ``points`` alternating between ``levels`` x the nominal force (20 and 400 N by
+    default), made by the stand of ``config`` (linear or with its nonlinear joint), as :class:`LevelHit`
+    (sensor noise added; the default test plan's accelerometers)."""
     from analysis.linearity import LevelHit
     from simulator.nonlinear_joint import make_stand
-    from simulator.time_effects import simulate_hits
 
-    rec = simulate_hits(None, n_hits=n_hits, levels=levels, fs_hz=fs_hz, n_samples=n_samples, pretrigger=64,
-                        stand=make_stand(config, seed), seed=seed)
-    return [LevelHit(rec.force[i], rec.responses[i], rec.fs_hz, rec.pretrigger, rec.reference, rec.outputs)
-            for i in range(rec.n_hits)]
+    stand = make_stand(config, seed)
+    s = stand.config.sensors
+    rng = np.random.default_rng([seed, 25])
+    outputs = tuple(c.point for c in stand.channels[1:])
+    hits = []
+    for p in points:
+        stand.set_hammer_point(p)
+        for i in range(n_hits):
+            stand.next_strike(double_hit=False, neighbour=False, amplitude_scale=float(levels[i % len(levels)]))
+            ev = stand.strike(fs_hz, n_samples, 64, noise=False)
+            f = ev.force_n + s.force.noise_density_n_per_rthz * np.sqrt(fs_hz / 2) * rng.standard_normal(n_samples)
+            x = ev.response[1:] + (s.accelerometer.noise_density_g_per_rthz * G_M_S2 * np.sqrt(fs_hz / 2)
+                                   * rng.standard_normal((len(outputs), n_samples)))
+            hits.append(LevelHit(f, x, fs_hz, 64, p, outputs))
+    return hits
