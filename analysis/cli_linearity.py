@@ -25,7 +25,7 @@ import numpy as np
 
 from .command_line import Parser as _Parser, add_estimator, check_out_dir, parse_args, with_examples
 
-__all__ = ["main", "build_parser", "recording_levels"]
+__all__ = ["main", "build_parser", "recording_levels", "level_dependence"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -63,6 +63,41 @@ def recording_levels(path: str) -> "tuple[list[float], list] | None":
         sets = rec.frfsets()
         quantity, unit = (sets[0].quantity, sets[0].unit) if sets else ("accelerance", "")
         return level_frfsets(hits, rec.windows, quantity, unit)
+
+
+def level_dependence(measured: str, simulated: str, band: "tuple[float, float] | None" = None) -> Optional[dict]:
+    """For ``analysis diagnose``: the level comparison of a recording whose hits span force levels and,
+    when it says "nonlinear" and ``simulated`` is a simulator config (``.toml``), the
+    ``joint_nonlinearity`` cause (:mod:`analysis.diagnosis.joint_nonlinearity`) with the test re-simulated
+    by :class:`simulator.nonlinear_simulation.JointHitSimulation`. None when there is nothing to compare."""
+    from .diagnosis.joint_nonlinearity import joint_nonlinearity
+    from .inputs import detect_format
+    from .linearity import LevelHit, compare_levels, level_frfsets
+    from .recording import Recording
+
+    if detect_format(measured) != "recording":
+        return None
+    with Recording(measured) as rec:
+        hits = [LevelHit(force=h.data[h.force_channel], responses=h.data[h.response_channels], fs_hz=h.sample_rate_hz,
+                         trigger_index=h.trigger_index, point=h.reference, outputs=tuple(h.outputs))
+                for h in rec.hits(accepted_only=True, skip_damaged=True)]
+        sets0 = rec.frfsets()
+        windows = rec.windows
+    if not hits or not sets0:
+        return None
+    levels, sets = level_frfsets(hits, windows, sets0[0].quantity, sets0[0].unit)
+    if len(sets) < 2:
+        return None
+    lin = compare_levels(sets, levels, band=band)
+    out: dict = {"linearity": lin.to_dict()}
+    if lin.verdict == "nonlinear" and Path(simulated).suffix.lower() == ".toml":
+        from simulator.nonlinear_simulation import JointHitSimulation
+
+        points = tuple(dict.fromkeys(h.point for h in hits))
+        sim = JointHitSimulation(simulated, points, hits[0].outputs, levels, hits[0].fs_hz, hits[0].force.size,
+                                 hits[0].trigger_index, sets0[0].quantity, sets0[0].unit)
+        out["cause"] = joint_nonlinearity(lin, sim)
+    return out
 
 
 def _levels(args: argparse.Namespace, n: int) -> Optional[list[float]]:

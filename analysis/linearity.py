@@ -21,6 +21,7 @@ are grouped by their peak force (:func:`group_by_force`) and averaged to one H1 
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Optional, Sequence
 
@@ -64,7 +65,8 @@ class ModeShift:
 class LinearityResult:
     """The comparison: ``levels`` (ascending, the data's units: N, V...), ``modes`` (:class:`ModeShift`,
     by frequency), ``verdict`` "linear" or "nonlinear", ``band`` (Hz), per-level frequencies and damping
-    ``freq_hz`` / ``zeta`` (n_levels, n_modes) with their standard deviations, ``notes``."""
+    ``freq_hz`` / ``zeta`` (n_levels, n_modes) with their standard deviations, ``notes``, and ``poles``
+    (rad/s, as fitted to the lowest level's data: the start of every level's fit)."""
 
     levels: tuple
     modes: tuple
@@ -76,6 +78,7 @@ class LinearityResult:
     zeta_std: np.ndarray
     z: float = Z_SIGNIFICANT
     notes: tuple = field(default=())
+    poles: np.ndarray = field(default_factory=lambda: np.zeros(0, complex), repr=False)
 
     @property
     def nonlinear_modes(self) -> list[int]:
@@ -126,12 +129,14 @@ def compare_levels(
     min_df_percent: float = MIN_DF_PERCENT,
     min_dzeta_percent: float = MIN_DZETA_PERCENT,
     fit_options: Optional[dict] = None,
+    poles: Optional[np.ndarray] = None,
 ) -> LinearityResult:
     """Compare FRF sets measured at excitation ``levels`` (any positive unit; one level per set).
 
     The lowest level's set is fitted automatically (:func:`analysis.pipeline.fit_auto`, ``band`` or the
     default band, ``fit_options`` passed on); every level is then fitted by LSFD from those poles in
-    the same band. Inputs are not modified. Raises ValueError on mismatched inputs.
+    the same band. ``poles`` (complex rad/s, with ``band``): start every level's fit from these instead
+    (e.g. another comparison's ``poles``). Inputs are not modified. Raises ValueError on mismatched inputs.
     """
     from .lsfd import fit_lsfd
     from .pipeline import fit_auto
@@ -147,16 +152,25 @@ def compare_levels(
     sets = [frfs[i] for i in order]
     lv = lv[order]
     notes: list[str] = []
-    base = fit_auto(sets[0], band=band, **(fit_options or {}))
-    band_used = tuple(float(b) for b in base.band)
-    poles = base.lsfd.poles_raw
+    if poles is None:
+        base = fit_auto(sets[0], band=band, **(fit_options or {}))
+        band_used = tuple(float(b) for b in base.band)
+        poles = base.lsfd.poles_raw
+    else:
+        if band is None:
+            raise ValueError("give the band with the poles")
+        band_used = (float(band[0]), float(band[1]))
+        poles = np.asarray(poles, complex)
     # every level's pole stays within MAX_SHIFT of the lowest level's: a pole that ends on that bound went
     # to fit something else (a neighbour, distortion) and its mode is not judged
     window = MAX_SHIFT * np.abs(poles)
-    fits = [fit_lsfd(s, poles, band=band_used, freq_window_hz=window / (2 * np.pi)) for s in sets]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # non-convergence is noted below
+        fits = [fit_lsfd(s, poles, band=band_used, freq_window_hz=window / (2 * np.pi), max_iter=300) for s in sets]
     for lvl, r in zip(lv, fits):
         if not r.success:
-            notes.append(f"the fit at level {lvl:.3g} did not converge ({r.message})")
+            notes.append(f"the fit at level {lvl:.3g} stopped before converging ({r.message}); its modes are "
+                         "compared as they are")
     f = np.array([r.freq_hz for r in fits])
     zt = np.array([r.damping for r in fits])
     fs = np.array([r.freq_hz_std for r in fits])
@@ -177,14 +191,15 @@ def compare_levels(
         if not determined:
             notes.append(f"the mode at {f[0, r]:.5g} Hz is poorly determined at some level (sd {df_sd:.2g} % in "
                          f"frequency, {dz_sd:.2g} % in damping): not judged")
-        ok = all(r_.success for r_ in (fits[0], fits[-1])) and np.isfinite(df) and determined
+        ok = bool(np.isfinite(df)) and determined
         modes.append(ModeShift(freq_hz=float(f[0, r]), zeta=float(zt[0, r]), df_percent=df, df_std_percent=df_sd,
                                dzeta_percent=dz, dzeta_std_percent=dz_sd, df_percent_per_decade=df / decades,
                                dzeta_percent_per_decade=dz / decades, significant=bool(ok and (sig_f or sig_z)),
                                determined=determined))
     verdict = "nonlinear" if any(m.significant for m in modes) else "linear"
     return LinearityResult(levels=tuple(float(v) for v in lv), modes=tuple(modes), verdict=verdict, band=band_used,
-                           freq_hz=f, zeta=zt, freq_hz_std=fs, zeta_std=zs, z=float(z), notes=tuple(notes))
+                           freq_hz=f, zeta=zt, freq_hz_std=fs, zeta_std=zs, z=float(z), notes=tuple(notes),
+                           poles=fits[0].poles_raw[idx])
 
 
 def group_by_force(peaks_n: Sequence[float], min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:
