@@ -15,7 +15,7 @@ import numpy as np
 import scipy.signal
 
 from .frf import FRFSet
-from .reciprocity import frf_error_variance, same_dof
+from .reciprocity import finite_or_none, frf_error_variance, same_dof
 
 __all__ = ["DrivingPointCheck", "driving_points", "check_driving_point"]
 
@@ -44,7 +44,8 @@ class DrivingPointCheck:
 
     def to_dict(self) -> dict:
         return {"point": self.point, "ok": self.ok, "phase_ok": self.phase_ok, "phase_outside": self.phase_outside,
-                "resonances_hz": list(self.resonances_hz), "antiresonances_hz": list(self.antiresonances_hz),
+                "resonances_hz": list(self.resonances_hz),
+                "antiresonances_hz": [finite_or_none(a) for a in self.antiresonances_hz],
                 "missing": [list(m) for m in self.missing]}
 
 

@@ -58,7 +58,9 @@ class ModeShift:
     determined: bool = True
 
     def to_dict(self) -> dict:
-        return {k: (bool(v) if isinstance(v, (bool, np.bool_)) else float(v)) for k, v in self.__dict__.items()}
+        from .reciprocity import finite_or_none
+
+        return {k: (bool(v) if isinstance(v, (bool, np.bool_)) else finite_or_none(v)) for k, v in self.__dict__.items()}
 
 
 @dataclass(frozen=True)
@@ -99,8 +101,8 @@ class LinearityResult:
         levels, band, z, per-level frequencies and damping, notes."""
         return {"verdict": self.verdict, "modes": [m.to_dict() for m in self.modes],
                 "levels": [float(v) for v in self.levels], "band_hz": [float(b) for b in self.band],
-                "z": float(self.z), "freq_hz_by_level": np.asarray(self.freq_hz).tolist(),
-                "zeta_by_level": np.asarray(self.zeta).tolist(), "notes": list(self.notes)}
+                "z": float(self.z), "freq_hz_by_level": np.nan_to_num(self.freq_hz).tolist(),
+                "zeta_by_level": np.nan_to_num(self.zeta).tolist(), "notes": list(self.notes)}
 
 
 @dataclass(frozen=True)
@@ -134,10 +136,11 @@ def compare_levels(
     """Compare FRF sets measured at excitation ``levels`` (any positive unit; one level per set).
 
     The lowest level's set is fitted automatically (:func:`analysis.pipeline.fit_auto`, ``band`` or the
-    default band, ``fit_options`` passed on); every level is then fitted by LSFD from those poles in
+    default band, ``fit_options`` passed on; the next level's when no poles are found there); every level is then fitted by LSFD from those poles in
     the same band. ``poles`` (complex rad/s, with ``band``): start every level's fit from these instead
     (e.g. another comparison's ``poles``). Inputs are not modified. Raises ValueError on mismatched inputs.
     """
+    from .bands import FitError
     from .lsfd import fit_lsfd
     from .pipeline import fit_auto
 
@@ -153,8 +156,17 @@ def compare_levels(
     lv = lv[order]
     notes: list[str] = []
     if poles is None:
-        base = fit_auto(sets[0], band=band, **(fit_options or {}))
-        band_used = tuple(float(b) for b in base.band)
+        base = None
+        for k, s in enumerate(sets):  # the lowest level first; a higher one (better signal) when it finds no poles
+            try:
+                base = fit_auto(s, band=band, **(fit_options or {}))
+                break
+            except FitError:
+                if k == len(sets) - 1:
+                    raise
+                notes.append(f"no poles found at level {lv[k]:.3g}; the modes were found at level {lv[k + 1]:.3g}")
+        assert base is not None
+        band_used: tuple[float, float] = (float(base.band[0]), float(base.band[1]))
         poles = base.lsfd.poles_raw
     else:
         if band is None:
@@ -179,20 +191,20 @@ def compare_levels(
     f, zt, fs, zs = f[:, idx], zt[:, idx], fs[:, idx], zs[:, idx]
     decades = float(np.log10(lv[-1] / lv[0]))
     modes = []
-    for r in range(f.shape[1]):
-        df = _pct(f[0, r], f[-1, r])
-        df_sd = 100.0 * float(np.hypot(fs[0, r], fs[-1, r])) / f[0, r]
-        dz = _pct(zt[0, r], zt[-1, r])
-        dz_sd = 100.0 * float(np.hypot(zs[0, r], zs[-1, r])) / zt[0, r] if zt[0, r] else float("nan")
+    for k in range(f.shape[1]):
+        df = _pct(float(f[0, k]), float(f[-1, k]))
+        df_sd = 100.0 * float(np.hypot(fs[0, k], fs[-1, k]) / f[0, k])
+        dz = _pct(float(zt[0, k]), float(zt[-1, k]))
+        dz_sd = 100.0 * float(np.hypot(zs[0, k], zs[-1, k]) / zt[0, k]) if zt[0, k] else float("nan")
         sig_f = abs(df) > max(z * df_sd, min_df_percent)
         sig_z = abs(dz) > max(z * dz_sd, min_dzeta_percent) if np.isfinite(dz_sd) else False
         determined = bool(df_sd <= MAX_DF_STD_PERCENT and np.isfinite(dz_sd) and dz_sd <= MAX_DZETA_STD_PERCENT
                           and abs(df) < 95.0 * MAX_SHIFT)
         if not determined:
-            notes.append(f"the mode at {f[0, r]:.5g} Hz is poorly determined at some level (sd {df_sd:.2g} % in "
+            notes.append(f"the mode at {f[0, k]:.5g} Hz is poorly determined at some level (sd {df_sd:.2g} % in "
                          f"frequency, {dz_sd:.2g} % in damping): not judged")
         ok = bool(np.isfinite(df)) and determined
-        modes.append(ModeShift(freq_hz=float(f[0, r]), zeta=float(zt[0, r]), df_percent=df, df_std_percent=df_sd,
+        modes.append(ModeShift(freq_hz=float(f[0, k]), zeta=float(zt[0, k]), df_percent=df, df_std_percent=df_sd,
                                dzeta_percent=dz, dzeta_std_percent=dz_sd, df_percent_per_decade=df / decades,
                                dzeta_percent_per_decade=dz / decades, significant=bool(ok and (sig_f or sig_z)),
                                determined=determined))

@@ -26,12 +26,18 @@ from .frf import FRFSet
 from .points import PointLabelError, parse_point
 
 __all__ = ["ReciprocityPair", "ReciprocityResult", "reciprocity", "same_dof", "frf_error_variance",
-           "default_bands"]
+           "default_bands", "finite_or_none"]
 
 MIN_COHERENCE = 0.5
 MIN_RATIO_ERROR = 0.03
 MIN_LINES = 10
 MIN_R = 3.0
+
+
+def finite_or_none(x: float) -> Optional[float]:
+    """``float(x)``, or None when it is not finite (JSON has no NaN)."""
+    v = float(x)
+    return v if np.isfinite(v) else None
 
 
 def same_dof(a: str, b: str) -> int:
@@ -89,7 +95,8 @@ class ReciprocityPair:
 
     def to_dict(self) -> dict:
         return {"i": self.i, "j": self.j,
-                "bands": [{"band_hz": list(b), "r": float(r), "lines": int(n), "ratio": float(q), "flagged": bool(f)}
+                "bands": [{"band_hz": list(b), "r": finite_or_none(r), "lines": int(n), "ratio": finite_or_none(q),
+                           "flagged": bool(f)}
                           for b, r, n, q, f in zip(self.bands, self.r, self.lines, self.ratio, self.flagged)]}
 
 
@@ -157,14 +164,20 @@ def reciprocity(
             sel = good & (f >= lo) & (f <= hi_b) & (np.abs(h2) > 0)
             n = int(sel.sum())
             if n < MIN_LINES:
-                rs.append(float("nan")), ns.append(0), qs.append(float("nan")), fl.append(False)
+                rs.append(float("nan"))
+                ns.append(n)
+                qs.append(float("nan"))
+                fl.append(False)
                 continue
             r = float(np.mean(np.abs(h1[sel] - h2[sel]) ** 2 / v[sel])) if var is not None else float("nan")
             q = float(np.median(np.abs(h1[sel] / h2[sel])))
             big = abs(q - 1.0) > min_ratio_error or float(np.median(np.abs(h1[sel] - h2[sel]) / np.abs(h2[sel]))) > \
                 2 * min_ratio_error
             noisy = (r > max(1.0 + z / np.sqrt(n), MIN_R)) if np.isfinite(r) else True
-            rs.append(r), ns.append(n), qs.append(q), fl.append(bool(big and noisy))
+            rs.append(r)
+            ns.append(n)
+            qs.append(q)
+            fl.append(bool(big and noisy))
         pairs.append(ReciprocityPair(frf.outputs[a], frf.outputs[b], tuple(tuple(map(float, bd)) for bd in bands),
                                      tuple(rs), tuple(ns), tuple(qs), tuple(fl)))
         okq = [(q, n) for q, n in zip(qs, ns) if n > 0 and np.isfinite(q)]

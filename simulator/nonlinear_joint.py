@@ -15,8 +15,8 @@ response to ``-delta m``; only ``theta`` and ``m`` need stepping. On a grid ``h 
 each mode's complex state is propagated exactly for an input linear between steps (the first-order
 hold of :mod:`simulator.response`), so with ``theta_nl[k] = P[k] - d1 m[k-1] - d0 m[k]`` the step is
 implicit in ``m[k]`` only: the scalar equation ``m = M(theta) - k0 theta`` is solved by a Newton step on the
-law's tangent stiffness (exact for the piecewise-linear Iwan law unless a slider changes state within the step). The joint's moment is
-then exact up to its first-order hold between steps (second order in ``h``).
+law's tangent stiffness (exact for the piecewise-linear Iwan law unless a slider changes state within
+the step). The joint's moment is then exact up to its first-order hold between steps (second order in ``h``).
 
 Laws (``[nonlinear] law``):
 
@@ -361,7 +361,7 @@ class NonlinearJointStand(TestStand):
         self._last = res
         return res.accel
 
-    def strike(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+    def strike(self, *args, **kwargs):
         self._last = None
         ev = super().strike(*args, **kwargs)
         if self._last is not None:

@@ -42,7 +42,7 @@ def test_friction_joint_softens_and_damps_the_modes_that_rotate_it():
     sig = [m for m in res.modes if m.significant]
     assert len(sig) >= 2 and all(m.df_percent < 0 for m in sig)
     # the joint's share of each mode's strain energy, k0 delta_r^2 / omega_r^2: the mode that softens most
-    # is one of the joint's (and gains damping); the softening follows the shares' order
+    # is one of the joint's (and gains damping)
     model = FrameModel.from_config(cfg)
     ms = model.modes()
     share = joint_law(cfg).k0 * (joint_dof_vector(model, cfg) @ ms.shapes) ** 2 / ms.omega ** 2
@@ -51,8 +51,8 @@ def test_friction_joint_softens_and_damps_the_modes_that_rotate_it():
     df = np.array([m.df_percent for m in judged])
     most = int(np.argmin(df))
     assert at[most] > 0.5 * at.max() and judged[most].dzeta_percent > 10
-    rank = lambda x: np.argsort(np.argsort(x))  # noqa: E731
-    assert np.corrcoef(rank(at), rank(-df))[0, 1] > 0
+    # a mode that moves beyond the noise is one whose shape loads the joint
+    assert all(a >= 0.1 * at.max() for a, m in zip(at, judged) if m.significant)
     d = res.to_dict()
     assert d["verdict"] == "nonlinear" and {"freq_hz", "df_percent", "df_std_percent", "dzeta_percent",
                                             "significant"} <= set(d["modes"][0])

@@ -98,7 +98,7 @@ def quality_html(q: Optional[dict]) -> str:
     for dp in c["driving_points"]:
         rows.append(_row(f"driving point {dp['point']}", "ok" if dp["ok"] else "suspect",
                          f"{len(dp['resonances_hz'])} resonances, antiresonances at "
-                         + ", ".join(f"{a:.4g}" for a in dp["antiresonances_hz"] if a == a) + " Hz"
+                         + ", ".join(f"{a:.4g}" for a in dp["antiresonances_hz"] if a is not None) + " Hz"
                          + ("" if dp["phase_ok"] else f"; phase outside +-90 deg on {100 * dp['phase_outside']:.0f} %")))
     if not c["driving_points"]:
         rows.append(_row("driving point", "not measured", "no response taken where and along which a hit struck"))
