@@ -289,7 +289,24 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,
                                      progress=say, timeout_s=args.timeout)
             result = _run_session(session, writer)
-    return _finish(result, f"recording written: {out}", out_stream, quiet=args.quiet)
+    done = _finish(result, f"recording written: {out}", out_stream, quiet=args.quiet)
+    if result is not None:
+        _print_quality(out, out_stream)
+    return done
+
+
+def _print_quality(path: Path, out_stream: TextIO) -> None:
+    """The recording's quality checks (linearity when the hits span force levels, reciprocity, driving
+    points), one line each; a check that cannot run is named, the recording stays as written."""
+    from analysis.errors import ImpactlabError
+    from analysis.quality import quality_lines, recording_quality
+
+    try:
+        lines = quality_lines(recording_quality(path))
+    except (ImpactlabError, ValueError, OSError) as exc:
+        lines = [f"not checked ({exc})"]
+    for line in lines:
+        print(f"quality: {line}", file=out_stream)
 
 
 def recorded_test(args: argparse.Namespace) -> tuple:

@@ -25,7 +25,7 @@ import numpy as np
 
 from .command_line import Parser as _Parser, add_estimator, check_out_dir, parse_args, with_examples
 
-__all__ = ["main", "build_parser", "recording_levels", "level_dependence"]
+__all__ = ["main", "build_parser", "level_dependence"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -45,47 +45,18 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def recording_levels(path: str) -> "tuple[list[float], list] | None":
-    """(levels N, FRF sets) from a recording's accepted hits grouped by peak force; None when the file
-    is not a recording or holds no hits."""
-    from .inputs import detect_format
-    from .linearity import LevelHit, level_frfsets
-    from .recording import Recording
-
-    if detect_format(path) != "recording":
-        return None
-    with Recording(path) as rec:
-        hits = [LevelHit(force=h.data[h.force_channel], responses=h.data[h.response_channels], fs_hz=h.sample_rate_hz,
-                         trigger_index=h.trigger_index, point=h.reference, outputs=tuple(h.outputs))
-                for h in rec.hits(accepted_only=True, skip_damaged=True)]
-        if not hits:
-            return None
-        sets = rec.frfsets()
-        quantity, unit = (sets[0].quantity, sets[0].unit) if sets else ("accelerance", "")
-        return level_frfsets(hits, rec.windows, quantity, unit)
-
-
 def level_dependence(measured: str, simulated: str, band: "tuple[float, float] | None" = None) -> Optional[dict]:
     """For ``analysis diagnose``: the level comparison of a recording whose hits span force levels and,
     when it says "nonlinear" and ``simulated`` is a simulator config (``.toml``), the
     ``joint_nonlinearity`` cause (:mod:`analysis.diagnosis.joint_nonlinearity`) with the test re-simulated
     by :class:`simulator.nonlinear_simulation.JointHitSimulation`. None when there is nothing to compare."""
     from .diagnosis.joint_nonlinearity import joint_nonlinearity
-    from .inputs import detect_format
-    from .linearity import LevelHit, compare_levels, level_frfsets
-    from .recording import Recording
+    from .linearity import compare_levels, recording_hits
 
-    if detect_format(measured) != "recording":
+    got = recording_hits(measured)
+    if got is None:
         return None
-    with Recording(measured) as rec:
-        hits = [LevelHit(force=h.data[h.force_channel], responses=h.data[h.response_channels], fs_hz=h.sample_rate_hz,
-                         trigger_index=h.trigger_index, point=h.reference, outputs=tuple(h.outputs))
-                for h in rec.hits(accepted_only=True, skip_damaged=True)]
-        sets0 = rec.frfsets()
-        windows = rec.windows
-    if not hits or not sets0:
-        return None
-    levels, sets = level_frfsets(hits, windows, sets0[0].quantity, sets0[0].unit)
+    hits, levels, sets = got
     if len(sets) < 2:
         return None
     lin = compare_levels(sets, levels, band=band)
@@ -95,7 +66,7 @@ def level_dependence(measured: str, simulated: str, band: "tuple[float, float] |
 
         points = tuple(dict.fromkeys(h.point for h in hits))
         sim = JointHitSimulation(simulated, points, hits[0].outputs, levels, hits[0].fs_hz, hits[0].force.size,
-                                 hits[0].trigger_index, sets0[0].quantity, sets0[0].unit)
+                                 hits[0].trigger_index, sets[0].quantity, sets[0].unit)
         out["cause"] = joint_nonlinearity(lin, sim)
     return out
 
@@ -115,7 +86,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError
     from .inputs import InputError, load_input, parse_band_text
-    from .linearity import compare_levels
+    from .linearity import compare_levels, recording_hits
     from .recording import RecordingError
 
     args = parse_args(build_parser(), argv)
@@ -128,21 +99,21 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if len(args.inputs) == 1:
             if levels is not None:
                 raise InputError("--levels needs one input per level; one recording's hits are grouped by force")
-            got = recording_levels(args.inputs[0])
+            got = recording_hits(args.inputs[0])
             if got is None:
                 raise InputError(f"{args.inputs[0]}: one input must be a recording with hits (its hits are grouped "
                                  "by force); otherwise give one input per level")
-            levels, sets = got
+            _, levels, sets = got
             if len(sets) < 2:
                 raise InputError(f"{args.inputs[0]}: the hits' peak forces do not spread enough to compare levels "
                                  "(strike soft and hard hits at each point)")
         else:
             sets = [load_input(p, estimator=args.estimator) for p in args.inputs]
             if levels is None:
-                found = [recording_levels(p) for p in args.inputs]
+                found = [recording_hits(p) for p in args.inputs]
                 if any(f is None for f in found):
                     raise InputError("give --levels (one per input): the level cannot be read from every input")
-                levels = [float(np.median(f[0])) for f in found if f is not None]
+                levels = [float(np.median([np.max(np.abs(h.force)) for h in f[0]])) for f in found if f is not None]
         result = compare_levels(sets, levels, band=band, z=args.z)
     except (InputError, RecordingError, FitError, ValueError, OSError) as exc:
         print(f"analysis linearity: {exc}", file=sys.stderr)

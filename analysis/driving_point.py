@@ -23,6 +23,7 @@ PHASE_TOLERANCE_DEG = 10.0
 PEAK_PROMINENCE_DB = 6.0
 ANTIRESONANCE_DEPTH_DB = 3.0
 MIN_PHASE_RISE_DEG = 20.0
+MIN_COHERENCE = 0.5
 
 
 @dataclass(frozen=True)
@@ -64,11 +65,16 @@ def check_driving_point(frf: FRFSet, output: int, reference: int, sign: int = 1,
                         band: Optional[Sequence[float]] = None,
                         tolerance_deg: float = PHASE_TOLERANCE_DEG,
                         prominence_db: float = PEAK_PROMINENCE_DB) -> DrivingPointCheck:
-    """Check one driving-point FRF ``H[output, reference]`` (times ``sign``) in ``band`` (Hz; default all
-    lines above 0). Inputs are not modified."""
+    """Check one driving-point FRF ``H[output, reference]`` (times ``sign``) in ``band`` (Hz; default
+    :func:`analysis.bands.default_band`: what the analyser, the hammer and the coherence support). Lines
+    whose coherence is below ``MIN_COHERENCE`` are left out. Inputs are not modified."""
+    from .bands import default_band
+
     f = frf.freq_hz
-    lo, hi = (float(band[0]), float(band[1])) if band is not None else (float(f[f > 0][0]), float(f[-1]))
+    lo, hi = (float(band[0]), float(band[1])) if band is not None else default_band(frf)
     sel = (f >= lo) & (f <= hi) & (f > 0)
+    if frf.coherence is not None:
+        sel &= ~(frf.coherence[output, reference] < MIN_COHERENCE)
     mob = frf.as_quantity("mobility").H[output, reference, sel] * sign
     fb = f[sel]
     var = frf_error_variance(frf)
@@ -89,12 +95,16 @@ def check_driving_point(frf: FRFSet, output: int, reference: int, sign: int = 1,
         # the mobility's phase falls by up to 180 degrees through each resonance and rises again at the
         # antiresonance between them (damping may keep it below zero when the two are close); without an
         # antiresonance it keeps falling
+        # antiresonance: the imaginary part turns from negative (mass-like) back to positive, or (close
+        # pairs) the phase rises by at least MIN_PHASE_RISE_DEG
         seg = np.degrees(np.unwrap(np.angle(mob[p1:p2 + 1])))
         rise = float(np.max(seg - np.minimum.accumulate(seg)))
+        im = mob[p1:p2 + 1].imag
+        turns = bool(np.any((im[:-1] < 0) & (im[1:] >= 0)))
         dips = mag[p1:p2 + 1]
         k = int(np.argmin(dips))
         deep = dips[k] < min(mag[p1], mag[p2]) - ANTIRESONANCE_DEPTH_DB
-        if rise >= MIN_PHASE_RISE_DEG and deep:
+        if (turns or rise >= MIN_PHASE_RISE_DEG) and deep:
             anti.append(float(fb[p1 + k]))
         else:
             anti.append(float("nan"))

@@ -30,6 +30,7 @@ import numpy as np
 from .frf import FRFSet
 
 __all__ = ["ModeShift", "LinearityResult", "LevelHit", "compare_levels", "group_by_force", "level_frfsets",
+           "recording_hits",
            "Z_SIGNIFICANT", "MIN_DF_PERCENT", "MIN_DZETA_PERCENT", "MIN_LEVEL_RATIO"]
 
 Z_SIGNIFICANT = 3.0
@@ -267,3 +268,25 @@ def level_frfsets(hits: Sequence[Any], windows: Any = None, quantity: str = "acc
             peaks.setdefault(g, []).extend(p for p, lab in zip(pk, labels) if lab == g)
     keys = sorted(per_level)
     return [float(np.median(peaks[k])) for k in keys], [merge_frfsets(per_level[k]) for k in keys]
+
+
+def recording_hits(path: Any) -> "tuple[list[LevelHit], list[float], list[FRFSet]] | None":
+    """A recording's accepted hits (:class:`LevelHit`), their levels (median peak force per group, N) and
+    H1 per level (:func:`level_frfsets`, the recording's windows, quantity and unit); None when the file
+    is not a recording or holds no hits."""
+    from .inputs import detect_format
+    from .recording import Recording
+
+    if detect_format(path) != "recording":
+        return None
+    with Recording(path) as rec:
+        hits = [LevelHit(force=h.data[h.force_channel], responses=h.data[h.response_channels], fs_hz=h.sample_rate_hz,
+                         trigger_index=h.trigger_index, point=h.reference, outputs=tuple(h.outputs))
+                for h in rec.hits(accepted_only=True, skip_damaged=True)]
+        sets = rec.frfsets()
+        windows = rec.windows
+    if not hits:
+        return None
+    quantity, unit = (sets[0].quantity, sets[0].unit) if sets else ("accelerance", "")
+    levels, level_sets = level_frfsets(hits, windows, quantity, unit)
+    return hits, levels, level_sets

@@ -14,7 +14,7 @@ from .driving_point import check_driving_point, driving_points
 from .frf import FRFSet
 from .reciprocity import reciprocity
 
-__all__ = ["quality_checks", "quality_lines"]
+__all__ = ["quality_checks", "quality_lines", "recording_quality"]
 
 
 def quality_checks(frf: FRFSet, *, band: Optional[Sequence[float]] = None, linearity: Any = None) -> dict:
@@ -55,3 +55,21 @@ def quality_lines(checks: dict) -> list[str]:
                 why.append("no antiresonance between " + ", ".join(f"{a:.4g}-{b:.4g} Hz" for a, b in dp["missing"]))
             out.append(f"driving point {dp['point']}: " + "; ".join(why) + " (sign, place or label wrong?)")
     return out
+
+
+def recording_quality(path: Any, estimator: Optional[str] = None) -> dict:
+    """:func:`quality_checks` of a recording's FRFs, with the linearity of its hits when their peak forces
+    span levels (:func:`analysis.linearity.recording_hits`)."""
+    from .bands import FitError
+    from .linearity import compare_levels, recording_hits
+    from .recording import load_frfset
+
+    frf = load_frfset(path, estimator)
+    got = recording_hits(path)
+    lin = None
+    if got is not None and len(got[2]) >= 2:
+        try:
+            lin = compare_levels(got[2], got[1])
+        except (FitError, ValueError):
+            lin = None
+    return quality_checks(frf, linearity=lin)
