@@ -30,7 +30,7 @@ import numpy as np
 from .frf import FRFSet
 
 __all__ = ["ModeShift", "LinearityResult", "LevelHit", "compare_levels", "group_by_force", "level_frfsets",
-           "recording_hits",
+           "recording_hits", "level_spread",
            "Z_SIGNIFICANT", "MIN_DF_PERCENT", "MIN_DZETA_PERCENT", "MIN_LEVEL_RATIO"]
 
 Z_SIGNIFICANT = 3.0
@@ -290,3 +290,48 @@ def recording_hits(path: Any) -> "tuple[list[LevelHit], list[float], list[FRFSet
     quantity, unit = (sets[0].quantity, sets[0].unit) if sets else ("accelerance", "")
     levels, level_sets = level_frfsets(hits, windows, quantity, unit)
     return hits, levels, level_sets
+
+
+def level_spread(hits: Sequence[Any], band: Optional[Sequence[float]] = None, n_peaks: int = 4) -> Optional[dict]:
+    """A quick look for the operator while testing: the hits of one point (:class:`analysis.spectra.HitSpectra`)
+    grouped by force (the RMS of each force spectrum in ``band`` Hz, relative to the softest group), H1
+    per group and, at the ``n_peaks`` strongest resonances of the first output, the peak frequency of the
+    hard hits' H1 relative to the soft hits' (parabola through the top three lines of ``|H1|``, in %).
+    None until the hits span two levels. No modal fit: :func:`compare_levels` gives the changes with
+    their uncertainty."""
+    from scipy.signal import find_peaks
+
+    if len(hits) < 2:
+        return None
+    f = hits[0].freq_hz
+    lo, hi = (float(band[0]), float(band[1])) if band is not None else (float(f[1]), float(f[-1]))
+    sel = (f >= lo) & (f <= hi)
+    rms = np.array([np.sqrt(np.sum(h.Gff[sel])) for h in hits])
+    labels = group_by_force(rms)
+    if labels.max() == 0:
+        return None
+    h1 = []
+    for g in (0, 1):
+        gff = sum(h.Gff for h, lab in zip(hits, labels) if lab == g)
+        gfx = sum(h.Gfx[0] for h, lab in zip(hits, labels) if lab == g)
+        h1.append(np.abs(gfx / np.where(gff > 0, gff, np.inf)))
+    mag = np.where(sel, h1[0], 0.0)
+    pk, prop = find_peaks(mag, prominence=0.05 * float(np.max(mag)))
+    top = np.sort(pk[np.argsort(prop["prominences"])[::-1][:n_peaks]])
+
+    def vertex(y: np.ndarray, k: int) -> float:
+        a, b, c = np.log(np.maximum(y[k - 1:k + 2], 1e-300))
+        den = a - 2 * b + c
+        return float(f[k] + (0.5 * (a - c) / den if den != 0 else 0.0) * (f[1] - f[0]))
+
+    peaks = []
+    for k in top:
+        if 0 < k < f.size - 1:
+            f0, f1 = vertex(h1[0], k), vertex(h1[1], k)
+            peaks.append({"freq_hz": f0, "df_percent": 100.0 * (f1 - f0) / f0,
+                          "db": float(20 * np.log10(max(h1[1][k], 1e-300) / max(h1[0][k], 1e-300)))})
+    ratio = float(np.median(rms[labels == 1]) / np.median(rms[labels == 0]))
+    line = (f"soft ({int(np.sum(labels == 0))}) and hard ({int(np.sum(labels == 1))}) hits, force x {ratio:.3g}: "
+            + ", ".join(f"{p['freq_hz']:.4g} Hz {p['df_percent']:+.2f} %" for p in peaks))
+    return {"force_ratio": ratio, "n_hits": [int(np.sum(labels == 0)), int(np.sum(labels == 1))], "peaks": peaks,
+            "line": line}

@@ -96,3 +96,19 @@ def test_bolted_beam_softens_and_damps_more_at_the_higher_drive(shared_data, tmp
     m98 = next(m for f, m in near.items() if 95 <= f <= 101)
     assert -1.3 < m98.df_percent < -0.8 and m98.significant and m98.dzeta_percent > 15
     assert sum(m.significant and m.df_percent < 0 for m in res.modes) >= 3
+
+
+def test_level_spread_for_the_station():
+    from analysis.linearity import level_spread
+    from analysis.spectra import WindowSettings, hit_spectra
+
+    out = []
+    for cfg in (None, FrameConfig.from_dict({"nonlinear": FRICTION_JOINT})):
+        hs = [hit_spectra(h.force, h.responses, h.fs_hz, h.trigger_index, WindowSettings())
+              for h in level_hits(cfg, 5, n_hits=6)]
+        out.append(level_spread(hs, (5.0, 400.0)))
+        assert level_spread(hs[::2], (5.0, 400.0)) is None  # soft hits only: one level
+    assert out[0]["n_hits"] == [3, 3] and out[0]["force_ratio"] > 10
+    assert all(abs(p["df_percent"]) < 0.05 for p in out[0]["peaks"])
+    assert min(p["df_percent"] for p in out[1]["peaks"]) < -0.2
+    assert "soft (3) and hard (3) hits" in out[1]["line"]
