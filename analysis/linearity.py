@@ -137,8 +137,8 @@ def compare_levels(
     """Compare FRF sets measured at excitation ``levels`` (any positive unit; one level per set).
 
     The lowest level's set is fitted automatically (:func:`analysis.pipeline.fit_auto`, ``band`` or the
-    default band, ``fit_options`` passed on; the next level's when no poles are found there); every level is then fitted by LSFD from those poles in
-    the same band. ``poles`` (complex rad/s, with ``band``): start every level's fit from these instead
+    default band, ``fit_options`` passed on; the next level's when no poles are found there); every level
+    is then fitted by LSFD from those poles in the same band. ``poles`` (complex rad/s, with ``band``): start every level's fit from these instead
     (e.g. another comparison's ``poles``). Inputs are not modified. Raises ValueError on mismatched inputs.
     """
     from .bands import FitError
@@ -215,7 +215,7 @@ def compare_levels(
                            poles=fits[0].poles_raw[idx])
 
 
-def group_by_force(peaks_n: Sequence[float], min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:
+def group_by_force(peaks_n: "Sequence[float] | np.ndarray", min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:
     """Level group (0 = soft, 1 = hard) of each hit from its peak force (N): the hits are split at the
     widest gap of their log peak forces when the groups' median forces differ by at least ``min_ratio``;
     otherwise every hit is group 0 (one level: the natural spread is too narrow to compare)."""
@@ -243,9 +243,9 @@ def level_frfsets(hits: Sequence[Any], windows: Any = None, quantity: str = "acc
     ``hits``: objects with ``force`` (n,) N, ``responses`` (n_out, n), ``fs_hz``, ``trigger_index``,
     ``point`` (the struck reference) and ``outputs`` (e.g. adapters over
     :class:`analysis.recording.RecordedHit`). Each point's hits are grouped by :func:`group_by_force`;
-    the groups' H1 are merged over points (:func:`analysis.recording.merge_frfsets`). Returns the
-    levels (median peak force per group, N) and one FRF set per level; one level when the forces do
-    not spread.
+    the groups' H1 are merged over the points struck at two levels (:func:`analysis.recording.merge_frfsets`;
+    a point struck at one level only is left out). Returns the levels (median peak force per group, N) and
+    one FRF set per level; one level when no point's forces spread.
     """
     from .recording import merge_frfsets
     from .spectra import FRFAccumulator, WindowSettings, hit_spectra
@@ -256,9 +256,13 @@ def level_frfsets(hits: Sequence[Any], windows: Any = None, quantity: str = "acc
         by_point.setdefault(str(h.point), []).append(h)
     per_level: dict[int, list[FRFSet]] = {}
     peaks: dict[int, list[float]] = {}
+    grouped = {point: group_by_force([float(np.max(np.abs(h.force))) for h in hs]) for point, hs in by_point.items()}
+    two = {point for point, lab in grouped.items() if lab.max() == 1}
     for point, hs in by_point.items():
+        if two and point not in two:
+            continue  # a point struck at one level only joins no comparison (the sets must hold the same FRFs)
         pk = [float(np.max(np.abs(h.force))) for h in hs]
-        labels = group_by_force(pk)
+        labels = grouped[point]
         for g in sorted(set(labels.tolist())):
             acc = FRFAccumulator(hs[0].outputs, point, quantity, unit)
             for h, lab in zip(hs, labels):

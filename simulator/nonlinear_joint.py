@@ -37,14 +37,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol, Sequence
+from typing import Any, Protocol, Sequence
 
 import numpy as np
 
 from .config import ConfigError, FrameConfig, NonlinearConfig
 from .fem import FrameModel
 from .response import foh_coefficients, simulate_segment
-from .stand import StandError, TestStand
+from .stand import StandError, StandEvent, TestStand
 
 __all__ = ["JointLaw", "IwanJoint", "CubicJoint", "LinearJoint", "JointResult", "joint_law", "joint_dof_vector",
            "simulate_joint", "NonlinearJointStand", "JointModes", "make_stand"]
@@ -361,7 +361,7 @@ class NonlinearJointStand(TestStand):
         self._last = res
         return res.accel
 
-    def strike(self, *args, **kwargs):
+    def strike(self, *args: Any, **kwargs: Any) -> StandEvent:
         self._last = None
         ev = super().strike(*args, **kwargs)
         if self._last is not None:
