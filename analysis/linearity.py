@@ -138,8 +138,9 @@ def compare_levels(
 
     The lowest level's set is fitted automatically (:func:`analysis.pipeline.fit_auto`, ``band`` or the
     default band, ``fit_options`` passed on; the next level's when no poles are found there); every level
-    is then fitted by LSFD from those poles in the same band. ``poles`` (complex rad/s, with ``band``): start every level's fit from these instead
-    (e.g. another comparison's ``poles``). Inputs are not modified. Raises ValueError on mismatched inputs.
+    is then fitted by LSFD from those poles in the same band. ``poles`` (complex rad/s, with ``band``):
+    start every level's fit from these instead (e.g. another comparison's ``poles``). Inputs are not
+    modified. Raises ValueError on mismatched inputs.
     """
     from .bands import FitError
     from .lsfd import fit_lsfd

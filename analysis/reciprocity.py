@@ -30,7 +30,7 @@ __all__ = ["ReciprocityPair", "ReciprocityResult", "reciprocity", "same_dof", "f
 
 MIN_COHERENCE = 0.5
 MIN_RATIO_ERROR = 0.03
-MIN_LINES = 10
+MIN_LINES = 20
 MIN_R = 3.0
 
 
