@@ -37,7 +37,7 @@ the Iwan slip moment.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Optional, Protocol, Sequence
+from typing import Any, Protocol, Sequence
 
 import numpy as np
 
@@ -119,8 +119,11 @@ def joint_nonlinearity(linearity: Any, simulation: JointSimulation) -> dict:
     Keys: ``effect`` ("joint_nonlinearity"), ``present`` (bool), ``evidence`` (one sentence), and when
     the modes allow a fit: ``joint`` (the best candidate: name, kind, nodes, axis, stiffness_nm_per_rad),
     ``law`` (``stiffness_change_percent``, ``loss_factor_change``, ``kind``: "micro-slip friction",
-    "softening spring" or "hardening spring", ``levels``), ``chi2`` per candidate (best first),
-    ``global_chi2``, ``modes_used``. ``linearity`` is a :class:`analysis.linearity.LinearityResult`.
+    "softening spring" or "hardening spring", ``slip_moment_nm`` and ``residual_stiffness_fraction`` when
+    simulated (else None), ``stiffness_change_percent_per_decade``, ``levels``), ``method`` ("strain-energy
+    shares" or "simulated hits"), ``ambiguous_with`` (candidates within ``MIN_MARGIN``), ``chi2`` per
+    candidate (best first), ``global_chi2``, ``global_change_percent``, ``modes_used``. ``linearity`` is a
+    :class:`analysis.linearity.LinearityResult`.
     """
     base = {"effect": "joint_nonlinearity", "present": False}
     if linearity.verdict != "nonlinear":
@@ -159,10 +162,14 @@ def joint_nonlinearity(linearity: Any, simulation: JointSimulation) -> dict:
     method = "strain-energy shares"
     slip = None
     if hasattr(simulation, "level_frfs") and getattr(linearity, "poles", np.zeros(0)).size:
-        sim_rows = _simulated(linearity, simulation, rows[:N_SIMULATED], f[keep], df, df_sd, dz, dz_sd)
+        df_sd2 = np.hypot(df_sd, SIM_MODEL_FRACTION * df)
+        dz_sd2 = np.hypot(dz_sd, SIM_MODEL_FRACTION * dz)
+        sim_rows = _simulated(linearity, simulation, rows[:N_SIMULATED], f[keep], df, df_sd2, dz, dz_sd2)
         if sim_rows:
             rows, method = sim_rows, "simulated hits"
             slip = rows[0][4]
+            # the global candidate judged with the same deviations
+            global_chi2 = _fit(np.ones(df.size), df, df_sd2)[1] + _fit(z0, dz, dz_sd2)[1]
     chi2, best, a, b = rows[0][:4]
     runner = rows[1][0] if len(rows) > 1 else float("inf")
     present = bool(chi2 * MIN_LIKELIHOOD_RATIO <= global_chi2 and a != 0)
@@ -193,14 +200,13 @@ def joint_nonlinearity(linearity: Any, simulation: JointSimulation) -> dict:
             "global_chi2": global_chi2, "global_change_percent": 100.0 * g_a, "modes_used": int(keep.sum())}
 
 
-def _simulated(linearity: Any, simulation: Any, screened: list, f: np.ndarray, df: np.ndarray, df_sd: np.ndarray,
-               dz: np.ndarray, dz_sd: np.ndarray) -> list:
+def _simulated(linearity: Any, simulation: Any, screened: list, f: np.ndarray, df: np.ndarray, df_sd2: np.ndarray,
+               dz: np.ndarray, dz_sd2: np.ndarray) -> list:
     """Rows (chi2, candidate, a, b, slip moment) from the simulated level dependence of each screened
-    candidate with an Iwan joint sized from its share fit, best first; [] when no simulation succeeds."""
+    candidate with an Iwan joint sized from its share fit, best first (deviations ``df_sd2``, ``dz_sd2``);
+    [] when no simulation succeeds."""
     from ..linearity import compare_levels
 
-    df_sd2 = np.hypot(df_sd, SIM_MODEL_FRACTION * df)
-    dz_sd2 = np.hypot(dz_sd, SIM_MODEL_FRACTION * dz)
     out = []
     for _, cand, a, b in screened:
         if not a < 0:
@@ -231,8 +237,3 @@ def _simulated(linearity: Any, simulation: Any, screened: list, f: np.ndarray, d
         out.append((chi_f + chi_z, cand, a, b, slip / c_f if c_f > 0 else slip))
     out.sort(key=lambda r: r[0])
     return out
-
-
-def best_candidate_name(cause: dict) -> Optional[str]:
-    """The named joint's candidate name, or None when the cause is absent."""
-    return cause["joint"]["name"] if cause.get("present") else None
