@@ -117,7 +117,24 @@ def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -
     except SessionError as exc:
         print(f"capture: {exc}", file=sys.stderr)
         return 1, None
-    return _finish(result, f"recording written: {out}", out_stream, quiet=args.quiet)
+    done = _finish(result, f"recording written: {out}", out_stream, quiet=args.quiet)
+    if result is not None and not args.quiet:
+        _print_quality(out, out_stream)
+    return done
+
+
+def _print_quality(path: Path, out_stream: TextIO) -> None:
+    """The recording's quality checks (linearity when the hits span force levels, reciprocity, driving
+    points), one line each; a check that cannot run is named, the recording stays as written."""
+    from analysis.errors import ImpactlabError
+    from analysis.quality import quality_lines, recording_quality
+
+    try:
+        lines = quality_lines(recording_quality(path))
+    except (ImpactlabError, ValueError, OSError) as exc:
+        lines = [f"not checked ({exc})"]
+    for line in lines:
+        print(f"quality: {line}", file=out_stream)
 
 
 def run_resume(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -> tuple[int, Any]:

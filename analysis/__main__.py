@@ -1,4 +1,4 @@
-"""``python -m analysis fit|stabilization|diagnose|report|batch ...``"""
+"""``python -m analysis fit|stabilization|diagnose|report|linearity|batch ...``"""
 import sys
 
 from analysis._cli_dispatch import dispatch
@@ -8,6 +8,7 @@ COMMANDS = {
     "stabilization": ("analysis.cli_stabilization", "draw a stabilization diagram"),
     "diagnose": ("analysis.cli_diagnose", "compare measurement and simulation, name the cause"),
     "report": ("analysis.cli_report", "write a self-contained HTML test report (FRFs, modes, animated shapes)"),
+    "linearity": ("analysis.cli_linearity", "is the structure linear? modes compared between excitation levels"),
     "batch": ("analysis.cli_batch", "fit many recordings on Dask; flag the units whose modes stray from the fleet"),
 }
 

@@ -231,6 +231,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             doc["verdict"] = counted[0]["effect"]
         elif doc["verdict"] == "unexplained" and any(c["effect"] == "amplitude_nonlinearity" for c in present):
             doc["verdict"] = "amplitude_nonlinearity"
+    from .cli_linearity import level_dependence
+
+    levels = level_dependence(args.measured, args.simulated, (float(measured.freq_hz[0]), float(measured.freq_hz[-1])))
+    if levels is not None:
+        doc["level_dependence"] = levels
+        if levels.get("cause", {}).get("present"):
+            doc["linear_verdict"], doc["verdict"] = doc["verdict"], "joint_nonlinearity"
     Path(args.json).write_text(json.dumps(doc, indent=1, default=_json_default))
     if args.report:
         from .diagnosis.report import write_report
@@ -239,6 +246,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for c in timed:
         if c["present"]:
             print(f"  time data ({c['reference']}): {c['evidence']}")
+    if levels is not None and "cause" in levels:
+        print(f"  level dependence: {levels['cause']['evidence']}")
     print(f"verdict: {doc['verdict']}" + (f" ({diag.reason})" if diag.reason else ""))
     print(f"error before {diag.error_before_db:.1f} dB, after {diag.error_after_db:.1f} dB "
           f"(noise {max(diag.noise_db.values()):.1f} dB)")

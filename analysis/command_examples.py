@@ -50,6 +50,11 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "report rec.h5 --out report/",
         "report rec.h5 --out report/ --fit fit.json --diagnosis diag.json --geometry frame",
     ),
+    "python -m analysis linearity": (
+        "linearity soft.h5 hard.h5 --json lin.json        # levels read from the hits' peak forces",
+        "linearity low.uff high.uff --levels 0.05,0.30 --band 10:400",
+        "linearity rec.h5                                 # one recording: its soft and hard hits",
+    ),
     "python -m analysis batch": (
         "batch fleet/*.h5 --out results/                       # a local Dask cluster, one worker per core",
         "batch fleet/*.h5 --out results/ --scheduler tcp://10.0.0.5:8786 --reference golden.json --band 4:1100",

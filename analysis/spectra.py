@@ -299,6 +299,11 @@ class FRFAccumulator:
     def n_averages(self) -> int:
         return len(self._hits)
 
+    @property
+    def hits(self) -> tuple:
+        """The accumulated hits' :class:`HitSpectra`, in order."""
+        return tuple(self._hits)
+
     def add(self, hit: HitSpectra) -> None:
         """Add one hit's spectra to the average."""
         if hit.Gxx.shape[0] != len(self.outputs):

@@ -77,9 +77,9 @@ def _build_stand(opts: Mapping[str, Any]) -> StandLike:
     import dataclasses
 
     from simulator.config import FrameConfig
-    from simulator.stand import TestStand
+    from simulator.nonlinear_joint import make_stand
 
     cfg = FrameConfig.load(opts.get("config") or None)
     if "noise" in opts:
         cfg = dataclasses.replace(cfg, noise=dataclasses.replace(cfg.noise, enabled=_as_bool(opts["noise"], "noise")))
-    return TestStand(config=cfg, seed=int(opts.get("seed", 0)))
+    return make_stand(cfg, seed=int(opts.get("seed", 0)))

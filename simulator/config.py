@@ -49,6 +49,8 @@ __all__ = [
     "SamplingConfig",
     "TestPlanConfig",
     "NoiseConfig",
+    "NonlinearConfig",
+    "NONLINEAR_LAWS",
     "overrides_to_toml",
 ]
 
@@ -263,6 +265,60 @@ class NoiseConfig:
     enabled: bool
 
 
+NONLINEAR_LAWS = ("none", "iwan", "cubic")
+_ROTATION_AXES = ("rx", "ry", "rz")
+
+
+@dataclass(frozen=True)
+class NonlinearConfig:
+    """An amplitude-dependent rotational spring at one joint or support (see ``[nonlinear]`` in
+    frame.toml and :mod:`simulator.nonlinear_joint`).
+
+    law : "none" (linear frame), "iwan" (micro-slip friction: a bank of ``n_sliders`` Jenkins elements,
+    stiffness falls and damping rises with amplitude) or "cubic" (``M = k0 theta + k3 theta^3``).
+    joint : a node of a ``[joints]`` pair (the relative rotation of the pair) or a ``[supports]`` node
+    (its rotation against the ground). axis : "rx", "ry" or "rz", the rotation about global X, Y, Z.
+    slip_moment_nm : moment (N m) the slider bank carries in full slip (Iwan).
+    residual_stiffness_fraction : share (-) of the joint's linear stiffness that never slips (Iwan).
+    cubic_nm_per_rad3 : k3 (N m/rad^3) of the cubic law (> 0 hardening, < 0 softening).
+    stiffness_nm_per_rad : the spring's small-amplitude stiffness k0 (N m/rad), replacing the joint's or
+        support's rotational stiffness about ``axis`` in the linear model; 0 keeps that stiffness.
+    integration_rate_hz : the lowest rate (Hz) of the time integration: a record sampled at fs is
+        integrated with ``ceil(integration_rate_hz / fs)`` steps per sample.
+    """
+
+    law: str
+    joint: str
+    axis: str
+    slip_moment_nm: float
+    residual_stiffness_fraction: float
+    n_sliders: int
+    cubic_nm_per_rad3: float
+    stiffness_nm_per_rad: float
+    integration_rate_hz: float
+
+    @property
+    def active(self) -> bool:
+        return self.law != "none"
+
+    @property
+    def axis_index(self) -> int:
+        """0, 1 or 2: the rotation DOF (after the three translations) of ``axis``."""
+        return _ROTATION_AXES.index(self.axis)
+
+    def substeps(self, fs_hz: float) -> int:
+        """Integration steps per sample at the sample rate ``fs_hz`` (Hz)."""
+        return max(1, int(np.ceil(self.integration_rate_hz / fs_hz - 1e-9)))
+
+    def spring_stiffness(self, nodes: "tuple[str, ...]", k6: "tuple | list") -> list[float]:
+        """The six stiffnesses of the support or joint at ``nodes``: ``k6`` with the rotational one about
+        ``axis`` set to ``stiffness_nm_per_rad`` when this is the active nonlinear spring and the value is given."""
+        k = [float(x) for x in k6]
+        if self.active and self.stiffness_nm_per_rad > 0 and self.joint in nodes:
+            k[3 + self.axis_index] = float(self.stiffness_nm_per_rad)
+        return k
+
+
 @dataclass(frozen=True)
 class FrameConfig:
     """All parameters of the simulated frame (see ``simulator/frame.toml``)."""
@@ -281,6 +337,7 @@ class FrameConfig:
     sampling: SamplingConfig
     test_plan: TestPlanConfig
     noise: NoiseConfig
+    nonlinear: NonlinearConfig
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
     source: str = "defaults"
 
@@ -449,6 +506,7 @@ def _build(d: dict, source: str) -> FrameConfig:
             sampling=_coerce(SamplingConfig, d["sampling"], "sampling"),
             test_plan=_coerce(TestPlanConfig, d["test_plan"], "test_plan"),
             noise=_coerce(NoiseConfig, d["noise"], "noise"),
+            nonlinear=_coerce(NonlinearConfig, d["nonlinear"], "nonlinear"),
             raw=d,
             source=source,
         )
@@ -561,3 +619,27 @@ def _validate(cfg: FrameConfig, source: str) -> None:
     except PointLabelError as exc:
         raise ConfigError(f"{p} test_plan: {exc}") from None
     _check(tp.averages >= 1, f"{p} test_plan.averages must be >= 1")
+    _validate_nonlinear(cfg, p)
+
+
+def _validate_nonlinear(cfg: FrameConfig, p: str) -> None:
+    nl = cfg.nonlinear
+    _check(nl.law in NONLINEAR_LAWS, f"{p} nonlinear.law = {nl.law!r}; use one of {', '.join(NONLINEAR_LAWS)}")
+    _check(nl.axis in _ROTATION_AXES, f"{p} nonlinear.axis = {nl.axis!r}; use 'rx', 'ry' or 'rz' (rotation about "
+                                      "global X, Y or Z)")
+    _check(nl.stiffness_nm_per_rad >= 0, f"{p} nonlinear.stiffness_nm_per_rad must be >= 0 N m/rad (0: keep the "
+                                         "joint's own stiffness)")
+    _check(nl.integration_rate_hz > 0, f"{p} nonlinear.integration_rate_hz must be > 0 Hz")
+    if not nl.active:
+        return
+    joint_nodes = {str(n) for pair in cfg.joints.pairs for n in pair}
+    _check(nl.joint in joint_nodes or nl.joint in cfg.supports.nodes,
+           f"{p} nonlinear.joint = {nl.joint!r} is neither a node of a [joints] pair ({sorted(joint_nodes)}) nor a "
+           f"support node ({list(cfg.supports.nodes)}); name the joint or support whose spring is nonlinear")
+    if nl.law == "iwan":
+        _check(nl.slip_moment_nm > 0, f"{p} nonlinear.slip_moment_nm must be > 0 N m (the moment of full slip)")
+        _check(0 <= nl.residual_stiffness_fraction < 1,
+               f"{p} nonlinear.residual_stiffness_fraction must be in [0, 1) (share of the stiffness that never slips)")
+        _check(1 <= nl.n_sliders <= 200, f"{p} nonlinear.n_sliders must be 1..200")
+    if nl.law == "cubic":
+        _check(nl.cubic_nm_per_rad3 != 0, f"{p} nonlinear.cubic_nm_per_rad3 must be non-zero for law = 'cubic'")

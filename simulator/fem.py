@@ -314,10 +314,12 @@ class FrameModel:
         if supports:
             for node in cfg.supports.nodes:
                 f = cfg.damage.spring_factor("support", (node,))
-                model._add_ground_spring(node, [k * f for k in cfg.supports.stiffness])
+                k6 = cfg.nonlinear.spring_stiffness((node,), cfg.supports.stiffness)
+                model._add_ground_spring(node, [k * f for k in k6])
         for a, b in cfg.joints.pairs:
             f = cfg.damage.spring_factor("joint", (a, b))
-            model._add_joint_spring(a, b, [k * f for k in cfg.joints.stiffness])
+            k6 = cfg.nonlinear.spring_stiffness((a, b), cfg.joints.stiffness)
+            model._add_joint_spring(a, b, [k * f for k in k6])
         for label, mass in (added_masses or {}).items():
             model._add_lumped_mass(label, mass)
         return model

@@ -281,6 +281,17 @@ class TestStand:
         force[idx] = seg[idx * q - seg_start]
         return force, seg, seg_start, q
 
+    def _frame_response(self, model: FrameModel, outputs: Sequence[str], in_point: str, seg: np.ndarray,
+                        seg_start: int, q: int, fs_hz: float, n_samples: int) -> np.ndarray:
+        """Accelerations (len(outputs), n_samples) m/s^2 of the frame at ``outputs`` to the force segment
+        ``seg`` (N, on the grid ``q fs``, first fine index ``seg_start``) at ``in_point``."""
+        modes = model.modes()
+        flex = modes.freq_hz > 0
+        phi_out = model.shape_at(list(outputs), modes)[:, flex]
+        phi_in = model.shape_at([in_point], modes)[0, flex]
+        return simulate_segment(seg, seg_start, q, fs_hz, n_samples, modes.poles[flex], phi_out, phi_in,
+                                "acceleration")
+
     def strike(
         self,
         fs_hz: float,
@@ -319,15 +330,11 @@ class TestStand:
         force, seg, seg_start, q = self._force(hit, fs_hz, n_samples, start)
 
         model = self.model
-        modes = model.modes()
-        flex = modes.freq_hz > 0
         acc_idx = [i for i, ch in enumerate(self._channels) if ch.quantity == "acceleration"]
         response = np.full((len(self._channels), n_samples), np.nan)
         if acc_idx:
-            phi_out = model.shape_at([self._channels[i].point for i in acc_idx], modes)[:, flex]
-            phi_in = model.shape_at([hit.point], modes)[0, flex]
-            response[acc_idx] = simulate_segment(seg, seg_start, q, fs_hz, n_samples, modes.poles[flex],
-                                                 phi_out, phi_in, "acceleration")
+            response[acc_idx] = self._frame_response(model, [self._channels[i].point for i in acc_idx], hit.point,
+                                                     seg, seg_start, q, fs_hz, n_samples)
 
         # sensor chain, vectorised over channels: EU (+ noise) -> V -> IEPE high-pass -> AC coupling
         s = self.config.sensors

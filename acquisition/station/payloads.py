@@ -103,7 +103,8 @@ def hit_payload(data: np.ndarray, fs_hz: float, trigger_index: int, pretrigger: 
 
 def frf_payload(average: Any, bandwidth_hz: float) -> dict:
     """H1, H2 (dB) and coherence per output of a point's running average
-    (``acquisition.session.MeasurementAverage``); empty when it has no hit yet."""
+    (``acquisition.session.MeasurementAverage``), and ``levels``: soft against hard hits when their forces
+    spread (:func:`analysis.linearity.level_spread`, else None); empty when it has no hit yet."""
     base = {"point": average.point, "reference": average.reference, "n_averages": average.n_averages,
             "unit": average.unit, "outputs": []}
     if average.n_averages == 0:
@@ -119,6 +120,9 @@ def frf_payload(average: Any, bandwidth_hz: float) -> dict:
             base["outputs"].append({"name": o, "h1_db": _round(db(h1[i, idx])), "h2_db": _round(db(h2[i, idx])),
                                     "coherence": _round(coh[i, idx])})
     base["f_hz"] = _round(freq[idx])
+    from analysis.linearity import level_spread
+
+    base["levels"] = level_spread(acc.hits, (float(freq[1]), float(bandwidth_hz)))
     return base
 
 

@@ -24,7 +24,7 @@ _OWN_ASSETS = ("report.js", "report.css")
 
 def build_document(frf: FRFSet, fit: FitData, *, geometry: Optional[Geometry] = None,
                    record: Optional[TestRecord] = None, diagnosis: Optional[dict] = None,
-                   input_name: str = "", title: str = "") -> dict:
+                   input_name: str = "", title: str = "", quality: Optional[dict] = None) -> dict:
     """The report's content as one JSON-able dict (see :mod:`analysis.report_html.collect`)."""
     notes = []
     labels, _ = shape_vectors(fit.model)
@@ -48,6 +48,7 @@ def build_document(frf: FRFSet, fit: FitData, *, geometry: Optional[Geometry] = 
         "modal": modal_section(frf, fit),
         "shapes": shapes_section(fit, geo),
         "diagnosis": diagnosis,
+        "quality": quality,
     }
     return doc
 
@@ -96,5 +97,9 @@ def make_report(input_path: "str | Path", out_dir: "str | Path", *, fit_json: "O
     record = read_test_record(input_path) if detect_format(input_path) == "recording" else None
     diag = load_diagnosis(diagnosis)
     fit = load_fit_json(fit_json, frf) if fit_json else run_fit(frf)
-    doc = build_document(frf, fit, geometry=geometry, record=record, diagnosis=diag, input_name=str(input_path))
+    from .quality_section import quality_section
+
+    quality = quality_section(frf, record, fit.band)
+    doc = build_document(frf, fit, geometry=geometry, record=record, diagnosis=diag, input_name=str(input_path),
+                         quality=quality)
     return write_report(out_dir, doc)

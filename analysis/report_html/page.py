@@ -7,6 +7,8 @@ import datetime as _dt
 from html import escape
 from typing import Any, Optional, Sequence
 
+from .quality_section import quality_html
+
 __all__ = ["render_page", "written_stamp"]
 
 
@@ -194,6 +196,7 @@ def render_page(data: dict, *, plotly_src: str = "plotly.min.js") -> str:
         _modes_html(data["modal"]),
         _shapes_html(),
         _diagnosis_html(data.get("diagnosis")),
+        quality_html(data.get("quality")),
         (f"</main><script src='{plotly_src}'></script><script src='report-data.js'></script>"
          "<script src='report.js'></script></body></html>"),
     ]

@@ -207,6 +207,29 @@
                            layout({ xaxis: axis(FREQ, { type: "log" }), yaxis: axis("simulation error [dB]"), showlegend: false }), CONFIG)];
   }
 
+  function drawLinearity() {
+    var Q = D.quality, div = el("linearity");
+    if (!Q || !div || !(Q.linearity_curves || []).length) { return []; }
+    var traces = Q.linearity_curves.map(function (c, i) {
+      return { x: c.freq_hz, y: c.db, type: "scatter", mode: "lines", name: c.level.toPrecision(3) + " (" + c.frf + ")",
+               line: { color: color(i), width: 1.5 } };
+    });
+    return [Plotly.newPlot(div, traces, layout({ xaxis: axis(FREQ), yaxis: axis("|H1| [dB]") }), CONFIG)];
+  }
+
+  function drawReciprocity() {
+    var Q = D.quality, div = el("reciprocity");
+    if (!Q || !div || !(Q.reciprocity_curves || []).length) { return []; }
+    var traces = [];
+    Q.reciprocity_curves.forEach(function (c, i) {
+      traces.push({ x: c.ij.freq_hz, y: c.ij.db, type: "scatter", mode: "lines", name: "H_ij " + c.pair,
+                    line: { color: color(i), width: 1.5 } });
+      traces.push({ x: c.ji.freq_hz, y: c.ji.db, type: "scatter", mode: "lines", name: "H_ji " + c.pair,
+                    line: { color: color(i), width: 1.5, dash: "dot" } });
+    });
+    return [Plotly.newPlot(div, traces, layout({ xaxis: axis(FREQ), yaxis: axis("|H| [dB]") }), CONFIG)];
+  }
+
   /* ---- mode shapes: a small orthographic 3-D view on a canvas (no WebGL needed) ---- */
   function ModeView(canvas, S) {
     var g = S.geometry, xyz = g.xyz, n = xyz.length;
@@ -354,6 +377,8 @@
   attempt("synthesis", drawSynthesis);
   attempt("AutoMAC", drawMAC);
   attempt("diagnosis", drawDiagnosis);
+  attempt("linearity", drawLinearity);
+  attempt("reciprocity", drawReciprocity);
   attempt("mode shapes", setupShapes);
   Promise.all(jobs).then(function () {
     document.body.dataset.drawnMs = String(Math.round(performance.now()));  // for benchmarks
