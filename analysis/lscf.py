@@ -47,6 +47,7 @@ import numpy as np
 import scipy.linalg
 
 from .frf import FRFSet
+from .threads import limits_blas_threads
 
 __all__ = ["lscf_poles", "lscf_poles_all_orders", "band_data", "parse_band", "prepare_band", "BandData"]
 
@@ -208,12 +209,14 @@ def _roots_to_poles(alpha: np.ndarray, ts: float) -> np.ndarray:
     return lam[np.argsort(np.imag(lam))]
 
 
+@limits_blas_threads
 def lscf_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *, band=None) -> list[np.ndarray]:
     """Poles (rad/s, upper half plane, sorted by damped frequency) for n = 1..max_modes."""
     alphas, ts = lscf_denominators(frf, max_modes, band=band)
     return [_roots_to_poles(a, ts) for a in alphas]
 
 
+@limits_blas_threads
 def lscf_poles(frf: FRFSet, n_modes: int, *, band=None) -> np.ndarray:
     """LSCF poles of a model with ``n_modes`` modes (denominator order 2 n_modes).
 
