@@ -13,7 +13,7 @@ from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
-from scipy.signal import find_peaks
+from .peaks import find_peaks
 
 from .errors import ImpactlabError
 from .frf import FRFSet

@@ -44,7 +44,6 @@ from dataclasses import dataclass
 from typing import Optional, Sequence
 
 import numpy as np
-import scipy.linalg
 
 from .frf import FRFSet
 from .threads import limits_blas_threads
@@ -182,6 +181,8 @@ def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *, band=None) ->
         L = np.linalg.cholesky(R)
     except np.linalg.LinAlgError:
         L = np.linalg.cholesky(R + np.eye(P + 1) * 1e-12 * np.trace(R))
+    import scipy.linalg  # imported on first use: a fast start of the commands
+
     X = scipy.linalg.solve_triangular(L, S.transpose(1, 2, 0).reshape(P + 1, -1), lower=True)
     X = X.reshape(P + 1, P + 1, -1)  # (row i, col a, frf o)
     # G_i[a, b] = sum_o X[i, a, o] X[i, b, o]; cumulative over rows i

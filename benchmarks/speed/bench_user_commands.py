@@ -1,0 +1,212 @@
+"""Wall time of the commands a user runs, as processes with the user's environment, on an idle
+machine and with two CPU-bound programs running beside them; and the automatic fit at
+scanning-vibrometer scale (time and peak memory, in a child process).
+
+The commands (each a fresh ``python -m ...`` process, the BLAS thread variables
+``OPENBLAS_NUM_THREADS``/``OMP_NUM_THREADS``/``MKL_NUM_THREADS`` removed from its environment, as a
+user who never heard of them runs it; ``IMPACTLAB_THREADS`` is passed on when set):
+
+* ``capture``: ``acquisition capture --device sim://?seed=1 --hits 5 --auto`` (the default test:
+  one hammer point, three accelerometers, 3 FRFs);
+* ``fit``: ``analysis fit rec.h5 --json fit.json`` on that capture;
+* ``report``: ``analysis report rec.h5 --out report/`` (the fit inside) and ``report --fit``:
+  the same from the fit's JSON (the report's own work);
+* ``stabilization``: ``analysis stabilization rec.h5 --png stab.png``;
+* ``diagnose``: one physical change (the supports' rotational springs x 0.4, written as a changed
+  frame configuration and captured through ``sim://?config=...``; not timed) diagnosed against the
+  unchanged ``simulator/frame.toml``.
+
+"busy" runs them while two ``python -c "while True: pass"`` processes, started and stopped by this
+script, keep the cores busy. ``scan`` runs ``bench_fit_scale.py`` in a child process (``--scan-outputs``
+x 3 FRFs x 8000 lines x 40 modes; the child's wall time of ``fit_auto`` and its maximum resident
+memory from ``resource.getrusage``).
+
+Run (about 5-10 minutes with the defaults on 2 cores)::
+
+    .venv/bin/python benchmarks/speed/bench_user_commands.py [--only fit,report] [--conditions idle,busy]
+        [--repeat 1] [--scan-outputs 1000 | --no-scan] [--keep DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Optional
+
+ROOT = Path(__file__).resolve().parents[2]
+PY = sys.executable
+COMMANDS = ("capture", "fit", "report", "report --fit", "stabilization", "diagnose")
+#: the issue's targets (s); None: no target, shown for information
+TARGETS: dict[str, Optional[float]] = {"capture": None, "fit": 1.0, "report": 2.0, "report --fit": 2.0,
+                                        "stabilization": None, "diagnose": 5.0}
+BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def user_env() -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in BLAS_VARS}
+    env.setdefault("MPLBACKEND", "Agg")
+    return env
+
+
+def run(argv: list[str], cwd: Path) -> float:
+    """Wall time (s) of one command; a failing command stops the benchmark with its stderr."""
+    t0 = time.perf_counter()
+    out = subprocess.run(argv, cwd=cwd, env=user_env(), capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if out.returncode != 0:
+        raise SystemExit(f"{' '.join(argv)} failed ({out.returncode}):\n{out.stderr[-2000:]}")
+    return wall
+
+
+def changed_frame(work: Path) -> Path:
+    """The physical change: the supports' rotational springs x 0.4 (a changed frame configuration)."""
+    sys.path.insert(0, str(ROOT))
+    from simulator.config import FrameConfig, overrides_to_toml
+
+    k = list(FrameConfig.load().supports.stiffness)
+    cfg = work / "changed.toml"
+    cfg.write_text(overrides_to_toml({"supports": {"stiffness": k[:3] + [0.4 * x for x in k[3:]]}}))
+    return cfg
+
+
+def command_line(name: str, work: Path) -> list[str]:
+    a, m = [PY, "-m", "acquisition"], [PY, "-m", "analysis"]
+    return {
+        "capture": a + ["capture", "--device", "sim://?seed=1", "--out", "rec_timed.h5", "--hits", "5", "--auto", "-q"],
+        "fit": m + ["fit", "rec.h5", "--json", "fit.json", "--overwrite", "-q"],
+        "report": m + ["report", "rec.h5", "--out", "report", "-q"],
+        "report --fit": m + ["report", "rec.h5", "--out", "report_fit", "--fit", "fit.json", "-q"],
+        "stabilization": m + ["stabilization", "rec.h5", "--png", "stab.png", "-q"],
+        "diagnose": m + ["diagnose", "--measured", "changed.h5", "--simulated", str(ROOT / "simulator" / "frame.toml"),
+                         "--json", "diag.json", "-q"],
+    }[name]
+
+
+def prepare(work: Path, names: list[str]) -> None:
+    """The inputs the timed commands read (not timed)."""
+    need = {"fit", "report", "report --fit", "stabilization"} & set(names)
+    if need:
+        run([PY, "-m", "acquisition", "capture", "--device", "sim://?seed=1", "--out", "rec.h5", "--hits", "5",
+             "--auto", "-q"], work)
+    if "report --fit" in names:
+        run(command_line("fit", work), work)
+    if "diagnose" in names:
+        cfg = changed_frame(work)
+        points = "right:6:-X,right:4:-X,left:6:X,top:4:Z,top:2:Z,left:9:Y"
+        run([PY, "-m", "acquisition", "capture", "--device", f"sim://?seed=22&config={cfg}", "--out", "changed.h5",
+             "--points", points, "--hits", "3", "--auto", "-q"], work)
+
+
+class Busy:
+    """Two CPU-bound processes for the duration of a ``with`` block."""
+
+    def __init__(self, n: int = 2) -> None:
+        self.n = n
+        self.procs: list[subprocess.Popen] = []
+
+    def __enter__(self) -> "Busy":
+        self.procs = [subprocess.Popen([PY, "-c", "while True: pass"]) for _ in range(self.n)]
+        time.sleep(1.0)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for p in self.procs:
+            p.terminate()
+        for p in self.procs:
+            p.wait()
+
+
+def time_commands(names: list[str], work: Path, repeat: int) -> dict[str, float]:
+    out = {}
+    for name in names:
+        times = []
+        for _ in range(repeat):
+            if name == "capture":
+                (work / "rec_timed.h5").unlink(missing_ok=True)
+            if name.startswith("report"):
+                shutil.rmtree(work / ("report" if name == "report" else "report_fit"), ignore_errors=True)
+            times.append(run(command_line(name, work), work))
+        out[name] = min(times)
+        print(f"  {name:14s} {out[name]:7.2f} s", flush=True)
+    return out
+
+
+def scan_case(outputs: int, busy: bool) -> dict[str, float]:
+    """bench_fit_scale.py in a child process: fit_auto's wall time and the child's peak memory."""
+    argv = [PY, str(ROOT / "benchmarks" / "speed" / "bench_fit_scale.py"), "--outputs", str(outputs)]
+    if busy:
+        with Busy():
+            out = subprocess.run(argv, env=user_env(), capture_output=True, text=True)
+    else:
+        out = subprocess.run(argv, env=user_env(), capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"the scanning-vibrometer case failed:\n{out.stderr[-2000:]}")
+    print("\n".join("    " + line for line in out.stdout.splitlines()))
+    wall = float(re.search(r"wall ([0-9.]+) s", out.stdout).group(1))          # type: ignore[union-attr]
+    gib = float(re.search(r"peak memory ([0-9.]+) GiB", out.stdout).group(1))  # type: ignore[union-attr]
+    return {"wall_s": wall, "peak_gib": gib}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", default=",".join(COMMANDS),
+                    help=f"comma-separated commands to time (default all: {', '.join(COMMANDS)}); 'none' for only the scan")
+    ap.add_argument("--conditions", default="idle,busy", help="idle, busy or both (default idle,busy)")
+    ap.add_argument("--repeat", type=int, default=1, help="runs per command; the best is shown (default 1)")
+    ap.add_argument("--scan-outputs", type=int, default=1000,
+                    help="outputs of the scanning-vibrometer case (x 3 references; default 1000 = 3000 FRFs)")
+    ap.add_argument("--no-scan", action="store_true", help="skip the scanning-vibrometer case")
+    ap.add_argument("--keep", metavar="DIR", help="work in DIR and keep it (default: a temporary folder)")
+    ap.add_argument("--json", metavar="OUT.json", help="also write the figures as JSON")
+    a = ap.parse_args(argv)
+    names = [] if a.only.strip() == "none" else [n.strip() for n in a.only.split(",") if n.strip()]
+    bad = [n for n in names if n not in COMMANDS]
+    conditions = [c.strip() for c in a.conditions.split(",") if c.strip()]
+    if bad or any(c not in ("idle", "busy") for c in conditions):
+        ap.error(f"unknown command or condition: {bad or conditions}")
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} at the start; "
+          f"removed from the commands' environment: {', '.join(BLAS_VARS)}; "
+          f"IMPACTLAB_THREADS={os.environ.get('IMPACTLAB_THREADS', '(unset)')}")
+    work = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="impactlab-bench-"))
+    work.mkdir(parents=True, exist_ok=True)
+    results: dict[str, dict] = {}
+    try:
+        prepare(work, names)
+        for cond in conditions:
+            print(f"{cond}:", flush=True)
+            if cond == "busy":
+                with Busy():
+                    results[cond] = time_commands(names, work, a.repeat)
+            else:
+                results[cond] = time_commands(names, work, a.repeat)
+        if not a.no_scan:
+            for cond in conditions:
+                print(f"scanning vibrometer ({a.scan_outputs * 3} FRFs x 8000 lines x 40 modes), {cond}:", flush=True)
+                results.setdefault("scan", {})[cond] = scan_case(a.scan_outputs, cond == "busy")
+    finally:
+        if not a.keep:
+            shutil.rmtree(work, ignore_errors=True)
+    print("\n| command | " + " | ".join(conditions) + " | target |")
+    print("|---|" + "---|" * len(conditions) + "---|")
+    for name in names:
+        t = TARGETS[name]
+        cells = [f"{results[c][name]:.2f} s" for c in conditions]
+        print(f"| {name} | " + " | ".join(cells) + f" | {'< %g s' % t if t else '-'} |")
+    if "scan" in results:
+        cells = [f"{results['scan'][c]['wall_s']:.1f} s, {results['scan'][c]['peak_gib']:.2f} GiB" for c in conditions]
+        print(f"| fit_auto, {a.scan_outputs * 3} FRFs x 8000 lines x 40 modes | " + " | ".join(cells) + " | < 10 s, < 4 GB |")
+    print(f"load average at the end: {os.getloadavg()[0]:.2f}")
+    if a.json:
+        Path(a.json).write_text(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
