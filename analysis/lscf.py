@@ -175,7 +175,8 @@ def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *, band=None) ->
     idx = _toeplitz_index(P)
     # entries (i, j): conj(Omega^i) Omega^j = exp(j w Ts (i - j))
     R = r[idx]
-    S = -s[:, idx].real
+    # S_o[i, j] = -Re s_o[idx[i, j]], laid out (row i, col j, frf o) for the solve: one real array
+    S = np.ascontiguousarray(-s.real.T)[idx]
     T = t[idx]
     try:
         L = np.linalg.cholesky(R)
@@ -183,7 +184,7 @@ def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *, band=None) ->
         L = np.linalg.cholesky(R + np.eye(P + 1) * 1e-12 * np.trace(R))
     import scipy.linalg  # imported on first use: a fast start of the commands
 
-    X = scipy.linalg.solve_triangular(L, S.transpose(1, 2, 0).reshape(P + 1, -1), lower=True)
+    X = scipy.linalg.solve_triangular(L, S.reshape(P + 1, -1), lower=True)
     X = X.reshape(P + 1, P + 1, -1)  # (row i, col a, frf o)
     # G_i[a, b] = sum_o X[i, a, o] X[i, b, o]; cumulative over rows i
     G = np.matmul(X, X.transpose(0, 2, 1))
