@@ -182,9 +182,7 @@ def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *, band=None) ->
         L = np.linalg.cholesky(R)
     except np.linalg.LinAlgError:
         L = np.linalg.cholesky(R + np.eye(P + 1) * 1e-12 * np.trace(R))
-    import scipy.linalg  # imported on first use: a fast start of the commands
-
-    X = scipy.linalg.solve_triangular(L, S.reshape(P + 1, -1), lower=True)
+    X = np.linalg.solve(L, S.reshape(P + 1, -1))  # L^-1 S (numpy: no scipy import for the diagram alone)
     X = X.reshape(P + 1, P + 1, -1)  # (row i, col a, frf o)
     # G_i[a, b] = sum_o X[i, a, o] X[i, b, o]; cumulative over rows i
     G = np.matmul(X, X.transpose(0, 2, 1))
