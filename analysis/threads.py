@@ -157,11 +157,15 @@ def blas_threads(work: float) -> Iterator[int]:
     n = requested_threads()
     if n is None:
         n = choose_threads(work, _cores(), _others_running())
-    from threadpoolctl import ThreadpoolController  # the pools of the libraries loaded by now
-
+    try:
+        from threadpoolctl import ThreadpoolController  # the pools of the libraries loaded by now
+    except ImportError:  # an environment installed before it was a dependency: BLAS as configured
+        limit: "contextlib.AbstractContextManager[Any]" = contextlib.nullcontext()
+    else:
+        limit = ThreadpoolController().limit(limits=n)
     _depth += 1
     try:
-        with ThreadpoolController().limit(limits=n):
+        with limit:
             yield n
     finally:
         _depth -= 1
