@@ -1,6 +1,8 @@
-"""Wall time of the commands a user runs, as processes with the user's environment, on an idle
-machine and with two CPU-bound programs running beside them; and the automatic fit at
-scanning-vibrometer scale (time and peak memory, in a child process).
+"""Wall and CPU time of the commands a user runs, idle and beside two CPU-bound programs.
+
+Each command runs as a process with the user's environment, on an idle machine and with two
+CPU-bound programs running beside it; then the automatic fit at scanning-vibrometer scale (time
+and peak memory, in a child process).
 
 The commands (each a fresh ``python -m ...`` process, the BLAS thread variables
 ``OPENBLAS_NUM_THREADS``/``OMP_NUM_THREADS``/``MKL_NUM_THREADS`` removed from its environment, as a
