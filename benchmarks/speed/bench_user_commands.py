@@ -230,17 +230,19 @@ def main(argv=None) -> int:
     finally:
         if not a.keep:
             shutil.rmtree(work, ignore_errors=True)
-    print("\n| command | " + " | ".join(f"{c}: wall (CPU)" for c in conditions) + " | target |")
-    print("|---|" + "---|" * len(conditions) + "---|")
+    if names:
+        print("\n| command | " + " | ".join(f"{c}: wall (CPU)" for c in conditions) + " | target |")
+        print("|---|" + "---|" * len(conditions) + "---|")
     for name in names:
         t = TARGETS[name]
         cells = [f"{results[c][name][0]:.2f} s ({results[c][name][1]:.2f} s)" for c in conditions]
         print(f"| {name} | " + " | ".join(cells) + f" | {'< %g s' % t if t else '-'} |")
     if "scan" in results:
+        print("\n| scanning-vibrometer case | wall, peak memory | target |\n|---|---|---|")
         for c, r in results["scan"].items():
             t = f"> {r['stopped_after_s']:.0f} s" if "stopped_after_s" in r else f"{r['wall_s']:.1f} s"
             print(f"| fit_auto, {a.scan_outputs * 3} FRFs x 8000 lines x 40 modes, {c} | {t}, {r['peak_gib']:.2f} GiB "
-                  f"peak | < 10 s, < 4 GB |")
+                  "| < 10 s, < 4 GB |")
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
     if a.json:
         Path(a.json).write_text(json.dumps(results, indent=1))
