@@ -50,7 +50,6 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-import scipy.linalg as sla
 
 from .modal import residual_basis
 
@@ -234,6 +233,8 @@ class ProjectedProblem:
         it falls back to the precise path when ``S < 1e-6 ||y||^2``. When the basis is rank
         deficient (poles collapsed onto each other) ``rank_ok`` is False.
         """
+        import scipy.linalg as sla  # imported on first use: a fast start of the commands
+
         theta = np.array(theta, dtype=float)
         A, E = self.basis(theta)
         norms = np.sqrt(np.einsum("ij,ij->j", A, A))
@@ -336,6 +337,8 @@ def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0)
     positive definite, least squares otherwise; NaN when no step can be computed (the
     iterations then reject it). Returns ``(d, x)``.
     """
+    import scipy.linalg as sla  # imported on first use: a fast start of the commands
+
     with np.errstate(over="ignore", invalid="ignore"):
         M = JtJ / np.outer(D, D)
         rhs = -g / D

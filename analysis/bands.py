@@ -13,7 +13,7 @@ from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
-from scipy.signal import find_peaks
+from .peaks import find_peaks
 
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz

@@ -27,8 +27,9 @@ import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
-from .command_line import Parser, cli_entry, errors_to_exit, exit_on, parse_args, with_examples
+from .command_line import Parser, add_threads, cli_entry, errors_to_exit, exit_on, parse_args, with_examples
 from .inputs import InputError, parse_band_text
+from .threads import ENV_VAR as THREADS_ENV_VAR
 
 __all__ = ["main", "build_parser", "expand_inputs"]
 
@@ -49,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="flag a mode shift beyond this many robust standard deviations (default 6)")
     p.add_argument("--min-shift", type=float, default=0.5, metavar="PCT",
                    help="... and beyond PCT %% (default 0.5): both must hold")
+    add_threads(p)
     return with_examples(p)
 
 
@@ -108,6 +110,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     # Dask's own log lines (worker start and stop) only with -v; workers inherit the setting
     os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "info" if args.verbose else "error")
+    if args.threads is not None:  # the local cluster's worker processes inherit it
+        os.environ[THREADS_ENV_VAR] = str(args.threads)
     out = Path(args.out)
     with errors_to_exit("analysis batch", OSError, prefix="cannot create the output folder: "):
         out.mkdir(parents=True, exist_ok=True)

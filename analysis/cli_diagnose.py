@@ -20,7 +20,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from .command_line import with_examples
-from .command_line import Parser as _Parser, check_out_dir, parse_args, add_estimator
+from .command_line import Parser as _Parser, check_out_dir, parse_args, add_estimator, add_threads, cli_entry
 
 __all__ = ["main", "build_parser", "load_simulation"]
 
@@ -51,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "excitation band and the coherence)")
     p.add_argument("--effects", metavar="A,B,...", help="only these effects of the catalogue")
     add_estimator(p)
+    add_threads(p)
     return p
 
 
@@ -175,6 +176,7 @@ def _hit_noise(path: str, measured) -> dict:
     return {} if level is None else {"hits": level}
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError, default_band

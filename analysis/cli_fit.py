@@ -20,7 +20,7 @@ __all__ = ["main", "build_parser"]
 
 
 from .command_line import with_examples
-from .command_line import Parser as _Parser, UsageError as _UsageError, add_estimator, check_out_dir, cli_entry
+from .command_line import Parser as _Parser, UsageError as _UsageError, add_estimator, add_threads, check_out_dir, cli_entry
 from .command_line import errors_to_exit, parse_args
 
 
@@ -69,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exclude-mains", metavar="HZ", type=float,
                    help="leave every harmonic of this mains frequency (Hz) in the band out of the LSFD")
     add_estimator(p)
+    add_threads(p)
     p.add_argument("--frf", metavar="OUTPUT",
                    help="output point shown in the terminal table (default: the strongest FRF)")
     return p

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 from .command_line import with_examples
-from .command_line import add_estimator
+from .command_line import add_estimator, add_threads, cli_entry
 from ._cli_dispatch import Parser, parse_args
 from .errors import ImpactlabError
 
@@ -34,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="UFF file with nodes (15) and trace lines (82), 'frame' or a simulator config .toml "
                         "(default: the simulated frame for simulator recordings, else the points on a line)")
     add_estimator(p)
+    add_threads(p)
     return p
 
 
@@ -59,6 +60,7 @@ def choose_geometry(spec: Optional[str], device: str = ""):
     return read_uff_geometry(spec)
 
 
+@cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 written, 2 bad input)."""
     args = parse_args(build_parser(), argv)

@@ -16,7 +16,7 @@ __all__ = ["main", "build_parser"]
 
 
 from .command_line import with_examples
-from .command_line import Parser as _Parser, check_out_dir, cli_entry, errors_to_exit, parse_args, add_estimator
+from .command_line import Parser as _Parser, check_out_dir, cli_entry, errors_to_exit, parse_args, add_estimator, add_threads
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -32,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lsfd", action="store_true", help="refine every order with a few LSFD iterations")
     p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: automatic)")
     add_estimator(p)
+    add_threads(p)
     return p
 
 

@@ -3,7 +3,8 @@
 - :class:`Parser` / :func:`parse_args`: an ``ArgumentParser`` whose usage errors become exit code 2
   with a message instead of ``SystemExit`` from deep inside argparse.
 - :func:`add_overwrite`, :func:`add_json_flag`, :func:`add_verbose`, :func:`set_verbosity`: the
-  common options (``--overwrite``, ``--json``, ``-v``) with each command's own help text.
+  common options (``--overwrite``, ``--json``, ``-v``) with each command's own help text;
+  :func:`add_threads`: ``--threads N`` of the commands that compute.
 - :func:`check_out_dir`: an output path whose folder does not exist is bad input, found before
   any work is done.
 - :func:`errors_to_exit` + :func:`cli_entry`: "these errors end the command with this exit code
@@ -26,7 +27,7 @@ from typing import Callable, Iterator, Optional, Sequence, TypeVar, Union
 from .errors import UsageError
 
 __all__ = ["UsageError", "Parser", "parse_args", "with_examples", "add_overwrite", "add_estimator", "add_json_flag",
-           "add_verbose", "set_verbosity", "check_out_dir", "CliExit", "exit_on", "errors_to_exit", "cli_entry"]
+           "add_threads", "add_verbose", "set_verbosity", "check_out_dir", "CliExit", "exit_on", "errors_to_exit", "cli_entry"]
 
 F = TypeVar("F", bound=Callable[..., int])
 
@@ -98,6 +99,34 @@ def add_estimator(parser: argparse.ArgumentParser) -> None:
 def add_json_flag(parser: argparse.ArgumentParser, help: str = "print one JSON object instead of text") -> None:
     """``--json`` as a switch: print JSON on stdout instead of text."""
     parser.add_argument("--json", action="store_true", help=help)
+
+
+def add_threads(parser: argparse.ArgumentParser) -> None:
+    """``--threads N``: BLAS threads of the command's numerical kernels (default: chosen per problem
+    from its size and the free cores, or the environment variable ``IMPACTLAB_THREADS``); set as soon
+    as it is parsed, for the rest of the command (:func:`cli_entry` restores the previous value)."""
+    parser.add_argument("--threads", type=_positive_int, metavar="N", action=_Threads, default=None,
+                        help="BLAS threads of the computation (default: chosen from the problem size and the free "
+                             "cores; also IMPACTLAB_THREADS=N)")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive whole number; got {text!r}")
+    return n
+
+
+class _Threads(argparse.Action):
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: "str | None" = None) -> None:
+        from .threads import set_threads
+
+        setattr(namespace, self.dest, values)
+        set_threads(int(values))  # type: ignore[call-overload]
 
 
 def add_verbose(parser: argparse.ArgumentParser) -> None:
@@ -191,8 +220,11 @@ def cli_entry(main: F) -> F:
 
     @functools.wraps(main)
     def run(*args: object, **kwargs: object) -> int:
+        from .threads import command_scope
+
         try:
-            return main(*args, **kwargs)
+            with command_scope():  # --threads holds for this command only
+                return main(*args, **kwargs)
         except CliExit as done:
             return done.code
         except BrokenPipeError:

@@ -43,6 +43,7 @@ import numpy as np
 
 from .frf import FRFSet
 from .lscf import BandData, prepare_band
+from .threads import limits_blas_threads
 
 __all__ = ["lsce_poles", "lsce_poles_all_orders"]
 
@@ -64,6 +65,7 @@ def _impulse_responses(frf: "FRFSet | BandData", band) -> tuple[np.ndarray, floa
     return h, dt, float(f[0]), (lo, hi)
 
 
+@limits_blas_threads
 def lsce_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *, band=None,
                           row_fraction: float = ROW_FRACTION) -> list[np.ndarray]:
     """LSCE poles (rad/s, Im > 0, in band, sorted by damped frequency) for n = 1..max_modes.
@@ -112,6 +114,7 @@ def lsce_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *, band=None
     return out
 
 
+@limits_blas_threads
 def lsce_poles(frf: FRFSet, n_modes: int, *, band=None, row_fraction: float = ROW_FRACTION) -> np.ndarray:
     """LSCE poles of the model with ``n_modes`` modes (2 n_modes complex poles in the zoomed band).
 

@@ -44,9 +44,9 @@ from dataclasses import dataclass
 from typing import Optional, Sequence
 
 import numpy as np
-import scipy.linalg
 
 from .frf import FRFSet
+from .threads import limits_blas_threads
 
 __all__ = ["lscf_poles", "lscf_poles_all_orders", "band_data", "parse_band", "prepare_band", "BandData"]
 
@@ -175,13 +175,14 @@ def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *, band=None) ->
     idx = _toeplitz_index(P)
     # entries (i, j): conj(Omega^i) Omega^j = exp(j w Ts (i - j))
     R = r[idx]
-    S = -s[:, idx].real
+    # S_o[i, j] = -Re s_o[idx[i, j]], laid out (row i, col j, frf o) for the solve: one real array
+    S = np.ascontiguousarray(-s.real.T)[idx]
     T = t[idx]
     try:
         L = np.linalg.cholesky(R)
     except np.linalg.LinAlgError:
         L = np.linalg.cholesky(R + np.eye(P + 1) * 1e-12 * np.trace(R))
-    X = scipy.linalg.solve_triangular(L, S.transpose(1, 2, 0).reshape(P + 1, -1), lower=True)
+    X = np.linalg.solve(L, S.reshape(P + 1, -1))  # L^-1 S (numpy: no scipy import for the diagram alone)
     X = X.reshape(P + 1, P + 1, -1)  # (row i, col a, frf o)
     # G_i[a, b] = sum_o X[i, a, o] X[i, b, o]; cumulative over rows i
     G = np.matmul(X, X.transpose(0, 2, 1))
@@ -208,12 +209,14 @@ def _roots_to_poles(alpha: np.ndarray, ts: float) -> np.ndarray:
     return lam[np.argsort(np.imag(lam))]
 
 
+@limits_blas_threads
 def lscf_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *, band=None) -> list[np.ndarray]:
     """Poles (rad/s, upper half plane, sorted by damped frequency) for n = 1..max_modes."""
     alphas, ts = lscf_denominators(frf, max_modes, band=band)
     return [_roots_to_poles(a, ts) for a in alphas]
 
 
+@limits_blas_threads
 def lscf_poles(frf: FRFSet, n_modes: int, *, band=None) -> np.ndarray:
     """LSCF poles of a model with ``n_modes`` modes (denominator order 2 n_modes).
 

@@ -37,6 +37,7 @@ from ._lm import run_lm
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, poles_to_theta, theta_to_poles
 from .frf import FRFSet, window_pole_shift
 from .modal import RESIDUAL_FORMS, ModalModel, damped_freq_hz, damping_ratio, natural_freq_hz
+from .threads import limits_blas_threads
 from .uncertainty import covariance_from_normal, fz_std
 
 __all__ = ["fit_lsfd", "LSFDResult", "LSFDConvergenceWarning", "rank_one_split", "METHODS", "Status",
@@ -184,6 +185,7 @@ def _check_weights(weights, n_out: int, n_ref: int, n_freq: int) -> tuple[Option
 
 
 # --------------------------------------------------------------------------- main entry
+@limits_blas_threads
 def fit_lsfd(
     frf: FRFSet,
     initial_poles: np.ndarray,

@@ -8,7 +8,7 @@ import warnings
 from typing import Optional, Sequence
 
 import numpy as np
-from scipy.signal import find_peaks
+from .peaks import find_peaks
 
 from .fit_checks import (DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, bandwidth_hz)
 from .frf import FRFSet
@@ -134,14 +134,14 @@ def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, ma
     median damping of the fitted poles, and at most ``MAINS_LINES`` lines wider than one line.
     A structural mode at that damping has a measurable half-power bandwidth; an electrical line
     is one or two lines wide."""
-    from scipy.signal import peak_widths
+    from .peaks import peak_widths
 
     for m in mains:
         k = int(round(c / m))
         if k < 1 or abs(c - k * m) > max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ):
             continue
         i = int(np.argmin(np.abs(f - c)))
-        width = float(peak_widths(e ** 2, [i], rel_height=0.5)[0][0]) * df
+        width = float(peak_widths(e ** 2, [i], rel_height=0.5)[0]) * df
         mode = 2.0 * z0 * c
         if width < MAINS_WIDTH_FRACTION * mode and width <= (1.0 + MAINS_LINES) * df:
             return (f"the misfit peak at {c:.6g} Hz lies on the mains line {k} x {m:g} Hz and is {width:.3g} Hz wide "

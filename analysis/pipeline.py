@@ -83,6 +83,7 @@ from .lscf import parse_band
 from .missing_modes import MAINS_HZ, add_missing_modes
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
+from .threads import limits_blas_threads
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -90,6 +91,7 @@ __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_
 log = logging.getLogger(__name__)
 
 
+@limits_blas_threads
 def fit_auto(
     frf: FRFSet,
     *,

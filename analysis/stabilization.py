@@ -43,6 +43,7 @@ from .frf import FRFSet
 from .mac import mac_matrix
 from .modal import damping_ratio, natural_freq_hz, residual_basis
 from .lscf import BandData, prepare_band
+from .threads import limits_blas_threads
 
 __all__ = [
     "StabilizationResult",
@@ -213,6 +214,7 @@ def _refine(frf: FRFSet, poles: np.ndarray, band, iterations: int) -> tuple[np.n
     return np.asarray(res.poles, dtype=complex), R.reshape(-1, R.shape[-1])
 
 
+@limits_blas_threads
 def stabilization(
     frf: FRFSet,
     max_modes: int,

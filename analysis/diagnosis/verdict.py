@@ -36,6 +36,7 @@ import numpy as np
 from ..progress import progress
 from ..frf import FRFSet
 from ..modal import ModalModel
+from ..threads import limits_blas_threads
 from .compare import band_errors, compare, line_folds, line_weights, noise_level, typical_error_db
 from .effects import EFFECTS, EffectError, FitContext, predict
 
@@ -222,6 +223,7 @@ def known_processing(measured: FRFSet) -> tuple:
     return tuple(out)
 
 
+@limits_blas_threads
 def diagnose(
     measured: FRFSet,
     base: ModalModel,
