@@ -198,3 +198,30 @@ def test_frf_picker_shows_an_frf_and_its_coherence(loaded):
     d.execute_script("const p = document.getElementById('frf-picker'); p.value = '5';"
                      "p.dispatchEvent(new Event('change'));")
     WebDriverWait(d, 10, poll_frequency=0.1).until(lambda drv: drv.execute_script(get) == [True, True, True])
+
+
+def _open_report(driver, index: Path) -> str:
+    """Load ``index`` and wait until its plots are drawn; returns ``dataset.ready``."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    driver.get_log("browser")
+    driver.get(index.resolve().as_uri())
+    WebDriverWait(driver, LOAD_TIMEOUT_S).until(lambda d: d.execute_script("return document.body.dataset.ready"))
+    return driver.execute_script("return document.body.dataset.ready")
+
+
+@pytest.mark.realdata
+def test_report_of_an_imported_real_recording_opens(browser, shared_data, tmp_path):
+    """The README's import of the LADISK beam (a real LabVIEW file: no sensitivities, no input ranges)
+    gives a report that draws every plot in Chromium without a console error."""
+    from acquisition import cli_import
+    from analysis import cli_report
+
+    rec = tmp_path / "beam.h5"
+    assert cli_import.main([str(shared_data / "ladisk_beam_impact" / "acceleration.lvm"), "--out", str(rec)]) == 0
+    assert cli_report.main([str(rec), "--out", str(tmp_path / "rb")]) == 0
+    assert _open_report(browser, tmp_path / "rb" / "index.html") == "1"
+    errors = [e for e in browser.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
+    assert not errors, f"console errors: {errors}"
+    n = browser.execute_script("return document.querySelectorAll('table#modes tbody tr').length")
+    assert n >= 1
