@@ -20,8 +20,8 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 INSTALL = ("install the browser for these tests: apt-get install chromium chromium-driver, and pip install "
            "selenium (in the test extra: pip install -e '.[test,report]')")
-PLOTS = ("frf", "coherence", "force-spectrum", "force-time", "response-time", "stabilization", "synthesis", "automac",
-         "mode-shapes", "diagnosis", "diagnosis-bands")
+PLOTS = ("frf", "coherence", "force-spectrum", "force-time", "response-time", "stabilization", "cmif", "synthesis",
+         "automac", "mode-shapes", "diagnosis", "diagnosis-bands")
 LOAD_TIMEOUT_S = 60
 
 
@@ -225,3 +225,87 @@ def test_report_of_an_imported_real_recording_opens(browser, shared_data, tmp_pa
     assert not errors, f"console errors: {errors}"
     n = browser.execute_script("return document.querySelectorAll('table#modes tbody tr').length")
     assert n >= 1
+
+
+#: the stability class whose markers the picking test clicks (stable frequency, damping and vector)
+STABLE = "freq+damp+mac"
+
+
+def _click_pole(driver, freq_hz: float) -> dict:
+    """Click the stable-class marker nearest ``freq_hz`` at the highest model order (a real mouse click
+    at the marker's place); returns the marker's {freq_hz, order, damping}, or None when no marker of
+    that class lies within 0.5 % of ``freq_hz``."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    found = driver.execute_script("""
+      const div = document.querySelector('[data-plot="stabilization"]');
+      const t = div._fullData.findIndex(d => d.meta === 'poles' && d.name.endsWith('vector'));
+      const tr = div._fullData[t];
+      const dist = tr.x.map(f => Math.abs(f - arguments[0]));
+      const near = Math.min(...dist);
+      if (near > 5e-3 * arguments[0]) return null;
+      let best = -1;  // the nearest column, its highest order
+      tr.x.forEach((f, i) => { if (dist[i] <= near + 1e-3 * f && (best < 0 || tr.y[i] > tr.y[best])) best = i; });
+      const xa = div._fullLayout.xaxis, ya = div._fullLayout.yaxis, box = div.getBoundingClientRect();
+      const px = div._fullLayout._size.l + xa.l2p(tr.x[best]), py = div._fullLayout._size.t + ya.l2p(tr.y[best]);
+      return {freq_hz: tr.x[best], order: tr.y[best], damping: tr.customdata[best],
+              dx: px - box.width / 2, dy: py - box.height / 2};""", freq_hz)
+    if found is None:
+        return None
+    div = driver.find_element("css selector", "[data-plot='stabilization']")
+    # the pause: two clicks within plotly's double-click interval (0.3 s) would be a double click (zoom reset)
+    ActionChains(driver).pause(0.45).move_to_element_with_offset(div, round(found["dx"]), round(found["dy"])) \
+        .click().perform()
+    return found
+
+
+def _wait_picks(driver, n: int) -> None:
+    """Wait until the diagram counts ``n`` picks."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    WebDriverWait(driver, 10, poll_frequency=0.1).until(lambda d: d.execute_script(
+        "return document.querySelector('[data-plot=\"stabilization\"]').dataset.picks") == str(n))
+
+
+def test_picked_poles_are_saved_and_fitted(browser, report_case, tmp_path):
+    """Click pole markers on the report's stabilization diagram, unpick one, save the picks with the
+    page's button (a real download), fit with ``--poles poles.json``: the fit's poles are the picked ones."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    from analysis import cli_fit
+
+    downloads = tmp_path / "downloads"
+    downloads.mkdir()
+    browser.execute_cdp_cmd("Browser.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(downloads)})
+    assert _open_report(browser, report_case["report"]) == "1"
+    browser.execute_script("document.querySelector('[data-plot=\"stabilization\"]').scrollIntoView()")
+    picked: list[dict] = []
+    for f in (p["freq_hz"] for p in report_case["fit_doc"]["poles"]):
+        if any(abs(q["freq_hz"] - f) < 5e-3 * f for q in picked):
+            continue  # a close pair drawn as one column: picked once
+        q = _click_pole(browser, f)
+        if q is None:
+            continue
+        picked.append(q)
+        _wait_picks(browser, len(picked))
+    wanted = [q["freq_hz"] for q in picked]
+    assert len(wanted) >= 4
+    # a second click unpicks, a third picks again
+    _click_pole(browser, wanted[0])
+    WebDriverWait(browser, 10, poll_frequency=0.1).until(lambda d: d.find_elements(
+        "css selector", "#pick-list li").__len__() == len(wanted) - 1)
+    _click_pole(browser, wanted[0])
+    WebDriverWait(browser, 10, poll_frequency=0.1).until(lambda d: d.find_elements(
+        "css selector", "#pick-list li").__len__() == len(wanted))
+    assert [round(q["freq_hz"], 4) for q in picked] == sorted(round(q["freq_hz"], 4) for q in picked)
+    browser.find_element("id", "save-picks").click()
+    saved = downloads / "poles.json"
+    WebDriverWait(browser, 10, poll_frequency=0.1).until(lambda d: saved.is_file() and saved.stat().st_size > 0)
+    doc = json.loads(saved.read_text())
+    assert doc["schema"] == "impactlab.poles/1" and len(doc["poles"]) == len(wanted)
+    assert [q["freq_hz"] for q in doc["poles"]] == pytest.approx(sorted(q["freq_hz"] for q in picked))
+    out = tmp_path / "fit.json"
+    assert cli_fit.main([str(report_case["recording"]), "--poles", str(saved), "--json", str(out), "-q"]) == 0
+    fitted = sorted(p["freq_hz"] for p in json.loads(out.read_text())["poles"])
+    assert len(fitted) == len(picked)
+    assert fitted == pytest.approx(sorted(q["freq_hz"] for q in picked), rel=5e-3)

@@ -94,11 +94,20 @@ def _modes_html(modal: dict) -> str:
                  "FRF; vertical lines: the fitted modes" if modal["stabilization"]["classes"] is not None else
                  "The fitted modes (vertical lines) over the summed FRF; no stabilization diagram: the fit was read "
                  "from a file (--fit)", 420)
+    picking = modal["stabilization"]["classes"] is not None
+    ind = modal["indicator"]
+    ind_caption = ("Mode indicator: CMIF, the singular values of the FRF matrix per line (dB; a peak of the "
+                   "first curve marks a mode, a peak of the second at the same line a second, close mode)"
+                   + ("; MIF of the one reference on the right axis (0..1, dips at modes)" if ind["mif"] else "")
+                   + "; vertical lines: the fitted modes")
     return ("<section id='modal'><h2>4. Modal parameters</h2>"
             f"<p>Fit: {escape(modal['source'])}; band {modal['band_hz'][0]:.4g}&ndash;{modal['band_hz'][1]:.4g} Hz; "
             f"{len(modal['modes'])} modes; relative RMS misfit of the synthesis "
             f"{_num(None if rel is None else 100 * rel, '{:.2f}')} %.</p>"
-            + stab + "<h3>Mode table</h3>" + _table(head, rows, " id='modes'")
+            "<div class='controls'><label><input id='log-frequency' type='checkbox'> logarithmic frequency axis"
+            "</label></div>"
+            + stab + (_picks_html() if picking else "") + _plot("cmif", ind_caption, 300)
+            + "<h3>Mode table</h3>" + _table(head, rows, " id='modes'")
             + "<p class='note'>&sigma;: standard deviations of the fit (white-noise, perfect-model lower bounds). "
               "MPC: modal phase collinearity of the shape (1: real mode); complexity = 1 - MPC.</p>"
             + (f"<details><summary>fit warnings ({len(modal['warnings'])})</summary><ul>{warn}</ul></details>"
@@ -108,6 +117,15 @@ def _modes_html(modal: dict) -> str:
             + _plot("automac", f"AutoMAC of the mode shapes over the {modal['shape_points']} points they are "
                     "measured at (few points cannot tell every pair of modes apart)", 420)
             + "</section>")
+
+
+def _picks_html() -> str:
+    return ("<div id='picks' class='controls'><p>Pick poles: click a pole marker of the diagram to pick it (a ring "
+            "marks it), click it again to unpick it. Save the picks and fit from them with "
+            "<code>python -m analysis fit INPUT --poles poles.json</code>.</p>"
+            "<ol id='pick-list'></ol>"
+            "<button id='save-picks' type='button' disabled>save picked poles (poles.json)</button> "
+            "<button id='clear-picks' type='button' disabled>clear the picks</button></div>")
 
 
 def _shapes_html() -> str:
