@@ -60,3 +60,33 @@ def test_report_of_the_imported_ladisk_beam(shared_data, tmp_path):
     assert (tmp_path / "rb" / "index.html").is_file()
     doc = _strict_report_data(tmp_path / "rb")
     assert len(doc["modal"]["modes"]) >= 1
+
+
+def _text(html_part: str) -> str:
+    import html
+    import re
+
+    return html.unescape(re.sub(r"<[^>]+>", " | ", html_part))
+
+
+def test_record_of_a_capture_without_points_reads_like_the_terminal(tmp_path, capsys):
+    """A capture made without --points: the points row names the struck point, no "None", the trigger
+    level has its unit, no raw keys, hits numbered from 1 (in the recording and at their point) as the
+    terminal numbers them."""
+    from acquisition import cli_capture
+    from analysis.report_html import make_report
+
+    rec = tmp_path / "cap.h5"
+    assert cli_capture.main(["--device", "sim://?seed=1", "--out", str(rec), "--auto", "--hits", "2"]) == 0
+    terminal = capsys.readouterr().out
+    page = make_report(rec, tmp_path / "report").read_text()
+    test = _text(page[page.index("<section id='test'>"):page.index("<section id='points'>")])
+    assert "None" not in test and "pretrigger" not in test and "_" not in test.replace("sim://?seed=1", "")
+    assert "| points |  | right:6:-X |" in test
+    assert "level 20 N" in test and "128 samples (20 ms) kept before the trigger" in test
+    assert "hits per point 2" in test and "roving hammer" in test
+    # "hit 1" and "hit 2" at right:6:-X in the terminal; rows 1 and 2 (hit at the point 1 and 2) in the report
+    assert "right:6:-X  hit 1:" in terminal and "right:6:-X  hit 2:" in terminal
+    hits = test[test.index("| reason |"):]
+    cells = [c.strip() for c in hits.split("|") if c.strip()]
+    assert cells[1:5] == ["1", "right:6:-X", "1", "accepted"] and cells[7:11] == ["2", "right:6:-X", "2", "accepted"]
