@@ -173,3 +173,56 @@ def test_fit_with_a_picks_file_fits_exactly_the_picks_in_their_band(uff_file, tm
     assert "holds no picked poles" in err and "Traceback" not in err
     assert cli_fit.main([str(uff_file), "--poles", str(tmp_path / "missing.json")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_stabilization_legend_sits_above_the_pole_columns(tmp_path, monkeypatch):
+    """The legend is drawn outside the diagram's axes, so no pole column is hidden behind it."""
+    import analysis.plots as plots
+    from analysis.stabilization import stabilization
+
+    frf = _two_reference_frf()
+    st = stabilization(frf, 8, band=(20.0, 120.0))
+    figures = []
+    real_save = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path: (figures.append(fig), real_save(fig, path))[1])
+    plots.plot_stabilization(st, frf, tmp_path / "stab.png")
+    fig = figures[0]
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    legend = ax.get_legend().get_window_extent()
+    assert legend.y0 >= ax.get_window_extent().y1 - 1  # above the plotting area
+    assert fig.axes[-1].get_ylabel().startswith("CMIF")  # two references: the CMIF beneath
+
+
+def test_fleet_png_names_the_flagged_units(tmp_path, monkeypatch):
+    """fleet.png ties its points to units: every flagged unit is named in both panels."""
+    import matplotlib.figure
+
+    from analysis.batch.fleet import assess_fleet
+    from analysis.batch.outputs import plot_fleet
+    from test_batch_fleet_stats import _fleet
+
+    units = _fleet(24, {3: {2: 0.03}, 17: {5: -0.04}})
+    names = [f"unit{k:02d}" for k in range(24)]
+    res = assess_fleet(units, names, [n + ".h5" for n in names])
+    flagged = {u.name for u in res.units if u.flagged}
+    assert flagged == {"unit03", "unit17"}
+    saved = []
+    real = matplotlib.figure.Figure.savefig
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda self, *a, **k: (saved.append(self), real(self, *a, **k))[1])
+    plot_fleet(tmp_path / "fleet.png", res)
+    fig = saved[0]
+    for ax in fig.axes[:2]:
+        assert {t.get_text() for t in ax.texts} == flagged
+    assert (tmp_path / "fleet.png").stat().st_size > 10_000
+
+
+def test_terminal_table_gives_the_units_of_the_standard_deviations():
+    from analysis.report import format_table
+
+    frf = _two_reference_frf()
+    from analysis.pipeline import fit_auto
+
+    fit = fit_auto(frf, band=(20.0, 120.0))
+    head = format_table(fit.lsfd, frf, initial=fit.selected_poles, initial_label="LSCF").splitlines()[1]
+    assert "f std [Hz]" in head and "zeta std [%]" in head and "LSCF f [Hz]" in head and "LSCF zeta [%]" in head

@@ -309,3 +309,11 @@ def test_picked_poles_are_saved_and_fitted(browser, report_case, tmp_path):
     fitted = sorted(p["freq_hz"] for p in json.loads(out.read_text())["poles"])
     assert len(fitted) == len(picked)
     assert fitted == pytest.approx(sorted(q["freq_hz"] for q in picked), rel=5e-3)
+
+
+def test_response_histories_differ_in_colour(loaded):
+    """The responses of one point are told apart by colour, not only by dash style."""
+    colours = loaded["driver"].execute_script("""
+      const div = document.querySelector('[data-plot="response-time"]');
+      return div._fullData.filter(t => t.visible === true).map(t => t.line.color);""")
+    assert len(colours) >= 2 and len(set(colours)) == len(colours)

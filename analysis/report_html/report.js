@@ -111,8 +111,10 @@
                   type: "scatter", mode: "lines", line: { color: color(i), width: 1.3 } });
       force.push({ x: p.force.t_ms, y: p.force.y, name: p.point, type: "scatter", mode: "lines", line: { color: color(i) } });
       p.responses.forEach(function (r, j) {
+        // one colour per response channel (the same channel has the same colour at every point), the dash per point
         resp.push({ x: r.t_ms, y: r.y, name: "hit at " + p.point + ": " + r.name + (r.unit ? " [" + r.unit + "]" : ""),
-                    visible: i === 0 ? true : "legendonly", type: "scatter", mode: "lines", line: { color: color(i), width: 1, dash: ["solid", "dot", "dash"][j % 3] } });
+                    visible: i === 0 ? true : "legendonly", type: "scatter", mode: "lines",
+                    line: { color: color(j), width: 1, dash: ["solid", "dash", "dot", "dashdot"][i % 4] } });
       });
     });
     var runit = (P[0].responses[0] && P[0].responses[0].unit) ? P[0].responses[0].unit : "EU";
