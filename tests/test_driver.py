@@ -241,7 +241,7 @@ def test_end_to_end_with_the_simulated_frame(packetized):
         block = an.read_block()
     assert (ident.vendor, ident.product, ident.revision) == ("IMPACTLB", "SIGLAB-SIM 2042", "0100")
     assert fw.stand.hammer_point == "right:6:-X"  # the operator strikes where the force channel is
-    assert block.counts.shape == (4, 8192) and block.trigger_index == pre and block.sequence == 1
+    assert block.counts.shape == (4, setup.block_size) and block.trigger_index == pre and block.sequence == 1
     f = block.data[0]
     assert f[pre] >= setup.trigger.level > f[pre - 1]
     assert 60.0 < f.max() < 160.0 and np.abs(f[:pre - 8]).max() < 2.0  # a ~100 N hit, quiet before it
