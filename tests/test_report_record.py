@@ -90,3 +90,12 @@ def test_record_of_a_capture_without_points_reads_like_the_terminal(tmp_path, ca
     hits = test[test.index("| reason |"):]
     cells = [c.strip() for c in hits.split("|") if c.strip()]
     assert cells[1:5] == ["1", "right:6:-X", "1", "accepted"] and cells[7:11] == ["2", "right:6:-X", "2", "accepted"]
+
+
+def test_shapes_of_points_labelled_by_another_tool():
+    """Labels that are not component:node:direction (e.g. 'view0:acc:Z') still get a node, an axis and a sign."""
+    from analysis.report_html.collect import _axis_sign
+
+    assert _axis_sign("right:4:-Z") == (2, -1) and _axis_sign("left:9:Y") == (1, 1)
+    assert _axis_sign("view0:acc:Z") == (2, 1) and _axis_sign("view0:acc:-x") == (0, -1)
+    assert _axis_sign("sensor 3") == (2, 1)

@@ -12,7 +12,7 @@ from ..frf import FRFSet
 from ..geometry import Geometry, node_label
 from ..modal import damping_ratio, natural_freq_hz, synthesize
 from ..plots import summed_magnitude_db
-from ..points import parse_point
+from ..points import PointLabelError, parse_point
 from ..spectra import excitation_band as spectra_excitation_band, hit_spectra
 from ..mac import mac_matrix
 from ..mif import indicator_summary
@@ -179,6 +179,19 @@ def stabilization_data(frf: FRFSet, fit: FitData) -> dict:
     return {**doc, "classes": classes, "method": stab.method, "max_order": int(max(stab.orders))}
 
 
+def _axis_sign(label: str) -> tuple[int, int]:
+    """Axis (0, 1, 2 for X, Y, Z) and sign of a point label; a label that is not
+    ``component:node:direction`` (e.g. ``view0:acc:Z`` of another tool) keeps a direction written
+    as its last part, else it moves along Z."""
+    try:
+        p = parse_point(label)
+        return p.axis, p.sign
+    except PointLabelError:
+        d = str(label).rsplit(":", 1)[-1].strip().upper()
+        axis = {"X": 0, "Y": 1, "Z": 2}.get(d.lstrip("+-"), 2)
+        return axis, -1 if d.startswith("-") and d.lstrip("+-") in ("X", "Y", "Z") else 1
+
+
 def shapes_section(fit: FitData, geometry: Geometry) -> dict:
     """Geometry and, per mode, the complex displacement (re, im) of every measured DOF."""
     labels, shapes = shape_vectors(fit.model)
@@ -186,8 +199,8 @@ def shapes_section(fit: FitData, geometry: Geometry) -> dict:
     shapes = shapes[:, order]
     dofs = []
     for lab in labels:
-        p = parse_point(lab)
-        dofs.append({"label": lab, "node": geometry.index(node_label(lab)), "axis": p.axis, "sign": p.sign})
+        axis, sign = _axis_sign(lab)
+        dofs.append({"label": lab, "node": geometry.index(node_label(lab)), "axis": axis, "sign": sign})
     f = natural_freq_hz(fit.model.poles)[order]
     return {"geometry": geometry.to_dict(), "dofs": dofs,
             "modes": [{"freq_hz": float(f[k]), "re": _r(shapes[:, k].real, 4), "im": _r(shapes[:, k].imag, 4)}
