@@ -220,7 +220,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from .mif import indicator_summary
 
     doc = result_to_dict(fit, frf, extra={"input": str(args.input), "warnings": notes + caught,
-                                          "mode_indicator": indicator_summary(frf, result.band)},
+                                          "mode_indicator": indicator_summary(frf, result.band, max_points=256)},
                          scatter=scatter)
     with errors_to_exit("analysis fit", (OSError, ValueError), prefix="cannot write the outputs: "):
         if args.json:
