@@ -204,7 +204,8 @@ def test_no_trigger_times_out_with_a_clear_message():
     stand = PulseStand(amplitude_n=10.0)  # below the 20 N trigger level
     fw = Firmware(stand, max_strikes=2)
     with Analyser(LoopbackTransport(fw), poll_interval_s=0.001) as an:
-        an.configure(default_setup())
+        # 8192-sample blocks: both strikes must fit in the 0.05 s wait, also on a loaded machine
+        an.configure(dataclasses.replace(default_setup(), block_size=8192))
         an.arm()
         with pytest.raises(TriggerTimeout, match="no trigger within 0.05 s.*did not cross the trigger level"):
             an.wait_for_trigger(0.05)
