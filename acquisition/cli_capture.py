@@ -56,6 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--auto", action="store_true", help="accept every hit that passes the automatic checks")
     p.add_argument("--seed", type=int, help="random seed of a simulated device (sim://, usbsim://)")
     p.add_argument("--setup", help="set-up file (JSON/TOML of AcquisitionSetup.to_dict()); default: default_setup()")
+    p.add_argument("--print-setup", action="store_true",
+                   help="print the set-up (--setup FILE, else the default) as TOML and exit: a template for --setup")
     p.add_argument("--force-window", default=DEFAULT_FORCE_WINDOW,
                    help=f"WIDTH[,TAPER] after the trigger, or none (default {DEFAULT_FORCE_WINDOW})")
     p.add_argument("--exp-window", default=DEFAULT_EXP_WINDOW,
@@ -177,6 +179,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                      (ImpactlabError, 1, "device or session failure: "),
                      (ValueError, 2),  # bad values reaching the library (file contents, options)
                      (OSError, 1)):
+            if args.print_setup:
+                from .setup import default_setup, load_setup, setup_to_toml
+
+                print(setup_to_toml(load_setup(args.setup) if args.setup else default_setup()), end="")
+                return 0
             code, _ = run_capture(args)
             return code
     except KeyboardInterrupt:

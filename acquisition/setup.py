@@ -24,7 +24,8 @@ from analysis.frf import analyser_band_hz
 
 __all__ = [
     "G", "ChannelSetup", "TriggerSetup", "AcquisitionSetup", "Capabilities", "validate_setup",
-    "default_setup", "setup_to_wire", "setup_from_wire", "load_setup",
+    "default_setup", "setup_to_wire", "setup_from_wire", "load_setup", "DEFAULT_SLOWEST_MODE", "DEFAULT_DECAY_DB",
+    "decay_time_s", "block_size_for_decay", "setup_to_toml",
 ]
 
 #: standard gravity, m/s^2 (mV/g -> mV/(m/s^2))
@@ -260,11 +261,49 @@ def setup_from_wire(data: protocol.SetupData, names: "list[str] | None" = None) 
     return AcquisitionSetup(float(data.sample_rate_hz), data.block_size, tuple(chans), trig)
 
 
+#: the slowest-decaying mode of the simulated frame in the default band: natural frequency (Hz) and
+#: damping ratio (simulator/frame.toml: 12.9 Hz at 0.86 %; decay time constant 1/(zeta omega) = 1.43 s)
+DEFAULT_SLOWEST_MODE = (12.9, 0.0086)
+#: how far (dB) the slowest mode's free decay falls within the default record: 30 dB leaves about 3 % of
+#: its amplitude at the block end, so the truncation's leakage stays a few per cent of its peak
+DEFAULT_DECAY_DB = 30.0
+#: the SigLab-like analyser's block sizes (samples per channel)
+_BLOCK_SIZES = tuple(protocol.SIGLAB_2042.block_sizes)
+
+
+def decay_time_s(freq_hz: float, damping: float, decay_db: float = DEFAULT_DECAY_DB) -> float:
+    """Seconds for the free decay of a mode (natural frequency Hz, viscous damping ratio) to fall by
+    ``decay_db`` dB: ``ln(10^(decay_db/20)) / (damping 2 pi freq_hz)``."""
+    if not (freq_hz > 0 and damping > 0 and decay_db > 0):
+        raise SetupError(f"a decay time needs a positive frequency, damping and decay; got {freq_hz} Hz, "
+                         f"damping {damping}, {decay_db} dB")
+    return math.log(10 ** (decay_db / 20)) / (damping * 2 * math.pi * freq_hz)
+
+
+def block_size_for_decay(sample_rate_hz: float, freq_hz: float, damping: float, *,
+                         decay_db: float = DEFAULT_DECAY_DB, pretrigger_samples: int = 0,
+                         block_sizes: tuple[int, ...] = _BLOCK_SIZES) -> int:
+    """The smallest of ``block_sizes`` whose samples after the trigger (block minus pre-trigger)
+    span :func:`decay_time_s` of the mode at ``sample_rate_hz`` (Hz): a record in which that mode
+    decays by ``decay_db`` dB. SetupError when even the largest block is too short (lower the
+    sample rate or use an exponential window)."""
+    need = decay_time_s(freq_hz, damping, decay_db) * sample_rate_hz + pretrigger_samples
+    for n in sorted(block_sizes):
+        if n >= need:
+            return int(n)
+    raise SetupError(f"a {freq_hz:g} Hz mode with {100 * damping:.3g} % damping needs {need / sample_rate_hz:.3g} s "
+                     f"to decay {decay_db:g} dB; the largest block ({max(block_sizes)} samples) at "
+                     f"{sample_rate_hz:g} Hz is {max(block_sizes) / sample_rate_hz:.3g} s: lower the sample rate or "
+                     "use an exponential window")
+
+
 def default_setup() -> AcquisitionSetup:
     """The simulated frame's default test plan: hammer at right:6:-X (2.25 mV/N, 1 V range =
     444 N), accelerometers at left:9:Y, top:4:X, right:4:-Z (100 mV/g, 5 V range = 51 g), all IEPE
-    with AC coupling; 6400 Hz (2500 Hz bandwidth, above the frame's modes of interest), 8192
-    samples (1.28 s, df 0.78 Hz); trigger on the force at 20 N rising with 128 samples pre-trigger.
+    with AC coupling; 6400 Hz (2500 Hz bandwidth, above the frame's modes of interest); the block
+    long enough for the slowest mode of the band (:data:`DEFAULT_SLOWEST_MODE`) to decay by
+    :data:`DEFAULT_DECAY_DB` (:func:`block_size_for_decay`: 32768 samples, 5.12 s, df 0.195 Hz);
+    trigger on the force at 20 N rising with 128 samples pre-trigger.
 
     The ranges leave generous headroom over the simulated frame's peaks with the default hammer
     (about 107 N, 0.24 V; accelerations up to about 38 m/s^2, 0.39 V, over the test plan's points),
@@ -272,7 +311,32 @@ def default_setup() -> AcquisitionSetup:
     hammer = ChannelSetup("force", "right:6:-X", "force", 2.25, "mV/N", "AC", True, 1.0)
     accels = tuple(ChannelSetup(f"acc{i + 1}", p, "acceleration", 100.0, "mV/g", "AC", True, 5.0)
                    for i, p in enumerate(("left:9:Y", "top:4:X", "right:4:-Z")))
-    return AcquisitionSetup(6400.0, 8192, (hammer,) + accels, TriggerSetup(0, 20.0, "rising", 128))
+    fs, pre = 6400.0, 128
+    block = block_size_for_decay(fs, *DEFAULT_SLOWEST_MODE, pretrigger_samples=pre)
+    return AcquisitionSetup(fs, block, (hammer,) + accels, TriggerSetup(0, 20.0, "rising", pre))
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def setup_to_toml(setup: AcquisitionSetup) -> str:
+    """The set-up as a commented TOML document that ``--setup FILE.toml`` reads back
+    (:func:`load_setup`): a template to edit."""
+    d = setup.to_dict()
+    lines = ["# impact test set-up (capture --setup FILE.toml); units: Hz, samples, mV/N or mV/g, V peak,",
+             "# trigger level in the trigger channel's unit (N or m/s^2)",
+             f"# record length {setup.duration_s:g} s, bandwidth {setup.bandwidth_hz:g} Hz",
+             f"sample_rate_hz = {_toml_value(d['sample_rate_hz'])}",
+             f"block_size = {_toml_value(d['block_size'])}", "", "[trigger]"]
+    lines += [f"{k} = {_toml_value(v)}" for k, v in d["trigger"].items()]
+    for ch in d["channels"]:
+        lines += ["", "[[channels]]"] + [f"{k} = {_toml_value(v)}" for k, v in ch.items()]
+    return "\n".join(lines) + "\n"
 
 
 def load_setup(path: "str | Path") -> AcquisitionSetup:

@@ -43,12 +43,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("gn", "lm"), default="lm", help="LSFD iteration (default lm)")
     p.add_argument("--initial", choices=("lscf", "lsce"), default="lscf",
                    help="initial-pole method of the stabilization (default lscf)")
-    p.add_argument("--poles", metavar="F1,F2,...", help="natural frequencies (Hz) to fit instead of automatic selection")
+    p.add_argument("--poles", metavar="F1,F2,...|FILE",
+                   help="natural frequencies (Hz) to fit instead of automatic selection (poles the data show "
+                        "beyond them are added), or a file of poles picked on the report's stabilization diagram "
+                        "(fitted exactly: no pole is added; see docs/report.md)")
     p.add_argument("--residuals", choices=("physical", "paper", "none"), default="physical",
                    help="residual terms (default physical)")
     p.add_argument("--per-frf", action="store_true", help="also fit every FRF alone (results in the JSON)")
     p.add_argument("--max-iter", type=int, default=100, metavar="N", help="LSFD iteration cap (default 100)")
-    p.add_argument("--plot", metavar="PNG", help="measured vs synthesised FRFs with the relative error (paper Fig. 7)")
+    p.add_argument("--plot", metavar="PNG", help="measured vs synthesised FRFs with the relative error (paper Fig. 7) "
+                                                  "and the mode indicator (CMIF, or MIF for one reference) beneath")
+    p.add_argument("--log-freq", action="store_true", help="logarithmic frequency axis in --plot")
     p.add_argument("--uff", metavar="OUT.uff",
                    help="write the test geometry (UFF 15 nodes, 82 trace lines), UFF 55 mode shapes (in order of "
                         "frequency) and UFF 58 synthesised FRFs: other tools can animate the shapes")
@@ -118,6 +123,20 @@ def _write_uff(path: str, frf, result, geometry=None) -> None:
                 out.write(piece.read_bytes())
 
 
+def _given_poles(text: str) -> tuple:
+    """``--poles``: a picked-poles file (when ``text`` names a file or looks like a path) or a list
+    of frequencies in Hz. Returns (complex poles (rad/s) or frequencies (Hz) for
+    ``fit_auto(initial=...)``, whether they came from a file of picked poles, the band (Hz) they
+    were picked in or None)."""
+    from .inputs import parse_float_list
+    from .picks import read_picks
+
+    if Path(text).is_file() or "/" in text or Path(text).suffix.lower() in (".json", ".txt"):
+        picks = read_picks(text)
+        return picks.initial(), True, picks.band_hz
+    return parse_float_list(text), False, None
+
+
 @cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
@@ -133,7 +152,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             v = getattr(args, name)
             if v is not None and v < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be >= 1; got {v}")
-        freqs = parse_float_list(args.poles) if args.poles else None
+        freqs, picked, picked_band = _given_poles(args.poles) if args.poles else (None, False, None)
+        if band is None and picked_band is not None:
+            band = picked_band  # the band of the diagram the poles were picked on
         exclude = parse_float_list(args.exclude_lines) if args.exclude_lines else []
         mains = () if str(args.mains).strip().lower() == "none" else tuple(parse_float_list(args.mains))
         if any(m <= 0 for m in mains) or (args.exclude_mains is not None and not args.exclude_mains > 0):
@@ -173,6 +194,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 residual_form=args.residuals, initial=freqs if freqs is not None else args.initial,
                 per_frf=args.per_frf, max_iter=args.max_iter, frf_weighting=args.frf_weights,
                 mains_hz=mains, exclude_hz=exclude or None,
+                add_missing=not picked,
             )
         caught = [str(w.message) for w in wlist]
     result, stab = fit.lsfd, fit.stabilization
@@ -196,7 +218,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             scatter = subset_scatter(frf, result)
         except ValueError as exc:
             print(f"warning: no scatter estimate: {exc}", file=sys.stderr)
-    doc = result_to_dict(fit, frf, extra={"input": str(args.input), "warnings": notes + caught},
+    from .mif import indicator_summary
+
+    doc = result_to_dict(fit, frf, extra={"input": str(args.input), "warnings": notes + caught,
+                                          "mode_indicator": indicator_summary(frf, result.band, max_points=256)},
                          scatter=scatter)
     with errors_to_exit("analysis fit", (OSError, ValueError), prefix="cannot write the outputs: "):
         if args.json:
@@ -207,7 +232,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
             order = [(int(k // rms.shape[1]), int(k % rms.shape[1])) for k in np.argsort(-rms, axis=None)]
             rows = [shown] + [p for p in order if p != shown and rms[p] > 0]
-            plot_fit(frf, result, args.plot, pairs=rows[:4], band=result.band)
+            plot_fit(frf, result, args.plot, pairs=rows[:4], band=result.band, log_freq=args.log_freq, indicator=True)
             print(f"plot written to {args.plot}")
         if args.uff:
             _write_uff(args.uff, frf, result, _geometry(args))

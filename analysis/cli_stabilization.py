@@ -21,7 +21,8 @@ from .command_line import Parser as _Parser, check_out_dir, cli_entry, errors_to
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="python -m analysis stabilization",
-                description="Stabilization diagram (paper Fig. 8) of LSCF or LSCE poles, optionally LSFD-refined.")
+                description="Stabilization diagram (paper Fig. 8) of LSCF or LSCE poles, optionally LSFD-refined, "
+                            "with the mode indicator (CMIF, or MIF for one reference) beneath.")
     with_examples(p)
     p.add_argument("input", metavar="INPUT", help="recording (.h5) or UFF file with dataset-58 FRFs")
     p.add_argument("--png", metavar="OUT.png", required=True, help="write the diagram")
@@ -31,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="initial-pole method (default lscf, as 'analysis fit')")
     p.add_argument("--lsfd", action="store_true", help="refine every order with a few LSFD iterations")
     p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: automatic)")
+    p.add_argument("--log-freq", action="store_true", help="logarithmic frequency axis")
     add_estimator(p)
     add_threads(p)
     return p
@@ -76,7 +78,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         c = clusters[k]
         print(f"{k + 1:4d} {natural_freq_hz(c.pole):10.4f} {100 * damping_ratio(c.pole):9.3f} {c.n_orders:7d}")
     with errors_to_exit("analysis stabilization", (OSError, ValueError), prefix="cannot write the outputs: "):
-        plot_stabilization(stab, frf, args.png, selected=poles)
+        plot_stabilization(stab, frf, args.png, selected=poles, log_freq=args.log_freq)
         print(f"diagram written to {args.png}")
         if args.json:
             doc = stab.to_dict()

@@ -25,7 +25,7 @@ import numpy as np
 
 from .frf import QUANTITY_POWER, FRFSet
 
-__all__ = ["cmif", "mif"]
+__all__ = ["SUMMARY_CURVES", "cmif", "indicator_summary", "mif"]
 
 
 def cmif(frf: FRFSet) -> np.ndarray:
@@ -54,3 +54,43 @@ def mif(frf: FRFSet, reference: int = 0) -> np.ndarray:
         out = np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
     out[~np.isfinite(out)] = np.nan
     return np.clip(out, 0.0, 1.0)
+
+
+#: curves of a CMIF summary (the strongest singular values; more are rarely above the noise)
+SUMMARY_CURVES = 4
+
+
+def indicator_summary(frf: FRFSet, band: "tuple[float, float] | None" = None, max_points: int = 400) -> dict:
+    """A compact, JSON-able view of the mode indicators over ``band`` (Hz; default: all lines).
+
+    The lines are grouped into at most ``max_points`` consecutive bins; each bin is represented by
+    its line where the first CMIF curve peaks, so peaks survive the reduction. Keys:
+    ``freq_hz`` (Hz), ``cmif_db`` (the first :data:`SUMMARY_CURVES` singular values per bin,
+    dB re 1 unit of ``frf.H``, one list per curve, None where undefined), ``mif`` (the real-normal
+    MIF of reference 0 at the same lines, dimensionless, only when there is one reference; else
+    None), ``lines`` (how many lines the band holds) and ``unit``.
+    """
+    if max_points < 2:
+        raise ValueError(f"max_points must be >= 2; got {max_points}")
+    f = np.asarray(frf.freq_hz, float)
+    lo, hi = (float(f[0]), float(f[-1])) if band is None else (float(band[0]), float(band[1]))
+    idx = np.flatnonzero((f >= lo) & (f <= hi))
+    s = cmif(frf)[idx, :SUMMARY_CURVES]
+    with np.errstate(divide="ignore"):
+        s_db = 20 * np.log10(s)
+    s_db[~np.isfinite(s_db)] = np.nan
+    edges = np.linspace(0, idx.size, min(idx.size, max_points) + 1).astype(int)
+    pick = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        seg = s_db[a:b, 0]
+        pick.append(a + (int(np.nanargmax(seg)) if np.any(np.isfinite(seg)) else 0))
+    sel = np.asarray(pick, dtype=int)
+
+    def _list(x: np.ndarray, decimals: int) -> list:
+        r = np.round(x, decimals)
+        return [None if not np.isfinite(v) else float(v) for v in r]
+
+    mif_curve = mif(frf, 0)[idx][sel] if frf.n_references == 1 else None
+    return {"freq_hz": _list(f[idx][sel], 4), "cmif_db": [_list(s_db[sel, k], 2) for k in range(s_db.shape[1])],
+            "mif": None if mif_curve is None else _list(mif_curve, 4), "lines": int(idx.size),
+            "unit": frf.unit or ""}

@@ -70,8 +70,8 @@ def format_table(result, frf: Optional[FRFSet] = None, *, output: int = 0, refer
     label = f"{outs[output]} / {refs[reference]}" if outs and refs else "FRF"
     head = title or f"LSFD ({result.method}) fit, residues of {label}"
     init = None if initial is None or np.size(initial) == 0 else np.asarray(initial, dtype=complex)
-    pre = (f"{initial_label} f", f"{initial_label} zeta") if init is not None else ()
-    rows = [("",) + pre + ("f [Hz]", "zeta [%]", "f std", "zeta std", "parameter", "value")]
+    pre = (f"{initial_label} f [Hz]", f"{initial_label} zeta [%]") if init is not None else ()
+    rows = [("",) + pre + ("f [Hz]", "zeta [%]", "f std [Hz]", "zeta std [%]", "parameter", "value")]
     order = np.argsort(result.freq_hz)
     match: dict = {}
     if init is not None:

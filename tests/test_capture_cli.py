@@ -8,6 +8,8 @@ import numpy as np
 import pyuff
 import pytest
 
+from acquisition.setup import default_setup
+
 from acquisition.cli_capture import main as capture_main
 from acquisition.cli_demo import main as demo_main
 from acquisition.cli_export import main as export_main
@@ -43,8 +45,9 @@ def test_capture_writes_a_complete_recording(captured):
         assert rec.closed_cleanly
     s = load_frfset(captured)
     assert s.H.shape[:2] == (3, 2) and s.quantity == "accelerance" and s.unit == "(m/s^2)/N"
+    setup = default_setup()  # 5 % at the block end: tau = (block - pre-trigger) / fs / ln 20
     assert s.exp_window_tau_s == pytest.approx(
-        (8192 - 128) / 6400.0 / np.log(20.0))  # default set-up: 8192 samples, 128 pre-trigger, 6400 Hz
+        (setup.block_size - setup.trigger.pretrigger_samples) / setup.sample_rate_hz / np.log(20.0))
 
 
 def test_replay_with_original_settings_is_bit_exact_and_leaves_original(captured, tmp_path):

@@ -69,9 +69,12 @@ def test_bad_inputs_exit_2_with_message(files, capsys):
 def test_recording_with_hits_adds_time_data(tmp_path):
     from acquisition.cli_capture import main as capture_main
 
+    from test_diagnosis_physical import _short_setup
+
     rec = tmp_path / "rec.h5"
+    # a 1.28 s record (see test_unchanged_frame_captured_with_an_exponential_window_is_none for the 5.12 s default)
     assert capture_main(["--device", "sim://", "--seed", "3", "--out", str(rec), "--points", "right:6:-X",
-                         "--hits", "4", "--auto", "-q"]) == 0
+                         "--hits", "4", "--auto", "-q", "--setup", _short_setup(tmp_path)]) == 0
     out = tmp_path / "d.json"
     assert main(["--measured", str(rec), "--simulated", TOML, "--json", str(out), "--band", "3:400",
                  "--effects", "stiffness_shift,sensitivity_error"]) == 0

@@ -204,7 +204,8 @@ def test_no_trigger_times_out_with_a_clear_message():
     stand = PulseStand(amplitude_n=10.0)  # below the 20 N trigger level
     fw = Firmware(stand, max_strikes=2)
     with Analyser(LoopbackTransport(fw), poll_interval_s=0.001) as an:
-        an.configure(default_setup())
+        # 8192-sample blocks: both strikes must fit in the 0.05 s wait, also on a loaded machine
+        an.configure(dataclasses.replace(default_setup(), block_size=8192))
         an.arm()
         with pytest.raises(TriggerTimeout, match="no trigger within 0.05 s.*did not cross the trigger level"):
             an.wait_for_trigger(0.05)
@@ -241,7 +242,7 @@ def test_end_to_end_with_the_simulated_frame(packetized):
         block = an.read_block()
     assert (ident.vendor, ident.product, ident.revision) == ("IMPACTLB", "SIGLAB-SIM 2042", "0100")
     assert fw.stand.hammer_point == "right:6:-X"  # the operator strikes where the force channel is
-    assert block.counts.shape == (4, 8192) and block.trigger_index == pre and block.sequence == 1
+    assert block.counts.shape == (4, setup.block_size) and block.trigger_index == pre and block.sequence == 1
     f = block.data[0]
     assert f[pre] >= setup.trigger.level > f[pre - 1]
     assert 60.0 < f.max() < 160.0 and np.abs(f[:pre - 8]).max() < 2.0  # a ~100 N hit, quiet before it

@@ -226,7 +226,8 @@ def _with_channel(i: int, **changes) -> AcquisitionSetup:
      r"trigger level 500 N is 1.125 V at the input, outside the 1 V range"),
     (dataclasses.replace(default_setup(), trigger=TriggerSetup(4, 20.0, "rising", 128)), r"trigger channel 4 does not exist"),
     (dataclasses.replace(default_setup(), trigger=TriggerSetup(0, 20.0, "up", 128)), r"slope 'up' must be one of rising, falling"),
-    (dataclasses.replace(default_setup(), trigger=TriggerSetup(0, 20.0, "rising", 8192)), r"pre-trigger of 8192 samples is outside 0..8191"),
+    (dataclasses.replace(default_setup(), block_size=8192, trigger=TriggerSetup(0, 20.0, "rising", 8192)),
+     r"pre-trigger of 8192 samples is outside 0..8191"),
     (dataclasses.replace(default_setup(), channels=default_setup().channels * 2), r"8 channels set up; the analyser has 1..4 inputs"),
 ])
 def test_setup_validation_names_the_value_and_the_allowed_ones(setup, message):
@@ -250,7 +251,7 @@ def test_setup_files_json_and_toml(tmp_path):
     s = default_setup()
     (tmp_path / "s.json").write_text(json.dumps(s.to_dict()))
     assert load_setup(tmp_path / "s.json") == s
-    toml = ['sample_rate_hz = 6400', 'block_size = 8192', '[trigger]', 'channel = 0', 'level = 20.0',
+    toml = ['sample_rate_hz = 6400', f'block_size = {s.block_size}', '[trigger]', 'channel = 0', 'level = 20.0',
             'slope = "rising"', 'pretrigger_samples = 128']
     for ch in s.channels:
         toml += ['[[channels]]'] + [f'{k} = {json.dumps(v)}' for k, v in dataclasses.asdict(ch).items()]

@@ -1,6 +1,8 @@
 """Fault injection (simulator.faults) and the recovery of the driver and the capture session."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -153,7 +155,8 @@ def test_session_recovers_from_each_fault_kind(kind, packetized, tmp_path):
 
     rate = 0.15 if kind in ("no_trigger", "double_hit", "overload") else 0.05
     fw = create_analyser({"seed": 5, "faults": f"{kind}:{rate}", "fault_seed": 11, "packetized": packetized})
-    setup = default_setup()
+    # 8192-sample blocks: the per-read fault rates are set for that many READ BLOCK calls per hit
+    setup = dataclasses.replace(default_setup(), block_size=8192)
     plan = TestPlan(hits_per_point=10)
     out = tmp_path / "rec.h5"
     with Analyser(LoopbackTransport(fw), timeout_s=5.0) as a:

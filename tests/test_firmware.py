@@ -1,6 +1,8 @@
 """The simulated firmware at the byte level: bulk-only cases, SCSI sense, stream and packet modes, capture."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -273,7 +275,8 @@ STATUS_CDB = bytes.fromhex("c4010010000000000000")
 def configured(polls: int = 1, packetized: bool = False, stand=None) -> tuple[Firmware, bytes]:
     fw = Firmware(stand or PulseStand(), packetized=packetized, strike_after_polls=polls)
     clear_ua(fw)
-    raw = P.encode_setup(setup_to_wire(default_setup()))
+    # an 8192-sample block: the chunk layout of the READ BLOCK tests below is written for it
+    raw = P.encode_setup(setup_to_wire(dataclasses.replace(default_setup(), block_size=8192)))
     send(fw, cbw(40, len(raw), False, bytes.fromhex("c101") + len(raw).to_bytes(2, "big") + bytes(6)), raw)
     assert b"".join(transfers(fw)) == csw(40, 0, 0)
     return fw, raw

@@ -14,7 +14,7 @@ from analysis.geometry import Geometry, GeometryError, points_on_a_line, read_uf
 from analysis.modal import ModalModel, pole_from_fz
 from analysis.report_html.collect import excitation_band, mpc, shape_vectors
 
-PLOTS = ("frf", "coherence", "force-spectrum", "stabilization", "synthesis", "automac", "mode-shapes")
+PLOTS = ("frf", "coherence", "force-spectrum", "stabilization", "cmif", "synthesis", "automac", "mode-shapes")
 
 
 class Page(HTMLParser):

@@ -20,8 +20,8 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 INSTALL = ("install the browser for these tests: apt-get install chromium chromium-driver, and pip install "
            "selenium (in the test extra: pip install -e '.[test,report]')")
-PLOTS = ("frf", "coherence", "force-spectrum", "force-time", "response-time", "stabilization", "synthesis", "automac",
-         "mode-shapes", "diagnosis", "diagnosis-bands")
+PLOTS = ("frf", "coherence", "force-spectrum", "force-time", "response-time", "stabilization", "cmif", "synthesis",
+         "automac", "mode-shapes", "diagnosis", "diagnosis-bands")
 LOAD_TIMEOUT_S = 60
 
 
@@ -198,3 +198,152 @@ def test_frf_picker_shows_an_frf_and_its_coherence(loaded):
     d.execute_script("const p = document.getElementById('frf-picker'); p.value = '5';"
                      "p.dispatchEvent(new Event('change'));")
     WebDriverWait(d, 10, poll_frequency=0.1).until(lambda drv: drv.execute_script(get) == [True, True, True])
+
+
+def _open_report(driver, index: Path) -> str:
+    """Load ``index`` and wait until its plots are drawn; returns ``dataset.ready``."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    driver.get_log("browser")
+    driver.get(index.resolve().as_uri())
+    WebDriverWait(driver, LOAD_TIMEOUT_S).until(lambda d: d.execute_script("return document.body.dataset.ready"))
+    return driver.execute_script("return document.body.dataset.ready")
+
+
+@pytest.mark.realdata
+def test_report_of_an_imported_real_recording_opens(browser, shared_data, tmp_path):
+    """The README's import of the LADISK beam (a real LabVIEW file: no sensitivities, no input ranges)
+    gives a report that draws every plot in Chromium without a console error."""
+    from acquisition import cli_import
+    from analysis import cli_report
+
+    rec = tmp_path / "beam.h5"
+    assert cli_import.main([str(shared_data / "ladisk_beam_impact" / "acceleration.lvm"), "--out", str(rec)]) == 0
+    assert cli_report.main([str(rec), "--out", str(tmp_path / "rb")]) == 0
+    assert _open_report(browser, tmp_path / "rb" / "index.html") == "1"
+    errors = [e for e in browser.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
+    assert not errors, f"console errors: {errors}"
+    n = browser.execute_script("return document.querySelectorAll('table#modes tbody tr').length")
+    assert n >= 1
+
+
+#: the stability class whose markers the picking test clicks (stable frequency, damping and vector)
+STABLE = "freq+damp+mac"
+
+
+def _click_pole(driver, freq_hz: float) -> dict:
+    """Click the stable-class marker nearest ``freq_hz`` at the highest model order (a real mouse click
+    at the marker's place); returns the marker's {freq_hz, order, damping}, or None when no marker of
+    that class lies within 0.5 % of ``freq_hz``."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    found = driver.execute_script("""
+      const div = document.querySelector('[data-plot="stabilization"]');
+      const t = div._fullData.findIndex(d => d.meta === 'poles' && d.name.endsWith('vector'));
+      const tr = div._fullData[t];
+      const dist = tr.x.map(f => Math.abs(f - arguments[0]));
+      const near = Math.min(...dist);
+      if (near > 5e-3 * arguments[0]) return null;
+      let best = -1;  // the nearest column, its highest order
+      tr.x.forEach((f, i) => { if (dist[i] <= near + 1e-3 * f && (best < 0 || tr.y[i] > tr.y[best])) best = i; });
+      const xa = div._fullLayout.xaxis, ya = div._fullLayout.yaxis, box = div.getBoundingClientRect();
+      const px = div._fullLayout._size.l + xa.l2p(tr.x[best]), py = div._fullLayout._size.t + ya.l2p(tr.y[best]);
+      return {freq_hz: tr.x[best], order: tr.y[best], damping: tr.customdata[best],
+              dx: px - box.width / 2, dy: py - box.height / 2};""", freq_hz)
+    if found is None:
+        return None
+    div = driver.find_element("css selector", "[data-plot='stabilization']")
+    # the pause: two clicks within plotly's double-click interval (0.3 s) would be a double click (zoom reset)
+    ActionChains(driver).pause(0.45).move_to_element_with_offset(div, round(found["dx"]), round(found["dy"])) \
+        .click().perform()
+    return found
+
+
+def _wait_picks(driver, n: int) -> None:
+    """Wait until the diagram counts ``n`` picks."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    WebDriverWait(driver, 10, poll_frequency=0.1).until(lambda d: d.execute_script(
+        "return document.querySelector('[data-plot=\"stabilization\"]').dataset.picks") == str(n))
+
+
+def test_picked_poles_are_saved_and_fitted(browser, report_case, tmp_path):
+    """Click pole markers on the report's stabilization diagram, unpick one, save the picks with the
+    page's button (a real download), fit with ``--poles poles.json``: the fit's poles are the picked ones."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    from analysis import cli_fit
+
+    downloads = tmp_path / "downloads"
+    downloads.mkdir()
+    browser.execute_cdp_cmd("Browser.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(downloads)})
+    assert _open_report(browser, report_case["report"]) == "1"
+    browser.execute_script("document.querySelector('[data-plot=\"stabilization\"]').scrollIntoView()")
+    picked: list[dict] = []
+    for f in (p["freq_hz"] for p in report_case["fit_doc"]["poles"]):
+        if any(abs(q["freq_hz"] - f) < 5e-3 * f for q in picked):
+            continue  # a close pair drawn as one column: picked once
+        q = _click_pole(browser, f)
+        if q is None:
+            continue
+        picked.append(q)
+        _wait_picks(browser, len(picked))
+    wanted = [q["freq_hz"] for q in picked]
+    assert len(wanted) >= 4
+    # a second click unpicks, a third picks again
+    _click_pole(browser, wanted[0])
+    WebDriverWait(browser, 10, poll_frequency=0.1).until(lambda d: d.find_elements(
+        "css selector", "#pick-list li").__len__() == len(wanted) - 1)
+    _click_pole(browser, wanted[0])
+    WebDriverWait(browser, 10, poll_frequency=0.1).until(lambda d: d.find_elements(
+        "css selector", "#pick-list li").__len__() == len(wanted))
+    assert [round(q["freq_hz"], 4) for q in picked] == sorted(round(q["freq_hz"], 4) for q in picked)
+    browser.find_element("id", "save-picks").click()
+    saved = downloads / "poles.json"
+    WebDriverWait(browser, 10, poll_frequency=0.1).until(lambda d: saved.is_file() and saved.stat().st_size > 0)
+    doc = json.loads(saved.read_text())
+    assert doc["schema"] == "impactlab.poles/1" and len(doc["poles"]) == len(wanted)
+    assert [q["freq_hz"] for q in doc["poles"]] == pytest.approx(sorted(q["freq_hz"] for q in picked))
+    out = tmp_path / "fit.json"
+    assert cli_fit.main([str(report_case["recording"]), "--poles", str(saved), "--json", str(out), "-q"]) == 0
+    fitted = sorted(p["freq_hz"] for p in json.loads(out.read_text())["poles"])
+    assert len(fitted) == len(picked)
+    assert fitted == pytest.approx(sorted(q["freq_hz"] for q in picked), rel=5e-3)
+
+
+def test_response_histories_differ_in_colour(loaded):
+    """The responses of one point are told apart by colour, not only by dash style."""
+    colours = loaded["driver"].execute_script("""
+      const div = document.querySelector('[data-plot="response-time"]');
+      return div._fullData.filter(t => t.visible === true).map(t => t.line.color);""")
+    assert len(colours) >= 2 and len(set(colours)) == len(colours)
+
+
+def _validation_cases() -> list:
+    """(name, loader, band) of every real dataset of docs/validation.md."""
+    from benchmarks.accuracy.validation import (f16_gvt, ladisk_beam, modelab_beam, plate_sweep, pyfrf_5impacts,
+                                                pyuff_3frf, uliege_plane, unesp_boltedbeam)
+
+    return [("f16_gvt", f16_gvt.load, f16_gvt.BAND), ("ladisk_single", ladisk_beam.load_single, ladisk_beam.BAND_SINGLE),
+            ("ladisk_multi", ladisk_beam.load_multi, ladisk_beam.BAND_MULTI),
+            ("modelab_beam", modelab_beam.load, modelab_beam.BAND), ("plate_sweep", plate_sweep.load, plate_sweep.BAND),
+            ("pyfrf_5impacts", pyfrf_5impacts.load, pyfrf_5impacts.BAND), ("pyuff_3frf", pyuff_3frf.load, pyuff_3frf.BAND),
+            ("uliege_plane", uliege_plane.load, uliege_plane.BAND),
+            ("unesp_boltedbeam", unesp_boltedbeam.load, unesp_boltedbeam.BAND)]
+
+
+@pytest.mark.long
+@pytest.mark.realdata
+@pytest.mark.parametrize("case", range(9))
+def test_report_of_every_validation_dataset_opens(browser, shared_data, tmp_path, case):
+    """The report of each real dataset of docs/validation.md (its FRFs, fitted in its band) draws every plot in
+    Chromium without a console error."""
+    from analysis.report_html import build_document, run_fit, write_report
+
+    name, load, band = _validation_cases()[case]
+    frf = load(shared_data)
+    doc = build_document(frf, run_fit(frf, band=band), input_name=name)
+    index = write_report(tmp_path / name, doc)
+    assert _open_report(browser, index) == "1", name
+    errors = [e for e in browser.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
+    assert not errors, f"{name}: console errors: {errors}"

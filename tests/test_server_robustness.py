@@ -125,7 +125,7 @@ def test_full_capture_after_the_abuse_and_clean_stop(server):
             except ImpactlabError:
                 if attempt == 4:
                     raise
-        assert block.counts.shape == (4, 8192) and np.abs(block.data[0]).max() > 20.0
+        assert block.counts.shape == (4, default_setup().block_size) and np.abs(block.data[0]).max() > 20.0
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(10) == 0
     assert "Traceback" not in proc.stderr.read()

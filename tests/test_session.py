@@ -231,11 +231,11 @@ def test_plan_validation():
 
 
 # ---------------------------------------------------------------------- part 2: the simulated frame over sim://
-def sim_session(url: str, points, hits: int, windows: WindowSettings, **options):
-    """A roving-hammer session on ``url`` with the default set-up (no recording)."""
+def sim_session(url: str, points, hits: int, windows: WindowSettings, setup=None, **options):
+    """A roving-hammer session on ``url`` with ``setup`` (default: the default set-up; no recording)."""
     from acquisition.setup import default_setup
 
-    setup = default_setup()
+    setup = setup or default_setup()
     with Analyser(url, timeout_s=30.0) as an:
         result = CaptureSession(an, setup, TestPlan("roving_hammer", tuple(points), hits), windows=windows,
                                 **options).run()
@@ -288,11 +288,17 @@ def test_sim_h1_agrees_with_the_analytic_frf():
     left:9:Y -> right:4:-Z: responses of a few ADC counts) deviate beyond this bound (normalised error
     median 2-7): reported to the simulator's owner, not asserted here.
     """
+    from dataclasses import replace
+
     from acquisition.setup import default_setup
 
-    tau = _tau(default_setup(), 0.05)
+    # 8192-sample blocks (1.28 s), the record these bounds are calibrated on: with the default 5.12 s
+    # record and the window at 5 % of it, the noisy tail weighs 4x longer and the weak path
+    # right:6:-X -> top:4:X has a median relative error of 5 % (0.3 % at the driving point)
+    short = replace(default_setup(), block_size=8192)
+    tau = _tau(short, 0.05)
     win = WindowSettings(force_width_s=0.02, force_taper_s=0.005, exp_tau_s=tau)
-    setup, result = sim_session("sim://?seed=5", ("right:6:-X", "left:9:Y"), 5, win)
+    setup, result = sim_session("sim://?seed=5", ("right:6:-X", "left:9:Y"), 5, win, setup=short)
     for avg, out in zip(result.averages, ("top:4:X", "left:9:Y")):
         i = avg.outputs.index(out)
         f, n = avg.acc.freq_hz, avg.n_averages

@@ -99,7 +99,8 @@ def fleet_document(fleet: FleetResult, run_info: dict[str, Any]) -> dict[str, An
 
 def plot_fleet(path: "str | Path", fleet: FleetResult) -> None:
     """fleet.png: per reference mode, every unit's shift beyond its common shift (%), flagged units
-    in red, the fleet's +-z_limit robust band in grey; the units' common shifts in a second panel."""
+    in red with their names (at their largest departure), the fleet's +-z_limit robust band in grey;
+    the units' common shifts in a second panel (flagged units named)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -119,8 +120,13 @@ def plot_fleet(path: "str | Path", fleet: FleetResult) -> None:
             if u.status != "ok" or u.flagged != flagged:
                 continue
             ok = np.isfinite(u.shift_pct)
-            xs.extend(x[ok] + rng.uniform(-0.18, 0.18, ok.sum()))
+            ux = x[ok] + rng.uniform(-0.18, 0.18, ok.sum())
+            xs.extend(ux)
             ys.extend(u.shift_pct[ok])
+            if flagged and ok.any():  # the unit's name at its largest departure: the plot names the units
+                k = int(np.argmax(np.abs(u.shift_pct[ok] - np.array([m.shift_median_pct for m in modes])[ok])))
+                ax.annotate(u.name, (ux[k], u.shift_pct[ok][k]), xytext=(4, 3), textcoords="offset points",
+                            fontsize=7, color=colour)
         if xs:
             ax.plot(xs, ys, ".", color=colour, ms=4 if not flagged else 6, alpha=0.6 if not flagged else 0.9,
                     label=label)
@@ -134,7 +140,11 @@ def plot_fleet(path: "str | Path", fleet: FleetResult) -> None:
     ax.legend(fontsize=8, loc="lower left")
     cs = [u.common_shift_pct for u in fleet.units if u.status == "ok"]
     colours = ["tab:red" if u.flagged else "tab:blue" for u in fleet.units if u.status == "ok"]
-    ax2.scatter(rng.uniform(-0.2, 0.2, len(cs)), cs, c=colours, s=10)
+    cx = rng.uniform(-0.2, 0.2, len(cs))
+    ax2.scatter(cx, cs, c=colours, s=10)
+    for xi, yi, u in zip(cx, cs, [u for u in fleet.units if u.status == "ok"]):
+        if u.flagged:
+            ax2.annotate(u.name, (xi, yi), xytext=(4, 0), textcoords="offset points", fontsize=7, color="tab:red")
     ax2.set_xticks([])
     ax2.set_ylabel("common shift of all modes (%)")
     ax2.set_title("material scatter")

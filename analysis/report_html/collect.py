@@ -12,9 +12,10 @@ from ..frf import FRFSet
 from ..geometry import Geometry, node_label
 from ..modal import damping_ratio, natural_freq_hz, synthesize
 from ..plots import summed_magnitude_db
-from ..points import parse_point
+from ..points import PointLabelError, parse_point
 from ..spectra import excitation_band as spectra_excitation_band, hit_spectra
 from ..mac import mac_matrix
+from ..mif import indicator_summary
 from ..stabilization import CLASS_NAMES
 from .sources import FitData, TestRecord
 
@@ -35,6 +36,8 @@ __all__ = [
 MAX_TIME_POINTS = 1600
 #: FRFs drawn when the page opens (the strongest); the others are one legend click away
 VISIBLE_FRFS = 4
+#: lines of the mode-indicator plot at most (bins keep their CMIF peak)
+INDICATOR_POINTS = 1500
 #: FRFs shown in the synthesis plot
 SYNTHESIS_FRFS = 3
 
@@ -144,7 +147,9 @@ def modal_section(frf: FRFSet, fit: FitData) -> dict:
     return {"band_hz": [float(lo), float(hi)], "modes": modes, "source": fit.source, "warnings": list(fit.warnings),
             "synthesis": {"freq_hz": _r(fb, 4), "frfs": synth, "rel_error_db": _r(20 * np.log10(
                 np.maximum(rel, 1e-6)), 2), "rel_rms": _finite(total)},
-            "automac": _r(mac, 3), "shape_points": len(labels), "stabilization": stabilization_data(frf, fit)}
+            "automac": _r(mac, 3), "shape_points": len(labels), "stabilization": stabilization_data(frf, fit),
+            "indicator": indicator_summary(frf, (lo, hi) if fit.stab is None else fit.stab.band,
+                                           max_points=INDICATOR_POINTS)}
 
 
 def _finite(x: float) -> Optional[float]:
@@ -154,21 +159,37 @@ def _finite(x: float) -> Optional[float]:
 
 def stabilization_data(frf: FRFSet, fit: FitData) -> dict:
     """Poles per order by class (``classes`` None without a stabilization, e.g. a fit read from a
-    file), the summed FRF (dB) and the fitted natural frequencies (Hz)."""
+    file; per class ``freq_hz`` (Hz), ``order`` and ``damping`` (ratio) of every physical pole, for
+    the page's pole picking), the summed FRF (dB), the fitted natural frequencies (Hz) and the band."""
     stab = fit.stab
     lo, hi = fit.band if stab is None else stab.band
     sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
     doc = {"classes": None, "freq_hz": _r(frf.freq_hz[sel], 4), "summed_db": _r(summed_magnitude_db(frf)[sel], 2),
-           "fitted_hz": _r(np.sort(natural_freq_hz(fit.model.poles)), 4), "method": None, "max_order": None}
+           "fitted_hz": _r(np.sort(natural_freq_hz(fit.model.poles)), 4), "method": None, "max_order": None,
+           "band_hz": [float(lo), float(hi)]}
     if stab is None:
         return doc
-    classes: dict[str, dict] = {name: {"freq_hz": [], "order": []} for name in CLASS_NAMES}
+    classes: dict[str, dict] = {name: {"freq_hz": [], "order": [], "damping": []} for name in CLASS_NAMES}
     for n, p, ph, s in zip(stab.orders, stab.poles, stab.physical, stab.status):
         for i in np.flatnonzero(ph):
             c = classes[CLASS_NAMES[int(s[i])]]
             c["freq_hz"].append(round(float(natural_freq_hz(p[i])), 4))
             c["order"].append(int(n))
+            c["damping"].append(float(f"{float(damping_ratio(p[i])):.6g}"))
     return {**doc, "classes": classes, "method": stab.method, "max_order": int(max(stab.orders))}
+
+
+def _axis_sign(label: str) -> tuple[int, int]:
+    """Axis (0, 1, 2 for X, Y, Z) and sign of a point label; a label that is not
+    ``component:node:direction`` (e.g. ``view0:acc:Z`` of another tool) keeps a direction written
+    as its last part, else it moves along Z."""
+    try:
+        p = parse_point(label)
+        return p.axis, p.sign
+    except PointLabelError:
+        d = str(label).rsplit(":", 1)[-1].strip().upper()
+        axis = {"X": 0, "Y": 1, "Z": 2}.get(d.lstrip("+-"), 2)
+        return axis, -1 if d.startswith("-") and d.lstrip("+-") in ("X", "Y", "Z") else 1
 
 
 def shapes_section(fit: FitData, geometry: Geometry) -> dict:
@@ -178,8 +199,8 @@ def shapes_section(fit: FitData, geometry: Geometry) -> dict:
     shapes = shapes[:, order]
     dofs = []
     for lab in labels:
-        p = parse_point(lab)
-        dofs.append({"label": lab, "node": geometry.index(node_label(lab)), "axis": p.axis, "sign": p.sign})
+        axis, sign = _axis_sign(lab)
+        dofs.append({"label": lab, "node": geometry.index(node_label(lab)), "axis": axis, "sign": sign})
     f = natural_freq_hz(fit.model.poles)[order]
     return {"geometry": geometry.to_dict(), "dofs": dofs,
             "modes": [{"freq_hz": float(f[k]), "re": _r(shapes[:, k].real, 4), "im": _r(shapes[:, k].imag, 4)}

@@ -41,32 +41,86 @@ def _test_html(test: Optional[dict], meta: dict) -> str:
         return ("<section id='test'><h2>1. The test</h2><p class='note'>The input holds FRFs only (a UFF file): no "
                 "record of the test (channels, windows, hits). Give the recording (.h5) for this section.</p>"
                 + _dl([("input", escape(meta["input"])), ("FRFs", escape(meta["frf_count"]))]) + "</section>")
-    trig = test["trigger"]
     win = test["windows"]
     exp = (f"tau {_num(win.get('exp_tau_s'))} s" if win.get("exp_tau_s") else
            (f"to {_num(100 * win['exp_decay'], '{:.3g}')} % at the block end" if win.get("exp_decay") else "none"))
     force = (f"{_num(1e3 * win['force_width_s'], '{:.3g}')} ms + {_num(1e3 * win.get('force_taper_s', 0), '{:.3g}')}"
              " ms cosine taper" if win.get("force_width_s") else "none")
+    fs, block = test["sample_rate_hz"], test["block_size"]
+    record = (f" ({_num(float(block) / float(fs), '{:.3g}')} s)" if fs and block else "")
+    points = test["points"] or list(dict.fromkeys(h["point"] for h in test["hits"]))
     items = [("device", escape(test["device"] or "unknown")), ("date (UTC)", escape(test["date"] or "unknown")),
-             ("instrument", escape(", ".join(f"{k} {v}" for k, v in test["instrument"].items()))),
-             ("sampling", f"{_num(test['sample_rate_hz'])} Hz, blocks of {escape(str(test['block_size']))} samples"),
-             ("trigger", escape(", ".join(f"{k} {v}" for k, v in trig.items())) if trig else "&ndash;"),
+             ("instrument", _described(test["instrument"], _INSTRUMENT_LABELS, skip=("url",))),
+             ("sampling", f"{_num(fs)} Hz, blocks of {escape(str(block))} samples{record}"),
+             ("trigger", _trigger(test["trigger"], test["channels"], fs)),
              ("force window", force), ("exponential window", exp),
-             ("plan", escape(", ".join(f"{k} {v}" for k, v in test["plan"].items() if k != "points"))),
-             ("points", escape(", ".join(test["points"]))),
+             ("plan", _described({**test["plan"], "mode": str(test["plan"].get("mode", "")).replace("_", " ")},
+                                 _PLAN_LABELS, skip=("points", "device"))),
+             ("points", escape(", ".join(points)) if points else "none recorded"),
              ("hits", f"{test['accepted']} accepted, {test['rejected']} rejected")]
     ch_rows = [[escape(str(c.get("name", ""))), escape(str(c.get("point", ""))), escape(str(c.get("direction", ""))),
                 escape(str(c.get("quantity", ""))),
                 f"{_num(c.get('sensitivity'))} {escape(str(c.get('sensitivity_unit', '')))}",
                 f"{_num(c.get('range_v'))} V", escape(str(c.get("coupling", ""))),
                 "yes" if c.get("iepe") else "no"] for c in test["channels"]]
-    hit_rows = [[str(h["index"]), escape(h["point"]), "accepted" if h["accepted"] else "<b>rejected</b>",
-                 _num(h["peak_n"], "{:.1f}"), escape("; ".join(h["reasons"])) or "&ndash;"] for h in test["hits"]]
+    # hits numbered from 1 as the terminal numbers them: in the recording and at their point
+    at_point: dict[str, int] = {}
+    hit_rows = []
+    for h in test["hits"]:
+        at_point[h["point"]] = at_point.get(h["point"], 0) + 1
+        hit_rows.append([str(int(h["index"]) + 1), escape(h["point"]), str(at_point[h["point"]]),
+                         "accepted" if h["accepted"] else "<b>rejected</b>", _num(h["peak_n"], "{:.1f}"),
+                         escape("; ".join(h["reasons"])) or "&ndash;"])
     return ("<section id='test'><h2>1. The test</h2>" + _dl(items) + "<h3>Channels</h3>"
             + _table(["channel", "point", "direction", "quantity", "sensitivity", "range", "coupling", "IEPE"],
                      ch_rows, " id='channels'")
-            + "<h3>Hits</h3>" + _table(["hit", "point", "decision", "peak force [N]", "reason"], hit_rows, " id='hits'")
+            + "<h3>Hits</h3>" + _table(["hit", "point", "hit at the point", "decision", "peak force [N]", "reason"], hit_rows,
+                                        " id='hits'")
             + "</section>")
+
+
+#: human labels of the instrument's and the plan's keys (other keys: underscores become spaces)
+_INSTRUMENT_LABELS = {"vendor": "", "model": "", "firmware": "firmware", "serial": "serial number",
+                      "protocol_version": "protocol version"}
+_PLAN_LABELS = {"mode": "", "hits_per_point": "hits per point", "reference": "reference"}
+
+
+def _described(d: dict, labels: dict, skip: Sequence[str] = ()) -> str:
+    """``d`` as "label value, ..." with human labels (an empty label: the value alone); keys in
+    ``skip`` and values that are None or empty (not recorded) are left out."""
+    parts = []
+    for k, v in d.items():
+        if k in skip or v is None or v == "" or v == []:
+            continue
+        label = labels.get(k, str(k).replace("_", " "))
+        parts.append(f"{label} {v}" if label else str(v))
+    return escape(", ".join(parts)) or "&ndash;"
+
+
+def _trigger(trig: dict, channels: list, fs: Any) -> str:
+    """The trigger in words: channel (numbered from 1, with its name), level with the channel's
+    unit, slope, and the pre-trigger samples with their duration."""
+    if not trig:
+        return "&ndash;"
+    parts = []
+    ch = trig.get("channel")
+    unit = ""
+    if isinstance(ch, int):
+        info = channels[ch] if 0 <= ch < len(channels) else {}
+        unit = str(info.get("unit", "") or "")
+        name = str(info.get("name", "") or "")
+        parts.append(f"channel {ch + 1}" + (f" ({name})" if name else ""))
+    if trig.get("level") is not None:
+        parts.append(f"level {_num(trig['level'])}" + (f" {unit}" if unit else " (engineering units)"))
+    if trig.get("slope"):
+        parts.append(f"{trig['slope']} slope")
+    pre = trig.get("pretrigger_samples")
+    if pre is not None:
+        dur = f" ({_num(1e3 * float(pre) / float(fs), '{:.3g}')} ms)" if fs else ""
+        parts.append(f"{pre} samples{dur} kept before the trigger")
+    rest = {k: v for k, v in trig.items() if k not in ("channel", "level", "slope", "pretrigger_samples")}
+    text = ", ".join(parts)
+    return escape(text + (", " + ", ".join(f"{str(k).replace('_', ' ')} {v}" for k, v in rest.items()) if rest else ""))
 
 
 def _points_html(points: Optional[list]) -> str:
@@ -96,11 +150,20 @@ def _modes_html(modal: dict) -> str:
                  "FRF; vertical lines: the fitted modes" if modal["stabilization"]["classes"] is not None else
                  "The fitted modes (vertical lines) over the summed FRF; no stabilization diagram: the fit was read "
                  "from a file (--fit)", 420)
+    picking = modal["stabilization"]["classes"] is not None
+    ind = modal["indicator"]
+    ind_caption = ("Mode indicator: CMIF, the singular values of the FRF matrix per line (dB; a peak of the "
+                   "first curve marks a mode, a peak of the second at the same line a second, close mode)"
+                   + ("; MIF of the one reference on the right axis (0..1, dips at modes)" if ind["mif"] else "")
+                   + "; vertical lines: the fitted modes")
     return ("<section id='modal'><h2>4. Modal parameters</h2>"
             f"<p>Fit: {escape(modal['source'])}; band {modal['band_hz'][0]:.4g}&ndash;{modal['band_hz'][1]:.4g} Hz; "
             f"{len(modal['modes'])} modes; relative RMS misfit of the synthesis "
             f"{_num(None if rel is None else 100 * rel, '{:.2f}')} %.</p>"
-            + stab + "<h3>Mode table</h3>" + _table(head, rows, " id='modes'")
+            "<div class='controls'><label><input id='log-frequency' type='checkbox'> logarithmic frequency axis"
+            "</label></div>"
+            + stab + (_picks_html() if picking else "") + _plot("cmif", ind_caption, 300)
+            + "<h3>Mode table</h3>" + _table(head, rows, " id='modes'")
             + "<p class='note'>&sigma;: standard deviations of the fit (white-noise, perfect-model lower bounds). "
               "MPC: modal phase collinearity of the shape (1: real mode); complexity = 1 - MPC.</p>"
             + (f"<details><summary>fit warnings ({len(modal['warnings'])})</summary><ul>{warn}</ul></details>"
@@ -110,6 +173,15 @@ def _modes_html(modal: dict) -> str:
             + _plot("automac", f"AutoMAC of the mode shapes over the {modal['shape_points']} points they are "
                     "measured at (few points cannot tell every pair of modes apart)", 420)
             + "</section>")
+
+
+def _picks_html() -> str:
+    return ("<div id='picks' class='controls'><p>Pick poles: click a pole marker of the diagram to pick it (a ring "
+            "marks it), click it again to unpick it. Save the picks and fit from them with "
+            "<code>python -m analysis fit INPUT --poles poles.json</code>.</p>"
+            "<ol id='pick-list'></ol>"
+            "<button id='save-picks' type='button' disabled>save picked poles (poles.json)</button> "
+            "<button id='clear-picks' type='button' disabled>clear the picks</button></div>")
 
 
 def _shapes_html() -> str:

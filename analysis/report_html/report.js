@@ -111,8 +111,10 @@
                   type: "scatter", mode: "lines", line: { color: color(i), width: 1.3 } });
       force.push({ x: p.force.t_ms, y: p.force.y, name: p.point, type: "scatter", mode: "lines", line: { color: color(i) } });
       p.responses.forEach(function (r, j) {
+        // one colour per response channel (the same channel has the same colour at every point), the dash per point
         resp.push({ x: r.t_ms, y: r.y, name: "hit at " + p.point + ": " + r.name + (r.unit ? " [" + r.unit + "]" : ""),
-                    visible: i === 0 ? true : "legendonly", type: "scatter", mode: "lines", line: { color: color(i), width: 1, dash: ["solid", "dot", "dash"][j % 3] } });
+                    visible: i === 0 ? true : "legendonly", type: "scatter", mode: "lines",
+                    line: { color: color(j), width: 1, dash: ["solid", "dash", "dot", "dashdot"][i % 4] } });
       });
     });
     var runit = (P[0].responses[0] && P[0].responses[0].unit) ? P[0].responses[0].unit : "EU";
@@ -129,26 +131,112 @@
     var SYM = { "new": ["circle-open", "#aaaaaa", "new pole"], "freq": ["x-thin-open", "#ff7f0e", "stable frequency"],
                 "freq+damp": ["diamond-open", "#1f77b4", "stable frequency + damping"],
                 "freq+damp+mac": ["circle", "#d62728", "stable frequency + damping + vector"] };
-    data.push({ x: S.freq_hz, y: S.summed_db, name: "summed FRF", type: "scatter", mode: "lines",
+    data.push({ x: S.freq_hz, y: S.summed_db, name: "summed FRF", type: "scatter", mode: "lines", hoverinfo: "skip",
                 line: { color: "#333", width: 1 }, yaxis: S.classes ? "y2" : "y" });
     if (S.classes) {
       Object.keys(SYM).forEach(function (k) {
         var c = S.classes[k];
         if (!c || !c.freq_hz.length) { return; }
-        data.push({ x: c.freq_hz, y: c.order, name: SYM[k][2], type: "scatter", mode: "markers",
-                    marker: { symbol: SYM[k][0], color: SYM[k][1], size: k === "new" ? 4 : 6, line: { width: 1, color: SYM[k][1] } } });
+        data.push({ x: c.freq_hz, y: c.order, customdata: c.damping, name: SYM[k][2], type: "scatter", mode: "markers",
+                    meta: "poles", hovertemplate: "%{x:.4f} Hz, \u03b6 %{customdata:.3%}, order %{y}<extra>" + SYM[k][2] + "</extra>",
+                    marker: { symbol: SYM[k][0], color: SYM[k][1], size: k === "new" ? 5 : 7, line: { width: 1, color: SYM[k][1] } } });
       });
+      data.push({ x: [], y: [], name: "picked", type: "scatter", mode: "markers", meta: "picked", hoverinfo: "skip",
+                  marker: { symbol: "circle-open", size: 15, color: "#000", line: { width: 2, color: "#000" } } });
     }
     S.fitted_hz.forEach(function (f) { shapes.push(vline(f, 0, 1, "dot", "#2ca02c")); });
-    var lay = { shapes: shapes, xaxis: axis(FREQ), legend: { orientation: "h", y: 1.1 } };
+    // the legend sits above the plot area, never over the pole columns
+    var lay = { shapes: shapes, xaxis: axis(FREQ), hovermode: "closest",
+                legend: { orientation: "h", x: 0, xanchor: "left", y: 1.02, yanchor: "bottom" } };
     if (S.classes) {
       lay.yaxis = axis("model order [modes]");
       lay.yaxis2 = axis("summed FRF [dB]", { overlaying: "y", side: "right", showgrid: false, tickmode: "auto" });
-      lay.margin = { l: 70, r: 70, t: 30, b: 50 };
+      lay.margin = { l: 70, r: 70, t: 70, b: 50 };
     } else {
       lay.yaxis = axis("summed FRF [dB]");
+      lay.margin = { l: 70, r: 20, t: 50, b: 50 };
     }
-    return Plotly.newPlot(el("stabilization"), data, layout(lay), CONFIG);
+    var div = el("stabilization");
+    var p = Plotly.newPlot(div, data, layout(lay), CONFIG);
+    return S.classes ? p.then(function () { setupPicking(div, data.length - 1); }) : p;
+  }
+
+  /* Pole picking: a click on a pole marker picks it (a ring marks it), a second click unpicks it; the
+     picks are listed under the diagram and saved as poles.json (schema impactlab.poles/1, read by
+     'python -m analysis fit INPUT --poles poles.json'). */
+  var PICKS_SCHEMA = "impactlab.poles/1";
+  function setupPicking(div, ringTrace) {
+    var picks = [], list = document.getElementById("pick-list");
+    var save = document.getElementById("save-picks"), clear = document.getElementById("clear-picks");
+    function key(p) { return p.freq_hz + "@" + p.order; }
+    function document_() {
+      return { schema: PICKS_SCHEMA, input: D.meta.input, band_hz: D.modal.stabilization.band_hz,
+               poles: picks.slice().sort(function (a, b) { return a.freq_hz - b.freq_hz; }) };
+    }
+    function refresh() {
+      var sorted = document_().poles;
+      list.innerHTML = "";
+      sorted.forEach(function (q) {
+        var li = document.createElement("li");
+        li.textContent = q.freq_hz.toFixed(4) + " Hz, \u03b6 " + (100 * q.damping).toFixed(3) + " %, model order " + q.order;
+        list.appendChild(li);
+      });
+      save.disabled = clear.disabled = !picks.length;
+      div.dataset.picks = String(picks.length);
+      return Plotly.restyle(div, { x: [picks.map(function (q) { return q.freq_hz; })],
+                                   y: [picks.map(function (q) { return q.order; })] }, [ringTrace]);
+    }
+    div.on("plotly_click", function (ev) {
+      var pt = (ev.points || []).filter(function (q) { return q.data.meta === "poles" || q.data.meta === "picked"; })[0];
+      if (!pt) { return; }
+      var q;
+      if (pt.data.meta === "picked") { q = picks[pt.pointIndex]; }
+      else { q = { freq_hz: pt.x, damping: pt.customdata, order: pt.y }; }
+      var k = key(q), at = picks.map(key).indexOf(k);
+      if (at >= 0) { picks.splice(at, 1); } else { picks.push(q); }
+      refresh();
+    });
+    clear.addEventListener("click", function () { picks = []; refresh(); });
+    save.addEventListener("click", function () {
+      var blob = new Blob([JSON.stringify(document_(), null, 1) + "\n"], { type: "application/json" });
+      var a = document.createElement("a");
+      a.href = URL.createObjectURL(blob);
+      a.download = "poles.json";
+      document.body.appendChild(a);
+      a.click();
+      a.remove();
+    });
+    window.impactlabPicks = function () { return document_(); };
+    div.dataset.picks = "0";
+  }
+
+  function drawIndicator() {
+    var I = D.modal.indicator, data = [], shapes = [];
+    var cols = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e"];
+    I.cmif_db.forEach(function (y, k) {
+      data.push({ x: I.freq_hz, y: y, name: "CMIF " + (k + 1), type: "scatter", mode: "lines",
+                  line: { color: cols[k % cols.length], width: 1.2 } });
+    });
+    if (I.mif) {
+      data.push({ x: I.freq_hz, y: I.mif, name: "MIF", type: "scatter", mode: "lines", yaxis: "y2",
+                  line: { color: "#9467bd", width: 1.2, dash: "dot" } });
+    }
+    D.modal.stabilization.fitted_hz.forEach(function (f) { shapes.push(vline(f, 0, 1, "dot", "#2ca02c")); });
+    var unit = I.unit ? " re 1 " + I.unit : "";
+    var lay = { shapes: shapes, xaxis: axis(FREQ), yaxis: axis("singular value [dB" + unit + "]"),
+                legend: { orientation: "h", x: 0, y: 1.02, yanchor: "bottom" }, margin: { l: 70, r: 70, t: 40, b: 50 } };
+    if (I.mif) { lay.yaxis2 = axis("MIF [-]", { overlaying: "y", side: "right", range: [0, 1.05], showgrid: false }); }
+    return Plotly.newPlot(el("cmif"), data, layout(lay), CONFIG);
+  }
+
+  function setupLogFrequency() {
+    var box = document.getElementById("log-frequency");
+    if (!box) { return []; }
+    box.addEventListener("change", function () {
+      var upd = { "xaxis.type": box.checked ? "log" : "linear", "xaxis.autorange": true };
+      ["stabilization", "cmif"].forEach(function (name) { if (el(name)) { Plotly.relayout(el(name), upd); } });
+    });
+    return [];
   }
 
   function drawSynthesis() {
@@ -374,6 +462,8 @@
   attempt("FRFs", drawFRF);
   attempt("time data", drawPoints);
   attempt("stabilization", drawStabilization);
+  attempt("mode indicator", drawIndicator);
+  attempt("log frequency", setupLogFrequency);
   attempt("synthesis", drawSynthesis);
   attempt("AutoMAC", drawMAC);
   attempt("diagnosis", drawDiagnosis);

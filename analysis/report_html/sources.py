@@ -28,6 +28,7 @@ __all__ = [
     "read_test_record",
     "recording_device",
     "run_fit",
+    "unknown_as_none",
 ]
 
 
@@ -69,17 +70,31 @@ class TestRecord:
     points: dict = field(default_factory=dict)
 
 
+def unknown_as_none(value: Any) -> Any:
+    """``value`` with every non-finite float (the recording's "unknown", NaN) replaced by None, through
+    nested dicts and lists; other values unchanged. A new object: the input is not modified."""
+    if isinstance(value, dict):
+        return {k: unknown_as_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [unknown_as_none(v) for v in value]
+    if isinstance(value, (float, np.floating)) and not np.isfinite(value):
+        return None
+    return value
+
+
 def read_test_record(path: "str | Path") -> TestRecord:
     """Test description, hit log and accepted hits' time data of a recording."""
     from ..recording import Recording
 
     rec = TestRecord()
     with Recording(path) as r:
-        rec.instrument = dict(r.instrument)
-        rec.setup = dict(r.setup)
-        rec.channels = [dict(c) for c in r.channels]
+        # a recording marks what the test did not know (an imported file's sensitivity and input
+        # range) as NaN; the report says "unknown" (None), and its JSON stays standard
+        rec.instrument = unknown_as_none(dict(r.instrument))
+        rec.setup = unknown_as_none(dict(r.setup))
+        rec.channels = [unknown_as_none(dict(c)) for c in r.channels]
         rec.windows = r.windows
-        rec.plan = dict(r.plan)
+        rec.plan = unknown_as_none(dict(r.plan))
         rec.date = r.created_utc
         rec.device = str(rec.plan.get("device") or rec.instrument.get("url") or rec.instrument.get("model") or "")
         for h in r.hits(skip_damaged=True):

@@ -1,0 +1,62 @@
+"""The default set-up's record length comes from the physics: the slowest-decaying mode of the
+simulated frame's default band decays by DEFAULT_DECAY_DB within the record; the set-up prints as
+a TOML template that --setup reads back."""
+from __future__ import annotations
+
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+from acquisition import cli_capture
+from acquisition.errors import SetupError
+from acquisition.setup import (DEFAULT_DECAY_DB, DEFAULT_SLOWEST_MODE, AcquisitionSetup, block_size_for_decay,
+                               decay_time_s, default_setup, load_setup, setup_to_toml)
+
+
+def test_decay_time_and_block_size():
+    tau = 1 / (0.01 * 2 * math.pi * 10.0)  # 1.59 s
+    assert decay_time_s(10.0, 0.01, 20 * math.log10(math.e)) == pytest.approx(tau)  # one time constant: 8.69 dB
+    assert decay_time_s(10.0, 0.01, 40.0) == pytest.approx(tau * math.log(100))
+    # 1.59 s x ln(100) = 7.33 s at 1000 Hz: 7330 samples (+ 100 pre-trigger) -> 8192
+    assert block_size_for_decay(1000.0, 10.0, 0.01, decay_db=40.0, pretrigger_samples=100) == 8192
+    assert block_size_for_decay(1000.0, 10.0, 0.01, decay_db=40.0, pretrigger_samples=900) == 16384
+    with pytest.raises(SetupError, match="lower the sample rate or use an exponential window"):
+        block_size_for_decay(51200.0, 1.0, 0.001)
+    with pytest.raises(SetupError, match="positive"):
+        decay_time_s(10.0, 0.0)
+
+
+def test_default_record_lets_the_slowest_mode_of_the_default_band_decay():
+    """The frame's modes (simulator, the truth) below the default band's top: the one with the longest
+    decay is DEFAULT_SLOWEST_MODE, and the default record (after the trigger) holds its decay by
+    DEFAULT_DECAY_DB; a block half as long would not."""
+    from simulator.config import FrameConfig
+    from simulator.fem import FrameModel
+
+    cfg = FrameConfig.load(None)
+    modes = FrameModel.from_config(cfg).modes(1100.0)
+    wn = np.abs(modes.poles)
+    zeta = -modes.poles.real / wn
+    slow = int(np.argmin(zeta * wn))
+    assert wn[slow] / (2 * np.pi) == pytest.approx(DEFAULT_SLOWEST_MODE[0], rel=0.02)
+    assert zeta[slow] == pytest.approx(DEFAULT_SLOWEST_MODE[1], rel=0.05)
+    s = default_setup()
+    after_trigger = (s.block_size - s.trigger.pretrigger_samples) / s.sample_rate_hz
+    need = math.log(10 ** (DEFAULT_DECAY_DB / 20)) / (zeta[slow] * wn[slow])
+    assert after_trigger >= need > (s.block_size / 2 - s.trigger.pretrigger_samples) / s.sample_rate_hz
+    # the old 1.28 s record kept 54 % of that mode's amplitude at its end
+    assert math.exp(-(8192 - 128) / 6400 * zeta[slow] * wn[slow]) > 0.4
+
+
+def test_print_setup_is_a_template_that_setup_reads_back(tmp_path, capsys):
+    assert cli_capture.main(["--print-setup"]) == 0
+    text = capsys.readouterr().out
+    assert AcquisitionSetup.from_dict(tomllib.loads(text)) == default_setup()
+    path = tmp_path / "mine.toml"
+    path.write_text(text.replace("level = 20.0", "level = 35.0"))
+    assert load_setup(path).trigger.level == 35.0
+    assert cli_capture.main(["--print-setup", "--setup", str(path)]) == 0
+    assert "level = 35.0" in capsys.readouterr().out
+    assert setup_to_toml(default_setup()).startswith("# impact test set-up")
