@@ -56,6 +56,8 @@ def test_damping_and_window_change_decay_as_stated():
                                predict(shifted, F, "receptance").H, rtol=1e-12)
     with pytest.raises(EffectError, match="exp_window_tau_s"):
         EFFECTS["exponential_window"].apply(m, {"exp_window_tau_s": -1.0})
+    # effect specs written before the parameter had its name
+    assert EFFECTS["exponential_window"].apply(m, {"tau_s": 0.5}).meta[WINDOW_SHIFT_KEY] == 2.0
 
 
 def test_mass_loading_rayleigh_shift():
