@@ -80,8 +80,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
         roles = channel_roles(test, reference=args.reference, outputs=outs, force_channel=fch,
                               response_channels=rch)
-        averages = write_imported(test, args.out, windows=windows, reference=args.reference, outputs=outs,
-                                  force_channel=fch, response_channels=rch, overwrite=args.overwrite)
+        averages = write_imported(test, args.out, windows=windows, roles=roles, overwrite=args.overwrite)
     for line in roles.describe():
         print(line)
     for a in averages:

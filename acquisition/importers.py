@@ -565,16 +565,20 @@ def write_imported(
     response_channels: Optional[Sequence[int]] = None,
     check_settings: HitCheckSettings = HitCheckSettings(),
     overwrite: bool = False,
+    roles: Optional[ChannelRoles] = None,
 ) -> "list":
     """Write ``test`` as a recording (one measurement) and return its averages.
 
     Hits failing the automatic checks (double hits) are stored as rejected with the reason.
-    ``reference``/``outputs`` relabel the force and response channels (point labels).
+    ``reference``/``outputs`` relabel the force and response channels (point labels); ``roles``,
+    when given, are the channel roles already made by :func:`channel_roles` (the four relabelling
+    arguments are then not used).
     """
     from .session import average_recorded_hits  # session imports this module's siblings; keep it local
 
-    roles = channel_roles(test, reference=reference, outputs=outputs, force_channel=force_channel,
-                          response_channels=response_channels)
+    if roles is None:
+        roles = channel_roles(test, reference=reference, outputs=outputs, force_channel=force_channel,
+                              response_channels=response_channels)
     chans, ref = roles.channels, roles.reference
     setup = {"sample_rate_hz": test.fs_hz, "block_size": int(test.hits[0].shape[1]),
              "channels": chans, "imported_from": test.source, "format": test.meta.get("format")}
