@@ -90,7 +90,7 @@ def average_recorded_hits(
     record_s: Optional[float] = None, pretrigger_s: Optional[float] = None,
 ) -> list[MeasurementAverage]:
     """Recompute the averages of recorded hits, grouped by measurement in order, with ``windows``
-    (a decay-fraction exponential is resolved from the first hit's block layout). ``channels`` is
+    (an end-fraction exponential is resolved from the first hit's block layout). ``channels`` is
     the recording's channel table (for quantity and unit); ``record_s``, ``pretrigger_s`` (s) the
     analyser's record, carried by the FRF sets."""
     hits = list(hits)

@@ -56,8 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
 @cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
-    from .importers import ImportDataError, channel_roles, load_description, read_dataphysics_mat, read_lvm, \
-        read_numpy, read_sep005_test, write_imported
+    from .importers import ImportDataError, channel_roles, combine_imports, load_description, read_dataphysics_mat, \
+        read_lvm, read_numpy, read_sep005_test, write_imported
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
@@ -73,21 +73,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             tests = [read_numpy(args.files, load_description(args.describe))]
         else:
             raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json (or --format)")
-        test = tests[0]
-        for t in tests[1:]:
-            if t.fs_hz != test.fs_hz or t.hits[0].shape != test.hits[0].shape:
-                raise UsageError(f"{t.source} differs in sample rate or block size from {test.source}")
-            test.hits += t.hits
-            test.trigger_indices = (test.trigger_indices + t.trigger_indices
-                                    if len(test.trigger_indices) == len(test.hits) - len(t.hits) else [])
+        test = combine_imports(tests)
         windows = parse_windows(args.force_window, args.exp_window, test.fs_hz)
         fch = args.force_channel - 1 if args.force_channel else None
         rch = [int(x) - 1 for x in args.responses.split(",")] if args.responses else None
         outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
         roles = channel_roles(test, reference=args.reference, outputs=outs, force_channel=fch,
                               response_channels=rch)
-        averages = write_imported(test, args.out, windows=windows, reference=args.reference, outputs=outs,
-                                  force_channel=fch, response_channels=rch, overwrite=args.overwrite)
+        averages = write_imported(test, args.out, windows=windows, roles=roles, overwrite=args.overwrite)
     for line in roles.describe():
         print(line)
     for a in averages:

@@ -1,8 +1,10 @@
 """Turn measured impact time data from other systems into recordings.
 
-Readers return an :class:`ImportedTest` (float time histories in engineering units, one array
-per hit); :func:`write_imported` quantises each hit to int16 counts and writes a schema-v1
-recording with FRFs computed by the same code path as a capture.
+Readers return an :class:`ImportedTest` (the file's float time histories in engineering units, one
+array per hit); :func:`channel_roles` fixes the force and response channels and their point labels,
+:func:`imported_hits` makes the :class:`analysis.hit.Hit` of each block (int16 counts, trigger,
+channel roles) and :func:`write_imported` writes them as a schema-v1 recording with FRFs computed
+by the same code path as a capture.
 
 Formats
 -------
@@ -61,6 +63,8 @@ __all__ = [
     "quantize",
     "detect_trigger",
     "write_imported",
+    "imported_hits",
+    "combine_imports",
     "ChannelRoles",
     "channel_roles",
 ]
@@ -77,10 +81,20 @@ _UNIT_QUANTITY = {
 
 @dataclass
 class ImportedTest:
-    """Time data of one test: ``hits[k]`` is ``(n_ch, n)`` float in engineering units.
+    """Time data of one test as read from its file(s): ``hits[k]`` is ``(n_ch, n)`` float in
+    engineering units, one block per hit.
 
+    fs_hz : sample rate (Hz).
     channels : dicts with name, quantity, unit, sensitivity (mV/EU or NaN), point.
-    trigger_indices : per hit, the sample the windows start at.
+    trigger_indices : per hit, the sample the windows start at (empty when the file has none: the
+        trigger is then found on the force channel).
+    source, meta : where the data came from and the reader's notes (format, ...).
+
+    This is the file's content, not yet a set of :class:`analysis.hit.Hit`: the values are kept as
+    read (a reader is checked against the file's numbers exactly, and several files are combined
+    before anything is decided), and what makes a block a hit (which channel is the force, the
+    responses' point labels, the trigger found on the force) may still be set by the user.
+    :func:`imported_hits` makes the hits once those are fixed.
     """
 
     fs_hz: float
@@ -498,6 +512,44 @@ def channel_roles(
     return ChannelRoles(chans, fch, rch)
 
 
+def combine_imports(tests: Sequence[ImportedTest]) -> ImportedTest:
+    """One test from several files read alike (e.g. one .lvm per hit): the hits in the order given.
+    The files must share the sample rate and the block shape; the files' trigger samples are kept
+    for the leading hits that all have one (the others' triggers are found on the force). Raises
+    :class:`ImportDataError` naming the file that differs."""
+    if not tests:
+        raise ImportDataError("no file to import")
+    first = tests[0]
+    hits: list = list(first.hits)
+    triggers: list = list(first.trigger_indices)
+    for t in tests[1:]:
+        if t.fs_hz != first.fs_hz or t.hits[0].shape != first.hits[0].shape:
+            raise ImportDataError(f"{t.source} differs in sample rate or block size from {first.source}; "
+                                  "import the files separately")
+        triggers = triggers + list(t.trigger_indices) if len(triggers) == len(hits) else []
+        hits += t.hits
+    return ImportedTest(first.fs_hz, first.channels, hits, triggers, first.source, dict(first.meta))
+
+
+def imported_hits(test: ImportedTest, roles: ChannelRoles) -> list[Hit]:
+    """The hits of ``test`` with the channel ``roles`` (:func:`channel_roles`), not yet checked:
+    each block quantised to int16 counts (:func:`quantize`), its trigger from the file or found on
+    the force (:func:`detect_trigger`), ``volts_per_count`` from the sensitivities (NaN unknown),
+    ``sequence`` the import order, ``timestamp`` the time of the import (s since the epoch)."""
+    chans, fch, rch = roles.channels, roles.force_channel, roles.response_channels
+    ref, outs = roles.reference, roles.outputs
+    names = tuple(str(c["name"]) for c in chans)
+    sens = np.array([c["sensitivity"] for c in chans], float)
+    hits = []
+    for k, data in enumerate(test.hits):
+        trig = test.trigger_indices[k] if k < len(test.trigger_indices) else detect_trigger(data[fch])
+        counts, eu = quantize(data)
+        hits.append(Hit(counts=counts, eu_per_count=eu, volts_per_count=eu * sens * 1e-3, sample_rate_hz=test.fs_hz,
+                        trigger_index=trig, force_channel=fch, response_channels=rch, point=ref, reference=ref,
+                        outputs=outs, measurement=0, channel_names=names, timestamp=time.time(), sequence=k))
+    return hits
+
+
 def write_imported(
     test: ImportedTest,
     out: "str | Path",
@@ -509,18 +561,21 @@ def write_imported(
     response_channels: Optional[Sequence[int]] = None,
     check_settings: HitCheckSettings = HitCheckSettings(),
     overwrite: bool = False,
+    roles: Optional[ChannelRoles] = None,
 ) -> "list":
     """Write ``test`` as a recording (one measurement) and return its averages.
 
     Hits failing the automatic checks (double hits) are stored as rejected with the reason.
-    ``reference``/``outputs`` relabel the force and response channels (point labels).
+    ``reference``/``outputs`` relabel the force and response channels (point labels); ``roles``,
+    when given, are the channel roles already made by :func:`channel_roles` (the four relabelling
+    arguments are then not used).
     """
     from .session import average_recorded_hits  # session imports this module's siblings; keep it local
 
-    roles = channel_roles(test, reference=reference, outputs=outputs, force_channel=force_channel,
-                          response_channels=response_channels)
-    chans, fch, rch = roles.channels, roles.force_channel, roles.response_channels
-    ref, outs = roles.reference, roles.outputs
+    if roles is None:
+        roles = channel_roles(test, reference=reference, outputs=outputs, force_channel=force_channel,
+                              response_channels=response_channels)
+    chans, ref = roles.channels, roles.reference
     setup = {"sample_rate_hz": test.fs_hz, "block_size": int(test.hits[0].shape[1]),
              "channels": chans, "imported_from": test.source, "format": test.meta.get("format")}
     instrument = {"vendor": "imported", "model": str(test.meta.get("format", "")), "source": test.source}
@@ -528,15 +583,9 @@ def write_imported(
                          plan={"mode": "imported", "points": [ref]}, overwrite=overwrite) as w:
         w.log("INFO", f"imported {len(test.hits)} hit(s) from {test.source}; " + "; ".join(roles.describe()))
         kept: list[Hit] = []
-        names = tuple(str(c["name"]) for c in chans)
-        sens = np.array([c["sensitivity"] for c in chans], float)
-        for k, data in enumerate(test.hits):
-            trig = test.trigger_indices[k] if k < len(test.trigger_indices) else detect_trigger(data[fch])
-            counts, eu = quantize(data)
-            hit = Hit(counts=counts, eu_per_count=eu, volts_per_count=eu * sens * 1e-3, sample_rate_hz=test.fs_hz,
-                      trigger_index=trig, force_channel=fch, response_channels=rch, point=ref, reference=ref,
-                      outputs=outs, measurement=0, channel_names=names, timestamp=time.time(), sequence=k)
-            chk = check_hit(hit.force, hit.sample_rate_hz, [False] * len(chans), list(names), check_settings)
+        for k, hit in enumerate(imported_hits(test, roles)):
+            chk = check_hit(hit.force, hit.sample_rate_hz, [False] * len(chans), list(hit.channel_names),
+                            check_settings)
             hit = hit.with_verdict(chk.verdict.accept is not False, chk.verdict.reasons, chk.to_dict())
             hit = hit.with_index(w.write_hit(hit))
             if not hit.accepted:

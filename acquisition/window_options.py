@@ -19,7 +19,7 @@ def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[floa
     """Window settings from the ``--force-window`` and ``--exp-window`` texts (None: keep ``base``)."""
     b = base or WindowSettings()
     fw, ft = b.force_width_s, b.force_taper_s
-    tau, decay = b.exp_tau_s, b.exp_decay
+    tau, end_fraction = b.exp_window_tau_s, b.exp_window_end_fraction
     try:
         if force is not None:
             t = force.strip().lower()
@@ -36,18 +36,18 @@ def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[floa
         if exp is not None:
             t = exp.strip().lower()
             if t in ("none", "off", ""):
-                tau, decay = None, None
+                tau, end_fraction = None, None
             elif t.endswith("%"):
-                decay = float(t[:-1]) / 100.0
+                end_fraction = float(t[:-1]) / 100.0
                 tau = None
-                if not 0 < decay < 1:
+                if not 0 < end_fraction < 1:
                     raise UsageError(f"--exp-window {exp!r}: the end value must lie between 0 and 100 %")
             else:
                 tau = parse_duration(t[4:] if t.startswith("tau=") else t, fs_hz)
-                decay = None
+                end_fraction = None
                 if tau <= 0:
                     raise UsageError(f"--exp-window {exp!r}: tau must be positive")
-        return WindowSettings(fw, ft, tau, decay, b.exp_on_force)
+        return WindowSettings(fw, ft, tau, end_fraction, b.exp_on_force)
     except UsageError:
         raise
     except ValueError as exc:

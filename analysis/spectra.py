@@ -7,7 +7,7 @@ Windows (applied to one triggered block of ``n`` samples at ``fs`` Hz, trigger a
   then 0 to the block end. It removes the noise that follows the pulse.
 * Exponential window on the responses: ``w(t) = 1`` before the trigger and
   ``w(t) = exp(-(t - t0)/tau)`` from the trigger time ``t0`` on. ``tau`` (s) from "decays to a
-  fraction ``r`` at the block end": ``tau = (n - k0) / fs / ln(1/r)`` (:func:`tau_from_decay`).
+  fraction ``r`` at the block end": ``tau = (n - k0) / fs / ln(1/r)`` (:func:`tau_from_end_fraction`).
   By default the force channel gets the same exponential (times its force window), so that the
   windowed FRF is exactly the FRF of the structure with every pole's decay rate increased by
   ``1/tau`` (rad/s); :class:`analysis.frf.FRFSet` carries ``exp_window_tau_s`` for the fitter.
@@ -44,7 +44,7 @@ __all__ = [
     "EXCITATION_DROP_DB",
     "WindowSettings",
     "AveragedSpectra",
-    "tau_from_decay",
+    "tau_from_end_fraction",
     "force_window",
     "exponential_window",
     "HitSpectra",
@@ -89,16 +89,18 @@ def parse_duration(text: "str | float | int", fs_hz: Optional[float] = None) -> 
     return value
 
 
-def tau_from_decay(final_fraction: float, duration_s: float) -> float:
-    """Time constant tau (s) of ``exp(-t/tau)`` that falls to ``final_fraction`` after ``duration_s``.
+def tau_from_end_fraction(exp_window_end_fraction: float, duration_s: float) -> float:
+    """Time constant tau (s) of ``exp(-t/tau)`` whose value after ``duration_s`` (s) is
+    ``exp_window_end_fraction`` (the window's value at the end of the record, a fraction of 1).
 
-    ``tau = duration_s / ln(1/final_fraction)``; e.g. 1 % at the block end: ``final_fraction=0.01``.
+    ``tau = duration_s / ln(1/exp_window_end_fraction)``; e.g. 1 % at the block end: ``0.01``.
     """
-    if not (0.0 < final_fraction < 1.0):
-        raise ValueError(f"decay fraction {final_fraction} must lie strictly between 0 and 1 (e.g. 0.01 for 1 %)")
+    if not (0.0 < exp_window_end_fraction < 1.0):
+        raise ValueError(f"exponential window end fraction {exp_window_end_fraction} must lie strictly between "
+                         "0 and 1 (the window's value at the block end, e.g. 0.01 for 1 %)")
     if not duration_s > 0:
-        raise ValueError(f"decay duration {duration_s} s must be positive")
-    return float(duration_s / math.log(1.0 / final_fraction))
+        raise ValueError(f"exponential window duration {duration_s} s must be positive")
+    return float(duration_s / math.log(1.0 / exp_window_end_fraction))
 
 
 @dataclass(frozen=True)
@@ -107,16 +109,16 @@ class WindowSettings:
 
     force_width_s : rectangular part of the force window after the trigger (None: no force window).
     force_taper_s : length of the cosine taper that follows it (0: hard edge).
-    exp_tau_s : exponential window time constant (None: no exponential window).
-    exp_decay : alternative to ``exp_tau_s``: the fraction the window reaches at the block end
-        (e.g. 0.01); resolved to a tau per block by :meth:`tau_for`.
+    exp_window_tau_s : exponential window time constant (s; None: no exponential window).
+    exp_window_end_fraction : alternative to ``exp_window_tau_s``: the window's value at the end of
+        the block, a fraction of 1 (e.g. 0.01); resolved to a tau per block by :meth:`tau_for`.
     exp_on_force : apply the exponential to the force channel as well (default True, see module doc).
     """
 
     force_width_s: Optional[float] = None
     force_taper_s: float = 0.0
-    exp_tau_s: Optional[float] = None
-    exp_decay: Optional[float] = None
+    exp_window_tau_s: Optional[float] = None
+    exp_window_end_fraction: Optional[float] = None
     exp_on_force: bool = True
 
     def __post_init__(self) -> None:
@@ -124,24 +126,24 @@ class WindowSettings:
             raise ValueError(f"force window width {self.force_width_s} s must be positive")
         if self.force_taper_s < 0:
             raise ValueError(f"force window taper {self.force_taper_s} s must be >= 0")
-        if self.exp_tau_s is not None and self.exp_decay is not None:
-            raise ValueError("give the exponential window either as a time constant or as a decay fraction, not both")
-        if self.exp_tau_s is not None and not self.exp_tau_s > 0:
-            raise ValueError(f"exponential window tau {self.exp_tau_s} s must be positive")
-        if self.exp_decay is not None and not (0 < self.exp_decay < 1):
-            raise ValueError(f"exponential decay fraction {self.exp_decay} must lie strictly between 0 and 1")
+        if self.exp_window_tau_s is not None and self.exp_window_end_fraction is not None:
+            raise ValueError("give the exponential window either as a time constant or as an end fraction, not both")
+        if self.exp_window_tau_s is not None and not self.exp_window_tau_s > 0:
+            raise ValueError(f"exponential window tau {self.exp_window_tau_s} s must be positive")
+        if self.exp_window_end_fraction is not None and not (0 < self.exp_window_end_fraction < 1):
+            raise ValueError(f"exponential window end fraction {self.exp_window_end_fraction} must lie strictly between 0 and 1")
 
     def tau_for(self, n_samples: int, fs_hz: float, trigger_index: int) -> Optional[float]:
         """The exponential time constant (s) for a block, or None when there is no exponential window."""
-        if self.exp_tau_s is not None:
-            return float(self.exp_tau_s)
-        if self.exp_decay is not None:
-            return tau_from_decay(self.exp_decay, (n_samples - trigger_index) / fs_hz)
+        if self.exp_window_tau_s is not None:
+            return float(self.exp_window_tau_s)
+        if self.exp_window_end_fraction is not None:
+            return tau_from_end_fraction(self.exp_window_end_fraction, (n_samples - trigger_index) / fs_hz)
         return None
 
     def resolved(self, n_samples: int, fs_hz: float, trigger_index: int) -> "WindowSettings":
-        """A copy with a decay-fraction exponential turned into a fixed tau (s) for this block layout."""
-        if self.exp_decay is None:
+        """A copy with an end-fraction exponential turned into a fixed tau (s) for this block layout."""
+        if self.exp_window_end_fraction is None:
             return self
         tau = self.tau_for(n_samples, fs_hz, trigger_index)
         return WindowSettings(self.force_width_s, self.force_taper_s, tau, None, self.exp_on_force)
@@ -153,10 +155,10 @@ class WindowSettings:
             parts.append("force: none")
         else:
             parts.append(f"force {self.force_width_s * 1e3:.4g} ms + {self.force_taper_s * 1e3:.4g} ms taper")
-        if self.exp_tau_s is not None:
-            parts.append(f"exp tau {self.exp_tau_s:.6g} s" + (" (also force)" if self.exp_on_force else ""))
-        elif self.exp_decay is not None:
-            parts.append(f"exp to {100 * self.exp_decay:.4g} % at block end")
+        if self.exp_window_tau_s is not None:
+            parts.append(f"exp tau {self.exp_window_tau_s:.6g} s" + (" (also force)" if self.exp_on_force else ""))
+        elif self.exp_window_end_fraction is not None:
+            parts.append(f"exp to {100 * self.exp_window_end_fraction:.4g} % at block end")
         else:
             parts.append("exp: none")
         return "; ".join(parts)
@@ -166,8 +168,16 @@ class WindowSettings:
 
     @classmethod
     def from_dict(cls, d: dict) -> "WindowSettings":
-        known = {k: d[k] for k in ("force_width_s", "force_taper_s", "exp_tau_s", "exp_decay", "exp_on_force") if k in d}
+        """Settings from :meth:`to_dict`'s keys; recordings written before the exponential window's
+        names were settled (``exp_tau_s``, ``exp_decay``) are read as well."""
+        d = {_OLD_WINDOW_KEYS.get(k, k): v for k, v in d.items()}
+        known = {k: d[k] for k in ("force_width_s", "force_taper_s", "exp_window_tau_s", "exp_window_end_fraction",
+                                   "exp_on_force") if k in d}
         return cls(**known)
+
+
+#: window keys of older recordings and the names they now have
+_OLD_WINDOW_KEYS = {"exp_tau_s": "exp_window_tau_s", "exp_decay": "exp_window_end_fraction"}
 
 
 def force_window(n: int, fs_hz: float, trigger_index: int, width_s: float, taper_s: float = 0.0) -> np.ndarray:
@@ -315,7 +325,7 @@ class FRFAccumulator:
             if hit.exp_window_tau_s != first.exp_window_tau_s:
                 raise ValueError(
                     f"hit used exponential tau {hit.exp_window_tau_s} s but earlier hits used {first.exp_window_tau_s} s; "
-                    "use one window per average (a fixed tau rather than a decay fraction with varying triggers)"
+                    "use one window per average (a fixed tau rather than an end fraction with varying triggers)"
                 )
         self._hits.append(hit)
         if self._sum is None:

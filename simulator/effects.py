@@ -86,7 +86,7 @@ def add_frf_noise(frf: FRFSet, rng: np.random.Generator, relative: float = 0.01,
 DRAW_RANGES = {
     "stiffness_shift": "factor in [0.93, 0.99] or [1.01, 1.07]",
     "damping_change": "factor in [0.4, 0.7] or [1.5, 3]",
-    "exponential_window": "tau_s: added damping 0.3..1.5 % at the first mode in band",
+    "exponential_window": "exp_window_tau_s: added damping 0.3..1.5 % at the first mode in band",
     "mass_loading": "mass_kg in [0.05, 0.3]",
     "missing_mode": "freq_hz between modes in the band, zeta 0.3..2 %, residue of a unit-ish mode shape",
     "residual_modes": "upper = 0.3..1 x the upper residual of the modes above 2 f_max",
@@ -119,7 +119,7 @@ def draw_effect(name: str, rng: np.random.Generator, model: ModalModel, freq_hz:
     if name == "exponential_window":
         f1 = inband[0] if inband.size else lo
         s = rng.uniform(0.003, 0.015) * 2 * np.pi * f1
-        return {"effect": name, "tau_s": float(1 / s)}
+        return {"effect": name, "exp_window_tau_s": float(1 / s)}
     if name == "mass_loading":
         return {"effect": name, "mass_kg": float(rng.uniform(0.05, 0.3))}
     if name == "missing_mode":
@@ -200,7 +200,7 @@ def primary_error(injected: Mapping, fitted: Mapping) -> float:
     if name in ("stiffness_shift", "damping_change"):
         return rel(fitted["factor"], injected["factor"])
     if name == "exponential_window":
-        return rel(fitted["tau_s"], injected["tau_s"])
+        return rel(fitted["exp_window_tau_s"], injected["exp_window_tau_s"])
     if name == "sensitivity_error":
         (label, g), = injected["gains"].items()
         return rel(fitted["gains"][label], g)

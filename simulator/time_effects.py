@@ -62,6 +62,12 @@ class HitRecord:
     overload : (n_hits, 1 + n_out) bool, the analyser's flags; base : receptance :class:`ModalModel`
     of the linear frame at (outputs, reference) as instrumented (accelerometer masses included);
     effect : the injected effect (None for clean hits); info : the stand's per-hit info dicts.
+
+    Not a set of :class:`analysis.hit.Hit`: these hits never pass an analyser's ADC. They are the
+    stand's float values (with the clipping at ``full_scale`` the effect asks for) beside the truth
+    they were made from (``base``, ``effect``), which is what the time-data diagnosis is scored
+    against; quantising them to int16 counts would change the diagnosis figures its tests and
+    benchmarks hold. Hits that go through the simulated analyser are :class:`analysis.hit.Hit`.
     """
 
     force: np.ndarray

@@ -38,7 +38,7 @@ def test_capture_writes_a_complete_recording(captured):
         assert rec.instrument["model"] == "SIGLAB-SIM 2042"
         assert rec.plan["mode"] == "roving_hammer" and rec.plan["points"] == ["right:6:-X", "top:4:Z"]
         assert [c["point"] for c in rec.channels] == ["right:6:-X", "left:9:Y", "top:4:X", "right:4:-Z"]
-        assert rec.windows.exp_tau_s is not None and rec.windows.exp_decay is None  # resolved from 5 %
+        assert rec.windows.exp_window_tau_s is not None and rec.windows.exp_window_end_fraction is None  # resolved from 5 %
         acc = list(rec.hits(accepted_only=True))
         assert len(acc) == 6 and {h.reference for h in acc} == {"right:6:-X", "top:4:Z"}
         assert all(h.counts.dtype == np.int16 and h.crc_ok for h in acc)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from analysis.diagnosis import EFFECTS, EffectError, predict
-from analysis.diagnosis.effects import WINDOW_DECAY_KEY
+from analysis.diagnosis.effects import WINDOW_SHIFT_KEY
 from analysis.modal import ModalModel, natural_freq_hz, damping_ratio, pole_from_fz
 
 F = np.linspace(1.0, 100.0, 400)
@@ -46,16 +46,18 @@ def test_damping_and_window_change_decay_as_stated():
     d = EFFECTS["damping_change"].apply(m, {"factor": 2.0})
     np.testing.assert_allclose(damping_ratio(d.poles), 2 * m.damping, rtol=1e-12)
     np.testing.assert_allclose(natural_freq_hz(d.poles), m.freq_hz, rtol=1e-12)
-    w = EFFECTS["exponential_window"].apply(m, {"tau_s": 0.5})
-    assert w.meta[WINDOW_DECAY_KEY] == 2.0 and WINDOW_DECAY_KEY not in m.meta    # input untouched
-    w2 = EFFECTS["exponential_window"].apply(w, {"tau_s": 0.25})                 # windows compound
-    assert w2.meta[WINDOW_DECAY_KEY] == 6.0
+    w = EFFECTS["exponential_window"].apply(m, {"exp_window_tau_s": 0.5})
+    assert w.meta[WINDOW_SHIFT_KEY] == 2.0 and WINDOW_SHIFT_KEY not in m.meta    # input untouched
+    w2 = EFFECTS["exponential_window"].apply(w, {"exp_window_tau_s": 0.25})                 # windows compound
+    assert w2.meta[WINDOW_SHIFT_KEY] == 6.0
     # in its own form, the window moves every pole by -1/tau with the same residues
     shifted = ModalModel(poles=m.poles - 2.0, residues=m.residues, quantity="receptance", residual_form="none")
-    np.testing.assert_allclose(predict(m, F, "receptance", [{"effect": "exponential_window", "tau_s": 0.5}]).H,
+    np.testing.assert_allclose(predict(m, F, "receptance", [{"effect": "exponential_window", "exp_window_tau_s": 0.5}]).H,
                                predict(shifted, F, "receptance").H, rtol=1e-12)
-    with pytest.raises(EffectError, match="tau_s"):
-        EFFECTS["exponential_window"].apply(m, {"tau_s": -1.0})
+    with pytest.raises(EffectError, match="exp_window_tau_s"):
+        EFFECTS["exponential_window"].apply(m, {"exp_window_tau_s": -1.0})
+    # effect specs written before the parameter had its name
+    assert EFFECTS["exponential_window"].apply(m, {"tau_s": 0.5}).meta[WINDOW_SHIFT_KEY] == 2.0
 
 
 def test_mass_loading_rayleigh_shift():
@@ -157,7 +159,7 @@ def test_exponential_window_is_exact_for_accelerance_and_mobility():
     # trapezoidal Fourier integral of the windowed response (the jump at t = 0 counted half), plus the delta
     E = np.exp(-2j * np.pi * np.outer(t, fpk))
     want = (h @ E - 0.5 * h[..., :1]) / fs + D[..., None]
-    spec = [{"effect": "exponential_window", "tau_s": tau}]
+    spec = [{"effect": "exponential_window", "exp_window_tau_s": tau}]
     for model in (rec, acc):
         got = predict(model, fpk, "accelerance", spec).H
         np.testing.assert_allclose(got, want, rtol=1e-6)

@@ -131,7 +131,7 @@ def test_finite_record_and_window_match_the_dft_of_a_truncated_impulse_response(
     f = k * fs / n
     windowed = ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none",
                           outputs=("a:0:X",), references=("a:0:X",),
-                          meta={RECORD_KEY: n / fs - pre / fs, "window_decay_per_s": 1 / tau})
+                          meta={RECORD_KEY: n / fs - pre / fs, "exp_window_pole_shift_per_s": 1 / tau})
     H = synthesize_windowed(windowed, f, "accelerance").H[0, 0]
     # the DFT of samples is the transform of the continuous response up to its aliasing: compare where
     # that is small (lines far below fs / 2), relative to the peak
@@ -139,7 +139,7 @@ def test_finite_record_and_window_match_the_dft_of_a_truncated_impulse_response(
     assert err.max() < 2e-3
     untruncated = synthesize_windowed(ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none",
                                                  outputs=("a:0:X",), references=("a:0:X",),
-                                                 meta={"window_decay_per_s": 1 / tau}), f, "accelerance").H[0, 0]
+                                                 meta={"exp_window_pole_shift_per_s": 1 / tau}), f, "accelerance").H[0, 0]
     assert (np.abs(untruncated - H_dft) / np.abs(H).max()).max() > 10 * err.max()
 
 

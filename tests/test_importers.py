@@ -11,6 +11,10 @@ from scipy import signal
 from acquisition.cli_import import main as import_main
 from acquisition.importers import (
     ImportDataError,
+    ImportedTest,
+    channel_roles,
+    combine_imports,
+    imported_hits,
     load_description,
     quantize,
     read_dataphysics_mat,
@@ -71,6 +75,37 @@ def test_lvm_decimal_comma_segments(tmp_path):
     band = (s.freq_hz > 50) & (s.freq_hz < 150)
     # 16-bit requantisation of the import: relative error ~1e-4 where the response is strong
     assert np.max(np.abs(s.H[0, 0, band] - H[band]) / np.abs(H[band])) < 2e-3
+
+
+def test_imported_hits_are_the_blocks_quantised_with_their_roles_and_triggers():
+    """Each block becomes one Hit: int16 counts within a count of the float data, the file's trigger
+    where it has one, else the sample the force first reaches 10 % of its peak."""
+    hits, _ = synthetic_hits(2)
+    chans = [{"name": "F", "quantity": "force", "unit": "N", "sensitivity": 2.25, "point": "n:1:Z"},
+             {"name": "A", "quantity": "acceleration", "unit": "g", "sensitivity": float("nan"), "point": "n:2:Z"}]
+    test = ImportedTest(FS, chans, [np.vstack(h) for h in hits], [], "synthetic")
+    out = imported_hits(test, channel_roles(test, outputs=["n:3:Y"]))
+    assert [h.sequence for h in out] == [0, 1] and all(h.sample_rate_hz == FS for h in out)
+    for h, (f, x) in zip(out, hits):
+        assert h.counts.dtype == np.int16 and (h.force_channel, list(h.response_channels)) == (0, [1])
+        assert (h.reference, list(h.outputs), h.channel_names) == ("n:1:Z", ["n:3:Y"], ("F", "A"))
+        assert np.max(np.abs(h.force - f)) <= 0.5 * h.eu_per_count[0] * (1 + 1e-12)
+        assert np.max(np.abs(h.responses[0] - x)) <= 0.5 * h.eu_per_count[1] * (1 + 1e-12)
+        assert h.trigger_index == int(np.argmax(np.abs(f) >= 0.1 * np.abs(f).max()))
+        assert h.volts_per_count[0] == pytest.approx(h.eu_per_count[0] * 2.25e-3) and np.isnan(h.volts_per_count[1])
+    given = imported_hits(ImportedTest(FS, chans, test.hits, [7, 9], "synthetic"), channel_roles(test))
+    assert [h.trigger_index for h in given] == [7, 9]
+
+
+def test_combined_files_keep_the_leading_triggers_and_refuse_other_shapes():
+    chans = [{"name": "F", "quantity": "force", "unit": "N", "sensitivity": float("nan"), "point": "n:1:Z"}]
+    one = ImportedTest(FS, chans, [np.ones((1, 8))], [3], "a")
+    none = ImportedTest(FS, chans, [np.ones((1, 8))], [], "b")
+    both = combine_imports([one, one, none])
+    assert len(both.hits) == 3 and both.trigger_indices == [3, 3] and both.source == "a"
+    assert combine_imports([none, one]).trigger_indices == []
+    with pytest.raises(ImportDataError, match="differs in sample rate or block size"):
+        combine_imports([one, ImportedTest(FS, chans, [np.ones((1, 9))], [], "c")])
 
 
 def test_lvm_double_hit_is_stored_rejected(tmp_path):

@@ -1,6 +1,7 @@
 """analysis.recording: schema v1 round trip, crash safety (SIGKILL), and every kind of bad file."""
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import sys
@@ -31,7 +32,7 @@ CHANNELS = [
     {"name": "acc1", "point": "left:9:Y", "direction": "Y", "quantity": "acceleration", "sensitivity": 100.0,
      "sensitivity_unit": "mV/g", "unit": "m/s^2", "range_v": 5.0, "coupling": "AC", "iepe": True},
 ]
-WIN = WindowSettings(force_width_s=0.01, force_taper_s=0.002, exp_tau_s=0.4)
+WIN = WindowSettings(force_width_s=0.01, force_taper_s=0.002, exp_window_tau_s=0.4)
 
 
 def write_example(path: Path, n_hits: int = 3, seed: int = 0) -> list[np.ndarray]:
@@ -251,3 +252,17 @@ def test_merging_points_with_different_exponential_windows_is_refused_not_silent
     same = merge_frfsets([a, FRFSet(freq_hz=f, H=np.ones((1, 1, 50)), outputs=("left:9:Y",),
                                     references=("top:4:Z",), exp_window_tau_s=0.5)])
     assert same.exp_window_tau_s == 0.5 and same.H.shape == (1, 2, 50)
+
+
+def test_recordings_with_the_old_exponential_window_keys_are_read(tmp_path) -> None:
+    """Files written before the window's names were settled (``exp_tau_s``, ``exp_decay``) read as
+    ``exp_window_tau_s`` and ``exp_window_end_fraction``, in /windows and in each FRF's windows_json."""
+    p = tmp_path / "old.h5"
+    write_example(p)
+    old = {"force_width_s": 0.01, "force_taper_s": 0.002, "exp_tau_s": 0.4, "exp_decay": None, "exp_on_force": True}
+    with h5py.File(p, "r+") as f:
+        f["windows"].attrs["json"] = json.dumps({**old, "exp_tau_s": None, "exp_decay": 0.05})
+        f["frf/m000"].attrs["windows_json"] = json.dumps(old)
+    with Recording(p) as rec:
+        assert rec.windows == WindowSettings(force_width_s=0.01, force_taper_s=0.002, exp_window_end_fraction=0.05)
+        assert rec.frf_group("m000")["windows"] == WIN

@@ -242,7 +242,7 @@ def sim_session(url: str, points, hits: int, windows: WindowSettings, setup=None
     return setup, result
 
 
-def windowed_truth(setup, hammer_point: str, outputs, freq_hz, tau_s: float, config=None) -> np.ndarray:
+def windowed_truth(setup, hammer_point: str, outputs, freq_hz, exp_window_tau_s: float, config=None) -> np.ndarray:
     """The simulated frame's exact accelerance seen through the test chain, as the windowed estimate sees it.
 
     An exponential window exp(-t/tau) on force and response turns every mode's pole lambda into
@@ -259,7 +259,7 @@ def windowed_truth(setup, hammer_point: str, outputs, freq_hz, tau_s: float, con
     stand.set_channels(chans)  # the same accelerometer layout (mass loading) as in the test
     model = stand.model
     modes = model.modes()
-    wt = 2 * np.pi * np.asarray(freq_hz) - 1j / tau_s
+    wt = 2 * np.pi * np.asarray(freq_hz) - 1j / exp_window_tau_s
     wr = modes.omega
     po = model.shape_at(list(outputs), modes)
     pr = model.shape_at([hammer_point], modes)
@@ -271,9 +271,9 @@ def windowed_truth(setup, hammer_point: str, outputs, freq_hz, tau_s: float, con
 
 
 def _tau(setup, fraction: float) -> float:
-    from analysis.spectra import tau_from_decay
+    from analysis.spectra import tau_from_end_fraction
 
-    return tau_from_decay(fraction, (setup.block_size - setup.trigger.pretrigger_samples) / setup.sample_rate_hz)
+    return tau_from_end_fraction(fraction, (setup.block_size - setup.trigger.pretrigger_samples) / setup.sample_rate_hz)
 
 
 def test_sim_h1_agrees_with_the_analytic_frf():
@@ -297,7 +297,7 @@ def test_sim_h1_agrees_with_the_analytic_frf():
     # right:6:-X -> top:4:X has a median relative error of 5 % (0.3 % at the driving point)
     short = replace(default_setup(), block_size=8192)
     tau = _tau(short, 0.05)
-    win = WindowSettings(force_width_s=0.02, force_taper_s=0.005, exp_tau_s=tau)
+    win = WindowSettings(force_width_s=0.02, force_taper_s=0.005, exp_window_tau_s=tau)
     setup, result = sim_session("sim://?seed=5", ("right:6:-X", "left:9:Y"), 5, win, setup=short)
     for avg, out in zip(result.averages, ("top:4:X", "left:9:Y")):
         i = avg.outputs.index(out)
@@ -332,7 +332,7 @@ def test_sim_noisy_channels_h1_h2_bracket_truth_and_coherence_dips_at_antiresona
     cfg = tmp_path / "noisy.toml"
     cfg.write_text(NOISY)
     tau = _tau(default_setup(), 0.05)
-    win = WindowSettings(force_width_s=None, exp_tau_s=tau)
+    win = WindowSettings(force_width_s=None, exp_window_tau_s=tau)
     # the force noise (3.4 N rms per sample) would pass for double hits at the default 10 % threshold
     from acquisition.hitcheck import HitCheckSettings
 

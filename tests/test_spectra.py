@@ -14,7 +14,7 @@ from analysis.spectra import (
     force_window,
     hit_spectra,
     parse_duration,
-    tau_from_decay,
+    tau_from_end_fraction,
 )
 
 FS = 1024.0
@@ -61,15 +61,15 @@ def test_force_window_shape():
     assert np.all(w[40:] == 0.0)
 
 
-def test_exponential_window_decay_fraction():
+def test_exponential_window_end_fraction():
     k0 = 100
-    tau = tau_from_decay(0.01, (N - k0) / FS)
+    tau = tau_from_end_fraction(0.01, (N - k0) / FS)
     w = exponential_window(N, FS, k0, tau)
     assert np.all(w[: k0 + 1] == 1.0)
     # one sample before the (virtual) end sample N, the window is 0.01 * exp(1/(tau fs))
     assert w[-1] * math.exp(-1 / (tau * FS)) == pytest.approx(0.01, rel=1e-12)
-    ws = WindowSettings(exp_decay=0.01).resolved(N, FS, k0)
-    assert ws.exp_tau_s == pytest.approx(tau) and ws.exp_decay is None
+    ws = WindowSettings(exp_window_end_fraction=0.01).resolved(N, FS, k0)
+    assert ws.exp_window_tau_s == pytest.approx(tau) and ws.exp_window_end_fraction is None
 
 
 def test_parseval_one_sided_scaling():
@@ -103,7 +103,7 @@ def test_exponential_window_shifts_poles_exactly():
     x = signal.lfilter(b, a, f)
     tau = 0.5
     acc = FRFAccumulator(["n:1:Z"], "n:2:Z")
-    acc.add(hit_spectra(f, x, FS, trigger_index=0, windows=WindowSettings(exp_tau_s=tau)))
+    acc.add(hit_spectra(f, x, FS, trigger_index=0, windows=WindowSettings(exp_window_tau_s=tau)))
     r = math.exp(-1 / (tau * FS))
     bw = b * r ** np.arange(b.size)
     aw = a * r ** np.arange(a.size)
@@ -198,19 +198,19 @@ def test_bad_input_messages():
         hit_spectra(np.zeros(100), np.zeros((2, 99)), FS)
     with pytest.raises(ValueError, match="trigger index"):
         hit_spectra(np.zeros(100), np.zeros(100), FS, trigger_index=100)
-    with pytest.raises(ValueError, match="decay fraction"):
-        tau_from_decay(1.5, 1.0)
+    with pytest.raises(ValueError, match="end fraction"):
+        tau_from_end_fraction(1.5, 1.0)
     with pytest.raises(ValueError, match="not both"):
-        WindowSettings(exp_tau_s=1.0, exp_decay=0.01)
+        WindowSettings(exp_window_tau_s=1.0, exp_window_end_fraction=0.01)
     acc = FRFAccumulator(["n:1:Z"], "n:2:Z")
-    acc.add(hit_spectra(np.ones(64), np.ones(64), FS, windows=WindowSettings(exp_tau_s=0.1)))
+    acc.add(hit_spectra(np.ones(64), np.ones(64), FS, windows=WindowSettings(exp_window_tau_s=0.1)))
     with pytest.raises(ValueError, match="tau"):
-        acc.add(hit_spectra(np.ones(64), np.ones(64), FS, windows=WindowSettings(exp_tau_s=0.2)))
+        acc.add(hit_spectra(np.ones(64), np.ones(64), FS, windows=WindowSettings(exp_window_tau_s=0.2)))
 
 
 def test_inputs_not_modified():
     f = pulse()
     x = np.vstack([f, 2 * f])
     f0, x0 = f.copy(), x.copy()
-    hit_spectra(f, x, FS, 10, WindowSettings(force_width_s=0.01, force_taper_s=0.005, exp_tau_s=0.5))
+    hit_spectra(f, x, FS, 10, WindowSettings(force_width_s=0.01, force_taper_s=0.005, exp_window_tau_s=0.5))
     assert np.array_equal(f, f0) and np.array_equal(x, x0)

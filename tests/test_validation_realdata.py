@@ -60,10 +60,10 @@ def test_uliege_window_constant_and_raw_h1(shared_data):
     wt = u.window_tau(shared_data)
     # the analyser's exponential decays to 0.329 over the 8 s block: tau = 8 / ln(1/0.329)
     assert wt["block_s"] == pytest.approx(8.0)
-    assert wt["tau_s"] == pytest.approx(8.0 / math.log(1 / 0.329), rel=2e-3)
+    assert wt["exp_window_tau_s"] == pytest.approx(8.0 / math.log(1 / 0.329), rel=2e-3)
     # our H1 of the stored last hit, with the analyser's windows, agrees with the analyser's (averaged) H1
-    frf = u.load(shared_data, band=u.BAND, tau_s=wt["tau_s"])
-    raw = u.raw_h1(shared_data, wt["tau_s"], wt["force_window_end_s"], band=u.BAND)
+    frf = u.load(shared_data, band=u.BAND, exp_window_tau_s=wt["exp_window_tau_s"])
+    raw = u.raw_h1(shared_data, wt["exp_window_tau_s"], wt["force_window_end_s"], band=u.BAND)
     good = frf.coherence > 0.98
     rel = np.abs(raw.H - frf.H) / np.abs(frf.H)
     assert good.sum() > 10000
@@ -86,7 +86,7 @@ def test_uliege_exponential_window_is_removed_from_every_pole(shared_data):
     from benchmarks.accuracy.validation import uliege_plane as u
 
     tau = 8.0 / math.log(1 / 0.329)
-    frf = u.load(shared_data, band=(37.0, 43.0), tau_s=tau)
+    frf = u.load(shared_data, band=(37.0, 43.0), exp_window_tau_s=tau)
     res = fit_lsfd(frf, pole_from_fz([40.17], [0.003]), residual_form="physical")
     assert res.success
     assert res.poles.real - res.poles_raw.real == pytest.approx([1.0 / tau], rel=1e-12)
@@ -253,7 +253,7 @@ def test_uliege_weak_39_7_hz_mode_is_in_every_accelerometer(shared_data):
 
     tau = 8.0 / math.log(1 / 0.329)
     band = (37.2, 42.7)
-    frf = u.load(shared_data, band=band, tau_s=tau)
+    frf = u.load(shared_data, band=band, exp_window_tau_s=tau)
     start = pole_from_fz([39.72, 40.16], [0.0035, 0.0021]) - 1.0 / tau
     for o in range(3):
         one = frf.select(outputs=[frf.outputs[o]])

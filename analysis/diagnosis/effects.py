@@ -18,8 +18,8 @@ name                     kind   model extension
 ``stiffness_shift``      modal  every natural frequency times ``factor`` (stiffness times
                                 factor^2), damping ratios kept; residues times factor^(p-1)
 ``damping_change``       modal  every damping ratio times ``factor``
-``exponential_window``   modal  an exponential window ``exp(-t/tau_s)`` on the measured impulse
-                                response: ``H_q,w(w) = H_q(j w + 1/tau_s)`` exactly, in the
+``exponential_window``   modal  an exponential window ``exp(-t/exp_window_tau_s)`` on the measured impulse
+                                response: ``H_q,w(w) = H_q(j w + 1/exp_window_tau_s)`` exactly, in the
                                 measured quantity q (see :func:`synthesize_windowed`)
 ``mass_loading``         modal  a mass ``mass_kg`` at each output sensor: omega_r^2 / (1 + mu_r),
                                 ``mu_r = m sum_o phi_or^2`` (mass-normalised shapes at the
@@ -56,7 +56,7 @@ from .effect_types import Effect, EffectError, FitContext, check_positive as _ch
 from .frf_effects import (apply_residual_modes, apply_sensitivity_error, apply_sensor_highpass, apply_time_delay,
                           fit_residual_modes, fit_sensitivity_error, fit_sensor_highpass, fit_time_delay)
 from .mains import apply_mains_hum, default_hum_width, fit_mains_hum, held_out_mains_hum, hum_kernels
-from .processing import (RECORD_KEY, WINDOW_DECAY_KEY, apply_exponential_window, apply_record_length,
+from .processing import (RECORD_KEY, WINDOW_SHIFT_KEY, apply_exponential_window, apply_record_length,
                          synthesize_windowed, truncation_tail)
 
 __all__ = [
@@ -74,7 +74,7 @@ __all__ = [
     "hum_kernels",
     "default_hum_width",
     "held_out_mains_hum",
-    "WINDOW_DECAY_KEY",
+    "WINDOW_SHIFT_KEY",
     "RECORD_KEY",
 ]
 
@@ -212,16 +212,16 @@ def fit_exponential_window(ctx: FitContext, lines: np.ndarray) -> dict:
     coarse = _modal_cost(ctx, lines, "exponential_window", coarse=True)
     cost = _modal_cost(ctx, lines, "exponential_window")
     f = ctx.measured.freq_hz[lines]
-    # added decay up to 5 % damping of the lowest simulated mode in the band (or of f_max / 10)
+    # pole shift (1/tau) up to 5 % damping of the lowest simulated mode in the band (or of f_max / 10)
     fn = ctx.base.freq_hz
     inband = fn[(fn >= f[0]) & (fn <= f[-1])]
     f1 = float(inband.min()) if inband.size else f[-1] / 10
     smax = 2 * np.pi * f1 * 0.05
     grid = np.linspace(0.0, smax, 61)
-    i = int(np.argmin([coarse({"tau_s": 1.0 / max(x, 1e-9)}) for x in grid]))
-    s = _fit_scalar(lambda x: cost({"tau_s": 1.0 / max(x, 1e-9)}), grid[max(i - 1, 0):i + 2])
+    i = int(np.argmin([coarse({"exp_window_tau_s": 1.0 / max(x, 1e-9)}) for x in grid]))
+    s = _fit_scalar(lambda x: cost({"exp_window_tau_s": 1.0 / max(x, 1e-9)}), grid[max(i - 1, 0):i + 2])
     s = max(s, 1e-9)
-    return {"tau_s": 1.0 / s, "added_decay_per_s": s}
+    return {"exp_window_tau_s": 1.0 / s, "exp_window_pole_shift_per_s": s}
 
 
 def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
@@ -356,7 +356,7 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            "all natural frequencies scaled alike (stiffness or material off)"),
     Effect("damping_change", "modal", apply_damping_change, fit_damping_change, "factor",
            "all damping ratios scaled alike"),
-    Effect("exponential_window", "modal", apply_exponential_window, fit_exponential_window, "tau_s",
+    Effect("exponential_window", "modal", apply_exponential_window, fit_exponential_window, "exp_window_tau_s",
            "an exponential window added decay 1/tau to every mode"),
     Effect("sensitivity_error", "frf", apply_sensitivity_error, fit_sensitivity_error, "gain",
            "a channel's calibration (sensitivity) is wrong"),

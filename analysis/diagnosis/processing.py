@@ -12,27 +12,27 @@ from ..frf import QUANTITY_POWER, FRFSet, convert_quantity, window_pole_shift
 from ..modal import ModalModel, synthesize, transfer
 from .effect_types import EffectError
 
-__all__ = ["WINDOW_DECAY_KEY", "RECORD_KEY", "apply_exponential_window", "apply_record_length", "truncation_tail",
+__all__ = ["WINDOW_SHIFT_KEY", "RECORD_KEY", "apply_exponential_window", "apply_record_length", "truncation_tail",
            "synthesize_windowed"]
 
 _POWER = QUANTITY_POWER
-WINDOW_DECAY_KEY = "window_decay_per_s"   # model.meta key: summed 1/tau of the exponential windows (1/s)
-RECORD_KEY = "record_after_pulse_s"       # model.meta key: response record length after the hammer pulse (s)
+WINDOW_SHIFT_KEY = "exp_window_pole_shift_per_s"  # model.meta key: summed 1/tau of the exponential windows (1/s)
+RECORD_KEY = "record_after_pulse_s"                # model.meta key: response record length after the hammer pulse (s)
 
 
 def apply_exponential_window(model: ModalModel, params: Mapping) -> ModalModel:
-    """An exponential window ``exp(-t/tau_s)`` (s) on the measured responses.
+    """An exponential window ``exp(-t/exp_window_tau_s)`` (s) on the measured responses.
 
     The window multiplies the impulse response of the *measured* quantity, so its effect depends on
     the quantity the model is synthesised in; the model's poles and residues are therefore left as
-    they are and the added decay ``1/tau_s`` (1/s) is recorded in ``meta[WINDOW_DECAY_KEY]`` (several
-    windows add their decays). :func:`predict` then synthesises the exact windowed FRF with
+    they are and the pole shift ``1/exp_window_tau_s`` (1/s) is recorded in ``meta[WINDOW_SHIFT_KEY]``
+    (several windows add their shifts). :func:`predict` then synthesises the exact windowed FRF with
     :func:`synthesize_windowed`."""
-    tau = float(params.get("tau_s", np.inf))
+    tau = float(params.get("exp_window_tau_s", params.get("tau_s", np.inf)))  # "tau_s": older effect specs
     if not (tau > 0 and np.isfinite(tau)):
-        raise EffectError(f"exponential_window: tau_s must be a finite number > 0 (s), got {tau!r}")
+        raise EffectError(f"exponential_window: exp_window_tau_s must be a finite number > 0 (s), got {tau!r}")
     meta = dict(model.meta)
-    meta[WINDOW_DECAY_KEY] = float(meta.get(WINDOW_DECAY_KEY, 0.0)) + window_pole_shift(tau)
+    meta[WINDOW_SHIFT_KEY] = float(meta.get(WINDOW_SHIFT_KEY, 0.0)) + window_pole_shift(tau)
     return replace(model, meta=meta)
 
 
@@ -67,43 +67,43 @@ def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: f
 
 
 def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
-                        decay_per_s: Optional[float] = None) -> FRFSet:
-    """FRFs of ``model`` in ``quantity`` as measured through an exponential window ``exp(-a t)``,
-    ``a = decay_per_s`` (1/s; default ``model.meta[WINDOW_DECAY_KEY]``, 0 without a window).
+                        pole_shift_per_s: Optional[float] = None) -> FRFSet:
+    """FRFs of ``model`` in ``quantity`` as measured through an exponential window ``exp(-t/tau)``,
+    ``sigma_w = pole_shift_per_s = 1/tau`` (1/s; default ``model.meta[WINDOW_SHIFT_KEY]``, 0 without a window).
 
-    Multiplying the impulse response ``h_q(t)`` of the measured quantity q by ``exp(-a t)`` shifts its
-    Laplace transform: ``H_q,w(j w) = H_q(j w + a)``. With the model in form p,
+    Multiplying the impulse response ``h_q(t)`` of the measured quantity q by ``exp(-sigma_w t)`` shifts its
+    Laplace transform: ``H_q,w(j w) = H_q(j w + sigma_w)``. With the model in form p,
     ``H_q(s) = s^(q-p) H_p(s)`` and ``H_p(s) = sum_r [R_r / (s - lambda_r) + c.c.] + UR b_U(s) + LR b_L(s)``,
     so the exact windowed FRF is
 
-        H_q,w(w) = (j w + a)^(q-p) H_p(j w + a).
+        H_q,w(w) = (j w + sigma_w)^(q-p) H_p(j w + sigma_w).
 
-    Equivalently every pole of the measured quantity's pole-residue model moves by ``-a`` with the same
+    Equivalently every pole of the measured quantity's pole-residue model moves by ``-sigma_w`` with the same
     residues (e.g. accelerance from receptance: ``N_r = R_r lambda_r^2`` over ``s - lambda_r``), a
     constant (feed-through, a delta at t = 0) is unchanged and a term ``c s`` (delta') becomes
-    ``c (s + a)``. Converting the shifted receptance by ``(j w)^(q-p)`` instead errs by about
-    ``(q-p) a / w`` relative. Residual terms are continued as the functions of s they are on the
+    ``c (s + sigma_w)``. Converting the shifted receptance by ``(j w)^(q-p)`` instead errs by about
+    ``(q-p) sigma_w / w`` relative. Residual terms are continued as the functions of s they are on the
     j w axis and shifted alike: ``"physical"`` basis ``(s^p, -s^(p-2))``, ``"paper"`` ``(1, -1/s^2)``
     (a constant UR is unchanged; LR, a rigid-body/mass line, becomes its windowed version).
     A fixed FRF term (``meta["frf_correction"]``) is not part of this (see :func:`predict`).
     With ``meta[RECORD_KEY]`` (:func:`apply_record_length`) the finite record is applied too
     (:func:`truncation_tail`, at the windowed ``s``: the window and the record act on the same response).
-    Returns an :class:`FRFSet` in ``quantity``; with ``a = 0`` and no record this is plain synthesis and
+    Returns an :class:`FRFSet` in ``quantity``; with ``sigma_w = 0`` and no record this is plain synthesis and
     conversion."""
     if quantity not in _POWER:
         raise EffectError(f"quantity {quantity!r} is not one of {tuple(_POWER)}")
-    a = float(model.meta.get(WINDOW_DECAY_KEY, 0.0)) if decay_per_s is None else float(decay_per_s)
-    if not (np.isfinite(a) and a >= 0):
-        raise EffectError(f"exponential window decay must be a finite number >= 0 (1/s), got {a!r}")
+    sigma_w = float(model.meta.get(WINDOW_SHIFT_KEY, 0.0)) if pole_shift_per_s is None else float(pole_shift_per_s)
+    if not (np.isfinite(sigma_w) and sigma_w >= 0):
+        raise EffectError(f"exponential window pole shift must be a finite number >= 0 (1/s), got {sigma_w!r}")
     f = np.asarray(freq_hz, float)
     record = model.meta.get(RECORD_KEY)
-    if a == 0.0 and not record:
+    if sigma_w == 0.0 and not record:
         frf = synthesize(model, f)
         if frf.quantity != quantity:
             frf = replace(frf, H=convert_quantity(frf.H, f, frf.quantity, quantity), quantity=quantity)
         return frf
-    s = 2j * np.pi * f + a
-    if a == 0.0:
+    s = 2j * np.pi * f + sigma_w
+    if sigma_w == 0.0:
         frf = synthesize(model, f)
         H = convert_quantity(frf.H, f, frf.quantity, quantity) if frf.quantity != quantity else frf.H
     else:

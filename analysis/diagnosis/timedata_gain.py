@@ -11,7 +11,7 @@ from scipy.optimize import minimize_scalar
 
 from ..modal import ModalModel
 from ..frf import window_pole_shift
-from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_decay
+from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_end_fraction
 from .compare import line_folds
 from .effects import synthesize_windowed
 from .timedata import (FORCE_TAPER_S, FORCE_WINDOW_S, NOISE_GUARD, _check_hits, detect_amplitude_nonlinearity,
@@ -20,7 +20,7 @@ from .timedata import (FORCE_TAPER_S, FORCE_WINDOW_S, NOISE_GUARD, _check_hits, 
 __all__ = ["windowed_accelerance", "HitSpectraSet", "hit_spectra_set", "diagnose_time_effects"]
 
 
-def windowed_accelerance(base: ModalModel, freq_hz: np.ndarray, tau_s: Optional[float],
+def windowed_accelerance(base: ModalModel, freq_hz: np.ndarray, exp_window_tau_s: Optional[float],
                          factor: float = 1.0) -> np.ndarray:
     """Accelerance (m/s^2/N) of a receptance pole-residue model as estimated from exponentially
     windowed hits, with all natural frequencies times ``factor`` (stiffness times factor^2).
@@ -39,7 +39,7 @@ def windowed_accelerance(base: ModalModel, freq_hz: np.ndarray, tau_s: Optional[
                          "(e.g. simulator FrameModel.modal_model(..., 'receptance'))")
     model = replace(base, poles=np.asarray(base.poles) * factor, residues=np.asarray(base.residues) / factor,
                     meta={})
-    return synthesize_windowed(model, freq_hz, "accelerance", window_pole_shift(tau_s)).H
+    return synthesize_windowed(model, freq_hz, "accelerance", window_pole_shift(exp_window_tau_s)).H
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ class HitSpectraSet:
     """Per-hit spectra of a set of hits (:func:`analysis.spectra.hit_spectra` scaling), band lines only.
 
     freq_hz (n_freq,); Gff (n_hits, n_freq) N^2/Hz; Gfx (n_hits, n_out, n_freq); starts: pulse start
-    sample of each hit (window origin); tau_s: exponential window; noise_gain: sum_n w_n^2 of each hit's
+    sample of each hit (window origin); exp_window_tau_s: exponential window; noise_gain: sum_n w_n^2 of each hit's
     force window (to turn a white noise variance into its expected G_nn); response_noise (n_out,): rms
     (EU) of the responses before the pulses (the sensor noise); response_gain: sum w^2 of the response
     window of each hit."""
@@ -56,7 +56,7 @@ class HitSpectraSet:
     Gff: np.ndarray
     Gfx: np.ndarray
     starts: np.ndarray
-    tau_s: float
+    exp_window_tau_s: float
     noise_gain: np.ndarray
     response_noise: np.ndarray
     response_gain: np.ndarray
@@ -69,10 +69,10 @@ class HitSpectraSet:
 
 
 def hit_spectra_set(force: np.ndarray, responses: np.ndarray, fs_hz: float, band: Sequence[float], *,
-                    decay: float = 1e-3, force_width_s: Optional[float] = None, force_taper_s: float = 0.0,
+                    exp_window_end_fraction: float = 1e-3, force_width_s: Optional[float] = None, force_taper_s: float = 0.0,
                     ) -> HitSpectraSet:
     """Spectra of each hit with the window origin at its pulse start (:func:`pulse_bounds`), an
-    exponential window reaching ``decay`` at the block end (same tau for all hits, from the median
+    exponential window reaching ``exp_window_end_fraction`` at the block end (same tau for all hits, from the median
     start) on force and responses, and optionally a force window (``force_width_s`` after the start)."""
     f = _check_hits(force)
     x = np.asarray(responses, float)
@@ -80,8 +80,8 @@ def hit_spectra_set(force: np.ndarray, responses: np.ndarray, fs_hz: float, band
         x = x[:, None, :]
     n = f.shape[1]
     starts = np.array([pulse_bounds(r)[0] for r in f])
-    tau = tau_from_decay(decay, (n - float(np.median(starts))) / fs_hz)
-    win = WindowSettings(force_width_s=force_width_s, force_taper_s=force_taper_s, exp_tau_s=tau)
+    tau = tau_from_end_fraction(exp_window_end_fraction, (n - float(np.median(starts))) / fs_hz)
+    win = WindowSettings(force_width_s=force_width_s, force_taper_s=force_taper_s, exp_window_tau_s=tau)
     Gff, Gfx, gains, rgains = [], [], [], []
     freq = sel = None
     for i in range(f.shape[0]):
@@ -162,7 +162,7 @@ def _fit_nonlinearity(spec: HitSpectraSet, peaks: np.ndarray, base: ModalModel, 
     def pred(k: float) -> np.ndarray:
         H = np.zeros(measured.shape, complex)
         for g, p in zip(G, peaks):
-            H += g[None, None, :] * windowed_accelerance(base, spec.freq_hz, spec.tau_s, 1.0 - k * p)
+            H += g[None, None, :] * windowed_accelerance(base, spec.freq_hz, spec.exp_window_tau_s, 1.0 - k * p)
         return H
 
     def cost(k: float) -> float:
@@ -190,7 +190,7 @@ def diagnose_time_effects(
     *,
     full_scale: Optional[Sequence[float]] = None,
     overload_flags: Optional[np.ndarray] = None,
-    decay: float = 1e-3,
+    exp_window_end_fraction: float = 1e-3,
     outputs: Optional[Sequence[str]] = None,
     reference: str = "",
     z_min: float = 3.0,
@@ -202,7 +202,7 @@ def diagnose_time_effects(
 
     force (n_hits, n) N; responses (n_hits, n_out, n) m/s^2; base: the linear simulation as a receptance
     pole-residue model at (outputs, reference) (e.g. ``FrameModel.modal_model(..., "receptance")``);
-    band (lo, hi) Hz. The measured FRF is H1 of all hits with an exponential window (``decay`` at the
+    band (lo, hi) Hz. The measured FRF is H1 of all hits with an exponential window (``exp_window_end_fraction`` at the
     block end, force and responses); the simulation is :func:`windowed_accelerance`. Per effect:
 
     * ``amplitude_nonlinearity`` (model): H1 predicted as ``sum_i G_ff,i H(f; 1 - k F_pk,i) / sum_i G_ff,i``;
@@ -214,7 +214,7 @@ def diagnose_time_effects(
     * ``double_hit`` (data quality): the same with a force window of ``FORCE_WINDOW_S`` after each
       pulse start (a double hit harms H1 only when the force window cuts the second pulse).
 
-    Returns ``{"verdict", "causes", "error_before_db", "error_after_db", "tau_s", "n_hits"}``; each cause
+    Returns ``{"verdict", "causes", "error_before_db", "error_after_db", "exp_window_tau_s", "n_hits"}``; each cause
     has ``effect, kind, parameters, present, significant, gain_db, error_before_db, error_after_db, z,
     evidence``. A cause counts when its detector finds it and (model effects) its gain is significant
     (``gain >= min_gain_db`` and (``z >= z_min`` or ``gain >= strong_gain_db``)); the verdict is the
@@ -230,9 +230,9 @@ def diagnose_time_effects(
     if base.residues.shape[0] != x.shape[1] or base.residues.shape[1] != 1:
         raise ValueError(f"the simulation has {base.residues.shape[:2]} (outputs, references) but the hits "
                          f"have {x.shape[1]} responses at one reference; build it at the hits' points")
-    spec = hit_spectra_set(f, x, fs_hz, band, decay=decay)
+    spec = hit_spectra_set(f, x, fs_hz, band, exp_window_end_fraction=exp_window_end_fraction)
     Hm = spec.h1()[:, None, :]
-    sim = windowed_accelerance(base, spec.freq_hz, spec.tau_s)
+    sim = windowed_accelerance(base, spec.freq_hz, spec.exp_window_tau_s)
     w = noise_weights(spec, Hm, n, fs_hz)
     causes = []
 
@@ -285,7 +285,7 @@ def diagnose_time_effects(
     det = detect_double_hit(f, fs_hz)
     bad = np.zeros(n_hits, bool)
     bad[det["parameters"]["hits"]] = True
-    spec_fw = hit_spectra_set(f, x, fs_hz, band, decay=decay, force_width_s=FORCE_WINDOW_S,
+    spec_fw = hit_spectra_set(f, x, fs_hz, band, exp_window_end_fraction=exp_window_end_fraction, force_width_s=FORCE_WINDOW_S,
                               force_taper_s=FORCE_TAPER_S)
     Hfw = spec_fw.h1()[:, None, :]
     s = _exclusion(Hfw, spec_fw, bad, sim, w)
@@ -301,7 +301,7 @@ def diagnose_time_effects(
     before = _db(float(np.mean(w * np.abs(Hm - sim) ** 2)))
     after = causes[0]["error_after_db"] if verdict != "none" else before
     return {"verdict": verdict, "causes": causes, "error_before_db": before, "error_after_db": after,
-            "tau_s": spec.tau_s, "n_hits": n_hits, "band_hz": [float(band[0]), float(band[1])]}
+            "exp_window_tau_s": spec.exp_window_tau_s, "n_hits": n_hits, "band_hz": [float(band[0]), float(band[1])]}
 
 
 

@@ -219,7 +219,7 @@ def known_processing(measured: FRFSet) -> tuple:
         out.append({"effect": "record_length", "record_s": float(record), "pretrigger_s": float(pre)})
     tau = measured.exp_window_tau_s
     if tau:
-        out.append({"effect": "exponential_window", "tau_s": float(tau)})
+        out.append({"effect": "exponential_window", "exp_window_tau_s": float(tau)})
     return tuple(out)
 
 

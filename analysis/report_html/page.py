@@ -42,8 +42,9 @@ def _test_html(test: Optional[dict], meta: dict) -> str:
                 "record of the test (channels, windows, hits). Give the recording (.h5) for this section.</p>"
                 + _dl([("input", escape(meta["input"])), ("FRFs", escape(meta["frf_count"]))]) + "</section>")
     win = test["windows"]
-    exp = (f"tau {_num(win.get('exp_tau_s'))} s" if win.get("exp_tau_s") else
-           (f"to {_num(100 * win['exp_decay'], '{:.3g}')} % at the block end" if win.get("exp_decay") else "none"))
+    tau, end = win.get("exp_window_tau_s"), win.get("exp_window_end_fraction")
+    exp = (f"tau {_num(tau)} s" if tau else
+           (f"to {_num(100 * end, '{:.3g}')} % at the block end" if end else "none"))
     force = (f"{_num(1e3 * win['force_width_s'], '{:.3g}')} ms + {_num(1e3 * win.get('force_taper_s', 0), '{:.3g}')}"
              " ms cosine taper" if win.get("force_width_s") else "none")
     fs, block = test["sample_rate_hz"], test["block_size"]

@@ -50,7 +50,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     blocks = [make_counts(rng) for _ in range(8)]
     eu = np.array([0.05, 0.001, 0.001, 0.001])
-    win = WindowSettings(force_width_s=0.02, force_taper_s=0.005, exp_tau_s=0.4)
+    win = WindowSettings(force_width_s=0.02, force_taper_s=0.005, exp_window_tau_s=0.4)
     acc = FRFAccumulator(["a", "b", "c"], "f")
     times = []
     for i in range(N_HITS):

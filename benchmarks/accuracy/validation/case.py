@@ -40,15 +40,15 @@ def crlb_of(fit: OurFit, frf: FRFSet):
         return None
 
 
-def correct_peer_window(peer: PeerFit, tau_s: float) -> PeerFit:
-    """The peer's poles with an exponential window's decay ``1/tau_s`` (rad/s) removed, as our LSFD does."""
+def correct_peer_window(peer: PeerFit, exp_window_tau_s: float) -> PeerFit:
+    """The peer's poles with an exponential window's decay ``1/exp_window_tau_s`` (rad/s) removed, as our LSFD does."""
     from dataclasses import replace
 
     from analysis.modal import damping_ratio, natural_freq_hz, pole_from_fz
 
     out = {}
     for fk, zk in (("freq_hz", "damping"), ("used_freq_hz", "used_damping")):
-        lam = pole_from_fz(getattr(peer, fk), getattr(peer, zk)) + 1.0 / tau_s
+        lam = pole_from_fz(getattr(peer, fk), getattr(peer, zk)) + 1.0 / exp_window_tau_s
         out[fk], out[zk] = natural_freq_hz(lam), damping_ratio(lam)
     return replace(peer, **out)
 

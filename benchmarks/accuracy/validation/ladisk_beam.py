@@ -35,7 +35,7 @@ BAND_SINGLE = (300.0, 6500.0)
 BAND_MULTI = (200.0, 3000.0)
 WIN_SINGLE = WindowSettings(force_width_s=0.002, force_taper_s=0.001)
 #: the multi-hit records still ring at 1.5 % of the peak at the block end: exponential window to 10 %
-WIN_MULTI = WindowSettings(force_width_s=0.002, force_taper_s=0.001, exp_tau_s=1.0 / np.log(10.0))
+WIN_MULTI = WindowSettings(force_width_s=0.002, force_taper_s=0.001, exp_window_tau_s=1.0 / np.log(10.0))
 
 
 def load_single(data_dir: Path) -> FRFSet:
@@ -93,7 +93,7 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         "FRFs estimated here from the raw time data with `analysis.spectra` (force window 2 ms + 1 ms taper from "
         "10 samples before the force onset; H1). The single 50 kHz hit decays to 0.04 % of its peak within the "
         "block, so no exponential window; the four 25.6 kHz hits still ring at 1.5 %, so an exponential window "
-        f"decaying to 10 % at the block end (tau = {WIN_MULTI.exp_tau_s:.4g} s) is applied and removed by the fitter "
+        f"decaying to 10 % at the block end (tau = {WIN_MULTI.exp_window_tau_s:.4g} s) is applied and removed by the fitter "
         "(`exp_window_tau_s`).",
         "",
         "### One hit at 50 kHz",

@@ -70,12 +70,12 @@ def window_tau(data_dir: Path) -> dict:
         if z.size:
             ends.append(t[k0 + z[0]])
     T = t[-1] - t[0] + (t[1] - t[0])
-    return {"tau_s": float(np.median(taus)), "tau_spread_s": float(np.ptp(taus)), "block_s": float(T),
+    return {"exp_window_tau_s": float(np.median(taus)), "tau_spread_s": float(np.ptp(taus)), "block_s": float(T),
             "tau_nominal_s": float(T / math.log(1 / DECAY_AT_END)), "force_window_end_s": float(np.median(ends)),
             "t0_s": float(t[0]), "fs_hz": float(1.0 / (t[1] - t[0]))}
 
 
-def load(data_dir: Path, band: tuple[float, float] | None = BAND, tau_s: float = 7.2) -> FRFSet:
+def load(data_dir: Path, band: tuple[float, float] | None = BAND, exp_window_tau_s: float = 7.2) -> FRFSet:
     """Analyser H1 of the 74 impact points: H[3 accelerometers, 74 hammer points, n], (m/s^2)/N."""
     d = _npz(data_dir)
     ids = list(d["file_id"])
@@ -85,7 +85,7 @@ def load(data_dir: Path, band: tuple[float, float] | None = BAND, tau_s: float =
     f = d["freq_hz"]
     refs = tuple(f"plane:{k + 1}:{'Z' if k < 68 else 'X'}" for k in range(74))
     frf = FRFSet(freq_hz=f, H=H, quantity="accelerance", outputs=("acc:1:Z", "acc:2:Z", "acc:3:Z"),
-                 references=refs, unit="(m/s^2)/N", coherence=np.clip(C, 0, 1), exp_window_tau_s=tau_s,
+                 references=refs, unit="(m/s^2)/N", coherence=np.clip(C, 0, 1), exp_window_tau_s=exp_window_tau_s,
                  meta={"source": SOURCE, "estimator": "analyser H1"})
     return frf.band(*band) if band else frf
 
@@ -132,17 +132,17 @@ def importer_check(data_dir: Path) -> float:
     return float(np.max(np.abs(t.hits[0] - x)) / np.max(np.abs(x)))
 
 
-def raw_h1(data_dir: Path, tau_s: float, force_end_s: float, band: tuple[float, float] | None = BAND) -> FRFSet:
+def raw_h1(data_dir: Path, exp_window_tau_s: float, force_end_s: float, band: tuple[float, float] | None = BAND) -> FRFSet:
     """H1 of the stored last hit of every impact point, by :mod:`analysis.spectra` with the analyser's windows.
 
     The windows start at the block start (the analyser's convention): force window up to
-    ``force_end_s`` after the trigger, exponential ``tau_s`` on force and responses.
+    ``force_end_s`` after the trigger, exponential ``exp_window_tau_s`` on force and responses.
     """
     d = _npz(data_dir)
     ids = list(d["file_id"])
     t = d["t_s"]
     fs = 1.0 / (t[1] - t[0])
-    win = WindowSettings(force_width_s=force_end_s - t[0], force_taper_s=0.0, exp_tau_s=tau_s, exp_on_force=True)
+    win = WindowSettings(force_width_s=force_end_s - t[0], force_taper_s=0.0, exp_window_tau_s=exp_window_tau_s, exp_on_force=True)
     blocks = d["x_last_block"]  # read once: every NpzFile item access re-reads the array
     Hs = []
     for k in IMPACT_FILES:
@@ -154,7 +154,7 @@ def raw_h1(data_dir: Path, tau_s: float, force_end_s: float, band: tuple[float, 
     H = np.stack(Hs, axis=1)
     refs = tuple(f"plane:{k + 1}:{'Z' if k < 68 else 'X'}" for k in range(74))
     frf = FRFSet(freq_hz=fr.freq_hz, H=H, quantity="accelerance", outputs=("acc:1:Z", "acc:2:Z", "acc:3:Z"),
-                 references=refs, unit="(m/s^2)/N", exp_window_tau_s=tau_s, meta={"estimator": "impactlab H1, 1 hit"})
+                 references=refs, unit="(m/s^2)/N", exp_window_tau_s=exp_window_tau_s, meta={"estimator": "impactlab H1, 1 hit"})
     return frf.band(*band) if band else frf
 
 
@@ -258,8 +258,8 @@ def _paired(ref_f: np.ndarray, f: np.ndarray, x: np.ndarray, target_hz: float) -
 
 def run(data_dir: Path, out_dir: Path) -> CaseReport:
     wt = window_tau(data_dir)
-    tau = wt["tau_s"]
-    frf = load(data_dir, band=None, tau_s=tau)
+    tau = wt["exp_window_tau_s"]
+    frf = load(data_dir, band=None, exp_window_tau_s=tau)
     ours, peer, block, summary, plots = compare(NAME, frf, out_dir, band=BAND, plot_name=f"{NAME}.png", title=NAME)
     res = ours.result
     md = [
@@ -436,7 +436,7 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
     for k, d in pair_figs.items():
         figs.update({f"pair{k + 1}_{n}": v for n, v in d.items()})
     summary["figures"] = {**summary.get("figures", {}), **figs}
-    summary["extra"] = {"tau_s": tau, "consistency": arr}
+    summary["extra"] = {"exp_window_tau_s": tau, "consistency": arr}
     s_uw = {"case": NAME + " (unweighted)", "n_frf": summary["n_frf"], "lines": summary["lines"], "band": uw.band,
             "modes_ours": int(uw.result.poles.size), "modes_peer": None, "err_ours": uw.synth_err_pct, "err_peer": None,
             "t_ours": uw.time_s, "t_peer": None}
