@@ -25,7 +25,6 @@ PENDING = {
     "docs/diagnosis.md",
     "docs/diagnosis-realdata.md",
     "docs/reliability.md",
-    "docs/scaling.md",
 }
 
 
