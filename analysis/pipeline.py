@@ -80,9 +80,10 @@ from .bounded_fit import drop_bad_poles, fit_bounded
 from .fit_result import FitResult, assess_fit
 from .progress import progress
 from .lscf import parse_band
-from .missing_modes import MAINS_HZ, add_missing_modes
+from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
+from .visibility import visible_peaks
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -224,10 +225,13 @@ def fit_auto(
     else:
         result = fit_bounded(fit_frf, poles, fit_kw)
         result = drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
-    if add_missing and n_modes is None:
+    visible = visible_peaks(fit_frf, (lo2, hi2))
+    complete_search = add_missing and n_modes is None
+    if complete_search:
         # the user's poles/frequencies are kept: step 7 only adds (it never drops a pole)
         progress("fit: looking for resonances the model misses")
-        result = add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz)
+        result = add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz,
+                                   visible=visible)
     if not result.success:
         warnings_out.append(f"LSFD did not converge: {result.message}")
         log.warning("LSFD did not converge: %s", result.message)
@@ -237,6 +241,12 @@ def fit_auto(
                             "the standard deviations and weights rest on the misfit alone (take several hits per point)")
     result = sorted_by_frequency(result)
     problems = assess_fit(result, (lo2, hi2))
+    left, notes = unfitted_resonances(fit_frf, visible, result, mains)
+    warnings_out += notes
+    if complete_search:
+        problems += left
+    else:  # the user fixed the model: what it leaves out is said, not held against it
+        warnings_out += left
     for p in problems:
         log.warning("implausible fit: %s", p)
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,

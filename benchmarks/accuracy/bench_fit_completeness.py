@@ -15,20 +15,20 @@ datasets of ``docs/validation.md`` (from ``--data``; skipped when absent) with t
 
 Visible modes (independent of the fit)
 --------------------------------------
-The curves: the magnitude (dB) of every FRF and the first CMIF curve (:func:`analysis.mif.cmif`).
-A *visible peak* is a local maximum of one curve, inside the fitted band, whose topographic
-prominence (scipy's ``peak_prominences``: how far it stands above the higher of its two
-neighbouring minima) is >= ``PROMINENCE_DB`` (10 dB), with a coherence >= ``MIN_COHERENCE``
-(0.9) at that line in that FRF (for the CMIF: the median over the FRFs) when the data carry
-coherence. On the simulated frame a true mode (the frame model's modal solution with the
-capture's sensor masses, :attr:`simulator.stand.TestStand.model`) is *visible* when a visible
-peak lies within ``max(0.5 % f, 1.5 lines)`` of it and it is the true mode nearest that peak.
-On real data (no truth) the visible peaks themselves, merged within ``max(0.5 %, 1.5 lines)``,
-are the visible modes.
+The visible peaks of :mod:`analysis.visibility` (data only): on the magnitude of every FRF and
+on the first CMIF curve, a local maximum inside the band standing >= 10 dB above the higher of
+its two neighbouring minima, with a coherence >= 0.9 over its top (the lines within 3 dB of
+the maximum and one more each side) when the data carry coherence, else at least two lines
+wide at 3 dB (without coherence and with more than 8 FRFs only the CMIF curve). On the
+simulated frame a true mode (the frame model's modal solution with the capture's sensor
+masses, :attr:`simulator.stand.TestStand.model`) is *visible* when a visible peak lies within
+``max(0.5 % f, 1.5 lines)`` of it and it is the true mode nearest that peak. On real data (no
+truth) the visible peaks themselves, merged within ``max(0.5 %, 1.5 lines)``, are the visible
+modes.
 
 Scores per capture
 ------------------
-fitted: visible modes with a fitted pole within 0.5 % (real data: within ``max(0.5 %, 1.5
+fitted: visible modes with a fitted pole within 0.5 %, each pole counted for one mode only (real data: within ``max(0.5 %, 1.5
 lines)`` of the peak); named: visible modes left unfitted whose frequency (within 1 %) appears
 in a warning; spurious: fitted poles (in the band) with no true mode within 1 % or two poles on
 one true mode (simulated frame only); dishonest: ``success`` is True while a visible mode is left.
@@ -60,14 +60,11 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
-from scipy.signal import find_peaks, peak_prominences  # noqa: E402
 
 from analysis.frf import FRFSet  # noqa: E402
-from analysis.mif import cmif  # noqa: E402
 from analysis.pipeline import fit_auto  # noqa: E402
+from analysis.visibility import visible_peaks as find_visible  # noqa: E402
 
-PROMINENCE_DB = 10.0
-MIN_COHERENCE = 0.9
 MATCH_FRACTION = 0.005
 MATCH_LINES = 1.5
 SPURIOUS_FRACTION = 0.01
@@ -150,27 +147,8 @@ def capture(case: Case, folder: Path) -> tuple[FRFSet, np.ndarray]:
 
 
 def visible_peaks(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
-    """Frequencies (Hz) of the visible peaks (module docstring), unsorted, possibly repeated."""
-    f = frf.freq_hz
-    sel = np.flatnonzero((f >= band[0]) & (f <= band[1]))
-    H = np.asarray(frf.H).reshape(-1, f.size)[:, sel]
-    coh = None if frf.coherence is None else np.asarray(frf.coherence, float).reshape(-1, f.size)[:, sel]
-    curves = [np.abs(h) for h in H]
-    cohs = [None if coh is None else c for c in (coh if coh is not None else [None] * len(curves))]
-    curves.append(cmif(frf)[sel, 0])
-    cohs.append(None if coh is None else np.median(coh, axis=0))
-    out = []
-    for mag, c in zip(curves, cohs):
-        db = 20 * np.log10(np.maximum(mag, 1e-300))
-        pk, _ = find_peaks(db)
-        if pk.size == 0:
-            continue
-        prom = peak_prominences(db, pk)[0]
-        ok = prom >= PROMINENCE_DB
-        if c is not None:
-            ok &= c[pk] >= MIN_COHERENCE
-        out.extend(f[sel][pk[ok]].tolist())
-    return np.asarray(out, float)
+    """Frequencies (Hz) of the visible peaks (:func:`analysis.visibility.visible_peaks`)."""
+    return np.asarray([v.freq_hz for v in find_visible(frf, band)], float)
 
 
 def visible_modes(peaks: np.ndarray, truth: Optional[np.ndarray], df: float) -> np.ndarray:
