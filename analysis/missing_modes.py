@@ -19,7 +19,7 @@ from .mac import mac
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz, transfer
 
 from .bands import MAINS_DEVIATION_HZ, MAINS_HZ, MAINS_LINES, mains_harmonic_index
-from .bounded_fit import bad_poles, drop_bad_poles, fit_bounded, trust_window_hz
+from .bounded_fit import bad_poles, trust_window_hz
 from .fit_result import MAX_DAMPING
 from .modal import ModalModel
 from .visibility import VisiblePeak, reproduced, unaccounted_peaks
@@ -48,6 +48,10 @@ MISFIT_MIN_GAIN = 0.5
 NOT_A_RESONANCE_DAMPING_RATIO = 6.0
 SPLIT_MIN_RATIO = 0.01
 LOCAL_TOL = 1e-7
+FINAL_BANDWIDTHS = 0.5
+FINAL_DAMPING_WINDOW = 1.5
+MAX_FINAL_ROUNDS = 3
+PAIR_FRACTION = 0.02
 
 
 def _synthesize_flat(model, f: np.ndarray) -> np.ndarray:
@@ -370,8 +374,35 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
         warnings_out.append(msg)
     if not added:
         return result
-    full = fit_bounded(frf, np.asarray(model.poles), fit_kw)
-    return drop_bad_poles(frf, full, fit_kw, warnings_out)
+    return _final_fit(frf, np.asarray(model.poles), fit_kw, warnings_out)
+
+
+def _final_fit(frf: FRFSet, poles: np.ndarray, fit_kw: dict, warnings_out: list[str]):
+    """One LSFD over the whole band from the poles the local fits found, each held close to its
+    local estimate (``FINAL_BANDWIDTHS`` half-power bandwidths in frequency, a factor
+    ``FINAL_DAMPING_WINDOW`` in damping): the local fits decided which poles there are; the full
+    fit polishes them together and gives the residues and uncertainties of the whole band. On a
+    wide band of weak modes an unbounded fit would turn some of them into very damped poles that
+    absorb broadband misfit. Poles that leave the band or physical damping are dropped (step 6)."""
+    from .lsfd import fit_lsfd
+
+    df = frf.line_spacing_hz
+    p = np.asarray(poles)
+    for _ in range(MAX_FINAL_ROUNDS):
+        res = fit_lsfd(frf, p, freq_window_hz=FINAL_BANDWIDTHS * bandwidth_hz(p, df),
+                       damping_window=FINAL_DAMPING_WINDOW, **fit_kw)
+        lo, hi = res.band
+        fd = res.poles_raw.imag / (2 * np.pi)
+        bad = ~((fd >= lo) & (fd <= hi) & (res.damping > 0) & (res.damping < MAX_DAMPING))
+        if not np.any(bad) or np.all(bad):
+            return res
+        msg = "dropped and refitted: " + "; ".join(
+            f"{natural_freq_hz(p[k]):.4g} Hz -> {res.freq_hz[k]:.4g} Hz/{100 * res.damping[k]:.3g} %: out of the band "
+            "or physical damping" for k in np.flatnonzero(bad))
+        log.info(msg)
+        warnings_out.append(msg)
+        p = p[~bad]
+    return res
 
 
 def _unaccounted(frf: FRFSet, visible: Sequence[VisiblePeak], model: ModalModel, df: float) -> list[VisiblePeak]:
@@ -384,21 +415,35 @@ def _unaccounted(frf: FRFSet, visible: Sequence[VisiblePeak], model: ModalModel,
 def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result,
                         mains: Sequence[float] = MAINS_HZ) -> tuple[list[str], list[str]]:
     """The visible peaks the LSFD ``result`` leaves unaccounted for (:mod:`analysis.visibility`), in
-    words: ``(problems, notes)``. A peak on a mains harmonic is a note (not a resonance); any other
-    is a problem: the fit is not complete."""
+    words: ``(problems, notes)``. A peak on a mains harmonic at most ``1 + MAINS_LINES`` lines wide
+    is a note (an electrical line, not a resonance); any other is a problem: the fit is not
+    complete. A peak with a fitted pole within ``PAIR_FRACTION`` of it that another peak of its
+    curve took is named a possible close pair."""
     df = float(frf.line_spacing_hz)
     model = result.model_raw
-    missed, pairs = unaccounted_peaks(visible, result.freq_hz, df,
+    fitted = np.asarray(result.freq_hz, float)
+    missed, pairs = unaccounted_peaks(visible, fitted, df,
                                       lambda v: reproduced(frf, v, lambda f: transfer(model, 2j * np.pi * f)))
     problems: list[str] = []
     notes: list[str] = []
-    for v in missed:
-        text = (f"a resonance at {v.freq_hz:.5g} Hz (a peak {v.prominence_db:.0f} dB above its neighbouring minima in "
-                f"{v.curve}) has no pole")
-        (notes if mains_harmonic_index(v.freq_hz, mains, df) is not None else problems).append(
-            text + (" (on a mains line)" if mains_harmonic_index(v.freq_hz, mains, df) is not None else ""))
-    for v, x in pairs:
-        problems.append(f"a possible close pair: the peak at {v.freq_hz:.5g} Hz ({v.prominence_db:.0f} dB above its "
-                        f"neighbouring minima in {v.curve}) shares the pole at {x:.5g} Hz with a neighbouring peak "
-                        "(more references would separate them; or give both frequencies with --poles)")
+    seen: list[float] = []
+    for v in missed + [v for v, _ in pairs]:
+        if any(abs(v.freq_hz - x) < 0.5 * df for x in seen):
+            continue   # the same line in another curve: said once
+        seen.append(v.freq_hz)
+        where = f"a peak {v.prominence_db:.0f} dB above its neighbouring minima in {v.curve}"
+        width_lines = (v.top_hz[1] - v.top_hz[0]) / df - 1.0
+        if mains_harmonic_index(v.freq_hz, mains, df) is not None and width_lines <= 1 + MAINS_LINES:
+            notes.append(f"the peak at {v.freq_hz:.5g} Hz ({where}) lies on a mains line and is "
+                         f"{width_lines:.0f} line(s) wide: not a resonance")
+            continue
+        near = fitted[np.abs(fitted - v.freq_hz) <= PAIR_FRACTION * v.freq_hz] if fitted.size else fitted
+        if near.size:
+            x = float(near[np.argmin(np.abs(near - v.freq_hz))])
+            problems.append(f"a possible close pair: the resonance at {v.freq_hz:.5g} Hz ({where}) has no pole of "
+                            f"its own; the pole at {x:.5g} Hz may stand for both (more references would separate "
+                            "them; or give both frequencies with --poles)")
+        else:
+            problems.append(f"a resonance at {v.freq_hz:.5g} Hz ({where}) is neither fitted by a pole nor "
+                            "reproduced by the model")
     return problems, notes

@@ -243,10 +243,7 @@ def fit_auto(
     problems = assess_fit(result, (lo2, hi2))
     left, notes = unfitted_resonances(fit_frf, visible, result, mains)
     warnings_out += notes
-    if complete_search:
-        problems += left
-    else:  # the user fixed the model: what it leaves out is said, not held against it
-        warnings_out += left
+    problems += left
     for p in problems:
         log.warning("implausible fit: %s", p)
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,

@@ -19,7 +19,7 @@ maximum of a curve inside the band is a visible peak when
   is searched when there are more than ``MAX_CURVES_WITHOUT_COHERENCE`` FRFs: it averages the
   FRFs' noise, where each noisy FRF alone would show peaks of noise.
 
-Peaks of several curves on the same line are one peak (the most prominent stands for it).
+The peaks of every curve are kept (a resonance shows in several curves).
 
 **Accounted for.** A visible peak is accounted for by a fitted model when a pole lies within
 ``max(MATCH_FRACTION f, MATCH_LINES df)`` of it that no other peak *of the same curve* took (two
@@ -95,15 +95,14 @@ def _top(db: np.ndarray, i: int, drop_db: float = 3.0) -> tuple[int, int]:
 
 
 def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
-    """The visible peaks of ``frf`` in ``band`` (lo, hi Hz), one per resonance, most prominent
-    first (see module docstring)."""
+    """The visible peaks of ``frf`` in ``band`` (lo, hi Hz) of every curve, most prominent first
+    (see module docstring)."""
     f_all = frf.freq_hz
     sel = np.flatnonzero((f_all >= float(band[0])) & (f_all <= float(band[1])) & np.all(
         np.isfinite(np.asarray(frf.H).reshape(-1, f_all.size)), axis=0))
     if sel.size < 3:
         return []
     f = f_all[sel]
-    df = float(frf.line_spacing_hz)
     found: list[VisiblePeak] = []
     curves = _curves(frf, sel)
     for ci, (name, mag, coh) in enumerate(curves):
@@ -124,11 +123,7 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
             index = -1 if name == "CMIF" else ci
             found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b]))))
     found.sort(key=lambda v: -v.prominence_db)
-    kept: list[VisiblePeak] = []
-    for v in found:   # the same line in several curves: one peak, the most prominent
-        if not any(abs(k.freq_hz - v.freq_hz) < 0.5 * df for k in kept):
-            kept.append(v)
-    return kept
+    return found
 
 
 def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.ndarray]) -> bool:
