@@ -43,8 +43,9 @@ MISSING_CANCEL_RATIO = 0.2
 MAINS_WIDTH_FRACTION = 0.5
 LOCAL_BANDWIDTHS = 4.0
 LOCAL_MIN_LINES = 12
-VISIBLE_MIN_GAIN = 0.5
-MISFIT_MIN_GAIN = 0.5
+VISIBLE_MIN_GAIN = 0.7
+MISFIT_MIN_GAIN = 0.7
+SPLIT_MIN_GAIN = 0.9
 NOT_A_RESONANCE_DAMPING_RATIO = 6.0
 SPLIT_MIN_RATIO = 0.01
 LOCAL_TOL = 1e-7
@@ -301,11 +302,13 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
     on_mains: list[tuple[float, str]] = []  # reported once at the end, with a count
     added = 0
 
-    def attempt(c: float, min_gain: float) -> bool:
+    def attempt(c: float, min_gain: float, peak: Optional[VisiblePeak] = None) -> bool:
         nonlocal model, added
         tried.append(c)
         f, e, _ = _scaled_misfit(frf, model, band)
-        mains_why = _mains_line(c, f, e, df, z0, mains)
+        # a visible peak wider than a mains line is a resonance whatever the misfit's shape
+        wide = peak is not None and (peak.top_hz[1] - peak.top_hz[0]) / df - 1.0 > 1 + MAINS_LINES
+        mains_why = None if wide else _mains_line(c, f, e, df, z0, mains)
         if mains_why is not None:
             log.debug(mains_why)
             on_mains.append((c, mains_why))
@@ -336,7 +339,7 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
         left = [v for v in _unaccounted(frf, visible, model, df) if all(abs(v.freq_hz - x) > 0.5 * df for x in tried)]
         if not left:
             break
-        attempt(left[0].freq_hz, VISIBLE_MIN_GAIN)
+        attempt(left[0].freq_hz, VISIBLE_MIN_GAIN, left[0])
     # close pairs fitted as one pole: where the misfit over a pole's top (+- half its bandwidth)
     # exceeds SPLIT_MIN_RATIO of the data there, a second pole half a bandwidth either side is
     # tried (the pair checks decide)
@@ -354,7 +357,7 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
             continue
         for side in (-0.5, 0.5):
             c = fk + side * bk
-            if all(abs(c - x) > 0.5 * df for x in tried) and attempt(c, VISIBLE_MIN_GAIN):
+            if all(abs(c - x) > 0.5 * df for x in tried) and attempt(c, SPLIT_MIN_GAIN):
                 f, e, d = _scaled_misfit(frf, model, band)
                 break
     failures = 0

@@ -195,6 +195,8 @@ def fit_auto(
         else:
             poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
         if poles.size == 0:
+            poles = _poles_from_peaks(frf, (lo, hi), stab, warnings_out)
+        if poles.size == 0:
             raise FitError(
                 f"no stable physical poles found in {lo:.6g}..{hi:.6g} Hz up to {mm} modes: raise --order, "
                 "change the band, or give the poles (--poles F1,F2,...)"
@@ -248,6 +250,28 @@ def fit_auto(
         log.warning("implausible fit: %s", p)
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
+
+
+def _poles_from_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
+                      warnings_out: list[str]) -> np.ndarray:
+    """Starting poles at the visible peaks (:mod:`analysis.visibility`) when the stabilization
+    kept none: one per distinct peak frequency (peaks within ``max(MATCH_FRACTION f, MATCH_LINES
+    df)`` are one), damping from the diagram (:func:`poles_from_frequencies`). Empty when the
+    data show no peak either."""
+    from .visibility import MATCH_FRACTION, MATCH_LINES
+
+    df = frf.line_spacing_hz
+    freqs: list[float] = []
+    for v in visible_peaks(frf, band):   # most prominent first
+        if all(abs(v.freq_hz - x) > max(MATCH_FRACTION * x, MATCH_LINES * df) for x in freqs):
+            freqs.append(v.freq_hz)
+    if not freqs:
+        return np.zeros(0, dtype=complex)
+    msg = (f"the stabilization kept no pole in {band[0]:.6g}..{band[1]:.6g} Hz; the fit starts from the "
+           f"{len(freqs)} visible peak(s) at {', '.join(f'{x:.5g}' for x in sorted(freqs))} Hz")
+    log.info(msg)
+    warnings_out.append(msg)
+    return poles_from_frequencies(sorted(freqs), stab)
 
 
 def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:

@@ -21,15 +21,16 @@ maximum of a curve inside the band is a visible peak when
 
 The peaks of every curve are kept (a resonance shows in several curves).
 
-**Accounted for.** A visible peak is accounted for by a fitted model when a pole lies within
-``max(MATCH_FRACTION f, MATCH_LINES df)`` of it that no other peak *of the same curve* took (two
-maxima of one curve are two resonances; peaks of different FRFs a few lines apart are one mode
-seen through different neighbours), or when the model reproduces the peak: over the peak's top
-(the lines within 3 dB of its maximum, and one more on each side) the model's misfit in that
-curve is below ``REPRODUCED_FRACTION`` of the data's energy. A peak between two nearby
-antiresonances is such a case: the model's other modes make it. A peak not accounted for is
-*missed*; when the pole within reach was taken by another peak of the same curve, the two are a
-*possible close pair* fitted as one pole.
+**Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
+the most prominent one are one resonance seen through different FRFs (a neighbouring mode shifts a
+peak by a line or two); two maxima of the same curve are always two resonances. Each resonance,
+most prominent first, takes the nearest still free fitted pole within ``max(MATCH_FRACTION f,
+MATCH_LINES df)`` of one of its peaks. A resonance with no pole within that reach is still
+accounted for when the model reproduces one of its peaks: over the peak's top (the lines within 3 dB of its maximum,
+and one more on each side) the model's misfit in that curve is below ``REPRODUCED_FRACTION`` of
+the data's energy. A peak between two nearby antiresonances is such a case: the model's other
+modes make it. A resonance not accounted for is *missed*; when the pole within reach was taken by
+another resonance, the two are a *possible close pair* fitted as one pole.
 """
 from __future__ import annotations
 
@@ -51,7 +52,9 @@ VISIBLE_MIN_LINES = 2
 MAX_CURVES_WITHOUT_COHERENCE = 8
 MATCH_FRACTION = 0.005
 MATCH_LINES = 1.5
-REPRODUCED_FRACTION = 0.1
+SAME_LINES = 2.5
+SAME_FRACTION = 0.002
+REPRODUCED_FRACTION = 0.03
 
 
 @dataclass(frozen=True)
@@ -144,24 +147,32 @@ def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: f
                       is_reproduced: Optional[Callable[[VisiblePeak], bool]] = None,
                       ) -> tuple[list[VisiblePeak], list[tuple[VisiblePeak, float]]]:
     """Visible peaks the fitted natural frequencies ``fitted_hz`` (Hz) leave unaccounted for:
-    ``(missed, pairs)``; ``pairs`` holds (peak, frequency of the one pole it shares with another
-    peak of its curve). ``is_reproduced(peak)`` (e.g. :func:`reproduced` with the model) tells
-    whether the model makes a peak without a pole of its own. See module docstring."""
+    ``(missed, pairs)``; ``pairs`` holds (peak, frequency of the pole it would share with another
+    resonance). ``is_reproduced(peak)`` (e.g. :func:`reproduced` with the model) tells whether
+    the model makes a peak without a pole of its own. See module docstring."""
+    groups: list[list[VisiblePeak]] = []   # one per resonance, most prominent peak first
+    for v in sorted(peaks, key=lambda v: -v.prominence_db):
+        reach = max(SAME_LINES * df, SAME_FRACTION * v.freq_hz)
+        for g in groups:
+            if abs(g[0].freq_hz - v.freq_hz) <= reach and all(u.curve_index != v.curve_index for u in g):
+                g.append(v)
+                break
+        else:
+            groups.append([v])
     poles = [float(x) for x in np.asarray(fitted_hz, float).ravel()]
-    taken: dict[int, set] = {}   # pole index -> curves that took it
+    free = list(range(len(poles)))
     missed: list[VisiblePeak] = []
     pairs: list[tuple[VisiblePeak, float]] = []
-    for v in sorted(peaks, key=lambda v: -v.prominence_db):
+    for g in groups:
+        v = g[0]
         tol = max(MATCH_FRACTION * v.freq_hz, MATCH_LINES * df)
-        near = sorted((abs(x - v.freq_hz), k) for k, x in enumerate(poles) if abs(x - v.freq_hz) <= tol)
-        free = [k for _, k in near if v.curve_index not in taken.get(k, set())]
-        if free:
-            taken.setdefault(free[0], set()).add(v.curve_index)
-            continue
-        if is_reproduced is not None and is_reproduced(v):
-            continue
+        near = sorted((abs(poles[k] - u.freq_hz), k) for u in g for k in free if abs(poles[k] - u.freq_hz) <= tol)
         if near:
-            pairs.append((v, poles[near[0][1]]))
-        else:
+            free.remove(near[0][1])
+            continue
+        taken = [x for k, x in enumerate(poles) if k not in free and abs(x - v.freq_hz) <= tol]
+        if taken:
+            pairs.append((v, min(taken, key=lambda x: abs(x - v.freq_hz))))
+        elif is_reproduced is None or not any(is_reproduced(u) for u in g):
             missed.append(v)
     return missed, pairs

@@ -77,15 +77,17 @@ def test_a_mode_left_out_is_named_and_the_fit_is_not_a_success():
     assert any(f"{left[0]:.5g}" in p for p in fit.problems), (left, fit.problems)
 
 
-def test_peaks_of_different_frfs_share_a_pole_but_two_maxima_of_one_frf_do_not():
+def test_peaks_of_different_frfs_a_line_apart_share_a_pole_but_two_maxima_of_one_frf_do_not():
     a = VisiblePeak(100.0, 30.0, "a", 0, (99.0, 101.0))
-    b = VisiblePeak(101.0, 20.0, "b", 1, (100.0, 102.0))
-    c = VisiblePeak(101.0, 20.0, "a", 0, (100.0, 102.0))
-    assert unaccounted_peaks([a, b], np.array([100.4]), df=0.5) == ([], [])
-    missed, pairs = unaccounted_peaks([a, c], np.array([100.4]), df=0.5)
-    assert missed == [] and pairs == [(c, 100.4)]
-    missed, pairs = unaccounted_peaks([a, c], np.array([100.4, 101.1]), df=0.5)
-    assert missed == [] and pairs == []
+    b = VisiblePeak(100.5, 20.0, "b", 1, (100.0, 101.0))     # one line away in another FRF: the same mode
+    c = VisiblePeak(100.5, 20.0, "a", 0, (100.0, 101.0))     # a second maximum of the same FRF
+    d = VisiblePeak(103.0, 20.0, "b", 1, (102.5, 103.5))     # 6 lines away in another FRF: another mode
+    assert unaccounted_peaks([a, b], np.array([100.2]), df=0.5) == ([], [])
+    missed, pairs = unaccounted_peaks([a, c], np.array([100.2]), df=0.5)
+    assert missed == [] and pairs == [(c, 100.2)]
+    assert unaccounted_peaks([a, c], np.array([100.1, 100.6]), df=0.5) == ([], [])
+    missed, pairs = unaccounted_peaks([a, d], np.array([100.2]), df=0.5)
+    assert missed == [d] and pairs == []
     missed, _ = unaccounted_peaks([a], np.array([120.0]), df=0.5)
     assert missed == [a]
 
