@@ -268,7 +268,7 @@ def fit_lsfd(
         raise ValueError("the FRFs contain NaN or infinite values; restrict the band or drop those FRFs")
     n_out, n_ref, N = frf.H.shape
     line_w, frf_w = _check_weights(full_weights, n_out, n_ref, N)
-    bounds = _freq_bounds(lam0, freq_window_hz)
+    bounds: Optional[tuple] = _freq_bounds(lam0, freq_window_hz)
     if damping_window is not None:
         F = float(damping_window)
         if not F > 1.0:

@@ -31,7 +31,6 @@ log = logging.getLogger(__name__)
 
 MISSING_MEDIAN_FACTOR = 4.0
 MISSING_DATA_FRACTION = 0.25
-MISSING_MIN_GAIN = 0.01
 MAX_ADDED = 40
 MISSING_BANDWIDTH_RATIO = 4.0
 MAX_FAILED_TRIES = 2
@@ -46,6 +45,7 @@ LOCAL_MIN_LINES = 12
 VISIBLE_MIN_GAIN = 0.7
 MISFIT_MIN_GAIN = 0.7
 SPLIT_MIN_GAIN = 0.9
+MAX_FAILED_VISIBLE = 6
 NOT_A_RESONANCE_DAMPING_RATIO = 6.0
 SPLIT_MIN_RATIO = 0.01
 LOCAL_TOL = 1e-7
@@ -118,8 +118,8 @@ def _pair_is_resolved(trial, k: int, f: np.ndarray, e_old: np.ndarray, e_new: np
 
     The data must say so: the pair is at least a line apart; over the pair's lines (the two
     frequencies +- the larger half-power bandwidth, at least ``MISSING_MIN_LINES`` lines) the
-    scaled misfit ``sum e^2`` fell by at least ``MISSING_LOCAL_GAIN`` (the total gain of
-    ``MISSING_MIN_GAIN`` is checked by the caller); and both poles keep distinct residues:
+    scaled misfit ``sum e^2`` fell by at least ``MISSING_LOCAL_GAIN`` (the gain of the whole
+    trial is checked by the caller); and both poles keep distinct residues:
     neither is negligible (the smaller residue norm >= ``MISSING_MIN_RESIDUE_RATIO`` of the
     larger) and they do not cancel (``|R_a + R_b| >= MISSING_CANCEL_RATIO (|R_a| + |R_b|)``,
     two large opposite residues fitting a noise wiggle). Returns (verdict, reason)."""
@@ -335,11 +335,12 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
         added += 1
         return True
 
-    while added < MAX_ADDED:
+    failures = 0
+    while added < MAX_ADDED and failures < MAX_FAILED_VISIBLE:
         left = [v for v in _unaccounted(frf, visible, model, df) if all(abs(v.freq_hz - x) > 0.5 * df for x in tried)]
         if not left:
             break
-        attempt(left[0].freq_hz, VISIBLE_MIN_GAIN, left[0])
+        failures = 0 if attempt(left[0].freq_hz, VISIBLE_MIN_GAIN, left[0]) else failures + 1
     # close pairs fitted as one pole: where the misfit over a pole's top (+- half its bandwidth)
     # exceeds SPLIT_MIN_RATIO of the data there, a second pole half a bandwidth either side is
     # tried (the pair checks decide)

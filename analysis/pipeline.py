@@ -3,7 +3,8 @@
 This is the paper's Fig. 1 flow with the choices made automatically:
 
 Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6),
-:mod:`analysis.missing_modes` (7), :mod:`analysis.fit_result` (the verdict); this module runs them.
+:mod:`analysis.missing_modes` (7, 8), :mod:`analysis.visibility` (the visible peaks),
+:mod:`analysis.fit_result` (the verdict); this module runs them.
 
 1. **Band** (paper sec. 3.1). Default: from the lowest reliable line to the top line. The
    lowest ``LOW_LINES`` lines (f < LOW_LINES * df: the record is too short there, and an
@@ -42,29 +43,32 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    spurious initial poles; they are dropped and the LSFD repeated from the starts of the
    remaining poles (same trust regions), up to ``MAX_CHECK_ROUNDS`` times; each drop is
    noted in the result's ``warnings``.
-7. **Missing resonances**: the misfit of every FRF, scaled by that FRF's RMS in the band
-   (so weak-but-clean FRFs count like strong ones), is averaged over the FRFs:
-   ``e(f) = sqrt(mean_o |H_o - G_o|^2 / rms_o^2)``, and likewise ``d(f)`` for the data.
-   Peaks of ``e`` above ``MISSING_MEDIAN_FACTOR`` times its median and above
-   ``MISSING_DATA_FRACTION`` of ``d`` are resonances the model misses (modes the
-   stabilization did not stabilise, or a close pair fitted as one pole). The strongest is
-   tried first: a pole at that frequency (damping: the median of the fitted ones) is added
-   and the LSFD repeated; the new model is kept when the scaled cost ``sum e^2`` falls by at
-   least ``MISSING_MIN_GAIN``, step 6 finds nothing wrong with the new poles, and the new
-   pole is a mode of its own: not a broad pole under a much sharper one (within the larger
-   half-bandwidth, bandwidths more than ``MISSING_BANDWIDTH_RATIO`` apart: that absorbs the
-   misfit of a sharp peak, e.g. leakage; two genuine close modes have similar damping). A new
-   pole closer to a neighbour than ``MISSING_MIN_LINES`` lines or a quarter of the smaller
-   bandwidth, or a duplicate of it (step 6), is kept only on clear evidence: at least a line
-   apart, the local cost over the pair's lines falls by ``MISSING_LOCAL_GAIN`` and both keep
-   distinct residues (:func:`_pair_is_resolved`). A candidate on a mains harmonic (``mains_hz``)
-   much narrower than a mode at the median damping is not tried (reported in the warnings,
-   :func:`_mains_line`). The step also runs with the user's frequencies/poles (they are kept,
-   poles are only added). Lines given in ``exclude_hz`` are left out of the LSFD and of this
-   misfit (:func:`exclude_lines`). Repeated until no candidate is left (at most
-   ``MAX_ADDED`` poles, and at most ``MAX_FAILED_TRIES`` rejected candidates in a row: each
-   try is a full LSFD, capped at ``MISSING_TRIAL_ITER`` iterations). ``G`` is synthesised from the
-   raw poles (window damping included), as the data were measured.
+7. **Missing resonances** (:mod:`analysis.missing_modes`). Candidates, in this order: the
+   *visible peaks* (:mod:`analysis.visibility`: a peak of an FRF or of the first CMIF curve
+   standing >= 10 dB above its neighbouring minima, clean in the coherence over its top) that no
+   pole accounts for, strongest first; then, for every pole whose misfit over its top exceeds
+   ``SPLIT_MIN_RATIO`` of the data there, a second pole half a bandwidth either side (a close pair
+   fitted as one); then the peaks of the scaled misfit ``e(f) = sqrt(mean_o |H_o - G_o|^2 /
+   rms_o^2)`` above ``MISSING_MEDIAN_FACTOR`` times its median and ``MISSING_DATA_FRACTION`` of the
+   data's ``d(f)``. Each candidate is tried by a *local* LSFD: over a few bandwidths around it,
+   on the data minus the synthesis of the model's other poles (and residual terms), its
+   neighbours refitted with and without the new pole; it is kept when the local weighted cost
+   falls by ``VISIBLE_MIN_GAIN`` (split: ``SPLIT_MIN_GAIN``; misfit: ``MISFIT_MIN_GAIN``), the
+   pole is physical and not much broader than the modes, passes the checks of step 6, is not a
+   broad pole under a sharper one, and a close neighbour keeps a distinct residue
+   (:func:`analysis.missing_modes._pair_is_resolved`). A candidate on a mains harmonic
+   (``mains_hz``) much narrower than a mode is not tried (reported in the warnings). The local
+   trials cost a few milliseconds each (tens of lines instead of the whole band); one LSFD over
+   the whole band follows from all poles, each held within ``FINAL_BANDWIDTHS`` half-power
+   bandwidths and a factor ``FINAL_DAMPING_WINDOW`` in damping of its local estimate (on a wide
+   band an unbounded fit turns weak modes into very damped poles that absorb broadband misfit).
+   The step also runs with the user's frequencies/poles (poles are only added). Lines given in
+   ``exclude_hz`` are left out of the LSFD and of this step (:func:`exclude_lines`).
+8. **Verdict**: every visible peak the final model leaves unaccounted for is named in the
+   result's ``problems`` (``success`` is then False): "a resonance at F Hz ... is neither
+   fitted by a pole nor reproduced by the model", or "a possible close pair" when a pole within
+   2 % stands for it and a neighbour. When the stabilization keeps no pole but the data (with
+   coherence) show visible peaks, the fit starts from those peaks.
 """
 from __future__ import annotations
 
@@ -194,7 +198,7 @@ def fit_auto(
             poles = poles_from_frequencies(given_freqs, stab)
         else:
             poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
-        if poles.size == 0:
+        if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
             poles = _poles_from_peaks(frf, (lo, hi), stab, warnings_out)
         if poles.size == 0:
             raise FitError(
@@ -255,7 +259,7 @@ def fit_auto(
 def _poles_from_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
                       warnings_out: list[str]) -> np.ndarray:
     """Starting poles at the visible peaks (:mod:`analysis.visibility`) when the stabilization
-    kept none: one per distinct peak frequency (peaks within ``max(MATCH_FRACTION f, MATCH_LINES
+    kept none and the data carry coherence: one per distinct peak frequency (peaks within ``max(MATCH_FRACTION f, MATCH_LINES
     df)`` are one), damping from the diagram (:func:`poles_from_frequencies`). Empty when the
     data show no peak either."""
     from .visibility import MATCH_FRACTION, MATCH_LINES
