@@ -23,7 +23,7 @@ The peaks of every curve are kept (a resonance shows in several curves).
 
 **Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
 the most prominent one are one resonance seen through different FRFs (a neighbouring mode shifts a
-peak by a line or two); two maxima of the same curve are always two resonances. Each resonance,
+peak by a few lines); two maxima of the same curve are always two resonances. Each resonance,
 most prominent first, takes the nearest still free fitted pole within ``max(MATCH_FRACTION f,
 MATCH_LINES df)`` of one of its peaks. A resonance with no pole within that reach is still
 accounted for when the model reproduces one of its peaks: over the peak's top (the lines within 3 dB of its maximum,
@@ -52,7 +52,7 @@ VISIBLE_MIN_LINES = 2
 MAX_CURVES_WITHOUT_COHERENCE = 8
 MATCH_FRACTION = 0.005
 MATCH_LINES = 1.5
-SAME_LINES = 2.5
+SAME_LINES = 4.0
 SAME_FRACTION = 0.002
 REPRODUCED_FRACTION = 0.03
 

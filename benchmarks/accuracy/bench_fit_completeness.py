@@ -213,20 +213,10 @@ def score(name: str, frf: FRFSet, truth: Optional[np.ndarray], band: Optional[tu
 
 
 def real_cases(data: Path) -> list[tuple[str, Any]]:
-    from benchmarks.accuracy.validation import (f16_gvt, ladisk_beam, modelab_beam, plate_sweep, pyfrf_5impacts,
-                                                 pyuff_3frf, uliege_plane, unesp_boltedbeam)
+    """(name, loader) of the real datasets of docs/validation.md, loaded over their whole range."""
+    from benchmarks.studies.default_band_realdata import _cases
 
-    return [
-        ("uliege_meca0062_plane_hammer", lambda: uliege_plane.load(data, band=None)),
-        ("modelab_beam_roving_hammer", lambda: modelab_beam.load(data)),
-        ("ladisk_beam (1 hit)", lambda: ladisk_beam.load_single(data)),
-        ("ladisk_beam (4 hits)", lambda: ladisk_beam.load_multi(data)),
-        ("pyfrf_hammer_5impacts", lambda: pyfrf_5impacts.load(data)),
-        ("f16_gvt_multisine", lambda: f16_gvt.load(data)),
-        ("ladisk_plate_sweep", lambda: plate_sweep.load(data)),
-        ("pyuff_3frf", lambda: pyuff_3frf.load(data)),
-        ("unesp_bert_boltedbeam_subset (0.05 V)", lambda: unesp_boltedbeam.load(data)),
-    ]
+    return _cases(data)
 
 
 def _hz(values: Sequence[float], n: int = 8) -> str:
