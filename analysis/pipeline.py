@@ -88,6 +88,7 @@ from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .visibility import visible_peaks
+from .modal import natural_freq_hz
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -200,6 +201,8 @@ def fit_auto(
             poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
         if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
             poles = _poles_from_peaks(frf, (lo, hi), stab, warnings_out)
+        elif poles.size and frf.coherence is not None and given_freqs is None and n_modes is None and add_missing:
+            poles = _with_visible_peaks(frf, (lo, hi), stab, poles)
         if poles.size == 0:
             raise FitError(
                 f"no stable physical poles found in {lo:.6g}..{hi:.6g} Hz up to {mm} modes: raise --order, "
@@ -254,6 +257,24 @@ def fit_auto(
         log.warning("implausible fit: %s", p)
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
+
+
+def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
+                        poles: np.ndarray) -> np.ndarray:
+    """The selected ``poles`` and one more at each visible peak (:mod:`analysis.visibility`) that no
+    selected pole lies near, damping from the diagram: the data show at least that many modes,
+    and a whole-band LSFD started with fewer drags its poles between resonances (a pole pulled
+    halfway between two modes fits neither and leaves the search for the missed ones without
+    clean neighbours). Only for data with coherence, where a visible peak is confirmed by it."""
+    from .visibility import unaccounted_peaks
+
+    missed, _ = unaccounted_peaks(visible_peaks(frf, band), natural_freq_hz(poles), frf.line_spacing_hz)
+    if not missed:
+        return poles
+    extra = poles_from_frequencies(sorted({v.freq_hz for v in missed}), stab)
+    log.info("the fit starts from %d selected pole(s) and %d visible peak(s) at %s Hz", poles.size, extra.size,
+             ", ".join(f"{natural_freq_hz(p):.5g}" for p in extra))
+    return np.concatenate([np.asarray(poles), extra])
 
 
 def _poles_from_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
