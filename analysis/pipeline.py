@@ -201,7 +201,7 @@ def fit_auto(
             poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
         if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
             poles = _poles_from_peaks(frf, (lo, hi), stab, warnings_out)
-        elif poles.size and frf.coherence is not None and given_freqs is None and n_modes is None and add_missing:
+        elif poles.size and given_freqs is None and n_modes is None and add_missing and _averaged(frf):
             poles = _with_visible_peaks(frf, (lo, hi), stab, poles)
         if poles.size == 0:
             raise FitError(
@@ -259,13 +259,26 @@ def fit_auto(
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
 
 
+#: averages per FRF from which the coherence confirms a visible peak for the fit's start
+SEED_MIN_AVERAGES = 3
+
+
+def _averaged(frf: FRFSet) -> bool:
+    """Whether ``frf`` carries coherence from at least ``SEED_MIN_AVERAGES`` averages per FRF."""
+    n_avg = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    return frf.coherence is not None and n_avg.size > 0 and bool(np.all(n_avg >= SEED_MIN_AVERAGES))
+
+
 def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
                         poles: np.ndarray) -> np.ndarray:
     """The selected ``poles`` and one more at each visible peak (:mod:`analysis.visibility`) that no
     selected pole lies near, damping from the diagram: the data show at least that many modes,
     and a whole-band LSFD started with fewer drags its poles between resonances (a pole pulled
     halfway between two modes fits neither and leaves the search for the missed ones without
-    clean neighbours). Only for data with coherence, where a visible peak is confirmed by it."""
+    clean neighbours). Only for data whose coherence comes from at least
+    ``SEED_MIN_AVERAGES`` averages: noise reaches a coherence of 0.9 on a tenth of the lines with
+    two averages, on a hundredth with three (``0.1 ** (n - 1)``), so only then does the coherence
+    confirm a visible peak; otherwise the peaks are left to step 7's local trials."""
     from .visibility import unaccounted_peaks
 
     missed, _ = unaccounted_peaks(visible_peaks(frf, band), natural_freq_hz(poles), frf.line_spacing_hz)
