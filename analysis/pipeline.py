@@ -281,7 +281,11 @@ def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizat
     confirm a visible peak; otherwise the peaks are left to step 7's local trials."""
     from .visibility import unaccounted_peaks
 
-    missed, _ = unaccounted_peaks(visible_peaks(frf, band), natural_freq_hz(poles), frf.line_spacing_hz)
+    # peaks are found on the whole record (a resonance just inside an edge has a flank outside it,
+    # and its prominence is measured there), then kept inside the band; a pole near an edge then
+    # moves the edge (step 4)
+    peaks = [v for v in visible_peaks(frf, (float(frf.freq_hz[0]), band[1])) if v.freq_hz >= band[0]]
+    missed, _ = unaccounted_peaks(peaks, natural_freq_hz(poles), frf.line_spacing_hz)
     if not missed:
         return poles
     extra = poles_from_frequencies(sorted({v.freq_hz for v in missed}), stab)

@@ -22,8 +22,9 @@ maximum of a curve inside the band is a visible peak when
 The peaks of every curve are kept (a resonance shows in several curves).
 
 **Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
-the most prominent one are one resonance seen through different FRFs (a neighbouring mode shifts a
-peak by a few lines); two maxima of the same curve are always two resonances. Each resonance,
+a peak of the resonance (the most prominent first) are one resonance seen through different FRFs
+(a neighbouring mode shifts a peak by a few lines, the most prominent one too, so the reach is
+measured from each of its peaks); two maxima of the same curve are always two resonances. Each resonance,
 most prominent first, takes the nearest still free fitted pole within ``max(MATCH_FRACTION f,
 MATCH_LINES df)`` of one of its peaks. A resonance with no pole within that reach is still
 accounted for when the model reproduces one of its peaks: over the peak's top (the lines within 3 dB of its maximum,
@@ -154,7 +155,7 @@ def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: f
     for v in sorted(peaks, key=lambda v: -v.prominence_db):
         reach = max(SAME_LINES * df, SAME_FRACTION * v.freq_hz)
         for g in groups:
-            if abs(g[0].freq_hz - v.freq_hz) <= reach and all(u.curve_index != v.curve_index for u in g):
+            if any(abs(u.freq_hz - v.freq_hz) <= reach for u in g) and all(u.curve_index != v.curve_index for u in g):
                 g.append(v)
                 break
         else:
