@@ -121,15 +121,21 @@ def test_fail_builds_a_failed_reply():
     assert r.status == P.CswStatus.FAILED and r.sense.key == P.SenseKey.NOT_READY and r.data == b""
 
 
-def test_capture_engine_builds_a_block_without_scsi_or_link():
+def _struck_engine(stand) -> tuple[CaptureEngine, P.SetupData]:
+    """A capture engine with the default set-up, after one strike of ``stand``."""
     eng = CaptureEngine()
-    eng.stand, eng.margin = PulseStand(), 1024
+    eng.stand, eng.margin = stand, 1024
     eng._init_capture()
     setup = setup_to_wire(default_setup())
     eng._setup = setup
     eng._give_stand(setup)
     eng._start_arm()
     eng._strike()
+    return eng, setup
+
+
+def test_capture_engine_builds_a_block_without_scsi_or_link():
+    eng, setup = _struck_engine(PulseStand())
     assert eng._state == P.State.BLOCK_READY and eng._sequence == 1
     header, volts_per_count, counts = P.decode_block_image(eng._block)
     assert header.n_samples == setup.block_size and counts.shape == (len(setup.channels), setup.block_size)
@@ -159,14 +165,7 @@ class _WeakStand(PulseStand):
 
 
 def _weak_counts(noisy: bool) -> np.ndarray:
-    eng = CaptureEngine()
-    eng.stand, eng.margin = _WeakStand(noisy), 1024
-    eng._init_capture()
-    setup = setup_to_wire(default_setup())
-    eng._setup = setup
-    eng._give_stand(setup)
-    eng._start_arm()
-    eng._strike()
+    eng, setup = _struck_engine(_WeakStand(noisy))
     _, _, counts = P.decode_block_image(eng._block)
     return counts[[i for i, ch in enumerate(setup.channels) if ch.quantity != "force"]].astype(float)
 
