@@ -92,6 +92,20 @@ def test_peaks_of_different_frfs_a_line_apart_share_a_pole_but_two_maxima_of_one
     assert missed == [a]
 
 
+def test_the_same_resonance_reach_is_measured_from_each_of_its_peaks():
+    # the frame's 525.2 Hz mode in three FRFs of a default capture (0.78 Hz lines): the most
+    # prominent peak is itself a line low, the weakest 2.3 lines high of the 525.0 Hz peak and 3
+    # lines from the most prominent one; one mode, one pole
+    df = 0.78125
+    top = VisiblePeak(524.21875, 46.5, "top:4:X/left:9:Y", 5, (521.1, 528.9))
+    mid = VisiblePeak(525.0, 43.8, "left:9:Y/right:6:-X", 0, (521.9, 528.9))
+    weak = VisiblePeak(526.5625, 12.8, "top:4:X/right:6:-X", 3, (523.4, 532.8))
+    assert unaccounted_peaks([top, mid, weak], np.array([525.19]), df) == ([], [])
+    # without the peak between them they are two resonances sharing one pole: a possible pair
+    missed, pairs = unaccounted_peaks([top, weak], np.array([525.19]), df)
+    assert missed == [] and pairs == [(weak, 525.19)]
+
+
 def test_a_noise_spike_without_coherence_is_not_a_visible_peak():
     frf = pair_frf(1)
     H = frf.H.copy()
