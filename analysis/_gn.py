@@ -47,12 +47,24 @@ def check_poles(theta: np.ndarray) -> str:
     return ""
 
 
+def _theta_bounds(bounds: tuple, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) over the whole ``theta`` (n values) from ``bounds``: ``(lo_im, hi_im)`` bounds the
+    damped frequencies only; ``(lo_im, hi_im, lo_re, hi_re)`` also the real parts (decay rates)."""
+    lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
+    lo[1::2], hi[1::2] = bounds[0], bounds[1]
+    if len(bounds) == 4:
+        lo[0::2], hi[0::2] = bounds[2], bounds[3]
+    return lo, hi
+
+
 def project_to_bounds(theta: np.ndarray, bounds: Optional[tuple]) -> np.ndarray:
     """Clip every pole's damped frequency ``Im lambda_r`` (rad/s) into ``[lo_r, hi_r]`` (the
-    frequency trust region); ``bounds`` None returns ``theta`` unchanged (a copy)."""
+    frequency trust region), and with four bounds its real part too (the damping trust region);
+    ``bounds`` None returns ``theta`` unchanged (a copy)."""
     t = np.array(theta, dtype=float)
     if bounds is not None:
-        t[1::2] = np.clip(t[1::2], bounds[0], bounds[1])
+        lo, hi = _theta_bounds(bounds, t.size)
+        t = np.clip(t, lo, hi)
     return t
 
 
@@ -65,14 +77,13 @@ def freeze_active(theta: np.ndarray, JtJ: np.ndarray, g: np.ndarray,
     ``-(J^T J)^-1 g``). Without bounds the inputs are returned unchanged."""
     if bounds is None:
         return JtJ, g
-    im = np.asarray(theta, dtype=float)[1::2]
-    lo, hi = bounds
-    tol = 1e-12 * np.maximum(np.abs(hi), 1.0)
-    gi = g[1::2]
-    active = ((im <= lo + tol) & (gi > 0)) | ((im >= hi - tol) & (gi < 0))
+    t = np.asarray(theta, dtype=float)
+    lo, hi = _theta_bounds(bounds, t.size)
+    tol = 1e-12 * np.maximum(np.abs(t), 1.0)
+    active = ((t <= lo + tol) & (g > 0)) | ((t >= hi - tol) & (g < 0))
     if not np.any(active):
         return JtJ, g
-    idx = 2 * np.flatnonzero(active) + 1
+    idx = np.flatnonzero(active)
     A = np.array(JtJ, dtype=float, copy=True)
     b = np.array(g, dtype=float, copy=True)
     A[idx, :] = 0.0

@@ -18,6 +18,9 @@ log = logging.getLogger(__name__)
 
 
 MAX_CHECK_ROUNDS = 4
+#: a pole's decay rate stays within this factor of its start in the pipeline's LSFD: on a wide band a
+#: weak mode is otherwise turned into a very damped pole that absorbs broadband misfit
+DAMPING_WINDOW = 4.0
 
 
 def trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
@@ -25,12 +28,14 @@ def trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
     return MIGRATE_BANDWIDTHS * bandwidth_hz(start, df)
 
 
-def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict):
+def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict, damping_window: float = DAMPING_WINDOW):
     """LSFD with each pole's damped frequency held within ``MIGRATE_BANDWIDTHS`` half-power
-    bandwidths of its start (the trust region, steps 5-7)."""
+    bandwidths of its start and its decay rate within a factor ``damping_window`` of its start
+    (the trust region, steps 5-7)."""
     from .lsfd import fit_lsfd
 
-    return fit_lsfd(frf, start, freq_window_hz=trust_window_hz(start, frf.line_spacing_hz), **fit_kw)
+    return fit_lsfd(frf, start, freq_window_hz=trust_window_hz(start, frf.line_spacing_hz),
+                    damping_window=damping_window, **fit_kw)
 
 
 def bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
@@ -41,13 +46,17 @@ def bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) -> 
     z = result.damping
     out_of_range = ~((fd >= lo) & (fd <= hi) & (z > 0) & (z < MAX_DAMPING))
     on_bound = np.abs(result.poles_raw.imag - start.imag) / (2 * np.pi) >= 0.99 * trust_window_hz(start, df)
+    # a decay rate on its bound (DAMPING_WINDOW) wanted to go elsewhere as well
+    ratio = result.poles_raw.real / np.where(start.real == 0, -1e-300, start.real)
+    on_bound |= (ratio >= 0.99 * DAMPING_WINDOW) | (ratio <= 1.01 / DAMPING_WINDOW)
     migrated = (migrated_poles(start, result.poles_raw, df) | on_bound) & ~out_of_range
     moved = np.abs(natural_freq_hz(result.poles_raw) - natural_freq_hz(start)) / bandwidth_hz(start, df)
     dup = duplicate_poles(result.poles_raw, result.model.residues, df, moved=moved) & ~out_of_range & ~migrated
     if not duplicates:
         dup = np.zeros_like(dup)
     why = []
-    edge = f"pulled to its trust-region edge ({MIGRATE_BANDWIDTHS:g} half-power bandwidths from its start)"
+    edge = (f"pulled to its trust-region edge ({MIGRATE_BANDWIDTHS:g} half-power bandwidths from its start, or "
+            f"{DAMPING_WINDOW:g} times its start's damping)")
     for mask, text in ((out_of_range, "moved out of the band or to unphysical damping"),
                        (migrated, edge),
                        (dup, "duplicates a neighbour (same resonance, same shape)")):

@@ -8,6 +8,11 @@ stabilization diagram, the band, the warnings, and an honest verdict.
   damping ratio in ``(0, MAX_DAMPING)``, and every frequency is determined by the data (a
   finite standard deviation smaller than ``MAX_FREQ_STD_FRACTION`` of the frequency).
 
+- complete (:func:`analysis.missing_modes.unfitted_resonances`, called by the pipeline): every
+  resonance the data show (:mod:`analysis.visibility`: a peak >= 10 dB above its neighbouring
+  minima, clean in the coherence) has a pole of its own or is reproduced by the model; a peak
+  left over is named with its frequency (or as a possible close pair).
+
 Anything else is reported in ``problems`` and ``success`` is False. FRFs of a single average are
 flagged in the warnings: their coherence is 1 everywhere and says nothing about the noise.
 """
@@ -58,7 +63,8 @@ class FitResult:
     selected_poles : (m,) complex rad/s, the poles the LSFD started from.
     warnings : what the user should know (band edges, dropped or added poles, non-convergence,
         a single average), each once.
-    problems : why the model is not physically sensible (:func:`assess_fit`); empty when it is.
+    problems : why the model is not physically sensible (:func:`assess_fit`) or not complete (a
+        visible resonance left without a pole); empty when it is both.
 
     ``success`` = converged and no problems; ``status`` "converged", "not converged" or
     "implausible"; ``message`` says why in words. The result unpacks as

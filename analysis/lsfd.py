@@ -201,6 +201,7 @@ def fit_lsfd(
     correct_exp_window: bool = True,
     weights: np.ndarray | None = None,
     freq_window_hz: "float | np.ndarray | None" = None,
+    damping_window: Optional[float] = None,
 ) -> LSFDResult:
     """Fit global poles, residues and residual terms to an FRF set by nonlinear least squares.
 
@@ -223,6 +224,10 @@ def fit_lsfd(
         initial value (a bound constraint). A pole that ends on its bound wanted to go
         elsewhere (typically a weak spurious pole drawn to a strong neighbour); see
         :mod:`analysis.pipeline`. None: no bound.
+    damping_window : a factor F > 1: every pole's decay rate ``-Re lambda`` is held within
+        ``[sigma_0 / F, F sigma_0]`` of its initial value (a bound constraint, with
+        ``freq_window_hz`` or alone). A weak mode of a wide band otherwise may be turned into a
+        very damped pole that absorbs broadband misfit (leakage, non-modal content). None: no bound.
 
     Returns
     -------
@@ -262,7 +267,15 @@ def fit_lsfd(
         raise ValueError("the FRFs contain NaN or infinite values; restrict the band or drop those FRFs")
     n_out, n_ref, N = frf.H.shape
     line_w, frf_w = _check_weights(full_weights, n_out, n_ref, N)
-    bounds = _freq_bounds(lam0, freq_window_hz)
+    bounds: Optional[tuple] = _freq_bounds(lam0, freq_window_hz)
+    if damping_window is not None:
+        F = float(damping_window)
+        if not F > 1.0:
+            raise ValueError(f"damping_window must be a factor > 1; got {damping_window!r}")
+        if bounds is None:
+            bounds = (np.full(lam0.size, 1e-6) * lam0.imag, np.full(lam0.size, np.inf))
+        sigma0 = -lam0.real
+        bounds = (bounds[0], bounds[1], -F * sigma0, -sigma0 / F)
     outcome, prob = _run(frf, lam0, method, residual_form, line_w, frf_w, int(max_iter), ftol, xtol, mu0, bounds)
     sub = None
     if per_frf:

@@ -1,6 +1,9 @@
 """Step 7 of :mod:`analysis.pipeline`: resonances the fitted model misses (see the pipeline's module
-docstring): misfit peaks are tried as new poles, kept only on clear evidence, with a guard
-against mains lines."""
+docstring). Candidates are the visible peaks (:mod:`analysis.visibility`) no pole accounts for,
+then the peaks of the scaled misfit; each is tried by a *local* fit on the residual (the data
+minus the model's other poles, over a few bandwidths around the candidate), kept only on clear
+evidence, with a guard against mains lines; one full LSFD from all poles follows. Visible peaks
+still unaccounted for are named in the warnings and make the fit unsuccessful."""
 from __future__ import annotations
 
 import logging
@@ -16,17 +19,19 @@ from .mac import mac
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz, transfer
 
 from .bands import MAINS_DEVIATION_HZ, MAINS_HZ, MAINS_LINES, mains_harmonic_index
-from .bounded_fit import bad_poles, fit_bounded
+from .bounded_fit import bad_poles, trust_window_hz
+from .fit_result import MAX_DAMPING
+from .modal import ModalModel
+from .visibility import VisiblePeak, reproduced, unaccounted_peaks
 
-__all__ = ["add_missing_modes", "MAINS_HZ"]
+__all__ = ["add_missing_modes", "unfitted_resonances", "MAINS_HZ"]
 
 log = logging.getLogger(__name__)
 
 
 MISSING_MEDIAN_FACTOR = 4.0
 MISSING_DATA_FRACTION = 0.25
-MISSING_MIN_GAIN = 0.01
-MAX_ADDED = 8
+MAX_ADDED = 40
 MISSING_BANDWIDTH_RATIO = 4.0
 MAX_FAILED_TRIES = 2
 MISSING_MIN_LINES = 3
@@ -35,6 +40,19 @@ MISSING_LOCAL_GAIN = 0.3
 MISSING_MIN_RESIDUE_RATIO = 0.05
 MISSING_CANCEL_RATIO = 0.2
 MAINS_WIDTH_FRACTION = 0.5
+LOCAL_BANDWIDTHS = 4.0
+LOCAL_MIN_LINES = 12
+VISIBLE_MIN_GAIN = 0.7
+MISFIT_MIN_GAIN = 0.7
+SPLIT_MIN_GAIN = 0.9
+MAX_FAILED_VISIBLE = 6
+NOT_A_RESONANCE_DAMPING_RATIO = 6.0
+SPLIT_MIN_RATIO = 0.01
+LOCAL_TOL = 1e-7
+FINAL_BANDWIDTHS = 0.1
+FINAL_DAMPING_WINDOW = 1.25
+MAX_FINAL_ROUNDS = 3
+PAIR_FRACTION = 0.02
 
 
 def _synthesize_flat(model, f: np.ndarray) -> np.ndarray:
@@ -43,13 +61,14 @@ def _synthesize_flat(model, f: np.ndarray) -> np.ndarray:
     return transfer(model, 2j * np.pi * f).reshape(-1, f.size)
 
 
-def _scaled_misfit(frf: FRFSet, result) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(freq_hz, e, d) of step 7: RMS-scaled misfit and data over the FRFs, per line of the band."""
-    lo, hi = result.band
+def _scaled_misfit(frf: FRFSet, model: ModalModel, band: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(freq_hz, e, d) of step 7: RMS-scaled misfit of ``model`` (raw poles, as the data were
+    measured) and the data over the FRFs, per line of ``band``."""
+    lo, hi = band
     sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
     f = frf.freq_hz[sel]
     H = frf.H[..., sel].reshape(-1, f.size)
-    G = _synthesize_flat(result.model_raw, f)
+    G = _synthesize_flat(model, f)
     rms = np.sqrt(np.mean(H.real ** 2 + H.imag ** 2, axis=1))
     live = np.isfinite(rms) & (rms > 0)
     if not np.all(live):
@@ -99,8 +118,8 @@ def _pair_is_resolved(trial, k: int, f: np.ndarray, e_old: np.ndarray, e_new: np
 
     The data must say so: the pair is at least a line apart; over the pair's lines (the two
     frequencies +- the larger half-power bandwidth, at least ``MISSING_MIN_LINES`` lines) the
-    scaled misfit ``sum e^2`` fell by at least ``MISSING_LOCAL_GAIN`` (the total gain of
-    ``MISSING_MIN_GAIN`` is checked by the caller); and both poles keep distinct residues:
+    scaled misfit ``sum e^2`` fell by at least ``MISSING_LOCAL_GAIN`` (the gain of the whole
+    trial is checked by the caller); and both poles keep distinct residues:
     neither is negligible (the smaller residue norm >= ``MISSING_MIN_RESIDUE_RATIO`` of the
     larger) and they do not cancel (``|R_a + R_b| >= MISSING_CANCEL_RATIO (|R_a| + |R_b|)``,
     two large opposite residues fitting a noise wiggle). Returns (verdict, reason)."""
@@ -150,84 +169,203 @@ def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, ma
     return None
 
 
+def _with_poles(model: ModalModel, keep: np.ndarray, extra_poles: Optional[np.ndarray] = None,
+                extra_residues: Optional[np.ndarray] = None) -> ModalModel:
+    """``model`` with the poles ``keep`` (bool mask) and ``extra_poles`` (residues (n_out, n_ref, k))
+    appended; the residual terms are kept."""
+    from dataclasses import replace
+
+    R = np.asarray(model.residues)[..., keep]
+    p = np.asarray(model.poles)[keep]
+    if extra_poles is not None and extra_poles.size:
+        p = np.concatenate([p, extra_poles])
+        R = np.concatenate([R, np.asarray(extra_residues)], axis=-1)
+    return replace(model, poles=p, residues=R)
+
+
+def _line_costs(local: FRFSet, res, weights: Optional[np.ndarray]) -> np.ndarray:
+    """Per-line weighted squared misfit (summed over the FRFs) of an LSFD ``res`` on ``local``."""
+    G = _synthesize_flat(res.model_raw, local.freq_hz)
+    E = local.H.reshape(-1, local.freq_hz.size) - G
+    w2 = np.ones(E.shape[0]) if weights is None else np.asarray(weights, float).reshape(-1) ** 2
+    return np.sqrt(np.sum((E.real ** 2 + E.imag ** 2) * w2[:, None], axis=0))
+
+
+def _residual_terms_only(local: FRFSet, residual_form: str, weights: Optional[np.ndarray]) -> np.ndarray:
+    """Per-line misfit (as :func:`_line_costs`) of the residual terms alone fitted to ``local``."""
+    from .modal import residual_basis
+
+    B = residual_basis(local.omega, local.quantity, residual_form)
+    D = local.H.reshape(-1, local.freq_hz.size)
+    if B.shape[0]:
+        X, *_ = np.linalg.lstsq(B.T, D.T, rcond=None)
+        D = D - (B.T @ X).T
+    w2 = np.ones(D.shape[0]) if weights is None else np.asarray(weights, float).reshape(-1) ** 2
+    return np.sqrt(np.sum((D.real ** 2 + D.imag ** 2) * w2[:, None], axis=0))
+
+
+class _Trial:
+    """Outcome of one local trial: ``ok``, ``why`` (reason or pair note), the local fit ``fit``,
+    the indices ``nb`` of the neighbours it refitted, and whether a rejection says the peak is
+    ``not_mode`` (too broad / damped to be a structural resonance, or a mains line)."""
+
+    def __init__(self, ok: bool, why: str, fit=None, nb: Optional[np.ndarray] = None, not_mode: bool = False):
+        self.ok, self.why, self.fit, self.nb, self.not_mode = ok, why, fit, nb, not_mode
+
+
+def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float, z0: float, fit_kw: dict,
+                 min_gain: float) -> _Trial:
+    """Try a pole at ``c`` Hz by an LSFD over the lines around it, fitted to the residual of the
+    model's other poles: the data minus the synthesis of every pole farther than the local window
+    (and of the residual terms). The neighbours inside the window are refitted with and without
+    the new pole; the new pole is kept when the local weighted cost falls by ``min_gain`` and
+    the pole is a mode of its own (see the module docstring of :mod:`analysis.pipeline`)."""
+    from .lsfd import LSFDConvergenceWarning, fit_lsfd
+
+    df = float(frf.line_spacing_hz)
+    f_all = natural_freq_hz(model.poles)
+    new = pole_from_fz(c, z0)
+    hw = max(LOCAL_BANDWIDTHS * float(bandwidth_hz(np.array([new]), df)[0]), LOCAL_MIN_LINES * df)
+    nb_mask = np.abs(f_all - c) < hw
+    nb = np.flatnonzero(nb_mask)
+    lo = max(float(band[0]), min([c - hw] + [f_all[k] - hw for k in nb]))
+    hi = min(float(band[1]), max([c + hw] + [f_all[k] + hw for k in nb]))
+    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
+    n_lines = int(np.sum(sel))
+    if n_lines < 2 * (nb.size + 1) + 4:
+        return _Trial(False, "too few lines around it")
+    far = _with_poles(model, ~nb_mask)
+    from dataclasses import replace
+
+    f_loc = frf.freq_hz[sel]
+    D = frf.H[..., sel] - transfer(far, 2j * np.pi * f_loc).reshape(frf.H.shape[:2] + (f_loc.size,))
+    local = replace(frf.band(lo, hi), H=D)
+    w = fit_kw.get("weights")
+    kw = {k: v for k, v in fit_kw.items() if k not in ("band", "weights")}
+    kw["max_iter"] = min(int(fit_kw.get("max_iter", 100)), MISSING_TRIAL_ITER)
+    kw["ftol"], kw["xtol"] = LOCAL_TOL, LOCAL_TOL   # a verdict, not the final estimate (the full LSFD follows)
+    start_old = np.asarray(model.poles)[nb]
+    start = np.concatenate([start_old, [new]])
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", LSFDConvergenceWarning)
+            if nb.size:
+                base = fit_lsfd(local, start_old, weights=w, freq_window_hz=trust_window_hz(start_old, df), **kw)
+                e_old = _line_costs(local, base, w)
+            else:
+                e_old = _residual_terms_only(local, fit_kw.get("residual_form", "physical"), w)
+            trial = fit_lsfd(local, start, weights=w, freq_window_hz=trust_window_hz(start, df), **kw)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        return _Trial(False, f"the local fit failed ({exc})")
+    if any(issubclass(x.category, LSFDConvergenceWarning) for x in caught):
+        return _Trial(False, "the local fit did not converge")
+    e_new = _line_costs(local, trial, w)
+    c_old, c_new = float(np.sum(e_old ** 2)), float(np.sum(e_new ** 2))
+    z_new = float(damping_ratio(trial.poles_raw[-1]))
+    f_new = float(natural_freq_hz(trial.poles_raw[-1]))
+    if not 0.0 < z_new < MAX_DAMPING or not lo <= f_new <= hi:
+        return _Trial(False, f"the pole went to {f_new:.5g} Hz/{100 * z_new:.3g} %", not_mode=True)
+    if z_new > NOT_A_RESONANCE_DAMPING_RATIO * max(z0, 0.5 * df / max(c, df)):
+        return _Trial(False, f"too broad for a mode ({100 * z_new:.3g} % against {100 * z0:.3g} % of the modes)",
+                      not_mode=True)
+    bad, _ = bad_poles(trial, start, df, duplicates=False)
+    if np.any(bad):
+        return _Trial(False, f"{int(np.sum(bad))} pole(s) of the local fit fail the checks")
+    if not c_new <= (1.0 - min_gain) * c_old:
+        return _Trial(False, f"local cost {c_old:.4g} -> {c_new:.4g} (less than {100 * min_gain:g} % gain)")
+    broad, close = _new_pole_relation(trial.poles_raw, trial.model_raw.residues, df)
+    if broad:
+        return _Trial(False, "a broad pole under a sharper one")
+    note = f"local cost {c_old:.4g} -> {c_new:.4g}"
+    for k in close:
+        ok, text = _pair_is_resolved(trial, int(k), f_loc, e_old, e_new, df)
+        if not ok:
+            return _Trial(False, text)
+        note = text
+    return _Trial(True, note, trial, nb)
+
+
 def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str],
-                       mains: Sequence[float] = MAINS_HZ, df: Optional[float] = None):
-    """Step 7: add poles at the resonances the model misses (see module docstring). A trial fit
-    that does not converge is a rejected candidate (its convergence warning is not passed on).
-    The poles of ``result`` are kept; poles are only added."""
-    from .lsfd import LSFDConvergenceWarning
+                      mains: Sequence[float] = MAINS_HZ, df: Optional[float] = None,
+                      visible: Sequence[VisiblePeak] = ()):
+    """Step 7: add poles at the resonances the model misses (see module docstring): first the
+    ``visible`` peaks no pole accounts for, then the misfit peaks; each tried by a local fit on
+    the residual; then one LSFD from all poles (and step 6's checks). The poles of ``result``
+    are kept; poles are only added. Returns the new LSFD result (``result`` when nothing was added)."""
     df = frf.line_spacing_hz if df is None else float(df)
+    band = result.band
+    model = result.model_raw
+    z0 = float(np.median(damping_ratio(result.poles_raw)))
     tried: list[float] = []
     on_mains: list[tuple[float, str]] = []  # reported once at the end, with a count
     added = 0
-    f, e, d = _scaled_misfit(frf, result)
-    cost = float(np.sum(e ** 2))
-    failures = 0
-    while added < MAX_ADDED and failures < MAX_FAILED_TRIES:
-        cands = [c for c in _missing_candidates(f, e, d) if all(abs(c - t) > 2 * df for t in tried)]
-        if not cands:
-            break
-        c = float(cands[0])
+
+    def attempt(c: float, min_gain: float, peak: Optional[VisiblePeak] = None) -> bool:
+        nonlocal model, added
         tried.append(c)
-        z0 = float(np.median(damping_ratio(result.poles_raw)))
-        mains_why = _mains_line(c, f, e, df, z0, mains)
+        f, e, _ = _scaled_misfit(frf, model, band)
+        # a visible peak wider than a mains line is a resonance whatever the misfit's shape
+        wide = peak is not None and (peak.top_hz[1] - peak.top_hz[0]) / df - 1.0 > 1 + MAINS_LINES
+        mains_why = None if wide else _mains_line(c, f, e, df, z0, mains)
         if mains_why is not None:
             log.debug(mains_why)
             on_mains.append((c, mains_why))
-            continue
-        new = pole_from_fz(c, z0)
-        start = np.concatenate([result.poles_raw, [new]])
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", LSFDConvergenceWarning)
-                trial = fit_bounded(frf, start, {**fit_kw, "max_iter": min(fit_kw["max_iter"], MISSING_TRIAL_ITER)})
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            log.info("adding a pole at %.6g Hz failed (%s)", c, exc)
-            failures += 1
-            continue
-        if any(issubclass(w.category, LSFDConvergenceWarning) for w in caught):
-            log.info("adding a pole at %.6g Hz: the LSFD did not converge; not added", c)
-            failures += 1
-            continue
-        bad, _ = bad_poles(trial, start, df, duplicates=False)
-        broad, close = _new_pole_relation(trial.poles_raw, trial.model_raw.residues, df)
-        f2, e2, d2 = _scaled_misfit(frf, trial)
-        cost2 = float(np.sum(e2 ** 2))
-        why = ""
-        if broad:
-            why = "a broad pole under a sharper one"
-        elif np.any(bad):
-            why = f"{int(np.sum(bad))} pole(s) fail the checks"
-        elif cost2 > (1.0 - MISSING_MIN_GAIN) * cost:
-            why = f"cost {cost:.4g} -> {cost2:.4g}"
-        else:
-            for k in close:
-                ok, text = _pair_is_resolved(trial, int(k), f, e, e2, df)
-                if not ok:
-                    why = text
-                    break
-        if why:
-            log.info("pole at %.6g Hz not added: %s", c, why)
-            failures += 1
-            continue
-        f_new = trial.freq_hz[-1]
-        on_line = mains_harmonic_index(f_new, mains, df) is not None
-        if on_line and 2.0 * trial.damping[-1] * f_new < MAINS_WIDTH_FRACTION * 2.0 * z0 * f_new:
-            msg = (f"a pole tried at {f_new:.6g} Hz ({100 * trial.damping[-1]:.3g} %) sits on a mains line and is much "
+            return False
+        t = _local_trial(frf, model, band, c, z0, fit_kw, min_gain)
+        if not t.ok:
+            log.info("pole at %.6g Hz not added: %s", c, t.why)
+            return False
+        fit = t.fit
+        f_new, z_new = float(fit.freq_hz[-1]), float(fit.damping[-1])
+        if mains_harmonic_index(f_new, mains, df) is not None and z_new < MAINS_WIDTH_FRACTION * z0:
+            msg = (f"a pole tried at {f_new:.6g} Hz ({100 * z_new:.3g} %) sits on a mains line and is much "
                    f"sharper than the modes ({100 * z0:.3g} %): not added")
             log.info(msg)
             warnings_out.append(msg)
-            failures += 1
-            continue
-        msg = (f"added a pole at {f_new:.5g} Hz/{100 * trial.damping[-1]:.3g} % for a resonance the "
-               f"model missed (scaled misfit peak at {c:.5g} Hz; cost {cost:.4g} -> {cost2:.4g})")
-        if len(close):
-            msg += "; " + _pair_is_resolved(trial, int(close[0]), f, e, e2, df)[1]
+            return False
+        keep = np.ones(model.poles.size, dtype=bool)
+        keep[t.nb] = False
+        model = _with_poles(model, keep, fit.poles_raw, fit.model_raw.residues)
+        msg = (f"added a pole at {f_new:.5g} Hz/{100 * z_new:.3g} % for a resonance the model missed "
+               f"(peak at {c:.5g} Hz; {t.why})")
         log.info(msg)
         warnings_out.append(msg)
-        result, f, e, d, cost = trial, f2, e2, d2, cost2
         added += 1
-        failures = 0
+        return True
+
+    failures = 0
+    while added < MAX_ADDED and failures < MAX_FAILED_VISIBLE:
+        left = [v for v in _unaccounted(frf, visible, model, df) if all(abs(v.freq_hz - x) > 0.5 * df for x in tried)]
+        if not left:
+            break
+        failures = 0 if attempt(left[0].freq_hz, VISIBLE_MIN_GAIN, left[0]) else failures + 1
+    # close pairs fitted as one pole: where the misfit over a pole's top (+- half its bandwidth)
+    # exceeds SPLIT_MIN_RATIO of the data there, a second pole half a bandwidth either side is
+    # tried (the pair checks decide)
+    f, e, d = _scaled_misfit(frf, model, band)
+    for p in sorted(np.asarray(model.poles), key=lambda p: float(natural_freq_hz(p))):
+        if added >= MAX_ADDED:
+            break
+        fk = float(natural_freq_hz(p))
+        bk = float(bandwidth_hz(np.array([p]), df)[0])
+        top = (f >= fk - 0.5 * bk) & (f <= fk + 0.5 * bk)
+        if not np.any(top):
+            continue
+        ratio = float(np.sum(e[top] ** 2) / max(float(np.sum(d[top] ** 2)), 1e-300))
+        if ratio < SPLIT_MIN_RATIO:
+            continue
+        for side in (-0.5, 0.5):
+            c = fk + side * bk
+            if all(abs(c - x) > 0.5 * df for x in tried) and attempt(c, SPLIT_MIN_GAIN):
+                f, e, d = _scaled_misfit(frf, model, band)
+                break
+    failures = 0
+    while added < MAX_ADDED and failures < MAX_FAILED_TRIES:
+        f, e, d = _scaled_misfit(frf, model, band)
+        cands = [c for c in _missing_candidates(f, e, d) if all(abs(c - x) > 2 * df for x in tried)]
+        if not cands:
+            break
+        failures = 0 if attempt(float(cands[0]), MISFIT_MIN_GAIN) else failures + 1
     if on_mains:
         msg = on_mains[0][1]
         if len(on_mains) > 1:
@@ -236,4 +374,78 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
             msg += f"; and {len(rest)} more misfit peak(s) on mains lines, not fitted as modes either: {shown} Hz"
         log.info(msg)
         warnings_out.append(msg)
-    return result
+    if not added:
+        return result
+    return _final_fit(frf, np.asarray(model.poles), fit_kw, warnings_out)
+
+
+def _final_fit(frf: FRFSet, poles: np.ndarray, fit_kw: dict, warnings_out: list[str]):
+    """One LSFD over the whole band from the poles the local fits found, each held close to its
+    local estimate (``FINAL_BANDWIDTHS`` half-power bandwidths in frequency, a factor
+    ``FINAL_DAMPING_WINDOW`` in damping): the local fits decided which poles there are; the full
+    fit polishes them together and gives the residues and uncertainties of the whole band. On a
+    wide band of weak modes an unbounded fit would turn some of them into very damped poles that
+    absorb broadband misfit. Poles that leave the band or physical damping are dropped (step 6)."""
+    from .lsfd import fit_lsfd
+
+    df = frf.line_spacing_hz
+    p = np.asarray(poles)
+    for _ in range(MAX_FINAL_ROUNDS):
+        res = fit_lsfd(frf, p, freq_window_hz=FINAL_BANDWIDTHS * bandwidth_hz(p, df),
+                       damping_window=FINAL_DAMPING_WINDOW, **fit_kw)
+        lo, hi = res.band
+        fd = res.poles_raw.imag / (2 * np.pi)
+        bad = ~((fd >= lo) & (fd <= hi) & (res.damping > 0) & (res.damping < MAX_DAMPING))
+        if not np.any(bad) or np.all(bad):
+            return res
+        msg = "dropped and refitted: " + "; ".join(
+            f"{natural_freq_hz(p[k]):.4g} Hz -> {res.freq_hz[k]:.4g} Hz/{100 * res.damping[k]:.3g} %: out of the band "
+            "or physical damping" for k in np.flatnonzero(bad))
+        log.info(msg)
+        warnings_out.append(msg)
+        p = p[~bad]
+    return res
+
+
+def _unaccounted(frf: FRFSet, visible: Sequence[VisiblePeak], model: ModalModel, df: float) -> list[VisiblePeak]:
+    """The visible peaks ``model`` (raw poles) does not account for, most prominent first."""
+    missed, pairs = unaccounted_peaks(visible, natural_freq_hz(model.poles), df,
+                                      lambda v: reproduced(frf, v, lambda f: transfer(model, 2j * np.pi * f)))
+    return sorted(missed + [v for v, _ in pairs], key=lambda v: -v.prominence_db)
+
+
+def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result,
+                        mains: Sequence[float] = MAINS_HZ) -> tuple[list[str], list[str]]:
+    """The visible peaks the LSFD ``result`` leaves unaccounted for (:mod:`analysis.visibility`), in
+    words: ``(problems, notes)``. A peak on a mains harmonic at most ``1 + MAINS_LINES`` lines wide
+    is a note (an electrical line, not a resonance); any other is a problem: the fit is not
+    complete. A peak with a fitted pole within ``PAIR_FRACTION`` of it that another peak of its
+    curve took is named a possible close pair."""
+    df = float(frf.line_spacing_hz)
+    model = result.model_raw
+    fitted = np.asarray(result.freq_hz, float)
+    missed, pairs = unaccounted_peaks(visible, fitted, df,
+                                      lambda v: reproduced(frf, v, lambda f: transfer(model, 2j * np.pi * f)))
+    problems: list[str] = []
+    notes: list[str] = []
+    seen: list[float] = []
+    for v in missed + [v for v, _ in pairs]:
+        if any(abs(v.freq_hz - x) < 0.5 * df for x in seen):
+            continue   # the same line in another curve: said once
+        seen.append(v.freq_hz)
+        where = f"a peak {v.prominence_db:.0f} dB above its neighbouring minima in {v.curve}"
+        width_lines = (v.top_hz[1] - v.top_hz[0]) / df - 1.0
+        if mains_harmonic_index(v.freq_hz, mains, df) is not None and width_lines <= 1 + MAINS_LINES:
+            notes.append(f"the peak at {v.freq_hz:.5g} Hz ({where}) lies on a mains line and is "
+                         f"{width_lines:.0f} line(s) wide: not a resonance")
+            continue
+        near = fitted[np.abs(fitted - v.freq_hz) <= PAIR_FRACTION * v.freq_hz] if fitted.size else fitted
+        if near.size:
+            x = float(near[np.argmin(np.abs(near - v.freq_hz))])
+            problems.append(f"a possible close pair: the resonance at {v.freq_hz:.5g} Hz ({where}) has no pole of "
+                            f"its own; the pole at {x:.5g} Hz may stand for both (more references would separate "
+                            "them; or give both frequencies with --poles)")
+        else:
+            problems.append(f"a resonance at {v.freq_hz:.5g} Hz ({where}) is neither fitted by a pole nor "
+                            "reproduced by the model")
+    return problems, notes

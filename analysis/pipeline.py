@@ -3,7 +3,8 @@
 This is the paper's Fig. 1 flow with the choices made automatically:
 
 Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6),
-:mod:`analysis.missing_modes` (7), :mod:`analysis.fit_result` (the verdict); this module runs them.
+:mod:`analysis.missing_modes` (7, 8), :mod:`analysis.visibility` (the visible peaks),
+:mod:`analysis.fit_result` (the verdict); this module runs them.
 
 1. **Band** (paper sec. 3.1). Default: from the lowest reliable line to the top line. The
    lowest ``LOW_LINES`` lines (f < LOW_LINES * df: the record is too short there, and an
@@ -42,29 +43,32 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    spurious initial poles; they are dropped and the LSFD repeated from the starts of the
    remaining poles (same trust regions), up to ``MAX_CHECK_ROUNDS`` times; each drop is
    noted in the result's ``warnings``.
-7. **Missing resonances**: the misfit of every FRF, scaled by that FRF's RMS in the band
-   (so weak-but-clean FRFs count like strong ones), is averaged over the FRFs:
-   ``e(f) = sqrt(mean_o |H_o - G_o|^2 / rms_o^2)``, and likewise ``d(f)`` for the data.
-   Peaks of ``e`` above ``MISSING_MEDIAN_FACTOR`` times its median and above
-   ``MISSING_DATA_FRACTION`` of ``d`` are resonances the model misses (modes the
-   stabilization did not stabilise, or a close pair fitted as one pole). The strongest is
-   tried first: a pole at that frequency (damping: the median of the fitted ones) is added
-   and the LSFD repeated; the new model is kept when the scaled cost ``sum e^2`` falls by at
-   least ``MISSING_MIN_GAIN``, step 6 finds nothing wrong with the new poles, and the new
-   pole is a mode of its own: not a broad pole under a much sharper one (within the larger
-   half-bandwidth, bandwidths more than ``MISSING_BANDWIDTH_RATIO`` apart: that absorbs the
-   misfit of a sharp peak, e.g. leakage; two genuine close modes have similar damping). A new
-   pole closer to a neighbour than ``MISSING_MIN_LINES`` lines or a quarter of the smaller
-   bandwidth, or a duplicate of it (step 6), is kept only on clear evidence: at least a line
-   apart, the local cost over the pair's lines falls by ``MISSING_LOCAL_GAIN`` and both keep
-   distinct residues (:func:`_pair_is_resolved`). A candidate on a mains harmonic (``mains_hz``)
-   much narrower than a mode at the median damping is not tried (reported in the warnings,
-   :func:`_mains_line`). The step also runs with the user's frequencies/poles (they are kept,
-   poles are only added). Lines given in ``exclude_hz`` are left out of the LSFD and of this
-   misfit (:func:`exclude_lines`). Repeated until no candidate is left (at most
-   ``MAX_ADDED`` poles, and at most ``MAX_FAILED_TRIES`` rejected candidates in a row: each
-   try is a full LSFD, capped at ``MISSING_TRIAL_ITER`` iterations). ``G`` is synthesised from the
-   raw poles (window damping included), as the data were measured.
+7. **Missing resonances** (:mod:`analysis.missing_modes`). Candidates, in this order: the
+   *visible peaks* (:mod:`analysis.visibility`: a peak of an FRF or of the first CMIF curve
+   standing >= 10 dB above its neighbouring minima, clean in the coherence over its top) that no
+   pole accounts for, strongest first; then, for every pole whose misfit over its top exceeds
+   ``SPLIT_MIN_RATIO`` of the data there, a second pole half a bandwidth either side (a close pair
+   fitted as one); then the peaks of the scaled misfit ``e(f) = sqrt(mean_o |H_o - G_o|^2 /
+   rms_o^2)`` above ``MISSING_MEDIAN_FACTOR`` times its median and ``MISSING_DATA_FRACTION`` of the
+   data's ``d(f)``. Each candidate is tried by a *local* LSFD: over a few bandwidths around it,
+   on the data minus the synthesis of the model's other poles (and residual terms), its
+   neighbours refitted with and without the new pole; it is kept when the local weighted cost
+   falls by ``VISIBLE_MIN_GAIN`` (split: ``SPLIT_MIN_GAIN``; misfit: ``MISFIT_MIN_GAIN``), the
+   pole is physical and not much broader than the modes, passes the checks of step 6, is not a
+   broad pole under a sharper one, and a close neighbour keeps a distinct residue
+   (:func:`analysis.missing_modes._pair_is_resolved`). A candidate on a mains harmonic
+   (``mains_hz``) much narrower than a mode is not tried (reported in the warnings). The local
+   trials cost a few milliseconds each (tens of lines instead of the whole band); one LSFD over
+   the whole band follows from all poles, each held within ``FINAL_BANDWIDTHS`` half-power
+   bandwidths and a factor ``FINAL_DAMPING_WINDOW`` in damping of its local estimate (on a wide
+   band an unbounded fit turns weak modes into very damped poles that absorb broadband misfit).
+   The step also runs with the user's frequencies/poles (poles are only added). Lines given in
+   ``exclude_hz`` are left out of the LSFD and of this step (:func:`exclude_lines`).
+8. **Verdict**: every visible peak the final model leaves unaccounted for is named in the
+   result's ``problems`` (``success`` is then False): "a resonance at F Hz ... is neither
+   fitted by a pole nor reproduced by the model", or "a possible close pair" when a pole within
+   2 % stands for it and a neighbour. When the stabilization keeps no pole but the data (with
+   coherence) show visible peaks, the fit starts from those peaks.
 """
 from __future__ import annotations
 
@@ -80,10 +84,12 @@ from .bounded_fit import drop_bad_poles, fit_bounded
 from .fit_result import FitResult, assess_fit
 from .progress import progress
 from .lscf import parse_band
-from .missing_modes import MAINS_HZ, add_missing_modes
+from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
+from .visibility import visible_peaks
+from .modal import natural_freq_hz
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -195,6 +201,10 @@ def fit_auto(
             poles = poles_from_frequencies(given_freqs, stab)
         else:
             poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
+        if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
+            poles = _poles_from_peaks(frf, (lo, hi), stab, warnings_out)
+        elif poles.size and given_freqs is None and n_modes is None and add_missing and _averaged(frf):
+            poles = _with_visible_peaks(frf, (lo, hi), stab, poles)
         if poles.size == 0:
             raise FitError(
                 f"no stable physical poles found in {lo:.6g}..{hi:.6g} Hz up to {mm} modes: raise --order, "
@@ -226,10 +236,13 @@ def fit_auto(
     else:
         result = fit_bounded(fit_frf, poles, fit_kw)
         result = drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
-    if add_missing and n_modes is None:
+    visible = visible_peaks(fit_frf, (lo2, hi2))
+    complete_search = add_missing and n_modes is None
+    if complete_search:
         # the user's poles/frequencies are kept: step 7 only adds (it never drops a pole)
         progress("fit: looking for resonances the model misses")
-        result = add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz)
+        result = add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz,
+                                   visible=visible)
     if not result.success:
         warnings_out.append(f"LSFD did not converge: {result.message}")
         log.warning("LSFD did not converge: %s", result.message)
@@ -239,10 +252,70 @@ def fit_auto(
                             "the standard deviations and weights rest on the misfit alone (take several hits per point)")
     result = sorted_by_frequency(result)
     problems = assess_fit(result, (lo2, hi2))
+    left, notes = unfitted_resonances(fit_frf, visible, result, mains)
+    warnings_out += notes
+    problems += left
     for p in problems:
         log.warning("implausible fit: %s", p)
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
+
+
+#: averages per FRF from which the coherence confirms a visible peak for the fit's start
+SEED_MIN_AVERAGES = 3
+
+
+def _averaged(frf: FRFSet) -> bool:
+    """Whether ``frf`` carries coherence from at least ``SEED_MIN_AVERAGES`` averages per FRF."""
+    n_avg = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    return frf.coherence is not None and n_avg.size > 0 and bool(np.all(n_avg >= SEED_MIN_AVERAGES))
+
+
+def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
+                        poles: np.ndarray) -> np.ndarray:
+    """The selected ``poles`` and one more at each visible peak (:mod:`analysis.visibility`) that no
+    selected pole lies near, damping from the diagram: the data show at least that many modes,
+    and a whole-band LSFD started with fewer drags its poles between resonances (a pole pulled
+    halfway between two modes fits neither and leaves the search for the missed ones without
+    clean neighbours). Only for data whose coherence comes from at least
+    ``SEED_MIN_AVERAGES`` averages: noise reaches a coherence of 0.9 on a tenth of the lines with
+    two averages, on a hundredth with three (``0.1 ** (n - 1)``), so only then does the coherence
+    confirm a visible peak; otherwise the peaks are left to step 7's local trials."""
+    from .visibility import unaccounted_peaks
+
+    # peaks are found on the whole record (a resonance just inside an edge has a flank outside it,
+    # and its prominence is measured there), then kept inside the band; a pole near an edge then
+    # moves the edge (step 4)
+    peaks = [v for v in visible_peaks(frf, (float(frf.freq_hz[0]), band[1])) if v.freq_hz >= band[0]]
+    missed, _ = unaccounted_peaks(peaks, natural_freq_hz(poles), frf.line_spacing_hz)
+    if not missed:
+        return poles
+    extra = poles_from_frequencies(sorted({v.freq_hz for v in missed}), stab)
+    log.info("the fit starts from %d selected pole(s) and %d visible peak(s) at %s Hz", poles.size, extra.size,
+             ", ".join(f"{natural_freq_hz(p):.5g}" for p in extra))
+    return np.concatenate([np.asarray(poles), extra])
+
+
+def _poles_from_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
+                      warnings_out: list[str]) -> np.ndarray:
+    """Starting poles at the visible peaks (:mod:`analysis.visibility`) when the stabilization
+    kept none and the data carry coherence: one per distinct peak frequency (peaks within ``max(MATCH_FRACTION f, MATCH_LINES
+    df)`` are one), damping from the diagram (:func:`poles_from_frequencies`). Empty when the
+    data show no peak either."""
+    from .visibility import MATCH_FRACTION, MATCH_LINES
+
+    df = frf.line_spacing_hz
+    freqs: list[float] = []
+    for v in visible_peaks(frf, band):   # most prominent first
+        if all(abs(v.freq_hz - x) > max(MATCH_FRACTION * x, MATCH_LINES * df) for x in freqs):
+            freqs.append(v.freq_hz)
+    if not freqs:
+        return np.zeros(0, dtype=complex)
+    msg = (f"the stabilization kept no pole in {band[0]:.6g}..{band[1]:.6g} Hz; the fit starts from the "
+           f"{len(freqs)} visible peak(s) at {', '.join(f'{x:.5g}' for x in sorted(freqs))} Hz")
+    log.info(msg)
+    warnings_out.append(msg)
+    return poles_from_frequencies(sorted(freqs), stab)
 
 
 def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:

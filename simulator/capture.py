@@ -84,7 +84,7 @@ class CaptureEngine:
 
     Needs ``stand``, ``margin`` and ``_setup`` (set by SET UP); owns ``_state``, ``_sequence``,
     ``_block``, ``_overload_mask``, ``_polls``, ``_strikes``, ``_no_trigger``, ``_clock_s``,
-    ``_cache``, ``_fe_cfg``.
+    ``_cache``, ``_fe_cfg``, ``_adc_rng``.
     """
 
     stand: "StandLike | None"
@@ -103,6 +103,7 @@ class CaptureEngine:
         self._clock_s = 0.0
         self._cache: "tuple[Any, bytes, int] | None" = None
         self._fe_cfg: Any = None
+        self._adc_rng: "np.random.Generator | None" = None
 
     def _start_arm(self) -> None:
         """Enter ARMED with a fresh strike count; no block ready."""
@@ -166,7 +167,7 @@ class CaptureEngine:
         if key is not None and self._cache is not None and self._cache[0] == key:
             _, body, mask = self._cache
         else:
-            digitised = self._digitise(np.asarray(event.volts, dtype=float), s)
+            digitised = self._digitise(np.asarray(event.volts, dtype=float), s, bool(info.get("noise", False)))
             if digitised is None:
                 self._no_trigger = True
                 _log.debug("strike %d: no trigger crossing", self._strikes)
@@ -181,16 +182,27 @@ class CaptureEngine:
         self._no_trigger = False
         self._state = P.State.BLOCK_READY
 
-    def _digitise(self, volts: np.ndarray, s: P.SetupData) -> "tuple[bytes, int] | None":
-        """(volts-per-count + counts bytes, overload mask) of the block around the trigger, or None."""
+    def _digitise(self, volts: np.ndarray, s: P.SetupData, noise: bool = False) -> "tuple[bytes, int] | None":
+        """(volts-per-count + counts bytes, overload mask) of the block around the trigger, or None.
+
+        ``noise``: the stand's signals carry noise (its ``[noise]`` switch); then the converter adds
+        its own, ``adc_noise_lsb_rms`` counts rms at each channel's range, before the quantizer.
+        """
         from simulator import frontend  # the physics of the input stage
 
         n, pre, fs = s.block_size, s.pretrigger, float(s.sample_rate_hz)
         n_ch = len(s.channels)
         if volts.ndim != 2 or volts.shape[0] != n_ch or volts.shape[1] < n:
             raise RuntimeError(f"the stand returned volts of shape {volts.shape}; expected ({n_ch}, >= {n})")
-        filtered = frontend.apply_anti_alias(volts, fs, self._frontend_config())
+        cfg = self._frontend_config()
+        filtered = frontend.apply_anti_alias(volts, fs, cfg)
         ranges = np.array([ch.range_mv / 1000.0 for ch in s.channels])
+        lsb_rms = float(getattr(cfg, "adc_noise_lsb_rms", 0.0))
+        if noise and lsb_rms > 0:
+            if self._adc_rng is None:  # seeded from the stand: a capture is reproducible
+                self._adc_rng = np.random.default_rng([int(getattr(self.stand, "seed", 0)), 0xADC])
+            vpc = np.asarray(frontend.volts_per_count(ranges)).reshape(-1, 1)
+            filtered = filtered + lsb_rms * vpc * self._adc_rng.standard_normal(filtered.shape)
         t = s.trigger_channel
         counts_t, _ = frontend.quantize(filtered[t], ranges[t])
         level_counts = float(s.trigger_level_v / frontend.volts_per_count(ranges[t]))

@@ -233,6 +233,9 @@ class FrontendConfig:
     ac_coupling_hz: float
     adc_bits: int
     ranges_v: tuple
+    #: the converter's own noise (transition noise and the input amplifier), rms in counts; it
+    #: dithers the quantizer, as in every real ADC (see ``[frontend]`` in frame.toml)
+    adc_noise_lsb_rms: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -606,6 +609,7 @@ def _validate(cfg: FrameConfig, source: str) -> None:
            f"{p} frontend.anti_alias_cutoff_fraction must be in (0, 1) and anti_alias_order >= 1")
     _check(2 <= fe.adc_bits <= 24 and len(fe.ranges_v) > 0 and all(r > 0 for r in fe.ranges_v),
            f"{p} frontend.adc_bits must be 2..24 and ranges_v positive volts")
+    _check(0 <= fe.adc_noise_lsb_rms <= 100, f"{p} frontend.adc_noise_lsb_rms must be 0..100 counts rms")
     sm = cfg.sampling
     _check(2 <= sm.oversample <= 64 and 1 <= sm.fir_half_length <= 256 and sm.stopband_db > 20,
            f"{p} [sampling] needs 2 <= oversample <= 64, 1 <= fir_half_length <= 256, stopband_db > 20")

@@ -121,15 +121,21 @@ def test_fail_builds_a_failed_reply():
     assert r.status == P.CswStatus.FAILED and r.sense.key == P.SenseKey.NOT_READY and r.data == b""
 
 
-def test_capture_engine_builds_a_block_without_scsi_or_link():
+def _struck_engine(stand) -> tuple[CaptureEngine, P.SetupData]:
+    """A capture engine with the default set-up, after one strike of ``stand``."""
     eng = CaptureEngine()
-    eng.stand, eng.margin = PulseStand(), 1024
+    eng.stand, eng.margin = stand, 1024
     eng._init_capture()
     setup = setup_to_wire(default_setup())
     eng._setup = setup
     eng._give_stand(setup)
     eng._start_arm()
     eng._strike()
+    return eng, setup
+
+
+def test_capture_engine_builds_a_block_without_scsi_or_link():
+    eng, setup = _struck_engine(PulseStand())
     assert eng._state == P.State.BLOCK_READY and eng._sequence == 1
     header, volts_per_count, counts = P.decode_block_image(eng._block)
     assert header.n_samples == setup.block_size and counts.shape == (len(setup.channels), setup.block_size)
@@ -138,3 +144,37 @@ def test_capture_engine_builds_a_block_without_scsi_or_link():
     level = setup.trigger_level_v / volts_per_count[t]
     k = int(np.flatnonzero(counts[t] >= level)[0])
     assert k == setup.pretrigger
+
+
+class _WeakStand(PulseStand):
+    """The pulse stand with its responses replaced by a constant 0.3 count (a signal below one
+    count) and the stand's noise switch given by ``noisy``."""
+
+    def __init__(self, noisy: bool) -> None:
+        super().__init__()
+        self.noisy = noisy
+        self.volts_per_count: "np.ndarray | None" = None
+
+    def strike(self, fs_hz: float, n_samples: int, pretrigger: int):
+        ev = super().strike(fs_hz, n_samples, pretrigger)
+        for i, ch in enumerate(self.channels):
+            if ch.quantity != "force":
+                ev.volts[i] = 0.3 * ch.range_v / 32767
+        ev.info["noise"] = self.noisy
+        return ev
+
+
+def _weak_counts(noisy: bool) -> np.ndarray:
+    eng, setup = _struck_engine(_WeakStand(noisy))
+    _, _, counts = P.decode_block_image(eng._block)
+    return counts[[i for i, ch in enumerate(setup.channels) if ch.quantity != "force"]].astype(float)
+
+
+def test_adc_noise_dithers_the_quantizer_only_while_the_stand_is_noisy():
+    # an ideal quantizer rounds a 0.3-count signal to 0 in every sample (the error is a function of
+    # the signal: weak responses turn into coherent distortion); the converter's own noise makes
+    # the quantized record's mean the signal's
+    quiet, noisy = _weak_counts(False), _weak_counts(True)
+    assert np.all(quiet == 0)
+    assert abs(float(noisy.mean()) - 0.3) < 0.05
+    assert 0.3 < float(noisy.std()) < 0.8  # 0.5 count rms plus the quantization's own

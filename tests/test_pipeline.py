@@ -182,9 +182,12 @@ def test_misfit_step_does_not_fit_a_mains_line_as_a_mode():
     assert not np.any(np.abs(res.freq_hz - 300.0) < 2.0), res.freq_hz
     np.testing.assert_allclose(np.sort(res.freq_hz), natural_freq_hz(truth), rtol=1e-3)
     assert any("mains line" in w and "300 Hz" in w for w in fit_st.warnings), fit_st.warnings
-    # the guard off: the line is fitted as a (very sharp) pole
-    res_off, _ = fit_auto(frf, mains_hz=None)
-    assert np.any(np.abs(res_off.freq_hz - 300.0) < 1.0)
+    # the guard off: the line is not named a mains line; the local trial of the misfit step (a fit
+    # over the lines around it, on the residual of the other poles) does not keep a one-line
+    # spike as a mode either (before the local trials, a full refit kept it as a very sharp pole)
+    fit_off = fit_auto(frf, mains_hz=None)
+    assert not any("mains line" in w for w in fit_off.warnings), fit_off.warnings
+    assert not np.any(np.abs(fit_off.freq_hz - 300.0) < 1.0), fit_off.freq_hz
     # or leave the line out of the fit altogether: the modes fit better
     fit_st_x = fit_auto(frf, exclude_hz=[300.0])
     res_x, st_x = fit_st_x

@@ -1,0 +1,179 @@
+"""Resonances the data show, independent of any fit, and whether a fitted model accounts for them.
+
+The automatic fit (:func:`analysis.pipeline.fit_auto`) promises that every resonance the data
+show is fitted, or named in a warning with ``success`` False. "Shown by the data" is this rule:
+
+**Visible peak.** The curves are the magnitude of every FRF and the first CMIF curve
+(:func:`analysis.mif.cmif`, the largest singular value of the FRF matrix per line). A local
+maximum of a curve inside the band is a visible peak when
+
+- its topographic prominence (how far it stands above the higher of its two neighbouring
+  minima, :func:`analysis.peaks.prominences`) is at least ``VISIBLE_PROMINENCE_DB`` (10 dB),
+- when the data carry coherence, it is at least ``VISIBLE_COHERENCE`` (0.9) over the peak's
+  top (the lines within 3 dB of its maximum, and one more line on each side) in that FRF (for
+  the CMIF: the median over the FRFs): a resonance is measured clean across its top, while a
+  noise-level FRF shows "peaks" between random dips where the coherence of a few averages
+  reaches 0.9 at single lines by chance, and
+- without coherence, it is at least ``VISIBLE_MIN_LINES`` lines wide at 3 dB below its top
+  (a resonance spans lines; a noise spike is one line). Without coherence only the CMIF curve
+  is searched when there are more than ``MAX_CURVES_WITHOUT_COHERENCE`` FRFs: it averages the
+  FRFs' noise, where each noisy FRF alone would show peaks of noise.
+
+The peaks of every curve are kept (a resonance shows in several curves).
+
+**Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
+a peak of the resonance (the most prominent first) are one resonance seen through different FRFs
+(a neighbouring mode shifts a peak by a few lines, the most prominent one too, so the reach is
+measured from each of its peaks); two maxima of the same curve are always two resonances. Each resonance,
+most prominent first, takes the nearest still free fitted pole within ``max(MATCH_FRACTION f,
+MATCH_LINES df)`` of one of its peaks. A resonance with no pole within that reach is still
+accounted for when the model reproduces one of its peaks: over the peak's top (the lines within 3 dB of its maximum,
+and one more on each side) the model's misfit in that curve is below ``REPRODUCED_FRACTION`` of
+the data's energy. A peak between two nearby antiresonances is such a case: the model's other
+modes make it. A resonance not accounted for is *missed*; when the pole within reach was taken by
+another resonance, the two are a *possible close pair* fitted as one pole.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from .frf import FRFSet
+from .peaks import find_peaks, prominences
+from .mif import cmif
+
+__all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "VISIBLE_PROMINENCE_DB", "VISIBLE_COHERENCE",
+           "MATCH_FRACTION", "MATCH_LINES", "reproduced"]
+
+VISIBLE_PROMINENCE_DB = 10.0
+VISIBLE_COHERENCE = 0.9
+VISIBLE_MIN_LINES = 2
+MAX_CURVES_WITHOUT_COHERENCE = 8
+MATCH_FRACTION = 0.005
+MATCH_LINES = 1.5
+SAME_LINES = 2.5
+SAME_FRACTION = 0.002
+REPRODUCED_FRACTION = 0.03
+
+
+@dataclass(frozen=True)
+class VisiblePeak:
+    """A visible peak: frequency (Hz, the line of the maximum), prominence (dB), the curve it was
+    found on ("CMIF" or "output/reference"), its index (the flat FRF index ``o * n_ref + r``, or
+    -1 for the CMIF), and the span (lo, hi Hz) of its top (module docstring)."""
+
+    freq_hz: float
+    prominence_db: float
+    curve: str
+    curve_index: int
+    top_hz: tuple = (0.0, 0.0)
+
+
+def _curves(frf: FRFSet, sel: np.ndarray) -> list[tuple[str, np.ndarray, Optional[np.ndarray]]]:
+    """(name, magnitude, coherence or None) of each curve searched, over the lines ``sel``."""
+    n = frf.freq_hz.size
+    H = np.asarray(frf.H).reshape(-1, n)[:, sel]
+    coh = None if frf.coherence is None else np.asarray(frf.coherence, float).reshape(-1, n)[:, sel]
+    out: list[tuple[str, np.ndarray, Optional[np.ndarray]]] = []
+    if coh is not None or H.shape[0] <= MAX_CURVES_WITHOUT_COHERENCE:
+        names = [f"{o}/{r}" for o in (frf.outputs or range(frf.n_outputs)) for r in
+                 (frf.references or range(frf.n_references))]
+        for k in range(H.shape[0]):
+            out.append((str(names[k]) if k < len(names) else str(k), np.abs(H[k]), None if coh is None else coh[k]))
+    s1 = cmif(frf)[sel, 0]
+    out.append(("CMIF", s1, None if coh is None else np.median(coh, axis=0)))
+    return out
+
+
+def _top(db: np.ndarray, i: int, drop_db: float = 3.0) -> tuple[int, int]:
+    """First and last index of the contiguous lines around ``i`` within ``drop_db`` of ``db[i]``."""
+    lo = i
+    while lo > 0 and db[lo - 1] >= db[i] - drop_db:
+        lo -= 1
+    hi = i
+    while hi < db.size - 1 and db[hi + 1] >= db[i] - drop_db:
+        hi += 1
+    return lo, hi
+
+
+def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
+    """The visible peaks of ``frf`` in ``band`` (lo, hi Hz) of every curve, most prominent first
+    (see module docstring)."""
+    f_all = frf.freq_hz
+    sel = np.flatnonzero((f_all >= float(band[0])) & (f_all <= float(band[1])) & np.all(
+        np.isfinite(np.asarray(frf.H).reshape(-1, f_all.size)), axis=0))
+    if sel.size < 3:
+        return []
+    f = f_all[sel]
+    found: list[VisiblePeak] = []
+    curves = _curves(frf, sel)
+    for ci, (name, mag, coh) in enumerate(curves):
+        db = 20.0 * np.log10(np.maximum(mag, 1e-300))
+        pk, _ = find_peaks(db)
+        if pk.size == 0:
+            continue
+        prom = prominences(db, pk)
+        for i, p in zip(pk, prom):
+            if p < VISIBLE_PROMINENCE_DB:
+                continue
+            a, b = _top(db, int(i))
+            if coh is None and b - a + 1 < VISIBLE_MIN_LINES:
+                continue
+            a, b = max(a - 1, 0), min(b + 1, f.size - 1)
+            if coh is not None and not np.all(coh[a:b + 1] >= VISIBLE_COHERENCE):
+                continue
+            index = -1 if name == "CMIF" else ci
+            found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b]))))
+    found.sort(key=lambda v: -v.prominence_db)
+    return found
+
+
+def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.ndarray]) -> bool:
+    """Whether a model reproduces ``peak``: its misfit over the peak's top, in the peak's curve
+    (the CMIF: all FRFs), is below ``REPRODUCED_FRACTION`` of the data's energy there.
+    ``synth(freq_hz)`` gives the model's FRFs (n_out, n_ref, n_f) as the data were measured."""
+    f = frf.freq_hz
+    sel = (f >= peak.top_hz[0]) & (f <= peak.top_hz[1])
+    H = np.asarray(frf.H)[..., sel].reshape(-1, int(np.sum(sel)))
+    G = np.asarray(synth(f[sel])).reshape(H.shape)
+    if peak.curve_index >= 0:
+        H, G = H[peak.curve_index], G[peak.curve_index]
+    data = float(np.sum(np.abs(H) ** 2))
+    return data > 0 and float(np.sum(np.abs(H - G) ** 2)) <= REPRODUCED_FRACTION * data
+
+
+def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: float,
+                      is_reproduced: Optional[Callable[[VisiblePeak], bool]] = None,
+                      ) -> tuple[list[VisiblePeak], list[tuple[VisiblePeak, float]]]:
+    """Visible peaks the fitted natural frequencies ``fitted_hz`` (Hz) leave unaccounted for:
+    ``(missed, pairs)``; ``pairs`` holds (peak, frequency of the pole it would share with another
+    resonance). ``is_reproduced(peak)`` (e.g. :func:`reproduced` with the model) tells whether
+    the model makes a peak without a pole of its own. See module docstring."""
+    groups: list[list[VisiblePeak]] = []   # one per resonance, most prominent peak first
+    for v in sorted(peaks, key=lambda v: -v.prominence_db):
+        reach = max(SAME_LINES * df, SAME_FRACTION * v.freq_hz)
+        for g in groups:
+            if any(abs(u.freq_hz - v.freq_hz) <= reach for u in g) and all(u.curve_index != v.curve_index for u in g):
+                g.append(v)
+                break
+        else:
+            groups.append([v])
+    poles = [float(x) for x in np.asarray(fitted_hz, float).ravel()]
+    free = list(range(len(poles)))
+    missed: list[VisiblePeak] = []
+    pairs: list[tuple[VisiblePeak, float]] = []
+    for g in groups:
+        v = g[0]
+        tol = max(MATCH_FRACTION * v.freq_hz, MATCH_LINES * df)
+        near = sorted((abs(poles[k] - u.freq_hz), k) for u in g for k in free if abs(poles[k] - u.freq_hz) <= tol)
+        if near:
+            free.remove(near[0][1])
+            continue
+        taken = [x for k, x in enumerate(poles) if k not in free and abs(x - v.freq_hz) <= tol]
+        if taken:
+            pairs.append((v, min(taken, key=lambda x: abs(x - v.freq_hz))))
+        elif is_reproduced is None or not any(is_reproduced(u) for u in g):
+            missed.append(v)
+    return missed, pairs

@@ -1,0 +1,140 @@
+"""The automatic fit is complete and honest: every visible resonance is fitted, or named with
+``success`` False (analysis.visibility, analysis.missing_modes)."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from analysis.frf import FRFSet
+from analysis.lsfd import fit_lsfd
+from analysis.missing_modes import unfitted_resonances
+from analysis.modal import ModalModel, pole_from_fz, synthesize
+from analysis.pipeline import fit_auto
+from analysis.visibility import VisiblePeak, unaccounted_peaks, visible_peaks
+
+
+def modal_frf(freqs, zetas, shapes, participation, *, fmax=300.0, n_f=1500, noise=0.0, seed=0) -> FRFSet:
+    """Accelerance FRFs of a known modal model: residues ``shapes[o, m] participation[m, r]``,
+    with constant coherence 0.99 (clean data, several averages)."""
+    rng = np.random.default_rng(seed)
+    poles = pole_from_fz(np.asarray(freqs, float), np.asarray(zetas, float))
+    R = np.einsum("om,mr->orm", np.asarray(shapes, float), np.asarray(participation, float)) * poles.imag / 2j
+    n_out, n_ref = R.shape[:2]
+    model = ModalModel(poles, R, quantity="accelerance", residual_form="physical",
+                       upper_residual=np.zeros((n_out, n_ref)), lower_residual=np.zeros((n_out, n_ref)))
+    frf = synthesize(model, np.linspace(fmax / n_f, fmax, n_f))
+    if noise:
+        n = (rng.standard_normal(frf.H.shape) + 1j * rng.standard_normal(frf.H.shape)) / np.sqrt(2)
+        frf = replace(frf, H=frf.H + noise * np.abs(frf.H) * n)
+    return replace(frf, coherence=np.full(frf.H.shape, 0.99), meta={"n_averages": [5]})
+
+
+PAIR = (140.0, 142.0)
+
+
+def pair_frf(n_ref: int, noise: float = 0.002) -> FRFSet:
+    """Modes at 70 Hz, a close pair 140.0 / 142.0 Hz (1.4 % apart, half-power bandwidths 0.9 Hz) and
+    230 Hz; the pair's shapes are orthogonal, so a second reference excites them differently."""
+    shapes = np.array([[1.0, 1.0, 1.0, 0.5], [0.6, -1.0, 1.0, 1.0], [-0.8, 0.5, 0.7, 0.9]])
+    part = np.array([[1.0, 0.8], [1.0, -0.6], [1.0, 1.0], [1.0, 0.7]])[:, :n_ref]
+    return modal_frf([70.0, PAIR[0], PAIR[1], 230.0], [0.005, 0.003, 0.003, 0.005], shapes, part, noise=noise)
+
+
+def test_close_pair_resolved_with_two_references():
+    frf = pair_frf(2)
+    fit = fit_auto(frf)
+    assert fit.success, fit.message
+    f = np.sort(fit.freq_hz)
+    assert f.size == 4, (f, fit.warnings)
+    np.testing.assert_allclose(f, [70.0, PAIR[0], PAIR[1], 230.0], rtol=2e-4)
+
+
+def test_pair_fitted_by_one_pole_is_reported_as_a_possible_pair():
+    """One reference: the pair shows as two maxima of one FRF. A model with one pole for both
+    leaves the weaker peak unaccounted for: named as a possible close pair, a problem of the fit."""
+    frf = pair_frf(1)
+    band = (20.0, 290.0)
+    peaks = visible_peaks(frf, band)
+    assert any(abs(v.freq_hz - PAIR[0]) < 0.4 for v in peaks) and any(abs(v.freq_hz - PAIR[1]) < 0.4 for v in peaks)
+    one = fit_lsfd(frf, pole_from_fz(np.array([70.0, 141.0, 230.0]), np.full(3, 0.005)), band=band)
+    problems, notes = unfitted_resonances(frf, peaks, one)
+    pair = [p for p in problems if "possible close pair" in p]
+    assert len(pair) == 1 and notes == [], problems
+    assert any(f"resonance at {x:.5g} Hz" in pair[0] for x in PAIR), pair
+    # the automatic fit resolves this pair from the data (one reference, three outputs)
+    fit = fit_auto(frf, band=band)
+    assert fit.success, fit.message
+    np.testing.assert_allclose(np.sort(fit.freq_hz), [70.0, PAIR[0], PAIR[1], 230.0], rtol=2e-4)
+
+
+def test_a_mode_left_out_is_named_and_the_fit_is_not_a_success():
+    frf = pair_frf(2)
+    fit = fit_auto(frf, n_modes=3)   # the user's model size leaves one visible mode out
+    assert not fit.success and fit.status == "implausible"
+    f = np.sort(fit.freq_hz)
+    left = [x for x in (70.0, PAIR[0], PAIR[1], 230.0) if np.min(np.abs(f - x)) > 0.3]
+    assert len(left) == 1
+    assert any(f"{left[0]:.5g}" in p for p in fit.problems), (left, fit.problems)
+
+
+def test_peaks_of_different_frfs_a_line_apart_share_a_pole_but_two_maxima_of_one_frf_do_not():
+    a = VisiblePeak(100.0, 30.0, "a", 0, (99.0, 101.0))
+    b = VisiblePeak(100.5, 20.0, "b", 1, (100.0, 101.0))     # one line away in another FRF: the same mode
+    c = VisiblePeak(100.5, 20.0, "a", 0, (100.0, 101.0))     # a second maximum of the same FRF
+    d = VisiblePeak(103.0, 20.0, "b", 1, (102.5, 103.5))     # 6 lines away in another FRF: another mode
+    assert unaccounted_peaks([a, b], np.array([100.2]), df=0.5) == ([], [])
+    missed, pairs = unaccounted_peaks([a, c], np.array([100.2]), df=0.5)
+    assert missed == [] and pairs == [(c, 100.2)]
+    assert unaccounted_peaks([a, c], np.array([100.1, 100.6]), df=0.5) == ([], [])
+    missed, pairs = unaccounted_peaks([a, d], np.array([100.2]), df=0.5)
+    assert missed == [d] and pairs == []
+    missed, _ = unaccounted_peaks([a], np.array([120.0]), df=0.5)
+    assert missed == [a]
+
+
+def test_the_same_resonance_reach_is_measured_from_each_of_its_peaks():
+    # the frame's 525.2 Hz mode in three FRFs of a default capture (0.78 Hz lines): the most
+    # prominent peak is itself a line low, the weakest 2.3 lines high of the 525.0 Hz peak and 3
+    # lines from the most prominent one; one mode, one pole
+    df = 0.78125
+    top = VisiblePeak(524.21875, 46.5, "top:4:X/left:9:Y", 5, (521.1, 528.9))
+    mid = VisiblePeak(525.0, 43.8, "left:9:Y/right:6:-X", 0, (521.9, 528.9))
+    weak = VisiblePeak(526.5625, 12.8, "top:4:X/right:6:-X", 3, (523.4, 532.8))
+    assert unaccounted_peaks([top, mid, weak], np.array([525.19]), df) == ([], [])
+    # without the peak between them they are two resonances sharing one pole: a possible pair
+    missed, pairs = unaccounted_peaks([top, weak], np.array([525.19]), df)
+    assert missed == [] and pairs == [(weak, 525.19)]
+
+
+def test_a_noise_spike_without_coherence_is_not_a_visible_peak():
+    frf = pair_frf(1)
+    H = frf.H.copy()
+    k = int(np.argmin(np.abs(frf.freq_hz - 100.0)))
+    H[0, 0, k] *= 30.0          # one line: a spike, not a resonance
+    peaks = visible_peaks(replace(frf, H=H, coherence=None), (20.0, 290.0))
+    assert not any(abs(v.freq_hz - frf.freq_hz[k]) < 0.1 for v in peaks)
+    assert any(abs(v.freq_hz - 70.0) < 0.3 for v in peaks)
+
+
+@pytest.fixture(scope="module")
+def one_point_capture(tmp_path_factory):
+    """One-point capture of the simulated frame through the simulated analyser (hammer right:6:-X, seed 1)."""
+    from acquisition.cli_capture import main as capture_main
+    from analysis.recording import load_frfset
+
+    rec = tmp_path_factory.mktemp("fitcomplete") / "rec.h5"
+    assert capture_main(["--device", "sim://?seed=1", "--out", str(rec), "--points", "right:6:-X", "--hits", "5",
+                         "--auto", "-q"]) == 0
+    return load_frfset(rec)
+
+
+def test_capture_close_pair_of_the_frame_is_resolved(one_point_capture):
+    """The frame's 160.0 / 161.0 Hz pair in 4..215 Hz: each peak stands out in the data; both are
+    fitted (one pole of 0.73 % damping before), and so are the fainter 50.4 and 81.7 Hz modes."""
+    from simulator.stand import TestStand
+
+    truth = TestStand(seed=1).model.modes(215.0).freq_hz
+    fit = fit_auto(one_point_capture, band=(4.0, 215.0))
+    assert fit.success, fit.message
+    for t in truth[(truth > 10.0) & (truth < 215.0)]:
+        assert np.min(np.abs(fit.freq_hz - t)) <= 0.005 * t, (t, fit.freq_hz)
