@@ -132,7 +132,6 @@ class RecordingWriter:
             self._f.close()
             self._lock.release()
             raise RecordingError(f"{self.path} is damaged and cannot be resumed ({type(exc).__name__}: {exc})") from None
-        return self
 
     # -- writing -------------------------------------------------------------------------------
     @property
