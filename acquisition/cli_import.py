@@ -39,23 +39,27 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--windowed", action="store_true", help="DataPhysics: import the analyser-windowed blocks Wk")
     p.add_argument("--force-window", default="none")
     p.add_argument("--exp-window", default="none")
+    p.add_argument("--drop-nonfinite", action="store_true",
+                   help="leave out hits holding NaN or infinite samples (counted) instead of refusing the file")
     add_overwrite(p)
     args = p.parse_args(argv)
     from .importers import ImportDataError, load_description, read_dataphysics_mat, read_lvm, read_numpy, \
         read_sep005_test, write_imported
+    from .importers import read_dropping_nonfinite as _read
+    drop = args.drop_nonfinite
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
         if fmt == "lvm":
-            tests = [read_lvm(f) for f in args.files]
+            tests = [_read(read_lvm, f, drop=drop) for f in args.files]
         elif fmt == "mat":
-            tests = [read_dataphysics_mat(f, windowed=args.windowed) for f in args.files]
+            tests = [_read(read_dataphysics_mat, f, windowed=args.windowed, drop=drop) for f in args.files]
         elif fmt in ("sep005", "json"):
-            tests = [read_sep005_test(f) for f in args.files]
+            tests = [_read(read_sep005_test, f, drop=drop) for f in args.files]
         elif fmt == "npy":
             if not args.describe:
                 raise UsageError("numpy input needs --describe DESC.json|toml naming the channels and sample rate")
-            tests = [read_numpy(args.files, load_description(args.describe))]
+            tests = [_read(read_numpy, args.files, load_description(args.describe), drop=drop)]
         else:
             raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json (or --format)")
         test = tests[0]
@@ -71,6 +75,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
         averages = write_imported(test, args.out, windows=windows, reference=args.reference, outputs=outs,
                                   force_channel=fch, response_channels=rch, overwrite=args.overwrite)
+    dropped = sum(int(t.meta.get("dropped_nonfinite_hits", 0)) for t in tests)
+    if dropped:
+        print(f"left out {dropped} hit(s) holding non-finite samples")
     for a in averages:
         print(f"imported {a.n_averages} accepted hit(s): reference {a.reference}, outputs {', '.join(a.outputs)}")
     print(f"recording written: {args.out}")
