@@ -210,3 +210,40 @@ def test_simulator_config_bounds(tmp_path, text, pattern):
     p.write_text(text)
     with pytest.raises(ConfigError, match=pattern):
         FrameConfig.load(p)
+
+
+def test_a_report_that_fails_writes_nothing_and_names_the_nan_pole(tmp_path, capsys):
+    from analysis.cli_report import main
+
+    from analysis.uff import read_uff58, write_uff58
+
+    uff = tmp_path / "in.uff"
+    write_uff58(uff, _frf())
+    back = read_uff58(uff)
+    fit = tmp_path / "fit.json"
+    doc = _fit_doc()
+    doc["poles"][1]["pole"] = [float("nan"), 120.0]
+    doc["residues"][0].update(output=back.outputs[0], reference=back.references[0])
+    fit.write_text(json.dumps(doc))
+    out = tmp_path / "report"
+    assert main([str(uff), "--out", str(out), "--fit", str(fit)]) == 2
+    err = capsys.readouterr().err
+    assert f"{fit}: field poles[1].pole is" in err and err.count("\n") == 1
+    assert not out.exists() and {p.name for p in tmp_path.iterdir()} == {"fit.json", "in.uff"}
+
+
+def test_a_report_whose_page_fails_leaves_an_earlier_report_as_it_was(tmp_path, monkeypatch):
+    from analysis.report_html import build
+
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "index.html").write_text("earlier")
+
+    def broken(doc):
+        raise ValueError("Out of range float values are not JSON compliant")
+
+    monkeypatch.setattr(build, "render_page", broken)
+    with pytest.raises(ValueError):
+        build.write_report(out, {"a": 1})
+    assert [p.name for p in out.iterdir()] == ["index.html"] and (out / "index.html").read_text() == "earlier"
+    assert [p.name for p in tmp_path.iterdir()] == ["report"]
