@@ -484,7 +484,18 @@ def read_sep005_test(path: "str | Path") -> ImportedTest:
     """An SEP005 JSON file (:mod:`analysis.sep005`) as a test: each ``group`` of channels is one hit
     (no groups: the whole file is one hit); channel quantities from the SEP005 codes ('f' force,
     'a' acceleration, ...), points from the ``point`` key (else the channel name), trigger samples
-    from ``trigger_index`` when every channel of a hit has it (else found on the force)."""
+    from ``trigger_index`` when every channel of a hit has it (else found on the force).
+    Raises :class:`ImportDataError` for anything else."""
+    try:
+        return _checked(_read_sep005_test(path))
+    except ImportDataError:
+        raise
+    except _MALFORMED as exc:
+        raise ImportDataError(f"{path} is not an SEP005 test impactlab can import ({type(exc).__name__}: {exc}); "
+                              "check the groups, fs and trigger_index of its channels") from None
+
+
+def _read_sep005_test(path: "str | Path") -> ImportedTest:
     from analysis.sep005 import QUANTITY_CODES, SEP005Error, read_sep005
 
     try:

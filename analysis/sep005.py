@@ -62,9 +62,15 @@ def check_sep005(channels: Any, source: str = "SEP005 data") -> list[dict]:
             t = ch.get("time")
             if t is None:
                 raise SEP005Error(f"{where} ({ch['name']}): give fs (Hz) or time (s) to place the samples in time")
-            t = np.asarray(t, dtype=float)
+            try:
+                t = np.asarray(t, dtype=float)
+            except (TypeError, ValueError):
+                raise SEP005Error(f"{where} ({ch['name']}): time must be a list of numbers (s)") from None
             if t.shape != data.shape:
                 raise SEP005Error(f"{where} ({ch['name']}): time has {t.size} values for {data.size} samples")
+            bad_t = describe_nonfinite(t)
+            if bad_t is not None:
+                raise SEP005Error(f"{where} ({ch['name']}): time {bad_t}; times must be finite numbers of seconds")
             step = np.diff(t)
             if np.any(step <= 0) or np.ptp(step) > 1e-6 * float(np.mean(step)):
                 raise SEP005Error(f"{where} ({ch['name']}): time must be uniformly increasing (impact data are sampled)")

@@ -416,7 +416,7 @@ def _coerce(cls: type, d: Mapping[str, Any], where: str) -> Any:
                 if not isinstance(v, (list, tuple)):
                     raise TypeError
                 v = tuple(tuple(x) if isinstance(x, list) else x for x in v)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ConfigError(f"'{where}.{f.name}' = {v!r} must be of type {t}") from None
         kwargs[f.name] = v
     return cls(**kwargs)
@@ -499,12 +499,12 @@ def _validate_bounds(cfg: FrameConfig, source: str) -> None:
 
     bad = _first_nonfinite_key(cfg.raw)
     _check(bad is None, f"{source}: {bad} is not a finite number; give a value in the units the key names")
-    n_dof = 6 * sum(c.n_elements + 1 for c in cfg.components.values())
+    n_dof = 6.0 * sum(float(c.n_elements) + 1 for c in cfg.components.values())
     budget = memory_budget_bytes()
     if FE_BYTES_PER_DOF2 * n_dof ** 2 > budget:
         largest = int((budget / FE_BYTES_PER_DOF2) ** 0.5) // 6 - len(cfg.components)
-        _check(False, f"{source}: the components' n_elements add up to {n_dof // 6 - len(cfg.components)} elements "
-                      f"({n_dof} degrees of freedom, {FE_BYTES_PER_DOF2 * n_dof ** 2 / 2**30:.3g} GiB for the "
+        _check(False, f"{source}: the components' n_elements add up to {n_dof / 6 - len(cfg.components):.6g} elements "
+                      f"({n_dof:.6g} degrees of freedom, {FE_BYTES_PER_DOF2 * n_dof ** 2 / 2**30:.3g} GiB for the "
                       f"eigenproblem, {budget / 2**30:.3g} GiB may be used now); the largest accepted total here is "
                       f"{max(largest, 0)} elements")
     mass = _structure_mass_kg(cfg)
