@@ -35,7 +35,13 @@ JSONISH = st.recursive(st.none() | st.booleans() | NUMBER | st.text(max_size=6),
                        max_leaves=8)
 
 
-def _finite_test(test) -> None:
+def _import_checked(read, *args) -> None:
+    """``read(*args)`` gives a test holding only finite samples and a finite rate, or ImportDataError."""
+    try:
+        test = read(*args)
+    except ImportDataError as exc:
+        assert str(exc)
+        return
     assert math.isfinite(test.fs_hz) and test.fs_hz > 0
     for h in test.hits:
         assert np.all(np.isfinite(h)), "non-finite samples passed on"
@@ -52,12 +58,7 @@ def test_lvm_with_non_finite_and_extreme_values(values, dx):
     with tempfile.TemporaryDirectory() as tmp:
         p = Path(tmp) / "x.lvm"
         p.write_text(text)
-        try:
-            test = read_lvm(p)
-        except ImportDataError as exc:
-            assert str(exc)
-            return
-    _finite_test(test)
+        _import_checked(read_lvm, p)
 
 
 @FUZZ
@@ -68,12 +69,7 @@ def test_numpy_with_non_finite_values(values, fs):
     with tempfile.TemporaryDirectory() as tmp:
         p = Path(tmp) / "h.npy"
         np.save(p, arr)
-        try:
-            test = read_numpy([p], desc)
-        except ImportDataError as exc:
-            assert str(exc)
-            return
-    _finite_test(test)
+        _import_checked(read_numpy, [p], desc)
 
 
 # ---------------------------------------------------------------------- SEP005
@@ -102,12 +98,7 @@ def test_sep005_documents(doc, deep):
         else:
             for ch in channels:
                 assert np.all(np.isfinite(ch["data"])) and math.isfinite(ch["fs"]) and ch["fs"] > 0
-        try:
-            test = read_sep005_test(p)
-        except ImportDataError as exc:
-            assert str(exc)
-            return
-    _finite_test(test)
+        _import_checked(read_sep005_test, p)
 
 
 # ---------------------------------------------------------------------- fit JSON
