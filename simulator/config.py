@@ -501,10 +501,12 @@ def _validate_bounds(cfg: FrameConfig, source: str) -> None:
     _check(bad is None, f"{source}: {bad} is not a finite number; give a value in the units the key names")
     n_dof = 6.0 * sum(float(c.n_elements) + 1 for c in cfg.components.values())
     budget = memory_budget_bytes()
-    if FE_BYTES_PER_DOF2 * n_dof ** 2 > budget:
-        largest = int((budget / FE_BYTES_PER_DOF2) ** 0.5) // 6 - len(cfg.components)
+    max_dof = (budget / FE_BYTES_PER_DOF2) ** 0.5
+    if n_dof > max_dof:
+        largest = int(max_dof) // 6 - len(cfg.components)
+        gib = FE_BYTES_PER_DOF2 * n_dof * n_dof / 2**30  # inf, not an error, beyond float range
         _check(False, f"{source}: the components' n_elements add up to {n_dof / 6 - len(cfg.components):.6g} elements "
-                      f"({n_dof:.6g} degrees of freedom, {FE_BYTES_PER_DOF2 * n_dof ** 2 / 2**30:.3g} GiB for the "
+                      f"({n_dof:.6g} degrees of freedom, {gib:.3g} GiB for the "
                       f"eigenproblem, {budget / 2**30:.3g} GiB may be used now); the largest accepted total here is "
                       f"{max(largest, 0)} elements")
     mass = _structure_mass_kg(cfg)
