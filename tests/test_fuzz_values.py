@@ -187,11 +187,23 @@ def test_simulator_config_files(changes, junk):
 def station(tmp_path_factory):
     from station_support import StationProcess
 
+    import signal
+    import threading
+
     d = tmp_path_factory.mktemp("station_fuzz")
     s = StationProcess(["--device", "sim://?seed=9", "--out", str(d / "rec.h5"), "--points", "left:9:Y,top:4:X",
                         "--hits", "2"], cwd=d)
+    logged: dict[str, list[str]] = {"out": [], "err": []}
+    readers = [threading.Thread(target=lambda f=f, k=k: logged[k].extend(f), daemon=True)  # drain: one log line
+               for f, k in ((s.proc.stdout, "out"), (s.proc.stderr, "err"))]    # per bad request fills a pipe
+    for t in readers:
+        t.start()
     yield s
-    code, _, err = s.stop()
+    s.proc.send_signal(signal.SIGTERM)
+    s.proc.wait(timeout=120)
+    for t in readers:
+        t.join(timeout=30)
+    err = "".join(logged["err"])
     assert "Traceback" not in err, err[-3000:]
 
 
