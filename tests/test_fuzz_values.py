@@ -203,6 +203,9 @@ def station(tmp_path_factory):
     s.proc.wait(timeout=120)
     for t in readers:
         t.join(timeout=30)
+    for pipe in (s.proc.stdout, s.proc.stderr):
+        if pipe is not None:
+            pipe.close()
     err = "".join(logged["err"])
     assert "Traceback" not in err, err[-3000:]
 
