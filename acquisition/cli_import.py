@@ -49,6 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exp-window", default="none", metavar="TAU|PCT%|none",
                    help="exponential window on the responses: the time constant (e.g. 0.3s) or the value it "
                         "decays to at the block end (e.g. 5%%); default none")
+    p.add_argument("--drop-nonfinite", action="store_true",
+                   help="leave out hits holding NaN or infinite samples (counted) instead of refusing the file")
     add_overwrite(p, "replace an existing --out file")
     return p
 
@@ -58,19 +60,21 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     from .importers import ImportDataError, channel_roles, combine_imports, load_description, read_dataphysics_mat, \
         read_lvm, read_numpy, read_sep005_test, write_imported
+    from .importers import read_dropping_nonfinite as _read
+    drop = args.drop_nonfinite
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
         if fmt == "lvm":
-            tests = [read_lvm(f) for f in args.files]
+            tests = [_read(read_lvm, f, drop=drop) for f in args.files]
         elif fmt == "mat":
-            tests = [read_dataphysics_mat(f, windowed=args.windowed) for f in args.files]
+            tests = [_read(read_dataphysics_mat, f, windowed=args.windowed, drop=drop) for f in args.files]
         elif fmt in ("sep005", "json"):
-            tests = [read_sep005_test(f) for f in args.files]
+            tests = [_read(read_sep005_test, f, drop=drop) for f in args.files]
         elif fmt == "npy":
             if not args.describe:
                 raise UsageError("numpy input needs --describe DESC.json|toml naming the channels and sample rate")
-            tests = [read_numpy(args.files, load_description(args.describe))]
+            tests = [_read(read_numpy, args.files, load_description(args.describe), drop=drop)]
         else:
             raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json (or --format)")
         test = combine_imports(tests)
@@ -83,6 +87,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         averages = write_imported(test, args.out, windows=windows, roles=roles, overwrite=args.overwrite)
     for line in roles.describe():
         print(line)
+    dropped = sum(int(t.meta.get("dropped_nonfinite_hits", 0)) for t in tests)
+    if dropped:
+        print(f"left out {dropped} hit(s) holding non-finite samples")
     for a in averages:
         print(f"imported {a.n_averages} accepted hit(s): reference {a.reference}, outputs {', '.join(a.outputs)}")
     print(f"recording written: {args.out}")

@@ -19,7 +19,7 @@ __all__ = [
     "CommandFailed",
     "SetupError",
     "RecordingError",
-    "UsageError", "ImportDataError"]
+    "UsageError", "ImportDataError", "NonFiniteSamples"]
 
 
 class InvalidDeviceURL(ImpactlabError, ValueError):
@@ -67,3 +67,12 @@ class CommandFailed(ImpactlabError, OSError):
 
 class ImportDataError(ImpactlabError, ValueError):
     """Input data that cannot be imported; the message names the problem and the fix."""
+
+
+class NonFiniteSamples(ImportDataError):
+    """Time data holding NaN or infinite samples; ``test`` is what was read (the importer's
+    ``drop_nonfinite_hits`` can leave those hits out)."""
+
+    def __init__(self, message: str, test: object) -> None:
+        super().__init__(message)
+        self.test = test

@@ -39,10 +39,11 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
+from analysis.finite_checks import describe_nonfinite
 from analysis.points import parse_point, PointLabelError
 from analysis.spectra import WindowSettings
 
@@ -50,10 +51,13 @@ from .textdoc import read_document
 from .hitcheck import HitCheckSettings, check_hit
 from analysis.hit import Hit
 from analysis.recording_writer import RecordingWriter
-from .errors import ImportDataError
+from .errors import ImportDataError, NonFiniteSamples
 
 __all__ = [
     "ImportDataError",
+    "NonFiniteSamples",
+    "drop_nonfinite_hits",
+    "read_dropping_nonfinite",
     "ImportedTest",
     "read_lvm",
     "read_dataphysics_mat",
@@ -77,6 +81,10 @@ _UNIT_QUANTITY = {
     "m/s/s": ("acceleration", "m/s^2"), "m/s": ("velocity", "m/s"), "m": ("displacement", "m"),
     "v": ("voltage", "V"), "volt": ("voltage", "V"), "volts": ("voltage", "V"),
 }
+
+
+#: the highest sample rate accepted from a file (Hz); no impact-test analyser comes near it
+MAX_SAMPLE_RATE_HZ = 1e7
 
 
 @dataclass
@@ -146,6 +154,9 @@ def _checked(test: ImportedTest) -> ImportedTest:
     if not (isinstance(test.fs_hz, (int, float)) and math.isfinite(test.fs_hz) and test.fs_hz > 0):
         raise ImportDataError(f"{test.source}: the sample rate {test.fs_hz!r} Hz is not a positive number; check "
                               "the sample interval / rate in the file or the description")
+    if test.fs_hz > MAX_SAMPLE_RATE_HZ:
+        raise ImportDataError(f"{test.source}: the sample rate {test.fs_hz:.6g} Hz is above the largest accepted, "
+                              f"{MAX_SAMPLE_RATE_HZ:g} Hz; check the sample interval (Delta_X) or rate in the file")
     if not test.hits:
         raise ImportDataError(f"{test.source}: no hit (no time data) found")
     n_ch = len(test.channels)
@@ -153,7 +164,59 @@ def _checked(test: ImportedTest) -> ImportedTest:
         if h.ndim != 2 or h.shape[0] != n_ch or h.shape[1] < 2 or h.shape != test.hits[0].shape:
             raise ImportDataError(f"{test.source}: hit {k + 1} has shape {h.shape}; expected ({n_ch} channels, "
                                   f">= 2 samples), the same for every hit")
+    _require_finite_hits(test)
     return test
+
+
+def _nonfinite_hits(test: ImportedTest) -> list[tuple[int, int, str]]:
+    """(hit, channel, description of the first bad sample) of every hit holding a non-finite sample."""
+    out = []
+    for k, h in enumerate(test.hits):
+        for c in range(h.shape[0]):
+            what = describe_nonfinite(h[c])
+            if what is not None:
+                out.append((k, c, what))
+                break
+    return out
+
+
+def _require_finite_hits(test: ImportedTest) -> None:
+    """Raise :class:`NonFiniteSamples` naming the file, hit, channel and first sample of a NaN/inf."""
+    bad = _nonfinite_hits(test)
+    if bad:
+        k, c, what = bad[0]
+        name = test.channels[c].get("name", f"ch{c + 1}") if c < len(test.channels) else f"ch{c + 1}"
+        raise NonFiniteSamples(
+            f"{test.source}: hit {k + 1}, channel {c + 1} ({name}): {what}; {len(bad)} of {len(test.hits)} hit(s) "
+            "hold non-finite samples: fix the export, or import with --drop-nonfinite to leave those hits out", test)
+
+
+def drop_nonfinite_hits(test: ImportedTest) -> tuple[ImportedTest, int]:
+    """``test`` without the hits that hold a non-finite sample, and how many were dropped (a new
+    test; ``test`` is not changed). Raises :class:`ImportDataError` when no hit is left."""
+    bad = {k for k, _, _ in _nonfinite_hits(test)}
+    keep = [k for k in range(len(test.hits)) if k not in bad]
+    if not keep:
+        raise ImportDataError(f"{test.source}: every hit ({len(test.hits)}) holds non-finite samples; nothing to import")
+    triggers = [test.trigger_indices[k] for k in keep] if len(test.trigger_indices) == len(test.hits) else []
+    meta = {**test.meta, "dropped_nonfinite_hits": len(bad)}
+    return ImportedTest(test.fs_hz, test.channels, [test.hits[k] for k in keep], triggers, test.source, meta), len(bad)
+
+
+def read_dropping_nonfinite(read: "Callable[..., ImportedTest]", *args: Any, drop: bool = False,
+                            **kwargs: Any) -> ImportedTest:
+    """``read(*args, **kwargs)``; with ``drop``, hits holding non-finite samples are left out (and
+    counted in ``meta["dropped_nonfinite_hits"]``) instead of failing the import."""
+    try:
+        return read(*args, **kwargs)
+    except NonFiniteSamples as exc:
+        if not drop:
+            raise
+        if not isinstance(exc.test, ImportedTest):
+            raise
+        test, n = drop_nonfinite_hits(exc.test)
+        log.warning("%s: left out %d hit(s) holding non-finite samples", test.source, n)
+        return test
 
 
 def read_lvm(path: "str | Path") -> ImportedTest:
@@ -353,7 +416,9 @@ def _read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTes
     hits = []
     for path in paths:
         try:
-            a = np.load(str(path), allow_pickle=False)
+            a = _load_npy(Path(path))
+        except ImportDataError:
+            raise
         except (OSError, ValueError, EOFError) as exc:
             raise ImportDataError(f"cannot read {path} as a numpy array ({type(exc).__name__}: {exc})") from None
         if not isinstance(a, np.ndarray) or a.dtype.kind not in "biuf":
@@ -389,6 +454,24 @@ def _read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTes
     return ImportedTest(float(fs), channels, hits, [], ", ".join(str(p) for p in paths), {"format": "numpy"})
 
 
+def _load_npy(path: Path) -> np.ndarray:
+    """``np.load`` after checking that the array the header claims fits in the file (a damaged or
+    hostile header can claim terabytes); raises ImportDataError naming both sizes."""
+    with path.open("rb") as fh:
+        try:
+            version = np.lib.format.read_magic(fh)
+            shape, _, dtype = (np.lib.format.read_array_header_1_0(fh) if version == (1, 0)
+                               else np.lib.format.read_array_header_2_0(fh))
+        except (ValueError, EOFError, SyntaxError):
+            return np.load(str(path), allow_pickle=False)  # let numpy name the problem
+        claimed = float(np.prod(shape, dtype=float)) * dtype.itemsize
+        available = path.stat().st_size - fh.tell()
+    if claimed > available:
+        raise ImportDataError(f"{path}: the header claims an array of shape {shape} ({claimed:.3g} bytes) but the "
+                              f"file holds {available} bytes of data; the file is damaged or cut short")
+    return np.load(str(path), allow_pickle=False)
+
+
 def quantize(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """int16 counts and EU per count per channel for ``data[n_ch, n]`` (full scale = max |x|)."""
     d = np.asarray(data, float)
@@ -408,7 +491,18 @@ def read_sep005_test(path: "str | Path") -> ImportedTest:
     """An SEP005 JSON file (:mod:`analysis.sep005`) as a test: each ``group`` of channels is one hit
     (no groups: the whole file is one hit); channel quantities from the SEP005 codes ('f' force,
     'a' acceleration, ...), points from the ``point`` key (else the channel name), trigger samples
-    from ``trigger_index`` when every channel of a hit has it (else found on the force)."""
+    from ``trigger_index`` when every channel of a hit has it (else found on the force).
+    Raises :class:`ImportDataError` for anything else."""
+    try:
+        return _checked(_read_sep005_test(path))
+    except ImportDataError:
+        raise
+    except _MALFORMED as exc:
+        raise ImportDataError(f"{path} is not an SEP005 test impactlab can import ({type(exc).__name__}: {exc}); "
+                              "check the groups, fs and trigger_index of its channels") from None
+
+
+def _read_sep005_test(path: "str | Path") -> ImportedTest:
     from analysis.sep005 import QUANTITY_CODES, SEP005Error, read_sep005
 
     try:

@@ -42,6 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="a running Dask scheduler: tcp://HOST:PORT, or the file of 'dask scheduler --scheduler-file'")
     where.add_argument("--workers", type=int, metavar="N", help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--dashboard", nargs="?", const="127.0.0.1:8787", metavar="HOST:PORT",
+                   help="serve Dask's dashboard for the local cluster (default address 127.0.0.1:8787); off unless given")
     p.add_argument("--reference", metavar="FIT.json",
                    help="pair modes to this fit ('analysis fit --json' of a good unit); default: the fleet's median unit")
     p.add_argument("--band", metavar="LO:HI", help="fit band in Hz for every input (default: each input's own, from its data)")
@@ -54,16 +56,37 @@ def build_parser() -> argparse.ArgumentParser:
     return with_examples(p)
 
 
-def expand_inputs(items: Sequence[str]) -> list[Path]:
+def _not_regular(path: Path) -> Optional[str]:
+    """Why a glob match is not an input file (a folder, a dangling or looping link...), or None."""
+    try:
+        st = path.stat()
+    except OSError as exc:
+        if path.is_symlink():
+            return "a symbolic link that loops" if getattr(exc, "errno", None) == 40 else "a dangling symbolic link"
+        return exc.strerror or "unreadable"
+    if path.is_dir():
+        return "a folder"
+    import stat as _stat
+
+    return None if _stat.S_ISREG(st.st_mode) else "not a regular file"
+
+
+def expand_inputs(items: Sequence[str], skipped: Optional[list[str]] = None) -> list[Path]:
     """Paths of the inputs: each item a file or a glob pattern; a pattern that matches nothing and a
-    missing file are errors that name them."""
+    missing file are errors that name them. Glob matches that are not regular files are left out,
+    each named with the reason in ``skipped``."""
     out: list[Path] = []
     for item in items:
         if any(ch in item for ch in "*?["):
             found = sorted(glob.glob(item))
             if not found:
                 raise InputError(f"no input matches {item!r}: check the pattern")
-            out.extend(Path(f) for f in found if Path(f).is_file())
+            for f in found:
+                why = _not_regular(Path(f))
+                if why is None:
+                    out.append(Path(f))
+                elif skipped is not None:
+                    skipped.append(f"{f} ({why})")
         elif Path(item).is_dir():
             raise InputError(f"{item} is a folder: give its files, e.g. '{item}/*.h5'")
         elif not Path(item).exists():
@@ -95,19 +118,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
-    from .batch.unit_modes import modes_from_fit, read_reference
+    from .batch.unit_modes import read_reference
 
+    skipped: list[str] = []
     with errors_to_exit("analysis batch", InputError):
-        paths = expand_inputs(args.inputs)
+        paths = expand_inputs(args.inputs, skipped)
+        if skipped:
+            print(f"analysis batch: skipped {len(skipped)} match(es) that are not regular files: "
+                  f"{', '.join(skipped[:10])}{' ...' if len(skipped) > 10 else ''}", file=sys.stderr)
         band = parse_band_text(args.band) if args.band else None
         reference = read_reference(args.reference) if args.reference else None
         if args.workers is not None and args.workers < 1:
             raise InputError("--workers must be at least 1")
-    from .batch.fleet import assess_fleet
-    from .atomic import write_json_atomic
-    from .batch.outputs import fleet_document, modes_rows, plot_fleet, write_modes_parquet
-    from .batch.run import open_client, plan_inputs, run_batch
-
     # Dask's own log lines (worker start and stop) only with -v; workers inherit the setting
     os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "info" if args.verbose else "error")
     if args.threads is not None:  # the local cluster's worker processes inherit it
@@ -115,15 +137,34 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     out = Path(args.out)
     with errors_to_exit("analysis batch", OSError, prefix="cannot create the output folder: "):
         out.mkdir(parents=True, exist_ok=True)
+    from .batch.out_lock import FolderLock
+
+    with errors_to_exit("analysis batch", OSError, code=1):
+        lock = FolderLock(out)
+    try:
+        return _run(args, paths, skipped, out, band, reference)
+    finally:
+        lock.release()
+
+
+def _run(args: argparse.Namespace, paths: list[Path], skipped: list[str], out: Path, band: Any, reference: Any) -> int:
+    from .batch.fleet import assess_fleet
+    from .atomic import write_json_atomic
+    from .batch.outputs import fleet_document, modes_rows, plot_fleet, write_modes_parquet
+    from .batch.run import open_client, plan_inputs, run_batch
+    from .batch.unit_modes import modes_from_fit
+
     inputs = plan_inputs(paths)
     t0 = time.perf_counter()
     unreachable = "cannot reach the Dask scheduler (check the address, and that 'dask scheduler' runs there): "
     with exit_on("analysis batch", (ImportError, 2), (OSError, 1, unreachable)):
-        client = open_client(args.scheduler, args.workers)
+        client = open_client(args.scheduler, args.workers, dashboard=args.dashboard)
     try:
         if not args.quiet:
             n = len(client.scheduler_info().get("workers", {}))
             print(f"... {len(inputs)} inputs on {n} Dask worker(s) at {client.scheduler.address}", file=sys.stderr)
+            if args.dashboard:
+                print(f"... Dask dashboard: {client.dashboard_link}", file=sys.stderr)
         run = run_batch(inputs, out, client, band=band, estimator=args.estimator, on_result=_progress(args.quiet, t0))
     finally:
         cluster = getattr(client, "cluster", None)
@@ -151,7 +192,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for u in fleet.units:
         if u.flagged:
             print(f"flagged {u.name}: " + "; ".join(u.reasons[:3]) + (" ..." if len(u.reasons) > 3 else ""))
-    print(f"batch of {len(inputs)}: {len(inputs) - run.failed} done ({run.fitted} fitted, {run.reused} reused), "
+    print(f"batch of {len(inputs)}{f' ({len(skipped)} non-file matches skipped)' if skipped else ''}: "
+          f"{len(inputs) - run.failed} done ({run.fitted} fitted, {run.reused} reused), "
           f"{run.failed} failed, {info['flagged']} flagged; {wall:.1f} s on {run.workers} worker(s) "
           f"(fits {run.fit_seconds:.1f} s of work); results in {out}/ (fits/, modes.parquet, fleet.json, fleet.png)")
     if run.lost:

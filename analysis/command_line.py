@@ -214,9 +214,29 @@ def errors_to_exit(prog: str, errors: "type[BaseException] | tuple[type[BaseExce
     return exit_on(prog, (errors, code, prefix))
 
 
+def _last_resort(prog: str, exc: BaseException) -> int:
+    """One line and the documented exit code for what no command rule caught: Ctrl-C 130; running
+    out of memory, a file system error (disk full, permission) 1; input nested too deeply 2."""
+    if isinstance(exc, KeyboardInterrupt):
+        print(f"{prog}: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130
+    if isinstance(exc, MemoryError):
+        print(f"{prog}: out of memory ({exc or 'allocation failed'}); ask for less work (a smaller order, band or "
+              "model) or free memory", file=sys.stderr)
+        return 1
+    if isinstance(exc, RecursionError):
+        print(f"{prog}: an input is nested too deeply to be read ({exc}); check the files given", file=sys.stderr)
+        return 2
+    assert isinstance(exc, OSError)
+    where = f": {exc.filename}" if getattr(exc, "filename", None) else ""
+    print(f"{prog}: {exc.strerror or exc}{where}; check the disk space, permissions and paths", file=sys.stderr)
+    return 1
+
+
 def cli_entry(main: F) -> F:
     """Decorate a ``main(argv) -> int``: a :class:`CliExit` returns its code; a closed stdout pipe
-    (``| head``) ends quietly with exit code 0 as the reader wanted no more."""
+    (``| head``) ends quietly with exit code 0 as the reader wanted no more; Ctrl-C, running out
+    of memory and file system errors no rule caught end with one line (:func:`_last_resort`)."""
 
     @functools.wraps(main)
     def run(*args: object, **kwargs: object) -> int:
@@ -227,12 +247,26 @@ def cli_entry(main: F) -> F:
                 return main(*args, **kwargs)
         except CliExit as done:
             return done.code
-        except BrokenPipeError:
-            try:  # no flush of the rest at exit into the closed pipe
-                devnull = os.open(os.devnull, os.O_WRONLY)
-                os.dup2(devnull, sys.stdout.fileno())
-            except (OSError, ValueError):
-                pass
-            return 0
+        except (KeyboardInterrupt, MemoryError, RecursionError) as exc:
+            return _last_resort(_prog_of(main), exc)
+        except OSError as exc:
+            if isinstance(exc, BrokenPipeError):
+                return _quiet_broken_pipe()
+            return _last_resort(_prog_of(main), exc)
 
     return run  # type: ignore[return-value]
+
+
+def _prog_of(main: Callable[..., int]) -> str:
+    """``python -m analysis fit`` style name of a command from its module (``analysis.cli_fit``)."""
+    package, _, module = getattr(main, "__module__", "impactlab").partition(".")
+    return f"{package} {module.removeprefix('cli_')}".strip()
+
+
+def _quiet_broken_pipe() -> int:
+    try:  # no flush of the rest at exit into the closed pipe
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return 0

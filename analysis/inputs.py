@@ -30,8 +30,11 @@ def detect_format(path: "str | Path") -> str:
         raise InputError(f"input file {p} not found: check the path")
     if not p.is_file():
         raise InputError(f"input {p} is not a file: give a recording (.h5) or a UFF 58 file (.uff)")
-    with p.open("rb") as fh:
-        head = fh.read(512)
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(512)
+    except OSError as exc:
+        raise InputError(f"cannot read {p}: {exc.strerror or exc}; check its permissions") from None
     if head.startswith(_HDF5_MAGIC) or p.suffix.lower() in _H5_SUFFIXES:
         return "recording"
     if p.suffix.lower() in _UFF_SUFFIXES or head.lstrip().startswith(b"-1"):

@@ -47,6 +47,7 @@ import numpy as np
 
 from .frf import FRFSet
 from .threads import limits_blas_threads
+from .work_limits import check_model_order
 
 __all__ = ["lscf_poles", "lscf_poles_all_orders", "band_data", "parse_band", "prepare_band", "BandData"]
 
@@ -170,6 +171,7 @@ def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *, band=None) ->
     P = 2 * int(max_modes)
     bd = frf if isinstance(frf, BandData) else prepare_band(frf, band)
     f, H = bd.freq_hz, bd.H
+    check_model_order(int(max_modes), f.size, H.shape[0])  # before allocating (2n+1)^3 arrays
     ts = 1.0 / (2.0 * float(f[-1]))
     r, s, t = _toeplitz_sums(f, H, ts, P)
     idx = _toeplitz_index(P)

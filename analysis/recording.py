@@ -12,6 +12,7 @@ the session and a replay compute FRFs from bit-identical inputs.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 from pathlib import Path
@@ -26,6 +27,7 @@ from analysis.errors import RecordingError
 
 from analysis.hit import Hit
 
+from .recording_lock import is_lock_error, live_copy, locked_by_writer, locked_error
 from .recording_schema import (CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _DAMAGE, _as_str, _h5py, counts_crc32,
                                scale_counts)
 
@@ -47,7 +49,12 @@ log = logging.getLogger(__name__)
 
 
 class Recording:
-    """Read-only view of a recording; validates the schema on open. Use as a context manager."""
+    """Read-only view of a recording; validates the schema on open. Use as a context manager.
+
+    A recording an impactlab writer has open is read live: the reader sees every hit flushed
+    before it opened (``live`` is True; ``analysis.recording_lock``)."""
+
+    live = False
 
     def __init__(self, path: "str | Path") -> None:
         h5py = _h5py()
@@ -63,23 +70,46 @@ class Recording:
                 f"{self.path} is not an HDF5 file: give an impactlab recording (.h5) written by "
                 "'python -m acquisition capture' or 'python -m acquisition import'"
             )
-        self._file_bytes = self.path.stat().st_size
+        self._live_copy: Optional[Path] = None
         try:
             self._f = h5py.File(self.path, "r")
         except OSError as exc:
-            raise RecordingError(
-                f"{self.path} is damaged or truncated and cannot be opened ({exc}); "
-                "use a backup or re-run the test"
-            ) from None
+            if not is_lock_error(exc):
+                raise self._unopenable(exc) from None
+            self._f = self._open_live()
+        self._file_bytes = Path(self._f.filename).stat().st_size
         try:
             self._validate()
         except RecordingError:
-            self._f.close()
+            self.close()
             raise
         except _DAMAGE as exc:
-            self._f.close()
+            self.close()
             raise RecordingError(f"{self.path} is damaged ({type(exc).__name__}: {exc}); "
                                  "use a backup or re-run the test") from None
+
+    def _open_live(self) -> Any:
+        """Open a consistent copy of a recording a writer has open (``analysis.recording_lock``)."""
+        if not locked_by_writer(self.path):
+            raise locked_error(self.path)
+        try:
+            self._live_copy = live_copy(self.path)
+        except RecordingError:
+            raise
+        except OSError as exc:
+            raise RecordingError(f"cannot copy {self.path}, which is being written, to read it live: "
+                                 f"{exc}; free space in the temporary folder or wait for the writer to finish") from None
+        self.live = True
+        log.info("%s is being written: reading the hits flushed so far", self.path)
+        try:
+            return _h5py().File(self._live_copy, "r")
+        except OSError as exc:
+            self._remove_live_copy()
+            raise self._unopenable(exc) from None
+
+    def _unopenable(self, exc: OSError) -> RecordingError:
+        return RecordingError(f"{self.path} is damaged or truncated and cannot be opened ({exc}); "
+                              "use a backup or re-run the test")
 
     def _validate(self) -> None:
         a = self._f.attrs
@@ -292,6 +322,13 @@ class Recording:
     def close(self) -> None:
         if self._f.id.valid:
             self._f.close()
+        self._remove_live_copy()
+
+    def _remove_live_copy(self) -> None:
+        if self._live_copy is not None:
+            with contextlib.suppress(OSError):
+                self._live_copy.unlink()
+            self._live_copy = None
 
     def __enter__(self) -> "Recording":
         return self

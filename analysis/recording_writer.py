@@ -17,6 +17,7 @@ from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.spectra import AveragedSpectra, WindowSettings
 
+from .recording_lock import WriterLock, is_lock_error, locked, locked_error
 from .recording_schema import (SCHEMA, SCHEMA_VERSION, _DAMAGE, _as_str, _channel_table, _h5py,
                                _now_iso, counts_crc32)
 
@@ -60,14 +61,27 @@ class RecordingWriter:
         software: str = "impactlab",
         overwrite: bool = False,
     ) -> None:
-        h5py = _h5py()
         self.path = Path(path)
         if self.path.exists() and not overwrite:
             raise RecordingError(f"{self.path} exists: choose another --out file or delete it first")
+        self._lock = WriterLock(self.path)
+        with self._lock.changing():
+            self._open_locked("w", lambda exc: RecordingError(f"cannot create recording {self.path}: {exc}"))
+            self._create(instrument, setup, channels, windows, plan, software)
+
+    def _open_locked(self, mode: str, failed: Any) -> None:
+        """Open the HDF5 file for writing holding the lock readers follow (``analysis.recording_lock``)."""
+        h5py = _h5py()
         try:
-            self._f = h5py.File(self.path, "w")
+            self._f = h5py.File(self.path, mode)
         except OSError as exc:
-            raise RecordingError(f"cannot create recording {self.path}: {exc}") from None
+            self._lock.release()
+            raise (locked_error(self.path) if is_lock_error(exc) else failed(exc)) from None
+        self._lock.claim()
+
+    def _create(self, instrument: dict, setup: dict, channels: Sequence[dict], windows: WindowSettings,
+                plan: Optional[dict], software: str) -> None:
+        h5py = _h5py()
         f = self._f
         f.attrs["schema"] = SCHEMA
         f.attrs["schema_version"] = SCHEMA_VERSION
@@ -102,15 +116,18 @@ class RecordingWriter:
         recording this version writes or cannot be opened for writing."""
         from .recording import verify_recording   # the reader's check (the reader imports this module)
 
-        h5py = _h5py()
         verify_recording(path)  # in a child process: damage (even a libhdf5 crash) becomes RecordingError
         self = cls.__new__(cls)
         self.path = Path(path)
-        try:
-            self._f = h5py.File(self.path, "r+")
-        except OSError as exc:
-            raise RecordingError(f"cannot open {self.path} for appending ({exc}); copy it and resume the copy, or "
-                                 "start a new recording") from None
+        self._lock = WriterLock(self.path)
+        with self._lock.changing():
+            self._open_locked("r+", lambda exc: RecordingError(
+                f"cannot open {self.path} for appending ({exc}); copy it and resume the copy, or start a new "
+                "recording"))
+            self._drop_cut_hits()
+        return self
+
+    def _drop_cut_hits(self) -> None:
         try:
             hits = self._f["hits"]
             last = -1
@@ -126,14 +143,15 @@ class RecordingWriter:
             self._f.flush()
         except _DAMAGE as exc:
             self._f.close()
+            self._lock.release()
             raise RecordingError(f"{self.path} is damaged and cannot be resumed ({type(exc).__name__}: {exc})") from None
-        return self
 
     # -- writing -------------------------------------------------------------------------------
     @property
     def n_hits(self) -> int:
         return self._n_hits
 
+    @locked
     def log(self, level: str, message: str) -> None:
         """Append an event (time, level, message) and flush."""
         ev = self._f["events"]
@@ -143,6 +161,7 @@ class RecordingWriter:
             ev[name][n] = value
         self._f.flush()
 
+    @locked
     def write_hit(self, hit: Hit) -> int:
         """Write one :class:`~analysis.hit.Hit` (its counts, scaling, roles, place and verdict) and
         flush; returns its index in the recording."""
@@ -173,6 +192,7 @@ class RecordingWriter:
         self._f.flush()
         return idx
 
+    @locked
     def withdraw_hit(self, index: int, reason: str) -> None:
         """Mark an accepted hit as not accepted after all (an operator's undo), adding ``reason``; flush."""
         name = f"{int(index):06d}"
@@ -183,6 +203,7 @@ class RecordingWriter:
         a["reasons"] = json.dumps(json.loads(_as_str(a["reasons"])) + [str(reason)])
         self._f.flush()
 
+    @locked
     def write_frf(self, point: FRFPoint, frfset: FRFSet, spectra: AveragedSpectra) -> None:
         """Write (or replace) the FRF results of one measurement point and flush.
 
@@ -218,6 +239,7 @@ class RecordingWriter:
             a[key] = float("nan") if value is None else float(value)
         self._f.flush()
 
+    @locked
     def set_attr(self, key: str, value: Any) -> None:
         """Set a root attribute (str, number or bool) and flush."""
         self._f.attrs[str(key)] = value
@@ -225,8 +247,10 @@ class RecordingWriter:
 
     def close(self) -> None:
         if self._f.id.valid:
-            self._f.attrs["closed_utc"] = _now_iso()
-            self._f.close()
+            with self._lock.changing():
+                self._f.attrs["closed_utc"] = _now_iso()
+                self._f.close()
+        self._lock.release()
 
     def __enter__(self) -> "RecordingWriter":
         return self

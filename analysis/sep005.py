@@ -20,6 +20,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .errors import SEP005Error
+from .finite_checks import describe_nonfinite
 
 __all__ = ["SEP005Error", "QUANTITY_CODES", "check_sep005", "read_sep005", "write_sep005"]
 
@@ -47,16 +48,25 @@ def check_sep005(channels: Any, source: str = "SEP005 data") -> list[dict]:
             data = np.asarray(ch["data"], dtype=float)
         except (TypeError, ValueError):
             raise SEP005Error(f"{where} ({ch['name']}): data must be numbers") from None
-        if data.ndim != 1 or data.size < 2 or not np.all(np.isfinite(data)):
+        if data.ndim != 1 or data.size < 2:
             raise SEP005Error(f"{where} ({ch['name']}): data must be a 1-D list of at least 2 finite numbers")
+        bad = describe_nonfinite(data)
+        if bad is not None:
+            raise SEP005Error(f"{where} ({ch['name']}): {bad}; measured samples must be finite numbers: fix the file")
         fs = ch.get("fs")
         if fs is None:
             t = ch.get("time")
             if t is None:
                 raise SEP005Error(f"{where} ({ch['name']}): give fs (Hz) or time (s) to place the samples in time")
-            t = np.asarray(t, dtype=float)
+            try:
+                t = np.asarray(t, dtype=float)
+            except (TypeError, ValueError):
+                raise SEP005Error(f"{where} ({ch['name']}): time must be a list of numbers (s)") from None
             if t.shape != data.shape:
                 raise SEP005Error(f"{where} ({ch['name']}): time has {t.size} values for {data.size} samples")
+            bad_t = describe_nonfinite(t)
+            if bad_t is not None:
+                raise SEP005Error(f"{where} ({ch['name']}): time {bad_t}; times must be finite numbers of seconds")
             step = np.diff(t)
             if np.any(step <= 0) or np.ptp(step) > 1e-6 * float(np.mean(step)):
                 raise SEP005Error(f"{where} ({ch['name']}): time must be uniformly increasing (impact data are sampled)")
@@ -89,8 +99,10 @@ def read_sep005(path: "str | Path") -> list[dict]:
         raise SEP005Error(f"{p} not found: check the path")
     try:
         doc = json.loads(p.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SEP005Error(f"{p} is not a JSON SEP005 file ({exc})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise SEP005Error(f"{p} is not a JSON SEP005 file ({type(exc).__name__}: {exc})") from None
+    except OSError as exc:
+        raise SEP005Error(f"cannot read {p}: {exc.strerror or exc}") from None
     if isinstance(doc, dict) and "channels" in doc:
         doc = doc["channels"]
     return check_sep005(doc, str(p))

@@ -30,6 +30,7 @@ import numpy as np
 from .frf import FRFSet
 from .points import parse_point, point_from_uff, uff_direction, uff_node
 from .errors import UFFError
+from .finite_checks import describe_nonfinite
 
 __all__ = ["write_uff58", "time_records", "read_uff58", "write_uff55", "read_uff55", "UFFError"]
 
@@ -166,13 +167,49 @@ def read_uff58(path: "str | Path") -> FRFSet:
     order of first appearance; missing combinations are NaN. All FRFs must share the frequency axis.
     """
     sets = [s for s in _read_sets(path) if isinstance(s, dict) and s.get("type") == 58]
+    if sets:
+        _require_complete_file(path)
     try:
+        for s in sets:
+            _check_record(path, s)
         return _frfset_from_sets(path, sets)
     except UFFError:
         raise
     except (KeyError, IndexError, ValueError, TypeError, OverflowError, AttributeError) as exc:
         raise UFFError(f"{path}: a dataset 58 record is damaged or incomplete ({type(exc).__name__}: {exc}); "
                        "export the file again") from None
+
+
+def _require_complete_file(path: "str | Path") -> None:
+    """Refuse a file cut short: every UFF dataset ends with the delimiter ``-1``, so the file must
+    (the reader library silently leaves out a dataset cut short)."""
+    p = Path(path)
+    try:
+        size = p.stat().st_size
+        with p.open("rb") as fh:
+            fh.seek(max(0, size - 256))
+            tail = fh.read()
+    except OSError as exc:
+        raise UFFError(f"cannot read {p}: {exc.strerror or exc}") from None
+    end = tail.rstrip()
+    if size and not (end.endswith(b"-1") and (len(end) == 2 or end[-3:-2].isspace())):
+        raise UFFError(f"{p} ends inside a dataset (its last line is not the closing '-1'): the file was cut short; "
+                       "copy or export it again")
+
+
+def _check_record(path: "str | Path", s: dict) -> None:
+    """A dataset-58 record's declared point count, abscissa and values are consistent and finite."""
+    where = (f"{path}: dataset 58 response {s.get('rsp_node')}:{s.get('rsp_dir')} reference "
+             f"{s.get('ref_node')}:{s.get('ref_dir')} (function type {s.get('func_type')})")
+    data = np.asarray(s.get("data", []))
+    n = int(s.get("num_pts", -1))
+    if n != data.size or n < 1:
+        raise UFFError(f"{where}: its header claims {n} points but it holds {data.size}; the file is damaged, "
+                       "export it again")
+    for key, values in (("abscissa", s.get("x", [])), ("values", data)):
+        what = describe_nonfinite(np.asarray(values, dtype=complex if key == "values" else float))
+        if what is not None:
+            raise UFFError(f"{where}: {key} {what}; measured values must be finite: fix or re-export the file")
 
 
 def _frfset_from_sets(path: "str | Path", sets: list) -> FRFSet:

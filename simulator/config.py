@@ -409,6 +409,8 @@ def _read_toml(path: Path) -> dict:
         raise ConfigError(f"config file {path} cannot be read ({exc.strerror})") from None
     except _toml.TOMLDecodeError as exc:
         raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ConfigError(f"config file {path} is nested too deeply to be a frame configuration") from None
 
 
 _DEFAULTS_CACHE: dict | None = None
@@ -470,7 +472,7 @@ def _coerce(cls: type, d: Mapping[str, Any], where: str) -> Any:
                 if not isinstance(v, (list, tuple)):
                     raise TypeError
                 v = tuple(tuple(x) if isinstance(x, list) else x for x in v)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ConfigError(f"'{where}.{f.name}' = {v!r} must be of type {t}") from None
         kwargs[f.name] = v
     return cls(**kwargs)
@@ -516,7 +518,58 @@ def _build(d: dict, source: str) -> FrameConfig:
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None
     _validate(cfg, source)
+    _validate_bounds(cfg, source)
     return cfg
+
+
+def _first_nonfinite_key(d: Any, prefix: str = "") -> "str | None":
+    """The dotted key of the first NaN or infinite number in a parsed TOML document, or None."""
+    items = d.items() if isinstance(d, Mapping) else enumerate(d) if isinstance(d, (list, tuple)) else ()
+    for k, v in items:
+        key = f"{prefix}.{k}" if prefix and isinstance(k, str) else f"{prefix}[{k}]" if prefix else str(k)
+        if isinstance(v, float) and not np.isfinite(v):
+            return key
+        found = _first_nonfinite_key(v, key) if isinstance(v, (Mapping, list, tuple)) else None
+        if found:
+            return found
+    return None
+
+
+#: bytes per squared degree of freedom of the dense eigenproblem (K, M, shapes and the solver's copies)
+FE_BYTES_PER_DOF2 = 5 * 8
+
+
+def _structure_mass_kg(cfg: FrameConfig) -> float:
+    total = 0.0
+    for c in cfg.components.values():
+        s = cfg.sections[c.section]
+        area = (s.area_m2 if s.shape == "explicit" else s.width_m * s.depth_m if s.shape == "rect"
+                else s.width_m * s.depth_m - (s.width_m - 2 * s.wall_m) * (s.depth_m - 2 * s.wall_m))
+        total += cfg.material.density_kg_m3 * area * float(np.linalg.norm(np.subtract(c.end_m, c.start_m)))
+    return total
+
+
+def _validate_bounds(cfg: FrameConfig, source: str) -> None:
+    """Finite numbers everywhere, an FE model whose eigenproblem fits in memory, a sensor lighter
+    than the structure (checked before anything is built)."""
+    from analysis.work_limits import memory_budget_bytes
+
+    bad = _first_nonfinite_key(cfg.raw)
+    _check(bad is None, f"{source}: {bad} is not a finite number; give a value in the units the key names")
+    n_dof = 6.0 * sum(float(c.n_elements) + 1 for c in cfg.components.values())
+    budget = memory_budget_bytes()
+    max_dof = (budget / FE_BYTES_PER_DOF2) ** 0.5
+    if n_dof > max_dof:
+        largest = int(max_dof) // 6 - len(cfg.components)
+        gib = FE_BYTES_PER_DOF2 * n_dof * n_dof / 2**30  # inf, not an error, beyond float range
+        _check(False, f"{source}: the components' n_elements add up to {n_dof / 6 - len(cfg.components):.6g} elements "
+                      f"({n_dof:.6g} degrees of freedom, {gib:.3g} GiB for the "
+                      f"eigenproblem, {budget / 2**30:.3g} GiB may be used now); the largest accepted total here is "
+                      f"{max(largest, 0)} elements")
+    mass = _structure_mass_kg(cfg)
+    _check(cfg.sensors.accelerometer.mass_kg < mass,
+           f"{source}: sensors.accelerometer.mass_kg = {cfg.sensors.accelerometer.mass_kg:g} kg is not below the "
+           f"structure's mass ({mass:.4g} kg); give the accelerometer's mass in kg")
 
 
 def _validate(cfg: FrameConfig, source: str) -> None:

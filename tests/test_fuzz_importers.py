@@ -31,6 +31,7 @@ def _check(test) -> None:
     assert test.hits, "an import with no hit"
     for h in test.hits:
         assert h.ndim == 2 and h.shape[0] == len(test.channels) and h.shape == test.hits[0].shape
+        assert np.all(np.isfinite(h)), "non-finite samples passed on"
 
 
 def _valid_lvm(decimal: str = ",", n: int = 6) -> str:

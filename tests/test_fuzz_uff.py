@@ -53,6 +53,9 @@ def _read(raw: bytes) -> None:
             assert str(exc)
             return
     assert isinstance(frf, FRFSet) and frf.H.shape[2] == frf.freq_hz.size
+    assert np.all(np.isfinite(frf.freq_hz))
+    measured = ~np.all(np.isnan(frf.H), axis=2)  # combinations the file does not hold are all-NaN markers
+    assert np.all(np.isfinite(frf.H[measured])), "non-finite FRF values passed on"
 
 
 def test_bases_read_back():

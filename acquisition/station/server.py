@@ -22,6 +22,8 @@ import hmac
 import json
 import logging
 import secrets
+import socket
+import sys
 import threading
 from collections.abc import Callable
 from http.cookies import CookieError, SimpleCookie
@@ -44,6 +46,15 @@ _TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=
 _COOKIE = "impactlab_station"
 #: seconds between keep-alive comments on an idle event stream
 SSE_KEEPALIVE_S = 10.0
+#: connections the listening socket queues while the handler threads accept (the standard library's 5
+#: reset clients when a few tabs and scripts connect at once)
+LISTEN_BACKLOG = 128
+#: what a malformed request body makes the engine's checks raise beyond their own errors (answered 422)
+_BAD_VALUES = (TypeError, ValueError, KeyError, AttributeError, OverflowError, IndexError, RecursionError)
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number; give a finite number")
 
 
 def new_token() -> str:
@@ -55,6 +66,7 @@ class StationServer(ThreadingHTTPServer):
 
     daemon_threads = True
     allow_reuse_address = True
+    request_queue_size = LISTEN_BACKLOG
 
     def __init__(self, address: tuple, engine: StationEngine, token: str,
                  plotly_js: Optional[Callable[[], Path]] = None) -> None:
@@ -62,7 +74,19 @@ class StationServer(ThreadingHTTPServer):
         self.token = token
         self.plotly_js = plotly_js
         self.closing = threading.Event()
+        if ":" in str(address[0]):  # an IPv6 address such as ::1
+            self.address_family = socket.AF_INET6
         super().__init__(address, _Handler)
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """One log line, never a traceback: a client that resets or drops its connection is routine;
+        anything else is logged with its type and message."""
+        exc = sys.exc_info()[1]
+        who = client_address[0] if isinstance(client_address, tuple) and client_address else client_address
+        if isinstance(exc, (ConnectionError, TimeoutError)):
+            log.info("client %s dropped the connection (%s)", who, type(exc).__name__)
+        else:
+            log.warning("request from %s failed: %s: %s", who, type(exc).__name__, exc)
 
     @property
     def url(self) -> str:
@@ -102,6 +126,9 @@ class _Handler(BaseHTTPRequestHandler):
         self._send(status, json.dumps(obj, allow_nan=False).encode())
 
     def _error(self, status: int, message: str) -> None:
+        level = logging.INFO if status in (403, 409) else logging.WARNING
+        log.log(level, "%s %s from %s -> %d %s", self.command, urlsplit(self.path).path[:80],
+                self.client_address[0] if self.client_address else "?", status, message[:200])
         self._json(status, {"error": message})
 
     def _authorised(self, query: dict, cookie_ok: bool = False) -> bool:
@@ -134,9 +161,12 @@ class _Handler(BaseHTTPRequestHandler):
             return None
         raw = self.rfile.read(n) if n > 0 else b""
         try:
-            data = json.loads(raw.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            data = json.loads(raw.decode("utf-8"), parse_constant=_no_constant)
+        except (UnicodeDecodeError, ValueError) as exc:
             self._error(400, f"malformed JSON: {exc}")
+            return None
+        except RecursionError:
+            self._error(400, "malformed JSON: nested too deeply")
             return None
         if not isinstance(data, dict):
             self._error(400, "the request body must be a JSON object")
@@ -213,12 +243,18 @@ class _Handler(BaseHTTPRequestHandler):
             except ActionRefused as exc:
                 self._error(exc.status, str(exc))
                 return
+            except _BAD_VALUES as exc:
+                self._error(422, f"invalid {action} request: {type(exc).__name__}: {exc}")
+                return
             self._json(200, {"ok": True, "action": action})
         elif parts.path == "/api/setup/check":
             try:
                 setup, windows = eng.check_setup(body)
             except ActionRefused as exc:
                 self._error(exc.status, str(exc))
+                return
+            except _BAD_VALUES as exc:
+                self._error(422, f"invalid set-up: {type(exc).__name__}: {exc}")
                 return
             self._json(200, {"ok": True, "bandwidth_hz": setup.bandwidth_hz, "windows_text": windows.describe()})
         else:
@@ -233,9 +269,13 @@ class _Handler(BaseHTTPRequestHandler):
                 self._error(404, str(exc))
                 return
         else:
-            path = (STATIC_DIR / name).resolve()
-            if STATIC_DIR not in path.parents or not path.is_file():
-                self._error(404, f"no static file {name!r}")
+            try:
+                path = (STATIC_DIR / name).resolve()
+                found = STATIC_DIR in path.parents and path.is_file()
+            except (ValueError, OSError):  # a NUL byte, a name too long for the file system
+                found = False
+            if not found:
+                self._error(404, f"no static file {name[:100]!r}")
                 return
         headers = dict(extra or {})
         if name.endswith(".min.js"):

@@ -102,11 +102,13 @@ def plan_inputs(paths: Sequence["str | Path"]) -> list[BatchInput]:
     return out
 
 
-def open_client(scheduler: Optional[str] = None, workers: Optional[int] = None) -> Any:
+def open_client(scheduler: Optional[str] = None, workers: Optional[int] = None,
+                dashboard: Optional[str] = None) -> Any:
     """A ``distributed.Client``: of the cluster at ``scheduler`` (``tcp://HOST:PORT`` or a scheduler
     file), else of a new ``LocalCluster`` with ``workers`` processes (default: one per core) of one
-    thread each. The caller closes it (``client.close()``, and ``client.cluster.close()`` for a
-    local one)."""
+    thread each, with Dask's dashboard at ``dashboard`` (``HOST:PORT``) only when given (otherwise
+    the scheduler's HTTP endpoint takes a free loopback port, so batches never compete for 8787).
+    The caller closes it (``client.close()``, and ``client.cluster.close()`` for a local one)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -120,7 +122,11 @@ def open_client(scheduler: Optional[str] = None, workers: Optional[int] = None) 
 
     n = workers or os.cpu_count() or 1
     with dask.config.set(dask_settings()):
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+        if dashboard:
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=dashboard)
+        else:
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
     return Client(cluster)
 
 

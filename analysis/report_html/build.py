@@ -54,24 +54,42 @@ def build_document(frf: FRFSet, fit: FitData, *, geometry: Optional[Geometry] = 
 
 
 def write_report(out_dir: "str | Path", doc: dict) -> Path:
-    """Write the report folder for ``doc`` (from :func:`build_document`); returns ``index.html``."""
+    """Write the report folder for ``doc`` (from :func:`build_document`); returns ``index.html``.
+
+    The files are built in a temporary folder beside ``out_dir`` and moved into place at the end
+    (``index.html`` last), so a report that fails while being built writes nothing."""
+    import os
+    import tempfile
+
     out = Path(out_dir)
     try:
-        out.mkdir(parents=True, exist_ok=True)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.part-", dir=out.parent))
     except OSError as exc:
         raise ReportInputError(f"cannot create the report folder {out}: {exc.strerror}") from None
-    src = plotly_js_path()
-    dst = out / "plotly.min.js"
-    if not dst.exists() or dst.stat().st_size != src.stat().st_size:
-        shutil.copyfile(src, dst)
+    try:
+        os.chmod(tmp, 0o755)
+        _write_files(tmp, doc)
+        if not out.exists():
+            os.replace(tmp, out)
+        else:
+            names = sorted((p.name for p in tmp.iterdir()), key=lambda n: n == "index.html")
+            for name in names:
+                os.replace(tmp / name, out / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out / "index.html"
+
+
+def _write_files(out: Path, doc: dict) -> None:
+    """The report's files into the (new, empty) folder ``out``."""
+    shutil.copyfile(plotly_js_path(), out / "plotly.min.js")
     pkg = resources.files(__package__)
     for name in _OWN_ASSETS:
         (out / name).write_text(pkg.joinpath(name).read_text(encoding="utf-8"), encoding="utf-8")
     payload = json.dumps(doc, separators=(",", ":"), allow_nan=False, default=_default)
     (out / "report-data.js").write_text("window.REPORT_DATA = " + payload + ";\n", encoding="utf-8")
-    index = out / "index.html"
-    index.write_text(render_page(doc), encoding="utf-8")
-    return index
+    (out / "index.html").write_text(render_page(doc), encoding="utf-8")
 
 
 def _default(x):

@@ -164,14 +164,39 @@ def load_fit_json(path: "str | Path", frf: FRFSet) -> FitData:
                            residual_form=doc.get("residual_form", "physical"), outputs=frf.outputs,
                            references=frf.references, **resid)
         band = (float(doc["band"][0]), float(doc["band"][1]))
+        check_fit_values(p, poles, R, band)
+    except ReportInputError:
+        raise
     except FileNotFoundError:
         raise ReportInputError(f"fit file {p} not found: check the path or leave --fit out to fit here") from None
+    except RecursionError:
+        raise ReportInputError(f"{p} is nested too deeply to be a fit file; write it with 'python -m analysis fit "
+                               "INPUT --json FIT.json'") from None
     except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
         raise ReportInputError(f"{p} is not a fit of this input ({type(exc).__name__}: {exc}); write it with "
                                "'python -m analysis fit INPUT --json FIT.json' on the same INPUT") from None
     return FitData(model=model, model_raw=seen_through_window(model, frf.exp_window_tau_s), freq_hz_std=fstd,
                    damping_std=zstd, band=band, stab=_redo_stabilization(frf, doc.get("stabilization")), source=str(p),
                    warnings=tuple(doc.get("warnings", ()) or ()))
+
+
+def check_fit_values(path: Path, poles: np.ndarray, residues: np.ndarray, band: tuple) -> None:
+    """Refuse a fit file with a non-finite or unstable pole, a non-finite residue or band, naming the field."""
+    from ..finite_checks import first_nonfinite
+
+    for k, lam in enumerate(poles):
+        if not np.isfinite(lam):
+            raise ReportInputError(f"{path}: field poles[{k}].pole is {lam} (not a finite number); write the fit "
+                                   "again with 'python -m analysis fit INPUT --json FIT.json'")
+        if lam.real >= 0:
+            raise ReportInputError(f"{path}: field poles[{k}].pole {lam} has a real part >= 0 (an unstable pole, "
+                                   "negative damping); write the fit again with 'python -m analysis fit'")
+    bad = first_nonfinite(residues)
+    if bad is not None:
+        raise ReportInputError(f"{path}: field residues (output {bad[0] + 1}, reference {bad[1] + 1}) values[{bad[2]}] "
+                               "is not a finite number; write the fit again")
+    if not all(np.isfinite(band)) or band[0] >= band[1]:
+        raise ReportInputError(f"{path}: field band {list(band)} is not an increasing pair of finite Hz")
 
 
 def _redo_stabilization(frf: FRFSet, info: Optional[dict]):
