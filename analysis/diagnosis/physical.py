@@ -53,7 +53,7 @@ from ..modal import ModalModel
 from ..progress import progress
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
-           "fit_cause", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB",
+           "fit_cause", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB",
            "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
            "ADEQUATE_MARGIN_DB", "ADEQUATE_FRACTION", "DISCREPANCY_CHI2"]
 
@@ -118,13 +118,15 @@ class ParamSpec:
 @dataclass(frozen=True)
 class CauseSpec:
     """A physical cause: its continuous parameters and, optionally, a choice (``"point"``: a node,
-    ``"component"``: a member) among ``options``."""
+    ``"component"``: a member, ``"element"``: an element ``member:e``) among ``options``; what it
+    is (``description``) and what to do when it is named (``advice``)."""
 
     name: str
     params: tuple
     choice: Optional[str] = None
     options: tuple = ()
     description: str = ""
+    advice: str = ""
 
 
 class PhysicalSimulation(Protocol):
@@ -136,6 +138,11 @@ class PhysicalSimulation(Protocol):
 
     def model(self, cause: Optional[str], params: Mapping) -> ModalModel: ...
 
+    def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def model_of(self, changes: Sequence[tuple[str, Mapping]]) -> ModalModel: ...
+
+    # ``modes_of`` / ``model_of``: several causes at once (a list of (cause, params)), for two causes.
     # optional: ``refined_model() -> ModalModel``, the same simulation on a finer mesh: what it removes
     # of the typical error is discretisation, added to the noise level (``noise_db["model_form"]``)
 
@@ -287,7 +294,7 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
     return best[0], best[1], ranked
 
 
-def _variants(cause: CauseSpec) -> list[tuple[str, ...]]:
+def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
     names = [s.name for s in cause.params]
     out: list[tuple[str, ...]] = []
     for k in range(1, len(names) + 1):
@@ -319,7 +326,7 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
     for i, cause in enumerate(causes, start=1):
         progress("diagnosis: physical cause %d/%d, %s", i, len(causes), cause.name)
         best: Optional[PhysicalFit] = None
-        for free in _variants(cause):
+        for free in variants(cause):
             p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
             options = [o for _, o in ranked[:N_SCREEN_FOLD]] if ranked else None
             cv = _cross_validate(sim, cause, free, mm, fmax, options, p)

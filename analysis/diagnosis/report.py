@@ -20,29 +20,23 @@ __all__ = ["frf_figure", "band_figure", "report_text", "write_report", "ACTIONS"
 log = logging.getLogger(__name__)
 
 # What to do about each verdict (first sentence of the report).
-ACTIONS = {
-    "residual_modes": "Add upper/lower residual terms (modes outside the band) to the model, or widen the "
-                      "simulated mode set; the in-band modes are fine.",
-    "sensor_highpass": "The response sensor rolls off at low frequency (AC coupling / IEPE / piezo): start the "
-                       "analysis band well above the corner, use DC coupling, or model the roll-off.",
-    "time_delay": "Force and response channels are delayed against each other (different anti-alias filters "
-                  "or sample skew): use matched channels or correct the phase by exp(j w delay).",
-    "mass_loading": "The accelerometers' mass lowers the frequencies: add the sensor masses at their nodes "
-                    "in the model, or use lighter sensors.",
-    "missing_mode": "The structure has a mode the model lacks: check the model's mode set (a component, "
-                    "a local mode, a support or joint degree of freedom) near the fitted frequency.",
-    "stiffness_shift": "All frequencies are off by the same factor: update the material stiffness or the "
-                       "section properties (stiffness scales by the square of the fitted factor).",
-    "damping_change": "The damping ratios are off by a common factor: update the model's damping.",
-    "exponential_window": "An exponential window added damping sigma = 1/tau: correct the fitted damping "
-                          "(or record exp_window_tau_s with the FRFs).",
-    "sensitivity_error": "A channel's calibration is wrong: recalibrate or correct the sensitivity of the "
-                         "named channel by the fitted gain.",
-    "mains_hum": "Mains hum at the named base frequency and harmonics: check grounding and cable routing; "
-                 "ignore those lines in fits.",
-    "none": "The simulation explains the measurement within its noise: nothing to fix.",
-    "unexplained": "No effect of the catalogue explains the difference: look at the named bands and modes.",
-}
+def _actions() -> dict[str, str]:
+    """What to do about each verdict: the advice of every catalogue row, and of the verdicts that name
+    no single row (a physical or time-data cause carries its own ``advice``)."""
+    from .effects import EFFECTS
+
+    out = {name: e.advice for name, e in EFFECTS.items()}
+    out.update({
+        "none": "The simulation explains the measurement within its noise: nothing to fix.",
+        "combined": "Two causes together explain the measurement: act on each (below).",
+        "unexplained": "No cause of the catalogue, alone or with one other, explains the difference: look at "
+                       "the bands and modes named below.",
+    })
+    return out
+
+
+# What to do about each verdict (first sentence of the report).
+ACTIONS = _actions()
 
 
 def _save(fig: Figure, path: Path) -> None:
