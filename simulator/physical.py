@@ -294,6 +294,16 @@ class FrameVariants:
                                 [{"effect": c, "parameters": dict(p)} for c, p in changes],
                                 "output_shapes": po})
 
+    def points(self) -> tuple[str, ...]:
+        """Every measurable point of the frame: each node in each direction (``component:node:X``...)."""
+        return tuple(f"{n}:{d}" for n in self.nodes for d in ("X", "Y", "Z"))
+
+    def at_points(self, outputs: Sequence[str], references: Sequence[str]) -> "FrameVariants":
+        """The same frame (same configuration, same accelerometers) at other measured points."""
+        other = FrameVariants(self.config, outputs, references)
+        other.sensor_nodes, other.sensor_mass_kg = self.sensor_nodes, self.sensor_mass_kg
+        return other
+
     def refined(self, refine: int = 2) -> "FrameVariants":
         """The same frame with every member's elements ``refine`` times finer, at the same measured
         points (their labels mapped to the finer mesh's nodes); built once per ``refine``."""

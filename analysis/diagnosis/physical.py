@@ -216,6 +216,7 @@ class PhysicalFit:
     chi2_cv: float = np.inf
     cv_per_mode: np.ndarray = field(default_factory=lambda: np.zeros(0))
     at_edge: tuple = ()
+    ranked: list = field(default_factory=list)       # [(chi2, option, params)] of a choice, best first
 
 
 def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[ParamSpec], fixed: dict,
@@ -276,7 +277,7 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
               start: Optional[dict] = None) -> tuple[dict, float, list]:
     """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
     With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted.
-    Returns (params, chi2, [(chi2, option)] of the fitted options, sorted)."""
+    Returns (params, chi2, [(chi2, option, params)] of the fitted options, sorted)."""
     specs = [s for s in cause.params if s.name in free]
     fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
     if cause.choice is None:
@@ -287,10 +288,10 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
     best: tuple[dict, float] = ({}, np.inf)
     for _, opt, p0 in screened[:N_SCREEN]:
         p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: opt}, mm, sel, fmax, p0)
-        ranked.append((c, opt))
+        ranked.append((c, opt, p))
         if c < best[1]:
             best = (p, c)
-    ranked.sort()
+    ranked.sort(key=lambda t: t[0])
     return best[0], best[1], ranked
 
 
@@ -328,11 +329,11 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
         best: Optional[PhysicalFit] = None
         for free in variants(cause):
             p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
-            options = [o for _, o in ranked[:N_SCREEN_FOLD]] if ranked else None
+            options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
             cv = _cross_validate(sim, cause, free, mm, fmax, options, p)
             edge = tuple(s.name for s in cause.params if s.name in free and s.at_edge(float(p[s.name])))
             fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
-                              cv_per_mode=cv, at_edge=edge)
+                              cv_per_mode=cv, at_edge=edge, ranked=ranked)
             if best is None or fit.chi2_cv < best.chi2_cv:
                 best = fit
         if best is not None:

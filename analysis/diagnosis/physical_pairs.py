@@ -26,7 +26,7 @@ __all__ = ["OnTop", "PairFit", "fit_pair", "changes_of"]
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
                ) -> tuple[np.ndarray, np.ndarray]:
     """Modes of ``sim`` changed by every ``(cause, params)`` of ``changes`` at once (``modes_of``)."""
-    return sim.modes_of(list(changes), fmax)  # type: ignore[attr-defined]
+    return sim.modes_of(list(changes), fmax)
 
 
 class OnTop:
@@ -46,7 +46,13 @@ class OnTop:
 
     def model(self, cause: Optional[str], params: Mapping) -> ModalModel:
         more = [] if cause is None else [(cause, params)]
-        return self.sim.model_of(self.first + more)  # type: ignore[attr-defined]
+        return self.sim.model_of(self.first + more)
+
+    def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        return changes_of(self.sim, self.first + list(changes), max_freq_hz)
+
+    def model_of(self, changes: Sequence[tuple[str, Mapping]]) -> ModalModel:
+        return self.sim.model_of(self.first + list(changes))
 
 
 @dataclass

@@ -35,6 +35,7 @@ from ..progress import progress
 from .physical import (ADEQUATE_FRACTION, ADEQUATE_MARGIN_DB, DISCREPANCY_CHI2, MIN_GAIN_DB, RESIDUAL_CAP, CauseSpec,
                        MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, gain_db, pair, paired_well,
                        physical_causes, residuals, same_structure, shown_params, variants, z_score)
+from .next_measurement import propose, rivals
 from .physical_pairs import OnTop, fit_pair
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes"]
@@ -116,7 +117,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
 
     def frf(changes: list) -> FRFSet:
         model = (sim.model(None, {}) if not changes else sim.model(*changes[0]) if len(changes) == 1
-                 else sim.model_of(changes))  # type: ignore[attr-defined]
+                 else sim.model_of(changes))
         return predict(model, measured.freq_hz, measured.quantity, prior,
                        outputs=measured.outputs, references=measured.references)
 
@@ -181,6 +182,9 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
                   else f"the FRFs differ from the simulation's by {before_db - noise_db:.1f} dB above the noise")
         out.reason = (f"{differ} but no physical cause, alone or with one other, is both significant and adequate; "
                       f"best partial causes: {partial}")
+    close = rivals(found) if out.verdict != "combined" else None
+    if close is not None:
+        out.next_measurement = propose(sim, measured, prior, noise_db, *close)
     out.causes = [{k: v for k, v in c.items() if not k.startswith("_")} for c in found]
     return out
 

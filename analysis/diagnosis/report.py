@@ -93,10 +93,21 @@ def band_figure(diag: Diagnosis) -> Figure:
 
 def report_text(diag: Diagnosis) -> str:
     """The ``report.md`` text: verdict, action, evidence, mode table, bands, coherence."""
-    L = ["# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {ACTIONS.get(diag.verdict, '')}", ""]
-    L.append(f"Held-out error of the simulation {diag.error_before_db:.1f} dB, after the extension "
-             f"{diag.error_after_db:.1f} dB; noise level {max(diag.noise_db.values()):.1f} dB "
-             f"(relative squared error, see docs/diagnosis.md).")
+    L = ["# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {_action(diag)}", ""]
+    advice = {c["effect"]: c.get("advice") for c in diag.causes}
+    for c in diag.named:
+        shown = ", ".join(f"{k} = {_value(k, v)}" for k, v in c["parameters"].items() if not isinstance(v, (list, dict)))
+        L.append(f"- **{c['effect']}** ({shown}): {advice.get(c['effect']) or ACTIONS.get(c['effect'], '')}")
+    if diag.named:
+        L.append("")
+    if diag.next_measurement:
+        nm = diag.next_measurement
+        L += [f"**Next measurement:** {nm['point']}: {nm['why']} (the candidates' FRFs there differ by "
+              f"{nm['separation_db']:.1f} dB above the noise).", ""]
+    L.append(f"FRF error of the simulation {diag.error_before_db:.1f} dB, after the extension "
+             f"{diag.error_after_db:.1f} dB; noise level {max(diag.noise_db.values()):.1f} dB (dB of the mean "
+             "squared error relative to the measured |H|, lines weighted as in docs/diagnosis.md; -40 dB is a 1 % "
+             "error). The error is a typical value over all lines: bands listed below can stay above the noise.")
     if len(diag.combined) > 1:
         L += ["", "Accepted effects, stage by stage (each on top of the previous): "
               + "; ".join(f"{c['effect']} (+{c['gain_db']:.2f} dB -> {c['error_after_db']:.1f} dB)" for c in diag.combined)]
@@ -109,11 +120,11 @@ def report_text(diag: Diagnosis) -> str:
         L += ["", "Not tried: " + "; ".join(f"{k} ({v})" for k, v in diag.skipped.items())]
     modes = diag.comparison["modes"]
     L += ["", "## Modes (simulation vs measurement)", "",
-          "| measured Hz | simulated Hz | df % | zeta meas | zeta sim | amplitude dB | phase deg | MAC |",
-          "|---|---|---|---|---|---|---|---|"]
+          "| measured Hz | simulated Hz | df % | damping measured % | damping simulated % | amplitude dB | "
+          "phase deg | MAC |", "|---|---|---|---|---|---|---|---|"]
     for p in modes["pairs"]:
         L.append(f"| {p['measured_hz']:.3f} | {p['simulated_hz']:.3f} | {p['df_percent']:+.2f} | "
-                 f"{p['measured_damping']:.4f} | {p['simulated_damping']:.4f} | {p['amplitude_db']:+.1f} | "
+                 f"{100 * p['measured_damping']:.2f} | {100 * p['simulated_damping']:.2f} | {p['amplitude_db']:+.1f} | "
                  f"{p['phase_deg']:+.0f} | {p['mac']:.2f} |")
     if modes["only_measured"]:
         L.append("\nPeaks only in the measurement: " + ", ".join(f"{m['freq_hz']:.2f} Hz" for m in modes["only_measured"]))
@@ -130,6 +141,22 @@ def report_text(diag: Diagnosis) -> str:
               + ", ".join(f"{r['lo_hz']:.2f}-{r['hi_hz']:.2f} Hz (min {r['min_coherence']:.2f})"
                           for r in diag.comparison["doubtful_coherence"][:20])]
     return "\n".join(L) + "\n"
+
+
+def _action(diag: Diagnosis) -> str:
+    """The first sentence of the report: what to do about the verdict."""
+    if len(diag.named) == 1:
+        c: dict = next((c for c in diag.causes if c["effect"] == diag.named[0]["effect"]), {})
+        return str(c.get("advice") or ACTIONS.get(diag.verdict, ""))
+    return ACTIONS.get(diag.verdict, "")
+
+
+def _value(name: str, v: object) -> str:
+    """A parameter as shown: masses in kg, factors plain, times in s, the rest with 4 digits."""
+    if not isinstance(v, float):
+        return str(v)
+    unit = " kg" if name.endswith("_kg") else " Hz" if name.endswith("_hz") else " s" if name.endswith("_s") else ""
+    return f"{v:.4g}{unit}"
 
 
 def write_report(diag: Diagnosis, outdir: "str | Path", max_frf_plots: int = 6) -> Path:

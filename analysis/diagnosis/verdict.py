@@ -95,7 +95,7 @@ class Diagnosis:
             "named": [{"effect": c["effect"], "parameters": c["parameters"]} for c in self.named],
             "causes": [{k: c[k] for k in ("effect", "parameters", "gain_db", "evidence", "error_before_db",
                                           "error_after_db", "z", "significant")}
-                       | {k: c[k] for k in ("kind", "adequate", "description") if k in c} for c in self.causes],
+                       | {k: c[k] for k in ("kind", "adequate", "description", "advice") if k in c} for c in self.causes],
             "error_before_db": self.error_before_db,
             "error_after_db": self.error_after_db,
             "noise_db": self.noise_db,

@@ -26,7 +26,11 @@ Families:
 * out of the catalogue (the span 6 % longer, the right column rolled 20 -> 40 deg): ``unexplained``.
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_diagnosis_large.py \
-        [--per-family 6] [--nulls 30] [--families large:added_mass,pair:mass+support] [--workers 1] [--json out.json]
+        [--per-family 6] [--nulls 30] [--families large:added_mass,pair:mass+support] [--first N] \
+        [--workers 1] [--json out.json]
+
+The cases are drawn for every family whatever ``--families`` selects, so a subset runs the same cases
+as a full run with the same ``--per-family`` and ``--nulls``.
 """
 from __future__ import annotations
 
@@ -148,18 +152,7 @@ def diagnose_recording(rec: Path, relabel: int = 0):
     if relabel:
         m = _relabel(m, relabel)
     fv = FrameVariants(None, m.outputs, m.references)
-    import inspect
-
-    if "recording" in inspect.signature(diagnose).parameters:
-        return diagnose(m, fv, recording=None if relabel else rec)
-    from analysis.bands import default_band
-    from analysis.diagnosis.compare import line_weights
-    from analysis.diagnosis.hit_noise import hit_scatter_noise_db
-
-    lo, hi = default_band(m)
-    m = m.band(lo, min(hi, fv.converged_below_hz()))
-    hits_db = None if relabel else hit_scatter_noise_db(rec, m, line_weights(m))
-    return diagnose(m, fv.model(None, {}), physical=fv, extra_noise_db={"hits": hits_db})
+    return diagnose(m, fv, band="data", recording=None if relabel else rec)
 
 
 def run_case(spec: dict) -> dict:
@@ -283,6 +276,8 @@ def main() -> None:
     ap.add_argument("--per-family", type=int, default=6)
     ap.add_argument("--nulls", type=int, default=30, help="null cases (about 2/3 other seeds, the rest finer mesh and window)")
     ap.add_argument("--families", default=",".join(FAMILIES), help="comma-separated families to run")
+    ap.add_argument("--first", type=int, default=None,
+                    help="run only the first N cases of each family (the same cases as a full run)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--json", help="write every case's result")
     args = ap.parse_args()
@@ -290,7 +285,10 @@ def main() -> None:
     bad = [f for f in fams if f not in FAMILIES]
     if bad:
         ap.error(f"unknown families {bad}; choose from {', '.join(FAMILIES)}")
-    todo = cases(args.per_family, args.nulls, fams)
+    todo = [c for c in cases(args.per_family, args.nulls, FAMILIES) if c["family"] in fams
+            or (c["family"].partition(":")[0] in ("null", "out-of-catalogue") and args.nulls)]
+    if args.first is not None:
+        todo = [c for i, c in enumerate(todo) if sum(d["family"] == c["family"] for d in todo[:i]) < args.first]
     t0 = time.perf_counter()
     results = []
     with ProcessPoolExecutor(args.workers) as pool:
