@@ -215,20 +215,21 @@ def test_window_correlated_noise_is_not_underestimated() -> None:
 # ---------------------------------------------------------------- captured through the analyser
 def _capture_and_diagnose(tmp_path: Path, overrides: dict, seed: int, extra=()) -> dict:
     from acquisition.cli_capture import main as capture
-    from analysis.cli_diagnose import main as diagnose
+    from analysis.diagnosis import diagnose
+    from analysis.inputs import load_input
 
     device = f"sim://?seed={seed}"
     if overrides:
         cfg = tmp_path / "changed.toml"
         cfg.write_text(overrides_to_toml(overrides))
         device += f"&config={cfg}"
-    rec, out = tmp_path / "rec.h5", tmp_path / "diag.json"
+    rec = tmp_path / "rec.h5"
     with contextlib.redirect_stdout(io.StringIO()):
         assert capture(["--device", device, "--out", str(rec), "--points", ",".join(REFS), "--hits", "3", "--auto",
                         "-q", *extra]) == 0
-        assert diagnose(["--measured", str(rec), "--simulated", str(ROOT / "simulator" / "frame.toml"),
-                         "--json", str(out), "-q"]) == 0
-    return json.loads(out.read_text())
+    m = load_input(rec)
+    frame = FrameVariants(ROOT / "simulator" / "frame.toml", m.outputs, m.references)
+    return json.loads(json.dumps(diagnose(rec, frame).to_json(), default=float))
 
 
 def test_steel_block_on_the_beam_is_an_added_mass_at_its_node(tmp_path) -> None:
@@ -237,6 +238,7 @@ def test_steel_block_on_the_beam_is_an_added_mass_at_its_node(tmp_path) -> None:
     over = _bench().steel_block(FrameConfig.load(), "top:6", 3.0)
     doc = _capture_and_diagnose(tmp_path, over, seed=21)
     assert doc["verdict"] == "added_mass", doc["reason"]
+    assert doc["named"] == [{"effect": "added_mass", "parameters": doc["causes"][0]["parameters"]}]
     best = doc["causes"][0]
     assert best["kind"] == "physical" and best["significant"] and best["adequate"]
     assert best["parameters"]["point"] == "top:6"
