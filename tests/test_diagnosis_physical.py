@@ -229,7 +229,7 @@ def _capture_and_diagnose(tmp_path: Path, overrides: dict, seed: int, extra=()) 
                         "-q", *extra]) == 0
     m = load_input(rec)
     frame = FrameVariants(ROOT / "simulator" / "frame.toml", m.outputs, m.references)
-    return json.loads(json.dumps(diagnose(rec, frame).to_json(), default=float))
+    return json.loads(json.dumps(diagnose(rec, frame).to_json(), default=lambda x: x.tolist()))
 
 
 def test_steel_block_on_the_beam_is_an_added_mass_at_its_node(tmp_path) -> None:

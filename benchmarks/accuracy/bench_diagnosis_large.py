@@ -51,7 +51,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_diagnosis_physical import POINTS, _explicit, _node_xyz, _relabel, null_case, steel_block  # noqa: E402
+from bench_diagnosis_physical import POINTS, _explicit, _node_xyz, _relabel, null_case, steel_block, table  # noqa: E402
 
 FAMILIES = ("large:added_mass", "large:support_stiffness", "crack", "pair:mass+support", "pair:damping+modulus",
             "pair:member+sensors", "pair:mass+joint", "pair:mass+damping")
@@ -189,12 +189,12 @@ def run_case(spec: dict) -> dict:
                           "--auto", "-q", *extra])
         if rc != 0:
             return {**spec, "verdict": f"capture failed ({rc})", "right": False, "params_ok": False, "named": []}
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         d = diagnose_recording(rec, relabel)
-        dt = time.perf_counter() - t0
+        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     named = named_causes(d)
     out = {"family": spec["family"], "seed": spec["seed"], "truths": truths, "verdict": d.verdict, "named": named,
-           "time_s": dt, "reason": d.reason,
+           "time_s": dt, "cpu_s": cpu, "reason": d.reason,
            "causes": [{k: c.get(k) for k in ("effect", "parameters", "gain_db", "significant", "adequate")}
                       for c in d.causes[:6]]}
     out.update(score(truths, d.verdict, named))
@@ -258,19 +258,6 @@ def cases(per_family: int, nulls: int, families, seed: int = 2027) -> list[dict]
     return out
 
 
-def table(results: list[dict]) -> str:
-    rows = ["| family | cases | named right | parameters right | median s | max s |", "|---|---|---|---|---|---|"]
-    for fam in dict.fromkeys(r["family"] for r in results):
-        rs = [r for r in results if r["family"] == fam]
-        t = [r.get("time_s", np.nan) for r in rs]
-        rows.append(f"| {fam} | {len(rs)} | {sum(r['right'] for r in rs)} | {sum(r['params_ok'] for r in rs)} | "
-                    f"{np.nanmedian(t):.1f} | {np.nanmax(t):.1f} |")
-    nul = [r for r in results if r["family"].startswith("null")]
-    if nul:
-        rows.append(f"\nnulls: {sum(not r['right'] for r in nul)} false alarms in {len(nul)}")
-    return "\n".join(rows)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-family", type=int, default=6)
@@ -298,7 +285,7 @@ def main() -> None:
             shown = [(c["effect"], {k: (round(v, 4) if isinstance(v, float) else v)
                                     for k, v in c["parameters"].items() if not isinstance(v, (list, dict))})
                      for c in r["named"]]
-            print(f"{mark} {r['family']:26s} truth {r['truths']} -> {r['verdict']} {shown} ({r.get('time_s', 0):.1f} s)",
+            print(f"{mark} {r['family']:26s} truth {r['truths']} -> {r['verdict']} {shown} ({r.get('time_s', 0):.1f} s, CPU {r.get('cpu_s', 0):.1f} s)",
                   flush=True)
     print(table(results))
     print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} cases, {args.workers} workers")
