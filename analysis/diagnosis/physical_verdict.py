@@ -161,6 +161,8 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
         out.combined = [_stage_entry(best)]
         out.named = [{"effect": best["effect"], "parameters": best["parameters"]}]
+        if best["error_after_db"] - noise_db > ADEQUATE_MARGIN_DB:
+            out.on_top = best          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
     elif hasattr(sim, "modes_of") and (causes is None or len(causes) > 1):
         two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes)
         if two is not None:

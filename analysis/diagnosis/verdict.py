@@ -206,10 +206,11 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
 
 def _frf_on_top(ctx: FitContext, physical: "PhysicalSimulation", outcome: Any, names: Sequence[str], z_min: float,
                 min_gain_db: float, noise_db: float, none_margin_db: float) -> Optional[tuple[list, FRFSet]]:
-    """A physical cause that explains the modes but not the FRFs, completed by one FRF-level effect (a
-    damping change, a sensor): the catalogue fitted on top of the physical cause's model with the same
-    cross-validation and rule; named as a pair when the pair is adequate (the FRF error within
-    ``none_margin_db`` of the noise or ``ADEQUATE_FRACTION`` of its excess removed). None otherwise."""
+    """A physical cause that explains the modes but leaves the FRFs above the noise, completed by one
+    FRF-level effect (a damping change, a sensor): the catalogue fitted on top of the physical cause's
+    model with the same cross-validation and rule (held-out gain at least ``min_gain_db``); named as a
+    pair when the pair is adequate (the FRF error within ``none_margin_db`` of the noise or
+    ``ADEQUATE_FRACTION`` of its excess removed). None otherwise."""
     from .physical import ADEQUATE_FRACTION
 
     first = outcome.on_top
@@ -218,7 +219,7 @@ def _frf_on_top(ctx: FitContext, physical: "PhysicalSimulation", outcome: Any, n
     m, w = ctx.measured, ctx.weights
     ctx2 = FitContext(measured=m, base=base, weights=w, sim=first["_extended"], prior=ctx.prior)
     more, _ = _stage(ctx2, names, z_min, min_gain_db)
-    sig = [c for c in more if c["significant"]]
+    sig = [c for c in more if c["significant"] and c["gain_db"] >= min_gain_db]
     if not sig:
         return None
     nxt = sig[0]
@@ -350,8 +351,9 @@ def diagnose_frfs(
                                    causes=effects)
         phys_doc = outcome.doc
         if outcome.on_top is not None:
+            # on top of a cause already named alone, a second must gain as much as a physical cause must
             top = _frf_on_top(ctx, physical, outcome, [n for n in names if n not in ("stiffness_shift", "mass_loading")],
-                              z_min, min_gain_db, noise_db, none_margin_db)
+                              z_min, STRONG_GAIN_DB if outcome.named else min_gain_db, noise_db, none_margin_db)
             if top is not None:
                 combined, ext = top
                 return Diagnosis(verdict="combined", causes=outcome.causes, error_before_db=outcome.error_before_db,
