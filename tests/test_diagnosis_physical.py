@@ -341,3 +341,33 @@ def test_a_mass_at_one_sensor_is_an_added_mass_at_its_node() -> None:
     assert d.verdict == "added_mass", d.reason
     p = d.causes[0]["parameters"]
     assert p["point"] == "top:4" and p["mass_kg"] == pytest.approx(0.3, rel=0.05)
+
+
+def test_next_measurement_is_the_point_that_separates_two_candidates() -> None:
+    """Two added masses the plan's single hammer point sees alike: the proposed hammer point is a frame
+    point not yet hammered, and there the two candidates' FRFs differ more than at today's point."""
+    from analysis.diagnosis.effects import predict
+    from analysis.diagnosis.next_measurement import _relative_db, propose, rivals
+    from analysis.diagnosis.physical import PhysicalFit
+
+    fv = FrameVariants(None, OUTS, ["top:4:Z"])
+    f = np.linspace(5.0, 400.0, 600)
+    meas = FRFSet(freq_hz=f, H=np.ones((len(OUTS), 1, f.size), complex), quantity="accelerance",
+                  outputs=tuple(OUTS), references=("top:4:Z",))
+    a = ("added_mass", {"point": "top:3", "mass_kg": 2.0})
+    b = ("added_mass", {"point": "top:5", "mass_kg": 2.0})
+    fit = PhysicalFit("added_mass", a[1], ("mass_kg",), 1.0, 2.0, ranked=[(1.0, "top:3", a[1]), (2.5, "top:5", b[1])])
+    close = rivals([{"significant": True, "_fit": fit}])
+    assert close is not None and close[1] == b and "top:3" in close[2] and "top:5" in close[2]
+    nm = propose(fv, meas, (), -40.0, *close)
+    assert nm is not None and nm["point"] in fv.points() and nm["point"] != "top:4:Z"
+
+    def sep(point: str) -> float:
+        there = fv.at_points(OUTS, [point])
+        h = [predict(there.model(*c), f, "accelerance", (), outputs=tuple(OUTS), references=(point,)).H for c in (a, b)]
+        return float(_relative_db(h[0], h[1])[0]) + 40.0
+
+    assert nm["separation_db"] == pytest.approx(sep(nm["point"]), abs=1e-6)
+    assert nm["separation_db"] > sep("top:4:Z")
+    assert rivals([{"significant": True, "_fit": PhysicalFit("added_mass", a[1], ("mass_kg",), 1.0, 2.0,
+                                                            ranked=[(1.0, "top:3", a[1]), (9.0, "top:5", b[1])])}]) is None
