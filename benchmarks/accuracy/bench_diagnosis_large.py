@@ -26,7 +26,7 @@ Families:
 * out of the catalogue (the span 6 % longer, the right column rolled 20 -> 40 deg): ``unexplained``.
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_diagnosis_large.py \
-        [--per-family 6] [--nulls 30] [--families large:added_mass,pair:mass+support] [--first N] \
+        [--per-family 6] [--nulls 30] [--families large:added_mass,pair:mass+support] [--skip M] [--first N] \
         [--workers 1] [--json out.json]
 
 The cases are drawn for every family whatever ``--families`` selects, so a subset runs the same cases
@@ -265,6 +265,7 @@ def main() -> None:
     ap.add_argument("--families", default=",".join(FAMILIES), help="comma-separated families to run")
     ap.add_argument("--first", type=int, default=None,
                     help="run only the first N cases of each family (the same cases as a full run)")
+    ap.add_argument("--skip", type=int, default=0, help="skip the first N cases of each family")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--json", help="write every case's result")
     args = ap.parse_args()
@@ -274,8 +275,8 @@ def main() -> None:
         ap.error(f"unknown families {bad}; choose from {', '.join(FAMILIES)}")
     todo = [c for c in cases(args.per_family, args.nulls, FAMILIES) if c["family"] in fams
             or (c["family"].partition(":")[0] in ("null", "out-of-catalogue") and args.nulls)]
-    if args.first is not None:
-        todo = [c for i, c in enumerate(todo) if sum(d["family"] == c["family"] for d in todo[:i]) < args.first]
+    rank = [sum(d["family"] == c["family"] for d in todo[:i]) for i, c in enumerate(todo)]
+    todo = [c for c, k in zip(todo, rank) if k >= args.skip and (args.first is None or k < args.first)]
     t0 = time.perf_counter()
     results = []
     with ProcessPoolExecutor(args.workers) as pool:
