@@ -283,7 +283,11 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
     if cause.choice is None:
         p, c = _fit_continuous(sim, cause, specs, fixed, mm, sel, fmax, start)
         return p, c, []
-    screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, options if options is not None else cause.options)
+    if isinstance(start, dict) and options is not None and set(options) <= set(start):
+        # the options' own fits as starts (a fold of the cross-validation): no coarse screen again
+        screened = [(0.0, opt, start[opt]) for opt in options]
+    else:
+        screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, options if options is not None else cause.options)
     ranked = []
     best: tuple[dict, float] = ({}, np.inf)
     for _, opt, p0 in screened[:N_SCREEN]:
@@ -311,7 +315,7 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
     for k in range(K):
         sel = np.ones(K, bool)
         sel[k] = False
-        p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, None if options else start)
+        p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, start)
         f, P = sim.modes(cause.name, p, fmax)
         out[k] = float(np.sum(residuals(mm, f, P)[k] ** 2))
     return out
@@ -330,7 +334,8 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
         for free in variants(cause):
             p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
             options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
-            cv = _cross_validate(sim, cause, free, mm, fmax, options, p)
+            starts = {o: q for _, o, q in ranked} if ranked else p
+            cv = _cross_validate(sim, cause, free, mm, fmax, options, starts)
             edge = tuple(s.name for s in cause.params if s.name in free and s.at_edge(float(p[s.name])))
             fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
                               cv_per_mode=cv, at_edge=edge, ranked=ranked)

@@ -352,7 +352,10 @@ def diagnose_frfs(
         phys_doc = outcome.doc
         if outcome.on_top is not None:
             # on top of a cause already named alone, a second must gain as much as a physical cause must
-            top = _frf_on_top(ctx, physical, outcome, [n for n in names if n not in ("stiffness_shift", "mass_loading")],
+            # (not missing_mode: with an FE model a mode the model lacks shows in the pairing; on top of a
+            # physical cause an extra mode only patches a mode the cause misplaces)
+            top = _frf_on_top(ctx, physical, outcome,
+                              [n for n in names if n not in ("stiffness_shift", "mass_loading", "missing_mode")],
                               z_min, STRONG_GAIN_DB if outcome.named else min_gain_db, noise_db, none_margin_db)
             if top is not None:
                 combined, ext = top
