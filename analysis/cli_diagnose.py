@@ -22,10 +22,9 @@ import numpy as np
 from .command_line import with_examples
 from .command_line import Parser as _Parser, check_out_dir, parse_args, add_estimator, add_threads, cli_entry
 
-__all__ = ["main", "build_parser", "load_simulation"]
+__all__ = ["main", "build_parser", "load_simulations"]
 
 log = logging.getLogger(__name__)
-
 
 
 def _json_default(x):
@@ -55,134 +54,31 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def load_simulation(path: str, measured, estimator: Optional[str] = None):
-    """The simulation as a :class:`ModalModel` at the measured points (outputs, references order)."""
-    return load_simulations(path, measured, estimator)[0]
-
-
 def load_simulations(path: str, measured, estimator: Optional[str] = None):
-    """(model, physical): the simulation as a :class:`ModalModel` at the measured points, and for a
-    simulator config its FE model split by physical cause (:class:`simulator.physical.FrameVariants`,
-    None for an FRF file)."""
-    from .inputs import InputError, load_input
-    from .diagnosis.compare import common_points
+    """The simulation for :func:`analysis.diagnosis.diagnose`: for a simulator config (``.toml``) its FE
+    model split by physical cause (:class:`simulator.physical.FrameVariants`) at the measured points;
+    otherwise the path itself (an FRF file, read by the library)."""
+    from .inputs import InputError
 
     p = Path(path)
-    if p.suffix.lower() == ".toml":
-        from simulator.config import ConfigError
-        from simulator.fem import ModelError
-        from simulator.physical import FrameVariants
-
-        try:
-            variants = FrameVariants(p, measured.outputs, measured.references)
-            return variants.model(None, {}), variants
-        except (ConfigError, ModelError, OSError) as exc:
-            raise InputError(f"simulator config {p}: {exc}") from None
-    sim = load_input(p, estimator=estimator)
-    outs, refs = common_points(measured, sim)
-    if len(outs) != measured.n_outputs or len(refs) != measured.n_references:
-        raise InputError(f"{p} lacks some measured points: it has outputs {list(sim.outputs)} and references "
-                         f"{list(sim.references)}; measured {list(measured.outputs)} / {list(measured.references)}")
-    sim = sim.select(outs, refs)
-    from .pipeline import FitError, fit_auto
+    if p.suffix.lower() != ".toml":
+        return p
+    from simulator.config import ConfigError
+    from simulator.fem import ModelError
+    from simulator.physical import FrameVariants
 
     try:
-        result = fit_auto(sim).lsfd
-    except FitError as exc:
-        raise InputError(f"cannot build a modal model of the simulated FRFs in {p}: {exc}") from None
-    return model_with_correction(result.model, sim), None
-
-
-def model_with_correction(model, sim):
-    """The fitted model plus, in ``meta["frf_correction"]``, what it misses of the simulated FRFs,
-    so that the prediction without effects is the simulated FRFs themselves (modal effects move
-    only the fitted modes)."""
-    from dataclasses import replace
-
-    from .modal import synthesize
-
-    syn = synthesize(model, sim.freq_hz)
-    same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
-    corr = replace(same, H=same.H - syn.H, coherence=None)
-    meta = dict(model.meta)
-    meta["frf_correction"] = corr
-    return replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references), meta=meta)
-
-
-def time_data_causes(path: str, band: tuple, base=None) -> list:
-    """Time-data causes (:mod:`analysis.diagnosis.timedata`) of a recording's accepted hits (those its
-    FRFs were made from; rejected hits changed nothing), per reference point; [] when the file is not
-    a recording or holds no accepted hits. With ``base`` (the simulation as a receptance
-    pole-residue model holding the hits' points), each cause also gets its held-out ``gain_db``,
-    ``error_before_db``, ``error_after_db``, ``significant`` and ``counts`` from
-    :func:`analysis.diagnosis.timedata_gain.diagnose_time_effects` (re-simulated or hits excluded)."""
-    from .inputs import detect_format
-    from .diagnosis.timedata import diagnose_hits
-
-    if detect_format(path) != "recording":
-        return []
-    from analysis.recording import Recording, RecordingError
-
-    groups: dict = {}
-    try:
-        with Recording(path) as rec:
-            for h in rec.hits(accepted_only=True, skip_damaged=True):
-                groups.setdefault((h.reference, h.sample_rate_hz, h.data.shape), []).append(h)
-    except (RecordingError, OSError) as exc:
-        log.warning("time data of %s not read: %s", path, exc)
-        return []
-    out = []
-    for (ref, fs, _), hits in groups.items():
-        if len(hits) < 2:
-            continue
-        force = np.array([h.data[h.force_channel] for h in hits])
-        resp = np.array([h.data[h.response_channels] for h in hits])
-        flags = np.array([h.overload for h in hits])
-        gains = _time_gains(force, resp, fs, band, base, hits[0].outputs, ref, flags) if base is not None else {}
-        for c in diagnose_hits(force, resp, fs, band, overload_flags=flags):
-            c["reference"] = ref
-            c.update(gains.get(c["effect"], {}))
-            out.append(c)
-    return sorted(out, key=lambda c: (not c["present"], -c.get("gain_db", 0.0)))
-
-
-def _time_gains(force, resp, fs, band, base, outputs, ref, flags) -> dict:
-    """Held-out gains of the time-data effects per effect name ({} when the simulation cannot be used)."""
-    from dataclasses import replace
-
-    from .diagnosis.timedata_gain import diagnose_time_effects
-
-    try:
-        oi = [list(base.outputs).index(o) for o in outputs]
-        ri = list(base.references).index(ref)
-        sub = replace(base, residues=base.residues[oi][:, [ri]], outputs=tuple(outputs), references=(ref,))
-        d = diagnose_time_effects(force, resp, fs, sub, band, overload_flags=flags, outputs=outputs, reference=ref)
-    except (ValueError, IndexError) as exc:
-        log.info("time-data gains of %s not measured: %s", ref, exc)
-        return {}
-    keys = ("gain_db", "error_before_db", "error_after_db", "z", "significant", "counts", "kind")
-    return {c["effect"]: {k: c[k] for k in keys} for c in d["causes"]}
-
-
-def _hit_noise(path: str, measured) -> dict:
-    """``{"hits": dB}``: the noise of a recording's FRFs from the scatter of its hits ({} otherwise)."""
-    from .diagnosis.compare import line_weights
-    from .diagnosis.hit_noise import hit_scatter_noise_db
-    from .inputs import detect_format
-
-    if detect_format(path) != "recording":
-        return {}
-    level = hit_scatter_noise_db(path, measured, line_weights(measured))
-    return {} if level is None else {"hits": level}
+        return FrameVariants(p, measured.outputs, measured.references)
+    except (ConfigError, ModelError, OSError) as exc:
+        raise InputError(f"simulator config {p}: {exc}") from None
 
 
 @cli_entry
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
-    from .bands import FitError, default_band
-    from .inputs import InputError, load_input, parse_band_text
+    from .bands import FitError
     from .diagnosis import EFFECTS, EffectError, diagnose
-    from .diagnosis.compare import common_points
+    from .inputs import InputError, load_input, parse_band_text
 
     parser = build_parser()
     args = parse_args(parser, argv)
@@ -198,41 +94,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 raise InputError(f"unknown effect(s) {bad}; the catalogue has {', '.join(EFFECTS)}")
         measured = load_input(args.measured, estimator=args.estimator)
         band = parse_band_text(args.band)
-        lo, hi = band if band is not None else default_band(measured)
-        measured = measured.band(lo, hi)
-        finite = np.all(np.isfinite(measured.H), axis=(0, 1))
-        if not finite.all():
-            raise InputError(f"{args.measured} holds NaN/inf lines at {np.count_nonzero(~finite)} frequencies; "
-                             "give --band to exclude them")
-        base, physical = load_simulations(args.simulated, measured, args.estimator)
-        if physical is not None and band is None:
-            top = physical.converged_below_hz()
-            if top < measured.freq_hz[-1]:
-                print(f"band {measured.freq_hz[0]:.4g}-{top:.4g} Hz: the simulation's mesh is converged only below "
-                      f"{top:.4g} Hz (give --band to override)", file=sys.stderr)
-                measured = measured.band(float(measured.freq_hz[0]), top)
-        outs, refs = common_points(measured, base)
-        measured = measured.select(outs, refs)
-        diag = diagnose(measured, base, effects=effects, physical=physical,
-                        extra_noise_db=_hit_noise(args.measured, measured))
+        simulated = load_simulations(args.simulated, measured, args.estimator)
+        diag = diagnose(measured, simulated, band=band if band is not None else "data", effects=effects,
+                        estimator=args.estimator, recording=_recording(args.measured))
     except (InputError, EffectError, ValueError, FitError) as exc:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2
     doc = diag.to_json()
-    try:
-        timed = time_data_causes(args.measured, (float(measured.freq_hz[0]), float(measured.freq_hz[-1])), base)
-    except ValueError as exc:
-        timed = []
-        log.warning("time data not analysed: %s", exc)
-    if timed:
-        doc["time_data"] = timed
-        present = [c for c in timed if c["present"]]
-        counted = sorted((c for c in present if c.get("counts")), key=lambda c: -c.get("gain_db", 0.0))
-        doc["time_data_verdict"] = counted[0]["effect"] if counted else "none"
-        if doc["verdict"] == "unexplained" and counted:
-            doc["verdict"] = counted[0]["effect"]
-        elif doc["verdict"] == "unexplained" and any(c["effect"] == "amplitude_nonlinearity" for c in present):
-            doc["verdict"] = "amplitude_nonlinearity"
     from .cli_linearity import level_dependence
 
     levels = level_dependence(args.measured, args.simulated, (float(measured.freq_hz[0]), float(measured.freq_hz[-1])))
@@ -245,14 +113,26 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         from .diagnosis.report import write_report
 
         write_report(diag, args.report)
-    for c in timed:
+    for c in diag.time_data:
         if c["present"]:
             print(f"  time data ({c['reference']}): {c['evidence']}")
     if levels is not None and "cause" in levels:
         print(f"  level dependence: {levels['cause']['evidence']}")
     print(f"verdict: {doc['verdict']}" + (f" ({diag.reason})" if diag.reason else ""))
+    for c in diag.named:
+        print(f"  named: {c['effect']} {c['parameters']}")
+    if diag.next_measurement:
+        nm = diag.next_measurement
+        print(f"  next measurement: {nm['point']} ({nm['why']}; {nm['separation_db']:.1f} dB apart)")
     print(f"error before {diag.error_before_db:.1f} dB, after {diag.error_after_db:.1f} dB "
           f"(noise {max(diag.noise_db.values()):.1f} dB)")
     for c in diag.causes[:5]:
         print(f"  {'*' if c['significant'] else ' '} {c['evidence']}")
     return 0
+
+
+def _recording(path: str) -> Optional[Path]:
+    """``path`` when it is a recording (its hits feed the noise estimate and the time-data stage)."""
+    from .inputs import detect_format
+
+    return Path(path) if detect_format(path) == "recording" else None

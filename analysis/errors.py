@@ -23,6 +23,8 @@ __all__ = [
     "PointLabelError",
     "ChildCrashed",
     "ChildTimeout",
+    "FolderBusy",
+    "WorkLimitError",
 ]
 
 
@@ -84,3 +86,12 @@ class ChildCrashed(ImpactlabError, RuntimeError):
 
 class ChildTimeout(ImpactlabError, RuntimeError):
     """The child process did not answer in time (it was killed)."""
+
+
+class FolderBusy(ImpactlabError, OSError):
+    """Another process holds an output folder's lock (a batch writing there); the message names its pid."""
+
+
+class WorkLimitError(UsageError):
+    """A request for more work than the data support or the machine can hold (the message names the
+    largest accepted value)."""

@@ -9,17 +9,13 @@ from __future__ import annotations
 import os
 from typing import Callable
 
-from .errors import UsageError
+from .errors import WorkLimitError
 
 __all__ = ["WorkLimitError", "available_memory_bytes", "memory_budget_bytes", "largest_within", "check_model_order",
            "lscf_work_bytes"]
 
 #: the share of the free memory one computation may take
 MEMORY_SHARE = 0.5
-
-
-class WorkLimitError(UsageError):
-    """A request for more work than the data support or the machine can hold."""
 
 
 def available_memory_bytes() -> int:

@@ -11,7 +11,9 @@ masses, followed by ``K phi = omega^2 M phi`` (:func:`scipy.linalg.eigh`, only t
   node, all three translations) when ``[sensors] mass_loading`` is on: known processing, part of the
   simulation, not a discrepancy.
 
-The causes (names and parameters fixed: tests, the JSON and users key on them):
+The causes are the rows of the registry :data:`CAUSES` (:class:`PhysicalCause`: the cause's
+:class:`~analysis.diagnosis.physical.CauseSpec` and the function that applies it to an
+:class:`Assembly`); names and parameters are fixed (tests, the JSON and users key on them):
 
 =====================  ===========================================  =======================================
 name                   parameters                                   change
@@ -22,6 +24,7 @@ name                   parameters                                   change
 ``joint_stiffness``    ``factor_translational``, ``factor_rotational``  column-beam joint springs x factor
 ``member_mass``        ``component``, ``factor``                     density (mass) of one member x factor
 ``member_stiffness``   ``component``, ``factor``                     bending stiffness EI of one member x factor
+``element_stiffness``  ``element`` (``member:e``), ``factor``        bending stiffness EI of one element x factor
 ``mass_loading``       ``mass_kg`` (each accelerometer)              accelerometer mass at every output node
 ``stiffness_shift``    ``stiffness_factor`` (and ``factor`` =        Young's modulus x stiffness_factor (all
                        its square root, the frequency ratio)         members; springs unchanged)
@@ -33,9 +36,9 @@ sees only containers.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import scipy.linalg
@@ -47,27 +50,124 @@ from analysis.points import parse_point
 from .config import FrameConfig
 from .fem import FrameModel, ModelError, assemble_beam, member_nodes_xyz, section_properties, stamp_spring
 
-__all__ = ["FrameVariants", "CAUSES"]
+__all__ = ["FrameVariants", "CAUSES", "PhysicalCause", "Assembly", "register_cause"]
 
-#: The physical causes and their search ranges (factors are dimensionless, masses kg).
-CAUSES: tuple[CauseSpec, ...] = (
-    CauseSpec("added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),), choice="point",
-              description="a mass fixed on the frame at one node (all three translations)"),
-    CauseSpec("support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2),
-                                    ParamSpec("factor_rotational", 1e-2, 1e2)),
-              description="the base supports' springs, translational and rotational, scaled"),
-    CauseSpec("joint_stiffness", (ParamSpec("factor_translational", 1e-4, 1e2),
-                                  ParamSpec("factor_rotational", 1e-3, 1e2)),
-              description="the column-beam joints' springs, translational and rotational, scaled"),
-    CauseSpec("member_mass", (ParamSpec("factor", 0.5, 2.0),), choice="component",
-              description="the mass (density or area) of one member scaled"),
-    CauseSpec("member_stiffness", (ParamSpec("factor", 0.3, 2.0),), choice="component",
-              description="the bending stiffness EI of one member scaled"),
-    CauseSpec("mass_loading", (ParamSpec("mass_kg", 0.0, 1.0, nominal=None, unit="kg", log=False),),
-              description="the accelerometers' mass at every measured output (all three translations)"),
-    CauseSpec("stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6),),
-              description="the material's Young's modulus scaled (every member; springs unchanged)"),
-)
+
+@dataclass
+class Assembly:
+    """What a candidate changes: factors on the frame's parts and lumped masses. A cause's function
+    edits it in place; :meth:`FrameVariants.matrices` then sums the scaled parts."""
+
+    modulus: float = 1.0                                              # Young's modulus factor, every member
+    bending: dict = field(default_factory=dict)                       # member -> EI factor
+    element_bending: dict = field(default_factory=dict)               # "member:e" -> EI factor of that element
+    mass: dict = field(default_factory=dict)                          # member -> mass factor
+    springs: dict = field(default_factory=dict)                       # (kind, part) -> factor
+    sensor_mass_kg: "float | None" = None                             # accelerometer mass (None: the config's)
+    lumped: list = field(default_factory=list)                        # [(node, kg, rotary inertia?)]
+
+
+@dataclass(frozen=True)
+class PhysicalCause:
+    """One row of the cause registry: the cause as the diagnosis sees it (:class:`CauseSpec`: name,
+    parameters with their search ranges, the choice, description, advice) and the function that
+    applies its parameters to an :class:`Assembly`."""
+
+    spec: CauseSpec
+    apply: Callable[[Assembly, Mapping], None]
+
+
+def _added_mass(a: Assembly, p: Mapping) -> None:
+    a.lumped.append((str(p["point"]), float(p["mass_kg"]), True))
+
+
+def _springs(kind: str) -> Callable[[Assembly, Mapping], None]:
+    def apply(a: Assembly, p: Mapping) -> None:
+        for part in ("translational", "rotational"):
+            a.springs[(kind, part)] = a.springs.get((kind, part), 1.0) * float(p.get(f"factor_{part}", 1.0))
+    return apply
+
+
+def _member_mass(a: Assembly, p: Mapping) -> None:
+    c = str(p["component"])
+    a.mass[c] = a.mass.get(c, 1.0) * float(p["factor"])
+
+
+def _member_stiffness(a: Assembly, p: Mapping) -> None:
+    c = str(p["component"])
+    a.bending[c] = a.bending.get(c, 1.0) * float(p["factor"])
+
+
+def _element_stiffness(a: Assembly, p: Mapping) -> None:
+    e = str(p["element"])
+    a.element_bending[e] = a.element_bending.get(e, 1.0) * float(p["factor"])
+
+
+def _mass_loading(a: Assembly, p: Mapping) -> None:
+    a.sensor_mass_kg = float(p["mass_kg"])
+
+
+def _stiffness_shift(a: Assembly, p: Mapping) -> None:
+    a.modulus *= float(p.get("stiffness_factor", 1.0))
+
+
+#: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function.
+CAUSES: dict[str, PhysicalCause] = {}
+
+
+def register_cause(row: PhysicalCause) -> None:
+    """Add a row to :data:`CAUSES` (a cause of the same name is replaced)."""
+    CAUSES[row.spec.name] = row
+
+
+for _row in (
+    PhysicalCause(CauseSpec(
+        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),), choice="point",
+        description="a mass fixed on the frame at one node (all three translations)",
+        advice="A mass the model lacks sits at the named node (a fixture, a block, cabling): add it to the "
+               "model as a lumped mass there, or remove it from the structure."), _added_mass),
+    PhysicalCause(CauseSpec(
+        "support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2), ParamSpec("factor_rotational", 1e-2, 1e2)),
+        description="the base supports' springs, translational and rotational, scaled",
+        advice="The supports are softer or stiffer than modelled: check the clamping (bolts' torque, the "
+               "foundation) or update the support springs by the fitted factors."), _springs("support")),
+    PhysicalCause(CauseSpec(
+        "joint_stiffness", (ParamSpec("factor_translational", 1e-4, 1e2), ParamSpec("factor_rotational", 1e-3, 1e2)),
+        description="the column-beam joints' springs, translational and rotational, scaled",
+        advice="The column-beam joints are softer or stiffer than modelled: check the joints' bolts and "
+               "welds, or update the joint springs by the fitted factors."), _springs("joint")),
+    PhysicalCause(CauseSpec(
+        "member_mass", (ParamSpec("factor", 0.5, 2.0),), choice="component",
+        description="the mass (density or area) of one member scaled",
+        advice="One member is heavier or lighter than modelled: check its section and material, or add the "
+               "attached mass spread along it."), _member_mass),
+    PhysicalCause(CauseSpec(
+        "member_stiffness", (ParamSpec("factor", 0.3, 2.0),), choice="component",
+        description="the bending stiffness EI of one member scaled",
+        advice="One member bends more or less easily than modelled: check its section (second moments) and "
+               "orientation, or update its EI by the fitted factor."), _member_stiffness),
+    PhysicalCause(CauseSpec(
+        "element_stiffness", (ParamSpec("factor", 0.02, 2.0),), choice="element",
+        description="the bending stiffness EI of one element scaled (a crack or local damage)",
+        advice="One short piece of a member has lost (or gained) bending stiffness: inspect the named element "
+               "(between nodes e and e+1) for a crack, a notch, corrosion or a loose attachment."),
+        _element_stiffness),
+    PhysicalCause(CauseSpec(
+        "mass_loading", (ParamSpec("mass_kg", 0.0, 1.0, nominal=None, unit="kg", log=False),),
+        description="the accelerometers' mass at every measured output (all three translations)",
+        advice="The accelerometers' mass lowers the frequencies: put the sensors' mass at their nodes in the "
+               "model (the channel set-up's accelerometer mass), or use lighter sensors."), _mass_loading),
+    PhysicalCause(CauseSpec(
+        "stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6),),
+        description="the material's Young's modulus scaled (every member; springs unchanged)",
+        advice="Every member is stiffer or softer by the same factor: update Young's modulus (or every "
+               "section's second moments) by the fitted stiffness factor."), _stiffness_shift),
+):
+    register_cause(_row)
+
+
+def _one(cause: "str | None", params: Mapping) -> list[tuple[str, Mapping]]:
+    return [] if cause is None else [(cause, params)]
 
 
 def _config(config: "FrameConfig | str | Path | None") -> FrameConfig:
@@ -98,20 +198,34 @@ class FrameVariants:
         self.components = tuple(cfg.components)
         self._K_rest: dict[str, np.ndarray] = {}
         self._K_bend: dict[str, np.ndarray] = {}
+        self._K_elem: dict[str, np.ndarray] = {}      # "member:e" -> that element's bending stiffness
         self._M: dict[str, np.ndarray] = {}
+        elements = []
         for name, comp in cfg.components.items():
             sp = section_properties(cfg.sections[comp.section])
             xyz = member_nodes_xyz(comp)
-            k_all, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg,
-                                     cfg.damage.bending_factors(name, comp.n_elements))
+            damage = cfg.damage.bending_factors(name, comp.n_elements)
+            _, m = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg)
             k_rest, _ = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3,
                                       replace(sp, Iy=0.0, Iz=0.0), comp.roll_deg)
             first = 6 * self.frame.node_index[(name, 0)]
-            sl = slice(first, first + k_all.shape[0])
-            for store, block in ((self._K_rest, k_rest), (self._K_bend, k_all - k_rest), (self._M, m)):
-                full = np.zeros((n, n))
-                full[sl, sl] = block
-                store[name] = full
+            sl = slice(first, first + k_rest.shape[0])
+
+            def full(block: np.ndarray, sl: slice = sl) -> np.ndarray:
+                out = np.zeros((n, n))
+                out[sl, sl] = block
+                return out
+
+            bend = np.zeros((n, n))
+            for e in range(comp.n_elements):
+                one = [0.0] * comp.n_elements
+                one[e] = damage[e]
+                k_e, _ = assemble_beam(xyz, mat.youngs_modulus_pa, G, mat.density_kg_m3, sp, comp.roll_deg, one)
+                self._K_elem[f"{name}:{e}"] = full(k_e - k_rest)
+                bend += self._K_elem[f"{name}:{e}"]
+                elements.append(f"{name}:{e}")
+            self._K_rest[name], self._K_bend[name], self._M[name] = full(k_rest), bend, full(m)
+        self.elements = tuple(elements)
         self._springs = {}
         for kind, pairs, k6 in (("support", [(a, None) for a in cfg.supports.nodes], cfg.supports.stiffness),
                                 ("joint", list(cfg.joints.pairs), cfg.joints.stiffness)):
@@ -132,14 +246,14 @@ class FrameVariants:
 
     # ------------------------------------------------------------------ protocol of the diagnosis
     def causes(self) -> tuple[CauseSpec, ...]:
-        """The physical causes with their choices filled in (every node, every member)."""
+        """The physical causes with their choices filled in (every node, member, element)."""
+        options = {"point": self.nodes, "component": self.components, "element": self.elements}
         out = []
-        for c in CAUSES:
-            if c.choice == "point":
-                c = replace(c, options=self.nodes)
-            elif c.choice == "component":
-                c = replace(c, options=self.components)
-            elif c.name == "mass_loading":
+        for row in CAUSES.values():
+            c = row.spec
+            if c.choice is not None:
+                c = replace(c, options=options[c.choice])
+            if c.name == "mass_loading":
                 c = replace(c, params=(replace(c.params[0], nominal=self.sensor_mass_kg),))
             out.append(c)
         return tuple(out)
@@ -147,7 +261,11 @@ class FrameVariants:
     def modes(self, cause: "str | None", params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
         """Natural frequencies (Hz, flexible modes up to ``max_freq_hz``) and the shape products
         ``phi_o phi_r`` (n_out * n_ref, n_modes) at the measured points (C order over (o, r))."""
-        K, M = self.matrices(cause, params)
+        return self.modes_of(_one(cause, params), max_freq_hz)
+
+    def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`modes` of the frame changed by every ``(cause, params)`` of ``changes`` at once."""
+        K, M = self.matrices_of(changes)
         w2, phi = scipy.linalg.eigh(K, M, subset_by_value=(1.0, (2 * np.pi * max_freq_hz) ** 2))
         f = np.sqrt(w2) / (2 * np.pi)
         return f, self._products(phi)
@@ -155,7 +273,11 @@ class FrameVariants:
     def model(self, cause: "str | None", params: Mapping) -> ModalModel:
         """Receptance pole-residue model (m/N) of the changed frame, modes up to ``[modes] max_freq_hz``,
         damping from ``[damping]`` of the config, ``meta["output_shapes"]`` at the outputs."""
-        K, M = self.matrices(cause, params)
+        return self.model_of(_one(cause, params))
+
+    def model_of(self, changes: Sequence[tuple[str, Mapping]]) -> ModalModel:
+        """:meth:`model` of the frame changed by every ``(cause, params)`` of ``changes`` at once."""
+        K, M = self.matrices_of(changes)
         fmax = self.config.modes.max_freq_hz
         w2, phi = scipy.linalg.eigh(K, M, subset_by_value=(1.0, (2 * np.pi * fmax) ** 2))
         f = np.sqrt(w2) / (2 * np.pi)
@@ -164,10 +286,23 @@ class FrameVariants:
         po, pr = self._shapes_at(phi)
         pp = np.einsum("om,rm->orm", po, pr)
         R = pp / (2j * np.imag(lam))[None, None, :]
+        names = "+".join(c for c, _ in changes) or None
         return ModalModel(poles=lam, residues=R, quantity="receptance", residual_form="none",
                           outputs=self.outputs, references=self.references,
-                          meta={"source": "simulator.physical", "cause": cause, "parameters": dict(params),
+                          meta={"source": "simulator.physical", "cause": names,
+                                "parameters": dict(changes[0][1]) if len(changes) == 1 else
+                                [{"effect": c, "parameters": dict(p)} for c, p in changes],
                                 "output_shapes": po})
+
+    def points(self) -> tuple[str, ...]:
+        """Every measurable point of the frame: each node in each direction (``component:node:X``...)."""
+        return tuple(f"{n}:{d}" for n in self.nodes for d in ("X", "Y", "Z"))
+
+    def at_points(self, outputs: Sequence[str], references: Sequence[str]) -> "FrameVariants":
+        """The same frame (same configuration, same accelerometers) at other measured points."""
+        other = FrameVariants(self.config, outputs, references)
+        other.sensor_nodes, other.sensor_mass_kg = self.sensor_nodes, self.sensor_mass_kg
+        return other
 
     def refined(self, refine: int = 2) -> "FrameVariants":
         """The same frame with every member's elements ``refine`` times finer, at the same measured
@@ -215,34 +350,36 @@ class FrameVariants:
     # ------------------------------------------------------------------ assembly
     def matrices(self, cause: "str | None", params: Mapping) -> tuple[np.ndarray, np.ndarray]:
         """K (N/m, N m/rad) and M (kg, kg m^2) of the frame changed by ``cause`` with ``params``."""
-        p = dict(params)
-        E = float(p.get("stiffness_factor", 1.0)) if cause == "stiffness_shift" else 1.0
+        return self.matrices_of(_one(cause, params))
+
+    def matrices_of(self, changes: Sequence[tuple[str, Mapping]]) -> tuple[np.ndarray, np.ndarray]:
+        """K and M of the frame changed by every ``(cause, params)`` of ``changes`` (registry rows of
+        :data:`CAUSES` applied in turn to one :class:`Assembly`)."""
+        a = Assembly()
+        for cause, params in changes:
+            if cause not in CAUSES:
+                raise ModelError(f"unknown physical cause {cause!r}; the registry has {', '.join(CAUSES)}")
+            CAUSES[cause].apply(a, params)
         n = self.frame.n_dof
         K, M = np.zeros((n, n)), np.zeros((n, n))
+        E = a.modulus
         for c in self.components:
             K += E * self._K_rest[c]
-            K += E * self._bend_factor(cause, p, c) * self._K_bend[c]
-            M += self._mass_factor(cause, p, c) * self._M[c]
-        for kind in ("support", "joint"):
-            ft, fr = 1.0, 1.0
-            if cause == f"{kind}_stiffness":
-                ft, fr = float(p.get("factor_translational", 1.0)), float(p.get("factor_rotational", 1.0))
-            K += ft * self._springs[(kind, "translational")]
-            K += fr * self._springs[(kind, "rotational")]
-        sensor_mass = float(p["mass_kg"]) if cause == "mass_loading" else self.sensor_mass_kg
+            K += E * a.bending.get(c, 1.0) * self._K_bend[c]
+            M += a.mass.get(c, 1.0) * self._M[c]
+        for e, f in a.element_bending.items():
+            if e not in self._K_elem:
+                raise ModelError(f"element {e!r} is not on the frame; its elements are {', '.join(self.elements)}")
+            c = e.partition(":")[0]
+            K += E * a.bending.get(c, 1.0) * (float(f) - 1.0) * self._K_elem[e]
+        for key, spring in self._springs.items():
+            K += a.springs.get(key, 1.0) * spring
+        sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
         for node in self.sensor_nodes:
             self._lump(M, node, sensor_mass)
-        if cause == "added_mass":
-            self._lump(M, str(p["point"]), float(p["mass_kg"]), rotary=True)
+        for node, mass, rotary in a.lumped:
+            self._lump(M, node, mass, rotary=rotary)
         return K, M
-
-    @staticmethod
-    def _bend_factor(cause: "str | None", p: dict, component: str) -> float:
-        return float(p["factor"]) if cause == "member_stiffness" and p.get("component") == component else 1.0
-
-    @staticmethod
-    def _mass_factor(cause: "str | None", p: dict, component: str) -> float:
-        return float(p["factor"]) if cause == "member_mass" and p.get("component") == component else 1.0
 
     def _lump(self, M: np.ndarray, node: str, mass_kg: float, rotary: bool = False) -> None:
         """A lumped mass (kg) on the node's translations; with ``rotary`` also the rotary inertia of a

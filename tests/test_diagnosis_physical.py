@@ -49,6 +49,14 @@ def _sensor_masses(cfg: FrameConfig) -> dict:
     ("stiffness_shift", {"stiffness_factor": 1.08},
      lambda c: {"material": {"youngs_modulus_pa": 1.08 * c.material.youngs_modulus_pa}}),
     ("mass_loading", {"mass_kg": 0.2}, lambda c: {"sensors": {"accelerometer": {"mass_kg": 0.2}}}),
+    ("element_stiffness", {"element": "left:1", "factor": 0.2},
+     lambda c: {"damage": {"cracked_elements": ["left:1"], "crack_bending_factor": [0.2]}}),
+    ([("element_stiffness", {"element": "top:5", "factor": 0.3}), ("stiffness_shift", {"stiffness_factor": 1.08})],
+     None, lambda c: {"damage": {"cracked_elements": ["top:5"], "crack_bending_factor": [0.3]},
+                      "material": {"youngs_modulus_pa": 1.08 * c.material.youngs_modulus_pa}}),
+    ([("support_stiffness", {"factor_rotational": 0.4}), ("mass_loading", {"mass_kg": 0.2})],
+     None, lambda c: {"supports": {"stiffness": list(c.supports.stiffness[:3]) + [x * 0.4 for x in c.supports.stiffness[3:]]},
+                      "sensors": {"accelerometer": {"mass_kg": 0.2}}}),
 ])
 def test_split_frame_equals_frames_built_from_changed_configs(cause, params, overrides) -> None:
     """K and M assembled once and scaled by part give the same modes as the frame assembled from the
@@ -57,7 +65,8 @@ def test_split_frame_equals_frames_built_from_changed_configs(cause, params, ove
     cfg = base.with_overrides(overrides(base))
     f_ref = FrameModel.from_config(cfg, _sensor_masses(cfg)).modes(600.0).freq_hz
     f_ref = f_ref[f_ref > 1.0]
-    f, P = FrameVariants(base, OUTS, REFS).modes(cause, params, 600.0)
+    fv = FrameVariants(base, OUTS, REFS)
+    f, P = fv.modes_of(cause, 600.0) if isinstance(cause, list) else fv.modes(cause, params, 600.0)
     assert f.size == f_ref.size and P.shape == (len(OUTS) * len(REFS), f.size)
     np.testing.assert_allclose(f, f_ref, rtol=1e-6)      # 1e9 N/m springs: K cond ~1e10
 
@@ -82,6 +91,7 @@ def test_member_stiffness_scales_bending_stiffness_only() -> None:
     ("support_stiffness", {"factor_translational": 1.0, "factor_rotational": 0.4}, ("factor_rotational",)),
     ("member_stiffness", {"component": "top", "factor": 0.85}, ("factor",)),
     ("added_mass", {"point": "top:6", "mass_kg": 2.5}, ("mass_kg",)),
+    ("element_stiffness", {"element": "right:2", "factor": 0.25}, ("factor",)),
 ])
 def test_noise_free_modes_give_the_parameters_back(cause, truth, free) -> None:
     fv = FrameVariants(None, OUTS, REFS)
@@ -97,6 +107,46 @@ def test_noise_free_modes_give_the_parameters_back(cause, truth, free) -> None:
             assert p[k] == v
         else:
             assert p[k] == pytest.approx(v, rel=1e-4)
+
+
+def test_every_cause_is_one_registry_row_with_its_advice() -> None:
+    from simulator.physical import CAUSES
+
+    fv = FrameVariants(None, OUTS, REFS)
+    assert [c.name for c in fv.causes()] == list(CAUSES)
+    for name, row in CAUSES.items():
+        assert row.spec.name == name and row.spec.description and row.spec.advice and callable(row.apply)
+    opts = {c.name: c.options for c in fv.causes()}
+    assert len(opts["element_stiffness"]) == sum(c.n_elements for c in fv.config.components.values())
+    assert set(opts["added_mass"]) == set(fv.nodes)
+
+
+def test_two_noise_free_causes_are_found_together() -> None:
+    """A crack and a softer support at once: the pair of the forward selection, refined together, gives
+    both back (choices searched, nested leave-one-mode-out error near zero)."""
+    from analysis.diagnosis.physical import PhysicalFit
+    from analysis.diagnosis.physical_pairs import OnTop, fit_pair
+
+    fv = FrameVariants(None, OUTS, REFS)
+    truth = [("element_stiffness", {"element": "left:2", "factor": 0.3}),
+             ("support_stiffness", {"factor_translational": 1.0, "factor_rotational": 0.3})]
+    model = fv.model_of(truth)
+    keep = model.freq_hz < 460.0
+    mm = MeasuredModes(model.freq_hz[keep], np.zeros(int(keep.sum())),
+                       model.residues[..., keep].reshape(-1, int(keep.sum())))
+    specs = {c.name: c for c in fv.causes()}
+    allsel = np.ones(mm.freq_hz.size, bool)
+    pa, ca, _ = fit_cause(fv, specs["element_stiffness"], ("factor",), mm, allsel, 700.0)
+    top = OnTop(fv, [("element_stiffness", pa)])
+    pb, cb, _ = fit_cause(top, specs["support_stiffness"], ("factor_rotational",), mm, allsel, 700.0)
+    assert cb < ca
+    pair = fit_pair(fv, [specs["element_stiffness"], specs["support_stiffness"]],
+                    [PhysicalFit("element_stiffness", pa, ("factor",), ca),
+                     PhysicalFit("support_stiffness", pb, ("factor_rotational",), cb)], mm, 700.0)
+    assert pair.params[0]["element"] == "left:2"
+    assert pair.params[0]["factor"] == pytest.approx(0.3, rel=1e-3)
+    assert pair.params[1]["factor_rotational"] == pytest.approx(0.3, rel=1e-3)
+    assert pair.chi2_cv < 1e-3
 
 
 def test_modes_of_another_structure_do_not_pair() -> None:
@@ -176,20 +226,21 @@ def _short_setup(tmp_path: Path) -> str:
 
 def _capture_and_diagnose(tmp_path: Path, overrides: dict, seed: int, extra=()) -> dict:
     from acquisition.cli_capture import main as capture
-    from analysis.cli_diagnose import main as diagnose
+    from analysis.diagnosis import diagnose
+    from analysis.inputs import load_input
 
     device = f"sim://?seed={seed}"
     if overrides:
         cfg = tmp_path / "changed.toml"
         cfg.write_text(overrides_to_toml(overrides))
         device += f"&config={cfg}"
-    rec, out = tmp_path / "rec.h5", tmp_path / "diag.json"
+    rec = tmp_path / "rec.h5"
     with contextlib.redirect_stdout(io.StringIO()):
         assert capture(["--device", device, "--out", str(rec), "--points", ",".join(REFS), "--hits", "3", "--auto",
                         "-q", *extra]) == 0
-        assert diagnose(["--measured", str(rec), "--simulated", str(ROOT / "simulator" / "frame.toml"),
-                         "--json", str(out), "-q"]) == 0
-    return json.loads(out.read_text())
+    m = load_input(rec)
+    frame = FrameVariants(ROOT / "simulator" / "frame.toml", m.outputs, m.references)
+    return json.loads(json.dumps(diagnose(rec, frame).to_json(), default=lambda x: x.tolist()))
 
 
 def test_steel_block_on_the_beam_is_an_added_mass_at_its_node(tmp_path) -> None:
@@ -198,6 +249,7 @@ def test_steel_block_on_the_beam_is_an_added_mass_at_its_node(tmp_path) -> None:
     over = _bench().steel_block(FrameConfig.load(), "top:6", 3.0)
     doc = _capture_and_diagnose(tmp_path, over, seed=21)
     assert doc["verdict"] == "added_mass", doc["reason"]
+    assert doc["named"] == [{"effect": "added_mass", "parameters": doc["causes"][0]["parameters"]}]
     best = doc["causes"][0]
     assert best["kind"] == "physical" and best["significant"] and best["adequate"]
     assert best["parameters"]["point"] == "top:6"
@@ -303,3 +355,33 @@ def test_a_mass_at_one_sensor_is_an_added_mass_at_its_node() -> None:
     assert d.verdict == "added_mass", d.reason
     p = d.causes[0]["parameters"]
     assert p["point"] == "top:4" and p["mass_kg"] == pytest.approx(0.3, rel=0.05)
+
+
+def test_next_measurement_is_the_point_that_separates_two_candidates() -> None:
+    """Two added masses the plan's single hammer point sees alike: the proposed hammer point is a frame
+    point not yet hammered, and there the two candidates' FRFs differ more than at today's point."""
+    from analysis.diagnosis.effects import predict
+    from analysis.diagnosis.next_measurement import _relative_db, propose, rivals
+    from analysis.diagnosis.physical import PhysicalFit
+
+    fv = FrameVariants(None, OUTS, ["top:4:Z"])
+    f = np.linspace(5.0, 400.0, 600)
+    meas = FRFSet(freq_hz=f, H=np.ones((len(OUTS), 1, f.size), complex), quantity="accelerance",
+                  outputs=tuple(OUTS), references=("top:4:Z",))
+    a = ("added_mass", {"point": "top:3", "mass_kg": 2.0})
+    b = ("added_mass", {"point": "top:5", "mass_kg": 2.0})
+    fit = PhysicalFit("added_mass", a[1], ("mass_kg",), 1.0, 2.0, ranked=[(1.0, "top:3", a[1]), (2.5, "top:5", b[1])])
+    close = rivals([{"significant": True, "_fit": fit}])
+    assert close is not None and close[1] == b and "top:3" in close[2] and "top:5" in close[2]
+    nm = propose(fv, meas, (), -40.0, *close)
+    assert nm is not None and nm["point"] in fv.points() and nm["point"] != "top:4:Z"
+
+    def sep(point: str) -> float:
+        there = fv.at_points(OUTS, [point])
+        h = [predict(there.model(*c), f, "accelerance", (), outputs=tuple(OUTS), references=(point,)).H for c in (a, b)]
+        return float(_relative_db(h[0], h[1])[0]) + 40.0
+
+    assert nm["separation_db"] == pytest.approx(sep(nm["point"]), abs=1e-6)
+    assert nm["separation_db"] > sep("top:4:Z")
+    assert rivals([{"significant": True, "_fit": PhysicalFit("added_mass", a[1], ("mass_kg",), 1.0, 2.0,
+                                                            ranked=[(1.0, "top:3", a[1]), (9.0, "top:5", b[1])])}]) is None

@@ -83,19 +83,18 @@ def test_nonlinear_stand_scales_frequencies_by_peak_force():
     assert st.model.modes().freq_hz[0] == lin.model.modes().freq_hz[0]   # linear between strikes
 
 
-def test_cli_adds_held_out_gains_to_time_data(tmp_path):
-    import json
-
+def test_the_diagnosis_adds_held_out_gains_to_time_data(tmp_path):
     from acquisition.cli_capture import main as capture_main
-    from analysis.cli_diagnose import main
+    from analysis.diagnosis import diagnose
+    from analysis.inputs import load_input
+    from simulator.physical import FrameVariants
 
     rec = tmp_path / "rec.h5"
     assert capture_main(["--device", "sim://", "--seed", "3", "--out", str(rec), "--points", "right:6:-X",
                          "--hits", "4", "--auto", "-q"]) == 0
-    out = tmp_path / "d.json"
-    assert main(["--measured", str(rec), "--simulated", str(TOML), "--json", str(out),
-                 "--band", "3:400", "--effects", "stiffness_shift"]) == 0
-    doc = json.loads(out.read_text())
+    m = load_input(rec)
+    doc = diagnose(rec, FrameVariants(TOML, m.outputs, m.references), band=(3.0, 400.0),
+                   effects=["stiffness_shift"]).to_json()
     assert doc["time_data_verdict"] == "none"
     for c in doc["time_data"]:
         assert {"gain_db", "error_before_db", "error_after_db", "significant", "counts"} <= set(c)

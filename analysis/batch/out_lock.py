@@ -7,14 +7,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 from typing import Optional
+from ..errors import FolderBusy
 
 __all__ = ["FolderLock", "FolderBusy"]
 
 LOCK_NAME = ".batch.lock"
-
-
-class FolderBusy(OSError):
-    """Another process holds the output folder's lock."""
 
 
 class FolderLock:

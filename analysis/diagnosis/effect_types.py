@@ -50,6 +50,7 @@ class Effect:
     kind : "modal" (apply takes/returns a ModalModel) or "frf" (an FRFSet).
     primary : name of the parameter a test checks (the effect's physical size).
     needs : meta keys the base model must carry for the effect to be fitted (e.g. shapes).
+    advice : what to do when the effect is named (the report's first sentence).
     held_out : optional ``held_out(ctx) -> (before, after) or None``, the effect's own cross-validation
         when interleaved lines cannot test it (single lines at the mains harmonics:
         :func:`analysis.diagnosis.mains.held_out_mains_hum`); None: the default folds.
@@ -63,6 +64,7 @@ class Effect:
     description: str
     needs: tuple = ()
     held_out: Optional[Callable] = None
+    advice: str = ""
 
 
 # --------------------------------------------------------------------------- helpers

@@ -342,26 +342,45 @@ def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
 # --------------------------------------------------------------------------- registry
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Effect("residual_modes", "frf", apply_residual_modes, fit_residual_modes, "upper",
-           "modes outside the band (upper and lower residual terms)"),
+           "modes outside the band (upper and lower residual terms)",
+           advice='Add upper/lower residual terms (modes outside the band) to the model, or widen the '
+                  'simulated mode set; the in-band modes are fine.'),
     Effect("sensor_highpass", "frf", apply_sensor_highpass, fit_sensor_highpass, "corner_hz",
-           "AC coupling / IEPE / piezo low-frequency roll-off of the response sensor"),
+           "AC coupling / IEPE / piezo low-frequency roll-off of the response sensor",
+           advice='The response sensor rolls off at low frequency (AC coupling / IEPE / piezo): start the '
+                  'analysis band well above the corner, use DC coupling, or model the roll-off.'),
     Effect("time_delay", "frf", apply_time_delay, fit_time_delay, "delay_s",
-           "a delay between force and response channels (e.g. different anti-alias filters)"),
+           "a delay between force and response channels (e.g. different anti-alias filters)",
+           advice='Force and response channels are delayed against each other (different anti-alias filters '
+                  'or sample skew): use matched channels or correct the phase by exp(j w delay).'),
     Effect("mass_loading", "modal", apply_mass_loading, fit_mass_loading, "mass_kg",
            "the accelerometers' mass lowers the frequencies in proportion to the mode shape at their points",
-           needs=("output_shapes",)),
+           needs=("output_shapes",),
+           advice="The accelerometers' mass lowers the frequencies: add the sensor masses at their nodes in "
+                  'the model, or use lighter sensors.'),
     Effect("missing_mode", "modal", apply_missing_mode, fit_missing_mode, "freq_hz",
-           "a mode the simulation lacks"),
+           "a mode the simulation lacks",
+           advice="The structure has a mode the model lacks: check the model's mode set (a component, a "
+                  'local mode, a support or joint degree of freedom) near the fitted frequency.'),
     Effect("stiffness_shift", "modal", apply_stiffness_shift, fit_stiffness_shift, "factor",
-           "all natural frequencies scaled alike (stiffness or material off)"),
+           "all natural frequencies scaled alike (stiffness or material off)",
+           advice='All frequencies are off by the same factor: update the material stiffness or the section '
+                  'properties (stiffness scales by the square of the fitted factor).'),
     Effect("damping_change", "modal", apply_damping_change, fit_damping_change, "factor",
-           "all damping ratios scaled alike"),
+           "all damping ratios scaled alike",
+           advice="The damping ratios are off by a common factor: update the model's damping."),
     Effect("exponential_window", "modal", apply_exponential_window, fit_exponential_window, "exp_window_tau_s",
-           "an exponential window added decay 1/tau to every mode"),
+           "an exponential window added decay 1/tau to every mode",
+           advice='An exponential window added damping sigma = 1/tau: correct the fitted damping (or record '
+                  'exp_window_tau_s with the FRFs).'),
     Effect("sensitivity_error", "frf", apply_sensitivity_error, fit_sensitivity_error, "gain",
-           "a channel's calibration (sensitivity) is wrong"),
+           "a channel's calibration (sensitivity) is wrong",
+           advice="A channel's calibration is wrong: recalibrate or correct the sensitivity of the named "
+                  'channel by the fitted gain.'),
     Effect("mains_hum", "frf", apply_mains_hum, fit_mains_hum, "base_hz",
-           "lines at the mains frequency (50/60 Hz) and its harmonics", held_out=held_out_mains_hum),
+           "lines at the mains frequency (50/60 Hz) and its harmonics", held_out=held_out_mains_hum,
+           advice='Mains hum at the named base frequency and harmonics: check grounding and cable routing; '
+                  'ignore those lines in fits.'),
 )}
 
 

@@ -53,7 +53,7 @@ from ..modal import ModalModel
 from ..progress import progress
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
-           "fit_cause", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB",
+           "fit_cause", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB",
            "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
            "ADEQUATE_MARGIN_DB", "ADEQUATE_FRACTION", "DISCREPANCY_CHI2"]
 
@@ -118,13 +118,15 @@ class ParamSpec:
 @dataclass(frozen=True)
 class CauseSpec:
     """A physical cause: its continuous parameters and, optionally, a choice (``"point"``: a node,
-    ``"component"``: a member) among ``options``."""
+    ``"component"``: a member, ``"element"``: an element ``member:e``) among ``options``; what it
+    is (``description``) and what to do when it is named (``advice``)."""
 
     name: str
     params: tuple
     choice: Optional[str] = None
     options: tuple = ()
     description: str = ""
+    advice: str = ""
 
 
 class PhysicalSimulation(Protocol):
@@ -136,6 +138,11 @@ class PhysicalSimulation(Protocol):
 
     def model(self, cause: Optional[str], params: Mapping) -> ModalModel: ...
 
+    def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def model_of(self, changes: Sequence[tuple[str, Mapping]]) -> ModalModel: ...
+
+    # ``modes_of`` / ``model_of``: several causes at once (a list of (cause, params)), for two causes.
     # optional: ``refined_model() -> ModalModel``, the same simulation on a finer mesh: what it removes
     # of the typical error is discretisation, added to the noise level (``noise_db["model_form"]``)
 
@@ -209,6 +216,7 @@ class PhysicalFit:
     chi2_cv: float = np.inf
     cv_per_mode: np.ndarray = field(default_factory=lambda: np.zeros(0))
     at_edge: tuple = ()
+    ranked: list = field(default_factory=list)       # [(chi2, option, params)] of a choice, best first
 
 
 def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[ParamSpec], fixed: dict,
@@ -269,25 +277,29 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
               start: Optional[dict] = None) -> tuple[dict, float, list]:
     """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
     With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted.
-    Returns (params, chi2, [(chi2, option)] of the fitted options, sorted)."""
+    Returns (params, chi2, [(chi2, option, params)] of the fitted options, sorted)."""
     specs = [s for s in cause.params if s.name in free]
     fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
     if cause.choice is None:
         p, c = _fit_continuous(sim, cause, specs, fixed, mm, sel, fmax, start)
         return p, c, []
-    screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, options if options is not None else cause.options)
+    if isinstance(start, dict) and options is not None and set(options) <= set(start):
+        # the options' own fits as starts (a fold of the cross-validation): no coarse screen again
+        screened = [(0.0, opt, start[opt]) for opt in options]
+    else:
+        screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, options if options is not None else cause.options)
     ranked = []
     best: tuple[dict, float] = ({}, np.inf)
     for _, opt, p0 in screened[:N_SCREEN]:
         p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: opt}, mm, sel, fmax, p0)
-        ranked.append((c, opt))
+        ranked.append((c, opt, p))
         if c < best[1]:
             best = (p, c)
-    ranked.sort()
+    ranked.sort(key=lambda t: t[0])
     return best[0], best[1], ranked
 
 
-def _variants(cause: CauseSpec) -> list[tuple[str, ...]]:
+def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
     names = [s.name for s in cause.params]
     out: list[tuple[str, ...]] = []
     for k in range(1, len(names) + 1):
@@ -303,7 +315,7 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
     for k in range(K):
         sel = np.ones(K, bool)
         sel[k] = False
-        p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, None if options else start)
+        p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, start)
         f, P = sim.modes(cause.name, p, fmax)
         out[k] = float(np.sum(residuals(mm, f, P)[k] ** 2))
     return out
@@ -319,13 +331,14 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
     for i, cause in enumerate(causes, start=1):
         progress("diagnosis: physical cause %d/%d, %s", i, len(causes), cause.name)
         best: Optional[PhysicalFit] = None
-        for free in _variants(cause):
+        for free in variants(cause):
             p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
-            options = [o for _, o in ranked[:N_SCREEN_FOLD]] if ranked else None
-            cv = _cross_validate(sim, cause, free, mm, fmax, options, p)
+            options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
+            starts = {o: q for _, o, q in ranked} if ranked else p
+            cv = _cross_validate(sim, cause, free, mm, fmax, options, starts)
             edge = tuple(s.name for s in cause.params if s.name in free and s.at_edge(float(p[s.name])))
             fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
-                              cv_per_mode=cv, at_edge=edge)
+                              cv_per_mode=cv, at_edge=edge, ranked=ranked)
             if best is None or fit.chi2_cv < best.chi2_cv:
                 best = fit
         if best is not None:

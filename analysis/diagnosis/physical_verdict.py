@@ -31,9 +31,12 @@ import numpy as np
 from ..frf import FRFSet
 from .compare import typical_error_db
 from .effects import predict
-from .physical import (ADEQUATE_FRACTION, ADEQUATE_MARGIN_DB, DISCREPANCY_CHI2, MIN_GAIN_DB, MeasuredModes,
-                       PhysicalSimulation, gain_db, pair, paired_well, physical_causes, residuals, same_structure,
-                       shown_params, z_score)
+from ..progress import progress
+from .physical import (ADEQUATE_FRACTION, ADEQUATE_MARGIN_DB, DISCREPANCY_CHI2, MIN_GAIN_DB, RESIDUAL_CAP, CauseSpec,
+                       MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, gain_db, pair, paired_well,
+                       physical_causes, residuals, same_structure, shown_params, variants, z_score)
+from .next_measurement import propose, rivals
+from .physical_pairs import OnTop, fit_pair
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes"]
 
@@ -55,6 +58,9 @@ class PhysicalOutcome:
     combined: list = field(default_factory=list)
     reason: str = ""
     doc: dict = field(default_factory=dict)
+    named: list = field(default_factory=list)
+    next_measurement: Optional[dict] = None
+    on_top: Optional[dict] = None
 
 
 def measure_modes(measured: FRFSet) -> MeasuredModes:
@@ -109,28 +115,34 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     doc: dict = {"measured_modes_hz": mm.freq_hz.tolist(), "measured_std_hz": mm.freq_std_hz.tolist(),
                  "simulated_modes_hz": [float(f0[i]) if i >= 0 else None for i in idx], "mac": macs.tolist()}
 
-    def frf(cause: Optional[str], params: dict) -> FRFSet:
-        return predict(sim.model(cause, params), measured.freq_hz, measured.quantity, prior,
+    def frf(changes: list) -> FRFSet:
+        model = (sim.model(None, {}) if not changes else sim.model(*changes[0]) if len(changes) == 1
+                 else sim.model_of(changes))
+        return predict(model, measured.freq_hz, measured.quantity, prior,
                        outputs=measured.outputs, references=measured.references)
 
-    nominal = frf(None, {})
+    nominal = frf([])
     before_db = typical_error_db(measured, nominal.H, weights)
     good = paired_well(mm, f0, P0)
     same, why = same_structure(mm, f0, P0, good)
     if not same:
         return PhysicalOutcome(decided=True, verdict="unexplained", extended=nominal, error_before_db=before_db,
                                error_after_db=before_db, reason=why, doc={**doc, "same_structure": False})
-    # a measured mode with no counterpart at all (a local mode of something not modelled, a spurious
-    # peak) is reported, not fitted: no change of the catalogue could bring a mode from nowhere
+    # every candidate is paired with the measured modes on its own: a measured mode that no mode of the
+    # unchanged frame pairs with stays in (a large change may have moved a mode past its neighbours or
+    # into the band) and counts against every candidate that does not produce it
     doc["unpaired_measured_hz"] = mm.freq_hz[~good].tolist()
     merged = merged_pairs(mm, f0, P0)
     doc["merged_measured_hz"] = mm.freq_hz[merged & good].tolist()
-    mm = mm.subset(good & ~merged)
-    if mm.freq_hz.size < 3:
+    keep = ~(merged & good)
+    mm, far = mm.subset(keep), ~good[keep]
+    if int((~far).sum()) < 3:
         return PhysicalOutcome(decided=False, doc={**doc, "skipped": "fewer than 3 measured modes pair with the simulation's"})
     base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
-    doc["chi2_per_mode"] = float(base.mean())
-    modes_differ = bool(base.mean() > DISCREPANCY_CHI2)
+    doc["chi2_per_mode"] = float(base[~far].mean())
+    # a mode of its own is not evidence of a change while the paired modes agree (a spurious peak, a
+    # local mode of something not modelled): the paired modes decide whether the modes differ
+    modes_differ = bool(base[~far].mean() > DISCREPANCY_CHI2)
     frfs_differ = bool(before_db - noise_db > none_margin_db)
     doc["discrepancy"] = {"modes": modes_differ, "frfs": frfs_differ}
     if not (modes_differ or frfs_differ):
@@ -139,46 +151,167 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     fits = physical_causes(sim, mm, fmax, causes)
     if not fits:
         return PhysicalOutcome(decided=False, doc=doc)
-    excess = _power(before_db) - _power(noise_db)
-    found: list[dict[str, Any]] = []
-    for fit in fits:
-        spec = specs[fit.cause]
-        ext = frf(fit.cause, fit.params)
-        after_db = typical_error_db(measured, ext.H, weights)
-        removed = (_power(before_db) - _power(after_db)) / excess if excess > 0 else 0.0
-        g = gain_db(base, fit.cv_per_mode)
-        significant = bool(g >= MIN_GAIN_DB and not fit.at_edge)
-        adequate = bool((after_db - noise_db <= ADEQUATE_MARGIN_DB or removed >= ADEQUATE_FRACTION)
-                        and fit.chi2_cv / base.size <= DISCREPANCY_CHI2)
-        params = shown_params(spec, fit.params)
-        shown = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in params.items())
-        edge = f"; at the edge of its range: {', '.join(fit.at_edge)}" if fit.at_edge else ""
-        evidence = (f"{fit.cause} ({shown}): held-out mode error {10 * np.log10(max(base.sum(), 1e-30)):.1f} -> "
-                    f"{10 * np.log10(max(fit.chi2_cv, 1e-30)):.1f} dB (leave one mode out), FRF error "
-                    f"{before_db:.1f} -> {after_db:.1f} dB (noise {noise_db:.1f} dB, {100 * removed:.0f} % of the "
-                    f"excess removed){edge}")
-        found.append({"effect": fit.cause, "kind": "physical", "parameters": params, "gain_db": g,
-                       "error_before_db": before_db, "error_after_db": after_db, "z": z_score(base, fit.cv_per_mode),
-                       "significant": significant, "adequate": adequate, "description": spec.description,
-                       "evidence": evidence, "_extended": ext, "_removed": removed})
+    judge = _Judge(measured, frf, weights, base, far, before_db, noise_db)
+    found = [judge.single(specs[fit.cause], fit) for fit in fits]
     found.sort(key=lambda c: c["gain_db"], reverse=True)
     named = [c for c in found if c["significant"] and c["adequate"]]
-    # frequencies that differ cannot be explained by an FRF-level effect: then unexplained is decided here
-    out = PhysicalOutcome(decided=bool(named) or modes_differ, error_before_db=before_db, doc=doc)
+    out = PhysicalOutcome(decided=True, error_before_db=before_db, doc=doc)
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
-        out.combined = [{"effect": best["effect"], "parameters": best["parameters"], "gain_db": best["gain_db"],
-                         "error_after_db": best["error_after_db"]}]
-    else:
+        out.combined = [_stage_entry(best)]
+        out.named = [{"effect": best["effect"], "parameters": best["parameters"]}]
+        if best["error_after_db"] - noise_db > ADEQUATE_MARGIN_DB:
+            out.on_top = best          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
+    elif hasattr(sim, "modes_of") and (causes is None or len(causes) > 1):
+        two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes)
+        if two is not None:
+            doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate")}
+        if two is not None and two["significant"] and two["adequate"]:
+            out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
+            out.combined = [_stage_entry(c) for c in two["_stages"]]
+            out.named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in two["_stages"]]
+    if not out.named:
+        # a cause that explains the modes but not the FRFs: an FRF-level cause (damping, a sensor) may
+        # complete it; the caller tries the FRF catalogue on top of it
+        modal = [c for c in found if c["significant"] and c["modes_adequate"]]
+        if modal:
+            out.on_top = modal[0]
+        elif not modes_differ:
+            out.decided = False
         out.verdict, out.extended, out.error_after_db = "unexplained", nominal, before_db
-        partial = ", ".join(f"{c['effect']} ({c['gain_db']:+.1f} dB held out, {100 * c['_removed']:.0f} % of the excess "
-                            f"FRF error removed)" for c in found[:3])
+        partial = ", ".join(f"{c['effect']} ({c['gain_db']:+.1f} dB held out, {_removed_text(c['_removed'])})"
+                            for c in found[:3])
         differ = (f"the measured modes differ from the simulation's (mean chi2 {base.mean():.1f} per mode)" if modes_differ
                   else f"the FRFs differ from the simulation's by {before_db - noise_db:.1f} dB above the noise")
-        out.reason = f"{differ} but no physical cause is both significant and adequate; best partial causes: {partial}"
-    for c in found:
-        c.pop("_extended")
-        c.pop("_removed")
-    out.causes = found
+        out.reason = (f"{differ} but no physical cause, alone or with one other, is both significant and adequate; "
+                      f"best partial causes: {partial}")
+    close = rivals(found) if out.verdict != "combined" else None
+    if close is not None:
+        out.next_measurement = propose(sim, measured, prior, noise_db, *close)
+    out.causes = [{k: v for k, v in c.items() if not k.startswith("_")} for c in found]
     return out
+
+
+def _removed_text(removed: float) -> str:
+    """The share of the excess FRF error a cause removes, in words (never a negative percentage)."""
+    if removed < 0:
+        return "the FRF error grows"
+    return f"{100 * min(removed, 1.0):.0f} % of the FRF error above the noise removed"
+
+
+def _stage_entry(c: dict) -> dict:
+    return {"effect": c["effect"], "parameters": c["parameters"], "gain_db": c["gain_db"],
+            "error_after_db": c["error_after_db"]}
+
+
+def _shown(params: dict) -> str:
+    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in params.items())
+
+
+def _db(x: float) -> float:
+    return float(10 * np.log10(max(float(x), 1e-30)))
+
+
+@dataclass
+class _Judge:
+    """The rule of the physical stage for one candidate (one cause or two): held-out gain, significance
+    and adequacy (module docstring); modes that the unchanged frame does not pair (``far``) and the
+    candidate does not predict either are not counted (at most one)."""
+
+    measured: FRFSet
+    frf: Any
+    weights: np.ndarray
+    base: np.ndarray
+    far: np.ndarray
+    before_db: float
+    noise_db: float
+
+    def _counted(self, cv: np.ndarray) -> np.ndarray:
+        lost = self.far & (cv >= 0.5 * RESIDUAL_CAP ** 2)
+        return ~lost if lost.sum() <= 1 else np.ones(cv.size, bool)
+
+    def judge(self, changes: list, cv: np.ndarray, at_edge: tuple) -> dict:
+        ext = self.frf(changes)
+        after_db = typical_error_db(self.measured, ext.H, self.weights)
+        excess = _power(self.before_db) - _power(self.noise_db)
+        removed = (_power(self.before_db) - _power(after_db)) / excess if excess > 0 else 0.0
+        n = self._counted(cv)
+        g = gain_db(self.base[n], cv[n])
+        modes_ok = bool(np.sum(cv[n]) / n.sum() <= DISCREPANCY_CHI2)
+        return {"gain_db": g, "error_before_db": self.before_db, "error_after_db": after_db,
+                "z": z_score(self.base[n], cv[n]), "significant": bool(g >= MIN_GAIN_DB and not at_edge),
+                "modes_adequate": modes_ok,
+                "adequate": bool(modes_ok and (after_db - self.noise_db <= ADEQUATE_MARGIN_DB
+                                               or removed >= ADEQUATE_FRACTION)),
+                "_extended": ext, "_removed": removed}
+
+    def evidence(self, name: str, shown: str, cv: np.ndarray, c: dict, at_edge: tuple) -> str:
+        edge = f"; at the edge of its range: {', '.join(at_edge)}" if at_edge else ""
+        return (f"{name} ({shown}): mode mismatch (sum over the modes of the squared frequency and shape "
+                f"residuals, in dB) {_db(self.base.sum()):.1f} -> {_db(np.sum(cv)):.1f} dB when each mode is "
+                f"predicted from the others; FRF error {self.before_db:.1f} -> {c['error_after_db']:.1f} dB "
+                f"(noise {self.noise_db:.1f} dB: {_removed_text(c['_removed'])}){edge}")
+
+    def single(self, spec: CauseSpec, fit: PhysicalFit) -> dict:
+        params = shown_params(spec, fit.params)
+        c = self.judge([(fit.cause, fit.params)], fit.cv_per_mode, fit.at_edge)
+        c.update({"effect": fit.cause, "kind": "physical", "parameters": params, "description": spec.description,
+                  "advice": spec.advice, "_fit": fit})
+        c["evidence"] = self.evidence(fit.cause, _shown(params), fit.cv_per_mode, c, fit.at_edge)
+        return c
+
+
+#: First causes tried with a second cause on top (the best by held-out gain), and second causes (the best
+#: by penalised chi2 on top of the first) refined as a pair with nested cross-validation.
+N_FIRST = 2
+N_SECOND = 2
+
+
+def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
+             names: Optional[Sequence[str]]) -> list[PhysicalFit]:
+    """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
+    plus a penalty for its freedom (2 per parameter, 2 ln(number of options) for a choice)."""
+    top = OnTop(sim, [(first.cause, first.params)])
+    allsel = np.ones(mm.freq_hz.size, bool)
+    ranked: list[tuple[float, PhysicalFit]] = []
+    for spec in top.causes():
+        if names is not None and spec.name not in names:
+            continue
+        for free in variants(spec):
+            p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax)
+            penalty = 2.0 * len(free) + (2.0 * np.log(max(len(spec.options), 1)) if spec.choice else 0.0)
+            ranked.append((chi2 + penalty, PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
+    ranked.sort(key=lambda t: t[0])
+    out: list[PhysicalFit] = []
+    for _, f in ranked:            # the best variant of each cause
+        if all(g.cause != f.cause for g in out):
+            out.append(f)
+    return out[:N_SECOND]
+
+
+def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
+                  judge: _Judge, names: Optional[Sequence[str]]) -> Optional[dict]:
+    """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of the best
+    significant single cause (and, when that gives no adequate pair, the next), the other causes; the
+    best pair by nested held-out error, judged like a single cause and against the first cause alone."""
+    firsts = [c for c in found if c["significant"]][:N_FIRST]
+    best: Optional[dict] = None
+    for first in firsts:
+        fa: PhysicalFit = first["_fit"]
+        progress("diagnosis: second cause on top of %s", fa.cause)
+        for fb in _seconds(sim, specs, mm, fmax, fa, names):
+            two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa, fb], mm, fmax)
+            c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
+            over = gain_db(fa.cv_per_mode, two.cv_per_mode)
+            c["gain_over_first_db"] = over
+            c["significant"] = bool(c["significant"] and over >= MIN_GAIN_DB)
+            c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
+                             "error_after_db": c["error_after_db"]} for name, p in two.changes]
+            c["effect"], c["_chi2_cv"] = "+".join(two.causes), two.chi2_cv
+            if best is None or (c["significant"] and c["adequate"], -c["_chi2_cv"]) > (
+                    best["significant"] and best["adequate"], -best["_chi2_cv"]):
+                best = c
+        if best is not None and best["significant"] and best["adequate"]:
+            break
+    return best

@@ -20,29 +20,23 @@ __all__ = ["frf_figure", "band_figure", "report_text", "write_report", "ACTIONS"
 log = logging.getLogger(__name__)
 
 # What to do about each verdict (first sentence of the report).
-ACTIONS = {
-    "residual_modes": "Add upper/lower residual terms (modes outside the band) to the model, or widen the "
-                      "simulated mode set; the in-band modes are fine.",
-    "sensor_highpass": "The response sensor rolls off at low frequency (AC coupling / IEPE / piezo): start the "
-                       "analysis band well above the corner, use DC coupling, or model the roll-off.",
-    "time_delay": "Force and response channels are delayed against each other (different anti-alias filters "
-                  "or sample skew): use matched channels or correct the phase by exp(j w delay).",
-    "mass_loading": "The accelerometers' mass lowers the frequencies: add the sensor masses at their nodes "
-                    "in the model, or use lighter sensors.",
-    "missing_mode": "The structure has a mode the model lacks: check the model's mode set (a component, "
-                    "a local mode, a support or joint degree of freedom) near the fitted frequency.",
-    "stiffness_shift": "All frequencies are off by the same factor: update the material stiffness or the "
-                       "section properties (stiffness scales by the square of the fitted factor).",
-    "damping_change": "The damping ratios are off by a common factor: update the model's damping.",
-    "exponential_window": "An exponential window added damping sigma = 1/tau: correct the fitted damping "
-                          "(or record exp_window_tau_s with the FRFs).",
-    "sensitivity_error": "A channel's calibration is wrong: recalibrate or correct the sensitivity of the "
-                         "named channel by the fitted gain.",
-    "mains_hum": "Mains hum at the named base frequency and harmonics: check grounding and cable routing; "
-                 "ignore those lines in fits.",
-    "none": "The simulation explains the measurement within its noise: nothing to fix.",
-    "unexplained": "No effect of the catalogue explains the difference: look at the named bands and modes.",
-}
+def _actions() -> dict[str, str]:
+    """What to do about each verdict: the advice of every catalogue row, and of the verdicts that name
+    no single row (a physical or time-data cause carries its own ``advice``)."""
+    from .effects import EFFECTS
+
+    out = {name: e.advice for name, e in EFFECTS.items()}
+    out.update({
+        "none": "The simulation explains the measurement within its noise: nothing to fix.",
+        "combined": "Two causes together explain the measurement: act on each (below).",
+        "unexplained": "No cause of the catalogue, alone or with one other, explains the difference: look at "
+                       "the bands and modes named below.",
+    })
+    return out
+
+
+# What to do about each verdict (first sentence of the report).
+ACTIONS = _actions()
 
 
 def _save(fig: Figure, path: Path) -> None:
@@ -99,10 +93,21 @@ def band_figure(diag: Diagnosis) -> Figure:
 
 def report_text(diag: Diagnosis) -> str:
     """The ``report.md`` text: verdict, action, evidence, mode table, bands, coherence."""
-    L = ["# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {ACTIONS.get(diag.verdict, '')}", ""]
-    L.append(f"Held-out error of the simulation {diag.error_before_db:.1f} dB, after the extension "
-             f"{diag.error_after_db:.1f} dB; noise level {max(diag.noise_db.values()):.1f} dB "
-             f"(relative squared error, see docs/diagnosis.md).")
+    L = ["# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {_action(diag)}", ""]
+    advice = {c["effect"]: c.get("advice") for c in diag.causes}
+    for c in diag.named:
+        shown = ", ".join(f"{k} = {_value(k, v)}" for k, v in c["parameters"].items() if not isinstance(v, (list, dict)))
+        L.append(f"- **{c['effect']}** ({shown}): {advice.get(c['effect']) or ACTIONS.get(c['effect'], '')}")
+    if diag.named:
+        L.append("")
+    if diag.next_measurement:
+        nm = diag.next_measurement
+        L += [f"**Next measurement:** {nm['point']}: {nm['why']} (the candidates' FRFs there differ by "
+              f"{nm['separation_db']:.1f} dB above the noise).", ""]
+    L.append(f"FRF error of the simulation {diag.error_before_db:.1f} dB, after the extension "
+             f"{diag.error_after_db:.1f} dB; noise level {max(diag.noise_db.values()):.1f} dB (dB of the mean "
+             "squared error relative to the measured |H|, lines weighted as in docs/diagnosis.md; -40 dB is a 1 % "
+             "error). The error is a typical value over all lines: bands listed below can stay above the noise.")
     if len(diag.combined) > 1:
         L += ["", "Accepted effects, stage by stage (each on top of the previous): "
               + "; ".join(f"{c['effect']} (+{c['gain_db']:.2f} dB -> {c['error_after_db']:.1f} dB)" for c in diag.combined)]
@@ -115,11 +120,11 @@ def report_text(diag: Diagnosis) -> str:
         L += ["", "Not tried: " + "; ".join(f"{k} ({v})" for k, v in diag.skipped.items())]
     modes = diag.comparison["modes"]
     L += ["", "## Modes (simulation vs measurement)", "",
-          "| measured Hz | simulated Hz | df % | zeta meas | zeta sim | amplitude dB | phase deg | MAC |",
-          "|---|---|---|---|---|---|---|---|"]
+          "| measured Hz | simulated Hz | df % | damping measured % | damping simulated % | amplitude dB | "
+          "phase deg | MAC |", "|---|---|---|---|---|---|---|---|"]
     for p in modes["pairs"]:
         L.append(f"| {p['measured_hz']:.3f} | {p['simulated_hz']:.3f} | {p['df_percent']:+.2f} | "
-                 f"{p['measured_damping']:.4f} | {p['simulated_damping']:.4f} | {p['amplitude_db']:+.1f} | "
+                 f"{100 * p['measured_damping']:.2f} | {100 * p['simulated_damping']:.2f} | {p['amplitude_db']:+.1f} | "
                  f"{p['phase_deg']:+.0f} | {p['mac']:.2f} |")
     if modes["only_measured"]:
         L.append("\nPeaks only in the measurement: " + ", ".join(f"{m['freq_hz']:.2f} Hz" for m in modes["only_measured"]))
@@ -136,6 +141,22 @@ def report_text(diag: Diagnosis) -> str:
               + ", ".join(f"{r['lo_hz']:.2f}-{r['hi_hz']:.2f} Hz (min {r['min_coherence']:.2f})"
                           for r in diag.comparison["doubtful_coherence"][:20])]
     return "\n".join(L) + "\n"
+
+
+def _action(diag: Diagnosis) -> str:
+    """The first sentence of the report: what to do about the verdict."""
+    if len(diag.named) == 1:
+        c: dict = next((c for c in diag.causes if c["effect"] == diag.named[0]["effect"]), {})
+        return str(c.get("advice") or ACTIONS.get(diag.verdict, ""))
+    return ACTIONS.get(diag.verdict, "")
+
+
+def _value(name: str, v: object) -> str:
+    """A parameter as shown: masses in kg, factors plain, times in s, the rest with 4 digits."""
+    if not isinstance(v, float):
+        return str(v)
+    unit = " kg" if name.endswith("_kg") else " Hz" if name.endswith("_hz") else " s" if name.endswith("_s") else ""
+    return f"{v:.4g}{unit}"
 
 
 def write_report(diag: Diagnosis, outdir: "str | Path", max_frf_plots: int = 6) -> Path:

@@ -26,14 +26,16 @@ Definitions
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from dataclasses import dataclass
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 from scipy.signal import find_peaks
 
 
 __all__ = ["pulse_bounds", "detect_double_hit", "detect_overload", "detect_input_noise",
-           "detect_amplitude_nonlinearity", "diagnose_hits", "FORCE_WINDOW_S", "FORCE_TAPER_S"]
+           "detect_amplitude_nonlinearity", "diagnose_hits", "Hits", "TimeEffect", "TIME_EFFECTS", "FORCE_WINDOW_S",
+           "FORCE_TAPER_S"]
 
 PULSE_LEVEL = 0.1
 NOISE_GUARD = 32
@@ -211,22 +213,72 @@ def detect_amplitude_nonlinearity(force: np.ndarray, responses: np.ndarray, fs_h
     return {"effect": "amplitude_nonlinearity", "parameters": params, "present": present, "evidence": ev}
 
 
+@dataclass(frozen=True)
+class Hits:
+    """The accepted hits of one reference point: force (n_hits, n) N, responses (n_hits, n_out, n) EU,
+    sample rate (Hz), the analysis band (Hz), the channels' full scales and the analyser's overload
+    flags (n_hits, n_channels) when known."""
+
+    force: np.ndarray
+    responses: np.ndarray
+    fs_hz: float
+    band: Sequence[float]
+    full_scale: Optional[Sequence[float]] = None
+    overload_flags: Optional[np.ndarray] = None
+
+
+@dataclass(frozen=True)
+class TimeEffect:
+    """One row of the time-data registry: name, what it is, what to do when it is found, and its
+    detector ``detect(hits) -> cause dict`` (None when the hits cannot show it, e.g. no full scale)."""
+
+    name: str
+    description: str
+    advice: str
+    detect: Callable[[Hits], Optional[dict]]
+
+
+def _overload(h: Hits) -> Optional[dict]:
+    if h.full_scale is None and h.overload_flags is None:
+        return None
+    data = np.concatenate([np.asarray(h.force, float)[:, None, :], np.asarray(h.responses, float).reshape(
+        np.shape(h.force)[0], -1, np.shape(h.force)[1])], axis=1)
+    return detect_overload(data, h.full_scale, h.overload_flags)
+
+
+#: The time-data effects. Adding one: a row and its detector (and, for a held-out gain, its
+#: re-simulation in :mod:`analysis.diagnosis.timedata_gain`).
+TIME_EFFECTS: dict[str, TimeEffect] = {e.name: e for e in (
+    TimeEffect("double_hit", "the hammer bounced: a second pulse shortly after the first",
+               "Strike with a firmer wrist or a harder tip and reject double hits (the hit check of capture), "
+               "or widen the force window to keep the second pulse.",
+               lambda h: detect_double_hit(h.force, h.fs_hz)),
+    TimeEffect("overload", "a channel clipped at its full scale",
+               "Raise the input range of the overloaded channels or strike softer; the flagged hits are not usable.",
+               _overload),
+    TimeEffect("input_noise", "noise on the force channel biases H1 low",
+               "Use a more sensitive hammer range or a harder tip for more force in the band, or the H2 estimator.",
+               lambda h: detect_input_noise(h.force, h.fs_hz, h.band)),
+    TimeEffect("amplitude_nonlinearity", "the natural frequencies change with the force level",
+               "The structure is not linear at these levels (a loose joint, a rattling part): test at one force "
+               "level, tighten the joints, or model the nonlinearity.",
+               lambda h: detect_amplitude_nonlinearity(h.force, h.responses, h.fs_hz, h.band)),
+)}
+
+
 def diagnose_hits(force: np.ndarray, responses: np.ndarray, fs_hz: float, band: Sequence[float], *,
                   full_scale: Optional[Sequence[float]] = None, overload_flags: Optional[np.ndarray] = None) -> list:
-    """All time-data causes of a set of hits at one reference, present ones first."""
-    out = [detect_double_hit(force, fs_hz)]
-    data = np.concatenate([np.asarray(force, float)[:, None, :], np.asarray(responses, float).reshape(
-        np.shape(force)[0], -1, np.shape(force)[1])], axis=1)
-    if full_scale is not None or overload_flags is not None:
-        out.append(detect_overload(data, full_scale, overload_flags))
-    try:
-        out.append(detect_input_noise(force, fs_hz, band))
-    except ValueError as exc:
-        out.append({"effect": "input_noise", "parameters": {}, "present": False, "evidence": str(exc)})
-    try:
-        out.append(detect_amplitude_nonlinearity(force, responses, fs_hz, band))
-    except ValueError as exc:
-        out.append({"effect": "amplitude_nonlinearity", "parameters": {}, "present": False, "evidence": str(exc)})
+    """Every time-data cause of :data:`TIME_EFFECTS` for a set of hits at one reference, present ones first;
+    each cause dict carries the row's ``description`` and ``advice``."""
+    hits = Hits(force, responses, fs_hz, band, full_scale, overload_flags)
+    out = []
+    for e in TIME_EFFECTS.values():
+        try:
+            c = e.detect(hits)
+        except ValueError as exc:
+            c = {"effect": e.name, "parameters": {}, "present": False, "evidence": str(exc)}
+        if c is not None:
+            out.append({**c, "description": e.description, "advice": e.advice})
     return sorted(out, key=lambda c: not c["present"])
 
 

@@ -43,7 +43,7 @@ from .effects import EFFECTS, EffectError, FitContext, predict
 if TYPE_CHECKING:
     from .physical import MeasuredModes, PhysicalSimulation
 
-__all__ = ["Diagnosis", "diagnose", "Z_MIN", "MIN_GAIN_DB", "STRONG_GAIN_DB", "NONE_MARGIN_DB"]
+__all__ = ["Diagnosis", "diagnose_frfs", "named_verdict", "Z_MIN", "MIN_GAIN_DB", "STRONG_GAIN_DB", "NONE_MARGIN_DB"]
 
 log = logging.getLogger(__name__)
 
@@ -55,9 +55,11 @@ NONE_MARGIN_DB = 3.0
 
 @dataclass(frozen=True)
 class Diagnosis:
-    """Outcome of :func:`diagnose`.
+    """Outcome of :func:`analysis.diagnosis.diagnose`.
 
-    verdict : an effect name, ``"none"`` or ``"unexplained"``.
+    verdict : the named cause's name, ``"combined"`` when two causes are named, ``"none"`` or
+        ``"unexplained"`` (or a time-data cause when the FRFs leave the difference unexplained).
+    named : the named causes, ``{"effect", "parameters"}`` each (at most two).
     causes : one dict per effect tried, sorted by held-out gain: ``effect``, ``parameters`` (fitted on
         all lines), ``gain_db``, ``error_before_db``, ``error_after_db``, ``z``, ``significant``, ``evidence``.
     error_before_db, error_after_db : held-out error of the simulation and of the verdict's extension.
@@ -82,14 +84,19 @@ class Diagnosis:
     combined: list = field(default_factory=list)
     reason: str = ""
     physical: dict = field(default_factory=dict)
+    named: list = field(default_factory=list)
+    next_measurement: Optional[dict] = None
+    time_data: list = field(default_factory=list)
+    time_data_verdict: Optional[str] = None
 
     def to_json(self) -> dict:
         """The JSON document of ``python -m analysis diagnose``."""
-        return {
+        doc = {
             "verdict": self.verdict,
+            "named": [{"effect": c["effect"], "parameters": c["parameters"]} for c in self.named],
             "causes": [{k: c[k] for k in ("effect", "parameters", "gain_db", "evidence", "error_before_db",
                                           "error_after_db", "z", "significant")}
-                       | {k: c[k] for k in ("kind", "adequate", "description") if k in c} for c in self.causes],
+                       | {k: c[k] for k in ("kind", "adequate", "description", "advice") if k in c} for c in self.causes],
             "error_before_db": self.error_before_db,
             "error_after_db": self.error_after_db,
             "noise_db": self.noise_db,
@@ -100,6 +107,17 @@ class Diagnosis:
             "physical": _jsonable(self.physical),
             "comparison": _jsonable(self.comparison),
         }
+        if self.next_measurement is not None:
+            doc["next_measurement"] = _jsonable(self.next_measurement)
+        if self.time_data:
+            doc["time_data"] = self.time_data
+            doc["time_data_verdict"] = self.time_data_verdict
+        return doc
+
+
+def named_verdict(named: Sequence[dict]) -> str:
+    """The verdict of the named causes: the cause's name for one, ``"combined"`` for two."""
+    return named[0]["effect"] if len(named) == 1 else "combined"
 
 
 def _jsonable(x):
@@ -159,7 +177,9 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
         eff = EFFECTS[name]
         missing = [k for k in eff.needs if k not in ctx.base.meta]
         if missing:
-            skipped[name] = f"needs {', '.join(missing)} in the simulation (simulate from a TOML configuration)"
+            skipped[name] = (f"needs {', '.join(missing)} in the simulation: simulate from a frame configuration "
+                             "(TOML), or measure a driving point (an output at a reference's node and direction) so "
+                             "that the simulated FRFs' residues scale to mass-normalised shapes")
             continue
         try:
             before, after = _held_out(ctx, name)
@@ -183,6 +203,38 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
         })
     causes.sort(key=lambda c: c["gain_db"], reverse=True)
     return causes, skipped
+
+
+def _frf_on_top(ctx: FitContext, physical: "PhysicalSimulation", outcome: Any, names: Sequence[str], z_min: float,
+                min_gain_db: float, noise_db: float, none_margin_db: float) -> Optional[tuple[list, FRFSet]]:
+    """A physical cause that explains the modes but leaves the FRFs above the noise, completed by one
+    FRF-level effect (a damping change, a sensor): the catalogue fitted on top of the physical cause's
+    model with the same cross-validation and rule (held-out gain at least ``min_gain_db``); named as a
+    pair when the pair is adequate (the FRF error within ``none_margin_db`` of the noise or
+    ``ADEQUATE_FRACTION`` of its excess removed). None otherwise."""
+    from .physical import ADEQUATE_FRACTION
+
+    first = outcome.on_top
+    fit = first["_fit"]
+    base = physical.model(fit.cause, fit.params)
+    m, w = ctx.measured, ctx.weights
+    ctx2 = FitContext(measured=m, base=base, weights=w, sim=first["_extended"], prior=ctx.prior)
+    more, _ = _stage(ctx2, names, z_min, min_gain_db)
+    sig = [c for c in more if c["significant"] and c["gain_db"] >= min_gain_db]
+    if not sig:
+        return None
+    nxt = sig[0]
+    after = typical_error_db(m, nxt["_extended"].H, w)
+    before = outcome.error_before_db
+    excess = 10 ** (before / 10) - 10 ** (noise_db / 10)
+    removed = (10 ** (before / 10) - 10 ** (after / 10)) / excess if excess > 0 else 0.0
+    if not (after - noise_db <= none_margin_db or removed >= ADEQUATE_FRACTION):
+        return None
+    combined = [{"effect": first["effect"], "parameters": first["parameters"], "gain_db": first["gain_db"],
+                 "error_after_db": first["error_after_db"]},
+                {"effect": nxt["effect"], "parameters": nxt["parameters"], "gain_db": nxt["gain_db"],
+                 "error_after_db": after}]
+    return combined, nxt["_extended"]
 
 
 def _other_structure(comparison: dict) -> str:
@@ -224,7 +276,7 @@ def known_processing(measured: FRFSet) -> tuple:
 
 
 @limits_blas_threads
-def diagnose(
+def diagnose_frfs(
     measured: FRFSet,
     base: ModalModel,
     *,
@@ -255,7 +307,9 @@ def diagnose(
     Further stages: while the extended model still leaves the typical error more than
     ``none_margin_db`` above the noise, the remaining effects are fitted on top of the accepted ones
     (up to ``max_stages`` effects in all); each accepted effect is listed in ``Diagnosis.combined``
-    with its own held-out gain. The verdict is the first stage's (the largest single cause).
+    with its own held-out gain. The verdict and ``Diagnosis.named`` are the first stage's (the largest
+    single cause). Two causes are named (verdict ``"combined"``) by the physical stage: two physical
+    causes, or a physical cause that explains the modes completed by an FRF-level effect.
     """
     names = list(EFFECTS) if effects is None else list(effects)
     for n in names:
@@ -298,13 +352,30 @@ def diagnose(
         outcome = physical_verdict(measured, physical, prior, w, noise_db, none_margin_db, measured_modes,
                                    causes=effects)
         phys_doc = outcome.doc
+        if outcome.on_top is not None:
+            # on top of a cause already named alone, a second must gain as much as a physical cause must
+            # (not missing_mode: with an FE model a mode the model lacks shows in the pairing; on top of a
+            # physical cause an extra mode only patches a mode the cause misplaces)
+            top = _frf_on_top(ctx, physical, outcome,
+                              [n for n in names if n not in ("stiffness_shift", "mass_loading", "missing_mode")],
+                              z_min, STRONG_GAIN_DB if outcome.named else min_gain_db, noise_db, none_margin_db)
+            if top is not None:
+                combined, ext = top
+                return Diagnosis(verdict="combined", causes=outcome.causes, error_before_db=outcome.error_before_db,
+                                 error_after_db=combined[-1]["error_after_db"],
+                                 unexplained=[b for b in band_errors(measured, ext.H, w)
+                                              if b["error_db"] - noise_db > none_margin_db],
+                                 extended=ext, combined=combined, physical=phys_doc,
+                                 named=[{"effect": c["effect"], "parameters": c["parameters"]} for c in combined],
+                                 **common)
         if outcome.decided and outcome.extended is not None:
             return Diagnosis(verdict=outcome.verdict, causes=outcome.causes, error_before_db=outcome.error_before_db,
                              error_after_db=outcome.error_after_db,
                              unexplained=[b for b in band_errors(measured, outcome.extended.H, w)
                                           if b["error_db"] - noise_db > none_margin_db],
                              extended=outcome.extended, combined=outcome.combined, reason=outcome.reason,
-                             physical=phys_doc, **common)
+                             physical=phys_doc, named=outcome.named, next_measurement=outcome.next_measurement,
+                             **common)
         partial_reason = outcome.reason
         names = [n for n in names if n != "mass_loading"]     # the physical cause of that name covers it
         if outcome.causes:
@@ -347,6 +418,8 @@ def diagnose(
     reason = ("" if verdict != "unexplained" else partial_reason or
               "no effect of the catalogue gains significantly on held-out lines, and the error stays "
               f"{typical_error_db(measured, sim.H, w) - noise_db:.1f} dB above the noise")
+    # the FRF-level further stages are listed (``combined``) but not named: only the first is
+    named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in combined[:1]]
     return Diagnosis(verdict=verdict, causes=causes, error_before_db=error_before, error_after_db=after_db,
                      unexplained=unexplained, extended=extended, skipped=skipped, combined=combined,
-                     reason=reason, physical=phys_doc, **common)
+                     reason=reason, physical=phys_doc, named=named, **common)

@@ -1,0 +1,190 @@
+"""The whole diagnosis in one call: :func:`diagnose` (measurement and simulation in, :class:`Diagnosis` out).
+
+Steps: the measurement (an :class:`~analysis.frf.FRFSet` or a file) is read and cut to its band (the
+data's own band for a file, and for an FE simulation the band where its mesh has converged); the
+simulation (a pole-residue :class:`~analysis.modal.ModalModel`, an FRF set turned into one by the
+automatic fit, or an FE model with physical causes, :class:`analysis.diagnosis.physical.PhysicalSimulation`)
+is compared, the causes are fitted and cross-validated (:func:`analysis.diagnosis.verdict.diagnose_frfs`),
+and a recording's hits get the time-data stage (:mod:`analysis.diagnosis.timedata_stage`); an
+``unexplained`` verdict becomes the time-data cause that counts.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Optional, Sequence, Union
+
+import numpy as np
+
+from ..frf import FRFSet
+from ..modal import ModalModel
+from .verdict import Diagnosis, diagnose_frfs
+
+__all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_point_shapes"]
+
+log = logging.getLogger(__name__)
+
+
+def driving_point_shapes(model: ModalModel) -> Optional[np.ndarray]:
+    """Mass-normalised mode shapes (1/sqrt(kg)) at the outputs, (n_out, n_modes), scaled from a fitted
+    model's residues through a driving point (an output with the label of a reference: same node and
+    direction); None without one. For a real mode the receptance residue is ``phi_o phi_d / (2 j w_d)``
+    and a model of quantity power p has ``lambda^p`` times it, so ``A_o = 2 j w_d R_od / lambda^p =
+    phi_o phi_d`` and ``phi_o = A_o / sqrt(A_d)``. A mode not seen at the driving point gets zeros."""
+    from ..frf import QUANTITY_POWER
+
+    refs = list(model.references)
+    pairs = [(i, refs.index(o)) for i, o in enumerate(model.outputs) if o in refs]
+    if not pairs:
+        return None
+    i_d, j_d = pairs[0]
+    lam = np.asarray(model.poles, complex)
+    A = 2j * lam.imag[None, :] * np.asarray(model.residues)[:, j_d, :] / lam[None, :] ** QUANTITY_POWER[model.quantity]
+    a_d = A[i_d]
+    seen = np.abs(a_d) > 1e-6 * np.max(np.abs(a_d), initial=0.0)
+    root = np.where(seen, np.sqrt(np.where(seen, a_d, 1.0)), 1.0)
+    return np.where(seen[None, :], np.real(A / root[None, :]), 0.0)
+
+
+def model_with_correction(model: ModalModel, sim: FRFSet) -> ModalModel:
+    """The fitted ``model`` plus, in ``meta["frf_correction"]``, what it misses of the simulated FRFs
+    ``sim``, so that the prediction without effects is the simulated FRFs themselves (modal effects
+    move only the fitted modes); with a driving point also ``meta["output_shapes"]``
+    (:func:`driving_point_shapes`), so that the accelerometers' mass can be fitted."""
+    from ..modal import synthesize
+
+    syn = synthesize(model, sim.freq_hz)
+    same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
+    corr = replace(same, H=same.H - syn.H, coherence=None)
+    meta = dict(model.meta)
+    meta["frf_correction"] = corr
+    shapes = driving_point_shapes(replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references)))
+    if shapes is not None:
+        meta["output_shapes"] = shapes
+    return replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references), meta=meta)
+
+
+def simulation_model(sim: FRFSet, measured: FRFSet, source: str = "the simulation") -> ModalModel:
+    """A simulation given as FRFs, at the measured points, as a modal model (automatic fit) with the
+    correction of :func:`model_with_correction`. Raises :class:`InputError` when points are missing."""
+    from ..inputs import InputError
+    from ..pipeline import FitError, fit_auto
+    from .compare import common_points
+
+    outs, refs = common_points(measured, sim)
+    if len(outs) != measured.n_outputs or len(refs) != measured.n_references:
+        raise InputError(f"{source} lacks some measured points: it has outputs {list(sim.outputs)} and references "
+                         f"{list(sim.references)}; measured {list(measured.outputs)} / {list(measured.references)}")
+    sim = sim.select(outs, refs)
+    try:
+        result = fit_auto(sim).lsfd
+    except FitError as exc:
+        raise InputError(f"cannot build a modal model of the simulated FRFs in {source}: {exc}") from None
+    return model_with_correction(result.model, sim)
+
+
+def _is_physical(x: Any) -> bool:
+    return all(hasattr(x, a) for a in ("causes", "modes", "model"))
+
+
+def diagnose(
+    measured: Union[FRFSet, str, Path],
+    simulated: Any,
+    *,
+    band: Union[tuple, str, None] = None,
+    effects: Optional[Sequence[str]] = None,
+    estimator: Optional[str] = None,
+    physical: Any = None,
+    recording: Union[str, Path, None] = None,
+    extra_noise_db: Optional[dict] = None,
+    **rule: Any,
+) -> Diagnosis:
+    """Compare a measurement with a simulation and name what differs (``docs/diagnosis.md``).
+
+    measured : FRF set, or a file (recording ``.h5`` or UFF 58) read with ``estimator``.
+    simulated : a :class:`ModalModel` at the measured points (any quantity); an :class:`FRFSet`
+        or FRF file with the measured points (turned into a modal model by the automatic fit); or an
+        FE model with physical causes (``causes``, ``modes``, ``model``: e.g.
+        :class:`simulator.physical.FrameVariants`), whose unchanged model is the simulation.
+    band : ``(lo, hi)`` Hz; None: a file gets the band from its data (analyser, hammer, coherence)
+        and an FRF set is used on its own lines; ``"data"``: from the data for an FRF set too. With an
+        FE model and a band from the data, the band stops where the FE mesh has converged.
+    effects : only these causes (names of the catalogue or of the physical causes).
+    physical : the FE model when ``simulated`` is its :class:`ModalModel` already.
+    recording : the recording whose hits made ``measured`` (a file given as ``measured`` is used when
+        it is a recording): the noise from the hits' scatter and the time-data stage.
+    extra_noise_db : further noise estimates (dB) as :func:`diagnose_frfs` takes them.
+    rule : the decision rule's settings of :func:`diagnose_frfs` (``z_min``, ``min_gain_db``, ...).
+
+    Raises :class:`analysis.inputs.InputError` for unreadable or inconsistent input and
+    :class:`analysis.diagnosis.EffectError` for unknown effects. Neither input is modified.
+    """
+    from ..bands import default_band
+    from ..inputs import InputError, detect_format, load_input
+    from .compare import common_points
+
+    if isinstance(measured, (str, Path)):
+        path = Path(measured)
+        if recording is None and detect_format(path) == "recording":
+            recording = path
+        measured = load_input(path, estimator=estimator)
+        if band is None:
+            band = "data"
+    if _is_physical(simulated):
+        physical, base = simulated, simulated.model(None, {})
+    elif isinstance(simulated, ModalModel):
+        base = simulated
+    elif isinstance(simulated, (FRFSet, str, Path)):
+        source = str(simulated) if not isinstance(simulated, FRFSet) else "the simulation"
+        sim = simulated if isinstance(simulated, FRFSet) else load_input(Path(simulated), estimator=estimator)
+        base = simulation_model(sim, measured, source)
+    else:
+        raise InputError(f"the simulation is a {type(simulated).__name__}; give a modal model, an FRF set or file, "
+                         "or an FE model with physical causes")
+    if isinstance(band, str):
+        if band != "data":
+            raise InputError(f"band {band!r}: give (lo, hi) in Hz, None or 'data'")
+        lo, hi = default_band(measured)
+        if physical is not None and hasattr(physical, "converged_below_hz"):
+            top = float(physical.converged_below_hz())
+            if top < hi:
+                log.info("band %.4g-%.4g Hz: the simulation's mesh is converged only below %.4g Hz", lo, top, top)
+                hi = top
+        measured = measured.band(lo, hi)
+    elif band is not None:
+        measured = measured.band(float(band[0]), float(band[1]))
+    finite = np.all(np.isfinite(measured.H), axis=(0, 1))
+    if not finite.all():
+        raise InputError(f"the measurement holds NaN/inf lines at {np.count_nonzero(~finite)} frequencies; "
+                         "give a band that excludes them")
+    outs, refs = common_points(measured, base)
+    measured = measured.select(outs, refs)
+    noise = dict(extra_noise_db or {})
+    if recording is not None and "hits" not in noise:
+        from .compare import line_weights
+        from .hit_noise import hit_scatter_noise_db
+
+        noise["hits"] = hit_scatter_noise_db(recording, measured, line_weights(measured))
+    diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise, **rule)
+    if recording is None:
+        return diag
+    from .timedata_stage import time_data_causes
+
+    band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
+    try:
+        timed = time_data_causes(recording, band_hz, base)
+    except ValueError as exc:
+        log.warning("time data not analysed: %s", exc)
+        return diag
+    if not timed:
+        return diag
+    present = [c for c in timed if c["present"]]
+    counted = sorted((c for c in present if c.get("counts")), key=lambda c: -c.get("gain_db", 0.0))
+    verdict = diag.verdict
+    if verdict == "unexplained" and counted:
+        verdict = counted[0]["effect"]
+    elif verdict == "unexplained" and any(c["effect"] == "amplitude_nonlinearity" for c in present):
+        verdict = "amplitude_nonlinearity"
+    return replace(diag, verdict=verdict, time_data=timed,
+                   time_data_verdict=counted[0]["effect"] if counted else "none")

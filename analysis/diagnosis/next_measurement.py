@@ -1,0 +1,87 @@
+"""The next measurement: the point whose FRFs would best tell two candidate causes apart.
+
+Two candidates are *not separated* when the data cannot choose between them: two options of one
+cause (an added mass at two nodes the test's sensors see alike) whose chi2 on all modes differ by less
+than ``SEPARATED_CHI2``, or two causes whose held-out mode errors differ by less than that. Then every
+node and direction of the frame (:meth:`points` of the FE model, not only today's test plan) is tried
+as a new hammer point: the FRFs from it to the measured outputs are predicted by both candidates
+(through the measurement's processing), and the point where they differ most against the noise is
+proposed::
+
+    separation_db = 10 log10( mean_{o,k} |H_A - H_B|^2 / (|H_A|^2 + floor^2) ) - noise_db
+
+(the weighted relative error of :mod:`analysis.diagnosis.compare` between the two predictions, above
+the measured noise level). A hammer point gives the FRFs from it to every sensor; by reciprocity this is
+also what a sensor there would see from the present hammer points.
+"""
+from __future__ import annotations
+
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from ..frf import FRFSet
+from .effects import predict
+
+__all__ = ["propose", "SEPARATED_CHI2", "rivals"]
+
+#: Two candidates whose (held-out) chi2 differ by less than this are not separated by the data
+#: (chi2 is a sum of squared residuals in units of their uncertainty: 4 is two standard deviations).
+SEPARATED_CHI2 = 4.0
+DIRECTIONS = ("X", "Y", "Z")
+
+
+def rivals(found: Sequence[dict]) -> Optional[tuple[tuple[str, dict], tuple[str, dict], str]]:
+    """The best candidate and its closest rival when the data do not separate them, with the reason;
+    None when they are separated. ``found``: the physical causes as the verdict ranks them, each with
+    its fit (``_fit``: ``cause``, ``params``, ``chi2``, ``chi2_cv``, ``ranked``)."""
+    sig = [c for c in found if c["significant"]]
+    if not sig:
+        return None
+    best = sig[0]["_fit"]
+    options = [r for r in best.ranked[1:] if r[0] - best.chi2 < SEPARATED_CHI2]
+    choice = next((k for k, v in best.params.items() if isinstance(v, str)), None)
+    if options and choice is not None:
+        chi2, opt, params = options[0]
+        why = (f"{best.cause} at {best.params[choice]} and at {opt} fit the measured modes alike "
+               f"(chi2 {best.chi2:.1f} and {chi2:.1f})")
+        return (best.cause, best.params), (best.cause, params), why
+    for other in sig[1:]:
+        fit = other["_fit"]
+        if fit.chi2_cv - best.chi2_cv < SEPARATED_CHI2:
+            why = (f"{best.cause} and {fit.cause} predict the held-out modes alike (chi2 {best.chi2_cv:.1f} and "
+                   f"{fit.chi2_cv:.1f})")
+            return (best.cause, best.params), (fit.cause, fit.params), why
+    return None
+
+
+def _relative_db(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Weighted relative squared difference (dB) of two FRF arrays per reference (last axis lines)."""
+    mag2 = np.abs(a) ** 2
+    floor = (0.01 * np.median(np.abs(a), axis=-1, keepdims=True)) ** 2
+    e = np.mean(np.abs(a - b) ** 2 / (mag2 + floor), axis=(0, 2))
+    return 10 * np.log10(np.maximum(e, 1e-30))
+
+
+def propose(sim: Any, measured: FRFSet, prior: Sequence, noise_db: float, a: tuple[str, dict], b: tuple[str, dict],
+            why: str) -> Optional[dict]:
+    """The hammer point (``component:node:direction``) whose FRFs to the measured outputs best separate
+    candidates ``a`` and ``b`` (``(cause, params)``), as ``{"point", "why", "separation_db"}``; None when
+    the simulation cannot be evaluated at other points (no ``points`` / ``at_points``)."""
+    if not (hasattr(sim, "points") and hasattr(sim, "at_points")):
+        return None
+    done = set(measured.references)
+    points = [p for p in sim.points() if p not in done]
+    if not points:
+        return None
+    there = sim.at_points(measured.outputs, points)
+
+    def frf(c: tuple[str, dict]) -> np.ndarray:
+        return predict(there.model(*c), measured.freq_hz, measured.quantity, prior,
+                       outputs=measured.outputs, references=tuple(points)).H
+
+    sep = _relative_db(frf(a), frf(b)) - noise_db
+    k = int(np.argmax(sep))
+    return {"point": points[k], "separation_db": float(sep[k]),
+            "why": f"{why}; hammered at {points[k]} their FRFs to the sensors differ by {sep[k]:.1f} dB above the noise",
+            "candidates": [{"effect": c, "parameters": {k2: v for k2, v in p.items()}} for c, p in (a, b)]}

@@ -1,0 +1,114 @@
+"""Two physical causes at once: forward selection of a second cause and its nested cross-validation.
+
+A second cause is searched on top of the first (the first cause's change applied with its fitted
+parameters, :class:`OnTop`): every other cause is fitted and cross-validated (leave one mode out) by
+:func:`analysis.diagnosis.physical.physical_causes` as on the unchanged simulation. The best of them
+and the first cause are then refined together (:func:`fit_pair`): both causes' continuous parameters
+by least squares (the choices, a node or a member, kept), and the pair's held-out error is measured
+with *both* causes refitted in each fold (nested: the first cause never sees the left-out mode either).
+The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
+held-out modes better than the first cause alone by at least ``MIN_GAIN_DB``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Optional, Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..modal import ModalModel
+from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, residuals
+
+__all__ = ["OnTop", "PairFit", "fit_pair", "changes_of"]
+
+
+def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Modes of ``sim`` changed by every ``(cause, params)`` of ``changes`` at once (``modes_of``)."""
+    return sim.modes_of(list(changes), fmax)
+
+
+class OnTop:
+    """The simulation ``sim`` with the changes ``first`` applied: every cause is fitted on top of them."""
+
+    def __init__(self, sim: PhysicalSimulation, first: Sequence[tuple[str, Mapping]]) -> None:
+        self.sim = sim
+        self.first = [(c, dict(p)) for c, p in first]
+
+    def causes(self) -> Sequence[CauseSpec]:
+        taken = {c for c, _ in self.first}
+        return [c for c in self.sim.causes() if c.name not in taken]
+
+    def modes(self, cause: Optional[str], params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        more = [] if cause is None else [(cause, params)]
+        return changes_of(self.sim, self.first + more, max_freq_hz)
+
+    def model(self, cause: Optional[str], params: Mapping) -> ModalModel:
+        more = [] if cause is None else [(cause, params)]
+        return self.sim.model_of(self.first + more)
+
+    def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        return changes_of(self.sim, self.first + list(changes), max_freq_hz)
+
+    def model_of(self, changes: Sequence[tuple[str, Mapping]]) -> ModalModel:
+        return self.sim.model_of(self.first + list(changes))
+
+
+@dataclass
+class PairFit:
+    """Two causes fitted together: their parameters, chi2 on all modes, nested held-out chi2 per mode,
+    parameters at the edge of their range."""
+
+    causes: tuple
+    params: tuple
+    chi2: float
+    cv_per_mode: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    at_edge: tuple = ()
+
+    @property
+    def changes(self) -> list[tuple[str, dict]]:
+        return list(zip(self.causes, self.params))
+
+    @property
+    def chi2_cv(self) -> float:
+        return float(np.sum(self.cv_per_mode))
+
+
+def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,
+             fmax: float) -> PairFit:
+    """Refine the two causes ``fits`` (their free parameters, choices kept) together on all modes, then
+    leave each mode out with both refitted from there (nested cross-validation)."""
+    free = [[s for s in spec.params if s.name in fit.free] for spec, fit in zip(specs, fits)]
+    flat = [(i, s) for i, ss in enumerate(free) for s in ss]
+    lo = np.array([s.x_bounds[0] for _, s in flat])
+    hi = np.array([s.x_bounds[1] for _, s in flat])
+
+    def params(x: np.ndarray) -> list[dict]:
+        out = [dict(f.params) for f in fits]
+        for (i, s), xi in zip(flat, x):
+            out[i][s.name] = s.from_x(float(xi))
+        return out
+
+    def resid(x: np.ndarray, sel: np.ndarray) -> np.ndarray:
+        f, P = changes_of(sim, list(zip([f.cause for f in fits], params(x))), fmax)
+        return residuals(mm, f, P)[sel].ravel()
+
+    def solve(x0: np.ndarray, sel: np.ndarray) -> np.ndarray:
+        x0 = np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
+        return least_squares(resid, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=20 * len(flat), args=(sel,)).x
+
+    K = mm.freq_hz.size
+    x0 = np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat])
+    allsel = np.ones(K, bool)
+    x = solve(x0, allsel)
+    chi2 = float(np.sum(resid(x, allsel) ** 2))
+    cv = np.empty(K)
+    for k in range(K):
+        sel = allsel.copy()
+        sel[k] = False
+        xk = solve(x, sel)
+        cv[k] = float(np.sum(resid(xk, ~sel) ** 2))
+    p = params(x)
+    edge = tuple(f"{fits[i].cause}.{s.name}" for i, s in flat if s.at_edge(float(p[i][s.name])))
+    return PairFit(causes=tuple(f.cause for f in fits), params=tuple(p), chi2=chi2, cv_per_mode=cv, at_edge=edge)
