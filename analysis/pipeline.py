@@ -73,6 +73,7 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
 from __future__ import annotations
 
 import logging
+import warnings
 from typing import Any, Optional, Sequence, Union
 
 import numpy as np
@@ -153,7 +154,7 @@ def fit_auto(
     ``.warnings``, and the verdict ``.success`` (converged *and* physically sensible), ``.status``,
     ``.problems``, ``.message``. Non-convergence is a status, never an exception.
     """
-    from .lsfd import fit_lsfd, sorted_by_frequency  # lazy import: keeps this module importable on its own
+    from .lsfd import LSFDConvergenceWarning, fit_lsfd, sorted_by_frequency  # lazy import: keeps this module importable on its own
 
     if not isinstance(frf, FRFSet):
         raise TypeError(f"frf must be an analysis.frf.FRFSet; got {type(frf).__name__}")
@@ -203,7 +204,7 @@ def fit_auto(
             poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
         if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
             poles = _poles_from_peaks(frf, (lo, hi), stab, warnings_out)
-        elif poles.size and given_freqs is None and n_modes is None and add_missing and _averaged(frf):
+        elif poles.size and given_freqs is None and n_modes is None and add_missing and _peaks_trusted(frf):
             poles = _with_visible_peaks(frf, (lo, hi), stab, poles)
         if poles.size == 0:
             raise FitError(
@@ -234,7 +235,10 @@ def fit_auto(
     if given_complex is not None:
         result = fit_lsfd(fit_frf, poles, **fit_kw)
     else:
-        result = fit_bounded(fit_frf, poles, fit_kw)
+        with warnings.catch_warnings():
+            # the status is read below ("LSFD did not converge" in the warnings): not a second notice
+            warnings.simplefilter("ignore", LSFDConvergenceWarning)
+            result = fit_bounded(fit_frf, poles, fit_kw)
         result = drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
     visible = visible_peaks(fit_frf, (lo2, hi2))
     complete_search = add_missing and n_modes is None
@@ -265,10 +269,13 @@ def fit_auto(
 SEED_MIN_AVERAGES = 3
 
 
-def _averaged(frf: FRFSet) -> bool:
-    """Whether ``frf`` carries coherence from at least ``SEED_MIN_AVERAGES`` averages per FRF."""
+def _peaks_trusted(frf: FRFSet) -> bool:
+    """Whether the visible peaks of ``frf`` may start the fit: its coherence comes from at least
+    ``SEED_MIN_AVERAGES`` averages per FRF, or the number of averages is not known (FRFs read from a
+    file that does not say: their coherence is taken as the analyser's, as for any peak's
+    visibility)."""
     n_avg = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
-    return frf.coherence is not None and n_avg.size > 0 and bool(np.all(n_avg >= SEED_MIN_AVERAGES))
+    return n_avg.size == 0 or bool(np.all(n_avg >= SEED_MIN_AVERAGES))
 
 
 def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
@@ -277,10 +284,10 @@ def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizat
     selected pole lies near, damping from the diagram: the data show at least that many modes,
     and a whole-band LSFD started with fewer drags its poles between resonances (a pole pulled
     halfway between two modes fits neither and leaves the search for the missed ones without
-    clean neighbours). Only for data whose coherence comes from at least
-    ``SEED_MIN_AVERAGES`` averages: noise reaches a coherence of 0.9 on a tenth of the lines with
+    clean neighbours). Not for data whose coherence comes from fewer than ``SEED_MIN_AVERAGES``
+    averages (:func:`_peaks_trusted`): noise reaches a coherence of 0.9 on a tenth of the lines with
     two averages, on a hundredth with three (``0.1 ** (n - 1)``), so only then does the coherence
-    confirm a visible peak; otherwise the peaks are left to step 7's local trials."""
+    confirm a visible peak; there the peaks are left to step 7's local trials."""
     from .visibility import unaccounted_peaks
 
     # peaks are found on the whole record (a resonance just inside an edge has a flank outside it,

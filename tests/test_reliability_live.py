@@ -14,7 +14,7 @@ from analysis.recording import Recording, verify_recording
 WRITER = """
 import sys
 import numpy as np
-from analysis.recording import RecordingWriter
+from analysis.recording_writer import RecordingWriter
 from analysis.spectra import WindowSettings
 hit = dict(eu_per_count=[0.01, 0.02], volts_per_count=[3e-5, 1.5e-4], trigger_index=8, sample_rate_hz=6400.0,
            timestamp=1.0, measurement=0, point="a:1:X", reference="a:1:X", outputs=["b:2:Y"],
@@ -75,7 +75,7 @@ def test_a_recording_being_written_is_read_live_with_every_flushed_hit(tmp_path)
 
 
 def test_a_file_locked_by_another_program_is_reported_as_locked_with_its_pid(tmp_path):
-    from analysis.recording import RecordingWriter
+    from analysis.recording_writer import RecordingWriter
     from analysis.spectra import WindowSettings
 
     path = tmp_path / "rec.h5"
