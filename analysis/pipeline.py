@@ -154,7 +154,7 @@ def fit_auto(
     ``.warnings``, and the verdict ``.success`` (converged *and* physically sensible), ``.status``,
     ``.problems``, ``.message``. Non-convergence is a status, never an exception.
     """
-    from .lsfd import LSFDConvergenceWarning, fit_lsfd, sorted_by_frequency  # lazy import: keeps this module importable on its own
+    from .lsfd import LSFDConvergenceWarning, fit_lsfd, sorted_by_frequency  # lazy: this module imports alone
 
     if not isinstance(frf, FRFSet):
         raise TypeError(f"frf must be an analysis.frf.FRFSet; got {type(frf).__name__}")
