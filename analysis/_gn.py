@@ -22,7 +22,7 @@ from typing import Optional
 
 import numpy as np
 
-from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
+from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
 
 __all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "project_to_bounds", "freeze_active",
            "SWITCH_TO_PRECISE", "PRED_FLOOR"]
@@ -107,7 +107,8 @@ PRED_FLOOR = 1e-13
 SWITCH_TO_PRECISE = 1e-6
 
 
-def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: float, ftol: float):
+def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: float,
+                        ftol: float) -> Optional[tuple[int, str]]:
     """The stopping rules after an accepted step: ``(status, message)`` or None to go on.
 
     S at the round-off floor, relative step <= xtol, or relative decrease of S <= ftol.
@@ -121,7 +122,8 @@ def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: f
     return None
 
 
-def start_iteration(problem: ProjectedProblem, theta0: np.ndarray):
+def start_iteration(problem: ProjectedProblem, theta0: np.ndarray
+                    ) -> tuple[np.ndarray, bool, Evaluation, list[float], float, Optional[NLSOutcome]]:
     """The common start of GN and LM: copy ``theta0``, evaluate once (fast where allowed).
 
     Returns ``(theta, fast, ev, history, floor, early)``; ``early`` is an :class:`NLSOutcome`
@@ -132,7 +134,7 @@ def start_iteration(problem: ProjectedProblem, theta0: np.ndarray):
     ev = problem.evaluate(theta, fast=fast)
     history = [ev.S]
     floor = roundoff_floor(problem)
-    early = None
+    early: Optional[NLSOutcome] = None
     if not ev.rank_ok:
         early = NLSOutcome(theta, ev, history, 0, 1, Status.COLLAPSED,
                            f"initial poles give a rank-deficient basis (rcond {ev.rcond:.2g})")

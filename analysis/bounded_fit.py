@@ -3,6 +3,7 @@ check that drops out-of-range, migrated and duplicate poles and refits."""
 from __future__ import annotations
 
 import logging
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -11,6 +12,9 @@ from .fit_checks import (MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles,
 from .fit_result import MAX_DAMPING
 from .frf import FRFSet
 from .modal import natural_freq_hz
+
+if TYPE_CHECKING:
+    from .lsfd import LSFDResult
 
 __all__ = ["fit_bounded", "bad_poles", "drop_bad_poles", "trust_window_hz", "MAX_DAMPING"]
 
@@ -28,7 +32,8 @@ def trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
     return MIGRATE_BANDWIDTHS * bandwidth_hz(start, df)
 
 
-def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict, damping_window: float = DAMPING_WINDOW):
+def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict,
+                damping_window: float = DAMPING_WINDOW) -> LSFDResult:
     """LSFD with each pole's damped frequency held within ``MIGRATE_BANDWIDTHS`` half-power
     bandwidths of its start and its decay rate within a factor ``damping_window`` of its start
     (the trust region, steps 5-7)."""
@@ -38,7 +43,7 @@ def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict, damping_window: fl
                     damping_window=damping_window, **fit_kw)
 
 
-def bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
+def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
     """Mask of fitted poles to drop (step 6) and the reasons (``duplicates=False``: without the
     duplicate check; step 7 judges its new pole's neighbours itself)."""
     lo, hi = result.band
@@ -65,7 +70,7 @@ def bad_poles(result, start: np.ndarray, df: float, duplicates: bool = True) -> 
     return out_of_range | migrated | dup, why
 
 
-def drop_bad_poles(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]):
+def drop_bad_poles(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_out: list[str]) -> LSFDResult:
     """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring)."""
     df = frf.line_spacing_hz
     anchor = np.asarray(result.initial_poles if result.initial_poles is not None else result.poles_raw)

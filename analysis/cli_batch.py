@@ -25,7 +25,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 from .command_line import Parser, add_threads, cli_entry, errors_to_exit, exit_on, parse_args, with_examples
 from .inputs import InputError, parse_band_text
@@ -98,7 +98,7 @@ def expand_inputs(items: Sequence[str], skipped: Optional[list[str]] = None) -> 
     return out
 
 
-def _progress(quiet: bool, t0: float):
+def _progress(quiet: bool, t0: float) -> Callable[[dict[str, Any], int, int], None]:
     failed = 0
 
     def show(doc: dict[str, Any], done: int, total: int) -> None:

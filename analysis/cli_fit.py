@@ -12,7 +12,7 @@ import tempfile
 import warnings
 from dataclasses import replace
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Optional, Sequence
 
 import numpy as np
 
@@ -22,6 +22,11 @@ __all__ = ["main", "build_parser"]
 from .command_line import with_examples
 from .command_line import Parser as _Parser, UsageError as _UsageError, add_estimator, add_threads, check_out_dir, cli_entry
 from .command_line import errors_to_exit, parse_args
+
+if TYPE_CHECKING:
+    from .frf import FRFSet
+    from .geometry import Geometry
+    from .lsfd import LSFDResult
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _geometry(args: argparse.Namespace):
+def _geometry(args: argparse.Namespace) -> Optional[Geometry]:
     """The geometry for ``--uff`` (``--geometry``, else the simulated frame for a simulated test,
     else None: the points on a line)."""
     from .cli_report import choose_geometry
@@ -91,7 +96,7 @@ def _geometry(args: argparse.Namespace):
     return choose_geometry(args.geometry, device)
 
 
-def _write_uff(path: str, frf, result, geometry=None) -> None:
+def _write_uff(path: str, frf: FRFSet, result: LSFDResult, geometry: Optional[Geometry] = None) -> None:
     """UFF 55 mode shapes (the structure: window-corrected poles), then the geometry (UFF 15 nodes
     and 82 trace lines; ``geometry`` or the measured points on a line), then UFF 58 synthesised FRFs
     appended in the same file. The FRFs are synthesised *as measured* (raw poles, the exponential

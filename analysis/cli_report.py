@@ -11,12 +11,15 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Optional, Sequence
 
 from .command_line import with_examples
 from .command_line import add_estimator, add_threads, cli_entry
 from ._cli_dispatch import Parser, parse_args
 from .errors import ImpactlabError
+
+if TYPE_CHECKING:
+    from .geometry import Geometry
 
 __all__ = ["build_parser", "choose_geometry", "main"]
 
@@ -38,14 +41,14 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _frame(config: Optional[str] = None):
+def _frame(config: Optional[str] = None) -> Geometry:
     from simulator.config import FrameConfig
     from simulator.geometry import frame_geometry
 
     return frame_geometry(FrameConfig.load(config))
 
 
-def choose_geometry(spec: Optional[str], device: str = ""):
+def choose_geometry(spec: Optional[str], device: str = "") -> Optional[Geometry]:
     """The geometry named by ``--geometry`` (see module doc); None: the report puts the points on a line."""
     from .geometry import GeometryError, read_uff_geometry
 

@@ -162,7 +162,8 @@ def _toeplitz_index(p: int) -> np.ndarray:
     return (i[:, None] - i[None, :]) + p
 
 
-def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *, band=None) -> tuple[list[np.ndarray], float]:
+def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *,
+                      band: Optional[Sequence[float]] = None) -> tuple[list[np.ndarray], float]:
     """Denominator coefficients ``alpha`` (length 2n+1, alpha[-1] = 1) for n = 1..max_modes,
     and the sampling time Ts (s). See the module docstring for the mathematics.
     ``frf`` may be an already prepared :class:`BandData` (``band`` is then ignored)."""
@@ -212,14 +213,15 @@ def _roots_to_poles(alpha: np.ndarray, ts: float) -> np.ndarray:
 
 
 @limits_blas_threads
-def lscf_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *, band=None) -> list[np.ndarray]:
+def lscf_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *,
+                          band: Optional[Sequence[float]] = None) -> list[np.ndarray]:
     """Poles (rad/s, upper half plane, sorted by damped frequency) for n = 1..max_modes."""
     alphas, ts = lscf_denominators(frf, max_modes, band=band)
     return [_roots_to_poles(a, ts) for a in alphas]
 
 
 @limits_blas_threads
-def lscf_poles(frf: FRFSet, n_modes: int, *, band=None) -> np.ndarray:
+def lscf_poles(frf: FRFSet, n_modes: int, *, band: Optional[Sequence[float]] = None) -> np.ndarray:
     """LSCF poles of a model with ``n_modes`` modes (denominator order 2 n_modes).
 
     Parameters

@@ -166,7 +166,8 @@ def _check_poles(initial_poles: np.ndarray) -> np.ndarray:
     return p
 
 
-def _check_weights(weights, n_out: int, n_ref: int, n_freq: int) -> tuple[Optional[np.ndarray], Optional[np.ndarray]]:
+def _check_weights(weights: Optional[np.ndarray], n_out: int, n_ref: int,
+                   n_freq: int) -> tuple[Optional[np.ndarray], Optional[np.ndarray]]:
     if weights is None:
         return None, None
     w = np.asarray(weights, dtype=float)
@@ -296,7 +297,8 @@ def _n_lines(prob: ProjectedProblem) -> int:
     return prob.N if prob.line_w is None else int(np.count_nonzero(prob.line_w))
 
 
-def _freq_bounds(lam0: np.ndarray, freq_window_hz) -> Optional[tuple[np.ndarray, np.ndarray]]:
+def _freq_bounds(lam0: np.ndarray, freq_window_hz: "float | np.ndarray | None"
+                 ) -> Optional[tuple[np.ndarray, np.ndarray]]:
     """(lo, hi) bounds (rad/s) of each pole's damped frequency, or None."""
     if freq_window_hz is None:
         return None
@@ -309,8 +311,9 @@ def _freq_bounds(lam0: np.ndarray, freq_window_hz) -> Optional[tuple[np.ndarray,
     return np.maximum(lam0.imag - half, 1e-6 * lam0.imag), lam0.imag + half
 
 
-def _run(frf, lam0, method, residual_form, line_w, frf_w, max_iter, ftol, xtol,
-         mu0, bounds=None) -> tuple[NLSOutcome, ProjectedProblem]:
+def _run(frf: FRFSet, lam0: np.ndarray, method: str, residual_form: str, line_w: Optional[np.ndarray],
+         frf_w: Optional[np.ndarray], max_iter: int, ftol: float, xtol: float, mu0: Optional[float],
+         bounds: Optional[tuple] = None) -> tuple[NLSOutcome, ProjectedProblem]:
     n_out, n_ref, N = frf.H.shape
     prob = ProjectedProblem(frf.omega, frf.H.reshape(n_out * n_ref, N), frf.quantity, residual_form, line_w, frf_w)
     m = lam0.size
@@ -338,7 +341,7 @@ def _run(frf, lam0, method, residual_form, line_w, frf_w, max_iter, ftol, xtol,
 
 
 def _result(frf: FRFSet, prob: ProjectedProblem, oc: NLSOutcome, method: str, residual_form: str,
-            correct_exp_window: bool, lam0: np.ndarray, sub) -> LSFDResult:
+            correct_exp_window: bool, lam0: np.ndarray, sub: Optional[list[LSFDResult]]) -> LSFDResult:
     n_out, n_ref, _ = frf.H.shape
     m = lam0.size
     ev = oc.evaluation

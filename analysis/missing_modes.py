@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import logging
 import warnings
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Optional, Sequence
 
 import numpy as np
 from .peaks import find_peaks
@@ -23,6 +23,9 @@ from .bounded_fit import bad_poles, trust_window_hz
 from .fit_result import MAX_DAMPING
 from .modal import ModalModel
 from .visibility import VisiblePeak, reproduced, unaccounted_peaks
+
+if TYPE_CHECKING:
+    from .lsfd import LSFDResult
 
 __all__ = ["add_missing_modes", "unfitted_resonances", "MAINS_HZ"]
 
@@ -55,7 +58,7 @@ MAX_FINAL_ROUNDS = 3
 PAIR_FRACTION = 0.02
 
 
-def _synthesize_flat(model, f: np.ndarray) -> np.ndarray:
+def _synthesize_flat(model: ModalModel, f: np.ndarray) -> np.ndarray:
     """``synthesize(model, f).H`` flattened to (n_frf, n_f), by matrix products (BLAS): the same
     sum (eq. 11), several times faster than the general einsum on big sets."""
     return transfer(model, 2j * np.pi * f).reshape(-1, f.size)
@@ -113,7 +116,8 @@ def _new_pole_relation(poles_raw: np.ndarray, residues: np.ndarray, df: float) -
     return broad, np.flatnonzero(unresolved | dup)
 
 
-def _pair_is_resolved(trial, k: int, f: np.ndarray, e_old: np.ndarray, e_new: np.ndarray, df: float) -> tuple[bool, str]:
+def _pair_is_resolved(trial: LSFDResult, k: int, f: np.ndarray, e_old: np.ndarray, e_new: np.ndarray,
+                      df: float) -> tuple[bool, str]:
     """Whether the added (last) pole and its close neighbour ``k`` are two modes (step 7).
 
     The data must say so: the pair is at least a line apart; over the pair's lines (the two
@@ -183,7 +187,7 @@ def _with_poles(model: ModalModel, keep: np.ndarray, extra_poles: Optional[np.nd
     return replace(model, poles=p, residues=R)
 
 
-def _line_costs(local: FRFSet, res, weights: Optional[np.ndarray]) -> np.ndarray:
+def _line_costs(local: FRFSet, res: LSFDResult, weights: Optional[np.ndarray]) -> np.ndarray:
     """Per-line weighted squared misfit (summed over the FRFs) of an LSFD ``res`` on ``local``."""
     G = _synthesize_flat(res.model_raw, local.freq_hz)
     E = local.H.reshape(-1, local.freq_hz.size) - G
@@ -209,7 +213,8 @@ class _Trial:
     the indices ``nb`` of the neighbours it refitted, and whether a rejection says the peak is
     ``not_mode`` (too broad / damped to be a structural resonance, or a mains line)."""
 
-    def __init__(self, ok: bool, why: str, fit=None, nb: Optional[np.ndarray] = None, not_mode: bool = False):
+    def __init__(self, ok: bool, why: str, fit: Optional[LSFDResult] = None, nb: Optional[np.ndarray] = None,
+                 not_mode: bool = False) -> None:
         self.ok, self.why, self.fit, self.nb, self.not_mode = ok, why, fit, nb, not_mode
 
 
@@ -285,9 +290,9 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
     return _Trial(True, note, trial, nb)
 
 
-def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str],
+def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_out: list[str],
                       mains: Sequence[float] = MAINS_HZ, df: Optional[float] = None,
-                      visible: Sequence[VisiblePeak] = ()):
+                      visible: Sequence[VisiblePeak] = ()) -> LSFDResult:
     """Step 7: add poles at the resonances the model misses (see module docstring): first the
     ``visible`` peaks no pole accounts for, then the misfit peaks; each tried by a local fit on
     the residual; then one LSFD from all poles (and step 6's checks). The poles of ``result``
@@ -316,6 +321,7 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
             log.info("pole at %.6g Hz not added: %s", c, t.why)
             return False
         fit = t.fit
+        assert fit is not None  # an accepted trial carries its local fit
         f_new, z_new = float(fit.freq_hz[-1]), float(fit.damping[-1])
         if mains_harmonic_index(f_new, mains, df) is not None and z_new < MAINS_WIDTH_FRACTION * z0:
             msg = (f"a pole tried at {f_new:.6g} Hz ({100 * z_new:.3g} %) sits on a mains line and is much "
@@ -379,7 +385,7 @@ def add_missing_modes(frf: FRFSet, result, fit_kw: dict, warnings_out: list[str]
     return _final_fit(frf, np.asarray(model.poles), fit_kw, warnings_out)
 
 
-def _final_fit(frf: FRFSet, poles: np.ndarray, fit_kw: dict, warnings_out: list[str]):
+def _final_fit(frf: FRFSet, poles: np.ndarray, fit_kw: dict, warnings_out: list[str]) -> LSFDResult:
     """One LSFD over the whole band from the poles the local fits found, each held close to its
     local estimate (``FINAL_BANDWIDTHS`` half-power bandwidths in frequency, a factor
     ``FINAL_DAMPING_WINDOW`` in damping): the local fits decided which poles there are; the full
@@ -414,7 +420,7 @@ def _unaccounted(frf: FRFSet, visible: Sequence[VisiblePeak], model: ModalModel,
     return sorted(missed + [v for v, _ in pairs], key=lambda v: -v.prominence_db)
 
 
-def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result,
+def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSFDResult,
                         mains: Sequence[float] = MAINS_HZ) -> tuple[list[str], list[str]]:
     """The visible peaks the LSFD ``result`` leaves unaccounted for (:mod:`analysis.visibility`), in
     words: ``(problems, notes)``. A peak on a mains harmonic at most ``1 + MAINS_LINES`` lines wide

@@ -116,7 +116,7 @@ def fit_auto(
     frf_weighting: str = "rms",
     mains_hz: Optional[Sequence[float]] = MAINS_HZ,
     exclude_hz: Optional[Sequence[float]] = None,
-):
+) -> FitResult:
     """Automatic modal fit of an FRF set; returns a :class:`~analysis.fit_result.FitResult`.
 
     Parameters

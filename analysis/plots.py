@@ -6,12 +6,19 @@ through pyplot's global state, so this module is safe in servers, tests and thre
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Optional, Sequence, cast
 
 import numpy as np
 
 from .frf import FRFSet
 from .modal import ModalModel, natural_freq_hz, synthesize
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from .lsfd import LSFDResult
+    from .stabilization import StabilizationResult
 
 __all__ = ["fit_figure", "indicator_panel", "label_levels", "plot_fit", "plot_stabilization",
            "summed_magnitude_db"]
@@ -26,7 +33,7 @@ _STYLE = {
 }
 
 
-def _figure(width_in: float, height_in: float):
+def _figure(width_in: float, height_in: float) -> Figure:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -35,7 +42,7 @@ def _figure(width_in: float, height_in: float):
     return fig
 
 
-def _save(fig, path: "str | Path") -> Path:
+def _save(fig: Figure, path: "str | Path") -> Path:
     p = Path(path)
     fig.savefig(str(p), format="png")
     return p
@@ -78,7 +85,7 @@ def label_levels(x: Sequence[float], width: float, levels: int = 4) -> list[int]
     return out
 
 
-def _mark_modes(ax, modes_hz: np.ndarray, x_lo: float, x_hi: float, log_freq: bool, *, labels: bool = True,
+def _mark_modes(ax: Axes, modes_hz: np.ndarray, x_lo: float, x_hi: float, log_freq: bool, *, labels: bool = True,
                 fontsize: float = 7) -> None:
     """The fitted modes as dotted green lines, numbered from 1 in order of frequency above the axes
     (rows chosen by :func:`label_levels`, so close numbers do not overlap)."""
@@ -90,7 +97,8 @@ def _mark_modes(ax, modes_hz: np.ndarray, x_lo: float, x_hi: float, log_freq: bo
     scale = (lambda v: np.log10(v)) if log_freq else (lambda v: v)
     a, b = scale(x_lo), scale(x_hi)
     pos = [(scale(f) - a) / (b - a) for _, f in shown]
-    width_in = ax.get_position().width * ax.figure.get_figwidth()
+    # the axes of this module are made on a top-level Figure (see _figure), never on a SubFigure
+    width_in = ax.get_position().width * cast("Figure", ax.figure).get_figwidth()
     label_in = (0.6 * len(str(len(shown))) + 0.5) * fontsize / 72  # digits and a little space, inches
     rows = label_levels(pos, width=label_in / max(width_in, 0.5))
     for (k, f), row in zip(shown, rows):
@@ -98,7 +106,7 @@ def _mark_modes(ax, modes_hz: np.ndarray, x_lo: float, x_hi: float, log_freq: bo
                 fontsize=fontsize, color="#2ca02c")
 
 
-def indicator_panel(ax, frf: FRFSet, band: Sequence[float], modes_hz: Optional[np.ndarray] = None,
+def indicator_panel(ax: Axes, frf: FRFSet, band: Sequence[float], modes_hz: Optional[np.ndarray] = None,
                     log_freq: bool = False) -> None:
     """Draw the mode indicator over ``band`` (Hz) on ``ax``: the CMIF (singular values of the FRF
     matrix per line, dB re 1 unit of H) when there are several references, else the real-normal MIF
@@ -130,7 +138,7 @@ def indicator_panel(ax, frf: FRFSet, band: Sequence[float], modes_hz: Optional[n
 _CMIF_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e")
 
 
-def plot_stabilization(result, frf: FRFSet, path_png: "str | Path", *, title: Optional[str] = None,
+def plot_stabilization(result: StabilizationResult, frf: FRFSet, path_png: "str | Path", *, title: Optional[str] = None,
                        show_nonphysical: bool = False, selected: Optional[np.ndarray] = None,
                        log_freq: bool = False, indicator: bool = True) -> Path:
     """Stabilization diagram (paper Fig. 8): poles by model order, one symbol per stability class,
@@ -189,7 +197,7 @@ def plot_stabilization(result, frf: FRFSet, path_png: "str | Path", *, title: Op
     return _save(fig, path_png)
 
 
-def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
+def plot_fit(frf: FRFSet, model: LSFDResult | ModalModel, path_png: "str | Path", *,
              pairs: Optional[Sequence[tuple[int, int]]] = None, max_panels: int = 4,
              band: Optional[Sequence[float]] = None, log_freq: bool = False, indicator: bool = False) -> Path:
     """:func:`fit_figure` written to ``path_png`` (PNG); returns the path."""
@@ -197,8 +205,9 @@ def plot_fit(frf: FRFSet, model, path_png: "str | Path", *,
                             indicator=indicator), path_png)
 
 
-def fit_figure(frf: FRFSet, model, *, pairs: Optional[Sequence[tuple[int, int]]] = None, max_panels: int = 4,
-               band: Optional[Sequence[float]] = None, log_freq: bool = False, indicator: bool = False) -> Any:
+def fit_figure(frf: FRFSet, model: LSFDResult | ModalModel, *, pairs: Optional[Sequence[tuple[int, int]]] = None,
+               max_panels: int = 4, band: Optional[Sequence[float]] = None, log_freq: bool = False,
+               indicator: bool = False) -> Any:
     """Measured vs synthesised FRFs in the manner of the paper's Fig. 7: magnitude (dB), phase
     (deg) and the relative error ``|H - G| / |H|`` (dB) beneath, one column per FRF.
 

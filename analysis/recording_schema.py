@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import zlib
+from types import ModuleType
 from typing import Any, Sequence
 
 import numpy as np
@@ -23,7 +24,7 @@ _DAMAGE = (OSError, KeyError, ValueError, TypeError, RuntimeError, IndexError, A
            MemoryError)
 
 
-def _h5py():
+def _h5py() -> ModuleType:
     import h5py  # local import keeps module import cheap and side-effect free
 
     return h5py
@@ -38,7 +39,7 @@ def _now_iso() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
 
 
-def _channel_table(channels: Sequence[dict]):
+def _channel_table(channels: Sequence[dict]) -> np.ndarray:
     h5py = _h5py()
     s = h5py.string_dtype()
     dt = np.dtype([("name", s), ("point", s), ("direction", s), ("quantity", s), ("sensitivity", "f8"),

@@ -7,12 +7,18 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Any, Optional, Sequence, cast
 
 import numpy as np
 
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
+
+if TYPE_CHECKING:
+    from .fit_result import FitResult
+    from .lsfd import LSFDResult
+    from .scatter import SubsetScatter
+    from .stabilization import StabilizationResult
 
 __all__ = ["roman", "format_table", "result_to_dict", "write_json", "complex_pair", "synthesis_error"]
 
@@ -53,7 +59,7 @@ def _cstr(z: complex, digits: int = 4) -> str:
     return f"{z.real:.{digits}g} {sign} {abs(z.imag):.{digits}g}i"
 
 
-def format_table(result, frf: Optional[FRFSet] = None, *, output: int = 0, reference: int = 0,
+def format_table(result: LSFDResult, frf: Optional[FRFSet] = None, *, output: int = 0, reference: int = 0,
                  title: Optional[str] = None, initial: Optional[np.ndarray] = None,
                  initial_label: str = "initial") -> str:
     """The paper's Table 1 for one FRF (``output``, ``reference`` indices) of an LSFD result.
@@ -123,7 +129,7 @@ def format_table(result, frf: Optional[FRFSet] = None, *, output: int = 0, refer
     return "\n".join(lines)
 
 
-def _labelled(values: np.ndarray, outs, refs, key: str) -> list:
+def _labelled(values: np.ndarray, outs: Sequence[str], refs: Sequence[str], key: str) -> list[dict[str, Any]]:
     out = []
     for i, o in enumerate(outs):
         for j, r in enumerate(refs):
@@ -143,8 +149,9 @@ STD_NOTE = ("freq_hz_std/damping_std assume white noise of equal variance on eve
             "groups divided by sqrt(number of groups) (see docs/fitting.md, section 9).")
 
 
-def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Optional[dict] = None,
-                   scatter=None) -> dict:
+def result_to_dict(result: "LSFDResult | FitResult", frf: Optional[FRFSet] = None,
+                   stab: Optional[StabilizationResult] = None, *, extra: Optional[dict] = None,
+                   scatter: Optional[SubsetScatter] = None) -> dict:
     """JSON-ready dictionary of an LSFD result (schema ``impactlab.fit/1``).
 
     Keys: poles (freq_hz, damping, freq_hz_std, damping_std, damped_freq_hz, pole [re, im] rad/s),
@@ -160,23 +167,24 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
     (then ``stab`` comes from it): ``success`` is then the fit's verdict, *converged and physically
     sensible*, with ``converged``, ``fit_status`` and ``problems`` beside it.
     """
-    fit = None
+    fit: Optional[FitResult] = None
     if hasattr(result, "lsfd"):  # a FitResult
-        fit, result = result, result.lsfd
+        fit = cast("FitResult", result)
         stab = fit.stabilization if stab is None else stab
-    model = result.model
+    lsfd: LSFDResult = fit.lsfd if fit is not None else cast("LSFDResult", result)
+    model = lsfd.model
     outs, refs = list(model.outputs), list(model.references)
-    order = np.argsort(result.freq_hz)
+    order = np.argsort(lsfd.freq_hz)
     poles = []
     for k, r in enumerate(order, start=1):
         poles.append({
             "label": f"pole {roman(k)}",
-            "freq_hz": _fnum(result.freq_hz[r]),
-            "damping": _fnum(result.damping[r]),
-            "freq_hz_std": _fnum(result.freq_hz_std[r]),
-            "damping_std": _fnum(result.damping_std[r]),
-            "damped_freq_hz": _fnum(result.damped_freq_hz[r]),
-            "pole": complex_pair(result.poles[r]),
+            "freq_hz": _fnum(lsfd.freq_hz[r]),
+            "damping": _fnum(lsfd.damping[r]),
+            "freq_hz_std": _fnum(lsfd.freq_hz_std[r]),
+            "damping_std": _fnum(lsfd.damping_std[r]),
+            "damped_freq_hz": _fnum(lsfd.damped_freq_hz[r]),
+            "pole": complex_pair(lsfd.poles[r]),
         })
         if scatter is not None:
             poles[-1]["freq_hz_scatter_std"] = _fnum(scatter.freq_hz_std[r])
@@ -184,11 +192,11 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
     R = np.asarray(model.residues)[..., order]
     doc: dict[str, Any] = {
         "schema": JSON_SCHEMA,
-        "method": result.method,
-        "status": int(result.status),
-        "message": str(result.message),
-        "success": bool(result.success),
-        "band": [float(result.band[0]), float(result.band[1])],
+        "method": lsfd.method,
+        "status": int(lsfd.status),
+        "message": str(lsfd.message),
+        "success": bool(lsfd.success),
+        "band": [float(lsfd.band[0]), float(lsfd.band[1])],
         "quantity": model.quantity,
         "unit": frf.unit if frf is not None else "",
         "residual_form": model.residual_form,
@@ -198,15 +206,15 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
         "residues": _labelled(R, outs, refs, "values"),
         "upper_residual": None if model.upper_residual is None else _labelled(model.upper_residual, outs, refs, "value"),
         "lower_residual": None if model.lower_residual is None else _labelled(model.lower_residual, outs, refs, "value"),
-        "sse": _fnum(result.sse),
-        "iterations": int(result.iterations),
-        "nfev": int(result.nfev),
-        "history": [_fnum(s) for s in result.history],
-        "noise_var": _fnum(result.noise_var),
+        "sse": _fnum(lsfd.sse),
+        "iterations": int(lsfd.iterations),
+        "nfev": int(lsfd.nfev),
+        "history": [_fnum(s) for s in lsfd.history],
+        "noise_var": _fnum(lsfd.noise_var),
         "std_note": STD_NOTE,
     }
     if fit is not None:
-        doc["converged"] = bool(result.success)
+        doc["converged"] = bool(lsfd.success)
         doc["success"] = bool(fit.success)
         doc["fit_status"] = fit.status
         doc["problems"] = list(fit.problems)
@@ -215,18 +223,18 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
     if scatter is not None:
         doc["scatter_groups"] = list(scatter.groups)
     if frf is not None and frf.H.shape[:2] == np.asarray(model.residues).shape[:2]:
-        doc["synthesis_error"] = synthesis_error(result, frf)
-    if result.mode_shapes is not None:
+        doc["synthesis_error"] = synthesis_error(lsfd, frf)
+    if lsfd.mode_shapes is not None:
         doc["mode_shapes"] = [
-            {"output": o, "values": [complex_pair(x) for x in np.asarray(result.mode_shapes)[i, order]]}
+            {"output": o, "values": [complex_pair(x) for x in np.asarray(lsfd.mode_shapes)[i, order]]}
             for i, o in enumerate(outs)
         ]
-    if result.participation is not None:
+    if lsfd.participation is not None:
         doc["participation"] = [
-            {"reference": r, "values": [complex_pair(x) for x in np.asarray(result.participation)[order, j]]}
+            {"reference": r, "values": [complex_pair(x) for x in np.asarray(lsfd.participation)[order, j]]}
             for j, r in enumerate(refs)
         ]
-    if result.per_frf:
+    if lsfd.per_frf:
         doc["per_frf"] = [
             {
                 "output": sub.model.outputs[0],
@@ -236,7 +244,7 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
                 "sse": _fnum(sub.sse),
                 "success": bool(sub.success),
             }
-            for sub in result.per_frf
+            for sub in lsfd.per_frf
         ]
     if stab is not None:
         doc["stabilization"] = {
@@ -252,7 +260,7 @@ def result_to_dict(result, frf: Optional[FRFSet] = None, stab=None, *, extra: Op
     return doc
 
 
-def synthesis_error(result, frf: FRFSet) -> dict:
+def synthesis_error(result: LSFDResult, frf: FRFSet) -> dict:
     """Relative RMS misfit ``||H - G|| / ||H||`` over the fitted band and all FRFs, with ``G``
     synthesised from the model *as measured* (``result.model_raw``: raw poles, the exponential
     window's damping included), so windowed data are compared like with like."""

@@ -21,11 +21,15 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .fit_checks import MIGRATE_BANDWIDTHS, bandwidth_hz
 from .frf import FRFSet
+
+if TYPE_CHECKING:
+    from .lsfd import LSFDResult
 
 __all__ = ["SubsetScatter", "subset_scatter"]
 
@@ -66,7 +70,7 @@ def _groups(frf: FRFSet) -> list[tuple[str, FRFSet]]:
     raise ValueError("a scatter estimate needs at least two references or two outputs (one FRF cannot be split)")
 
 
-def subset_scatter(frf: FRFSet, result, *, max_iter: int = 50) -> SubsetScatter:
+def subset_scatter(frf: FRFSet, result: LSFDResult, *, max_iter: int = 50) -> SubsetScatter:
     """Refit every FRF group (see module docstring) from ``result.poles_raw``; ``frf`` is the set the
     result was fitted to (same outputs and references)."""
     from .lsfd import LSFDConvergenceWarning, fit_lsfd

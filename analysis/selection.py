@@ -30,7 +30,7 @@ The user overrides the selection by giving poles (or frequencies, see
 from __future__ import annotations
 
 import logging
-from typing import NamedTuple, Optional, Sequence
+from typing import Any, NamedTuple, Optional, Sequence
 
 import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
@@ -121,7 +121,7 @@ def select_clusters(
 def select_poles(
     stab: StabilizationResult,
     n_modes: Optional[int] = None,
-    **kwargs,
+    **kwargs: Any,
 ) -> np.ndarray:
     """Physical poles (rad/s, sorted by frequency) picked automatically from a stabilization result.
 

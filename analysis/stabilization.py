@@ -35,7 +35,7 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -198,7 +198,8 @@ def _initial_poles(bd: BandData, max_modes: int, method: str) -> list[np.ndarray
     return lscf_poles_all_orders(bd, max_modes)
 
 
-def _refine(frf: FRFSet, poles: np.ndarray, band, iterations: int) -> tuple[np.ndarray, Optional[np.ndarray]]:
+def _refine(frf: FRFSet, poles: np.ndarray, band: tuple[float, float],
+            iterations: int) -> tuple[np.ndarray, Optional[np.ndarray]]:
     """A few LSFD iterations from the given poles; returns (poles, flattened residues)."""
     from .lsfd import LSFDConvergenceWarning, fit_lsfd  # lazy: written by another engineer
 
@@ -220,7 +221,7 @@ def stabilization(
     max_modes: int,
     *,
     method: str = "lsce",
-    band=None,
+    band: Optional[Sequence[float]] = None,
     refine_lsfd: bool = False,
     refine_iterations: int = 5,
     tol_freq: float = 0.01,

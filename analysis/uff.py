@@ -23,6 +23,7 @@ import logging
 import os
 import warnings
 from pathlib import Path
+from types import ModuleType
 from typing import Optional, Sequence
 
 import numpy as np
@@ -41,7 +42,7 @@ _TYPE_QUANTITY = {v: k for k, v in _QUANTITY_TYPE.items()}
 _UNIT_TYPE = {"N": 13, "m/s^2": 12, "m/s2": 12, "g": 12, "m/s": 11, "m": 8}
 
 
-def _pyuff():
+def _pyuff() -> ModuleType:
     import pyuff
 
     return pyuff

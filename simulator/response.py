@@ -114,7 +114,8 @@ def _recursion(seg: np.ndarray, b0: np.ndarray, b1: np.ndarray, E: np.ndarray) -
     return z
 
 
-def _check_shapes(poles, phi_out, phi_in, quantity):
+def _check_shapes(poles: np.ndarray, phi_out: np.ndarray, phi_in: np.ndarray,
+                  quantity: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if quantity not in RESPONSE_QUANTITIES:
         raise ValueError(f"quantity {quantity!r} is not one of {RESPONSE_QUANTITIES}")
     lam = np.atleast_1d(np.asarray(poles, dtype=complex))

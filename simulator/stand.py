@@ -36,7 +36,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -92,7 +92,7 @@ class StandEvent:
     response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 0)))
 
 
-def _parse_channel(i: int, ch: Mapping[str, Any], model_check) -> ChannelSpec:
+def _parse_channel(i: int, ch: Mapping[str, Any], model_check: Callable[[str, int], None]) -> ChannelSpec:
     if not isinstance(ch, Mapping):
         raise StandError(f"channel {i}: expected a dict with keys {', '.join(_CHANNEL_KEYS)}, got {type(ch).__name__}")
     missing = [k for k in _CHANNEL_KEYS if k not in ch]

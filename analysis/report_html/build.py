@@ -92,7 +92,7 @@ def _write_files(out: Path, doc: dict) -> None:
     (out / "index.html").write_text(render_page(doc), encoding="utf-8")
 
 
-def _default(x):
+def _default(x: object) -> "bool | int | float | list":
     import numpy as np
 
     if isinstance(x, (np.floating, np.integer, np.bool_)):

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..frf import FRFSet
 from ..geometry import Geometry, node_label
-from ..modal import damping_ratio, natural_freq_hz, synthesize
+from ..modal import ModalModel, damping_ratio, natural_freq_hz, synthesize
 from ..plots import summed_magnitude_db
 from ..points import PointLabelError, parse_point
 from ..spectra import excitation_band as spectra_excitation_band, hit_spectra
@@ -98,7 +98,7 @@ def mpc(phi: np.ndarray) -> float:
     return float(((ev[1] - ev[0]) / tot) ** 2) if tot > 0 else float("nan")
 
 
-def shape_vectors(model) -> tuple[list[str], np.ndarray]:
+def shape_vectors(model: ModalModel) -> tuple[list[str], np.ndarray]:
     """Point labels and (n_dof, m) complex shapes: per mode, the residue row/column of the larger
     point set (references for a roving hammer, outputs for a roving sensor) with the largest norm;
     phase-rotated so the largest entry is real positive, scaled to a largest modulus of 1."""

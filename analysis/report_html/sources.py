@@ -11,13 +11,16 @@ import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 
 from ..frf import FRFSet
 from ..modal import ModalModel
 from ..errors import ReportInputError
+
+if TYPE_CHECKING:
+    from ..stabilization import StabilizationResult
 
 __all__ = [
     "FitData",
@@ -199,7 +202,7 @@ def check_fit_values(path: Path, poles: np.ndarray, residues: np.ndarray, band: 
         raise ReportInputError(f"{path}: field band {list(band)} is not an increasing pair of finite Hz")
 
 
-def _redo_stabilization(frf: FRFSet, info: Optional[dict]):
+def _redo_stabilization(frf: FRFSet, info: Optional[dict]) -> Optional[StabilizationResult]:
     """The fit's stabilization diagram again, from the settings its JSON records (method, band,
     largest model size): a deterministic function of the FRFs. None when the JSON has none."""
     from ..stabilization import stabilization
