@@ -15,9 +15,14 @@ import json
 import logging
 import sys
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Any, Optional, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from simulator.physical import FrameVariants
+
+    from .frf import FRFSet
 
 from .command_line import with_examples
 from .command_line import Parser as _Parser, check_out_dir, parse_args, add_estimator, add_threads, cli_entry
@@ -27,7 +32,7 @@ __all__ = ["main", "build_parser", "load_simulations"]
 log = logging.getLogger(__name__)
 
 
-def _json_default(x):
+def _json_default(x: Any) -> Any:
     if isinstance(x, (np.floating, np.integer, np.bool_)):
         return x.item()
     if isinstance(x, np.ndarray):
@@ -54,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def load_simulations(path: str, measured, estimator: Optional[str] = None):
+def load_simulations(path: str, measured: "FRFSet", estimator: Optional[str] = None) -> "Path | FrameVariants":
     """The simulation for :func:`analysis.diagnosis.diagnose`: for a simulator config (``.toml``) its FE
     model split by physical cause (:class:`simulator.physical.FrameVariants`) at the measured points;
     otherwise the path itself (an FRF file, read by the library)."""

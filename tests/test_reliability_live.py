@@ -14,6 +14,7 @@ from analysis.recording import Recording, verify_recording
 WRITER = """
 import sys
 import numpy as np
+from analysis.hit import Hit
 from analysis.recording_writer import RecordingWriter
 from analysis.spectra import WindowSettings
 hit = dict(eu_per_count=[0.01, 0.02], volts_per_count=[3e-5, 1.5e-4], trigger_index=8, sample_rate_hz=6400.0,
@@ -26,7 +27,7 @@ w = RecordingWriter(sys.argv[1], instrument={}, setup={}, channels=ch, windows=W
 print(0, flush=True)
 for line in sys.stdin:
     for k in range(int(line)):
-        w.write_hit(counts=np.full((2, 16), w.n_hits, np.int16), sequence=w.n_hits + 1, **hit)
+        w.write_hit(Hit(counts=np.full((2, 16), w.n_hits, np.int16), sequence=w.n_hits + 1, **hit))
     print(w.n_hits, flush=True)
 w.close()
 """

@@ -4,7 +4,7 @@ hits (overload, double hit), scored on held-out lines as the FRF effects (``docs
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -133,7 +133,8 @@ def _db(x: float) -> float:
     return float(10 * np.log10(max(x, 1e-30)))
 
 
-def _score(measured: "np.ndarray | tuple[np.ndarray, np.ndarray]", before: np.ndarray, after_of,
+def _score(measured: "np.ndarray | tuple[np.ndarray, np.ndarray]", before: np.ndarray,
+           after_of: "Callable[[np.ndarray], tuple[np.ndarray, Any]]",
            weights: np.ndarray) -> dict:
     """Held-out errors: ``after_of(train_mask) -> (model H, params)`` is fitted on one fold of lines and
     scored on the other, both ways (as :mod:`analysis.diagnosis.verdict`). ``measured``/``before`` may be

@@ -5,16 +5,18 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Union
+from typing import Optional, Sequence, Union
 
 import numpy as np
+
+from ..modal import ModalModel
 
 __all__ = ["time_data_causes"]
 
 log = logging.getLogger(__name__)
 
 
-def time_data_causes(path: Union[str, Path], band: tuple, base=None) -> list:
+def time_data_causes(path: Union[str, Path], band: tuple, base: Optional[ModalModel] = None) -> list:
     """Time-data causes (:mod:`analysis.diagnosis.timedata`) of a recording's accepted hits (those its
     FRFs were made from; rejected hits changed nothing), per reference point; [] when the file is not
     a recording or holds no accepted hits. With ``base`` (the simulation as a receptance
@@ -51,7 +53,8 @@ def time_data_causes(path: Union[str, Path], band: tuple, base=None) -> list:
     return sorted(out, key=lambda c: (not c["present"], -c.get("gain_db", 0.0)))
 
 
-def _time_gains(force, resp, fs, band, base, outputs, ref, flags) -> dict:
+def _time_gains(force: np.ndarray, resp: np.ndarray, fs: float, band: tuple, base: ModalModel,
+                outputs: Sequence[str], ref: str, flags: np.ndarray) -> dict:
     """Held-out gains of the time-data effects per effect name ({} when the simulation cannot be used)."""
     from dataclasses import replace
 

@@ -120,7 +120,7 @@ def named_verdict(named: Sequence[dict]) -> str:
     return named[0]["effect"] if len(named) == 1 else "combined"
 
 
-def _jsonable(x):
+def _jsonable(x: Any) -> Any:
     if isinstance(x, dict):
         return {k: _jsonable(v) for k, v in x.items() if k != "vector"}
     if isinstance(x, (list, tuple)):
