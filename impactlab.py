@@ -8,7 +8,7 @@ too. A wiring module above the three packages' faces: it only reads their comman
 from __future__ import annotations
 
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
 from acquisition.__main__ import COMMANDS as ACQUISITION
 from analysis.__main__ import COMMANDS as ANALYSIS
@@ -19,7 +19,7 @@ from simulator.__main__ import COMMANDS as SIMULATOR
 COMMANDS = {**ACQUISITION, **ANALYSIS, **SIMULATOR}
 
 
-def main(argv: "Sequence[str] | None" = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run ``impactlab SUBCOMMAND ...`` (``--help`` lists the subcommands, ``--version``)."""
     return dispatch("impactlab", COMMANDS, argv)
 

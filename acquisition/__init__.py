@@ -39,11 +39,11 @@ __all__ = list(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily
-    from .driver import Analyser, Identity, Block  # noqa: F401
-    from .setup import AcquisitionSetup, ChannelSetup, TriggerSetup, default_setup, load_setup  # noqa: F401
-    from .session import CaptureSession, SessionResult  # noqa: F401
-    from .plan import TestPlan  # noqa: F401
-    from .operator import HitSummary, Operator, auto_accept  # noqa: F401
-    from .urls import parse_device_url, open_transport  # noqa: F401
     from .discovery import list_devices  # noqa: F401
-    from .errors import ImpactlabError, TransportError, TransportTimeout, ProtocolError, CommandFailed  # noqa: F401
+    from .driver import Analyser, Block, Identity  # noqa: F401
+    from .errors import CommandFailed, ImpactlabError, ProtocolError, TransportError, TransportTimeout  # noqa: F401
+    from .operator import HitSummary, Operator, auto_accept  # noqa: F401
+    from .plan import TestPlan  # noqa: F401
+    from .session import CaptureSession, SessionResult  # noqa: F401
+    from .setup import AcquisitionSetup, ChannelSetup, TriggerSetup, default_setup, load_setup  # noqa: F401
+    from .urls import open_transport, parse_device_url  # noqa: F401

@@ -1,4 +1,6 @@
 """``python -m acquisition capture|replay|export|import|demo ...``"""
+from __future__ import annotations
+
 import sys
 
 from analysis._cli_dispatch import dispatch

@@ -4,7 +4,7 @@ recomputation from a recording (:func:`average_recorded_hits`)."""
 
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -36,8 +36,8 @@ class MeasurementAverage:
     """
 
     def __init__(self, index: int, point: str, reference: str, outputs: Sequence[str], quantity: str, unit: str,
-                 windows: WindowSettings, sample_rate_hz: Optional[float] = None, *,
-                 record_s: Optional[float] = None, pretrigger_s: Optional[float] = None) -> None:
+                 windows: WindowSettings, sample_rate_hz: float | None = None, *,
+                 record_s: float | None = None, pretrigger_s: float | None = None) -> None:
         self.index = int(index)
         self.point = str(point)
         self.reference = str(reference)
@@ -67,7 +67,7 @@ class MeasurementAverage:
         if hit.index >= 0:
             self.hits.append(hit.index)
 
-    def mean_coherence(self, lo_hz: float = 0.0, hi_hz: float = np.inf) -> Optional[float]:
+    def mean_coherence(self, lo_hz: float = 0.0, hi_hz: float = np.inf) -> float | None:
         """Mean coherence over lo..hi Hz and the outputs that carry a signal (None before two hits:
         one hit gives 1 trivially)."""
         if self.acc.n_averages < 2:
@@ -87,7 +87,7 @@ class MeasurementAverage:
 
 def average_recorded_hits(
     hits: Sequence[Hit], windows: WindowSettings, channels: Sequence[dict], *,
-    record_s: Optional[float] = None, pretrigger_s: Optional[float] = None,
+    record_s: float | None = None, pretrigger_s: float | None = None,
 ) -> list[MeasurementAverage]:
     """Recompute the averages of recorded hits, grouped by measurement in order, with ``windows``
     (an end-fraction exponential is resolved from the first hit's block layout). ``channels`` is

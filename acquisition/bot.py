@@ -35,8 +35,7 @@ import time
 from dataclasses import dataclass
 
 from acquisition import protocol as P
-from acquisition.errors import (CommandFailed, DeviceGone, EndpointStalled, ProtocolError, TransportError,
-                                TransportTimeout)
+from acquisition.errors import CommandFailed, DeviceGone, EndpointStalled, ProtocolError, TransportError, TransportTimeout
 from acquisition.transport import Transport
 
 __all__ = ["BulkOnly", "Response"]
@@ -90,8 +89,8 @@ class BulkOnly:
         return tag
 
     # ------------------------------------------------------------------ public
-    def command(self, opcode: "int | str", *, data_out: bytes = b"", length: int = 0,
-                timeout_s: "float | None" = None, **fields: int) -> Response:
+    def command(self, opcode: int | str, *, data_out: bytes = b"", length: int = 0,
+                timeout_s: float | None = None, **fields: int) -> Response:
         """Run one command. ``length``: data-in bytes asked for (IN commands; also put in the CDB's
         allocation-length field unless given); ``data_out``: parameter data (OUT commands; its
         length goes in the CDB). Returns :class:`Response`; raises as described in the module docstring."""
@@ -132,7 +131,7 @@ class BulkOnly:
                     continue
                 raise
 
-    def request_sense(self, timeout_s: "float | None" = None) -> P.Sense:
+    def request_sense(self, timeout_s: float | None = None) -> P.Sense:
         """REQUEST SENSE (18 bytes); a failure of REQUEST SENSE itself is a ProtocolError."""
         budget = self.timeout_s if timeout_s is None else timeout_s
         spec = P.command_spec(P.Op.REQUEST_SENSE)
@@ -161,7 +160,7 @@ class BulkOnly:
         return Response(bytes(data[:valid]), csw.residue)
 
     def _transaction(self, spec: P.CommandSpec, cdb: bytes, host_len: int, data_out: bytes,
-                     deadline: float) -> "tuple[bytes, P.Csw]":
+                     deadline: float) -> tuple[bytes, P.Csw]:
         """CBW, data phase, CSW; raises _Retry after reset recovery for an envelope fault."""
         tag = self.next_tag()
         data_in = spec.direction is P.Direction.IN

@@ -4,8 +4,9 @@ once, for the set-up's block layout, and the same settings go to the recording a
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from analysis.recording_writer import RecordingWriter
 from analysis.spectra import WindowSettings
@@ -30,7 +31,7 @@ def open_analyser(url: str, timeout_s: float = 10.0) -> Any:
 
 def capture_to_file(
     url: str,
-    out: "str | Path",
+    out: str | Path,
     setup: AcquisitionSetup,
     plan: TestPlan,
     windows: WindowSettings,

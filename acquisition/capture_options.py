@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from .errors import SetupError, UsageError
 
 __all__ = ["with_seed", "continue_stream", "plan_from_options", "recorded_plan", "recorded_test"]
 
 
-def with_seed(url: str, seed: Optional[int]) -> str:
+def with_seed(url: str, seed: int | None) -> str:
     """``url`` with ``--seed`` added (simulated devices only; None: unchanged)."""
     if seed is None:
         return url
@@ -36,7 +36,7 @@ def continue_stream(url: str, n_recorded: int) -> str:
     return url[:m.start()] + f"{m.group(1)}seed={int(m.group(2)) + n_recorded}" + url[m.end():]
 
 
-def plan_from_options(args: argparse.Namespace, replay_plan: Optional[dict] = None) -> Any:
+def plan_from_options(args: argparse.Namespace, replay_plan: dict | None = None) -> Any:
     """The test plan of the ``--points``, ``--reference``, ``--mode`` and ``--hits`` options (a replayed
     recording's plan fills those not given)."""
     from .session import TestPlan

@@ -20,9 +20,9 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Optional, Sequence, TextIO
-
+from typing import Any, TextIO
 
 from analysis.command_line import add_overwrite, cli_entry, exit_on, with_examples
 
@@ -68,19 +68,18 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def run_capture(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -> tuple[int, Any]:
+def run_capture(args: argparse.Namespace, out_stream: TextIO | None = None) -> tuple[int, Any]:
     """The capture job behind :func:`main`. Returns (exit code, SessionResult or None).
 
     Everything the operator typed is checked before the analyser is opened.
     """
     out_stream = sys.stdout if out_stream is None else out_stream  # resolved at call time (pipes, tests)
+    from analysis.geometry import GeometryError
     from analysis.recording import Recording
+    from simulator.geometry import check_device_points  # a face wires the simulator in
 
     from .session import SessionError, auto_accept
     from .setup import AcquisitionSetup, default_setup, load_setup
-    from analysis.geometry import GeometryError
-    from simulator.geometry import check_device_points  # a face wires the simulator in
-
     from .urls import SimURL, parse_device_url
 
     if args.resume:
@@ -139,7 +138,7 @@ def _print_quality(path: Path, out_stream: TextIO) -> None:
         print(f"quality: {line}", file=out_stream)
 
 
-def run_resume(args: argparse.Namespace, out_stream: Optional[TextIO] = None) -> tuple[int, Any]:
+def run_resume(args: argparse.Namespace, out_stream: TextIO | None = None) -> tuple[int, Any]:
     """``capture --resume REC.h5``: continue an interrupted capture with the recording's set-up, plan,
     windows and device (``--device`` overrides it), appending to the same file. The accepted hits
     already recorded (complete, CRC-checked) count towards each point's average."""
@@ -172,7 +171,7 @@ def run_resume(args: argparse.Namespace, out_stream: Optional[TextIO] = None) ->
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         with exit_on("capture", ((UsageError, InvalidDeviceURL, SetupError, RecordingError), 2),

@@ -16,9 +16,10 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any
 
 from analysis.command_line import with_examples
 
@@ -76,8 +77,8 @@ class DemoContext:
     seed: int = 1
     hits: int = 5
     points: tuple = DEMO_POINTS
-    recording: Optional[Path] = None
-    uff: Optional[Path] = None
+    recording: Path | None = None
+    uff: Path | None = None
     result: Any = None
     frf: Any = None
     true_model: Any = None
@@ -90,16 +91,16 @@ class DemoContext:
 
 def capture_step(ctx: DemoContext) -> None:
     """The session on the simulated frame (loopback link to the simulated firmware)."""
+    from analysis.recording_writer import RecordingWriter
     from simulator.analyser import create_analyser
     from simulator.config import FrameConfig
     from simulator.stand import TestStand
 
     from .driver import Analyser
     from .loopback import LoopbackTransport
-    from analysis.recording_writer import RecordingWriter
     from .session import CaptureSession, TestPlan, auto_accept, channel_table
-    from .window_options import DEFAULT_FORCE_WINDOW, parse_windows
     from .setup import DEFAULT_SLOWEST_MODE, block_size_for_decay, default_setup
+    from .window_options import DEFAULT_FORCE_WINDOW, parse_windows
 
     config = FrameConfig.load().with_overrides({"hammer": {"tip": DEMO_HAMMER_TIP, "double_hit_delay_s": [0.012, 0.02]}})
     stand = ScriptedStand(TestStand(config, seed=ctx.seed), double_hits=[DOUBLE_HIT_STRIKE], overloads=[OVERLOAD_STRIKE])
@@ -207,7 +208,7 @@ def report_step(ctx: DemoContext) -> None:
 STEPS: list[Callable[[DemoContext], None]] = [capture_step, summary_step, export_step, fit_step, report_step]
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition demo", description=__doc__.split("\n\n")[0])
     with_examples(p)
     p.add_argument("--out", default="demo-output", help="output folder (created)")

@@ -11,21 +11,19 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence
 
-from analysis.command_line import with_examples
-from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, add_estimator
+from analysis.command_line import add_estimator, add_overwrite, cli_entry, errors_to_exit, with_examples
 
 __all__ = ["main", "export"]
 
 
-def export(rec_path: "str | Path", uff_path: "str | Path", *, time_data: bool = False, estimator: "str | None" = None,
+def export(rec_path: str | Path, uff_path: str | Path, *, time_data: bool = False, estimator: str | None = None,
            overwrite: bool = False) -> int:
     """Write the UFF file; returns the number of datasets written."""
-    from analysis.uff import time_records, write_uff58
-
     from analysis.recording import Recording, merge_frfsets
+    from analysis.uff import time_records, write_uff58
 
     with Recording(rec_path) as rec:
         frf = merge_frfsets(rec.frfsets(estimator))
@@ -47,7 +45,7 @@ def export(rec_path: "str | Path", uff_path: "str | Path", *, time_data: bool = 
                        extra_sets=extra, overwrite=overwrite)
 
 
-def export_sep005(rec_path: "str | Path", out_path: "str | Path", *, overwrite: bool = False,
+def export_sep005(rec_path: str | Path, out_path: str | Path, *, overwrite: bool = False,
                   accepted_only: bool = False) -> int:
     """Write the recording's hits as SEP005 channels (:mod:`analysis.sep005`, one group per hit, in
     engineering units); returns the number of channels written."""
@@ -72,7 +70,7 @@ def export_sep005(rec_path: "str | Path", out_path: "str | Path", *, overwrite: 
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition export", description=__doc__.split("\n\n")[0])
     with_examples(p)
     p.add_argument("recording")

@@ -3,11 +3,10 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Sequence
+from collections.abc import Sequence
 
-from analysis.command_line import with_examples
 from acquisition.errors import ImpactlabError, InvalidDeviceURL, UsageError
-from analysis.command_line import add_json_flag, add_verbose, cli_entry, exit_on, set_verbosity
+from analysis.command_line import add_json_flag, add_verbose, cli_entry, exit_on, set_verbosity, with_examples
 
 __all__ = ["main"]
 
@@ -25,7 +24,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 @cli_entry
-def main(argv: "Sequence[str] | None" = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     set_verbosity(args.verbose)
     from acquisition.driver import Analyser

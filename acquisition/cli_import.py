@@ -11,15 +11,13 @@ Formats (by extension unless ``--format``): LabVIEW ``.lvm`` (segments = hits), 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence
 
-from analysis.command_line import with_examples
-from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
+from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, with_examples
 
-from .errors import UsageError
+from .errors import RecordingError, UsageError
 from .window_options import parse_windows
-from .errors import RecordingError
 
 __all__ = ["main", "build_parser", "FORMATS"]
 
@@ -56,10 +54,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from .importers import ImportDataError, channel_roles, combine_imports, load_description, read_dataphysics_mat, \
-        read_lvm, read_numpy, read_sep005_test, write_imported
+    from .importers import (
+        ImportDataError,
+        channel_roles,
+        combine_imports,
+        load_description,
+        read_dataphysics_mat,
+        read_lvm,
+        read_numpy,
+        read_sep005_test,
+        write_imported,
+    )
     from .importers import read_dropping_nonfinite as _read
     drop = args.drop_nonfinite
 

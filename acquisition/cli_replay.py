@@ -12,10 +12,9 @@ exclusions the FRFs equal the original ones bit for bit.
 from __future__ import annotations
 
 import argparse
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
-from analysis.command_line import with_examples
-from analysis.command_line import add_overwrite, cli_entry, errors_to_exit
+from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, with_examples
 
 from .errors import RecordingError, UsageError
 from .replay import replay
@@ -24,7 +23,7 @@ from .window_options import parse_windows
 __all__ = ["main", "parse_hit_list"]
 
 
-def parse_hit_list(text: Optional[str]) -> set[int]:
+def parse_hit_list(text: str | None) -> set[int]:
     """``"3,7-9"`` -> {3, 7, 8, 9} (hit indices as stored)."""
     out: set[int] = set()
     if not text:
@@ -47,7 +46,7 @@ def parse_hit_list(text: Optional[str]) -> set[int]:
     return out
 
 
-def _split_window(text: str) -> tuple[Optional[str], Optional[str]]:
+def _split_window(text: str) -> tuple[str | None, str | None]:
     force = exp = None
     for item in text.split(";"):
         key, _, val = item.partition("=")
@@ -62,7 +61,7 @@ def _split_window(text: str) -> tuple[Optional[str], Optional[str]]:
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition replay", description=__doc__.split("\n\n")[0])
     with_examples(p)
     p.add_argument("recording", help="the recording to read (never modified)")

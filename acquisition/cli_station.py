@@ -20,7 +20,7 @@ import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Optional, TextIO
+from typing import Any, TextIO
 
 from analysis.command_line import with_examples
 
@@ -122,7 +122,7 @@ def _prepare(args: argparse.Namespace) -> dict:
                 editable=True, out=out, identity_box=identity_box)
 
 
-def run_station(args: argparse.Namespace, out_stream: Optional[TextIO] = None, ready: Optional[threading.Event] = None) -> int:
+def run_station(args: argparse.Namespace, out_stream: TextIO | None = None, ready: threading.Event | None = None) -> int:
     """Serve the station until it is stopped (Ctrl-C / SIGTERM). Returns the exit code."""
     out_stream = sys.stdout if out_stream is None else out_stream  # resolved at call time (pipes, tests)
     from analysis.web_assets import plotly_js_path
@@ -191,7 +191,7 @@ def run_station(args: argparse.Namespace, out_stream: Optional[TextIO] = None, r
         return 0 if finished else 130
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return run_station(args)

@@ -8,7 +8,7 @@ and the simulated doors come from the ``impactlab.doors`` entry points.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any, Optional
+from typing import Any
 
 __all__ = ["DeviceEntry", "ANALYSER_USB_IDS", "list_devices", "list_usb", "list_serial", "list_doors"]
 
@@ -31,7 +31,7 @@ class DeviceEntry:
         return asdict(self)
 
 
-def list_usb(backend: Any = None, *, all_devices: bool = False) -> tuple[list[DeviceEntry], Optional[str]]:
+def list_usb(backend: Any = None, *, all_devices: bool = False) -> tuple[list[DeviceEntry], str | None]:
     """USB analysers (every USB device with ``all_devices``) as ``usb://VID:PID/SERIAL`` entries.
 
     ``backend``: a pyusb backend (None: the libusb that pyusb finds). Returns the entries and a note

@@ -88,7 +88,7 @@ class Analyser:
     polls in :meth:`wait_for_trigger`. Use as a context manager or call :meth:`close`.
     """
 
-    def __init__(self, url_or_transport: "str | Transport", timeout_s: float = 2.0,
+    def __init__(self, url_or_transport: str | Transport, timeout_s: float = 2.0,
                  poll_interval_s: float = 0.005) -> None:
         if not (timeout_s > 0 and poll_interval_s > 0):
             raise ValueError(f"timeout_s ({timeout_s}) and poll_interval_s ({poll_interval_s}) must be positive seconds")
@@ -102,9 +102,9 @@ class Analyser:
         self.bot = BulkOnly(self.transport, timeout_s)
         self.timeout_s = float(timeout_s)
         self.poll_interval_s = float(poll_interval_s)
-        self._caps: "Capabilities | None" = None
-        self._setup: "AcquisitionSetup | None" = None
-        self._last_status: "P.StatusData | None" = None
+        self._caps: Capabilities | None = None
+        self._setup: AcquisitionSetup | None = None
+        self._last_status: P.StatusData | None = None
         self._closed = False
 
     @property
@@ -112,7 +112,7 @@ class Analyser:
         return getattr(self.transport, "url", "")
 
     @property
-    def setup(self) -> "AcquisitionSetup | None":
+    def setup(self) -> AcquisitionSetup | None:
         """The set-up last written by :meth:`configure` (or read back from the analyser)."""
         return self._setup
 
@@ -250,7 +250,7 @@ class Analyser:
             self._closed = True
             self.transport.close()
 
-    def __enter__(self) -> "Analyser":
+    def __enter__(self) -> Analyser:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -14,8 +14,8 @@ otherwise the verdict is ``accept=None``: the operator (or ``--auto``) decides.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -26,7 +26,7 @@ __all__ = ["HitVerdict", "HitCheck", "HitCheckSettings", "check_hit", "pulse_ext
 class HitVerdict:
     """accept: False = rejected automatically, None = operator decides, True = accepted."""
 
-    accept: Optional[bool]
+    accept: bool | None
     reasons: list[str] = field(default_factory=list)
 
 

@@ -37,21 +37,22 @@ import logging
 import math
 import re
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
 from analysis.finite_checks import describe_nonfinite
-from analysis.points import parse_point, PointLabelError
+from analysis.hit import Hit
+from analysis.points import PointLabelError, parse_point
+from analysis.recording_writer import RecordingWriter
 from analysis.spectra import WindowSettings
 
-from .textdoc import read_document
-from .hitcheck import HitCheckSettings, check_hit
-from analysis.hit import Hit
-from analysis.recording_writer import RecordingWriter
 from .errors import ImportDataError, NonFiniteSamples
+from .hitcheck import HitCheckSettings, check_hit
+from .textdoc import read_document
 
 __all__ = [
     "ImportDataError",
@@ -203,7 +204,7 @@ def drop_nonfinite_hits(test: ImportedTest) -> tuple[ImportedTest, int]:
     return ImportedTest(test.fs_hz, test.channels, [test.hits[k] for k in keep], triggers, test.source, meta), len(bad)
 
 
-def read_dropping_nonfinite(read: "Callable[..., ImportedTest]", *args: Any, drop: bool = False,
+def read_dropping_nonfinite(read: Callable[..., ImportedTest], *args: Any, drop: bool = False,
                             **kwargs: Any) -> ImportedTest:
     """``read(*args, **kwargs)``; with ``drop``, hits holding non-finite samples are left out (and
     counted in ``meta["dropped_nonfinite_hits"]``) instead of failing the import."""
@@ -219,7 +220,7 @@ def read_dropping_nonfinite(read: "Callable[..., ImportedTest]", *args: Any, dro
         return test
 
 
-def read_lvm(path: "str | Path") -> ImportedTest:
+def read_lvm(path: str | Path) -> ImportedTest:
     """Read a LabVIEW measurement file; each segment is one hit (see module doc).
 
     Raises :class:`ImportDataError` for anything that is not a well-formed .lvm file."""
@@ -232,7 +233,7 @@ def read_lvm(path: "str | Path") -> ImportedTest:
                               "export it again from LabVIEW (Write To Measurement File)") from None
 
 
-def _read_lvm(path: "str | Path") -> ImportedTest:
+def _read_lvm(path: str | Path) -> ImportedTest:
     p = Path(path)
     try:
         lines = p.read_text(encoding="latin-1").splitlines()
@@ -303,7 +304,7 @@ def _read_lvm(path: "str | Path") -> ImportedTest:
     return test
 
 
-def read_dataphysics_mat(path: "str | Path", windowed: bool = False) -> ImportedTest:
+def read_dataphysics_mat(path: str | Path, windowed: bool = False) -> ImportedTest:
     """Read a DataPhysics SignalCalc ``.mat`` export: ``Xk`` (or ``Wk`` with ``windowed``) blocks
     of two columns (time s, value). Raises :class:`ImportDataError` for anything else."""
     p = Path(path)
@@ -377,7 +378,7 @@ def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:
     return ImportedTest(fs, channels, [data], [trig], str(p), meta)
 
 
-def load_description(path: "str | Path") -> dict:
+def load_description(path: str | Path) -> dict:
     """Read a JSON or TOML channel description (see module doc)."""
     p = Path(path)
     out = read_document(p, "description", ImportDataError)
@@ -387,7 +388,7 @@ def load_description(path: "str | Path") -> dict:
     return out
 
 
-def read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTest:
+def read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
     """Read ``.npy`` hits (one file per hit) described by ``description`` (see module doc).
 
     Raises :class:`ImportDataError` for unreadable arrays or a description that does not fit them."""
@@ -402,7 +403,7 @@ def read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTest
                               "channels, layout, time_row and sample_rate_hz") from None
 
 
-def _read_numpy(paths: Sequence["str | Path"], description: dict) -> ImportedTest:
+def _read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
     if not paths:
         raise ImportDataError("no .npy file given")
     chans = description.get("channels")
@@ -487,7 +488,7 @@ def detect_trigger(force: np.ndarray, level: float = 0.1) -> int:
     return int(np.argmax(f >= level * f.max())) if f.max() > 0 else 0
 
 
-def read_sep005_test(path: "str | Path") -> ImportedTest:
+def read_sep005_test(path: str | Path) -> ImportedTest:
     """An SEP005 JSON file (:mod:`analysis.sep005`) as a test: each ``group`` of channels is one hit
     (no groups: the whole file is one hit); channel quantities from the SEP005 codes ('f' force,
     'a' acceleration, ...), points from the ``point`` key (else the channel name), trigger samples
@@ -502,7 +503,7 @@ def read_sep005_test(path: "str | Path") -> ImportedTest:
                               "check the groups, fs and trigger_index of its channels") from None
 
 
-def _read_sep005_test(path: "str | Path") -> ImportedTest:
+def _read_sep005_test(path: str | Path) -> ImportedTest:
     from analysis.sep005 import QUANTITY_CODES, SEP005Error, read_sep005
 
     try:
@@ -564,10 +565,10 @@ class ChannelRoles:
 def channel_roles(
     test: ImportedTest,
     *,
-    reference: Optional[str] = None,
-    outputs: Optional[Sequence[str]] = None,
-    force_channel: Optional[int] = None,
-    response_channels: Optional[Sequence[int]] = None,
+    reference: str | None = None,
+    outputs: Sequence[str] | None = None,
+    force_channel: int | None = None,
+    response_channels: Sequence[int] | None = None,
 ) -> ChannelRoles:
     """The force and response channels of ``test`` and their point labels: from the file, or as
     given (``force_channel``/``response_channels`` 0-based; ``reference``/``outputs`` relabel them)."""
@@ -646,17 +647,17 @@ def imported_hits(test: ImportedTest, roles: ChannelRoles) -> list[Hit]:
 
 def write_imported(
     test: ImportedTest,
-    out: "str | Path",
+    out: str | Path,
     *,
     windows: WindowSettings = WindowSettings(),
-    reference: Optional[str] = None,
-    outputs: Optional[Sequence[str]] = None,
-    force_channel: Optional[int] = None,
-    response_channels: Optional[Sequence[int]] = None,
+    reference: str | None = None,
+    outputs: Sequence[str] | None = None,
+    force_channel: int | None = None,
+    response_channels: Sequence[int] | None = None,
     check_settings: HitCheckSettings = HitCheckSettings(),
     overwrite: bool = False,
-    roles: Optional[ChannelRoles] = None,
-) -> "list":
+    roles: ChannelRoles | None = None,
+) -> list:
     """Write ``test`` as a recording (one measurement) and return its averages.
 
     Hits failing the automatic checks (double hits) are stored as rejected with the reason.

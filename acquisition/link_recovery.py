@@ -4,7 +4,8 @@ bringing the analyser back to a known state after a fault in the middle of a mea
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from .errors import CommandFailed, ProtocolError, TransportError
 from .session_errors import SessionError

@@ -10,8 +10,9 @@ Library code here prints nothing: the terminal dialogue lives in :mod:`acquisiti
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional, Protocol
+from typing import Any, Protocol
 
 from .hitcheck import HitCheck
 from .session_errors import OperatorQuit
@@ -31,12 +32,12 @@ class HitSummary:
     target: int
     rejected: int
     check: HitCheck
-    coherence_so_far: Optional[float] = None
+    coherence_so_far: float | None = None
 
     #: the point's running average (``acquisition.averaging.MeasurementAverage``; this hit included while deciding)
     average: Any = field(default=None, repr=False)
     #: filled in when the hit is decided: True accepted, False rejected; why; its index in the recording
-    decision: Optional[bool] = None
+    decision: bool | None = None
     reasons: list = field(default_factory=list)
     hit_index: int = -1
     #: the hit itself (``analysis.hit.Hit`` before its verdict): its data, sample rate and trigger
@@ -88,8 +89,8 @@ class CallbackOperator:
     default to doing nothing)."""
 
     def __init__(self, decide: Callable[[HitSummary], bool] = auto_accept,
-                 progress: Optional[Callable[[str], None]] = None,
-                 on_hit: Optional[Callable[[HitSummary], None]] = None) -> None:
+                 progress: Callable[[str], None] | None = None,
+                 on_hit: Callable[[HitSummary], None] | None = None) -> None:
         self._decide = decide
         self._progress = progress
         self._on_hit = on_hit

@@ -5,8 +5,9 @@ table and the EU scaling of a set-up."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +49,7 @@ class TestPlan:
     mode: str = "roving_hammer"
     points: tuple = ()
     hits_per_point: int = 5
-    reference: Optional[str] = None
+    reference: str | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in PLAN_MODES:

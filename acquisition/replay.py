@@ -3,8 +3,8 @@ into a new recording (the original is never modified). With the original windows
 the FRFs equal the original ones bit for bit."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence
 
 from analysis.spectra import WindowSettings
 
@@ -13,8 +13,8 @@ from .errors import UsageError
 __all__ = ["replay"]
 
 
-def replay(src: "str | Path", out: "str | Path", *, windows: Optional[WindowSettings] = None,
-           exclude: "Sequence[int] | set[int]" = (), estimator: str = "H1", overwrite: bool = False) -> list:
+def replay(src: str | Path, out: str | Path, *, windows: WindowSettings | None = None,
+           exclude: Sequence[int] | set[int] = (), estimator: str = "H1", overwrite: bool = False) -> list:
     """Recompute the FRFs of ``src`` into a new recording ``out``; returns the new averages."""
     from analysis.recording import Recording
     from analysis.recording_writer import RecordingWriter

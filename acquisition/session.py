@@ -28,8 +28,9 @@ the first response channel moves over the points (each point is a new output).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -132,19 +133,19 @@ class CaptureSession:
         setup: Any,
         plan: TestPlan,
         *,
-        writer: Optional[RecordingWriter] = None,
+        writer: RecordingWriter | None = None,
         windows: WindowSettings = WindowSettings(),
         decide: Callable[[HitSummary], bool] = auto_accept,
-        operator: Optional[Operator] = None,
+        operator: Operator | None = None,
         check_settings: HitCheckSettings = HitCheckSettings(),
-        progress: Optional[Callable[[str], None]] = None,
+        progress: Callable[[str], None] | None = None,
         timeout_s: float = 10.0,
         max_attempts_factor: int = 10,
         max_timeouts: int = 3,
         max_link_failures: int = 8,
         resume_hits: Sequence[Any] = (),
-        gate: Optional[Callable[[Measurement, MeasurementAverage, "SessionResult", bool], bool]] = None,
-        on_hit: Optional[Callable[[HitSummary], None]] = None,
+        gate: Callable[[Measurement, MeasurementAverage, SessionResult, bool], bool] | None = None,
+        on_hit: Callable[[HitSummary], None] | None = None,
     ) -> None:
         self.analyser = analyser
         self.setup = setup

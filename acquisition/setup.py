@@ -13,14 +13,15 @@ SI: N and m/s^2. Bandwidth = fs / 2.56.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from acquisition import protocol
 from acquisition.errors import SetupError
-from analysis.points import PointLabelError, parse_point
 from analysis.frf import analyser_band_hz
+from analysis.points import PointLabelError, parse_point
 
 __all__ = [
     "G", "ChannelSetup", "TriggerSetup", "AcquisitionSetup", "Capabilities", "validate_setup",
@@ -116,7 +117,7 @@ class AcquisitionSetup:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "AcquisitionSetup":
+    def from_dict(cls, data: Mapping[str, Any]) -> AcquisitionSetup:
         """Inverse of :meth:`to_dict`; unknown or missing keys raise SetupError naming them."""
         if not isinstance(data, Mapping):
             raise SetupError(f"a set-up must be a mapping (JSON object / TOML table), got {type(data).__name__}")
@@ -165,7 +166,7 @@ class Capabilities:
     max_transfer: int = protocol.MAX_TRANSFER
 
     @classmethod
-    def from_wire(cls, caps: protocol.CapabilitiesData) -> "Capabilities":
+    def from_wire(cls, caps: protocol.CapabilitiesData) -> Capabilities:
         couplings = tuple(c for c, ok in (("AC", caps.ac), ("DC", caps.dc)) if ok)
         return cls(caps.n_inputs, tuple(float(r) for r in caps.sample_rates_hz),
                    tuple(m / 1000.0 for m in caps.ranges_mv), tuple(caps.block_sizes), couplings, caps.iepe,
@@ -247,7 +248,7 @@ def _decimal(x: float) -> float:
     return float(f"{x:.12g}")
 
 
-def setup_from_wire(data: protocol.SetupData, names: "list[str] | None" = None) -> AcquisitionSetup:
+def setup_from_wire(data: protocol.SetupData, names: list[str] | None = None) -> AcquisitionSetup:
     """Rebuild an operator set-up from the wire (names default to ``ch0``...; sensitivities back in mV/N, mV/g)."""
     chans = []
     for i, rec in enumerate(data.channels):
@@ -342,7 +343,7 @@ def setup_to_toml(setup: AcquisitionSetup) -> str:
     return "\n".join(lines) + "\n"
 
 
-def load_setup(path: "str | Path") -> AcquisitionSetup:
+def load_setup(path: str | Path) -> AcquisitionSetup:
     """Read a set-up from a ``.json`` or ``.toml`` file (the layout of :meth:`AcquisitionSetup.to_dict`)."""
     from .textdoc import read_document
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Optional
+from typing import Any
 
 from acquisition.errors import DeviceGone, TransportTimeout
 from acquisition.transport import Transport
@@ -49,8 +49,8 @@ class StreamTransport(Transport):
         self.url = url or str(getattr(port, "portstr", "") or "")
         self.quiet_s = float(quiet_s)
         self.poll_s = float(poll_s)
-        self._read_timeout: Optional[float] = None
-        self._write_timeout: Optional[float] = None
+        self._read_timeout: float | None = None
+        self._write_timeout: float | None = None
         self._closed = False
 
     @property

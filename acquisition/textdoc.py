@@ -8,7 +8,7 @@ from typing import Any
 __all__ = ["read_document"]
 
 
-def read_document(path: "str | Path", what: str, error: type[Exception]) -> Any:
+def read_document(path: str | Path, what: str, error: type[Exception]) -> Any:
     """Parse ``path`` as TOML (``.toml``) or JSON (anything else).
 
     ``what`` names the document in messages ("set-up file", "description"); every failure

@@ -21,7 +21,7 @@ from __future__ import annotations
 import re
 import urllib.parse
 from dataclasses import dataclass, field
-from typing import Any, Union
+from typing import Any
 
 from acquisition.errors import DeviceGone, InvalidDeviceURL, TransportError
 from acquisition.transport import Transport
@@ -103,7 +103,7 @@ class UsbURL:
     url: str = ""
 
 
-DeviceURL = Union[SimURL, UsbSimURL, SocketURL, SerialURL, UsbURL]
+DeviceURL = SimURL | UsbSimURL | SocketURL | SerialURL | UsbURL
 
 _INT_RE = re.compile(r"^[0-9]+$")
 
@@ -142,7 +142,7 @@ def _parse_query(url: str, query: str) -> dict:
     return options
 
 
-def _parse_sim(url: str, rest: str, cls: type) -> Union[SimURL, UsbSimURL]:
+def _parse_sim(url: str, rest: str, cls: type) -> SimURL | UsbSimURL:
     path, _, query = rest.partition("?")
     if path not in ("", "/"):
         raise _bad(url, f"the simulator takes no host or path (got {path!r}); put options after '?'")
@@ -250,8 +250,9 @@ def find_door(scheme: str, url: str = "") -> Any:
 
 def register_url_handlers() -> None:
     """Let ``serial.serial_for_url`` find the handlers of every installed pyserial door (idempotent)."""
-    import serial
     from importlib.metadata import entry_points
+
+    import serial
 
     for ep in entry_points(group=DOOR_GROUP):
         door = ep.load()
@@ -285,7 +286,7 @@ def _open_stream(pyserial_url: str, target: DeviceURL, timeout_s: float) -> Tran
     return StreamTransport(port, url=target.url)
 
 
-def open_transport(url: Union[str, DeviceURL], timeout_s: float = 2.0) -> Transport:
+def open_transport(url: str | DeviceURL, timeout_s: float = 2.0) -> Transport:
     """Open the door a device URL names and return a connected :class:`Transport`.
 
     ``timeout_s``: the port's initial read/write timeout, seconds (every transport call then

@@ -17,7 +17,7 @@ from __future__ import annotations
 import array
 import errno
 import logging
-from typing import Any, Optional
+from typing import Any
 
 import usb.core
 import usb.util
@@ -93,8 +93,8 @@ class UsbTransport(Transport):
         self.max_packet = int(ep_in.wMaxPacketSize)
 
     @classmethod
-    def find(cls, vid: int, pid: int, *, serial: Optional[str] = None, backend: Any = None,
-             url: str = "") -> "UsbTransport":
+    def find(cls, vid: int, pid: int, *, serial: str | None = None, backend: Any = None,
+             url: str = "") -> UsbTransport:
         """Open the first device with this VID/PID (and serial number, when given).
 
         ``backend``: a pyusb backend (None = libusb found by pyusb; ``SimUsbBackend`` for usbsim://).

@@ -2,8 +2,6 @@
 ``--force-window 10ms,2ms`` and ``--exp-window 1%`` (or ``0.3s``) and their defaults."""
 from __future__ import annotations
 
-from typing import Optional
-
 from analysis.spectra import WindowSettings, parse_duration
 
 from .errors import UsageError
@@ -14,8 +12,8 @@ DEFAULT_FORCE_WINDOW = "20ms,5ms"
 DEFAULT_EXP_WINDOW = "none"
 
 
-def parse_windows(force: Optional[str], exp: Optional[str], fs_hz: Optional[float],
-                  base: Optional[WindowSettings] = None) -> WindowSettings:
+def parse_windows(force: str | None, exp: str | None, fs_hz: float | None,
+                  base: WindowSettings | None = None) -> WindowSettings:
     """Window settings from the ``--force-window`` and ``--exp-window`` texts (None: keep ``base``)."""
     b = base or WindowSettings()
     fw, ft = b.force_width_s, b.force_taper_s

@@ -46,19 +46,19 @@ __all__ = list(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily
-    from .frf import FRFSet, QUANTITIES, convert_quantity  # noqa: F401
-    from .modal import ModalModel, synthesize  # noqa: F401
-    from .mif import cmif, mif  # noqa: F401
-    from .lsfd import fit_lsfd, LSFDResult  # noqa: F401
-    from .pipeline import fit_auto, default_band  # noqa: F401
-    from .stabilization import stabilization, StabilizationResult  # noqa: F401
-    from .lscf import lscf_poles  # noqa: F401
-    from .lsce import lsce_poles  # noqa: F401
-    from .spectra import WindowSettings  # noqa: F401
+    from .errors import ImpactlabError, RecordingError, UsageError  # noqa: F401
+    from .frf import QUANTITIES, FRFSet, convert_quantity  # noqa: F401
+    from .geometry import Geometry  # noqa: F401
     from .hit import Hit  # noqa: F401
+    from .inputs import load_input  # noqa: F401
+    from .lsce import lsce_poles  # noqa: F401
+    from .lscf import lscf_poles  # noqa: F401
+    from .lsfd import LSFDResult, fit_lsfd  # noqa: F401
+    from .mif import cmif, mif  # noqa: F401
+    from .modal import ModalModel, synthesize  # noqa: F401
+    from .pipeline import default_band, fit_auto  # noqa: F401
     from .recording import Recording  # noqa: F401
     from .recording_writer import RecordingWriter  # noqa: F401
-    from .inputs import load_input  # noqa: F401
-    from .uff import read_uff58, write_uff58, read_uff55, write_uff55  # noqa: F401
-    from .geometry import Geometry  # noqa: F401
-    from .errors import ImpactlabError, RecordingError, UsageError  # noqa: F401
+    from .spectra import WindowSettings  # noqa: F401
+    from .stabilization import StabilizationResult, stabilization  # noqa: F401
+    from .uff import read_uff55, read_uff58, write_uff55, write_uff58  # noqa: F401

@@ -1,4 +1,6 @@
 """``python -m analysis fit|stabilization|diagnose|report|linearity|batch ...``"""
+from __future__ import annotations
+
 import sys
 
 from analysis._cli_dispatch import dispatch

@@ -10,7 +10,8 @@ import importlib
 import io
 import os
 import sys
-from typing import Any, Iterator, Mapping, Sequence, TextIO
+from collections.abc import Iterator, Mapping, Sequence
+from typing import Any, TextIO
 
 from .command_line import Parser, UsageError, parse_args
 

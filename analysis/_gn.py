@@ -18,8 +18,6 @@ Stopping rules (shared with LM, :mod:`analysis._lm`):
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
@@ -57,7 +55,7 @@ def _theta_bounds(bounds: tuple, n: int) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def project_to_bounds(theta: np.ndarray, bounds: Optional[tuple]) -> np.ndarray:
+def project_to_bounds(theta: np.ndarray, bounds: tuple | None) -> np.ndarray:
     """Clip every pole's damped frequency ``Im lambda_r`` (rad/s) into ``[lo_r, hi_r]`` (the
     frequency trust region), and with four bounds its real part too (the damping trust region);
     ``bounds`` None returns ``theta`` unchanged (a copy)."""
@@ -69,7 +67,7 @@ def project_to_bounds(theta: np.ndarray, bounds: Optional[tuple]) -> np.ndarray:
 
 
 def freeze_active(theta: np.ndarray, JtJ: np.ndarray, g: np.ndarray,
-                  bounds: Optional[tuple]) -> tuple[np.ndarray, np.ndarray]:
+                  bounds: tuple | None) -> tuple[np.ndarray, np.ndarray]:
     """Normal equations with the *active* bound coordinates frozen: a damped frequency sitting on
     its bound whose gradient pushes it outwards gets a decoupled unit row/column and zero
     gradient, so the step leaves it where it is and the convergence tests (predicted decrease,
@@ -108,7 +106,7 @@ SWITCH_TO_PRECISE = 1e-6
 
 
 def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: float,
-                        ftol: float) -> Optional[tuple[int, str]]:
+                        ftol: float) -> tuple[int, str] | None:
     """The stopping rules after an accepted step: ``(status, message)`` or None to go on.
 
     S at the round-off floor, relative step <= xtol, or relative decrease of S <= ftol.
@@ -123,7 +121,7 @@ def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: f
 
 
 def start_iteration(problem: ProjectedProblem, theta0: np.ndarray
-                    ) -> tuple[np.ndarray, bool, Evaluation, list[float], float, Optional[NLSOutcome]]:
+                    ) -> tuple[np.ndarray, bool, Evaluation, list[float], float, NLSOutcome | None]:
     """The common start of GN and LM: copy ``theta0``, evaluate once (fast where allowed).
 
     Returns ``(theta, fast, ev, history, floor, early)``; ``early`` is an :class:`NLSOutcome`
@@ -134,7 +132,7 @@ def start_iteration(problem: ProjectedProblem, theta0: np.ndarray
     ev = problem.evaluate(theta, fast=fast)
     history = [ev.S]
     floor = roundoff_floor(problem)
-    early: Optional[NLSOutcome] = None
+    early: NLSOutcome | None = None
     if not ev.rank_ok:
         early = NLSOutcome(theta, ev, history, 0, 1, Status.COLLAPSED,
                            f"initial poles give a rank-deficient basis (rcond {ev.rcond:.2g})")
@@ -144,7 +142,7 @@ def start_iteration(problem: ProjectedProblem, theta0: np.ndarray
 
 
 def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           bounds: Optional[tuple] = None) -> NLSOutcome:
+           bounds: tuple | None = None) -> NLSOutcome:
     """Gauss-Newton from ``theta0`` (see the module docstring); never raises on non-convergence.
 
     ``bounds`` (lo, hi), each (m,) rad/s: every step is projected so that each pole's damped

@@ -4,9 +4,10 @@ calling program. Used by :mod:`acquisition.importers` and :func:`analysis.record
 """
 from __future__ import annotations
 
-from typing import Any, Callable
-from .errors import ChildCrashed
-from .errors import ChildTimeout
+from collections.abc import Callable
+from typing import Any
+
+from .errors import ChildCrashed, ChildTimeout
 
 __all__ = ["ChildCrashed", "ChildTimeout", "run_isolated"]
 
@@ -59,7 +60,7 @@ def run_isolated(target: Callable[..., Any], args: tuple, timeout_s: float) -> A
 
 
 def call_isolated(target: Callable[..., Any], args: tuple, timeout_s: float, *,
-                  crashed: "Callable[[int | None], Exception]", timed_out: Callable[[], Exception]) -> Any:
+                  crashed: Callable[[int | None], Exception], timed_out: Callable[[], Exception]) -> Any:
     """:func:`run_isolated`, with a crash or a timeout of the child turned into the caller's own
     error: ``crashed(exitcode)`` and ``timed_out()`` build the exception raised instead."""
     try:

@@ -28,12 +28,18 @@ converged with status ``FTOL``).
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
-from ._gn import (PRED_FLOOR, SWITCH_TO_PRECISE, check_poles, freeze_active, project_to_bounds, relative_step,
-                  start_iteration, convergence_verdict)
+from ._gn import (
+    PRED_FLOOR,
+    SWITCH_TO_PRECISE,
+    check_poles,
+    convergence_verdict,
+    freeze_active,
+    project_to_bounds,
+    relative_step,
+    start_iteration,
+)
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
 
 __all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
@@ -44,7 +50,7 @@ MU0_DEFAULT = 1e-3
 
 
 def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           mu0: Optional[float] = None, bounds: Optional[tuple] = None) -> NLSOutcome:
+           mu0: float | None = None, bounds: tuple | None = None) -> NLSOutcome:
     """Levenberg-Marquardt from ``theta0`` (see the module docstring); never raises on non-convergence.
 
     ``bounds`` (lo, hi), each (m,) rad/s: every trial step is projected so that each pole's damped

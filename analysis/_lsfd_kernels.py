@@ -47,7 +47,6 @@ Line weights ``w_n`` (real, > 0) multiply rows of ``A``, ``E`` and the data; FRF
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -88,7 +87,7 @@ class NLSOutcome:
     """What a solver returns: final parameters, its evaluation and the bookkeeping."""
 
     theta: np.ndarray
-    evaluation: "Evaluation"
+    evaluation: Evaluation
     history: list
     iterations: int
     nfev: int
@@ -124,15 +123,15 @@ class Evaluation:
 
     theta: np.ndarray
     S: float
-    coef: Optional[np.ndarray]       # (P, n_frf) real coefficients of the weighted data
+    coef: np.ndarray | None       # (P, n_frf) real coefficients of the weighted data
     rank_ok: bool
     rcond: float
     precise: bool = True
-    Q: Optional[np.ndarray] = None   # (2N, P) orthonormal basis of the weighted A
-    resid: Optional[np.ndarray] = None  # (2N, n_frf) weighted residuals
-    E: Optional[np.ndarray] = None   # (2N, 2m) weighted derivative columns
-    G: Optional[np.ndarray] = None   # (2m, 2m) (P E)^T (P E)  (fast evaluations)
-    EtR: Optional[np.ndarray] = None  # (2m, n_frf) E^T r       (fast evaluations)
+    Q: np.ndarray | None = None   # (2N, P) orthonormal basis of the weighted A
+    resid: np.ndarray | None = None  # (2N, n_frf) weighted residuals
+    E: np.ndarray | None = None   # (2N, 2m) weighted derivative columns
+    G: np.ndarray | None = None   # (2m, 2m) (P E)^T (P E)  (fast evaluations)
+    EtR: np.ndarray | None = None  # (2m, n_frf) E^T r       (fast evaluations)
 
 
 class ProjectedProblem:
@@ -153,8 +152,8 @@ class ProjectedProblem:
         Y: np.ndarray,
         quantity: str,
         residual_form: str,
-        line_weights: Optional[np.ndarray] = None,
-        frf_weights: Optional[np.ndarray] = None,
+        line_weights: np.ndarray | None = None,
+        frf_weights: np.ndarray | None = None,
     ) -> None:
         self.omega = np.asarray(omega, dtype=float)
         self.jw = 1j * self.omega

@@ -9,14 +9,15 @@ import contextlib
 import json
 import os
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 __all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_json_atomic"]
 
 
 @contextlib.contextmanager
-def atomic_path(path: "str | os.PathLike[str]") -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path`` for a writer that wants a file name (pyarrow,
     matplotlib, h5py); on normal exit it replaces ``path``, on an error it is removed."""
     target = Path(path)
@@ -32,17 +33,17 @@ def atomic_path(path: "str | os.PathLike[str]") -> Iterator[Path]:
         raise
 
 
-def write_bytes_atomic(path: "str | os.PathLike[str]", data: bytes) -> None:
+def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
 
 
-def write_text_atomic(path: "str | os.PathLike[str]", text: str) -> None:
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     write_bytes_atomic(path, text.encode("utf-8"))
 
 
-def write_json_atomic(path: "str | os.PathLike[str]", doc: Any) -> None:
+def write_json_atomic(path: str | os.PathLike[str], doc: Any) -> None:
     """Write ``doc`` as strict JSON (no NaN) to ``path`` atomically."""
     write_text_atomic(path, json.dumps(doc, indent=2, allow_nan=False) + "\n")

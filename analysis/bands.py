@@ -9,15 +9,15 @@ the coherence (:func:`upper_limits`), so no pole is fitted to lines the data can
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import Sequence
 
 import numpy as np
-from .peaks import find_peaks
 
+from .errors import FitError
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
-from .errors import FitError
+from .peaks import find_peaks
 
 __all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges", "mains_harmonics",
            "exclude_lines", "mains_harmonic_index", "MAINS_HZ"]
@@ -42,7 +42,7 @@ TAIL_COHERENCE = 0.5
 COHERENCE_SMOOTH_FRACTION = 0.02
 
 
-def upper_limits(frf: FRFSet) -> "dict[str, float]":
+def upper_limits(frf: FRFSet) -> dict[str, float]:
     """What bounds the band from above, from the data (Hz per reason):
 
     - ``"data"``: the top line;
@@ -178,7 +178,7 @@ def exclude_lines(frf: FRFSet, freqs_hz: Sequence[float], n_lines: float = EXCLU
     return replace(frf, freq_hz=f[keep], H=frf.H[..., keep], coherence=coh), int(drop.sum())
 
 
-def mains_harmonic_index(freq_hz: float, mains: Sequence[float], df: float) -> "tuple[int, float] | None":
+def mains_harmonic_index(freq_hz: float, mains: Sequence[float], df: float) -> tuple[int, float] | None:
     """``(k, m)`` when ``freq_hz`` lies on the k-th harmonic of the mains frequency ``m`` (Hz): within
     ``MAINS_LINES`` line spacings ``df`` or the grid's deviation ``k MAINS_DEVIATION_HZ``; else None."""
     for m in mains:

@@ -7,8 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .fit_checks import (MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles,
-                         migrated_poles)
+from .fit_checks import MIGRATE_BANDWIDTHS, bandwidth_hz, duplicate_poles, migrated_poles
 from .fit_result import MAX_DAMPING
 from .frf import FRFSet
 from .modal import natural_freq_hz

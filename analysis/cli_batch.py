@@ -24,8 +24,9 @@ import glob
 import os
 import sys
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any
 
 from .command_line import Parser, add_threads, cli_entry, errors_to_exit, exit_on, parse_args, with_examples
 from .inputs import InputError, parse_band_text
@@ -56,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     return with_examples(p)
 
 
-def _not_regular(path: Path) -> Optional[str]:
+def _not_regular(path: Path) -> str | None:
     """Why a glob match is not an input file (a folder, a dangling or looping link...), or None."""
     try:
         st = path.stat()
@@ -71,7 +72,7 @@ def _not_regular(path: Path) -> Optional[str]:
     return None if _stat.S_ISREG(st.st_mode) else "not a regular file"
 
 
-def expand_inputs(items: Sequence[str], skipped: Optional[list[str]] = None) -> list[Path]:
+def expand_inputs(items: Sequence[str], skipped: list[str] | None = None) -> list[Path]:
     """Paths of the inputs: each item a file or a glob pattern; a pattern that matches nothing and a
     missing file are errors that name them. Glob matches that are not regular files are left out,
     each named with the reason in ``skipped``."""
@@ -114,7 +115,7 @@ def _progress(quiet: bool, t0: float) -> Callable[[dict[str, Any], int, int], No
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
@@ -148,8 +149,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
 
 def _run(args: argparse.Namespace, paths: list[Path], skipped: list[str], out: Path, band: Any, reference: Any) -> int:
-    from .batch.fleet import assess_fleet
     from .atomic import write_json_atomic
+    from .batch.fleet import assess_fleet
     from .batch.outputs import fleet_document, modes_rows, plot_fleet, write_modes_parquet
     from .batch.run import open_client, plan_inputs, run_batch
     from .batch.unit_modes import modes_from_fit

@@ -14,8 +14,9 @@ import argparse
 import json
 import logging
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,8 +25,8 @@ if TYPE_CHECKING:
 
     from .frf import FRFSet
 
-from .command_line import with_examples
-from .command_line import Parser as _Parser, check_out_dir, parse_args, add_estimator, add_threads, cli_entry
+from .command_line import Parser as _Parser
+from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, parse_args, with_examples
 
 __all__ = ["main", "build_parser", "load_simulations"]
 
@@ -59,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def load_simulations(path: str, measured: "FRFSet", estimator: Optional[str] = None) -> "Path | FrameVariants":
+def load_simulations(path: str, measured: FRFSet, estimator: str | None = None) -> Path | FrameVariants:
     """The simulation for :func:`analysis.diagnosis.diagnose`: for a simulator config (``.toml``) its FE
     model split by physical cause (:class:`simulator.physical.FrameVariants`) at the measured points;
     otherwise the path itself (an FRF file, read by the library)."""
@@ -79,7 +80,7 @@ def load_simulations(path: str, measured: "FRFSet", estimator: Optional[str] = N
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError
     from .diagnosis import EFFECTS, EffectError, diagnose
@@ -136,7 +137,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     return 0
 
 
-def _recording(path: str) -> Optional[Path]:
+def _recording(path: str) -> Path | None:
     """``path`` when it is a recording (its hits feed the noise estimate and the time-data stage)."""
     from .inputs import detect_format
 

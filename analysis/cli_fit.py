@@ -10,18 +10,19 @@ import argparse
 import sys
 import tempfile
 import warnings
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 __all__ = ["main", "build_parser"]
 
 
-from .command_line import with_examples
-from .command_line import Parser as _Parser, UsageError as _UsageError, add_estimator, add_threads, check_out_dir, cli_entry
-from .command_line import errors_to_exit, parse_args
+from .command_line import Parser as _Parser
+from .command_line import UsageError as _UsageError
+from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, errors_to_exit, parse_args, with_examples
 
 if TYPE_CHECKING:
     from .frf import FRFSet
@@ -85,7 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _geometry(args: argparse.Namespace) -> Optional[Geometry]:
+def _geometry(args: argparse.Namespace) -> Geometry | None:
     """The geometry for ``--uff`` (``--geometry``, else the simulated frame for a simulated test,
     else None: the points on a line)."""
     from .cli_report import choose_geometry
@@ -96,7 +97,7 @@ def _geometry(args: argparse.Namespace) -> Optional[Geometry]:
     return choose_geometry(args.geometry, device)
 
 
-def _write_uff(path: str, frf: FRFSet, result: LSFDResult, geometry: Optional[Geometry] = None) -> None:
+def _write_uff(path: str, frf: FRFSet, result: LSFDResult, geometry: Geometry | None = None) -> None:
     """UFF 55 mode shapes (the structure: window-corrected poles), then the geometry (UFF 15 nodes
     and 82 trace lines; ``geometry`` or the measured points on a line), then UFF 58 synthesised FRFs
     appended in the same file. The FRFs are synthesised *as measured* (raw poles, the exponential
@@ -143,7 +144,7 @@ def _given_poles(text: str) -> tuple:
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .inputs import InputError, load_input, parse_band_text, parse_float_list
 

@@ -18,12 +18,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 
-from .command_line import Parser as _Parser, add_estimator, check_out_dir, parse_args, with_examples
+from .command_line import Parser as _Parser
+from .command_line import add_estimator, check_out_dir, parse_args, with_examples
 
 __all__ = ["main", "build_parser", "level_dependence"]
 
@@ -45,7 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def level_dependence(measured: str, simulated: str, band: "tuple[float, float] | None" = None) -> Optional[dict]:
+def level_dependence(measured: str, simulated: str, band: tuple[float, float] | None = None) -> dict | None:
     """For ``analysis diagnose``: the level comparison of a recording whose hits span force levels and,
     when it says "nonlinear" and ``simulated`` is a simulator config (``.toml``), the
     ``joint_nonlinearity`` cause (:mod:`analysis.diagnosis.joint_nonlinearity`) with the test re-simulated
@@ -71,7 +72,7 @@ def level_dependence(measured: str, simulated: str, band: "tuple[float, float] |
     return out
 
 
-def _levels(args: argparse.Namespace, n: int) -> Optional[list[float]]:
+def _levels(args: argparse.Namespace, n: int) -> list[float] | None:
     from .inputs import InputError, parse_float_list
 
     if not args.levels:
@@ -82,7 +83,7 @@ def _levels(args: argparse.Namespace, n: int) -> Optional[list[float]]:
     return lv
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError
     from .inputs import InputError, load_input, parse_band_text

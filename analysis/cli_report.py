@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import TYPE_CHECKING
 
-from .command_line import with_examples
-from .command_line import add_estimator, add_threads, cli_entry
 from ._cli_dispatch import Parser, parse_args
+from .command_line import add_estimator, add_threads, cli_entry, with_examples
 from .errors import ImpactlabError
 
 if TYPE_CHECKING:
@@ -41,14 +41,14 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _frame(config: Optional[str] = None) -> Geometry:
+def _frame(config: str | None = None) -> Geometry:
     from simulator.config import FrameConfig
     from simulator.geometry import frame_geometry
 
     return frame_geometry(FrameConfig.load(config))
 
 
-def choose_geometry(spec: Optional[str], device: str = "") -> Optional[Geometry]:
+def choose_geometry(spec: str | None, device: str = "") -> Geometry | None:
     """The geometry named by ``--geometry`` (see module doc); None: the report puts the points on a line."""
     from .geometry import GeometryError, read_uff_geometry
 
@@ -64,7 +64,7 @@ def choose_geometry(spec: Optional[str], device: str = "") -> Optional[Geometry]
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 written, 2 bad input)."""
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):

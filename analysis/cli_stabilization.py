@@ -8,15 +8,15 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 __all__ = ["main", "build_parser"]
 
 
-from .command_line import with_examples
-from .command_line import Parser as _Parser, check_out_dir, cli_entry, errors_to_exit, parse_args, add_estimator, add_threads
+from .command_line import Parser as _Parser
+from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, errors_to_exit, parse_args, with_examples
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -39,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .inputs import InputError, load_input, parse_band_text
 

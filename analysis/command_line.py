@@ -21,8 +21,9 @@ import functools
 import logging
 import os
 import sys
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Callable, Iterator, Optional, Sequence, TypeVar, Union
+from typing import TypeVar
 
 from .errors import UsageError
 
@@ -39,7 +40,7 @@ class Parser(argparse.ArgumentParser):
         raise UsageError(f"{self.prog}: {message}")
 
 
-def parse_args(parser: argparse.ArgumentParser, argv: "Sequence[str] | None") -> "argparse.Namespace | int":
+def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace | int:
     """Parse ``argv`` (default ``sys.argv[1:]``); an ``int`` is the exit code to return at once
     (2 after printing a usage error on stderr, 0 after ``--help``)."""
     try:
@@ -70,7 +71,7 @@ def with_examples(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
     from .command_examples import examples_epilog
 
-    def plain(s: "str | None") -> "str | None":  # docstring markup (``x``, :func:`x`) reads as plain text
+    def plain(s: str | None) -> str | None:  # docstring markup (``x``, :func:`x`) reads as plain text
         return None if s is None else re.sub(r"(:\w+:)?``?([^`]+)``?", r"\2", s)
 
     parser.description = plain(parser.description)
@@ -83,7 +84,7 @@ def with_examples(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return parser
 
 
-def add_overwrite(parser: argparse.ArgumentParser, help: Optional[str] = None) -> None:
+def add_overwrite(parser: argparse.ArgumentParser, help: str | None = None) -> None:
     """``--overwrite``: replace an existing output file."""
     parser.add_argument("--overwrite", action="store_true", help=help)
 
@@ -122,7 +123,7 @@ def _positive_int(text: str) -> int:
 
 class _Threads(argparse.Action):
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
-                 option_string: "str | None" = None) -> None:
+                 option_string: str | None = None) -> None:
         from .threads import set_threads
 
         setattr(namespace, self.dest, values)
@@ -157,7 +158,7 @@ class _Verbosity(argparse.Action):
     """``-v`` / ``-q`` that set the logging levels as soon as they are parsed (every command alike)."""
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
-                 option_string: "str | None" = None) -> None:
+                 option_string: str | None = None) -> None:
         if self.dest == "verbose":
             namespace.verbose = int(getattr(namespace, "verbose", 0) or 0) + 1
         else:
@@ -165,7 +166,7 @@ class _Verbosity(argparse.Action):
         set_verbosity(int(getattr(namespace, "verbose", 0) or 0), bool(getattr(namespace, "quiet", False)))
 
 
-def check_out_dir(path: "str | os.PathLike[str] | None", what: str = "", error: type[Exception] = UsageError,
+def check_out_dir(path: str | os.PathLike[str] | None, what: str = "", error: type[Exception] = UsageError,
                   message: str = "cannot write {label}: folder {folder} does not exist") -> None:
     """Raise ``error`` when the folder of the output ``path`` does not exist (None: nothing to check).
     ``what`` names the output in the message (``cannot write the JSON out.json: ...``); ``message``
@@ -186,8 +187,8 @@ class CliExit(Exception):
         self.code = int(code)
 
 
-Errors = Union[type[BaseException], tuple[type[BaseException], ...]]
-Rule = Union[tuple[Errors, int], tuple[Errors, int, str]]
+Errors = type[BaseException] | tuple[type[BaseException], ...]
+Rule = tuple[Errors, int] | tuple[Errors, int, str]
 
 
 @contextlib.contextmanager
@@ -208,8 +209,8 @@ def exit_on(prog: str, *rules: Rule) -> Iterator[None]:
         raise
 
 
-def errors_to_exit(prog: str, errors: "type[BaseException] | tuple[type[BaseException], ...]", code: int = 2,
-                   prefix: str = "") -> "contextlib.AbstractContextManager[None]":
+def errors_to_exit(prog: str, errors: type[BaseException] | tuple[type[BaseException], ...], code: int = 2,
+                   prefix: str = "") -> contextlib.AbstractContextManager[None]:
     """:func:`exit_on` with one rule: ``errors`` -> ``PROG: PREFIXERROR`` on stderr, exit ``code``."""
     return exit_on(prog, (errors, code, prefix))
 

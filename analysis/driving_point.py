@@ -8,8 +8,8 @@ points at a wrong sign, a sensor not at the struck point, or a mislabelled chann
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 import scipy.signal
@@ -62,7 +62,7 @@ def driving_points(frf: FRFSet) -> list[tuple[int, int, int]]:
 
 
 def check_driving_point(frf: FRFSet, output: int, reference: int, sign: int = 1,
-                        band: Optional[Sequence[float]] = None,
+                        band: Sequence[float] | None = None,
                         tolerance_deg: float = PHASE_TOLERANCE_DEG,
                         prominence_db: float = PEAK_PROMINENCE_DB) -> DrivingPointCheck:
     """Check one driving-point FRF ``H[output, reference]`` (times ``sign``) in ``band`` (Hz; default

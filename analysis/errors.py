@@ -79,7 +79,7 @@ class PointLabelError(ImpactlabError, ValueError):
 class ChildCrashed(ImpactlabError, RuntimeError):
     """The child process died without an answer (``exitcode``: negative signal number or status)."""
 
-    def __init__(self, exitcode: "int | None") -> None:
+    def __init__(self, exitcode: int | None) -> None:
         super().__init__(f"the reader process died (exit code {exitcode})")
         self.exitcode = exitcode
 

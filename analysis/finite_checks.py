@@ -3,14 +3,12 @@ SEP005, fit results): a NaN or an infinity is never stored, replaced by 0 or pas
 Each check names where the first bad value is, so the user can find it in the file."""
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 __all__ = ["first_nonfinite", "describe_nonfinite"]
 
 
-def first_nonfinite(values: "np.ndarray | list | tuple") -> Optional[tuple[int, ...]]:
+def first_nonfinite(values: np.ndarray | list | tuple) -> tuple[int, ...] | None:
     """The index of the first non-finite value (NaN, +-inf; real or complex) in C order, or None."""
     a = np.asarray(values)
     if a.dtype.kind not in "fc":
@@ -21,7 +19,7 @@ def first_nonfinite(values: "np.ndarray | list | tuple") -> Optional[tuple[int, 
     return tuple(int(i) for i in np.unravel_index(int(np.argmax(bad)), a.shape))
 
 
-def describe_nonfinite(values: "np.ndarray | list | tuple") -> Optional[str]:
+def describe_nonfinite(values: np.ndarray | list | tuple) -> str | None:
     """``"sample 17 is nan (3 non-finite values in all)"`` for the first bad value of a 1-D array
     (last axis of an n-D one), or None when every value is finite."""
     idx = first_nonfinite(values)

@@ -22,8 +22,6 @@ Hidden close pairs and weak modes missed by the stabilization are found from the
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from .mac import mac
@@ -65,7 +63,7 @@ def migrated_poles(start: np.ndarray, end: np.ndarray, df_hz: float = 0.0,
 
 
 def duplicate_poles(poles: np.ndarray, residues: np.ndarray, df_hz: float = 0.0,
-                    moved: Optional[np.ndarray] = None) -> np.ndarray:
+                    moved: np.ndarray | None = None) -> np.ndarray:
     """Mask of poles that duplicate another one (see module docstring); the other is kept.
 
     poles : (m,) complex rad/s (raw); residues : (n_out, n_ref, m); moved : (m,) how far each

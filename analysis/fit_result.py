@@ -18,8 +18,9 @@ flagged in the warnings: their coherence is 1 everywhere and says nothing about 
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -31,7 +32,7 @@ MAX_DAMPING = 0.2
 MAX_FREQ_STD_FRACTION = 0.1
 
 
-def assess_fit(lsfd: Any, band: "tuple[float, float]") -> list[str]:
+def assess_fit(lsfd: Any, band: tuple[float, float]) -> list[str]:
     """Reasons why a fitted model is not physically sensible (empty: it is). ``lsfd`` is an
     :class:`analysis.lsfd.LSFDResult`; ``band`` (lo, hi) Hz the fitted band."""
     problems = []
@@ -114,7 +115,7 @@ class FitResult:
     def damping(self) -> np.ndarray:
         return self.lsfd.damping
 
-    def table(self) -> "list[dict[str, float]]":
+    def table(self) -> list[dict[str, float]]:
         """One row per mode in order of frequency: f (Hz), zeta (ratio) and their standard deviations."""
         lf = self.lsfd
         order = np.argsort(np.asarray(lf.freq_hz, dtype=float))

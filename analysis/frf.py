@@ -21,8 +21,9 @@ every pole's decay rate, which a fitter removes (apparent damping sigma_w/omega_
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -33,7 +34,7 @@ QUANTITIES = ("receptance", "mobility", "accelerance")
 QUANTITY_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
 
 
-def window_pole_shift(exp_window_tau_s: Optional[float]) -> float:
+def window_pole_shift(exp_window_tau_s: float | None) -> float:
     """The decay rate (1/s) an exponential window ``exp(-t / tau)`` adds to every pole: ``1 / tau``;
     0 without a window (None or 0). The one place windowed and structural poles are related (the
     fitter removes it, the diagnosis adds it to a simulation)."""
@@ -81,12 +82,12 @@ class FRFSet:
     outputs: tuple = ()
     references: tuple = ()
     unit: str = ""
-    coherence: Optional[np.ndarray] = None
-    exp_window_tau_s: Optional[float] = None
+    coherence: np.ndarray | None = None
+    exp_window_tau_s: float | None = None
     meta: dict = field(default_factory=dict)
-    sample_rate_hz: Optional[float] = None
-    record_s: Optional[float] = None
-    pretrigger_s: Optional[float] = None
+    sample_rate_hz: float | None = None
+    record_s: float | None = None
+    pretrigger_s: float | None = None
 
     def __post_init__(self) -> None:
         f = np.asarray(self.freq_hz, dtype=float)
@@ -180,7 +181,7 @@ class FRFSet:
         return float(np.median(np.diff(self.freq_hz))) if self.freq_hz.size > 1 else 0.0
 
     @property
-    def analyser_band_hz(self) -> Optional[float]:
+    def analyser_band_hz(self) -> float | None:
         """Upper end of the analyser's flat (alias-free) band, ``sample_rate_hz / 2.56`` (Hz), when
         the sample rate is known."""
         return None if self.sample_rate_hz is None else analyser_band_hz(self.sample_rate_hz)
@@ -198,7 +199,7 @@ class FRFSet:
     def n_references(self) -> int:
         return self.H.shape[1]
 
-    def band(self, lo_hz: float, hi_hz: float) -> "FRFSet":
+    def band(self, lo_hz: float, hi_hz: float) -> FRFSet:
         """A new FRF set restricted to lo_hz <= f <= hi_hz."""
         sel = (self.freq_hz >= lo_hz) & (self.freq_hz <= hi_hz)
         if sel.sum() < 2:
@@ -209,7 +210,7 @@ class FRFSet:
         coh = None if self.coherence is None else self.coherence[..., sel]
         return replace(self, freq_hz=self.freq_hz[sel], H=self.H[..., sel], coherence=coh)
 
-    def select(self, outputs: Sequence[str] | None = None, references: Sequence[str] | None = None) -> "FRFSet":
+    def select(self, outputs: Sequence[str] | None = None, references: Sequence[str] | None = None) -> FRFSet:
         """A new FRF set with the named outputs/references (in the order given)."""
         oi = [self.outputs.index(str(o)) for o in outputs] if outputs else list(range(self.n_outputs))
         ri = [self.references.index(str(r)) for r in references] if references else list(range(self.n_references))
@@ -222,7 +223,7 @@ class FRFSet:
             coherence=coh,
         )
 
-    def as_quantity(self, quantity: str) -> "FRFSet":
+    def as_quantity(self, quantity: str) -> FRFSet:
         """The same FRFs in another form (see :func:`convert_quantity`)."""
         return replace(self, H=convert_quantity(self.H, self.freq_hz, self.quantity, quantity), quantity=quantity,
                        unit="")

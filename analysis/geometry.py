@@ -8,14 +8,14 @@ points on a line, 0.1 m apart, joined in order.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 
-from .points import PointLabelError, point_from_uff, uff_node
 from .errors import GeometryError
+from .points import PointLabelError, point_from_uff, uff_node
 
 __all__ = ["Geometry", "GeometryError", "node_label", "points_on_a_line", "read_uff_geometry",
            "write_uff_geometry"]
@@ -138,7 +138,7 @@ def _uff_of_label(label: str) -> int:
         raise GeometryError(f"node {label!r} has no UFF node number: {exc}") from None
 
 
-def read_uff_geometry(path: "str | Path") -> Geometry:
+def read_uff_geometry(path: str | Path) -> Geometry:
     """Nodes (data set 15, coordinates converted to m with the file's units when given) and trace
     lines (data set 82) of a UFF file; GeometryError when the file holds no data set 15."""
     import pyuff
@@ -175,7 +175,7 @@ def read_uff_geometry(path: "str | Path") -> Geometry:
     return Geometry(tuple(labels), np.asarray(xyz), tuple(lines), name=p.name)
 
 
-def write_uff_geometry(path: "str | Path", geometry: Geometry, *, overwrite: bool = True) -> Path:
+def write_uff_geometry(path: str | Path, geometry: Geometry, *, overwrite: bool = True) -> Path:
     """Write data set 15 (nodes, m) and one data set 82 per trace line of ``geometry``."""
     import pyuff
 

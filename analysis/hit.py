@@ -12,8 +12,8 @@ each channel, so that a replay computes bit-identical spectra; :attr:`Hit.data`,
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -152,17 +152,17 @@ class Hit:
         """Length of the block (s)."""
         return self.n_samples / self.sample_rate_hz
 
-    def with_verdict(self, accepted: bool, reasons: Sequence[str] = (), check: "dict | None" = None) -> "Hit":
+    def with_verdict(self, accepted: bool, reasons: Sequence[str] = (), check: dict | None = None) -> Hit:
         """This hit with its verdict set (a new hit)."""
         return replace(self, accepted=bool(accepted), reasons=list(reasons),
                        check=self.check if check is None else dict(check))
 
-    def with_index(self, index: int) -> "Hit":
+    def with_index(self, index: int) -> Hit:
         """This hit as written at ``index`` of its recording (a new hit)."""
         return replace(self, index=int(index))
 
 
-def stack_hits(hits: Iterable[Hit]) -> "tuple[np.ndarray, np.ndarray, float]":
+def stack_hits(hits: Iterable[Hit]) -> tuple[np.ndarray, np.ndarray, float]:
     """A set of hits of one shape as arrays: ``force[n_hits, n]`` (N), ``responses[n_hits, n_out, n]``
     (EU) and the common sample rate (Hz), as the time-data diagnosis takes them."""
     hs = list(hits)
@@ -176,7 +176,7 @@ def stack_hits(hits: Iterable[Hit]) -> "tuple[np.ndarray, np.ndarray, float]":
     return (np.array([h.force for h in hs]), np.array([h.responses for h in hs]), hs[0].sample_rate_hz)
 
 
-def group_hits(hits: Iterable[Hit]) -> "dict[tuple[str, float, int], list[Hit]]":
+def group_hits(hits: Iterable[Hit]) -> dict[tuple[str, float, int], list[Hit]]:
     """Hits grouped by what lets them be stacked and compared: ``(reference, sample_rate_hz,
     n_samples)``, in order of first appearance, each group in the order given."""
     groups: dict[tuple[str, float, int], list[Hit]] = {}

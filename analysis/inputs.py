@@ -9,12 +9,11 @@ message that names the file, the problem and what to do.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
-from .frf import FRFSet
 from .errors import InputError
+from .frf import FRFSet
 
 __all__ = ["InputError", "load_input", "detect_format", "parse_band_text", "parse_float_list"]
 
@@ -23,7 +22,7 @@ _H5_SUFFIXES = {".h5", ".hdf5", ".hdf"}
 _UFF_SUFFIXES = {".uff", ".unv", ".uf", ".txt", ".asc"}
 
 
-def detect_format(path: "str | Path") -> str:
+def detect_format(path: str | Path) -> str:
     """"recording" or "uff" for an existing file; raises InputError otherwise."""
     p = Path(path)
     if not p.exists():
@@ -45,7 +44,7 @@ def detect_format(path: "str | Path") -> str:
     )
 
 
-def load_input(path: "str | Path", *, estimator: Optional[str] = None) -> FRFSet:
+def load_input(path: str | Path, *, estimator: str | None = None) -> FRFSet:
     """The FRFs of a recording or a UFF 58 file as one :class:`FRFSet`.
 
     ``estimator`` chooses the recording's FRF estimate ("H1" or "H2"). FRFs that are entirely
@@ -81,7 +80,7 @@ def load_input(path: "str | Path", *, estimator: Optional[str] = None) -> FRFSet
     return frf
 
 
-def parse_band_text(text: Optional[str]) -> Optional[tuple[float, float]]:
+def parse_band_text(text: str | None) -> tuple[float, float] | None:
     """``"LO:HI"`` (Hz) -> (lo, hi); None stays None. Raises InputError for anything else."""
     if text is None:
         return None

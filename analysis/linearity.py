@@ -22,8 +22,9 @@ are grouped by their peak force (:func:`group_by_force`) and averaged to one H1 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -127,12 +128,12 @@ def compare_levels(
     frfs: Sequence[FRFSet],
     levels: Sequence[float],
     *,
-    band: Optional[Sequence[float]] = None,
+    band: Sequence[float] | None = None,
     z: float = Z_SIGNIFICANT,
     min_df_percent: float = MIN_DF_PERCENT,
     min_dzeta_percent: float = MIN_DZETA_PERCENT,
-    fit_options: Optional[dict] = None,
-    poles: Optional[np.ndarray] = None,
+    fit_options: dict | None = None,
+    poles: np.ndarray | None = None,
 ) -> LinearityResult:
     """Compare FRF sets measured at excitation ``levels`` (any positive unit; one level per set).
 
@@ -216,7 +217,7 @@ def compare_levels(
                            poles=fits[0].poles_raw[idx])
 
 
-def group_by_force(peaks_n: "Sequence[float] | np.ndarray", min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:
+def group_by_force(peaks_n: Sequence[float] | np.ndarray, min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:
     """Level group (0 = soft, 1 = hard) of each hit from its peak force (N): the hits are split at the
     widest gap of their log peak forces when the groups' median forces differ by at least ``min_ratio``;
     otherwise every hit is group 0 (one level: the natural spread is too narrow to compare)."""
@@ -275,7 +276,7 @@ def level_frfsets(hits: Sequence[Any], windows: Any = None, quantity: str = "acc
     return [float(np.median(peaks[k])) for k in keys], [merge_frfsets(per_level[k]) for k in keys]
 
 
-def recording_hits(path: Any) -> "tuple[list[LevelHit], list[float], list[FRFSet]] | None":
+def recording_hits(path: Any) -> tuple[list[LevelHit], list[float], list[FRFSet]] | None:
     """A recording's accepted hits (:class:`LevelHit`), their levels (median peak force per group, N) and
     H1 per level (:func:`level_frfsets`, the recording's windows, quantity and unit); None when the file
     is not a recording or holds no hits."""
@@ -297,7 +298,7 @@ def recording_hits(path: Any) -> "tuple[list[LevelHit], list[float], list[FRFSet
     return hits, levels, level_sets
 
 
-def level_spread(hits: Sequence[Any], band: Optional[Sequence[float]] = None, n_peaks: int = 4) -> Optional[dict]:
+def level_spread(hits: Sequence[Any], band: Sequence[float] | None = None, n_peaks: int = 4) -> dict | None:
     """A quick look for the operator while testing: the hits of one point (:class:`analysis.spectra.HitSpectra`)
     grouped by force (the RMS of each force spectrum in ``band`` Hz, relative to the softest group), H1
     per group and, at the ``n_peaks`` strongest resonances of the first output, the peak frequency of the

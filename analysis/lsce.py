@@ -38,7 +38,7 @@ returned.
 from __future__ import annotations
 
 import logging
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -53,7 +53,7 @@ log = logging.getLogger(__name__)
 ROW_FRACTION = 0.25
 
 
-def _impulse_responses(frf: "FRFSet | BandData", band: Optional[Sequence[float]]
+def _impulse_responses(frf: FRFSet | BandData, band: Sequence[float] | None
                        ) -> tuple[np.ndarray, float, float, tuple[float, float]]:
     bd = frf if isinstance(frf, BandData) else prepare_band(frf, band)
     f, H, (lo, hi) = bd.freq_hz, bd.H, bd.band
@@ -68,7 +68,7 @@ def _impulse_responses(frf: "FRFSet | BandData", band: Optional[Sequence[float]]
 
 
 @limits_blas_threads
-def lsce_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *, band: Optional[Sequence[float]] = None,
+def lsce_poles_all_orders(frf: FRFSet | BandData, max_modes: int, *, band: Sequence[float] | None = None,
                           row_fraction: float = ROW_FRACTION) -> list[np.ndarray]:
     """LSCE poles (rad/s, Im > 0, in band, sorted by damped frequency) for n = 1..max_modes.
 
@@ -117,7 +117,7 @@ def lsce_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *, band: Opt
 
 
 @limits_blas_threads
-def lsce_poles(frf: FRFSet, n_modes: int, *, band: Optional[Sequence[float]] = None,
+def lsce_poles(frf: FRFSet, n_modes: int, *, band: Sequence[float] | None = None,
                row_fraction: float = ROW_FRACTION) -> np.ndarray:
     """LSCE poles of the model with ``n_modes`` modes (2 n_modes complex poles in the zoomed band).
 

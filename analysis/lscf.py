@@ -40,8 +40,8 @@ order follow from one cumulative sum over the rows of ``X_o`` (see
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -54,7 +54,7 @@ __all__ = ["lscf_poles", "lscf_poles_all_orders", "band_data", "parse_band", "pr
 log = logging.getLogger(__name__)
 
 
-def parse_band(band: "Optional[Sequence[float]]", freq_hz: np.ndarray) -> tuple[float, float]:
+def parse_band(band: Sequence[float] | None, freq_hz: np.ndarray) -> tuple[float, float]:
     """Check a band ``(lo_hz, hi_hz)`` against the data; ``None`` is the whole span.
 
     Raises ValueError naming the problem (reversed band, band outside the data).
@@ -89,7 +89,7 @@ class BandData:
     band: tuple
 
 
-def prepare_band(frf: FRFSet, band: "Optional[Sequence[float]]") -> BandData:
+def prepare_band(frf: FRFSet, band: Sequence[float] | None) -> BandData:
     """Check the band and cut, stack and scale the FRFs once (see :class:`BandData`)."""
     lo, hi = parse_band(band, frf.freq_hz)
     i0 = int(np.searchsorted(frf.freq_hz, lo, side="left"))
@@ -106,7 +106,7 @@ def prepare_band(frf: FRFSet, band: "Optional[Sequence[float]]") -> BandData:
     return BandData(f, Hs, (lo, hi))
 
 
-def band_data(frf: FRFSet, band: "Optional[Sequence[float]]") -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
+def band_data(frf: FRFSet, band: Sequence[float] | None) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
     """The lines of the band: ``(freq_hz[n_f], H2[N_o, n_f], (lo, hi))`` (see :func:`prepare_band`)."""
     bd = prepare_band(frf, band)
     return bd.freq_hz, bd.H, bd.band
@@ -162,8 +162,8 @@ def _toeplitz_index(p: int) -> np.ndarray:
     return (i[:, None] - i[None, :]) + p
 
 
-def lscf_denominators(frf: "FRFSet | BandData", max_modes: int, *,
-                      band: Optional[Sequence[float]] = None) -> tuple[list[np.ndarray], float]:
+def lscf_denominators(frf: FRFSet | BandData, max_modes: int, *,
+                      band: Sequence[float] | None = None) -> tuple[list[np.ndarray], float]:
     """Denominator coefficients ``alpha`` (length 2n+1, alpha[-1] = 1) for n = 1..max_modes,
     and the sampling time Ts (s). See the module docstring for the mathematics.
     ``frf`` may be an already prepared :class:`BandData` (``band`` is then ignored)."""
@@ -213,15 +213,15 @@ def _roots_to_poles(alpha: np.ndarray, ts: float) -> np.ndarray:
 
 
 @limits_blas_threads
-def lscf_poles_all_orders(frf: "FRFSet | BandData", max_modes: int, *,
-                          band: Optional[Sequence[float]] = None) -> list[np.ndarray]:
+def lscf_poles_all_orders(frf: FRFSet | BandData, max_modes: int, *,
+                          band: Sequence[float] | None = None) -> list[np.ndarray]:
     """Poles (rad/s, upper half plane, sorted by damped frequency) for n = 1..max_modes."""
     alphas, ts = lscf_denominators(frf, max_modes, band=band)
     return [_roots_to_poles(a, ts) for a in alphas]
 
 
 @limits_blas_threads
-def lscf_poles(frf: FRFSet, n_modes: int, *, band: Optional[Sequence[float]] = None) -> np.ndarray:
+def lscf_poles(frf: FRFSet, n_modes: int, *, band: Sequence[float] | None = None) -> np.ndarray:
     """LSCF poles of a model with ``n_modes`` modes (denominator order 2 n_modes).
 
     Parameters

@@ -28,7 +28,6 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass, field, replace
-from typing import Optional
 
 import numpy as np
 
@@ -81,8 +80,8 @@ class LSFDResult:
     freq_hz_std: np.ndarray
     damping_std: np.ndarray
     model: ModalModel
-    mode_shapes: Optional[np.ndarray]
-    participation: Optional[np.ndarray]
+    mode_shapes: np.ndarray | None
+    participation: np.ndarray | None
     sse: float
     history: list
     iterations: int
@@ -94,8 +93,8 @@ class LSFDResult:
     band: tuple
     noise_var: float
     cov_poles: np.ndarray
-    per_frf: Optional[list] = None
-    initial_poles: Optional[np.ndarray] = field(default=None, repr=False)
+    per_frf: list | None = None
+    initial_poles: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def model_raw(self) -> ModalModel:
@@ -104,7 +103,7 @@ class LSFDResult:
         return replace(self.model, poles=np.asarray(self.poles_raw, dtype=complex).copy())
 
 
-def seen_through_window(model: ModalModel, exp_window_tau_s: Optional[float]) -> ModalModel:
+def seen_through_window(model: ModalModel, exp_window_tau_s: float | None) -> ModalModel:
     """The model as seen through an exponential window ``exp(-t / tau)``: every pole shifted by
     ``-1/tau`` (rad/s), residues and residual terms unchanged (see the module docstring).
     ``model`` describes the structure (window-corrected poles, as ``LSFDResult.model``);
@@ -166,8 +165,8 @@ def _check_poles(initial_poles: np.ndarray) -> np.ndarray:
     return p
 
 
-def _check_weights(weights: Optional[np.ndarray], n_out: int, n_ref: int,
-                   n_freq: int) -> tuple[Optional[np.ndarray], Optional[np.ndarray]]:
+def _check_weights(weights: np.ndarray | None, n_out: int, n_ref: int,
+                   n_freq: int) -> tuple[np.ndarray | None, np.ndarray | None]:
     if weights is None:
         return None, None
     w = np.asarray(weights, dtype=float)
@@ -201,8 +200,8 @@ def fit_lsfd(
     mu0: float | None = None,
     correct_exp_window: bool = True,
     weights: np.ndarray | None = None,
-    freq_window_hz: "float | np.ndarray | None" = None,
-    damping_window: Optional[float] = None,
+    freq_window_hz: float | np.ndarray | None = None,
+    damping_window: float | None = None,
 ) -> LSFDResult:
     """Fit global poles, residues and residual terms to an FRF set by nonlinear least squares.
 
@@ -268,7 +267,7 @@ def fit_lsfd(
         raise ValueError("the FRFs contain NaN or infinite values; restrict the band or drop those FRFs")
     n_out, n_ref, N = frf.H.shape
     line_w, frf_w = _check_weights(full_weights, n_out, n_ref, N)
-    bounds: Optional[tuple] = _freq_bounds(lam0, freq_window_hz)
+    bounds: tuple | None = _freq_bounds(lam0, freq_window_hz)
     if damping_window is not None:
         F = float(damping_window)
         if not F > 1.0:
@@ -297,8 +296,8 @@ def _n_lines(prob: ProjectedProblem) -> int:
     return prob.N if prob.line_w is None else int(np.count_nonzero(prob.line_w))
 
 
-def _freq_bounds(lam0: np.ndarray, freq_window_hz: "float | np.ndarray | None"
-                 ) -> Optional[tuple[np.ndarray, np.ndarray]]:
+def _freq_bounds(lam0: np.ndarray, freq_window_hz: float | np.ndarray | None
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
     """(lo, hi) bounds (rad/s) of each pole's damped frequency, or None."""
     if freq_window_hz is None:
         return None
@@ -311,9 +310,9 @@ def _freq_bounds(lam0: np.ndarray, freq_window_hz: "float | np.ndarray | None"
     return np.maximum(lam0.imag - half, 1e-6 * lam0.imag), lam0.imag + half
 
 
-def _run(frf: FRFSet, lam0: np.ndarray, method: str, residual_form: str, line_w: Optional[np.ndarray],
-         frf_w: Optional[np.ndarray], max_iter: int, ftol: float, xtol: float, mu0: Optional[float],
-         bounds: Optional[tuple] = None) -> tuple[NLSOutcome, ProjectedProblem]:
+def _run(frf: FRFSet, lam0: np.ndarray, method: str, residual_form: str, line_w: np.ndarray | None,
+         frf_w: np.ndarray | None, max_iter: int, ftol: float, xtol: float, mu0: float | None,
+         bounds: tuple | None = None) -> tuple[NLSOutcome, ProjectedProblem]:
     n_out, n_ref, N = frf.H.shape
     prob = ProjectedProblem(frf.omega, frf.H.reshape(n_out * n_ref, N), frf.quantity, residual_form, line_w, frf_w)
     m = lam0.size
@@ -341,7 +340,7 @@ def _run(frf: FRFSet, lam0: np.ndarray, method: str, residual_form: str, line_w:
 
 
 def _result(frf: FRFSet, prob: ProjectedProblem, oc: NLSOutcome, method: str, residual_form: str,
-            correct_exp_window: bool, lam0: np.ndarray, sub: Optional[list[LSFDResult]]) -> LSFDResult:
+            correct_exp_window: bool, lam0: np.ndarray, sub: list[LSFDResult] | None) -> LSFDResult:
     n_out, n_ref, _ = frf.H.shape
     m = lam0.size
     ev = oc.evaluation

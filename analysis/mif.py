@@ -60,7 +60,7 @@ def mif(frf: FRFSet, reference: int = 0) -> np.ndarray:
 SUMMARY_CURVES = 4
 
 
-def indicator_summary(frf: FRFSet, band: "tuple[float, float] | None" = None, max_points: int = 400) -> dict:
+def indicator_summary(frf: FRFSet, band: tuple[float, float] | None = None, max_points: int = 400) -> dict:
     """A compact, JSON-able view of the mode indicators over ``band`` (Hz; default: all lines).
 
     The lines are grouped into at most ``max_points`` consecutive bins; each bin is represented by

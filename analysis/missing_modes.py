@@ -8,20 +8,19 @@ from __future__ import annotations
 
 import logging
 import warnings
-from typing import TYPE_CHECKING, Optional, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
-from .peaks import find_peaks
-
-from .fit_checks import (DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, bandwidth_hz)
-from .frf import FRFSet
-from .mac import mac
-from .modal import damping_ratio, natural_freq_hz, pole_from_fz, transfer
 
 from .bands import MAINS_DEVIATION_HZ, MAINS_HZ, MAINS_LINES, mains_harmonic_index
 from .bounded_fit import bad_poles, trust_window_hz
+from .fit_checks import DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, bandwidth_hz
 from .fit_result import MAX_DAMPING
-from .modal import ModalModel
+from .frf import FRFSet
+from .mac import mac
+from .modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz, transfer
+from .peaks import find_peaks
 from .visibility import VisiblePeak, reproduced, unaccounted_peaks
 
 if TYPE_CHECKING:
@@ -148,7 +147,7 @@ def _pair_is_resolved(trial: LSFDResult, k: int, f: np.ndarray, e_old: np.ndarra
     return True, f"a close pair with {fa:.5g} Hz (local cost {c_old:.3g} -> {c_new:.3g})"
 
 
-def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, mains: Sequence[float]) -> Optional[str]:
+def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, mains: Sequence[float]) -> str | None:
     """Why the misfit peak at ``c`` Hz is a mains line (step 7), or None.
 
     On a harmonic ``k m`` of a mains frequency ``m`` (within ``MAINS_LINES`` lines or the grid's
@@ -173,8 +172,8 @@ def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, ma
     return None
 
 
-def _with_poles(model: ModalModel, keep: np.ndarray, extra_poles: Optional[np.ndarray] = None,
-                extra_residues: Optional[np.ndarray] = None) -> ModalModel:
+def _with_poles(model: ModalModel, keep: np.ndarray, extra_poles: np.ndarray | None = None,
+                extra_residues: np.ndarray | None = None) -> ModalModel:
     """``model`` with the poles ``keep`` (bool mask) and ``extra_poles`` (residues (n_out, n_ref, k))
     appended; the residual terms are kept."""
     from dataclasses import replace
@@ -187,7 +186,7 @@ def _with_poles(model: ModalModel, keep: np.ndarray, extra_poles: Optional[np.nd
     return replace(model, poles=p, residues=R)
 
 
-def _line_costs(local: FRFSet, res: LSFDResult, weights: Optional[np.ndarray]) -> np.ndarray:
+def _line_costs(local: FRFSet, res: LSFDResult, weights: np.ndarray | None) -> np.ndarray:
     """Per-line weighted squared misfit (summed over the FRFs) of an LSFD ``res`` on ``local``."""
     G = _synthesize_flat(res.model_raw, local.freq_hz)
     E = local.H.reshape(-1, local.freq_hz.size) - G
@@ -195,7 +194,7 @@ def _line_costs(local: FRFSet, res: LSFDResult, weights: Optional[np.ndarray]) -
     return np.sqrt(np.sum((E.real ** 2 + E.imag ** 2) * w2[:, None], axis=0))
 
 
-def _residual_terms_only(local: FRFSet, residual_form: str, weights: Optional[np.ndarray]) -> np.ndarray:
+def _residual_terms_only(local: FRFSet, residual_form: str, weights: np.ndarray | None) -> np.ndarray:
     """Per-line misfit (as :func:`_line_costs`) of the residual terms alone fitted to ``local``."""
     from .modal import residual_basis
 
@@ -213,7 +212,7 @@ class _Trial:
     the indices ``nb`` of the neighbours it refitted, and whether a rejection says the peak is
     ``not_mode`` (too broad / damped to be a structural resonance, or a mains line)."""
 
-    def __init__(self, ok: bool, why: str, fit: Optional[LSFDResult] = None, nb: Optional[np.ndarray] = None,
+    def __init__(self, ok: bool, why: str, fit: LSFDResult | None = None, nb: np.ndarray | None = None,
                  not_mode: bool = False) -> None:
         self.ok, self.why, self.fit, self.nb, self.not_mode = ok, why, fit, nb, not_mode
 
@@ -291,7 +290,7 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
 
 
 def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_out: list[str],
-                      mains: Sequence[float] = MAINS_HZ, df: Optional[float] = None,
+                      mains: Sequence[float] = MAINS_HZ, df: float | None = None,
                       visible: Sequence[VisiblePeak] = ()) -> LSFDResult:
     """Step 7: add poles at the resonances the model misses (see module docstring): first the
     ``visible`` peaks no pole accounts for, then the misfit peaks; each tried by a local fit on
@@ -305,7 +304,7 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
     on_mains: list[tuple[float, str]] = []  # reported once at the end, with a count
     added = 0
 
-    def attempt(c: float, min_gain: float, peak: Optional[VisiblePeak] = None) -> bool:
+    def attempt(c: float, min_gain: float, peak: VisiblePeak | None = None) -> bool:
         nonlocal model, added
         tried.append(c)
         f, e, _ = _scaled_misfit(frf, model, band)

@@ -27,7 +27,6 @@ with the residual basis ``(b_U, b_L)`` chosen by ``residual_form``:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 
@@ -49,25 +48,25 @@ RESIDUAL_FORMS = ("physical", "paper", "none")
 _POWER = QUANTITY_POWER
 
 
-def pole_from_fz(freq_hz: "np.ndarray | float", zeta: "np.ndarray | float") -> np.ndarray:
+def pole_from_fz(freq_hz: np.ndarray | float, zeta: np.ndarray | float) -> np.ndarray:
     """Pole(s) lambda = -zeta w_n + j w_n sqrt(1 - zeta^2) from natural frequency (Hz) and damping ratio."""
     wn = 2 * np.pi * np.asarray(freq_hz, dtype=float)
     z = np.asarray(zeta, dtype=float)
     return -z * wn + 1j * wn * np.sqrt(1 - z ** 2)
 
 
-def natural_freq_hz(poles: "np.ndarray | complex") -> np.ndarray:
+def natural_freq_hz(poles: np.ndarray | complex) -> np.ndarray:
     """|lambda| / 2 pi (Hz); ``poles`` in rad/s (an array or one pole)."""
     return np.abs(np.asarray(poles)) / (2 * np.pi)
 
 
-def damping_ratio(poles: "np.ndarray | complex") -> np.ndarray:
+def damping_ratio(poles: np.ndarray | complex) -> np.ndarray:
     """-Re(lambda) / |lambda| (dimensionless)."""
     p = np.asarray(poles)
     return -np.real(p) / np.abs(p)
 
 
-def damped_freq_hz(poles: "np.ndarray | complex") -> np.ndarray:
+def damped_freq_hz(poles: np.ndarray | complex) -> np.ndarray:
     """Im(lambda) / 2 pi (Hz)."""
     return np.imag(np.asarray(poles)) / (2 * np.pi)
 
@@ -107,8 +106,8 @@ class ModalModel:
     residues: np.ndarray
     quantity: str = "accelerance"
     residual_form: str = "physical"
-    upper_residual: Optional[np.ndarray] = None
-    lower_residual: Optional[np.ndarray] = None
+    upper_residual: np.ndarray | None = None
+    lower_residual: np.ndarray | None = None
     outputs: tuple = ()
     references: tuple = ()
     meta: dict = field(default_factory=dict)

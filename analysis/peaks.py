@@ -9,8 +9,6 @@ its top.
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 __all__ = ["find_peaks", "prominences", "peak_widths"]
@@ -54,7 +52,7 @@ def prominences(x: np.ndarray, peaks: np.ndarray) -> np.ndarray:
     return _bases(np.asarray(x, dtype=float), np.asarray(peaks, dtype=np.intp))[0]
 
 
-def peak_widths(x: np.ndarray, peaks: "np.ndarray | list[int]", rel_height: float = 0.5) -> np.ndarray:
+def peak_widths(x: np.ndarray, peaks: np.ndarray | list[int], rel_height: float = 0.5) -> np.ndarray:
     """Width (in samples, linearly interpolated) of each peak at ``rel_height`` of its prominence
     below its top, within its bases (as ``scipy.signal.peak_widths(...)[0]``)."""
     x = np.asarray(x, dtype=float)
@@ -79,7 +77,7 @@ def peak_widths(x: np.ndarray, peaks: "np.ndarray | list[int]", rel_height: floa
     return out
 
 
-def find_peaks(x: np.ndarray, prominence: Optional[float] = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+def find_peaks(x: np.ndarray, prominence: float | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Indices of the peaks of the 1-D curve ``x`` whose prominence is at least ``prominence``
     (None: every peak), and ``{"prominences": ...}`` when a prominence was asked for (as
     ``scipy.signal.find_peaks``)."""

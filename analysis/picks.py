@@ -19,7 +19,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -39,8 +39,8 @@ class PolePicks:
     ``band_hz`` they were picked in (or None) and the ``input`` they were picked on ("" unknown)."""
 
     freq_hz: np.ndarray
-    damping: Optional[np.ndarray]
-    band_hz: Optional[tuple[float, float]] = None
+    damping: np.ndarray | None
+    band_hz: tuple[float, float] | None = None
     input: str = ""
 
     def initial(self) -> np.ndarray:
@@ -68,7 +68,7 @@ def _from_json(doc: Any, where: str) -> PolePicks:
         raise InputError(f"{where} holds no picked poles (\"poles\" is empty or missing): pick at least one pole "
                          "on the stabilization diagram before saving")
     freqs: list[float] = []
-    damps: list[Optional[float]] = []
+    damps: list[float | None] = []
     for k, item in enumerate(items, start=1):
         at = f"{where}, pole {k}"
         if not isinstance(item, dict) or "freq_hz" not in item:
@@ -93,7 +93,7 @@ def _from_json(doc: Any, where: str) -> PolePicks:
     return PolePicks(np.asarray(freqs, float), damping, band_hz, str(doc.get("input", "")))
 
 
-def read_picks(path: "str | Path") -> PolePicks:
+def read_picks(path: str | Path) -> PolePicks:
     """Read a picked-poles file (JSON, schema :data:`PICKS_SCHEMA`) or a text file of frequencies
     (Hz). Raises :class:`analysis.inputs.InputError` naming the file and the problem."""
     from .inputs import parse_float_list

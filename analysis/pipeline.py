@@ -74,23 +74,23 @@ from __future__ import annotations
 
 import logging
 import warnings
-from typing import Any, Optional, Sequence, Union
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
-
-from .frf import FRFSet
 
 from .bands import FitError, check_band_edges, default_band, default_max_modes, exclude_lines, mains_harmonics
 from .bounded_fit import drop_bad_poles, fit_bounded
 from .fit_result import FitResult, assess_fit
-from .progress import progress
+from .frf import FRFSet
 from .lscf import parse_band
 from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
+from .modal import natural_freq_hz
+from .progress import progress
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
 from .visibility import visible_peaks
-from .modal import natural_freq_hz
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -102,20 +102,20 @@ log = logging.getLogger(__name__)
 def fit_auto(
     frf: FRFSet,
     *,
-    band: Optional[Sequence[float]] = None,
-    max_modes: Optional[int] = None,
-    n_modes: Optional[int] = None,
+    band: Sequence[float] | None = None,
+    max_modes: int | None = None,
+    n_modes: int | None = None,
     method: str = "lm",
     residual_form: str = "physical",
-    initial: Union[str, Sequence[complex], Sequence[float], np.ndarray] = "lscf",
+    initial: str | Sequence[complex] | Sequence[float] | np.ndarray = "lscf",
     per_frf: bool = False,
     max_iter: int = 100,
     refine_lsfd: bool = False,
-    selection_options: Optional[dict] = None,
+    selection_options: dict | None = None,
     add_missing: bool = True,
     frf_weighting: str = "rms",
-    mains_hz: Optional[Sequence[float]] = MAINS_HZ,
-    exclude_hz: Optional[Sequence[float]] = None,
+    mains_hz: Sequence[float] | None = MAINS_HZ,
+    exclude_hz: Sequence[float] | None = None,
 ) -> FitResult:
     """Automatic modal fit of an FRF set; returns a :class:`~analysis.fit_result.FitResult`.
 
@@ -191,7 +191,7 @@ def fit_auto(
 
     progress("fit: band %.6g..%.6g Hz (%d lines, %d FRFs)", lo, hi,
              int(np.sum((frf.freq_hz >= lo) & (frf.freq_hz <= hi))), frf.n_outputs * frf.n_references)
-    stab: Optional[StabilizationResult] = None
+    stab: StabilizationResult | None = None
     if given_complex is None:
         mm = int(max_modes) if max_modes is not None else default_max_modes(frf, (lo, hi))
         if n_modes is not None:

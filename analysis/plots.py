@@ -5,8 +5,9 @@ through pyplot's global state, so this module is safe in servers, tests and thre
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional, Sequence, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -42,7 +43,7 @@ def _figure(width_in: float, height_in: float) -> Figure:
     return fig
 
 
-def _save(fig: Figure, path: "str | Path") -> Path:
+def _save(fig: Figure, path: str | Path) -> Path:
     p = Path(path)
     fig.savefig(str(p), format="png")
     return p
@@ -106,7 +107,7 @@ def _mark_modes(ax: Axes, modes_hz: np.ndarray, x_lo: float, x_hi: float, log_fr
                 fontsize=fontsize, color="#2ca02c")
 
 
-def indicator_panel(ax: Axes, frf: FRFSet, band: Sequence[float], modes_hz: Optional[np.ndarray] = None,
+def indicator_panel(ax: Axes, frf: FRFSet, band: Sequence[float], modes_hz: np.ndarray | None = None,
                     log_freq: bool = False) -> None:
     """Draw the mode indicator over ``band`` (Hz) on ``ax``: the CMIF (singular values of the FRF
     matrix per line, dB re 1 unit of H) when there are several references, else the real-normal MIF
@@ -138,8 +139,8 @@ def indicator_panel(ax: Axes, frf: FRFSet, band: Sequence[float], modes_hz: Opti
 _CMIF_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e")
 
 
-def plot_stabilization(result: StabilizationResult, frf: FRFSet, path_png: "str | Path", *, title: Optional[str] = None,
-                       show_nonphysical: bool = False, selected: Optional[np.ndarray] = None,
+def plot_stabilization(result: StabilizationResult, frf: FRFSet, path_png: str | Path, *, title: str | None = None,
+                       show_nonphysical: bool = False, selected: np.ndarray | None = None,
                        log_freq: bool = False, indicator: bool = True) -> Path:
     """Stabilization diagram (paper Fig. 8): poles by model order, one symbol per stability class,
     over the summed FRF magnitude (right axis, dB), with the mode indicator beneath
@@ -197,16 +198,16 @@ def plot_stabilization(result: StabilizationResult, frf: FRFSet, path_png: "str 
     return _save(fig, path_png)
 
 
-def plot_fit(frf: FRFSet, model: LSFDResult | ModalModel, path_png: "str | Path", *,
-             pairs: Optional[Sequence[tuple[int, int]]] = None, max_panels: int = 4,
-             band: Optional[Sequence[float]] = None, log_freq: bool = False, indicator: bool = False) -> Path:
+def plot_fit(frf: FRFSet, model: LSFDResult | ModalModel, path_png: str | Path, *,
+             pairs: Sequence[tuple[int, int]] | None = None, max_panels: int = 4,
+             band: Sequence[float] | None = None, log_freq: bool = False, indicator: bool = False) -> Path:
     """:func:`fit_figure` written to ``path_png`` (PNG); returns the path."""
     return _save(fit_figure(frf, model, pairs=pairs, max_panels=max_panels, band=band, log_freq=log_freq,
                             indicator=indicator), path_png)
 
 
-def fit_figure(frf: FRFSet, model: LSFDResult | ModalModel, *, pairs: Optional[Sequence[tuple[int, int]]] = None,
-               max_panels: int = 4, band: Optional[Sequence[float]] = None, log_freq: bool = False,
+def fit_figure(frf: FRFSet, model: LSFDResult | ModalModel, *, pairs: Sequence[tuple[int, int]] | None = None,
+               max_panels: int = 4, band: Sequence[float] | None = None, log_freq: bool = False,
                indicator: bool = False) -> Any:
     """Measured vs synthesised FRFs in the manner of the paper's Fig. 7: magnitude (dB), phase
     (deg) and the relative error ``|H - G| / |H|`` (dB) beneath, one column per FRF.

@@ -14,6 +14,7 @@ from __future__ import annotations
 import re
 import zlib
 from dataclasses import dataclass
+
 from .errors import PointLabelError
 
 __all__ = ["Point", "PointLabelError", "parse_point", "uff_node", "uff_direction", "point_from_uff"]
@@ -53,7 +54,7 @@ class Point:
         return f"{self.component}:{self.node}:{self.direction}"
 
 
-def parse_point(label: "str | Point") -> Point:
+def parse_point(label: str | Point) -> Point:
     """Parse ``component:node:direction`` into a :class:`Point`."""
     if isinstance(label, Point):
         return label
@@ -66,7 +67,7 @@ def parse_point(label: "str | Point") -> Point:
     return Point(comp, int(node), ("-" if sign == "-" else "") + axis.upper())
 
 
-def uff_node(point: "str | Point") -> int:
+def uff_node(point: str | Point) -> int:
     """UFF node number of a point (see module docstring)."""
     p = parse_point(point)
     if p.component in ("n", "node"):
@@ -77,7 +78,7 @@ def uff_node(point: "str | Point") -> int:
     return base + p.node
 
 
-def uff_direction(point: "str | Point") -> int:
+def uff_direction(point: str | Point) -> int:
     """UFF direction code of a point: +-1, +-2, +-3 for X, Y, Z."""
     p = parse_point(point)
     return p.sign * (p.axis + 1)

@@ -8,7 +8,8 @@ computed from the hits' force levels may be passed in and is added as it is.
 """
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from .driving_point import check_driving_point, driving_points
 from .frf import FRFSet
@@ -17,7 +18,7 @@ from .reciprocity import reciprocity
 __all__ = ["quality_checks", "quality_lines", "recording_quality"]
 
 
-def quality_checks(frf: FRFSet, *, band: Optional[Sequence[float]] = None, linearity: Any = None) -> dict:
+def quality_checks(frf: FRFSet, *, band: Sequence[float] | None = None, linearity: Any = None) -> dict:
     """``{"reciprocity": ..., "driving_points": [...], "linearity": ... or None}`` (see the modules'
     ``to_dict``); ``band`` (Hz) limits the driving-point check. Inputs are not modified."""
     rec = reciprocity(frf)
@@ -57,7 +58,7 @@ def quality_lines(checks: dict) -> list[str]:
     return out
 
 
-def recording_quality(path: Any, estimator: Optional[str] = None) -> dict:
+def recording_quality(path: Any, estimator: str | None = None) -> dict:
     """:func:`quality_checks` of a recording's FRFs, with the linearity of its hits when their peak forces
     span levels (:func:`analysis.linearity.recording_hits`)."""
     from .bands import FitError

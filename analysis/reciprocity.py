@@ -17,8 +17,8 @@ sensor that is off.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -34,7 +34,7 @@ MIN_LINES = 20
 MIN_R = 3.0
 
 
-def finite_or_none(x: float) -> Optional[float]:
+def finite_or_none(x: float) -> float | None:
     """``float(x)``, or None when it is not finite (JSON has no NaN)."""
     v = float(x)
     return v if np.isfinite(v) else None
@@ -51,7 +51,7 @@ def same_dof(a: str, b: str) -> int:
     return pa.sign * pb.sign
 
 
-def frf_error_variance(frf: FRFSet) -> Optional[np.ndarray]:
+def frf_error_variance(frf: FRFSet) -> np.ndarray | None:
     """Complex random-error variance (FRF units^2) of each H1 line from its coherence and the number of
     averages (``meta["n_averages"]``, one per reference or one for all); None without coherence."""
     if frf.coherence is None:
@@ -106,7 +106,7 @@ class ReciprocityResult:
     the sensors whose calibration is off by more than ``min_ratio_error`` (``suspects``)."""
 
     pairs: tuple
-    calibration: Optional[dict]
+    calibration: dict | None
     suspects: tuple
     verdict: str  # "reciprocal", "not reciprocal" or "no pairs"
 
@@ -135,7 +135,7 @@ def _pairs(frf: FRFSet) -> list[tuple[int, int, int, int, int]]:
 
 
 def reciprocity(
-    frf: FRFSet, bands: Optional[Sequence[Sequence[float]]] = None, *, z: float = 4.0,
+    frf: FRFSet, bands: Sequence[Sequence[float]] | None = None, *, z: float = 4.0,
     min_ratio_error: float = MIN_RATIO_ERROR, min_coherence: float = MIN_COHERENCE,
 ) -> ReciprocityResult:
     """Compare ``H_ij`` with ``H_ji`` for every pair of points both struck and measured (module docstring).
@@ -192,7 +192,7 @@ def reciprocity(
 
 
 def _calibrations(frf: FRFSet, logs: list[tuple[int, int, float]], tol: float
-                  ) -> tuple[Optional[dict], tuple]:
+                  ) -> tuple[dict | None, tuple]:
     """Relative sensor calibrations from log(c_i / c_j) of the pairs (least squares, median 1)."""
     nodes = sorted({a for a, _, _ in logs} | {b for _, b, _ in logs})
     if len(nodes) < 3:

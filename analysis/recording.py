@@ -15,21 +15,19 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, Iterator, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
+from analysis.errors import RecordingError
 from analysis.frf import FRFSet
+from analysis.hit import Hit
 from analysis.spectra import WindowSettings, excitation_limit_hz
 
-from analysis.errors import RecordingError
-
-from analysis.hit import Hit
-
 from .recording_lock import is_lock_error, live_copy, locked_by_writer, locked_error
-from .recording_schema import (CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _DAMAGE, _as_str, _h5py, counts_crc32,
-                               scale_counts)
+from .recording_schema import _DAMAGE, CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _as_str, _h5py, counts_crc32, scale_counts
 
 __all__ = [
     "SCHEMA",
@@ -56,7 +54,7 @@ class Recording:
 
     live = False
 
-    def __init__(self, path: "str | Path") -> None:
+    def __init__(self, path: str | Path) -> None:
         h5py = _h5py()
         self.path = Path(path)
         if not self.path.is_file():
@@ -70,7 +68,7 @@ class Recording:
                 f"{self.path} is not an HDF5 file: give an impactlab recording (.h5) written by "
                 "'python -m acquisition capture' or 'python -m acquisition import'"
             )
-        self._live_copy: Optional[Path] = None
+        self._live_copy: Path | None = None
         try:
             self._f = h5py.File(self.path, "r")
         except OSError as exc:
@@ -197,7 +195,7 @@ class Recording:
         except _DAMAGE as exc:
             raise RecordingError(f"hit {index} in {self.path} is damaged ({type(exc).__name__}: {exc})") from None
 
-    def _hit_sample_rate(self) -> Optional[float]:
+    def _hit_sample_rate(self) -> float | None:
         """The sample rate (Hz) stored with the first hit (for FRFs written before the FRF group
         stored its own), or None for a recording without hits (imported FRFs)."""
         try:
@@ -269,7 +267,7 @@ class Recording:
         est = _as_str(value).upper() if isinstance(value, (bytes, str)) else "H1"
         return est if est in ("H1", "H2") else "H1"
 
-    def frfsets(self, estimator: Optional[str] = None) -> list[FRFSet]:
+    def frfsets(self, estimator: str | None = None) -> list[FRFSet]:
         """One FRF set per measurement point (one reference each); ``estimator`` "H1" or "H2"
         (default: :attr:`preferred_estimator`)."""
         est = (estimator or self.preferred_estimator).upper()
@@ -299,7 +297,7 @@ class Recording:
                   "measurement": name, "point": g["point"]},
         )
 
-    def _setup_record(self) -> "tuple[Optional[float], Optional[float]]":
+    def _setup_record(self) -> tuple[float | None, float | None]:
         """Record length (s) and pre-trigger (s) of the analyser's set-up, when the recording holds
         one with a trigger (a capture; an import has none): (None, None) otherwise."""
         try:
@@ -310,12 +308,12 @@ class Recording:
             return None, None
 
     @property
-    def record_s(self) -> Optional[float]:
+    def record_s(self) -> float | None:
         """The set-up's record length (s), None when the recording holds no analyser set-up."""
         return self._setup_record()[0]
 
     @property
-    def pretrigger_s(self) -> Optional[float]:
+    def pretrigger_s(self) -> float | None:
         """The set-up's pre-trigger time (s), None when the recording holds no analyser set-up."""
         return self._setup_record()[1]
 
@@ -330,7 +328,7 @@ class Recording:
                 self._live_copy.unlink()
             self._live_copy = None
 
-    def __enter__(self) -> "Recording":
+    def __enter__(self) -> Recording:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -351,7 +349,7 @@ def _read_all(path: str) -> int:
     return n
 
 
-def verify_recording(path: "str | Path", timeout_s: float = VERIFY_TIMEOUT_S) -> int:
+def verify_recording(path: str | Path, timeout_s: float = VERIFY_TIMEOUT_S) -> int:
     """Read the whole recording in a child process; returns the number of complete hits.
 
     libhdf5 can crash the process (segmentation fault) on some damaged files, which no Python code
@@ -377,7 +375,7 @@ def verify_recording(path: "str | Path", timeout_s: float = VERIFY_TIMEOUT_S) ->
         raise RecordingError(f"{p} is damaged ({type(exc).__name__}: {exc}); use a backup or re-run the test") from None
 
 
-def open_recording(path: "str | Path") -> Recording:
+def open_recording(path: str | Path) -> Recording:
     """Open and validate a recording (raises :class:`RecordingError` with a clear message)."""
     return Recording(path)
 
@@ -435,7 +433,7 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
                   pretrigger_s=sets[0].pretrigger_s)
 
 
-def load_frfset(path: "str | Path", estimator: Optional[str] = None) -> FRFSet:
+def load_frfset(path: str | Path, estimator: str | None = None) -> FRFSet:
     """All FRF results of a recording as one :class:`FRFSet` (see :func:`merge_frfsets`)."""
     with Recording(path) as rec:
         return merge_frfsets(rec.frfsets(estimator))

@@ -20,8 +20,9 @@ import errno
 import os
 import shutil
 import tempfile
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator, Optional, TypeVar
+from typing import Any, TypeVar
 
 from analysis.errors import RecordingError
 
@@ -30,7 +31,7 @@ __all__ = ["WriterLock", "locked", "lock_path", "locked_by_writer", "live_copy",
 _F = TypeVar("_F", bound=Callable[..., Any])
 
 
-def lock_path(path: "str | Path") -> Path:
+def lock_path(path: str | Path) -> Path:
     """The lock file of a recording: ``REC.h5`` -> ``REC.h5.lock``."""
     p = Path(path)
     return p.with_name(p.name + ".lock")
@@ -57,12 +58,12 @@ class WriterLock:
     of the recording (re-entrant), :meth:`claim` writes this process id into it once the recording
     is open, :meth:`release` removes it when the recording is closed."""
 
-    def __init__(self, path: "str | Path") -> None:
+    def __init__(self, path: str | Path) -> None:
         self.path = lock_path(path)
         self._depth = 0
         self._created = not self.path.exists()
         try:
-            self._fd: Optional[int] = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            self._fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError:
             self._fd = None  # a read-only folder: the recording itself cannot be written either
 
@@ -125,7 +126,7 @@ def is_lock_error(exc: BaseException) -> bool:
     return "unable to lock file" in text or "resource temporarily unavailable" in text
 
 
-def _writer_pid(path: Path) -> Optional[int]:
+def _writer_pid(path: Path) -> int | None:
     try:
         text = lock_path(path).read_text().strip()
         return int(text) if text else None
@@ -133,7 +134,7 @@ def _writer_pid(path: Path) -> Optional[int]:
         return None
 
 
-def holder_pid(path: "str | Path") -> Optional[int]:
+def holder_pid(path: str | Path) -> int | None:
     """The process id holding a lock on ``path`` (impactlab's lock file, else the Linux lock table)."""
     p = Path(path)
     pid = _writer_pid(p) if lock_path(p).exists() else None
@@ -154,7 +155,7 @@ def holder_pid(path: "str | Path") -> Optional[int]:
     return None
 
 
-def locked_by_writer(path: "str | Path") -> bool:
+def locked_by_writer(path: str | Path) -> bool:
     """Whether an impactlab writer has the recording open (its lock file exists and is locked)."""
     lp = lock_path(path)
     if not lp.exists():
@@ -178,7 +179,7 @@ def locked_by_writer(path: "str | Path") -> bool:
         os.close(fd)
 
 
-def live_copy(path: "str | Path") -> Path:
+def live_copy(path: str | Path) -> Path:
     """A consistent copy of a recording an impactlab writer has open (see module doc); the caller
     deletes it. Raises :class:`RecordingError` when the lock file cannot be read."""
     p = Path(path)
@@ -203,7 +204,7 @@ def live_copy(path: "str | Path") -> Path:
         os.close(fd)
 
 
-def locked_error(path: "str | Path", why: str = "") -> RecordingError:
+def locked_error(path: str | Path, why: str = "") -> RecordingError:
     """The one message for a recording that another process holds open for writing."""
     p = Path(path)
     pid = holder_pid(p)

@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import datetime as _dt
 import zlib
+from collections.abc import Sequence
 from types import ModuleType
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 

@@ -6,9 +6,10 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -18,8 +19,7 @@ from analysis.hit import Hit
 from analysis.spectra import AveragedSpectra, WindowSettings
 
 from .recording_lock import WriterLock, is_lock_error, locked, locked_error
-from .recording_schema import (SCHEMA, SCHEMA_VERSION, _DAMAGE, _as_str, _channel_table, _h5py,
-                               _now_iso, counts_crc32)
+from .recording_schema import _DAMAGE, SCHEMA, SCHEMA_VERSION, _as_str, _channel_table, _h5py, _now_iso, counts_crc32
 
 __all__ = ["RecordingWriter", "FRFPoint"]
 
@@ -51,13 +51,13 @@ class RecordingWriter:
 
     def __init__(
         self,
-        path: "str | Path",
+        path: str | Path,
         *,
         instrument: dict,
         setup: dict,
         channels: Sequence[dict],
         windows: WindowSettings,
-        plan: Optional[dict] = None,
+        plan: dict | None = None,
         software: str = "impactlab",
         overwrite: bool = False,
     ) -> None:
@@ -80,7 +80,7 @@ class RecordingWriter:
         self._lock.claim()
 
     def _create(self, instrument: dict, setup: dict, channels: Sequence[dict], windows: WindowSettings,
-                plan: Optional[dict], software: str) -> None:
+                plan: dict | None, software: str) -> None:
         h5py = _h5py()
         f = self._f
         f.attrs["schema"] = SCHEMA
@@ -108,13 +108,13 @@ class RecordingWriter:
         f.flush()
 
     @classmethod
-    def resume(cls, path: "str | Path") -> "RecordingWriter":
+    def resume(cls, path: str | Path) -> RecordingWriter:
         """Reopen an existing recording to append to it (``capture --resume``).
 
         Hits cut short by a crash (no ``complete`` attribute) are removed; new hits are numbered
         after the last complete one. Raises :class:`RecordingError` when the file is not a
         recording this version writes or cannot be opened for writing."""
-        from .recording import verify_recording   # the reader's check (the reader imports this module)
+        from .recording import verify_recording  # the reader's check (the reader imports this module)
 
         verify_recording(path)  # in a child process: damage (even a libhdf5 crash) becomes RecordingError
         self = cls.__new__(cls)
@@ -252,7 +252,7 @@ class RecordingWriter:
                 self._f.close()
         self._lock.release()
 
-    def __enter__(self) -> "RecordingWriter":
+    def __enter__(self) -> RecordingWriter:
         return self
 
     def __exit__(self, *exc: Any) -> None:

@@ -6,8 +6,9 @@ the JSON (percent in the table), residues in the FRF unit times rad/s.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional, Sequence, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -38,7 +39,7 @@ def roman(n: int) -> str:
     return "".join(out)
 
 
-def complex_pair(z: complex) -> Optional[list]:
+def complex_pair(z: complex) -> list | None:
     """``[re, im]`` of a complex number, None when it is not finite."""
     z = complex(z)
     if not (math.isfinite(z.real) and math.isfinite(z.imag)):
@@ -46,7 +47,7 @@ def complex_pair(z: complex) -> Optional[list]:
     return [float(z.real), float(z.imag)]
 
 
-def _fnum(x: float) -> Optional[float]:
+def _fnum(x: float) -> float | None:
     x = float(x)
     return x if math.isfinite(x) else None
 
@@ -59,8 +60,8 @@ def _cstr(z: complex, digits: int = 4) -> str:
     return f"{z.real:.{digits}g} {sign} {abs(z.imag):.{digits}g}i"
 
 
-def format_table(result: LSFDResult, frf: Optional[FRFSet] = None, *, output: int = 0, reference: int = 0,
-                 title: Optional[str] = None, initial: Optional[np.ndarray] = None,
+def format_table(result: LSFDResult, frf: FRFSet | None = None, *, output: int = 0, reference: int = 0,
+                 title: str | None = None, initial: np.ndarray | None = None,
                  initial_label: str = "initial") -> str:
     """The paper's Table 1 for one FRF (``output``, ``reference`` indices) of an LSFD result.
 
@@ -149,9 +150,9 @@ STD_NOTE = ("freq_hz_std/damping_std assume white noise of equal variance on eve
             "groups divided by sqrt(number of groups) (see docs/fitting.md, section 9).")
 
 
-def result_to_dict(result: "LSFDResult | FitResult", frf: Optional[FRFSet] = None,
-                   stab: Optional[StabilizationResult] = None, *, extra: Optional[dict] = None,
-                   scatter: Optional[SubsetScatter] = None) -> dict:
+def result_to_dict(result: LSFDResult | FitResult, frf: FRFSet | None = None,
+                   stab: StabilizationResult | None = None, *, extra: dict | None = None,
+                   scatter: SubsetScatter | None = None) -> dict:
     """JSON-ready dictionary of an LSFD result (schema ``impactlab.fit/1``).
 
     Keys: poles (freq_hz, damping, freq_hz_std, damping_std, damped_freq_hz, pole [re, im] rad/s),
@@ -167,7 +168,7 @@ def result_to_dict(result: "LSFDResult | FitResult", frf: Optional[FRFSet] = Non
     (then ``stab`` comes from it): ``success`` is then the fit's verdict, *converged and physically
     sensible*, with ``converged``, ``fit_status`` and ``problems`` beside it.
     """
-    fit: Optional[FitResult] = None
+    fit: FitResult | None = None
     if hasattr(result, "lsfd"):  # a FitResult
         fit = cast("FitResult", result)
         stab = fit.stabilization if stab is None else stab
@@ -277,7 +278,7 @@ def synthesis_error(result: LSFDResult, frf: FRFSet) -> dict:
             "exp_window_tau_s": _fnum(frf.exp_window_tau_s) if frf.exp_window_tau_s else None}
 
 
-def write_json(path: "str | Path", doc: dict) -> None:
+def write_json(path: str | Path, doc: dict) -> None:
     """Write a JSON document (strict: no NaN; NaN values are written as null), atomically."""
     from .atomic import write_json_atomic
 

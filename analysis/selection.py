@@ -30,7 +30,8 @@ The user overrides the selection by giving poles (or frequencies, see
 from __future__ import annotations
 
 import logging
-from typing import Any, NamedTuple, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
@@ -64,10 +65,10 @@ def select_clusters(
     stab: StabilizationResult,
     *,
     min_class: int = STABLE_DAMP,
-    tol_freq: Optional[float] = None,
+    tol_freq: float | None = None,
     tol_damp: float = 0.25,
     min_damping: float = 0.0,
-    max_damping: Optional[float] = None,
+    max_damping: float | None = None,
     min_orders: int = 3,
     min_fraction: float = 0.5,
     abs_tol_damp: float = ABS_TOL_DAMP_CLUSTER,
@@ -120,7 +121,7 @@ def select_clusters(
 
 def select_poles(
     stab: StabilizationResult,
-    n_modes: Optional[int] = None,
+    n_modes: int | None = None,
     **kwargs: Any,
 ) -> np.ndarray:
     """Physical poles (rad/s, sorted by frequency) picked automatically from a stabilization result.
@@ -144,7 +145,7 @@ def select_poles(
 
 
 def poles_from_frequencies(
-    freqs_hz: "Sequence[float] | np.ndarray", stab: Optional[StabilizationResult] = None, *, default_damping: float = 0.01
+    freqs_hz: Sequence[float] | np.ndarray, stab: StabilizationResult | None = None, *, default_damping: float = 0.01
 ) -> np.ndarray:
     """Poles for user-given natural frequencies (Hz).
 

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -77,7 +78,7 @@ def check_sep005(channels: Any, source: str = "SEP005 data") -> list[dict]:
     return out
 
 
-def write_sep005(path: "str | Path", channels: Sequence[Mapping[str, Any]], *, overwrite: bool = False) -> Path:
+def write_sep005(path: str | Path, channels: Sequence[Mapping[str, Any]], *, overwrite: bool = False) -> Path:
     """Write channels (checked by :func:`check_sep005`) as a JSON SEP005 file."""
     p = Path(path)
     if p.exists() and not overwrite:
@@ -91,7 +92,7 @@ def write_sep005(path: "str | Path", channels: Sequence[Mapping[str, Any]], *, o
     return p
 
 
-def read_sep005(path: "str | Path") -> list[dict]:
+def read_sep005(path: str | Path) -> list[dict]:
     """The checked channels of a JSON SEP005 file (a list of channels, or an object holding one
     under ``"channels"``)."""
     p = Path(path)

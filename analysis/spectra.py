@@ -31,8 +31,8 @@ All functions are pure: inputs are never modified.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -54,7 +54,7 @@ __all__ = [
 ]
 
 
-def parse_duration(text: "str | float | int", fs_hz: Optional[float] = None) -> float:
+def parse_duration(text: str | float | int, fs_hz: float | None = None) -> float:
     """Parse an operator duration into seconds: ``"5ms"``, ``"0.005s"``, ``"0.005"`` (s), ``"200samples"``/``"200smp"``.
 
     Sample counts need ``fs_hz``; raises ``ValueError`` naming the accepted forms otherwise.
@@ -115,10 +115,10 @@ class WindowSettings:
     exp_on_force : apply the exponential to the force channel as well (default True, see module doc).
     """
 
-    force_width_s: Optional[float] = None
+    force_width_s: float | None = None
     force_taper_s: float = 0.0
-    exp_window_tau_s: Optional[float] = None
-    exp_window_end_fraction: Optional[float] = None
+    exp_window_tau_s: float | None = None
+    exp_window_end_fraction: float | None = None
     exp_on_force: bool = True
 
     def __post_init__(self) -> None:
@@ -133,7 +133,7 @@ class WindowSettings:
         if self.exp_window_end_fraction is not None and not (0 < self.exp_window_end_fraction < 1):
             raise ValueError(f"exponential window end fraction {self.exp_window_end_fraction} must lie strictly between 0 and 1")
 
-    def tau_for(self, n_samples: int, fs_hz: float, trigger_index: int) -> Optional[float]:
+    def tau_for(self, n_samples: int, fs_hz: float, trigger_index: int) -> float | None:
         """The exponential time constant (s) for a block, or None when there is no exponential window."""
         if self.exp_window_tau_s is not None:
             return float(self.exp_window_tau_s)
@@ -141,7 +141,7 @@ class WindowSettings:
             return tau_from_end_fraction(self.exp_window_end_fraction, (n_samples - trigger_index) / fs_hz)
         return None
 
-    def resolved(self, n_samples: int, fs_hz: float, trigger_index: int) -> "WindowSettings":
+    def resolved(self, n_samples: int, fs_hz: float, trigger_index: int) -> WindowSettings:
         """A copy with an end-fraction exponential turned into a fixed tau (s) for this block layout."""
         if self.exp_window_end_fraction is None:
             return self
@@ -167,7 +167,7 @@ class WindowSettings:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict) -> "WindowSettings":
+    def from_dict(cls, d: dict) -> WindowSettings:
         """Settings from :meth:`to_dict`'s keys; recordings written before the exponential window's
         names were settled (``exp_tau_s``, ``exp_decay``) are read as well."""
         d = {_OLD_WINDOW_KEYS.get(k, k): v for k, v in d.items()}
@@ -215,7 +215,7 @@ class HitSpectra:
     Gff: np.ndarray
     Gxx: np.ndarray
     Gfx: np.ndarray
-    exp_window_tau_s: Optional[float]
+    exp_window_tau_s: float | None
 
 
 @dataclass(frozen=True)
@@ -303,7 +303,7 @@ class FRFAccumulator:
         self.quantity = quantity
         self.unit = unit
         self._hits: list[HitSpectra] = []
-        self._sum: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = None
+        self._sum: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @property
     def n_averages(self) -> int:
@@ -356,7 +356,7 @@ class FRFAccumulator:
         return self._hits[0].freq_hz
 
     @property
-    def exp_window_tau_s(self) -> Optional[float]:
+    def exp_window_tau_s(self) -> float | None:
         """The exponential window's time constant (s) of the averaged hits (None: none)."""
         return self._hits[0].exp_window_tau_s if self._hits else None
 
@@ -394,9 +394,9 @@ class FRFAccumulator:
             c = np.where(ok, (Sfx.real ** 2 + Sfx.imag ** 2) / np.where(ok, den, 1.0), 0.0)
         return np.clip(c, 0.0, 1.0)
 
-    def frfset(self, estimator: str = "H1", meta: Optional[dict] = None,
-               sample_rate_hz: Optional[float] = None, record_s: Optional[float] = None,
-               pretrigger_s: Optional[float] = None) -> FRFSet:
+    def frfset(self, estimator: str = "H1", meta: dict | None = None,
+               sample_rate_hz: float | None = None, record_s: float | None = None,
+               pretrigger_s: float | None = None) -> FRFSet:
         """The averaged FRFs as an :class:`FRFSet` with one reference (``H[n_out, 1, n_freq]``);
         ``sample_rate_hz`` (Hz), ``record_s`` and ``pretrigger_s`` (s): the acquisition's, carried by the set."""
         est = estimator.upper()
@@ -423,7 +423,7 @@ class FRFAccumulator:
 
 
 def excitation_band(freq_hz: np.ndarray, gff_db: np.ndarray, drops_db: Sequence[float] = (10.0, 20.0)
-                    ) -> "dict[float, Optional[float]]":
+                    ) -> dict[float, float | None]:
     """Where the force autospectrum has fallen ``drop`` dB below its low-frequency level, for each
     drop (Hz; None when it never falls that far): the usable excitation band of a hammer hit.
 
@@ -438,7 +438,7 @@ def excitation_band(freq_hz: np.ndarray, gff_db: np.ndarray, drops_db: Sequence[
     g = np.where(np.isfinite(g), g, -np.inf)
     first = 1 if f.size > 3 and f[0] == 0.0 else 0
     level = float(np.max(g[first:first + max(3, int(0.02 * f.size))]))
-    out: dict[float, Optional[float]] = {}
+    out: dict[float, float | None] = {}
     for drop in drops_db:
         below = np.flatnonzero(g < level - drop)
         below = below[below > first]
@@ -456,7 +456,7 @@ def excitation_band(freq_hz: np.ndarray, gff_db: np.ndarray, drops_db: Sequence[
 EXCITATION_DROP_DB = 20.0
 
 
-def excitation_limit_hz(freq_hz: np.ndarray, gff: np.ndarray, drop_db: float = EXCITATION_DROP_DB) -> Optional[float]:
+def excitation_limit_hz(freq_hz: np.ndarray, gff: np.ndarray, drop_db: float = EXCITATION_DROP_DB) -> float | None:
     """Upper end (Hz) of the excitation band of a force autospectrum ``gff`` (linear, e.g. N^2/Hz)
     at ``freq_hz``: where it has fallen ``drop_db`` below its low-frequency level
     (:func:`excitation_band`); None when it never falls that far (the hammer excites every line)."""

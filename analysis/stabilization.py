@@ -34,15 +34,15 @@ from __future__ import annotations
 
 import logging
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
 
 import numpy as np
 
 from .frf import FRFSet
+from .lscf import BandData, prepare_band
 from .mac import mac_matrix
 from .modal import damping_ratio, natural_freq_hz, residual_basis
-from .lscf import BandData, prepare_band
 from .threads import limits_blas_threads
 
 __all__ = [
@@ -199,7 +199,7 @@ def _initial_poles(bd: BandData, max_modes: int, method: str) -> list[np.ndarray
 
 
 def _refine(frf: FRFSet, poles: np.ndarray, band: tuple[float, float],
-            iterations: int) -> tuple[np.ndarray, Optional[np.ndarray]]:
+            iterations: int) -> tuple[np.ndarray, np.ndarray | None]:
     """A few LSFD iterations from the given poles; returns (poles, flattened residues)."""
     from .lsfd import LSFDConvergenceWarning, fit_lsfd  # lazy: written by another engineer
 
@@ -221,7 +221,7 @@ def stabilization(
     max_modes: int,
     *,
     method: str = "lsce",
-    band: Optional[Sequence[float]] = None,
+    band: Sequence[float] | None = None,
     refine_lsfd: bool = False,
     refine_iterations: int = 5,
     tol_freq: float = 0.01,

@@ -24,7 +24,8 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
-from typing import Any, Callable, Iterator, Optional, TypeVar
+from collections.abc import Callable, Iterator
+from typing import Any, TypeVar
 
 __all__ = ["ENV_VAR", "WORK_PER_THREAD", "choose_threads", "requested_threads", "use_threads",
            "command_scope", "set_threads", "blas_threads", "limits_blas_threads"]
@@ -36,7 +37,7 @@ WORK_PER_THREAD = 1_000_000
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-_override: Optional[int] = None     # --threads of the running command (use_threads)
+_override: int | None = None     # --threads of the running command (use_threads)
 _depth = 0                          # how many kernels are active (the outermost one chooses)
 
 
@@ -77,7 +78,7 @@ def _others_running() -> float:
     return max(0.0, max(load, running) - 1.0)
 
 
-def _parse(text: str, where: str) -> Optional[int]:
+def _parse(text: str, where: str) -> int | None:
     text = text.strip().lower()
     if text in ("", "auto"):
         return None
@@ -90,7 +91,7 @@ def _parse(text: str, where: str) -> Optional[int]:
     return n
 
 
-def requested_threads() -> Optional[int]:
+def requested_threads() -> int | None:
     """The user's thread count: ``--threads`` of the running command, else ``IMPACTLAB_THREADS``;
     None: chosen per problem. A bad value of the environment variable is a ``ValueError`` naming it."""
     if _override is not None:
@@ -99,7 +100,7 @@ def requested_threads() -> Optional[int]:
 
 
 @contextlib.contextmanager
-def use_threads(n: Optional[int]) -> Iterator[None]:
+def use_threads(n: int | None) -> Iterator[None]:
     """Within the block every kernel uses ``n`` BLAS threads (None: the environment variable or the
     rule); what ``--threads`` does for a command."""
     global _override
@@ -128,7 +129,7 @@ def command_scope() -> Iterator[None]:
             os.environ[ENV_VAR] = env
 
 
-def set_threads(n: Optional[int]) -> None:
+def set_threads(n: int | None) -> None:
     """Set the user's thread count for the rest of the command (``--threads`` when it is parsed);
     :func:`analysis.command_line.cli_entry` restores the previous value when the command ends."""
     global _override
@@ -155,7 +156,7 @@ def blas_threads(work: float) -> Iterator[int]:
     try:
         from threadpoolctl import ThreadpoolController  # the pools of the libraries loaded by now
     except ImportError:  # an environment installed before it was a dependency: BLAS as configured
-        limit: "contextlib.AbstractContextManager[Any]" = contextlib.nullcontext()
+        limit: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
     else:
         limit = ThreadpoolController().limit(limits=n)
     _depth += 1

@@ -22,16 +22,16 @@ import gc
 import logging
 import os
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
-from typing import Optional, Sequence
 
 import numpy as np
 
-from .frf import FRFSet
-from .points import parse_point, point_from_uff, uff_direction, uff_node
 from .errors import UFFError
 from .finite_checks import describe_nonfinite
+from .frf import FRFSet
+from .points import parse_point, point_from_uff, uff_direction, uff_node
 
 __all__ = ["write_uff58", "time_records", "read_uff58", "write_uff55", "read_uff55", "UFFError"]
 
@@ -122,8 +122,8 @@ def time_records(
 
 
 def write_uff58(
-    path: "str | Path",
-    frf: Optional[FRFSet] = None,
+    path: str | Path,
+    frf: FRFSet | None = None,
     *,
     id_lines: Sequence[str] = (),
     extra_sets: Sequence[dict] = (),
@@ -148,7 +148,7 @@ def write_uff58(
     return len(sets)
 
 
-def _read_sets(path: "str | Path") -> list[dict]:
+def _read_sets(path: str | Path) -> list[dict]:
     p = Path(path)
     if not p.is_file():
         raise UFFError(f"UFF file {p} not found: check the path")
@@ -161,7 +161,7 @@ def _read_sets(path: "str | Path") -> list[dict]:
     return sets
 
 
-def read_uff58(path: "str | Path") -> FRFSet:
+def read_uff58(path: str | Path) -> FRFSet:
     """Read the FRFs (type 4) of a UFF file, with coherence (type 6) where present, as one FRFSet.
 
     Outputs are the response node/directions, references the reference node/directions, in the
@@ -181,7 +181,7 @@ def read_uff58(path: "str | Path") -> FRFSet:
                        "export the file again") from None
 
 
-def _require_complete_file(path: "str | Path") -> None:
+def _require_complete_file(path: str | Path) -> None:
     """Refuse a file cut short: every UFF dataset ends with the delimiter ``-1``, so the file must
     (the reader library silently leaves out a dataset cut short)."""
     p = Path(path)
@@ -198,7 +198,7 @@ def _require_complete_file(path: "str | Path") -> None:
                        "copy or export it again")
 
 
-def _check_record(path: "str | Path", s: dict) -> None:
+def _check_record(path: str | Path, s: dict) -> None:
     """A dataset-58 record's declared point count, abscissa and values are consistent and finite."""
     where = (f"{path}: dataset 58 response {s.get('rsp_node')}:{s.get('rsp_dir')} reference "
              f"{s.get('ref_node')}:{s.get('ref_dir')} (function type {s.get('func_type')})")
@@ -213,7 +213,7 @@ def _check_record(path: "str | Path", s: dict) -> None:
             raise UFFError(f"{where}: {key} {what}; measured values must be finite: fix or re-export the file")
 
 
-def _frfset_from_sets(path: "str | Path", sets: list) -> FRFSet:
+def _frfset_from_sets(path: str | Path, sets: list) -> FRFSet:
     frfs = [s for s in sets if int(s.get("func_type", -1)) == 4]
     if not frfs:
         raise UFFError(f"{path} holds no dataset-58 FRF (function type 4)")
@@ -256,7 +256,7 @@ def _frfset_from_sets(path: "str | Path", sets: list) -> FRFSet:
 
 
 def write_uff55(
-    path: "str | Path",
+    path: str | Path,
     poles: np.ndarray,
     shapes: np.ndarray,
     points: Sequence[str],
@@ -301,7 +301,7 @@ def write_uff55(
     return len(sets)
 
 
-def read_uff55(path: "str | Path") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def read_uff55(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read complex UFF 55 shapes: (poles (n_modes,), node numbers (n_nodes,), shapes (n_nodes, 3, n_modes))."""
     sets = [s for s in _read_sets(path) if s.get("type") == 55]
     if not sets:

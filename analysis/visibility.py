@@ -35,14 +35,14 @@ another resonance, the two are a *possible close pair* fitted as one pole.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Optional, Sequence
 
 import numpy as np
 
 from .frf import FRFSet
-from .peaks import find_peaks, prominences
 from .mif import cmif
+from .peaks import find_peaks, prominences
 
 __all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "VISIBLE_PROMINENCE_DB", "VISIBLE_COHERENCE",
            "MATCH_FRACTION", "MATCH_LINES", "reproduced"]
@@ -71,12 +71,12 @@ class VisiblePeak:
     top_hz: tuple = (0.0, 0.0)
 
 
-def _curves(frf: FRFSet, sel: np.ndarray) -> list[tuple[str, np.ndarray, Optional[np.ndarray]]]:
+def _curves(frf: FRFSet, sel: np.ndarray) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
     """(name, magnitude, coherence or None) of each curve searched, over the lines ``sel``."""
     n = frf.freq_hz.size
     H = np.asarray(frf.H).reshape(-1, n)[:, sel]
     coh = None if frf.coherence is None else np.asarray(frf.coherence, float).reshape(-1, n)[:, sel]
-    out: list[tuple[str, np.ndarray, Optional[np.ndarray]]] = []
+    out: list[tuple[str, np.ndarray, np.ndarray | None]] = []
     if coh is not None or H.shape[0] <= MAX_CURVES_WITHOUT_COHERENCE:
         names = [f"{o}/{r}" for o in (frf.outputs or range(frf.n_outputs)) for r in
                  (frf.references or range(frf.n_references))]
@@ -145,7 +145,7 @@ def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.
 
 
 def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: float,
-                      is_reproduced: Optional[Callable[[VisiblePeak], bool]] = None,
+                      is_reproduced: Callable[[VisiblePeak], bool] | None = None,
                       ) -> tuple[list[VisiblePeak], list[tuple[VisiblePeak, float]]]:
     """Visible peaks the fitted natural frequencies ``fitted_hz`` (Hz) leave unaccounted for:
     ``(missed, pairs)``; ``pairs`` holds (peak, frequency of the pole it would share with another

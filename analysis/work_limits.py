@@ -7,7 +7,7 @@ refused with :class:`WorkLimitError` naming the largest value that would be acce
 from __future__ import annotations
 
 import os
-from typing import Callable
+from collections.abc import Callable
 
 from .errors import WorkLimitError
 

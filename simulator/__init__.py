@@ -18,7 +18,7 @@ __all__ = list(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily
-    from .config import FrameConfig  # noqa: F401
-    from .stand import TestStand  # noqa: F401
     from .analyser import create_analyser  # noqa: F401
+    from .config import FrameConfig  # noqa: F401
     from .firmware import Firmware  # noqa: F401
+    from .stand import TestStand  # noqa: F401

@@ -1,4 +1,6 @@
 """``python -m simulator modes|serve|fleet ...``"""
+from __future__ import annotations
+
 import sys
 
 from analysis._cli_dispatch import dispatch

@@ -3,7 +3,8 @@ query options (``sim://``, ``usbsim://``) and wraps it with fault injection when
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from simulator.capture import StandLike
 from simulator.commands import DEFAULT_SERIAL
@@ -13,8 +14,8 @@ from simulator.firmware import Firmware
 __all__ = ["create_analyser"]
 
 
-def create_analyser(options: "Mapping[str, Any] | None" = None,
-                    stand: "StandLike | None" = None) -> "Firmware | FaultyFirmware":
+def create_analyser(options: Mapping[str, Any] | None = None,
+                    stand: StandLike | None = None) -> Firmware | FaultyFirmware:
     """A firmware from URL query options.
 
     Options (all optional): ``seed`` (int, default 0), ``config`` (path of a frame TOML file),
@@ -39,7 +40,7 @@ def create_analyser(options: "Mapping[str, Any] | None" = None,
     return FaultyFirmware(fw, FaultPlan.from_options(fault_opts))
 
 
-def _create_firmware(opts: Mapping[str, Any], stand: "StandLike | None") -> Firmware:
+def _create_firmware(opts: Mapping[str, Any], stand: StandLike | None) -> Firmware:
     """The plain firmware from the options without the fault keys."""
     known = {"seed", "config", "noise", "plan", "packetized", "serial", "polls", "max_strikes", "replay"}
     unknown = set(opts) - known

@@ -7,8 +7,9 @@ stand and leaves a block image in ``_block``.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -73,7 +74,7 @@ class StandChannel(dict):
             raise AttributeError(name) from None
 
     @classmethod
-    def from_record(cls, rec: P.ChannelRecord) -> "StandChannel":
+    def from_record(cls, rec: P.ChannelRecord) -> StandChannel:
         return cls(point=rec.point, quantity=rec.quantity, sensitivity=rec.sensitivity, sensitivity_unit="V/EU",
                    iepe=rec.iepe, coupling=rec.coupling, range_v=rec.range_mv / 1000.0, input=rec.input)
 
@@ -87,23 +88,23 @@ class CaptureEngine:
     ``_cache``, ``_fe_cfg``, ``_adc_rng``.
     """
 
-    stand: "StandLike | None"
+    stand: StandLike | None
     margin: int
 
     def _init_capture(self) -> None:
-        self._setup: "P.SetupData | None" = None
+        self._setup: P.SetupData | None = None
         self._setup_bytes = b""
         self._state = P.State.IDLE
         self._sequence = 0
-        self._block: "bytes | None" = None
+        self._block: bytes | None = None
         self._overload_mask = 0
         self._polls = 0
         self._strikes = 0
         self._no_trigger = False
         self._clock_s = 0.0
-        self._cache: "tuple[Any, bytes, int] | None" = None
+        self._cache: tuple[Any, bytes, int] | None = None
         self._fe_cfg: Any = None
-        self._adc_rng: "np.random.Generator | None" = None
+        self._adc_rng: np.random.Generator | None = None
 
     def _start_arm(self) -> None:
         """Enter ARMED with a fresh strike count; no block ready."""
@@ -182,7 +183,7 @@ class CaptureEngine:
         self._no_trigger = False
         self._state = P.State.BLOCK_READY
 
-    def _digitise(self, volts: np.ndarray, s: P.SetupData, noise: bool = False) -> "tuple[bytes, int] | None":
+    def _digitise(self, volts: np.ndarray, s: P.SetupData, noise: bool = False) -> tuple[bytes, int] | None:
         """(volts-per-count + counts bytes, overload mask) of the block around the trigger, or None.
 
         ``noise``: the stand's signals carry noise (its ``[noise]`` switch); then the converter adds
@@ -216,7 +217,7 @@ class CaptureEngine:
 
 
 
-def find_trigger(x: np.ndarray, level: float, slope: str, pre: int, n: int) -> "int | None":
+def find_trigger(x: np.ndarray, level: float, slope: str, pre: int, n: int) -> int | None:
     """First index k >= max(pre, 1) with a crossing of ``level`` between x[k-1] and x[k]
     (rising: x[k-1] < level <= x[k]; falling: x[k-1] > level >= x[k]) and room for the block
     (k - pre + n <= len(x)); None when there is none."""

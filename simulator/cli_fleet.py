@@ -22,8 +22,8 @@ import contextlib
 import os
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence
 
 from analysis.atomic import atomic_path, write_json_atomic, write_text_atomic
 from analysis.command_line import Parser, cli_entry, errors_to_exit, parse_args, with_examples
@@ -124,7 +124,7 @@ def _run(specs: list[UnitSpec], out: Path, hits: int, jobs: int, quiet: bool) ->
 
 
 @cli_entry
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args

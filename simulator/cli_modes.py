@@ -10,10 +10,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
-from analysis.command_line import with_examples
-from analysis.command_line import add_json_flag, cli_entry, errors_to_exit
+from analysis.command_line import add_json_flag, cli_entry, errors_to_exit, with_examples
 
 from .config import ConfigError, FrameConfig
 from .fem import FrameModel, ModelError

@@ -7,11 +7,11 @@ import logging
 import os
 import signal
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
 from analysis.command_line import with_examples
-from .serve import (Prebuilt, StopFlag, analyser_options, firmware_factory, open_pty, serve_pty, serve_tcp,
-                    tcp_listener, tcp_url)
+
+from .serve import Prebuilt, StopFlag, analyser_options, firmware_factory, open_pty, serve_pty, serve_tcp, tcp_listener, tcp_url
 
 __all__ = ["main"]
 

@@ -9,7 +9,7 @@ link (framing, phases, stalls) and leaves the capture physics (the strike, the A
 from __future__ import annotations
 
 import logging
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -40,11 +40,11 @@ class ScsiCommands(CaptureEngine):
     max_strikes: int
     _sense: P.Sense
     _unit_attention: bool
-    _handlers: "dict[int, Callable[[Mapping[str, int], bytes], Reply]]"
+    _handlers: dict[int, Callable[[Mapping[str, int], bytes], Reply]]
     _inquiry_bytes: bytes
     _caps_bytes: bytes
 
-    def _command_table(self) -> "dict[int, Callable[[Mapping[str, int], bytes], Reply]]":
+    def _command_table(self) -> dict[int, Callable[[Mapping[str, int], bytes], Reply]]:
         return {
             P.Op.TEST_UNIT_READY: self._test_unit_ready, P.Op.REQUEST_SENSE: self._request_sense,
             P.Op.INQUIRY: self._inquiry, P.Op.GET_CAPABILITIES: self._get_capabilities,
@@ -52,11 +52,11 @@ class ScsiCommands(CaptureEngine):
             P.Op.GET_STATUS: self._get_status, P.Op.READ_BLOCK: self._read_block, P.Op.ABORT: self._abort,
         }
 
-    def _run(self, spec: P.CommandSpec, fields: "dict[str, int]", data: bytes) -> Reply:
+    def _run(self, spec: P.CommandSpec, fields: dict[str, int], data: bytes) -> Reply:
         """Execute one decoded, admitted command with its data-out bytes."""
         return self._handlers[spec.opcode](fields, data)
 
-    def _decode(self, cbw: P.Cbw) -> "tuple[P.CommandSpec | None, dict[str, int], Reply | None]":
+    def _decode(self, cbw: P.Cbw) -> tuple[P.CommandSpec | None, dict[str, int], Reply | None]:
         """(table row or None, CDB fields, a failure Reply or None when the command may run).
 
         Order of checks: unsupported opcode (0x20), CDB too short (0x24), LUN other than 0 (0x25),
@@ -136,7 +136,7 @@ class ScsiCommands(CaptureEngine):
         self._cache = None
         return Reply()
 
-    def _check_setup(self, s: P.SetupData) -> "str | None":
+    def _check_setup(self, s: P.SetupData) -> str | None:
         caps = self.capabilities
         n = len(s.channels)
         if s.sample_rate_hz not in caps.sample_rates_hz:
@@ -180,7 +180,7 @@ class ScsiCommands(CaptureEngine):
             return self._strike_safely() or Reply()
         return Reply()
 
-    def _strike_safely(self) -> "Reply | None":
+    def _strike_safely(self) -> Reply | None:
         """Strike; a stand that cannot (bad request, broken chain) ends the capture with HARDWARE ERROR."""
         try:
             self._strike()

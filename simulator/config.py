@@ -8,15 +8,17 @@ plain frozen dataclass; :attr:`FrameConfig.raw` keeps the merged dictionary.
 from __future__ import annotations
 
 import copy
-import sys
 import dataclasses
+import sys
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from analysis.points import PointLabelError, parse_point
+
 from .errors import ConfigError
 
 _toml: Any
@@ -129,7 +131,7 @@ class DamageConfig:
                 f[int(e)] *= float(k)
         return f
 
-    def spring_factor(self, kind: str, nodes: "tuple[str, ...]") -> float:
+    def spring_factor(self, kind: str, nodes: tuple[str, ...]) -> float:
         """Factor (-) on the springs of a support (``kind="support"``, its node) or a joint
         (``kind="joint"``, its two nodes)."""
         places, factors = ((self.loose_supports, self.loose_support_factor) if kind == "support"
@@ -313,7 +315,7 @@ class NonlinearConfig:
         """Integration steps per sample at the sample rate ``fs_hz`` (Hz)."""
         return max(1, int(np.ceil(self.integration_rate_hz / fs_hz - 1e-9)))
 
-    def spring_stiffness(self, nodes: "tuple[str, ...]", k6: "tuple | list") -> list[float]:
+    def spring_stiffness(self, nodes: tuple[str, ...], k6: tuple | list) -> list[float]:
         """The six stiffnesses of the support or joint at ``nodes``: ``k6`` with the rotational one about
         ``axis`` set to ``stiffness_nm_per_rad`` when this is the active nonlinear spring and the value is given."""
         k = [float(x) for x in k6]
@@ -345,7 +347,7 @@ class FrameConfig:
     source: str = "defaults"
 
     @classmethod
-    def load(cls, path: "str | Path | None" = None) -> "FrameConfig":
+    def load(cls, path: str | Path | None = None) -> FrameConfig:
         """Defaults from frame.toml, merged with the TOML file ``path`` if given."""
         if path is None:
             return cls.from_dict(None)
@@ -353,13 +355,13 @@ class FrameConfig:
         return cls.from_dict(user, source=str(path))
 
     @classmethod
-    def from_dict(cls, overrides: "Mapping[str, Any] | None" = None, source: str = "overrides") -> "FrameConfig":
+    def from_dict(cls, overrides: Mapping[str, Any] | None = None, source: str = "overrides") -> FrameConfig:
         """Defaults merged with a nested dictionary shaped like frame.toml."""
         base = _defaults()
         merged = _merge(base, copy.deepcopy(dict(overrides or {})), source, ())
         return _build(merged, source if overrides else "defaults")
 
-    def with_overrides(self, overrides: Mapping[str, Any]) -> "FrameConfig":
+    def with_overrides(self, overrides: Mapping[str, Any]) -> FrameConfig:
         """A new config: this one's values merged with ``overrides`` (same rules as a user file)."""
         merged = _merge(copy.deepcopy(dict(self.raw)), copy.deepcopy(dict(overrides)), "overrides", ())
         return _build(merged, self.source)
@@ -522,7 +524,7 @@ def _build(d: dict, source: str) -> FrameConfig:
     return cfg
 
 
-def _first_nonfinite_key(d: Any, prefix: str = "") -> "str | None":
+def _first_nonfinite_key(d: Any, prefix: str = "") -> str | None:
     """The dotted key of the first NaN or infinite number in a parsed TOML document, or None."""
     items = d.items() if isinstance(d, Mapping) else enumerate(d) if isinstance(d, (list, tuple)) else ()
     for k, v in items:

@@ -14,8 +14,9 @@ Nothing is built at import time.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 __all__ = ["DOOR_GROUP", "SerialDoor", "UsbBackendDoor", "SIM", "USBSIM"]
 

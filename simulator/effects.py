@@ -12,8 +12,8 @@ mass-normalised mode shapes at the outputs in ``meta["output_shapes"]`` (for ``m
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -28,13 +28,13 @@ __all__ = ["base_model", "simulate_with_effects", "add_frf_noise", "draw_effect"
            "primary_error"]
 
 
-def _config(config: "FrameConfig | str | Path | None") -> FrameConfig:
+def _config(config: FrameConfig | str | Path | None) -> FrameConfig:
     return config if isinstance(config, FrameConfig) else FrameConfig.load(config)
 
 
 def base_model(
-    config: "FrameConfig | str | Path | None", outputs: Sequence[str], references: Sequence[str],
-    *, max_freq_hz: "float | None" = None,
+    config: FrameConfig | str | Path | None, outputs: Sequence[str], references: Sequence[str],
+    *, max_freq_hz: float | None = None,
 ) -> ModalModel:
     """Receptance pole-residue model of the frame at the points, with ``meta["output_shapes"]``
     (n_out, n_modes) mass-normalised shapes (1/sqrt(kg)) at the outputs. ``max_freq_hz`` keeps only
@@ -53,7 +53,7 @@ def base_model(
 
 
 def simulate_with_effects(
-    config: "FrameConfig | str | Path | ModalModel | None",
+    config: FrameConfig | str | Path | ModalModel | None,
     outputs: Sequence[str],
     references: Sequence[str],
     freq_hz: np.ndarray,

@@ -6,8 +6,9 @@ whole story is in :mod:`simulator.faults`."""
 from __future__ import annotations
 
 import collections
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -33,13 +34,13 @@ OVERLOAD_SCALE = 40.0
 FAULT_OPTION_KEYS = ("faults", "fault_seed", "fault_gone_calls", "fault_slow_s")
 
 
-def parse_faults(text: "str | Mapping[str, float]") -> dict[str, float]:
+def parse_faults(text: str | Mapping[str, float]) -> dict[str, float]:
     """``"short_transfer:0.05,garbage:0.02"`` -> ``{"short_transfer": 0.05, "garbage": 0.02}``.
 
     Each probability lies in [0, 1]; ``all:P`` sets every kind. Raises ValueError naming the bad
     entry and the known kinds."""
     if isinstance(text, Mapping):
-        items: "list[tuple[str, object]]" = [(str(k), v) for k, v in text.items()]
+        items: list[tuple[str, object]] = [(str(k), v) for k, v in text.items()]
     else:
         items = []
         for part in str(text).split(","):
@@ -86,7 +87,7 @@ class FaultPlan:
             raise ValueError("fault plan: gone_calls must be >= 1 and slow_s within 0..1 s")
 
     @classmethod
-    def from_options(cls, options: Mapping[str, Any]) -> "FaultPlan":
+    def from_options(cls, options: Mapping[str, Any]) -> FaultPlan:
         """From URL options ``faults``, ``fault_seed`` (default: ``seed``), ``fault_gone_calls``, ``fault_slow_s``."""
         try:
             seed = int(options.get("fault_seed", options.get("seed", 0)))

@@ -56,14 +56,14 @@ import collections
 import logging
 import time
 import zlib
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
 from acquisition import protocol as P
 
-from .fault_plan import (_STAND_FAULTS, FAULT_KINDS, FAULT_OPTION_KEYS, TRANSIENT_SENSES, FaultPlan, FaultyStand,
-                         parse_faults)
+from .fault_plan import _STAND_FAULTS, FAULT_KINDS, FAULT_OPTION_KEYS, TRANSIENT_SENSES, FaultPlan, FaultyStand, parse_faults
 
 __all__ = ["FAULT_KINDS", "TRANSIENT_SENSES", "FaultPlan", "parse_faults", "FaultyFirmware", "FaultyStand",
            "cbw_bytes", "FAULT_OPTION_KEYS"]
@@ -80,7 +80,7 @@ class FaultyFirmware:
     The wrapper owns ``firmware`` from then on (its stand is replaced by a :class:`FaultyStand`).
     """
 
-    def __init__(self, firmware: Any, plan: "FaultPlan | Mapping[str, float] | str") -> None:
+    def __init__(self, firmware: Any, plan: FaultPlan | Mapping[str, float] | str) -> None:
         if not isinstance(plan, FaultPlan):
             plan = FaultPlan(parse_faults(plan))
         self._fw = firmware
@@ -96,10 +96,10 @@ class FaultyFirmware:
         self._deaf = False  # stream "stall": ignore input until the reset frame
         self._deaf_tail = b""
         self._swallow = 0
-        self._fake_sense: "P.Sense | None" = None
+        self._fake_sense: P.Sense | None = None
         self._gone = 0
         self._resets_seen = getattr(firmware, "resets", 0)
-        self._last_seq: "int | None" = None
+        self._last_seq: int | None = None
 
     # ------------------------------------------------------------------ delegation
     def __getattr__(self, name: str) -> Any:
@@ -179,7 +179,7 @@ class FaultyFirmware:
         return False
 
     # ------------------------------------------------------------------ bytes in
-    def write(self, data: "bytes | bytearray | memoryview") -> None:
+    def write(self, data: bytes | bytearray | memoryview) -> None:
         data = bytes(data)
         if self._tick_gone() or not data:
             return
@@ -213,7 +213,7 @@ class FaultyFirmware:
             self._clear_link()
         self._note_block()
 
-    def _as_idle_cbw(self, data: bytes) -> "P.Cbw | None":
+    def _as_idle_cbw(self, data: bytes) -> P.Cbw | None:
         """The CBW in ``data`` when it is exactly one, arriving at a command boundary, else None."""
         if len(data) != P.CBW.size or getattr(self._fw, "_phase", "cbw") != "cbw" or self.pending():
             return None

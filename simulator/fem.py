@@ -33,8 +33,9 @@ and mobility/accelerance are ``(jw)^p H_ij`` (p = 1, 2). In pole-residue form,
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace as _replace
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from dataclasses import replace as _replace
 
 import numpy as np
 import scipy.linalg
@@ -193,7 +194,7 @@ def _transform(R: np.ndarray) -> np.ndarray:
 
 def assemble_beam(
     coords: np.ndarray, E: float, G: float, rho: float, sp: SectionProperties, roll_deg: float = 0.0,
-    bending_factors: "Sequence[float] | None" = None,
+    bending_factors: Sequence[float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Global K, M (6 n_nodes square) of a straight chain of elements through ``coords`` (n_nodes, 3) m.
 
@@ -220,7 +221,7 @@ def member_nodes_xyz(comp: ComponentConfig) -> np.ndarray:
     return start[None, :] + t[:, None] * (end - start)[None, :]
 
 
-def stamp_spring(K: np.ndarray, node_a: int, node_b: "int | None", k6: "Sequence[float] | np.ndarray") -> None:
+def stamp_spring(K: np.ndarray, node_a: int, node_b: int | None, k6: Sequence[float] | np.ndarray) -> None:
     """Add six springs ``k6`` (3 x N/m, 3 x N m/rad) to ``K`` in place: from node ``node_a`` to ground
     (``node_b`` None) or between nodes ``node_a`` and ``node_b`` (``+k`` on both diagonals, ``-k``
     between them)."""
@@ -284,10 +285,10 @@ class FrameModel:
     def from_config(
         cls,
         cfg: FrameConfig,
-        added_masses: "dict[str, float] | None" = None,
+        added_masses: dict[str, float] | None = None,
         *,
         supports: bool = True,
-    ) -> "FrameModel":
+    ) -> FrameModel:
         """Assemble the frame from a :class:`FrameConfig`.
 
         ``added_masses``: {point or ``component:node``: kg}; lumped masses on the three translations.
@@ -336,7 +337,7 @@ class FrameModel:
         return self.node_index[(comp, node)]
 
     def _node_help(self) -> str:
-        comps: "dict[str, int]" = {}
+        comps: dict[str, int] = {}
         for (c, i) in self.node_index:
             comps[c] = max(comps.get(c, 0), i)
         return "nodes are " + ", ".join(f"{c}:0..{n}" for c, n in comps.items())
@@ -359,7 +360,7 @@ class FrameModel:
     def n_dof(self) -> int:
         return self.K.shape[0]
 
-    def dof(self, point: "str | Point") -> tuple[int, int]:
+    def dof(self, point: str | Point) -> tuple[int, int]:
         """(global DOF index, sign) of a point label ``component:node:direction``."""
         p = parse_point(point)
         if (p.component, p.node) not in self.node_index:

@@ -86,7 +86,7 @@ class Firmware(ScsiCommands, BulkOnlyLink):
     block (room for the trigger to land late).
     """
 
-    def __init__(self, stand: "StandLike | None" = None, *, packetized: bool = False,
+    def __init__(self, stand: StandLike | None = None, *, packetized: bool = False,
                  serial: str = DEFAULT_SERIAL, capabilities: P.CapabilitiesData = P.SIGLAB_2042,
                  strike_after_polls: int = 1, max_strikes: int = 3, margin: int = 1024,
                  identity: P.Inquiry = IDENTITY) -> None:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -47,7 +47,7 @@ class UnitSpec:
     name: str
     seed: int
     scatter: dict[str, float]
-    defect: Optional[dict[str, Any]] = None
+    defect: dict[str, Any] | None = None
     overrides: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def truth(self, file: str) -> dict[str, Any]:
@@ -55,8 +55,8 @@ class UnitSpec:
         return {"name": self.name, "file": file, "defect": self.defect, "scatter": self.scatter}
 
 
-def unit_overrides(scatter: dict[str, float], defect: Optional[dict[str, Any]],
-                   base: Optional[FrameConfig] = None) -> dict[str, Any]:
+def unit_overrides(scatter: dict[str, float], defect: dict[str, Any] | None,
+                   base: FrameConfig | None = None) -> dict[str, Any]:
     """Config overrides (shaped like frame.toml) of a unit with these scatter factors and defect."""
     cfg = base or FrameConfig.load()
     over: dict[str, Any] = {
@@ -122,7 +122,7 @@ def plan_fleet(units: int, scatter: float = 0.02, defects: int = 0, seed: int = 
     return out
 
 
-def fleet_folder_conflict(out_dir: "str | Path", specs: "list[UnitSpec]") -> Optional[str]:
+def fleet_folder_conflict(out_dir: str | Path, specs: list[UnitSpec]) -> str | None:
     """Why the recordings already in ``out_dir`` are not units of the fleet ``specs`` (None when
     they all are): a unit recorded with another config (other ``--units``, ``--scatter``,
     ``--defects`` or ``--seed``), or a recording the plan does not hold. Completing such a folder
@@ -144,7 +144,7 @@ def fleet_folder_conflict(out_dir: "str | Path", specs: "list[UnitSpec]") -> Opt
     return None
 
 
-def recorded_plan(out_dir: "str | Path") -> str:
+def recorded_plan(out_dir: str | Path) -> str:
     """The options a fleet folder was made with, as its ``truth.json`` records them ('' when unknown)."""
     try:
         truth = json.loads((Path(out_dir) / "truth.json").read_text(encoding="utf-8"))

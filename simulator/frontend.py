@@ -65,7 +65,7 @@ def _highpass_coeffs(fs_hz: float, corners_hz: tuple) -> tuple[np.ndarray, np.nd
     return b, a
 
 
-def highpass_cascade(x: np.ndarray, fs_hz: float, corners_hz: "tuple[float, ...]") -> np.ndarray:
+def highpass_cascade(x: np.ndarray, fs_hz: float, corners_hz: tuple[float, ...]) -> np.ndarray:
     """First-order high-passes in series (corners in Hz; zeros skipped) along the last axis, in one filter
     call (e.g. an IEPE sensor's high-pass followed by the input AC coupling). Returns a new array."""
     cs = tuple(float(c) for c in corners_hz if c > 0)
@@ -106,7 +106,7 @@ def _design(fs_hz: float, kind: str, order: int, rp: float, rs: float, frac: flo
     raise ValueError(f"anti-alias kind {kind!r} is unknown; use 'elliptic' or 'butterworth'")
 
 
-def anti_alias_sos(fs_hz: float, cfg: "FrontendConfig | None" = None) -> np.ndarray:
+def anti_alias_sos(fs_hz: float, cfg: FrontendConfig | None = None) -> np.ndarray:
     """Second-order sections of the anti-alias filter at sample rate ``fs_hz`` (Hz)."""
     if cfg is None:
         from .config import FrameConfig
@@ -117,7 +117,7 @@ def anti_alias_sos(fs_hz: float, cfg: "FrontendConfig | None" = None) -> np.ndar
     return sos.copy()
 
 
-def apply_anti_alias(volts: np.ndarray, fs_hz: float, cfg: "FrontendConfig | None" = None) -> np.ndarray:
+def apply_anti_alias(volts: np.ndarray, fs_hz: float, cfg: FrontendConfig | None = None) -> np.ndarray:
     """Anti-alias filtered copy of ``volts`` ([n_channels, n] or [n]), causal, same filter on all channels."""
     return scipy.signal.sosfilt(anti_alias_sos(fs_hz, cfg), np.asarray(volts, dtype=float), axis=-1)
 
@@ -127,7 +127,7 @@ def full_scale_counts(bits: int = 16) -> int:
     return (1 << (bits - 1)) - 1
 
 
-def volts_per_count(range_v: "float | np.ndarray", bits: int = 16) -> "float | np.ndarray":
+def volts_per_count(range_v: float | np.ndarray, bits: int = 16) -> float | np.ndarray:
     """Volts per ADC count for an input range of +-``range_v`` V: range_v / (2^(bits-1) - 1)."""
     r = np.asarray(range_v, dtype=float)
     if np.any(r <= 0):
@@ -136,7 +136,7 @@ def volts_per_count(range_v: "float | np.ndarray", bits: int = 16) -> "float | n
     return float(v) if v.ndim == 0 else v
 
 
-def quantize(volts: np.ndarray, range_v: "float | np.ndarray", bits: int = 16) -> tuple[np.ndarray, np.ndarray]:
+def quantize(volts: np.ndarray, range_v: float | np.ndarray, bits: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """ADC: volts [n_channels, n] (or [n]) -> (counts int16 same shape, overload bool [n_channels]).
 
     ``range_v`` is one range (V) or one per channel. counts = round(v / volts_per_count), clipped to

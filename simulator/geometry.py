@@ -7,7 +7,7 @@ lines join consecutive nodes of a component and the node pairs of ``[joints]``; 
 """
 from __future__ import annotations
 
-from typing import Iterable, Optional
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from .config import FrameConfig
 __all__ = ["frame_geometry", "device_geometry", "check_device_points"]
 
 
-def frame_geometry(config: Optional[FrameConfig] = None) -> Geometry:
+def frame_geometry(config: FrameConfig | None = None) -> Geometry:
     """Wireframe of the frame of ``config`` (default: ``FrameConfig.load()``)."""
     cfg = config if config is not None else FrameConfig.load()
     labels: list[str] = []
@@ -38,7 +38,7 @@ def frame_geometry(config: Optional[FrameConfig] = None) -> Geometry:
                     supports=tuple(str(n) for n in cfg.supports.nodes))
 
 
-def device_geometry(url: str) -> Optional[Geometry]:
+def device_geometry(url: str) -> Geometry | None:
     """The frame a simulated device URL (``sim://``, ``usbsim://``, with its ``config=``) holds; None for
     any other device and for a recording played back (``replay=``), which holds no frame of its own."""
     from acquisition.urls import SimURL, UsbSimURL, parse_device_url

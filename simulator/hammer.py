@@ -61,9 +61,9 @@ def draw_hit(
     max_node: int,
     rng: np.random.Generator,
     *,
-    double_hit: "bool | None" = None,
+    double_hit: bool | None = None,
     amplitude_scale: float = 1.0,
-    neighbour: "bool | None" = None,
+    neighbour: bool | None = None,
 ) -> HammerHit:
     """Draw one strike aimed at ``nominal_point`` (``max_node``: last node of its component).
 

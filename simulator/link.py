@@ -26,7 +26,7 @@ class Reply:
     """What a command handler produced: CSW status, data-in payload, sense."""
 
     status: int = P.CswStatus.PASSED
-    data: "bytes | memoryview" = b""
+    data: bytes | memoryview = b""
     sense: P.Sense = P.Sense(P.SenseKey.NO_SENSE, 0, 0)
 
 
@@ -35,7 +35,7 @@ UA_RESET_SENSE = P.Sense(P.SenseKey.UNIT_ATTENTION, *P.ASC_POWER_ON_RESET)
 _GOOD = GOOD_SENSE
 
 
-def fail(key: int, asc: "tuple[int, int]") -> Reply:
+def fail(key: int, asc: tuple[int, int]) -> Reply:
     """A failed command's reply with sense ``key`` / ``asc`` (ASC, ASCQ)."""
     return Reply(P.CswStatus.FAILED, b"", P.Sense(key, *asc))
 
@@ -51,11 +51,11 @@ class BulkOnlyLink:
     commands_executed: int = 0
     resets: int = 0
 
-    def _decode(self, cbw: P.Cbw) -> "tuple[P.CommandSpec | None, dict[str, int], Reply | None]":
+    def _decode(self, cbw: P.Cbw) -> tuple[P.CommandSpec | None, dict[str, int], Reply | None]:
         """(table row or None, CDB fields, a failure Reply or None when the command may run)."""
         raise NotImplementedError
 
-    def _run(self, spec: P.CommandSpec, fields: "dict[str, int]", data: bytes) -> Reply:
+    def _run(self, spec: P.CommandSpec, fields: dict[str, int], data: bytes) -> Reply:
         """Execute one decoded command with its data-out bytes."""
         raise NotImplementedError
 
@@ -68,7 +68,7 @@ class BulkOnlyLink:
         self._tail = b""
         self._out: collections.deque[memoryview] = collections.deque()
         self._phase = "cbw"  # cbw | data_out | discard (stream, bad CBW) | invalid (packetized, bad CBW)
-        self._cbw: "P.Cbw | None" = None
+        self._cbw: P.Cbw | None = None
         self._need_out = 0
         self._halted_in = False
         self._halted_out = False
@@ -115,7 +115,7 @@ class BulkOnlyLink:
             self._halted_out = False
 
     # ------------------------------------------------------------------ bytes in
-    def write(self, data: "bytes | bytearray | memoryview") -> None:
+    def write(self, data: bytes | bytearray | memoryview) -> None:
         """Accept host-to-device bytes (any chunking in stream mode; one OUT transfer when packetized)."""
         data = bytes(data)
         if not data:
@@ -249,7 +249,7 @@ class BulkOnlyLink:
             self._send_in(b"", cbw.data_length, stall=True)
         self._queue_csw(cbw.tag, cbw.data_length, P.CswStatus.PHASE_ERROR)
 
-    def _send_in(self, data: "bytes | memoryview", H: int, stall: bool) -> None:
+    def _send_in(self, data: bytes | memoryview, H: int, stall: bool) -> None:
         """Data-in phase of at most H bytes (case 4/5/6)."""
         if self.packetized:
             if len(data):

@@ -35,9 +35,10 @@ factory :func:`make_stand` returns it when the configuration has an active ``[no
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -186,9 +187,9 @@ class LinearJoint:
         return 0.0
 
 
-def _springs(cfg: FrameConfig) -> list[tuple[str, str, "str | None", list[float]]]:
+def _springs(cfg: FrameConfig) -> list[tuple[str, str, str | None, list[float]]]:
     """(kind, node a, node b or None, six stiffnesses as the FE model stamps them) of every joint and support."""
-    out: list[tuple[str, str, "str | None", list[float]]] = []
+    out: list[tuple[str, str, str | None, list[float]]] = []
     for a in cfg.supports.nodes:
         f = cfg.damage.spring_factor("support", (a,))
         out.append(("support", str(a), None, [k * f for k in cfg.nonlinear.spring_stiffness((a,), cfg.supports.stiffness)]))
@@ -198,7 +199,7 @@ def _springs(cfg: FrameConfig) -> list[tuple[str, str, "str | None", list[float]
     return out
 
 
-def _joint_places(cfg: FrameConfig) -> tuple[str, "str | None", float]:
+def _joint_places(cfg: FrameConfig) -> tuple[str, str | None, float]:
     """(node a, node b or None for a support, linear rotational stiffness k0 N m/rad) of the nonlinear spring."""
     nl = cfg.nonlinear
     for kind, a, b, k6 in _springs(cfg):
@@ -342,12 +343,12 @@ class NonlinearJointStand(TestStand):
 
     __test__ = False
 
-    def __init__(self, config: "FrameConfig | str | Path | None" = None, seed: int = 0) -> None:
+    def __init__(self, config: FrameConfig | str | Path | None = None, seed: int = 0) -> None:
         super().__init__(config, seed)
         if not self.config.nonlinear.active:
             raise StandError("NonlinearJointStand needs a [nonlinear] table with law 'iwan' or 'cubic'")
         self.law = joint_law(self.config)
-        self._last: "JointResult | None" = None
+        self._last: JointResult | None = None
 
     def _frame_response(self, model: FrameModel, outputs: Sequence[str], in_point: str, seg: np.ndarray,
                         seg_start: int, q: int, fs_hz: float, n_samples: int) -> np.ndarray:
@@ -376,14 +377,14 @@ class JointModes:
     share of each mode's strain energy in it. ``sensor_points``: accelerometer places (their masses load
     the frame when the configuration's ``[sensors] mass_loading`` is on)."""
 
-    def __init__(self, config: "FrameConfig | str | Path | None" = None, sensor_points: Sequence[str] = ()) -> None:
+    def __init__(self, config: FrameConfig | str | Path | None = None, sensor_points: Sequence[str] = ()) -> None:
         self.config = config if isinstance(config, FrameConfig) else FrameConfig.load(config)
         s = self.config.sensors
         masses = ({f"{p.split(':')[0]}:{p.split(':')[1]}": s.accelerometer.mass_kg for p in sensor_points}
                   if s.mass_loading else {})
         self.model = FrameModel.from_config(self.config, masses)
 
-    def joint_candidates(self) -> "tuple[np.ndarray, list]":
+    def joint_candidates(self) -> tuple[np.ndarray, list]:
         from analysis.diagnosis.joint_nonlinearity import JointCandidate
 
         ms = self.model.modes()
@@ -405,7 +406,7 @@ class JointModes:
         return ms.freq_hz[flex], out
 
 
-def make_stand(config: "FrameConfig | str | Path | None" = None, seed: int = 0) -> TestStand:
+def make_stand(config: FrameConfig | str | Path | None = None, seed: int = 0) -> TestStand:
     """The stand of a configuration: :class:`NonlinearJointStand` when its ``[nonlinear]`` law is
     active, else the linear :class:`simulator.stand.TestStand`."""
     cfg = config if isinstance(config, FrameConfig) else FrameConfig.load(config)

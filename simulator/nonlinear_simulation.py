@@ -10,8 +10,8 @@ length, trigger) and its levels (peak force per level, N).
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -35,7 +35,7 @@ class JointHitSimulation:
     ``outputs``, ``levels`` (peak force N, ascending) sampled at ``fs_hz`` with ``n_samples`` samples and
     the trigger at ``trigger_index``; ``quantity`` and ``unit`` of the FRFs as measured."""
 
-    def __init__(self, config: "FrameConfig | str | Path | None", points: Sequence[str], outputs: Sequence[str],
+    def __init__(self, config: FrameConfig | str | Path | None, points: Sequence[str], outputs: Sequence[str],
                  levels: Sequence[float], fs_hz: float, n_samples: int, trigger_index: int = 64,
                  quantity: str = "accelerance", unit: str = "") -> None:
         cfg = config if isinstance(config, FrameConfig) else FrameConfig.load(config)
@@ -63,7 +63,7 @@ class JointHitSimulation:
         stand.set_channels(chans)
         return stand
 
-    def joint_candidates(self) -> "tuple[np.ndarray, list]":
+    def joint_candidates(self) -> tuple[np.ndarray, list]:
         return self._modes.joint_candidates()
 
     def peak_rotation(self, candidate: str) -> float:

@@ -36,9 +36,9 @@ sees only containers.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import scipy.linalg
@@ -63,7 +63,7 @@ class Assembly:
     element_bending: dict = field(default_factory=dict)               # "member:e" -> EI factor of that element
     mass: dict = field(default_factory=dict)                          # member -> mass factor
     springs: dict = field(default_factory=dict)                       # (kind, part) -> factor
-    sensor_mass_kg: "float | None" = None                             # accelerometer mass (None: the config's)
+    sensor_mass_kg: float | None = None                             # accelerometer mass (None: the config's)
     lumped: list = field(default_factory=list)                        # [(node, kg, rotary inertia?)]
 
 
@@ -166,11 +166,11 @@ for _row in (
     register_cause(_row)
 
 
-def _one(cause: "str | None", params: Mapping) -> list[tuple[str, Mapping]]:
+def _one(cause: str | None, params: Mapping) -> list[tuple[str, Mapping]]:
     return [] if cause is None else [(cause, params)]
 
 
-def _config(config: "FrameConfig | str | Path | None") -> FrameConfig:
+def _config(config: FrameConfig | str | Path | None) -> FrameConfig:
     return config if isinstance(config, FrameConfig) else FrameConfig.load(config)
 
 
@@ -183,7 +183,7 @@ class FrameVariants:
     but with the channel set-up's accelerometer masses. ``cause=None`` is the frame as configured.
     """
 
-    def __init__(self, config: "FrameConfig | str | Path | None", outputs: Sequence[str],
+    def __init__(self, config: FrameConfig | str | Path | None, outputs: Sequence[str],
                  references: Sequence[str]) -> None:
         cfg = _config(config)
         self.config = cfg
@@ -258,7 +258,7 @@ class FrameVariants:
             out.append(c)
         return tuple(out)
 
-    def modes(self, cause: "str | None", params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
         """Natural frequencies (Hz, flexible modes up to ``max_freq_hz``) and the shape products
         ``phi_o phi_r`` (n_out * n_ref, n_modes) at the measured points (C order over (o, r))."""
         return self.modes_of(_one(cause, params), max_freq_hz)
@@ -270,7 +270,7 @@ class FrameVariants:
         f = np.sqrt(w2) / (2 * np.pi)
         return f, self._products(phi)
 
-    def model(self, cause: "str | None", params: Mapping) -> ModalModel:
+    def model(self, cause: str | None, params: Mapping) -> ModalModel:
         """Receptance pole-residue model (m/N) of the changed frame, modes up to ``[modes] max_freq_hz``,
         damping from ``[damping]`` of the config, ``meta["output_shapes"]`` at the outputs."""
         return self.model_of(_one(cause, params))
@@ -298,13 +298,13 @@ class FrameVariants:
         """Every measurable point of the frame: each node in each direction (``component:node:X``...)."""
         return tuple(f"{n}:{d}" for n in self.nodes for d in ("X", "Y", "Z"))
 
-    def at_points(self, outputs: Sequence[str], references: Sequence[str]) -> "FrameVariants":
+    def at_points(self, outputs: Sequence[str], references: Sequence[str]) -> FrameVariants:
         """The same frame (same configuration, same accelerometers) at other measured points."""
         other = FrameVariants(self.config, outputs, references)
         other.sensor_nodes, other.sensor_mass_kg = self.sensor_nodes, self.sensor_mass_kg
         return other
 
-    def refined(self, refine: int = 2) -> "FrameVariants":
+    def refined(self, refine: int = 2) -> FrameVariants:
         """The same frame with every member's elements ``refine`` times finer, at the same measured
         points (their labels mapped to the finer mesh's nodes); built once per ``refine``."""
         if refine in self._refined_frames:
@@ -348,7 +348,7 @@ class FrameVariants:
         return ":".join([parts[0], str(refine * int(parts[1])), *parts[2:]])
 
     # ------------------------------------------------------------------ assembly
-    def matrices(self, cause: "str | None", params: Mapping) -> tuple[np.ndarray, np.ndarray]:
+    def matrices(self, cause: str | None, params: Mapping) -> tuple[np.ndarray, np.ndarray]:
         """K (N/m, N m/rad) and M (kg, kg m^2) of the frame changed by ``cause`` with ``params``."""
         return self.matrices_of(_one(cause, params))
 

@@ -15,9 +15,10 @@ channel points (a roving test replays point by point); when none match, all hits
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +38,7 @@ class ReplayEvent:
 class ReplayStand:
     """Replay the hits of a recording (``accepted_only``: skip the rejected ones)."""
 
-    def __init__(self, path: "str | Path", accepted_only: bool = True) -> None:
+    def __init__(self, path: str | Path, accepted_only: bool = True) -> None:
         from analysis.recording import Recording  # the reader validates the file
 
         with Recording(path) as rec:

@@ -44,7 +44,7 @@ class Transducer:
     noise_density: float
     highpass_hz: float = 0.0
 
-    def volts(self, x: np.ndarray, fs_hz: float, rng: "np.random.Generator | None" = None) -> np.ndarray:
+    def volts(self, x: np.ndarray, fs_hz: float, rng: np.random.Generator | None = None) -> np.ndarray:
         """Output voltage (V) for the physical signal ``x`` (EU) sampled at ``fs_hz`` (Hz).
 
         Noise is added only when ``rng`` is given (noise-free otherwise). ``x`` is not modified.

@@ -33,7 +33,8 @@ import socket
 import threading
 import time
 import tty
-from typing import Any, Callable, Optional, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 __all__ = ["StopFlag", "Session", "Prebuilt", "serve_tcp", "serve_pty", "analyser_options", "firmware_factory",
            "tcp_listener", "tcp_url", "open_pty"]
@@ -96,7 +97,7 @@ class Prebuilt:
     def __init__(self, factory: Callable[[], Any]) -> None:
         self._factory = factory
         self._result: tuple[bool, Any] = (False, None)
-        self._thread: Optional[threading.Thread] = None
+        self._thread: threading.Thread | None = None
         self._start()
 
     def _start(self) -> None:
@@ -124,7 +125,7 @@ class Prebuilt:
         return firmware
 
 
-def analyser_options(seed: Optional[int], config: Optional[str], noise: Optional[str],
+def analyser_options(seed: int | None, config: str | None, noise: str | None,
                      extra: Sequence[str]) -> dict:
     """The ``create_analyser`` options (as a ``sim://`` URL query would give them)."""
     options: dict = {}
@@ -144,7 +145,7 @@ def analyser_options(seed: Optional[int], config: Optional[str], noise: Optional
     return options
 
 
-def firmware_factory(options: dict, precomputed: Optional[str] = None) -> Callable[[], Any]:
+def firmware_factory(options: dict, precomputed: str | None = None) -> Callable[[], Any]:
     """A function building one fresh firmware; ``precomputed`` is an ``.npz`` with ``volts`` and ``fs_hz``."""
     # the firmware imports its front end (scipy.signal) at the first strike; do it now so that a
     # client's first ARM does not wait a second or two for an import
@@ -199,7 +200,7 @@ def _send_all(conn: socket.socket, data: bytes, stop: StopFlag, send_timeout_s: 
 
 
 def _serve_connection(conn: socket.socket, session: Session, stop: StopFlag, send_timeout_s: float,
-                      idle_timeout_s: float, waiting: Optional[Callable[[], bool]] = None,
+                      idle_timeout_s: float, waiting: Callable[[], bool] | None = None,
                       yield_after_s: float = 0.0) -> None:
     """Serve one client until it hangs up, errs, stalls, or (``yield_after_s`` > 0) has been silent
     that long while ``waiting()`` says another client is queued: a stalled client cannot keep the
@@ -305,7 +306,7 @@ def _pty_write(master: int, data: bytes, stop: StopFlag, send_timeout_s: float) 
 def serve_pty(master: int, factory: Callable[[], Any], stop: StopFlag, *, max_clients: int = 0,
               send_timeout_s: float = 10.0) -> int:
     """Serve the pty master until ``stop``; a client's first bytes after a hang-up start a fresh analyser."""
-    session: Optional[Session] = None
+    session: Session | None = None
     served = 0
     while not stop:
         ready, _, _ = select.select([master], [], [], TICK_S)

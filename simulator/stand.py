@@ -34,9 +34,10 @@ values in the same order, so a seed reproduces a whole session.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -44,12 +45,12 @@ from analysis.frf import FRFSet
 from analysis.points import Point, PointLabelError, parse_point
 
 from .config import ConfigError, FrameConfig
+from .errors import StandError
 from .fem import FrameModel, ModelError
 from .frontend import bandlimit_fir, highpass_cascade
 from .hammer import HammerHit, draw_hit, force_signal
 from .response import simulate_segment
 from .sensors import G_M_S2, SENSITIVITY_UNITS, sensitivity_v_per_eu
-from .errors import StandError
 
 __all__ = ["TestStand", "StandEvent", "StandError", "ChannelSpec"]
 
@@ -130,7 +131,7 @@ class TestStand:
 
     __test__ = False  # not a pytest test class
 
-    def __init__(self, config: "FrameConfig | str | Path | None" = None, seed: int = 0) -> None:
+    def __init__(self, config: FrameConfig | str | Path | None = None, seed: int = 0) -> None:
         if config is None or isinstance(config, (str, Path)):
             config = FrameConfig.load(config)
         if not isinstance(config, FrameConfig):
@@ -140,7 +141,7 @@ class TestStand:
         self._rng = np.random.default_rng(self.seed)
         self._models: dict[frozenset, FrameModel] = {}
         bare = self._model(frozenset())
-        self._max_node: "dict[str, int]" = {}
+        self._max_node: dict[str, int] = {}
         for (comp, node) in bare.node_index:
             self._max_node[comp] = max(self._max_node.get(comp, 0), node)
         self._pending: dict[str, Any] = {}
@@ -183,7 +184,7 @@ class TestStand:
             nodes = ", ".join(f"{c}:0..{n}" for c, n in self._max_node.items())
             raise StandError(f"{where}point {point} is not on the frame; nodes are {nodes}")
 
-    def set_hammer_point(self, point: "str | Point") -> None:
+    def set_hammer_point(self, point: str | Point) -> None:
         """Direct the operator to strike ``point`` (``component:node:direction``) from now on."""
         try:
             label = str(parse_point(point))
@@ -197,8 +198,8 @@ class TestStand:
         return self._hammer_point
 
     def next_strike(
-        self, *, double_hit: "bool | None" = None, amplitude_scale: "float | None" = None,
-        neighbour: "bool | None" = None,
+        self, *, double_hit: bool | None = None, amplitude_scale: float | None = None,
+        neighbour: bool | None = None,
     ) -> None:
         """One-shot overrides for the next strike only: force (True) or forbid (False) a double hit or a
         neighbouring-node hit, scale the peak force (e.g. 20 for an overload)."""
@@ -239,7 +240,7 @@ class TestStand:
         return self._model(self._mass_layout())
 
     def analytic_frf(
-        self, output: "str | Sequence[str]", reference: "str | Sequence[str]", freq_hz: np.ndarray,
+        self, output: str | Sequence[str], reference: str | Sequence[str], freq_hz: np.ndarray,
         quantity: str = "accelerance",
     ) -> FRFSet:
         """Exact FRF of the frame as currently instrumented (see :meth:`FrameModel.analytic_frf`)."""
@@ -298,9 +299,9 @@ class TestStand:
         n_samples: int,
         pretrigger: int = 0,
         *,
-        noise: "bool | None" = None,
-        double_hit: "bool | None" = None,
-        amplitude_scale: "float | None" = None,
+        noise: bool | None = None,
+        double_hit: bool | None = None,
+        amplitude_scale: float | None = None,
     ) -> StandEvent:
         """One hammer strike recorded by the configured channels.
 

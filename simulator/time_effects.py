@@ -24,9 +24,9 @@ generator seeded by ``seed``. ``draw_time_effect`` draws random physical paramet
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -79,7 +79,7 @@ class HitRecord:
     full_scale: np.ndarray
     overload: np.ndarray
     base: ModalModel
-    effect: Optional[dict]
+    effect: dict | None
     info: list = field(default_factory=list)
 
     @property
@@ -109,7 +109,7 @@ class NonlinearStand(TestStand):
 
     __test__ = False
 
-    def __init__(self, config: "FrameConfig | str | Path | None" = None, seed: int = 0, k_per_n: float = 0.0) -> None:
+    def __init__(self, config: FrameConfig | str | Path | None = None, seed: int = 0, k_per_n: float = 0.0) -> None:
         self.k_per_n = float(k_per_n)
         self._factor = 1.0
         super().__init__(config, seed)
@@ -141,7 +141,7 @@ def _count(fraction: float, n_hits: int) -> int:
 
 
 def simulate_hits(
-    effect: Optional[Mapping] = None,
+    effect: Mapping | None = None,
     *,
     n_hits: int = 8,
     levels: Sequence[float] = (0.4, 1.0),
@@ -149,8 +149,8 @@ def simulate_hits(
     n_samples: int = 4096,
     pretrigger: int = 128,
     seed: int = 0,
-    config: "FrameConfig | str | Path | None" = None,
-    stand: Optional[TestStand] = None,
+    config: FrameConfig | str | Path | None = None,
+    stand: TestStand | None = None,
 ) -> HitRecord:
     """``n_hits`` hits (force levels cycling through ``levels`` x the nominal amplitude) with one
     time-data ``effect`` (module docstring), in engineering units. ``stand`` may be a ready linear

@@ -31,8 +31,9 @@ import errno
 import logging
 import struct
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, Iterator, Optional
+from typing import Any
 
 import usb.backend
 import usb.core
@@ -97,7 +98,7 @@ class SimUsbBackend(usb.backend.IBackend):
         self,
         firmware: Any = None,
         *,
-        options: Optional[dict] = None,
+        options: dict | None = None,
         vid: int = SIM_VID,
         pid: int = SIM_PID,
         serial: str = "SIM00001",

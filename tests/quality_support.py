@@ -13,7 +13,7 @@ SENSORS = ("left:9:Y", "top:2:Z", "right:6:-X")
 
 
 def roving_test(stand: TestStand, points=SENSORS, sensors=SENSORS, n_hits: int = 4, fs_hz: float = 1024.0,
-                n_samples: int = 4096, gain: "dict[str, float] | None" = None, seed: int = 0) -> FRFSet:
+                n_samples: int = 4096, gain: dict[str, float] | None = None, seed: int = 0) -> FRFSet:
     """H1 at every struck point (sensors fixed; ``gain``: a sensor whose data are that factor off)."""
     s = stand.config.sensors
     chans = [{"point": points[0], "quantity": "force", "sensitivity": s.force.sensitivity_mv_per_n,

@@ -10,7 +10,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 from urllib.parse import urlsplit
 
 import pytest
@@ -61,8 +61,8 @@ class Api:
         self.s = station
         self.client = client
 
-    def request(self, method: str, path: str, body: Any = None, token: Optional[str] = "", raw: Optional[bytes] = None,
-                headers: Optional[dict] = None) -> tuple[int, Any]:
+    def request(self, method: str, path: str, body: Any = None, token: str | None = "", raw: bytes | None = None,
+                headers: dict | None = None) -> tuple[int, Any]:
         conn = http.client.HTTPConnection(self.s.host, self.s.port, timeout=WAIT_S)
         h = dict(headers or {})
         if token is not None:

@@ -31,7 +31,7 @@ def _unit(freq: np.ndarray, rng: np.random.Generator, shapes: np.ndarray = SHAPE
                      outputs=("a:1:X", "b:2:Y", "c:3:Z"))
 
 
-def _fleet(n: int, defective: dict[int, dict[int, float]], seed: int = 1, drop: "dict[int, tuple] | None" = None):
+def _fleet(n: int, defective: dict[int, dict[int, float]], seed: int = 1, drop: dict[int, tuple] | None = None):
     drop = drop or {}
     rng = np.random.default_rng(seed)
     units = []

@@ -5,15 +5,14 @@ from __future__ import annotations
 import hashlib
 
 import numpy as np
-import pyuff
 import pytest
-
-from acquisition.setup import default_setup
+import pyuff
 
 from acquisition.cli_capture import main as capture_main
 from acquisition.cli_demo import main as demo_main
 from acquisition.cli_export import main as export_main
 from acquisition.cli_replay import main as replay_main
+from acquisition.setup import default_setup
 from analysis.recording import Recording, load_frfset
 from analysis.uff import read_uff58
 
@@ -201,8 +200,8 @@ def test_capture_reports_each_points_excitation_band_and_warns_when_narrow(captu
     """Issue 11, item 1: the medium tip's force spectrum is 20 dB down near 1.1 kHz, well inside the
     analyser's 2.5 kHz band: the summary says so per point and warns."""
     from acquisition.averaging import average_recorded_hits
-    from acquisition.terminal import summary_text
     from acquisition.session import SessionResult
+    from acquisition.terminal import summary_text
     from analysis.recording import Recording
 
     with Recording(captured) as rec:

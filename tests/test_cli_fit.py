@@ -1,4 +1,6 @@
 """``python -m analysis fit`` and ``python -m analysis stabilization`` on a UFF 58 file written with pyuff."""
+from __future__ import annotations
+
 import gc
 import json
 import subprocess

@@ -1,4 +1,6 @@
 """The shared containers: point labels, FRFSet validation, eq. (11) synthesis."""
+from __future__ import annotations
+
 import numpy as np
 import pytest
 

@@ -4,15 +4,23 @@ a TOML template that --setup reads back."""
 from __future__ import annotations
 
 import math
-import tomllib
 
 import numpy as np
 import pytest
+import tomllib
 
 from acquisition import cli_capture
 from acquisition.errors import SetupError
-from acquisition.setup import (DEFAULT_DECAY_DB, DEFAULT_SLOWEST_MODE, AcquisitionSetup, block_size_for_decay,
-                               decay_time_s, default_setup, load_setup, setup_to_toml)
+from acquisition.setup import (
+    DEFAULT_DECAY_DB,
+    DEFAULT_SLOWEST_MODE,
+    AcquisitionSetup,
+    block_size_for_decay,
+    decay_time_s,
+    default_setup,
+    load_setup,
+    setup_to_toml,
+)
 
 
 def test_decay_time_and_block_size():

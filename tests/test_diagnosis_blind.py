@@ -11,8 +11,7 @@ import pytest
 
 from analysis.diagnosis import EFFECTS, diagnose
 from analysis.modal import ModalModel
-from simulator.effects import (TOLERANCES, add_frf_noise, base_model, draw_effect, primary_error,
-                               simulate_with_effects)
+from simulator.effects import TOLERANCES, add_frf_noise, base_model, draw_effect, primary_error, simulate_with_effects
 
 OUTS = ["left:9:Y", "top:4:X", "right:6:-X", "left:6:X"]
 REFS = ["right:6:-X"]

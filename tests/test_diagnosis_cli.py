@@ -67,9 +67,9 @@ def test_bad_inputs_exit_2_with_message(files, capsys):
 
 
 def test_recording_with_hits_adds_time_data(tmp_path):
-    from acquisition.cli_capture import main as capture_main
-
     from test_diagnosis_physical import _short_setup
+
+    from acquisition.cli_capture import main as capture_main
 
     rec = tmp_path / "rec.h5"
     # a 1.28 s record (see test_unchanged_frame_captured_with_an_exponential_window_is_none for the 5.12 s default)

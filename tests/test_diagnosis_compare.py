@@ -6,8 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from analysis.diagnosis.compare import (compare, doubtful_coherence, error_db, line_weights, noise_level,
-                                        pair_modes)
+from analysis.diagnosis.compare import compare, doubtful_coherence, error_db, line_weights, noise_level, pair_modes
 from simulator.effects import add_frf_noise, base_model, simulate_with_effects
 
 OUTS = ["left:9:Y", "top:4:X", "right:6:-X"]

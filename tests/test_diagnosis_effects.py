@@ -6,7 +6,7 @@ import pytest
 
 from analysis.diagnosis import EFFECTS, EffectError, predict
 from analysis.diagnosis.effects import WINDOW_SHIFT_KEY
-from analysis.modal import ModalModel, natural_freq_hz, damping_ratio, pole_from_fz
+from analysis.modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz
 
 F = np.linspace(1.0, 100.0, 400)
 

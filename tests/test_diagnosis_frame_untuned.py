@@ -4,7 +4,6 @@ flexibility as the cause, and the fitted support stiffness comes back near the t
 from __future__ import annotations
 
 import numpy as np
-
 from benchmark_modules import load_benchmark
 
 

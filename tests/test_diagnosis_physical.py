@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from benchmark_modules import load_benchmark
 
 from analysis.diagnosis.compare import second_difference_gain
 from analysis.diagnosis.effects import RECORD_KEY, synthesize_windowed
@@ -24,7 +25,6 @@ from analysis.modal import ModalModel, pole_from_fz
 from simulator.config import FrameConfig, overrides_to_toml
 from simulator.fem import FrameModel
 from simulator.physical import FrameVariants
-from benchmark_modules import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 OUTS = ["left:9:Y", "top:4:X", "right:4:-Z"]

@@ -4,8 +4,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analysis.diagnosis.timedata import (detect_amplitude_nonlinearity, detect_double_hit, detect_input_noise,
-                                         detect_overload, diagnose_hits)
+from analysis.diagnosis.timedata import (
+    detect_amplitude_nonlinearity,
+    detect_double_hit,
+    detect_input_noise,
+    detect_overload,
+    diagnose_hits,
+)
 
 FS = 2048.0
 N = 4096

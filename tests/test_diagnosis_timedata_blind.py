@@ -16,8 +16,14 @@ import pytest
 from analysis.diagnosis.effects import predict
 from analysis.diagnosis.timedata_gain import diagnose_time_effects, windowed_accelerance
 from simulator.stand import TestStand
-from simulator.time_effects import (TIME_EFFECTS, TIME_TOLERANCES, NonlinearStand, draw_time_effect, simulate_hits,
-                                    time_primary_error)
+from simulator.time_effects import (
+    TIME_EFFECTS,
+    TIME_TOLERANCES,
+    NonlinearStand,
+    draw_time_effect,
+    simulate_hits,
+    time_primary_error,
+)
 
 BAND = (5.0, 400.0)
 TOML = Path(__file__).resolve().parents[1] / "simulator" / "frame.toml"

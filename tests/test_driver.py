@@ -7,13 +7,13 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scripted_transport import ScriptedTransport
 
 from acquisition import protocol as P
 from acquisition.driver import Analyser, Block
 from acquisition.errors import CommandFailed, SetupError, TriggerTimeout
 from acquisition.loopback import LoopbackTransport
 from acquisition.setup import AcquisitionSetup, ChannelSetup, TriggerSetup, default_setup
-from scripted_transport import ScriptedTransport
 from simulator.analyser import create_analyser
 from simulator.firmware import Firmware
 

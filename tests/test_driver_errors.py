@@ -5,17 +5,25 @@ import dataclasses
 import struct
 
 import pytest
+from scripted_transport import CLEAR_IN, RESET, ScriptedTransport
+from test_driver import INQUIRY_DATA, cbw, csw
 
 from acquisition import protocol as P
 from acquisition.bot import BulkOnly
 from acquisition.driver import Analyser
 from acquisition.errors import CommandFailed, DeviceGone, EndpointStalled, ProtocolError, SetupError, TransportTimeout
-from acquisition.setup import (AcquisitionSetup, Capabilities, TriggerSetup, default_setup, load_setup,
-                               setup_from_wire, setup_to_wire, validate_setup)
 from acquisition.loopback import LoopbackTransport
-from scripted_transport import CLEAR_IN, RESET, ScriptedTransport
+from acquisition.setup import (
+    AcquisitionSetup,
+    Capabilities,
+    TriggerSetup,
+    default_setup,
+    load_setup,
+    setup_from_wire,
+    setup_to_wire,
+    validate_setup,
+)
 from simulator.firmware import Firmware
-from test_driver import INQUIRY_DATA, cbw, csw
 
 TUR = "000000000000"
 SENSE_CDB = "030000001200"

@@ -5,18 +5,18 @@ import dataclasses
 
 import numpy as np
 import pytest
+from benchmark_modules import load_benchmark
 
 from acquisition import protocol as P
 from acquisition.driver import Analyser
 from acquisition.errors import CommandFailed, InvalidDeviceURL
 from acquisition.loopback import LoopbackTransport
-from analysis.recording import Recording, counts_crc32
 from acquisition.session import CaptureSession, TestPlan
 from acquisition.setup import default_setup
+from analysis.recording import Recording, counts_crc32
 from simulator.analyser import create_analyser
 from simulator.faults import FAULT_KINDS, TRANSIENT_SENSES, FaultPlan, FaultyFirmware, parse_faults
 from simulator.firmware import Firmware
-from benchmark_modules import load_benchmark
 
 
 def _soak_module():
@@ -149,8 +149,8 @@ def test_stand_faults_miss_and_overload():
 def test_session_recovers_from_each_fault_kind(kind, packetized, tmp_path):
     """10 hits with one kind of fault (15 % per strike, 5 % per command or read): all accepted hits
     recorded, intact and equal to the firmware's own blocks."""
-    from analysis.recording_writer import RecordingWriter
     from acquisition.session import channel_table
+    from analysis.recording_writer import RecordingWriter
     from analysis.spectra import WindowSettings
 
     rate = 0.15 if kind in ("no_trigger", "double_hit", "overload") else 0.05
@@ -210,8 +210,8 @@ def test_block_truth_matches_what_the_driver_reads():
 
 
 def test_device_gone_for_good_ends_the_session_saying_why_and_keeps_every_hit(tmp_path):
-    from analysis.recording_writer import RecordingWriter
     from acquisition.session import SessionError, channel_table
+    from analysis.recording_writer import RecordingWriter
     from analysis.spectra import WindowSettings
 
     fw = create_analyser({"seed": 6, "faults": "garbage:0.02", "fault_seed": 1})

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_driver import PulseStand
 
 from acquisition import protocol as P
 from acquisition.setup import default_setup, setup_to_wire
 from simulator.analyser import create_analyser
 from simulator.capture import find_trigger as _find_trigger
 from simulator.firmware import Firmware, PrecomputedStand
-from test_driver import PulseStand
 
 INQ_CDB = bytes.fromhex("120000002400")  # INQUIRY, allocation length 36
 

@@ -3,13 +3,13 @@ capture physics, the capture physics without SCSI or link."""
 from __future__ import annotations
 
 import numpy as np
+from test_driver import PulseStand
 
 from acquisition import protocol as P
 from acquisition.setup import default_setup, setup_to_wire
 from simulator.capture import CaptureEngine
 from simulator.commands import IDENTITY, ScsiCommands
 from simulator.link import GOOD_SENSE, BulkOnlyLink, Reply, fail
-from test_driver import PulseStand
 
 
 class BareDevice(ScsiCommands, CaptureEngine):
@@ -153,7 +153,7 @@ class _WeakStand(PulseStand):
     def __init__(self, noisy: bool) -> None:
         super().__init__()
         self.noisy = noisy
-        self.volts_per_count: "np.ndarray | None" = None
+        self.volts_per_count: np.ndarray | None = None
 
     def strike(self, fs_hz: float, n_samples: int, pretrigger: int):
         ev = super().strike(fs_hz, n_samples, pretrigger)

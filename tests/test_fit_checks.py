@@ -1,5 +1,7 @@
 """Fit-pipeline quality: migrated / duplicate poles, the frequency trust region, missed modes and
 close pairs, lightly damped modes in the stabilization and selection, window-aware synthesis."""
+from __future__ import annotations
+
 from dataclasses import replace
 
 import numpy as np

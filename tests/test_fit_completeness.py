@@ -1,5 +1,7 @@
 """The automatic fit is complete and honest: every visible resonance is fitted, or named with
 ``success`` False (analysis.visibility, analysis.missing_modes)."""
+from __future__ import annotations
+
 from dataclasses import replace
 
 import numpy as np

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli_fit import F_TRUE, _write_uff58_with_pyuff
 
 from analysis import cli_fit, cli_stabilization
 from analysis.frf import FRFSet
@@ -15,7 +16,6 @@ from analysis.mif import cmif, indicator_summary
 from analysis.modal import ModalModel, pole_from_fz, synthesize
 from analysis.picks import PICKS_SCHEMA, read_picks
 from analysis.plots import fit_figure, label_levels
-from test_cli_fit import F_TRUE, _write_uff58_with_pyuff
 
 
 @pytest.fixture(scope="module")
@@ -197,10 +197,10 @@ def test_stabilization_legend_sits_above_the_pole_columns(tmp_path, monkeypatch)
 def test_fleet_png_names_the_flagged_units(tmp_path, monkeypatch):
     """fleet.png ties its points to units: every flagged unit is named in both panels."""
     import matplotlib.figure
+    from test_batch_fleet_stats import _fleet
 
     from analysis.batch.fleet import assess_fleet
     from analysis.batch.outputs import plot_fleet
-    from test_batch_fleet_stats import _fleet
 
     units = _fleet(24, {3: {2: 0.03}, 17: {5: -0.04}})
     names = [f"unit{k:02d}" for k in range(24)]

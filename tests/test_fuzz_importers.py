@@ -78,7 +78,7 @@ def lvm_texts(draw) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _write(tmp: Path, name: str, data: "str | bytes") -> Path:
+def _write(tmp: Path, name: str, data: str | bytes) -> Path:
     p = tmp / name
     if isinstance(data, str):
         p.write_text(data, encoding="latin-1", errors="replace")

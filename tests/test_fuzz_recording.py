@@ -26,8 +26,7 @@ from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.recording import Recording, counts_crc32, load_frfset, verify_recording
 from analysis.recording_writer import FRFPoint, RecordingWriter
-from analysis.spectra import AveragedSpectra
-from analysis.spectra import WindowSettings
+from analysis.spectra import AveragedSpectra, WindowSettings
 
 N = int(os.environ.get("IMPACTLAB_FUZZ_EXAMPLES", "100"))  # each case forks a verifying child
 FUZZ = settings(max_examples=N, derandomize=True, deadline=None, database=None,

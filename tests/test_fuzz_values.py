@@ -185,10 +185,10 @@ def test_simulator_config_files(changes, junk):
 # ---------------------------------------------------------------------- the station's JSON API
 @pytest.fixture(scope="module")
 def station(tmp_path_factory):
-    from station_support import StationProcess
-
     import signal
     import threading
+
+    from station_support import StationProcess
 
     d = tmp_path_factory.mktemp("station_fuzz")
     s = StationProcess(["--device", "sim://?seed=9", "--out", str(d / "rec.h5"), "--points", "left:9:Y,top:4:X",

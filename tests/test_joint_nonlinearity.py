@@ -54,11 +54,11 @@ def test_every_mode_alike_is_not_a_joint_and_linear_is_absent():
 
 @pytest.mark.long
 def test_time_domain_frame_joint_named_by_simulated_hits(monkeypatch):
+    from quality_support import level_hits
+
     from analysis.linearity import compare_levels, level_frfsets
     from simulator.config import FrameConfig
     from simulator.nonlinear_simulation import JointHitSimulation
-
-    from quality_support import level_hits
 
     base = {"joints": {"stiffness": [1e9, 1e9, 1e9, 1e8, 2e4, 1e8]},
             "supports": {"stiffness": [1e9, 1e9, 1e9, 1.6e7, 5e4, 1.6e7]}}

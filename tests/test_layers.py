@@ -17,7 +17,7 @@ import pytest
 from import_graph import PACKAGES, ROOT, import_statements
 
 #: what a library (non-face) module of each package may import from the other two
-ALLOWED: dict[str, dict[str, "frozenset[str] | None"]] = {
+ALLOWED: dict[str, dict[str, frozenset[str] | None]] = {
     "analysis": {},
     "acquisition": {"analysis": None},  # None: any module of that package
     "simulator": {"analysis": None,

@@ -6,11 +6,10 @@ import json
 
 import numpy as np
 import pytest
+from quality_support import FRICTION_JOINT, level_hits
 
 from analysis.linearity import compare_levels, group_by_force, level_frfsets
 from simulator.config import FrameConfig
-
-from quality_support import FRICTION_JOINT, level_hits
 
 BAND = (5.0, 220.0)
 

@@ -1,4 +1,6 @@
 """LSCE and LSCF initial poles against the known poles of synthetic FRFs (paper eq. (11))."""
+from __future__ import annotations
+
 from dataclasses import replace
 
 import numpy as np

@@ -1,4 +1,6 @@
 """The whole automatic fit: default band, stabilization, selection, nonlinear LSFD (paper Fig. 1)."""
+from __future__ import annotations
+
 import logging
 from dataclasses import replace
 
@@ -145,9 +147,10 @@ def test_real_uff_three_frfs(shared_data):
     (the summed magnitude has 6 clear peaks below 1 kHz) and reproduce the measured FRFs
     (median relative error below -20 dB on every FRF).
     """
+    from scipy.signal import find_peaks
+
     from analysis.inputs import load_input
     from analysis.modal import synthesize
-    from scipy.signal import find_peaks
 
     frf = load_input(shared_data / "pyuff_3frf" / "measurement.uff")
     fit_st = fit_auto(frf)

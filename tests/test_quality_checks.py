@@ -5,13 +5,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 import pytest
+from quality_support import SENSORS, roving_test
 
 from analysis.driving_point import check_driving_point, driving_points
 from analysis.quality import quality_checks, quality_lines
 from analysis.reciprocity import reciprocity, same_dof
 from simulator.stand import TestStand
-
-from quality_support import SENSORS, roving_test
 
 
 @pytest.fixture(scope="module")

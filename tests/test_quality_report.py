@@ -4,16 +4,15 @@ from __future__ import annotations
 import json
 
 import numpy as np
+from quality_support import FRICTION_JOINT, level_hits, roving_test
 
-from analysis.report_html.quality_section import quality_html, quality_section
 from analysis.report_html import sources
+from analysis.report_html.quality_section import quality_html, quality_section
 from simulator.config import FrameConfig
 from simulator.stand import TestStand
 
-from quality_support import FRICTION_JOINT, level_hits, roving_test
 
-
-def _record(hits) -> "sources.TestRecord":
+def _record(hits) -> sources.TestRecord:
     rec = sources.TestRecord()
     for h in hits:
         p = rec.points.setdefault(h.point, {"fs_hz": h.fs_hz, "trigger_index": h.trigger_index,

@@ -214,7 +214,6 @@ def test_simulator_config_bounds(tmp_path, text, pattern):
 
 def test_a_report_that_fails_writes_nothing_and_names_the_nan_pole(tmp_path, capsys):
     from analysis.cli_report import main
-
     from analysis.uff import read_uff58, write_uff58
 
     uff = tmp_path / "in.uff"

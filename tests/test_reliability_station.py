@@ -9,7 +9,6 @@ import struct
 import threading
 
 import pytest
-
 from station_support import Api, StationProcess
 
 POINTS = "left:9:Y,top:4:X"

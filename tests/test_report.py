@@ -28,7 +28,7 @@ class Page(HTMLParser):
         self.mode_rows: list[list[str]] = []
         self._stack: list[str] = []
         self._in_modes_body = False
-        self._cell: "list[str] | None" = None
+        self._cell: list[str] | None = None
         self.feed(text)
 
     def handle_starttag(self, tag, attrs):
@@ -222,8 +222,8 @@ def test_report_of_the_uliege_plane(shared_data, tmp_path):
     """The ULiege plane (222 FRFs, 74 hammer points on node_shock.csv): every mode in the table, the shapes
     on the measured geometry (timings: benchmarks/speed/bench_report.py)."""
     from analysis.report_html import build_document, run_fit, write_report
-    from benchmarks.speed.bench_report import uliege_geometry
     from benchmarks.accuracy.validation import uliege_plane
+    from benchmarks.speed.bench_report import uliege_geometry
 
     frf = uliege_plane.load(shared_data)
     fit = run_fit(frf, band=uliege_plane.BAND)

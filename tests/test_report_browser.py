@@ -321,8 +321,16 @@ def test_response_histories_differ_in_colour(loaded):
 
 def _validation_cases() -> list:
     """(name, loader, band) of every real dataset of docs/validation.md."""
-    from benchmarks.accuracy.validation import (f16_gvt, ladisk_beam, modelab_beam, plate_sweep, pyfrf_5impacts,
-                                                pyuff_3frf, uliege_plane, unesp_boltedbeam)
+    from benchmarks.accuracy.validation import (
+        f16_gvt,
+        ladisk_beam,
+        modelab_beam,
+        plate_sweep,
+        pyfrf_5impacts,
+        pyuff_3frf,
+        uliege_plane,
+        unesp_boltedbeam,
+    )
 
     return [("f16_gvt", f16_gvt.load, f16_gvt.BAND), ("ladisk_single", ladisk_beam.load_single, ladisk_beam.BAND_SINGLE),
             ("ladisk_multi", ladisk_beam.load_multi, ladisk_beam.BAND_MULTI),

@@ -7,7 +7,6 @@ import json
 from pathlib import Path
 
 import pytest
-
 from test_importers import synthetic_hits, write_lvm
 
 BEAM_LVM = Path("ladisk_beam_impact/acceleration.lvm")

@@ -14,8 +14,6 @@ from scipy import signal
 
 from acquisition.driver import Analyser
 from acquisition.loopback import LoopbackTransport
-from analysis.recording import Recording, load_frfset
-from analysis.recording_writer import RecordingWriter
 from acquisition.session import (
     CaptureSession,
     HitSummary,
@@ -25,8 +23,10 @@ from acquisition.session import (
     average_recorded_hits,
     channel_table,
 )
-from acquisition.terminal import terminal_decider
 from acquisition.setup import AcquisitionSetup, ChannelSetup, TriggerSetup
+from acquisition.terminal import terminal_decider
+from analysis.recording import Recording, load_frfset
+from analysis.recording_writer import RecordingWriter
 from analysis.spectra import WindowSettings
 
 FS = 6400.0
@@ -327,8 +327,9 @@ def test_sim_noisy_channels_h1_h2_bracket_truth_and_coherence_dips_at_antiresona
     """With noise on the force (no force window) and on the response: |H1| <= |H| <= |H2| as theory
     says (H1 low by the force noise, H2 high by the response noise), and the coherence drops at the
     antiresonances of the driving-point FRF."""
-    from acquisition.setup import default_setup
     from scipy.signal import find_peaks
+
+    from acquisition.setup import default_setup
 
     cfg = tmp_path / "noisy.toml"
     cfg.write_text(NOISY)

@@ -6,8 +6,16 @@ import numpy as np
 import pytest
 
 from simulator.config import ConfigError, FrameConfig
-from simulator.nonlinear_joint import (CubicJoint, IwanJoint, LinearJoint, NonlinearJointStand, joint_dof_vector,
-                                       joint_law, make_stand, simulate_joint)
+from simulator.nonlinear_joint import (
+    CubicJoint,
+    IwanJoint,
+    LinearJoint,
+    NonlinearJointStand,
+    joint_dof_vector,
+    joint_law,
+    make_stand,
+    simulate_joint,
+)
 from simulator.response import simulate_segment
 from simulator.stand import TestStand
 

@@ -1,7 +1,6 @@
 """The simulated test stand: channel set-up, strikes, reproducibility, FRFs from its voltages."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 import scipy.signal

@@ -1,4 +1,6 @@
 """Stabilization flags, automatic hint-free pole selection, the stabilization plot."""
+from __future__ import annotations
+
 import json
 from dataclasses import replace
 
@@ -6,10 +8,10 @@ import numpy as np
 import pytest
 
 from analysis.frf import FRFSet
+from analysis.mac import mac, mac_matrix
 from analysis.modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz, synthesize
 from analysis.plots import plot_stabilization
 from analysis.selection import poles_from_frequencies, select_clusters, select_poles
-from analysis.mac import mac, mac_matrix
 from analysis.stabilization import (
     NEW,
     STABLE_DAMP,

@@ -8,16 +8,22 @@ import sys
 import numpy as np
 import pytest
 import scipy.linalg  # noqa: F401  (loads SciPy's BLAS, so both pools are seen)
-from threadpoolctl import threadpool_info
-
 from test_pipeline import make_frf
+from threadpoolctl import threadpool_info
 
 from analysis import threads
 from analysis.cli_fit import build_parser
 from analysis.command_line import cli_entry
 from analysis.pipeline import fit_auto
-from analysis.threads import (ENV_VAR, WORK_PER_THREAD, blas_threads, choose_threads, limits_blas_threads,
-                              requested_threads, use_threads)
+from analysis.threads import (
+    ENV_VAR,
+    WORK_PER_THREAD,
+    blas_threads,
+    choose_threads,
+    limits_blas_threads,
+    requested_threads,
+    use_threads,
+)
 
 
 def blas_counts() -> set[int]:

@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
-import pyuff
 import pytest
+import pyuff
 
 from analysis.frf import FRFSet
 from analysis.points import uff_direction, uff_node

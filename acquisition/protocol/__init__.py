@@ -57,14 +57,14 @@ from __future__ import annotations
 
 from acquisition.errors import ProtocolError, SetupError  # noqa: F401  (raised by every decoder)
 
-from .envelope import *  # noqa: F401,F403
-from .sense import *  # noqa: F401,F403
-from .payloads import *  # noqa: F401,F403
 from .commands import *  # noqa: F401,F403
-from .envelope import __all__ as _envelope_all
-from .sense import __all__ as _sense_all
-from .payloads import __all__ as _payloads_all
 from .commands import __all__ as _commands_all
+from .envelope import *  # noqa: F401,F403
+from .envelope import __all__ as _envelope_all
+from .payloads import *  # noqa: F401,F403
+from .payloads import __all__ as _payloads_all
+from .sense import *  # noqa: F401,F403
+from .sense import __all__ as _sense_all
 
 #: every public name of the four parts (the API of ``from acquisition import protocol as P``)
 __all__ = [*_envelope_all, *_sense_all, *_payloads_all, *_commands_all]

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import enum
 import struct
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Callable, Mapping
-
 
 from .envelope import MAX_TRANSFER, PROTOCOL_VERSION, Direction
 from .payloads import VPD_SERIAL_NUMBER, VPD_SUPPORTED_PAGES
@@ -143,7 +142,7 @@ COMMANDS: Mapping[int, CommandSpec] = {spec.opcode: spec for spec in (
 _BY_NAME = {spec.name: spec for spec in COMMANDS.values()}
 
 
-def command_spec(opcode_or_name: "int | str") -> CommandSpec:
+def command_spec(opcode_or_name: int | str) -> CommandSpec:
     """The table row of an opcode (int) or a command name (``"READ BLOCK"``)."""
     spec = _BY_NAME.get(opcode_or_name) if isinstance(opcode_or_name, str) else COMMANDS.get(opcode_or_name)
     if spec is None:

@@ -6,7 +6,6 @@ import enum
 import struct
 from dataclasses import dataclass
 
-
 from acquisition.errors import ProtocolError
 
 __all__ = [

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from acquisition.errors import ProtocolError, SetupError
+
 from .envelope import MAX_TRANSFER, PROTOCOL_VERSION
 
 __all__ = [

@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import enum
 import struct
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
-
 
 from acquisition.errors import ProtocolError
 

@@ -24,15 +24,15 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, Optional
+from typing import Any
 
 from analysis.spectra import WindowSettings
 
 from ..errors import ImpactlabError, SetupError
 from ..session import CaptureSession, HitSummary, OperatorQuit, SessionError, TestPlan
 from ..setup import AcquisitionSetup, validate_setup
-from .adapters import LogToPage, Timed
 from ..window_options import parse_windows
+from .adapters import LogToPage, Timed
 from .publish import PagePublisher
 from .state import StationState
 from .testhit import take_test_hit
@@ -84,7 +84,7 @@ class StationEngine(PagePublisher):
     def __init__(self, analyser: Any, setup: AcquisitionSetup, plan: TestPlan, *, capabilities: Any,
                  windows: WindowSettings, open_writer: Callable[[AcquisitionSetup, WindowSettings], Any],
                  resume_hits: Sequence[Any] = (), setup_editable: bool = True, timeout_s: float = 10.0,
-                 geometry: Optional[dict] = None, auto: bool = False) -> None:
+                 geometry: dict | None = None, auto: bool = False) -> None:
         self.analyser = analyser
         self.setup = setup
         self.plan = plan
@@ -95,18 +95,18 @@ class StationEngine(PagePublisher):
         self.setup_editable = bool(setup_editable)
         self.timeout_s = float(timeout_s)
         self.state = StationState()
-        self.session: Optional[CaptureSession] = None
+        self.session: CaptureSession | None = None
         self._cond = self.state.cond
         self._cmds: list[tuple[str, dict]] = []
         self._quit = False
         self._auto = bool(auto)
         self._paused = False
-        self._thread: Optional[threading.Thread] = None
+        self._thread: threading.Thread | None = None
         self._log_handler = LogToPage(self.state)
-        self._pending_hit: Optional[HitSummary] = None
+        self._pending_hit: HitSummary | None = None
         self._shown_seq = 0
         self._accepted: dict[int, Any] = {}  # recording index -> accepted hit (for a pass that goes back)
-        self._redo: Optional[int] = None
+        self._redo: int | None = None
         self._block_time = 0.0
         self.geometry = geometry or {"nodes": {}, "lines": []}
         rows = self._plan_rows()
@@ -131,7 +131,7 @@ class StationEngine(PagePublisher):
         self._thread = threading.Thread(target=self._run, name="station-session", daemon=True)
         self._thread.start()
 
-    def join(self, timeout: Optional[float] = None) -> None:
+    def join(self, timeout: float | None = None) -> None:
         if self._thread is not None:
             self._thread.join(timeout)
 
@@ -215,7 +215,7 @@ class StationEngine(PagePublisher):
             self._publish_hit(got, pending=False)
         self.state.update(phase="setup")
 
-    def _wait_redo(self) -> Optional[int]:
+    def _wait_redo(self) -> int | None:
         """After the plan: wait for a point to measure again (its index) or the end (None)."""
         with self._cond:
             while True:
@@ -244,7 +244,7 @@ class StationEngine(PagePublisher):
         base = tuple(a for a in _ALLOWED.get(phase, ()) if not (self._paused and a == "arm"))
         return base + (_ANYTIME if phase not in ("finished", "error") else ())
 
-    def submit(self, action: str, params: Optional[dict] = None) -> str:
+    def submit(self, action: str, params: dict | None = None) -> str:
         """Queue or apply an action; raises :class:`ActionRefused` when it is unknown (400) or not
         possible in the current phase (409). Returns a short description for the page."""
         params = dict(params or {})
@@ -313,7 +313,7 @@ class StationEngine(PagePublisher):
                            f"pre-trigger {self.setup.trigger.pretrigger_samples}; windows {self.windows.describe()}")
 
     # -- the session's operator (session thread): decide, progress, on_hit, gate ----------------------
-    def _next_command(self, wanted: tuple, auto_answer: Optional[str]) -> tuple[str, dict]:
+    def _next_command(self, wanted: tuple, auto_answer: str | None) -> tuple[str, dict]:
         with self._cond:
             while True:
                 if self._quit:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -69,7 +69,7 @@ def _lines(freq_hz: np.ndarray, bandwidth_hz: float) -> np.ndarray:
 
 def hit_payload(data: np.ndarray, fs_hz: float, trigger_index: int, pretrigger: int, force_channel: int,
                 response_channels: Sequence[int], names: Sequence[str], units: Sequence[str],
-                force_window_s: Optional[float] = None) -> dict:
+                force_window_s: float | None = None) -> dict:
     """Traces of one hit (``data[n_ch, n]`` EU) and its force autospectrum.
 
     The force trace shows the first 0.25 s after the pre-trigger at full resolution (the pulse is
@@ -126,7 +126,7 @@ def frf_payload(average: Any, bandwidth_hz: float) -> dict:
     return base
 
 
-def range_advice(check: Any, setup: Any, ranges_v: Sequence[float], data: Optional[np.ndarray]) -> list[str]:
+def range_advice(check: Any, setup: Any, ranges_v: Sequence[float], data: np.ndarray | None) -> list[str]:
     """For each overloaded channel, the next input range up that holds the hit's peak with 20 %
     headroom (or the largest range), as a sentence for the operator."""
     out = []
@@ -186,7 +186,7 @@ def setup_payload(setup: Any, caps: Any, windows: Any, editable: bool) -> dict:
     }
 
 
-def geometry_payload(geometry: "Geometry | None") -> dict:
+def geometry_payload(geometry: Geometry | None) -> dict:
     """The test-plan view's wireframe: ``{"nodes": {"left:0": [x, y, z], ...}, "lines": [["left:0",
     "left:1"], ...]}`` (m, to 10 um); empty without a geometry."""
     if geometry is None:

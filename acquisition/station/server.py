@@ -29,7 +29,7 @@ from collections.abc import Callable
 from http.cookies import CookieError, SimpleCookie
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from .engine import ActionRefused, StationEngine
@@ -69,7 +69,7 @@ class StationServer(ThreadingHTTPServer):
     request_queue_size = LISTEN_BACKLOG
 
     def __init__(self, address: tuple, engine: StationEngine, token: str,
-                 plotly_js: Optional[Callable[[], Path]] = None) -> None:
+                 plotly_js: Callable[[], Path] | None = None) -> None:
         self.engine = engine
         self.token = token
         self.plotly_js = plotly_js
@@ -109,7 +109,7 @@ class _Handler(BaseHTTPRequestHandler):
         log.debug("%s - %s", self.address_string(), fmt % args)
 
     # -- plumbing ----------------------------------------------------------------------------------
-    def _send(self, status: int, body: bytes, ctype: str = "application/json", extra: Optional[dict] = None) -> None:
+    def _send(self, status: int, body: bytes, ctype: str = "application/json", extra: dict | None = None) -> None:
         self.send_response(status)
         self.send_header("Content-Type", ctype)
         self.send_header("Content-Length", str(len(body)))
@@ -148,7 +148,7 @@ class _Handler(BaseHTTPRequestHandler):
         morsel = cookie.get(_COOKIE)
         return morsel.value if morsel is not None else ""
 
-    def _body(self) -> Optional[dict]:
+    def _body(self) -> dict | None:
         """The JSON object of a POST, or None after answering 4xx."""
         try:
             n = int(self.headers.get("Content-Length", "0"))
@@ -261,7 +261,7 @@ class _Handler(BaseHTTPRequestHandler):
             self._error(404, f"no such API {parts.path!r}")
 
     # -- pieces ------------------------------------------------------------------------------------
-    def _static(self, name: str, extra: Optional[dict] = None) -> None:
+    def _static(self, name: str, extra: dict | None = None) -> None:
         if name == "plotly.min.js" and self.server.plotly_js is not None:
             try:
                 path = self.server.plotly_js()

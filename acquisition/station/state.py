@@ -11,7 +11,7 @@ import collections
 import json
 import threading
 import time
-from typing import Any, Optional
+from typing import Any
 
 __all__ = ["Lease", "StationState"]
 
@@ -28,7 +28,7 @@ class Lease:
     def __init__(self, ttl_s: float = 15.0, clock: Any = time.monotonic) -> None:
         self.ttl_s = float(ttl_s)
         self._clock = clock
-        self.holder: Optional[str] = None
+        self.holder: str | None = None
         self._until = 0.0
 
     def acquire(self, client: str, take: bool = False) -> bool:
@@ -39,7 +39,7 @@ class Lease:
             return True
         return False
 
-    def holds(self, client: Optional[str]) -> bool:
+    def holds(self, client: str | None) -> bool:
         return client is not None and client == self.holder and self._clock() < self._until
 
 
@@ -87,7 +87,7 @@ class StationState:
             self._blobs[name] = (self.version + 1, data)
             self._changed()
 
-    def blob(self, name: str) -> Optional[bytes]:
+    def blob(self, name: str) -> bytes | None:
         with self.cond:
             item = self._blobs.get(name)
             return None if item is None else item[1]

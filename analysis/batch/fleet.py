@@ -28,8 +28,8 @@ unit, :func:`median_unit`):
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -78,12 +78,12 @@ class UnitFlags:
     name: str
     file: str
     status: str                               # "ok" or "error"
-    error: Optional[str] = None
+    error: str | None = None
     flagged: bool = False
     reasons: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)      # what is odd but not a flag (a weak mode not found)
     common_shift_pct: float = float("nan")
-    pairing: Optional[Pairing] = None
+    pairing: Pairing | None = None
     shift_pct: np.ndarray = field(default_factory=lambda: np.zeros(0))   # per reference mode, NaN: not paired
     z: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -175,8 +175,8 @@ def median_unit(units: Sequence[UnitModes], clip: float = 0.03, max_sample: int 
     return best
 
 
-def assess_fleet(units: Sequence[Optional[UnitModes]], names: Sequence[str], files: Sequence[str], *,
-                 reference: Optional[UnitModes] = None, reference_name: str = "", errors: Sequence[Optional[str]] = (),
+def assess_fleet(units: Sequence[UnitModes | None], names: Sequence[str], files: Sequence[str], *,
+                 reference: UnitModes | None = None, reference_name: str = "", errors: Sequence[str | None] = (),
                  tol: float = 0.05, z_limit: float = 6.0, min_shift_pct: float = 0.5, min_found: float = 0.9,
                  common_min_shift_pct: float = 3.0) -> FleetResult:
     """Pair, measure and flag every unit (see the module docstring). ``units[i]`` None (with

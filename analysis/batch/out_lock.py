@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Optional
+
 from ..errors import FolderBusy
 
 __all__ = ["FolderLock", "FolderBusy"]
@@ -17,9 +17,9 @@ LOCK_NAME = ".batch.lock"
 class FolderLock:
     """Take ``DIR/.batch.lock`` (raises :class:`FolderBusy` naming the holder's pid); :meth:`release` frees it."""
 
-    def __init__(self, folder: "str | Path") -> None:
+    def __init__(self, folder: str | Path) -> None:
         self.path = Path(folder) / LOCK_NAME
-        self._fd: Optional[int] = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        self._fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             import fcntl
         except ImportError:  # no flock on this platform: no protection, as before

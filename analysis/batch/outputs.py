@@ -15,8 +15,9 @@ common shift and the fleet's median), ``z`` (in robust standard deviations), ``f
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +36,7 @@ def _f(x: Any) -> float:
     return float(x) if x is not None and np.isfinite(x) else float("nan")
 
 
-def modes_rows(fleet: FleetResult, units: Sequence["UnitModes | None"], inputs: Sequence[str],
+def modes_rows(fleet: FleetResult, units: Sequence[UnitModes | None], inputs: Sequence[str],
                ref_freq_hz: np.ndarray) -> list[dict[str, Any]]:
     """The rows of modes.parquet (see the module docstring); ``inputs`` are the inputs' file names."""
     rows = []
@@ -59,7 +60,7 @@ def modes_rows(fleet: FleetResult, units: Sequence["UnitModes | None"], inputs: 
     return rows
 
 
-def write_modes_parquet(path: "str | Path", rows: Sequence[dict[str, Any]]) -> None:
+def write_modes_parquet(path: str | Path, rows: Sequence[dict[str, Any]]) -> None:
     """Write the rows as a Parquet table (pyarrow), atomically, with the columns in MODES_COLUMNS order."""
     try:
         import pyarrow as pa
@@ -74,7 +75,7 @@ def write_modes_parquet(path: "str | Path", rows: Sequence[dict[str, Any]]) -> N
         pq.write_table(table, tmp)
 
 
-def _num(x: float, nd: int = 6) -> "float | None":
+def _num(x: float, nd: int = 6) -> float | None:
     return round(float(x), nd) if x is not None and np.isfinite(x) else None
 
 
@@ -97,7 +98,7 @@ def fleet_document(fleet: FleetResult, run_info: dict[str, Any]) -> dict[str, An
     }
 
 
-def plot_fleet(path: "str | Path", fleet: FleetResult) -> None:
+def plot_fleet(path: str | Path, fleet: FleetResult) -> None:
     """fleet.png: per reference mode, every unit's shift beyond its common shift (%), flagged units
     in red with their names (at their largest departure), the fleet's +-z_limit robust band in grey;
     the units' common shifts in a second panel (flagged units named)."""

@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any
 
 from ..atomic import write_json_atomic
-from .task import fit_one, file_sha256, options_key, result_is_current
+from .task import file_sha256, fit_one, options_key, result_is_current
 
 __all__ = ["BatchInput", "BatchRun", "DASK_CONFIG_DIR", "dask_settings", "plan_inputs", "open_client", "run_batch",
            "run_serial"]
@@ -76,7 +77,7 @@ class BatchRun:
     lost: list[str] = field(default_factory=list)   # inputs whose task Dask gave up on (no result file)
 
 
-def plan_inputs(paths: Sequence["str | Path"]) -> list[BatchInput]:
+def plan_inputs(paths: Sequence[str | Path]) -> list[BatchInput]:
     """The inputs, sorted by path, with unique names (``unit-007``; a clash gets its folder's name:
     ``lineB-unit-007``) and their SHA-256 (an unreadable input gets the hash of its path's text, so
     it still gets its error row)."""
@@ -102,8 +103,8 @@ def plan_inputs(paths: Sequence["str | Path"]) -> list[BatchInput]:
     return out
 
 
-def open_client(scheduler: Optional[str] = None, workers: Optional[int] = None,
-                dashboard: Optional[str] = None) -> Any:
+def open_client(scheduler: str | None = None, workers: int | None = None,
+                dashboard: str | None = None) -> Any:
     """A ``distributed.Client``: of the cluster at ``scheduler`` (``tcp://HOST:PORT`` or a scheduler
     file), else of a new ``LocalCluster`` with ``workers`` processes (default: one per core) of one
     thread each, with Dask's dashboard at ``dashboard`` (``HOST:PORT``) only when given (otherwise
@@ -139,9 +140,9 @@ def _reuse(inputs: Sequence[BatchInput], fits_dir: Path, key: str) -> dict[str, 
     return done
 
 
-def run_batch(inputs: Sequence[BatchInput], out_dir: "str | Path", client: Any, *,
-              band: Optional[Sequence[float]] = None, estimator: Optional[str] = None,
-              on_result: Optional[Callable[[dict[str, Any], int, int], None]] = None) -> BatchRun:
+def run_batch(inputs: Sequence[BatchInput], out_dir: str | Path, client: Any, *,
+              band: Sequence[float] | None = None, estimator: str | None = None,
+              on_result: Callable[[dict[str, Any], int, int], None] | None = None) -> BatchRun:
     """Fit every input on the Dask ``client``'s cluster; results in ``out_dir/fits/``.
 
     ``on_result(doc, done, total)`` is called after each new result is on disk (progress)."""
@@ -185,8 +186,8 @@ def run_batch(inputs: Sequence[BatchInput], out_dir: "str | Path", client: Any, 
     return run
 
 
-def run_serial(inputs: Sequence[BatchInput], out_dir: "str | Path", *, band: Optional[Sequence[float]] = None,
-               estimator: Optional[str] = None) -> BatchRun:
+def run_serial(inputs: Sequence[BatchInput], out_dir: str | Path, *, band: Sequence[float] | None = None,
+               estimator: str | None = None) -> BatchRun:
     """The same work in a plain loop in this process (no Dask): the baseline of the benchmark."""
     t0 = time.perf_counter()
     fits_dir = Path(out_dir) / "fits"

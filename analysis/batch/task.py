@@ -13,15 +13,16 @@ import logging
 import os
 import socket
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any
 
 __all__ = ["RESULT_SCHEMA", "file_sha256", "options_key", "fit_one", "result_is_current"]
 
 RESULT_SCHEMA = "impactlab.batch-fit/1"
 
 
-def file_sha256(path: "str | os.PathLike[str]", chunk: int = 1 << 20) -> str:
+def file_sha256(path: str | os.PathLike[str], chunk: int = 1 << 20) -> str:
     """Hex SHA-256 of a file's bytes (read in 1 MiB pieces)."""
     h = hashlib.sha256()
     with open(path, "rb") as fh:
@@ -33,15 +34,15 @@ def file_sha256(path: "str | os.PathLike[str]", chunk: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
-def options_key(band: Optional[Sequence[float]], estimator: Optional[str]) -> str:
+def options_key(band: Sequence[float] | None, estimator: str | None) -> str:
     """A short fingerprint of the options that change a fit (band in Hz, FRF estimator)."""
     text = json.dumps({"schema": RESULT_SCHEMA, "band": None if band is None else [float(b) for b in band],
                        "estimator": estimator}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def fit_one(path: str, name: str, sha256: str, band: Optional[Sequence[float]] = None,
-            estimator: Optional[str] = None) -> dict[str, Any]:
+def fit_one(path: str, name: str, sha256: str, band: Sequence[float] | None = None,
+            estimator: str | None = None) -> dict[str, Any]:
     """Load ``path`` (recording or UFF 58), run the automatic fit (:func:`analysis.pipeline.fit_auto`)
     in ``band`` (Hz; None: the band the data support) and return the result document:
     ``{schema, input, path, sha256, options, status: "ok"|"error", error, fit, seconds, worker}``
@@ -82,7 +83,7 @@ def fit_one(path: str, name: str, sha256: str, band: Optional[Sequence[float]] =
     return doc
 
 
-def result_is_current(path: Path, sha256: str, key: str) -> Optional[dict[str, Any]]:
+def result_is_current(path: Path, sha256: str, key: str) -> dict[str, Any] | None:
     """The stored result at ``path`` if it is for this content (``sha256``) and options (``key``)
     and is complete; None otherwise (missing, another input version, unreadable)."""
     try:

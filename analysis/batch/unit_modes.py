@@ -6,9 +6,10 @@ of a batch result, so a reference may be any earlier fit of a good unit.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -69,7 +70,7 @@ def modes_from_fit(doc: Mapping[str, Any]) -> UnitModes:
     )
 
 
-def read_reference(path: "str | Path") -> UnitModes:
+def read_reference(path: str | Path) -> UnitModes:
     """The modes of a reference fit: an ``analysis fit --json`` file or a batch result JSON."""
     p = Path(path)
     try:

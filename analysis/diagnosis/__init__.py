@@ -4,6 +4,8 @@ Modules: :mod:`.compare` (errors, mode pairing, coherence), :mod:`.effects` (the
 :mod:`.verdict` (cross-validated gain, significance, verdict), :mod:`.entry` (the whole diagnosis in
 one call, :func:`diagnose`), :mod:`.report` (plots and text).
 """
+from __future__ import annotations
+
 from .effects import EFFECTS, EffectError, effect_names, predict
 from .entry import diagnose
 from .verdict import Diagnosis, diagnose_frfs

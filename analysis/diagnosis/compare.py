@@ -18,7 +18,7 @@ With coherence, the H1 variance ``(1 - g^2) / (2 n_avg g^2) |H|^2`` gives a seco
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.signal import find_peaks
@@ -62,7 +62,7 @@ def averages(measured: FRFSet) -> float:
         return 5.0
 
 
-def coherence_variance(measured: FRFSet) -> Optional[np.ndarray]:
+def coherence_variance(measured: FRFSet) -> np.ndarray | None:
     """Relative variance of the H1 estimate from the coherence, ``(1 - g^2) / (2 n_avg g^2)``
     (``n_avg`` from :func:`averages`), or None without coherence."""
     if measured.coherence is None or not np.all(np.isfinite(measured.coherence)):
@@ -92,7 +92,7 @@ def _db(x: float) -> float:
     return float(10 * np.log10(max(x, 1e-30)))
 
 
-def error_db(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray, lines: Optional[np.ndarray] = None) -> float:
+def error_db(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray, lines: np.ndarray | None = None) -> float:
     """10 log10 of the mean weighted squared error over ``lines`` (boolean mask, default all)."""
     sel = np.ones(measured.freq_hz.size, bool) if lines is None else lines
     e = measured.H[..., sel] - model_H[..., sel]
@@ -252,7 +252,7 @@ def doubtful_coherence(measured: FRFSet, threshold: float = 0.9, min_lines: int 
     return out
 
 
-def compare(measured: FRFSet, simulated: FRFSet, weights: Optional[np.ndarray] = None,
+def compare(measured: FRFSet, simulated: FRFSet, weights: np.ndarray | None = None,
             n_bands: int = 8) -> dict:
     """All the comparisons as one JSON-able dict: ``bands``, ``channels``, ``modes``, ``coherence``."""
     w = line_weights(measured) if weights is None else weights

@@ -1,15 +1,16 @@
 """What every effect of the catalogue shares: the entry type, the fitting context, the error."""
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Optional
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from ..errors import EffectError
 from ..frf import FRFSet
 from ..modal import ModalModel
-from ..errors import EffectError
 
 __all__ = ["Effect", "EffectError", "FitContext", "check_positive", "fit_scalar"]
 
@@ -63,7 +64,7 @@ class Effect:
     primary: str
     description: str
     needs: tuple = ()
-    held_out: Optional[Callable] = None
+    held_out: Callable | None = None
     advice: str = ""
 
 

@@ -44,20 +44,36 @@ and :func:`predict`.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
-from typing import Callable, Mapping, Optional, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
 from ..modal import ModalModel, pole_from_fz
-from .effect_types import Effect, EffectError, FitContext, check_positive as _check_positive, fit_scalar as _fit_scalar
-from .frf_effects import (apply_residual_modes, apply_sensitivity_error, apply_sensor_highpass, apply_time_delay,
-                          fit_residual_modes, fit_sensitivity_error, fit_sensor_highpass, fit_time_delay)
+from .effect_types import Effect, EffectError, FitContext
+from .effect_types import check_positive as _check_positive
+from .effect_types import fit_scalar as _fit_scalar
+from .frf_effects import (
+    apply_residual_modes,
+    apply_sensitivity_error,
+    apply_sensor_highpass,
+    apply_time_delay,
+    fit_residual_modes,
+    fit_sensitivity_error,
+    fit_sensor_highpass,
+    fit_time_delay,
+)
 from .mains import apply_mains_hum, default_hum_width, fit_mains_hum, held_out_mains_hum, hum_kernels
-from .processing import (RECORD_KEY, WINDOW_SHIFT_KEY, apply_exponential_window, apply_record_length,
-                         synthesize_windowed, truncation_tail)
+from .processing import (
+    RECORD_KEY,
+    WINDOW_SHIFT_KEY,
+    apply_exponential_window,
+    apply_record_length,
+    synthesize_windowed,
+    truncation_tail,
+)
 
 __all__ = [
     "Effect",
@@ -113,7 +129,7 @@ def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = 
     f = ctx.measured.freq_hz[lines]
     Hm, W = ctx.measured.H[..., lines], ctx.weights[..., lines]
     base = ctx.base
-    background: "float | np.ndarray" = 0.0
+    background: float | np.ndarray = 0.0
     if coarse:
         near = (base.freq_hz >= f[0] / 1.5) & (base.freq_hz <= f[-1] * 1.5)
         if near.any() and not near.all():
@@ -320,7 +336,7 @@ def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
             break
         if all(abs(f[k] - c) > 10 * df for c in cands):
             cands.append(float(f[k]))
-    best: "tuple[float, float, float, np.ndarray] | None" = None
+    best: tuple[float, float, float, np.ndarray] | None = None
     for fc in cands:
         zs = [(float(np.sum(_missing_mode_residuals(ctx, lines, np.array([fc, z]))[0] ** 2)), z)
               for z in (0.002, 0.005, 0.01, 0.02, 0.05)]
@@ -432,8 +448,8 @@ def predict(
     quantity: str,
     effects: Sequence[Mapping] = (),
     *,
-    outputs: Optional[Sequence[str]] = None,
-    references: Optional[Sequence[str]] = None,
+    outputs: Sequence[str] | None = None,
+    references: Sequence[str] | None = None,
 ) -> FRFSet:
     """The simulation extended by ``effects`` (list of ``{"effect": name, **params}``) at ``freq_hz``
     (Hz) in ``quantity``: modal effects change the model, then it is synthesised (eq. 11), converted to

@@ -11,9 +11,10 @@ and a recording's hits get the time-data stage (:mod:`analysis.diagnosis.timedat
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Optional, Sequence, Union
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ __all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_poi
 log = logging.getLogger(__name__)
 
 
-def driving_point_shapes(model: ModalModel) -> Optional[np.ndarray]:
+def driving_point_shapes(model: ModalModel) -> np.ndarray | None:
     """Mass-normalised mode shapes (1/sqrt(kg)) at the outputs, (n_out, n_modes), scaled from a fitted
     model's residues through a driving point (an output with the label of a reference: same node and
     direction); None without one. For a real mode the receptance residue is ``phi_o phi_d / (2 j w_d)``
@@ -89,15 +90,15 @@ def _is_physical(x: Any) -> bool:
 
 
 def diagnose(
-    measured: Union[FRFSet, str, Path],
+    measured: FRFSet | str | Path,
     simulated: Any,
     *,
-    band: Union[tuple, str, None] = None,
-    effects: Optional[Sequence[str]] = None,
-    estimator: Optional[str] = None,
+    band: tuple | str | None = None,
+    effects: Sequence[str] | None = None,
+    estimator: str | None = None,
     physical: Any = None,
-    recording: Union[str, Path, None] = None,
-    extra_noise_db: Optional[dict] = None,
+    recording: str | Path | None = None,
+    extra_noise_db: dict | None = None,
     **rule: Any,
 ) -> Diagnosis:
     """Compare a measurement with a simulation and name what differs (``docs/diagnosis.md``).

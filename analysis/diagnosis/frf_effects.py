@@ -2,14 +2,16 @@
 high-pass, a channel delay, a channel's calibration); see :mod:`analysis.diagnosis.effects`."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import Mapping
 
 import numpy as np
 
 from ..frf import FRFSet
 from ..modal import residual_basis
-from .effect_types import EffectError, FitContext, check_positive as _check_positive, fit_scalar as _fit_scalar
+from .effect_types import EffectError, FitContext
+from .effect_types import check_positive as _check_positive
+from .effect_types import fit_scalar as _fit_scalar
 
 __all__ = ["apply_residual_modes", "fit_residual_modes", "highpass_response", "apply_sensor_highpass",
            "fit_sensor_highpass", "apply_time_delay", "fit_time_delay", "apply_sensitivity_error",
@@ -64,7 +66,7 @@ def apply_sensor_highpass(frf: FRFSet, params: Mapping) -> FRFSet:
 def fit_sensor_highpass(ctx: FitContext, lines: np.ndarray) -> dict:
     f = ctx.measured.freq_hz
     f0 = max(f[lines][0], 1e-3)
-    best: "tuple[float, float, int] | None" = None
+    best: tuple[float, float, int] | None = None
     for n in (1, 2):
         def cost(lfc: float, n: int = n) -> float:
             return ctx.cost(ctx.sim.H * highpass_response(f, float(np.exp(lfc)), n), lines)

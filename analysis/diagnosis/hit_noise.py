@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
@@ -24,7 +23,7 @@ __all__ = ["hit_scatter_noise_db"]
 log = logging.getLogger(__name__)
 
 
-def hit_scatter_noise_db(path: "str | Path", measured: FRFSet, weights: np.ndarray) -> Optional[float]:
+def hit_scatter_noise_db(path: str | Path, measured: FRFSet, weights: np.ndarray) -> float | None:
     """Noise level (dB) of ``measured`` (FRFs of the recording ``path``, in its band and point order)
     from the scatter of the recording's accepted hits; None when a point has fewer than two hits or the
     hits cannot be matched to the FRFs."""

@@ -36,8 +36,9 @@ the Iwan slip moment.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -81,7 +82,7 @@ class JointCandidate:
 class JointSimulation(Protocol):
     """What the cause needs of the simulation (:class:`simulator.nonlinear_simulation.JointHitSimulation`)."""
 
-    def joint_candidates(self) -> "tuple[np.ndarray, Sequence[JointCandidate]]":
+    def joint_candidates(self) -> tuple[np.ndarray, Sequence[JointCandidate]]:
         """The model's natural frequencies (Hz) and its candidate springs."""
         ...
 
@@ -89,7 +90,7 @@ class JointSimulation(Protocol):
         """Peak rotation (rad) of the candidate spring in the linear frame at the highest level's hits."""
         ...
 
-    def level_frfs(self, candidate: str, slip_moment_nm: float) -> "list[FRFSet]":
+    def level_frfs(self, candidate: str, slip_moment_nm: float) -> list[FRFSet]:
         """The test's FRFs per level (ascending, the measurement's levels, points and lines) with an Iwan
         joint of that slip moment (N m) at the candidate spring (``RESIDUAL_FRACTION`` never slips)."""
         ...

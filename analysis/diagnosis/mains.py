@@ -2,13 +2,14 @@
 record, or broadened), their fit and their cross-validation by harmonics."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import Mapping
 
 import numpy as np
 
 from ..frf import FRFSet
-from .effect_types import EffectError, FitContext, check_positive as _check_positive
+from .effect_types import EffectError, FitContext
+from .effect_types import check_positive as _check_positive
 
 __all__ = ["HUM_BASES_HZ", "hum_kernels", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
            "held_out_mains_hum", "held_out_by_harmonics"]
@@ -107,7 +108,7 @@ def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
 
 
 def _fit_candidate(ctx: FitContext, E: np.ndarray, lines: np.ndarray, f0_hz: float, width_hz: float,
-                   shape: str) -> "tuple[np.ndarray, float, int] | None":
+                   shape: str) -> tuple[np.ndarray, float, int] | None:
     """Amplitudes, remaining weighted cost and number of harmonics fitted for mains lines at the
     harmonics of ``f0_hz`` on ``lines``; None when no harmonic can be fitted there. A harmonic is
     fitted only where lines within its width are given: its tails alone would fit noise."""
@@ -161,7 +162,7 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
             "shape": best[6] if best[3] else "line", "amplitudes": best[4].tolist()}
 
 
-def held_out_mains_hum(ctx: FitContext) -> "tuple[np.ndarray, np.ndarray]":
+def held_out_mains_hum(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     """The cross-validation of ``mains_hum``: by harmonics (:func:`held_out_by_harmonics`), for single
     lines and lines with a width alike (neighbouring lines of a line with a width are not independent,
     so interleaved folds would let a fold fit what it is scored on)."""

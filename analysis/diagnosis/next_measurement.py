@@ -16,7 +16,8 @@ also what a sensor there would see from the present hammer points.
 """
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -31,7 +32,7 @@ SEPARATED_CHI2 = 4.0
 DIRECTIONS = ("X", "Y", "Z")
 
 
-def rivals(found: Sequence[dict]) -> Optional[tuple[tuple[str, dict], tuple[str, dict], str]]:
+def rivals(found: Sequence[dict]) -> tuple[tuple[str, dict], tuple[str, dict], str] | None:
     """The best candidate and its closest rival when the data do not separate them, with the reason;
     None when they are separated. ``found``: the physical causes as the verdict ranks them, each with
     its fit (``_fit``: ``cause``, ``params``, ``chi2``, ``chi2_cv``, ``ranked``)."""
@@ -64,7 +65,7 @@ def _relative_db(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def propose(sim: Any, measured: FRFSet, prior: Sequence, noise_db: float, a: tuple[str, dict], b: tuple[str, dict],
-            why: str) -> Optional[dict]:
+            why: str) -> dict | None:
     """The hammer point (``component:node:direction``) whose FRFs to the measured outputs best separate
     candidates ``a`` and ``b`` (``(cause, params)``), as ``{"point", "why", "separation_db"}``; None when
     the simulation cannot be evaluated at other points (no ``points`` / ``at_points``)."""

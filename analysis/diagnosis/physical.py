@@ -41,9 +41,10 @@ search range (not at an edge).
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
-from typing import Mapping, Optional, Protocol, Sequence
+from typing import Protocol
 
 import numpy as np
 from scipy.optimize import least_squares, linear_sum_assignment
@@ -89,7 +90,7 @@ class ParamSpec:
     name: str
     lo: float
     hi: float
-    nominal: Optional[float] = 1.0
+    nominal: float | None = 1.0
     unit: str = ""
     log: bool = True
 
@@ -123,7 +124,7 @@ class CauseSpec:
 
     name: str
     params: tuple
-    choice: Optional[str] = None
+    choice: str | None = None
     options: tuple = ()
     description: str = ""
     advice: str = ""
@@ -134,9 +135,9 @@ class PhysicalSimulation(Protocol):
 
     def causes(self) -> Sequence[CauseSpec]: ...
 
-    def modes(self, cause: Optional[str], params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]: ...
+    def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]: ...
 
-    def model(self, cause: Optional[str], params: Mapping) -> ModalModel: ...
+    def model(self, cause: str | None, params: Mapping) -> ModalModel: ...
 
     def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]: ...
 
@@ -158,7 +159,7 @@ class MeasuredModes:
     shapes: np.ndarray
 
     @classmethod
-    def from_model(cls, model: ModalModel, freq_std_hz: Optional[np.ndarray] = None) -> "MeasuredModes":
+    def from_model(cls, model: ModalModel, freq_std_hz: np.ndarray | None = None) -> MeasuredModes:
         f = np.asarray(model.freq_hz, float)
         std = np.zeros_like(f) if freq_std_hz is None else np.asarray(freq_std_hz, float)
         R = np.asarray(model.residues).reshape(-1, f.size)
@@ -166,7 +167,7 @@ class MeasuredModes:
         keep = keep[np.argsort(f[keep])][:MAX_MODES]
         return cls(freq_hz=f[keep], freq_std_hz=std[keep], shapes=R[:, keep])
 
-    def subset(self, keep: np.ndarray) -> "MeasuredModes":
+    def subset(self, keep: np.ndarray) -> MeasuredModes:
         """The modes selected by the mask or indices ``keep``."""
         return MeasuredModes(self.freq_hz[keep], self.freq_std_hz[keep], self.shapes[:, keep])
 
@@ -220,7 +221,7 @@ class PhysicalFit:
 
 
 def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[ParamSpec], fixed: dict,
-                    mm: MeasuredModes, sel: np.ndarray, fmax: float, start: Optional[dict] = None) -> tuple[dict, float]:
+                    mm: MeasuredModes, sel: np.ndarray, fmax: float, start: dict | None = None) -> tuple[dict, float]:
     """Least squares over the free parameters (log-factors) from ``start`` (else from the nominal and
     from the best point of a 7-point-per-parameter grid)."""
     def full(x: np.ndarray) -> dict:
@@ -273,8 +274,8 @@ def _screen(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec
 
 
 def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm: MeasuredModes,
-              sel: np.ndarray, fmax: float, options: Optional[Sequence[str]] = None,
-              start: Optional[dict] = None) -> tuple[dict, float, list]:
+              sel: np.ndarray, fmax: float, options: Sequence[str] | None = None,
+              start: dict | None = None) -> tuple[dict, float, list]:
     """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
     With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted.
     Returns (params, chi2, [(chi2, option, params)] of the fitted options, sorted)."""
@@ -308,7 +309,7 @@ def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
 
 
 def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
-                    options: Optional[Sequence[str]], start: dict) -> np.ndarray:
+                    options: Sequence[str] | None, start: dict) -> np.ndarray:
     """Held-out chi2 of each measured mode (leave one mode out, everything refitted in the fold)."""
     K = mm.freq_hz.size
     out = np.empty(K)
@@ -322,7 +323,7 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
 
 
 def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
-                    names: Optional[Sequence[str]] = None) -> list[PhysicalFit]:
+                    names: Sequence[str] | None = None) -> list[PhysicalFit]:
     """Every cause (its best nested variant by leave-one-mode-out chi2) fitted; sorted by held-out
     chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``)."""
     allsel = np.ones(mm.freq_hz.size, bool)
@@ -330,7 +331,7 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
     causes = [c for c in sim.causes() if names is None or c.name in names]
     for i, cause in enumerate(causes, start=1):
         progress("diagnosis: physical cause %d/%d, %s", i, len(causes), cause.name)
-        best: Optional[PhysicalFit] = None
+        best: PhysicalFit | None = None
         for free in variants(cause):
             p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
             options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
@@ -358,7 +359,7 @@ def paired_well(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
 
 
 def same_structure(mm: MeasuredModes, f: np.ndarray, P: np.ndarray,
-                   good: Optional[np.ndarray] = None) -> tuple[bool, str]:
+                   good: np.ndarray | None = None) -> tuple[bool, str]:
     """Do the measured modes pair with the simulation's by frequency and MAC? At least half of them
     must (:func:`paired_well`; ``good`` is its mask when the caller has it)."""
     good = paired_well(mm, f, P) if good is None else good

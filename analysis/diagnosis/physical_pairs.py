@@ -11,8 +11,8 @@ held-out modes better than the first cause alone by at least ``MIN_GAIN_DB``.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Mapping, Optional, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -40,11 +40,11 @@ class OnTop:
         taken = {c for c, _ in self.first}
         return [c for c in self.sim.causes() if c.name not in taken]
 
-    def modes(self, cause: Optional[str], params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
         more = [] if cause is None else [(cause, params)]
         return changes_of(self.sim, self.first + more, max_freq_hz)
 
-    def model(self, cause: Optional[str], params: Mapping) -> ModalModel:
+    def model(self, cause: str | None, params: Mapping) -> ModalModel:
         more = [] if cause is None else [(cause, params)]
         return self.sim.model_of(self.first + more)
 

@@ -23,19 +23,38 @@ Steps, each one able to decide:
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
 from ..frf import FRFSet
+from ..progress import progress
 from .compare import typical_error_db
 from .effects import predict
-from ..progress import progress
-from .physical import (ADEQUATE_FRACTION, ADEQUATE_MARGIN_DB, DISCREPANCY_CHI2, MIN_GAIN_DB, RESIDUAL_CAP, CauseSpec,
-                       MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, gain_db, pair, paired_well,
-                       physical_causes, residuals, same_structure, shown_params, variants, z_score)
 from .next_measurement import propose, rivals
+from .physical import (
+    ADEQUATE_FRACTION,
+    ADEQUATE_MARGIN_DB,
+    DISCREPANCY_CHI2,
+    MIN_GAIN_DB,
+    RESIDUAL_CAP,
+    CauseSpec,
+    MeasuredModes,
+    PhysicalFit,
+    PhysicalSimulation,
+    fit_cause,
+    gain_db,
+    pair,
+    paired_well,
+    physical_causes,
+    residuals,
+    same_structure,
+    shown_params,
+    variants,
+    z_score,
+)
 from .physical_pairs import OnTop, fit_pair
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes"]
@@ -52,15 +71,15 @@ class PhysicalOutcome:
     decided: bool
     verdict: str = "none"
     causes: list = field(default_factory=list)
-    extended: Optional[FRFSet] = None
+    extended: FRFSet | None = None
     error_before_db: float = float("nan")
     error_after_db: float = float("nan")
     combined: list = field(default_factory=list)
     reason: str = ""
     doc: dict = field(default_factory=dict)
     named: list = field(default_factory=list)
-    next_measurement: Optional[dict] = None
-    on_top: Optional[dict] = None
+    next_measurement: dict | None = None
+    on_top: dict | None = None
 
 
 def measure_modes(measured: FRFSet) -> MeasuredModes:
@@ -97,8 +116,8 @@ def _power(db: float) -> float:
 
 def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence, weights: np.ndarray,
                      noise_db: float, none_margin_db: float,
-                     measured_modes: Optional[MeasuredModes] = None,
-                     causes: Optional[Sequence[str]] = None) -> PhysicalOutcome:
+                     measured_modes: MeasuredModes | None = None,
+                     causes: Sequence[str] | None = None) -> PhysicalOutcome:
     """Steps 1-4 of the module docstring; ``causes`` limits the physical causes tried (None: all)."""
     from ..errors import ImpactlabError
 
@@ -269,7 +288,7 @@ N_SECOND = 2
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-             names: Optional[Sequence[str]]) -> list[PhysicalFit]:
+             names: Sequence[str] | None) -> list[PhysicalFit]:
     """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
     plus a penalty for its freedom (2 per parameter, 2 ln(number of options) for a choice)."""
     top = OnTop(sim, [(first.cause, first.params)])
@@ -291,12 +310,12 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
 
 
 def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
-                  judge: _Judge, names: Optional[Sequence[str]]) -> Optional[dict]:
+                  judge: _Judge, names: Sequence[str] | None) -> dict | None:
     """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of the best
     significant single cause (and, when that gives no adequate pair, the next), the other causes; the
     best pair by nested held-out error, judged like a single cause and against the first cause alone."""
     firsts = [c for c in found if c["significant"]][:N_FIRST]
-    best: Optional[dict] = None
+    best: dict | None = None
     for first in firsts:
         fa: PhysicalFit = first["_fit"]
         progress("diagnosis: second cause on top of %s", fa.cause)

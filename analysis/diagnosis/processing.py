@@ -3,8 +3,8 @@ exponential window on the responses and the finite record after the pulse (exact
 measured quantity)."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import Mapping, Optional
 
 import numpy as np
 
@@ -67,7 +67,7 @@ def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: f
 
 
 def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
-                        pole_shift_per_s: Optional[float] = None) -> FRFSet:
+                        pole_shift_per_s: float | None = None) -> FRFSet:
     """FRFs of ``model`` in ``quantity`` as measured through an exponential window ``exp(-t/tau)``,
     ``sigma_w = pole_shift_per_s = 1/tau`` (1/s; default ``model.meta[WINDOW_SHIFT_KEY]``, 0 without a window).
 

@@ -159,7 +159,7 @@ def _value(name: str, v: object) -> str:
     return f"{v:.4g}{unit}"
 
 
-def write_report(diag: Diagnosis, outdir: "str | Path", max_frf_plots: int = 6) -> Path:
+def write_report(diag: Diagnosis, outdir: str | Path, max_frf_plots: int = 6) -> Path:
     """Write ``report.md``, ``diagnosis.json``, ``bands.png`` and ``frf_<o>_<r>.png`` into ``outdir``."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)

@@ -26,12 +26,11 @@ Definitions
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Optional, Sequence
 
 import numpy as np
 from scipy.signal import find_peaks
-
 
 __all__ = ["pulse_bounds", "detect_double_hit", "detect_overload", "detect_input_noise",
            "detect_amplitude_nonlinearity", "diagnose_hits", "Hits", "TimeEffect", "TIME_EFFECTS", "FORCE_WINDOW_S",
@@ -66,7 +65,7 @@ def _check_hits(force: np.ndarray) -> np.ndarray:
     return f
 
 
-def _pre_noise(x: np.ndarray, a: int, guard: int = NOISE_GUARD) -> Optional[float]:
+def _pre_noise(x: np.ndarray, a: int, guard: int = NOISE_GUARD) -> float | None:
     """Standard deviation (N) of the samples before ``a - guard`` (None with fewer than 8 of them)."""
     pre = x[:max(a - guard, 0)]
     return float(np.std(pre)) if pre.size >= 8 else None
@@ -103,8 +102,8 @@ def detect_double_hit(force: np.ndarray, fs_hz: float, fraction: float = 0.1,
     return {"effect": "double_hit", "parameters": params, "present": bool(hits), "evidence": ev}
 
 
-def detect_overload(data: np.ndarray, full_scale: Optional[Sequence[float]] = None,
-                    flags: Optional[np.ndarray] = None) -> dict:
+def detect_overload(data: np.ndarray, full_scale: Sequence[float] | None = None,
+                    flags: np.ndarray | None = None) -> dict:
     """Overloaded hits: ``data[n_hits, n_ch, n]`` at >= 99.9 % of ``full_scale[n_ch]`` (EU), or ``flags``."""
     d = np.asarray(data, float)
     if flags is not None:
@@ -121,7 +120,7 @@ def detect_overload(data: np.ndarray, full_scale: Optional[Sequence[float]] = No
             "present": bool(hits), "evidence": ev}
 
 
-def detect_input_noise(force: np.ndarray, fs_hz: float, band: Optional[Sequence[float]] = None,
+def detect_input_noise(force: np.ndarray, fs_hz: float, band: Sequence[float] | None = None,
                        max_bias_db: float = 0.5, guard: int = NOISE_GUARD) -> dict:
     """Force-channel noise and the H1 bias it causes (module docstring). The noise is the rms of the
     samples up to ``guard`` samples before the pulse start (an anti-alias filter rings before a pulse)."""
@@ -223,8 +222,8 @@ class Hits:
     responses: np.ndarray
     fs_hz: float
     band: Sequence[float]
-    full_scale: Optional[Sequence[float]] = None
-    overload_flags: Optional[np.ndarray] = None
+    full_scale: Sequence[float] | None = None
+    overload_flags: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -235,10 +234,10 @@ class TimeEffect:
     name: str
     description: str
     advice: str
-    detect: Callable[[Hits], Optional[dict]]
+    detect: Callable[[Hits], dict | None]
 
 
-def _overload(h: Hits) -> Optional[dict]:
+def _overload(h: Hits) -> dict | None:
     if h.full_scale is None and h.overload_flags is None:
         return None
     data = np.concatenate([np.asarray(h.force, float)[:, None, :], np.asarray(h.responses, float).reshape(
@@ -267,7 +266,7 @@ TIME_EFFECTS: dict[str, TimeEffect] = {e.name: e for e in (
 
 
 def diagnose_hits(force: np.ndarray, responses: np.ndarray, fs_hz: float, band: Sequence[float], *,
-                  full_scale: Optional[Sequence[float]] = None, overload_flags: Optional[np.ndarray] = None) -> list:
+                  full_scale: Sequence[float] | None = None, overload_flags: np.ndarray | None = None) -> list:
     """Every time-data cause of :data:`TIME_EFFECTS` for a set of hits at one reference, present ones first;
     each cause dict carries the row's ``description`` and ``advice``."""
     hits = Hits(force, responses, fs_hz, band, full_scale, overload_flags)

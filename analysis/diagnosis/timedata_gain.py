@@ -3,24 +3,34 @@ error before and after re-simulating the effect (nonlinearity, input noise) or e
 hits (overload, double hit), scored on held-out lines as the FRF effects (``docs/diagnosis.md``)."""
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Callable, Optional, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..modal import ModalModel
 from ..frf import window_pole_shift
+from ..modal import ModalModel
 from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_end_fraction
 from .compare import line_folds
 from .effects import synthesize_windowed
-from .timedata import (FORCE_TAPER_S, FORCE_WINDOW_S, NOISE_GUARD, _check_hits, detect_amplitude_nonlinearity,
-                       detect_double_hit, detect_input_noise, detect_overload, pulse_bounds)
+from .timedata import (
+    FORCE_TAPER_S,
+    FORCE_WINDOW_S,
+    NOISE_GUARD,
+    _check_hits,
+    detect_amplitude_nonlinearity,
+    detect_double_hit,
+    detect_input_noise,
+    detect_overload,
+    pulse_bounds,
+)
 
 __all__ = ["windowed_accelerance", "HitSpectraSet", "hit_spectra_set", "diagnose_time_effects"]
 
 
-def windowed_accelerance(base: ModalModel, freq_hz: np.ndarray, exp_window_tau_s: Optional[float],
+def windowed_accelerance(base: ModalModel, freq_hz: np.ndarray, exp_window_tau_s: float | None,
                          factor: float = 1.0) -> np.ndarray:
     """Accelerance (m/s^2/N) of a receptance pole-residue model as estimated from exponentially
     windowed hits, with all natural frequencies times ``factor`` (stiffness times factor^2).
@@ -60,16 +70,16 @@ class HitSpectraSet:
     noise_gain: np.ndarray
     response_noise: np.ndarray
     response_gain: np.ndarray
-    force_width_s: Optional[float] = None
+    force_width_s: float | None = None
 
-    def h1(self, hits: Optional[np.ndarray] = None) -> np.ndarray:
+    def h1(self, hits: np.ndarray | None = None) -> np.ndarray:
         """H1 (n_out, n_freq) over the selected hits (boolean mask or indices; default all)."""
         sel = slice(None) if hits is None else hits
         return np.sum(self.Gfx[sel], axis=0) / np.sum(self.Gff[sel], axis=0)
 
 
 def hit_spectra_set(force: np.ndarray, responses: np.ndarray, fs_hz: float, band: Sequence[float], *,
-                    exp_window_end_fraction: float = 1e-3, force_width_s: Optional[float] = None, force_taper_s: float = 0.0,
+                    exp_window_end_fraction: float = 1e-3, force_width_s: float | None = None, force_taper_s: float = 0.0,
                     ) -> HitSpectraSet:
     """Spectra of each hit with the window origin at its pulse start (:func:`pulse_bounds`), an
     exponential window reaching ``exp_window_end_fraction`` at the block end (same tau for all hits, from the median
@@ -133,8 +143,8 @@ def _db(x: float) -> float:
     return float(10 * np.log10(max(x, 1e-30)))
 
 
-def _score(measured: "np.ndarray | tuple[np.ndarray, np.ndarray]", before: np.ndarray,
-           after_of: "Callable[[np.ndarray], tuple[np.ndarray, Any]]",
+def _score(measured: np.ndarray | tuple[np.ndarray, np.ndarray], before: np.ndarray,
+           after_of: Callable[[np.ndarray], tuple[np.ndarray, Any]],
            weights: np.ndarray) -> dict:
     """Held-out errors: ``after_of(train_mask) -> (model H, params)`` is fitted on one fold of lines and
     scored on the other, both ways (as :mod:`analysis.diagnosis.verdict`). ``measured``/``before`` may be
@@ -189,10 +199,10 @@ def diagnose_time_effects(
     base: ModalModel,
     band: Sequence[float],
     *,
-    full_scale: Optional[Sequence[float]] = None,
-    overload_flags: Optional[np.ndarray] = None,
+    full_scale: Sequence[float] | None = None,
+    overload_flags: np.ndarray | None = None,
     exp_window_end_fraction: float = 1e-3,
-    outputs: Optional[Sequence[str]] = None,
+    outputs: Sequence[str] | None = None,
     reference: str = "",
     z_min: float = 3.0,
     min_gain_db: float = 0.5,

@@ -4,8 +4,8 @@ held-out gains (:func:`analysis.diagnosis.timedata_gain.diagnose_time_effects`).
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence, Union
 
 import numpy as np
 
@@ -16,7 +16,7 @@ __all__ = ["time_data_causes"]
 log = logging.getLogger(__name__)
 
 
-def time_data_causes(path: Union[str, Path], band: tuple, base: Optional[ModalModel] = None) -> list:
+def time_data_causes(path: str | Path, band: tuple, base: ModalModel | None = None) -> list:
     """Time-data causes (:mod:`analysis.diagnosis.timedata`) of a recording's accepted hits (those its
     FRFs were made from; rejected hits changed nothing), per reference point; [] when the file is not
     a recording or holds no accepted hits. With ``base`` (the simulation as a receptance

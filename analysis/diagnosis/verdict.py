@@ -28,14 +28,15 @@ Rule (documented in ``docs/diagnosis.md``):
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Optional, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..progress import progress
 from ..frf import FRFSet
 from ..modal import ModalModel
+from ..progress import progress
 from ..threads import limits_blas_threads
 from .compare import band_errors, compare, line_folds, line_weights, noise_level, typical_error_db
 from .effects import EFFECTS, EffectError, FitContext, predict
@@ -85,9 +86,9 @@ class Diagnosis:
     reason: str = ""
     physical: dict = field(default_factory=dict)
     named: list = field(default_factory=list)
-    next_measurement: Optional[dict] = None
+    next_measurement: dict | None = None
     time_data: list = field(default_factory=list)
-    time_data_verdict: Optional[str] = None
+    time_data_verdict: str | None = None
 
     def to_json(self) -> dict:
         """The JSON document of ``python -m analysis diagnose``."""
@@ -205,8 +206,8 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
     return causes, skipped
 
 
-def _frf_on_top(ctx: FitContext, physical: "PhysicalSimulation", outcome: Any, names: Sequence[str], z_min: float,
-                min_gain_db: float, noise_db: float, none_margin_db: float) -> Optional[tuple[list, FRFSet]]:
+def _frf_on_top(ctx: FitContext, physical: PhysicalSimulation, outcome: Any, names: Sequence[str], z_min: float,
+                min_gain_db: float, noise_db: float, none_margin_db: float) -> tuple[list, FRFSet] | None:
     """A physical cause that explains the modes but leaves the FRFs above the noise, completed by one
     FRF-level effect (a damping change, a sensor): the catalogue fitted on top of the physical cause's
     model with the same cross-validation and rule (held-out gain at least ``min_gain_db``); named as a
@@ -280,10 +281,10 @@ def diagnose_frfs(
     measured: FRFSet,
     base: ModalModel,
     *,
-    effects: Optional[Sequence[str]] = None,
-    physical: "Optional[PhysicalSimulation]" = None,
-    measured_modes: "Optional[MeasuredModes]" = None,
-    extra_noise_db: Optional[dict] = None,
+    effects: Sequence[str] | None = None,
+    physical: PhysicalSimulation | None = None,
+    measured_modes: MeasuredModes | None = None,
+    extra_noise_db: dict | None = None,
     z_min: float = Z_MIN,
     min_gain_db: float = MIN_GAIN_DB,
     none_margin_db: float = NONE_MARGIN_DB,

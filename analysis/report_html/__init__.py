@@ -3,6 +3,8 @@
 :func:`build_document` collects the content, :func:`write_report` writes the folder
 (``index.html`` and its assets; opens from ``file://`` with no network).
 """
+from __future__ import annotations
+
 from .build import build_document, make_report, write_report
 from .sources import (
                       FitData,

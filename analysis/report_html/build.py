@@ -7,7 +7,6 @@ import logging
 import shutil
 from importlib import resources
 from pathlib import Path
-from typing import Optional
 
 from ..frf import FRFSet
 from ..geometry import Geometry, points_on_a_line
@@ -22,9 +21,9 @@ log = logging.getLogger(__name__)
 _OWN_ASSETS = ("report.js", "report.css")
 
 
-def build_document(frf: FRFSet, fit: FitData, *, geometry: Optional[Geometry] = None,
-                   record: Optional[TestRecord] = None, diagnosis: Optional[dict] = None,
-                   input_name: str = "", title: str = "", quality: Optional[dict] = None) -> dict:
+def build_document(frf: FRFSet, fit: FitData, *, geometry: Geometry | None = None,
+                   record: TestRecord | None = None, diagnosis: dict | None = None,
+                   input_name: str = "", title: str = "", quality: dict | None = None) -> dict:
     """The report's content as one JSON-able dict (see :mod:`analysis.report_html.collect`)."""
     notes = []
     labels, _ = shape_vectors(fit.model)
@@ -53,7 +52,7 @@ def build_document(frf: FRFSet, fit: FitData, *, geometry: Optional[Geometry] = 
     return doc
 
 
-def write_report(out_dir: "str | Path", doc: dict) -> Path:
+def write_report(out_dir: str | Path, doc: dict) -> Path:
     """Write the report folder for ``doc`` (from :func:`build_document`); returns ``index.html``.
 
     The files are built in a temporary folder beside ``out_dir`` and moved into place at the end
@@ -92,7 +91,7 @@ def _write_files(out: Path, doc: dict) -> None:
     (out / "index.html").write_text(render_page(doc), encoding="utf-8")
 
 
-def _default(x: object) -> "bool | int | float | list":
+def _default(x: object) -> bool | int | float | list:
     import numpy as np
 
     if isinstance(x, (np.floating, np.integer, np.bool_)):
@@ -102,9 +101,9 @@ def _default(x: object) -> "bool | int | float | list":
     raise TypeError(f"{type(x).__name__} is not JSON serialisable")
 
 
-def make_report(input_path: "str | Path", out_dir: "str | Path", *, fit_json: "Optional[str | Path]" = None,
-                diagnosis: "Optional[str | Path]" = None, geometry: Optional[Geometry] = None,
-                estimator: Optional[str] = None) -> Path:
+def make_report(input_path: str | Path, out_dir: str | Path, *, fit_json: str | Path | None = None,
+                diagnosis: str | Path | None = None, geometry: Geometry | None = None,
+                estimator: str | None = None) -> Path:
     """Write the report of a recording or UFF file into ``out_dir``; returns ``index.html``.
 
     Without ``fit_json`` the automatic fit runs here; ``geometry`` None puts the points on a line.

@@ -4,18 +4,19 @@ Units: frequencies Hz, magnitudes dB re 1 (FRF unit), phases deg, times ms, forc
 """
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
 from ..frf import FRFSet
 from ..geometry import Geometry, node_label
+from ..mac import mac_matrix
+from ..mif import indicator_summary
 from ..modal import ModalModel, damping_ratio, natural_freq_hz, synthesize
 from ..plots import summed_magnitude_db
 from ..points import PointLabelError, parse_point
-from ..spectra import excitation_band as spectra_excitation_band, hit_spectra
-from ..mac import mac_matrix
-from ..mif import indicator_summary
+from ..spectra import excitation_band as spectra_excitation_band
+from ..spectra import hit_spectra
 from ..stabilization import CLASS_NAMES
 from .sources import FitData, TestRecord
 
@@ -152,7 +153,7 @@ def modal_section(frf: FRFSet, fit: FitData) -> dict:
                                            max_points=INDICATOR_POINTS)}
 
 
-def _finite(x: float) -> Optional[float]:
+def _finite(x: float) -> float | None:
     x = float(x)
     return x if np.isfinite(x) else None
 

@@ -4,8 +4,9 @@ from ``file://``)."""
 from __future__ import annotations
 
 import datetime as _dt
+from collections.abc import Sequence
 from html import escape
-from typing import Any, Optional, Sequence
+from typing import Any
 
 from .quality_section import quality_html
 
@@ -36,7 +37,7 @@ def _dl(items: Sequence[tuple[str, str]]) -> str:
     return "<dl>" + "".join(f"<dt>{escape(k)}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
 
 
-def _test_html(test: Optional[dict], meta: dict) -> str:
+def _test_html(test: dict | None, meta: dict) -> str:
     if test is None:
         return ("<section id='test'><h2>1. The test</h2><p class='note'>The input holds FRFs only (a UFF file): no "
                 "record of the test (channels, windows, hits). Give the recording (.h5) for this section.</p>"
@@ -124,7 +125,7 @@ def _trigger(trig: dict, channels: list, fs: Any) -> str:
     return escape(text + (", " + ", ".join(f"{str(k).replace('_', ' ')} {v}" for k, v in rest.items()) if rest else ""))
 
 
-def _points_html(points: Optional[list]) -> str:
+def _points_html(points: list | None) -> str:
     if not points:
         return ("<section id='points'><h2>2. Excitation and responses</h2><p class='note'>No time data in the input "
                 "(FRFs only): the force spectra and time histories need the recording.</p></section>")
@@ -209,7 +210,7 @@ def _noise(x: Any) -> str:
     return f"{_num(x, '{:.1f}')} dB"
 
 
-def _diagnosis_html(diag: Optional[dict]) -> str:
+def _diagnosis_html(diag: dict | None) -> str:
     if diag is None:
         return ""
     rows = [[escape(str(c.get("effect", ""))), _num(c.get("gain_db"), "{:.1f}"), _num(c.get("error_before_db"), "{:.1f}"),

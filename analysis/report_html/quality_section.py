@@ -3,8 +3,9 @@
 table ``#quality`` and the plots ``data-plot="linearity"`` and ``data-plot="reciprocity"``)."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from html import escape
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +36,7 @@ def _curve(freq: np.ndarray, h: np.ndarray, sel: np.ndarray) -> dict:
             "db": np.round(20 * np.log10(np.maximum(np.abs(h[idx]), 1e-300)), 3).tolist()}
 
 
-def quality_section(frf: FRFSet, record: Any = None, band: Optional[Sequence[float]] = None) -> dict:
+def quality_section(frf: FRFSet, record: Any = None, band: Sequence[float] | None = None) -> dict:
     """The checks (:func:`analysis.quality.quality_checks`) with the linearity of the record's hits when
     they span force levels, the terminal lines, and the curves the plots draw (``band`` Hz)."""
     from ..linearity import compare_levels, level_frfsets
@@ -76,7 +77,7 @@ def _row(check: str, verdict: str, detail: str) -> str:
     return f"<tr><td>{escape(check)}</td><td><b>{escape(verdict)}</b></td><td>{escape(detail)}</td></tr>"
 
 
-def quality_html(q: Optional[dict]) -> str:
+def quality_html(q: dict | None) -> str:
     """The report's quality section (empty without data)."""
     if not q:
         return ""

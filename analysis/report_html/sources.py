@@ -11,13 +11,13 @@ import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..errors import ReportInputError
 from ..frf import FRFSet
 from ..modal import ModalModel
-from ..errors import ReportInputError
 
 if TYPE_CHECKING:
     from ..stabilization import StabilizationResult
@@ -85,7 +85,7 @@ def unknown_as_none(value: Any) -> Any:
     return value
 
 
-def read_test_record(path: "str | Path") -> TestRecord:
+def read_test_record(path: str | Path) -> TestRecord:
     """Test description, hit log and accepted hits' time data of a recording."""
     from ..recording import Recording
 
@@ -117,7 +117,7 @@ def read_test_record(path: "str | Path") -> TestRecord:
     return rec
 
 
-def recording_device(path: "str | Path") -> str:
+def recording_device(path: str | Path) -> str:
     """The device a recording was made with (the plan's ``device``, else the instrument's model)."""
     from ..recording import Recording
 
@@ -142,7 +142,7 @@ def _cpx(pair: Any) -> complex:
     return complex(float(pair[0]), float(pair[1])) if pair is not None else complex("nan")
 
 
-def load_fit_json(path: "str | Path", frf: FRFSet) -> FitData:
+def load_fit_json(path: str | Path, frf: FRFSet) -> FitData:
     """A fit written by ``python -m analysis fit --json``; residues are matched to ``frf`` by label."""
     from ..lsfd import seen_through_window
 
@@ -202,7 +202,7 @@ def check_fit_values(path: Path, poles: np.ndarray, residues: np.ndarray, band: 
         raise ReportInputError(f"{path}: field band {list(band)} is not an increasing pair of finite Hz")
 
 
-def _redo_stabilization(frf: FRFSet, info: Optional[dict]) -> Optional[StabilizationResult]:
+def _redo_stabilization(frf: FRFSet, info: dict | None) -> StabilizationResult | None:
     """The fit's stabilization diagram again, from the settings its JSON records (method, band,
     largest model size): a deterministic function of the FRFs. None when the JSON has none."""
     from ..stabilization import stabilization
@@ -218,7 +218,7 @@ def _redo_stabilization(frf: FRFSet, info: Optional[dict]) -> Optional[Stabiliza
         return None
 
 
-def load_diagnosis(path: "Optional[str | Path]") -> Optional[dict]:
+def load_diagnosis(path: str | Path | None) -> dict | None:
     """A diagnosis written by ``python -m analysis diagnose --json`` (None stays None)."""
     if path is None:
         return None

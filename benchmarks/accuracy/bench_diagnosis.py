@@ -24,8 +24,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from analysis.diagnosis import EFFECTS, diagnose  # noqa: E402
-from simulator.effects import (TOLERANCES, add_frf_noise, base_model, draw_effect, primary_error,  # noqa: E402
-                               simulate_with_effects)
+from simulator.effects import TOLERANCES, add_frf_noise, base_model, draw_effect, primary_error, simulate_with_effects  # noqa: E402
 
 OUTS = ["left:9:Y", "top:4:X", "right:6:-X", "left:6:X"]
 REFS = ["right:6:-X"]

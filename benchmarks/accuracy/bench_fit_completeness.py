@@ -51,9 +51,10 @@ import re
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[2]
@@ -77,7 +78,7 @@ class Case:
     name: str
     seed: int
     points: tuple[str, ...]
-    band: Optional[tuple[float, float]] = None
+    band: tuple[float, float] | None = None
 
 
 @dataclass
@@ -151,7 +152,7 @@ def visible_peaks(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
     return np.asarray([v.freq_hz for v in find_visible(frf, band)], float)
 
 
-def visible_modes(peaks: np.ndarray, truth: Optional[np.ndarray], df: float) -> np.ndarray:
+def visible_modes(peaks: np.ndarray, truth: np.ndarray | None, df: float) -> np.ndarray:
     """Visible true modes (truth given) or merged visible peaks (real data), sorted (Hz)."""
     if truth is None:
         merged: list[float] = []
@@ -176,7 +177,7 @@ def named_in_warnings(f: float, warnings: Sequence[str]) -> bool:
     return False
 
 
-def score(name: str, frf: FRFSet, truth: Optional[np.ndarray], band: Optional[tuple[float, float]]) -> Row:
+def score(name: str, frf: FRFSet, truth: np.ndarray | None, band: tuple[float, float] | None) -> Row:
     t0 = time.perf_counter()
     try:
         res = fit_auto(frf, band=band)
@@ -258,7 +259,7 @@ def default_fit_time(frf: FRFSet, repeats: int = 3) -> float:
     return best
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=16, help="drawn captures beside the five fixed ones (default 16)")
     ap.add_argument("--draw-seed", type=int, default=2026, help="seed of the draws (default 2026)")

@@ -35,6 +35,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks" / "accuracy"))
 
+from quality_support import FRICTION_JOINT, level_hits, roving_test  # noqa: E402
+
 from analysis.diagnosis.joint_nonlinearity import joint_nonlinearity  # noqa: E402
 from analysis.linearity import compare_levels, level_frfsets  # noqa: E402
 from analysis.reciprocity import reciprocity  # noqa: E402
@@ -43,8 +45,6 @@ from simulator.fem import FrameModel  # noqa: E402
 from simulator.nonlinear_joint import joint_dof_vector, joint_law  # noqa: E402
 from simulator.nonlinear_simulation import JointHitSimulation  # noqa: E402
 from simulator.stand import TestStand  # noqa: E402
-
-from quality_support import FRICTION_JOINT, level_hits, roving_test  # noqa: E402
 
 SEMI_RIGID = {"joints": {"stiffness": [1e9, 1e9, 1e9, 1e8, 2e4, 1e8]},
               "supports": {"stiffness": [1e9, 1e9, 1e9, 1.6e7, 5e4, 1.6e7]}}

@@ -47,7 +47,7 @@ class KillTrial:
     reported_accepted: int = 0
     recorded_accepted: int = 0
     file_opened: bool = False
-    resumed: "bool | None" = None
+    resumed: bool | None = None
     problems: list = field(default_factory=list)
 
     @property
@@ -167,7 +167,7 @@ def run_kills(n: int, tmp: Path, *, seed: int = 0, resume_every: int = 5, hits: 
         return list(pool.map(trial, range(n)))
 
 
-def main(argv: "list[str] | None" = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--kills", type=int, default=50)
     p.add_argument("--resume-every", type=int, default=5)

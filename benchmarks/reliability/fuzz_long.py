@@ -49,7 +49,7 @@ def run_file(path: Path, examples: int) -> tuple[list[tuple[str, int, int]], boo
     return [(k, v[0], v[1]) for k, v in merged.items()], proc.returncode == 0, time.monotonic() - t0
 
 
-def main(argv: "list[str] | None" = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--examples", type=int, default=10000)
     p.add_argument("--files", nargs="*", default=None)

@@ -118,7 +118,7 @@ def run(hits: int, n_points: int, period: float, door: str, workdir: Path) -> di
             "wall_s": time.monotonic() - t0}
 
 
-def main(argv: "list[str] | None" = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--hits", type=int, default=200)
     p.add_argument("--points", type=int, default=4)

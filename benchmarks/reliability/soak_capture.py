@@ -29,7 +29,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 DEFAULT_FAULTS = ("no_trigger:0.02,double_hit:0.02,overload:0.01,short_transfer:0.01,check_condition:0.01,"
                   "phase_error:0.01,stall:0.01,garbage:0.005,disconnect:0.002,slow:0.01")
@@ -90,16 +90,16 @@ def _transport(door: str, fw: Any, timeout_s: float) -> Any:
     raise ValueError(f"door {door!r}: use sim, usbsim or loopback")
 
 
-def run_soak(hits: int, out: "str | Path", *, door: str = "sim", faults: str = DEFAULT_FAULTS, seed: int = 1,
+def run_soak(hits: int, out: str | Path, *, door: str = "sim", faults: str = DEFAULT_FAULTS, seed: int = 1,
              points: tuple = SOAK_POINTS, command_timeout_s: float = 0.5, trigger_timeout_s: float = 2.0,
-             hang_limit_s: Optional[float] = None) -> SoakReport:
+             hang_limit_s: float | None = None) -> SoakReport:
     """Capture ``hits`` accepted hits (spread over ``points``) through ``door`` with ``faults``
     injected, write the recording ``out``, and check it against the firmware's ground truth."""
     from acquisition.driver import Analyser
-    from analysis.recording import Recording
-    from analysis.recording_writer import RecordingWriter
     from acquisition.session import CaptureSession, TestPlan, channel_table, retry_on_link_fault
     from acquisition.setup import default_setup
+    from analysis.recording import Recording
+    from analysis.recording_writer import RecordingWriter
     from analysis.spectra import WindowSettings
     from simulator.analyser import create_analyser
 
@@ -167,7 +167,7 @@ def run_soak(hits: int, out: "str | Path", *, door: str = "sim", faults: str = D
     return report
 
 
-def main(argv: "list[str] | None" = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--hits", type=int, default=1000)
     p.add_argument("--door", choices=("sim", "usbsim", "loopback"), default="sim")

@@ -28,8 +28,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -42,11 +42,11 @@ from acquisition.driver import Analyser  # noqa: E402
 from acquisition.loopback import LoopbackTransport  # noqa: E402
 from acquisition.setup import AcquisitionSetup, default_setup  # noqa: E402
 from acquisition.stream_transport import StreamTransport  # noqa: E402
-from simulator.urlhandlers.protocol_sim import Serial as SimSerial  # noqa: E402
 from acquisition.urls import open_transport  # noqa: E402
 from acquisition.usb_transport import UsbTransport  # noqa: E402
 from simulator.analyser import create_analyser  # noqa: E402
 from simulator.firmware import PrecomputedStand  # noqa: E402
+from simulator.urlhandlers.protocol_sim import Serial as SimSerial  # noqa: E402
 from simulator.usb_backend import SimUsbBackend  # noqa: E402
 
 FS = 51200.0

@@ -42,13 +42,12 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Optional
 
 ROOT = Path(__file__).resolve().parents[2]
 PY = sys.executable
 COMMANDS = ("capture", "fit", "report", "report --fit", "stabilization", "diagnose")
 #: the issue's targets (s); None: no target, shown for information
-TARGETS: dict[str, Optional[float]] = {"capture": None, "fit": 1.0, "report": 2.0, "report --fit": 2.0,
+TARGETS: dict[str, float | None] = {"capture": None, "fit": 1.0, "report": 2.0, "report --fit": 2.0,
                                         "stabilization": None, "diagnose": 5.0}
 BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -122,7 +121,7 @@ class Busy:
         self.n = n
         self.procs: list[subprocess.Popen] = []
 
-    def __enter__(self) -> "Busy":
+    def __enter__(self) -> Busy:
         self.procs = [subprocess.Popen([PY, "-c", "while True: pass"]) for _ in range(self.n)]
         if self.n:
             time.sleep(1.0)
@@ -236,7 +235,7 @@ def main(argv=None) -> int:
     for name in names:
         t = TARGETS[name]
         cells = [f"{results[c][name][0]:.2f} s ({results[c][name][1]:.2f} s)" for c in conditions]
-        print(f"| {name} | " + " | ".join(cells) + f" | {'< %g s' % t if t else '-'} |")
+        print(f"| {name} | " + " | ".join(cells) + f" | {f'< {t:g} s' if t else '-'} |")
     if "scan" in results:
         print("\n| scanning-vibrometer case | wall, peak memory | target |\n|---|---|---|")
         for c, r in results["scan"].items():

@@ -28,8 +28,16 @@ from analysis.pipeline import fit_auto  # noqa: E402
 
 
 def _cases(data: Path):
-    from benchmarks.accuracy.validation import (f16_gvt, ladisk_beam, modelab_beam, plate_sweep, pyfrf_5impacts,
-                                                 pyuff_3frf, uliege_plane, unesp_boltedbeam)
+    from benchmarks.accuracy.validation import (
+        f16_gvt,
+        ladisk_beam,
+        modelab_beam,
+        plate_sweep,
+        pyfrf_5impacts,
+        pyuff_3frf,
+        uliege_plane,
+        unesp_boltedbeam,
+    )
 
     return [
         ("uliege_meca0062_plane_hammer", lambda: uliege_plane.load(data, band=None)),

@@ -21,6 +21,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks" / "accuracy"))
 
 import bench_diagnosis_physical as bench  # noqa: E402
+
 from simulator.config import FrameConfig, overrides_to_toml  # noqa: E402
 from simulator.fem import section_properties  # noqa: E402
 

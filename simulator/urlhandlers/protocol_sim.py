@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 import urllib.parse
-from typing import Any, Optional
+from typing import Any
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, SerialTimeoutException, to_bytes
 
@@ -40,7 +40,7 @@ class Serial(SerialBase):
 
     # -- opening -----------------------------------------------------------------------------
     @classmethod
-    def from_firmware(cls, firmware: Any, *, timeout: Optional[float] = None) -> "Serial":
+    def from_firmware(cls, firmware: Any, *, timeout: float | None = None) -> Serial:
         """An open port over an existing stream-mode firmware object (benchmarks, tests)."""
         port = cls(None, timeout=timeout)
         port._port = "sim://"

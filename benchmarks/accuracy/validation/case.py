@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -53,10 +53,10 @@ def correct_peer_window(peer: PeerFit, exp_window_tau_s: float) -> PeerFit:
     return replace(peer, **out)
 
 
-def compare(name: str, frf: FRFSet, out_dir: Path, *, band: Optional[Sequence[float]] = None,
-            max_modes: Optional[int] = None, n_modes: Optional[int] = None, pair: Optional[tuple] = None,
+def compare(name: str, frf: FRFSet, out_dir: Path, *, band: Sequence[float] | None = None,
+            max_modes: int | None = None, n_modes: int | None = None, pair: tuple | None = None,
             title: str = "", with_peer: bool = True, with_crlb: bool = True,
-            selection_options: Optional[dict] = None, plot_name: Optional[str] = None, initial="lscf",
+            selection_options: dict | None = None, plot_name: str | None = None, initial="lscf",
             frf_weighting: str = "rms") -> tuple[OurFit, PeerFit, str, dict, list]:
     """Fit ``frf`` with impactlab (automatic) and with sdypy-EMA (hinted by our frequencies).
 
@@ -174,7 +174,7 @@ def peer_repeats(frfs: Sequence[FRFSet], band: Sequence[float], max_modes: int, 
     return F, Z
 
 
-def scatter_table(ref_freqs: np.ndarray, ours: dict, peer_f: Optional[np.ndarray], peer_z: Optional[np.ndarray]) -> str:
+def scatter_table(ref_freqs: np.ndarray, ours: dict, peer_f: np.ndarray | None, peer_z: np.ndarray | None) -> str:
     """Per mode: standard deviation over repetitions of f and zeta, ours vs the peer's, and the
     median standard deviation our fit claims (so the claim can be checked against the scatter)."""
     import warnings

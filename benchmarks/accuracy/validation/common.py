@@ -18,9 +18,9 @@ from __future__ import annotations
 import logging
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -95,9 +95,9 @@ def _model_error(frf: FRFSet, result, band: Sequence[float]) -> float:
     return synthesis_error(sub.H, G)
 
 
-def fit_ours(frf: FRFSet, *, band: Optional[Sequence[float]] = None, max_modes: Optional[int] = None,
-             n_modes: Optional[int] = None, method: str = "lm", initial="lscf",
-             selection_options: Optional[dict] = None, max_iter: int = 100, frf_weighting: str = "rms") -> OurFit:
+def fit_ours(frf: FRFSet, *, band: Sequence[float] | None = None, max_modes: int | None = None,
+             n_modes: int | None = None, method: str = "lm", initial="lscf",
+             selection_options: dict | None = None, max_iter: int = 100, frf_weighting: str = "rms") -> OurFit:
     """Run :func:`analysis.pipeline.fit_auto` (LSCF stabilization, automatic selection, LSFD), timed.
 
     ``frf_weighting`` is passed on: "rms" (the pipeline's default, each FRF weighted by 1 / its
@@ -133,7 +133,7 @@ def fit_ours_from_poles(frf: FRFSet, poles: np.ndarray, band: Sequence[float], *
                   [str(w.message) for w in caught])
 
 
-def match_poles(f_a: np.ndarray, f_b: np.ndarray, tol: float = 0.03) -> list[tuple[Optional[int], Optional[int]]]:
+def match_poles(f_a: np.ndarray, f_b: np.ndarray, tol: float = 0.03) -> list[tuple[int | None, int | None]]:
     """Pair two lists of natural frequencies (Hz) greedily by relative distance; unpaired get None.
 
     Returns (index in a or None, index in b or None), sorted by frequency.
@@ -256,7 +256,7 @@ def _summed_db(H: np.ndarray) -> np.ndarray:
     return np.where(np.all(np.isnan(a), axis=0), np.nan, out)
 
 
-def plot_case(path: Path, frf: FRFSet, fit: OurFit, peer=None, *, title: str = "", pair: Optional[tuple] = None) -> Path:
+def plot_case(path: Path, frf: FRFSet, fit: OurFit, peer=None, *, title: str = "", pair: tuple | None = None) -> Path:
     """One figure per case (PNG, dpi 80): stabilization diagram over the summed FRF magnitude (top,
     when a stabilization exists), and measured vs synthesised FRF (ours, and the peer's) with our
     natural frequencies (bottom; ``pair`` = (output, reference) or the root-sum-square of all FRFs)."""

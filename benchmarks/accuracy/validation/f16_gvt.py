@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 
 from analysis.frf import FRFSet
-
 from analysis.uncertainty import crlb_poles
 
 from .case import compare, peer_repeats, scatter_table

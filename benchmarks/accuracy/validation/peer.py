@@ -25,8 +25,8 @@ import io
 import logging
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -52,7 +52,7 @@ class PeerFit:
     damping: np.ndarray = field(default_factory=lambda: np.zeros(0))
     used_freq_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
     used_damping: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    H_band: Optional[np.ndarray] = None
+    H_band: np.ndarray | None = None
     synth_err_pct: float = float("nan")
     time_s: float = float("nan")
     version: str = ""

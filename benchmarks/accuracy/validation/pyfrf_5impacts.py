@@ -83,13 +83,12 @@ def hint_regression(frf: FRFSet, band, peaks: list, auto_result, local=(1500.0, 
     without the FRF weighting; the start the pipeline made before the absolute damping tolerance
     (``abs_tol_damp=0``: hints without a damping-stable pole nearby get 1 % damping) fitted without trust
     regions (the LSFD of that time); the hints plus the automatic fit's poles that no hint is near (1 %)."""
-    from analysis.modal import damping_ratio, natural_freq_hz
+    from analysis.modal import damping_ratio, natural_freq_hz, synthesize
     from analysis.pipeline import fit_auto
     from analysis.selection import poles_from_frequencies
     from analysis.stabilization import stabilization
 
     from .common import data_model, synthesis_error
-    from analysis.modal import synthesize
 
     def errs(res):
         sub = frf.band(*band)

@@ -1,13 +1,13 @@
 """FRFs from raw hammer time data with the project's spectra (:mod:`analysis.spectra`), hit by hit."""
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
+from acquisition.importers import detect_trigger
 from analysis.frf import FRFSet
 from analysis.spectra import FRFAccumulator, WindowSettings, hit_spectra
-from acquisition.importers import detect_trigger
 
 __all__ = ["impact_frf", "per_hit_frfs"]
 
@@ -17,7 +17,7 @@ PRE_SAMPLES = 10
 
 def impact_frf(hits: Sequence[tuple[np.ndarray, np.ndarray]], fs_hz: float, windows: WindowSettings, *,
                outputs: Sequence[str] = ("n:2:Z",), reference: str = "n:1:Z", unit: str = "",
-               estimator: str = "H1", meta: Optional[dict] = None) -> FRFSet:
+               estimator: str = "H1", meta: dict | None = None) -> FRFSet:
     """H1 (or H2) averaged over hits ``(force[n] N, responses[n_resp, n])`` by :class:`FRFAccumulator`.
 
     Each hit's window origin is ``PRE_SAMPLES`` before the sample where the force first reaches 10 %

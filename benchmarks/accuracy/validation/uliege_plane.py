@@ -21,19 +21,26 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
 from analysis.frf import FRFSet
+from analysis.mac import mac
+from analysis.modal import natural_freq_hz, synthesize
 from analysis.spectra import FRFAccumulator, WindowSettings, hit_spectra
 
 from .case import compare, peer_repeats, scatter_table
-from analysis.mac import mac
-from analysis.modal import natural_freq_hz, synthesize
-
-from .common import (CaseReport, consistency_table, data_model, fit_ours, fit_ours_from_poles, fmt, match_poles,
-                     md_table, synthesis_error)
+from .common import (
+    CaseReport,
+    consistency_table,
+    data_model,
+    fit_ours,
+    fit_ours_from_poles,
+    fmt,
+    match_poles,
+    md_table,
+    synthesis_error,
+)
 
 NAME = "uliege_meca0062_plane_hammer"
 SOURCE = ("GitHub VictorRenkin/MECA0062-1_vibration_testing (commit a22f8821), University of Liege MECA0062 "
@@ -206,7 +213,7 @@ def subsets(frf: FRFSet) -> dict:
 
 
 def close_pair_check(sets: dict, poles_raw: np.ndarray, pair_hz: tuple[float, float], margin_hz: float = 2.5,
-                     auto: Optional[dict] = None) -> tuple[list, dict]:
+                     auto: dict | None = None) -> tuple[list, dict]:
     """Is a close pair of global poles (one of them possibly added by the pipeline's misfit step) a pair of
     modes in every subset? For each subset: LSFD on ``pair - margin .. pair + margin`` Hz from the global
     poles there (and within 3 Hz of that band), with and without the lower pole of the pair; the pair's

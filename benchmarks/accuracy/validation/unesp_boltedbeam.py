@@ -17,10 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from analysis.frf import FRFSet
-
-from .case import compare
 from analysis.modal import synthesize
 
+from .case import compare
 from .common import CaseReport, consistency_table, data_model, fit_ours_from_poles, synthesis_error
 
 NAME = "unesp_bert_boltedbeam_subset"
