@@ -196,7 +196,7 @@ def fit_step(ctx: DemoContext) -> None:
 
 
 def report_step(ctx: DemoContext) -> None:
-    """The HTML test report of the demo (issue 12), with the fit above and the frame's wireframe."""
+    """The HTML test report of the demo, with the fit above and the frame's wireframe."""
     from analysis.report_html import make_report
     from simulator.geometry import frame_geometry
 

@@ -180,7 +180,7 @@ def test_capture_asks_the_operator(tmp_path, monkeypatch, capsys):
 
     monkeypatch.setattr("sys.stdin", io.StringIO("a\nr\nq\n"))
     rec = tmp_path / "asked.h5"
-    # q on an incomplete test: exit code 3 (issue 11, item 6), every hit kept
+    # q on an incomplete test: exit code 3, every hit kept
     assert capture_main(["--device", "sim://?seed=8", "--out", str(rec), "--hits", "5"]) == 3
     cap = capsys.readouterr()
     assert "accept (a), reject (r), quit (q)?" in cap.out
@@ -197,7 +197,7 @@ def test_capture_asks_the_operator(tmp_path, monkeypatch, capsys):
 
 
 def test_capture_reports_each_points_excitation_band_and_warns_when_narrow(captured):
-    """Issue 11, item 1: the medium tip's force spectrum is 20 dB down near 1.1 kHz, well inside the
+    """The medium tip's force spectrum is 20 dB down near 1.1 kHz, well inside the
     analyser's 2.5 kHz band: the summary says so per point and warns."""
     from acquisition.averaging import average_recorded_hits
     from acquisition.session import SessionResult
@@ -215,7 +215,7 @@ def test_capture_reports_each_points_excitation_band_and_warns_when_narrow(captu
 
 
 def test_resume_continues_the_hit_count_the_rejections_and_the_simulated_stream(tmp_path, monkeypatch, capsys):
-    """Issue 11, item 6: after 'q', --resume numbers its hits on from the recording's, lists the
+    """After 'q', --resume numbers its hits on from the recording's, lists the
     earlier rejections, and the simulated device does not play the same strikes again."""
     import io
 
@@ -237,7 +237,7 @@ def test_resume_continues_the_hit_count_the_rejections_and_the_simulated_stream(
 
 
 def test_sep005_export_import_round_trip(captured, tmp_path, capsys):
-    """Issue 11: SEP005 (SDyPy's time-series exchange dicts) beside UFF: a recording's hits exported,
+    """SEP005 (SDyPy's time-series exchange dicts) beside UFF: a recording's hits exported,
     valid for SDyPy's own checker when it is installed, and imported back into the same FRFs."""
     import json
 

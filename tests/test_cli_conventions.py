@@ -102,7 +102,7 @@ def test_the_same_bad_url_gives_the_same_exit_code_everywhere(tmp_path, capsys):
 
 
 def test_every_command_takes_v_and_q_and_q_keeps_output_short(tmp_path, capsys):
-    """Issue 11, item 5/10: -v/-q on all commands; -q prints no progress and no per-note lines."""
+    """-v/-q on all commands; -q prints no progress and no per-note lines."""
     import contextlib
     import importlib
     import io

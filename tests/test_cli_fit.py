@@ -90,7 +90,7 @@ def test_fit_writes_json_plot_and_uff(uff_file, tmp_path, capsys):
     from analysis.uff import read_uff55, read_uff58
 
     lam, nodes, shapes = read_uff55(out_uff)
-    # issue 11, item 7: modes in order of frequency in the file, as in the table and the JSON
+    # modes in order of frequency in the file, as in the table and the JSON
     np.testing.assert_allclose(natural_freq_hz(lam), F_TRUE, rtol=1e-4)
     assert np.all(np.diff(natural_freq_hz(lam)) > 0) and np.all(np.diff(freqs) > 0)
     synth = read_uff58(out_uff)
@@ -112,7 +112,7 @@ def test_fit_user_poles_band_and_modes(uff_file, tmp_path, capsys):
     doc = json.loads(out.read_text())
     assert len(doc["poles"]) == 3 and doc["residual_form"] == "paper"
     np.testing.assert_allclose([p["freq_hz"] for p in doc["poles"]], F_TRUE[:3], rtol=1e-4)
-    # the same output again: refused without --overwrite (issue 11, item 10), replaced with it
+    # the same output again: refused without --overwrite, replaced with it
     assert cli_fit.main([str(uff_file), "--json", str(out), "--modes", "2"]) == 2
     assert "add --overwrite" in capsys.readouterr().err and len(json.loads(out.read_text())["poles"]) == 3
     rc = cli_fit.main([str(uff_file), "--json", str(out), "--modes", "2", "--order", "12", "--initial", "lsce",
@@ -255,14 +255,14 @@ def test_fit_exclude_lines_and_mains_options(uff_file, tmp_path, capsys):
 
 
 def test_fit_prints_its_table_without_json(uff_file, tmp_path, capsys):
-    """Issue 11, item 10: the table on the terminal needs no --json."""
+    """The table on the terminal needs no --json."""
     assert cli_fit.main([str(uff_file), "--modes", "3"]) == 0
     out = capsys.readouterr().out
     assert "pole I " in out and "results written" not in out
 
 
 def test_every_subcommand_help_documents_its_options_with_an_example():
-    """Issue 11, item 10: each --help page ends with worked examples, every option has a help text,
+    """Each --help page ends with worked examples, every option has a help text,
     and no raw reStructuredText markup leaks into the pages."""
     import contextlib
     import importlib

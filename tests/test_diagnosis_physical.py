@@ -1,4 +1,4 @@
-"""Physical diagnosis (issue 15): the FE model re-run with parameterised changes.
+"""Physical diagnosis: the FE model re-run with parameterised changes.
 
 Truth tests of the pieces (the split frame equals frames built from changed configs; noise-free
 recovery; the finite record and the window's line correlation against time-domain computations),

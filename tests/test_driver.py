@@ -316,5 +316,5 @@ def test_cli_identify_prints_identity_and_capabilities(capsys):
     info = json.loads(capsys.readouterr().out)
     assert info["identity"]["serial"] == "SL2042-0000001" and info["capabilities"]["inputs"] == 4
     assert info["capabilities"]["bandwidths_hz"][-1] == 20000.0  # 51200 / 2.56
-    assert main(["--device", "bogus://x"]) == 2  # a usage error, as in capture (issue 11, item 10)
+    assert main(["--device", "bogus://x"]) == 2  # a usage error, as in capture
     assert "invalid device URL" in capsys.readouterr().err

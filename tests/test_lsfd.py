@@ -393,7 +393,7 @@ def test_bad_arguments_raise_clear_errors() -> None:
 
 
 def test_sorted_by_frequency_permutes_every_per_mode_quantity_alike() -> None:
-    """Issue 11, item 7: a fit started from poles out of order (as the missing-mode step appends
+    """A fit started from poles out of order (as the missing-mode step appends
     them) comes out in order of frequency, with residues, shapes and deviations following."""
     from analysis.lsfd import sorted_by_frequency
     from analysis.modal import natural_freq_hz

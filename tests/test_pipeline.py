@@ -231,7 +231,7 @@ def test_fit_auto_finds_two_modes_two_lines_apart():
 
 
 def test_success_means_converged_and_physically_sensible() -> None:
-    """Issue 11, item 2: a fit that stops with implausible poles is not a success, in the result and
+    """A fit that stops with implausible poles is not a success, in the result and
     in the JSON document; a single average is flagged."""
     from analysis.fit_result import FitResult, assess_fit
     from analysis.report import result_to_dict
@@ -260,7 +260,7 @@ def test_success_means_converged_and_physically_sensible() -> None:
 
 
 def test_default_band_comes_from_the_analyser_the_hammer_and_the_coherence() -> None:
-    """Issue 11, item 1: the automatic band ends where the data stop supporting a fit."""
+    """The automatic band ends where the data stop supporting a fit."""
     from analysis.bands import upper_limits
 
     frf, _ = make_frf(n_f=2000, fmax=500.0)
@@ -282,7 +282,7 @@ def test_default_band_comes_from_the_analyser_the_hammer_and_the_coherence() -> 
 
 
 def test_stabilization_order_respects_the_band_it_is_given() -> None:
-    """Issue 11, item 8: a narrow band of a noisy FRF no longer asks for more modes than its lines hold."""
+    """A narrow band of a noisy FRF no longer asks for more modes than its lines hold."""
     frf, _ = make_frf(n_out=1, noise=0.2, n_f=2000, fmax=500.0)  # noise peaks: the old rule asked for 50 modes
     band = (4.0, 70.0)  # 265 lines
     n = default_max_modes(frf, band)
@@ -294,7 +294,7 @@ def test_stabilization_order_respects_the_band_it_is_given() -> None:
 
 
 def test_fit_figure_spans_the_band_numbers_the_modes_and_says_what_it_leaves_out() -> None:
-    """Issue 11, item 4: the x axis spans the fitted band (10 % margin), the modes are numbered in
+    """The x axis spans the fitted band (10 % margin), the modes are numbered in
     order of frequency, a single column keeps its y labels, and a partial set says so."""
     from analysis.plots import fit_figure
 
@@ -314,7 +314,7 @@ def test_fit_figure_spans_the_band_numbers_the_modes_and_says_what_it_leaves_out
 
 
 def test_many_mains_lines_give_one_warning_with_a_count() -> None:
-    """Issue 11, item 5: a misfit peak on every mains harmonic is reported once, with a count, not
+    """A misfit peak on every mains harmonic is reported once, with a count, not
     once per line (227 lines on the LADISK beam before)."""
     frf, truth = make_frf(np.array([120.0, 210.0, 380.0]), np.array([0.01, 0.01, 0.01]), n_out=3, seed=1,
                           noise=0.002)

@@ -1,4 +1,4 @@
-"""The README's Python API example runs as written (issue 11: a short API from exported names),
+"""The README's Python API example runs as written (a short API from exported names),
 and the notebook faces (reprs, .plot) of its results work."""
 from __future__ import annotations
 

@@ -213,7 +213,7 @@ def test_sigkill_mid_session_loses_no_hit(tmp_path, seed, n_before_kill):
 
 def test_frfs_carry_sample_rate_and_the_preferred_estimator(tmp_path) -> None:
     """The FRF set carries the sample rate it was measured at, and a recording replayed with H2 is
-    read as H2 by every consumer unless told otherwise (issue 11, item 3)."""
+    read as H2 by every consumer unless told otherwise."""
     from analysis.recording import load_frfset
     from analysis.recording_writer import RecordingWriter
     from analysis.spectra import WindowSettings

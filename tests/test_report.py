@@ -1,4 +1,4 @@
-"""The HTML test report (issue 12), checked from Python: the page's DOM contract, its assets, the
+"""The HTML test report, checked from Python: the page's DOM contract, its assets, the
 content against the fit, the geometry files and the command's errors. The browser checks are in
 tests/test_report_browser.py."""
 from __future__ import annotations

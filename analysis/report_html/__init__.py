@@ -1,4 +1,4 @@
-"""Self-contained HTML test report (issue 12): ``python -m analysis report``.
+"""Self-contained HTML test report: ``python -m analysis report``.
 
 :func:`build_document` collects the content, :func:`write_report` writes the folder
 (``index.html`` and its assets; opens from ``file://`` with no network).

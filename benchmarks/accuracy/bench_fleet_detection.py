@@ -8,7 +8,7 @@ defective ones with a soft joint, a cracked member or a loose support, written i
 [damage] table, captured through the simulated analyser); ``analysis batch`` fits them on a local
 Dask cluster and flags outliers; the flags are scored against truth.json. Prints one row per seed
 and per defect kind, with the smallest defect that was flagged and the largest that was missed.
-Target (issue 13): >= 9 of 10 defective units flagged, <= 1 good unit flagged, per fleet of 100.
+Target: >= 9 of 10 defective units flagged, <= 1 good unit flagged, per fleet of 100.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """HTML test report of the ULiege plane (222 FRFs x 1241 lines, 14 modes) and the ModeLAB beam.
 
-Targets (issue 12): the ULiege report written in < 5 s (content collected from the FRFs, the fit and
+Targets: the ULiege report written in < 5 s (content collected from the FRFs, the fit and
 its stabilization, and the folder written; the fit itself is timed apart), the page < 15 MB (the
 whole folder, plotly.js included), loaded and drawn by headless Chromium in < 3 s (navigation start
 to the page's "drawn" mark). Needs ../shared/data, plotly (the report extra), and for the browser

@@ -1,4 +1,4 @@
-"""The automatic band (issue 11) on every real dataset of docs/validation.md: what bounds it, and
+"""The automatic band on every real dataset of docs/validation.md: what bounds it, and
 whether the automatic fit keeps every pole inside it.
 
 For each dataset the FRFs are loaded over their whole recorded range (no hand-picked band), the

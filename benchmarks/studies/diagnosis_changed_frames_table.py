@@ -1,8 +1,8 @@
-"""The changed frames of issue 15's table, each captured through ``sim://?config=...`` (the default test
+"""Frames changed in one physical way, each captured through ``sim://?config=...`` (the default test
 plan's six points, 3 hits each) and diagnosed against the unchanged frame.toml with the command line
-(``python -m analysis diagnose``). Prints the table of docs/diagnosis.md ("The frames of issue 15").
+(``python -m analysis diagnose``). Prints the table of docs/diagnosis.md ("Frames changed in one physical way").
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/diagnosis_issue15_table.py
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/diagnosis_changed_frames_table.py
 """
 from __future__ import annotations
 
