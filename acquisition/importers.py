@@ -220,17 +220,23 @@ def read_dropping_nonfinite(read: Callable[..., ImportedTest], *args: Any, drop:
         return test
 
 
+def _parsed(read: Callable[[], ImportedTest], what: str, advice: str) -> ImportedTest:
+    """``read()`` checked (:func:`_checked`); a malformed input (any of ``_MALFORMED``) becomes one
+    :class:`ImportDataError`: ``what`` (the problem), the parser's words, then ``advice``."""
+    try:
+        return _checked(read())
+    except ImportDataError:
+        raise
+    except _MALFORMED as exc:
+        raise ImportDataError(f"{what} ({type(exc).__name__}: {exc}); {advice}") from None
+
+
 def read_lvm(path: str | Path) -> ImportedTest:
     """Read a LabVIEW measurement file; each segment is one hit (see module doc).
 
     Raises :class:`ImportDataError` for anything that is not a well-formed .lvm file."""
-    try:
-        return _checked(_read_lvm(path))
-    except ImportDataError:
-        raise
-    except _MALFORMED as exc:
-        raise ImportDataError(f"{path} is not a well-formed .lvm file ({type(exc).__name__}: {exc}); "
-                              "export it again from LabVIEW (Write To Measurement File)") from None
+    return _parsed(lambda: _read_lvm(path), f"{path} is not a well-formed .lvm file",
+                   "export it again from LabVIEW (Write To Measurement File)")
 
 
 def _read_lvm(path: str | Path) -> ImportedTest:
@@ -309,13 +315,9 @@ def read_dataphysics_mat(path: str | Path, windowed: bool = False) -> ImportedTe
     of two columns (time s, value). Raises :class:`ImportDataError` for anything else."""
     p = Path(path)
     m = _loadmat_isolated(p)
-    try:
-        return _checked(_dataphysics_from(p, m, windowed))
-    except ImportDataError:
-        raise
-    except _MALFORMED as exc:
-        raise ImportDataError(f"{p} does not hold DataPhysics time blocks of two columns (time, value) "
-                              f"({type(exc).__name__}: {exc}); export the time data again") from None
+    return _parsed(lambda: _dataphysics_from(p, m, windowed),
+                   f"{p} does not hold DataPhysics time blocks of two columns (time, value)",
+                   "export the time data again")
 
 
 #: longest a damaged MATLAB file may keep the reader busy (s)
@@ -394,13 +396,8 @@ def read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
     Raises :class:`ImportDataError` for unreadable arrays or a description that does not fit them."""
     if not isinstance(description, dict):
         raise ImportDataError(f"the description must be a mapping with 'channels', got {type(description).__name__}")
-    try:
-        return _checked(_read_numpy(paths, description))
-    except ImportDataError:
-        raise
-    except _MALFORMED as exc:
-        raise ImportDataError(f"the arrays do not fit the description ({type(exc).__name__}: {exc}); check "
-                              "channels, layout, time_row and sample_rate_hz") from None
+    return _parsed(lambda: _read_numpy(paths, description), "the arrays do not fit the description",
+                   "check channels, layout, time_row and sample_rate_hz")
 
 
 def _read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
@@ -494,13 +491,8 @@ def read_sep005_test(path: str | Path) -> ImportedTest:
     'a' acceleration, ...), points from the ``point`` key (else the channel name), trigger samples
     from ``trigger_index`` when every channel of a hit has it (else found on the force).
     Raises :class:`ImportDataError` for anything else."""
-    try:
-        return _checked(_read_sep005_test(path))
-    except ImportDataError:
-        raise
-    except _MALFORMED as exc:
-        raise ImportDataError(f"{path} is not an SEP005 test impactlab can import ({type(exc).__name__}: {exc}); "
-                              "check the groups, fs and trigger_index of its channels") from None
+    return _parsed(lambda: _read_sep005_test(path), f"{path} is not an SEP005 test impactlab can import",
+                   "check the groups, fs and trigger_index of its channels")
 
 
 def _read_sep005_test(path: str | Path) -> ImportedTest:
