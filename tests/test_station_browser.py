@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from station_support import WAIT_S, StationProcess, chrome
 
-POINTS = ["right:6:-X", "top:4:Z"]
+POINTS = ["right:6:-X", "left:9:Y"]  # the second is struck where a sensor is: its driving point
 HITS = 2
 DEVICE = "sim://?seed=1&faults=double_hit:0.25&fault_seed=4"  # strike 2 is a double hit
 
@@ -95,6 +95,11 @@ def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
             for name in ("force", "response", "force-spectrum", "frf", "coherence", "geometry"):
                 el = driver.find_element(By.CSS_SELECTOR, f'[data-plot="{name}"]')
                 wait.until(lambda d, e=el: "js-plotly-plot" in e.get_attribute("class"))
+            quality = driver.find_element(By.ID, "quality-lines")
+            if POINTS[k] == "left:9:Y":  # a driving point: its check shows beside the hits
+                wait.until(lambda d, e=quality: "driving point left:9:Y" in e.text)
+            else:
+                assert "driving point" not in quality.text
             if k == 0:
                 driver.save_screenshot(str(tmp_path / "station-point1.png"))
             click("next-point")

@@ -1,6 +1,8 @@
 """The station's plot data and control lease against known answers (no server, no browser)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -67,3 +69,41 @@ def test_the_lease_lapses_only_when_its_tab_stops_renewing():
     now[0] = 29.5
     assert not lease.holds("a") and lease.acquire("b") and lease.holds("b")
     assert lease.acquire("a", take=True) and not lease.holds("b")
+
+
+class _Point:
+    """A point's running average as the station holds it (one reference, the sensors as outputs)."""
+
+    def __init__(self, frf, reference):
+        one = frf.select(references=[reference])
+        self._frf = replace(one, meta={**one.meta, "n_averages": 4})
+        self.point = self.reference = reference
+        self.outputs = tuple(frf.outputs)
+        self.n_averages = 4
+
+    def frfset(self, estimator="H1"):
+        return self._frf
+
+
+def test_quality_lines_name_the_driving_point_and_the_reciprocal_pairs_measured_so_far():
+    from quality_support import SENSORS, roving_test
+
+    from acquisition.station.payloads import quality_payload
+    from simulator.stand import TestStand
+
+    clean = roving_test(TestStand(seed=2))
+    pts = [_Point(clean, p) for p in SENSORS]
+    first = quality_payload(pts[0], pts[:1])  # the first point: its driving point, no pair yet
+    assert first == [f"driving point {SENSORS[0]}: phase within +-90 deg, an antiresonance between every two "
+                     "resonances"]
+    lines = quality_payload(pts[2], pts)  # the third: the pairs among the three points
+    assert lines[0] == "reciprocity: reciprocal (3 pair(s))" and lines[1].startswith(f"driving point {SENSORS[2]}: ")
+    off = roving_test(TestStand(seed=5), gain={"top:2:Z": 1.1})
+    pts = [_Point(off, p) for p in SENSORS]
+    bad = quality_payload(pts[1], pts)
+    assert bad[0].startswith("reciprocity: not reciprocal") and "top:2:Z" in bad[0]
+    # a point struck where no sensor is has neither check
+    away = _Point(clean, SENSORS[0])
+    away.point = away.reference = "top:4:X"
+    away._frf = replace(away._frf, references=("top:4:X",))
+    assert quality_payload(away, pts) == []

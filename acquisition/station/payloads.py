@@ -17,8 +17,8 @@ from analysis.frf import analyser_band_hz
 from analysis.geometry import Geometry
 from analysis.spectra import excitation_band
 
-__all__ = ["band_edges", "frf_payload", "geometry_payload", "hit_payload", "range_advice", "setup_payload",
-           "verdict_payload"]
+__all__ = ["band_edges", "frf_payload", "geometry_payload", "hit_payload", "quality_payload", "range_advice",
+           "setup_payload", "verdict_payload"]
 
 #: most samples of a time trace sent to the page (min/max pairs keep the peaks when decimating)
 MAX_TRACE_POINTS = 2400
@@ -101,10 +101,11 @@ def hit_payload(data: np.ndarray, fs_hz: float, trigger_index: int, pretrigger: 
     }
 
 
-def frf_payload(average: Any, bandwidth_hz: float) -> dict:
+def frf_payload(average: Any, bandwidth_hz: float, measured: Sequence[Any] = ()) -> dict:
     """H1, H2 (dB) and coherence per output of a point's running average
-    (``acquisition.session.MeasurementAverage``), and ``levels``: soft against hard hits when their forces
-    spread (:func:`analysis.linearity.level_spread`, else None); empty when it has no hit yet."""
+    (``acquisition.session.MeasurementAverage``), ``levels``: soft against hard hits when their forces
+    spread (:func:`analysis.linearity.level_spread`, else None), and ``quality``: the point's quality
+    lines (:func:`quality_payload` against the other points ``measured`` so far); empty when it has no hit yet."""
     base = {"point": average.point, "reference": average.reference, "n_averages": average.n_averages,
             "unit": average.unit, "outputs": []}
     if average.n_averages == 0:
@@ -123,7 +124,37 @@ def frf_payload(average: Any, bandwidth_hz: float) -> dict:
     from analysis.linearity import level_spread
 
     base["levels"] = level_spread(acc.hits, (float(freq[1]), float(bandwidth_hz)))
+    base["quality"] = quality_payload(average, measured)
     return base
+
+
+def quality_payload(average: Any, measured: Sequence[Any] = ()) -> list[str]:
+    """Short lines of the quality checks for the point on screen (:func:`analysis.quality.quality_lines`):
+    its driving point when its reference is among its outputs (:func:`analysis.driving_point.check_driving_point`
+    in the band the analyser, the hammer and the coherence support),
+    and reciprocity (:func:`analysis.reciprocity.reciprocity`) over the point and its partners among the
+    points ``measured`` so far (running averages with at least one hit that form a pair H_ij / H_ji with
+    it). Only those partners are merged, so the cost per hit stays that of a few FRFs. Empty when no
+    check applies or the data cannot carry one yet (a band with no usable line)."""
+    from analysis.driving_point import check_driving_point, driving_points
+    from analysis.errors import FitError, RecordingError
+    from analysis.quality import quality_lines
+    from analysis.reciprocity import reciprocity, same_dof
+    from analysis.recording import merge_frfsets
+
+    here = average.frfset()
+    partners = [a for a in measured if a is not average and a.n_averages > 0 and a.point != average.point
+                and any(same_dof(a.reference, o) for o in average.outputs)
+                and any(same_dof(average.reference, o) for o in a.outputs)]
+    checks: dict = {"linearity": None, "reciprocity": None, "driving_points": []}
+    try:
+        checks["driving_points"] = [check_driving_point(here, o, r, s).to_dict()
+                                    for o, r, s in driving_points(here)]
+        if partners:
+            checks["reciprocity"] = reciprocity(merge_frfsets([here, *(a.frfset() for a in partners)])).to_dict()
+    except (FitError, RecordingError, ValueError):
+        return []
+    return quality_lines(checks)
 
 
 def range_advice(check: Any, setup: Any, ranges_v: Sequence[float], data: np.ndarray | None) -> list[str]:

@@ -26,6 +26,7 @@ class PagePublisher:
     _pending_hit: Any
     _shown_seq: int
     _block_time: float
+    _averages: list
 
     def _publish_setup(self) -> None:
         self.state.set_blob("setup", payloads.setup_payload(self.setup, self.caps, self.windows,
@@ -41,10 +42,15 @@ class PagePublisher:
                  "accepted": old.get(m.point, {}).get("accepted", 0),
                  "done": old.get(m.point, {}).get("done", False)} for m in ms]
 
+    def _measured(self) -> list:
+        """The running averages of the points measured so far (the session's result, kept by :meth:`_publish_point`)."""
+        return list(getattr(self, "_averages", ()))
+
     def _publish_frf(self, avg: Any) -> None:
-        self.state.set_blob("frf", payloads.frf_payload(avg, self.setup.bandwidth_hz))
+        self.state.set_blob("frf", payloads.frf_payload(avg, self.setup.bandwidth_hz, self._measured()))
 
     def _publish_point(self, m: Any, avg: Any, result: Any, phase: str) -> None:
+        self._averages = result.averages
         rows = self.state.get("plan") or self._plan_rows()
         rows = [dict(r) for r in rows]
         for r in rows:
@@ -83,7 +89,7 @@ class PagePublisher:
         verdict["seq"] = self._shown_seq
         hits_here = (summary.average.n_averages - (1 if pending else 0)) if summary.average is not None else 0
         if summary.average is not None:
-            self.state.set_blob("frf", payloads.frf_payload(summary.average, setup.bandwidth_hz))
+            self.state.set_blob("frf", payloads.frf_payload(summary.average, setup.bandwidth_hz, self._measured()))
         phase = "decide" if pending else "busy"
         self.state.update(verdict=verdict, hit_seq=self._shown_seq, phase=phase, point_hits=hits_here)
         if not pending:

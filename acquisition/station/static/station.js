@@ -211,6 +211,8 @@
       const h2 = outs.map((o) => ({ x: d.f_hz, y: o.h2_db, name: "H2 " + o.name, line: { width: 1, dash: "dot" }, visible: "legendonly" }));
       Plotly.react(plotEl("frf"), h1.concat(h2),
         layoutBase(`FRF at reference ${d.reference || "-"} (${d.n_averages} averages${state && state.phase === "decide" ? ", the hit on screen included" : ""})` + (d.levels ? "<br>linearity: " + d.levels.line : ""), "frequency (Hz)", `dB re 1 ${d.unit || ""}`), cfg);
+      const ql = document.getElementById("quality-lines");
+      if (ql) ql.replaceChildren(...(d.quality || []).map((t) => { const li = document.createElement("li"); li.textContent = t; return li; }));
       Plotly.react(plotEl("coherence"), outs.map((o) => ({ x: d.f_hz, y: o.coherence, name: o.name, line: { width: 1 } })),
         Object.assign(layoutBase("coherence", "frequency (Hz)", ""), { yaxis: { range: [0, 1.05] } }), cfg);
     }).catch((e) => note("FRF plots: " + e.message, "WARNING"));
