@@ -23,12 +23,13 @@ import numpy as np
 if TYPE_CHECKING:
     from simulator.physical import FrameVariants
 
+    from .diagnosis.joint_nonlinearity import JointSimulation, JointSimulationFactory
     from .frf import FRFSet
 
 from .command_line import Parser as _Parser
 from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, parse_args, with_examples
 
-__all__ = ["main", "build_parser", "load_simulations"]
+__all__ = ["main", "build_parser", "load_simulations", "joint_simulation"]
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +80,23 @@ def load_simulations(path: str, measured: FRFSet, estimator: str | None = None) 
         raise InputError(f"simulator config {p}: {exc}") from None
 
 
+def joint_simulation(path: str) -> JointSimulationFactory | None:
+    """For a simulator config (``.toml``): the factory that re-simulates the recorded test's hits with
+    :class:`simulator.nonlinear_simulation.JointHitSimulation` (the ``joint_nonlinearity`` cause); None
+    for FRF files."""
+    if Path(path).suffix.lower() != ".toml":
+        return None
+
+    def build(hits: Sequence[Any], levels: Sequence[float], sets: Sequence[FRFSet]) -> JointSimulation:
+        from simulator.nonlinear_simulation import JointHitSimulation
+
+        points = tuple(dict.fromkeys(h.point for h in hits))
+        return JointHitSimulation(path, points, hits[0].outputs, levels, hits[0].fs_hz, hits[0].force.size,
+                                  hits[0].trigger_index, sets[0].quantity, sets[0].unit)
+
+    return build
+
+
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
@@ -102,18 +120,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         band = parse_band_text(args.band)
         simulated = load_simulations(args.simulated, measured, args.estimator)
         diag = diagnose(measured, simulated, band=band if band is not None else "data", effects=effects,
-                        estimator=args.estimator, recording=_recording(args.measured))
+                        estimator=args.estimator, recording=_recording(args.measured),
+                        joint_simulation=joint_simulation(args.simulated))
     except (InputError, EffectError, ValueError, FitError) as exc:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2
     doc = diag.to_json()
-    from .cli_linearity import level_dependence
-
-    levels = level_dependence(args.measured, args.simulated, (float(measured.freq_hz[0]), float(measured.freq_hz[-1])))
-    if levels is not None:
-        doc["level_dependence"] = levels
-        if levels.get("cause", {}).get("present"):
-            doc["linear_verdict"], doc["verdict"] = doc["verdict"], "joint_nonlinearity"
     Path(args.json).write_text(json.dumps(doc, indent=1, default=_json_default))
     if args.report:
         from .diagnosis.report import write_report
@@ -122,8 +134,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for c in diag.time_data:
         if c["present"]:
             print(f"  time data ({c['reference']}): {c['evidence']}")
-    if levels is not None and "cause" in levels:
-        print(f"  level dependence: {levels['cause']['evidence']}")
+    if diag.level_dependence is not None and "cause" in diag.level_dependence:
+        print(f"  level dependence: {diag.level_dependence['cause']['evidence']}")
     print(f"verdict: {doc['verdict']}" + (f" ({diag.reason})" if diag.reason else ""))
     for c in diag.named:
         print(f"  named: {c['effect']} {c['parameters']}")

@@ -26,7 +26,7 @@ import numpy as np
 from .command_line import Parser as _Parser
 from .command_line import add_estimator, check_out_dir, parse_args, with_examples
 
-__all__ = ["main", "build_parser", "level_dependence"]
+__all__ = ["main", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,32 +44,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="L.json", help="write the comparison as JSON")
     add_estimator(p)
     return p
-
-
-def level_dependence(measured: str, simulated: str, band: tuple[float, float] | None = None) -> dict | None:
-    """For ``analysis diagnose``: the level comparison of a recording whose hits span force levels and,
-    when it says "nonlinear" and ``simulated`` is a simulator config (``.toml``), the
-    ``joint_nonlinearity`` cause (:mod:`analysis.diagnosis.joint_nonlinearity`) with the test re-simulated
-    by :class:`simulator.nonlinear_simulation.JointHitSimulation`. None when there is nothing to compare."""
-    from .diagnosis.joint_nonlinearity import joint_nonlinearity
-    from .linearity import compare_levels, recording_hits
-
-    got = recording_hits(measured)
-    if got is None:
-        return None
-    hits, levels, sets = got
-    if len(sets) < 2:
-        return None
-    lin = compare_levels(sets, levels, band=band)
-    out: dict = {"linearity": lin.to_dict()}
-    if lin.verdict == "nonlinear" and Path(simulated).suffix.lower() == ".toml":
-        from simulator.nonlinear_simulation import JointHitSimulation
-
-        points = tuple(dict.fromkeys(h.point for h in hits))
-        sim = JointHitSimulation(simulated, points, hits[0].outputs, levels, hits[0].fs_hz, hits[0].force.size,
-                                 hits[0].trigger_index, sets[0].quantity, sets[0].unit)
-        out["cause"] = joint_nonlinearity(lin, sim)
-    return out
 
 
 def _levels(args: argparse.Namespace, n: int) -> list[float] | None:

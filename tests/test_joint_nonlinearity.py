@@ -74,3 +74,39 @@ def test_time_domain_frame_joint_named_by_simulated_hits(monkeypatch):
     assert c["present"] and c["method"] == "simulated hits"
     assert "right:10" in c["joint"]["nodes"] and c["joint"]["axis"] == "ry"
     assert 1.0 < c["law"]["slip_moment_nm"] < 4.0
+
+
+def test_the_diagnosis_carries_the_level_stage_and_a_present_joint_becomes_its_verdict(monkeypatch):
+    from analysis.diagnosis import entry
+    from analysis.diagnosis.verdict import Diagnosis
+
+    linear = Diagnosis(verdict="element_stiffness", causes=[], error_before_db=-20.0, error_after_db=-30.0,
+                       noise_db={"difference": -40.0}, comparison={}, unexplained=[], measured=None,
+                       simulated=None, extended=None, named=[{"effect": "element_stiffness", "parameters": {}}])
+    cause = {"effect": "joint_nonlinearity", "present": True, "evidence": "the modes follow the joint right:10 ry",
+             "joint": {"name": "joint right:10-top:8 ry", "nodes": ["right:10", "top:8"], "axis": "ry"},
+             "law": {"stiffness_change_percent": -3.0, "kind": "micro-slip friction", "levels": [20.0, 400.0]}}
+    seen = {}
+
+    def compare(recording, band, simulation):
+        seen.update(recording=recording, band=band, simulation=simulation)
+        return {"linearity": {"verdict": "nonlinear"}, "cause": cause}
+
+    monkeypatch.setattr(jn, "level_dependence", compare)
+    factory = object()
+    got = entry._level_stage(linear, "rec.h5", (5.0, 400.0), factory)
+    assert seen == {"recording": "rec.h5", "band": (5.0, 400.0), "simulation": factory}
+    assert got.verdict == "joint_nonlinearity" and got.linear_verdict == "element_stiffness"
+    assert got.named == [{"effect": "joint_nonlinearity", "evidence": cause["evidence"],
+                          "parameters": {"joint": "joint right:10-top:8 ry", "stiffness_change_percent": -3.0,
+                                         "kind": "micro-slip friction"}}]
+    doc = got.to_json()
+    assert doc["verdict"] == "joint_nonlinearity" and doc["linear_verdict"] == "element_stiffness"
+    assert doc["level_dependence"]["cause"]["joint"]["axis"] == "ry" and linear.verdict == "element_stiffness"
+    # an absent cause keeps the FRF comparison's verdict; no levels to compare leave the diagnosis as it is
+    monkeypatch.setattr(jn, "level_dependence", lambda *a: {"linearity": {"verdict": "linear"}})
+    kept = entry._level_stage(linear, "rec.h5", (5.0, 400.0), None)
+    assert kept.verdict == "element_stiffness" and kept.linear_verdict is None and "linear_verdict" not in kept.to_json()
+    assert kept.to_json()["level_dependence"] == {"linearity": {"verdict": "linear"}}
+    monkeypatch.setattr(jn, "level_dependence", lambda *a: None)
+    assert entry._level_stage(linear, "rec.h5", (5.0, 400.0), None) is linear

@@ -5,8 +5,10 @@ data's own band for a file, and for an FE simulation the band where its mesh has
 simulation (a pole-residue :class:`~analysis.modal.ModalModel`, an FRF set turned into one by the
 automatic fit, or an FE model with physical causes, :class:`analysis.diagnosis.physical.PhysicalSimulation`)
 is compared, the causes are fitted and cross-validated (:func:`analysis.diagnosis.verdict.diagnose_frfs`),
-and a recording's hits get the time-data stage (:mod:`analysis.diagnosis.timedata_stage`); an
-``unexplained`` verdict becomes the time-data cause that counts.
+and a recording's hits get the time-data stage (:mod:`analysis.diagnosis.timedata_stage`; an
+``unexplained`` verdict becomes the time-data cause that counts) and the level stage: soft against
+hard hits and, given a simulation of the recorded test, the ``joint_nonlinearity`` cause, which
+becomes the verdict when present (:func:`analysis.diagnosis.joint_nonlinearity.level_dependence`).
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import numpy as np
 
 from ..frf import FRFSet
 from ..modal import ModalModel
+from .joint_nonlinearity import JointSimulationFactory
 from .verdict import Diagnosis, diagnose_frfs
 
 __all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_point_shapes"]
@@ -99,6 +102,7 @@ def diagnose(
     physical: Any = None,
     recording: str | Path | None = None,
     extra_noise_db: dict | None = None,
+    joint_simulation: JointSimulationFactory | None = None,
     **rule: Any,
 ) -> Diagnosis:
     """Compare a measurement with a simulation and name what differs (``docs/diagnosis.md``).
@@ -116,6 +120,9 @@ def diagnose(
     recording : the recording whose hits made ``measured`` (a file given as ``measured`` is used when
         it is a recording): the noise from the hits' scatter and the time-data stage.
     extra_noise_db : further noise estimates (dB) as :func:`diagnose_frfs` takes them.
+    joint_simulation : builds the simulation of the recorded test for the ``joint_nonlinearity`` cause
+        (:data:`analysis.diagnosis.joint_nonlinearity.JointSimulationFactory`; the face builds it, e.g.
+        from a simulator config); without it a recording's levels are compared but no joint is named.
     rule : the decision rule's settings of :func:`diagnose_frfs` (``z_min``, ``min_gain_db``, ...).
 
     Raises :class:`analysis.inputs.InputError` for unreadable or inconsistent input and
@@ -143,6 +150,7 @@ def diagnose(
     else:
         raise InputError(f"the simulation is a {type(simulated).__name__}; give a modal model, an FRF set or file, "
                          "or an FE model with physical causes")
+    lines_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))  # the level stage's band: every line
     if isinstance(band, str):
         if band != "data":
             raise InputError(f"band {band!r}: give (lo, hi) in Hz, None or 'data'")
@@ -170,9 +178,16 @@ def diagnose(
     diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise, **rule)
     if recording is None:
         return diag
+    band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
+    return _level_stage(_time_data_stage(diag, recording, band_hz, base), recording, lines_hz, joint_simulation)
+
+
+def _time_data_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, float],
+                     base: ModalModel) -> Diagnosis:
+    """``diag`` with the recording's time-data causes in ``band_hz`` (Hz); an ``unexplained`` verdict becomes
+    the one that counts."""
     from .timedata_stage import time_data_causes
 
-    band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
     try:
         timed = time_data_causes(recording, band_hz, base)
     except ValueError as exc:
@@ -189,3 +204,19 @@ def diagnose(
         verdict = "amplitude_nonlinearity"
     return replace(diag, verdict=verdict, time_data=timed,
                    time_data_verdict=counted[0]["effect"] if counted else "none")
+
+
+def _level_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, float],
+                 simulation: JointSimulationFactory | None) -> Diagnosis:
+    """``diag`` with the recording's level dependence; a present ``joint_nonlinearity`` cause becomes the
+    verdict and the named cause (the FRF comparison's verdict kept as ``linear_verdict``)."""
+    from .joint_nonlinearity import level_dependence, named_joint
+
+    levels = level_dependence(recording, band_hz, simulation)
+    if levels is None:
+        return diag
+    cause = levels.get("cause") or {}
+    if not cause.get("present"):
+        return replace(diag, level_dependence=levels)
+    return replace(diag, level_dependence=levels, linear_verdict=diag.verdict, verdict="joint_nonlinearity",
+                   named=[named_joint(cause)])

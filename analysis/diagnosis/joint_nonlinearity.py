@@ -36,15 +36,17 @@ the Iwan slip moment.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from ..frf import FRFSet
 
-__all__ = ["JointCandidate", "JointSimulation", "joint_nonlinearity", "MODEL_FRACTION", "MIN_MARGIN"]
+__all__ = ["JointCandidate", "JointSimulation", "JointSimulationFactory", "joint_nonlinearity", "level_dependence",
+           "named_joint", "MODEL_FRACTION", "MIN_MARGIN"]
 
 #: Model error of the share pattern as a fraction of each change.
 MODEL_FRACTION = 0.3
@@ -112,6 +114,40 @@ def _fit(x: np.ndarray, y: np.ndarray, sd: np.ndarray) -> tuple[float, float]:
     den = float(np.sum(w * x * x))
     c = float(np.sum(w * x * y)) / den if den > 0 else 0.0
     return c, float(np.sum(w * (y - c * x) ** 2))
+
+
+#: Builds the simulation of a recorded test from its hits (:class:`analysis.linearity.LevelHit`), their force
+#: levels (N) and the FRF set per level (e.g. :class:`simulator.nonlinear_simulation.JointHitSimulation`).
+JointSimulationFactory = Callable[[Sequence[Any], Sequence[float], Sequence[FRFSet]], JointSimulation]
+
+
+def level_dependence(recording: str | Path, band: tuple[float, float] | None = None,
+                     simulation: JointSimulationFactory | None = None) -> dict | None:
+    """The level comparison of a recording whose hits span force levels (``{"linearity": ...}``,
+    :func:`analysis.linearity.compare_levels` in ``band`` Hz) and, when it says "nonlinear" and a
+    ``simulation`` factory is given, ``"cause"``: :func:`joint_nonlinearity` with the simulation it builds
+    of the recorded test. None when the recording holds no hits or their forces do not spread."""
+    from ..linearity import compare_levels, recording_hits
+
+    got = recording_hits(recording)
+    if got is None:
+        return None
+    hits, levels, sets = got
+    if len(sets) < 2:
+        return None
+    lin = compare_levels(sets, levels, band=band)
+    out: dict = {"linearity": lin.to_dict()}
+    if lin.verdict == "nonlinear" and simulation is not None:
+        out["cause"] = joint_nonlinearity(lin, simulation(hits, levels, sets))
+    return out
+
+
+def named_joint(cause: dict) -> dict:
+    """A present cause of :func:`joint_nonlinearity` as a named cause of the diagnosis: ``effect`` and
+    ``parameters`` (the joint's name and the law's plain values)."""
+    params: dict = {"joint": cause["joint"]["name"]}
+    params.update({k: v for k, v in (cause.get("law") or {}).items() if not isinstance(v, (list, dict))})
+    return {"effect": "joint_nonlinearity", "parameters": params, "evidence": cause["evidence"]}
 
 
 def joint_nonlinearity(linearity: Any, simulation: JointSimulation) -> dict:

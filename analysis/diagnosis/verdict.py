@@ -59,7 +59,8 @@ class Diagnosis:
     """Outcome of :func:`analysis.diagnosis.diagnose`.
 
     verdict : the named cause's name, ``"combined"`` when two causes are named, ``"none"`` or
-        ``"unexplained"`` (or a time-data cause when the FRFs leave the difference unexplained).
+        ``"unexplained"`` (or a time-data cause when the FRFs leave the difference unexplained, or
+        ``"joint_nonlinearity"`` when the hits' force levels name a nonlinear joint).
     named : the named causes, ``{"effect", "parameters"}`` each (at most two).
     causes : one dict per effect tried, sorted by held-out gain: ``effect``, ``parameters`` (fitted on
         all lines), ``gain_db``, ``error_before_db``, ``error_after_db``, ``z``, ``significant``, ``evidence``.
@@ -69,6 +70,9 @@ class Diagnosis:
     combined : the accepted effects stage by stage (verdict first), each with its held-out gain on top
         of the previous ones; ``error_after_db`` is the last stage's.
     measured, simulated, extended : the FRF sets (extended = simulation with the accepted effects).
+    level_dependence : a recording's soft against hard hits and the ``joint_nonlinearity`` cause
+        (:func:`analysis.diagnosis.joint_nonlinearity.level_dependence`), None without levels to compare.
+    linear_verdict : the verdict of the FRF comparison when ``joint_nonlinearity`` replaced it, else None.
     """
 
     verdict: str
@@ -89,6 +93,8 @@ class Diagnosis:
     next_measurement: dict | None = None
     time_data: list = field(default_factory=list)
     time_data_verdict: str | None = None
+    level_dependence: dict | None = None
+    linear_verdict: str | None = None
 
     def to_json(self) -> dict:
         """The JSON document of ``python -m analysis diagnose``."""
@@ -113,6 +119,10 @@ class Diagnosis:
         if self.time_data:
             doc["time_data"] = self.time_data
             doc["time_data_verdict"] = self.time_data_verdict
+        if self.level_dependence is not None:
+            doc["level_dependence"] = _jsonable(self.level_dependence)
+        if self.linear_verdict is not None:
+            doc["linear_verdict"] = self.linear_verdict
         return doc
 
 
