@@ -36,7 +36,7 @@ def test_diagnose_names_the_friction_joint(tmp_path):
     rec = tmp_path / "rec.h5"
     cap = subprocess.run([sys.executable, "-m", "acquisition", "capture", "--device",
                           f"sim://?seed=11&config={tmp_path / 'measured.toml'}", "--out", str(rec), "--hits", "8",
-                          "--points", "right:6:-X,left:6:X,top:4:Z", "--auto", "-q"],
+                          "--points", "right:6:-X,left:6:X,top:4:Z", "--auto"],
                          capture_output=True, text=True, timeout=1200)
     assert cap.returncode == 0, cap.stderr
     assert "quality: linearity: nonlinear" in cap.stdout

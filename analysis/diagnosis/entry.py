@@ -150,7 +150,6 @@ def diagnose(
     else:
         raise InputError(f"the simulation is a {type(simulated).__name__}; give a modal model, an FRF set or file, "
                          "or an FE model with physical causes")
-    lines_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))  # the level stage's band: every line
     if isinstance(band, str):
         if band != "data":
             raise InputError(f"band {band!r}: give (lo, hi) in Hz, None or 'data'")
@@ -179,7 +178,7 @@ def diagnose(
     if recording is None:
         return diag
     band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
-    return _level_stage(_time_data_stage(diag, recording, band_hz, base), recording, lines_hz, joint_simulation)
+    return _level_stage(_time_data_stage(diag, recording, band_hz, base), recording, band_hz, joint_simulation)
 
 
 def _time_data_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, float],
@@ -208,11 +207,17 @@ def _time_data_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[floa
 
 def _level_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, float],
                  simulation: JointSimulationFactory | None) -> Diagnosis:
-    """``diag`` with the recording's level dependence; a present ``joint_nonlinearity`` cause becomes the
-    verdict and the named cause (the FRF comparison's verdict kept as ``linear_verdict``)."""
+    """``diag`` with the recording's level dependence in the diagnosis band ``band_hz`` (Hz); a present
+    ``joint_nonlinearity`` cause becomes the verdict and the named cause (the FRF comparison's verdict kept
+    as ``linear_verdict``). Levels that cannot be compared (no mode to fit) leave ``diag`` as it is."""
+    from ..errors import FitError
     from .joint_nonlinearity import level_dependence, named_joint
 
-    levels = level_dependence(recording, band_hz, simulation)
+    try:
+        levels = level_dependence(recording, band_hz, simulation)
+    except (FitError, ValueError) as exc:
+        log.warning("force levels not compared: %s", exc)
+        return diag
     if levels is None:
         return diag
     cause = levels.get("cause") or {}
