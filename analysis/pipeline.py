@@ -250,7 +250,7 @@ def fit_auto(
     if not result.success:
         warnings_out.append(f"LSFD did not converge: {result.message}")
         log.warning("LSFD did not converge: %s", result.message)
-    n_avg = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    n_avg = _n_averages(frf)
     if n_avg.size and np.all(n_avg == 1):
         warnings_out.append("one average per point: the coherence is 1 everywhere and says nothing about the noise; "
                             "the standard deviations and weights rest on the misfit alone (take several hits per point)")
@@ -269,12 +269,17 @@ def fit_auto(
 SEED_MIN_AVERAGES = 3
 
 
+def _n_averages(frf: FRFSet) -> np.ndarray:
+    """The averages per FRF the set's metadata carries (empty when it does not say)."""
+    return np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+
+
 def _peaks_trusted(frf: FRFSet) -> bool:
     """Whether the visible peaks of ``frf`` may start the fit: its coherence comes from at least
     ``SEED_MIN_AVERAGES`` averages per FRF, or the number of averages is not known (FRFs read from a
     file that does not say: their coherence is taken as the analyser's, as for any peak's
     visibility)."""
-    n_avg = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    n_avg = _n_averages(frf)
     return n_avg.size == 0 or bool(np.all(n_avg >= SEED_MIN_AVERAGES))
 
 

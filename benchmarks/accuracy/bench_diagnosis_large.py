@@ -42,7 +42,6 @@ import os
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -51,7 +50,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_diagnosis_physical import POINTS, _explicit, _node_xyz, _relabel, null_case, steel_block, table  # noqa: E402
+from bench_diagnosis_physical import POINTS, _explicit, _node_xyz, _relabel, null_case, run_all, steel_block  # noqa: E402
 
 FAMILIES = ("large:added_mass", "large:support_stiffness", "crack", "pair:mass+support", "pair:damping+modulus",
             "pair:member+sensors", "pair:mass+joint", "pair:mass+damping")
@@ -277,21 +276,16 @@ def main() -> None:
             or (c["family"].partition(":")[0] in ("null", "out-of-catalogue") and args.nulls)]
     rank = [sum(d["family"] == c["family"] for d in todo[:i]) for i, c in enumerate(todo)]
     todo = [c for c, k in zip(todo, rank) if k >= args.skip and (args.first is None or k < args.first)]
-    t0 = time.perf_counter()
-    results = []
-    with ProcessPoolExecutor(args.workers) as pool:
-        for r in pool.map(run_case, todo):
-            results.append(r)
-            mark = "ok " if r["params_ok"] else ("~  " if r["right"] else "BAD")
-            shown = [(c["effect"], {k: (round(v, 4) if isinstance(v, float) else v)
-                                    for k, v in c["parameters"].items() if not isinstance(v, (list, dict))})
-                     for c in r["named"]]
-            print(f"{mark} {r['family']:26s} truth {r['truths']} -> {r['verdict']} {shown} ({r.get('time_s', 0):.1f} s, CPU {r.get('cpu_s', 0):.1f} s)",
-                  flush=True)
-    print(table(results))
-    print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} cases, {args.workers} workers")
-    if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1, default=str))
+    run_all(run_case, todo, args.workers, _case_line, args.json)
+
+
+def _case_line(r: dict) -> str:
+    mark = "ok " if r["params_ok"] else ("~  " if r["right"] else "BAD")
+    shown = [(c["effect"], {k: (round(v, 4) if isinstance(v, float) else v)
+                            for k, v in c["parameters"].items() if not isinstance(v, (list, dict))})
+             for c in r["named"]]
+    return (f"{mark} {r['family']:26s} truth {r['truths']} -> {r['verdict']} {shown} "
+            f"({r.get('time_s', 0):.1f} s, CPU {r.get('cpu_s', 0):.1f} s)")
 
 
 if __name__ == "__main__":

@@ -35,6 +35,7 @@ import json
 import os
 import tempfile
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -291,19 +292,30 @@ def main() -> None:
     ap.add_argument("--families", default=",".join(FAMILIES), help="comma-separated families to run")
     args = ap.parse_args()
     todo = cases(args.per_family, args.nulls, families=[f for f in args.families.split(",") if f])
+    run_all(run_case, todo, args.workers, _case_line, args.json)
+
+
+def _case_line(r: dict) -> str:
+    mark = "ok " if r["right"] and r.get("params_ok", True) else ("~  " if r["right"] else "BAD")
+    shown = {k: v for k, v in (r.get("parameters") or {}).items() if not isinstance(v, (list, dict))}
+    return f"{mark} {r['family']:28s} truth {r['truth']} -> {r['verdict']} {shown} ({r.get('time_s', 0):.1f} s)"
+
+
+def run_all(run: Callable[[dict], dict], todo: list, workers: int, line: Callable[[dict], str],
+            json_path: str | None) -> list[dict]:
+    """Run the cases on ``workers`` processes, print one ``line(result)`` per case as it ends, then the
+    table and the wall time; write every result to ``json_path`` when given."""
     t0 = time.perf_counter()
     results = []
-    with ProcessPoolExecutor(args.workers) as pool:
-        for r in pool.map(run_case, todo):
+    with ProcessPoolExecutor(workers) as pool:
+        for r in pool.map(run, todo):
             results.append(r)
-            mark = "ok " if r["right"] and r.get("params_ok", True) else ("~  " if r["right"] else "BAD")
-            shown = {k: v for k, v in (r.get("parameters") or {}).items() if not isinstance(v, (list, dict))}
-            print(f"{mark} {r['family']:28s} truth {r['truth']} -> {r['verdict']} {shown} "
-                  f"({r.get('time_s', 0):.1f} s)", flush=True)
+            print(line(r), flush=True)
     print(table(results))
-    print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} cases, {args.workers} workers")
-    if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1, default=str))
+    print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} cases, {workers} workers")
+    if json_path:
+        Path(json_path).write_text(json.dumps(results, indent=1, default=str))
+    return results
 
 
 if __name__ == "__main__":
