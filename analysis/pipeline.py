@@ -85,12 +85,12 @@ from .fit_result import FitResult, assess_fit
 from .frf import FRFSet
 from .lscf import parse_band
 from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
-from .modal import natural_freq_hz
+from .modal import natural_freq_hz, pole_from_fz
 from .progress import progress
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
-from .visibility import visible_peaks
+from .visibility import VisiblePeak, visible_peaks
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -302,7 +302,7 @@ def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizat
     missed, _ = unaccounted_peaks(peaks, natural_freq_hz(poles), frf.line_spacing_hz)
     if not missed:
         return poles
-    extra = poles_from_frequencies(sorted({v.freq_hz for v in missed}), stab)
+    extra = peak_poles(missed, frf.line_spacing_hz)
     log.info("the fit starts from %d selected pole(s) and %d visible peak(s) at %s Hz", poles.size, extra.size,
              ", ".join(f"{natural_freq_hz(p):.5g}" for p in extra))
     return np.concatenate([np.asarray(poles), extra])
@@ -318,16 +318,37 @@ def _poles_from_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizatio
 
     df = frf.line_spacing_hz
     freqs: list[float] = []
+    kept: list[VisiblePeak] = []
     for v in visible_peaks(frf, band):   # most prominent first
         if all(abs(v.freq_hz - x) > max(MATCH_FRACTION * x, MATCH_LINES * df) for x in freqs):
             freqs.append(v.freq_hz)
+            kept.append(v)
     if not freqs:
         return np.zeros(0, dtype=complex)
     msg = (f"the stabilization kept no pole in {band[0]:.6g}..{band[1]:.6g} Hz; the fit starts from the "
            f"{len(freqs)} visible peak(s) at {', '.join(f'{x:.5g}' for x in sorted(freqs))} Hz")
     log.info(msg)
     warnings_out.append(msg)
-    return poles_from_frequencies(sorted(freqs), stab)
+    return peak_poles(kept, df)
+
+
+def peak_poles(peaks: Sequence[VisiblePeak], df: float) -> np.ndarray:
+    """One starting pole (rad/s, sorted by frequency) per distinct frequency of ``peaks`` (visible
+    peaks, most prominent first): at the peak's line, with the damping its own half-power width
+    gives (``zeta = w / (2 f)``, ``w`` the width of its top within 3 dB, at least a line). The
+    stabilization diagram has no stable pole where it missed a mode, and the poles of its higher
+    orders near such a peak are mathematical ones (damping 0.001 %, or none at all); an LSFD
+    started from those leaves them on the edge of their damping trust region and drops them."""
+    seen: dict[float, VisiblePeak] = {}
+    for v in peaks:
+        seen.setdefault(v.freq_hz, v)
+    freqs = np.array(sorted(seen))
+    widths = np.array([max(seen[x].top_hz[1] - seen[x].top_hz[0] - df, df) for x in freqs])
+    return pole_from_fz(freqs, np.minimum(widths / (2.0 * freqs), MAX_START_DAMPING))
+
+
+#: the largest damping ratio a start from a peak's half-power width takes
+MAX_START_DAMPING = 0.05
 
 
 def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:

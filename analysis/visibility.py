@@ -173,7 +173,8 @@ def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: f
             continue
         taken = [x for k, x in enumerate(poles) if k not in free and abs(x - v.freq_hz) <= tol]
         if taken:
-            pairs.append((v, min(taken, key=lambda x: abs(x - v.freq_hz))))
+            if is_reproduced is None or not all(is_reproduced(u) for u in g):
+                pairs.append((v, min(taken, key=lambda x: abs(x - v.freq_hz))))
         elif is_reproduced is None or not any(is_reproduced(u) for u in g):
             missed.append(v)
     return missed, pairs
