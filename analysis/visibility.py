@@ -56,6 +56,7 @@ MATCH_LINES = 1.5
 SAME_LINES = 2.5
 SAME_FRACTION = 0.002
 REPRODUCED_FRACTION = 0.03
+REPRODUCED_NOISE_FACTOR = 4.0
 
 
 @dataclass(frozen=True)
@@ -138,10 +139,28 @@ def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.
     sel = (f >= peak.top_hz[0]) & (f <= peak.top_hz[1])
     H = np.asarray(frf.H)[..., sel].reshape(-1, int(np.sum(sel)))
     G = np.asarray(synth(f[sel])).reshape(H.shape)
+    var = _error_variance(frf)
+    noise = None if var is None else var[..., sel].reshape(H.shape)
     if peak.curve_index >= 0:
         H, G = H[peak.curve_index], G[peak.curve_index]
+        noise = None if noise is None else noise[peak.curve_index]
     data = float(np.sum(np.abs(H) ** 2))
-    return data > 0 and float(np.sum(np.abs(H - G) ** 2)) <= REPRODUCED_FRACTION * data
+    misfit = float(np.sum(np.abs(H - G) ** 2))
+    if noise is not None and misfit > REPRODUCED_NOISE_FACTOR * float(np.sum(noise)):
+        return False
+    return data > 0 and misfit <= REPRODUCED_FRACTION * data
+
+
+def _error_variance(frf: FRFSet) -> np.ndarray | None:
+    """The random-error variance of each FRF line (:func:`analysis.reciprocity.frf_error_variance`), or
+    None when the set carries no coherence or does not say it averaged more than one hit (one average
+    has a coherence of 1 and no error estimate)."""
+    from .reciprocity import frf_error_variance
+
+    n = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    if frf.coherence is None or n.size == 0 or not np.all(n > 1):
+        return None
+    return frf_error_variance(frf)
 
 
 def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: float,
