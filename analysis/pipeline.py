@@ -85,7 +85,7 @@ from .fit_result import FitResult, assess_fit
 from .frf import FRFSet
 from .lscf import parse_band
 from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
-from .modal import natural_freq_hz, pole_from_fz
+from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .progress import progress
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
@@ -286,8 +286,8 @@ def _peaks_trusted(frf: FRFSet) -> bool:
 def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
                         poles: np.ndarray) -> np.ndarray:
     """The selected ``poles`` and one more at each visible peak (:mod:`analysis.visibility`) that no
-    selected pole lies near, damping from the diagram: the data show at least that many modes,
-    and a whole-band LSFD started with fewer drags its poles between resonances (a pole pulled
+    selected pole lies near, with the selected poles' median damping (:func:`peak_poles`): the data
+    show at least that many modes, and a whole-band LSFD started with fewer drags its poles between resonances (a pole pulled
     halfway between two modes fits neither and leaves the search for the missed ones without
     clean neighbours). Not for data whose coherence comes from fewer than ``SEED_MIN_AVERAGES``
     averages (:func:`_peaks_trusted`): noise reaches a coherence of 0.9 on a tenth of the lines with
@@ -302,7 +302,7 @@ def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizat
     missed, _ = unaccounted_peaks(peaks, natural_freq_hz(poles), frf.line_spacing_hz)
     if not missed:
         return poles
-    extra = peak_poles(missed, frf.line_spacing_hz)
+    extra = peak_poles(missed, frf.line_spacing_hz, float(np.median(damping_ratio(poles))))
     log.info("the fit starts from %d selected pole(s) and %d visible peak(s) at %s Hz", poles.size, extra.size,
              ", ".join(f"{natural_freq_hz(p):.5g}" for p in extra))
     return np.concatenate([np.asarray(poles), extra])
@@ -312,7 +312,7 @@ def _poles_from_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizatio
                       warnings_out: list[str]) -> np.ndarray:
     """Starting poles at the visible peaks (:mod:`analysis.visibility`) when the stabilization
     kept none and the data carry coherence: one per distinct peak frequency (peaks within ``max(MATCH_FRACTION f, MATCH_LINES
-    df)`` are one), damping from the diagram (:func:`poles_from_frequencies`). Empty when the
+    df)`` are one), damping from each peak's half-power width (:func:`peak_poles`). Empty when the
     data show no peak either."""
     from .visibility import MATCH_FRACTION, MATCH_LINES
 
@@ -332,17 +332,22 @@ def _poles_from_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizatio
     return peak_poles(kept, df)
 
 
-def peak_poles(peaks: Sequence[VisiblePeak], df: float) -> np.ndarray:
+def peak_poles(peaks: Sequence[VisiblePeak], df: float, damping: float | None = None) -> np.ndarray:
     """One starting pole (rad/s, sorted by frequency) per distinct frequency of ``peaks`` (visible
-    peaks, most prominent first): at the peak's line, with the damping its own half-power width
-    gives (``zeta = w / (2 f)``, ``w`` the width of its top within 3 dB, at least a line). The
-    stabilization diagram has no stable pole where it missed a mode, and the poles of its higher
-    orders near such a peak are mathematical ones (damping 0.001 %, or none at all); an LSFD
-    started from those leaves them on the edge of their damping trust region and drops them."""
+    peaks, most prominent first) at the peak's line, with ``damping`` (a ratio: the median of the
+    modes the diagram selected) or, without it, the damping the peak's own half-power width gives
+    (``zeta = w / (2 f)``, ``w`` the width of its top within 3 dB, at least a line; at most
+    ``MAX_START_DAMPING``). Not the diagram's poles near the peak: it has no stable pole where it
+    missed a mode, and the poles of its higher orders there are mathematical ones (damping 0.001 %,
+    or none at all); an LSFD started from those leaves them on the edge of their damping trust
+    region and drops them. The width is the fallback only: a mode narrower than a few lines (the
+    frame's 12.9 Hz, 0.22 Hz wide on 0.78 Hz lines) shows the line spacing and leakage there."""
     seen: dict[float, VisiblePeak] = {}
     for v in peaks:
         seen.setdefault(v.freq_hz, v)
     freqs = np.array(sorted(seen))
+    if damping is not None:
+        return pole_from_fz(freqs, np.full(freqs.size, float(damping)))
     widths = np.array([max(seen[x].top_hz[1] - seen[x].top_hz[0] - df, df) for x in freqs])
     return pole_from_fz(freqs, np.minimum(widths / (2.0 * freqs), MAX_START_DAMPING))
 

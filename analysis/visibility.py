@@ -29,7 +29,10 @@ most prominent first, takes the nearest still free fitted pole within ``max(MATC
 MATCH_LINES df)`` of one of its peaks. A resonance with no pole within that reach is still
 accounted for when the model reproduces one of its peaks: over the peak's top (the lines within 3 dB of its maximum,
 and one more on each side) the model's misfit in that curve is below ``REPRODUCED_FRACTION`` of
-the data's energy. A peak between two nearby antiresonances is such a case: the model's other
+the data's energy and, when the coherence and the number of averages give the FRF's random error
+(:func:`analysis.reciprocity.frf_error_variance`), within ``REPRODUCED_NOISE_FACTOR`` times that
+error's energy over the top: a weak peak the model misses by a few per cent, many times the noise,
+is not reproduced. A peak between two nearby antiresonances is such a case: the model's other
 modes make it. A resonance not accounted for is *missed*; when the pole within reach was taken by
 another resonance, the two are a *possible close pair* fitted as one pole.
 """
@@ -133,7 +136,9 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
 
 def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.ndarray]) -> bool:
     """Whether a model reproduces ``peak``: its misfit over the peak's top, in the peak's curve
-    (the CMIF: all FRFs), is below ``REPRODUCED_FRACTION`` of the data's energy there.
+    (the CMIF: all FRFs), is below ``REPRODUCED_FRACTION`` of the data's energy there and, when the
+    set carries coherence from more than one average, within ``REPRODUCED_NOISE_FACTOR`` times the
+    energy of the random error there.
     ``synth(freq_hz)`` gives the model's FRFs (n_out, n_ref, n_f) as the data were measured."""
     f = frf.freq_hz
     sel = (f >= peak.top_hz[0]) & (f <= peak.top_hz[1])

@@ -142,9 +142,10 @@ def test_capture_close_pair_of_the_frame_is_resolved(one_point_capture):
         assert np.min(np.abs(fit.freq_hz - t)) <= 0.005 * t, (t, fit.freq_hz)
 
 
-def test_a_start_pole_at_a_visible_peak_takes_the_damping_of_its_half_power_width():
-    """A peak the diagram missed starts a pole with the damping its own 3 dB width gives (the
-    diagram's poles near a missed mode are mathematical ones, 0.001 % or none)."""
+def test_a_start_pole_at_a_visible_peak_takes_the_modes_damping_or_its_half_power_width():
+    """A peak the diagram missed starts a pole with the selected modes' damping, or without one the
+    damping its own 3 dB width gives (the diagram's poles near a missed mode are mathematical ones,
+    0.001 % or none)."""
     from analysis.modal import damping_ratio, natural_freq_hz
     from analysis.pipeline import peak_poles
 
@@ -153,6 +154,7 @@ def test_a_start_pole_at_a_visible_peak_takes_the_damping_of_its_half_power_widt
     p = peak_poles(peaks, frf.line_spacing_hz)
     np.testing.assert_allclose(natural_freq_hz(p), [100.0, 200.0], atol=0.2)
     np.testing.assert_allclose(damping_ratio(p), [0.01, 0.004], rtol=0.3)
+    np.testing.assert_allclose(damping_ratio(peak_poles(peaks, frf.line_spacing_hz, 0.006)), [0.006, 0.006])
 
 
 def test_a_peak_is_reproduced_only_within_the_noise_the_coherence_gives():
