@@ -186,14 +186,22 @@ def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: f
             groups.append([v])
     poles = [float(x) for x in np.asarray(fitted_hz, float).ravel()]
     free = list(range(len(poles)))
+    tols = [max(MATCH_FRACTION * g[0].freq_hz, MATCH_LINES * df) for g in groups]
+    # each pole goes to the resonance nearest to it (the nearest pairs first), not to the most
+    # prominent resonance within reach: a pole between two resonances is the nearer one's
+    links = sorted((min(abs(poles[k] - u.freq_hz) for u in g), gi, k) for gi, g in enumerate(groups)
+                   for k in free if min(abs(poles[k] - u.freq_hz) for u in g) <= tols[gi])
+    owner: dict[int, int] = {}
+    for _, gi, k in links:
+        if gi not in owner and k not in owner.values():
+            owner[gi] = k
+    free = [k for k in free if k not in owner.values()]
     missed: list[VisiblePeak] = []
     pairs: list[tuple[VisiblePeak, float]] = []
-    for g in groups:
+    for gi, g in enumerate(groups):
         v = g[0]
-        tol = max(MATCH_FRACTION * v.freq_hz, MATCH_LINES * df)
-        near = sorted((abs(poles[k] - u.freq_hz), k) for u in g for k in free if abs(poles[k] - u.freq_hz) <= tol)
-        if near:
-            free.remove(near[0][1])
+        tol = tols[gi]
+        if gi in owner:
             continue
         taken = [x for k, x in enumerate(poles) if k not in free and abs(x - v.freq_hz) <= tol]
         if taken:

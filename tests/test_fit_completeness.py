@@ -202,3 +202,13 @@ def test_the_default_capture_fits_every_visible_mode_without_a_false_pair(one_po
     fit = fit_auto(one_point_capture)
     assert fit.success, fit.problems
     assert not any("close pair" in p for p in fit.problems)
+
+
+def test_a_pole_between_two_resonances_accounts_for_the_nearer_one():
+    """A pole 1.1 Hz from one resonance and 4.4 Hz from another (both within its 0.5 % reach) goes to
+    the nearer one, whatever their prominences; the other, not reproduced, is a possible close pair."""
+    df = 0.78125
+    far = VisiblePeak(993.75, 12.8, "top:4:X/right:6:-X", 1, (989.8, 1001.6))
+    near = VisiblePeak(999.22, 12.7, "right:4:-Z/right:6:-X", 2, (989.8, 1007.0))
+    missed, pairs = unaccounted_peaks([far, near], np.array([998.15]), df, lambda v: v is near)
+    assert missed == [] and pairs == [(far, 998.15)]
