@@ -24,9 +24,10 @@ The peaks of every curve are kept (a resonance shows in several curves).
 **Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
 a peak of the resonance (the most prominent first) are one resonance seen through different FRFs
 (a neighbouring mode shifts a peak by a few lines, the most prominent one too, so the reach is
-measured from each of its peaks); two maxima of the same curve are always two resonances. Each resonance,
-most prominent first, takes the nearest still free fitted pole within ``max(MATCH_FRACTION f,
-MATCH_LINES df)`` of one of its peaks. A resonance with no pole within that reach is still
+measured from each of its peaks); two maxima of the same curve are always two resonances. Each fitted
+pole accounts for the resonance nearest to it within ``max(MATCH_FRACTION f, MATCH_LINES df)`` of
+one of its peaks (the nearest resonance-pole pairs first: a pole between two resonances is the
+nearer one's, whichever is more prominent). A resonance with no pole within that reach is still
 accounted for when the model reproduces one of its peaks: over the peak's top (the lines within 3 dB of its maximum,
 and one more on each side) the model's misfit in that curve is below ``REPRODUCED_FRACTION`` of
 the data's energy and, when the coherence and the number of averages give the FRF's random error
