@@ -155,6 +155,9 @@ def test_a_start_pole_at_a_visible_peak_takes_the_modes_damping_or_its_half_powe
     np.testing.assert_allclose(natural_freq_hz(p), [100.0, 200.0], atol=0.2)
     np.testing.assert_allclose(damping_ratio(p), [0.01, 0.004], rtol=0.3)
     np.testing.assert_allclose(damping_ratio(peak_poles(peaks, frf.line_spacing_hz, 0.006)), [0.006, 0.006])
+    # an exponential window's decay (1/s) is added as the data show it: far more damping at 100 Hz
+    shifted = peak_poles(peaks, frf.line_spacing_hz, 0.006, pole_shift=2.4)
+    np.testing.assert_allclose(shifted.real, pole_from_fz(natural_freq_hz(p), np.full(2, 0.006)).real - 2.4)
 
 
 def test_a_peak_is_reproduced_only_within_the_noise_the_coherence_gives():
