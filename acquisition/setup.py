@@ -308,7 +308,12 @@ def default_setup() -> AcquisitionSetup:
     amplitude at the end of this record, so its peak leaks; a record in which it decays by
     :data:`DEFAULT_DECAY_DB` is :func:`block_size_for_decay` (32768 samples, 5.12 s), at four times
     the lines to fit and with more noise per line unless a force window and an exponential window are
-    used. ``capture --print-setup`` writes this set-up as a template to edit.
+    used. Measured on the default capture (``benchmarks/accuracy/bench_record_length.py``,
+    docs/fitting.md): the leakage shows as +5 % on that mode's damping; 2.56 s and 5.12 s records
+    lower the coherence (their tails add noise after the responses have decayed) and double or
+    quadruple the fit's lines, so this record stays the default; ``--exp-window 5%`` gives the
+    damping within 0.5 % and a higher coherence. ``capture --print-setup`` writes this set-up as a
+    template to edit.
 
     The ranges leave generous headroom over the simulated frame's peaks with the default hammer
     (about 107 N, 0.24 V; accelerations up to about 38 m/s^2, 0.39 V, over the test plan's points),

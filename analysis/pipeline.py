@@ -82,15 +82,15 @@ import numpy as np
 from .bands import FitError, check_band_edges, default_band, default_max_modes, exclude_lines, mains_harmonics
 from .bounded_fit import drop_bad_poles, fit_bounded
 from .fit_result import FitResult, assess_fit
-from .frf import FRFSet
+from .frf import FRFSet, window_pole_shift
 from .lscf import parse_band
 from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
-from .modal import natural_freq_hz
+from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .progress import progress
 from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
-from .visibility import visible_peaks
+from .visibility import VisiblePeak, visible_peaks
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -286,8 +286,8 @@ def _peaks_trusted(frf: FRFSet) -> bool:
 def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult,
                         poles: np.ndarray) -> np.ndarray:
     """The selected ``poles`` and one more at each visible peak (:mod:`analysis.visibility`) that no
-    selected pole lies near, damping from the diagram: the data show at least that many modes,
-    and a whole-band LSFD started with fewer drags its poles between resonances (a pole pulled
+    selected pole lies near, with the selected poles' median damping (:func:`peak_poles`): the data
+    show at least that many modes, and a whole-band LSFD started with fewer drags its poles between resonances (a pole pulled
     halfway between two modes fits neither and leaves the search for the missed ones without
     clean neighbours). Not for data whose coherence comes from fewer than ``SEED_MIN_AVERAGES``
     averages (:func:`_peaks_trusted`): noise reaches a coherence of 0.9 on a tenth of the lines with
@@ -302,7 +302,8 @@ def _with_visible_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizat
     missed, _ = unaccounted_peaks(peaks, natural_freq_hz(poles), frf.line_spacing_hz)
     if not missed:
         return poles
-    extra = poles_from_frequencies(sorted({v.freq_hz for v in missed}), stab)
+    shift = window_pole_shift(frf.exp_window_tau_s)   # the window's decay: the same for every mode
+    extra = peak_poles(missed, frf.line_spacing_hz, float(np.median(damping_ratio(np.asarray(poles) + shift))), shift)
     log.info("the fit starts from %d selected pole(s) and %d visible peak(s) at %s Hz", poles.size, extra.size,
              ", ".join(f"{natural_freq_hz(p):.5g}" for p in extra))
     return np.concatenate([np.asarray(poles), extra])
@@ -312,22 +313,55 @@ def _poles_from_peaks(frf: FRFSet, band: tuple[float, float], stab: Stabilizatio
                       warnings_out: list[str]) -> np.ndarray:
     """Starting poles at the visible peaks (:mod:`analysis.visibility`) when the stabilization
     kept none and the data carry coherence: one per distinct peak frequency (peaks within ``max(MATCH_FRACTION f, MATCH_LINES
-    df)`` are one), damping from the diagram (:func:`poles_from_frequencies`). Empty when the
+    df)`` are one), damping from each peak's half-power width (:func:`peak_poles`). Empty when the
     data show no peak either."""
     from .visibility import MATCH_FRACTION, MATCH_LINES
 
     df = frf.line_spacing_hz
     freqs: list[float] = []
+    kept: list[VisiblePeak] = []
     for v in visible_peaks(frf, band):   # most prominent first
         if all(abs(v.freq_hz - x) > max(MATCH_FRACTION * x, MATCH_LINES * df) for x in freqs):
             freqs.append(v.freq_hz)
+            kept.append(v)
     if not freqs:
         return np.zeros(0, dtype=complex)
     msg = (f"the stabilization kept no pole in {band[0]:.6g}..{band[1]:.6g} Hz; the fit starts from the "
            f"{len(freqs)} visible peak(s) at {', '.join(f'{x:.5g}' for x in sorted(freqs))} Hz")
     log.info(msg)
     warnings_out.append(msg)
-    return poles_from_frequencies(sorted(freqs), stab)
+    return peak_poles(kept, df)
+
+
+def peak_poles(peaks: Sequence[VisiblePeak], df: float, damping: float | None = None,
+               pole_shift: float = 0.0) -> np.ndarray:
+    """One starting pole (rad/s, sorted by frequency) per distinct frequency of ``peaks`` (visible
+    peaks, most prominent first) at the peak's line.
+
+    Its damping is ``damping`` (a ratio: the median of the modes the diagram selected, without the
+    exponential window's decay) with the window's decay ``pole_shift`` (1/s,
+    :func:`analysis.frf.window_pole_shift`) added, as the data show it: the window broadens a low
+    mode far more than the modes the median comes from (the frame's 12.9 Hz at 0.86 % shows 3.8 %
+    through a window to 5 % at the end of a 1.28 s record). Without ``damping``: the damping the
+    peak's own half-power width gives (``zeta = w / (2 f)``, ``w`` the width of its top within
+    3 dB, at least a line; at most ``MAX_START_DAMPING``); the width is the fallback only, since a
+    mode narrower than a few lines (the frame's 12.9 Hz, 0.22 Hz wide on 0.78 Hz lines) shows the
+    line spacing and leakage there. Not the diagram's poles near the peak: it has no stable pole
+    where it missed a mode, and the poles of its higher orders there are mathematical ones
+    (damping 0.001 %, or none); an LSFD started from those leaves them on the edge of their
+    damping trust region and drops them."""
+    seen: dict[float, VisiblePeak] = {}
+    for v in peaks:
+        seen.setdefault(v.freq_hz, v)
+    freqs = np.array(sorted(seen))
+    if damping is not None:
+        return pole_from_fz(freqs, np.full(freqs.size, float(damping))) - float(pole_shift)
+    widths = np.array([max(seen[x].top_hz[1] - seen[x].top_hz[0] - df, df) for x in freqs])
+    return pole_from_fz(freqs, np.minimum(widths / (2.0 * freqs), MAX_START_DAMPING))
+
+
+#: the largest damping ratio a start from a peak's half-power width takes
+MAX_START_DAMPING = 0.05
 
 
 def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:

@@ -24,12 +24,16 @@ The peaks of every curve are kept (a resonance shows in several curves).
 **Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
 a peak of the resonance (the most prominent first) are one resonance seen through different FRFs
 (a neighbouring mode shifts a peak by a few lines, the most prominent one too, so the reach is
-measured from each of its peaks); two maxima of the same curve are always two resonances. Each resonance,
-most prominent first, takes the nearest still free fitted pole within ``max(MATCH_FRACTION f,
-MATCH_LINES df)`` of one of its peaks. A resonance with no pole within that reach is still
+measured from each of its peaks); two maxima of the same curve are always two resonances. Each fitted
+pole accounts for the resonance nearest to it within ``max(MATCH_FRACTION f, MATCH_LINES df)`` of
+one of its peaks (the nearest resonance-pole pairs first: a pole between two resonances is the
+nearer one's, whichever is more prominent). A resonance with no pole within that reach is still
 accounted for when the model reproduces one of its peaks: over the peak's top (the lines within 3 dB of its maximum,
 and one more on each side) the model's misfit in that curve is below ``REPRODUCED_FRACTION`` of
-the data's energy. A peak between two nearby antiresonances is such a case: the model's other
+the data's energy and, when the coherence and the number of averages give the FRF's random error
+(:func:`analysis.reciprocity.frf_error_variance`), within ``REPRODUCED_NOISE_FACTOR`` times that
+error's energy over the top: a weak peak the model misses by a few per cent, many times the noise,
+is not reproduced. A peak between two nearby antiresonances is such a case: the model's other
 modes make it. A resonance not accounted for is *missed*; when the pole within reach was taken by
 another resonance, the two are a *possible close pair* fitted as one pole.
 """
@@ -56,6 +60,7 @@ MATCH_LINES = 1.5
 SAME_LINES = 2.5
 SAME_FRACTION = 0.002
 REPRODUCED_FRACTION = 0.03
+REPRODUCED_NOISE_FACTOR = 4.0
 
 
 @dataclass(frozen=True)
@@ -132,16 +137,36 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
 
 def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.ndarray]) -> bool:
     """Whether a model reproduces ``peak``: its misfit over the peak's top, in the peak's curve
-    (the CMIF: all FRFs), is below ``REPRODUCED_FRACTION`` of the data's energy there.
+    (the CMIF: all FRFs), is below ``REPRODUCED_FRACTION`` of the data's energy there and, when the
+    set carries coherence from more than one average, within ``REPRODUCED_NOISE_FACTOR`` times the
+    energy of the random error there.
     ``synth(freq_hz)`` gives the model's FRFs (n_out, n_ref, n_f) as the data were measured."""
     f = frf.freq_hz
     sel = (f >= peak.top_hz[0]) & (f <= peak.top_hz[1])
     H = np.asarray(frf.H)[..., sel].reshape(-1, int(np.sum(sel)))
     G = np.asarray(synth(f[sel])).reshape(H.shape)
+    var = _error_variance(frf)
+    noise = None if var is None else var[..., sel].reshape(H.shape)
     if peak.curve_index >= 0:
         H, G = H[peak.curve_index], G[peak.curve_index]
+        noise = None if noise is None else noise[peak.curve_index]
     data = float(np.sum(np.abs(H) ** 2))
-    return data > 0 and float(np.sum(np.abs(H - G) ** 2)) <= REPRODUCED_FRACTION * data
+    misfit = float(np.sum(np.abs(H - G) ** 2))
+    if noise is not None and misfit > REPRODUCED_NOISE_FACTOR * float(np.sum(noise)):
+        return False
+    return data > 0 and misfit <= REPRODUCED_FRACTION * data
+
+
+def _error_variance(frf: FRFSet) -> np.ndarray | None:
+    """The random-error variance of each FRF line (:func:`analysis.reciprocity.frf_error_variance`), or
+    None when the set carries no coherence or does not say it averaged more than one hit (one average
+    has a coherence of 1 and no error estimate)."""
+    from .reciprocity import frf_error_variance
+
+    n = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    if frf.coherence is None or n.size == 0 or not np.all(n > 1):
+        return None
+    return frf_error_variance(frf)
 
 
 def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: float,
@@ -162,18 +187,27 @@ def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: f
             groups.append([v])
     poles = [float(x) for x in np.asarray(fitted_hz, float).ravel()]
     free = list(range(len(poles)))
+    tols = [max(MATCH_FRACTION * g[0].freq_hz, MATCH_LINES * df) for g in groups]
+    # each pole goes to the resonance nearest to it (the nearest pairs first), not to the most
+    # prominent resonance within reach: a pole between two resonances is the nearer one's
+    links = sorted((min(abs(poles[k] - u.freq_hz) for u in g), gi, k) for gi, g in enumerate(groups)
+                   for k in free if min(abs(poles[k] - u.freq_hz) for u in g) <= tols[gi])
+    owner: dict[int, int] = {}
+    for _, gi, k in links:
+        if gi not in owner and k not in owner.values():
+            owner[gi] = k
+    free = [k for k in free if k not in owner.values()]
     missed: list[VisiblePeak] = []
     pairs: list[tuple[VisiblePeak, float]] = []
-    for g in groups:
+    for gi, g in enumerate(groups):
         v = g[0]
-        tol = max(MATCH_FRACTION * v.freq_hz, MATCH_LINES * df)
-        near = sorted((abs(poles[k] - u.freq_hz), k) for u in g for k in free if abs(poles[k] - u.freq_hz) <= tol)
-        if near:
-            free.remove(near[0][1])
+        tol = tols[gi]
+        if gi in owner:
             continue
         taken = [x for k, x in enumerate(poles) if k not in free and abs(x - v.freq_hz) <= tol]
         if taken:
-            pairs.append((v, min(taken, key=lambda x: abs(x - v.freq_hz))))
+            if is_reproduced is None or not all(is_reproduced(u) for u in g):
+                pairs.append((v, min(taken, key=lambda x: abs(x - v.freq_hz))))
         elif is_reproduced is None or not any(is_reproduced(u) for u in g):
             missed.append(v)
     return missed, pairs
