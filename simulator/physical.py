@@ -248,6 +248,7 @@ class FrameVariants:
         sens = cfg.sensors
         self.sensor_nodes = tuple(dict.fromkeys(f"{q.component}:{q.node}" for q in map(parse_point, self.outputs)))
         self.sensor_mass_kg = float(sens.accelerometer.mass_kg) if sens.mass_loading else 0.0
+        self._node_set = frozenset(self.nodes)
         for node in self.nodes:
             first = 6 * self.frame.node(node)
             self._mparts[("lump", node)] = Part(first + np.arange(3), np.eye(3))
@@ -257,7 +258,7 @@ class FrameVariants:
         self._K0 = self._assemble(self._kparts, self._nominal[1])
         self._M0 = self._assemble(self._mparts, self._nominal[2])
         self._ritz: RitzReduction | None = None
-        self._spaces: dict[tuple, ReducedSpace | None] = {}
+        self._spaces: dict[tuple, tuple[ReducedSpace | None, np.ndarray | None]] = {}
         self._memo: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         #: candidates' modes by Rayleigh-Ritz reduction (:mod:`simulator.ritz`); False: the full model
         self.reduced = True
@@ -319,17 +320,18 @@ class FrameVariants:
         n_modes = self._ritz.n_modes(w2_max / scale)
         skey = (frozenset(dk), frozenset(dm), n_modes)
         if skey not in self._spaces:
-            self._spaces[skey] = self._ritz.space({q: self._kparts[q] for q in dk}, {q: self._mparts[q] for q in dm},
-                                                  n_modes)
-        space = self._spaces[skey]
+            space = self._ritz.space({q: self._kparts[q] for q in dk}, {q: self._mparts[q] for q in dm}, n_modes)
+            # the basis at the measured points, signed: outputs then references
+            at = None if space is None else np.array([s * space.V[d] for d, s in self._out + self._ref])
+            self._spaces[skey] = (space, at)
+        space, at = self._spaces[skey]
         if space is None:
             return None
         w2, Y = space.eigen(dk, dm, scale, w2_max)
-        rows = space.V[[d for d, _ in self._out + self._ref]] @ Y
-        po = rows[:len(self._out)] * np.array([s for _, s in self._out])[:, None]
-        pr = rows[len(self._out):] * np.array([s for _, s in self._ref])[:, None]
+        rows = at @ Y
+        n_out = len(self._out)
         f = np.sqrt(w2) / (2 * np.pi)
-        return f, np.einsum("om,rm->orm", po, pr).reshape(len(self._out) * len(self._ref), -1)
+        return f, (rows[:n_out, None, :] * rows[None, n_out:, :]).reshape(n_out * len(self._ref), -1)
 
     def model(self, cause: str | None, params: Mapping) -> ModalModel:
         """Receptance pole-residue model (m/N) of the changed frame, modes up to ``[modes] max_freq_hz``,
@@ -451,7 +453,7 @@ class FrameVariants:
         for node, mass, rotary in lumped:
             if mass < 0:
                 raise ModelError(f"a mass of {mass} kg at {node}: masses must be >= 0")
-            node = self.nodes[self.frame.node(node)]              # validates and names the node
+            node = node if node in self._node_set else self.nodes[self.frame.node(node)]  # validates, names
             m[("lump", node)] = m.get(("lump", node), 0.0) + mass
             if rotary:
                 # a compact steel block centred on the node: m a^2 / 6 about each axis, a = (m / rho)^(1/3)

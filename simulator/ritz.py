@@ -11,8 +11,8 @@ others, which for ``lambda`` well below the omitted modes is ``K0^-1 X`` (static
 
     V = [Phi_m, K0^-1 X, K0^-1 M0 K0^-1 X]     (M0-orthonormal, ``Phi_m`` the lowest ``N_MODES`` modes)
 
-with ``X`` the unit vectors of the changed DOFs for a local part (at most ``LOCAL_DOFS`` DOFs: a node,
-an element, the supports, the joints, the sensors' nodes) and ``D_p Phi_m`` for a part spread over a
+with ``X`` the unit vectors of the changed DOFs of a node or an element, the range of another local
+part (on at most ``LOCAL_DOFS`` DOFs: the supports, the joints, the sensors' nodes) and ``D_p Phi_m`` for a part spread over a
 whole member (its mass or bending stiffness: the first-order change of the nominal modes). The changed
 frame's modes are those of ``(V^T K V, V^T M V)``: ``r`` unknowns (30 to about 100) instead of the
 frame's ``n`` (186), and the projected parts ``V^T K_p V`` are computed once per set of changed parts,
@@ -57,6 +57,15 @@ class Part:
         """``part @ X`` for X (n, k)."""
         out = np.zeros_like(X)
         out[self.dofs] = self.block @ X[self.dofs]
+        return out
+
+    def range(self, n: int) -> np.ndarray:
+        """An orthonormal basis (n, rank) of the part's range (a joint's springs act on the difference of
+        its two nodes' motions: six directions on twelve DOFs)."""
+        e, U = np.linalg.eigh(self.block)
+        keep = np.abs(e) > 1e-12 * np.abs(e).max()
+        out = np.zeros((n, int(keep.sum())))
+        out[self.dofs] = U[:, keep]
         return out
 
     def project(self, V: np.ndarray) -> np.ndarray:
@@ -125,10 +134,12 @@ class RitzReduction:
         phi = self.modes[:, :n_modes]
         X = []
         for p in [*kparts.values(), *mparts.values()]:
-            if p.dofs.size <= LOCAL_DOFS:
+            if p.dofs.size <= 12:             # a node, an element: every DOF (the range alone is less accurate)
                 E = np.zeros((n, p.dofs.size))
                 E[p.dofs, np.arange(p.dofs.size)] = 1.0
                 X.append(E)
+            elif p.dofs.size <= LOCAL_DOFS:   # springs between nodes act on differences: their range
+                X.append(p.range(n))
             else:
                 X.append(p.times(phi))
         if X:
