@@ -254,14 +254,19 @@ class FrameVariants:
             self._mparts[("lump", node)] = Part(first + np.arange(3), np.eye(3))
             self._mparts[("rot", node)] = Part(first + np.arange(3, 6), np.eye(3))
         self._refined_frames: dict[int, FrameVariants] = {}
+        #: candidates' modes by Rayleigh-Ritz reduction (:mod:`simulator.ritz`); False: the full model
+        self.reduced = True
+        self._set_nominal()
+
+    def _set_nominal(self) -> None:
+        """The unchanged frame's coefficients and matrices (with the accelerometers); the reduced spaces
+        and the kept answers start afresh."""
         self._nominal = self._coefficients([])
         self._K0 = self._assemble(self._kparts, self._nominal[1])
         self._M0 = self._assemble(self._mparts, self._nominal[2])
         self._ritz: RitzReduction | None = None
         self._spaces: dict[tuple, tuple[ReducedSpace | None, np.ndarray | None]] = {}
         self._memo: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
-        #: candidates' modes by Rayleigh-Ritz reduction (:mod:`simulator.ritz`); False: the full model
-        self.reduced = True
 
     # ------------------------------------------------------------------ protocol of the diagnosis
     def causes(self) -> tuple[CauseSpec, ...]:
@@ -365,6 +370,7 @@ class FrameVariants:
         """The same frame (same configuration, same accelerometers) at other measured points."""
         other = FrameVariants(self.config, outputs, references)
         other.sensor_nodes, other.sensor_mass_kg = self.sensor_nodes, self.sensor_mass_kg
+        other._set_nominal()
         return other
 
     def refined(self, refine: int = 2) -> FrameVariants:

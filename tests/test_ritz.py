@@ -139,3 +139,13 @@ def test_a_chosen_fit_is_checked_on_the_full_model(fv: FrameVariants) -> None:
     mm = _measured(fv, truth)
     (fit,) = physical_causes(_Skewed(fv), mm, 700.0)
     assert fit.params["stiffness_factor"] == pytest.approx(1.08, rel=1e-4)
+
+
+def test_other_points_keep_the_accelerometers(fv: FrameVariants) -> None:
+    """The same frame at other measured points carries the test's accelerometers (their masses where
+    the test's sensors are), in its full and in its reduced candidates."""
+    assert fv.sensor_mass_kg > 0
+    other = fv.at_points(["top:4:Z"], ["top:1:Z"])
+    np.testing.assert_array_equal(other.matrices(None, {})[1], fv.matrices(None, {})[1])
+    change = [("added_mass", {"point": "left:3", "mass_kg": 1.0})]
+    np.testing.assert_allclose(other.modes_of(change, 400.0)[0], fv.exact_modes_of(change, 400.0)[0], rtol=1e-6)
