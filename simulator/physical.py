@@ -1,8 +1,12 @@
 """The frame's physical changes as parameters: the model the physical diagnosis fits.
 
 A physical change of the frame is a sum of scaled parts of its FE matrices, so the frame is assembled
-once, split into parts, and every candidate is ``K = sum_i a_i K_i``, ``M = sum_j b_j M_j`` plus lumped
-masses, followed by ``K phi = omega^2 M phi`` (:func:`scipy.linalg.eigh`, only the modes needed):
+once, split into parts (each a block on the few DOFs it touches, :class:`simulator.ritz.Part`), and
+every candidate is ``K = sum_i a_i K_i``, ``M = sum_j b_j M_j`` plus lumped masses, followed by
+``K phi = omega^2 M phi`` for the modes needed. A candidate changes only a few parts, so its modes are
+solved in a Rayleigh-Ritz space built for those parts (:mod:`simulator.ritz`: ~0.2-0.6 ms instead of
+~3 ms for the full eigenproblem, natural frequencies equal to the full model's to 1e-6);
+:meth:`FrameVariants.exact_modes_of` solves the full model (``reduced = False``: always):
 
 * ``K_c`` axial + torsion and ``K_c,bend`` bending stiffness of each member ``c`` (``left``, ``right``,
   ``top``), ``M_c`` its mass; the springs of the supports and joints split into their translational
