@@ -34,6 +34,11 @@ full fit, and the parameters refitted), so a cause that only bends to fit some m
 left-out mode badly. ``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal
 simulation's. A cause is significant when ``gain_db >= MIN_GAIN_DB``.
 
+Exactness: a simulation may solve candidates approximately (the FE frame by Rayleigh-Ritz reduction,
+:mod:`simulator.ritz`); each cause's chosen fit is then evaluated on the full model
+(``exact_modes_of``) and, when its chi2 there differs by more than ``FULL_MODEL_CHI2_TOL``, the cause
+is fitted again on the full model.
+
 Adequacy (before a name is given): the extended simulation's FRFs (after the measurement's own
 processing) must bring the typical FRF error within ``ADEQUATE_MARGIN_DB`` of the noise or remove at
 least ``ADEQUATE_FRACTION`` of the excess error in power, and its parameters must lie inside their
@@ -148,7 +153,9 @@ class PhysicalSimulation(Protocol):
 
     # ``modes_of`` / ``model_of``: several causes at once (a list of (cause, params)), for two causes.
     # optional: ``refined_model() -> ModalModel``, the same simulation on a finer mesh: what it removes
-    # of the typical error is discretisation, added to the noise level (``noise_db["model_form"]``)
+    # of the typical error is discretisation, added to the noise level (``noise_db["model_form"]``);
+    # ``exact_modes_of(changes, max_freq_hz)``, when ``modes_of`` is an approximation (a reduced model):
+    # each cause's chosen fit is checked with it (:func:`physical_causes`)
 
 
 @dataclass(frozen=True)
