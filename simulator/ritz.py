@@ -152,8 +152,10 @@ class RitzReduction:
             e, U = np.linalg.eigh(R.T @ self.M0 @ R)
             keep = e > _RANK_TOL * e.max()
             Q = R @ (U[:, keep] / np.sqrt(e[keep]))
-            Q -= phi @ (phi.T @ (self.M0 @ Q))          # once more against rounding
             V = np.hstack([phi, Q])
+            # M0-orthonormal to rounding (the standard eigenproblem of a stiffness change relies on it)
+            L = np.linalg.cholesky(V.T @ self.M0 @ V)
+            V = scipy.linalg.solve_triangular(L, V.T, lower=True).T
         else:
             V = phi
         if V.shape[1] > 0.6 * n:
