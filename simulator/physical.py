@@ -300,7 +300,7 @@ class FrameVariants:
         hit = self._memo.get(key)
         if hit is not None:
             return hit
-        out = self._modes_reduced(changes, max_freq_hz) if self.reduced else None
+        out = self._modes_reduced(changes, max_freq_hz) if self.reduced and changes else None
         if out is None:
             out = self.exact_modes_of(changes, max_freq_hz)
         for a in out:
