@@ -54,6 +54,7 @@ __all__ = [
     "beam_mass_local",
     "rotation_matrix",
     "assemble_beam",
+    "element_matrices",
     "member_nodes_xyz",
     "stamp_spring",
     "FrameModel",
@@ -203,15 +204,28 @@ def assemble_beam(
     n = coords.shape[0]
     K = np.zeros((6 * n, 6 * n))
     M = np.zeros((6 * n, 6 * n))
-    for e in range(n - 1):
+    for e, (k, m) in enumerate(element_matrices(coords, E, G, rho, sp, roll_deg, bending_factors)):
+        sl = slice(6 * e, 6 * e + 12)
+        K[sl, sl] += k
+        M[sl, sl] += m
+    return K, M
+
+
+def element_matrices(
+    coords: np.ndarray, E: float, G: float, rho: float, sp: SectionProperties, roll_deg: float = 0.0,
+    bending_factors: Sequence[float] | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each element's global 12x12 stiffness (N/m, N m/rad) and mass (kg, kg m^2) along the chain of
+    nodes ``coords`` (n_nodes, 3) m, on the DOFs of its two nodes; ``bending_factors`` as in
+    :func:`assemble_beam`."""
+    out = []
+    for e in range(coords.shape[0] - 1):
         L = float(np.linalg.norm(coords[e + 1] - coords[e]))
         T = _transform(rotation_matrix(coords[e], coords[e + 1], roll_deg))
-        sl = slice(6 * e, 6 * e + 12)
         f = 1.0 if bending_factors is None else float(bending_factors[e])
         sp_e = sp if f == 1.0 else _replace(sp, Iy=sp.Iy * f, Iz=sp.Iz * f)
-        K[sl, sl] += T.T @ beam_stiffness_local(E, G, sp_e, L) @ T
-        M[sl, sl] += T.T @ beam_mass_local(rho, sp, L) @ T
-    return K, M
+        out.append((T.T @ beam_stiffness_local(E, G, sp_e, L) @ T, T.T @ beam_mass_local(rho, sp, L) @ T))
+    return out
 
 
 def member_nodes_xyz(comp: ComponentConfig) -> np.ndarray:

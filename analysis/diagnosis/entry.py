@@ -22,6 +22,7 @@ import numpy as np
 
 from ..frf import FRFSet
 from ..modal import ModalModel
+from ..threads import blas_threads
 from .joint_nonlinearity import JointSimulationFactory
 from .verdict import Diagnosis, diagnose_frfs
 
@@ -155,7 +156,8 @@ def diagnose(
             raise InputError(f"band {band!r}: give (lo, hi) in Hz, None or 'data'")
         lo, hi = default_band(measured)
         if physical is not None and hasattr(physical, "converged_below_hz"):
-            top = float(physical.converged_below_hz())
+            with blas_threads(float(measured.H.size)):      # eigenproblems of a few hundred DOFs
+                top = float(physical.converged_below_hz())
             if top < hi:
                 log.info("band %.4g-%.4g Hz: the simulation's mesh is converged only below %.4g Hz", lo, top, top)
                 hi = top

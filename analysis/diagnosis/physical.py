@@ -34,6 +34,11 @@ full fit, and the parameters refitted), so a cause that only bends to fit some m
 left-out mode badly. ``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal
 simulation's. A cause is significant when ``gain_db >= MIN_GAIN_DB``.
 
+Exactness: a simulation may solve candidates approximately (the FE frame by Rayleigh-Ritz reduction,
+:mod:`simulator.ritz`); each cause's chosen fit is then evaluated on the full model
+(``exact_modes_of``) and, when its chi2 there differs by more than ``FULL_MODEL_CHI2_TOL``, the cause
+is fitted again on the full model.
+
 Adequacy (before a name is given): the extended simulation's FRFs (after the measurement's own
 processing) must bring the typical FRF error within ``ADEQUATE_MARGIN_DB`` of the noise or remove at
 least ``ADEQUATE_FRACTION`` of the excess error in power, and its parameters must lie inside their
@@ -41,6 +46,7 @@ search range (not at an edge).
 """
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
@@ -52,6 +58,8 @@ from scipy.optimize import least_squares, linear_sum_assignment
 from ..mac import mac_matrix
 from ..modal import ModalModel
 from ..progress import progress
+
+log = logging.getLogger(__name__)
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
            "fit_cause", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB",
@@ -145,7 +153,9 @@ class PhysicalSimulation(Protocol):
 
     # ``modes_of`` / ``model_of``: several causes at once (a list of (cause, params)), for two causes.
     # optional: ``refined_model() -> ModalModel``, the same simulation on a finer mesh: what it removes
-    # of the typical error is discretisation, added to the noise level (``noise_db["model_form"]``)
+    # of the typical error is discretisation, added to the noise level (``noise_db["model_form"]``);
+    # ``exact_modes_of(changes, max_freq_hz)``, when ``modes_of`` is an approximation (a reduced model):
+    # each cause's chosen fit is checked with it (:func:`physical_causes`)
 
 
 @dataclass(frozen=True)
@@ -322,30 +332,78 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
     return out
 
 
+def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float) -> PhysicalFit | None:
+    """The cause's nested variants fitted and cross-validated; the one with the least held-out chi2."""
+    allsel = np.ones(mm.freq_hz.size, bool)
+    best: PhysicalFit | None = None
+    for free in variants(cause):
+        p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
+        options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
+        starts = {o: q for _, o, q in ranked} if ranked else p
+        cv = _cross_validate(sim, cause, free, mm, fmax, options, starts)
+        edge = tuple(s.name for s in cause.params if s.name in free and s.at_edge(float(p[s.name])))
+        fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
+                          cv_per_mode=cv, at_edge=edge, ranked=ranked)
+        if best is None or fit.chi2_cv < best.chi2_cv:
+            best = fit
+    return best
+
+
 def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
                     names: Sequence[str] | None = None) -> list[PhysicalFit]:
     """Every cause (its best nested variant by leave-one-mode-out chi2) fitted; sorted by held-out
     chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``)."""
-    allsel = np.ones(mm.freq_hz.size, bool)
     fits: list[PhysicalFit] = []
     causes = [c for c in sim.causes() if names is None or c.name in names]
     for i, cause in enumerate(causes, start=1):
         progress("diagnosis: physical cause %d/%d, %s", i, len(causes), cause.name)
-        best: PhysicalFit | None = None
-        for free in variants(cause):
-            p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
-            options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
-            starts = {o: q for _, o, q in ranked} if ranked else p
-            cv = _cross_validate(sim, cause, free, mm, fmax, options, starts)
-            edge = tuple(s.name for s in cause.params if s.name in free and s.at_edge(float(p[s.name])))
-            fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
-                              cv_per_mode=cv, at_edge=edge, ranked=ranked)
-            if best is None or fit.chi2_cv < best.chi2_cv:
-                best = fit
+        best = _best_variant(sim, cause, mm, fmax)
+        if best is not None and not _agrees_with_full_model(sim, cause, best, mm, fmax):
+            log.warning("diagnosis: %s refitted on the full model (its reduced model disagreed)", cause.name)
+            best = _best_variant(_FullModel(sim), cause, mm, fmax)
         if best is not None:
             fits.append(best)
     fits.sort(key=lambda x: x.chi2_cv)
     return fits
+
+
+#: A fit's chi2 on the full model may differ from the reduced model's by this (absolute plus relative).
+FULL_MODEL_CHI2_TOL = (0.01, 1e-3)
+
+
+class _FullModel:
+    """A simulation that solves candidates approximately (``exact_modes_of``: e.g. a reduced FE model)
+    seen through its exact solver."""
+
+    def __init__(self, sim: PhysicalSimulation) -> None:
+        self.sim = sim
+
+    def causes(self) -> Sequence[CauseSpec]:
+        return self.sim.causes()
+
+    def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        return self.modes_of([] if cause is None else [(cause, params)], max_freq_hz)
+
+    def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        return self.sim.exact_modes_of(changes, max_freq_hz)  # type: ignore[attr-defined]
+
+    def model(self, cause: str | None, params: Mapping) -> ModalModel:
+        return self.sim.model(cause, params)
+
+    def model_of(self, changes: Sequence[tuple[str, Mapping]]) -> ModalModel:
+        return self.sim.model_of(changes)
+
+
+def _agrees_with_full_model(sim: PhysicalSimulation, cause: CauseSpec, fit: PhysicalFit, mm: MeasuredModes,
+                            fmax: float) -> bool:
+    """Does the chosen fit's chi2 on all modes hold on the full model (``exact_modes_of``, when the
+    simulation has one) within ``FULL_MODEL_CHI2_TOL``? A simulation without one is exact already."""
+    if not hasattr(sim, "exact_modes_of"):
+        return True
+    f, P = sim.exact_modes_of([(cause.name, fit.params)], fmax)
+    chi2 = float(np.sum(residuals(mm, f, P) ** 2))
+    atol, rtol = FULL_MODEL_CHI2_TOL
+    return abs(chi2 - fit.chi2) <= atol + rtol * fit.chi2
 
 
 def paired_well(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:

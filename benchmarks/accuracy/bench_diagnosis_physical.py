@@ -191,7 +191,7 @@ def run_case(spec: dict) -> dict:
         m = load_input(rec)
         if truth.get("relabel"):
             m = _relabel(m, truth["relabel"])
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         lo, hi = default_band(m)
         fv = FrameVariants(None, m.outputs, m.references)
         m = m.band(lo, min(hi, fv.converged_below_hz()))
@@ -200,12 +200,12 @@ def run_case(spec: dict) -> dict:
 
         hits_db = hit_scatter_noise_db(rec, m, line_weights(m)) if not truth.get("relabel") else None
         d = diagnose(m, fv.model(None, {}), physical=fv, extra_noise_db={"hits": hits_db})
-        dt = time.perf_counter() - t0
+        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     params = next((c["parameters"] for c in d.causes if c["effect"] == d.verdict), {})
     phys = [{k: c[k] for k in ("effect", "parameters", "gain_db", "significant", "adequate")}
             for c in (d.causes if d.causes and d.causes[0].get("kind") == "physical" else d.physical.get("causes", []))]
     out = {"family": spec["family"], "seed": spec["seed"], "truth": truth, "verdict": d.verdict,
-           "parameters": params, "time_s": dt, "reason": d.reason,
+           "parameters": params, "time_s": dt, "cpu_s": cpu, "reason": d.reason,
            "physical": {k: v for k, v in d.physical.items() if k != "causes"}, "physical_causes": phys}
     out.update(score(truth, d.verdict, params))
     return out
@@ -298,7 +298,8 @@ def main() -> None:
 def _case_line(r: dict) -> str:
     mark = "ok " if r["right"] and r.get("params_ok", True) else ("~  " if r["right"] else "BAD")
     shown = {k: v for k, v in (r.get("parameters") or {}).items() if not isinstance(v, (list, dict))}
-    return f"{mark} {r['family']:28s} truth {r['truth']} -> {r['verdict']} {shown} ({r.get('time_s', 0):.1f} s)"
+    return (f"{mark} {r['family']:28s} truth {r['truth']} -> {r['verdict']} {shown} "
+            f"({r.get('time_s', 0):.1f} s, CPU {r.get('cpu_s', 0):.1f} s)")
 
 
 def run_all(run: Callable[[dict], dict], todo: list, workers: int, line: Callable[[dict], str],

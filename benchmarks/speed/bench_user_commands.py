@@ -16,7 +16,10 @@ user who never heard of them runs it; ``IMPACTLAB_THREADS`` is passed on when se
 * ``stabilization``: ``analysis stabilization rec.h5 --png stab.png``;
 * ``diagnose``: one physical change (the supports' rotational springs x 0.4, written as a changed
   frame configuration and captured through ``sim://?config=...``; not timed) diagnosed against the
-  unchanged ``simulator/frame.toml``.
+  unchanged ``simulator/frame.toml``; ``diagnose pair``: two changes at once (a 1.3 kg steel block
+  clamped at ``top:2``, built as an extra member on joint springs, and the supports' rotational springs
+  x 0.264: the first pair case of ``bench_diagnosis_large.py``, rounded), the same way. The verdict and the named causes are printed under the times (the same
+  verdicts before and after a speed change are part of what the benchmark shows).
 
 "busy" runs them while two ``python -c "while True: pass"`` processes, started and stopped by this
 script, keep the cores busy. ``scan`` runs ``bench_fit_scale.py`` in a child process (``--scan-outputs``
@@ -45,10 +48,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 PY = sys.executable
-COMMANDS = ("capture", "fit", "report", "report --fit", "stabilization", "diagnose")
+COMMANDS = ("capture", "fit", "report", "report --fit", "stabilization", "diagnose", "diagnose pair")
 #: the issue's targets (s); None: no target, shown for information
 TARGETS: dict[str, float | None] = {"capture": None, "fit": 1.0, "report": 2.0, "report --fit": 2.0,
-                                        "stabilization": None, "diagnose": 5.0}
+                                        "stabilization": None, "diagnose": 5.0, "diagnose pair": 15.0}
 BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
@@ -86,6 +89,23 @@ def changed_frame(work: Path) -> Path:
     return cfg
 
 
+def changed_pair(work: Path) -> Path:
+    """Two physical changes: a 1.3 kg steel block at ``top:2`` (an extra member on joint springs) and the
+    supports' rotational springs x 0.264."""
+    sys.path.insert(0, str(ROOT))
+    sys.path.insert(0, str(ROOT / "benchmarks" / "accuracy"))
+    from bench_diagnosis_physical import steel_block
+
+    from simulator.config import FrameConfig, overrides_to_toml
+
+    cfg = FrameConfig.load()
+    k = list(cfg.supports.stiffness)
+    over = {**steel_block(cfg, "top:2", 1.3), "supports": {"stiffness": k[:3] + [0.264 * x for x in k[3:]]}}
+    path = work / "changed_pair.toml"
+    path.write_text(overrides_to_toml(over))
+    return path
+
+
 def command_line(name: str, work: Path) -> list[str]:
     a, m = [PY, "-m", "acquisition"], [PY, "-m", "analysis"]
     return {
@@ -96,6 +116,8 @@ def command_line(name: str, work: Path) -> list[str]:
         "stabilization": m + ["stabilization", "rec.h5", "--png", "stab.png", "-q"],
         "diagnose": m + ["diagnose", "--measured", "changed.h5", "--simulated", str(ROOT / "simulator" / "frame.toml"),
                          "--json", "diag.json", "-q"],
+        "diagnose pair": m + ["diagnose", "--measured", "changed_pair.h5", "--simulated",
+                              str(ROOT / "simulator" / "frame.toml"), "--json", "diag_pair.json", "-q"],
     }[name]
 
 
@@ -107,11 +129,13 @@ def prepare(work: Path, names: list[str]) -> None:
              "--auto", "-q"], work)
     if "report --fit" in names:
         run(command_line("fit", work), work)
-    if "diagnose" in names:
-        cfg = changed_frame(work)
-        points = "right:6:-X,right:4:-X,left:6:X,top:4:Z,top:2:Z,left:9:Y"
-        run([PY, "-m", "acquisition", "capture", "--device", f"sim://?seed=22&config={cfg}", "--out", "changed.h5",
-             "--points", points, "--hits", "3", "--auto", "-q"], work)
+    points = "right:6:-X,right:4:-X,left:6:X,top:4:Z,top:2:Z,left:9:Y"
+    for name, make, seed, out in (("diagnose", changed_frame, 22, "changed.h5"),
+                                  ("diagnose pair", changed_pair, 877201, "changed_pair.h5")):
+        if name in names:
+            cfg = make(work)
+            run([PY, "-m", "acquisition", "capture", "--device", f"sim://?seed={seed}&config={cfg}", "--out", out,
+                 "--points", points, "--hits", "3", "--auto", "-q"], work)
 
 
 class Busy:
@@ -147,7 +171,17 @@ def time_commands(names: list[str], work: Path, repeat: int) -> dict[str, tuple[
             times.append(run(command_line(name, work), work))
         out[name] = min(times)
         print(f"  {name:14s} wall {out[name][0]:7.2f} s, CPU {out[name][1]:7.2f} s", flush=True)
+        if name.startswith("diagnose"):
+            print(f"  {'':14s} {verdict_line(work / ('diag.json' if name == 'diagnose' else 'diag_pair.json'))}")
     return out
+
+
+def verdict_line(path: Path) -> str:
+    """The verdict and the named causes with their parameters (4 digits) of a diagnosis JSON."""
+    doc = json.loads(path.read_text())
+    named = [f"{c['effect']}(" + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                                           for k, v in c["parameters"].items()) + ")" for c in doc.get("named", [])]
+    return f"verdict {doc['verdict']}: {'; '.join(named) or '-'}"
 
 
 def _peak_rss_gib(pid: int) -> float:
