@@ -298,7 +298,7 @@ def cases(per_family: int, nulls: int, families=FAMILIES, seed: int = 2027, larg
         over, extra, relabel, points = null_spec(kind, rng)
         out.append({"family": f"null:{kind}", "overrides": over, "truths": [{"cause": "none"}], "extra": extra,
                     "relabel": relabel, "seed": int(rng.integers(1, 10**6)), **({"points": points} if points else {})})
-    for kind in ("span", "roll"):
+    for kind in ("span", "roll") if nulls else ():
         over, truth, extra = null_case(kind, rng)
         out.append({"family": f"out-of-catalogue:{kind}", "overrides": over, "truths": [{"cause": "unexplained"}],
                     "extra": extra, "seed": int(rng.integers(1, 10**6))})
