@@ -55,7 +55,7 @@ from .physical import (
     variants,
     z_score,
 )
-from .physical_pairs import OnTop, fit_pair
+from .physical_pairs import OnTop, fit_pair, refit_on_top
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes"]
 
@@ -320,7 +320,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         fa: PhysicalFit = first["_fit"]
         progress("diagnosis: second cause on top of %s", fa.cause)
         for fb in _seconds(sim, specs, mm, fmax, fa, names):
-            two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa, fb], mm, fmax)
+            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax)
+            two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
             c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
             over = gain_db(fa.cv_per_mode, two.cv_per_mode)
             c["gain_over_first_db"] = over
