@@ -312,9 +312,11 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
 def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
                   judge: _Judge, names: Sequence[str] | None) -> dict | None:
     """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of the best
-    significant single cause (and, when that gives no adequate pair, the next), the other causes; the
-    best pair by nested held-out error, judged like a single cause and against the first cause alone."""
-    firsts = [c for c in found if c["significant"]][:N_FIRST]
+    significant single cause (and, when that gives no adequate pair, the next; when none is significant,
+    the best by held-out gain), the other causes; the best pair by nested held-out error, judged like a
+    single cause and against the first cause alone."""
+    # two changes at once may leave every single cause short of significance: then the best by held-out gain
+    firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
     best: dict | None = None
     for first in firsts:
         fa: PhysicalFit = first["_fit"]

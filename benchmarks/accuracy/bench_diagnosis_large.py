@@ -194,7 +194,8 @@ def run_case(spec: dict) -> dict:
         dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     named = named_causes(d)
     out = {"family": spec["family"], "seed": spec["seed"], "truths": truths, "verdict": d.verdict, "named": named,
-           "time_s": dt, "cpu_s": cpu, "reason": d.reason,
+           "time_s": dt, "cpu_s": cpu, "reason": d.reason, "next_measurement": d.next_measurement,
+           "physical": {k: v for k, v in d.physical.items() if k != "causes"},
            "causes": [{k: c.get(k) for k in ("effect", "parameters", "gain_db", "significant", "adequate")}
                       for c in d.causes[:6]]}
     out.update(score(truths, d.verdict, named))
