@@ -175,14 +175,26 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     found.sort(key=lambda c: c["gain_db"], reverse=True)
     named = [c for c in found if c["significant"] and c["adequate"]]
     out = PhysicalOutcome(decided=True, error_before_db=before_db, doc=doc)
+    pairs_ok = hasattr(sim, "modes_of") and (causes is None or len(causes) > 1)
+    two = None
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
         out.combined = [_stage_entry(best)]
         out.named = [{"effect": best["effect"], "parameters": best["parameters"]}]
-        if best["error_after_db"] - noise_db > ADEQUATE_MARGIN_DB:
+        if pairs_ok and _leaves_evidence(best, judge):
+            # adequate, yet the held-out modes or the FRFs keep more than the noise: a second physical cause
+            # is named with it only when the pair predicts the held-out modes clearly better (forward selection)
+            two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=[best])
+            if two is not None:
+                doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate")}
+            if two is not None and two["significant"] and two["adequate"]:
+                out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
+                out.combined = [_stage_entry(c) for c in two["_stages"]]
+                out.named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in two["_stages"]]
+        if out.verdict != "combined" and best["error_after_db"] - noise_db > ADEQUATE_MARGIN_DB:
             out.on_top = best          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
-    elif hasattr(sim, "modes_of") and (causes is None or len(causes) > 1):
+    elif pairs_ok:
         two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes)
         if two is not None:
             doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate")}
@@ -210,6 +222,20 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         out.next_measurement = propose(sim, measured, prior, noise_db, *close)
     out.causes = [{k: v for k, v in c.items() if not k.startswith("_")} for c in found]
     return out
+
+
+#: A named cause whose held-out chi2 per mode stays above this (the modes keep a discrepancy of about one
+#: standard deviation or more) is tried with a second physical cause on top (FRFs alone above the noise
+#: are left to the FRF-level catalogue: a physical cause moves modes).
+LEAVES_CHI2 = 1.0
+
+
+def _leaves_evidence(best: dict, judge: _Judge) -> bool:
+    """Does the named single cause ``best`` leave evidence in the modes that a second physical cause
+    could explain (held-out chi2 per counted mode above ``LEAVES_CHI2``)?"""
+    cv = best["_fit"].cv_per_mode
+    n = judge._counted(cv)
+    return bool(np.sum(cv[n]) / max(int(n.sum()), 1) > LEAVES_CHI2)
 
 
 def _removed_text(removed: float) -> str:
@@ -287,6 +313,11 @@ N_FIRST = 2
 N_SECOND = 2
 
 
+def _choice_penalty(spec: CauseSpec) -> float:
+    """The freedom of a cause's choice in chi2 units: 2 ln(number of options) (0 without a choice)."""
+    return 2.0 * float(np.log(max(len(spec.options), 1))) if spec.choice else 0.0
+
+
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
              names: Sequence[str] | None) -> list[PhysicalFit]:
     """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
@@ -299,7 +330,7 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
             continue
         for free in variants(spec):
             p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax)
-            penalty = 2.0 * len(free) + (2.0 * np.log(max(len(spec.options), 1)) if spec.choice else 0.0)
+            penalty = 2.0 * len(free) + _choice_penalty(spec)
             ranked.append((chi2 + penalty, PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
     ranked.sort(key=lambda t: t[0])
     out: list[PhysicalFit] = []
@@ -310,13 +341,15 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
 
 
 def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
-                  judge: _Judge, names: Sequence[str] | None) -> dict | None:
+                  judge: _Judge, names: Sequence[str] | None, firsts: list | None = None) -> dict | None:
     """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of the best
     significant single cause (and, when that gives no adequate pair, the next; when none is significant,
     the best by held-out gain), the other causes; the best pair by nested held-out error, judged like a
-    single cause and against the first cause alone."""
-    # two changes at once may leave every single cause short of significance: then the best by held-out gain
-    firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
+    single cause and against the first cause alone; ``firsts`` given: on top of those only. Pairs are
+    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`)."""
+    if firsts is None:
+        # two changes at once may leave every single cause short of significance: then the best by held-out gain
+        firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
     best: dict | None = None
     for first in firsts:
         fa: PhysicalFit = first["_fit"]
@@ -330,7 +363,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
             c["significant"] = bool(c["significant"] and over >= MIN_GAIN_DB)
             c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
                              "error_after_db": c["error_after_db"]} for name, p in two.changes]
-            c["effect"], c["_chi2_cv"] = "+".join(two.causes), two.chi2_cv
+            c["effect"] = "+".join(two.causes)
+            c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(specs[n]) for n in two.causes)
             if best is None or (c["significant"] and c["adequate"], -c["_chi2_cv"]) > (
                     best["significant"] and best["adequate"], -best["_chi2_cv"]):
                 best = c
