@@ -176,32 +176,25 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     named = [c for c in found if c["significant"] and c["adequate"]]
     out = PhysicalOutcome(decided=True, error_before_db=before_db, doc=doc)
     pairs_ok = hasattr(sim, "modes_of") and (causes is None or len(causes) > 1)
-    two = None
+    firsts: list | None = None          # None: the pair search picks its first causes
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
         out.combined = [_stage_entry(best)]
         out.named = [{"effect": best["effect"], "parameters": best["parameters"]}]
-        if pairs_ok and _leaves_evidence(best, judge):
-            # adequate, yet the held-out modes or the FRFs keep more than the noise: a second physical cause
-            # is named with it only when the pair predicts the held-out modes clearly better (forward selection)
-            two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=[best])
-            if two is not None:
-                doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate")}
-            if two is not None and two["significant"] and two["adequate"]:
-                out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
-                out.combined = [_stage_entry(c) for c in two["_stages"]]
-                out.named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in two["_stages"]]
-        if out.verdict != "combined" and best["error_after_db"] - noise_db > ADEQUATE_MARGIN_DB:
-            out.on_top = best          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
-    elif pairs_ok:
-        two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes)
+        # adequate, yet the held-out modes keep more than the noise: a second physical cause is named with
+        # it only when the pair predicts the held-out modes clearly better (forward selection)
+        firsts = [best] if _leaves_evidence(best, judge) else []
+    if pairs_ok and firsts != []:
+        two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
         if two is not None:
             doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate")}
         if two is not None and two["significant"] and two["adequate"]:
             out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
             out.combined = [_stage_entry(c) for c in two["_stages"]]
             out.named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in two["_stages"]]
+    if named and out.verdict != "combined" and named[0]["error_after_db"] - noise_db > ADEQUATE_MARGIN_DB:
+        out.on_top = named[0]          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
     if not out.named:
         # a cause that explains the modes but not the FRFs: an FRF-level cause (damping, a sensor) may
         # complete it; the caller tries the FRF catalogue on top of it
