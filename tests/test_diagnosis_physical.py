@@ -121,6 +121,14 @@ def test_every_cause_is_one_registry_row_with_its_advice() -> None:
     assert set(opts["added_mass"]) == set(fv.nodes)
 
 
+def _noise_free_modes(fv: FrameVariants, changes: list) -> MeasuredModes:
+    """The modes below 460 Hz of the frame with ``changes`` ((cause, params) pairs), exact."""
+    model = fv.model_of(changes)
+    keep = model.freq_hz < 460.0
+    return MeasuredModes(model.freq_hz[keep], np.zeros(int(keep.sum())),
+                         model.residues[..., keep].reshape(-1, int(keep.sum())))
+
+
 def test_two_noise_free_causes_are_found_together() -> None:
     """A crack and a softer support at once: the pair of the forward selection, refined together, gives
     both back (choices searched, nested leave-one-mode-out error near zero)."""
@@ -128,12 +136,8 @@ def test_two_noise_free_causes_are_found_together() -> None:
     from analysis.diagnosis.physical_pairs import OnTop, fit_pair
 
     fv = FrameVariants(None, OUTS, REFS)
-    truth = [("element_stiffness", {"element": "left:2", "factor": 0.3}),
-             ("support_stiffness", {"factor_translational": 1.0, "factor_rotational": 0.3})]
-    model = fv.model_of(truth)
-    keep = model.freq_hz < 460.0
-    mm = MeasuredModes(model.freq_hz[keep], np.zeros(int(keep.sum())),
-                       model.residues[..., keep].reshape(-1, int(keep.sum())))
+    mm = _noise_free_modes(fv, [("element_stiffness", {"element": "left:2", "factor": 0.3}),
+                                ("support_stiffness", {"factor_translational": 1.0, "factor_rotational": 0.3})])
     specs = {c.name: c for c in fv.causes()}
     allsel = np.ones(mm.freq_hz.size, bool)
     pa, ca, _ = fit_cause(fv, specs["element_stiffness"], ("factor",), mm, allsel, 700.0)
@@ -147,6 +151,33 @@ def test_two_noise_free_causes_are_found_together() -> None:
     assert pair.params[0]["factor"] == pytest.approx(0.3, rel=1e-3)
     assert pair.params[1]["factor_rotational"] == pytest.approx(0.3, rel=1e-3)
     assert pair.chi2_cv < 1e-3
+
+
+def test_a_mass_placed_wrong_beside_a_second_change_finds_its_node() -> None:
+    """Noise-free modes of a 2 kg mass at top:6 with the supports' rotational springs x 0.3. A first fit of
+    the mass put at top:4 (as a single-cause fit pulled aside by the supports may): with the supports'
+    change applied, the mass is searched over every node again and the pair gives both back."""
+    from analysis.diagnosis.physical import PhysicalFit
+    from analysis.diagnosis.physical_pairs import OnTop, fit_pair, refit_on_top
+
+    fv = FrameVariants(None, OUTS, REFS)
+    mm = _noise_free_modes(fv, [("added_mass", {"point": "top:6", "mass_kg": 2.0}),
+                                ("support_stiffness", {"factor_translational": 1.0, "factor_rotational": 0.3})])
+    specs = {c.name: c for c in fv.causes()}
+    allsel = np.ones(mm.freq_hz.size, bool)
+    wrong = PhysicalFit("added_mass", {"point": "top:4", "mass_kg": 1.5}, ("mass_kg",), np.inf)
+    pb, cb, _ = fit_cause(OnTop(fv, [(wrong.cause, wrong.params)]), specs["support_stiffness"], ("factor_rotational",),
+                          mm, allsel, 700.0)
+    second = PhysicalFit("support_stiffness", pb, ("factor_rotational",), cb)
+    again = refit_on_top(fv, specs["added_mass"], wrong, second, mm, 700.0)
+    assert again.params["point"] == "top:6" and again.ranked[0][1] == "top:6"
+    pair = fit_pair(fv, [specs["added_mass"], specs["support_stiffness"]], [again, second], mm, 700.0)
+    assert pair.params[0]["point"] == "top:6"
+    assert pair.params[0]["mass_kg"] == pytest.approx(2.0, rel=1e-3)
+    assert pair.params[1]["factor_rotational"] == pytest.approx(0.3, rel=1e-3)
+    assert pair.chi2_cv < 1e-3
+    # a cause without a choice is left to the pair's refinement
+    assert refit_on_top(fv, specs["support_stiffness"], second, again, mm, 700.0) is second
 
 
 def test_modes_of_another_structure_do_not_pair() -> None:

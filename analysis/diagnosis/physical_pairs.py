@@ -6,6 +6,8 @@ parameters, :class:`OnTop`): every other cause is fitted and cross-validated (le
 and the first cause are then refined together (:func:`fit_pair`): both causes' continuous parameters
 by least squares (the choices, a node or a member, kept), and the pair's held-out error is measured
 with *both* causes refitted in each fold (nested: the first cause never sees the left-out mode either).
+The first cause's choice (the node of a mass, a member) was made while the second change was in the data;
+it is made again with the second cause applied (:func:`refit_on_top`) before the pair is refined.
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
 held-out modes better than the first cause alone by at least ``MIN_GAIN_DB``.
 """
@@ -18,9 +20,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..modal import ModalModel
-from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, residuals
+from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals
 
-__all__ = ["OnTop", "PairFit", "fit_pair", "changes_of"]
+__all__ = ["OnTop", "PairFit", "fit_pair", "changes_of", "refit_on_top"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -112,3 +114,16 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     p = params(x)
     edge = tuple(f"{fits[i].cause}.{s.name}" for i, s in flat if s.at_edge(float(p[i][s.name])))
     return PairFit(causes=tuple(f.cause for f in fits), params=tuple(p), chi2=chi2, cv_per_mode=cv, at_edge=edge)
+
+
+def refit_on_top(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, other: PhysicalFit, mm: MeasuredModes,
+                 fmax: float) -> PhysicalFit:
+    """``fit`` (its cause and free parameters) fitted again on all modes with ``other``'s change applied:
+    a choice (node, member, element) is searched over every option again, so a first cause whose choice
+    was pulled aside by the second change in the data finds its place. ``fit`` itself when the cause has
+    no choice (its parameters are refined with the pair anyway)."""
+    if spec.choice is None:
+        return fit
+    top = OnTop(sim, [(other.cause, other.params)])
+    p, chi2, ranked = fit_cause(top, spec, fit.free, mm, np.ones(mm.freq_hz.size, bool), fmax)
+    return PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=chi2, ranked=ranked)

@@ -55,7 +55,7 @@ from .physical import (
     variants,
     z_score,
 )
-from .physical_pairs import OnTop, fit_pair
+from .physical_pairs import OnTop, fit_pair, refit_on_top
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes"]
 
@@ -175,21 +175,26 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     found.sort(key=lambda c: c["gain_db"], reverse=True)
     named = [c for c in found if c["significant"] and c["adequate"]]
     out = PhysicalOutcome(decided=True, error_before_db=before_db, doc=doc)
+    pairs_ok = hasattr(sim, "modes_of") and (causes is None or len(causes) > 1)
+    firsts: list | None = None          # None: the pair search picks its first causes
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
         out.combined = [_stage_entry(best)]
         out.named = [{"effect": best["effect"], "parameters": best["parameters"]}]
-        if best["error_after_db"] - noise_db > ADEQUATE_MARGIN_DB:
-            out.on_top = best          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
-    elif hasattr(sim, "modes_of") and (causes is None or len(causes) > 1):
-        two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes)
+        # adequate, yet the held-out modes keep more than the noise: a second physical cause is named with
+        # it only when the pair predicts the held-out modes clearly better (forward selection)
+        firsts = [best] if _leaves_evidence(best, judge) else []
+    if pairs_ok and firsts != []:
+        two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
         if two is not None:
             doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate")}
         if two is not None and two["significant"] and two["adequate"]:
             out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
             out.combined = [_stage_entry(c) for c in two["_stages"]]
             out.named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in two["_stages"]]
+    if named and out.verdict != "combined" and named[0]["error_after_db"] - noise_db > ADEQUATE_MARGIN_DB:
+        out.on_top = named[0]          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
     if not out.named:
         # a cause that explains the modes but not the FRFs: an FRF-level cause (damping, a sensor) may
         # complete it; the caller tries the FRF catalogue on top of it
@@ -210,6 +215,20 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         out.next_measurement = propose(sim, measured, prior, noise_db, *close)
     out.causes = [{k: v for k, v in c.items() if not k.startswith("_")} for c in found]
     return out
+
+
+#: A named cause whose held-out chi2 per mode stays above this (the modes keep a discrepancy of about one
+#: standard deviation or more) is tried with a second physical cause on top (FRFs alone above the noise
+#: are left to the FRF-level catalogue: a physical cause moves modes).
+LEAVES_CHI2 = 1.0
+
+
+def _leaves_evidence(best: dict, judge: _Judge) -> bool:
+    """Does the named single cause ``best`` leave evidence in the modes that a second physical cause
+    could explain (held-out chi2 per counted mode above ``LEAVES_CHI2``)?"""
+    cv = best["_fit"].cv_per_mode
+    n = judge._counted(cv)
+    return bool(np.sum(cv[n]) / max(int(n.sum()), 1) > LEAVES_CHI2)
 
 
 def _removed_text(removed: float) -> str:
@@ -287,6 +306,11 @@ N_FIRST = 2
 N_SECOND = 2
 
 
+def _choice_penalty(spec: CauseSpec) -> float:
+    """The freedom of a cause's choice in chi2 units: 2 ln(number of options) (0 without a choice)."""
+    return 2.0 * float(np.log(max(len(spec.options), 1))) if spec.choice else 0.0
+
+
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
              names: Sequence[str] | None) -> list[PhysicalFit]:
     """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
@@ -299,7 +323,7 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
             continue
         for free in variants(spec):
             p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax)
-            penalty = 2.0 * len(free) + (2.0 * np.log(max(len(spec.options), 1)) if spec.choice else 0.0)
+            penalty = 2.0 * len(free) + _choice_penalty(spec)
             ranked.append((chi2 + penalty, PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
     ranked.sort(key=lambda t: t[0])
     out: list[PhysicalFit] = []
@@ -310,24 +334,30 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
 
 
 def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
-                  judge: _Judge, names: Sequence[str] | None) -> dict | None:
+                  judge: _Judge, names: Sequence[str] | None, firsts: list | None = None) -> dict | None:
     """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of the best
-    significant single cause (and, when that gives no adequate pair, the next), the other causes; the
-    best pair by nested held-out error, judged like a single cause and against the first cause alone."""
-    firsts = [c for c in found if c["significant"]][:N_FIRST]
+    significant single cause (and, when that gives no adequate pair, the next; when none is significant,
+    the best by held-out gain), the other causes; the best pair by nested held-out error, judged like a
+    single cause and against the first cause alone; ``firsts`` given: on top of those only. Pairs are
+    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`)."""
+    if firsts is None:
+        # two changes at once may leave every single cause short of significance: then the best by held-out gain
+        firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
     best: dict | None = None
     for first in firsts:
         fa: PhysicalFit = first["_fit"]
         progress("diagnosis: second cause on top of %s", fa.cause)
         for fb in _seconds(sim, specs, mm, fmax, fa, names):
-            two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa, fb], mm, fmax)
+            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax)
+            two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
             c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
             over = gain_db(fa.cv_per_mode, two.cv_per_mode)
             c["gain_over_first_db"] = over
             c["significant"] = bool(c["significant"] and over >= MIN_GAIN_DB)
             c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
                              "error_after_db": c["error_after_db"]} for name, p in two.changes]
-            c["effect"], c["_chi2_cv"] = "+".join(two.causes), two.chi2_cv
+            c["effect"] = "+".join(two.causes)
+            c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(specs[n]) for n in two.causes)
             if best is None or (c["significant"] and c["adequate"], -c["_chi2_cv"]) > (
                     best["significant"] and best["adequate"], -best["_chi2_cv"]):
                 best = c

@@ -323,9 +323,11 @@ def diagnose_frfs(
     causes, or a physical cause that explains the modes completed by an FRF-level effect.
     """
     names = list(EFFECTS) if effects is None else list(effects)
+    physical_names = [c.name for c in physical.causes()] if physical is not None else []
     for n in names:
-        if n not in EFFECTS:
-            raise EffectError(f"unknown effect {n!r}; the catalogue has {', '.join(EFFECTS)}")
+        if n not in EFFECTS and n not in physical_names:
+            raise EffectError(f"unknown effect {n!r}; the catalogue has {', '.join([*EFFECTS, *physical_names])}")
+    names = [n for n in names if n in EFFECTS]          # the physical causes among them go to the physical stage
     if base.residues.shape[:2] != measured.H.shape[:2]:
         raise ValueError(f"the simulation has {base.residues.shape[:2]} (outputs, references) but the "
                          f"measurement {measured.H.shape[:2]}; select the common points first")

@@ -22,15 +22,16 @@ Families:
   (every damping ratio x 1.6-3, Young's modulus x 0.88-0.94 or 1.06-1.12), ``pair:member+sensors``
   (one member's EI x 1.2-1.5, accelerometers of 0.1-0.3 kg), ``pair:mass+joint`` (block 1-4 kg, joint
   rotational springs x 0.02-0.08), ``pair:mass+damping`` (block 1-4 kg, damping x 1.6-3);
-* nulls (no change; other seeds, a finer mesh, an exponential window): ``none`` is right;
+* nulls (no change): other seeds, other hammer points (4-6 drawn over the frame's inner nodes), more
+  noise (sensor noise x 1-10, hammer scatter x 1-3), a finer mesh, an exponential window; ``none`` is right;
 * out of the catalogue (the span 6 % longer, the right column rolled 20 -> 40 deg): ``unexplained``.
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_diagnosis_large.py \
-        [--per-family 6] [--nulls 30] [--families large:added_mass,pair:mass+support] [--skip M] [--first N] \
-        [--workers 1] [--json out.json]
+        [--large 3] [--per-family 5] [--nulls 30] [--families large:added_mass,pair:mass+support] \
+        [--nulls-only] [--skip M] [--first N] [--workers 1] [--list] [--json out.json]
 
-The cases are drawn for every family whatever ``--families`` selects, so a subset runs the same cases
-as a full run with the same ``--per-family`` and ``--nulls``.
+The cases are drawn once, for every family whatever ``--families`` selects (``--list`` prints them), so
+a subset runs the same cases as a full run with the same ``--large``, ``--per-family`` and ``--nulls``.
 """
 from __future__ import annotations
 
@@ -167,7 +168,7 @@ def run_case(spec: dict) -> dict:
             cfg = Path(tmp) / "frame.toml"
             cfg.write_text(overrides_to_toml(over))
             device += f"&config={cfg}"
-        pts = POINTS
+        pts = tuple(spec.get("points") or POINTS)
         if relabel:
             from acquisition.setup import default_setup
             from analysis.points import parse_point
@@ -193,7 +194,8 @@ def run_case(spec: dict) -> dict:
         dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     named = named_causes(d)
     out = {"family": spec["family"], "seed": spec["seed"], "truths": truths, "verdict": d.verdict, "named": named,
-           "time_s": dt, "cpu_s": cpu, "reason": d.reason,
+           "time_s": dt, "cpu_s": cpu, "reason": d.reason, "next_measurement": d.next_measurement,
+           "physical": {k: v for k, v in d.physical.items() if k != "causes"},
            "causes": [{k: c.get(k) for k in ("effect", "parameters", "gain_db", "significant", "adequate")}
                       for c in d.causes[:6]]}
     out.update(score(truths, d.verdict, named))
@@ -238,44 +240,97 @@ def score(truths: list, verdict: str, named: list) -> dict:
     return {"right": right, "params_ok": bool(ok)}
 
 
-def cases(per_family: int, nulls: int, families, seed: int = 2027) -> list[dict]:
+LARGE = ("large:added_mass", "large:support_stiffness", "crack")
+
+
+def hammer_points(rng: np.random.Generator) -> list[str]:
+    """4-6 hammer points drawn over the frame's inner nodes: a column in its plane (X) or out of it (Y),
+    the beam from above (Z) or from the side (Y)."""
+    from simulator.config import FrameConfig
+
+    cfg = FrameConfig.load()
+    out: list[str] = []
+    while len(out) < int(rng.integers(4, 7)):
+        comp = str(rng.choice(list(cfg.components)))
+        node = int(rng.integers(1, cfg.components[comp].n_elements))
+        d = str(rng.choice(["Z", "Z", "Y"] if comp == "top" else ["X", "X", "Y"]))
+        p = f"{comp}:{node}:{d}"
+        if p not in out:
+            out.append(p)
+    return out
+
+
+def null_spec(kind: str, rng: np.random.Generator) -> tuple[dict, list, int, list]:
+    """(overrides, extra capture arguments, relabel, hammer points or []) of a null of ``kind``: ``seed`` (another seed),
+    ``points`` (other hammer points), ``noise`` (sensor noise x 1-10 and hammer scatter x 1-3), ``mesh``
+    (every member's elements doubled), ``window`` (an exponential window)."""
+    from simulator.config import FrameConfig
+
+    if kind == "points":
+        return {}, [], 0, hammer_points(rng)
+    if kind == "noise":
+        cfg = FrameConfig.load()
+        f = float(np.exp(rng.uniform(0.0, np.log(10.0))))
+        h = float(rng.uniform(1.0, 3.0))
+        acc = cfg.sensors.accelerometer.noise_density_g_per_rthz
+        return ({"sensors": {"accelerometer": {"noise_density_g_per_rthz": acc * f}},
+                 "hammer": {"amplitude_scatter": cfg.hammer.amplitude_scatter * h,
+                            "width_scatter": cfg.hammer.width_scatter * h}}, [], 0, [])
+    over, truth, extra = null_case(kind, rng)
+    return over, extra, int(truth.get("relabel", 0)), []
+
+
+NULL_KINDS = ("seed", "points", "noise", "mesh", "window")
+
+
+def cases(per_family: int, nulls: int, families=FAMILIES, seed: int = 2027, large: int = 3) -> list[dict]:
+    """The benchmark's cases, drawn once by a seeded generator before any tuning: ``large`` cases of each
+    large single-change family (blocks 3-5 kg, supports x 0.01-0.1, cracks of factor 0.1-0.3),
+    ``per_family`` of each pair family, ``nulls`` nulls (the kinds of :func:`null_spec` in turn), the two
+    out-of-catalogue changes. The draws do not depend on ``families``."""
     rng = np.random.default_rng(seed)
     out = []
-    for fam in families:
-        for _ in range(per_family):
+    for fam in FAMILIES:
+        for _ in range(large if fam in LARGE else per_family):
             over, truths = make_case(fam, rng)
             out.append({"family": fam, "overrides": over, "truths": truths, "seed": int(rng.integers(1, 10**6))})
-    kinds = ["seed"] * (nulls - 2 * (nulls // 6)) + ["mesh"] * (nulls // 6) + ["window"] * (nulls // 6)
-    for kind in kinds:
-        over, truth, extra = null_case(kind, rng)
+    for i in range(nulls):
+        kind = NULL_KINDS[i % len(NULL_KINDS)]
+        over, extra, relabel, points = null_spec(kind, rng)
         out.append({"family": f"null:{kind}", "overrides": over, "truths": [{"cause": "none"}], "extra": extra,
-                    "relabel": truth.get("relabel", 0), "seed": int(rng.integers(1, 10**6))})
+                    "relabel": relabel, "seed": int(rng.integers(1, 10**6)), **({"points": points} if points else {})})
     for kind in ("span", "roll") if nulls else ():
         over, truth, extra = null_case(kind, rng)
         out.append({"family": f"out-of-catalogue:{kind}", "overrides": over, "truths": [{"cause": "unexplained"}],
                     "extra": extra, "seed": int(rng.integers(1, 10**6))})
-    return out
+    return [c for c in out if c["family"] in families or c["family"].partition(":")[0] in ("null", "out-of-catalogue")]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--per-family", type=int, default=6)
-    ap.add_argument("--nulls", type=int, default=30, help="null cases (about 2/3 other seeds, the rest finer mesh and window)")
+    ap.add_argument("--per-family", type=int, default=5, help="cases of each pair family")
+    ap.add_argument("--large", type=int, default=3, help="cases of each large single-change family (and cracks)")
+    ap.add_argument("--nulls", type=int, default=30, help="null cases (other seeds, hammer points, noise, mesh, window)")
     ap.add_argument("--families", default=",".join(FAMILIES), help="comma-separated families to run")
     ap.add_argument("--first", type=int, default=None,
                     help="run only the first N cases of each family (the same cases as a full run)")
     ap.add_argument("--skip", type=int, default=0, help="skip the first N cases of each family")
+    ap.add_argument("--nulls-only", action="store_true", help="run the nulls and out-of-catalogue cases alone")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--list", action="store_true", help="print the cases (truths, seeds, points) and stop")
     ap.add_argument("--json", help="write every case's result")
     args = ap.parse_args()
     fams = [f for f in args.families.split(",") if f]
     bad = [f for f in fams if f not in FAMILIES]
     if bad:
         ap.error(f"unknown families {bad}; choose from {', '.join(FAMILIES)}")
-    todo = [c for c in cases(args.per_family, args.nulls, FAMILIES) if c["family"] in fams
-            or (c["family"].partition(":")[0] in ("null", "out-of-catalogue") and args.nulls)]
+    todo = cases(args.per_family, args.nulls, [] if args.nulls_only else fams, large=args.large)
     rank = [sum(d["family"] == c["family"] for d in todo[:i]) for i, c in enumerate(todo)]
     todo = [c for c, k in zip(todo, rank) if k >= args.skip and (args.first is None or k < args.first)]
+    if args.list:
+        for c in todo:
+            print(f"{c['family']:28s} seed {c['seed']:6d} {c['truths']} {c.get('points', '')} {c.get('extra', '')}")
+        return
     run_all(run_case, todo, args.workers, _case_line, args.json)
 
 

@@ -1,15 +1,19 @@
 """The next measurement at work: a test plan that cannot separate two candidates, the proposed point
 added to the plan and captured, and the diagnosis again.
 
-Each case fixes a steel block (1-4 kg, a cube of two beam elements on joint springs) at a random inner
-node of the frame, captures through ``sim://?config=...`` with a reduced plan (two hammer points drawn
-from the default plan, the default sensors), and diagnoses against the unchanged frame. When the
-diagnosis proposes a next measurement, the proposed point is added to the hammer points, the frame is
-captured again (same seed) and diagnosed again. Reported per case: the verdict and mass node before,
-the proposal, and after: named right (node within one element, mass within 25 %) and whether a
-proposal between the same candidates remains.
+Each case fixes a steel block (1.5-4 kg, a cube of two beam elements on joint springs) at a random inner
+node of the beam other than its middle, and captures through ``sim://?config=...`` with the beam
+hammered at its middle only (``top:4:Z``) and the default three sensors: a plan under which a mass and
+its mirror image about the middle give nearly the same measured modes. The recording is diagnosed
+against the unchanged frame (the whole catalogue). When the diagnosis proposes a next measurement, the
+proposed point is added to the hammer points, the frame is captured again (same seed) and diagnosed
+again. Reported per case: the verdict and mass node before, the proposal and its two candidates, and
+after: named right (node within one element, mass within 25 %) and whether a proposal remains.
+``--plan default2`` draws two hammer points of the default plan instead (the plan is not chosen to be
+ambiguous: proposals are rarer there).
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_next_measurement.py [--cases 6] [--json out.json]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_next_measurement.py [--cases 4] \
+        [--plan middle|default2] [--json out.json]
 """
 from __future__ import annotations
 
@@ -30,7 +34,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_diagnosis_large import _block, _param_ok  # noqa: E402
-from bench_diagnosis_physical import POINTS  # noqa: E402
+from bench_diagnosis_physical import POINTS, steel_block  # noqa: E402
 
 
 def _diagnose(tmp: Path, device: str, points: list[str], tag: str):
@@ -77,7 +81,8 @@ def main() -> None:
     from simulator.config import FrameConfig
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", type=int, default=6)
+    ap.add_argument("--cases", type=int, default=4)
+    ap.add_argument("--plan", choices=("middle", "default2"), default="middle")
     ap.add_argument("--seed", type=int, default=2028)
     ap.add_argument("--json")
     args = ap.parse_args()
@@ -85,13 +90,21 @@ def main() -> None:
     cfg = FrameConfig.load()
     rows = []
     for _ in range(args.cases):
-        over, truth = _block(cfg, rng, 1.0, 4.0)
-        points = [str(p) for p in rng.choice(POINTS, size=2, replace=False)]
+        if args.plan == "middle":
+            node = f"top:{int(rng.choice([1, 2, 3, 5, 6, 7]))}"
+            mass = float(rng.uniform(1.5, 4.0))
+            over, truth = steel_block(cfg, node, mass), {"cause": "added_mass", "point": node, "mass_kg": mass}
+            points = ["top:4:Z"]
+        else:
+            over, truth = _block(cfg, rng, 1.0, 4.0)
+            points = [str(p) for p in rng.choice(POINTS, size=2, replace=False)]
         r = run_case({"overrides": over, "truth": truth, "points": points, "seed": int(rng.integers(1, 10**6))})
         rows.append(r)
         nxt = r["next"]
+        pair = nxt and [c["parameters"].get("point", c["effect"]) for c in nxt["candidates"]]
         print(f"truth {truth['point']} {truth['mass_kg']:.2f} kg, hammer {points}: {r['verdict_before']} "
               f"{r['named_before']} right={r['right_before']}; next {nxt and (nxt['point'], round(nxt['separation_db'], 1))}"
+              f" between {pair}"
               + (f" -> {r['verdict_after']} {r['named_after']} right={r['right_after']}, next after "
                  f"{r['next_after'] and r['next_after']['point']}" if nxt else "") + f" ({r['time_s']:.0f} s)", flush=True)
     asked = [r for r in rows if r["next"]]
