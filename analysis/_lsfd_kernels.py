@@ -76,6 +76,8 @@ class Status:
     FTOL = 1
     XTOL = 2
     ROUNDOFF = 4
+    #: the poles were given (fitted elsewhere); residues and residual terms solved at them
+    FIXED_POLES = 5
     S_INCREASED = -1
     UNSTABLE = -2
     COLLAPSED = -3

@@ -70,10 +70,10 @@ class _Steps(logging.Handler):
 
     def __init__(self) -> None:
         super().__init__()
-        self.marks: list[tuple[float, str]] = []
+        self.marks: list[tuple[float, float, str]] = []
 
     def emit(self, record: logging.LogRecord) -> None:
-        self.marks.append((time.perf_counter(), record.getMessage()))
+        self.marks.append((time.perf_counter(), time.process_time(), record.getMessage()))
 
 
 def main(argv=None) -> int:
@@ -103,7 +103,7 @@ def main(argv=None) -> int:
         prof = cProfile.Profile()
         prof.enable()
     ru0 = resource.getrusage(resource.RUSAGE_SELF)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     with use_threads(a.threads):
         fit = fit_auto(frf)
     wall = time.perf_counter() - t0
@@ -115,9 +115,10 @@ def main(argv=None) -> int:
         prof.disable()
         pstats.Stats(prof).sort_stats("cumulative").print_stats(25)
     peak = _rss_mib()
-    marks = [(t0, "start")] + steps.marks + [(t0 + wall, "end")]
-    for (ta, what), (tb, _) in zip(marks[1:-1], marks[2:]):
-        print(f"  {tb - ta:7.2f} s  {what}")
+    marks = [(t0, c0, "start")] + steps.marks + [(t0 + wall, c0 + cpu, "end")]
+    print("     wall      CPU  step")
+    for (ta, ca, what), (tb, cb, _) in zip(marks[1:-1], marks[2:]):
+        print(f"  {tb - ta:7.2f} s {cb - ca:6.2f} s  {what}")
     f_true, z_true = np.sort(natural_freq_hz(lam)), damping_ratio(lam)[np.argsort(natural_freq_hz(lam))]
     f_fit = natural_freq_hz(fit.lsfd.poles)
     near = np.array([np.min(np.abs(f_fit - f)) / f for f in f_true]) if f_fit.size else np.ones(f_true.size)
