@@ -42,7 +42,9 @@ How many PRFs (the rank kept)
    resonance left out shows there as a bump. Lines where it exceeds its running median (over
    ``BASELINE_FRACTION`` of the band) by ``LOST_SIGMAS`` of its own scatter fail the check; then
    every PRF of the sketch is kept, then the sketch grows, and when it would hold more than
-   ``MAX_FRACTION`` of the FRFs the set is fitted uncompressed.
+   ``MAX_FRACTION`` of the FRFs the set is fitted uncompressed. (Singular values below
+   ``DYNAMIC_RANGE`` of the largest and left-out energy below ``ROUNDING_FLOOR`` of a line's are
+   rounding: noise-free data compress to their exact rank.)
 
 Below ``MIN_FRFS`` FRFs (or with ``compress=False``) nothing of this is done.
 """
@@ -68,6 +70,11 @@ MIN_FRFS = 64
 OVERSAMPLE = 16
 #: the noise edge is taken this much above its estimate
 EDGE_MARGIN = 1.1
+#: singular values below this fraction of the largest are not signal (120 dB: the single-precision
+#: sketch's own rounding; no measurement reaches it)
+DYNAMIC_RANGE = 1e-6
+#: left-out energy below this fraction of a line's energy is rounding, never a lost resonance
+ROUNDING_FLOOR = 1e-10
 #: PRFs kept beyond those whose singular value is above the noise edge
 KEEP_MARGIN = 4
 #: the range finder never holds more than this fraction of the FRFs (else: no compression)
@@ -141,9 +148,10 @@ def _sketch(X: np.ndarray, L: int, rng: np.random.Generator) -> np.ndarray:
     return Q
 
 
-def _lost_lines(left: np.ndarray, n_dirs: int) -> np.ndarray:
+def _lost_lines(left: np.ndarray, energy: np.ndarray, n_dirs: int) -> np.ndarray:
     """Lines where the left-out energy per line ``left`` stands out of its running median by
-    ``LOST_SIGMAS`` of its scatter (``n_dirs`` real noise directions per line)."""
+    ``LOST_SIGMAS`` of its scatter (``n_dirs`` real noise directions per line) and above the
+    rounding of the line's ``energy``."""
     from scipy.ndimage import median_filter
 
     n = left.size
@@ -155,7 +163,7 @@ def _lost_lines(left: np.ndarray, n_dirs: int) -> np.ndarray:
     # the measured robust scatter is used when larger (noise that is not white over the FRFs)
     mad = 1.4826 * float(np.median(np.abs(ratio - np.median(ratio))))
     scatter = max(mad, np.sqrt(2.0 / max(n_dirs, 1)))
-    return np.flatnonzero(ratio > LOST_SIGMAS * scatter)
+    return np.flatnonzero((ratio > LOST_SIGMAS * scatter) & (left > ROUNDING_FLOOR * energy))
 
 
 def principal_responses(frf: FRFSet, band: Sequence[float], weights: np.ndarray, max_modes: int,
@@ -181,8 +189,9 @@ def principal_responses(frf: FRFSet, band: Sequence[float], weights: np.ndarray,
     energy_line = np.einsum("ij,ij->j", X, X).reshape(-1, 2).sum(axis=1)
     X32 = X.astype(np.float32)
     rng = np.random.default_rng(SEED)
-    L = 2 * int(max_modes) + 2 * n_res + OVERSAMPLE
-    while L <= MAX_FRACTION * n_frf:
+    cap = int(MAX_FRACTION * n_frf)
+    L = min(2 * int(max_modes) + 2 * n_res + OVERSAMPLE, cap)
+    while L > OVERSAMPLE:
         Q = _sketch(X32, L, rng)
         B_all = (Q.T @ Y.view(np.float64)).view(complex)   # (L, n_freq): the sketch's PRFs
         Ub, s, _ = np.linalg.svd(B_all[:, i0:i1].view(np.float64), full_matrices=False)
@@ -191,17 +200,18 @@ def principal_responses(frf: FRFSet, band: Sequence[float], weights: np.ndarray,
         left_row = np.maximum(row_energy - np.sum((basis_all * s) ** 2, axis=1), 0.0)
         sigma2 = left_row / (2 * n_band) * n_frf / (n_frf - L)
         edge = EDGE_MARGIN * float(np.sqrt(np.max(sigma2) * 2 * n_band) + np.sqrt(np.sum(sigma2)))
+        edge = max(edge, DYNAMIC_RANGE * float(s[0]))
         n_signal = int(np.sum(s > edge))
         if n_signal > L - OVERSAMPLE:
             log.info("compression: %d of %d sketched singular values above the noise edge; a larger sketch",
                      n_signal, L)
-            L *= 2
+            L = 0 if L == cap else min(2 * L, cap)
             continue
         prf_all = Ub.T @ B_all                    # (L, n_freq) complex, by decreasing singular value
         for k in (min(L, n_signal + KEEP_MARGIN), L):
             pb = prf_all[:k, i0:i1]
             left = energy_line - np.sum(pb.real ** 2 + pb.imag ** 2, axis=0)
-            lost = _lost_lines(left, 2 * (n_frf - k))
+            lost = _lost_lines(left, energy_line, 2 * (n_frf - k))
             if lost.size == 0:
                 basis = np.ascontiguousarray(basis_all[:, :k])
                 comp = Compression(_prf_set(frf, prf_all[:k]), basis, np.asarray(weights, float), s, edge, n_signal)
@@ -209,7 +219,7 @@ def principal_responses(frf: FRFSet, band: Sequence[float], weights: np.ndarray,
                 return comp
             log.info("compression: with %d PRFs the left-out data peak at %d line(s) near %.6g Hz", k, lost.size,
                      float(f[i0 + lost[np.argmax(left[lost])]]))
-        L *= 2
+        L = 0 if L == cap else min(2 * L, cap)
     log.info("compression: no rank below %.0f %% of the %d FRFs keeps every resonance; fitted uncompressed",
              100 * MAX_FRACTION, n_frf)
     return None

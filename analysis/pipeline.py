@@ -349,8 +349,8 @@ def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
         raise FitError(f"no line of the data lies in the band {band[0]:.6g}..{band[1]:.6g} Hz; choose a band inside the data")
     i0, i1 = np.flatnonzero(sel)[[0, -1]]
     H = frf.H[..., i0:i1 + 1]   # a view (the band's lines are contiguous)
-    Hr = H.view(np.float64)
-    rms = np.sqrt(np.einsum("...k,...k->...", Hr, Hr) / H.shape[-1])
+    rms = np.sqrt((np.einsum("...k,...k->...", H.real, H.real) + np.einsum("...k,...k->...", H.imag, H.imag))
+                  / H.shape[-1])
     ok = np.isfinite(rms) & (rms > 0)
     if not np.any(ok):
         raise FitError("all FRFs are zero in the band; nothing to fit")

@@ -35,9 +35,9 @@ TARGET_S = 10.0
 TARGET_GB = 4.0
 
 
-def scanning_test(n_out: int, n_ref: int, n_lines: int, n_modes: int, noise: float, seed: int
-                  ) -> tuple[FRFSet, np.ndarray, float]:
-    """The FRFs, the true poles (rad/s) and the noise standard deviation."""
+def scanning_model(n_out: int, n_ref: int, n_modes: int, seed: int) -> ModalModel:
+    """The test's modal model (see the module docstring): poles, residues and residual terms from
+    the seed."""
     rng = np.random.default_rng(seed)
     fn = np.sort(rng.uniform(30.0, 760.0, n_modes))
     for k in range(1, n_modes):  # modes at least 1 % apart
@@ -47,18 +47,36 @@ def scanning_test(n_out: int, n_ref: int, n_lines: int, n_modes: int, noise: flo
     psi = rng.normal(size=(n_out, n_modes)) * (1 + 0.05j * rng.normal(size=(n_out, n_modes)))
     L = rng.normal(size=(n_modes, n_ref))
     R = np.einsum("oj,jr->orj", psi, L) * (np.abs(lam) / 2j)[None, None, :]
-    model = ModalModel(lam, R, quantity="accelerance", residual_form="physical",
-                       upper_residual=1e-7 * rng.normal(size=(n_out, n_ref)) * (1 + 0j),
-                       lower_residual=2.0 * rng.normal(size=(n_out, n_ref)) * (1 + 0j))
-    f = np.linspace(10.0, 800.0, n_lines)
-    clean = synthesize(model, f)
+    return ModalModel(lam, R, quantity="accelerance", residual_form="physical",
+                      upper_residual=1e-7 * rng.normal(size=(n_out, n_ref)) * (1 + 0j),
+                      lower_residual=2.0 * rng.normal(size=(n_out, n_ref)) * (1 + 0j))
+
+
+def scanning_freq(n_lines: int) -> np.ndarray:
+    """The test's lines (Hz): 10..800 Hz."""
+    return np.linspace(10.0, 800.0, n_lines)
+
+
+def add_noise(H: np.ndarray, sd: float | np.ndarray, rng: np.random.Generator) -> None:
+    """Add circular complex Gaussian noise of standard deviation ``sd`` (a number, or one per
+    output and reference) to ``H`` in place, 100 outputs at a time (no second copy of the data)."""
+    sd_all = np.broadcast_to(np.asarray(sd, dtype=float), H.shape[:2])
+    for i in range(0, H.shape[0], 100):
+        part = H[i:i + 100]
+        part += (sd_all[i:i + 100, :, None] / np.sqrt(2)) * (rng.standard_normal(part.shape)
+                                                               + 1j * rng.standard_normal(part.shape))
+
+
+def scanning_test(n_out: int, n_ref: int, n_lines: int, n_modes: int, noise: float, seed: int
+                  ) -> tuple[FRFSet, np.ndarray, float]:
+    """The FRFs, the true poles (rad/s) and the noise standard deviation."""
+    model = scanning_model(n_out, n_ref, n_modes, seed)
+    clean = synthesize(model, scanning_freq(n_lines))
     sd = noise * float(np.sqrt(np.mean(clean.H.real ** 2 + clean.H.imag ** 2)))
     H = np.array(clean.H)
     del clean
-    for i in range(0, n_out, 100):  # in pieces: no second copy of the data in memory
-        part = H[i:i + 100]
-        part += sd / np.sqrt(2) * (rng.standard_normal(part.shape) + 1j * rng.standard_normal(part.shape))
-    return FRFSet(f, H, quantity="accelerance"), lam, sd
+    add_noise(H, sd, np.random.default_rng(seed))
+    return FRFSet(scanning_freq(n_lines), H, quantity="accelerance"), np.asarray(model.poles), sd
 
 
 def _rss_mib() -> float:
