@@ -60,6 +60,7 @@ __all__ = [
     "Status",
     "NLSOutcome",
     "solve_scaled",
+    "solve_upper",
     "projected_gram",
     "gram_from_G",
     "RANK_TOL",
@@ -234,8 +235,6 @@ class ProjectedProblem:
         it falls back to the precise path when ``S < 1e-6 ||y||^2``. When the basis is rank
         deficient (poles collapsed onto each other) ``rank_ok`` is False.
         """
-        import scipy.linalg as sla  # imported on first use: a fast start of the commands
-
         theta = np.array(theta, dtype=float)
         A, E = self.basis(theta)
         norms = np.sqrt(np.einsum("ij,ij->j", A, A))
@@ -243,7 +242,7 @@ class ProjectedProblem:
         An = A / norms
         P = An.shape[1]
         if fast:
-            Rq = sla.qr(An, mode="r", check_finite=False)[0][:P]
+            Rq = np.linalg.qr(An, mode="r")[:P]
         else:
             Q, Rq = np.linalg.qr(An)
         d = np.abs(np.diag(Rq))
@@ -254,19 +253,19 @@ class ProjectedProblem:
         if fast:
             AE = np.concatenate([An, E], axis=1)
             prod = AE.T @ self.Ys                                   # (P + 2m, n_frf)
-            QtY = sla.solve_triangular(Rq, prod[:P], trans="T")
+            QtY = solve_upper(Rq, prod[:P], transposed=True)
             S = self.y_norm2 - float(np.einsum("ij,ij->", QtY, QtY))
             if S >= self.FAST_MIN_REL_S * self.y_norm2:
-                QtE = sla.solve_triangular(Rq, An.T @ E, trans="T")
+                QtE = solve_upper(Rq, An.T @ E, transposed=True)
                 G = E.T @ E - QtE.T @ QtE
                 EtR = prod[P:] - QtE.T @ QtY
-                coef = sla.solve_triangular(Rq, QtY) / norms[:, None]
+                coef = solve_upper(Rq, QtY) / norms[:, None]
                 return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
             Q, Rq = np.linalg.qr(An)
         QtY = Q.T @ self.Ys
         resid = self.Ys - Q @ QtY
         S = float(np.einsum("ij,ij->", resid, resid))
-        coef = sla.solve_triangular(Rq, QtY) / norms[:, None]
+        coef = solve_upper(Rq, QtY) / norms[:, None]
         return Evaluation(theta, S, coef, True, rcond, precise=True, Q=Q, resid=resid, E=E)
 
     def normal_equations(self, ev: Evaluation) -> tuple[np.ndarray, np.ndarray]:
@@ -331,6 +330,16 @@ def gram_from_G(G: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.nd
     return 0.5 * (JtJ + JtJ.T), Gam
 
 
+def solve_upper(R: np.ndarray, B: np.ndarray, transposed: bool = False) -> np.ndarray:
+    """``R^-1 B`` (``R^-T B`` when ``transposed``) for an upper-triangular ``R`` (numpy only: the
+    commands start without importing scipy). The transposed system is turned into an upper one by
+    reversing the order of the unknowns, so the LU factorisation inside ``numpy.linalg.solve`` never
+    pivots: the work and the rounding of a triangular solve."""
+    if not transposed:
+        return np.linalg.solve(R, B)
+    return np.linalg.solve(R.T[::-1, ::-1], B[::-1])[::-1]
+
+
 def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``(J^T J + mu D^2) d = -g`` through the scaled system.
 
@@ -338,8 +347,6 @@ def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0)
     positive definite, least squares otherwise; NaN when no step can be computed (the
     iterations then reject it). Returns ``(d, x)``.
     """
-    import scipy.linalg as sla  # imported on first use: a fast start of the commands
-
     with np.errstate(over="ignore", invalid="ignore"):
         M = JtJ / np.outer(D, D)
         rhs = -g / D
@@ -350,8 +357,8 @@ def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0)
         x = np.full(rhs.shape, np.nan)
         return x, x
     try:
-        c = sla.cho_factor(Mm, lower=True, check_finite=True)
-        x = sla.cho_solve(c, rhs)
+        L = np.linalg.cholesky(Mm)   # fails unless positive definite
+        x = solve_upper(L.T, solve_upper(L.T, rhs, transposed=True))
     except (np.linalg.LinAlgError, ValueError):
         try:
             x = np.linalg.lstsq(Mm, rhs, rcond=None)[0]
