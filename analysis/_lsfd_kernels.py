@@ -242,7 +242,7 @@ class ProjectedProblem:
         An = A / norms
         P = An.shape[1]
         if fast:
-            Rq = np.linalg.qr(An, mode="r")[:P]
+            Q, Rq = An, np.asarray(np.linalg.qr(An, mode="r"))[:P]   # Q: not formed (fast path)
         else:
             Q, Rq = np.linalg.qr(An)
         d = np.abs(np.diag(Rq))
