@@ -241,8 +241,9 @@ class ProjectedProblem:
         norms[norms == 0] = 1.0
         An = A / norms
         P = An.shape[1]
+        Q: np.ndarray | None = None
         if fast:
-            Q, Rq = An, np.asarray(np.linalg.qr(An, mode="r"))[:P]   # Q: not formed (fast path)
+            Rq = np.asarray(np.linalg.qr(An, mode="r"))[:P]
         else:
             Q, Rq = np.linalg.qr(An)
         d = np.abs(np.diag(Rq))
@@ -262,6 +263,7 @@ class ProjectedProblem:
                 coef = solve_upper(Rq, QtY) / norms[:, None]
                 return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
             Q, Rq = np.linalg.qr(An)
+        assert Q is not None
         QtY = Q.T @ self.Ys
         resid = self.Ys - Q @ QtY
         S = float(np.einsum("ij,ij->", resid, resid))
