@@ -165,10 +165,13 @@ class ProjectedProblem:
         self.n_res = self.B.shape[0]
         self.line_w = None if line_weights is None else np.asarray(line_weights, dtype=float)
         self.frf_w = None if frf_weights is None else np.asarray(frf_weights, dtype=float)
-        Yw = np.asarray(Y).T                       # (N, n_frf), view
-        ys = np.empty((2 * self.N, Yw.shape[1]))
-        ys[: self.N] = Yw.real
-        ys[self.N:] = Yw.imag
+        Y = np.asarray(Y)
+        # rows [Re; Im] of every FRF written contiguously, then seen transposed (2N, n_frf): two
+        # plain copies of the data instead of two strided ones (a large set costs seconds so)
+        rows = np.empty((Y.shape[0], 2 * self.N))
+        rows[:, : self.N] = Y.real
+        rows[:, self.N:] = Y.imag
+        ys = rows.T
         if self.line_w is not None:
             ys *= np.concatenate([self.line_w, self.line_w])[:, None]
         if self.frf_w is not None:
@@ -327,8 +330,10 @@ def gram_from_G(G: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.nd
     Gam[:, 1, 0] = b
     Gam[:, 0, 1] = -b
     Gam[:, 1, 1] = a
-    GG = np.einsum("rpsq,sqjf->rpsjf", G4, Gam, optimize=True)
-    JtJ = np.einsum("rpif,rpsjf->risj", Gam, GG, optimize=True).reshape(2 * m, 2 * m)
+    # sum over the FRFs first (one matrix product), then the small contraction with G
+    Gf = Gam.reshape(4 * m, -1)
+    C = (Gf @ Gf.T).reshape(m, 2, 2, m, 2, 2)              # [r, p, i, s, q, j]
+    JtJ = np.einsum("rpsq,rpisqj->risj", G4, C, optimize=True).reshape(2 * m, 2 * m)
     return 0.5 * (JtJ + JtJ.T), Gam
 
 

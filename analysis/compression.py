@@ -39,8 +39,9 @@ How many PRFs (the rank kept)
    edge) it may have cut modes off: ``L`` is doubled and the sketch repeated.
 4. The check that no resonance is lost: the energy per line of the part of the data the kept
    PRFs leave out (``sum_o |w_o H_o|^2 - sum_j |PRF_j|^2``) is noise, smooth over frequency; a
-   resonance left out shows there as a bump. Lines where it exceeds its running median (over
-   ``BASELINE_FRACTION`` of the band) by ``LOST_SIGMAS`` of its own scatter fail the check; then
+   resonance left out shows there as a bump. Lines where it exceeds its baseline (the medians of
+   blocks of ``BASELINE_FRACTION`` of the band, interpolated) by ``LOST_SIGMAS`` of its own
+   scatter fail the check; then
    every PRF of the sketch is kept, then the sketch grows, and when it would hold more than
    ``MAX_FRACTION`` of the FRFs the set is fitted uncompressed. (Singular values below
    ``DYNAMIC_RANGE`` of the largest and left-out energy below ``ROUNDING_FLOOR`` of a line's are
@@ -79,7 +80,7 @@ ROUNDING_FLOOR = 1e-10
 KEEP_MARGIN = 4
 #: the range finder never holds more than this fraction of the FRFs (else: no compression)
 MAX_FRACTION = 0.5
-#: running-median window of the lost-resonance check, as a fraction of the band's lines
+#: block of the lost-resonance check's baseline, as a fraction of the band's lines
 BASELINE_FRACTION = 0.1
 #: a line of the left-out energy this many (robust) standard deviations above its baseline fails
 LOST_SIGMAS = 6.0
@@ -152,12 +153,15 @@ def _lost_lines(left: np.ndarray, energy: np.ndarray, n_dirs: int) -> np.ndarray
     """Lines where the left-out energy per line ``left`` stands out of its running median by
     ``LOST_SIGMAS`` of its scatter (``n_dirs`` real noise directions per line) and above the
     rounding of the line's ``energy``."""
-    from scipy.ndimage import median_filter
-
     n = left.size
-    win = max(9, int(BASELINE_FRACTION * n) | 1)
-    base = median_filter(left, size=win, mode="nearest")
-    base = np.maximum(base, 1e-300)
+    win = max(9, int(BASELINE_FRACTION * n))
+    # the baseline: the median of every block of ``win`` lines, interpolated between the blocks'
+    # middles (a bump narrower than half a block does not move it)
+    n_blocks = max(1, n // win)
+    edges = np.linspace(0, n, n_blocks + 1).astype(int)
+    mids = 0.5 * (edges[:-1] + edges[1:] - 1)
+    meds = np.array([np.median(left[a:b]) for a, b in zip(edges[:-1], edges[1:])])
+    base = np.maximum(np.interp(np.arange(n), mids, meds), 1e-300)
     ratio = left / base - 1.0
     # the scatter of a sum of n_dirs squared Gaussians relative to its mean is sqrt(2 / n_dirs);
     # the measured robust scatter is used when larger (noise that is not white over the FRFs)

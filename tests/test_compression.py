@@ -88,3 +88,15 @@ def test_lsfd_at_poles_is_the_lsfd_optimum_evaluated():
     with pytest.raises(ValueError, match="lines"):
         lsfd_at_poles(frf, best.poles_raw, band=(1000.0, 2000.0))
 
+
+
+def test_cmif_of_a_scanning_set_matches_the_svd():
+    # many outputs per reference: the CMIF comes from the small H^H H (analysis.mif.TALL_RATIO)
+    from analysis.mif import TALL_RATIO, cmif
+
+    frf, _ = scanned_set(TALL_RATIO * 2, n_f=300, noise=0.01)
+    H2 = np.concatenate([frf.H, 0.5j * frf.H[::-1]], axis=1)     # two references
+    two = FRFSet(frf.freq_hz, H2, quantity="accelerance")
+    s = cmif(two)
+    ref = np.linalg.svd(np.moveaxis(H2, 2, 0), compute_uv=False)
+    np.testing.assert_allclose(s, ref, rtol=1e-9, atol=1e-12 * ref.max())
