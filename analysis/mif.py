@@ -43,8 +43,17 @@ def cmif(frf: FRFSet) -> np.ndarray:
         if n_out >= TALL_RATIO * n_ref:
             # many outputs (a scanning test): the eigenvalues of the small H^H H, not an SVD of
             # every tall matrix; the curves lose only what lies 150 dB under their top
-            Hf = Hk[finite]
-            ev = np.linalg.eigvalsh(np.einsum("kor,kos->krs", Hf.conj(), Hf))[:, ::-1]
+            H = np.asarray(frf.H)
+            G = np.empty((H.shape[-1], n_ref, n_ref), dtype=complex)
+            for r in range(n_ref):
+                for q in range(r, n_ref):
+                    a, b = H[:, r], H[:, q]   # sum_o conj(a) b in real arithmetic (no temporaries)
+                    G[:, r, q] = (np.einsum("ok,ok->k", a.real, b.real) + np.einsum("ok,ok->k", a.imag, b.imag)
+                                  + 1j * (np.einsum("ok,ok->k", a.real, b.imag)
+                                          - np.einsum("ok,ok->k", a.imag, b.real)))
+                    G[:, q, r] = G[:, r, q].conj()
+            G = G[finite]
+            ev = np.linalg.eigvalsh(G)[:, ::-1]
             out[finite] = np.sqrt(np.clip(ev, 0.0, None))
         else:
             out[finite] = np.linalg.svd(Hk[finite], compute_uv=False)
