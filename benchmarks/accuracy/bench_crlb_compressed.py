@@ -35,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "speed"))
 
-from bench_fit_scale import add_noise, scanning_freq, scanning_model  # noqa: E402
+from bench_fit_scale import add_noise, scanning_freq, scanning_model, size_arguments  # noqa: E402
 
 from analysis.frf import FRFSet  # noqa: E402
 from analysis.modal import synthesize  # noqa: E402
@@ -48,13 +48,9 @@ FOUND_FRACTION = 0.002
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--outputs", type=int, default=1000)
-    ap.add_argument("--refs", type=int, default=3)
-    ap.add_argument("--lines", type=int, default=8000)
-    ap.add_argument("--modes", type=int, default=40)
+    size_arguments(ap)
     ap.add_argument("--runs", type=int, default=8)
     ap.add_argument("--noise", type=float, default=0.01, help="noise sd as a fraction of each FRF's RMS")
-    ap.add_argument("--seed", type=int, default=7, help="seed of the model")
     a = ap.parse_args(argv)
     model = scanning_model(a.outputs, a.refs, a.modes, a.seed)
     freq = scanning_freq(a.lines)

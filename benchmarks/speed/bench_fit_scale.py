@@ -94,14 +94,19 @@ class _Steps(logging.Handler):
         self.marks.append((time.perf_counter(), time.process_time(), record.getMessage()))
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def size_arguments(ap: argparse.ArgumentParser) -> None:
+    """The test's size and seed on the command line (``--outputs --refs --lines --modes --seed``)."""
     ap.add_argument("--outputs", type=int, default=1000)
     ap.add_argument("--refs", type=int, default=3)
     ap.add_argument("--lines", type=int, default=8000)
     ap.add_argument("--modes", type=int, default=40)
+    ap.add_argument("--seed", type=int, default=7, help="seed of the model")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    size_arguments(ap)
     ap.add_argument("--noise", type=float, default=0.01)
-    ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--threads", type=int, default=None, help="BLAS threads (default: analysis.threads chooses)")
     ap.add_argument("--profile", action="store_true", help="print the 25 most expensive functions (cProfile)")
     a = ap.parse_args(argv)
