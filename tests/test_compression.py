@@ -100,3 +100,21 @@ def test_cmif_of_a_scanning_set_matches_the_svd():
     s = cmif(two)
     ref = np.linalg.svd(np.moveaxis(H2, 2, 0), compute_uv=False)
     np.testing.assert_allclose(s, ref, rtol=1e-9, atol=1e-12 * ref.max())
+
+
+def test_a_resonance_of_one_frf_only_is_kept():
+    # a local mode (a panel seen by one point of 160): weak in the set's singular values, it must
+    # still reach the PRFs (or the set be fitted whole) and be fitted
+    frf, _ = scanned_set(160, n_f=1500, seed=4)
+    lam = pole_from_fz(np.array([205.0]), np.array([0.003]))
+    R = np.zeros((160, 1, 1), complex)
+    R[17, 0, 0] = 0.2 * np.abs(lam[0]) / 2j
+    H = np.array(frf.H) + synthesize(ModalModel(lam, R, quantity="accelerance", residual_form="none"), frf.freq_hz).H
+    rng = np.random.default_rng(0)
+    sd = 0.02 * np.sqrt(np.mean(np.abs(H) ** 2, axis=-1, keepdims=True))
+    H += sd / np.sqrt(2) * (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape))
+    fit = fit_auto(FRFSet(frf.freq_hz, H, quantity="accelerance"))
+    assert fit.lsfd.status == Status.FIXED_POLES
+    f = fit.lsfd.freq_hz
+    assert np.min(np.abs(f - 205.0)) < 0.05
+    assert all(np.min(np.abs(f - x)) < 0.01 * x for x in F_TRUE)
