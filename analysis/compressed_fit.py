@@ -4,7 +4,7 @@
 :data:`analysis.compression.MIN_FRFS` FRFs here. The steps:
 
 1. the band (the user's or :func:`analysis.bands.default_band`) and the FRF weights
-   (:func:`analysis.pipeline.rms_weights`) on the whole set;
+   (:func:`analysis.pipeline.rms_weights`, handed over by the pipeline) on the whole set;
 2. the principal response functions (:func:`analysis.compression.principal_responses`: a few
    weighted real combinations of the FRFs that keep every resonance; None when no such rank
    exists, and the set is fitted as it is);
@@ -48,17 +48,17 @@ MAX_MODES = 120
 SELECTION_TOL_FREQ = 0.004
 
 
-def with_compression(fit: F) -> F:
-    """Decorate :func:`analysis.pipeline.fit_auto`: a call on a set of at least
-    :data:`analysis.compression.MIN_FRFS` FRFs, without ``compress=False`` or ``per_frf=True``,
-    goes through :func:`fit_compressed` (when the set compresses)."""
+def with_compression(fit: F, rms_weights: Callable[[FRFSet, tuple[float, float]], np.ndarray]) -> F:
+    """Wrap :func:`analysis.pipeline.fit_auto` (``fit``, with its FRF weights ``rms_weights``): a call
+    on a set of at least :data:`analysis.compression.MIN_FRFS` FRFs, without ``compress=False`` or
+    ``per_frf=True``, goes through :func:`fit_compressed` (when the set compresses)."""
     from .compression import worth_compressing
 
     @functools.wraps(fit)
     def run(frf: FRFSet, **options: Any) -> FitResult:
         if (options.get("compress") is not False and not options.get("per_frf") and isinstance(frf, FRFSet)
                 and worth_compressing(frf)):
-            done = fit_compressed(frf, fit, {k: v for k, v in options.items() if k != "compress"})
+            done = fit_compressed(frf, fit, {k: v for k, v in options.items() if k != "compress"}, rms_weights)
             if done is not None:
                 return done
         return fit(frf, **options)
@@ -67,14 +67,15 @@ def with_compression(fit: F) -> F:
 
 
 @limits_blas_threads
-def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str, Any]) -> FitResult | None:
+def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str, Any],
+                   rms_weights: Callable[[FRFSet, tuple[float, float]], np.ndarray]) -> FitResult | None:
     """The automatic fit of ``frf`` through its PRFs (module docstring), or None when the set does
-    not compress (the caller then fits it as it is). ``fit`` is
-    :func:`analysis.pipeline.fit_auto`; ``options`` its keyword arguments (without ``compress``)."""
+    not compress (the caller then fits it as it is). ``fit`` is :func:`analysis.pipeline.fit_auto`
+    as it fits a set uncompressed; ``options`` its keyword arguments (without ``compress``);
+    ``rms_weights`` its FRF weights (:func:`analysis.pipeline.rms_weights`)."""
     from .compression import principal_responses
     from .lsfd import lsfd_at_poles, sorted_by_frequency
     from .missing_modes import MAINS_HZ, unfitted_resonances
-    from .pipeline import rms_weights
     from .visibility import visible_peaks
 
     band = options.get("band")

@@ -99,7 +99,6 @@ __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_
 log = logging.getLogger(__name__)
 
 
-@with_compression
 @limits_blas_threads
 def fit_auto(
     frf: FRFSet,
@@ -151,8 +150,8 @@ def fit_auto(
         see :func:`mains_harmonics`. The stabilization still sees all lines.
     compress : None (default): a set of at least :data:`analysis.compression.MIN_FRFS` FRFs (and
         not ``per_frf``) is searched for its poles on its principal response functions and its
-        residues fitted on all FRFs (:func:`analysis.compressed_fit.with_compression`, which reads
-        this argument); False: never.
+        residues fitted on all FRFs (:func:`analysis.compressed_fit.with_compression`, which wraps
+        this function at the end of the module and reads this argument); False: never.
 
     Returns
     -------
@@ -369,3 +368,6 @@ def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
     w = np.full(rms.shape, float(np.median(1.0 / sigma[ok])))
     w[ok] = 1.0 / sigma[ok]
     return w / float(np.max(w[ok]))
+
+
+fit_auto = with_compression(fit_auto, rms_weights)   # large sets: the pole search on their PRFs
