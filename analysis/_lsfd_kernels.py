@@ -60,6 +60,7 @@ __all__ = [
     "Status",
     "NLSOutcome",
     "solve_scaled",
+    "solve_upper",
     "projected_gram",
     "gram_from_G",
     "RANK_TOL",
@@ -76,6 +77,8 @@ class Status:
     FTOL = 1
     XTOL = 2
     ROUNDOFF = 4
+    #: the poles were given (fitted elsewhere); residues and residual terms solved at them
+    FIXED_POLES = 5
     S_INCREASED = -1
     UNSTABLE = -2
     COLLAPSED = -3
@@ -162,10 +165,13 @@ class ProjectedProblem:
         self.n_res = self.B.shape[0]
         self.line_w = None if line_weights is None else np.asarray(line_weights, dtype=float)
         self.frf_w = None if frf_weights is None else np.asarray(frf_weights, dtype=float)
-        Yw = np.asarray(Y).T                       # (N, n_frf), view
-        ys = np.empty((2 * self.N, Yw.shape[1]))
-        ys[: self.N] = Yw.real
-        ys[self.N:] = Yw.imag
+        Y = np.asarray(Y)
+        # rows [Re; Im] of every FRF written contiguously, then seen transposed (2N, n_frf): two
+        # plain copies of the data instead of two strided ones (a large set costs seconds so)
+        rows = np.empty((Y.shape[0], 2 * self.N))
+        rows[:, : self.N] = Y.real
+        rows[:, self.N:] = Y.imag
+        ys = rows.T
         if self.line_w is not None:
             ys *= np.concatenate([self.line_w, self.line_w])[:, None]
         if self.frf_w is not None:
@@ -232,16 +238,15 @@ class ProjectedProblem:
         it falls back to the precise path when ``S < 1e-6 ||y||^2``. When the basis is rank
         deficient (poles collapsed onto each other) ``rank_ok`` is False.
         """
-        import scipy.linalg as sla  # imported on first use: a fast start of the commands
-
         theta = np.array(theta, dtype=float)
         A, E = self.basis(theta)
         norms = np.sqrt(np.einsum("ij,ij->j", A, A))
         norms[norms == 0] = 1.0
         An = A / norms
         P = An.shape[1]
+        Q: np.ndarray | None = None
         if fast:
-            Rq = sla.qr(An, mode="r", check_finite=False)[0][:P]
+            Rq = np.asarray(np.linalg.qr(An, mode="r"))[:P]
         else:
             Q, Rq = np.linalg.qr(An)
         d = np.abs(np.diag(Rq))
@@ -252,19 +257,20 @@ class ProjectedProblem:
         if fast:
             AE = np.concatenate([An, E], axis=1)
             prod = AE.T @ self.Ys                                   # (P + 2m, n_frf)
-            QtY = sla.solve_triangular(Rq, prod[:P], trans="T")
+            QtY = solve_upper(Rq, prod[:P], transposed=True)
             S = self.y_norm2 - float(np.einsum("ij,ij->", QtY, QtY))
             if S >= self.FAST_MIN_REL_S * self.y_norm2:
-                QtE = sla.solve_triangular(Rq, An.T @ E, trans="T")
+                QtE = solve_upper(Rq, An.T @ E, transposed=True)
                 G = E.T @ E - QtE.T @ QtE
                 EtR = prod[P:] - QtE.T @ QtY
-                coef = sla.solve_triangular(Rq, QtY) / norms[:, None]
+                coef = solve_upper(Rq, QtY) / norms[:, None]
                 return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
             Q, Rq = np.linalg.qr(An)
+        assert Q is not None
         QtY = Q.T @ self.Ys
         resid = self.Ys - Q @ QtY
         S = float(np.einsum("ij,ij->", resid, resid))
-        coef = sla.solve_triangular(Rq, QtY) / norms[:, None]
+        coef = solve_upper(Rq, QtY) / norms[:, None]
         return Evaluation(theta, S, coef, True, rcond, precise=True, Q=Q, resid=resid, E=E)
 
     def normal_equations(self, ev: Evaluation) -> tuple[np.ndarray, np.ndarray]:
@@ -324,9 +330,21 @@ def gram_from_G(G: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.nd
     Gam[:, 1, 0] = b
     Gam[:, 0, 1] = -b
     Gam[:, 1, 1] = a
-    GG = np.einsum("rpsq,sqjf->rpsjf", G4, Gam, optimize=True)
-    JtJ = np.einsum("rpif,rpsjf->risj", Gam, GG, optimize=True).reshape(2 * m, 2 * m)
+    # sum over the FRFs first (one matrix product), then the small contraction with G
+    Gf = Gam.reshape(4 * m, -1)
+    C = (Gf @ Gf.T).reshape(m, 2, 2, m, 2, 2)              # [r, p, i, s, q, j]
+    JtJ = np.einsum("rpsq,rpisqj->risj", G4, C, optimize=True).reshape(2 * m, 2 * m)
     return 0.5 * (JtJ + JtJ.T), Gam
+
+
+def solve_upper(R: np.ndarray, B: np.ndarray, transposed: bool = False) -> np.ndarray:
+    """``R^-1 B`` (``R^-T B`` when ``transposed``) for an upper-triangular ``R`` (numpy only: the
+    commands start without importing scipy). The transposed system is turned into an upper one by
+    reversing the order of the unknowns, so the LU factorisation inside ``numpy.linalg.solve`` never
+    pivots: the work and the rounding of a triangular solve."""
+    if not transposed:
+        return np.linalg.solve(R, B)
+    return np.linalg.solve(R.T[::-1, ::-1], B[::-1])[::-1]
 
 
 def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -336,8 +354,6 @@ def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0)
     positive definite, least squares otherwise; NaN when no step can be computed (the
     iterations then reject it). Returns ``(d, x)``.
     """
-    import scipy.linalg as sla  # imported on first use: a fast start of the commands
-
     with np.errstate(over="ignore", invalid="ignore"):
         M = JtJ / np.outer(D, D)
         rhs = -g / D
@@ -348,8 +364,8 @@ def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0)
         x = np.full(rhs.shape, np.nan)
         return x, x
     try:
-        c = sla.cho_factor(Mm, lower=True, check_finite=True)
-        x = sla.cho_solve(c, rhs)
+        L = np.linalg.cholesky(Mm)   # fails unless positive definite
+        x = solve_upper(L.T, solve_upper(L.T, rhs, transposed=True))
     except (np.linalg.LinAlgError, ValueError):
         try:
             x = np.linalg.lstsq(Mm, rhs, rcond=None)[0]

@@ -104,7 +104,12 @@ def default_max_modes(frf: FRFSet, band: tuple[float, float]) -> int:
     and never more than the band's lines support (``lines // LINES_PER_MODE``: LSCE's Hankel
     matrix needs more than ten lines per mode)."""
     sel = (frf.freq_hz >= band[0]) & (frf.freq_hz <= band[1])
-    s = np.sqrt(np.nansum(np.abs(frf.H[..., sel].reshape(-1, int(sel.sum()))) ** 2, axis=0))
+    i = np.flatnonzero(sel)
+    H = frf.H[..., i[0]:i[-1] + 1].reshape(-1, i.size) if i.size else frf.H[..., sel].reshape(-1, 0)
+    p2 = np.einsum("ij,ij->j", H.real, H.real) + np.einsum("ij,ij->j", H.imag, H.imag)   # in place: a large set
+    if not np.all(np.isfinite(p2)):
+        p2 = np.nansum(H.real ** 2 + H.imag ** 2, axis=0)
+    s = np.sqrt(p2)
     s = 20 * np.log10(np.maximum(s, np.max(s) * 1e-12 + 1e-300))
     peaks, _ = find_peaks(s, prominence=3.0)
     return int(max(1, min(np.clip(2 * peaks.size + 8, 12, 60), int(sel.sum()) // LINES_PER_MODE)))

@@ -29,7 +29,10 @@ Roots: ``D`` is a polynomial in ``x = exp(-s Ts)``; a root ``x_r`` gives the
 continuous-time pole ``lambda_r = -ln(x_r) / Ts`` (rad/s).
 
 Each FRF is scaled to unit RMS in the band first (one scalar per FRF), so strong and
-weak responses take part alike; this does not change the poles of noise-free data.
+weak responses take part alike; this does not change the poles of noise-free data. FRFs that
+carry noise of one level by construction (the principal response functions of
+:mod:`analysis.compression`, ``meta[EQUAL_NOISE]``) are scaled by one common scalar instead: a
+weak one is weak because it is mostly noise.
 
 All orders at once: with the Cholesky factor ``R = L L^T``, ``X_o = L^-1 S_o`` gives
 ``S_o^T R^-1 S_o = X_o^T X_o``; because ``L`` is lower triangular the leading
@@ -52,6 +55,11 @@ from .work_limits import check_model_order
 __all__ = ["lscf_poles", "lscf_poles_all_orders", "band_data", "parse_band", "prepare_band", "BandData"]
 
 log = logging.getLogger(__name__)
+
+
+#: ``FRFSet.meta`` key: the FRFs carry noise of one level (principal response functions,
+#: :mod:`analysis.compression`); they are not scaled to unit RMS one by one
+EQUAL_NOISE = "equal_noise"
 
 
 def parse_band(band: Sequence[float] | None, freq_hz: np.ndarray) -> tuple[float, float]:
@@ -102,7 +110,13 @@ def prepare_band(frf: FRFSet, band: Sequence[float] | None) -> BandData:
     keep = rms > 0
     if not np.any(keep):
         raise ValueError("all FRFs are zero inside the band; nothing to fit")
-    Hs = (H[keep] if not np.all(keep) else H) * (1.0 / rms[keep])[:, None]
+    if frf.meta.get(EQUAL_NOISE):
+        # rows of equal noise (principal response functions): scaled alike, so that each counts by
+        # its signal-to-noise ratio
+        scale = np.full(int(np.sum(keep)), 1.0 / float(np.sqrt(np.mean(rms[keep] ** 2))))
+    else:
+        scale = 1.0 / rms[keep]
+    Hs = (H[keep] if not np.all(keep) else H) * scale[:, None]
     return BandData(f, Hs, (lo, hi))
 
 

@@ -39,7 +39,7 @@ from .modal import RESIDUAL_FORMS, ModalModel, damped_freq_hz, damping_ratio, na
 from .threads import limits_blas_threads
 from .uncertainty import covariance_from_normal, fz_std
 
-__all__ = ["fit_lsfd", "LSFDResult", "LSFDConvergenceWarning", "rank_one_split", "METHODS", "Status",
+__all__ = ["fit_lsfd", "lsfd_at_poles", "LSFDResult", "LSFDConvergenceWarning", "rank_one_split", "METHODS", "Status",
            "seen_through_window", "sorted_by_frequency"]
 
 log = logging.getLogger(__name__)
@@ -65,7 +65,8 @@ class LSFDResult:
     sse : final S (weighted when weights are given); history : S per iteration (first = initial S).
     iterations, nfev : iterations done, model evaluations.
     status, message, success : see :class:`analysis._lsfd_kernels.Status` (> 0 is success).
-    method : "lm" or "gn"; band : (lo, hi) Hz of the lines used.
+    method : "lm" or "gn" (for :func:`lsfd_at_poles`: the iteration that found the poles); band : (lo, hi) Hz
+        of the lines used.
     noise_var : estimated ``E|e|^2`` per line, ``2 S / (2 N n_frf - n_params)`` (N: lines of non-zero weight).
     cov_poles : (2m, 2m) covariance of (Re lambda_1, Im lambda_1, Re lambda_2, ...) (rad/s)^2.
     per_frf : with ``per_frf=True``, one result per (output, reference) FRF (C order), else None.
@@ -291,6 +292,48 @@ def fit_lsfd(
     return _result(frf, prob, outcome, method, residual_form, correct_exp_window, lam0, sub)
 
 
+@limits_blas_threads
+def lsfd_at_poles(
+    frf: FRFSet,
+    poles: np.ndarray,
+    *,
+    band: tuple[float, float] | None = None,
+    residual_form: str = "physical",
+    weights: np.ndarray | None = None,
+    correct_exp_window: bool = True,
+    method: str = "lm",
+    message: str = "poles given; residues solved at them",
+) -> LSFDResult:
+    """The LSFD result at fixed ``poles`` (raw, rad/s, as seen in the data): residues and residual
+    terms by linear least squares over all FRFs, the weighted S, and the poles' standard deviations
+    from the Jacobian of the whole set, as :func:`fit_lsfd` reports them at its optimum. For poles
+    found on a compressed problem (:mod:`analysis.compression`): one projection of the whole set
+    instead of an iteration over it. ``status`` is :attr:`Status.FIXED_POLES` (a success) when the
+    basis has full rank, else :attr:`Status.COLLAPSED`. ``method`` names the iteration that found
+    the poles (kept in the result); the other parameters as for :func:`fit_lsfd`."""
+    if not isinstance(frf, FRFSet):
+        raise TypeError(f"frf must be an analysis.frf.FRFSet; got {type(frf).__name__}")
+    if residual_form not in RESIDUAL_FORMS:
+        raise ValueError(f"residual_form {residual_form!r} is not one of {RESIDUAL_FORMS}")
+    lam0 = _check_poles(poles)
+    f = frf.freq_hz
+    lo, hi = (float(f[0]), float(f[-1])) if band is None else (float(band[0]), float(band[1]))
+    i0, i1 = int(np.searchsorted(f, lo, side="left")), int(np.searchsorted(f, hi, side="right"))
+    if i1 - i0 < 2:
+        raise ValueError(f"band {lo:g}:{hi:g} Hz holds {max(i1 - i0, 0)} lines; data span {f[0]:.4g}..{f[-1]:.4g} Hz")
+    H = frf.H[..., i0:i1]   # a view: no copy of a large set
+    if not np.all(np.isfinite(H)):
+        raise ValueError("the FRFs contain NaN or infinite values; restrict the band or drop those FRFs")
+    n_out, n_ref, N = H.shape
+    line_w, frf_w = _check_weights(weights, n_out, n_ref, N)
+    prob = ProjectedProblem(frf.omega[i0:i1], H.reshape(n_out * n_ref, N), frf.quantity, residual_form, line_w, frf_w)
+    theta = poles_to_theta(lam0)
+    ev = prob.evaluate(theta, fast=prob.fast_ok)
+    status, text = (Status.FIXED_POLES, message) if ev.rank_ok else (Status.COLLAPSED, "the poles' basis is rank deficient")
+    oc = NLSOutcome(theta, ev, [float(ev.S)], 0, 1, status, text)
+    return _result(frf, prob, oc, str(method), residual_form, correct_exp_window, lam0, None, band_hz=(f[i0], f[i1 - 1]))
+
+
 def _n_lines(prob: ProjectedProblem) -> int:
     """Lines that count as observations (non-zero line weight)."""
     return prob.N if prob.line_w is None else int(np.count_nonzero(prob.line_w))
@@ -340,7 +383,10 @@ def _run(frf: FRFSet, lam0: np.ndarray, method: str, residual_form: str, line_w:
 
 
 def _result(frf: FRFSet, prob: ProjectedProblem, oc: NLSOutcome, method: str, residual_form: str,
-            correct_exp_window: bool, lam0: np.ndarray, sub: list[LSFDResult] | None) -> LSFDResult:
+            correct_exp_window: bool, lam0: np.ndarray, sub: list[LSFDResult] | None,
+            band_hz: tuple[float, float] | None = None) -> LSFDResult:
+    """The result of a fit of ``frf`` (the lines fitted; or the whole set with ``band_hz`` the lines'
+    first and last frequency)."""
     n_out, n_ref, _ = frf.H.shape
     m = lam0.size
     ev = oc.evaluation
@@ -395,7 +441,8 @@ def _result(frf: FRFSet, prob: ProjectedProblem, oc: NLSOutcome, method: str, re
         message=oc.message,
         success=bool(oc.status > 0),
         method=method,
-        band=(float(frf.freq_hz[0]), float(frf.freq_hz[-1])),
+        band=(float(frf.freq_hz[0]), float(frf.freq_hz[-1])) if band_hz is None else
+        (float(band_hz[0]), float(band_hz[1])),
         noise_var=float(2.0 * real_var),
         cov_poles=cov,
         per_frf=sub,

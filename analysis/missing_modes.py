@@ -18,6 +18,7 @@ from .bounded_fit import bad_poles, trust_window_hz
 from .fit_checks import DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, bandwidth_hz
 from .fit_result import MAX_DAMPING
 from .frf import FRFSet
+from .lscf import EQUAL_NOISE
 from .mac import mac
 from .modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz, transfer
 from .peaks import find_peaks
@@ -72,6 +73,8 @@ def _scaled_misfit(frf: FRFSet, model: ModalModel, band: Sequence[float]) -> tup
     H = frf.H[..., sel].reshape(-1, f.size)
     G = _synthesize_flat(model, f)
     rms = np.sqrt(np.mean(H.real ** 2 + H.imag ** 2, axis=1))
+    if frf.meta.get(EQUAL_NOISE):   # principal response functions: one scale (lscf.EQUAL_NOISE)
+        rms = np.full_like(rms, np.sqrt(np.mean(rms ** 2)))
     live = np.isfinite(rms) & (rms > 0)
     if not np.all(live):
         H, G, rms = H[live], G[live], rms[live]

@@ -81,6 +81,7 @@ import numpy as np
 
 from .bands import FitError, check_band_edges, default_band, default_max_modes, exclude_lines, mains_harmonics
 from .bounded_fit import drop_bad_poles, fit_bounded
+from .compressed_fit import with_compression
 from .fit_result import FitResult, assess_fit
 from .frf import FRFSet, window_pole_shift
 from .lscf import parse_band
@@ -116,6 +117,7 @@ def fit_auto(
     frf_weighting: str = "rms",
     mains_hz: Sequence[float] | None = MAINS_HZ,
     exclude_hz: Sequence[float] | None = None,
+    compress: bool | None = None,
 ) -> FitResult:
     """Automatic modal fit of an FRF set; returns a :class:`~analysis.fit_result.FitResult`.
 
@@ -146,6 +148,10 @@ def fit_auto(
     exclude_hz : frequencies (Hz) whose lines (within ``EXCLUDE_LINES`` lines) are left out of
         the LSFD and of the misfit of step 7 altogether (zero weight), e.g. mains harmonics;
         see :func:`mains_harmonics`. The stabilization still sees all lines.
+    compress : None (default): a set of at least :data:`analysis.compression.MIN_FRFS` FRFs (and
+        not ``per_frf``) is searched for its poles on its principal response functions and its
+        residues fitted on all FRFs (:func:`analysis.compressed_fit.with_compression`, which wraps
+        this function at the end of the module and reads this argument); False: never.
 
     Returns
     -------
@@ -372,14 +378,18 @@ def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
     noise at all) ``sigma_o`` is taken proportional to the FRF's RMS. An all-zero FRF gets the
     median weight (it carries no information either way)."""
     sel = (frf.freq_hz >= band[0]) & (frf.freq_hz <= band[1])
-    H = frf.H[..., sel]
-    p2 = H.real ** 2 + H.imag ** 2
-    rms = np.sqrt(np.mean(p2, axis=-1))
+    if not np.any(sel):
+        raise FitError(f"no line of the data lies in the band {band[0]:.6g}..{band[1]:.6g} Hz; choose a band inside the data")
+    i0, i1 = np.flatnonzero(sel)[[0, -1]]
+    H = frf.H[..., i0:i1 + 1]   # a view (the band's lines are contiguous)
+    rms = np.sqrt((np.einsum("...k,...k->...", H.real, H.real) + np.einsum("...k,...k->...", H.imag, H.imag))
+                  / H.shape[-1])
     ok = np.isfinite(rms) & (rms > 0)
     if not np.any(ok):
         raise FitError("all FRFs are zero in the band; nothing to fit")
     sigma = rms.copy()
     if frf.coherence is not None:
+        p2 = H.real ** 2 + H.imag ** 2
         g2 = np.clip(np.asarray(frf.coherence, dtype=float)[..., sel], 1e-3, 1.0)
         with np.errstate(invalid="ignore"):
             nv = np.nanmean(p2 * (1.0 - g2) / g2, axis=-1)
@@ -392,3 +402,6 @@ def rms_weights(frf: FRFSet, band: tuple[float, float]) -> np.ndarray:
     w = np.full(rms.shape, float(np.median(1.0 / sigma[ok])))
     w[ok] = 1.0 / sigma[ok]
     return w / float(np.max(w[ok]))
+
+
+fit_auto = with_compression(fit_auto, rms_weights)   # large sets: the pole search on their PRFs

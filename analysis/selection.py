@@ -34,8 +34,8 @@ from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.cluster.hierarchy import fcluster, linkage
 
+from .clustering import complete_linkage_labels
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .stabilization import STABLE_DAMP, StabilizationResult
 
@@ -90,13 +90,9 @@ def select_clusters(
     if p.size == 1:
         labels = np.array([1])
     else:
-        # condensed distance matrix, in the order scipy's pdist uses
-        i, j = np.triu_indices(p.size, k=1)
-        dfm = np.abs(f[i] - f[j]) / (np.maximum(f[i], f[j]) * tol_f)
-        dzm = np.abs(z[i] - z[j]) / np.maximum(np.maximum(z[i], z[j]) * tol_damp, abs_tol_damp)
-        D = np.maximum(dfm, dzm)
-        Z = linkage(D, method="complete")
-        labels = fcluster(Z, t=1.0, criterion="distance")
+        dfm = np.abs(f[:, None] - f[None, :]) / (np.maximum(f[:, None], f[None, :]) * tol_f)
+        dzm = np.abs(z[:, None] - z[None, :]) / np.maximum(np.maximum(z[:, None], z[None, :]) * tol_damp, abs_tol_damp)
+        labels = complete_linkage_labels(np.maximum(dfm, dzm), 1.0)
     last = max(stab.orders)
     out: list[SelectedCluster] = []
     for lab in np.unique(labels):

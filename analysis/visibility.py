@@ -79,10 +79,10 @@ class VisiblePeak:
 def _curves(frf: FRFSet, sel: np.ndarray) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
     """(name, magnitude, coherence or None) of each curve searched, over the lines ``sel``."""
     n = frf.freq_hz.size
-    H = np.asarray(frf.H).reshape(-1, n)[:, sel]
     coh = None if frf.coherence is None else np.asarray(frf.coherence, float).reshape(-1, n)[:, sel]
     out: list[tuple[str, np.ndarray, np.ndarray | None]] = []
-    if coh is not None or H.shape[0] <= MAX_CURVES_WITHOUT_COHERENCE:
+    if coh is not None or frf.n_outputs * frf.n_references <= MAX_CURVES_WITHOUT_COHERENCE:
+        H = np.asarray(frf.H).reshape(-1, n)[:, sel]   # only when the FRFs are searched one by one
         names = [f"{o}/{r}" for o in (frf.outputs or range(frf.n_outputs)) for r in
                  (frf.references or range(frf.n_references))]
         for k in range(H.shape[0]):

@@ -35,9 +35,9 @@ TARGET_S = 10.0
 TARGET_GB = 4.0
 
 
-def scanning_test(n_out: int, n_ref: int, n_lines: int, n_modes: int, noise: float, seed: int
-                  ) -> tuple[FRFSet, np.ndarray, float]:
-    """The FRFs, the true poles (rad/s) and the noise standard deviation."""
+def scanning_model(n_out: int, n_ref: int, n_modes: int, seed: int) -> ModalModel:
+    """The test's modal model (see the module docstring): poles, residues and residual terms from
+    the seed."""
     rng = np.random.default_rng(seed)
     fn = np.sort(rng.uniform(30.0, 760.0, n_modes))
     for k in range(1, n_modes):  # modes at least 1 % apart
@@ -47,18 +47,36 @@ def scanning_test(n_out: int, n_ref: int, n_lines: int, n_modes: int, noise: flo
     psi = rng.normal(size=(n_out, n_modes)) * (1 + 0.05j * rng.normal(size=(n_out, n_modes)))
     L = rng.normal(size=(n_modes, n_ref))
     R = np.einsum("oj,jr->orj", psi, L) * (np.abs(lam) / 2j)[None, None, :]
-    model = ModalModel(lam, R, quantity="accelerance", residual_form="physical",
-                       upper_residual=1e-7 * rng.normal(size=(n_out, n_ref)) * (1 + 0j),
-                       lower_residual=2.0 * rng.normal(size=(n_out, n_ref)) * (1 + 0j))
-    f = np.linspace(10.0, 800.0, n_lines)
-    clean = synthesize(model, f)
+    return ModalModel(lam, R, quantity="accelerance", residual_form="physical",
+                      upper_residual=1e-7 * rng.normal(size=(n_out, n_ref)) * (1 + 0j),
+                      lower_residual=2.0 * rng.normal(size=(n_out, n_ref)) * (1 + 0j))
+
+
+def scanning_freq(n_lines: int) -> np.ndarray:
+    """The test's lines (Hz): 10..800 Hz."""
+    return np.linspace(10.0, 800.0, n_lines)
+
+
+def add_noise(H: np.ndarray, sd: float | np.ndarray, rng: np.random.Generator) -> None:
+    """Add circular complex Gaussian noise of standard deviation ``sd`` (a number, or one per
+    output and reference) to ``H`` in place, 100 outputs at a time (no second copy of the data)."""
+    sd_all = np.broadcast_to(np.asarray(sd, dtype=float), H.shape[:2])
+    for i in range(0, H.shape[0], 100):
+        part = H[i:i + 100]
+        part += (sd_all[i:i + 100, :, None] / np.sqrt(2)) * (rng.standard_normal(part.shape)
+                                                               + 1j * rng.standard_normal(part.shape))
+
+
+def scanning_test(n_out: int, n_ref: int, n_lines: int, n_modes: int, noise: float, seed: int
+                  ) -> tuple[FRFSet, np.ndarray, float]:
+    """The FRFs, the true poles (rad/s) and the noise standard deviation."""
+    model = scanning_model(n_out, n_ref, n_modes, seed)
+    clean = synthesize(model, scanning_freq(n_lines))
     sd = noise * float(np.sqrt(np.mean(clean.H.real ** 2 + clean.H.imag ** 2)))
     H = np.array(clean.H)
     del clean
-    for i in range(0, n_out, 100):  # in pieces: no second copy of the data in memory
-        part = H[i:i + 100]
-        part += sd / np.sqrt(2) * (rng.standard_normal(part.shape) + 1j * rng.standard_normal(part.shape))
-    return FRFSet(f, H, quantity="accelerance"), lam, sd
+    add_noise(H, sd, np.random.default_rng(seed))
+    return FRFSet(scanning_freq(n_lines), H, quantity="accelerance"), np.asarray(model.poles), sd
 
 
 def _rss_mib() -> float:
@@ -70,20 +88,25 @@ class _Steps(logging.Handler):
 
     def __init__(self) -> None:
         super().__init__()
-        self.marks: list[tuple[float, str]] = []
+        self.marks: list[tuple[float, float, str]] = []
 
     def emit(self, record: logging.LogRecord) -> None:
-        self.marks.append((time.perf_counter(), record.getMessage()))
+        self.marks.append((time.perf_counter(), time.process_time(), record.getMessage()))
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def size_arguments(ap: argparse.ArgumentParser) -> None:
+    """The test's size and seed on the command line (``--outputs --refs --lines --modes --seed``)."""
     ap.add_argument("--outputs", type=int, default=1000)
     ap.add_argument("--refs", type=int, default=3)
     ap.add_argument("--lines", type=int, default=8000)
     ap.add_argument("--modes", type=int, default=40)
+    ap.add_argument("--seed", type=int, default=7, help="seed of the model")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    size_arguments(ap)
     ap.add_argument("--noise", type=float, default=0.01)
-    ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--threads", type=int, default=None, help="BLAS threads (default: analysis.threads chooses)")
     ap.add_argument("--profile", action="store_true", help="print the 25 most expensive functions (cProfile)")
     a = ap.parse_args(argv)
@@ -103,7 +126,7 @@ def main(argv=None) -> int:
         prof = cProfile.Profile()
         prof.enable()
     ru0 = resource.getrusage(resource.RUSAGE_SELF)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     with use_threads(a.threads):
         fit = fit_auto(frf)
     wall = time.perf_counter() - t0
@@ -115,9 +138,10 @@ def main(argv=None) -> int:
         prof.disable()
         pstats.Stats(prof).sort_stats("cumulative").print_stats(25)
     peak = _rss_mib()
-    marks = [(t0, "start")] + steps.marks + [(t0 + wall, "end")]
-    for (ta, what), (tb, _) in zip(marks[1:-1], marks[2:]):
-        print(f"  {tb - ta:7.2f} s  {what}")
+    marks = [(t0, c0, "start")] + steps.marks + [(t0 + wall, c0 + cpu, "end")]
+    print("     wall      CPU  step")
+    for (ta, ca, what), (tb, cb, _) in zip(marks[1:-1], marks[2:]):
+        print(f"  {tb - ta:7.2f} s {cb - ca:6.2f} s  {what}")
     f_true, z_true = np.sort(natural_freq_hz(lam)), damping_ratio(lam)[np.argsort(natural_freq_hz(lam))]
     f_fit = natural_freq_hz(fit.lsfd.poles)
     near = np.array([np.min(np.abs(f_fit - f)) / f for f in f_true]) if f_fit.size else np.ones(f_true.size)
