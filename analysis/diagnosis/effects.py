@@ -332,8 +332,10 @@ def fit_mass_loading(ctx: FitContext, lines: np.ndarray) -> dict:
         raise EffectError("mass_loading: no mode is seen at the outputs (all shapes zero)")
     best: tuple[float, str, float] | None = None
     for _, place, bracket in sorted(screened, key=lambda t: t[0])[:2]:
-        m = max(_fit_scalar(lambda x, pl=place: cost({"mass_kg": max(x, 0.0), "sensor": pl}), bracket), 0.0)
-        c = cost({"mass_kg": m, "sensor": place})
+        def placed(x: float, pl: str = place) -> float:
+            return cost({"mass_kg": max(x, 0.0), "sensor": pl})
+        m = max(_fit_scalar(placed, bracket), 0.0)
+        c = placed(m)
         if best is None or c < best[0]:
             best = (c, place, m)
     assert best is not None
