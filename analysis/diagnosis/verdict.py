@@ -210,8 +210,30 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
             "error_after_db": a_db, "z": z, "significant": bool(gain >= min_gain_db and (z >= z_min or gain >= STRONG_GAIN_DB)),
             "evidence": _evidence(name, params, b_db, a_db, z, band_gain), "_extended": ext,
         })
+        edge = _at_range_edge(name, params)
+        if edge and causes[-1]["significant"]:
+            causes[-1]["significant"] = False
+            causes[-1]["evidence"] += f"; {edge} at the edge of its physical range"
     causes.sort(key=lambda c: c["gain_db"], reverse=True)
     return causes, skipped
+
+
+def _at_range_edge(name: str, params: dict) -> str:
+    """The parameter of an FRF-level fit that stopped at the edge of its physical range ("" if none): a
+    calibration off by :data:`~analysis.diagnosis.frf_effects.MAX_GAIN_ERROR` or more, damping scaled
+    by 10 or 1/10. The data then want more than the effect can physically be, as with the physical
+    causes: such a fit is not evidence of that effect (a simulation far off elsewhere is)."""
+    from .frf_effects import MAX_GAIN_ERROR
+
+    if name == "sensitivity_error":
+        g = np.abs(np.asarray(list(params.get("gains", {}).values()), float))
+        if g.size and (np.any(g >= MAX_GAIN_ERROR * (1 - 1e-9)) or np.any(g <= (1 + 1e-9) / MAX_GAIN_ERROR)):
+            return "a channel's gain"
+    if name == "damping_change":
+        c = float(params.get("factor", 1.0))
+        if c >= 10.0 * (1 - 1e-3) or c <= 0.1 * (1 + 1e-3):
+            return "the damping factor"
+    return ""
 
 
 def _missing_needs(name: str, missing: Sequence[str], ctx: FitContext) -> str:
