@@ -58,6 +58,33 @@ def test_driving_point_scales_residues_to_mass_normalised_shapes() -> None:
         np.testing.assert_allclose(got[:, 0] * got[1, 0], phi[:, 0] * phi[1, 0], rtol=1e-12)
 
 
+def test_mass_at_one_sensor_or_all_is_exact_in_a_complete_modal_space() -> None:
+    """With every mode of a 3-mass chain in the model and its shapes at every mass, the re-analysis of
+    ``mass_loading`` is the eigen-solution of the chain with the mass added: frequencies and residues."""
+    from scipy.linalg import eigh
+
+    from analysis.diagnosis.effects import EFFECTS
+    from analysis.modal import natural_freq_hz
+
+    K = np.array([[7e5, -3e5, 0.0], [-3e5, 5e5, -2e5], [0.0, -2e5, 2e5]])
+    M = np.diag([2.0, 1.5, 1.0])
+    labels = ("c:0:X", "c:1:X", "c:2:X")
+
+    def model(mass: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        w2, phi = eigh(K, mass)
+        lam = 1j * np.sqrt(w2)
+        return lam, phi[:, None, :] * phi[None, [1], :] / (2j * lam.imag)
+
+    lam, R = model(M)
+    base = ModalModel(poles=lam, residues=R * lam ** 2, quantity="accelerance", residual_form="none",
+                      outputs=labels, references=("c:1:X",), meta={"output_shapes": eigh(K, M)[1]})
+    for sensor, added in (("c:2:X", np.diag([0.0, 0.0, 0.4])), ("all", 0.25 * np.eye(3))):
+        got = EFFECTS["mass_loading"].apply(base, {"mass_kg": float(added.max()), "sensor": sensor})
+        want_lam, want_R = model(M + added)
+        np.testing.assert_allclose(natural_freq_hz(got.poles), natural_freq_hz(want_lam), rtol=1e-10)
+        np.testing.assert_allclose(got.residues, want_R * want_lam ** 2, rtol=1e-8, atol=1e-12 * np.abs(want_R).max())
+
+
 @pytest.mark.parametrize("sensor_kg, seed", [(0.06, 1), (0.12, 2)])
 def test_sensor_mass_named_from_an_frf_file_with_a_driving_point(sensor_kg: float, seed: int) -> None:
     outputs, ref = [1, 2, 3], 1

@@ -48,6 +48,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
+from scipy.linalg import eigh
 from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
@@ -240,9 +241,42 @@ def fit_exponential_window(ctx: FitContext, lines: np.ndarray) -> dict:
     return {"exp_window_tau_s": 1.0 / s, "exp_window_pole_shift_per_s": s}
 
 
+def _mass_sensors(model: ModalModel, sensor: object) -> np.ndarray:
+    """Boolean mask of the outputs that carry the mass: every output for ``"all"`` (or None), else the
+    output labelled ``sensor``."""
+    if sensor is None or sensor == "all":
+        return np.ones(len(model.outputs), bool)
+    if sensor not in model.outputs:
+        raise EffectError(f"mass_loading: sensor {sensor!r} is not one of the outputs {list(model.outputs)}; "
+                          "give an output label or 'all'")
+    return np.asarray([o == sensor for o in model.outputs])
+
+
+def _shapes_at_references(model: ModalModel, phi: np.ndarray) -> np.ndarray | None:
+    """Mass-normalised shapes at the references, (n_ref, n_modes): ``meta["reference_shapes"]``, else the
+    outputs' rows for references that are outputs; None when a reference has none."""
+    given = model.meta.get("reference_shapes")
+    if given is not None:
+        return np.asarray(given, float)
+    outs = list(model.outputs)
+    if not all(r in outs for r in model.references):
+        return None
+    return phi[[outs.index(r) for r in model.references]]
+
+
 def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
-    """A mass ``mass_kg`` at each output sensor (needs ``model.meta["output_shapes"]``, the
-    mass-normalised mode shapes (1/sqrt(kg)) at the outputs, shape (n_out, n_modes))."""
+    """A mass ``mass_kg`` (kg) at each output sensor, or at the one output ``sensor`` (a label; ``"all"``
+    or absent: every output). Needs ``model.meta["output_shapes"]``, the mass-normalised mode shapes
+    (1/sqrt(kg)) at the outputs, shape (n_out, n_modes).
+
+    The modes are re-analysed in the model's own modal space: ``K_r = diag(omega_r^2)``,
+    ``M_r = I + m Phi_S^T Phi_S`` (S the loaded outputs), ``K_r V = M_r V Omega'^2`` (V M_r-normalised),
+    so that the mass couples the modes (to first order this is ``omega_r^2 / (1 + m sum_S phi_r^2)``,
+    the Rayleigh quotient; the coupling matters when a heavy sensor sits where neighbouring modes are
+    both large). Each mode keeps its damping ratio; its receptance residue becomes
+    ``R_r V_rr^2 w_d / w_d' + [(Phi_o V)_r (Phi_ref V)_r - V_rr^2 phi_or phi_ref,r] / (2 j w_d')`` (the fitted
+    residue kept where the shapes cannot say more; the coupled part from the shapes, at the references
+    from ``meta["reference_shapes"]`` or the outputs' rows; without them the coupled part is left out)."""
     m = float(params.get("mass_kg", 0.0))
     if not m >= 0:
         raise EffectError(f"mass_loading: mass_kg must be >= 0 (kg), got {m!r}")
@@ -251,26 +285,61 @@ def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
         raise EffectError("mass_loading needs the mode shapes at the outputs (model.meta['output_shapes']); "
                           "simulate from a frame configuration (TOML) instead of an FRF file")
     phi = np.asarray(shapes, float)
-    mu = m * np.sum(phi ** 2, axis=0)
+    loaded = phi[_mass_sensors(model, params.get("sensor"))]
+    lam = np.asarray(model.poles, complex)
+    wn, z = np.abs(lam), -lam.real / np.abs(lam)
+    order = np.argsort(wn)
+    Mr = np.eye(lam.size) + m * loaded.T @ loaded
+    w2, V = eigh(np.diag(wn ** 2), Mr)
+    Vk = np.empty_like(V)
+    Vk[:, order] = V                                    # new mode i is the i-th lowest old mode
+    Vk *= np.where(np.diag(Vk) < 0, -1.0, 1.0)[None, :]
+    wn_new = np.empty_like(wn)
+    wn_new[order] = np.sqrt(np.maximum(w2, 0.0))
+    new = wn_new * (-z + 1j * np.sqrt(1 - z ** 2))
     p = _model_power(model)
-    return _replace_poles(model, model.poles / np.sqrt(1 + mu), (1 + mu) ** (-(1 + p) / 2))
+    d = np.diag(Vk)
+    R = np.asarray(model.residues, complex) / lam[None, None, :] ** p * (d ** 2 * lam.imag / new.imag)[None, None, :]
+    ref = _shapes_at_references(model, phi)
+    if ref is not None and m > 0:
+        po, pr = phi @ Vk, ref @ Vk
+        coupled = po[:, None, :] * pr[None, :, :] - (d ** 2)[None, None, :] * phi[:, None, :] * ref[None, :, :]
+        R = R + coupled / (2j * new.imag)[None, None, :]
+    return replace(model, poles=new, residues=R * new[None, None, :] ** p)
 
 
 def fit_mass_loading(ctx: FitContext, lines: np.ndarray) -> dict:
+    """The mass at every output (``sensor`` ``"all"``) or at one output (its label): each placement is
+    searched on a grid of the mass (0.1 % frequency steps of its most loaded in-band mode, up to 30 %),
+    the two best are refined; the placement with the smaller cost on ``lines`` wins."""
     coarse = _modal_cost(ctx, lines, "mass_loading", coarse=True)
     cost = _modal_cost(ctx, lines, "mass_loading")
     phi = np.asarray(ctx.base.meta["output_shapes"], float)
     f = ctx.measured.freq_hz[lines]
     inband = (ctx.base.freq_hz >= f[0]) & (ctx.base.freq_hz <= f[-1])
-    smax = float(np.max(np.sum(phi ** 2, axis=0)[inband])) if inband.any() else float(np.max(np.sum(phi ** 2, axis=0)))
-    # step: at most 0.1 % frequency change of the most loaded mode; up to 30 % change
-    step = 0.002 / smax
-    mmax = 0.7 / smax
-    grid = np.arange(0.0, mmax + step, step)
-    vals = np.array([coarse({"mass_kg": x}) for x in grid])
-    i = int(np.argmin(vals))
-    m = _fit_scalar(lambda x: cost({"mass_kg": max(x, 0.0)}), grid[max(i - 1, 0):i + 2])
-    return {"mass_kg": max(m, 0.0)}
+    places: list[str] = ["all"] + (list(ctx.base.outputs) if len(ctx.base.outputs) > 1 else [])
+    screened = []
+    for place in places:
+        load = np.sum(phi[_mass_sensors(ctx.base, place)] ** 2, axis=0)
+        smax = float(np.max(load[inband])) if inband.any() else float(np.max(load))
+        if not smax > 0:
+            continue
+        grid = np.arange(0.0, 0.7 / smax + 0.002 / smax, 0.002 / smax)
+        vals = np.array([coarse({"mass_kg": x, "sensor": place}) for x in grid])
+        i = int(np.argmin(vals))
+        screened.append((float(vals[i]), place, grid[max(i - 1, 0):i + 2]))
+    if not screened:
+        raise EffectError("mass_loading: no mode is seen at the outputs (all shapes zero)")
+    best: tuple[float, str, float] | None = None
+    for _, place, bracket in sorted(screened, key=lambda t: t[0])[:2]:
+        def placed(x: float, pl: str = place) -> float:
+            return cost({"mass_kg": max(x, 0.0), "sensor": pl})
+        m = max(_fit_scalar(placed, bracket), 0.0)
+        c = placed(m)
+        if best is None or c < best[0]:
+            best = (c, place, m)
+    assert best is not None
+    return {"mass_kg": best[2], "sensor": best[1]}
 
 
 def apply_missing_mode(model: ModalModel, params: Mapping) -> ModalModel:

@@ -26,17 +26,19 @@ from ..threads import blas_threads
 from .joint_nonlinearity import JointSimulationFactory
 from .verdict import Diagnosis, diagnose_frfs
 
-__all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_point_shapes"]
+__all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_point_shapes", "as_receptance"]
 
 log = logging.getLogger(__name__)
 
 
-def driving_point_shapes(model: ModalModel) -> np.ndarray | None:
+def driving_point_shapes(model: ModalModel, at: str = "outputs") -> np.ndarray | None:
     """Mass-normalised mode shapes (1/sqrt(kg)) at the outputs, (n_out, n_modes), scaled from a fitted
     model's residues through a driving point (an output with the label of a reference: same node and
     direction); None without one. For a real mode the receptance residue is ``phi_o phi_d / (2 j w_d)``
     and a model of quantity power p has ``lambda^p`` times it, so ``A_o = 2 j w_d R_od / lambda^p =
-    phi_o phi_d`` and ``phi_o = A_o / sqrt(A_d)``. A mode not seen at the driving point gets zeros."""
+    phi_o phi_d`` and ``phi_o = A_o / sqrt(A_d)``. A mode not seen at the driving point gets zeros.
+    ``at="references"``: the shapes at the references instead, (n_ref, n_modes), from the driving point's
+    row (``phi_r = A_dr / sqrt(A_d)``)."""
     from ..frf import QUANTITY_POWER
 
     refs = list(model.references)
@@ -45,28 +47,55 @@ def driving_point_shapes(model: ModalModel) -> np.ndarray | None:
         return None
     i_d, j_d = pairs[0]
     lam = np.asarray(model.poles, complex)
-    A = 2j * lam.imag[None, :] * np.asarray(model.residues)[:, j_d, :] / lam[None, :] ** QUANTITY_POWER[model.quantity]
-    a_d = A[i_d]
+    A = 2j * lam.imag[None, None, :] * np.asarray(model.residues) / lam[None, None, :] ** QUANTITY_POWER[model.quantity]
+    a_d = A[i_d, j_d]
     seen = np.abs(a_d) > 1e-6 * np.max(np.abs(a_d), initial=0.0)
     root = np.where(seen, np.sqrt(np.where(seen, a_d, 1.0)), 1.0)
-    return np.where(seen[None, :], np.real(A / root[None, :]), 0.0)
+    rows = A[:, j_d, :] if at == "outputs" else A[i_d, :, :]
+    return np.where(seen[None, :], np.real(rows / root[None, :]), 0.0)
+
+
+def as_receptance(model: ModalModel) -> ModalModel:
+    """The model's modes in receptance form (residues ``R / lambda^p``; physical residual terms are the
+    same numbers in every form, other residual terms are dropped).
+
+    A pole-residue model of accelerance is the receptance model times ``s^2`` *minus* the polynomial
+    ``sum_r R_r (s + lambda_r) + c.c.`` (``lambda^2 / (s - lambda) = s^2 / (s - lambda) - (s + lambda)``),
+    which a fit cancels with its residual terms. An effect that moves the poles (a mass, a stiffness)
+    changes that polynomial too and would leave a constant error below the first mode and between
+    modes; in receptance form a moved mode changes the measured quantity by exactly ``s^p`` times its
+    receptance change."""
+    from ..frf import QUANTITY_POWER
+
+    p = QUANTITY_POWER[model.quantity]
+    if p == 0:
+        return model
+    keep = model.residual_form == "physical"
+    return replace(model, residues=np.asarray(model.residues) / np.asarray(model.poles)[None, None, :] ** p,
+                   quantity="receptance", residual_form=model.residual_form if keep else "none",
+                   upper_residual=model.upper_residual if keep else None,
+                   lower_residual=model.lower_residual if keep else None)
 
 
 def model_with_correction(model: ModalModel, sim: FRFSet) -> ModalModel:
-    """The fitted ``model`` plus, in ``meta["frf_correction"]``, what it misses of the simulated FRFs
-    ``sim``, so that the prediction without effects is the simulated FRFs themselves (modal effects
-    move only the fitted modes); with a driving point also ``meta["output_shapes"]``
-    (:func:`driving_point_shapes`), so that the accelerometers' mass can be fitted."""
+    """The fitted ``model`` (in receptance form, :func:`as_receptance`) plus, in
+    ``meta["frf_correction"]``, what it misses of the simulated FRFs ``sim``, so that the prediction
+    without effects is the simulated FRFs themselves (modal effects move only the fitted modes); with a
+    driving point also ``meta["output_shapes"]`` (:func:`driving_point_shapes`), so that the
+    accelerometers' mass can be fitted."""
     from ..modal import synthesize
 
+    model = as_receptance(model)
     syn = synthesize(model, sim.freq_hz)
     same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
     corr = replace(same, H=same.H - syn.H, coherence=None)
     meta = dict(model.meta)
     meta["frf_correction"] = corr
-    shapes = driving_point_shapes(replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references)))
+    labelled = replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references))
+    shapes = driving_point_shapes(labelled)
     if shapes is not None:
         meta["output_shapes"] = shapes
+        meta["reference_shapes"] = driving_point_shapes(labelled, at="references")
     return replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references), meta=meta)
 
 

@@ -98,6 +98,11 @@ def fit_time_delay(ctx: FitContext, lines: np.ndarray) -> dict:
     return {"delay_s": d}
 
 
+#: The largest factor a channel's calibration is taken to be off by (either way): a sensitivity entered
+#: twice too large or small is a calibration error, an FRF 30 times smaller than simulated is not.
+MAX_GAIN_ERROR = 3.0
+
+
 def apply_sensitivity_error(frf: FRFSet, params: Mapping) -> FRFSet:
     """Output channel o read with a calibration off by ``gains[o]`` (dict label -> gain, or a list)."""
     g = params.get("gains", {})
@@ -117,6 +122,10 @@ def fit_sensitivity_error(ctx: FitContext, lines: np.ndarray) -> dict:
     num = np.sum(W * np.real(np.conj(Hs) * Hm), axis=(1, 2))
     den = np.sum(W * np.abs(Hs) ** 2, axis=(1, 2))
     g = np.where(den > 0, num / np.where(den > 0, den, 1), 1.0)
+    # a calibration off by more than MAX_GAIN_ERROR either way is not a calibration: a channel the
+    # simulation does not match at all (a peak far from its place) would otherwise be "fitted" by a
+    # gain near zero, which only predicts a smaller FRF
+    g = np.sign(g) * np.clip(np.abs(g), 1 / MAX_GAIN_ERROR, MAX_GAIN_ERROR)
     worst = int(np.argmax(np.abs(np.log(np.abs(g) + 1e-300))))
     return {"gains": {lab: float(v) for lab, v in zip(ctx.measured.outputs, g)},
             "channel": ctx.measured.outputs[worst], "gain": float(g[worst])}

@@ -188,9 +188,7 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
         eff = EFFECTS[name]
         missing = [k for k in eff.needs if k not in ctx.base.meta]
         if missing:
-            skipped[name] = (f"needs {', '.join(missing)} in the simulation: simulate from a frame configuration "
-                             "(TOML), or measure a driving point (an output at a reference's node and direction) so "
-                             "that the simulated FRFs' residues scale to mass-normalised shapes")
+            skipped[name] = _missing_needs(name, missing, ctx)
             continue
         try:
             before, after = _held_out(ctx, name)
@@ -212,8 +210,49 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
             "error_after_db": a_db, "z": z, "significant": bool(gain >= min_gain_db and (z >= z_min or gain >= STRONG_GAIN_DB)),
             "evidence": _evidence(name, params, b_db, a_db, z, band_gain), "_extended": ext,
         })
+        edge = _at_range_edge(name, params)
+        if edge and causes[-1]["significant"]:
+            causes[-1]["significant"] = False
+            causes[-1]["evidence"] += f"; {edge} at the edge of its physical range"
     causes.sort(key=lambda c: c["gain_db"], reverse=True)
     return causes, skipped
+
+
+def _at_range_edge(name: str, params: dict) -> str:
+    """The parameter of an FRF-level fit that stopped at the edge of its physical range ("" if none): a
+    calibration off by :data:`~analysis.diagnosis.frf_effects.MAX_GAIN_ERROR` or more, damping scaled
+    by 10 or 1/10. The data then want more than the effect can physically be, as with the physical
+    causes: such a fit is not evidence of that effect (a simulation far off elsewhere is)."""
+    from .frf_effects import MAX_GAIN_ERROR
+
+    if name == "sensitivity_error":
+        g = np.abs(np.asarray(list(params.get("gains", {}).values()), float))
+        if g.size and (np.any(g >= MAX_GAIN_ERROR * (1 - 1e-9)) or np.any(g <= (1 + 1e-9) / MAX_GAIN_ERROR)):
+            return "a channel's gain"
+    if name == "damping_change":
+        c = float(params.get("factor", 1.0))
+        if c >= 10.0 * (1 - 1e-3) or c <= 0.1 * (1 + 1e-3):
+            return "the damping factor"
+    return ""
+
+
+def _missing_needs(name: str, missing: Sequence[str], ctx: FitContext) -> str:
+    """Why ``name`` could not be fitted and which measurement would allow it. Mode shapes at the outputs
+    come with a frame configuration, or, for a simulation given as FRFs, from a driving point: the
+    response measured at the hammer's point in its direction scales the residues to mass-normalised
+    shapes (:func:`analysis.diagnosis.entry.driving_point_shapes`)."""
+    if "output_shapes" not in missing:
+        return f"needs {', '.join(missing)} in the simulation"
+    refs = list(ctx.measured.references)
+    what = ("the sensors' mass" if name == "mass_loading" else name)
+    if "frf_correction" in ctx.base.meta:
+        return (f"{what} not tried: the simulation is given as FRFs and the test has no driving point, so its "
+                "mode shapes cannot be scaled to mass-normalised ones; measure the driving point "
+                f"{' or '.join(refs)} (an accelerometer at the hammer's point, in its direction) and give the "
+                "simulated FRF there too, or simulate from a frame configuration (TOML)")
+    return (f"{what} not tried: the simulation carries no mass-normalised mode shapes at the outputs "
+            "(model.meta['output_shapes']); simulate from a frame configuration (TOML), or give the simulation "
+            f"as FRFs with the driving point {' or '.join(refs)} measured")
 
 
 def _frf_on_top(ctx: FitContext, physical: PhysicalSimulation, outcome: Any, names: Sequence[str], z_min: float,
@@ -431,6 +470,10 @@ def diagnose_frfs(
     reason = ("" if verdict != "unexplained" else partial_reason or
               "no effect of the catalogue gains significantly on held-out lines, and the error stays "
               f"{typical_error_db(measured, sim.H, w) - noise_db:.1f} dB above the noise")
+    if verdict != "none" and "mass_loading" in skipped and "not tried" in skipped["mass_loading"]:
+        # a verdict reached without the sensors' mass says so, and which measurement would allow it
+        reason = f"{reason}; " if reason else ""
+        reason += skipped["mass_loading"]
     # the FRF-level further stages are listed (``combined``) but not named: only the first is
     named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in combined[:1]]
     return Diagnosis(verdict=verdict, causes=causes, error_before_db=error_before, error_after_db=after_db,
