@@ -243,16 +243,12 @@ def _makes_peak(frf: FRFSet, model: ModalModel, nb_mask: np.ndarray, trial: LSFD
 
 
 def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float, z0: float, fit_kw: dict,
-                 min_gain: float, push: bool = False, peak: VisiblePeak | None = None) -> _Trial:
+                 min_gain: float, peak: VisiblePeak | None = None) -> _Trial:
     """Try a pole at ``c`` Hz by an LSFD over the lines around it, fitted to the residual of the
     model's other poles: the data minus the synthesis of every pole farther than the local window
     (and of the residual terms). The neighbours inside the window are refitted with and without
     the new pole; the new pole is kept when the local weighted cost falls by ``min_gain`` and
     the pole is a mode of its own (see the module docstring of :mod:`analysis.pipeline`).
-
-    ``push``: the trial starts the neighbour nearest ``c`` (within ``PAIR_FRACTION``) half their
-    gap farther from ``c``: a pole fitted for two overlapping resonances sits between them, and
-    the other resonance lies beyond it (the start of a close pair's split).
 
     ``peak``: the visible peak tried; a smaller gain (``REPRODUCED_MIN_GAIN``) is enough when the
     model with the trial's poles reproduces that peak within its noise (:func:`analysis.visibility.reproduced`)
@@ -283,13 +279,6 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
     kw["ftol"], kw["xtol"] = LOCAL_TOL, LOCAL_TOL   # a verdict, not the final estimate (the full LSFD follows)
     start_old = np.asarray(model.poles)[nb]
     start = np.concatenate([start_old, [new]])
-    if push:
-        gaps = np.abs(f_all[nb] - c)
-        if not gaps.size or gaps.min() > PAIR_FRACTION * c:
-            return _Trial(False, "no pole beside it to split")
-        j = int(np.argmin(gaps))
-        fj = float(f_all[nb[j]])
-        start[j] = pole_from_fz(fj + 0.5 * (fj - c), float(damping_ratio(start[j])))
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", LSFDConvergenceWarning)
@@ -359,12 +348,6 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
             on_mains.append((c, mains_why))
             return False
         t = _local_trial(frf, model, band, c, z0, fit_kw, min_gain, peak=peak)
-        if not t.ok and not t.not_mode and peak is not None:
-            # a visible peak beside a pole that may stand for two resonances: split that pole
-            pushed = _local_trial(frf, model, band, c, z0, fit_kw, min_gain, push=True, peak=peak)
-            log.debug("pole at %.6g Hz with its neighbour pushed: %s", c, pushed.why)
-            if pushed.ok:
-                t = pushed
         if not t.ok:
             log.info("pole at %.6g Hz not added: %s", c, t.why)
             return False
