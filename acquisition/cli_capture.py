@@ -61,7 +61,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force-window", default=DEFAULT_FORCE_WINDOW,
                    help=f"WIDTH[,TAPER] after the trigger, or none (default {DEFAULT_FORCE_WINDOW})")
     p.add_argument("--exp-window", default=DEFAULT_EXP_WINDOW,
-                   help="exponential window: PCT%% at block end, TAU (s/ms/samples), or none (default none)")
+                   help="exponential window: PCT%% at block end, TAU (s/ms/samples), or none "
+                        f"(default {DEFAULT_EXP_WINDOW.replace('%', '%%')})")
     p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for each trigger (default 10)")
     add_overwrite(p, "replace an existing --out file")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the final summary")

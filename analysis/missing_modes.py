@@ -27,7 +27,7 @@ from .visibility import VisiblePeak, reproduced, unaccounted_peaks
 if TYPE_CHECKING:
     from .lsfd import LSFDResult
 
-__all__ = ["add_missing_modes", "unfitted_resonances", "MAINS_HZ"]
+__all__ = ["add_missing_modes", "unfitted_resonances", "mains_line_max_lines", "MAINS_HZ"]
 
 log = logging.getLogger(__name__)
 
@@ -43,11 +43,15 @@ MISSING_LOCAL_GAIN = 0.3
 MISSING_MIN_RESIDUE_RATIO = 0.05
 MISSING_CANCEL_RATIO = 0.2
 MAINS_WIDTH_FRACTION = 0.5
+#: lines within 3 dB of the top of a steady line (mains) in a record without exponential window: one
+#: line when it falls on a line, two when it falls between (the record's main lobe)
+MAINS_TOP_LINES = 2
 LOCAL_BANDWIDTHS = 4.0
 LOCAL_MIN_LINES = 12
 VISIBLE_MIN_GAIN = 0.6
 MISFIT_MIN_GAIN = 0.7
 SPLIT_MIN_GAIN = 0.75
+REPRODUCED_MIN_GAIN = 0.2
 MAX_FAILED_VISIBLE = 6
 NOT_A_RESONANCE_DAMPING_RATIO = 6.0
 SPLIT_MIN_RATIO = 0.01
@@ -150,15 +154,28 @@ def _pair_is_resolved(trial: LSFDResult, k: int, f: np.ndarray, e_old: np.ndarra
     return True, f"a close pair with {fa:.5g} Hz (local cost {c_old:.3g} -> {c_new:.3g})"
 
 
-def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, mains: Sequence[float]) -> str | None:
+def mains_line_max_lines(df: float, exp_window_tau_s: float | None = None) -> int:
+    """The widest top (lines within 3 dB of the maximum) a steady line, e.g. a mains line, has in
+    a record of line spacing ``df`` (Hz): ``MAINS_TOP_LINES`` lines, plus, through an exponential
+    window of time constant ``exp_window_tau_s`` (s), the whole lines of the window's half-power
+    width ``1 / (pi tau)`` (Hz; a decaying line is a Lorentzian). A peak with a wider top is a
+    resonance whatever frequency it sits at."""
+    extra = 0
+    if exp_window_tau_s:
+        extra = int(np.floor(1.0 / (np.pi * float(exp_window_tau_s) * float(df)) + 1e-9))
+    return MAINS_TOP_LINES + extra
+
+
+def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, mains: Sequence[float],
+                max_lines: int = MAINS_TOP_LINES) -> str | None:
     """Why the misfit peak at ``c`` Hz is a mains line (step 7), or None.
 
     On a harmonic ``k m`` of a mains frequency ``m`` (within ``MAINS_LINES`` lines or the grid's
     frequency deviation ``k MAINS_DEVIATION_HZ``) *and* narrower than a mode would be: its
     half-power width (of ``e^2``) is below ``MAINS_WIDTH_FRACTION`` of ``2 zeta c`` with zeta the
-    median damping of the fitted poles, and at most ``MAINS_LINES`` lines wider than one line.
-    A structural mode at that damping has a measurable half-power bandwidth; an electrical line
-    is one or two lines wide."""
+    median damping of the fitted poles, and at most ``max_lines`` lines wide (the widest a steady
+    line is in the record, :func:`mains_line_max_lines`). A structural mode at that damping has a
+    measurable half-power bandwidth; an electrical line is one or two lines wide."""
     from .peaks import peak_widths
 
     for m in mains:
@@ -168,7 +185,7 @@ def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, ma
         i = int(np.argmin(np.abs(f - c)))
         width = float(peak_widths(e ** 2, [i], rel_height=0.5)[0]) * df
         mode = 2.0 * z0 * c
-        if width < MAINS_WIDTH_FRACTION * mode and width <= (1.0 + MAINS_LINES) * df:
+        if width < MAINS_WIDTH_FRACTION * mode and width <= max_lines * df:
             return (f"the misfit peak at {c:.6g} Hz lies on the mains line {k} x {m:g} Hz and is {width:.3g} Hz wide "
                     f"(a mode at {100 * z0:.3g} % damping would be {mode:.3g} Hz wide): not fitted as a mode (leave "
                     "such lines out with --exclude-lines/--exclude-mains, fit_auto(exclude_hz=...))")
@@ -220,13 +237,25 @@ class _Trial:
         self.ok, self.why, self.fit, self.nb, self.not_mode = ok, why, fit, nb, not_mode
 
 
+def _makes_peak(frf: FRFSet, model: ModalModel, nb_mask: np.ndarray, trial: LSFDResult, peak: VisiblePeak) -> bool:
+    """Whether ``model`` with its poles ``nb_mask`` replaced by the ``trial``'s reproduces ``peak``
+    while ``model`` does not."""
+    new = _with_poles(model, ~nb_mask, trial.poles_raw, trial.model_raw.residues)
+    return (not reproduced(frf, peak, lambda f: transfer(model, 2j * np.pi * f))
+            and reproduced(frf, peak, lambda f: transfer(new, 2j * np.pi * f)))
+
+
 def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float, z0: float, fit_kw: dict,
-                 min_gain: float) -> _Trial:
+                 min_gain: float, peak: VisiblePeak | None = None) -> _Trial:
     """Try a pole at ``c`` Hz by an LSFD over the lines around it, fitted to the residual of the
     model's other poles: the data minus the synthesis of every pole farther than the local window
     (and of the residual terms). The neighbours inside the window are refitted with and without
     the new pole; the new pole is kept when the local weighted cost falls by ``min_gain`` and
-    the pole is a mode of its own (see the module docstring of :mod:`analysis.pipeline`)."""
+    the pole is a mode of its own (see the module docstring of :mod:`analysis.pipeline`).
+
+    ``peak``: the visible peak tried; a smaller gain (``REPRODUCED_MIN_GAIN``) is enough when the
+    model with the trial's poles reproduces that peak within its noise (:func:`analysis.visibility.reproduced`)
+    and the model without them does not: the data show the resonance, and its pole accounts for it."""
     from .lsfd import LSFDConvergenceWarning, fit_lsfd
 
     df = float(frf.line_spacing_hz)
@@ -278,7 +307,9 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
     bad, _ = bad_poles(trial, start, df, duplicates=False)
     if np.any(bad):
         return _Trial(False, f"{int(np.sum(bad))} pole(s) of the local fit fail the checks")
-    if not c_new <= (1.0 - min_gain) * c_old:
+    if not c_new <= (1.0 - min_gain) * c_old and not (
+            peak is not None and c_new <= (1.0 - REPRODUCED_MIN_GAIN) * c_old
+            and _makes_peak(frf, model, nb_mask, trial, peak)):
         return _Trial(False, f"local cost {c_old:.4g} -> {c_new:.4g} (less than {100 * min_gain:g} % gain)")
     broad, close = _new_pole_relation(trial.poles_raw, trial.model_raw.residues, df)
     if broad:
@@ -303,6 +334,7 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
     band = result.band
     model = result.model_raw
     z0 = float(np.median(damping_ratio(result.poles_raw)))
+    mains_lines = mains_line_max_lines(df, frf.exp_window_tau_s)
     tried: list[float] = []
     on_mains: list[tuple[float, str]] = []  # reported once at the end, with a count
     added = 0
@@ -312,13 +344,13 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
         tried.append(c)
         f, e, _ = _scaled_misfit(frf, model, band)
         # a visible peak wider than a mains line is a resonance whatever the misfit's shape
-        wide = peak is not None and (peak.top_hz[1] - peak.top_hz[0]) / df - 1.0 > 1 + MAINS_LINES
-        mains_why = None if wide else _mains_line(c, f, e, df, z0, mains)
+        wide = peak is not None and (peak.top_hz[1] - peak.top_hz[0]) / df - 1.0 > mains_lines + 0.5
+        mains_why = None if wide else _mains_line(c, f, e, df, z0, mains, mains_lines)
         if mains_why is not None:
             log.debug(mains_why)
             on_mains.append((c, mains_why))
             return False
-        t = _local_trial(frf, model, band, c, z0, fit_kw, min_gain)
+        t = _local_trial(frf, model, band, c, z0, fit_kw, min_gain, peak=peak)
         if not t.ok:
             log.info("pole at %.6g Hz not added: %s", c, t.why)
             return False
@@ -425,11 +457,13 @@ def _unaccounted(frf: FRFSet, visible: Sequence[VisiblePeak], model: ModalModel,
 def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSFDResult,
                         mains: Sequence[float] = MAINS_HZ) -> tuple[list[str], list[str]]:
     """The visible peaks the LSFD ``result`` leaves unaccounted for (:mod:`analysis.visibility`), in
-    words: ``(problems, notes)``. A peak on a mains harmonic at most ``1 + MAINS_LINES`` lines wide
-    is a note (an electrical line, not a resonance); any other is a problem: the fit is not
+    words: ``(problems, notes)``. A peak on a mains harmonic no wider than a steady line of the
+    record (:func:`mains_line_max_lines`: 2 lines within 3 dB of its top, more through a strong
+    exponential window) is a note (an electrical line, not a resonance); any other is a problem: the fit is not
     complete. A peak with a fitted pole within ``PAIR_FRACTION`` of it that another peak of its
     curve took is named a possible close pair."""
     df = float(frf.line_spacing_hz)
+    mains_lines = mains_line_max_lines(df, frf.exp_window_tau_s)
     model = result.model_raw
     fitted = np.asarray(result.freq_hz, float)
     missed, pairs = unaccounted_peaks(visible, fitted, df,
@@ -443,7 +477,7 @@ def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSF
         seen.append(v.freq_hz)
         where = f"a peak {v.prominence_db:.0f} dB above its neighbouring minima in {v.curve}"
         width_lines = (v.top_hz[1] - v.top_hz[0]) / df - 1.0
-        if mains_harmonic_index(v.freq_hz, mains, df) is not None and width_lines <= 1 + MAINS_LINES:
+        if mains_harmonic_index(v.freq_hz, mains, df) is not None and width_lines <= mains_lines + 0.5:
             notes.append(f"the peak at {v.freq_hz:.5g} Hz ({where}) lies on a mains line and is "
                          f"{width_lines:.0f} line(s) wide: not a resonance")
             continue

@@ -53,11 +53,13 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    data's ``d(f)``. Each candidate is tried by a *local* LSFD: over a few bandwidths around it,
    on the data minus the synthesis of the model's other poles (and residual terms), its
    neighbours refitted with and without the new pole; it is kept when the local weighted cost
-   falls by ``VISIBLE_MIN_GAIN`` (split: ``SPLIT_MIN_GAIN``; misfit: ``MISFIT_MIN_GAIN``), the
+   falls by ``VISIBLE_MIN_GAIN`` (split: ``SPLIT_MIN_GAIN``; misfit: ``MISFIT_MIN_GAIN``; a
+   visible peak the model then reproduces within the noise: ``REPRODUCED_MIN_GAIN``), the
    pole is physical and not much broader than the modes, passes the checks of step 6, is not a
    broad pole under a sharper one, and a close neighbour keeps a distinct residue
    (:func:`analysis.missing_modes._pair_is_resolved`). A candidate on a mains harmonic
-   (``mains_hz``) much narrower than a mode is not tried (reported in the warnings). The local
+   (``mains_hz``) much narrower than a mode and no wider than a steady line of the record
+   (:func:`analysis.missing_modes.mains_line_max_lines`) is not tried (reported in the warnings). The local
    trials cost a few milliseconds each (tens of lines instead of the whole band); one LSFD over
    the whole band follows from all poles, each held within ``FINAL_BANDWIDTHS`` half-power
    bandwidths and a factor ``FINAL_DAMPING_WINDOW`` in damping of its local estimate (on a wide

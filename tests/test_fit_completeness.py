@@ -201,10 +201,24 @@ def test_three_overlapping_modes_are_all_fitted():
 def test_the_default_capture_fits_every_visible_mode_without_a_false_pair(one_point_capture):
     """The default-band fit of a one-point capture (hammer right:6:-X): the 525.2 Hz mode's weak peak
     2.7 lines beside the others in top:4:X, which the model reproduces within the noise, is no
-    possible close pair; the fit is a success."""
+    possible close pair; the fit is a success. The capture has the default exponential window: the
+    995.2 / 1000.2 Hz modes a bandwidth apart show two peaks; the pole tried at the one the first
+    model misses gains only a quarter of the local cost, but makes the model reproduce that peak
+    within the noise, so it is kept (one pole and a possible close pair before)."""
+    from simulator.stand import TestStand
+
+    assert one_point_capture.exp_window_tau_s is not None
     fit = fit_auto(one_point_capture)
     assert fit.success, fit.problems
     assert not any("close pair" in p for p in fit.problems)
+    modes = TestStand(seed=1).model.modes(1100.0)
+    truth = np.asarray(modes.freq_hz, float)
+    for t in truth[(truth > 990.0) & (truth < 1002.0)]:
+        assert np.min(np.abs(fit.freq_hz - t)) <= 0.005 * t, (t, fit.freq_hz)
+    # the slowest mode no longer leaks through the 1.28 s record: its damping within 2 %
+    k = int(np.argmin(np.abs(fit.freq_hz - 12.9)))
+    z_true = float(np.asarray(modes.damping, float)[int(np.argmin(np.abs(truth - 12.9)))])
+    assert abs(float(fit.damping[k]) - z_true) <= 0.02 * z_true, (fit.damping[k], z_true)
 
 
 def test_a_pole_between_two_resonances_accounts_for_the_nearer_one():
@@ -215,3 +229,32 @@ def test_a_pole_between_two_resonances_accounts_for_the_nearer_one():
     near = VisiblePeak(999.22, 12.7, "right:4:-Z/right:6:-X", 2, (989.8, 1007.0))
     missed, pairs = unaccounted_peaks([far, near], np.array([998.15]), df, lambda v: v is near)
     assert missed == [] and pairs == [(far, 998.15)]
+
+
+def test_a_resonance_beside_a_mains_harmonic_is_not_taken_for_a_mains_line():
+    """A sharp mode 1.25 lines from the 200 Hz mains harmonic, three lines wide at 3 dB (wider than
+    a steady line of the record), left out of the model: a problem of the fit, not a mains note;
+    a one-line spike on 250 Hz is a mains note."""
+    from analysis.missing_modes import mains_line_max_lines
+
+    shapes = np.array([[1.0, 1.0, 0.8], [0.7, -0.9, 1.0]])
+    frf = modal_frf([80.0, 199.75, 260.0], [0.005, 0.0014, 0.005], shapes, np.ones((3, 1)))
+    df = float(frf.line_spacing_hz)
+    k = int(np.argmin(np.abs(frf.freq_hz - 250.0)))
+    H = frf.H.copy()
+    H[..., k] += 30.0 * np.abs(H[..., k])   # a steady line, on one line
+    frf = replace(frf, H=H)
+    band = (20.0, 290.0)
+    peaks = visible_peaks(frf, band)
+    mode = [v for v in peaks if abs(v.freq_hz - 199.75) < 0.5]
+    assert mode and all(round((v.top_hz[1] - v.top_hz[0]) / df) - 1 == 3 for v in mode), mode
+    assert any(abs(v.freq_hz - frf.freq_hz[k]) < 0.1 for v in peaks)
+    two = fit_lsfd(frf, pole_from_fz(np.array([80.0, 260.0]), np.full(2, 0.005)), band=band)
+    problems, notes = unfitted_resonances(frf, peaks, two)
+    assert any("199.8 Hz" in p for p in problems), problems
+    assert not any("199." in n for n in notes), notes
+    assert len(notes) == 1 and "250" in notes[0] and "mains line" in notes[0], notes
+    # the widest steady line: two lines of the record, more through a strong exponential window
+    assert mains_line_max_lines(0.78125) == 2
+    assert mains_line_max_lines(0.78125, 1.28 / np.log(20.0)) == 2      # window to 5 % of a 1.28 s record
+    assert mains_line_max_lines(0.78125, 0.1) == 6                      # 1/(pi tau) = 3.2 Hz: 4 lines more

@@ -33,8 +33,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-#: (block size, --exp-window) of each candidate: the default, 2.56 s, 5.12 s (the slowest mode decays
-#: 30 dB: block_size_for_decay), the default block with an exponential window to 5 % at its end
+#: (block size, --exp-window) of each candidate: 1.28 s, 2.56 s, 5.12 s without a window (the slowest mode decays
+#: 30 dB: block_size_for_decay), the default: 1.28 s with an exponential window to 5 % at its end
 CANDIDATES = ((8192, "none"), (16384, "none"), (32768, "none"), (8192, "5%"))
 
 
