@@ -70,13 +70,17 @@ def format_table(result: LSFDResult, frf: FRFSet | None = None, *, output: int =
     e.g. those selected from the stabilization diagram) their f and zeta are shown first, as
     the paper's LSCE columns: each initial pole is matched to at most one fitted pole (nearest
     pairs first, within 3 half-power bandwidths of the fitted pole or 1 % in frequency); a fitted
-    pole without a match (added by the pipeline for a missed resonance) shows "-".
+    pole without a match (added by the pipeline for a missed resonance) shows "-". The exponential
+    window's decay that the fit removed from its poles (``meta["exp_window_shift_rad_s"]``, 1/s) is
+    removed from the initial poles too, so both columns speak of the structure.
     """
     model = result.model
     outs, refs = model.outputs, model.references
     label = f"{outs[output]} / {refs[reference]}" if outs and refs else "FRF"
     head = title or f"LSFD ({result.method}) fit, residues of {label}"
     init = None if initial is None or np.size(initial) == 0 else np.asarray(initial, dtype=complex)
+    if init is not None:
+        init = init + float(model.meta.get("exp_window_shift_rad_s", 0.0) or 0.0)
     pre = (f"{initial_label} f [Hz]", f"{initial_label} zeta [%]") if init is not None else ()
     rows = [("",) + pre + ("f [Hz]", "zeta [%]", "f std [Hz]", "zeta std [%]", "parameter", "value")]
     order = np.argsort(result.freq_hz)

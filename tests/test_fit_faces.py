@@ -226,3 +226,23 @@ def test_terminal_table_gives_the_units_of_the_standard_deviations():
     fit = fit_auto(frf, band=(20.0, 120.0))
     head = format_table(fit.lsfd, frf, initial=fit.selected_poles, initial_label="LSCF").splitlines()[1]
     assert "f std [Hz]" in head and "zeta std [%]" in head and "LSCF f [Hz]" in head and "LSCF zeta [%]" in head
+
+
+def test_terminal_table_removes_the_windows_decay_from_the_initial_poles_as_from_the_fit():
+    from dataclasses import replace
+
+    from analysis.modal import damping_ratio
+    from analysis.pipeline import fit_auto
+    from analysis.report import format_table
+
+    frf = replace(_two_reference_frf(), exp_window_tau_s=5.0)   # the data as if an exponential window had damped them
+    fit = fit_auto(frf, band=(20.0, 120.0))
+    shift = fit.lsfd.model.meta["exp_window_shift_rad_s"]
+    assert shift == pytest.approx(0.2)
+    rows = [r.split("|") for r in format_table(fit.lsfd, frf, initial=fit.selected_poles,
+                                                initial_label="LSCF").splitlines()[3:]]
+    shown = [float(r[2]) for r in rows if len(r) > 4 and r[0].strip().startswith("pole") and r[2].strip() != "-"]
+    structural = sorted(100 * damping_ratio(fit.selected_poles + shift))
+    raw = sorted(100 * damping_ratio(fit.selected_poles))
+    assert shown and sorted(shown) == pytest.approx(structural[:len(shown)], abs=1e-3)
+    assert sorted(shown) != pytest.approx(raw[:len(shown)], abs=1e-3)
