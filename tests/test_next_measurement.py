@@ -20,6 +20,8 @@ from benchmark_modules import load_benchmark
 from simulator.config import FrameConfig, overrides_to_toml
 from simulator.physical import FrameVariants
 
+HITS = "5"
+
 
 def _diagnose(tmp: Path, device: str, points: list[str], tag: str):
     from acquisition.cli_capture import main as capture
@@ -28,7 +30,7 @@ def _diagnose(tmp: Path, device: str, points: list[str], tag: str):
 
     rec = tmp / f"{tag}.h5"
     with contextlib.redirect_stdout(io.StringIO()):
-        assert capture(["--device", device, "--out", str(rec), "--points", ",".join(points), "--hits", "2",
+        assert capture(["--device", device, "--out", str(rec), "--points", ",".join(points), "--hits", HITS,
                         "--auto", "-q"]) == 0
     m = load_input(rec)
     return diagnose(m, FrameVariants(None, m.outputs, m.references), band="data", effects=["added_mass"])
