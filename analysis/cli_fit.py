@@ -143,49 +143,92 @@ def _given_poles(text: str) -> tuple:
     return parse_float_list(text), False, None
 
 
+def _check_options(args: argparse.Namespace) -> tuple:
+    """The options checked and parsed before the input is read: (band or None, given poles or
+    frequencies or None, whether they are picked poles, excluded lines (Hz), mains frequencies (Hz)).
+    Raises InputError naming the option."""
+    from .inputs import InputError, parse_band_text, parse_float_list
+
+    band = parse_band_text(args.band)
+    for name in ("modes", "order", "max_iter"):
+        v = getattr(args, name)
+        if v is not None and v < 1:
+            raise InputError(f"--{name.replace('_', '-')} must be >= 1; got {v}")
+    freqs, picked, picked_band = _given_poles(args.poles) if args.poles else (None, False, None)
+    if band is None and picked_band is not None:
+        band = picked_band  # the band of the diagram the poles were picked on
+    exclude = parse_float_list(args.exclude_lines) if args.exclude_lines else []
+    mains = () if str(args.mains).strip().lower() == "none" else tuple(parse_float_list(args.mains))
+    if any(m <= 0 for m in mains) or (args.exclude_mains is not None and not args.exclude_mains > 0):
+        raise InputError("mains frequencies must be > 0 Hz (or --mains none)")
+    for path, what in ((args.json, "JSON"), (args.plot, "plot"), (args.uff, "UFF file")):
+        check_out_dir(path, what)
+        if path and Path(path).exists() and not args.overwrite:
+            raise InputError(f"{path} exists: choose another {what} file or add --overwrite")
+    return band, freqs, picked, exclude, mains
+
+
+def _load(args: argparse.Namespace, band: tuple[float, float] | None) -> tuple[FRFSet, list[tuple[int, int]]]:
+    """The input's FRFs and their (output, reference) pairs by level, the one shown first (``--frf``'s
+    strongest FRF, else the strongest of all). Raises InputError for a band outside the data or an
+    unknown ``--frf``."""
+    from .frf import frf_pairs_by_level
+    from .inputs import InputError, load_input
+
+    frf = load_input(args.input, estimator=args.estimator)
+    if band is not None:
+        f = frf.freq_hz
+        if band[1] <= f[0] or band[0] >= f[-1]:
+            raise InputError(f"band {args.band} Hz lies outside the data ({f[0]:.6g}..{f[-1]:.6g} Hz)")
+    if args.frf is not None and args.frf not in frf.outputs:
+        raise InputError(f"--frf {args.frf!r} is not an output of {args.input}; outputs: {', '.join(frf.outputs)}")
+    return frf, frf_pairs_by_level(frf, args.frf)
+
+
+def _print_notes(notes: list[str], caught: list[str], quiet: bool) -> None:
+    """The fit's notes and the warnings caught during it on stderr (with ``-q`` only their count)."""
+    all_notes = notes + [c for c in caught if c not in notes]
+    if quiet and all_notes:
+        print(f"{len(all_notes)} note(s) about the fit: in the JSON's 'warnings', or run without -q", file=sys.stderr)
+    else:
+        for msg in all_notes:
+            print(f"note: {msg}", file=sys.stderr)
+
+
+def _write_outputs(args: argparse.Namespace, frf: FRFSet, result: LSFDResult, doc: dict,
+                   pairs: list[tuple[int, int]]) -> None:
+    """The JSON, the plot (the first four FRFs of ``pairs``) and the UFF file the options ask for."""
+    from .report import write_json
+
+    if args.json:
+        write_json(args.json, doc)
+        print(f"results written to {args.json}")
+    if args.plot:
+        from .plots import plot_fit
+
+        plot_fit(frf, result, args.plot, pairs=pairs[:4], band=result.band, log_freq=args.log_freq, indicator=True)
+        print(f"plot written to {args.plot}")
+    if args.uff:
+        _write_uff(args.uff, frf, result, _geometry(args))
+        print(f"mode shapes (UFF 55) and synthesised FRFs (UFF 58) written to {args.uff}")
+
+
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
-    from .inputs import InputError, load_input, parse_band_text, parse_float_list
+    from .inputs import InputError
 
     parser = build_parser()
     args = parse_args(parser, argv)
     if isinstance(args, int):
         return args
     with errors_to_exit("analysis fit", (InputError, _UsageError)):
-        band = parse_band_text(args.band)
-        for name in ("modes", "order", "max_iter"):
-            v = getattr(args, name)
-            if v is not None and v < 1:
-                raise InputError(f"--{name.replace('_', '-')} must be >= 1; got {v}")
-        freqs, picked, picked_band = _given_poles(args.poles) if args.poles else (None, False, None)
-        if band is None and picked_band is not None:
-            band = picked_band  # the band of the diagram the poles were picked on
-        exclude = parse_float_list(args.exclude_lines) if args.exclude_lines else []
-        mains = () if str(args.mains).strip().lower() == "none" else tuple(parse_float_list(args.mains))
-        if any(m <= 0 for m in mains) or (args.exclude_mains is not None and not args.exclude_mains > 0):
-            raise InputError("mains frequencies must be > 0 Hz (or --mains none)")
-        for path, what in ((args.json, "JSON"), (args.plot, "plot"), (args.uff, "UFF file")):
-            check_out_dir(path, what)
-            if path and Path(path).exists() and not args.overwrite:
-                raise InputError(f"{path} exists: choose another {what} file or add --overwrite")
-        frf = load_input(args.input, estimator=args.estimator)
-        if band is not None:
-            f = frf.freq_hz
-            if band[1] <= f[0] or band[0] >= f[-1]:
-                raise InputError(f"band {args.band} Hz lies outside the data ({f[0]:.6g}..{f[-1]:.6g} Hz)")
-        rms = np.sqrt(np.nanmean(np.abs(frf.H) ** 2, axis=2))  # (n_out, n_ref)
-        if args.frf is not None:
-            if args.frf not in frf.outputs:
-                raise InputError(f"--frf {args.frf!r} is not an output of {args.input}; outputs: {', '.join(frf.outputs)}")
-            row = frf.outputs.index(args.frf)
-            shown = (row, int(np.argmax(rms[row])))
-        else:  # the strongest FRF (usually the driving point); never an all-zero one
-            i_out, i_ref = np.unravel_index(int(np.argmax(rms)), rms.shape)
-            shown = (int(i_out), int(i_ref))
+        band, freqs, picked, exclude, mains = _check_options(args)
+        frf, pairs = _load(args, band)
+    shown = pairs[0]
 
     from .pipeline import fit_auto
-    from .report import format_table, result_to_dict, write_json
+    from .report import format_table, result_to_dict
 
     if args.exclude_mains is not None:
         from .pipeline import mains_harmonics
@@ -205,12 +248,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         caught = [str(w.message) for w in wlist]
     result, stab = fit.lsfd, fit.stabilization
     notes = list(fit.warnings)
-    all_notes = notes + [c for c in caught if c not in notes]
-    if args.quiet and all_notes:
-        print(f"{len(all_notes)} note(s) about the fit: in the JSON's 'warnings', or run without -q", file=sys.stderr)
-    else:
-        for msg in all_notes:
-            print(f"note: {msg}", file=sys.stderr)
+    _print_notes(notes, caught, args.quiet)
     if not fit.success:
         print(f"warning: {fit.message}", file=sys.stderr)
     initial = fit.selected_poles if stab is not None else None
@@ -230,19 +268,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                           "mode_indicator": indicator_summary(frf, result.band, max_points=256)},
                          scatter=scatter)
     with errors_to_exit("analysis fit", (OSError, ValueError), prefix="cannot write the outputs: "):
-        if args.json:
-            write_json(args.json, doc)
-            print(f"results written to {args.json}")
-        if args.plot:
-            from .plots import plot_fit
-
-            order = [(int(k // rms.shape[1]), int(k % rms.shape[1])) for k in np.argsort(-rms, axis=None)]
-            rows = [shown] + [p for p in order if p != shown and rms[p] > 0]
-            plot_fit(frf, result, args.plot, pairs=rows[:4], band=result.band, log_freq=args.log_freq, indicator=True)
-            print(f"plot written to {args.plot}")
-        if args.uff:
-            _write_uff(args.uff, frf, result, _geometry(args))
-            print(f"mode shapes (UFF 55) and synthesised FRFs (UFF 58) written to {args.uff}")
+        _write_outputs(args, frf, result, doc, pairs)
     return 0
 
 

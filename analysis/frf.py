@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "convert_quantity", "analyser_band_hz", "window_pole_shift"]
+__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "convert_quantity", "analyser_band_hz", "window_pole_shift",
+           "frf_pairs_by_level"]
 
 QUANTITIES = ("receptance", "mobility", "accelerance")
 #: the power p of (j omega) that turns a receptance (m/N) into each quantity: H_q = (j omega)^p H_receptance
@@ -242,3 +243,21 @@ def convert_quantity(H: np.ndarray, freq_hz: np.ndarray, src: str, dst: str) -> 
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = jw ** p if p >= 0 else np.where(jw == 0, np.nan, 1.0 / np.where(jw == 0, 1, jw) ** (-p))
     return np.asarray(H) * factor
+
+
+def frf_pairs_by_level(frf: FRFSet, output: str | None = None) -> list[tuple[int, int]]:
+    """The (output, reference) index pairs of ``frf`` by RMS level over all lines, strongest first
+    (usually the driving point), all-zero FRFs left out. The first pair is always the strongest FRF
+    of ``output`` when it is given (an output name of ``frf``), else the strongest of all.
+    Raises ValueError for an output ``frf`` does not have."""
+    rms = np.sqrt(np.nanmean(np.abs(frf.H) ** 2, axis=2))  # (n_out, n_ref), the H's units
+    if output is not None:
+        if output not in frf.outputs:
+            raise ValueError(f"{output!r} is not an output; outputs: {', '.join(frf.outputs)}")
+        row = frf.outputs.index(output)
+        first = (row, int(np.argmax(rms[row])))
+    else:
+        i_out, i_ref = np.unravel_index(int(np.argmax(rms)), rms.shape)
+        first = (int(i_out), int(i_ref))
+    order = [(int(k // rms.shape[1]), int(k % rms.shape[1])) for k in np.argsort(-rms, axis=None)]
+    return [first] + [p for p in order if p != first and rms[p] > 0]

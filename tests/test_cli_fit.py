@@ -285,3 +285,17 @@ def test_every_subcommand_help_documents_its_options_with_an_example():
         assert "``" not in text, (name, "raw markup")
         options = [ln.split()[0] for ln in text.splitlines() if ln.startswith("  --")]
         assert options, name
+
+
+def test_frf_pairs_by_level_strongest_first_and_all_zero_left_out():
+    from analysis.frf import FRFSet, frf_pairs_by_level
+
+    f = np.arange(1.0, 6.0)
+    H = np.zeros((3, 2, f.size), complex)
+    H[0, 0], H[0, 1], H[1, 0], H[2, 1] = 1.0, 4.0, 2.0, 3.0  # (1, 1) and (2, 0) stay all-zero
+    frf = FRFSet(freq_hz=f, H=H, quantity="accelerance", outputs=("a:1:X", "b:1:X", "c:1:X"),
+                 references=("a:1:X", "c:1:X"))
+    assert frf_pairs_by_level(frf) == [(0, 1), (2, 1), (1, 0), (0, 0)]
+    assert frf_pairs_by_level(frf, "b:1:X") == [(1, 0), (0, 1), (2, 1), (0, 0)]
+    with pytest.raises(ValueError, match="'z:1:X' is not an output"):
+        frf_pairs_by_level(frf, "z:1:X")
