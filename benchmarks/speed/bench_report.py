@@ -12,6 +12,7 @@ column selenium + chromium + chromium-driver. Prints a table; writes the reports
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import sys
 import tempfile
@@ -22,7 +23,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
-DATA = ROOT.parent / "shared" / "data"
+DATA = Path(os.environ.get("IMPACTLAB_SHARED_DATA", ROOT.parent / "shared" / "data"))   # as the tests find it
 
 from analysis.geometry import Geometry  # noqa: E402
 from analysis.report_html import build_document, run_fit, write_report  # noqa: E402
