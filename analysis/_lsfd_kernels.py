@@ -62,6 +62,7 @@ __all__ = [
     "solve_scaled",
     "solve_upper",
     "projected_gram",
+    "householder_project",
     "gram_from_G",
     "RANK_TOL",
 ]
@@ -119,9 +120,9 @@ def _stack(z: np.ndarray) -> np.ndarray:
 class Evaluation:
     """The variable-projection state at one set of poles.
 
-    ``precise`` evaluations hold the orthonormal factor and the explicit residuals; fast ones
-    (see :meth:`ProjectedProblem.evaluate`) hold the Gram quantities ``G = (P E)^T (P E)`` and
-    ``E^T r`` instead.
+    Both kinds hold the Gram quantities ``G = (P E)^T (P E)`` and ``E^T r`` the normal equations
+    need; ``precise`` ones compute them with orthogonal transformations only, fast ones (see
+    :meth:`ProjectedProblem.evaluate`) from the semi-normal equations.
     """
 
     theta: np.ndarray
@@ -130,11 +131,9 @@ class Evaluation:
     rank_ok: bool
     rcond: float
     precise: bool = True
-    Q: np.ndarray | None = None   # (2N, P) orthonormal basis of the weighted A
-    resid: np.ndarray | None = None  # (2N, n_frf) weighted residuals
     E: np.ndarray | None = None   # (2N, 2m) weighted derivative columns
-    G: np.ndarray | None = None   # (2m, 2m) (P E)^T (P E)  (fast evaluations)
-    EtR: np.ndarray | None = None  # (2m, n_frf) E^T r       (fast evaluations)
+    G: np.ndarray | None = None   # (2m, 2m) (P E)^T (P E)
+    EtR: np.ndarray | None = None  # (2m, n_frf) E^T r
 
 
 class ProjectedProblem:
@@ -230,8 +229,10 @@ class ProjectedProblem:
     def evaluate(self, theta: np.ndarray, *, fast: bool = False) -> Evaluation:
         """Project the data on the basis at ``theta``: S, coefficients and what the normal equations need.
 
-        Precise: Householder QR ``A = Q R`` (columns normalised), ``r = y - Q Q^T y`` explicitly,
-        ``S = ||r||^2``. Fast: only the triangular factor; ``Q^T y = R^-T (A^T y)``,
+        Precise: Householder QR ``A = Q R`` (columns normalised) and the same reflectors applied
+        to ``[E y]`` (:func:`householder_project`): ``S = ||r||^2``, ``G`` and ``E^T r`` from the
+        rows of ``Q_full^T [E y]`` below the basis, without cancellation. Fast: only the
+        triangular factor; ``Q^T y = R^-T (A^T y)``,
         ``S = ||y||^2 - ||Q^T y||^2``, ``E^T r = E^T y - (Q^T E)^T Q^T y`` and
         ``G = E^T E - (Q^T E)^T (Q^T E)``: one product ``[A E]^T Y`` with the data instead of
         three, at the price of cancellation (relative error of S about eps cond(A) ||y||^2 / S);
@@ -244,11 +245,12 @@ class ProjectedProblem:
         norms[norms == 0] = 1.0
         An = A / norms
         P = An.shape[1]
-        Q: np.ndarray | None = None
         if fast:
             Rq = np.asarray(np.linalg.qr(An, mode="r"))[:P]
+            h = tau = None
         else:
-            Q, Rq = np.linalg.qr(An)
+            h, tau = np.linalg.qr(An, mode="raw")
+            Rq = np.triu(h[:, :P].T)
         d = np.abs(np.diag(Rq))
         rcond = float(d.min() / d.max()) if d.size else 1.0
         rank_ok = bool(np.all(np.isfinite(Rq))) and rcond > RANK_TOL
@@ -265,13 +267,12 @@ class ProjectedProblem:
                 EtR = prod[P:] - QtE.T @ QtY
                 coef = solve_upper(Rq, QtY) / norms[:, None]
                 return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
-            Q, Rq = np.linalg.qr(An)
-        assert Q is not None
-        QtY = Q.T @ self.Ys
-        resid = self.Ys - Q @ QtY
-        S = float(np.einsum("ij,ij->", resid, resid))
+            h, tau = np.linalg.qr(An, mode="raw")
+            Rq = np.triu(h[:, :P].T)
+        assert h is not None and tau is not None
+        QtY, G, EtR, S = householder_project(h, tau, E, self.Ys)
         coef = solve_upper(Rq, QtY) / norms[:, None]
-        return Evaluation(theta, S, coef, True, rcond, precise=True, Q=Q, resid=resid, E=E)
+        return Evaluation(theta, S, coef, True, rcond, precise=True, E=E, G=G, EtR=EtR)
 
     def normal_equations(self, ev: Evaluation) -> tuple[np.ndarray, np.ndarray]:
         """Kaufman's ``J^T J`` (2m x 2m) and gradient ``J^T r`` (2m,) at an evaluation.
@@ -282,14 +283,9 @@ class ProjectedProblem:
             raise ValueError("normal equations need a full-rank evaluation")
         m = ev.theta.size // 2
         assert ev.coef is not None
-        if ev.precise:
-            assert ev.Q is not None and ev.E is not None and ev.resid is not None
-            JtJ, Gam = projected_gram(ev.Q, ev.E, ev.coef[:2 * m])
-            EtR = ev.E.T @ ev.resid
-        else:
-            assert ev.G is not None and ev.EtR is not None
-            JtJ, Gam = gram_from_G(ev.G, ev.coef[:2 * m])
-            EtR = ev.EtR
+        assert ev.G is not None and ev.EtR is not None
+        JtJ, Gam = gram_from_G(ev.G, ev.coef[:2 * m])
+        EtR = ev.EtR
         g = -np.einsum("rpif,rpf->ri", Gam, EtR.reshape(m, 2, -1)).reshape(2 * m)
         return JtJ, g
 
@@ -304,6 +300,38 @@ class ProjectedProblem:
         R = (c[0:2 * m:2] + 1j * c[1:2 * m:2]).T
         T = (c[2 * m::2] + 1j * c[2 * m + 1::2]).T
         return R, T
+
+
+def householder_project(h: np.ndarray, tau: np.ndarray, E: np.ndarray, Ys: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """``Q^T y``, ``G = (P E)^T (P E)``, ``E^T r`` and ``S = ||r||^2`` from a Householder QR of the basis.
+
+    ``h, tau``: ``numpy.linalg.qr(A, mode="raw")`` of the (2N, P) basis; E : (2N, 2m) derivative
+    columns; Ys : (2N, n_frf) data. The reflectors ``H_1 ... H_P = I - V T V^T`` (the compact WY
+    form, ``T`` upper triangular) are applied to ``X = [E Ys]`` as two matrix products:
+    ``C = Q_full^T X``; its first P rows are ``Q^T X`` and the rest ``C_b`` spans the orthogonal
+    complement of the basis, so ``(P X)^T (P X) = C_b^T C_b``. The explicit ``Q`` (whose forming
+    costs more than the factorisation) and the projected residuals are never formed, and the
+    rounding is that of Householder transformations (no cancellation).
+    """
+    P = tau.size
+    m2 = E.shape[1]
+    V1 = np.tril(h[:, :P].T, -1)          # the unit lower-triangular top of the reflectors
+    V1[np.diag_indices(P)] = 1.0
+    V2 = h.T[P:]                           # the rest (a view)
+    VtV = V1.T @ V1 + V2.T @ V2
+    T = np.zeros((P, P))
+    for i in range(P):                     # LAPACK's forward, column-wise T (dlarft)
+        T[i, i] = tau[i]
+        if i:
+            T[:i, i] = -tau[i] * (T[:i, :i] @ VtV[:i, i])
+    X = np.concatenate([E, Ys], axis=1)
+    Z = T.T @ (V1.T @ X[:P] + V2.T @ X[P:])
+    Cb = X[P:] - V2 @ Z
+    QtY = Ys[:P] - V1 @ Z[:, m2:]
+    Gf = Cb.T @ Cb
+    S = float(np.einsum("ij,ij->", Cb[:, m2:], Cb[:, m2:]))
+    return QtY, 0.5 * (Gf[:m2, :m2] + Gf[:m2, :m2].T), Gf[:m2, m2:], S
 
 
 def projected_gram(Q: np.ndarray, E: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -410,3 +410,20 @@ def test_sorted_by_frequency_permutes_every_per_mode_quantity_alike() -> None:
     np.testing.assert_allclose(synthesize(s.model, f).H, synthesize(res.model, f).H, rtol=1e-12, atol=0)
     np.testing.assert_allclose(s.model.residues, res.model.residues[..., ::-1])
     assert s.cov_poles[0, 0] == res.cov_poles[4, 4] and s.cov_poles[1, 3] == res.cov_poles[5, 3]
+
+
+def test_householder_projection_matches_explicit_orthonormal_basis() -> None:
+    """The reflectors applied to [E y] give Q^T y, (P E)^T (P E), E^T r and ||r||^2 as an explicit
+    orthonormal basis does (P = I - Q Q^T, r = P y), to round-off."""
+    from analysis._lsfd_kernels import householder_project
+    rng = np.random.default_rng(21)
+    A = rng.normal(size=(300, 9)) @ np.diag(np.logspace(0, 4, 9))   # columns of unequal size
+    E, Y = rng.normal(size=(300, 6)), rng.normal(size=(300, 2))
+    h, tau = np.linalg.qr(A, mode="raw")
+    QtY, G, EtR, S = householder_project(h, tau, E, Y)
+    Q, _ = np.linalg.qr(A)
+    PE, r = E - Q @ (Q.T @ E), Y - Q @ (Q.T @ Y)
+    assert np.allclose(QtY, Q.T @ Y, rtol=0, atol=1e-12)
+    assert np.allclose(G, PE.T @ PE, rtol=1e-12, atol=1e-11)
+    assert np.allclose(EtR, E.T @ r, rtol=1e-12, atol=1e-11)
+    assert S == pytest.approx(float(np.sum(r * r)), rel=1e-12)
