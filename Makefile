@@ -17,10 +17,14 @@ venv: $(STAMP)
 demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m acquisition demo --out demo-output
 
+# the suite on TEST_WORKERS processes (pytest-xdist; one test file stays on one process, so a
+# module's shared fixture is made once); TEST_WORKERS=0 runs it in this process
+TEST_WORKERS ?= 2
+
 test: $(STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m mypy
-	MPLBACKEND=Agg $(PY) -m pytest -q
+	MPLBACKEND=Agg $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 lint: $(STAMP)
 	$(PY) -m ruff check .
