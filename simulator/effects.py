@@ -133,6 +133,14 @@ def draw_effect(name: str, rng: np.random.Generator, model: ModalModel, freq_hz:
         phi_r = rng.uniform(0.1, 0.4, nr) * rng.choice([-1, 1], nr)
         R = np.einsum("o,r->or", phi_o, phi_r) / (2j * wd)
         return {"effect": name, "freq_hz": fm, "zeta": zeta, "residue": np.stack([R.real, R.imag], -1).tolist()}
+    if name == "local_resonator":
+        # a spring-mass at one output, its own frequency in the widest gap between modes
+        edges = np.concatenate([[lo], inband, [hi]])
+        gaps = np.diff(edges)
+        i = int(np.argmax(gaps * rng.uniform(0.5, 1.0, gaps.size)))
+        labels = model.outputs or tuple(f"n:{i + 1}:Z" for i in range(no))
+        return {"effect": name, "point": labels[int(rng.integers(no))], "mass_kg": float(rng.uniform(0.05, 0.3)),
+                "frequency_hz": float(edges[i] + gaps[i] * rng.uniform(0.3, 0.7)), "zeta": float(rng.uniform(0.005, 0.03))}
     if name == "residual_modes":
         # the flexibility of the modes above 2 f_max (what a truncated model lacks), scaled
         above = fn > 2 * hi
@@ -169,7 +177,7 @@ def draw_effect(name: str, rng: np.random.Generator, model: ModalModel, freq_hz:
 # Tolerances of the primary parameter (relative error, see primary_error) that tests and the benchmark use.
 TOLERANCES = {
     "residual_modes": 0.25, "sensor_highpass": 0.05, "time_delay": 0.02, "mass_loading": 0.05,
-    "missing_mode": 0.002, "stiffness_shift": 0.001, "damping_change": 0.05, "exponential_window": 0.10,
+    "missing_mode": 0.002, "local_resonator": 0.02, "stiffness_shift": 0.001, "damping_change": 0.05, "exponential_window": 0.10,
     "sensitivity_error": 0.01, "mains_hum": 0.0,
 }
 
@@ -197,6 +205,8 @@ def primary_error(injected: Mapping, fitted: Mapping) -> float:
         return rel(fitted["mass_kg"], injected["mass_kg"])
     if name == "missing_mode":
         return rel(fitted["freq_hz"], injected["freq_hz"])
+    if name == "local_resonator":
+        return rel(fitted["frequency_hz"], injected["frequency_hz"])
     if name in ("stiffness_shift", "damping_change"):
         return rel(fitted["factor"], injected["factor"])
     if name == "exponential_window":

@@ -29,7 +29,9 @@ def _measure(base: ModalModel, effects, seed: int, freq=F):
 
 
 # every effect once, in a seeded random order, each with seeded random parameters
-_ORDER = list(np.random.default_rng(8).permutation(list(EFFECTS)))
+# (the first ten in the order they were drawn in before the local resonator joined the catalogue)
+_FIRST = [n for n in EFFECTS if n != "local_resonator"]
+_ORDER = list(np.random.default_rng(8).permutation(_FIRST)) + [n for n in EFFECTS if n not in _FIRST]
 
 
 @pytest.mark.parametrize("case", range(len(_ORDER)))

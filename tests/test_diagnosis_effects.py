@@ -22,8 +22,9 @@ def _model(shapes=True) -> ModalModel:
                       outputs=("a:1:X", "a:2:X"), references=("a:1:X",), meta=meta)
 
 
-def test_catalogue_names_are_the_fixed_ten():
-    assert set(EFFECTS) == {"residual_modes", "sensor_highpass", "time_delay", "mass_loading", "missing_mode",
+def test_catalogue_names_are_the_fixed_eleven():
+    assert set(EFFECTS) == {"residual_modes", "sensor_highpass", "time_delay", "mass_loading", "local_resonator",
+                            "missing_mode",
                             "stiffness_shift", "damping_change", "exponential_window", "sensitivity_error",
                             "mains_hum"}
 

@@ -24,6 +24,9 @@ name                     kind   model extension
 ``mass_loading``         modal  a mass ``mass_kg`` at each output sensor: omega_r^2 / (1 + mu_r),
                                 ``mu_r = m sum_o phi_or^2`` (mass-normalised shapes at the
                                 outputs, first-order Rayleigh quotient), residues / sqrt(1+mu)^(1+p)
+``local_resonator``      modal  a spring-mass ``frequency_hz``, ``zeta`` attached through ``coupling``
+                                (``sqrt(m) phi_r`` at its point, per mode) or at output ``point`` with
+                                ``mass_kg``: re-analysed with the modes (:mod:`.resonator`)
 ``missing_mode``         modal  an extra mode ``freq_hz``, ``zeta``, complex ``residue[o][r]``
                                 (``[re, im]`` pairs, model units x rad/s)
 ``residual_modes``       frf    ``H += UR (j w)^q + LR (j w)^q / w^2`` (q of the FRF): the modes
@@ -38,7 +41,8 @@ name                     kind   model extension
 Modules: :mod:`.effect_types` (``Effect``, ``FitContext``, ``EffectError``, shared fit helpers),
 :mod:`.processing` (the exponential window and the finite record: exact synthesis as measured),
 :mod:`.mains` (mains lines and their cross-validation by harmonics), :mod:`.frf_effects` (residual
-terms, sensor high-pass, time delay, sensitivity); this module holds the modal effects, the registry
+terms, sensor high-pass, time delay, sensitivity), :mod:`.resonator` (a spring-mass at a point); this
+module holds the modal effects, the registry
 and :func:`predict`.
 """
 from __future__ import annotations
@@ -75,6 +79,7 @@ from .processing import (
     synthesize_windowed,
     truncation_tail,
 )
+from .resonator import apply_local_resonator, fit_local_resonator
 
 __all__ = [
     "Effect",
@@ -443,6 +448,12 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            needs=("output_shapes",),
            advice="The accelerometers' mass lowers the frequencies: add the sensor masses at their nodes in "
                   'the model, or use lighter sensors.'),
+    Effect("local_resonator", "modal", apply_local_resonator, fit_local_resonator, "frequency_hz",
+           "a spring-mass attached at a point: a mode more, and the neighbouring modes shifted by it",
+           needs=("output_shapes",),
+           advice="A local resonator (a spring-mass at one point: an absorber, a component on a soft mount, a "
+                  "loose part) adds a mode near the fitted frequency and shifts its neighbours: add it to the "
+                  "model; the largest coupling names the modes it sits on."),
     Effect("missing_mode", "modal", apply_missing_mode, fit_missing_mode, "freq_hz",
            "a mode the simulation lacks",
            advice="The structure has a mode the model lacks: check the model's mode set (a component, a "

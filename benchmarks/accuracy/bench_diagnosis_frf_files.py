@@ -38,6 +38,10 @@ def judge(case: Case, doc: dict) -> tuple[bool, str]:
         message = " ".join([doc.get("reason", ""), str(doc.get("skipped", {}).get("mass_loading", ""))])
         says = "driving point" in message and f"n:{ham}:Z" in message
         return verdict != "mass_loading" and says, f"{verdict}; message names n:{ham}:Z: {says}"
+    if verdict == "local_resonator" and truth["effect"] == "missing_mode":
+        # the resonator named as what it is: its own frequency (on a rigid base) within the same tolerance
+        err = abs(float(named["frequency_hz"]) / truth["freq_hz"] - 1)
+        return err <= TOL["missing_mode"], f"local_resonator {float(named['frequency_hz']):.1f} Hz (err {100 * err:.1f} %)"
     if verdict != truth["effect"]:
         return False, verdict
     if verdict == "none":
