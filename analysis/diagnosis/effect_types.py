@@ -12,7 +12,7 @@ from ..errors import EffectError
 from ..frf import FRFSet
 from ..modal import ModalModel
 
-__all__ = ["Effect", "EffectError", "FitContext", "check_positive", "fit_scalar"]
+__all__ = ["Effect", "EffectError", "FitContext", "check_positive", "fit_scalar", "shapes_at_references"]
 
 
 # --------------------------------------------------------------------------- containers
@@ -87,3 +87,14 @@ def fit_scalar(cost: Callable[[float], float], grid: np.ndarray) -> float:
         return float(grid[i])
     res = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6 * max(abs(hi), 1e-12)})
     return float(res.x) if res.fun <= vals[i] else float(grid[i])
+
+def shapes_at_references(model: ModalModel, phi: np.ndarray) -> np.ndarray | None:
+    """Mass-normalised shapes at the references, (n_ref, n_modes): ``meta["reference_shapes"]``, else the
+    outputs' rows for references that are outputs; None when a reference has none."""
+    given = model.meta.get("reference_shapes")
+    if given is not None:
+        return np.asarray(given, float)
+    outs = list(model.outputs)
+    if not all(r in outs for r in model.references):
+        return None
+    return phi[[outs.index(r) for r in model.references]]

@@ -57,7 +57,7 @@ from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
 from ..modal import ModalModel, pole_from_fz
-from .effect_types import Effect, EffectError, FitContext
+from .effect_types import Effect, EffectError, FitContext, shapes_at_references
 from .effect_types import check_positive as _check_positive
 from .effect_types import fit_scalar as _fit_scalar
 from .frf_effects import (
@@ -79,7 +79,7 @@ from .processing import (
     synthesize_windowed,
     truncation_tail,
 )
-from .resonator import apply_local_resonator, fit_local_resonator
+from .resonator import apply_local_resonator
 
 __all__ = [
     "Effect",
@@ -257,17 +257,6 @@ def _mass_sensors(model: ModalModel, sensor: object) -> np.ndarray:
     return np.asarray([o == sensor for o in model.outputs])
 
 
-def _shapes_at_references(model: ModalModel, phi: np.ndarray) -> np.ndarray | None:
-    """Mass-normalised shapes at the references, (n_ref, n_modes): ``meta["reference_shapes"]``, else the
-    outputs' rows for references that are outputs; None when a reference has none."""
-    given = model.meta.get("reference_shapes")
-    if given is not None:
-        return np.asarray(given, float)
-    outs = list(model.outputs)
-    if not all(r in outs for r in model.references):
-        return None
-    return phi[[outs.index(r) for r in model.references]]
-
 
 def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
     """A mass ``mass_kg`` (kg) at each output sensor, or at the one output ``sensor`` (a label; ``"all"``
@@ -305,7 +294,7 @@ def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
     p = _model_power(model)
     d = np.diag(Vk)
     R = np.asarray(model.residues, complex) / lam[None, None, :] ** p * (d ** 2 * lam.imag / new.imag)[None, None, :]
-    ref = _shapes_at_references(model, phi)
+    ref = shapes_at_references(model, phi)
     if ref is not None and m > 0:
         po, pr = phi @ Vk, ref @ Vk
         coupled = po[:, None, :] * pr[None, :, :] - (d ** 2)[None, None, :] * phi[:, None, :] * ref[None, :, :]
@@ -430,6 +419,79 @@ def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
 
 # --------------------------------------------------------------------------- FRF effects
 # --------------------------------------------------------------------------- registry
+
+def _initial_coupling(ctx: FitContext, fit: dict, wn: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
+    """First-order coupling from an extra mode's fitted residues (``missing_mode``'s): its shape at the
+    outputs ``psi_o = sum_r phi_or g_r w_a^2 / (w_r^2 - w_a^2)``, solved for g with the smallest norm."""
+    ref = shapes_at_references(ctx.base, phi)
+    outs = list(ctx.base.outputs)
+    if ref is None or not all(r in outs for r in ctx.base.references):
+        return None
+    wa = 2 * np.pi * fit["freq_hz"]
+    lam = complex(-fit["zeta"] * wa, wa * np.sqrt(1 - fit["zeta"] ** 2))
+    R = np.asarray(fit["residue"], float)
+    Rc = (R[..., 0] + 1j * R[..., 1]) / lam ** QUANTITY_POWER[ctx.base.quantity]
+    dp = outs.index(ctx.base.references[0])
+    col = np.real(2j * lam.imag * Rc[:, 0])             # psi_o psi_dp
+    if not col[dp] > 0:
+        return None
+    psi = col / np.sqrt(col[dp])
+    A = phi * (wa ** 2 / (wn ** 2 - wa ** 2))[None, :]
+    g = np.linalg.lstsq(A, psi, rcond=None)[0]
+    return np.asarray(g, float)
+
+
+def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
+    """The resonator's frequency, damping and coupling to every mode by least squares on ``lines``, started
+    from the extra modes ``missing_mode`` finds at the largest residuals (first-order coupling from their
+    shapes at the outputs); the start with the smaller cost wins."""
+    phi = np.asarray(ctx.base.meta["output_shapes"], float)
+    wn = np.abs(np.asarray(ctx.base.poles, complex))
+    f = ctx.measured.freq_hz[lines]
+    Hm, sw = ctx.measured.H[..., lines], np.sqrt(ctx.weights[..., lines])
+    lo, hi = f[0] / 1.05, f[-1] * 1.05
+
+    def spec(x: np.ndarray) -> dict:
+        return {"effect": "local_resonator", "frequency_hz": float(x[0]), "zeta": float(np.exp(x[1])),
+                "coupling": [float(v) for v in x[2:]]}
+
+    def resid(x: np.ndarray) -> np.ndarray:
+        e = (Hm - predict(ctx.base, f, ctx.measured.quantity, ctx.effects(spec(x))).H) * sw
+        return np.concatenate([e.real.ravel(), e.imag.ravel()])
+
+    mm = fit_missing_mode(ctx, lines)
+    inband = np.sort(wn[(wn >= 2 * np.pi * lo) & (wn <= 2 * np.pi * hi)]) / (2 * np.pi)
+    freqs = [mm["freq_hz"]] + list(np.sqrt(inband[:-1] * inband[1:]))   # and between each pair of modes
+    starts = []
+    for fc in freqs:
+        if not lo < fc < hi:
+            continue
+        zc, Rc = min(((float(np.sum(r ** 2)), z, R) for z in (0.005, 0.01, 0.02, 0.05)
+                      for r, R in [_missing_mode_residuals(ctx, lines, np.array([fc, z]))]), key=lambda t: t[0])[1:]
+        g0 = _initial_coupling(ctx, {"freq_hz": fc, "zeta": zc, "residue": Rc}, wn, phi)
+        if g0 is not None:
+            x0 = np.concatenate([[fc, np.log(zc)], np.clip(g0, -0.5, 0.5)])
+            starts.append((float(np.sum(resid(x0) ** 2)), x0))
+    if not starts:
+        raise EffectError("local_resonator: no extra mode with a shape at the driving point to start from")
+    starts = sorted(starts, key=lambda t: t[0])[:3]
+    best: tuple[float, np.ndarray] | None = None
+    df = ctx.measured.line_spacing_hz
+    for _, x0 in starts:
+        res = least_squares(resid, x0, bounds=([lo, np.log(1e-4)] + [-1.0] * wn.size,
+                                               [hi, np.log(0.3)] + [1.0] * wn.size),
+                            x_scale=[df, 0.3] + [0.01] * wn.size, method="trf", max_nfev=60)
+        c = float(np.sum(res.fun ** 2))
+        if best is None or c < best[0]:
+            best = (c, res.x)
+    assert best is not None
+    out = spec(best[1])
+    del out["effect"]
+    g = np.asarray(out["coupling"])
+    out["mass_ratio"] = float(np.max(g ** 2))
+    return out
+
+
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Effect("residual_modes", "frf", apply_residual_modes, fit_residual_modes, "upper",
            "modes outside the band (upper and lower residual terms)",

@@ -22,13 +22,12 @@ from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER
 from ..modal import ModalModel
-from .effect_types import EffectError, FitContext
+from .effect_types import EffectError, shapes_at_references
 
-__all__ = ["apply_local_resonator", "fit_local_resonator", "coupled_modes"]
+__all__ = ["apply_local_resonator", "coupled_modes"]
 
 
 def coupled_modes(wn: np.ndarray, zeta: np.ndarray, g: np.ndarray, w_a: float, zeta_a: float
@@ -70,8 +69,6 @@ def apply_local_resonator(model: ModalModel, params: Mapping) -> ModalModel:
     receptance residue is ``sum_r V_ri^2 R_r w_d,r / w_d,i`` (the fitted residues kept where the shapes
     cannot say more) plus ``[psi_o psi_ref - sum_r V_ri^2 phi_or phi_ref,r] / (2 j w_d,i)``, ``psi = Phi V``:
     exact when the residues are the shapes' own."""
-    from .effects import _shapes_at_references
-
     shapes = model.meta.get("output_shapes")
     if shapes is None:
         raise EffectError("local_resonator needs the mode shapes at the outputs (model.meta['output_shapes']): "
@@ -92,7 +89,7 @@ def apply_local_resonator(model: ModalModel, params: Mapping) -> ModalModel:
     Vb = V[:-1]                                         # (n_old, n_new): the beam's modal coordinates
     R_old = np.asarray(model.residues, complex) / lam[None, None, :] ** p
     R = np.einsum("orm,mi->ori", R_old * lam.imag[None, None, :], Vb ** 2) / new.imag[None, None, :]
-    ref = _shapes_at_references(model, phi)
+    ref = shapes_at_references(model, phi)
     if ref is not None:
         po, pr = phi @ Vb, ref @ Vb
         own = np.einsum("om,rm,mi->ori", phi, ref, Vb ** 2)
@@ -102,79 +99,3 @@ def apply_local_resonator(model: ModalModel, params: Mapping) -> ModalModel:
     if ref is not None and "reference_shapes" in meta:
         meta["reference_shapes"] = ref @ Vb
     return replace(model, poles=new, residues=R * new[None, None, :] ** p, meta=meta)
-
-
-def _initial_coupling(ctx: FitContext, fit: dict, wn: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
-    """First-order coupling from an extra mode's fitted residues (``missing_mode``'s): its shape at the
-    outputs ``psi_o = sum_r phi_or g_r w_a^2 / (w_r^2 - w_a^2)``, solved for g with the smallest norm."""
-    from .effects import _shapes_at_references
-
-    ref = _shapes_at_references(ctx.base, phi)
-    outs = list(ctx.base.outputs)
-    if ref is None or not all(r in outs for r in ctx.base.references):
-        return None
-    wa = 2 * np.pi * fit["freq_hz"]
-    lam = complex(-fit["zeta"] * wa, wa * np.sqrt(1 - fit["zeta"] ** 2))
-    R = np.asarray(fit["residue"], float)
-    Rc = (R[..., 0] + 1j * R[..., 1]) / lam ** QUANTITY_POWER[ctx.base.quantity]
-    dp = outs.index(ctx.base.references[0])
-    col = np.real(2j * lam.imag * Rc[:, 0])             # psi_o psi_dp
-    if not col[dp] > 0:
-        return None
-    psi = col / np.sqrt(col[dp])
-    A = phi * (wa ** 2 / (wn ** 2 - wa ** 2))[None, :]
-    g = np.linalg.lstsq(A, psi, rcond=None)[0]
-    return np.asarray(g, float)
-
-
-def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
-    """The resonator's frequency, damping and coupling to every mode by least squares on ``lines``, started
-    from the extra modes ``missing_mode`` finds at the largest residuals (first-order coupling from their
-    shapes at the outputs); the start with the smaller cost wins."""
-    from .effects import _missing_mode_residuals, fit_missing_mode, predict
-
-    phi = np.asarray(ctx.base.meta["output_shapes"], float)
-    wn = np.abs(np.asarray(ctx.base.poles, complex))
-    f = ctx.measured.freq_hz[lines]
-    Hm, sw = ctx.measured.H[..., lines], np.sqrt(ctx.weights[..., lines])
-    lo, hi = f[0] / 1.05, f[-1] * 1.05
-
-    def spec(x: np.ndarray) -> dict:
-        return {"effect": "local_resonator", "frequency_hz": float(x[0]), "zeta": float(np.exp(x[1])),
-                "coupling": [float(v) for v in x[2:]]}
-
-    def resid(x: np.ndarray) -> np.ndarray:
-        e = (Hm - predict(ctx.base, f, ctx.measured.quantity, ctx.effects(spec(x))).H) * sw
-        return np.concatenate([e.real.ravel(), e.imag.ravel()])
-
-    mm = fit_missing_mode(ctx, lines)
-    inband = np.sort(wn[(wn >= 2 * np.pi * lo) & (wn <= 2 * np.pi * hi)]) / (2 * np.pi)
-    freqs = [mm["freq_hz"]] + list(np.sqrt(inband[:-1] * inband[1:]))   # and between each pair of modes
-    starts = []
-    for fc in freqs:
-        if not lo < fc < hi:
-            continue
-        zc, Rc = min(((float(np.sum(r ** 2)), z, R) for z in (0.005, 0.01, 0.02, 0.05)
-                      for r, R in [_missing_mode_residuals(ctx, lines, np.array([fc, z]))]), key=lambda t: t[0])[1:]
-        g0 = _initial_coupling(ctx, {"freq_hz": fc, "zeta": zc, "residue": Rc}, wn, phi)
-        if g0 is not None:
-            x0 = np.concatenate([[fc, np.log(zc)], np.clip(g0, -0.5, 0.5)])
-            starts.append((float(np.sum(resid(x0) ** 2)), x0))
-    if not starts:
-        raise EffectError("local_resonator: no extra mode with a shape at the driving point to start from")
-    starts = sorted(starts, key=lambda t: t[0])[:3]
-    best: tuple[float, np.ndarray] | None = None
-    df = ctx.measured.line_spacing_hz
-    for _, x0 in starts:
-        res = least_squares(resid, x0, bounds=([lo, np.log(1e-4)] + [-1.0] * wn.size,
-                                               [hi, np.log(0.3)] + [1.0] * wn.size),
-                            x_scale=[df, 0.3] + [0.01] * wn.size, method="trf", max_nfev=60)
-        c = float(np.sum(res.fun ** 2))
-        if best is None or c < best[0]:
-            best = (c, res.x)
-    assert best is not None
-    out = spec(best[1])
-    del out["effect"]
-    g = np.asarray(out["coupling"])
-    out["mass_ratio"] = float(np.max(g ** 2))
-    return out
