@@ -416,3 +416,28 @@ def test_next_measurement_is_the_point_that_separates_two_candidates() -> None:
     assert nm["separation_db"] > sep("top:4:Z")
     assert rivals([{"significant": True, "_fit": PhysicalFit("added_mass", a[1], ("mass_kg",), 1.0, 2.0,
                                                             ranked=[(1.0, "top:3", a[1]), (9.0, "top:5", b[1])])}]) is None
+
+
+def test_a_joint_change_below_both_gates_is_still_named_and_an_unchanged_frame_is_not() -> None:
+    """Joints x 0.07 (rotational) move a few modes by a few tenths of a percent: the mean chi2 per mode stays
+    below the gate and the FRFs are said to be within the noise, yet the joint springs predict the held-out
+    modes far better and are named; the unchanged frame's modes give nothing to fit (not decided)."""
+    from analysis.diagnosis.compare import line_weights
+    from analysis.diagnosis.physical_verdict import QUIET_CHI2, physical_verdict
+    from analysis.diagnosis.verdict import known_processing
+
+    cfg = FrameConfig.load()
+    f = np.arange(8.0, 500.0, 0.25)
+    fv = FrameVariants(cfg, OUTS, REFS)
+    soft = {"joints": {"stiffness": list(cfg.joints.stiffness[:3]) + [x * 0.07 for x in cfg.joints.stiffness[3:]]}}
+    for overrides, changed in ((soft, True), ({}, False)):
+        c = FrameConfig.from_dict(overrides) if overrides else cfg
+        measured = FrameModel.from_config(c, _sensor_masses(c)).analytic_frf(OUTS, REFS, f)
+        mm = _noise_free_modes(FrameVariants(c, OUTS, REFS), [])
+        out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, 3.0, mm)
+        assert out.doc["discrepancy"] == {"modes": False, "frfs": False}
+        assert out.decided is changed
+        if changed:
+            assert out.doc["chi2_per_mode"] * mm.freq_hz.size >= QUIET_CHI2
+            assert out.verdict == "joint_stiffness"
+            assert out.named[0]["parameters"]["factor_rotational"] == pytest.approx(0.07, rel=0.05)
