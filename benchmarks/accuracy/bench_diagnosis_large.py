@@ -36,9 +36,6 @@ a subset runs the same cases as a full run with the same ``--large``, ``--per-fa
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
-import json
 import os
 import sys
 import tempfile
@@ -51,7 +48,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_diagnosis_physical import POINTS, _explicit, _node_xyz, _relabel, null_case, run_all, steel_block  # noqa: E402
+from bench_diagnosis_physical import POINTS, _explicit, _node_xyz, _relabel, capture_case, null_case, run_all, steel_block  # noqa: E402
 
 FAMILIES = ("large:added_mass", "large:support_stiffness", "crack", "pair:mass+support", "pair:damping+modulus",
             "pair:member+sensors", "pair:mass+joint", "pair:mass+damping")
@@ -157,36 +154,11 @@ def diagnose_recording(rec: Path, relabel: int = 0):
 
 def run_case(spec: dict) -> dict:
     """Capture and diagnose one case; the truths, the named causes, the verdict and the time."""
-    from acquisition.cli_capture import main as capture
-    from simulator.config import overrides_to_toml
-
     over, truths, extra = spec["overrides"], spec["truths"], list(spec.get("extra", []))
     relabel = int(spec.get("relabel", 0))
     with tempfile.TemporaryDirectory() as tmp:
-        device = f"sim://?seed={spec['seed']}"
-        if over:
-            cfg = Path(tmp) / "frame.toml"
-            cfg.write_text(overrides_to_toml(over))
-            device += f"&config={cfg}"
-        pts = tuple(spec.get("points") or POINTS)
-        if relabel:
-            from acquisition.setup import default_setup
-            from analysis.points import parse_point
-
-            def fine(p: str) -> str:
-                q = parse_point(p)
-                return str(p).replace(f"{q.component}:{q.node}:", f"{q.component}:{2 * q.node}:", 1)
-
-            pts = tuple(map(fine, POINTS))
-            setup = default_setup().to_dict()
-            for ch in setup["channels"]:
-                ch["point"] = fine(ch["point"])
-            (Path(tmp) / "setup.json").write_text(json.dumps(setup))
-            extra += ["--setup", str(Path(tmp) / "setup.json")]
-        rec = Path(tmp) / "rec.h5"
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            rc = capture(["--device", device, "--out", str(rec), "--points", ",".join(pts), "--hits", "3",
-                          "--auto", "-q", *extra])
+        rc, rec = capture_case(Path(tmp), spec["seed"], over, bool(relabel), extra,
+                               tuple(spec.get("points") or POINTS))
         if rc != 0:
             return {**spec, "verdict": f"capture failed ({rc})", "right": False, "params_ok": False, "named": []}
         t0, c0 = time.perf_counter(), time.process_time()

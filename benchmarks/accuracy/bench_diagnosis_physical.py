@@ -31,6 +31,8 @@ catalogue: the span 6 % longer, the right column's roll 20 -> 40 deg: ``unexplai
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import os
 import tempfile
@@ -148,44 +150,51 @@ def _relabel(frf, factor: int):
     return replace(frf, outputs=tuple(map(lab, frf.outputs)), references=tuple(map(lab, frf.references)))
 
 
+def capture_case(tmp: Path, seed: int, overrides: dict, finer_mesh: bool, extra: list,
+                 points: tuple[str, ...] = POINTS) -> tuple[int, Path]:
+    """Capture one case through ``sim://?seed=...`` (the frame changed by ``overrides``) with the default
+    plan (or ``points``), 3 hits per point, into ``tmp/rec.h5``; ``finer_mesh``: the points and sensors renumbered for
+    a mesh twice as fine (the same places). Returns the capture's exit code and the recording."""
+    from acquisition.cli_capture import main as capture
+    from simulator.config import overrides_to_toml
+
+    device = f"sim://?seed={seed}"
+    if overrides:
+        cfg = tmp / "frame.toml"
+        cfg.write_text(overrides_to_toml(overrides))
+        device += f"&config={cfg}"
+    pts = tuple(points)
+    if finer_mesh:
+        from acquisition.setup import default_setup
+        from analysis.points import parse_point
+
+        def fine(p: str) -> str:
+            q = parse_point(p)
+            return str(p).replace(f"{q.component}:{q.node}:", f"{q.component}:{2 * q.node}:", 1)
+
+        pts = tuple(map(fine, pts))
+        setup = default_setup().to_dict()                 # the sensors at the same places on the finer mesh
+        for ch in setup["channels"]:
+            ch["point"] = fine(ch["point"])
+        (tmp / "setup.json").write_text(json.dumps(setup))
+        extra = [*extra, "--setup", str(tmp / "setup.json")]
+    rec = tmp / "rec.h5"
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        rc = capture(["--device", device, "--out", str(rec), "--points", ",".join(pts), "--hits", "3",
+                      "--auto", "-q", *extra])
+    return rc, rec
+
+
 def run_case(spec: dict) -> dict:
     """Capture and diagnose one case; returns the truth, the verdict, the fitted parameters, the time."""
-    from acquisition.cli_capture import main as capture
     from analysis.bands import default_band
     from analysis.diagnosis import diagnose
     from analysis.inputs import load_input
-    from simulator.config import overrides_to_toml
     from simulator.physical import FrameVariants
 
     over, truth, extra = spec["overrides"], spec["truth"], spec.get("extra", [])
     with tempfile.TemporaryDirectory() as tmp:
-        device = f"sim://?seed={spec['seed']}"
-        if over:
-            cfg = Path(tmp) / "frame.toml"
-            cfg.write_text(overrides_to_toml(over))
-            device += f"&config={cfg}"
-        pts = POINTS
-        if truth.get("relabel"):
-            from acquisition.setup import default_setup
-            from analysis.points import parse_point
-
-            def fine(p: str) -> str:
-                q = parse_point(p)
-                return str(p).replace(f"{q.component}:{q.node}:", f"{q.component}:{2 * q.node}:", 1)
-
-            pts = tuple(map(fine, POINTS))
-            setup = default_setup().to_dict()                 # the sensors at the same places on the finer mesh
-            for ch in setup["channels"]:
-                ch["point"] = fine(ch["point"])
-            (Path(tmp) / "setup.json").write_text(json.dumps(setup))
-            extra = [*extra, "--setup", str(Path(tmp) / "setup.json")]
-        rec = Path(tmp) / "rec.h5"
-        import contextlib
-        import io
-
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            rc = capture(["--device", device, "--out", str(rec), "--points", ",".join(pts), "--hits", "3",
-                          "--auto", "-q", *extra])
+        rc, rec = capture_case(Path(tmp), spec["seed"], over, bool(truth.get("relabel")), extra)
         if rc != 0:
             return {**spec, "verdict": f"capture failed ({rc})", "right": False}
         m = load_input(rec)
