@@ -11,10 +11,18 @@ import io
 import json
 import os
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+# benchmarks/ is not an installed package: make the project root importable under plain `pytest` too
+_ROOT = str(Path(__file__).resolve().parents[1])
+if _ROOT not in sys.path:
+    sys.path.insert(0, _ROOT)
+
+from benchmarks.accuracy.validation.datasets import DATASETS  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
@@ -319,38 +327,17 @@ def test_response_histories_differ_in_colour(loaded):
     assert len(colours) >= 2 and len(set(colours)) == len(colours)
 
 
-def _validation_cases() -> list:
-    """(name, loader, band) of every real dataset of docs/validation.md."""
-    from benchmarks.accuracy.validation import (
-        f16_gvt,
-        ladisk_beam,
-        modelab_beam,
-        plate_sweep,
-        pyfrf_5impacts,
-        pyuff_3frf,
-        uliege_plane,
-        unesp_boltedbeam,
-    )
-
-    return [("f16_gvt", f16_gvt.load, f16_gvt.BAND), ("ladisk_single", ladisk_beam.load_single, ladisk_beam.BAND_SINGLE),
-            ("ladisk_multi", ladisk_beam.load_multi, ladisk_beam.BAND_MULTI),
-            ("modelab_beam", modelab_beam.load, modelab_beam.BAND), ("plate_sweep", plate_sweep.load, plate_sweep.BAND),
-            ("pyfrf_5impacts", pyfrf_5impacts.load, pyfrf_5impacts.BAND), ("pyuff_3frf", pyuff_3frf.load, pyuff_3frf.BAND),
-            ("uliege_plane", uliege_plane.load, uliege_plane.BAND),
-            ("unesp_boltedbeam", unesp_boltedbeam.load, unesp_boltedbeam.BAND)]
-
-
 @pytest.mark.long
 @pytest.mark.realdata
-@pytest.mark.parametrize("case", range(9))
-def test_report_of_every_validation_dataset_opens(browser, shared_data, tmp_path, case):
+@pytest.mark.parametrize("d", DATASETS, ids=lambda d: d.key)
+def test_report_of_every_validation_dataset_opens(browser, shared_data, tmp_path, d):
     """The report of each real dataset of docs/validation.md (its FRFs, fitted in its band) draws every plot in
     Chromium without a console error."""
     from analysis.report_html import build_document, run_fit, write_report
 
-    name, load, band = _validation_cases()[case]
-    frf = load(shared_data)
-    doc = build_document(frf, run_fit(frf, band=band), input_name=name)
+    name = d.key
+    frf = d.load(shared_data)
+    doc = build_document(frf, run_fit(frf, band=d.fit_band()), input_name=name)
     index = write_report(tmp_path / name, doc)
     assert _open_report(browser, index) == "1", name
     errors = [e for e in browser.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]

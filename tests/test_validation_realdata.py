@@ -52,6 +52,21 @@ def test_consistency_table_recovers_the_repeated_poles():
     assert arr["zeta"][1] == pytest.approx([0.01, 0.02], rel=1e-6)
 
 
+def test_dataset_table_names_every_validated_dataset_with_its_loader_and_band():
+    """The one table of real datasets (used by the report's browser test and the automatic-band study) holds
+    every dataset of docs/validation.md under its name there, each with a loader and an increasing band."""
+    from benchmarks.accuracy.validation.datasets import DATASETS
+    from benchmarks.accuracy.validation.run_all import CASE_KEYS, CASES
+
+    assert len({d.key for d in DATASETS}) == len(DATASETS)
+    assert {d.module for d in DATASETS} == set(CASES)
+    for d in DATASETS:                 # docs/validation.md's name, or with the variant of the fit in brackets
+        assert any(k == d.label or k.startswith(f"{d.label} (") for k in CASE_KEYS), d.label
+        lo, hi = d.fit_band()
+        assert 0 <= lo < hi, d.key
+        assert callable(d.loader_function()), d.key
+
+
 # ------------------------------------------------------------------ real data
 @realdata
 def test_uliege_window_constant_and_raw_h1(shared_data):

@@ -25,31 +25,7 @@ import numpy as np  # noqa: E402
 
 from analysis.bands import default_band, upper_limits  # noqa: E402
 from analysis.pipeline import fit_auto  # noqa: E402
-
-
-def _cases(data: Path):
-    from benchmarks.accuracy.validation import (
-        f16_gvt,
-        ladisk_beam,
-        modelab_beam,
-        plate_sweep,
-        pyfrf_5impacts,
-        pyuff_3frf,
-        uliege_plane,
-        unesp_boltedbeam,
-    )
-
-    return [
-        ("uliege_meca0062_plane_hammer", lambda: uliege_plane.load(data, band=None)),
-        ("modelab_beam_roving_hammer", lambda: modelab_beam.load(data)),
-        ("ladisk_beam (1 hit)", lambda: ladisk_beam.load_single(data)),
-        ("ladisk_beam (4 hits)", lambda: ladisk_beam.load_multi(data)),
-        ("pyfrf_hammer_5impacts", lambda: pyfrf_5impacts.load(data)),
-        ("f16_gvt_multisine", lambda: f16_gvt.load(data)),
-        ("ladisk_plate_sweep", lambda: plate_sweep.load(data)),
-        ("pyuff_3frf", lambda: pyuff_3frf.load(data)),
-        ("unesp_bert_boltedbeam_subset (0.05 V)", lambda: unesp_boltedbeam.load(data)),
-    ]
+from benchmarks.accuracy.validation.datasets import DATASETS  # noqa: E402
 
 
 def main() -> int:
@@ -64,9 +40,10 @@ def main() -> int:
           "all inside | success | fit s |")
     print("|---|---|---|---|---|---|---|---|---|")
     bad = 0
-    for name, load in _cases(data):
+    for d in DATASETS:
+        name = d.label
         try:
-            frf = load()
+            frf = d.load(data, **d.whole_range)
         except (OSError, ValueError) as exc:
             print(f"| {name} | not read: {exc} |")
             continue
