@@ -49,13 +49,14 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from itertools import combinations
 from typing import Protocol
 
 import numpy as np
 from scipy.optimize import least_squares, linear_sum_assignment
 
-from ..mac import mac_matrix
+from ..mac import MacReference
 from ..modal import ModalModel
 from ..progress import progress
 
@@ -181,10 +182,20 @@ class MeasuredModes:
         """The modes selected by the mask or indices ``keep``."""
         return MeasuredModes(self.freq_hz[keep], self.freq_std_hz[keep], self.shapes[:, keep])
 
-    @property
+    @cached_property
     def sigma(self) -> np.ndarray:
         """Relative frequency uncertainty per mode (model-form floor included)."""
         return np.hypot(self.freq_std_hz / self.freq_hz, FREQ_FLOOR)
+
+    @cached_property
+    def _mac(self) -> MacReference:
+        """The shapes held for MAC against every candidate (:func:`pair`)."""
+        return MacReference(self.shapes)
+
+    @cached_property
+    def _no_shape(self) -> np.ndarray:
+        """Mask of the modes known by their frequency only (a zero shape column)."""
+        return ~np.any(self.shapes != 0, axis=0)
 
 
 def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -194,8 +205,8 @@ def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, n
     macs = np.zeros(K)
     if f.size == 0:
         return idx, macs
-    M = mac_matrix(mm.shapes, P.astype(complex))
-    M[~np.any(mm.shapes != 0, axis=0)] = 1.0        # modes measured without shapes pair by frequency
+    M = mm._mac.against(P)
+    M[mm._no_shape] = 1.0                            # modes measured without shapes pair by frequency
     C = np.abs(np.log(f[None, :] / mm.freq_hz[:, None])) / 0.1 + (1.0 - M)
     rows, cols = linear_sum_assignment(C)
     idx[rows] = cols
@@ -209,8 +220,11 @@ def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
     idx, macs = pair(mm, f, P)
     r = np.empty((mm.freq_hz.size, 2))
     ok = idx >= 0
-    r[ok, 0] = (f[idx[ok]] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
-    r[~ok, 0] = RESIDUAL_CAP
+    if ok.all():
+        r[:, 0] = (f[idx] / mm.freq_hz - 1.0) / mm.sigma
+    else:
+        r[ok, 0] = (f[idx[ok]] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
+        r[~ok, 0] = RESIDUAL_CAP
     r[:, 1] = (1.0 - macs) / MAC_TOL
     return RESIDUAL_CAP * np.tanh(r / RESIDUAL_CAP)
 
