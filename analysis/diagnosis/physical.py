@@ -364,21 +364,84 @@ def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, 
 
 
 def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
-                    names: Sequence[str] | None = None) -> list[PhysicalFit]:
+                    names: Sequence[str] | None = None, processes: int | None = None) -> list[PhysicalFit]:
     """Every cause (its best nested variant by leave-one-mode-out chi2) fitted; sorted by held-out
-    chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``)."""
-    fits: list[PhysicalFit] = []
+    chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``).
+
+    The causes are independent: with ``processes`` > 1 they are fitted in that many forked processes
+    (the same answers; a few tens of ms to start them). None: as many as there are free cores
+    (:func:`analysis.threads.free_cores`: the user's thread count when given), one when the process
+    may not fork (another Python thread running, a daemonic worker, no ``fork`` on the platform)."""
     causes = [c for c in sim.causes() if names is None or c.name in names]
-    for i, cause in enumerate(causes, start=1):
-        progress("diagnosis: physical cause %d/%d, %s", i, len(causes), cause.name)
-        best = _best_variant(sim, cause, mm, fmax)
-        if best is not None and not _agrees_with_full_model(sim, cause, best, mm, fmax):
-            log.warning("diagnosis: %s refitted on the full model (its reduced model disagreed)", cause.name)
-            best = _best_variant(_FullModel(sim), cause, mm, fmax)
-        if best is not None:
-            fits.append(best)
-    fits.sort(key=lambda x: x.chi2_cv)
-    return fits
+    n = _cause_processes(len(causes), processes)
+    if n > 1:
+        fits = _fit_causes_forked(sim, causes, mm, fmax, n)
+    else:
+        fits = [_fit_one_cause(sim, causes, i, mm, fmax) for i in range(len(causes))]
+    out = [f for f in fits if f is not None]
+    out.sort(key=lambda x: x.chi2_cv)
+    return out
+
+
+def _fit_one_cause(sim: PhysicalSimulation, causes: Sequence[CauseSpec], i: int, mm: MeasuredModes,
+                   fmax: float) -> PhysicalFit | None:
+    """Cause ``causes[i]``: its best variant, refitted on the full model when the reduced model disagreed."""
+    cause = causes[i]
+    progress("diagnosis: physical cause %d/%d, %s", i + 1, len(causes), cause.name)
+    best = _best_variant(sim, cause, mm, fmax)
+    if best is not None and not _agrees_with_full_model(sim, cause, best, mm, fmax):
+        log.warning("diagnosis: %s refitted on the full model (its reduced model disagreed)", cause.name)
+        best = _best_variant(_FullModel(sim), cause, mm, fmax)
+    return best
+
+
+def _cause_processes(n_causes: int, processes: int | None) -> int:
+    """Processes for ``n_causes`` causes (:func:`physical_causes`)."""
+    import multiprocessing
+    import threading
+
+    from ..threads import free_cores
+
+    if n_causes < 2 or "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
+        return 1
+    if processes is None:
+        if threading.active_count() > 1:      # forking beside another thread may copy a lock it holds
+            return 1
+        processes = free_cores()
+    return max(1, min(int(processes), n_causes))
+
+
+#: What the forked processes of :func:`_fit_causes_forked` read: (sim, causes, measured modes, fmax).
+_FORKED: tuple | None = None
+
+
+def _one_blas_thread() -> None:
+    """A forked process computes with one BLAS thread (the processes share the cores)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    threadpool_limits(1)
+
+
+def _fit_forked_cause(i: int) -> PhysicalFit | None:
+    sim, causes, mm, fmax = _FORKED  # type: ignore[misc]
+    return _fit_one_cause(sim, causes, i, mm, fmax)
+
+
+def _fit_causes_forked(sim: PhysicalSimulation, causes: Sequence[CauseSpec], mm: MeasuredModes, fmax: float,
+                       n: int) -> list[PhysicalFit | None]:
+    """:func:`_fit_one_cause` of every cause in ``n`` forked processes (they inherit the simulation and
+    its kept answers; only the fits come back), in the causes' order."""
+    import multiprocessing
+
+    global _FORKED
+    _FORKED = (sim, causes, mm, fmax)
+    try:
+        with multiprocessing.get_context("fork").Pool(n, initializer=_one_blas_thread) as pool:
+            return pool.map(_fit_forked_cause, range(len(causes)), chunksize=1)
+    finally:
+        _FORKED = None
 
 
 #: A fit's chi2 on the full model may differ from the reduced model's by this (absolute plus relative).
