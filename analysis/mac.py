@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["mac", "mac_matrix"]
+__all__ = ["mac", "mac_matrix", "MacReference"]
 
 
 def mac(a: np.ndarray, b: np.ndarray) -> float:
@@ -25,7 +25,25 @@ def mac(a: np.ndarray, b: np.ndarray) -> float:
 def mac_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """MAC between the columns of ``a`` (N, p) and ``b`` (N, q): a (p, q) matrix, 0 where a column
     is zero."""
-    num = np.abs(a.conj().T @ b) ** 2
-    den = np.outer(np.sum(np.abs(a) ** 2, axis=0), np.sum(np.abs(b) ** 2, axis=0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+    return MacReference(a).against(b)
+
+
+class MacReference:
+    """The columns of ``a`` (N, p) held for MAC against many other sets of columns (a search that
+    compares one measured set with thousands of candidates): its conjugate transpose and the columns'
+    energies are computed once."""
+
+    def __init__(self, a: np.ndarray) -> None:
+        a = np.asarray(a)
+        self.a_h = a.conj().T
+        self.energy = np.sum(np.abs(a) ** 2, axis=0)
+
+    def against(self, b: np.ndarray) -> np.ndarray:
+        """MAC between the held columns and the columns of ``b`` (N, q): a (p, q) matrix, 0 where a
+        column is zero."""
+        num = np.abs(self.a_h @ b) ** 2
+        den = np.outer(self.energy, np.sum(np.abs(b) ** 2, axis=0))
+        if np.all(den > 0):
+            return num / den
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)

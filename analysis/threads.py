@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
 __all__ = ["ENV_VAR", "WORK_PER_THREAD", "choose_threads", "requested_threads", "use_threads",
-           "command_scope", "set_threads", "blas_threads", "limits_blas_threads"]
+           "command_scope", "set_threads", "blas_threads", "limits_blas_threads", "free_cores"]
 
 #: environment variable with the user's thread count ("auto" or unset: chosen per problem)
 ENV_VAR = "IMPACTLAB_THREADS"
@@ -77,6 +77,16 @@ def _others_running() -> float:
     except (OSError, IndexError, ValueError):
         pass
     return max(0.0, max(load, running) - 1.0)
+
+
+def free_cores() -> int:
+    """Cores a computation that splits into independent processes may use: the user's thread count
+    (:func:`requested_threads`) when given, else the cores this process may run on less the other
+    programs running (at least one)."""
+    n = requested_threads()
+    if n is not None:
+        return n
+    return max(1, int(round(_cores() - _others_running())))
 
 
 def _parse(text: str, where: str) -> int | None:

@@ -169,3 +169,18 @@ def test_ranked_causes_are_the_full_models() -> None:
                 x.params[k] == pytest.approx(y.params[k], rel=1e-4)
         np.testing.assert_allclose(x.cv_per_mode, y.cv_per_mode, rtol=1e-2, atol=0.05)
         assert x.chi2_cv == pytest.approx(y.chi2_cv, rel=1e-2)
+
+
+def test_causes_fitted_in_forked_processes_are_the_same(fv: FrameVariants) -> None:
+    """The causes fitted in two forked processes give the very fits of one process (same order, same
+    numbers): a block of 2 kg on left:5 with the supports' rotational springs x 0.5."""
+    truth = [("added_mass", {"point": "left:5", "mass_kg": 2.0}),
+             ("support_stiffness", {"factor_translational": 1.0, "factor_rotational": 0.5})]
+    mm = _measured(fv, truth, 300.0)
+    names = ["mass_loading", "stiffness_shift"]
+    one = physical_causes(FrameVariants(None, OUTS, REFS), mm, 450.0, names, processes=1)
+    two = physical_causes(FrameVariants(None, OUTS, REFS), mm, 450.0, names, processes=2)
+    assert [f.cause for f in one] == [f.cause for f in two] and len(one) == 2
+    for a, b in zip(one, two):
+        assert a.params == b.params and a.free == b.free and a.chi2 == b.chi2
+        np.testing.assert_array_equal(a.cv_per_mode, b.cv_per_mode)

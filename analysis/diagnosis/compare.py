@@ -21,10 +21,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from ..frf import FRFSet
 from ..mac import mac as mac_of
+from ..peaks import find_peaks
 
 __all__ = [
     "BLOCK_LINES",

@@ -158,9 +158,7 @@ def diagnose(
     Raises :class:`analysis.inputs.InputError` for unreadable or inconsistent input and
     :class:`analysis.diagnosis.EffectError` for unknown effects. Neither input is modified.
     """
-    from ..bands import default_band
-    from ..inputs import InputError, detect_format, load_input
-    from .compare import common_points
+    from ..inputs import detect_format, load_input
 
     if isinstance(measured, (str, Path)):
         path = Path(measured)
@@ -169,6 +167,22 @@ def diagnose(
         measured = load_input(path, estimator=estimator)
         if band is None:
             band = "data"
+    # one BLAS thread count for every stage below (the FE model's eigenproblems, the fits): a small problem
+    # run with a thread per core costs more CPU than its work when other programs keep the cores busy
+    with blas_threads(float(measured.H.size)):
+        return _diagnose_set(measured, simulated, band=band, effects=effects, estimator=estimator, physical=physical,
+                             recording=recording, extra_noise_db=extra_noise_db, joint_simulation=joint_simulation,
+                             **rule)
+
+
+def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None, effects: Sequence[str] | None,
+                  estimator: str | None, physical: Any, recording: str | Path | None, extra_noise_db: dict | None,
+                  joint_simulation: JointSimulationFactory | None, **rule: Any) -> Diagnosis:
+    """:func:`diagnose` of a measurement read already (``recording``: the file when it is one)."""
+    from ..bands import default_band
+    from ..inputs import InputError, load_input
+    from .compare import common_points
+
     if _is_physical(simulated):
         physical, base = simulated, simulated.model(None, {})
     elif isinstance(simulated, ModalModel):
@@ -185,8 +199,7 @@ def diagnose(
             raise InputError(f"band {band!r}: give (lo, hi) in Hz, None or 'data'")
         lo, hi = default_band(measured)
         if physical is not None and hasattr(physical, "converged_below_hz"):
-            with blas_threads(float(measured.H.size)):      # eigenproblems of a few hundred DOFs
-                top = float(physical.converged_below_hz())
+            top = float(physical.converged_below_hz())
             if top < hi:
                 log.info("band %.4g-%.4g Hz: the simulation's mesh is converged only below %.4g Hz", lo, top, top)
                 hi = top

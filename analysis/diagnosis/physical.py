@@ -49,13 +49,14 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from itertools import combinations
 from typing import Protocol
 
 import numpy as np
 from scipy.optimize import least_squares, linear_sum_assignment
 
-from ..mac import mac_matrix
+from ..mac import MacReference
 from ..modal import ModalModel
 from ..progress import progress
 
@@ -181,10 +182,20 @@ class MeasuredModes:
         """The modes selected by the mask or indices ``keep``."""
         return MeasuredModes(self.freq_hz[keep], self.freq_std_hz[keep], self.shapes[:, keep])
 
-    @property
+    @cached_property
     def sigma(self) -> np.ndarray:
         """Relative frequency uncertainty per mode (model-form floor included)."""
         return np.hypot(self.freq_std_hz / self.freq_hz, FREQ_FLOOR)
+
+    @cached_property
+    def _mac(self) -> MacReference:
+        """The shapes held for MAC against every candidate (:func:`pair`)."""
+        return MacReference(self.shapes)
+
+    @cached_property
+    def _no_shape(self) -> np.ndarray:
+        """Mask of the modes known by their frequency only (a zero shape column)."""
+        return ~np.any(self.shapes != 0, axis=0)
 
 
 def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -194,8 +205,8 @@ def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, n
     macs = np.zeros(K)
     if f.size == 0:
         return idx, macs
-    M = mac_matrix(mm.shapes, P.astype(complex))
-    M[~np.any(mm.shapes != 0, axis=0)] = 1.0        # modes measured without shapes pair by frequency
+    M = mm._mac.against(P)
+    M[mm._no_shape] = 1.0                            # modes measured without shapes pair by frequency
     C = np.abs(np.log(f[None, :] / mm.freq_hz[:, None])) / 0.1 + (1.0 - M)
     rows, cols = linear_sum_assignment(C)
     idx[rows] = cols
@@ -209,8 +220,11 @@ def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
     idx, macs = pair(mm, f, P)
     r = np.empty((mm.freq_hz.size, 2))
     ok = idx >= 0
-    r[ok, 0] = (f[idx[ok]] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
-    r[~ok, 0] = RESIDUAL_CAP
+    if ok.all():
+        r[:, 0] = (f[idx] / mm.freq_hz - 1.0) / mm.sigma
+    else:
+        r[ok, 0] = (f[idx[ok]] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
+        r[~ok, 0] = RESIDUAL_CAP
     r[:, 1] = (1.0 - macs) / MAC_TOL
     return RESIDUAL_CAP * np.tanh(r / RESIDUAL_CAP)
 
@@ -350,21 +364,84 @@ def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, 
 
 
 def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
-                    names: Sequence[str] | None = None) -> list[PhysicalFit]:
+                    names: Sequence[str] | None = None, processes: int | None = None) -> list[PhysicalFit]:
     """Every cause (its best nested variant by leave-one-mode-out chi2) fitted; sorted by held-out
-    chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``)."""
-    fits: list[PhysicalFit] = []
+    chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``).
+
+    The causes are independent: with ``processes`` > 1 they are fitted in that many forked processes
+    (the same answers; a few tens of ms to start them). None: as many as there are free cores
+    (:func:`analysis.threads.free_cores`: the user's thread count when given), one when the process
+    may not fork (another Python thread running, a daemonic worker, no ``fork`` on the platform)."""
     causes = [c for c in sim.causes() if names is None or c.name in names]
-    for i, cause in enumerate(causes, start=1):
-        progress("diagnosis: physical cause %d/%d, %s", i, len(causes), cause.name)
-        best = _best_variant(sim, cause, mm, fmax)
-        if best is not None and not _agrees_with_full_model(sim, cause, best, mm, fmax):
-            log.warning("diagnosis: %s refitted on the full model (its reduced model disagreed)", cause.name)
-            best = _best_variant(_FullModel(sim), cause, mm, fmax)
-        if best is not None:
-            fits.append(best)
-    fits.sort(key=lambda x: x.chi2_cv)
-    return fits
+    n = _cause_processes(len(causes), processes)
+    if n > 1:
+        fits = _fit_causes_forked(sim, causes, mm, fmax, n)
+    else:
+        fits = [_fit_one_cause(sim, causes, i, mm, fmax) for i in range(len(causes))]
+    out = [f for f in fits if f is not None]
+    out.sort(key=lambda x: x.chi2_cv)
+    return out
+
+
+def _fit_one_cause(sim: PhysicalSimulation, causes: Sequence[CauseSpec], i: int, mm: MeasuredModes,
+                   fmax: float) -> PhysicalFit | None:
+    """Cause ``causes[i]``: its best variant, refitted on the full model when the reduced model disagreed."""
+    cause = causes[i]
+    progress("diagnosis: physical cause %d/%d, %s", i + 1, len(causes), cause.name)
+    best = _best_variant(sim, cause, mm, fmax)
+    if best is not None and not _agrees_with_full_model(sim, cause, best, mm, fmax):
+        log.warning("diagnosis: %s refitted on the full model (its reduced model disagreed)", cause.name)
+        best = _best_variant(_FullModel(sim), cause, mm, fmax)
+    return best
+
+
+def _cause_processes(n_causes: int, processes: int | None) -> int:
+    """Processes for ``n_causes`` causes (:func:`physical_causes`)."""
+    import multiprocessing
+    import threading
+
+    from ..threads import free_cores
+
+    if n_causes < 2 or "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
+        return 1
+    if processes is None:
+        if threading.active_count() > 1:      # forking beside another thread may copy a lock it holds
+            return 1
+        processes = free_cores()
+    return max(1, min(int(processes), n_causes))
+
+
+#: What the forked processes of :func:`_fit_causes_forked` read: (sim, causes, measured modes, fmax).
+_FORKED: tuple | None = None
+
+
+def _one_blas_thread() -> None:
+    """A forked process computes with one BLAS thread (the processes share the cores)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    threadpool_limits(1)
+
+
+def _fit_forked_cause(i: int) -> PhysicalFit | None:
+    sim, causes, mm, fmax = _FORKED  # type: ignore[misc]
+    return _fit_one_cause(sim, causes, i, mm, fmax)
+
+
+def _fit_causes_forked(sim: PhysicalSimulation, causes: Sequence[CauseSpec], mm: MeasuredModes, fmax: float,
+                       n: int) -> list[PhysicalFit | None]:
+    """:func:`_fit_one_cause` of every cause in ``n`` forked processes (they inherit the simulation and
+    its kept answers; only the fits come back), in the causes' order."""
+    import multiprocessing
+
+    global _FORKED
+    _FORKED = (sim, causes, mm, fmax)
+    try:
+        with multiprocessing.get_context("fork").Pool(n, initializer=_one_blas_thread) as pool:
+            return pool.map(_fit_forked_cause, range(len(causes)), chunksize=1)
+    finally:
+        _FORKED = None
 
 
 #: A fit's chi2 on the full model may differ from the reduced model's by this (absolute plus relative).

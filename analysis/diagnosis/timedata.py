@@ -30,7 +30,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import find_peaks
+
+from ..peaks import find_peaks
 
 __all__ = ["pulse_bounds", "detect_double_hit", "detect_overload", "detect_input_noise",
            "detect_amplitude_nonlinearity", "diagnose_hits", "Hits", "TimeEffect", "TIME_EFFECTS", "FORCE_WINDOW_S",
