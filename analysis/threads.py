@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
 __all__ = ["ENV_VAR", "WORK_PER_THREAD", "choose_threads", "requested_threads", "use_threads",
-           "command_scope", "set_threads", "blas_threads", "limits_blas_threads", "free_cores"]
+           "command_scope", "set_threads", "blas_threads", "limits_blas_threads", "worker_processes"]
 
 #: environment variable with the user's thread count ("auto" or unset: chosen per problem)
 ENV_VAR = "IMPACTLAB_THREADS"
@@ -79,14 +79,18 @@ def _others_running() -> float:
     return max(0.0, max(load, running) - 1.0)
 
 
-def free_cores() -> int:
-    """Cores a computation that splits into independent processes may use: the user's thread count
-    (:func:`requested_threads`) when given, else the cores this process may run on less the other
-    programs running (at least one)."""
+def worker_processes() -> int:
+    """Processes a computation split into independent tasks may use: the user's thread count
+    (:func:`requested_threads`) when given, else every core this process may run on.
+
+    Unlike BLAS threads, which wait for each other at every step and lose far more than they gain
+    when another program holds a core, independent processes each progress on whatever share of a
+    core they get and never spend CPU waiting: on a busy machine two processes win the user's work a
+    larger share of the cores, on an idle one they use both."""
     n = requested_threads()
     if n is not None:
         return n
-    return max(1, int(round(_cores() - _others_running())))
+    return _cores()
 
 
 def _parse(text: str, where: str) -> int | None:

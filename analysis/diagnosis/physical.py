@@ -369,8 +369,8 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
     chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``).
 
     The causes are independent: with ``processes`` > 1 they are fitted in that many forked processes
-    (the same answers; a few tens of ms to start them). None: as many as there are free cores
-    (:func:`analysis.threads.free_cores`: the user's thread count when given), one when the process
+    (the same answers; a few tens of ms to start them). None: one per core
+    (:func:`analysis.threads.worker_processes`: the user's thread count when given), one when the process
     may not fork (another Python thread running, a daemonic worker, no ``fork`` on the platform)."""
     causes = [c for c in sim.causes() if names is None or c.name in names]
     n = _cause_processes(len(causes), processes)
@@ -400,14 +400,14 @@ def _cause_processes(n_causes: int, processes: int | None) -> int:
     import multiprocessing
     import threading
 
-    from ..threads import free_cores
+    from ..threads import worker_processes
 
     if n_causes < 2 or "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
         return 1
     if processes is None:
         if threading.active_count() > 1:      # forking beside another thread may copy a lock it holds
             return 1
-        processes = free_cores()
+        processes = worker_processes()
     return max(1, min(int(processes), n_causes))
 
 
