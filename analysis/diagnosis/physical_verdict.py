@@ -62,7 +62,7 @@ from .physical import (
 )
 from .physical_pairs import OnTop, fit_pair, refit_on_top
 
-__all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes"]
+__all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes", "compared_band_hz"]
 
 #: Candidate modes are computed up to this multiple of the highest measured mode used (modes that may pair).
 FMAX_FACTOR = 1.5
@@ -272,6 +272,18 @@ def _on_top_enough(first: PhysicalFit, cv_pair: np.ndarray) -> tuple[float, floa
     over = gain_db(first.cv_per_mode, cv_pair)
     removed = float(np.sum(first.cv_per_mode) - np.sum(cv_pair))
     return over, removed, bool(over >= MIN_GAIN_DB and removed >= QUIET_CHI2)
+
+
+def compared_band_hz(doc: dict, freq_hz: np.ndarray) -> float:
+    """The upper end (Hz) of the band in which a physical cause's modes were held against the measured
+    ones: halfway (geometric) between the highest measured mode compared (``doc["measured_modes_hz"]``,
+    the lowest ``MAX_MODES`` well-determined ones) and the next mode ``freq_hz`` of the extended
+    simulation above it; inf when it has none. Above it the cause's modes are the catalogue's model of
+    the change, unchecked (a point mass for a block on its joint springs), and an FRF-level effect
+    fitted there on top (a damping change) would absorb their misplacement."""
+    top = max(doc.get("measured_modes_hz") or [np.inf])
+    above = np.sort(freq_hz[freq_hz > 1.01 * top])
+    return float(np.sqrt(top * above[0])) if np.isfinite(top) and above.size else float("inf")
 
 
 def _removed_text(removed: float) -> str:
