@@ -395,8 +395,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     significant single cause (and, when that gives no adequate pair, the next; when none is significant,
     the best by held-out gain), the other causes; the best pair by nested held-out error, judged like a
     single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of
-    those only. Pairs are
-    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`)."""
+    those only. Pairs are compared by nested held-out chi2 plus their choices' freedom
+    (:func:`_choice_penalty`)."""
     if firsts is None:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
