@@ -263,15 +263,18 @@ def _leaves_evidence(best: dict, judge: _Judge) -> bool:
     return bool(np.sum(cv[judge._counted(cv)]) >= QUIET_CHI2)
 
 
-def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray) -> tuple[float, float, bool]:
+def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float) -> tuple[float, float, bool]:
     """The pair's nested held-out chi2 per mode ``cv_pair`` against the first cause's alone ``cv_first``,
     cross-validated alike (leave one mode out, the choices kept and every continuous parameter refitted
-    in each fold): (gain in dB, chi2 removed, enough). Enough: at least ``MIN_GAIN_DB`` better (a cause
-    that only bends to fit some modes does not predict the left-out ones) and at least ``QUIET_CHI2``
-    removed (one mode predicted one standard deviation better, the model-form floor included: a small
-    change on top of a large one, joint springs beside a block, leaves little, but that little is real)."""
+    in each fold): (gain in dB, chi2 removed net of ``freedom``, enough). ``freedom`` (chi2 units) is what
+    the pair chose on all modes, which no fold re-does: the second cause among those refined and its own
+    choice, 2 ln(number of options) each (:func:`_choice_penalty`). Enough: at least ``MIN_GAIN_DB``
+    better (a cause that only bends to fit some modes does not predict the left-out ones) and, net of that
+    freedom, at least ``QUIET_CHI2`` removed (one mode predicted one standard deviation better, the
+    model-form floor included: a small change on top of a large one, joint springs beside a block, leaves
+    little, but that little is real)."""
     over = gain_db(cv_first, cv_pair)
-    removed = float(np.sum(cv_first) - np.sum(cv_pair))
+    removed = float(np.sum(cv_first) - np.sum(cv_pair) - freedom)
     return over, removed, bool(over >= MIN_GAIN_DB and removed >= QUIET_CHI2)
 
 
@@ -408,11 +411,13 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         # the first cause alone, cross-validated as the pairs are (its choice kept in every fold): a pair is
         # not credited with what searching the choice again in a fold costs the single cause
         alone = fit_pair(sim, [specs[fa.cause]], [fa], mm, fmax).cv_per_mode
-        for fb in _seconds(sim, specs, mm, fmax, fa, names):
+        seconds = _seconds(sim, specs, mm, fmax, fa, names)
+        for fb in seconds:
             fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax)
             two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
             c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
-            c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(alone, two.cv_per_mode)
+            c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
+                alone, two.cv_per_mode, 2.0 * float(np.log(len(seconds))) + _choice_penalty(specs[fb.cause]))
             c["significant"] = bool(c["significant"] and enough)
             c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
                              "error_after_db": c["error_after_db"]} for name, p in two.changes]
