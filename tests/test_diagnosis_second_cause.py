@@ -83,3 +83,23 @@ def test_compared_band_ends_between_the_last_compared_mode_and_the_next() -> Non
     assert compared_band_hz(doc, np.array([35.1, 281.1, 424.4, 449.9, 467.1])) == pytest.approx(np.sqrt(424.5 * 449.9))
     assert compared_band_hz(doc, np.array([35.1, 281.1, 424.4])) == float("inf")
     assert compared_band_hz({}, np.array([35.1, 281.1])) == float("inf")
+
+
+def test_a_second_cause_must_remove_held_out_chi2_net_of_what_the_pair_chose() -> None:
+    """The rule on per-mode held-out chi2 (first alone, pair): 3 dB better and QUIET_CHI2 removed net of the
+    pair's freedom. A member's mass leaving 1.4 on ten modes, cut to 0.33 by a second cause chosen among
+    three (6 dB better) is not enough; joint springs cutting a block's 5.5 to 1.8 are."""
+    from analysis.diagnosis.physical_verdict import _on_top_enough
+
+    three = 2 * np.log(3)
+    alone = np.array([0.03, 0.01, 0.0, 0.0, 0.08, 0.0, 0.21, 0.06, 0.1, 0.91])
+    pair = np.array([0.05, 0.0, 0.03, 0.0, 0.03, 0.0, 0.0, 0.04, 0.1, 0.07])
+    over, removed, enough = _on_top_enough(alone, pair, three)
+    assert over == pytest.approx(10 * np.log10(alone.sum() / pair.sum())) and over > 6
+    assert removed == pytest.approx(alone.sum() - pair.sum() - three) and not enough
+    assert _on_top_enough(alone, pair, 0.0)[2]          # without the freedom it would pass
+    block = np.array([0.08, 0.04, 2.39, 0.03, 0.06, 1.03, 1.61, 0.03, 0.01, 0.24])
+    joint = np.array([0.08, 0.01, 0.0, 0.0, 0.0, 0.0, 1.57, 0.02, 0.01, 0.15])
+    assert _on_top_enough(block, joint, three)[2]
+    short = _on_top_enough(block, joint * 2.2, 0.0)      # removes 1.5 but only 1.3 dB better
+    assert short[1] >= 1.0 and short[0] < 3.0 and not short[2]
