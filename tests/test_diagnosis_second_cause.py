@@ -66,8 +66,8 @@ def test_joint_springs_beside_a_block_are_named_on_top_of_it() -> None:
 
 
 def test_a_block_alone_with_scattered_modes_gets_no_second_cause() -> None:
-    """The block alone, its modes scattered by their stated uncertainty: the block leaves more than
-    QUIET_CHI2 of held-out chi2, so a second cause is tried on top, and none is named (the best pair does
+    """The block alone, its modes scattered by their stated uncertainty: the block leaves more held-out chi2
+    than a pair needs to remove, so a second cause is tried on top, and none is named (the best pair does
     not predict the left-out modes better than the block alone)."""
     out = _verdict(*_block_frame(1.0, scatter_seed=1))
     assert out.verdict == "added_mass"

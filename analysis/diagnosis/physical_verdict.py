@@ -218,7 +218,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         # adequate, yet the held-out modes may keep a small real mismatch (joint springs beside a block): a
         # second physical cause is named with it only when the pair predicts the held-out modes clearly
         # better (forward selection, nested: :func:`_on_top_enough`); not tried when it cannot
-        firsts = [best] if _leaves_evidence(best, judge) else []
+        firsts = [best] if pairs_ok and _leaves_evidence(sim, specs, mm, fmax, best, causes) else []
     if pairs_ok and firsts != []:
         two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
         if two is not None:
@@ -254,13 +254,25 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     return out
 
 
-def _leaves_evidence(best: dict, judge: _Judge) -> bool:
-    """Could a second physical cause be named on top of the named single cause ``best``? Only when its
-    held-out chi2 summed over the counted modes reaches ``QUIET_CHI2``: a second cause is named only when
-    the pair removes that much held-out chi2 more than ``best`` alone (:func:`_on_top_enough`), which it
-    cannot do when ``best`` leaves less (the same noise scale as a first cause below both gates)."""
-    cv = best["_fit"].cv_per_mode
-    return bool(np.sum(cv[judge._counted(cv)]) >= QUIET_CHI2)
+def _leaves_evidence(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, best: dict,
+                     names: Sequence[str] | None) -> bool:
+    """Could a second physical cause be named on top of the named single cause ``best``? Only when ``best``
+    alone, cross-validated as the pairs are (:func:`_alone_cv`), leaves at least ``QUIET_CHI2`` plus the
+    least freedom of a pair, 2 ln(number of second causes refined): no pair can remove more than that
+    (:func:`_on_top_enough`), so the search is skipped (the same noise scale as a first cause below both gates)."""
+    others = [c for c in sim.causes() if c.name != best["effect"] and (names is None or c.name in names)]
+    n = min(N_SECOND, len(others))
+    return n > 0 and float(np.sum(_alone_cv(sim, specs, mm, fmax, best))) >= QUIET_CHI2 + 2.0 * float(np.log(n))
+
+
+def _alone_cv(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict) -> np.ndarray:
+    """Held-out chi2 per mode of the single cause ``first`` cross-validated as a pair is (:func:`fit_pair`:
+    its choice kept in every fold, its parameters refitted), kept in ``first["_alone_cv"]``: a pair is not
+    credited with what searching the choice again in a fold costs the single cause."""
+    if "_alone_cv" not in first:
+        fa: PhysicalFit = first["_fit"]
+        first["_alone_cv"] = fit_pair(sim, [specs[fa.cause]], [fa], mm, fmax).cv_per_mode
+    return first["_alone_cv"]
 
 
 def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float) -> tuple[float, float, bool]:
@@ -408,9 +420,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     for first in firsts:
         fa: PhysicalFit = first["_fit"]
         progress("diagnosis: second cause on top of %s", fa.cause)
-        # the first cause alone, cross-validated as the pairs are (its choice kept in every fold): a pair is
-        # not credited with what searching the choice again in a fold costs the single cause
-        alone = fit_pair(sim, [specs[fa.cause]], [fa], mm, fmax).cv_per_mode
+        alone = _alone_cv(sim, specs, mm, fmax, first)
         seconds = _seconds(sim, specs, mm, fmax, fa, names)
         for fb in seconds:
             fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax)
