@@ -9,7 +9,8 @@ with *both* causes refitted in each fold (nested: the first cause never sees the
 The first cause's choice (the node of a mass, a member) was made while the second change was in the data;
 it is made again with the second cause applied (:func:`refit_on_top`) before the pair is refined.
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
-held-out modes better than the first cause alone by at least ``MIN_GAIN_DB``.
+held-out modes better than the first cause alone by at least ``MIN_GAIN_DB`` and removes at least
+``QUIET_CHI2`` of their chi2 (:func:`analysis.diagnosis.physical_verdict._on_top_enough`).
 """
 from __future__ import annotations
 

@@ -259,21 +259,30 @@ def _frf_on_top(ctx: FitContext, physical: PhysicalSimulation, outcome: Any, nam
                 min_gain_db: float, noise_db: float, none_margin_db: float) -> tuple[list, FRFSet] | None:
     """A physical cause that explains the modes but leaves the FRFs above the noise, completed by one
     FRF-level effect (a damping change, a sensor): the catalogue fitted on top of the physical cause's
-    model with the same cross-validation and rule (held-out gain at least ``min_gain_db``); named as a
-    pair when the pair is adequate (the FRF error within ``none_margin_db`` of the noise or
+    model with the same cross-validation and rule (held-out gain at least ``min_gain_db``) on the lines up
+    to where the physical cause's modes were compared with the measured ones
+    (:func:`analysis.diagnosis.physical_verdict.compared_band_hz`); named as a pair when the pair is
+    adequate on every line (the FRF error within ``none_margin_db`` of the noise or
     ``ADEQUATE_FRACTION`` of its excess removed). None otherwise."""
     from .physical import ADEQUATE_FRACTION
+    from .physical_verdict import compared_band_hz
 
     first = outcome.on_top
     fit = first["_fit"]
     base = physical.model(fit.cause, fit.params)
     m, w = ctx.measured, ctx.weights
-    ctx2 = FitContext(measured=m, base=base, weights=w, sim=first["_extended"], prior=ctx.prior)
+    # fitted where the physical cause's modes were compared with the measured ones, judged on every line
+    hi = min(compared_band_hz(outcome.doc, base.freq_hz), float(m.freq_hz[-1]))
+    lines = m.freq_hz <= hi
+    ctx2 = FitContext(measured=m.band(float(m.freq_hz[0]), hi), base=base, weights=w[..., lines],
+                      sim=first["_extended"].band(float(m.freq_hz[0]), hi), prior=ctx.prior)
     more, _ = _stage(ctx2, names, z_min, min_gain_db)
     sig = [c for c in more if c["significant"] and c["gain_db"] >= min_gain_db]
     if not sig:
         return None
     nxt = sig[0]
+    nxt["_extended"] = predict(base, m.freq_hz, m.quantity, ctx.effects({"effect": nxt["effect"], **nxt["parameters"]}),
+                               outputs=m.outputs, references=m.references)
     after = typical_error_db(m, nxt["_extended"].H, w)
     before = outcome.error_before_db
     excess = 10 ** (before / 10) - 10 ** (noise_db / 10)
