@@ -72,3 +72,51 @@ def test_coupling_form_equals_point_form_and_bad_input_is_named():
                       outputs=model.outputs, references=model.references)
     with pytest.raises(EffectError, match="output_shapes"):
         predict(bare, f, "receptance", [{"effect": "local_resonator", "point": "2", "frequency_hz": 30.0}])
+
+
+def _measured(H: np.ndarray, f: np.ndarray, seed: int, relative: float = 0.005):
+    """The exact receptances (force at mass 1) as a measurement with complex noise of ``relative`` x |H|."""
+    from analysis.frf import FRFSet
+
+    rng = np.random.default_rng(seed)
+    noise = (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape)) / np.sqrt(2)
+    return FRFSet(freq_hz=f, H=(H + relative * np.abs(H) * noise)[:, None, :], quantity="receptance",
+                  outputs=("1", "2", "3"), references=("1",))
+
+
+def test_fit_ties_the_coupling_to_the_shapes_at_the_point():
+    """A spring-mass at mass 3 of the chain (the exact 4-DOF solution, noisy): the fit names the point and
+    recovers the mass and its own frequency; the coupling is the shapes there (no free coupling needed)."""
+    from analysis.diagnosis.compare import line_weights
+    from analysis.diagnosis.effects import FitContext, fit_local_resonator
+
+    M, K, C, model = _chain(0.005)
+    f = np.linspace(5.0, 120.0, 800)
+    H, _, _ = _exact(M, K, C, 2, 0.08, 45.0, 0.01, f)
+    meas = _measured(H, f, 3)
+    ctx = FitContext(measured=meas, base=model, weights=line_weights(meas), sim=predict(model, f, "receptance"))
+    got = fit_local_resonator(ctx, np.ones(f.size, bool))
+    assert "coupling" not in got and got["point"] == "3", got
+    assert got["frequency_hz"] == pytest.approx(45.0, rel=0.01)
+    assert got["mass_kg"] == pytest.approx(0.08, rel=0.05)
+    assert got["mass_ratio"] == pytest.approx(0.08 * np.max(model.meta["output_shapes"][2] ** 2), rel=0.05)
+
+
+def test_a_heavier_sensor_is_a_mass_not_a_resonator():
+    """A mass at output 2 (the exact chain with that mass): named ``mass_loading`` at that output with its
+    mass; the resonator, tied to the same shapes, gains less on held-out lines."""
+    from analysis.diagnosis.verdict import diagnose_frfs
+
+    M, K, C, model = _chain(0.005)
+    f = np.linspace(5.0, 120.0, 800)
+    Ml = M.copy()
+    Ml[1, 1] += 0.1
+    H = np.empty((3, f.size), complex)
+    for k, w in enumerate(2 * np.pi * f):
+        H[:, k] = np.linalg.solve(K - w ** 2 * Ml + 1j * w * C, np.eye(3)[:, 0])
+    d = diagnose_frfs(_measured(H, f, 4), model, effects=["mass_loading", "local_resonator"])
+    assert d.verdict == "mass_loading", [c["evidence"] for c in d.causes]
+    assert d.named[0]["parameters"]["sensor"] == "2"
+    assert d.named[0]["parameters"]["mass_kg"] == pytest.approx(0.1, rel=0.05)
+    gain = {c["effect"]: c["gain_db"] for c in d.causes}
+    assert gain["local_resonator"] < gain["mass_loading"]

@@ -57,7 +57,6 @@ from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
 from ..modal import ModalModel, pole_from_fz
-from .compare import noise_level
 from .effect_types import Effect, EffectError, FitContext, shapes_at_references
 from .effect_types import check_positive as _check_positive
 from .effect_types import fit_scalar as _fit_scalar
@@ -469,6 +468,8 @@ def _first_order_mass(ctx: FitContext, fit: dict, wn: np.ndarray, phi: np.ndarra
 #: ``RESONATOR_MASS_RATIO`` (the lower and upper bound).
 RESONATOR_SCREEN_RATIOS = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3)
 RESONATOR_MASS_RATIO = (1e-5, 1.0)
+#: how much smaller (dB) the cost of a free coupling must be than the attachment's at an output to be kept
+RESONATOR_FREE_GAIN_DB = 0.5
 
 
 def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
@@ -482,9 +483,8 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     outputs couples through a shape that is not measured: the coupling to each mode is then free, refined
     from the two best attachments at the outputs and from the best first-order coupling of an extra mode
     (:func:`_initial_coupling`). The free coupling is returned (with ``near``, the output whose shape it
-    resembles most) only when its cost is smaller than the attachment's by more than the noise explains
-    for its ``n - 1`` further parameters (mean plus three standard deviations of chi-square); else the
-    attachment (``point``, ``mass_kg``)."""
+    resembles most) only when its ``n - 1`` further parameters lower the cost by
+    :data:`RESONATOR_FREE_GAIN_DB` or more; else the attachment (``point``, ``mass_kg``)."""
     phi = np.asarray(ctx.base.meta["output_shapes"], float)
     wn = np.abs(np.asarray(ctx.base.poles, complex))
     outs = list(ctx.base.outputs)
@@ -551,10 +551,10 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
             best = (c, res.x)
     assert best is not None
     c_tied, p_tied, x_tied = tied[0]
-    # noise of variance s2 per (complex) line: n - 1 more parameters lower the cost by s2 / 2 chi2(n - 1)
-    k = max(wn.size - 1, 1)
-    s2 = 10 ** (max(noise_level(ctx.measured, ctx.weights).values()) / 10)
-    if c_tied - best[0] <= s2 / 2 * (k + 3 * np.sqrt(2 * k)):
+    # the n - 1 further parameters of the free coupling must lower the cost as much as any effect must lower
+    # the error to count (the verdict's 0.5 dB): the error left holds the effect's own approximation (the
+    # damping by modal projection), which more parameters always reduce a little
+    if 10 * np.log10(c_tied / max(best[0], 1e-300)) < RESONATOR_FREE_GAIN_DB:
         out = spec(p_tied, x_tied)
         out["mass_ratio"] = float(out["mass_kg"] * np.max(phi[p_tied] ** 2))
     else:
