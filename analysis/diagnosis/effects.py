@@ -24,9 +24,10 @@ name                     kind   model extension
 ``mass_loading``         modal  a mass ``mass_kg`` at each output sensor: omega_r^2 / (1 + mu_r),
                                 ``mu_r = m sum_o phi_or^2`` (mass-normalised shapes at the
                                 outputs, first-order Rayleigh quotient), residues / sqrt(1+mu)^(1+p)
-``local_resonator``      modal  a spring-mass ``frequency_hz``, ``zeta`` attached through ``coupling``
-                                (``sqrt(m) phi_r`` at its point, per mode) or at output ``point`` with
-                                ``mass_kg``: re-analysed with the modes (:mod:`.resonator`)
+``local_resonator``      modal  a spring-mass ``frequency_hz``, ``zeta`` attached at output ``point`` with
+                                ``mass_kg`` (coupling ``sqrt(m) phi_r`` there, the driving point's shapes)
+                                or, between the outputs, through a free ``coupling`` per mode:
+                                re-analysed with the modes (:mod:`.resonator`)
 ``missing_mode``         modal  an extra mode ``freq_hz``, ``zeta``, complex ``residue[o][r]``
                                 (``[re, im]`` pairs, model units x rad/s)
 ``residual_modes``       frf    ``H += UR (j w)^q + LR (j w)^q / w^2`` (q of the FRF): the modes
@@ -517,14 +518,14 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
             extra.append({"freq_hz": fc, "zeta": zc, "residue": Rc})
     starts = []
     for mode in extra:
-        for p in np.flatnonzero(load > 0):
-            masses = [r / load[p] for r in RESONATOR_SCREEN_RATIOS]
-            m1 = _first_order_mass(ctx, mode, wn, phi, int(p))
-            if m1 is not None and RESONATOR_MASS_RATIO[0] < m1 * load[p] < RESONATOR_MASS_RATIO[1]:
+        for q in [int(i) for i in np.flatnonzero(load > 0)]:
+            masses = [r / load[q] for r in RESONATOR_SCREEN_RATIOS]
+            m1 = _first_order_mass(ctx, mode, wn, phi, q)
+            if m1 is not None and RESONATOR_MASS_RATIO[0] < m1 * load[q] < RESONATOR_MASS_RATIO[1]:
                 masses.append(m1)
             for m in masses:
                 x0 = np.array([mode["freq_hz"], np.log(mode["zeta"]), np.log(m)])
-                starts.append((float(np.sum(resid(spec(int(p), x0)) ** 2)), int(p), x0))
+                starts.append((float(np.sum(resid(spec(q, x0)) ** 2)), q, x0))
     if not starts:
         raise EffectError("local_resonator: no output with a mode shape to attach a resonator to")
     df = ctx.measured.line_spacing_hz
@@ -536,9 +537,9 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
                             x_scale=[df, 0.3, 0.3], method="trf", max_nfev=60)
         tied.append((float(np.sum(res.fun ** 2)), p, res.x))
     tied.sort(key=lambda t: t[0])
-    first = [g0 for mode in extra if (g0 := _initial_coupling(ctx, mode, wn, phi)) is not None]
+    first = [(mode, g0) for mode in extra if (g0 := _initial_coupling(ctx, mode, wn, phi)) is not None]
     first_x = [np.concatenate([[mode["freq_hz"], np.log(mode["zeta"])], np.clip(g0, -0.5, 0.5)])
-               for mode, g0 in zip(extra, first)]
+               for mode, g0 in first]
     free_starts = [np.concatenate([x[:2], np.sqrt(np.exp(x[2])) * phi[p]]) for _, p, x in tied[:2]]
     free_starts += sorted(first_x, key=lambda x: float(np.sum(resid(free(x)) ** 2)))[:1]
     fb = ([lo, np.log(1e-4)] + [-1.0] * wn.size, [hi, np.log(0.3)] + [1.0] * wn.size)
