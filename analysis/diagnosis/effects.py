@@ -24,10 +24,9 @@ name                     kind   model extension
 ``mass_loading``         modal  a mass ``mass_kg`` at each output sensor: omega_r^2 / (1 + mu_r),
                                 ``mu_r = m sum_o phi_or^2`` (mass-normalised shapes at the
                                 outputs, first-order Rayleigh quotient), residues / sqrt(1+mu)^(1+p)
-``local_resonator``      modal  a spring-mass ``frequency_hz``, ``zeta`` attached at output ``point`` with
-                                ``mass_kg`` (coupling ``sqrt(m) phi_r`` there, the driving point's shapes)
-                                or, between the outputs, through a free ``coupling`` per mode:
-                                re-analysed with the modes (:mod:`.resonator`)
+``local_resonator``      modal  a spring-mass ``frequency_hz``, ``zeta`` attached through ``coupling``
+                                (``sqrt(m) phi_r`` at its point, per mode) or at output ``point`` with
+                                ``mass_kg``: re-analysed with the modes (:mod:`.resonator`)
 ``missing_mode``         modal  an extra mode ``freq_hz``, ``zeta``, complex ``residue[o][r]``
                                 (``[re, im]`` pairs, model units x rad/s)
 ``residual_modes``       frf    ``H += UR (j w)^q + LR (j w)^q / w^2`` (q of the FRF): the modes
@@ -442,128 +441,54 @@ def _initial_coupling(ctx: FitContext, fit: dict, wn: np.ndarray, phi: np.ndarra
     return np.asarray(g, float)
 
 
-def _first_order_mass(ctx: FitContext, fit: dict, wn: np.ndarray, phi: np.ndarray, point: int) -> float | None:
-    """The resonator's mass (kg) at output ``point`` from an extra mode's fitted residues (``missing_mode``'s),
-    to first order: attached through ``g_r = sqrt(m) phi_pr`` its mode has the shape
-    ``psi_o = sqrt(m) a_o``, ``a_o = sum_r phi_or phi_pr w_a^2 / (w_r^2 - w_a^2)``, so the driving-point
-    column of its residues is ``psi_o psi_dp = m a_o a_dp``: m by least squares. None without a driving
-    point or when the pattern does not fit a positive mass."""
-    outs = list(ctx.base.outputs)
-    if not ctx.base.references or ctx.base.references[0] not in outs:
-        return None
-    wa = 2 * np.pi * fit["freq_hz"]
-    lam = complex(-fit["zeta"] * wa, wa * np.sqrt(1 - fit["zeta"] ** 2))
-    R = np.asarray(fit["residue"], float)
-    Rc = (R[..., 0] + 1j * R[..., 1]) / lam ** QUANTITY_POWER[ctx.base.quantity]
-    dp = outs.index(ctx.base.references[0])
-    col = np.real(2j * lam.imag * Rc[:, 0])             # psi_o psi_dp
-    a = phi @ (phi[point] * wa ** 2 / (wn ** 2 - wa ** 2))
-    basis = a * a[dp]
-    nb = float(basis @ basis)
-    m = float(col @ basis) / nb if nb > 0 else 0.0
-    return m if m > 0 else None
-
-
-#: mass ratios ``m max_r phi_pr^2`` (the resonator's mass over the modal mass of the mode it moves most)
-#: on which a resonator's mass is screened at each start; the least-squares refinement is free within
-#: ``RESONATOR_MASS_RATIO`` (the lower and upper bound).
-RESONATOR_SCREEN_RATIOS = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3)
-RESONATOR_MASS_RATIO = (1e-5, 1.0)
-#: how much smaller (dB) the cost of a free coupling must be than the attachment's at an output to be kept
-RESONATOR_FREE_GAIN_DB = 0.5
-
-
 def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
-    """A spring-mass attached at one point: own frequency, damping and coupling by least squares on ``lines``.
-
-    Attached at an output, its coupling to every mode is the shape there, ``g_r = sqrt(m) phi_pr`` (the
-    driving point's shapes): one point and one mass set the shifts of all modes and the visibility of its
-    own mode. Starts: ``missing_mode``'s extra mode and the frequencies between each pair of in-band
-    modes; at each output the mass is screened on :data:`RESONATOR_SCREEN_RATIOS` and from the extra mode's
-    residues (first order, :func:`_first_order_mass`); the three best are refined. A resonator between the
-    outputs couples through a shape that is not measured: the coupling to each mode is then free, refined
-    from the two best attachments at the outputs and from the best first-order coupling of an extra mode
-    (:func:`_initial_coupling`). The free coupling is returned (with ``near``, the output whose shape it
-    resembles most) only when its ``n - 1`` further parameters lower the cost by
-    :data:`RESONATOR_FREE_GAIN_DB` or more; else the attachment (``point``, ``mass_kg``)."""
+    """The resonator's frequency, damping and coupling to every mode by least squares on ``lines``, started
+    from the extra modes ``missing_mode`` finds at the largest residuals (first-order coupling from their
+    shapes at the outputs); the start with the smaller cost wins."""
     phi = np.asarray(ctx.base.meta["output_shapes"], float)
     wn = np.abs(np.asarray(ctx.base.poles, complex))
-    outs = list(ctx.base.outputs)
     f = ctx.measured.freq_hz[lines]
     Hm, sw = ctx.measured.H[..., lines], np.sqrt(ctx.weights[..., lines])
     lo, hi = f[0] / 1.05, f[-1] * 1.05
-    inband = (wn >= 2 * np.pi * lo) & (wn <= 2 * np.pi * hi)
-    load = np.max(phi[:, inband] ** 2, axis=1) if inband.any() else np.max(phi ** 2, axis=1)
 
-    def spec(point: int, x: np.ndarray) -> dict:
-        return {"effect": "local_resonator", "frequency_hz": float(x[0]), "zeta": float(np.exp(x[1])),
-                "point": outs[point], "mass_kg": float(np.exp(x[2]))}
-
-    def free(x: np.ndarray) -> dict:
+    def spec(x: np.ndarray) -> dict:
         return {"effect": "local_resonator", "frequency_hz": float(x[0]), "zeta": float(np.exp(x[1])),
                 "coupling": [float(v) for v in x[2:]]}
 
-    def resid(sp: dict) -> np.ndarray:
-        e = (Hm - predict(ctx.base, f, ctx.measured.quantity, ctx.effects(sp)).H) * sw
+    def resid(x: np.ndarray) -> np.ndarray:
+        e = (Hm - predict(ctx.base, f, ctx.measured.quantity, ctx.effects(spec(x))).H) * sw
         return np.concatenate([e.real.ravel(), e.imag.ravel()])
 
     mm = fit_missing_mode(ctx, lines)
-    modes = np.sort(wn[inband]) / (2 * np.pi)
-    extra = []                                          # (frequency, damping, residues) of an extra mode
-    for fc in [mm["freq_hz"]] + list(np.sqrt(modes[:-1] * modes[1:])):   # and between each pair of modes
-        if lo < fc < hi:
-            zc, Rc = min(((float(np.sum(r ** 2)), z, R) for z in (0.005, 0.01, 0.02, 0.05)
-                          for r, R in [_missing_mode_residuals(ctx, lines, np.array([fc, z]))]),
-                         key=lambda t: t[0])[1:]
-            extra.append({"freq_hz": fc, "zeta": zc, "residue": Rc})
+    inband = np.sort(wn[(wn >= 2 * np.pi * lo) & (wn <= 2 * np.pi * hi)]) / (2 * np.pi)
+    freqs = [mm["freq_hz"]] + list(np.sqrt(inband[:-1] * inband[1:]))   # and between each pair of modes
     starts = []
-    for mode in extra:
-        for q in [int(i) for i in np.flatnonzero(load > 0)]:
-            masses = [r / load[q] for r in RESONATOR_SCREEN_RATIOS]
-            m1 = _first_order_mass(ctx, mode, wn, phi, q)
-            if m1 is not None and RESONATOR_MASS_RATIO[0] < m1 * load[q] < RESONATOR_MASS_RATIO[1]:
-                masses.append(m1)
-            for m in masses:
-                x0 = np.array([mode["freq_hz"], np.log(mode["zeta"]), np.log(m)])
-                starts.append((float(np.sum(resid(spec(q, x0)) ** 2)), q, x0))
+    for fc in freqs:
+        if not lo < fc < hi:
+            continue
+        zc, Rc = min(((float(np.sum(r ** 2)), z, R) for z in (0.005, 0.01, 0.02, 0.05)
+                      for r, R in [_missing_mode_residuals(ctx, lines, np.array([fc, z]))]), key=lambda t: t[0])[1:]
+        g0 = _initial_coupling(ctx, {"freq_hz": fc, "zeta": zc, "residue": Rc}, wn, phi)
+        if g0 is not None:
+            x0 = np.concatenate([[fc, np.log(zc)], np.clip(g0, -0.5, 0.5)])
+            starts.append((float(np.sum(resid(x0) ** 2)), x0))
     if not starts:
-        raise EffectError("local_resonator: no output with a mode shape to attach a resonator to")
-    df = ctx.measured.line_spacing_hz
-    tied: list[tuple[float, int, np.ndarray]] = []
-    for _, p, x0 in sorted(starts, key=lambda t: t[0])[:3]:
-        bounds = ([lo, np.log(1e-4), np.log(RESONATOR_MASS_RATIO[0] / load[p])],
-                  [hi, np.log(0.3), np.log(RESONATOR_MASS_RATIO[1] / load[p])])
-        res = least_squares(lambda x, p=p: resid(spec(p, x)), np.clip(x0, bounds[0], bounds[1]), bounds=bounds,
-                            x_scale=[df, 0.3, 0.3], method="trf", max_nfev=60)
-        tied.append((float(np.sum(res.fun ** 2)), p, res.x))
-    tied.sort(key=lambda t: t[0])
-    first = [(mode, g0) for mode in extra if (g0 := _initial_coupling(ctx, mode, wn, phi)) is not None]
-    first_x = [np.concatenate([[mode["freq_hz"], np.log(mode["zeta"])], np.clip(g0, -0.5, 0.5)])
-               for mode, g0 in first]
-    free_starts = [np.concatenate([x[:2], np.sqrt(np.exp(x[2])) * phi[p]]) for _, p, x in tied[:2]]
-    free_starts += sorted(first_x, key=lambda x: float(np.sum(resid(free(x)) ** 2)))[:1]
-    fb = ([lo, np.log(1e-4)] + [-1.0] * wn.size, [hi, np.log(0.3)] + [1.0] * wn.size)
+        raise EffectError("local_resonator: no extra mode with a shape at the driving point to start from")
+    starts = sorted(starts, key=lambda t: t[0])[:3]
     best: tuple[float, np.ndarray] | None = None
-    for x0 in free_starts:
-        res = least_squares(lambda x: resid(free(x)), np.clip(x0, fb[0], fb[1]), bounds=fb,
+    df = ctx.measured.line_spacing_hz
+    for _, x0 in starts:
+        res = least_squares(resid, x0, bounds=([lo, np.log(1e-4)] + [-1.0] * wn.size,
+                                               [hi, np.log(0.3)] + [1.0] * wn.size),
                             x_scale=[df, 0.3] + [0.01] * wn.size, method="trf", max_nfev=60)
         c = float(np.sum(res.fun ** 2))
         if best is None or c < best[0]:
             best = (c, res.x)
     assert best is not None
-    c_tied, p_tied, x_tied = tied[0]
-    # the n - 1 further parameters of the free coupling must lower the cost as much as any effect must lower
-    # the error to count (the verdict's 0.5 dB): the error left holds the effect's own approximation (the
-    # damping by modal projection), which more parameters always reduce a little
-    if 10 * np.log10(c_tied / max(best[0], 1e-300)) < RESONATOR_FREE_GAIN_DB:
-        out = spec(p_tied, x_tied)
-        out["mass_ratio"] = float(out["mass_kg"] * np.max(phi[p_tied] ** 2))
-    else:
-        out = free(best[1])
-        g = best[1][2:]
-        near = np.abs(phi @ g) / np.maximum(np.linalg.norm(phi, axis=1) * np.linalg.norm(g), 1e-300)
-        out.update(mass_ratio=float(np.max(g ** 2)), near=outs[int(np.argmax(near))])
+    out = spec(best[1])
     del out["effect"]
+    g = np.asarray(out["coupling"])
+    out["mass_ratio"] = float(np.max(g ** 2))
     return out
 
 
@@ -590,8 +515,7 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            needs=("output_shapes",),
            advice="A local resonator (a spring-mass at one point: an absorber, a component on a soft mount, a "
                   "loose part) adds a mode near the fitted frequency and shifts its neighbours: add it to the "
-                  "model at the named point (or, with a free coupling, near the output named 'near'); the "
-                  "largest coupling names the modes it sits on."),
+                  "model; the largest coupling names the modes it sits on."),
     Effect("missing_mode", "modal", apply_missing_mode, fit_missing_mode, "freq_hz",
            "a mode the simulation lacks",
            advice="The structure has a mode the model lacks: check the model's mode set (a component, a "
