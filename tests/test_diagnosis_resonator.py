@@ -72,3 +72,39 @@ def test_coupling_form_equals_point_form_and_bad_input_is_named():
                       outputs=model.outputs, references=model.references)
     with pytest.raises(EffectError, match="output_shapes"):
         predict(bare, f, "receptance", [{"effect": "local_resonator", "point": "2", "frequency_hz": 30.0}])
+
+
+def _measured(H: np.ndarray, f: np.ndarray, seed: int, relative: float = 0.005):
+    """The exact receptances (force at mass 1) as a measurement with complex noise of ``relative`` x |H|."""
+    from analysis.frf import FRFSet
+
+    rng = np.random.default_rng(seed)
+    noise = (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape)) / np.sqrt(2)
+    return FRFSet(freq_hz=f, H=(H + relative * np.abs(H) * noise)[:, None, :], quantity="receptance",
+                  outputs=("1", "2", "3"), references=("1",))
+
+
+def test_a_heavier_sensor_is_a_mass_not_a_resonator():
+    """A mass at output 2 (the exact chain with that mass, every mode in the model): the mass at that
+    output is found and fits it several times better than the best resonator (a resonator of its own
+    frequency in the band cannot act as a mass at every frequency)."""
+    from analysis.diagnosis.compare import line_weights
+    from analysis.diagnosis.effects import FitContext, fit_local_resonator, fit_mass_loading
+
+    M, K, C, model = _chain(0.005)
+    f = np.linspace(5.0, 120.0, 300)
+    Ml = M.copy()
+    Ml[1, 1] += 0.1
+    H = np.empty((3, f.size), complex)
+    for k, w in enumerate(2 * np.pi * f):
+        H[:, k] = np.linalg.solve(K - w ** 2 * Ml + 1j * w * C, np.eye(3)[:, 0])
+    meas = _measured(H, f, 4)
+    ctx = FitContext(measured=meas, base=model, weights=line_weights(meas), sim=predict(model, f, "receptance"))
+    lines = np.ones(f.size, bool)
+    mass = fit_mass_loading(ctx, lines)
+    assert mass["sensor"] == "2" and mass["mass_kg"] == pytest.approx(0.1, rel=0.02)
+    res = fit_local_resonator(ctx, lines)
+
+    def cost(name: str, params: dict) -> float:
+        return ctx.cost(predict(model, f, "receptance", [{"effect": name, **params}]).H, lines)
+    assert cost("mass_loading", mass) < 0.5 * cost("local_resonator", res), res
