@@ -60,7 +60,7 @@ from .physical import (
     variants,
     z_score,
 )
-from .physical_pairs import OnTop, fit_pair, refit_on_top
+from .physical_pairs import OnTop, fit_pair, rechoose, refit_on_top, with_options
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes"]
 
@@ -221,7 +221,8 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     if pairs_ok and firsts != []:
         two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
         if two is not None:
-            doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate")}
+            doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate",
+                                               "held_out_chi2_per_mode")}
         if two is not None and two["significant"] and two["adequate"]:
             out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
             out.combined = [_stage_entry(c) for c in two["_stages"]]
@@ -242,7 +243,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         differ = (f"the measured modes differ from the simulation's (mean chi2 {base.mean():.1f} per mode)" if modes_differ
                   else f"the FRFs differ from the simulation's by {before_db - noise_db:.1f} dB above the noise")
         out.reason = (f"{differ} but no physical cause, alone or with one other, is both significant and adequate; "
-                      f"best partial causes: {partial}")
+                      f"best partial causes: {partial}{_beyond_text(doc.get('pair'))}")
     close = rivals(found) if out.verdict != "combined" else None
     if close is not None:
         out.next_measurement = propose(sim, measured, prior, noise_db, *close)
@@ -261,9 +262,22 @@ LEAVES_CHI2 = 1.0
 def _leaves_evidence(best: dict, judge: _Judge) -> bool:
     """Does the named single cause ``best`` leave evidence in the modes that a second physical cause
     could explain (held-out chi2 per counted mode above ``LEAVES_CHI2``)?"""
-    cv = best["_fit"].cv_per_mode
+    return _held_out_per_mode(best["_fit"].cv_per_mode, judge) > LEAVES_CHI2
+
+
+def _held_out_per_mode(cv: np.ndarray, judge: _Judge) -> float:
+    """Held-out chi2 per counted mode (:meth:`_Judge._counted`)."""
     n = judge._counted(cv)
-    return bool(np.sum(cv[n]) / max(int(n.sum()), 1) > LEAVES_CHI2)
+    return float(np.sum(cv[n]) / max(int(n.sum()), 1))
+
+
+def _beyond_text(pair: dict | None) -> str:
+    """The reason's words for a significant pair that leaves the held-out modes above their uncertainty."""
+    if not pair or not pair["significant"] or pair["held_out_chi2_per_mode"] <= LEAVES_CHI2:
+        return ""
+    return (f"; the best pair, {pair['effect'].replace('+', ' with ')}, still leaves the held-out modes "
+            f"{pair['held_out_chi2_per_mode']:.1f} chi2 per mode (above {LEAVES_CHI2:g}): a change the catalogue "
+            f"does not hold (a geometry change, a third change) is left unexplained rather than named as two")
 
 
 def _removed_text(removed: float) -> str:
@@ -348,9 +362,10 @@ def _choice_penalty(spec: CauseSpec) -> float:
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-             names: Sequence[str] | None) -> list[PhysicalFit]:
+             names: Sequence[str] | None, n: int | None = N_SECOND) -> list[PhysicalFit]:
     """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
-    plus a penalty for its freedom (2 per parameter, 2 ln(number of options) for a choice)."""
+    plus a penalty for its freedom (2 per parameter, 2 ln(number of options) for a choice); the best
+    variant of each cause, the ``n`` best causes (None: all)."""
     top = OnTop(sim, [(first.cause, first.params)])
     allsel = np.ones(mm.freq_hz.size, bool)
     ranked: list[tuple[float, PhysicalFit]] = []
@@ -366,30 +381,63 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
     for _, f in ranked:            # the best variant of each cause
         if all(g.cause != f.cause for g in out):
             out.append(f)
-    return out[:N_SECOND]
+    return out[:n]
+
+
+def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
+            names: Sequence[str] | None) -> list[tuple[PhysicalFit, PhysicalFit]]:
+    """Second causes with the first cause's choice held open (:func:`with_options`): every other cause
+    (its best variant on top of ``first``) refined together with ``first`` at each of the options its own
+    fit ranked; ranked by the pair's chi2 plus the second cause's freedom; the ``N_SECOND`` best as
+    (first at its option, second)."""
+    ranked = []
+    for fb in _seconds(sim, specs, mm, fmax, first, names, n=None):
+        fa2, fb2, chi2 = with_options(sim, [specs[first.cause], specs[fb.cause]], first, fb, mm, fmax)
+        ranked.append((chi2 + 2.0 * len(fb.free) + _choice_penalty(specs[fb.cause]), fa2, fb2))
+    ranked.sort(key=lambda t: t[0])
+    return [(a, b) for _, a, b in ranked[:N_SECOND]]
+
+
+def _named_pair(c: dict | None) -> bool:
+    return c is not None and bool(c["significant"] and c["adequate"])
 
 
 def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
-                  judge: _Judge, names: Sequence[str] | None, firsts: list | None = None) -> dict | None:
+                  judge: _Judge, names: Sequence[str] | None, firsts: list | None = None,
+                  opened: bool = False) -> dict | None:
     """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of the best
     significant single cause (and, when that gives no adequate pair, the next; when none is significant,
     the best by held-out gain), the other causes; the best pair by nested held-out error, judged like a
     single cause and against the first cause alone; ``firsts`` given: on top of those only. Pairs are
-    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`)."""
+    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
+    naming has its choices made again where both causes are refined (:func:`rechoose`); it is adequate only
+    when it also leaves the held-out modes within their uncertainty (:func:`_held_out_per_mode` at most
+    ``LEAVES_CHI2``: at most two causes are named, so what a pair leaves is a change outside the catalogue).
+    With no single cause named and no pair found, the first causes with a choice are tried again with
+    their choice held open (``opened``, :func:`_opened`)."""
+    alone = firsts is None
     if firsts is None:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
     best: dict | None = None
     for first in firsts:
         fa: PhysicalFit = first["_fit"]
-        progress("diagnosis: second cause on top of %s", fa.cause)
-        for fb in _seconds(sim, specs, mm, fmax, fa, names):
-            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax)
+        progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
+        pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
+                 [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
+                  for fb in _seconds(sim, specs, mm, fmax, fa, names)])
+        for fa2, fb in pairs:
             two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+            if gain_db(fa.cv_per_mode, two.cv_per_mode) >= MIN_GAIN_DB:
+                two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
             c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
             over = gain_db(fa.cv_per_mode, two.cv_per_mode)
             c["gain_over_first_db"] = over
             c["significant"] = bool(c["significant"] and over >= MIN_GAIN_DB)
+            c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
+            c["leaves_evidence"] = c["held_out_chi2_per_mode"] > LEAVES_CHI2
+            c["adequate"] = bool(c["adequate"] and not c["leaves_evidence"])
+            c["_pair"] = two
             c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
                              "error_after_db": c["error_after_db"]} for name, p in two.changes]
             c["effect"] = "+".join(two.causes)
@@ -397,6 +445,11 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
             if best is None or (c["significant"] and c["adequate"], -c["_chi2_cv"]) > (
                     best["significant"] and best["adequate"], -best["_chi2_cv"]):
                 best = c
-        if best is not None and best["significant"] and best["adequate"]:
+        if _named_pair(best):
             break
+    if alone and not opened and not _named_pair(best):
+        chosen = [c for c in firsts if specs[c["_fit"].cause].choice is not None and len(c["_fit"].ranked) > 1]
+        more = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, chosen, opened=True) if chosen else None
+        if more is not None and (best is None or _named_pair(more)):
+            best = more
     return best
