@@ -133,3 +133,42 @@ def test_a_longer_span_is_unexplained_and_an_in_catalogue_pair_is_named() -> Non
         else:
             assert out.verdict == "unexplained" and "still leaves the held-out modes" in out.reason
             assert out.doc["pair"]["significant"] and not out.doc["pair"]["adequate"]
+
+
+def test_a_pairs_choice_the_data_do_not_separate_asks_for_the_next_measurement() -> None:
+    """A named pair whose mass fits at top:3 and at top:5 alike (chi2 within ``SEPARATED_CHI2``) with the
+    supports applied: the rival is the same pair with the mass at top:5, and the proposed hammer point is one
+    not yet hammered where the two pairs' FRFs differ more than at today's point; options far apart in chi2
+    ask for nothing."""
+    from analysis.diagnosis.effects import predict
+    from analysis.diagnosis.next_measurement import SEPARATED_CHI2, _relative_db, pair_rivals, propose
+    from analysis.frf import FRFSet
+
+    causes = ("support_stiffness", "added_mass")
+    at3, at5 = {"point": "top:3", "mass_kg": 1.2}, {"point": "top:5", "mass_kg": 1.2}
+    params = (_supports(0.28), at3)
+    close = pair_rivals(causes, params, 0.1, ([], [(0.1, "top:3", at3), (0.8, "top:5", at5)]))
+    assert close is not None
+    a, b, why = close
+    assert a == [("support_stiffness", params[0]), ("added_mass", at3)]
+    assert b == [("support_stiffness", params[0]), ("added_mass", at5)]
+    assert "top:3" in why and "top:5" in why and "support_stiffness" in why
+    assert pair_rivals(causes, params, 0.1, ([], [(0.1, "top:3", at3), (0.2 + SEPARATED_CHI2, "top:5", at5)])) is None
+    assert pair_rivals(causes, params, 0.1, ([], [])) is None
+
+    fv = FrameVariants(None, OUTS, ["top:4:Z"])
+    f = np.linspace(5.0, 400.0, 600)
+    meas = FRFSet(freq_hz=f, H=np.ones((len(OUTS), 1, f.size), complex), quantity="accelerance",
+                  outputs=tuple(OUTS), references=("top:4:Z",))
+    nm = propose(fv, meas, (), -40.0, a, b, why)
+    assert nm is not None and nm["point"] in fv.points() and nm["point"] != "top:4:Z"
+    assert [c["effect"] for c in nm["candidates"]] == ["support_stiffness+added_mass"] * 2
+    assert nm["candidates"][1]["changes"][1] == {"effect": "added_mass", "parameters": at5}
+
+    def sep(point: str) -> float:
+        there = fv.at_points(OUTS, [point])
+        h = [predict(there.model_of(c), f, "accelerance", (), outputs=tuple(OUTS), references=(point,)).H for c in (a, b)]
+        return float(_relative_db(h[0], h[1])[0]) + 40.0
+
+    assert nm["separation_db"] == pytest.approx(sep(nm["point"]), abs=1e-6)
+    assert nm["separation_db"] > sep("top:4:Z")

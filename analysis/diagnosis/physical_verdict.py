@@ -38,7 +38,7 @@ from ..frf import FRFSet
 from ..progress import progress
 from .compare import typical_error_db
 from .effects import predict
-from .next_measurement import propose, rivals
+from .next_measurement import pair_rivals, propose, rivals
 from .physical import (
     ADEQUATE_FRACTION,
     ADEQUATE_MARGIN_DB,
@@ -210,6 +210,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     out = PhysicalOutcome(decided=True, error_before_db=before_db, doc=doc)
     pairs_ok = hasattr(sim, "modes_of") and (causes is None or len(causes) > 1) and not quiet
     firsts: list | None = None          # None: the pair search picks its first causes
+    two: dict | None = None
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
@@ -244,7 +245,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
                   else f"the FRFs differ from the simulation's by {before_db - noise_db:.1f} dB above the noise")
         out.reason = (f"{differ} but no physical cause, alone or with one other, is both significant and adequate; "
                       f"best partial causes: {partial}{_beyond_text(doc.get('pair'))}")
-    close = rivals(found) if out.verdict != "combined" else None
+    close = rivals(found) if out.verdict != "combined" else _pair_rivals(two)
     if close is not None:
         out.next_measurement = propose(sim, measured, prior, noise_db, *close)
     if other is not None and not out.named:
@@ -278,6 +279,12 @@ def _beyond_text(pair: dict | None) -> str:
     return (f"; the best pair, {pair['effect'].replace('+', ' with ')}, still leaves the held-out modes "
             f"{pair['held_out_chi2_per_mode']:.1f} chi2 per mode (above {LEAVES_CHI2:g}): a change the catalogue "
             f"does not hold (a geometry change, a third change) is left unexplained rather than named as two")
+
+
+def _pair_rivals(two: dict | None) -> tuple[list, list, str] | None:
+    """The named pair and its rival when its choice is not separated by the data (:func:`pair_rivals`)."""
+    fit = None if two is None else two.get("_pair")
+    return None if fit is None else pair_rivals(fit.causes, fit.params, fit.chi2, fit.ranked)
 
 
 def _removed_text(removed: float) -> str:
