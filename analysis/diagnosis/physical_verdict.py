@@ -223,7 +223,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
         if two is not None:
             doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "significant", "adequate",
-                                               "held_out_chi2_per_mode")}
+                                               "held_out_chi2_per_mode", "one_member")}
         if two is not None and two["significant"] and two["adequate"]:
             out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
             out.combined = [_stage_entry(c) for c in two["_stages"]]
@@ -272,13 +272,21 @@ def _held_out_per_mode(cv: np.ndarray, judge: _Judge) -> float:
     return float(np.sum(cv[n]) / max(int(n.sum()), 1))
 
 
+def _one_member(specs: Sequence[CauseSpec], params: Sequence[dict]) -> str | None:
+    """The member both causes of a pair change (each chooses a member, the same one), else None."""
+    chosen = [p.get(s.choice) if s.choice == "component" else None for s, p in zip(specs, params)]
+    return chosen[0] if chosen[0] is not None and all(c == chosen[0] for c in chosen) else None
+
+
 def _beyond_text(pair: dict | None) -> str:
-    """The reason's words for a significant pair that leaves the held-out modes above their uncertainty."""
-    if not pair or not pair["significant"] or pair["held_out_chi2_per_mode"] <= LEAVES_CHI2:
+    """The reason's words for a significant pair of changes of one member that leaves the held-out modes
+    above their uncertainty (:func:`_second_cause`)."""
+    if not pair or not pair["significant"] or pair["one_member"] is None or pair["held_out_chi2_per_mode"] <= LEAVES_CHI2:
         return ""
-    return (f"; the best pair, {pair['effect'].replace('+', ' with ')}, still leaves the held-out modes "
+    return (f"; the best pair, {pair['effect'].replace('+', ' with ')} of {pair['one_member']}, acts as one change "
+            f"of that member's geometry (its length, its section) and still leaves the held-out modes "
             f"{pair['held_out_chi2_per_mode']:.1f} chi2 per mode (above {LEAVES_CHI2:g}): a change the catalogue "
-            f"does not hold (a geometry change, a third change) is left unexplained rather than named as two")
+            f"does not hold, left unexplained rather than named as two")
 
 
 def _pair_rivals(two: dict | None) -> tuple[list, list, str] | None:
@@ -417,9 +425,11 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     the best by held-out gain), the other causes; the best pair by nested held-out error, judged like a
     single cause and against the first cause alone; ``firsts`` given: on top of those only. Pairs are
     compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
-    naming has its choices made again where both causes are refined (:func:`rechoose`); it is adequate only
-    when it also leaves the held-out modes within their uncertainty (:func:`_held_out_per_mode` at most
-    ``LEAVES_CHI2``: at most two causes are named, so what a pair leaves is a change outside the catalogue).
+    naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
+    change one member (:func:`_one_member`) are adequate only when they also leave the held-out modes within
+    their uncertainty (:func:`_held_out_per_mode` at most ``LEAVES_CHI2``): the stiffness and the mass of
+    one member scaled together stand in for a change of its geometry (a longer member: EI/L^3 and its
+    mass), which the catalogue does not hold and which only the modes they leave tell apart.
     With no single cause named and no pair found, the first causes with a choice are tried again with
     their choice held open (``opened``, :func:`_opened`)."""
     alone = firsts is None
@@ -442,8 +452,9 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
             c["gain_over_first_db"] = over
             c["significant"] = bool(c["significant"] and over >= MIN_GAIN_DB)
             c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
-            c["leaves_evidence"] = c["held_out_chi2_per_mode"] > LEAVES_CHI2
-            c["adequate"] = bool(c["adequate"] and not c["leaves_evidence"])
+            c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
+            if c["one_member"] is not None and c["held_out_chi2_per_mode"] > LEAVES_CHI2:
+                c["adequate"] = False
             c["_pair"] = two
             c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
                              "error_after_db": c["error_after_db"]} for name, p in two.changes]
