@@ -7,7 +7,10 @@ and the first cause are then refined together (:func:`fit_pair`): both causes' c
 by least squares (the choices, a node or a member, kept), and the pair's held-out error is measured
 with *both* causes refitted in each fold (nested: the first cause never sees the left-out mode either).
 The first cause's choice (the node of a mass, a member) was made while the second change was in the data;
-it is made again with the second cause applied (:func:`refit_on_top`) before the pair is refined.
+it is made again with the second cause applied (:func:`refit_on_top`) before the pair is refined, and
+both choices once more where both causes are refined (:func:`rechoose`). A first cause that absorbed the
+second change (a mass grown at the wrong node for softer supports) is refined with the second from each
+of the options its own fit ranked (:func:`with_options`).
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
 held-out modes better than the first cause alone by at least ``MIN_GAIN_DB``.
 """
