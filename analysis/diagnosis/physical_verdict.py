@@ -29,7 +29,7 @@ Steps, each one able to decide:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -430,8 +430,12 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     their uncertainty (:func:`_held_out_per_mode` at most ``LEAVES_CHI2``): the stiffness and the mass of
     one member scaled together stand in for a change of its geometry (a longer member: EI/L^3 and its
     mass), which the catalogue does not hold and which only the modes they leave tell apart.
-    With no pair found, the first causes with a choice are tried again with their choice held open and
-    their parameters refined with the second cause (``opened``, :func:`_opened`)."""
+    With no pair found and no first cause that leaves the held-out modes within their uncertainty (at most
+    ``LEAVES_CHI2`` per mode: then there is no second physical change to find), the first causes with a
+    choice are tried again with their choice held open and their parameters refined with the second cause
+    (``opened``, :func:`_opened`); a named first cause keeps its choice (it was named on its own) and only
+    its parameters are refined with the second."""
+    alone = firsts is None
     if firsts is None:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
@@ -464,10 +468,13 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
                 best = c
         if _named_pair(best):
             break
-    if not opened and not _named_pair(best):
+    # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
+    explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= LEAVES_CHI2 for c in firsts)
+    if not opened and not explained and not _named_pair(best):
         # a first cause fitted alone may have absorbed the second change (a mass grown at the wrong node, a
         # member's factor pulled by heavier sensors): nothing on top of it helps, refined with it the pair shows
-        chosen = [c for c in firsts if specs[c["_fit"].cause].choice is not None and len(c["_fit"].ranked) > 1]
+        chosen = ([c for c in firsts if specs[c["_fit"].cause].choice is not None and len(c["_fit"].ranked) > 1]
+                  if alone else [{**c, "_fit": replace(c["_fit"], ranked=[])} for c in firsts])
         more = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, chosen, opened=True) if chosen else None
         if more is not None and (best is None or _named_pair(more)):
             best = more
