@@ -185,3 +185,18 @@ def test_a_pairs_choice_the_data_do_not_separate_asks_for_the_next_measurement()
 
     assert nm["separation_db"] == pytest.approx(sep(nm["point"]), abs=1e-6)
     assert nm["separation_db"] > sep("top:4:Z")
+
+
+def test_a_named_cause_keeps_its_choice_and_is_refined_with_the_second() -> None:
+    """The right column x 1.29 with accelerometers of 0.23 kg: the member's stiffness fitted alone comes out low
+    (heavier sensors lower the modes it raises) and the sensors on top of it find almost nothing; with no ranked
+    options (a named cause keeps its member) the pair refined together gives both back."""
+    fv = FrameVariants(None, OUTS, REFS)
+    specs = _specs(fv)
+    mm = _noise_free_modes(fv, [("member_stiffness", {"component": "right", "factor": 1.29}),
+                                ("mass_loading", {"mass_kg": 0.23})])
+    first = PhysicalFit("member_stiffness", {"component": "right", "factor": 1.21}, ("factor",), np.inf)
+    second = PhysicalFit("mass_loading", {"mass_kg": 0.03}, ("mass_kg",), np.inf)
+    a, b, chi2 = with_options(fv, [specs["member_stiffness"], specs["mass_loading"]], first, second, mm, FMAX)
+    assert a.params["component"] == "right" and a.params["factor"] == pytest.approx(1.29, rel=1e-3)
+    assert b.params["mass_kg"] == pytest.approx(0.23, rel=1e-2) and chi2 < 1e-3
