@@ -2,7 +2,8 @@
 
 Two candidates are *not separated* when the data cannot choose between them: two options of one
 cause (an added mass at two nodes the test's sensors see alike) whose chi2 on all modes differ by less
-than ``SEPARATED_CHI2``, or two causes whose held-out mode errors differ by less than that. Then every
+than ``SEPARATED_CHI2``, or two causes whose held-out mode errors differ by less than that; for a named
+pair, two options of its choice with the other cause applied (:func:`pair_rivals`). Then every
 node and direction of the frame (:meth:`points` of the FE model, not only today's test plan) is tried
 as a new hammer point: the FRFs from it to the measured outputs are predicted by both candidates
 (through the measurement's processing), and the point where they differ most against the noise is
@@ -24,7 +25,7 @@ import numpy as np
 from ..frf import FRFSet
 from .effects import predict
 
-__all__ = ["propose", "SEPARATED_CHI2", "rivals"]
+__all__ = ["propose", "SEPARATED_CHI2", "rivals", "pair_rivals"]
 
 #: Two candidates whose (held-out) chi2 differ by less than this are not separated by the data
 #: (chi2 is a sum of squared residuals in units of their uncertainty: 4 is two standard deviations).
@@ -56,6 +57,24 @@ def rivals(found: Sequence[dict]) -> tuple[tuple[str, dict], tuple[str, dict], s
     return None
 
 
+def pair_rivals(causes: Sequence[str], params: Sequence[dict], chi2: float, ranked: Sequence[Sequence]
+                ) -> tuple[list, list, str] | None:
+    """A named pair (``causes`` with refined ``params``, chi2 on all modes) and the same pair with one cause's
+    choice at its closest rival option, when the data do not separate them (chi2 within ``SEPARATED_CHI2``),
+    with the reason; None when they are separated. ``ranked``: per cause, its options searched with the
+    other cause applied ([(chi2, option, params)]; :func:`analysis.diagnosis.physical_pairs.rechoose`)."""
+    pair = list(zip(causes, params))
+    for i, options in enumerate(ranked):
+        choice = next((k for k, v in params[i].items() if isinstance(v, str)), None)
+        rival = next((r for r in options if choice is not None and r[1] != params[i][choice]), None)
+        if rival is not None and rival[0] - chi2 < SEPARATED_CHI2:
+            other = pair[1 - i][0]
+            why = (f"{causes[i]} at {params[i][choice]} and at {rival[1]} fit the measured modes alike with {other} "
+                   f"(chi2 {chi2:.1f} and {rival[0]:.1f})")
+            return pair, [*pair[:i], (causes[i], rival[2]), *pair[i + 1:]], why
+    return None
+
+
 def _relative_db(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Weighted relative squared difference (dB) of two FRF arrays per reference (last axis lines)."""
     mag2 = np.abs(a) ** 2
@@ -64,11 +83,12 @@ def _relative_db(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return 10 * np.log10(np.maximum(e, 1e-30))
 
 
-def propose(sim: Any, measured: FRFSet, prior: Sequence, noise_db: float, a: tuple[str, dict], b: tuple[str, dict],
-            why: str) -> dict | None:
+def propose(sim: Any, measured: FRFSet, prior: Sequence, noise_db: float, a: tuple[str, dict] | list,
+            b: tuple[str, dict] | list, why: str) -> dict | None:
     """The hammer point (``component:node:direction``) whose FRFs to the measured outputs best separate
-    candidates ``a`` and ``b`` (``(cause, params)``), as ``{"point", "why", "separation_db"}``; None when
-    the simulation cannot be evaluated at other points (no ``points`` / ``at_points``)."""
+    candidates ``a`` and ``b`` (``(cause, params)``, or a list of them: two causes at once), as
+    ``{"point", "why", "separation_db", "candidates"}``; None when the simulation cannot be evaluated at
+    other points (no ``points`` / ``at_points``)."""
     if not (hasattr(sim, "points") and hasattr(sim, "at_points")):
         return None
     done = set(measured.references)
@@ -77,12 +97,21 @@ def propose(sim: Any, measured: FRFSet, prior: Sequence, noise_db: float, a: tup
         return None
     there = sim.at_points(measured.outputs, points)
 
-    def frf(c: tuple[str, dict]) -> np.ndarray:
-        return predict(there.model(*c), measured.freq_hz, measured.quantity, prior,
+    def frf(c: tuple[str, dict] | list) -> np.ndarray:
+        model = there.model_of(c) if isinstance(c, list) else there.model(*c)
+        return predict(model, measured.freq_hz, measured.quantity, prior,
                        outputs=measured.outputs, references=tuple(points)).H
 
     sep = _relative_db(frf(a), frf(b)) - noise_db
     k = int(np.argmax(sep))
     return {"point": points[k], "separation_db": float(sep[k]),
             "why": f"{why}; hammered at {points[k]} their FRFs to the sensors differ by {sep[k]:.1f} dB above the noise",
-            "candidates": [{"effect": c, "parameters": {k2: v for k2, v in p.items()}} for c, p in (a, b)]}
+            "candidates": [_candidate(c) for c in (a, b)]}
+
+
+def _candidate(c: tuple[str, dict] | list) -> dict:
+    """A candidate as the JSON lists it: ``{"effect", "parameters"}``, for two causes ``{"effect": "a+b",
+    "changes": [{"effect", "parameters"}, ...]}``."""
+    if isinstance(c, list):
+        return {"effect": "+".join(e for e, _ in c), "changes": [_candidate(x) for x in c]}
+    return {"effect": c[0], "parameters": dict(c[1])}

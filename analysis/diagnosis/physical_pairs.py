@@ -7,7 +7,10 @@ and the first cause are then refined together (:func:`fit_pair`): both causes' c
 by least squares (the choices, a node or a member, kept), and the pair's held-out error is measured
 with *both* causes refitted in each fold (nested: the first cause never sees the left-out mode either).
 The first cause's choice (the node of a mass, a member) was made while the second change was in the data;
-it is made again with the second cause applied (:func:`refit_on_top`) before the pair is refined.
+it is made again with the second cause applied (:func:`refit_on_top`) before the pair is refined, and
+both choices once more where both causes are refined (:func:`rechoose`). A first cause that absorbed the
+second change (a mass grown at the wrong node for softer supports) is refined with the second from each
+of the options its own fit ranked (:func:`with_options`).
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
 held-out modes better than the first cause alone by at least ``MIN_GAIN_DB`` and removes at least
 ``QUIET_CHI2`` of their chi2 (:func:`analysis.diagnosis.physical_verdict._on_top_enough`).
@@ -23,7 +26,7 @@ from scipy.optimize import least_squares
 from ..modal import ModalModel
 from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals
 
-__all__ = ["OnTop", "PairFit", "fit_pair", "changes_of", "refit_on_top"]
+__all__ = ["OnTop", "PairFit", "fit_pair", "changes_of", "refit_on_top", "rechoose", "with_options"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -68,6 +71,9 @@ class PairFit:
     chi2: float
     cv_per_mode: np.ndarray = field(default_factory=lambda: np.zeros(0))
     at_edge: tuple = ()
+    #: per cause, its choice's options searched with the other cause applied ([(chi2, option, params)], best
+    #: first; empty for a cause without a choice or not searched again): :func:`rechoose`
+    ranked: tuple = ()
 
     @property
     def changes(self) -> list[tuple[str, dict]]:
@@ -78,10 +84,19 @@ class PairFit:
         return float(np.sum(self.cv_per_mode))
 
 
+def _start(x0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """A start for least squares strictly inside the bounds; a log-factor within rounding of its nominal
+    (0) is set to it: the finite-difference step (``diff_step``) is relative to ``|x|``, so a start at
+    1e-16 would get a step of 1e-19 (no derivative: the parameter never moves), at 0 an absolute one."""
+    x0 = np.where(np.abs(x0) < 1e-9, 0.0, x0)
+    return np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
+
+
 def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,
-             fmax: float) -> PairFit:
+             fmax: float, folds: bool = True) -> PairFit:
     """Refine the two causes ``fits`` (their free parameters, choices kept) together on all modes, then
-    leave each mode out with both refitted from there (nested cross-validation)."""
+    leave each mode out with both refitted from there (nested cross-validation; ``folds`` False: the
+    refinement alone, ``cv_per_mode`` empty)."""
     free = [[s for s in spec.params if s.name in fit.free] for spec, fit in zip(specs, fits)]
     flat = [(i, s) for i, ss in enumerate(free) for s in ss]
     lo = np.array([s.x_bounds[0] for _, s in flat])
@@ -98,7 +113,7 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
         return residuals(mm, f, P)[sel].ravel()
 
     def solve(x0: np.ndarray, sel: np.ndarray) -> np.ndarray:
-        x0 = np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
+        x0 = _start(x0, lo, hi)
         return least_squares(resid, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=20 * len(flat), args=(sel,)).x
 
     K = mm.freq_hz.size
@@ -106,8 +121,8 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     allsel = np.ones(K, bool)
     x = solve(x0, allsel)
     chi2 = float(np.sum(resid(x, allsel) ** 2))
-    cv = np.empty(K)
-    for k in range(K):
+    cv = np.empty(K if folds else 0)
+    for k in range(cv.size):
         sel = allsel.copy()
         sel[k] = False
         xk = solve(x, sel)
@@ -128,3 +143,48 @@ def refit_on_top(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, oth
     top = OnTop(sim, [(other.cause, other.params)])
     p, chi2, ranked = fit_cause(top, spec, fit.free, mm, np.ones(mm.freq_hz.size, bool), fmax)
     return PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=chi2, ranked=ranked)
+
+
+def rechoose(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], pair: PairFit,
+             mm: MeasuredModes, fmax: float) -> PairFit:
+    """The refined ``pair`` (of ``fits``) with each cause's choice searched again over every option, the other
+    cause applied with the pair's refined parameters: a choice made beside the other cause's first, rougher
+    value (a mass's node next to the supports' softening fitted alone) is made again where both are refined.
+    When a choice moves, the pair is refined (and cross-validated) again from there and kept if its chi2 on
+    all modes is lower. The result carries the options searched (``ranked``): the data separate the
+    chosen option from the next only by their chi2 difference."""
+    allsel = np.ones(mm.freq_hz.size, bool)
+    new = [PhysicalFit(cause=f.cause, params=dict(p), free=f.free, chi2=pair.chi2) for f, p in zip(fits, pair.params)]
+    ranked: list = [[] for _ in fits]
+    moved = False
+    for i, spec in enumerate(specs):
+        if spec.choice is None:
+            continue
+        other = new[1 - i]
+        p, chi2, ranked[i] = fit_cause(OnTop(sim, [(other.cause, other.params)]), spec, new[i].free, mm, allsel, fmax)
+        moved |= p[spec.choice] != pair.params[i][spec.choice]
+        new[i] = PhysicalFit(cause=spec.name, params=p, free=new[i].free, chi2=chi2)
+    out = pair
+    if moved:
+        again = fit_pair(sim, specs, new, mm, fmax, folds=pair.cv_per_mode.size > 0)
+        out = again if again.chi2 < pair.chi2 else pair
+    return PairFit(causes=out.causes, params=out.params, chi2=out.chi2, cv_per_mode=out.cv_per_mode,
+                   at_edge=out.at_edge, ranked=tuple(ranked))
+
+
+def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: PhysicalFit, second: PhysicalFit,
+                 mm: MeasuredModes, fmax: float) -> tuple[PhysicalFit, PhysicalFit, float]:
+    """``first``'s choice held open among the options its own fit ranked (``first.ranked``): the pair
+    (``first`` at each option, ``second``) refined together on all modes (every continuous parameter of
+    both; no cross-validation). A first cause fitted alone absorbs the second change where it can (a
+    mass grown at the wrong node for softer supports), so the second cause applied on top of it explains
+    nothing; at the right option both are refined to the data. Returns ``first`` at the best option and
+    ``second``, both with the refined parameters, and the pair's chi2 there."""
+    best: tuple[PhysicalFit, PhysicalFit, float] = (first, second, np.inf)
+    for _, _, params in first.ranked or [(first.chi2, None, first.params)]:
+        a = PhysicalFit(cause=first.cause, params=dict(params), free=first.free, chi2=np.inf)
+        two = fit_pair(sim, specs, [a, second], mm, fmax, folds=False)
+        if two.chi2 < best[2]:
+            best = (PhysicalFit(cause=first.cause, params=two.params[0], free=first.free, chi2=two.chi2),
+                    PhysicalFit(cause=second.cause, params=two.params[1], free=second.free, chi2=two.chi2), two.chi2)
+    return best

@@ -29,7 +29,7 @@ Steps, each one able to decide:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -38,7 +38,7 @@ from ..frf import FRFSet
 from ..progress import progress
 from .compare import typical_error_db
 from .effects import predict
-from .next_measurement import propose, rivals
+from .next_measurement import pair_rivals, propose, rivals
 from .physical import (
     ADEQUATE_FRACTION,
     ADEQUATE_MARGIN_DB,
@@ -60,7 +60,7 @@ from .physical import (
     variants,
     z_score,
 )
-from .physical_pairs import OnTop, fit_pair, refit_on_top
+from .physical_pairs import OnTop, fit_pair, rechoose, refit_on_top, with_options
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes", "compared_band_hz"]
 
@@ -210,6 +210,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     out = PhysicalOutcome(decided=True, error_before_db=before_db, doc=doc)
     pairs_ok = hasattr(sim, "modes_of") and (causes is None or len(causes) > 1) and not quiet
     firsts: list | None = None          # None: the pair search picks its first causes
+    two: dict | None = None
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
@@ -223,7 +224,7 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
         if two is not None:
             doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "removed_over_first_chi2",
-                                              "significant", "adequate")}
+                                              "significant", "adequate", "held_out_chi2_per_mode", "one_member")}
         if two is not None and two["significant"] and two["adequate"]:
             out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
             out.combined = [_stage_entry(c) for c in two["_stages"]]
@@ -244,8 +245,8 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         differ = (f"the measured modes differ from the simulation's (mean chi2 {base.mean():.1f} per mode)" if modes_differ
                   else f"the FRFs differ from the simulation's by {before_db - noise_db:.1f} dB above the noise")
         out.reason = (f"{differ} but no physical cause, alone or with one other, is both significant and adequate; "
-                      f"best partial causes: {partial}")
-    close = rivals(found) if out.verdict != "combined" else None
+                      f"best partial causes: {partial}{_beyond_text(doc.get('pair'))}")
+    close = rivals(found) if out.verdict != "combined" else _pair_rivals(two)
     if close is not None:
         out.next_measurement = propose(sim, measured, prior, noise_db, *close)
     if other is not None and not out.named:
@@ -300,6 +301,42 @@ def compared_band_hz(doc: dict, freq_hz: np.ndarray) -> float:
     top = max(doc.get("measured_modes_hz") or [np.inf])
     above = np.sort(freq_hz[freq_hz > 1.01 * top])
     return float(np.sqrt(top * above[0])) if np.isfinite(top) and above.size else float("inf")
+
+
+#: Held-out chi2 per counted mode within which a cause leaves the measured modes within their
+#: uncertainty (about one standard deviation per mode): a first cause that does leaves no second
+#: physical change to search for with its choice held open, and two changes of one member must (they
+#: stand in for a change of its geometry, which only the modes they leave tell apart).
+LEAVES_CHI2 = 1.0
+
+
+def _held_out_per_mode(cv: np.ndarray, judge: _Judge) -> float:
+    """Held-out chi2 per counted mode (:meth:`_Judge._counted`)."""
+    n = judge._counted(cv)
+    return float(np.sum(cv[n]) / max(int(n.sum()), 1))
+
+
+def _one_member(specs: Sequence[CauseSpec], params: Sequence[dict]) -> str | None:
+    """The member both causes of a pair change (each chooses a member, the same one), else None."""
+    chosen = [p.get(s.choice) if s.choice == "component" else None for s, p in zip(specs, params)]
+    return chosen[0] if chosen[0] is not None and all(c == chosen[0] for c in chosen) else None
+
+
+def _beyond_text(pair: dict | None) -> str:
+    """The reason's words for a significant pair of changes of one member that leaves the held-out modes
+    above their uncertainty (:func:`_second_cause`)."""
+    if not pair or not pair["significant"] or pair["one_member"] is None or pair["held_out_chi2_per_mode"] <= LEAVES_CHI2:
+        return ""
+    return (f"; the best pair, {pair['effect'].replace('+', ' with ')} of {pair['one_member']}, acts as one change "
+            f"of that member's geometry (its length, its section) and still leaves the held-out modes "
+            f"{pair['held_out_chi2_per_mode']:.1f} chi2 per mode (above {LEAVES_CHI2:g}): a change the catalogue "
+            f"does not hold, left unexplained rather than named as two")
+
+
+def _pair_rivals(two: dict | None) -> tuple[list, list, str] | None:
+    """The named pair and its rival when its choice is not separated by the data (:func:`pair_rivals`)."""
+    fit = None if two is None else two.get("_pair")
+    return None if fit is None else pair_rivals(fit.causes, fit.params, fit.chi2, fit.ranked)
 
 
 def _removed_text(removed: float) -> str:
@@ -384,9 +421,10 @@ def _choice_penalty(spec: CauseSpec) -> float:
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-             names: Sequence[str] | None) -> list[PhysicalFit]:
+             names: Sequence[str] | None, n: int | None = N_SECOND) -> list[PhysicalFit]:
     """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
-    plus a penalty for its freedom (2 per parameter, 2 ln(number of options) for a choice)."""
+    plus a penalty for its freedom (2 per parameter, 2 ln(number of options) for a choice); the best
+    variant of each cause, the ``n`` best causes (None: all)."""
     top = OnTop(sim, [(first.cause, first.params)])
     allsel = np.ones(mm.freq_hz.size, bool)
     ranked: list[tuple[float, PhysicalFit]] = []
@@ -402,33 +440,71 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
     for _, f in ranked:            # the best variant of each cause
         if all(g.cause != f.cause for g in out):
             out.append(f)
-    return out[:N_SECOND]
+    return out[:n]
+
+
+def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
+            names: Sequence[str] | None) -> list[tuple[PhysicalFit, PhysicalFit]]:
+    """Second causes with the first cause's choice held open (:func:`with_options`): every other cause
+    (its best variant on top of ``first``) refined together with ``first`` at each of the options its own
+    fit ranked; ranked by the pair's chi2 plus the second cause's freedom; the ``N_SECOND`` best as
+    (first at its option, second)."""
+    ranked = []
+    for fb in _seconds(sim, specs, mm, fmax, first, names, n=None):
+        fa2, fb2, chi2 = with_options(sim, [specs[first.cause], specs[fb.cause]], first, fb, mm, fmax)
+        ranked.append((chi2 + 2.0 * len(fb.free) + _choice_penalty(specs[fb.cause]), fa2, fb2))
+    ranked.sort(key=lambda t: t[0])
+    return [(a, b) for _, a, b in ranked[:N_SECOND]]
+
+
+def _named_pair(c: dict | None) -> bool:
+    return c is not None and bool(c["significant"] and c["adequate"])
 
 
 def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
-                  judge: _Judge, names: Sequence[str] | None, firsts: list | None = None) -> dict | None:
+                  judge: _Judge, names: Sequence[str] | None, firsts: list | None = None,
+                  opened: bool = False) -> dict | None:
     """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of the best
     significant single cause (and, when that gives no adequate pair, the next; when none is significant,
     the best by held-out gain), the other causes; the best pair by nested held-out error, judged like a
-    single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of
-    those only. Pairs are compared by nested held-out chi2 plus their choices' freedom
-    (:func:`_choice_penalty`)."""
+    single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of those only. Pairs are
+    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
+    naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
+    change one member (:func:`_one_member`) are adequate only when they also leave the held-out modes within
+    their uncertainty (:func:`_held_out_per_mode` at most ``LEAVES_CHI2``): the stiffness and the mass of
+    one member scaled together stand in for a change of its geometry (a longer member: EI/L^3 and its
+    mass), which the catalogue does not hold and which only the modes they leave tell apart.
+    With no pair found and no first cause that leaves the held-out modes within their uncertainty (at most
+    ``LEAVES_CHI2`` per mode: then there is no second physical change to find), the first causes with a
+    choice are tried again with their choice held open and their parameters refined with the second cause
+    (``opened``, :func:`_opened`); a named first cause keeps its choice (it was named on its own) and only
+    its parameters are refined with the second."""
+    alone = firsts is None
     if firsts is None:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
     best: dict | None = None
     for first in firsts:
         fa: PhysicalFit = first["_fit"]
-        progress("diagnosis: second cause on top of %s", fa.cause)
-        alone = _alone_cv(sim, specs, mm, fmax, first)
-        seconds = _seconds(sim, specs, mm, fmax, fa, names)
-        for fb in seconds:
-            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax)
+        progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
+        cv_alone = _alone_cv(sim, specs, mm, fmax, first)
+        pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
+                 [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
+                  for fb in _seconds(sim, specs, mm, fmax, fa, names)])
+        n_seconds = max(1, len({fb.cause for _, fb in pairs}))
+        for fa2, fb in pairs:
             two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+            if gain_db(fa.cv_per_mode, two.cv_per_mode) >= MIN_GAIN_DB:
+                two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
             c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
             c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
-                alone, two.cv_per_mode, 2.0 * float(np.log(len(seconds))) + _choice_penalty(specs[fb.cause]))
+                cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]))
             c["significant"] = bool(c["significant"] and enough)
+            c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
+            c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
+            if c["one_member"] is not None and c["held_out_chi2_per_mode"] > LEAVES_CHI2:
+                c["adequate"] = False
+            c["_pair"] = two
             c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
                              "error_after_db": c["error_after_db"]} for name, p in two.changes]
             c["effect"] = "+".join(two.causes)
@@ -436,6 +512,16 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
             if best is None or (c["significant"] and c["adequate"], -c["_chi2_cv"]) > (
                     best["significant"] and best["adequate"], -best["_chi2_cv"]):
                 best = c
-        if best is not None and best["significant"] and best["adequate"]:
+        if _named_pair(best):
             break
+    # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
+    explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= LEAVES_CHI2 for c in firsts)
+    if not opened and not explained and not _named_pair(best):
+        # a first cause fitted alone may have absorbed the second change (a mass grown at the wrong node, a
+        # member's factor pulled by heavier sensors): nothing on top of it helps, refined with it the pair shows
+        chosen = ([c for c in firsts if specs[c["_fit"].cause].choice is not None and len(c["_fit"].ranked) > 1]
+                  if alone else [{**c, "_fit": replace(c["_fit"], ranked=[])} for c in firsts])
+        more = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, chosen, opened=True) if chosen else None
+        if more is not None and (best is None or _named_pair(more)):
+            best = more
     return best
