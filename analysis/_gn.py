@@ -23,7 +23,7 @@ import numpy as np
 from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
 
 __all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "project_to_bounds", "freeze_active",
-           "SWITCH_TO_PRECISE", "PRED_FLOOR"]
+           "pred_tolerance", "stationary_message", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
 
 
 def roundoff_floor(problem: ProjectedProblem) -> float:
@@ -105,6 +105,30 @@ PRED_FLOOR = 1e-13
 SWITCH_TO_PRECISE = 1e-6
 
 
+def pred_tolerance(problem: ProjectedProblem, n_modes: int, ftol: float, sdtol: float | None) -> tuple[float, int]:
+    """``(tol, dof)`` of the predicted-decrease test: the iteration has converged when the decrease
+    of S the Gauss-Newton model predicts, ``pred = g^T (J^T J)^-1 g``, is at most ``tol S``.
+
+    ``tol = max(ftol, PRED_FLOOR)``; with ``sdtol`` also ``sdtol^2 / dof``: with the residual variance
+    ``S / dof`` the poles' covariance is ``(S / dof) (J^T J)^-1``, so ``pred / (S / dof)`` is the squared
+    length of the step still to go measured in standard deviations (Mahalanobis), and the test stops
+    once that step is below ``sdtol`` standard deviations (``dof`` from
+    :meth:`ProjectedProblem.dof`; the rule is off when ``dof <= 0``)."""
+    tol = max(ftol, PRED_FLOOR)
+    dof = problem.dof(n_modes)
+    if sdtol and dof > 0:
+        tol = max(tol, float(sdtol) ** 2 / dof)
+    return tol, dof
+
+
+def stationary_message(pred: float, S: float, dof: int, ftol: float, sdtol: float | None) -> str:
+    """The message of a verdict of the predicted-decrease test (:func:`pred_tolerance`)."""
+    if sdtol and dof > 0 and pred <= float(sdtol) ** 2 * S / dof and pred > max(ftol, PRED_FLOOR) * S:
+        return (f"converged: the step still to go is {np.sqrt(max(pred, 0.0) * dof / S):.2g} standard deviations "
+                f"of the poles <= sdtol")
+    return f"converged: predicted decrease of S {pred / S:.2g} S <= ftol"
+
+
 def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: float,
                         ftol: float) -> tuple[int, str] | None:
     """The stopping rules after an accepted step: ``(status, message)`` or None to go on.
@@ -142,11 +166,12 @@ def start_iteration(problem: ProjectedProblem, theta0: np.ndarray
 
 
 def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           bounds: tuple | None = None) -> NLSOutcome:
+           bounds: tuple | None = None, sdtol: float | None = None) -> NLSOutcome:
     """Gauss-Newton from ``theta0`` (see the module docstring); never raises on non-convergence.
 
     ``bounds`` (lo, hi), each (m,) rad/s: every step is projected so that each pole's damped
-    frequency stays in its trust region (see :func:`project_to_bounds`).
+    frequency stays in its trust region (see :func:`project_to_bounds`). ``sdtol``: also converged
+    when the step still to go is below ``sdtol`` standard deviations of the poles (:func:`pred_tolerance`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
@@ -156,6 +181,7 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     if early is not None:
         return early
     verdict = None
+    pred_tol, dof = pred_tolerance(problem, theta.size // 2, ftol, sdtol)
     for it in range(1, max_iter + 1):
         if verdict is not None and fast:
             # re-check the verdict with precise evaluations
@@ -177,14 +203,13 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         D[D == 0] = 1.0
         d, _ = solve_scaled(JtJ, g, D)
         pred = -float(g @ d)
-        if 0.0 <= pred <= max(ftol, PRED_FLOOR) * ev.S:
+        if 0.0 <= pred <= pred_tol * ev.S:
             if fast:
                 # confirmed with a precise evaluation at the loop top
-                verdict = (Status.FTOL, f"converged: predicted decrease of S {pred / ev.S:.2g} S <= ftol")
+                verdict = (Status.FTOL, stationary_message(pred, ev.S, dof, ftol, sdtol))
                 history.append(ev.S)
                 continue
-            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL,
-                              f"converged: predicted decrease of S {pred / ev.S:.2g} S <= ftol")
+            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL, stationary_message(pred, ev.S, dof, ftol, sdtol))
         trial = project_to_bounds(theta + d, bounds)
         d = trial - theta
         step = relative_step(theta, d)

@@ -31,14 +31,15 @@ from __future__ import annotations
 import numpy as np
 
 from ._gn import (
-    PRED_FLOOR,
     SWITCH_TO_PRECISE,
     check_poles,
     convergence_verdict,
     freeze_active,
+    pred_tolerance,
     project_to_bounds,
     relative_step,
     start_iteration,
+    stationary_message,
 )
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
 
@@ -50,11 +51,13 @@ MU0_DEFAULT = 1e-3
 
 
 def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           mu0: float | None = None, bounds: tuple | None = None) -> NLSOutcome:
+           mu0: float | None = None, bounds: tuple | None = None, sdtol: float | None = None) -> NLSOutcome:
     """Levenberg-Marquardt from ``theta0`` (see the module docstring); never raises on non-convergence.
 
     ``bounds`` (lo, hi), each (m,) rad/s: every trial step is projected so that each pole's damped
-    frequency stays in its trust region (:func:`analysis._gn.project_to_bounds`).
+    frequency stays in its trust region (:func:`analysis._gn.project_to_bounds`). ``sdtol``: also
+    converged when the step still to go is below ``sdtol`` standard deviations of the poles
+    (:func:`analysis._gn.pred_tolerance`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
@@ -72,6 +75,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     fail_status, fail_reason = Status.NO_PROGRESS, ""
     verdict = None
     check_pred = True
+    pred_tol, dof = pred_tolerance(problem, theta.size // 2, ftol, sdtol)
 
     for it in range(1, max_iter + 1):
         if verdict is not None:
@@ -94,8 +98,8 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             check_pred = False
             d_gn, _ = solve_scaled(JtJ, g, D)
             pred_gn = -float(g @ d_gn)
-            if 0.0 <= pred_gn <= max(ftol, PRED_FLOOR) * ev.S:
-                msg = f"converged: predicted decrease of S {pred_gn / ev.S:.2g} S <= ftol"
+            if 0.0 <= pred_gn <= pred_tol * ev.S:
+                msg = stationary_message(pred_gn, ev.S, dof, ftol, sdtol)
                 if not fast:
                     return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL, msg)
                 history.append(ev.S)

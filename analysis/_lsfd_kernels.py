@@ -116,6 +116,16 @@ def _stack(z: np.ndarray) -> np.ndarray:
     return np.concatenate([z.real, z.imag], axis=0)
 
 
+def _pair_columns(M: np.ndarray, X: np.ndarray, Xc: np.ndarray) -> None:
+    """Write the stacked columns ``X + Xc`` and ``j (X - Xc)`` of (N, m) complex ``X``, ``Xc`` into the
+    first 2m columns of the real (2N, .) ``M`` (interleaved, rows [Re; Im])."""
+    N, m = X.shape
+    np.add(X.real, Xc.real, out=M[:N, 0:2 * m:2])
+    np.add(X.imag, Xc.imag, out=M[N:, 0:2 * m:2])
+    np.subtract(Xc.imag, X.imag, out=M[:N, 1:2 * m:2])
+    np.subtract(X.real, Xc.real, out=M[N:, 1:2 * m:2])
+
+
 @dataclass
 class Evaluation:
     """The variable-projection state at one set of poles.
@@ -192,23 +202,31 @@ class ProjectedProblem:
         """Number of real linear parameters per FRF, ``P = 2 m + 2 n_res``."""
         return 2 * n_modes + 2 * self.n_res
 
+    def n_lines(self) -> int:
+        """Lines that count as observations (non-zero line weight)."""
+        return self.N if self.line_w is None else int(np.count_nonzero(self.line_w))
+
+    def dof(self, n_modes: int) -> int:
+        """Degrees of freedom of the real residuals with ``n_modes`` poles: ``2 lines n_frf`` real
+        equations less ``2 m`` pole parameters and ``n_frf P`` linear ones (may be <= 0)."""
+        return 2 * self.n_lines() * self.n_frf - 2 * n_modes - self.n_frf * self.n_linear(n_modes)
+
     def basis(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted stacked basis ``A`` (2N x P) and derivative columns ``E`` (2N x 2m)."""
+        """Weighted stacked basis ``A`` (2N x P) and derivative columns ``E`` (2N x 2m).
+
+        Written straight into the real arrays (rows ``[Re; Im]``) from the real and imaginary parts
+        of ``K``, ``Kc`` and their squares: no complex basis is built and stacked afterwards."""
         lam = theta_to_poles(theta)
-        m = lam.size
-        K = 1.0 / (self.jw[:, None] - lam[None, :])             # (N, m)
-        Kc = 1.0 / (self.jw[:, None] - np.conj(lam)[None, :])
-        Phi = np.empty((self.N, 2 * m + 2 * self.n_res), dtype=complex)
-        Phi[:, 0:2 * m:2] = K + Kc
-        Phi[:, 1:2 * m:2] = 1j * (K - Kc)
-        Phi[:, 2 * m:] = self._res_cols
-        K2 = K * K
-        Kc2 = Kc * Kc
-        Ec = np.empty((self.N, 2 * m), dtype=complex)
-        Ec[:, 0::2] = K2 + Kc2
-        Ec[:, 1::2] = 1j * (K2 - Kc2)
-        A = _stack(Phi)
-        E = _stack(Ec)
+        m, N = lam.size, self.N
+        # reciprocals into fresh arrays: numpy's in-place complex division is several times slower
+        K = np.reciprocal(self.jw[:, None] - lam[None, :])             # (N, m)
+        Kc = np.reciprocal(self.jw[:, None] - np.conj(lam)[None, :])
+        A = np.empty((2 * N, 2 * m + 2 * self.n_res))
+        E = np.empty((2 * N, 2 * m))
+        _pair_columns(A, K, Kc)
+        _pair_columns(E, np.square(K, out=K), np.square(Kc, out=Kc))
+        A[:N, 2 * m:] = self._res_cols.real
+        A[N:, 2 * m:] = self._res_cols.imag
         if self.line_w is not None:
             w2 = np.concatenate([self.line_w, self.line_w])[:, None]
             A *= w2
@@ -320,13 +338,22 @@ def householder_project(h: np.ndarray, tau: np.ndarray, E: np.ndarray, Ys: np.nd
     V1[np.diag_indices(P)] = 1.0
     V2 = h.T[P:]                           # the rest (a view)
     VtV = V1.T @ V1 + V2.T @ V2
-    T = np.zeros((P, P))
-    for i in range(P):                     # LAPACK's forward, column-wise T (dlarft)
-        T[i, i] = tau[i]
-        if i:
-            T[:i, i] = -tau[i] * (T[:i, :i] @ VtV[:i, i])
     X = np.concatenate([E, Ys], axis=1)
-    Z = T.T @ (V1.T @ X[:P] + V2.T @ X[P:])
+    W = V1.T @ X[:P] + V2.T @ X[P:]
+    if np.all(tau != 0):
+        # T^-1 = strictly upper part of V^T V + diag(1 / tau) (the UT transform; tau_i = 2 / v_i^T v_i):
+        # Z = T^T W by one triangular solve
+        Tinv = np.triu(VtV, 1)
+        Tinv[np.diag_indices(P)] = 1.0 / tau
+        Z = solve_upper(Tinv, W, transposed=True)
+    else:
+        # a reflector that is the identity (tau = 0): LAPACK's forward, column-wise T (dlarft)
+        T = np.zeros((P, P))
+        for i in range(P):
+            T[i, i] = tau[i]
+            if i:
+                T[:i, i] = -tau[i] * (T[:i, :i] @ VtV[:i, i])
+        Z = T.T @ W
     Cb = X[P:] - V2 @ Z
     QtY = Ys[:P] - V1 @ Z[:, m2:]
     Gf = Cb.T @ Cb

@@ -31,7 +31,9 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    recording: 1/RMS alone would weight FRFs that are 40 % noise 1600 times up). For noise
    that is a fixed fraction of each FRF's level 1/RMS is the maximum-likelihood weighting.
    The reported S, noise variance and standard deviations are then those of the weighted
-   problem. And with a frequency *trust region*: each pole's damped frequency is held
+   problem. Each LSFD of the automatic fit stops at the latest once the Gauss-Newton step still to
+   go is below ``SDTOL`` standard deviations of the poles (the slow tail of a fit to noisy data
+   changes them by less than that). And with a frequency *trust region*: each pole's damped frequency is held
    (bound constraint, projected steps) within ``MIGRATE_BANDWIDTHS`` half-power bandwidths (``2 zeta f`` of the start
    pole, at least two lines) of where it started. A weak initial pole the data do not
    support is otherwise not driven to zero residue: it slides onto a strong neighbour and
@@ -238,7 +240,7 @@ def fit_auto(
                             "left out of the fit (zero weight)")
         log.info(warnings_out[-1])
     fit_kw: dict[str, Any] = dict(method=method, band=(lo2, hi2), residual_form=residual_form, per_frf=per_frf, max_iter=max_iter,
-                  weights=rms_weights(fit_frf, (lo2, hi2)) if weighting == "rms" else None)
+                  weights=rms_weights(fit_frf, (lo2, hi2)) if weighting == "rms" else None, sdtol=SDTOL)
     progress("fit: LSFD (%s) from %d poles", method.upper(), np.asarray(poles).size)
     if given_complex is not None:
         result = fit_lsfd(fit_frf, poles, **fit_kw)
@@ -272,6 +274,11 @@ def fit_auto(
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
 
+
+#: every LSFD of the automatic fit also stops once the step still to go is below this many standard
+#: deviations of the poles (``fit_lsfd(sdtol=...)``): the remaining error is a hundredth of the
+#: statistical one, and the slow tail of iterations that changes the poles by less is not run
+SDTOL = 0.01
 
 #: averages per FRF from which the coherence confirms a visible peak for the fit's start
 SEED_MIN_AVERAGES = 3
