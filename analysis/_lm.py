@@ -32,6 +32,7 @@ import numpy as np
 
 from ._gn import (
     SWITCH_TO_PRECISE,
+    active_bounds,
     check_poles,
     convergence_verdict,
     freeze_active,
@@ -51,13 +52,16 @@ MU0_DEFAULT = 1e-3
 
 
 def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           mu0: float | None = None, bounds: tuple | None = None, sdtol: float | None = None) -> NLSOutcome:
+           mu0: float | None = None, bounds: tuple | None = None, sdtol: float | None = None,
+           edge_hold: int | None = None) -> NLSOutcome:
     """Levenberg-Marquardt from ``theta0`` (see the module docstring); never raises on non-convergence.
 
     ``bounds`` (lo, hi), each (m,) rad/s: every trial step is projected so that each pole's damped
     frequency stays in its trust region (:func:`analysis._gn.project_to_bounds`). ``sdtol``: also
     converged when the step still to go is below ``sdtol`` standard deviations of the poles
-    (:func:`analysis._gn.pred_tolerance`).
+    (:func:`analysis._gn.pred_tolerance`). ``edge_hold``: stop with status ``AT_EDGE`` once a
+    coordinate has sat on its bound, pushed outwards, at ``edge_hold`` accepted points in a row
+    (for a caller that drops such a pole and refits without it).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
@@ -76,6 +80,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     verdict = None
     check_pred = True
     pred_tol, dof = pred_tolerance(problem, theta.size // 2, ftol, sdtol)
+    held = np.zeros(theta.size, dtype=int)   # accepted points in a row at which a coordinate sat on its bound
 
     for it in range(1, max_iter + 1):
         if verdict is not None:
@@ -133,7 +138,15 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 ev = problem.evaluate(theta)
                 nfev += 1
             if verdict is None:
-                JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+                JtJ, g = problem.normal_equations(ev)
+                if edge_hold:
+                    held = np.where(active_bounds(theta, g, bounds), held + 1, 0)
+                    if np.any(held >= edge_hold):
+                        k = int(np.argmax(held)) // 2 + 1
+                        return NLSOutcome(theta, ev, history, it, nfev, Status.AT_EDGE,
+                                          f"stopped: pole {k} sat on its trust-region edge at {edge_hold} "
+                                          "accepted steps in a row")
+                JtJ, g = freeze_active(theta, JtJ, g, bounds)
                 D = np.maximum(D, np.sqrt(np.diag(JtJ)))
                 check_pred = True
             continue

@@ -15,7 +15,7 @@ from .modal import natural_freq_hz
 if TYPE_CHECKING:
     from .lsfd import LSFDResult
 
-__all__ = ["fit_bounded", "bad_poles", "drop_bad_poles", "trust_window_hz", "MAX_DAMPING"]
+__all__ = ["fit_bounded", "bad_poles", "drop_bad_poles", "trust_window_hz", "MAX_DAMPING", "EDGE_HOLD"]
 
 log = logging.getLogger(__name__)
 
@@ -31,20 +31,29 @@ def trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
     return MIGRATE_BANDWIDTHS * bandwidth_hz(start, df)
 
 
+#: the fits of steps 5-6 stop once a pole has sat on the edge of its trust region, pushed outwards,
+#: at this many accepted LM steps in a row (``fit_lsfd(edge_hold=...)``): step 6 drops such a pole
+#: and refits the others from their starts, so the rest of that iteration would be spent for nothing
+EDGE_HOLD = 3
+
+
 def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict,
-                damping_window: float = DAMPING_WINDOW) -> LSFDResult:
+                damping_window: float = DAMPING_WINDOW, edge_hold: int | None = None) -> LSFDResult:
     """LSFD with each pole's damped frequency held within ``MIGRATE_BANDWIDTHS`` half-power
     bandwidths of its start and its decay rate within a factor ``damping_window`` of its start
-    (the trust region, steps 5-7)."""
+    (the trust region, steps 5-7). ``edge_hold``: stop early at a pole held on its edge (status
+    ``AT_EDGE``, see :data:`EDGE_HOLD`; :func:`drop_bad_poles` then drops it)."""
     from .lsfd import fit_lsfd
 
     return fit_lsfd(frf, start, freq_window_hz=trust_window_hz(start, frf.line_spacing_hz),
-                    damping_window=damping_window, **fit_kw)
+                    damping_window=damping_window, edge_hold=edge_hold, **fit_kw)
 
 
-def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
+def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool = True,
+              edge_only: bool = False) -> tuple[np.ndarray, list[str]]:
     """Mask of fitted poles to drop (step 6) and the reasons (``duplicates=False``: without the
-    duplicate check; step 7 judges its new pole's neighbours itself)."""
+    duplicate check; step 7 judges its new pole's neighbours itself; ``edge_only``: only the poles
+    on the edge of their trust region, for a fit stopped there before its end)."""
     lo, hi = result.band
     fd = result.poles_raw.imag / (2 * np.pi)
     z = result.damping
@@ -53,10 +62,14 @@ def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool
     # a decay rate on its bound (DAMPING_WINDOW) wanted to go elsewhere as well
     ratio = result.poles_raw.real / np.where(start.real == 0, -1e-300, start.real)
     on_bound |= (ratio >= 0.99 * DAMPING_WINDOW) | (ratio <= 1.01 / DAMPING_WINDOW)
-    migrated = (migrated_poles(start, result.poles_raw, df) | on_bound) & ~out_of_range
+    if edge_only:
+        out_of_range = np.zeros_like(on_bound)
+        migrated = on_bound
+    else:
+        migrated = (migrated_poles(start, result.poles_raw, df) | on_bound) & ~out_of_range
     moved = np.abs(natural_freq_hz(result.poles_raw) - natural_freq_hz(start)) / bandwidth_hz(start, df)
     dup = duplicate_poles(result.poles_raw, result.model.residues, df, moved=moved) & ~out_of_range & ~migrated
-    if not duplicates:
+    if not duplicates or edge_only:
         dup = np.zeros_like(dup)
     why = []
     edge = (f"pulled to its trust-region edge ({MIGRATE_BANDWIDTHS:g} half-power bandwidths from its start, or "
@@ -70,11 +83,15 @@ def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool
 
 
 def drop_bad_poles(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_out: list[str]) -> LSFDResult:
-    """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring)."""
+    """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring).
+    ``result`` may have stopped at a pole held on its trust-region edge (:data:`EDGE_HOLD`); the
+    refits stop so too, and a result that still did is fitted to its end from its starts."""
+    from .lsfd import Status
+
     df = frf.line_spacing_hz
     anchor = np.asarray(result.initial_poles if result.initial_poles is not None else result.poles_raw)
     for _ in range(MAX_CHECK_ROUNDS):
-        bad, why = bad_poles(result, anchor, df)
+        bad, why = bad_poles(result, anchor, df, edge_only=result.status == Status.AT_EDGE)
         if not np.any(bad) or np.all(bad):
             break
         msg = f"dropped {int(bad.sum())} pole(s) and refitted: " + "; ".join(why)
@@ -82,5 +99,7 @@ def drop_bad_poles(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_out: 
         warnings_out.append(msg)
         # the kept poles restart from their own starts, with the same trust regions
         anchor = anchor[~bad]
+        result = fit_bounded(frf, anchor, fit_kw, edge_hold=EDGE_HOLD)
+    if result.status == Status.AT_EDGE:
         result = fit_bounded(frf, anchor, fit_kw)
     return result
