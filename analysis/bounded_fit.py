@@ -32,8 +32,9 @@ def trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
 
 
 #: the fits of steps 5-6 stop once a pole has sat on the edge of its trust region, pushed outwards,
-#: at this many accepted LM steps in a row (``fit_lsfd(edge_hold=...)``): step 6 drops such a pole
-#: and refits the others from their starts, so the rest of that iteration would be spent for nothing
+#: at this many accepted LM steps in a row and the step still to go is below one standard deviation
+#: (``fit_lsfd(edge_hold=...)``): step 6 drops that pole and refits the others from their starts, so
+#: the last digits of this fit are not needed (its checks compare poles with bandwidths)
 EDGE_HOLD = 3
 
 
@@ -49,11 +50,9 @@ def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict,
                     damping_window=damping_window, edge_hold=edge_hold, **fit_kw)
 
 
-def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool = True,
-              edge_only: bool = False) -> tuple[np.ndarray, list[str]]:
+def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
     """Mask of fitted poles to drop (step 6) and the reasons (``duplicates=False``: without the
-    duplicate check; step 7 judges its new pole's neighbours itself; ``edge_only``: only the poles
-    on the edge of their trust region, for a fit stopped there before its end)."""
+    duplicate check; step 7 judges its new pole's neighbours itself)."""
     lo, hi = result.band
     fd = result.poles_raw.imag / (2 * np.pi)
     z = result.damping
@@ -62,14 +61,10 @@ def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool
     # a decay rate on its bound (DAMPING_WINDOW) wanted to go elsewhere as well
     ratio = result.poles_raw.real / np.where(start.real == 0, -1e-300, start.real)
     on_bound |= (ratio >= 0.99 * DAMPING_WINDOW) | (ratio <= 1.01 / DAMPING_WINDOW)
-    if edge_only:
-        out_of_range = np.zeros_like(on_bound)
-        migrated = on_bound
-    else:
-        migrated = (migrated_poles(start, result.poles_raw, df) | on_bound) & ~out_of_range
+    migrated = (migrated_poles(start, result.poles_raw, df) | on_bound) & ~out_of_range
     moved = np.abs(natural_freq_hz(result.poles_raw) - natural_freq_hz(start)) / bandwidth_hz(start, df)
     dup = duplicate_poles(result.poles_raw, result.model.residues, df, moved=moved) & ~out_of_range & ~migrated
-    if not duplicates or edge_only:
+    if not duplicates:
         dup = np.zeros_like(dup)
     why = []
     edge = (f"pulled to its trust-region edge ({MIGRATE_BANDWIDTHS:g} half-power bandwidths from its start, or "
@@ -91,7 +86,7 @@ def drop_bad_poles(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_out: 
     df = frf.line_spacing_hz
     anchor = np.asarray(result.initial_poles if result.initial_poles is not None else result.poles_raw)
     for _ in range(MAX_CHECK_ROUNDS):
-        bad, why = bad_poles(result, anchor, df, edge_only=result.status == Status.AT_EDGE)
+        bad, why = bad_poles(result, anchor, df)
         if not np.any(bad) or np.all(bad):
             break
         msg = f"dropped {int(bad.sum())} pole(s) and refitted: " + "; ".join(why)

@@ -238,7 +238,8 @@ def fit_lsfd(
         round-off. None: ``ftol``/``xtol`` only.
     edge_hold : LM only: stop with status ``Status.AT_EDGE`` (not a success) once a pole has sat on
         the edge of its trust region (``freq_window_hz``/``damping_window``), pushed outwards, at
-        this many accepted steps in a row: for a caller that drops such poles and refits
+        this many accepted steps in a row and the step still to go is below one standard deviation
+        of the poles: for a caller that drops such poles and refits the others from their starts
         (:func:`analysis.bounded_fit.drop_bad_poles`). None: never.
 
     Returns
