@@ -390,7 +390,9 @@ def gram_from_G(G: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.nd
     # sum over the FRFs first (one matrix product), then the small contraction with G
     Gf = Gam.reshape(4 * m, -1)
     C = (Gf @ Gf.T).reshape(m, 2, 2, m, 2, 2)              # [r, p, i, s, q, j]
-    JtJ = np.einsum("rpsq,rpisqj->risj", G4, C, optimize=True).reshape(2 * m, 2 * m)
+    # JtJ[r, i, s, j] = sum_pq G4[r, p, s, q] C[r, p, i, s, q, j], by broadcasting (an optimised einsum
+    # spends more time choosing its order than computing)
+    JtJ = (G4[:, :, None, :, :, None] * C).sum(axis=(1, 4)).reshape(2 * m, 2 * m)
     return 0.5 * (JtJ + JtJ.T), Gam
 
 
@@ -407,8 +409,8 @@ def solve_upper(R: np.ndarray, B: np.ndarray, transposed: bool = False) -> np.nd
 def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``(J^T J + mu D^2) d = -g`` through the scaled system.
 
-    With ``M = D^-1 J^T J D^-1`` and ``x = D d``: ``(M + mu I) x = -D^-1 g``. Cholesky when
-    positive definite, least squares otherwise; NaN when no step can be computed (the
+    With ``M = D^-1 J^T J D^-1`` and ``x = D d``: ``(M + mu I) x = -D^-1 g``. Solved directly when
+    positive definite (a Cholesky factorisation tells), least squares otherwise; NaN when no step can be computed (the
     iterations then reject it). Returns ``(d, x)``.
     """
     with np.errstate(over="ignore", invalid="ignore"):
@@ -421,8 +423,8 @@ def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0)
         x = np.full(rhs.shape, np.nan)
         return x, x
     try:
-        L = np.linalg.cholesky(Mm)   # fails unless positive definite
-        x = solve_upper(L.T, solve_upper(L.T, rhs, transposed=True))
+        np.linalg.cholesky(Mm)       # fails unless positive definite
+        x = np.linalg.solve(Mm, rhs)  # one factorisation (numpy has no triangular solver)
     except (np.linalg.LinAlgError, ValueError):
         try:
             x = np.linalg.lstsq(Mm, rhs, rcond=None)[0]

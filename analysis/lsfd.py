@@ -123,19 +123,18 @@ def rank_one_split(residues: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     R = np.asarray(residues, dtype=complex)
     n_out, n_ref, m = R.shape
     psi = np.zeros((n_out, m), dtype=complex)
-    L = np.zeros((m, n_ref), dtype=complex)
+    L = np.ones((m, n_ref), dtype=complex)
     ratio = np.zeros(m)
-    for r in range(m):
-        U, s, Vh = np.linalg.svd(R[:, :, r], full_matrices=False)
-        if s[0] == 0:
-            L[r] = 1.0
-            continue
-        lr = Vh[0]
-        k = int(np.argmax(np.abs(lr)))
-        c = lr[k]
-        L[r] = lr / c
-        psi[:, r] = U[:, 0] * s[0] * c
-        ratio[r] = s[1] / s[0] if s.size > 1 else 0.0
+    if m == 0:
+        return psi, L, ratio
+    U, s, Vh = np.linalg.svd(np.moveaxis(R, 2, 0), full_matrices=False)   # all modes in one call
+    ok = s[:, 0] != 0
+    lr = Vh[:, 0, :]                                                       # (m, n_ref)
+    c = lr[np.arange(m), np.argmax(np.abs(lr), axis=1)]
+    L[ok] = lr[ok] / c[ok, None]
+    psi[:, ok] = (U[ok, :, 0] * (s[ok, 0] * c[ok])[:, None]).T
+    if s.shape[1] > 1:
+        ratio[ok] = s[ok, 1] / s[ok, 0]
     return psi, L, ratio
 
 
