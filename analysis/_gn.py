@@ -23,7 +23,7 @@ import numpy as np
 from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
 
 __all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "project_to_bounds", "freeze_active",
-           "active_bounds", "pred_tolerance", "stationary_message", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
+           "pred_tolerance", "stationary_message", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
 
 
 def roundoff_floor(problem: ProjectedProblem) -> float:
@@ -66,17 +66,6 @@ def project_to_bounds(theta: np.ndarray, bounds: tuple | None) -> np.ndarray:
     return t
 
 
-def active_bounds(theta: np.ndarray, g: np.ndarray, bounds: tuple | None) -> np.ndarray:
-    """Mask of the coordinates of ``theta`` that sit on a bound with the gradient ``g`` (``J^T r``)
-    pushing them outwards (all False without bounds)."""
-    t = np.asarray(theta, dtype=float)
-    if bounds is None:
-        return np.zeros(t.size, dtype=bool)
-    lo, hi = _theta_bounds(bounds, t.size)
-    tol = 1e-12 * np.maximum(np.abs(t), 1.0)
-    return ((t <= lo + tol) & (g > 0)) | ((t >= hi - tol) & (g < 0))
-
-
 def freeze_active(theta: np.ndarray, JtJ: np.ndarray, g: np.ndarray,
                   bounds: tuple | None) -> tuple[np.ndarray, np.ndarray]:
     """Normal equations with the *active* bound coordinates frozen: a damped frequency sitting on
@@ -86,7 +75,10 @@ def freeze_active(theta: np.ndarray, JtJ: np.ndarray, g: np.ndarray,
     ``-(J^T J)^-1 g``). Without bounds the inputs are returned unchanged."""
     if bounds is None:
         return JtJ, g
-    active = active_bounds(theta, g, bounds)
+    t = np.asarray(theta, dtype=float)
+    lo, hi = _theta_bounds(bounds, t.size)
+    tol = 1e-12 * np.maximum(np.abs(t), 1.0)
+    active = ((t <= lo + tol) & (g > 0)) | ((t >= hi - tol) & (g < 0))
     if not np.any(active):
         return JtJ, g
     idx = np.flatnonzero(active)

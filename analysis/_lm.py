@@ -32,7 +32,6 @@ import numpy as np
 
 from ._gn import (
     SWITCH_TO_PRECISE,
-    active_bounds,
     check_poles,
     convergence_verdict,
     freeze_active,
@@ -44,27 +43,21 @@ from ._gn import (
 )
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
 
-__all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT", "EDGE_SDTOL"]
+__all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
 
 MU_MIN = 1e-12
 MU_MAX = 1e10
 MU0_DEFAULT = 1e-3
-#: ``edge_hold``'s stop: the step still to go below this many standard deviations of the poles
-EDGE_SDTOL = 1.0
 
 
 def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           mu0: float | None = None, bounds: tuple | None = None, sdtol: float | None = None,
-           edge_hold: int | None = None) -> NLSOutcome:
+           mu0: float | None = None, bounds: tuple | None = None, sdtol: float | None = None) -> NLSOutcome:
     """Levenberg-Marquardt from ``theta0`` (see the module docstring); never raises on non-convergence.
 
     ``bounds`` (lo, hi), each (m,) rad/s: every trial step is projected so that each pole's damped
     frequency stays in its trust region (:func:`analysis._gn.project_to_bounds`). ``sdtol``: also
     converged when the step still to go is below ``sdtol`` standard deviations of the poles
-    (:func:`analysis._gn.pred_tolerance`). ``edge_hold``: stop with status ``AT_EDGE`` once a
-    coordinate has sat on its bound, pushed outwards, at ``edge_hold`` accepted points in a row and
-    the step still to go is below ``EDGE_SDTOL`` standard deviation (for a caller that drops such a
-    pole and refits the others from their starts: their last digits are not needed).
+    (:func:`analysis._gn.pred_tolerance`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
@@ -83,7 +76,6 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     verdict = None
     check_pred = True
     pred_tol, dof = pred_tolerance(problem, theta.size // 2, ftol, sdtol)
-    held = np.zeros(theta.size, dtype=int)   # accepted points in a row at which a coordinate sat on its bound
 
     for it in range(1, max_iter + 1):
         if verdict is not None:
@@ -106,11 +98,6 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             check_pred = False
             d_gn, _ = solve_scaled(JtJ, g, D)
             pred_gn = -float(g @ d_gn)
-            if edge_hold and held.max() >= edge_hold and 0.0 <= pred_gn <= EDGE_SDTOL ** 2 * ev.S / max(dof, 1):
-                k = int(np.argmax(held)) // 2 + 1
-                return NLSOutcome(theta, ev, history, it - 1, nfev, Status.AT_EDGE,
-                                  f"stopped: pole {k} sat on its trust-region edge at {int(held.max())} accepted "
-                                  f"steps in a row, the step still to go below {EDGE_SDTOL:g} standard deviation")
             if 0.0 <= pred_gn <= pred_tol * ev.S:
                 msg = stationary_message(pred_gn, ev.S, dof, ftol, sdtol)
                 if not fast:
@@ -146,9 +133,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 ev = problem.evaluate(theta)
                 nfev += 1
             if verdict is None:
-                JtJ, g = problem.normal_equations(ev)
-                held = np.where(active_bounds(theta, g, bounds), held + 1, 0)
-                JtJ, g = freeze_active(theta, JtJ, g, bounds)
+                JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
                 D = np.maximum(D, np.sqrt(np.diag(JtJ)))
                 check_pred = True
             continue

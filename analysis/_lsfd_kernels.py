@@ -84,8 +84,6 @@ class Status:
     UNSTABLE = -2
     COLLAPSED = -3
     NO_PROGRESS = -4
-    #: stopped on request while a pole sat on its trust-region edge (the caller drops it and refits)
-    AT_EDGE = -5
 
 
 @dataclass

@@ -15,7 +15,7 @@ from .modal import natural_freq_hz
 if TYPE_CHECKING:
     from .lsfd import LSFDResult
 
-__all__ = ["fit_bounded", "bad_poles", "drop_bad_poles", "trust_window_hz", "MAX_DAMPING", "EDGE_HOLD"]
+__all__ = ["fit_bounded", "bad_poles", "drop_bad_poles", "trust_window_hz", "MAX_DAMPING"]
 
 log = logging.getLogger(__name__)
 
@@ -31,23 +31,15 @@ def trust_window_hz(start: np.ndarray, df: float) -> np.ndarray:
     return MIGRATE_BANDWIDTHS * bandwidth_hz(start, df)
 
 
-#: the fits of steps 5-6 stop once a pole has sat on the edge of its trust region, pushed outwards,
-#: at this many accepted LM steps in a row and the step still to go is below one standard deviation
-#: (``fit_lsfd(edge_hold=...)``): step 6 drops that pole and refits the others from their starts, so
-#: the last digits of this fit are not needed (its checks compare poles with bandwidths)
-EDGE_HOLD = 3
-
-
 def fit_bounded(frf: FRFSet, start: np.ndarray, fit_kw: dict,
-                damping_window: float = DAMPING_WINDOW, edge_hold: int | None = None) -> LSFDResult:
+                damping_window: float = DAMPING_WINDOW) -> LSFDResult:
     """LSFD with each pole's damped frequency held within ``MIGRATE_BANDWIDTHS`` half-power
     bandwidths of its start and its decay rate within a factor ``damping_window`` of its start
-    (the trust region, steps 5-7). ``edge_hold``: stop early at a pole held on its edge (status
-    ``AT_EDGE``, see :data:`EDGE_HOLD`; :func:`drop_bad_poles` then drops it)."""
+    (the trust region, steps 5-7)."""
     from .lsfd import fit_lsfd
 
     return fit_lsfd(frf, start, freq_window_hz=trust_window_hz(start, frf.line_spacing_hz),
-                    damping_window=damping_window, edge_hold=edge_hold, **fit_kw)
+                    damping_window=damping_window, **fit_kw)
 
 
 def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool = True) -> tuple[np.ndarray, list[str]]:
@@ -78,11 +70,7 @@ def bad_poles(result: LSFDResult, start: np.ndarray, df: float, duplicates: bool
 
 
 def drop_bad_poles(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_out: list[str]) -> LSFDResult:
-    """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring).
-    ``result`` may have stopped at a pole held on its trust-region edge (:data:`EDGE_HOLD`); the
-    refits stop so too, and a result that still did is fitted to its end from its starts."""
-    from .lsfd import Status
-
+    """Step 6: drop out-of-range, migrated and duplicate poles and refit (see module docstring)."""
     df = frf.line_spacing_hz
     anchor = np.asarray(result.initial_poles if result.initial_poles is not None else result.poles_raw)
     for _ in range(MAX_CHECK_ROUNDS):
@@ -94,7 +82,5 @@ def drop_bad_poles(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_out: 
         warnings_out.append(msg)
         # the kept poles restart from their own starts, with the same trust regions
         anchor = anchor[~bad]
-        result = fit_bounded(frf, anchor, fit_kw, edge_hold=EDGE_HOLD)
-    if result.status == Status.AT_EDGE:
         result = fit_bounded(frf, anchor, fit_kw)
     return result

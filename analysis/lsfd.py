@@ -203,7 +203,6 @@ def fit_lsfd(
     freq_window_hz: float | np.ndarray | None = None,
     damping_window: float | None = None,
     sdtol: float | None = None,
-    edge_hold: int | None = None,
 ) -> LSFDResult:
     """Fit global poles, residues and residual terms to an FRF set by nonlinear least squares.
 
@@ -235,11 +234,6 @@ def fit_lsfd(
         remaining error is a hundredth of the statistical one). On noisy data this ends the slow
         tail of the iteration that ``ftol`` waits for; noise-free data keep converging to
         round-off. None: ``ftol``/``xtol`` only.
-    edge_hold : LM only: stop with status ``Status.AT_EDGE`` (not a success) once a pole has sat on
-        the edge of its trust region (``freq_window_hz``/``damping_window``), pushed outwards, at
-        this many accepted steps in a row and the step still to go is below one standard deviation
-        of the poles: for a caller that drops such poles and refits the others from their starts
-        (:func:`analysis.bounded_fit.drop_bad_poles`). None: never.
 
     Returns
     -------
@@ -259,8 +253,6 @@ def fit_lsfd(
         raise ValueError(f"ftol and xtol must be >= 0; got ftol={ftol}, xtol={xtol}")
     if sdtol is not None and not sdtol >= 0:
         raise ValueError(f"sdtol must be >= 0 (or None); got {sdtol}")
-    if edge_hold is not None and not int(edge_hold) >= 1:
-        raise ValueError(f"edge_hold must be a count >= 1 (or None); got {edge_hold}")
     if mu0 is not None and not mu0 > 0:
         raise ValueError(f"mu0 must be > 0 (or None for the default); got {mu0}")
     lam0 = _check_poles(initial_poles)
@@ -292,9 +284,8 @@ def fit_lsfd(
             bounds = (np.full(lam0.size, 1e-6) * lam0.imag, np.full(lam0.size, np.inf))
         sigma0 = -lam0.real
         bounds = (bounds[0], bounds[1], -F * sigma0, -sigma0 / F)
-    stops = {"sdtol": sdtol, "edge_hold": edge_hold}
     outcome, prob = _run(frf, lam0, method, residual_form, line_w, frf_w, int(max_iter), ftol, xtol, mu0, bounds,
-                         stops)
+                         sdtol)
     sub = None
     if per_frf:
         sub = []
@@ -304,7 +295,7 @@ def fit_lsfd(
                 one = replace(frf, H=frf.H[o:o + 1, r:r + 1], outputs=(frf.outputs[o],),
                               references=(frf.references[r],), coherence=coh)
                 oc, pb = _run(one, lam0, method, residual_form, line_w, None, int(max_iter), ftol, xtol, mu0,
-                              bounds, stops)
+                              bounds, sdtol)
                 sub.append(_result(one, pb, oc, method, residual_form, correct_exp_window, lam0, None))
     return _result(frf, prob, outcome, method, residual_form, correct_exp_window, lam0, sub)
 
@@ -367,9 +358,7 @@ def _freq_bounds(lam0: np.ndarray, freq_window_hz: float | np.ndarray | None
 
 def _run(frf: FRFSet, lam0: np.ndarray, method: str, residual_form: str, line_w: np.ndarray | None,
          frf_w: np.ndarray | None, max_iter: int, ftol: float, xtol: float, mu0: float | None,
-         bounds: tuple | None = None, stops: dict | None = None) -> tuple[NLSOutcome, ProjectedProblem]:
-    """One LSFD iteration on ``frf``; ``stops``: the extra stopping rules ``sdtol`` and (LM) ``edge_hold``."""
-    stops = stops or {}
+         bounds: tuple | None = None, sdtol: float | None = None) -> tuple[NLSOutcome, ProjectedProblem]:
     n_out, n_ref, N = frf.H.shape
     prob = ProjectedProblem(frf.omega, frf.H.reshape(n_out * n_ref, N), frf.quantity, residual_form, line_w, frf_w)
     m = lam0.size
@@ -382,9 +371,9 @@ def _run(frf: FRFSet, lam0: np.ndarray, method: str, residual_form: str, line_w:
         )
     theta0 = poles_to_theta(lam0)
     if method == "gn":
-        oc = run_gn(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, bounds=bounds, sdtol=stops.get("sdtol"))
+        oc = run_gn(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, bounds=bounds, sdtol=sdtol)
     else:
-        oc = run_lm(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, mu0=mu0, bounds=bounds, **stops)
+        oc = run_lm(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, mu0=mu0, bounds=bounds, sdtol=sdtol)
     if oc.status == Status.MAX_ITER:
         warnings.warn(
             f"LSFD ({method}) stopped at max_iter={max_iter} before converging (S = {oc.evaluation.S:.6g}); "

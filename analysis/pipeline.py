@@ -84,7 +84,7 @@ from typing import Any
 import numpy as np
 
 from .bands import FitError, check_band_edges, default_band, default_max_modes, exclude_lines, mains_harmonics
-from .bounded_fit import EDGE_HOLD, drop_bad_poles, fit_bounded
+from .bounded_fit import drop_bad_poles, fit_bounded
 from .compressed_fit import with_compression
 from .fit_result import FitResult, assess_fit
 from .frf import FRFSet, window_pole_shift
@@ -248,7 +248,7 @@ def fit_auto(
         with warnings.catch_warnings():
             # the status is read below ("LSFD did not converge" in the warnings): not a second notice
             warnings.simplefilter("ignore", LSFDConvergenceWarning)
-            result = fit_bounded(fit_frf, poles, fit_kw, edge_hold=EDGE_HOLD)
+            result = fit_bounded(fit_frf, poles, fit_kw)
         result = drop_bad_poles(fit_frf, result, fit_kw, warnings_out)
     visible = visible_peaks(fit_frf, (lo2, hi2))
     complete_search = add_missing and n_modes is None

@@ -1,6 +1,5 @@
-"""The LSFD's optional stopping rules (``sdtol``: the step still to go in standard deviations;
-``edge_hold``: a pole held on its trust-region edge) and the Householder kernel's T factor, against
-FRFs synthesised from known models with seeded noise."""
+"""The LSFD's optional stopping rule ``sdtol`` (the step still to go in standard deviations) and the
+Householder kernel's T factor, against FRFs synthesised from known models with seeded noise."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -8,8 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from analysis._lsfd_kernels import Status, householder_project
-from analysis.bounded_fit import EDGE_HOLD, drop_bad_poles, fit_bounded
+from analysis._lsfd_kernels import householder_project
 from analysis.frf import FRFSet
 from analysis.lsfd import fit_lsfd
 from analysis.modal import ModalModel, pole_from_fz, synthesize
@@ -62,44 +60,10 @@ def test_sdtol_keeps_noise_free_recovery_to_round_off(method: str) -> None:
     assert np.max(np.abs(got - lam) / np.abs(lam)) < 1e-9
 
 
-def test_sdtol_and_edge_hold_reject_bad_values() -> None:
+def test_sdtol_rejects_bad_values() -> None:
     frf, lam = noisy_set(0.0)
     with pytest.raises(ValueError, match="sdtol"):
         fit_lsfd(frf, lam, sdtol=-1.0)
-    with pytest.raises(ValueError, match="edge_hold"):
-        fit_lsfd(frf, lam, edge_hold=0)
-
-
-def spurious_case() -> tuple[FRFSet, np.ndarray]:
-    """The noisy set and starting poles with one more, weak and spurious, at 45 Hz (no mode there)."""
-    frf, lam = noisy_set(0.02, seed=5)
-    return frf, np.concatenate([start_poles(lam), pole_from_fz(np.array([45.0]), np.array([0.01]))])
-
-
-def test_edge_hold_stops_at_a_pole_held_on_its_trust_region_edge() -> None:
-    """The spurious pole is pushed to the edge of its trust region and held there: with
-    ``edge_hold`` the fit stops early with ``AT_EDGE`` (not a success) and fewer iterations."""
-    frf, start = spurious_case()
-    kw = {"residual_form": "none"}
-    full = fit_bounded(frf, start, kw)
-    held = fit_bounded(frf, start, kw, edge_hold=EDGE_HOLD)
-    assert held.status == Status.AT_EDGE and not held.success
-    assert "trust-region edge" in held.message and held.iterations < full.iterations
-
-
-def test_drop_after_an_early_edge_stop_gives_the_full_fits_result() -> None:
-    """Step 6 from the early-stopped fit drops the spurious pole and refits the rest from their
-    starts: the same poles as from the fit run to its end (to 0.05 standard deviations)."""
-    frf, start = spurious_case()
-    kw = {"residual_form": "none", "sdtol": 0.01}
-    notes_full: list[str] = []
-    notes_held: list[str] = []
-    full = drop_bad_poles(frf, fit_bounded(frf, start, kw), kw, notes_full)
-    held = drop_bad_poles(frf, fit_bounded(frf, start, kw, edge_hold=EDGE_HOLD), kw, notes_held)
-    assert full.success and held.success, (full.message, held.message)
-    assert held.poles.size == full.poles.size == start.size - 1
-    assert any("45 Hz" in n for n in notes_held) and any("45 Hz" in n for n in notes_full)
-    assert np.max(np.abs(held.freq_hz - full.freq_hz) / full.freq_hz_std) < 0.05
 
 
 @pytest.mark.parametrize("identity_first", [False, True])
