@@ -22,7 +22,7 @@ import numpy as np
 
 from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
 
-__all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "project_to_bounds", "freeze_active",
+__all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "theta_box", "project_to_bounds", "freeze_active",
            "pred_tolerance", "stationary_message", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
 
 
@@ -33,6 +33,9 @@ def roundoff_floor(problem: ProjectedProblem) -> float:
 
 def check_poles(theta: np.ndarray) -> str:
     """Empty string when every pole is stable with positive damped frequency, else a reason."""
+    t = np.asarray(theta, dtype=float)
+    if t[0::2].max() < 0 and t[1::2].min() > 0 and np.isfinite(t).all():   # the common case, in few passes
+        return ""
     lam = theta_to_poles(theta)
     bad = np.flatnonzero(lam.real >= 0)
     if bad.size:
@@ -45,9 +48,12 @@ def check_poles(theta: np.ndarray) -> str:
     return ""
 
 
-def _theta_bounds(bounds: tuple, n: int) -> tuple[np.ndarray, np.ndarray]:
+def theta_box(bounds: tuple | None, n: int) -> tuple[np.ndarray, np.ndarray] | None:
     """(lo, hi) over the whole ``theta`` (n values) from ``bounds``: ``(lo_im, hi_im)`` bounds the
-    damped frequencies only; ``(lo_im, hi_im, lo_re, hi_re)`` also the real parts (decay rates)."""
+    damped frequencies only; ``(lo_im, hi_im, lo_re, hi_re)`` also the real parts (decay rates).
+    None without bounds. The solvers make it once per run."""
+    if bounds is None:
+        return None
     lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
     lo[1::2], hi[1::2] = bounds[0], bounds[1]
     if len(bounds) == 4:
@@ -55,28 +61,27 @@ def _theta_bounds(bounds: tuple, n: int) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def project_to_bounds(theta: np.ndarray, bounds: tuple | None) -> np.ndarray:
-    """Clip every pole's damped frequency ``Im lambda_r`` (rad/s) into ``[lo_r, hi_r]`` (the
-    frequency trust region), and with four bounds its real part too (the damping trust region);
-    ``bounds`` None returns ``theta`` unchanged (a copy)."""
+def project_to_bounds(theta: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """Clip every pole's damped frequency ``Im lambda_r`` (rad/s) into its frequency trust region,
+    and with four bounds its real part too (the damping trust region); ``box`` from
+    :func:`theta_box`; None returns ``theta`` unchanged (a copy)."""
     t = np.array(theta, dtype=float)
-    if bounds is not None:
-        lo, hi = _theta_bounds(bounds, t.size)
-        t = np.clip(t, lo, hi)
+    if box is not None:
+        t = np.clip(t, box[0], box[1])
     return t
 
 
 def freeze_active(theta: np.ndarray, JtJ: np.ndarray, g: np.ndarray,
-                  bounds: tuple | None) -> tuple[np.ndarray, np.ndarray]:
+                  box: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
     """Normal equations with the *active* bound coordinates frozen: a damped frequency sitting on
     its bound whose gradient pushes it outwards gets a decoupled unit row/column and zero
     gradient, so the step leaves it where it is and the convergence tests (predicted decrease,
     relative step) see only the free parameters. ``g`` is the gradient ``J^T r`` (the step is
-    ``-(J^T J)^-1 g``). Without bounds the inputs are returned unchanged."""
-    if bounds is None:
+    ``-(J^T J)^-1 g``); ``box`` from :func:`theta_box`. Without bounds the inputs are returned unchanged."""
+    if box is None:
         return JtJ, g
     t = np.asarray(theta, dtype=float)
-    lo, hi = _theta_bounds(bounds, t.size)
+    lo, hi = box
     tol = 1e-12 * np.maximum(np.abs(t), 1.0)
     active = ((t <= lo + tol) & (g > 0)) | ((t >= hi - tol) & (g < 0))
     if not np.any(active):
@@ -182,6 +187,7 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         return early
     verdict = None
     pred_tol, dof = pred_tolerance(problem, theta.size // 2, ftol, sdtol)
+    box = theta_box(bounds, theta.size)
     for it in range(1, max_iter + 1):
         if verdict is not None and fast:
             # re-check the verdict with precise evaluations
@@ -194,7 +200,7 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                                   f"GN stopped: poles collapsed (basis rcond {ev.rcond:.2g})")
         elif verdict is not None:
             return NLSOutcome(theta, ev, history, it - 1, nfev, *verdict)
-        JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+        JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
         if not (np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g))):
             return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
                               "GN stopped: the fit became non-finite (poles nearly coincide or the basis is "
@@ -210,7 +216,7 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 history.append(ev.S)
                 continue
             return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL, stationary_message(pred, ev.S, dof, ftol, sdtol))
-        trial = project_to_bounds(theta + d, bounds)
+        trial = project_to_bounds(theta + d, box)
         d = trial - theta
         step = relative_step(theta, d)
         reason = check_poles(trial)

@@ -40,6 +40,7 @@ from ._gn import (
     relative_step,
     start_iteration,
     stationary_message,
+    theta_box,
 )
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
 
@@ -66,10 +67,11 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     nfev = 1
     if early is not None:
         return early
+    box = theta_box(bounds, theta.size)
     mu = MU0_DEFAULT if mu0 is None else float(mu0)
     mu = min(max(mu, MU_MIN), MU_MAX)
     nu = 2.0
-    JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+    JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
     D = np.sqrt(np.diag(JtJ))
     D[D == 0] = 1.0
     fail_status, fail_reason = Status.NO_PROGRESS, ""
@@ -85,7 +87,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             fast, verdict = False, None
             ev = problem.evaluate(theta)
             nfev += 1
-            JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+            JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
             check_pred = True
             mu = min(mu, 1.0)
             nu = 2.0
@@ -107,7 +109,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 continue
         d, x = solve_scaled(JtJ, g, D, mu)
         pred = float(x @ (mu * x - g / D))
-        trial = project_to_bounds(theta + d, bounds)
+        trial = project_to_bounds(theta + d, box)
         step = relative_step(theta, trial - theta)
         reason = check_poles(trial)
         new = None
@@ -133,7 +135,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 ev = problem.evaluate(theta)
                 nfev += 1
             if verdict is None:
-                JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+                JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
                 D = np.maximum(D, np.sqrt(np.diag(JtJ)))
                 check_pred = True
             continue
