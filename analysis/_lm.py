@@ -42,13 +42,52 @@ from ._gn import (
     stationary_message,
     theta_box,
 )
-from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
+from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled
 
 __all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
 
 MU_MIN = 1e-12
 MU_MAX = 1e10
 MU0_DEFAULT = 1e-3
+
+
+def _finite(ev: Evaluation, JtJ: np.ndarray, g: np.ndarray) -> bool:
+    """Whether S and the normal equations at ``ev`` are finite."""
+    return bool(np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g)))
+
+
+def _evaluate_trial(problem: ProjectedProblem, trial: np.ndarray, fast: bool) -> tuple[Evaluation | None, str, int]:
+    """The evaluation at a trial point (None when a pole would be unstable), the reason it cannot be
+    taken ("" when it can) and the status that reason stands for."""
+    reason = check_poles(trial)
+    if reason:
+        return None, reason, Status.UNSTABLE
+    new = problem.evaluate(trial, fast=fast)
+    if not new.rank_ok:
+        return new, f"poles would collapse (basis rcond {new.rcond:.2g})", Status.COLLAPSED
+    return new, "", Status.NO_PROGRESS
+
+
+def _accepted(new: Evaluation | None, ev: Evaluation, pred: float) -> bool:
+    """Whether a trial evaluation ``new`` is taken: full rank, S decreased, positive predicted decrease."""
+    return new is not None and new.rank_ok and new.S < ev.S and pred > 0
+
+
+def _rejected(reason: str, step: float, xtol: float, fast: bool, mu: float, nu: float, fail_status: int,
+              fail_reason: str) -> tuple[tuple[int, str] | None, float, float]:
+    """After a rejected step (``reason``: why it could not be taken, "" when S did not decrease):
+    ``(verdict or None, mu, nu)``. A step below ``xtol`` with ``mu <= 1`` is convergence; a tiny
+    step of a fast evaluation is re-checked precisely (an empty verdict message); otherwise mu grows,
+    and past ``MU_MAX`` the iteration gives up (with the last ``fail_status``/``fail_reason``)."""
+    if not reason and step <= xtol and mu <= 1.0:
+        return (Status.XTOL, f"converged: relative step {step:.2g} <= xtol (no further decrease of S)"), mu, nu
+    if fast and not reason and step <= SWITCH_TO_PRECISE:
+        return (Status.NO_PROGRESS, ""), mu, nu   # re-evaluated precisely at the top of the loop
+    mu, nu = mu * nu, nu * 2.0
+    if mu <= MU_MAX:
+        return None, mu, nu
+    msg = "LM could not decrease S (mu reached its ceiling)"
+    return ((fail_status, msg + ": " + fail_reason) if fail_reason else (Status.NO_PROGRESS, msg)), mu, nu
 
 
 def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
@@ -91,7 +130,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             check_pred = True
             mu = min(mu, 1.0)
             nu = 2.0
-        if not (np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g))):
+        if not _finite(ev, JtJ, g):
             return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
                               "LM stopped: the fit became non-finite (poles nearly coincide or the basis is "
                               "ill-conditioned); drop near-duplicate initial poles")
@@ -111,17 +150,12 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         pred = float(x @ (mu * x - g / D))
         trial = project_to_bounds(theta + d, box)
         step = relative_step(theta, trial - theta)
-        reason = check_poles(trial)
-        new = None
+        new, reason, why_status = _evaluate_trial(problem, trial, fast)
         if reason:
-            fail_status = Status.UNSTABLE
-        else:
-            new = problem.evaluate(trial, fast=fast)
-            nfev += 1
-            if not new.rank_ok:
-                reason = f"poles would collapse (basis rcond {new.rcond:.2g})"
-                fail_status = Status.COLLAPSED
-        if new is not None and new.rank_ok and new.S < ev.S and pred > 0:
+            fail_status = why_status
+        nfev += int(new is not None)
+        if _accepted(new, ev, pred):
+            assert new is not None
             rho = (ev.S - new.S) / pred
             rel = (ev.S - new.S) / ev.S
             theta, ev = trial, new
@@ -130,7 +164,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             nu = 2.0
             fail_status, fail_reason = Status.NO_PROGRESS, ""
             verdict = convergence_verdict(ev.S, floor, step, xtol, rel, ftol)
-            if verdict is None and fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
+            if verdict is None and fast and min(rel, step) <= SWITCH_TO_PRECISE:
                 fast = False
                 ev = problem.evaluate(theta)
                 nfev += 1
@@ -141,22 +175,8 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             continue
         # rejected step
         history.append(ev.S)
-        if reason:
-            fail_reason = reason
-        if not reason and step <= xtol and mu <= 1.0:
-            verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol (no further decrease of S)")
-            continue
-        if fast and not reason and step <= SWITCH_TO_PRECISE:
-            verdict = (Status.NO_PROGRESS, "")   # re-evaluated precisely at the top of the loop
-            continue
-        mu *= nu
-        nu *= 2.0
-        if mu > MU_MAX:
-            msg = "LM could not decrease S (mu reached its ceiling)"
-            if fail_reason:
-                verdict = (fail_status, msg + ": " + fail_reason)
-            else:
-                verdict = (Status.NO_PROGRESS, msg)
+        fail_reason = reason or fail_reason
+        verdict, mu, nu = _rejected(reason, step, xtol, fast, mu, nu, fail_status, fail_reason)
     if verdict is not None and fast:
         ev = problem.evaluate(theta)
         nfev += 1

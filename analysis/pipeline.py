@@ -183,22 +183,7 @@ def fit_auto(
     limits = default_band(frf) if not user_band else (lo, float(frf.freq_hz[-1]))
     warnings_out: list[str] = []
 
-    given_complex = None
-    given_freqs = None
-    if isinstance(initial, str):
-        stab_method = initial.lower()
-        if stab_method not in ("lsce", "lscf"):
-            raise ValueError(f"initial must be 'lsce', 'lscf' or an array of poles/frequencies; got {initial!r}")
-    else:
-        arr = np.atleast_1d(np.asarray(initial))
-        if arr.size == 0:
-            raise ValueError("no initial poles given: pass poles (rad/s), frequencies (Hz) or 'lsce'/'lscf'")
-        if np.iscomplexobj(arr) and np.any(arr.imag != 0):
-            given_complex = arr.astype(complex)
-        else:
-            given_freqs = arr.real.astype(float)
-        stab_method = "lscf"
-
+    stab_method, given_complex, given_freqs = _initial_kind(initial)
     progress("fit: band %.6g..%.6g Hz (%d lines, %d FRFs)", lo, hi,
              int(np.sum((frf.freq_hz >= lo) & (frf.freq_hz <= hi))), frf.n_outputs * frf.n_references)
     stab: StabilizationResult | None = None
@@ -208,19 +193,9 @@ def fit_auto(
             mm = max(mm, int(n_modes) + 4)
         progress("fit: stabilization (%s) up to %d modes", stab_method.upper(), mm)
         stab = stabilization(frf, mm, method=stab_method, band=(lo, hi), refine_lsfd=refine_lsfd)
-        if given_freqs is not None:
-            poles = poles_from_frequencies(given_freqs, stab)
-        else:
-            poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
-        if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
-            poles = _poles_from_peaks(frf, (lo, hi), stab, warnings_out)
-        elif poles.size and given_freqs is None and n_modes is None and add_missing and _peaks_trusted(frf):
-            poles = _with_visible_peaks(frf, (lo, hi), stab, poles)
-        if poles.size == 0:
-            raise FitError(
-                f"no stable physical poles found in {lo:.6g}..{hi:.6g} Hz up to {mm} modes: raise --order, "
-                "change the band, or give the poles (--poles F1,F2,...)"
-            )
+        seed_peaks = given_freqs is None and n_modes is None and add_missing
+        poles = _start_poles(frf, (lo, hi), stab, mm, given_freqs, n_modes, selection_options, seed_peaks,
+                             warnings_out)
     else:
         poles = given_complex
 
@@ -273,6 +248,47 @@ def fit_auto(
         log.warning("implausible fit: %s", p)
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
+
+
+def _initial_kind(initial: str | Sequence[complex] | Sequence[float] | np.ndarray
+                  ) -> tuple[str, np.ndarray | None, np.ndarray | None]:
+    """``fit_auto``'s ``initial``: (stabilization method, the user's complex poles or None, the
+    user's natural frequencies in Hz or None)."""
+    if isinstance(initial, str):
+        stab_method = initial.lower()
+        if stab_method not in ("lsce", "lscf"):
+            raise ValueError(f"initial must be 'lsce', 'lscf' or an array of poles/frequencies; got {initial!r}")
+        return stab_method, None, None
+    arr = np.atleast_1d(np.asarray(initial))
+    if arr.size == 0:
+        raise ValueError("no initial poles given: pass poles (rad/s), frequencies (Hz) or 'lsce'/'lscf'")
+    if np.iscomplexobj(arr) and np.any(arr.imag != 0):
+        return "lscf", arr.astype(complex), None
+    return "lscf", None, arr.real.astype(float)
+
+
+def _start_poles(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult, max_modes: int,
+                 given_freqs: np.ndarray | None, n_modes: int | None, selection_options: dict | None,
+                 seed_peaks: bool, warnings_out: list[str]) -> np.ndarray:
+    """Steps 2-3: the LSFD's start from the stabilization diagram: the user's frequencies, or the
+    selection plus the visible peaks no selected pole lies near (``seed_peaks``, data whose coherence
+    is trusted: :func:`_with_visible_peaks`); the visible peaks alone when the diagram keeps no pole.
+    Raises FitError when there is no start at all."""
+    lo, hi = band
+    if given_freqs is not None:
+        poles = poles_from_frequencies(given_freqs, stab)
+    else:
+        poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
+    if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
+        poles = _poles_from_peaks(frf, band, stab, warnings_out)
+    elif poles.size and seed_peaks and _peaks_trusted(frf):
+        poles = _with_visible_peaks(frf, band, stab, poles)
+    if poles.size == 0:
+        raise FitError(
+            f"no stable physical poles found in {lo:.6g}..{hi:.6g} Hz up to {max_modes} modes: raise --order, "
+            "change the band, or give the poles (--poles F1,F2,...)"
+        )
+    return poles
 
 
 #: every LSFD of the automatic fit also stops once the step still to go is below this many standard
