@@ -239,7 +239,8 @@ class ProjectedProblem:
     #: with ``E`` instead of the reflectors applied to ``[E y]``); below it (the local fits of a few
     #: dozen lines) an evaluation costs its overhead either way
     FAST_MIN_SIZE = 2_000
-    #: fast evaluations fall back to precise ones when S < FAST_MIN_REL_S ||y||^2
+    #: fast evaluations fall back to precise ones when S < FAST_MIN_REL_S ||y||^2, or when a derivative
+    #: column keeps less than that fraction of its square norm outside the basis (diag G < FAST_MIN_REL_S diag E^T E)
     FAST_MIN_REL_S = 1e-6
 
     @property
@@ -257,7 +258,8 @@ class ProjectedProblem:
         ``S = ||y||^2 - ||Q^T y||^2``, ``E^T r = E^T y - (Q^T E)^T Q^T y`` and
         ``G = E^T E - (Q^T E)^T (Q^T E)``: one product ``[A E]^T Y`` with the data instead of
         three, at the price of cancellation (relative error of S about eps cond(A) ||y||^2 / S);
-        it falls back to the precise path when ``S < 1e-6 ||y||^2``. When the basis is rank
+        it falls back to the precise path when ``S < 1e-6 ||y||^2`` or a derivative column keeps less
+        than 1e-6 of its square norm outside the basis. When the basis is rank
         deficient (poles collapsed onto each other) ``rank_ok`` is False.
         """
         theta = np.array(theta, dtype=float)
@@ -284,10 +286,13 @@ class ProjectedProblem:
             S = self.y_norm2 - float(np.einsum("ij,ij->", QtY, QtY))
             if S >= self.FAST_MIN_REL_S * self.y_norm2:
                 QtE = solve_upper(Rq, An.T @ E, transposed=True)
-                G = E.T @ E - QtE.T @ QtE
-                EtR = prod[P:] - QtE.T @ QtY
-                coef = solve_upper(Rq, QtY) / norms[:, None]
-                return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
+                EtE = E.T @ E
+                G = EtE - QtE.T @ QtE
+                # a derivative column (nearly) inside the basis loses its digits to cancellation: precise then
+                if np.all(np.diag(G) > self.FAST_MIN_REL_S * np.diag(EtE)):
+                    EtR = prod[P:] - QtE.T @ QtY
+                    coef = solve_upper(Rq, QtY) / norms[:, None]
+                    return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
             h, tau = np.linalg.qr(An, mode="raw")
             Rq = np.triu(h[:, :P].T)
         assert h is not None and tau is not None
