@@ -15,4 +15,7 @@ COMMANDS = {
 }
 
 if __name__ == "__main__":
+    from analysis.threads import load_blas_single_threaded
+
+    load_blas_single_threaded()
     sys.exit(dispatch("python -m analysis", COMMANDS))

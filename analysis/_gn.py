@@ -22,8 +22,8 @@ import numpy as np
 
 from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
 
-__all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "project_to_bounds", "freeze_active",
-           "SWITCH_TO_PRECISE", "PRED_FLOOR"]
+__all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "theta_box", "project_to_bounds", "freeze_active",
+           "pred_tolerance", "stationary_message", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
 
 
 def roundoff_floor(problem: ProjectedProblem) -> float:
@@ -33,6 +33,9 @@ def roundoff_floor(problem: ProjectedProblem) -> float:
 
 def check_poles(theta: np.ndarray) -> str:
     """Empty string when every pole is stable with positive damped frequency, else a reason."""
+    t = np.asarray(theta, dtype=float)
+    if t[0::2].max() < 0 and t[1::2].min() > 0 and np.isfinite(t).all():   # the common case, in few passes
+        return ""
     lam = theta_to_poles(theta)
     bad = np.flatnonzero(lam.real >= 0)
     if bad.size:
@@ -45,9 +48,12 @@ def check_poles(theta: np.ndarray) -> str:
     return ""
 
 
-def _theta_bounds(bounds: tuple, n: int) -> tuple[np.ndarray, np.ndarray]:
+def theta_box(bounds: tuple | None, n: int) -> tuple[np.ndarray, np.ndarray] | None:
     """(lo, hi) over the whole ``theta`` (n values) from ``bounds``: ``(lo_im, hi_im)`` bounds the
-    damped frequencies only; ``(lo_im, hi_im, lo_re, hi_re)`` also the real parts (decay rates)."""
+    damped frequencies only; ``(lo_im, hi_im, lo_re, hi_re)`` also the real parts (decay rates).
+    None without bounds. The solvers make it once per run."""
+    if bounds is None:
+        return None
     lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
     lo[1::2], hi[1::2] = bounds[0], bounds[1]
     if len(bounds) == 4:
@@ -55,28 +61,27 @@ def _theta_bounds(bounds: tuple, n: int) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def project_to_bounds(theta: np.ndarray, bounds: tuple | None) -> np.ndarray:
-    """Clip every pole's damped frequency ``Im lambda_r`` (rad/s) into ``[lo_r, hi_r]`` (the
-    frequency trust region), and with four bounds its real part too (the damping trust region);
-    ``bounds`` None returns ``theta`` unchanged (a copy)."""
+def project_to_bounds(theta: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """Clip every pole's damped frequency ``Im lambda_r`` (rad/s) into its frequency trust region,
+    and with four bounds its real part too (the damping trust region); ``box`` from
+    :func:`theta_box`; None returns ``theta`` unchanged (a copy)."""
     t = np.array(theta, dtype=float)
-    if bounds is not None:
-        lo, hi = _theta_bounds(bounds, t.size)
-        t = np.clip(t, lo, hi)
+    if box is not None:
+        t = np.clip(t, box[0], box[1])
     return t
 
 
 def freeze_active(theta: np.ndarray, JtJ: np.ndarray, g: np.ndarray,
-                  bounds: tuple | None) -> tuple[np.ndarray, np.ndarray]:
+                  box: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
     """Normal equations with the *active* bound coordinates frozen: a damped frequency sitting on
     its bound whose gradient pushes it outwards gets a decoupled unit row/column and zero
     gradient, so the step leaves it where it is and the convergence tests (predicted decrease,
     relative step) see only the free parameters. ``g`` is the gradient ``J^T r`` (the step is
-    ``-(J^T J)^-1 g``). Without bounds the inputs are returned unchanged."""
-    if bounds is None:
+    ``-(J^T J)^-1 g``); ``box`` from :func:`theta_box`. Without bounds the inputs are returned unchanged."""
+    if box is None:
         return JtJ, g
     t = np.asarray(theta, dtype=float)
-    lo, hi = _theta_bounds(bounds, t.size)
+    lo, hi = box
     tol = 1e-12 * np.maximum(np.abs(t), 1.0)
     active = ((t <= lo + tol) & (g > 0)) | ((t >= hi - tol) & (g < 0))
     if not np.any(active):
@@ -103,6 +108,30 @@ PRED_FLOOR = 1e-13
 
 #: relative progress (of S, or of the poles) below which fast evaluations give way to precise ones
 SWITCH_TO_PRECISE = 1e-6
+
+
+def pred_tolerance(problem: ProjectedProblem, n_modes: int, ftol: float, sdtol: float | None) -> tuple[float, int]:
+    """``(tol, dof)`` of the predicted-decrease test: the iteration has converged when the decrease
+    of S the Gauss-Newton model predicts, ``pred = g^T (J^T J)^-1 g``, is at most ``tol S``.
+
+    ``tol = max(ftol, PRED_FLOOR)``; with ``sdtol`` also ``sdtol^2 / dof``: with the residual variance
+    ``S / dof`` the poles' covariance is ``(S / dof) (J^T J)^-1``, so ``pred / (S / dof)`` is the squared
+    length of the step still to go measured in standard deviations (Mahalanobis), and the test stops
+    once that step is below ``sdtol`` standard deviations (``dof`` from
+    :meth:`ProjectedProblem.dof`; the rule is off when ``dof <= 0``)."""
+    tol = max(ftol, PRED_FLOOR)
+    dof = problem.dof(n_modes)
+    if sdtol and dof > 0:
+        tol = max(tol, float(sdtol) ** 2 / dof)
+    return tol, dof
+
+
+def stationary_message(pred: float, S: float, dof: int, ftol: float, sdtol: float | None) -> str:
+    """The message of a verdict of the predicted-decrease test (:func:`pred_tolerance`)."""
+    if sdtol and dof > 0 and pred <= float(sdtol) ** 2 * S / dof and pred > max(ftol, PRED_FLOOR) * S:
+        return (f"converged: the step still to go is {np.sqrt(max(pred, 0.0) * dof / S):.2g} standard deviations "
+                f"of the poles <= sdtol")
+    return f"converged: predicted decrease of S {pred / S:.2g} S <= ftol"
 
 
 def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: float,
@@ -142,11 +171,12 @@ def start_iteration(problem: ProjectedProblem, theta0: np.ndarray
 
 
 def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           bounds: tuple | None = None) -> NLSOutcome:
+           bounds: tuple | None = None, sdtol: float | None = None) -> NLSOutcome:
     """Gauss-Newton from ``theta0`` (see the module docstring); never raises on non-convergence.
 
     ``bounds`` (lo, hi), each (m,) rad/s: every step is projected so that each pole's damped
-    frequency stays in its trust region (see :func:`project_to_bounds`).
+    frequency stays in its trust region (see :func:`project_to_bounds`). ``sdtol``: also converged
+    when the step still to go is below ``sdtol`` standard deviations of the poles (:func:`pred_tolerance`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
@@ -156,6 +186,8 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     if early is not None:
         return early
     verdict = None
+    pred_tol, dof = pred_tolerance(problem, theta.size // 2, ftol, sdtol)
+    box = theta_box(bounds, theta.size)
     for it in range(1, max_iter + 1):
         if verdict is not None and fast:
             # re-check the verdict with precise evaluations
@@ -168,7 +200,7 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                                   f"GN stopped: poles collapsed (basis rcond {ev.rcond:.2g})")
         elif verdict is not None:
             return NLSOutcome(theta, ev, history, it - 1, nfev, *verdict)
-        JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+        JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
         if not (np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g))):
             return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
                               "GN stopped: the fit became non-finite (poles nearly coincide or the basis is "
@@ -177,15 +209,14 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         D[D == 0] = 1.0
         d, _ = solve_scaled(JtJ, g, D)
         pred = -float(g @ d)
-        if 0.0 <= pred <= max(ftol, PRED_FLOOR) * ev.S:
+        if 0.0 <= pred <= pred_tol * ev.S:
             if fast:
                 # confirmed with a precise evaluation at the loop top
-                verdict = (Status.FTOL, f"converged: predicted decrease of S {pred / ev.S:.2g} S <= ftol")
+                verdict = (Status.FTOL, stationary_message(pred, ev.S, dof, ftol, sdtol))
                 history.append(ev.S)
                 continue
-            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL,
-                              f"converged: predicted decrease of S {pred / ev.S:.2g} S <= ftol")
-        trial = project_to_bounds(theta + d, bounds)
+            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL, stationary_message(pred, ev.S, dof, ftol, sdtol))
+        trial = project_to_bounds(theta + d, box)
         d = trial - theta
         step = relative_step(theta, d)
         reason = check_poles(trial)

@@ -31,16 +31,18 @@ from __future__ import annotations
 import numpy as np
 
 from ._gn import (
-    PRED_FLOOR,
     SWITCH_TO_PRECISE,
     check_poles,
     convergence_verdict,
     freeze_active,
+    pred_tolerance,
     project_to_bounds,
     relative_step,
     start_iteration,
+    stationary_message,
+    theta_box,
 )
-from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, solve_scaled
+from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled
 
 __all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
 
@@ -49,12 +51,53 @@ MU_MAX = 1e10
 MU0_DEFAULT = 1e-3
 
 
+def _finite(ev: Evaluation, JtJ: np.ndarray, g: np.ndarray) -> bool:
+    """Whether S and the normal equations at ``ev`` are finite."""
+    return bool(np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g)))
+
+
+def _evaluate_trial(problem: ProjectedProblem, trial: np.ndarray, fast: bool) -> tuple[Evaluation | None, str, int]:
+    """The evaluation at a trial point (None when a pole would be unstable), the reason it cannot be
+    taken ("" when it can) and the status that reason stands for."""
+    reason = check_poles(trial)
+    if reason:
+        return None, reason, Status.UNSTABLE
+    new = problem.evaluate(trial, fast=fast)
+    if not new.rank_ok:
+        return new, f"poles would collapse (basis rcond {new.rcond:.2g})", Status.COLLAPSED
+    return new, "", Status.NO_PROGRESS
+
+
+def _accepted(new: Evaluation | None, ev: Evaluation, pred: float) -> bool:
+    """Whether a trial evaluation ``new`` is taken: full rank, S decreased, positive predicted decrease."""
+    return new is not None and new.rank_ok and new.S < ev.S and pred > 0
+
+
+def _rejected(reason: str, step: float, xtol: float, fast: bool, mu: float, nu: float, fail_status: int,
+              fail_reason: str) -> tuple[tuple[int, str] | None, float, float]:
+    """After a rejected step (``reason``: why it could not be taken, "" when S did not decrease):
+    ``(verdict or None, mu, nu)``. A step below ``xtol`` with ``mu <= 1`` is convergence; a tiny
+    step of a fast evaluation is re-checked precisely (an empty verdict message); otherwise mu grows,
+    and past ``MU_MAX`` the iteration gives up (with the last ``fail_status``/``fail_reason``)."""
+    if not reason and step <= xtol and mu <= 1.0:
+        return (Status.XTOL, f"converged: relative step {step:.2g} <= xtol (no further decrease of S)"), mu, nu
+    if fast and not reason and step <= SWITCH_TO_PRECISE:
+        return (Status.NO_PROGRESS, ""), mu, nu   # re-evaluated precisely at the top of the loop
+    mu, nu = mu * nu, nu * 2.0
+    if mu <= MU_MAX:
+        return None, mu, nu
+    msg = "LM could not decrease S (mu reached its ceiling)"
+    return ((fail_status, msg + ": " + fail_reason) if fail_reason else (Status.NO_PROGRESS, msg)), mu, nu
+
+
 def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
-           mu0: float | None = None, bounds: tuple | None = None) -> NLSOutcome:
+           mu0: float | None = None, bounds: tuple | None = None, sdtol: float | None = None) -> NLSOutcome:
     """Levenberg-Marquardt from ``theta0`` (see the module docstring); never raises on non-convergence.
 
     ``bounds`` (lo, hi), each (m,) rad/s: every trial step is projected so that each pole's damped
-    frequency stays in its trust region (:func:`analysis._gn.project_to_bounds`).
+    frequency stays in its trust region (:func:`analysis._gn.project_to_bounds`). ``sdtol``: also
+    converged when the step still to go is below ``sdtol`` standard deviations of the poles
+    (:func:`analysis._gn.pred_tolerance`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
     falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
@@ -63,15 +106,17 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     nfev = 1
     if early is not None:
         return early
+    box = theta_box(bounds, theta.size)
     mu = MU0_DEFAULT if mu0 is None else float(mu0)
     mu = min(max(mu, MU_MIN), MU_MAX)
     nu = 2.0
-    JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+    JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
     D = np.sqrt(np.diag(JtJ))
     D[D == 0] = 1.0
     fail_status, fail_reason = Status.NO_PROGRESS, ""
     verdict = None
     check_pred = True
+    pred_tol, dof = pred_tolerance(problem, theta.size // 2, ftol, sdtol)
 
     for it in range(1, max_iter + 1):
         if verdict is not None:
@@ -81,11 +126,11 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             fast, verdict = False, None
             ev = problem.evaluate(theta)
             nfev += 1
-            JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+            JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
             check_pred = True
             mu = min(mu, 1.0)
             nu = 2.0
-        if not (np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g))):
+        if not _finite(ev, JtJ, g):
             return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
                               "LM stopped: the fit became non-finite (poles nearly coincide or the basis is "
                               "ill-conditioned); drop near-duplicate initial poles")
@@ -94,8 +139,8 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             check_pred = False
             d_gn, _ = solve_scaled(JtJ, g, D)
             pred_gn = -float(g @ d_gn)
-            if 0.0 <= pred_gn <= max(ftol, PRED_FLOOR) * ev.S:
-                msg = f"converged: predicted decrease of S {pred_gn / ev.S:.2g} S <= ftol"
+            if 0.0 <= pred_gn <= pred_tol * ev.S:
+                msg = stationary_message(pred_gn, ev.S, dof, ftol, sdtol)
                 if not fast:
                     return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL, msg)
                 history.append(ev.S)
@@ -103,19 +148,14 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 continue
         d, x = solve_scaled(JtJ, g, D, mu)
         pred = float(x @ (mu * x - g / D))
-        trial = project_to_bounds(theta + d, bounds)
+        trial = project_to_bounds(theta + d, box)
         step = relative_step(theta, trial - theta)
-        reason = check_poles(trial)
-        new = None
+        new, reason, why_status = _evaluate_trial(problem, trial, fast)
         if reason:
-            fail_status = Status.UNSTABLE
-        else:
-            new = problem.evaluate(trial, fast=fast)
-            nfev += 1
-            if not new.rank_ok:
-                reason = f"poles would collapse (basis rcond {new.rcond:.2g})"
-                fail_status = Status.COLLAPSED
-        if new is not None and new.rank_ok and new.S < ev.S and pred > 0:
+            fail_status = why_status
+        nfev += int(new is not None)
+        if _accepted(new, ev, pred):
+            assert new is not None
             rho = (ev.S - new.S) / pred
             rel = (ev.S - new.S) / ev.S
             theta, ev = trial, new
@@ -124,33 +164,19 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             nu = 2.0
             fail_status, fail_reason = Status.NO_PROGRESS, ""
             verdict = convergence_verdict(ev.S, floor, step, xtol, rel, ftol)
-            if verdict is None and fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
+            if verdict is None and fast and min(rel, step) <= SWITCH_TO_PRECISE:
                 fast = False
                 ev = problem.evaluate(theta)
                 nfev += 1
             if verdict is None:
-                JtJ, g = freeze_active(theta, *problem.normal_equations(ev), bounds)
+                JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
                 D = np.maximum(D, np.sqrt(np.diag(JtJ)))
                 check_pred = True
             continue
         # rejected step
         history.append(ev.S)
-        if reason:
-            fail_reason = reason
-        if not reason and step <= xtol and mu <= 1.0:
-            verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol (no further decrease of S)")
-            continue
-        if fast and not reason and step <= SWITCH_TO_PRECISE:
-            verdict = (Status.NO_PROGRESS, "")   # re-evaluated precisely at the top of the loop
-            continue
-        mu *= nu
-        nu *= 2.0
-        if mu > MU_MAX:
-            msg = "LM could not decrease S (mu reached its ceiling)"
-            if fail_reason:
-                verdict = (fail_status, msg + ": " + fail_reason)
-            else:
-                verdict = (Status.NO_PROGRESS, msg)
+        fail_reason = reason or fail_reason
+        verdict, mu, nu = _rejected(reason, step, xtol, fast, mu, nu, fail_status, fail_reason)
     if verdict is not None and fast:
         ev = problem.evaluate(theta)
         nfev += 1

@@ -116,6 +116,16 @@ def _stack(z: np.ndarray) -> np.ndarray:
     return np.concatenate([z.real, z.imag], axis=0)
 
 
+def _pair_columns(M: np.ndarray, X: np.ndarray, Xc: np.ndarray) -> None:
+    """Write the stacked columns ``X + Xc`` and ``j (X - Xc)`` of (N, m) complex ``X``, ``Xc`` into the
+    first 2m columns of the real (2N, .) ``M`` (interleaved, rows [Re; Im])."""
+    N, m = X.shape
+    np.add(X.real, Xc.real, out=M[:N, 0:2 * m:2])
+    np.add(X.imag, Xc.imag, out=M[N:, 0:2 * m:2])
+    np.subtract(Xc.imag, X.imag, out=M[:N, 1:2 * m:2])
+    np.subtract(X.real, Xc.real, out=M[N:, 1:2 * m:2])
+
+
 @dataclass
 class Evaluation:
     """The variable-projection state at one set of poles.
@@ -192,23 +202,31 @@ class ProjectedProblem:
         """Number of real linear parameters per FRF, ``P = 2 m + 2 n_res``."""
         return 2 * n_modes + 2 * self.n_res
 
+    def n_lines(self) -> int:
+        """Lines that count as observations (non-zero line weight)."""
+        return self.N if self.line_w is None else int(np.count_nonzero(self.line_w))
+
+    def dof(self, n_modes: int) -> int:
+        """Degrees of freedom of the real residuals with ``n_modes`` poles: ``2 lines n_frf`` real
+        equations less ``2 m`` pole parameters and ``n_frf P`` linear ones (may be <= 0)."""
+        return 2 * self.n_lines() * self.n_frf - 2 * n_modes - self.n_frf * self.n_linear(n_modes)
+
     def basis(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted stacked basis ``A`` (2N x P) and derivative columns ``E`` (2N x 2m)."""
+        """Weighted stacked basis ``A`` (2N x P) and derivative columns ``E`` (2N x 2m).
+
+        Written straight into the real arrays (rows ``[Re; Im]``) from the real and imaginary parts
+        of ``K``, ``Kc`` and their squares: no complex basis is built and stacked afterwards."""
         lam = theta_to_poles(theta)
-        m = lam.size
-        K = 1.0 / (self.jw[:, None] - lam[None, :])             # (N, m)
-        Kc = 1.0 / (self.jw[:, None] - np.conj(lam)[None, :])
-        Phi = np.empty((self.N, 2 * m + 2 * self.n_res), dtype=complex)
-        Phi[:, 0:2 * m:2] = K + Kc
-        Phi[:, 1:2 * m:2] = 1j * (K - Kc)
-        Phi[:, 2 * m:] = self._res_cols
-        K2 = K * K
-        Kc2 = Kc * Kc
-        Ec = np.empty((self.N, 2 * m), dtype=complex)
-        Ec[:, 0::2] = K2 + Kc2
-        Ec[:, 1::2] = 1j * (K2 - Kc2)
-        A = _stack(Phi)
-        E = _stack(Ec)
+        m, N = lam.size, self.N
+        # reciprocals into fresh arrays: numpy's in-place complex division is several times slower
+        K = np.reciprocal(self.jw[:, None] - lam[None, :])             # (N, m)
+        Kc = np.reciprocal(self.jw[:, None] - np.conj(lam)[None, :])
+        A = np.empty((2 * N, 2 * m + 2 * self.n_res))
+        E = np.empty((2 * N, 2 * m))
+        _pair_columns(A, K, Kc)
+        _pair_columns(E, np.square(K, out=K), np.square(Kc, out=Kc))
+        A[:N, 2 * m:] = self._res_cols.real
+        A[N:, 2 * m:] = self._res_cols.imag
         if self.line_w is not None:
             w2 = np.concatenate([self.line_w, self.line_w])[:, None]
             A *= w2
@@ -216,9 +234,13 @@ class ProjectedProblem:
         return A, E
 
     # ------------------------------------------------------------- evaluation
-    #: problems with at least this many data values (n_freq x n_frf) may use fast evaluations
-    FAST_MIN_SIZE = 200_000
-    #: fast evaluations fall back to precise ones when S < FAST_MIN_REL_S ||y||^2
+    #: problems with at least this many data values (n_freq x n_frf) may use fast evaluations: about
+    #: half the work of a precise one from a default capture's 3 FRFs x 1400 lines up (one product
+    #: with ``E`` instead of the reflectors applied to ``[E y]``); below it (the local fits of a few
+    #: dozen lines) an evaluation costs its overhead either way
+    FAST_MIN_SIZE = 2_000
+    #: fast evaluations fall back to precise ones when S < FAST_MIN_REL_S ||y||^2, or when a derivative
+    #: column keeps less than that fraction of its square norm outside the basis (diag G < FAST_MIN_REL_S diag E^T E)
     FAST_MIN_REL_S = 1e-6
 
     @property
@@ -236,7 +258,8 @@ class ProjectedProblem:
         ``S = ||y||^2 - ||Q^T y||^2``, ``E^T r = E^T y - (Q^T E)^T Q^T y`` and
         ``G = E^T E - (Q^T E)^T (Q^T E)``: one product ``[A E]^T Y`` with the data instead of
         three, at the price of cancellation (relative error of S about eps cond(A) ||y||^2 / S);
-        it falls back to the precise path when ``S < 1e-6 ||y||^2``. When the basis is rank
+        it falls back to the precise path when ``S < 1e-6 ||y||^2`` or a derivative column keeps less
+        than 1e-6 of its square norm outside the basis. When the basis is rank
         deficient (poles collapsed onto each other) ``rank_ok`` is False.
         """
         theta = np.array(theta, dtype=float)
@@ -263,10 +286,13 @@ class ProjectedProblem:
             S = self.y_norm2 - float(np.einsum("ij,ij->", QtY, QtY))
             if S >= self.FAST_MIN_REL_S * self.y_norm2:
                 QtE = solve_upper(Rq, An.T @ E, transposed=True)
-                G = E.T @ E - QtE.T @ QtE
-                EtR = prod[P:] - QtE.T @ QtY
-                coef = solve_upper(Rq, QtY) / norms[:, None]
-                return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
+                EtE = E.T @ E
+                G = EtE - QtE.T @ QtE
+                # a derivative column (nearly) inside the basis loses its digits to cancellation: precise then
+                if np.all(np.diag(G) > self.FAST_MIN_REL_S * np.diag(EtE)):
+                    EtR = prod[P:] - QtE.T @ QtY
+                    coef = solve_upper(Rq, QtY) / norms[:, None]
+                    return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
             h, tau = np.linalg.qr(An, mode="raw")
             Rq = np.triu(h[:, :P].T)
         assert h is not None and tau is not None
@@ -320,13 +346,22 @@ def householder_project(h: np.ndarray, tau: np.ndarray, E: np.ndarray, Ys: np.nd
     V1[np.diag_indices(P)] = 1.0
     V2 = h.T[P:]                           # the rest (a view)
     VtV = V1.T @ V1 + V2.T @ V2
-    T = np.zeros((P, P))
-    for i in range(P):                     # LAPACK's forward, column-wise T (dlarft)
-        T[i, i] = tau[i]
-        if i:
-            T[:i, i] = -tau[i] * (T[:i, :i] @ VtV[:i, i])
     X = np.concatenate([E, Ys], axis=1)
-    Z = T.T @ (V1.T @ X[:P] + V2.T @ X[P:])
+    W = V1.T @ X[:P] + V2.T @ X[P:]
+    if np.all(tau != 0):
+        # T^-1 = strictly upper part of V^T V + diag(1 / tau) (the UT transform; tau_i = 2 / v_i^T v_i):
+        # Z = T^T W by one triangular solve
+        Tinv = np.triu(VtV, 1)
+        Tinv[np.diag_indices(P)] = 1.0 / tau
+        Z = solve_upper(Tinv, W, transposed=True)
+    else:
+        # a reflector that is the identity (tau = 0): LAPACK's forward, column-wise T (dlarft)
+        T = np.zeros((P, P))
+        for i in range(P):
+            T[i, i] = tau[i]
+            if i:
+                T[:i, i] = -tau[i] * (T[:i, :i] @ VtV[:i, i])
+        Z = T.T @ W
     Cb = X[P:] - V2 @ Z
     QtY = Ys[:P] - V1 @ Z[:, m2:]
     Gf = Cb.T @ Cb
@@ -361,7 +396,9 @@ def gram_from_G(G: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.nd
     # sum over the FRFs first (one matrix product), then the small contraction with G
     Gf = Gam.reshape(4 * m, -1)
     C = (Gf @ Gf.T).reshape(m, 2, 2, m, 2, 2)              # [r, p, i, s, q, j]
-    JtJ = np.einsum("rpsq,rpisqj->risj", G4, C, optimize=True).reshape(2 * m, 2 * m)
+    # JtJ[r, i, s, j] = sum_pq G4[r, p, s, q] C[r, p, i, s, q, j], by broadcasting (an optimised einsum
+    # spends more time choosing its order than computing)
+    JtJ = (G4[:, :, None, :, :, None] * C).sum(axis=(1, 4)).reshape(2 * m, 2 * m)
     return 0.5 * (JtJ + JtJ.T), Gam
 
 
@@ -378,8 +415,8 @@ def solve_upper(R: np.ndarray, B: np.ndarray, transposed: bool = False) -> np.nd
 def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``(J^T J + mu D^2) d = -g`` through the scaled system.
 
-    With ``M = D^-1 J^T J D^-1`` and ``x = D d``: ``(M + mu I) x = -D^-1 g``. Cholesky when
-    positive definite, least squares otherwise; NaN when no step can be computed (the
+    With ``M = D^-1 J^T J D^-1`` and ``x = D d``: ``(M + mu I) x = -D^-1 g``. Solved directly when
+    positive definite (a Cholesky factorisation tells), least squares otherwise; NaN when no step can be computed (the
     iterations then reject it). Returns ``(d, x)``.
     """
     with np.errstate(over="ignore", invalid="ignore"):
@@ -392,8 +429,8 @@ def solve_scaled(JtJ: np.ndarray, g: np.ndarray, D: np.ndarray, mu: float = 0.0)
         x = np.full(rhs.shape, np.nan)
         return x, x
     try:
-        L = np.linalg.cholesky(Mm)   # fails unless positive definite
-        x = solve_upper(L.T, solve_upper(L.T, rhs, transposed=True))
+        np.linalg.cholesky(Mm)       # fails unless positive definite
+        x = np.linalg.solve(Mm, rhs)  # one factorisation (numpy has no triangular solver)
     except (np.linalg.LinAlgError, ValueError):
         try:
             x = np.linalg.lstsq(Mm, rhs, rcond=None)[0]

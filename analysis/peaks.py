@@ -26,23 +26,63 @@ def _local_maxima(x: np.ndarray) -> np.ndarray:
     return ((start[top] + end[top]) // 2).astype(np.intp)
 
 
+def _tables(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sparse tables of ``x`` (n samples) for range queries in O(1): row k, column p covers
+    ``x[p:p + 2**k]`` (valid for ``p <= n - 2**k``): its maximum, and the index of its minimum
+    (the first of equal minima, and the last)."""
+    n = x.size
+    levels = max(1, int(n).bit_length())
+    top = np.empty((levels, n))
+    first = np.empty((levels, n), dtype=np.intp)
+    top[0] = x
+    first[0] = np.arange(n)
+    last = first.copy()
+    for k in range(1, levels):
+        w, m = 1 << (k - 1), n - (1 << k) + 1
+        top[k, :m] = np.maximum(top[k - 1, :m], top[k - 1, w:w + m])
+        a, b = first[k - 1, :m], first[k - 1, w:w + m]
+        first[k, :m] = np.where(x[b] < x[a], b, a)
+        a, b = last[k - 1, :m], last[k - 1, w:w + m]
+        last[k, :m] = np.where(x[b] <= x[a], b, a)
+    return top, first, last
+
+
+def _argmin_range(x: np.ndarray, table: np.ndarray, lo: np.ndarray, hi: np.ndarray, last: bool) -> np.ndarray:
+    """Index of the minimum of each ``x[lo:hi + 1]`` (``hi >= lo``) from a table of :func:`_tables`:
+    the first of equal minima, or the last one with ``last``."""
+    k = np.frexp((hi - lo + 1).astype(float))[1] - 1          # floor(log2(length)), exactly
+    a, b = table[k, lo], table[k, hi - (1 << k) + 1]
+    take_b = x[b] <= x[a] if last else x[b] < x[a]
+    return np.where(take_b, b, a)
+
+
 def _bases(x: np.ndarray, peaks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Prominence, left and right base of each peak: the lowest point on either side before a
-    higher sample or the end of ``x`` (of equal lowest points, the one nearest the peak)."""
-    prom = np.empty(len(peaks))
-    left = np.empty(len(peaks), dtype=np.intp)
-    right = np.empty(len(peaks), dtype=np.intp)
-    for k, i in enumerate(np.asarray(peaks, dtype=np.intp)):
-        h = x[i]
-        higher_left = np.flatnonzero(x[:i] > h)
-        lo = higher_left[-1] + 1 if higher_left.size else 0
-        higher_right = np.flatnonzero(x[i + 1:] > h)
-        hi = i + 1 + higher_right[0] if higher_right.size else x.size
-        seg_l = x[lo:i + 1][::-1]
-        seg_r = x[i:hi]
-        left[k] = i - int(np.argmin(seg_l))
-        right[k] = i + int(np.argmin(seg_r))
-        prom[k] = h - max(float(x[left[k]]), float(x[right[k]]))
+    higher sample or the end of ``x`` (of equal lowest points, the one nearest the peak).
+
+    All peaks at once by binary lifting on a sparse table of maxima (the run of samples not higher
+    than the peak on either side, longest power of two first) and range-minimum queries for the
+    bases."""
+    peaks = np.asarray(peaks, dtype=np.intp)
+    if peaks.size == 0:
+        return np.empty(0), np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
+    n = x.size
+    top, first, last = _tables(x)
+    h = x[peaks]
+    lo = peaks.copy()          # the run x[lo:peak] holds no sample higher than the peak
+    hi = peaks + 1             # ... and x[peak + 1:hi]
+    for k in range(top.shape[0] - 1, -1, -1):
+        w = 1 << k
+        c = lo - w
+        ok = c >= 0
+        ok[ok] = top[k, c[ok]] <= h[ok]
+        lo[ok] = c[ok]
+        ok = hi + w <= n
+        ok[ok] = top[k, hi[ok]] <= h[ok]
+        hi[ok] += w
+    left = _argmin_range(x, last, lo, peaks, last=True)
+    right = _argmin_range(x, first, peaks, hi - 1, last=False)
+    prom = h - np.maximum(x[left], x[right])
     return prom, left, right
 
 

@@ -31,7 +31,9 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    recording: 1/RMS alone would weight FRFs that are 40 % noise 1600 times up). For noise
    that is a fixed fraction of each FRF's level 1/RMS is the maximum-likelihood weighting.
    The reported S, noise variance and standard deviations are then those of the weighted
-   problem. And with a frequency *trust region*: each pole's damped frequency is held
+   problem. Each LSFD of the automatic fit stops at the latest once the Gauss-Newton step still to
+   go is below ``SDTOL`` standard deviations of the poles (the slow tail of a fit to noisy data
+   changes them by less than that). And with a frequency *trust region*: each pole's damped frequency is held
    (bound constraint, projected steps) within ``MIGRATE_BANDWIDTHS`` half-power bandwidths (``2 zeta f`` of the start
    pole, at least two lines) of where it started. A weak initial pole the data do not
    support is otherwise not driven to zero residue: it slides onto a strong neighbour and
@@ -181,22 +183,7 @@ def fit_auto(
     limits = default_band(frf) if not user_band else (lo, float(frf.freq_hz[-1]))
     warnings_out: list[str] = []
 
-    given_complex = None
-    given_freqs = None
-    if isinstance(initial, str):
-        stab_method = initial.lower()
-        if stab_method not in ("lsce", "lscf"):
-            raise ValueError(f"initial must be 'lsce', 'lscf' or an array of poles/frequencies; got {initial!r}")
-    else:
-        arr = np.atleast_1d(np.asarray(initial))
-        if arr.size == 0:
-            raise ValueError("no initial poles given: pass poles (rad/s), frequencies (Hz) or 'lsce'/'lscf'")
-        if np.iscomplexobj(arr) and np.any(arr.imag != 0):
-            given_complex = arr.astype(complex)
-        else:
-            given_freqs = arr.real.astype(float)
-        stab_method = "lscf"
-
+    stab_method, given_complex, given_freqs = _initial_kind(initial)
     progress("fit: band %.6g..%.6g Hz (%d lines, %d FRFs)", lo, hi,
              int(np.sum((frf.freq_hz >= lo) & (frf.freq_hz <= hi))), frf.n_outputs * frf.n_references)
     stab: StabilizationResult | None = None
@@ -206,19 +193,9 @@ def fit_auto(
             mm = max(mm, int(n_modes) + 4)
         progress("fit: stabilization (%s) up to %d modes", stab_method.upper(), mm)
         stab = stabilization(frf, mm, method=stab_method, band=(lo, hi), refine_lsfd=refine_lsfd)
-        if given_freqs is not None:
-            poles = poles_from_frequencies(given_freqs, stab)
-        else:
-            poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
-        if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
-            poles = _poles_from_peaks(frf, (lo, hi), stab, warnings_out)
-        elif poles.size and given_freqs is None and n_modes is None and add_missing and _peaks_trusted(frf):
-            poles = _with_visible_peaks(frf, (lo, hi), stab, poles)
-        if poles.size == 0:
-            raise FitError(
-                f"no stable physical poles found in {lo:.6g}..{hi:.6g} Hz up to {mm} modes: raise --order, "
-                "change the band, or give the poles (--poles F1,F2,...)"
-            )
+        seed_peaks = given_freqs is None and n_modes is None and add_missing
+        poles = _start_poles(frf, (lo, hi), stab, mm, given_freqs, n_modes, selection_options, seed_peaks,
+                             warnings_out)
     else:
         poles = given_complex
 
@@ -238,7 +215,7 @@ def fit_auto(
                             "left out of the fit (zero weight)")
         log.info(warnings_out[-1])
     fit_kw: dict[str, Any] = dict(method=method, band=(lo2, hi2), residual_form=residual_form, per_frf=per_frf, max_iter=max_iter,
-                  weights=rms_weights(fit_frf, (lo2, hi2)) if weighting == "rms" else None)
+                  weights=rms_weights(fit_frf, (lo2, hi2)) if weighting == "rms" else None, sdtol=SDTOL)
     progress("fit: LSFD (%s) from %d poles", method.upper(), np.asarray(poles).size)
     if given_complex is not None:
         result = fit_lsfd(fit_frf, poles, **fit_kw)
@@ -272,6 +249,52 @@ def fit_auto(
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
 
+
+def _initial_kind(initial: str | Sequence[complex] | Sequence[float] | np.ndarray
+                  ) -> tuple[str, np.ndarray | None, np.ndarray | None]:
+    """``fit_auto``'s ``initial``: (stabilization method, the user's complex poles or None, the
+    user's natural frequencies in Hz or None)."""
+    if isinstance(initial, str):
+        stab_method = initial.lower()
+        if stab_method not in ("lsce", "lscf"):
+            raise ValueError(f"initial must be 'lsce', 'lscf' or an array of poles/frequencies; got {initial!r}")
+        return stab_method, None, None
+    arr = np.atleast_1d(np.asarray(initial))
+    if arr.size == 0:
+        raise ValueError("no initial poles given: pass poles (rad/s), frequencies (Hz) or 'lsce'/'lscf'")
+    if np.iscomplexobj(arr) and np.any(arr.imag != 0):
+        return "lscf", arr.astype(complex), None
+    return "lscf", None, arr.real.astype(float)
+
+
+def _start_poles(frf: FRFSet, band: tuple[float, float], stab: StabilizationResult, max_modes: int,
+                 given_freqs: np.ndarray | None, n_modes: int | None, selection_options: dict | None,
+                 seed_peaks: bool, warnings_out: list[str]) -> np.ndarray:
+    """Steps 2-3: the LSFD's start from the stabilization diagram: the user's frequencies, or the
+    selection plus the visible peaks no selected pole lies near (``seed_peaks``, data whose coherence
+    is trusted: :func:`_with_visible_peaks`); the visible peaks alone when the diagram keeps no pole.
+    Raises FitError when there is no start at all."""
+    lo, hi = band
+    if given_freqs is not None:
+        poles = poles_from_frequencies(given_freqs, stab)
+    else:
+        poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
+    if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
+        poles = _poles_from_peaks(frf, band, stab, warnings_out)
+    elif poles.size and seed_peaks and _peaks_trusted(frf):
+        poles = _with_visible_peaks(frf, band, stab, poles)
+    if poles.size == 0:
+        raise FitError(
+            f"no stable physical poles found in {lo:.6g}..{hi:.6g} Hz up to {max_modes} modes: raise --order, "
+            "change the band, or give the poles (--poles F1,F2,...)"
+        )
+    return poles
+
+
+#: every LSFD of the automatic fit also stops once the step still to go is below this many standard
+#: deviations of the poles (``fit_lsfd(sdtol=...)``): the remaining error is a hundredth of the
+#: statistical one, and the slow tail of iterations that changes the poles by less is not run
+SDTOL = 0.01
 
 #: averages per FRF from which the coherence confirms a visible peak for the fit's start
 SEED_MIN_AVERAGES = 3

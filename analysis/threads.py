@@ -28,8 +28,9 @@ import sys
 from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
-__all__ = ["ENV_VAR", "WORK_PER_THREAD", "choose_threads", "requested_threads", "use_threads",
-           "command_scope", "set_threads", "blas_threads", "limits_blas_threads", "worker_processes"]
+__all__ = ["ENV_VAR", "BLAS_ENV_VARS", "WORK_PER_THREAD", "choose_threads", "requested_threads", "use_threads",
+           "command_scope", "set_threads", "blas_threads", "limits_blas_threads", "load_blas_single_threaded",
+           "worker_processes"]
 
 #: environment variable with the user's thread count ("auto" or unset: chosen per problem)
 ENV_VAR = "IMPACTLAB_THREADS"
@@ -186,6 +187,26 @@ def blas_threads(work: float) -> Iterator[int]:
             yield n
     finally:
         _depth -= 1
+
+
+#: the variables a BLAS library reads its thread count from when it is loaded
+BLAS_ENV_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def load_blas_single_threaded() -> None:
+    """Import numpy with its BLAS started on one thread, for a command's process (``python -m
+    analysis``): the kernels raise the count where the problem pays for it (:func:`blas_threads`),
+    and a threaded BLAS started at import costs a command CPU for threads that wait (on a busy
+    2-core machine about a tenth of the default fit). Nothing is done when numpy is loaded already
+    or the user set one of :data:`BLAS_ENV_VARS`; the environment is restored after the import,
+    so the processes the command starts see the user's."""
+    if "numpy" in sys.modules or any(os.environ.get(v) for v in BLAS_ENV_VARS):
+        return
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    try:
+        import numpy  # noqa: F401
+    finally:
+        os.environ.pop("OPENBLAS_NUM_THREADS", None)
 
 
 def _frf_values(obj: Any) -> float:

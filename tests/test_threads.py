@@ -138,3 +138,31 @@ def test_fit_identical_with_one_and_two_threads(monkeypatch):
     assert a.poles.size == b.poles.size > 0
     np.testing.assert_allclose(b.poles, a.poles, rtol=1e-12, atol=0)
     np.testing.assert_allclose(b.model.residues, a.model.residues, rtol=1e-12, atol=1e-12 * np.abs(a.model.residues).max())
+
+
+_START = """
+import os, sys
+from analysis.threads import load_blas_single_threaded
+load_blas_single_threaded()
+import numpy
+from threadpoolctl import threadpool_info
+from analysis.threads import use_threads, blas_threads
+counts = sorted({int(i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"})
+with use_threads(2), blas_threads(0) as n:
+    raised = sorted({int(i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"})
+print(counts, raised, os.environ.get("OPENBLAS_NUM_THREADS"))
+"""
+
+
+@pytest.mark.parametrize("user, expected", [(None, "[1] [2] None"), ("2", "[2] [2] 2")])
+def test_commands_load_blas_single_threaded_and_kernels_raise_it(user, expected):
+    """``python -m analysis`` loads numpy's BLAS on one thread (the environment restored after the
+    import), a kernel still raises the count (here the user's ``--threads 2``); a BLAS thread count
+    the user set is left alone."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in threads.BLAS_ENV_VARS}
+    if user is not None:
+        env["OPENBLAS_NUM_THREADS"] = user
+    out = subprocess.run([sys.executable, "-c", _START], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == expected

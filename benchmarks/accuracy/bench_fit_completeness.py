@@ -38,7 +38,7 @@ default fit of a default capture (3 FRFs, ~1.1 kHz) is printed as well.
 Run (about 2 s per capture for the capture, plus the fits)::
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_fit_completeness.py [--draws 16]
-        [--data ../shared/data] [--no-real] [--json out.json]
+        [--data ../shared/data] [--no-real] [--json out.json] [--exp-window none]
 """
 from __future__ import annotations
 
@@ -128,8 +128,9 @@ def cases(draws: int, draw_seed: int) -> list[Case]:
     return out
 
 
-def capture(case: Case, folder: Path) -> tuple[FRFSet, np.ndarray]:
-    """The case captured through the simulated analyser: (FRFs, true natural frequencies Hz)."""
+def capture(case: Case, folder: Path, exp_window: str | None = None) -> tuple[FRFSet, np.ndarray]:
+    """The case captured through the simulated analyser: (FRFs, true natural frequencies Hz);
+    ``exp_window``: the capture's ``--exp-window`` (None: its default)."""
     from acquisition.cli_capture import main as capture_main
     from analysis.recording import load_frfset
     from simulator.stand import TestStand
@@ -139,7 +140,8 @@ def capture(case: Case, folder: Path) -> tuple[FRFSet, np.ndarray]:
         rec.unlink()
     with contextlib.redirect_stdout(io.StringIO()):
         code = capture_main(["--device", f"sim://?seed={case.seed}", "--out", str(rec), "--points",
-                             ",".join(case.points), "--hits", "5", "--auto", "-q"])
+                             ",".join(case.points), "--hits", "5", "--auto", "-q"]
+                            + ([] if exp_window is None else ["--exp-window", exp_window]))
     if code != 0:
         raise RuntimeError(f"capture of {case.name} failed with exit code {code}")
     frf = load_frfset(rec)
@@ -267,6 +269,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--no-real", action="store_true", help="skip the real datasets")
     ap.add_argument("--only", default=None, help="run only the cases whose name contains this text")
     ap.add_argument("--json", default=None, help="write the rows as JSON here")
+    ap.add_argument("--exp-window", default=None, metavar="PCT%|none",
+                    help="the captures' exponential window (default: the capture's, 5 %%; none: the record as measured)")
     args = ap.parse_args(argv)
 
     rows: list[Row] = []
@@ -275,7 +279,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for case in cases(args.draws, args.draw_seed):
             if args.only and args.only not in case.name:
                 continue
-            frf, truth = capture(case, Path(tmp))
+            frf, truth = capture(case, Path(tmp), args.exp_window)
             if case.name == "issue: right:6:-X" and case.band is None:
                 default_frf = frf
             row = score(f"{case.name} [{','.join(case.points)} seed {case.seed}]", frf, truth, case.band)
