@@ -26,10 +26,10 @@ on a loaded 2-core machine threaded BLAS is many times slower for these small ma
 
 The sdypy venv (never a dependency of impactlab)
 ------------------------------------------------
-    python3 -m venv /tmp/bench-venv
-    /tmp/bench-venv/bin/pip install sdypy-EMA numpy scipy matplotlib
-    /tmp/bench-venv/bin/pip install -e /work/main
-    /tmp/bench-venv/bin/python benchmarks/speed/bench_vs_sdypy.py
+    python3 -m venv ../peer-venv
+    ../peer-venv/bin/pip install sdypy-EMA numpy scipy matplotlib
+    ../peer-venv/bin/pip install -e .
+    ../peer-venv/bin/python benchmarks/speed/bench_vs_sdypy.py
 
 Without sdypy importable, the sdypy rows are skipped with a message and the rest still runs
 (``.venv/bin/python benchmarks/speed/bench_vs_sdypy.py``).
@@ -170,7 +170,7 @@ def part_one(repeat, seed, max_modes):
     except ImportError:
         have_sdypy = False
         print("sdypy-EMA is not importable here: its rows are skipped (see the module docstring to create "
-              "/tmp/bench-venv)")
+              "../peer-venv)")
     runs = {
         "lm": lambda: run_impactlab(frf, "lm", max_modes),
         "gn": lambda: run_impactlab(frf, "gn", max_modes),

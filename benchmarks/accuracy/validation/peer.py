@@ -1,6 +1,6 @@
 """The peer: sdypy-EMA (LSCF poles + its linear LSFD for the modal constants) on the same FRFs.
 
-sdypy-EMA is never a dependency of impactlab: it lives in its own venv (``/tmp/val-venv``). When
+sdypy-EMA is never a dependency of impactlab: it lives in its own venv (``../peer-venv``). When
 it cannot be imported, :func:`fit_peer` returns a :class:`PeerFit` with ``ok=False`` and the reason,
 and the reports say the peer was unavailable.
 
@@ -62,7 +62,7 @@ def _import_ema():
     try:
         from sdypy import EMA  # noqa: F401
     except ImportError as exc:
-        return None, f"sdypy-EMA not importable ({exc}); run the scripts with /tmp/val-venv/bin/python"
+        return None, f"sdypy-EMA not importable ({exc}); run the scripts with ../peer-venv/bin/python"
     return EMA, ""
 
 

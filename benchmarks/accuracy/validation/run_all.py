@@ -2,8 +2,8 @@
 
 Usage (from the project root; the peer's venv has both impactlab and sdypy-EMA)::
 
-    /tmp/val-venv/bin/python -m benchmarks.accuracy.validation.run_all [--data ../shared/data] [--only NAME ...]
-    /tmp/val-venv/bin/python benchmarks/accuracy/validation/run_all.py
+    ../peer-venv/bin/python -m benchmarks.accuracy.validation.run_all [--data ../shared/data] [--only NAME ...]
+    ../peer-venv/bin/python benchmarks/accuracy/validation/run_all.py
 
 With the project venv (``.venv/bin/python``) sdypy is absent: our side is produced and the report says
 the peer was unavailable. Exit status 0 when every case ran, 1 when one failed (its error is in the report),
