@@ -268,12 +268,10 @@ class ProjectedProblem:
         norms[norms == 0] = 1.0
         An = A / norms
         P = An.shape[1]
-        if fast:
-            Rq = np.asarray(np.linalg.qr(An, mode="r"))[:P]
-            h = tau = None
-        else:
-            h, tau = np.linalg.qr(An, mode="raw")
-            Rq = np.triu(h[:, :P].T)
+        # the reflectors cost no more than the triangle alone (the same factorisation): kept, a fast
+        # evaluation that falls back to the precise one needs no second factorisation
+        h, tau = np.linalg.qr(An, mode="raw")
+        Rq = np.triu(h[:, :P].T)
         d = np.abs(np.diag(Rq))
         rcond = float(d.min() / d.max()) if d.size else 1.0
         rank_ok = bool(np.all(np.isfinite(Rq))) and rcond > RANK_TOL
@@ -293,9 +291,6 @@ class ProjectedProblem:
                     EtR = prod[P:] - QtE.T @ QtY
                     coef = solve_upper(Rq, QtY) / norms[:, None]
                     return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
-            h, tau = np.linalg.qr(An, mode="raw")
-            Rq = np.triu(h[:, :P].T)
-        assert h is not None and tau is not None
         QtY, G, EtR, S = householder_project(h, tau, E, self.Ys)
         coef = solve_upper(Rq, QtY) / norms[:, None]
         return Evaluation(theta, S, coef, True, rcond, precise=True, E=E, G=G, EtR=EtR)
