@@ -444,16 +444,20 @@ def _initial_coupling(ctx: FitContext, fit: dict, wn: np.ndarray, phi: np.ndarra
 def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     """The resonator's frequency, damping and coupling to every mode by least squares on ``lines``, started
     from the extra modes ``missing_mode`` finds at the largest residuals (first-order coupling from their
-    shapes at the outputs); the start with the smaller cost wins."""
-    phi = np.asarray(ctx.base.meta["output_shapes"], float)
-    wn = np.abs(np.asarray(ctx.base.poles, complex))
+    shapes at the outputs); the start with the smaller cost wins. A pseudo-mode above the band
+    (``meta["above_band_modes"]``, the last modes; :mod:`.above_band`) is not coupled: its shape is known
+    at the outputs only as a tail, so it stays the fixed term it was fitted as."""
+    n_all = ctx.base.poles.size
+    n_real = n_all - int(ctx.base.meta.get("above_band_modes", 0))
+    phi = np.asarray(ctx.base.meta["output_shapes"], float)[:, :n_real]
+    wn = np.abs(np.asarray(ctx.base.poles, complex))[:n_real]
     f = ctx.measured.freq_hz[lines]
     Hm, sw = ctx.measured.H[..., lines], np.sqrt(ctx.weights[..., lines])
     lo, hi = f[0] / 1.05, f[-1] * 1.05
 
     def spec(x: np.ndarray) -> dict:
         return {"effect": "local_resonator", "frequency_hz": float(x[0]), "zeta": float(np.exp(x[1])),
-                "coupling": [float(v) for v in x[2:]]}
+                "coupling": [float(v) for v in x[2:]] + [0.0] * (n_all - n_real)}
 
     def resid(x: np.ndarray) -> np.ndarray:
         e = (Hm - predict(ctx.base, f, ctx.measured.quantity, ctx.effects(spec(x))).H) * sw

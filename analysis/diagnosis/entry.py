@@ -77,15 +77,25 @@ def as_receptance(model: ModalModel) -> ModalModel:
                    lower_residual=model.lower_residual if keep else None)
 
 
-def model_with_correction(model: ModalModel, sim: FRFSet) -> ModalModel:
-    """The fitted ``model`` (in receptance form, :func:`as_receptance`) plus, in
+def model_with_correction(model: ModalModel, sim: FRFSet, above_band: bool = True,
+                          band_hz: tuple[float, float] | None = None) -> ModalModel:
+    """The fitted ``model`` (in receptance form, :func:`as_receptance`; with a driving point and
+    ``above_band``, plus the pseudo-mode just above the band that the FRFs' tail shows,
+    :func:`analysis.diagnosis.above_band.with_above_band_mode`, fitted in ``band_hz``, the band the
+    model was fitted in: default the FRFs' lines) plus, in
     ``meta["frf_correction"]``, what it misses of the simulated FRFs ``sim``, so that the prediction
     without effects is the simulated FRFs themselves (modal effects move only the fitted modes); with a
     driving point also ``meta["output_shapes"]`` (:func:`driving_point_shapes`), so that the
     accelerometers' mass can be fitted."""
     from ..modal import synthesize
+    from .above_band import with_above_band_mode
+    from .compare import line_weights
 
     model = as_receptance(model)
+    if above_band:
+        labelled = replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references))
+        rec = sim if sim.quantity == model.quantity else sim.as_quantity(model.quantity)
+        model = with_above_band_mode(labelled, rec, line_weights(replace(rec, coherence=None)), band_hz)
     syn = synthesize(model, sim.freq_hz)
     same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
     corr = replace(same, H=same.H - syn.H, coherence=None)
@@ -112,10 +122,10 @@ def simulation_model(sim: FRFSet, measured: FRFSet, source: str = "the simulatio
                          f"{list(sim.references)}; measured {list(measured.outputs)} / {list(measured.references)}")
     sim = sim.select(outs, refs)
     try:
-        result = fit_auto(sim).lsfd
+        result = fit_auto(sim)
     except FitError as exc:
         raise InputError(f"cannot build a modal model of the simulated FRFs in {source}: {exc}") from None
-    return model_with_correction(result.model, sim)
+    return model_with_correction(result.lsfd.model, sim, band_hz=result.band)
 
 
 def _is_physical(x: Any) -> bool:
