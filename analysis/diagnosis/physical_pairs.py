@@ -153,17 +153,15 @@ def rechoose(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     When a choice moves, the pair is refined (and cross-validated) again from there and kept if its chi2 on
     all modes is lower. The result carries the options searched (``ranked``): the data separate the
     chosen option from the next only by their chi2 difference."""
-    allsel = np.ones(mm.freq_hz.size, bool)
     new = [PhysicalFit(cause=f.cause, params=dict(p), free=f.free, chi2=pair.chi2) for f, p in zip(fits, pair.params)]
     ranked: list = [[] for _ in fits]
     moved = False
     for i, spec in enumerate(specs):
         if spec.choice is None:
             continue
-        other = new[1 - i]
-        p, chi2, ranked[i] = fit_cause(OnTop(sim, [(other.cause, other.params)]), spec, new[i].free, mm, allsel, fmax)
-        moved |= p[spec.choice] != pair.params[i][spec.choice]
-        new[i] = PhysicalFit(cause=spec.name, params=p, free=new[i].free, chi2=chi2)
+        new[i] = refit_on_top(sim, spec, new[i], new[1 - i], mm, fmax)
+        ranked[i] = new[i].ranked
+        moved |= new[i].params[spec.choice] != pair.params[i][spec.choice]
     out = pair
     if moved:
         again = fit_pair(sim, specs, new, mm, fmax, folds=pair.cv_per_mode.size > 0)
