@@ -420,6 +420,12 @@ def _choice_penalty(spec: CauseSpec) -> float:
     return 2.0 * float(np.log(max(len(spec.options), 1))) if spec.choice else 0.0
 
 
+def _freedom(spec: CauseSpec, free: Sequence[str]) -> float:
+    """The freedom of a cause fitted with the parameters ``free``, in chi2 units: 2 per parameter plus its
+    choice's (:func:`_choice_penalty`)."""
+    return 2.0 * len(free) + _choice_penalty(spec)
+
+
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
              names: Sequence[str] | None, n: int | None = N_SECOND) -> list[PhysicalFit]:
     """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
@@ -433,8 +439,7 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
             continue
         for free in variants(spec):
             p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax)
-            penalty = 2.0 * len(free) + _choice_penalty(spec)
-            ranked.append((chi2 + penalty, PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
+            ranked.append((chi2 + _freedom(spec, free), PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
     ranked.sort(key=lambda t: t[0])
     out: list[PhysicalFit] = []
     for _, f in ranked:            # the best variant of each cause
@@ -452,7 +457,7 @@ def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float
     ranked = []
     for fb in _seconds(sim, specs, mm, fmax, first, names, n=None):
         fa2, fb2, chi2 = with_options(sim, [specs[first.cause], specs[fb.cause]], first, fb, mm, fmax)
-        ranked.append((chi2 + 2.0 * len(fb.free) + _choice_penalty(specs[fb.cause]), fa2, fb2))
+        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free), fa2, fb2))
     ranked.sort(key=lambda t: t[0])
     return [(a, b) for _, a, b in ranked[:N_SECOND]]
 
