@@ -114,15 +114,19 @@ def evaluation_flops(n_lines: int, n_frf: int, n_modes: int, n_res: int) -> tupl
     return gram, direct
 
 
-def gram_form_pays(n_lines: int, n_frf: int, n_modes: int, n_res: int) -> bool:
-    """Whether the Gram-based evaluation of a projected problem of these sizes is worth trying: it
-    saves at least :data:`MIN_GRAM_SAVING` operations over the direct one (:func:`evaluation_flops`).
+def gram_form_pays(n_lines: int, n_frf: int, n_modes: int, n_res: int, falls_back: bool = False) -> bool:
+    """Whether a Gram-based evaluation of a projected problem of these sizes is worth trying: it saves at
+    least :data:`MIN_GRAM_SAVING` operations over the direct one (:func:`evaluation_flops`).
 
     Sizes: ``n_lines`` frequency lines, ``n_frf`` FRFs (data columns), ``n_modes`` poles, ``n_res``
-    residual terms. A default capture's whole-band fit (3 FRFs x 1400 lines, 20 modes) saves about
+    residual terms. ``falls_back``: the Gram form is expected to lose its digits at these poles (the
+    last evaluation showed it) and fall back to the direct form, so an attempt would cost both forms:
+    never worth it. A default capture's whole-band fit (3 FRFs x 1400 lines, 20 modes) saves about
     20 million operations an evaluation and uses it; the local fits of a few dozen lines around one
     resonance save some ten thousand and stay direct."""
     gram, direct = evaluation_flops(n_lines, n_frf, n_modes, n_res)
+    if falls_back:
+        gram += direct
     return direct - gram >= MIN_GRAM_SAVING
 
 
@@ -172,13 +176,14 @@ def _stack(z: np.ndarray) -> np.ndarray:
 
 
 def _pair_columns(M: np.ndarray, X: np.ndarray, Xc: np.ndarray) -> None:
-    """Write the stacked columns ``X + Xc`` and ``j (X - Xc)`` of (N, m) complex ``X``, ``Xc`` into the
-    first 2m columns of the real (2N, .) ``M`` (interleaved, rows [Re; Im])."""
-    N, m = X.shape
-    np.add(X.real, Xc.real, out=M[:N, 0:2 * m:2])
-    np.add(X.imag, Xc.imag, out=M[N:, 0:2 * m:2])
-    np.subtract(Xc.imag, X.imag, out=M[:N, 1:2 * m:2])
-    np.subtract(X.real, Xc.real, out=M[N:, 1:2 * m:2])
+    """Write the stacked columns ``X + Xc`` and ``j (X - Xc)`` of (m, N) complex ``X``, ``Xc`` (a row per
+    pole) into the first 2m columns of the real (2N, .) ``M`` (interleaved, rows [Re; Im]; in Fortran
+    order every write is contiguous)."""
+    m, N = X.shape
+    np.add(X.real, Xc.real, out=M[:N, 0:2 * m:2].T)
+    np.add(X.imag, Xc.imag, out=M[N:, 0:2 * m:2].T)
+    np.subtract(Xc.imag, X.imag, out=M[:N, 1:2 * m:2].T)
+    np.subtract(X.real, Xc.real, out=M[N:, 1:2 * m:2].T)
 
 
 @dataclass
@@ -275,14 +280,16 @@ class ProjectedProblem:
         """Weighted stacked basis ``A`` (2N x P) and derivative columns ``E`` (2N x 2m).
 
         Written straight into the real arrays (rows ``[Re; Im]``) from the real and imaginary parts
-        of ``K``, ``Kc`` and their squares: no complex basis is built and stacked afterwards."""
+        of ``K``, ``Kc`` and their squares: no complex basis is built and stacked afterwards. Both are
+        in Fortran order (a column after the other): the QR factorisation (LAPACK) reads ``A`` so
+        without a transposed copy, and every column is written contiguously."""
         lam = theta_to_poles(theta)
         m, N = lam.size, self.N
         # reciprocals into fresh arrays: numpy's in-place complex division is several times slower
-        K = np.reciprocal(self.jw[:, None] - lam[None, :])             # (N, m)
-        Kc = np.reciprocal(self.jw[:, None] - np.conj(lam)[None, :])
-        A = np.empty((2 * N, 2 * m + 2 * self.n_res))
-        E = np.empty((2 * N, 2 * m))
+        K = np.reciprocal(self.jw[None, :] - lam[:, None])             # (m, N)
+        Kc = np.reciprocal(self.jw[None, :] - np.conj(lam)[:, None])
+        A = np.empty((2 * N, 2 * m + 2 * self.n_res), order="F")
+        E = np.empty((2 * N, 2 * m), order="F")
         _pair_columns(A, K, Kc)
         _pair_columns(E, np.square(K, out=K), np.square(Kc, out=Kc))
         A[:N, 2 * m:] = self._res_cols.real
@@ -299,9 +306,10 @@ class ProjectedProblem:
     FAST_MIN_REL_S = 1e-6
 
     def prefers_gram(self, n_modes: int) -> bool:
-        """Whether fast (Gram-based) evaluations with ``n_modes`` poles are worth asking for: the cost
-        model of :func:`gram_form_pays` at this problem's sizes."""
-        return gram_form_pays(self.N, self.n_frf, n_modes, self.n_res)
+        """Whether a fast (Gram-based) evaluation with ``n_modes`` poles is worth trying now: the cost
+        model of :func:`gram_form_pays` at this problem's sizes, with the fall-back the last evaluation
+        predicts (:attr:`gram_fails`)."""
+        return gram_form_pays(self.N, self.n_frf, n_modes, self.n_res, self.gram_fails)
 
     def _gram_loses_digits(self, S: float, G: np.ndarray | None, E: np.ndarray) -> bool:
         """Whether the Gram-based form loses its digits to cancellation at an evaluation with ``S`` and
@@ -316,6 +324,8 @@ class ProjectedProblem:
     def evaluate(self, theta: np.ndarray, *, fast: bool = False) -> Evaluation:
         """Project the data on the basis at ``theta``: S, coefficients and what the normal equations need.
 
+        ``fast``: the Gram-based form may be used (where :meth:`prefers_gram`); else precise.
+
         Precise: Householder QR ``A = Q R`` (columns normalised) and the same reflectors applied
         to ``[E y]`` (:func:`householder_project`): ``S = ||r||^2``, ``G`` and ``E^T r`` from the
         rows of ``Q_full^T [E y]`` below the basis, without cancellation. Fast: only the
@@ -326,7 +336,7 @@ class ProjectedProblem:
         cancellation (relative error of S about eps cond(A) ||y||^2 / S); it falls back to the precise
         path when ``S < 1e-6 ||y||^2`` or a derivative column keeps less than 1e-6 of its square norm
         outside the basis; while the last evaluation shows that (:attr:`gram_fails`) a fast request
-        is answered in the precise form at once. When the basis is rank deficient (poles collapsed
+        is answered in the precise form at once (:meth:`prefers_gram`). When the basis is rank deficient (poles collapsed
         onto each other) ``rank_ok`` is False.
         """
         theta = np.array(theta, dtype=float)
@@ -344,7 +354,7 @@ class ProjectedProblem:
         rank_ok = bool(np.all(np.isfinite(Rq))) and rcond > RANK_TOL
         if not rank_ok:
             return Evaluation(theta, np.nan, None, False, rcond, precise=not fast)
-        if fast and not self.gram_fails:
+        if fast and self.prefers_gram(theta.size // 2):
             # two products with the data (no copy of [A E] side by side: the same arithmetic)
             QtY = solve_upper(Rq, An.T @ self.Ys, transposed=True)
             S = self.y_norm2 - float(np.einsum("ij,ij->", QtY, QtY))
