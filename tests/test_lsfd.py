@@ -144,7 +144,8 @@ def test_gn_divergence_is_a_status_not_an_exception() -> None:
     assert gn.status == Status.UNSTABLE and not gn.success
     assert "unstable" in gn.message
     assert np.all(gn.poles.real < 0)
-    assert gn.sse <= gn.history[0]
+    # not above the start (which was a Gram-based evaluation of the same poles: equal to its round-off)
+    assert gn.sse <= gn.history[0] * (1 + 1e-12)
     lm = fit_lsfd(frf, p0, method="lm", max_iter=50)
     assert lm.success, lm.message
     assert rel_err(lm.poles, model.poles) < 1e-6
@@ -381,7 +382,8 @@ def test_flop_counts_of_the_two_forms() -> None:
 
 @pytest.mark.parametrize("sizes, gram", [
     ((30, 3, 1, 2), False),       # a local fit around one resonance: the saving is lost in the overhead
-    ((60, 2, 2, 2), False),
+    ((20, 1, 2, 2), False),
+    ((200, 222, 2, 2), True),     # ... unless the FRFs are many
     ((1400, 3, 20, 2), True),     # a default capture's whole band
     ((8192, 4, 75, 2), True),     # a long real record, few FRFs, many poles
     ((8000, 3000, 40, 2), True),  # a scanning-vibrometer set
