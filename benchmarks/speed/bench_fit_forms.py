@@ -26,8 +26,8 @@ poles are from those of OLD (the largest difference in Hz, relative, and in stan
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/speed/bench_fit_forms.py [--only default,uliege,unesp,scan]
         [--repeat 3] [--form auto|gram|direct] [--source DIR] [--json OUT.json] [--compare OLD.json]
 
-The real datasets are read from ``/work/shared/data`` or ``--data DIR``; a case whose data is absent
-is skipped.
+The real datasets are read from ``../shared/data`` beside the checkout (as the tests do: the variable
+``IMPACTLAB_SHARED_DATA`` names another folder) or ``--data DIR``; a case whose data is absent is skipped.
 """
 from __future__ import annotations
 
@@ -41,8 +41,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 CASES = ("default", "uliege", "unesp", "scan")
-DEFAULT_DATA = ROOT.parent / "shared" / "data" if (ROOT.parent / "shared" / "data").is_dir() \
-    else Path("/work/shared/data")
+DEFAULT_DATA = Path(os.environ.get("IMPACTLAB_SHARED_DATA", ROOT.parent / "shared" / "data"))
 
 # ------------------------------------------------------------------------------------------- the child
 CHILD = r'''
