@@ -98,10 +98,11 @@ def evaluation_flops(n_lines: int, n_frf: int, n_modes: int, n_res: int) -> tupl
       basis (``r k^2 + 2 r k F``), the triangular solves (``P^2 (k + 2 F)``) and ``Q^T Y`` (``2 P^2 F``).
 
     The direct form costs more at every size (by ``r P^2 + 2 r P (k + F)`` and more), most where the
-    FRFs are many: measured on one core (2 vCPUs, other programs running), the Gram-based evaluation
-    took 0.80 to 0.87 of the direct one's time with 3 or 4 FRFs (50 to 8200 lines, 2 to 75 modes), 0.68 with
-    85 and 0.09 with 3000 FRFs (8000 lines, 40 modes); the shared part (basis and factorisation) is
-    not counted here. What the count leaves out is that a Gram-based evaluation can fall back to the
+    FRFs are many: measured on one core of a shared 2-core machine, a whole direct evaluation (the
+    shared part included) took 1.05 to 1.3 times a Gram-based one with 3 or 4 FRFs (1400 to 8200 lines,
+    22 to 75 modes), 1.6 times with 85 or 222 FRFs and 3 times with 3000 FRFs (8000 lines, 40 modes);
+    at a few dozen lines both cost their NumPy overhead, about 0.1 to 0.3 ms, within the machine's
+    scatter. What the count leaves out is that a Gram-based evaluation can fall back to the
     direct one (it loses its digits to cancellation when a derivative column lies nearly inside the
     basis or the fit is nearly exact) and then costs both: :meth:`ProjectedProblem.evaluate` answers
     a fast request in the direct form while the last evaluation shows the Gram form would fail.
