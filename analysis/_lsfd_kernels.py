@@ -337,8 +337,8 @@ class ProjectedProblem:
         cancellation (relative error of S about eps cond(A) ||y||^2 / S); it falls back to the precise
         path when ``S < 1e-6 ||y||^2`` or a derivative column keeps less than 1e-6 of its square norm
         outside the basis; while the last evaluation shows that (:attr:`gram_fails`) a fast request
-        is answered in the precise form at once (:meth:`prefers_gram`). When the basis is rank deficient (poles collapsed
-        onto each other) ``rank_ok`` is False.
+        is answered in the precise form at once (:meth:`prefers_gram`). When the basis is rank
+        deficient (poles collapsed onto each other) ``rank_ok`` is False.
         """
         theta = np.array(theta, dtype=float)
         A, E = self.basis(theta)
