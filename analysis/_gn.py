@@ -151,13 +151,14 @@ def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: f
 
 def start_iteration(problem: ProjectedProblem, theta0: np.ndarray
                     ) -> tuple[np.ndarray, bool, Evaluation, list[float], float, NLSOutcome | None]:
-    """The common start of GN and LM: copy ``theta0``, evaluate once (fast where allowed).
+    """The common start of GN and LM: copy ``theta0``, evaluate once (fast where its cost model says it
+    pays, :meth:`ProjectedProblem.prefers_gram`).
 
     Returns ``(theta, fast, ev, history, floor, early)``; ``early`` is an :class:`NLSOutcome`
     when the start already decides the result (rank-deficient basis, fit at round-off level).
     """
     theta = np.array(theta0, dtype=float)
-    fast = problem.fast_ok
+    fast = problem.prefers_gram(theta.size // 2)
     ev = problem.evaluate(theta, fast=fast)
     history = [ev.S]
     floor = roundoff_floor(problem)
@@ -179,7 +180,8 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     when the step still to go is below ``sdtol`` standard deviations of the poles (:func:`pred_tolerance`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
-    falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
+    falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure); an evaluation
+    that is precise already (a fast request the problem answered precisely) is not repeated.
     """
     theta, fast, ev, history, floor, early = start_iteration(problem, theta0)
     nfev = 1
@@ -193,8 +195,9 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             # re-check the verdict with precise evaluations
             fast = False
             verdict = None
-            ev = problem.evaluate(theta)
-            nfev += 1
+            if not ev.precise:
+                ev = problem.evaluate(theta)
+                nfev += 1
             if not ev.rank_ok:
                 return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
                                   f"GN stopped: poles collapsed (basis rcond {ev.rcond:.2g})")
@@ -245,14 +248,16 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         verdict = convergence_verdict(ev.S, floor, step, xtol, rel, ftol)
         if verdict is None and fast and (rel <= SWITCH_TO_PRECISE or step <= SWITCH_TO_PRECISE):
             fast = False
-            ev = problem.evaluate(theta)
-            nfev += 1
+            if not ev.precise:
+                ev = problem.evaluate(theta)
+                nfev += 1
     if verdict is not None and not fast:
         return NLSOutcome(theta, ev, history, max_iter, nfev, *verdict)
     if verdict is not None:
         # verdict reached on the last iteration with fast evaluations: confirm S precisely
-        ev = problem.evaluate(theta)
-        nfev += 1
+        if not ev.precise:
+            ev = problem.evaluate(theta)
+            nfev += 1
         if ev.rank_ok:
             return NLSOutcome(theta, ev, history, max_iter, nfev, *verdict)
     return NLSOutcome(theta, ev, history, max_iter, nfev, Status.MAX_ITER,

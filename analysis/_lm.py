@@ -100,7 +100,8 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
     (:func:`analysis._gn.pred_tolerance`).
 
     Big problems start with fast evaluations and switch to precise ones when the progress
-    falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure).
+    falls below ``SWITCH_TO_PRECISE`` or before any verdict (convergence or failure); an evaluation
+    that is precise already (a fast request the problem answered precisely) is not repeated.
     """
     theta, fast, ev, history, floor, early = start_iteration(problem, theta0)
     nfev = 1
@@ -124,8 +125,9 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 return NLSOutcome(theta, ev, history, it - 1, nfev, *verdict)
             # confirm the verdict with precise evaluations
             fast, verdict = False, None
-            ev = problem.evaluate(theta)
-            nfev += 1
+            if not ev.precise:
+                ev = problem.evaluate(theta)
+                nfev += 1
             JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
             check_pred = True
             mu = min(mu, 1.0)
@@ -166,8 +168,9 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             verdict = convergence_verdict(ev.S, floor, step, xtol, rel, ftol)
             if verdict is None and fast and min(rel, step) <= SWITCH_TO_PRECISE:
                 fast = False
-                ev = problem.evaluate(theta)
-                nfev += 1
+                if not ev.precise:
+                    ev = problem.evaluate(theta)
+                    nfev += 1
             if verdict is None:
                 JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
                 D = np.maximum(D, np.sqrt(np.diag(JtJ)))
@@ -177,7 +180,7 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         history.append(ev.S)
         fail_reason = reason or fail_reason
         verdict, mu, nu = _rejected(reason, step, xtol, fast, mu, nu, fail_status, fail_reason)
-    if verdict is not None and fast:
+    if verdict is not None and fast and not ev.precise:
         ev = problem.evaluate(theta)
         nfev += 1
     if verdict is not None and ev.rank_ok and verdict[1]:

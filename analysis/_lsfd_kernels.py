@@ -65,10 +65,70 @@ __all__ = [
     "householder_project",
     "gram_from_G",
     "RANK_TOL",
+    "MIN_GRAM_SAVING",
+    "evaluation_flops",
+    "gram_form_pays",
 ]
 
 #: relative threshold on the diagonal of the QR factor below which the basis is rank deficient
 RANK_TOL = 1e-11
+
+
+#: the least saving, in floating-point operations per evaluation, for which the Gram-based form is used
+#: (:func:`gram_form_pays`): an evaluation's NumPy calls cost about 0.1 ms whatever its size; a saving
+#: below 1e5 operations (a few microseconds) is lost in them, and the direct form, whose rounding is
+#: that of orthogonal transformations, is kept
+MIN_GRAM_SAVING = 1e5
+
+
+def evaluation_flops(n_lines: int, n_frf: int, n_modes: int, n_res: int) -> tuple[float, float]:
+    """Floating-point operations of one evaluation of the projected problem in the Gram-based and in
+    the direct form, ``(gram, direct)``, beyond what both share (the basis ``A``, its derivative columns
+    ``E`` and the Householder factorisation of ``A``).
+
+    Sizes: ``r = 2 n_lines`` real rows, ``P = 2 n_modes + 2 n_res`` basis columns, ``k = 2 n_modes``
+    derivative columns, ``F = n_frf`` data columns (a product of an (a x b) and a (b x c) matrix costs
+    ``2 a b c``, a symmetric one ``A^T A`` half of it, a triangular solve with c right-hand sides ``b^2 c``):
+
+    * Gram-based (:meth:`ProjectedProblem.evaluate` with ``fast``): ``A^T Y`` and ``E^T Y``
+      (``2 r F (P + k)``), ``A^T E`` (``2 r P k``), ``E^T E`` (``r k^2``), the triangular solves for
+      ``Q^T Y``, ``Q^T E`` and the coefficients (``P^2 (2 F + k)``);
+    * direct (:func:`householder_project`): ``V^T V`` for the reflectors' block form (``r P^2``),
+      ``V^T [E Y]`` and ``[E Y] - V Z`` (``4 r P (k + F)``), ``G`` and ``E^T r`` from the rows below the
+      basis (``r k^2 + 2 r k F``), the triangular solves (``P^2 (k + 2 F)``) and ``Q^T Y`` (``2 P^2 F``).
+
+    The direct form costs more at every size (by ``r P^2 + 2 r P (k + F)`` and more), most where the
+    FRFs are many: measured on one core of a shared 2-core machine, a whole direct evaluation (the
+    shared part included) took 1.05 to 1.3 times a Gram-based one with 3 or 4 FRFs (1400 to 8200 lines,
+    22 to 75 modes), 1.6 times with 85 or 222 FRFs and 3 times with 3000 FRFs (8000 lines, 40 modes);
+    at a few dozen lines both cost their NumPy overhead, about 0.1 to 0.3 ms, within the machine's
+    scatter. What the count leaves out is that a Gram-based evaluation can fall back to the
+    direct one (it loses its digits to cancellation when a derivative column lies nearly inside the
+    basis or the fit is nearly exact) and then costs both: :meth:`ProjectedProblem.evaluate` answers
+    a fast request in the direct form while the last evaluation shows the Gram form would fail.
+    """
+    r, F = 2.0 * n_lines, float(n_frf)
+    k = 2.0 * n_modes
+    P = k + 2.0 * n_res
+    gram = 2 * r * F * (P + k) + 2 * r * P * k + r * k ** 2 + P ** 2 * (2 * F + k)
+    direct = r * P ** 2 + 4 * r * P * (k + F) + r * k ** 2 + 2 * r * k * F + P ** 2 * (k + 2 * F) + 2 * P ** 2 * F
+    return gram, direct
+
+
+def gram_form_pays(n_lines: int, n_frf: int, n_modes: int, n_res: int, falls_back: bool = False) -> bool:
+    """Whether a Gram-based evaluation of a projected problem of these sizes is worth trying: it saves at
+    least :data:`MIN_GRAM_SAVING` operations over the direct one (:func:`evaluation_flops`).
+
+    Sizes: ``n_lines`` frequency lines, ``n_frf`` FRFs (data columns), ``n_modes`` poles, ``n_res``
+    residual terms. ``falls_back``: the Gram form is expected to lose its digits at these poles (the
+    last evaluation showed it) and fall back to the direct form, so an attempt would cost both forms:
+    never worth it. A default capture's whole-band fit (3 FRFs x 1400 lines, 20 modes) saves about
+    20 million operations an evaluation and uses it; its local fits of a few dozen lines around one
+    resonance save some ten thousand and stay direct (those of 222 FRFs, 300 thousand: Gram-based)."""
+    gram, direct = evaluation_flops(n_lines, n_frf, n_modes, n_res)
+    if falls_back:
+        gram += direct
+    return direct - gram >= MIN_GRAM_SAVING
 
 
 class Status:
@@ -117,13 +177,14 @@ def _stack(z: np.ndarray) -> np.ndarray:
 
 
 def _pair_columns(M: np.ndarray, X: np.ndarray, Xc: np.ndarray) -> None:
-    """Write the stacked columns ``X + Xc`` and ``j (X - Xc)`` of (N, m) complex ``X``, ``Xc`` into the
-    first 2m columns of the real (2N, .) ``M`` (interleaved, rows [Re; Im])."""
-    N, m = X.shape
-    np.add(X.real, Xc.real, out=M[:N, 0:2 * m:2])
-    np.add(X.imag, Xc.imag, out=M[N:, 0:2 * m:2])
-    np.subtract(Xc.imag, X.imag, out=M[:N, 1:2 * m:2])
-    np.subtract(X.real, Xc.real, out=M[N:, 1:2 * m:2])
+    """Write the stacked columns ``X + Xc`` and ``j (X - Xc)`` of (m, N) complex ``X``, ``Xc`` (a row per
+    pole) into the first 2m columns of the real (2N, .) ``M`` (interleaved, rows [Re; Im]; in Fortran
+    order every write is contiguous)."""
+    m, N = X.shape
+    np.add(X.real, Xc.real, out=M[:N, 0:2 * m:2].T)
+    np.add(X.imag, Xc.imag, out=M[N:, 0:2 * m:2].T)
+    np.subtract(Xc.imag, X.imag, out=M[:N, 1:2 * m:2].T)
+    np.subtract(X.real, Xc.real, out=M[N:, 1:2 * m:2].T)
 
 
 @dataclass
@@ -196,6 +257,11 @@ class ProjectedProblem:
             self._res_cols = cols
         else:
             self._res_cols = np.zeros((self.N, 0), dtype=complex)
+        #: whether the Gram-based form loses its digits at the poles of the last evaluation (a fast one
+        #: fell back, or a precise one shows it would have: :meth:`_gram_loses_digits`): the poles an
+        #: iteration tries next are close to those, so a fast request then goes straight to the direct
+        #: form instead of paying for a Gram-based evaluation that would fall back to it
+        self.gram_fails = False
 
     # ------------------------------------------------------------------ basis
     def n_linear(self, n_modes: int) -> int:
@@ -215,14 +281,16 @@ class ProjectedProblem:
         """Weighted stacked basis ``A`` (2N x P) and derivative columns ``E`` (2N x 2m).
 
         Written straight into the real arrays (rows ``[Re; Im]``) from the real and imaginary parts
-        of ``K``, ``Kc`` and their squares: no complex basis is built and stacked afterwards."""
+        of ``K``, ``Kc`` and their squares: no complex basis is built and stacked afterwards. Both are
+        in Fortran order (a column after the other): the QR factorisation (LAPACK) reads ``A`` so
+        without a transposed copy, and every column is written contiguously."""
         lam = theta_to_poles(theta)
         m, N = lam.size, self.N
         # reciprocals into fresh arrays: numpy's in-place complex division is several times slower
-        K = np.reciprocal(self.jw[:, None] - lam[None, :])             # (N, m)
-        Kc = np.reciprocal(self.jw[:, None] - np.conj(lam)[None, :])
-        A = np.empty((2 * N, 2 * m + 2 * self.n_res))
-        E = np.empty((2 * N, 2 * m))
+        K = np.reciprocal(self.jw[None, :] - lam[:, None])             # (m, N)
+        Kc = np.reciprocal(self.jw[None, :] - np.conj(lam)[:, None])
+        A = np.empty((2 * N, 2 * m + 2 * self.n_res), order="F")
+        E = np.empty((2 * N, 2 * m), order="F")
         _pair_columns(A, K, Kc)
         _pair_columns(E, np.square(K, out=K), np.square(Kc, out=Kc))
         A[:N, 2 * m:] = self._res_cols.real
@@ -234,32 +302,42 @@ class ProjectedProblem:
         return A, E
 
     # ------------------------------------------------------------- evaluation
-    #: problems with at least this many data values (n_freq x n_frf) may use fast evaluations: about
-    #: half the work of a precise one from a default capture's 3 FRFs x 1400 lines up (one product
-    #: with ``E`` instead of the reflectors applied to ``[E y]``); below it (the local fits of a few
-    #: dozen lines) an evaluation costs its overhead either way
-    FAST_MIN_SIZE = 2_000
     #: fast evaluations fall back to precise ones when S < FAST_MIN_REL_S ||y||^2, or when a derivative
     #: column keeps less than that fraction of its square norm outside the basis (diag G < FAST_MIN_REL_S diag E^T E)
     FAST_MIN_REL_S = 1e-6
 
-    @property
-    def fast_ok(self) -> bool:
-        """Whether fast (Gram-based) evaluations are worth it for this problem size."""
-        return self.N * self.n_frf >= self.FAST_MIN_SIZE
+    def prefers_gram(self, n_modes: int) -> bool:
+        """Whether a fast (Gram-based) evaluation with ``n_modes`` poles is worth trying now: the cost
+        model of :func:`gram_form_pays` at this problem's sizes, with the fall-back the last evaluation
+        predicts (:attr:`gram_fails`)."""
+        return gram_form_pays(self.N, self.n_frf, n_modes, self.n_res, self.gram_fails)
+
+    def _gram_loses_digits(self, S: float, G: np.ndarray | None, E: np.ndarray) -> bool:
+        """Whether the Gram-based form loses its digits to cancellation at an evaluation with ``S`` and
+        (when already computed) ``G``: ``S < FAST_MIN_REL_S ||y||^2``, or a derivative column keeps less
+        than that fraction of its square norm outside the basis."""
+        if S < self.FAST_MIN_REL_S * self.y_norm2:
+            return True
+        if G is None:
+            return False
+        return not bool(np.all(np.diag(G) > self.FAST_MIN_REL_S * np.einsum("ij,ij->j", E, E)))
 
     def evaluate(self, theta: np.ndarray, *, fast: bool = False) -> Evaluation:
         """Project the data on the basis at ``theta``: S, coefficients and what the normal equations need.
+
+        ``fast``: the Gram-based form may be used (where :meth:`prefers_gram`); else precise.
 
         Precise: Householder QR ``A = Q R`` (columns normalised) and the same reflectors applied
         to ``[E y]`` (:func:`householder_project`): ``S = ||r||^2``, ``G`` and ``E^T r`` from the
         rows of ``Q_full^T [E y]`` below the basis, without cancellation. Fast: only the
         triangular factor; ``Q^T y = R^-T (A^T y)``,
         ``S = ||y||^2 - ||Q^T y||^2``, ``E^T r = E^T y - (Q^T E)^T Q^T y`` and
-        ``G = E^T E - (Q^T E)^T (Q^T E)``: one product ``[A E]^T Y`` with the data instead of
-        three, at the price of cancellation (relative error of S about eps cond(A) ||y||^2 / S);
-        it falls back to the precise path when ``S < 1e-6 ||y||^2`` or a derivative column keeps less
-        than 1e-6 of its square norm outside the basis. When the basis is rank
+        ``G = E^T E - (Q^T E)^T (Q^T E)``: the products ``A^T Y`` and ``E^T Y`` with the data instead
+        of the reflectors applied to ``[E Y]`` (:func:`evaluation_flops` counts both), at the price of
+        cancellation (relative error of S about eps cond(A) ||y||^2 / S); it falls back to the precise
+        path when ``S < 1e-6 ||y||^2`` or a derivative column keeps less than 1e-6 of its square norm
+        outside the basis; while the last evaluation shows that (:attr:`gram_fails`) a fast request
+        is answered in the precise form at once (:meth:`prefers_gram`). When the basis is rank
         deficient (poles collapsed onto each other) ``rank_ok`` is False.
         """
         theta = np.array(theta, dtype=float)
@@ -277,21 +355,20 @@ class ProjectedProblem:
         rank_ok = bool(np.all(np.isfinite(Rq))) and rcond > RANK_TOL
         if not rank_ok:
             return Evaluation(theta, np.nan, None, False, rcond, precise=not fast)
-        if fast:
-            AE = np.concatenate([An, E], axis=1)
-            prod = AE.T @ self.Ys                                   # (P + 2m, n_frf)
-            QtY = solve_upper(Rq, prod[:P], transposed=True)
+        if fast and self.prefers_gram(theta.size // 2):
+            # two products with the data (no copy of [A E] side by side: the same arithmetic)
+            QtY = solve_upper(Rq, An.T @ self.Ys, transposed=True)
             S = self.y_norm2 - float(np.einsum("ij,ij->", QtY, QtY))
-            if S >= self.FAST_MIN_REL_S * self.y_norm2:
+            if not self._gram_loses_digits(S, None, E):
                 QtE = solve_upper(Rq, An.T @ E, transposed=True)
-                EtE = E.T @ E
-                G = EtE - QtE.T @ QtE
+                G = E.T @ E - QtE.T @ QtE
                 # a derivative column (nearly) inside the basis loses its digits to cancellation: precise then
-                if np.all(np.diag(G) > self.FAST_MIN_REL_S * np.diag(EtE)):
-                    EtR = prod[P:] - QtE.T @ QtY
+                if not self._gram_loses_digits(S, G, E):
+                    EtR = E.T @ self.Ys - QtE.T @ QtY
                     coef = solve_upper(Rq, QtY) / norms[:, None]
                     return Evaluation(theta, S, coef, True, rcond, precise=False, E=E, G=0.5 * (G + G.T), EtR=EtR)
         QtY, G, EtR, S = householder_project(h, tau, E, self.Ys)
+        self.gram_fails = self._gram_loses_digits(S, G, E)
         coef = solve_upper(Rq, QtY) / norms[:, None]
         return Evaluation(theta, S, coef, True, rcond, precise=True, E=E, G=G, EtR=EtR)
 
@@ -331,7 +408,8 @@ def householder_project(h: np.ndarray, tau: np.ndarray, E: np.ndarray, Ys: np.nd
     columns; Ys : (2N, n_frf) data. The reflectors ``H_1 ... H_P = I - V T V^T`` (the compact WY
     form, ``T`` upper triangular) are applied to ``X = [E Ys]`` as two matrix products:
     ``C = Q_full^T X``; its first P rows are ``Q^T X`` and the rest ``C_b`` spans the orthogonal
-    complement of the basis, so ``(P X)^T (P X) = C_b^T C_b``. The explicit ``Q`` (whose forming
+    complement of the basis, so ``(P X)^T (P X) = C_b^T C_b`` (of which only the blocks ``G``, ``E^T r``
+    and the trace of the data's block are formed). The explicit ``Q`` (whose forming
     costs more than the factorisation) and the projected residuals are never formed, and the
     rounding is that of Householder transformations (no cancellation).
     """
@@ -341,8 +419,8 @@ def householder_project(h: np.ndarray, tau: np.ndarray, E: np.ndarray, Ys: np.nd
     V1[np.diag_indices(P)] = 1.0
     V2 = h.T[P:]                           # the rest (a view)
     VtV = V1.T @ V1 + V2.T @ V2
-    X = np.concatenate([E, Ys], axis=1)
-    W = V1.T @ X[:P] + V2.T @ X[P:]
+    # V^T X for X = [E Ys], E and the data one after the other (no copy of [E Ys] side by side)
+    W = np.concatenate([V1.T @ E[:P] + V2.T @ E[P:], V1.T @ Ys[:P] + V2.T @ Ys[P:]], axis=1)
     if np.all(tau != 0):
         # T^-1 = strictly upper part of V^T V + diag(1 / tau) (the UT transform; tau_i = 2 / v_i^T v_i):
         # Z = T^T W by one triangular solve
@@ -357,11 +435,14 @@ def householder_project(h: np.ndarray, tau: np.ndarray, E: np.ndarray, Ys: np.nd
             if i:
                 T[:i, i] = -tau[i] * (T[:i, :i] @ VtV[:i, i])
         Z = T.T @ W
-    Cb = X[P:] - V2 @ Z
+    # of the Gram matrix of the rows below the basis only the blocks needed: G, E^T r and S (not the
+    # data's own n_frf x n_frf block)
+    CbE = E[P:] - V2 @ Z[:, :m2]
+    CbY = Ys[P:] - V2 @ Z[:, m2:]
     QtY = Ys[:P] - V1 @ Z[:, m2:]
-    Gf = Cb.T @ Cb
-    S = float(np.einsum("ij,ij->", Cb[:, m2:], Cb[:, m2:]))
-    return QtY, 0.5 * (Gf[:m2, :m2] + Gf[:m2, :m2].T), Gf[:m2, m2:], S
+    G = CbE.T @ CbE
+    S = float(np.einsum("ij,ij->", CbY, CbY))
+    return QtY, 0.5 * (G + G.T), CbE.T @ CbY, S
 
 
 def projected_gram(Q: np.ndarray, E: np.ndarray, mode_coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -336,7 +336,7 @@ def lsfd_at_poles(
     line_w, frf_w = _check_weights(weights, n_out, n_ref, N)
     prob = ProjectedProblem(frf.omega[i0:i1], H.reshape(n_out * n_ref, N), frf.quantity, residual_form, line_w, frf_w)
     theta = poles_to_theta(lam0)
-    ev = prob.evaluate(theta, fast=prob.fast_ok)
+    ev = prob.evaluate(theta, fast=prob.prefers_gram(lam0.size))
     status, text = (Status.FIXED_POLES, message) if ev.rank_ok else (Status.COLLAPSED, "the poles' basis is rank deficient")
     oc = NLSOutcome(theta, ev, [float(ev.S)], 0, 1, status, text)
     return _result(frf, prob, oc, str(method), residual_form, correct_exp_window, lam0, None, band_hz=(f[i0], f[i1 - 1]))

@@ -53,6 +53,7 @@ import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -217,9 +218,9 @@ def score(name: str, frf: FRFSet, truth: np.ndarray | None, band: tuple[float, f
 
 def real_cases(data: Path) -> list[tuple[str, Any]]:
     """(name, loader) of the real datasets of docs/validation.md, loaded over their whole range."""
-    from benchmarks.studies.default_band_realdata import _cases
+    from benchmarks.accuracy.validation.datasets import DATASETS
 
-    return _cases(data)
+    return [(d.label, partial(d.load, data, **d.whole_range)) for d in DATASETS]
 
 
 def _hz(values: Sequence[float], n: int = 8) -> str:
