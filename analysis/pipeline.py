@@ -13,7 +13,10 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    is used as given (checked against the data).
 2. **Stabilization** up to ``max_modes`` (default ``2 * peaks + 8``, from the peaks of the
    summed FRF magnitude, capped to ``[12, 60]``) with LSCF or LSCE.
-3. **Selection** (:mod:`analysis.selection`), or the user's poles / frequencies.
+3. **Selection** (:mod:`analysis.selection`), or the user's poles / frequencies. On data whose
+   coherence comes from at least ``SEED_MIN_AVERAGES`` averages (or does not say how many), one
+   more start pole at each visible peak no selected pole lies near (:func:`_with_visible_peaks`);
+   without coherence the visible peaks are left to step 7.
 4. **Band edges**: a selected pole within ``EDGE_BANDWIDTHS`` half-power bandwidths
    (``2 zeta f``) of a band edge sits on the edge; the paper (sec. 3.1, Fig. 4) shows the
    fit then suffers. An automatic edge is moved outwards (as far as the data and the
@@ -306,10 +309,14 @@ def _n_averages(frf: FRFSet) -> np.ndarray:
 
 
 def _peaks_trusted(frf: FRFSet) -> bool:
-    """Whether the visible peaks of ``frf`` may start the fit: its coherence comes from at least
-    ``SEED_MIN_AVERAGES`` averages per FRF, or the number of averages is not known (FRFs read from a
-    file that does not say: their coherence is taken as the analyser's, as for any peak's
-    visibility)."""
+    """Whether the visible peaks of ``frf`` may start the fit: the set carries coherence, and it comes
+    from at least ``SEED_MIN_AVERAGES`` averages per FRF or the number of averages is not known (FRFs
+    read from a file that does not say: their coherence is taken as the analyser's, as for any peak's
+    visibility). Without coherence a visible peak is only a bump 10 dB high and two lines wide, which
+    the noise of a finely resolved FRF shows by the dozen where the excitation has no energy; such peaks
+    are left to step 7's local trials."""
+    if frf.coherence is None:
+        return False
     n_avg = _n_averages(frf)
     return n_avg.size == 0 or bool(np.all(n_avg >= SEED_MIN_AVERAGES))
 
