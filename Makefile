@@ -18,7 +18,8 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m acquisition demo --out demo-output
 
 # the suite on TEST_WORKERS processes (pytest-xdist; one test file stays on one process, so a
-# module's shared fixture is made once); TEST_WORKERS=0 runs it in this process
+# module's shared fixture is made once, except the heavy independent tests that tests/conftest.py
+# spreads over both processes and hands out first); TEST_WORKERS=0 runs it in this process
 TEST_WORKERS ?= 2
 
 test: $(STAMP)

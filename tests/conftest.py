@@ -29,3 +29,45 @@ def report_case(tmp_path_factory) -> dict:
     from report_data import make_report_case
 
     return make_report_case(tmp_path_factory)
+
+
+# --- how `make test` shares the suite between processes (pytest-xdist, --dist loadfile) ---
+# A test file is one unit of work, kept on one process (its module fixtures are made once), except
+# the files of SPREAD: their tests are heavy and independent (no costly module fixture), so each
+# test is a unit of its own and both processes share them. The units are handed out heaviest
+# first (the SPREAD tests, then the files of HEAVY, then the rest in file order) and the light
+# files fill in behind, so the two processes end together. Only the speed depends on these lists.
+SPREAD = ("test_diagnosis_blind.py", "test_diagnosis_physical.py", "test_fuzz_importers.py",
+          "test_fuzz_recording.py", "test_crash_safety.py", "test_station_resume.py",
+          "test_diagnosis_frf_beam.py", "test_diagnosis_frf_mass.py", "test_diagnosis_second_cause.py",
+          "test_diagnosis_frame_untuned.py", "test_station_browser.py")
+HEAVY = ("test_batch_dask.py", "test_diagnosis_cli.py", "test_station_api.py")
+
+
+def _file(nodeid: str) -> str:
+    return nodeid.split("::")[0].rsplit("/", 1)[-1]
+
+
+def _rank(nodeid: str) -> int:
+    name = _file(nodeid)
+    return 0 if name in SPREAD else 1 if name in HEAVY else 2
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if hasattr(config, "workerinput"):                 # an xdist worker: the order the units are handed out
+        items.sort(key=lambda item: _rank(item.nodeid))    # stable: the files keep their order
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
+    """--dist loadfile with the SPREAD files' tests as units of their own, in collection order."""
+    if config.getoption("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class SpreadScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return nodeid if _file(nodeid) in SPREAD else super()._split_scope(nodeid)
+
+    config.option.loadscopereorder = False             # the order above, not by the files' test counts
+    return SpreadScheduling(config, log)
