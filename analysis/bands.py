@@ -146,7 +146,7 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     db = np.convolve(np.pad(db, w // 2, mode="edge"), np.ones(w) / w, mode="valid")
     peaks, _ = find_peaks(db, prominence=EDGE_PEAK_DB)
     near = []
-    for p in peaks:
+    for p in peaks[np.abs(hi - f[peaks]) < EDGE_BANDWIDTHS * 0.1 * f[peaks]]:   # bandwidths <= 10 % of f
         a, b = int(p), int(p)   # the peak's flanks down to EDGE_PEAK_DB below its top (within its bases)
         while a > 0 and db[a] > db[p] - EDGE_PEAK_DB:
             a -= 1
