@@ -4,7 +4,8 @@ edges kept off resonances, and lines left out (mains harmonics).
 The default band runs from the lowest reliable line (past the lowest ``LOW_LINES`` lines and any
 leading low-coherence lines) to the top of what the data support (:func:`default_band`): the
 analyser's flat band ``fs / 2.56``, the hammer's excitation band (force spectrum 20 dB down) and
-the coherence (:func:`upper_limits`), so no pole is fitted to lines the data cannot support.
+the coherence (:func:`upper_limits`), so no pole is fitted to lines the data cannot support; an
+edge the coherence sets takes a resonance whole or not at all (:func:`_coherence_edge_off_peak`).
 """
 from __future__ import annotations
 
@@ -19,8 +20,8 @@ from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
 from .peaks import find_peaks
 
-__all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges", "mains_harmonics",
-           "exclude_lines", "mains_harmonic_index", "MAINS_HZ"]
+__all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges",
+           "mains_harmonics", "exclude_lines", "mains_harmonic_index", "MAINS_HZ"]
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +41,12 @@ LINES_PER_MODE = 11
 TAIL_COHERENCE = 0.5
 #: running-mean length of the coherence, as a fraction of the lines
 COHERENCE_SMOOTH_FRACTION = 0.02
+#: median coherence over a resonance's half-power band that still lets a coherence edge take it in whole
+TOP_COHERENCE = 0.25
+#: prominence (dB) of a peak of the summed FRF power that a coherence edge must not cut
+EDGE_PEAK_DB = 10.0
+#: running-mean length (dB) of the summed FRF power for the edge's peaks, as a fraction of the lines
+POWER_SMOOTH_FRACTION = 0.001
 
 
 def upper_limits(frf: FRFSet) -> dict[str, float]:
@@ -91,12 +98,81 @@ def default_band(frf: FRFSet) -> tuple[float, float]:
         if ok.size and ok[0] > 0:
             lo = max(lo, float(f[ok[0]]))
     lo_line = float(f[f >= lo - 1e-9 * abs(lo)][0])
-    hi = min(upper_limits(frf).values())
+    limits = upper_limits(frf)
+    hi = min(limits.values())
+    hard = min(v for k, v in limits.items() if k != "coherence")
+    if hi < hard:   # the coherence ends the band: not on a resonance's flank
+        hi = _coherence_edge_off_peak(frf, lo_line, hi, hard)
     i_lo = int(np.searchsorted(f, lo_line))
     hi = max(hi, float(f[min(i_lo + 15, f.size - 1)]))
     hi_line = float(f[f <= hi + 1e-9 * abs(hi)][-1])
     return lo_line, hi_line
 
+
+def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> float:
+    """The band's upper edge ``hi`` (Hz), set by the coherence, moved off the flank of a resonance;
+    ``lo`` is the band's lower edge and ``cap`` the highest the other limits (analyser, excitation,
+    data) allow (Hz).
+
+    The coherence's edge falls where the coherence fades, and it often fades on the flank of a mode
+    near the top of the excitation: the fit would see half a resonance, whose pole is biased (the
+    paper's sec. 3.1, Fig. 4), or leave the mode to the upper residual while it pulls its neighbours.
+    A modal-test engineer takes a mode in whole or not at all, so an edge within ``EDGE_BANDWIDTHS``
+    half-power bandwidths of a peak of the summed FRF power (a running mean over
+    ``POWER_SMOOTH_FRACTION`` of the lines, in dB, standing ``EDGE_PEAK_DB`` above its minima; the
+    bandwidth: its lines within 3 dB of its top, at most 10 % of its frequency) moves ``EDGE_BANDWIDTHS``
+    bandwidths (the margin :func:`check_band_edges` asks of a fitted mode)
+
+    - past the peak (at most to ``cap``, and only when that clears the peak's half-power band) when
+      the median coherence over the peak's half-power band is at least ``TOP_COHERENCE``: the
+      resonance lifts the response out of the noise where the coherence fades around it, and the
+      averages leave a random error (for H1 of ``n`` averages ``sqrt((1 - g^2) / (2 n g^2))`` of the
+      FRF per line) that the fit spreads over the mode's many lines;
+    - before the peak otherwise: the mode is left out (the residual terms take it), as long as the
+      band keeps 16 lines.
+
+    The lower edge is not moved here: below it lie the lines the module's docstring leaves out
+    (record length, high-pass filters), and a mode near it is kept off the edge from its fitted pole
+    (:func:`check_band_edges`). Neither are the analyser's band, the excitation band and the end of
+    the data: they are hard limits.
+    """
+    f = frf.freq_hz
+    n = f.size
+    H = frf.H.reshape(-1, n)
+    p2 = np.einsum("ij,ij->j", H.real, H.real) + np.einsum("ij,ij->j", H.imag, H.imag)
+    p2 = np.nan_to_num(p2)
+    db = 10.0 * np.log10(np.maximum(p2, np.max(p2) * 1e-24 + 1e-300))
+    w = max(3, int(POWER_SMOOTH_FRACTION * n)) | 1
+    db = np.convolve(np.pad(db, w // 2, mode="edge"), np.ones(w) / w, mode="valid")
+    peaks, _ = find_peaks(db, prominence=EDGE_PEAK_DB)
+    near = []
+    for p in peaks[np.abs(hi - f[peaks]) < EDGE_BANDWIDTHS * 0.1 * f[peaks]]:   # bandwidths <= 10 % of f
+        a, b = int(p), int(p)   # the peak's flanks down to EDGE_PEAK_DB below its top (within its bases)
+        while a > 0 and db[a] > db[p] - EDGE_PEAK_DB:
+            a -= 1
+        while b < n - 1 and db[b] > db[p] - EDGE_PEAK_DB:
+            b += 1
+        top = a + np.flatnonzero(db[a:b + 1] >= db[p] - 3.0)   # its half-power lines (a noise dip does not end them)
+        a, b = int(top[0]), int(top[-1])
+        bw = max(float(top.size) * frf.line_spacing_hz, frf.line_spacing_hz)
+        if bw <= 0.1 * f[p] and abs(hi - f[p]) < EDGE_BANDWIDTHS * bw:
+            near.append((abs(hi - f[p]), int(p), a, b, bw))
+    if not near or frf.coherence is None:
+        return hi
+    _, p, a, b, bw = min(near)
+    coh = np.nanmedian(np.asarray(frf.coherence).reshape(-1, n)[:, a:b + 1], axis=0)
+    i_cap = int(np.searchsorted(f, cap + 1e-9 * abs(cap), side="right")) - 1
+    i_past = int(np.searchsorted(f, f[p] + EDGE_BANDWIDTHS * bw, side="right")) - 1
+    i_before = int(np.searchsorted(f, f[p] - EDGE_BANDWIDTHS * bw))
+    i_lo = int(np.searchsorted(f, lo)) + 15
+    if float(np.nanmedian(coh)) >= TOP_COHERENCE and min(i_past, i_cap) > b:
+        new = float(f[min(i_past, i_cap)])
+    elif max(i_before, i_lo) < a:
+        new = float(f[max(i_before, i_lo)])
+    else:
+        return hi
+    log.info("band edge %.6g Hz moved to %.6g Hz off the resonance at %.6g Hz", hi, new, f[p])
+    return new
 
 def default_max_modes(frf: FRFSet, band: tuple[float, float]) -> int:
     """Largest model size for the stabilization: ``2 * peaks + 8`` clipped to [12, 60], where

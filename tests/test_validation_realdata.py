@@ -208,6 +208,24 @@ def test_unesp_bolted_joint_softens_at_the_higher_level(shared_data):
 
 
 @realdata
+def test_unesp_coherence_is_matched_to_the_frfs_by_channel(shared_data):
+    """The coherence file holds five curves (four accelerometers and a laser vibrometer) for four
+    FRFs: each FRF gets its own accelerometer's, and a missing channel is a clear error."""
+    from benchmarks.accuracy.validation import unesp_boltedbeam as ub
+
+    d = shared_data / ub.NAME
+    f, _, channels = ub._lms(d / "Rand__Rand0p05__FRF.mat", "FRF")
+    _, C, names = ub._lms(d / "Rand__Rand0p05__Coherence.mat", "Coherence")
+    assert len(names) == 5 and "Laser:+X/Shaker:-X" in names and channels == [f"Acc{k}:+X/Shaker:-X" for k in range(1, 5)]
+    frf = ub.load(shared_data, "0p05")
+    assert frf.coherence is not None and frf.coherence.shape == (4, 1, 8192)
+    for k, c in enumerate(channels):
+        np.testing.assert_array_equal(frf.coherence[k, 0], np.clip(C[names.index(c), 1:].real, 0.0, 1.0))
+    with pytest.raises(ValueError, match="no coherence for Acc9"):
+        ub._matched_coherence(d / "Rand__Rand0p05__Coherence.mat", f, ["Acc9:+X/Shaker:-X"])
+
+
+@realdata
 def test_peer_pole_bookkeeping_defect(shared_data):
     pytest.importorskip("sdypy.EMA")
     from benchmarks.accuracy.validation.peer_defects import reproduce

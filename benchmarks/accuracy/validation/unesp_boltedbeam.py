@@ -29,7 +29,9 @@ LEVELS = ("0p05", "0p30")
 BAND = (10.0, 400.0)
 
 
-def _lms(path: Path, key: str) -> tuple[np.ndarray, np.ndarray]:
+def _lms(path: Path, key: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Frequencies (Hz), curves (one row each) and the curves' channel pairs ("Acc1:+X/Shaker:-X") of an
+    LMS Test.Lab export."""
     import scipy.io
 
     s = scipy.io.loadmat(str(path))[key][0, 0]
@@ -39,18 +41,34 @@ def _lms(path: Path, key: str) -> tuple[np.ndarray, np.ndarray]:
     v = np.asarray(s["y_values"][0, 0]["values"])
     if v.shape[0] == n:
         v = v.T
-    return f, v
+    rec = s["function_record"][0, 0]
+    resp = [str(np.ravel(a)[0]) for a in np.ravel(rec["primary_channel"][0, 0]["label"])]
+    ref = [str(np.ravel(a)[0]) for a in np.ravel(rec["reference_channel"][0, 0]["label"])]
+    return f, v, [f"{a}/{b}" for a, b in zip(resp, ref)]
+
+
+def _matched_coherence(path: Path, f: np.ndarray, channels: list[str]) -> np.ndarray:
+    """The coherence of each FRF's channel pair (``channels``), picked by name from the coherence export
+    (which may hold more curves, e.g. a laser vibrometer's); a clear error when one is missing."""
+    fc, C, names = _lms(path, "Coherence")
+    if fc.shape != f.shape or not np.allclose(fc, f):
+        raise ValueError(f"{path.name}: its frequency lines differ from the FRF file's; export both on one grid")
+    missing = [c for c in channels if c not in names]
+    if missing:
+        raise ValueError(f"{path.name} holds no coherence for {', '.join(missing)} (it holds {', '.join(names)}); "
+                         "export the coherence of every FRF's channel pair")
+    return np.clip(np.real(C[[names.index(c) for c in channels]]), 0.0, 1.0)
 
 
 def load(data_dir: Path, level: str = "0p05") -> FRFSet:
-    """The 4 accelerometer H1 (g/V) at drive level ``level`` ("0p05" or "0p30"), with coherence."""
+    """The 4 accelerometer H1 (g/V) at drive level ``level`` ("0p05" or "0p30"), with their coherence (matched to
+    the FRFs by channel names: the coherence file also holds a laser vibrometer's curve)."""
     d = Path(data_dir) / NAME
-    f, H = _lms(d / f"Rand__Rand{level}__FRF.mat", "FRF")
-    fc, C = _lms(d / f"Rand__Rand{level}__Coherence.mat", "Coherence")
-    coh = np.clip(np.real(C), 0, 1) if C.shape == H.shape else None
+    f, H, channels = _lms(d / f"Rand__Rand{level}__FRF.mat", "FRF")
+    coh = _matched_coherence(d / f"Rand__Rand{level}__Coherence.mat", f, channels)
     return FRFSet(freq_hz=f[1:], H=H[:, None, 1:], quantity="accelerance",
                   outputs=tuple(f"beam:{k + 1}:Z" for k in range(H.shape[0])), references=("shaker:0:Z",),
-                  unit="g/V", coherence=None if coh is None else coh[:, None, 1:],
+                  unit="g/V", coherence=coh[:, None, 1:],
                   meta={"source": SOURCE, "level_V": level.replace("p", ".")})
 
 
