@@ -448,6 +448,13 @@ RESONATOR_SCREEN_RATIOS = (0.003, 0.01, 0.03, 0.1)
 RESONATOR_REFINED = 2
 #: the start frequencies between two neighbouring modes a < b: a (b/a)^t
 RESONATOR_BETWEEN = (0.25, 0.5, 0.75)
+#: evaluations of every start's first refinement, and how many of the best go on to convergence
+RESONATOR_SHORT = 15
+RESONATOR_CONTINUED = 2
+#: how far beyond the band's ends the resonator's own frequency may lie (a factor): its own mode is what tells
+#: a resonator from a mass on the structure, so it stays in the band (a fit stopped at the band's end is not
+#: evidence of a resonator, :func:`analysis.diagnosis.verdict`)
+RESONATOR_BEYOND_BAND = 1.0
 
 
 def _attached_coupling(phi: np.ndarray, point: int, ratio: float) -> np.ndarray:
@@ -476,7 +483,7 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     wn = np.abs(np.asarray(ctx.base.poles, complex))[:n_real]
     f = ctx.measured.freq_hz[lines]
     Hm, sw = ctx.measured.H[..., lines], np.sqrt(ctx.weights[..., lines])
-    lo, hi = f[0] / 1.05, f[-1] * 1.05
+    lo, hi = f[0] / RESONATOR_BEYOND_BAND, f[-1] * RESONATOR_BEYOND_BAND
 
     def spec(x: np.ndarray) -> dict:
         return {"effect": "local_resonator", "frequency_hz": float(x[0]), "zeta": float(np.exp(x[1])),
@@ -511,17 +518,23 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     if not first and not attached:
         raise EffectError("local_resonator: no extra mode in the band and no output with a mode shape to start from")
     starts = [x0 for kind in (first, attached) for _, x0 in sorted(kind, key=lambda t: t[0])[:RESONATOR_REFINED]]
-    best: tuple[float, np.ndarray] | None = None
     df = ctx.measured.line_spacing_hz
-    for x0 in starts:
-        res = least_squares(resid, x0, bounds=([lo, np.log(1e-4)] + [-1.0] * wn.size,
-                                               [hi, np.log(0.3)] + [1.0] * wn.size),
-                            x_scale=[df, 0.3] + [0.01] * wn.size, method="trf", max_nfev=60)
-        c = float(np.sum(res.fun ** 2))
-        log.debug("local_resonator start %.1f Hz cost %.4g -> %.1f Hz cost %.4g (%d evaluations)", x0[0], cost(x0),
-                  res.x[0], c, res.nfev)
+    bounds = ([lo, np.log(1e-4)] + [-1.0] * wn.size, [hi, np.log(0.3)] + [1.0] * wn.size)
+
+    def refine(x0: np.ndarray, nfev: int) -> tuple[float, np.ndarray]:
+        res = least_squares(resid, x0, bounds=bounds, x_scale=[df, 0.3] + [0.01] * wn.size, method="trf",
+                            max_nfev=nfev)
+        log.debug("local_resonator: from %.1f Hz to %.1f Hz, cost %.4g (%d evaluations)", x0[0], res.x[0],
+                  float(np.sum(res.fun ** 2)), res.nfev)
+        return float(np.sum(res.fun ** 2)), res.x
+
+    # every start a few steps, then the best ones to convergence
+    short = sorted((refine(x0, RESONATOR_SHORT) for x0 in starts), key=lambda t: t[0])
+    best: tuple[float, np.ndarray] | None = None
+    for _, x1 in short[:RESONATOR_CONTINUED]:
+        c, x = refine(x1, 60)
         if best is None or c < best[0]:
-            best = (c, res.x)
+            best = (c, x)
     assert best is not None
     out = spec(best[1])
     del out["effect"]
