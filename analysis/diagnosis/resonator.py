@@ -59,24 +59,48 @@ def _matrices(wn: np.ndarray, zeta: np.ndarray, g: np.ndarray, w_a: float, zeta_
     return K, C
 
 
+#: modes whose damping couples them by more than this (``|C_ij| max(W_i, W_j) / |W_i^2 - W_j^2|`` in the
+#: undamped coupled modes) are solved together as complex modes; the others keep their projected damping
+DAMPING_COUPLING = 1e-3
+
+
 def damped_coupled_modes(wn: np.ndarray, zeta: np.ndarray, g: np.ndarray, w_a: float, zeta_a: float
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The complex modes of the modes ``wn`` (rad/s), damping ratios ``zeta``, with the resonator ``w_a``
     (rad/s), ``zeta_a`` coupled through ``g``: poles (n+1, rad/s, positive imaginary parts ascending),
-    eigenvectors (n+1, n+1; the last row the attached mass's coordinate) and their scales
+    eigenvectors (n+1, n+1; the last row the attached mass's coordinate), their scales
     ``a_i = x_i^T (2 lambda_i I + C) x_i`` (the receptance residue of coordinates k, l is
-    ``x_ki x_li / a_i``). None when fewer than n+1 modes oscillate (an overdamped pair)."""
-    n1 = wn.size + 1
+    ``x_ki x_li / a_i``) and the undamped coupled modes ``V`` in the same order (real, orthonormal).
+    Solved in the undamped coupled modes: those the damping couples
+    (:data:`DAMPING_COUPLING`) by the state-space eigenproblem of their block of ``V^T C V``, the others
+    as real modes with their projected damping. None when fewer modes oscillate (an overdamped pair)."""
     K, C = _matrices(wn, zeta, g, w_a, zeta_a)
-    A = np.block([[np.zeros((n1, n1)), np.eye(n1)], [-K, -C]])
-    ev, vec = np.linalg.eig(A)
-    up = np.flatnonzero(ev.imag > 0)
-    if up.size != n1:
+    w2, V = np.linalg.eigh(K)
+    W = np.sqrt(np.maximum(w2, 1e-300))
+    Ct = V.T @ C @ V
+    gap = np.abs(W[:, None] ** 2 - W[None, :] ** 2)
+    strong = np.abs(Ct) * np.maximum(W[:, None], W[None, :]) > DAMPING_COUPLING * gap
+    np.fill_diagonal(strong, False)
+    S = np.flatnonzero(strong.any(axis=1))
+    lam = W * (-np.diag(Ct) / (2 * W) + 1j * np.sqrt(np.maximum(1 - (np.diag(Ct) / (2 * W)) ** 2, 0.0)))
+    if np.any(np.diag(Ct) / (2 * W) >= 1):
         return None
-    up = up[np.argsort(ev[up].imag)]
-    lam, X = ev[up], vec[:n1, up]
-    a = np.einsum("ki,ki->i", X, C @ X + 2 * lam[None, :] * X)
-    return lam, X, a
+    X = V.astype(complex)
+    a = 2j * lam.imag
+    if S.size:
+        ns = S.size
+        A = np.block([[np.zeros((ns, ns)), np.eye(ns)], [-np.diag(W[S] ** 2), -Ct[np.ix_(S, S)]]])
+        ev, vec = np.linalg.eig(A)
+        up = np.flatnonzero(ev.imag > 0)
+        if up.size != ns:
+            return None
+        up = up[np.argsort(ev[up].imag)]
+        Y = vec[:ns, up]
+        lam[S] = ev[up]
+        X[:, S] = V[:, S] @ Y
+        a[S] = np.einsum("ki,ki->i", Y, Ct[np.ix_(S, S)] @ Y + 2 * ev[up][None, :] * Y)
+    order = np.argsort(lam.imag)
+    return lam[order], X[:, order], a[order], V[:, order]
 
 
 def _coupling(model: ModalModel, params: Mapping, phi: np.ndarray) -> np.ndarray:
@@ -116,13 +140,13 @@ def apply_local_resonator(model: ModalModel, params: Mapping) -> ModalModel:
     g = _coupling(model, params, phi)
     lam = np.asarray(model.poles, complex)
     wn, z = np.abs(lam), -lam.real / np.abs(lam)
-    W, Z, V = coupled_modes(wn, z, g, 2 * np.pi * fa, za)
-    Vb = V[:-1]                                         # (n_old, n_new): the beam's modal coordinates
     damped = damped_coupled_modes(wn, z, g, 2 * np.pi * fa, za)
     if damped is not None:
-        new, X, a = damped
-        Xb = X[:-1]
+        new, X, a, V = damped
+        Xb, Vb = X[:-1], V[:-1]
     else:
+        W, Z, V = coupled_modes(wn, z, g, 2 * np.pi * fa, za)
+        Vb = V[:-1]                                     # (n_old, n_new): the beam's modal coordinates
         new = W * (-Z + 1j * np.sqrt(1 - Z ** 2))
         Xb, a = Vb.astype(complex), 2j * new.imag
     p = QUANTITY_POWER[model.quantity]
