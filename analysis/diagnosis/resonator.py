@@ -12,7 +12,8 @@ attached mass (``x_a`` its displacement), with ``g_r = sqrt(m) phi_r(point)`` th
 damping ratio. The coupled modes (one more than the simulation's) are the complex modes of
 ``q'' + C q' + K q = 0`` (state space, :func:`damped_coupled_modes`): the resonator's damper couples the
 modes it sits on, and a resonator a few times more damped than the structure next to one of its modes
-makes that coupling large, so no modal damping is assumed. Mode ``i`` with pole ``lambda_i`` and
+makes that coupling large, so no modal damping is assumed (the modes the damping couples by less than
+:data:`DAMPING_COUPLING` keep the damping of their modal projection). Mode ``i`` with pole ``lambda_i`` and
 eigenvector ``x_i`` (the modal coordinates and the resonator's) has the receptance residue
 ``psi_o psi_r / a_i``, ``psi = Phi x_i[:n]``, ``a_i = x_i^T (2 lambda_i I + C) x_i`` (``2 j omega_d`` for a
 real mode). ``Phi`` are the mass-normalised shapes at the outputs, ``meta["output_shapes"]``; for an
