@@ -441,19 +441,49 @@ def _initial_coupling(ctx: FitContext, fit: dict, wn: np.ndarray, phi: np.ndarra
     return np.asarray(g, float)
 
 
+#: mass ratios ``m max_r phi_pr^2`` (the resonator's mass over the modal mass of the mode it moves most) of a
+#: resonator attached at an output, screened as starting points of the fit
+RESONATOR_SCREEN_RATIOS = (0.003, 0.01, 0.03, 0.1)
+#: starts refined of each kind (first-order extra mode, attached at an output)
+RESONATOR_REFINED = 2
+#: the start frequencies between two neighbouring modes a < b: a (b/a)^t
+RESONATOR_BETWEEN = (0.25, 0.5, 0.75)
+#: evaluations of every start's first refinement, and how many of the best go on to convergence
+RESONATOR_SHORT = 15
+RESONATOR_CONTINUED = 2
+#: how far beyond the band's ends the resonator's own frequency may lie (a factor): its own mode is what tells
+#: a resonator from a mass on the structure, so it stays in the band (a fit stopped at the band's end is not
+#: evidence of a resonator, :func:`analysis.diagnosis.verdict`)
+RESONATOR_BEYOND_BAND = 1.0
+
+
+def _attached_coupling(phi: np.ndarray, point: int, ratio: float) -> np.ndarray:
+    """The coupling ``sqrt(m) phi_p`` of a resonator attached at output ``point`` whose mass is ``ratio`` times
+    the modal mass of the mode it moves most there (mass-normalised shapes ``phi``, outputs x modes)."""
+    load = float(np.max(phi[point] ** 2))
+    return np.sqrt(ratio / load) * phi[point]
+
+
 def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
-    """The resonator's frequency, damping and coupling to every mode by least squares on ``lines``, started
-    from the extra modes ``missing_mode`` finds at the largest residuals (first-order coupling from their
-    shapes at the outputs); the start with the smaller cost wins. A pseudo-mode above the band
-    (``meta["above_band_modes"]``, the last modes; :mod:`.above_band`) is not coupled: its shape is known
-    at the outputs only as a tail, so it stays the fixed term it was fitted as."""
+    """The resonator's frequency, damping and coupling to every mode by least squares on ``lines``.
+
+    A strongly coupled resonator has local minima where its coupling pulls the wrong neighbouring modes, so
+    the fit is started from two kinds of points, at the frequencies of the extra modes ``missing_mode``
+    finds at the largest residuals and between each pair of in-band modes: the first-order coupling of the
+    extra mode's shape at the outputs (:func:`_initial_coupling`, right for a weakly coupled resonator), and
+    the resonator attached at each output (coupling ``sqrt(m) phi_p``, the driving point's shapes, its mass
+    screened on :data:`RESONATOR_SCREEN_RATIOS`; the physics of a strongly coupled one, shifts of every mode
+    included). The :data:`RESONATOR_REFINED` best starts of each kind are refined with the coupling to every
+    mode free; the smallest cost wins. A pseudo-mode above the band (``meta["above_band_modes"]``, the last
+    modes; :mod:`.above_band`) is not coupled: its shape is known at the outputs only as a tail, so it stays
+    the fixed term it was fitted as."""
     n_all = ctx.base.poles.size
     n_real = n_all - int(ctx.base.meta.get("above_band_modes", 0))
     phi = np.asarray(ctx.base.meta["output_shapes"], float)[:, :n_real]
     wn = np.abs(np.asarray(ctx.base.poles, complex))[:n_real]
     f = ctx.measured.freq_hz[lines]
     Hm, sw = ctx.measured.H[..., lines], np.sqrt(ctx.weights[..., lines])
-    lo, hi = f[0] / 1.05, f[-1] * 1.05
+    lo, hi = f[0] / RESONATOR_BEYOND_BAND, f[-1] * RESONATOR_BEYOND_BAND
 
     def spec(x: np.ndarray) -> dict:
         return {"effect": "local_resonator", "frequency_hz": float(x[0]), "zeta": float(np.exp(x[1])),
@@ -463,11 +493,16 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
         e = (Hm - predict(ctx.base, f, ctx.measured.quantity, ctx.effects(spec(x))).H) * sw
         return np.concatenate([e.real.ravel(), e.imag.ravel()])
 
+    def cost(x: np.ndarray) -> float:
+        return float(np.sum(resid(x) ** 2))
+
     mm = fit_missing_mode(ctx, lines)
     inband = np.sort(wn[(wn >= 2 * np.pi * lo) & (wn <= 2 * np.pi * hi)]) / (2 * np.pi)
-    freqs = [mm["freq_hz"]] + list(np.sqrt(inband[:-1] * inband[1:]))   # and between each pair of modes
-    starts = []
-    for fc in freqs:
+    # the extra mode's frequency and points between each pair of in-band modes (on a log scale)
+    between = [float(a * (b / a) ** t) for a, b in zip(inband[:-1], inband[1:]) for t in RESONATOR_BETWEEN]
+    first, attached = [], []
+    points = [p for p in range(phi.shape[0]) if np.max(phi[p] ** 2) > 0]
+    for fc in [mm["freq_hz"]] + between:
         if not lo < fc < hi:
             continue
         zc, Rc = min(((float(np.sum(r ** 2)), z, R) for z in (0.005, 0.01, 0.02, 0.05)
@@ -475,19 +510,31 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
         g0 = _initial_coupling(ctx, {"freq_hz": fc, "zeta": zc, "residue": Rc}, wn, phi)
         if g0 is not None:
             x0 = np.concatenate([[fc, np.log(zc)], np.clip(g0, -0.5, 0.5)])
-            starts.append((float(np.sum(resid(x0) ** 2)), x0))
-    if not starts:
-        raise EffectError("local_resonator: no extra mode with a shape at the driving point to start from")
-    starts = sorted(starts, key=lambda t: t[0])[:3]
-    best: tuple[float, np.ndarray] | None = None
+            first.append((cost(x0), x0))
+        tied = [np.concatenate([[fc, np.log(zc)], np.clip(_attached_coupling(phi, p, ratio), -0.5, 0.5)])
+                for p in points for ratio in RESONATOR_SCREEN_RATIOS]
+        if tied:                                        # the best attachment at this frequency
+            attached.append(min(((cost(x0), x0) for x0 in tied), key=lambda t: t[0]))
+    if not first and not attached:
+        raise EffectError("local_resonator: no extra mode in the band and no output with a mode shape to start from")
+    starts = [x0 for kind in (first, attached) for _, x0 in sorted(kind, key=lambda t: t[0])[:RESONATOR_REFINED]]
     df = ctx.measured.line_spacing_hz
-    for _, x0 in starts:
-        res = least_squares(resid, x0, bounds=([lo, np.log(1e-4)] + [-1.0] * wn.size,
-                                               [hi, np.log(0.3)] + [1.0] * wn.size),
-                            x_scale=[df, 0.3] + [0.01] * wn.size, method="trf", max_nfev=60)
-        c = float(np.sum(res.fun ** 2))
+    bounds = ([lo, np.log(1e-4)] + [-1.0] * wn.size, [hi, np.log(0.3)] + [1.0] * wn.size)
+
+    def refine(x0: np.ndarray, nfev: int) -> tuple[float, np.ndarray]:
+        res = least_squares(resid, x0, bounds=bounds, x_scale=[df, 0.3] + [0.01] * wn.size, method="trf",
+                            max_nfev=nfev)
+        log.debug("local_resonator: from %.1f Hz to %.1f Hz, cost %.4g (%d evaluations)", x0[0], res.x[0],
+                  float(np.sum(res.fun ** 2)), res.nfev)
+        return float(np.sum(res.fun ** 2)), res.x
+
+    # every start a few steps, then the best ones to convergence
+    short = sorted((refine(x0, RESONATOR_SHORT) for x0 in starts), key=lambda t: t[0])
+    best: tuple[float, np.ndarray] | None = None
+    for _, x1 in short[:RESONATOR_CONTINUED]:
+        c, x = refine(x1, 60)
         if best is None or c < best[0]:
-            best = (c, res.x)
+            best = (c, x)
     assert best is not None
     out = spec(best[1])
     del out["effect"]

@@ -9,12 +9,19 @@ attached mass (``x_a`` its displacement), with ``g_r = sqrt(m) phi_r(point)`` th
     K = diag(omega_r^2, 0) + omega_a^2 u u^T,   M = I,   C = diag(2 zeta_r omega_r, 0) + 2 zeta_a omega_a u u^T
 
 ``omega_a = 2 pi frequency_hz`` is the resonator's own frequency (on a rigid base), ``zeta_a`` its own
-damping ratio. ``K V = V Omega^2`` gives the coupled modes (one more than the simulation's); each
-keeps the damping ratio of its modal projection ``V_i^T C V_i / (2 Omega_i)``. The shapes at the outputs
-are ``Phi V[:n]`` (``Phi`` the mass-normalised shapes at the outputs, ``meta["output_shapes"]``; for an
-FRF-file simulation they come from the driving point), so the resonator needs them as the sensors' mass
+damping ratio. The coupled modes (one more than the simulation's) are the complex modes of
+``q'' + C q' + K q = 0`` (state space, :func:`damped_coupled_modes`): the resonator's damper couples the
+modes it sits on, and a resonator a few times more damped than the structure next to one of its modes
+makes that coupling large, so no modal damping is assumed (the modes the damping couples by less than
+:data:`DAMPING_COUPLING` keep the damping of their modal projection). Mode ``i`` with pole ``lambda_i`` and
+eigenvector ``x_i`` (the modal coordinates and the resonator's) has the receptance residue
+``psi_o psi_r / a_i``, ``psi = Phi x_i[:n]``, ``a_i = x_i^T (2 lambda_i I + C) x_i`` (``2 j omega_d`` for a
+real mode). ``Phi`` are the mass-normalised shapes at the outputs, ``meta["output_shapes"]``; for an
+FRF-file simulation they come from the driving point, so the resonator needs them as the sensors' mass
 does. Below its frequency the resonator adds mass to the neighbouring modes, above it takes some away:
-those shifts are part of the effect, not a second cause.
+those shifts are part of the effect, not a second cause. (An overdamped pair, without enough
+oscillating modes, falls back to the undamped modes ``K V = V Omega^2`` with the damping ratio of their
+modal projection, :func:`coupled_modes`.)
 """
 from __future__ import annotations
 
@@ -27,7 +34,7 @@ from ..frf import QUANTITY_POWER
 from ..modal import ModalModel
 from .effect_types import EffectError, shapes_at_references
 
-__all__ = ["apply_local_resonator", "coupled_modes"]
+__all__ = ["apply_local_resonator", "coupled_modes", "damped_coupled_modes"]
 
 
 def coupled_modes(wn: np.ndarray, zeta: np.ndarray, g: np.ndarray, w_a: float, zeta_a: float
@@ -36,14 +43,65 @@ def coupled_modes(wn: np.ndarray, zeta: np.ndarray, g: np.ndarray, w_a: float, z
     (n+1, n+1; the last row the attached mass's coordinate) of the modes ``wn`` (rad/s) with the
     resonator ``w_a`` (rad/s), ``zeta_a`` coupled through ``g``."""
     n = wn.size
-    u = np.append(np.asarray(g, float), -1.0)
-    K = np.diag(np.append(wn ** 2, 0.0)) + w_a ** 2 * np.outer(u, u)
-    C = np.diag(np.append(2 * zeta * wn, 0.0)) + 2 * zeta_a * w_a * np.outer(u, u)
+    K, C = _matrices(wn, zeta, g, w_a, zeta_a)
     w2, V = np.linalg.eigh(K)
     W = np.sqrt(np.maximum(w2, 1e-300))
     z = np.einsum("ri,rs,si->i", V, C, V) / (2 * W)
     assert V.shape == (n + 1, n + 1)
     return W, np.clip(z, 1e-6, 0.99), V
+
+
+def _matrices(wn: np.ndarray, zeta: np.ndarray, g: np.ndarray, w_a: float, zeta_a: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Stiffness and damping (n+1, n+1; M = I) of the modes ``wn`` (rad/s) with the resonator."""
+    u = np.append(np.asarray(g, float), -1.0)
+    K = np.diag(np.append(wn ** 2, 0.0)) + w_a ** 2 * np.outer(u, u)
+    C = np.diag(np.append(2 * zeta * wn, 0.0)) + 2 * zeta_a * w_a * np.outer(u, u)
+    return K, C
+
+
+#: modes whose damping couples them by more than this (``|C_ij| max(W_i, W_j) / |W_i^2 - W_j^2|`` in the
+#: undamped coupled modes) are solved together as complex modes; the others keep their projected damping
+DAMPING_COUPLING = 1e-3
+
+
+def damped_coupled_modes(wn: np.ndarray, zeta: np.ndarray, g: np.ndarray, w_a: float, zeta_a: float
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The complex modes of the modes ``wn`` (rad/s), damping ratios ``zeta``, with the resonator ``w_a``
+    (rad/s), ``zeta_a`` coupled through ``g``: poles (n+1, rad/s, positive imaginary parts ascending),
+    eigenvectors (n+1, n+1; the last row the attached mass's coordinate), their scales
+    ``a_i = x_i^T (2 lambda_i I + C) x_i`` (the receptance residue of coordinates k, l is
+    ``x_ki x_li / a_i``) and the undamped coupled modes ``V`` in the same order (real, orthonormal).
+    Solved in the undamped coupled modes: those the damping couples
+    (:data:`DAMPING_COUPLING`) by the state-space eigenproblem of their block of ``V^T C V``, the others
+    as real modes with their projected damping. None when fewer modes oscillate (an overdamped pair)."""
+    K, C = _matrices(wn, zeta, g, w_a, zeta_a)
+    w2, V = np.linalg.eigh(K)
+    W = np.sqrt(np.maximum(w2, 1e-300))
+    Ct = V.T @ C @ V
+    gap = np.abs(W[:, None] ** 2 - W[None, :] ** 2)
+    strong = np.abs(Ct) * np.maximum(W[:, None], W[None, :]) > DAMPING_COUPLING * gap
+    np.fill_diagonal(strong, False)
+    S = np.flatnonzero(strong.any(axis=1))
+    lam = W * (-np.diag(Ct) / (2 * W) + 1j * np.sqrt(np.maximum(1 - (np.diag(Ct) / (2 * W)) ** 2, 0.0)))
+    if np.any(np.diag(Ct) / (2 * W) >= 1):
+        return None
+    X = V.astype(complex)
+    a = 2j * lam.imag
+    if S.size:
+        ns = S.size
+        A = np.block([[np.zeros((ns, ns)), np.eye(ns)], [-np.diag(W[S] ** 2), -Ct[np.ix_(S, S)]]])
+        ev, vec = np.linalg.eig(A)
+        up = np.flatnonzero(ev.imag > 0)
+        if up.size != ns:
+            return None
+        up = up[np.argsort(ev[up].imag)]
+        Y = vec[:ns, up]
+        lam[S] = ev[up]
+        X[:, S] = V[:, S] @ Y
+        a[S] = np.einsum("ki,ki->i", Y, Ct[np.ix_(S, S)] @ Y + 2 * ev[up][None, :] * Y)
+    order = np.argsort(lam.imag)
+    return lam[order], X[:, order], a[order], V[:, order]
 
 
 def _coupling(model: ModalModel, params: Mapping, phi: np.ndarray) -> np.ndarray:
@@ -83,17 +141,23 @@ def apply_local_resonator(model: ModalModel, params: Mapping) -> ModalModel:
     g = _coupling(model, params, phi)
     lam = np.asarray(model.poles, complex)
     wn, z = np.abs(lam), -lam.real / np.abs(lam)
-    W, Z, V = coupled_modes(wn, z, g, 2 * np.pi * fa, za)
-    new = W * (-Z + 1j * np.sqrt(1 - Z ** 2))
+    damped = damped_coupled_modes(wn, z, g, 2 * np.pi * fa, za)
+    if damped is not None:
+        new, X, a, V = damped
+        Xb, Vb = X[:-1], V[:-1]
+    else:
+        W, Z, V = coupled_modes(wn, z, g, 2 * np.pi * fa, za)
+        Vb = V[:-1]                                     # (n_old, n_new): the beam's modal coordinates
+        new = W * (-Z + 1j * np.sqrt(1 - Z ** 2))
+        Xb, a = Vb.astype(complex), 2j * new.imag
     p = QUANTITY_POWER[model.quantity]
-    Vb = V[:-1]                                         # (n_old, n_new): the beam's modal coordinates
     R_old = np.asarray(model.residues, complex) / lam[None, None, :] ** p
-    R = np.einsum("orm,mi->ori", R_old * lam.imag[None, None, :], Vb ** 2) / new.imag[None, None, :]
     ref = shapes_at_references(model, phi)
+    if ref is not None:                                 # what the shapes do not say of the fitted residues
+        R_old = R_old - np.einsum("om,rm->orm", phi, ref) / (2j * lam.imag)[None, None, :]
+    R = np.einsum("orm,mi->ori", R_old * (2j * lam.imag)[None, None, :], Xb ** 2) / a[None, None, :]
     if ref is not None:
-        po, pr = phi @ Vb, ref @ Vb
-        own = np.einsum("om,rm,mi->ori", phi, ref, Vb ** 2)
-        R = R + (po[:, None, :] * pr[None, :, :] - own) / (2j * new.imag)[None, None, :]
+        R = R + (phi @ Xb)[:, None, :] * (ref @ Xb)[None, :, :] / a[None, None, :]
     meta = dict(model.meta)
     meta["output_shapes"] = phi @ Vb
     if ref is not None and "reference_shapes" in meta:

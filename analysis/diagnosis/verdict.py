@@ -210,19 +210,38 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
             "error_after_db": a_db, "z": z, "significant": bool(gain >= min_gain_db and (z >= z_min or gain >= STRONG_GAIN_DB)),
             "evidence": _evidence(name, params, b_db, a_db, z, band_gain), "_extended": ext,
         })
-        edge = _at_range_edge(name, params)
+        edge = _at_range_edge(name, params, (float(m.freq_hz[0]), float(m.freq_hz[-1])))
         if edge and causes[-1]["significant"]:
             causes[-1]["significant"] = False
             causes[-1]["evidence"] += f"; {edge} at the edge of its physical range"
+    _resonator_beyond_mass(causes)
     causes.sort(key=lambda c: c["gain_db"], reverse=True)
     return causes, skipped
 
 
-def _at_range_edge(name: str, params: dict) -> str:
+def _resonator_beyond_mass(causes: list) -> None:
+    """A spring-mass tuned high acts in the band as a mass at its point: ``mass_loading`` is the
+    ``local_resonator``'s stiff limit, and the resonator's own frequency and free coupling can also stand in
+    for what a mass model leaves (modes just above the band it moves). With both significant the resonator
+    counts only when it gains :data:`STRONG_GAIN_DB` more than the mass (the error the mass leaves halved)."""
+    by = {c["effect"]: c for c in causes}
+    res, mass = by.get("local_resonator"), by.get("mass_loading")
+    if res is None or mass is None or not (res["significant"] and mass["significant"]):
+        return
+    more = res["gain_db"] - mass["gain_db"]
+    if more < STRONG_GAIN_DB:
+        res["significant"] = False
+        res["evidence"] += (f"; {more:.1f} dB more than a mass at a sensor (its stiff limit), less than "
+                            f"{STRONG_GAIN_DB:g} dB")
+
+
+def _at_range_edge(name: str, params: dict, band_hz: tuple[float, float] | None = None) -> str:
     """The parameter of an FRF-level fit that stopped at the edge of its physical range ("" if none): a
     calibration off by :data:`~analysis.diagnosis.frf_effects.MAX_GAIN_ERROR` or more, damping scaled
-    by 10 or 1/10. The data then want more than the effect can physically be, as with the physical
+    by 10 or 1/10, a local resonator's own frequency at an end of the band ``band_hz`` (Hz; its own mode
+    is its evidence). The data then want more than the effect can physically be, as with the physical
     causes: such a fit is not evidence of that effect (a simulation far off elsewhere is)."""
+    from .effects import RESONATOR_BEYOND_BAND
     from .frf_effects import MAX_GAIN_ERROR
 
     if name == "sensitivity_error":
@@ -233,6 +252,11 @@ def _at_range_edge(name: str, params: dict) -> str:
         c = float(params.get("factor", 1.0))
         if c >= 10.0 * (1 - 1e-3) or c <= 0.1 * (1 + 1e-3):
             return "the damping factor"
+    if name == "local_resonator" and band_hz is not None:
+        fa = float(params.get("frequency_hz", 0.0))
+        lo, hi = band_hz[0] / RESONATOR_BEYOND_BAND, band_hz[1] * RESONATOR_BEYOND_BAND
+        if fa >= hi * (1 - 1e-3) or fa <= lo * (1 + 1e-3):
+            return "the resonator's own frequency"
     return ""
 
 
