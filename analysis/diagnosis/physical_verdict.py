@@ -479,6 +479,11 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     their uncertainty (:func:`_held_out_per_mode` at most ``LEAVES_CHI2``): the stiffness and the mass of
     one member scaled together stand in for a change of its geometry (a longer member: EI/L^3 and its
     mass), which the catalogue does not hold and which only the modes they leave tell apart.
+    With no first cause named and no pair named from the first causes, the best pair's second cause, fitted
+    alone with the parameters it took in that pair (:func:`_as_first`), is a first cause too when none of the
+    first causes is that cause in that form: a cause fitted alone with more freedom absorbs part of the other
+    change (the supports' translational springs softened for a block on the beam), and the other change then
+    fits nowhere alone and explains nothing on top of it (the block is no first cause).
     With no pair found and no first cause that leaves the held-out modes within their uncertainty (at most
     ``LEAVES_CHI2`` per mode: then there is no second physical change to find), the first causes with a
     choice are tried again with their choice held open and their parameters refined with the second cause
@@ -494,11 +499,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         if _named_pair(best):
             break
     if alone and not opened and best is not None and not _named_pair(best):
-        # the best pair's second cause, fitted in the variant it took beside the first, as a first cause of its
-        # own: a first cause fitted alone with more freedom absorbs part of the other change (the supports'
-        # translational springs softened for a block on the beam), so the other change is not among the single
-        # causes, and applied on top of it explains nothing; beside the pair's other cause the second took only
-        # the freedom its own change needs, and fitted alone in that form it leaves the other change in the data
+        # the best pair's second cause as a first cause: beside the pair's other cause it took only the freedom
+        # its own change needs, and fitted alone in that form it leaves the other change in the data
         fb = best["_pair"]
         name, free = fb.causes[1], best["_free"]
         if all((c["_fit"].cause, c["_fit"].free) != (name, free) for c in firsts):
