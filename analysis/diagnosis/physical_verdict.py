@@ -479,16 +479,16 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     their uncertainty (:func:`_held_out_per_mode` at most ``LEAVES_CHI2``): the stiffness and the mass of
     one member scaled together stand in for a change of its geometry (a longer member: EI/L^3 and its
     mass), which the catalogue does not hold and which only the modes they leave tell apart.
-    With no first cause named and no pair named from the first causes, the best pair's second cause, fitted
-    alone with the parameters it took in that pair (:func:`_as_first`), is a first cause too when none of the
-    first causes is that cause in that form: a cause fitted alone with more freedom absorbs part of the other
-    change (the supports' translational springs softened for a block on the beam), and the other change then
-    fits nowhere alone and explains nothing on top of it (the block is no first cause).
     With no pair found and no first cause that leaves the held-out modes within their uncertainty (at most
     ``LEAVES_CHI2`` per mode: then there is no second physical change to find), the first causes with a
     choice are tried again with their choice held open and their parameters refined with the second cause
     (``opened``, :func:`_opened`); a named first cause keeps its choice (it was named on its own) and only
-    its parameters are refined with the second."""
+    its parameters are refined with the second. When that names no pair either and no single cause was named,
+    the first round's best pair's second cause, fitted alone with the parameters it took in that pair
+    (:func:`_as_first`), is a first cause too (unless a first cause is that cause in that form): a cause
+    fitted alone with more freedom absorbs part of the other change (the supports' translational springs
+    softened for a block on the beam), which then fits nowhere alone (the block is no first cause) and
+    explains nothing on top of it."""
     alone = firsts is None
     if firsts is None:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
@@ -498,16 +498,9 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
         if _named_pair(best):
             break
-    if alone and not opened and best is not None and not _named_pair(best):
-        # the best pair's second cause as a first cause: beside the pair's other cause it took only the freedom
-        # its own change needs, and fitted alone in that form it leaves the other change in the data
-        fb = best["_pair"]
-        name, free = fb.causes[1], best["_free"]
-        if all((c["_fit"].cause, c["_fit"].free) != (name, free) for c in firsts):
-            first = _as_first(sim, specs, mm, fmax, name, free, judge)
-            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
     explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= LEAVES_CHI2 for c in firsts)
+    first_round = best
     if not opened and not explained and not _named_pair(best):
         # a first cause fitted alone may have absorbed the second change (a mass grown at the wrong node, a
         # member's factor pulled by heavier sensors): nothing on top of it helps, refined with it the pair shows
@@ -516,6 +509,13 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         more = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, chosen, opened=True) if chosen else None
         if more is not None and (best is None or _named_pair(more)):
             best = more
+    if alone and not opened and not explained and first_round is not None and not _named_pair(best):
+        # the first round's best pair's second cause as a first cause: beside the pair's other cause it took only
+        # the freedom its own change needs, and fitted alone in that form it leaves the other change in the data
+        name, free = first_round["_pair"].causes[1], first_round["_free"]
+        if all((c["_fit"].cause, c["_fit"].free) != (name, free) for c in firsts):
+            first = _as_first(sim, specs, mm, fmax, name, free, judge)
+            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
     return best
 
 
