@@ -3,7 +3,9 @@
 Noise-free modes of the FE frame changed in its config (or by two causes) at the test's points: the
 choice of a pair is made again where both causes are refined; a first cause that absorbed the second
 change is refined with it from each of its ranked options; a pair of member changes standing in for a
-longer span leaves the held-out modes above their uncertainty, an in-catalogue pair does not.
+longer span leaves the held-out modes above their uncertainty, an in-catalogue pair does not; a pair whose
+member is no leading single cause (a block absorbed by the supports fitted alone) is found from the first
+round's best pair.
 """
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ import numpy as np
 import pytest
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
 
-from analysis.diagnosis.physical import PhysicalFit
+from analysis.diagnosis.physical import MeasuredModes, PhysicalFit
 from analysis.diagnosis.physical_pairs import fit_pair, rechoose, with_options
 from simulator.config import FrameConfig
 from simulator.fem import FrameModel, section_properties
@@ -200,3 +202,49 @@ def test_a_named_cause_keeps_its_choice_and_is_refined_with_the_second() -> None
     a, b, chi2 = with_options(fv, [specs["member_stiffness"], specs["mass_loading"]], first, second, mm, FMAX)
     assert a.params["component"] == "right" and a.params["factor"] == pytest.approx(1.29, rel=1e-3)
     assert b.params["mass_kg"] == pytest.approx(0.23, rel=1e-2) and chi2 < 1e-3
+
+
+def _block_beside_softer_supports():
+    """FRFs (8-500 Hz) and modes of the frame with a 2.64 kg steel block at top:7 (a steel member on joint
+    springs, not the diagnosis' point mass) and the supports' rotational springs x 0.23, computed by the FE
+    frame of the simulator. The modes are those its capture determines: from 20 Hz (the sway mode at 12.6 Hz
+    is not among them) to 445 Hz (one mode of the close pair at 444/447 Hz)."""
+    from benchmark_modules import load_benchmark
+
+    cfg = FrameConfig.load()
+    over = load_benchmark("accuracy/bench_diagnosis_physical.py").steel_block(cfg, "top:7", 2.64)
+    over["supports"] = {"stiffness": list(cfg.supports.stiffness[:3]) + [x * 0.23 for x in cfg.supports.stiffness[3:]]}
+    changed = FrameConfig.from_dict(over)
+    fm = FrameModel.from_config(changed, _sensor_masses(changed))
+    measured = fm.analytic_frf(OUTS, REFS, np.arange(8.0, 500.0, 0.25))
+    model = fm.modal_model(OUTS, REFS, "receptance")
+    keep = (model.freq_hz > 20.0) & (model.freq_hz < 445.0)
+    n = int(keep.sum())
+    return measured, MeasuredModes(model.freq_hz[keep], np.zeros(n), model.residues[..., keep].reshape(-1, n))
+
+
+def test_a_pair_whose_member_is_no_leading_single_cause_is_found() -> None:
+    """The block and the softer supports: fitted alone, the supports soften their translational springs too
+    (x 0.21) and absorb the block, and the block alone fits nowhere (a 10 kg mass at top:1, worse than the
+    unchanged frame on held-out modes), so it is not among the first causes and nothing on top of the supports
+    finds it; the best pair of the first round is the joints with the supports' rotational springs alone,
+    inadequate. That second cause, fitted alone in the form it took in the pair, is a first cause of its own:
+    the block on top of it is found, and the pair is named with both parameters."""
+    from analysis.diagnosis.compare import line_weights
+    from analysis.diagnosis.physical_verdict import physical_verdict
+    from analysis.diagnosis.verdict import known_processing
+
+    measured, mm = _block_beside_softer_supports()
+    fv = FrameVariants(None, OUTS, REFS)
+    out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, 3.0, mm,
+                           causes=["added_mass", "support_stiffness", "joint_stiffness"])
+    alone = {c["effect"]: c for c in out.causes}
+    assert alone["added_mass"]["gain_db"] < 0 and alone["added_mass"]["parameters"]["point"] != "top:7"
+    assert alone["support_stiffness"]["parameters"]["factor_translational"] < 0.5
+    assert out.verdict == "combined"
+    named = {c["effect"]: c["parameters"] for c in out.named}
+    assert set(named) == {"added_mass", "support_stiffness"}
+    assert named["added_mass"]["point"] == "top:7"
+    assert named["added_mass"]["mass_kg"] == pytest.approx(2.64, rel=0.05)
+    assert named["support_stiffness"]["factor_rotational"] == pytest.approx(0.23, rel=0.03)
+    assert named["support_stiffness"]["factor_translational"] == pytest.approx(1.0, rel=0.03)

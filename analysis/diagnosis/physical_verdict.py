@@ -483,44 +483,24 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     ``LEAVES_CHI2`` per mode: then there is no second physical change to find), the first causes with a
     choice are tried again with their choice held open and their parameters refined with the second cause
     (``opened``, :func:`_opened`); a named first cause keeps its choice (it was named on its own) and only
-    its parameters are refined with the second."""
+    its parameters are refined with the second. When that names no pair either and no single cause was named,
+    the first round's best pair's second cause, fitted alone with the parameters it took in that pair
+    (:func:`_as_first`), is a first cause too (unless a first cause is that cause in that form): a cause
+    fitted alone with more freedom absorbs part of the other change (the supports' translational springs
+    softened for a block on the beam), which then fits nowhere alone (the block is no first cause) and
+    explains nothing on top of it."""
     alone = firsts is None
     if firsts is None:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
     best: dict | None = None
     for first in firsts:
-        fa: PhysicalFit = first["_fit"]
-        progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
-        cv_alone = _alone_cv(sim, specs, mm, fmax, first)
-        pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
-                 [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
-                  for fb in _seconds(sim, specs, mm, fmax, fa, names)])
-        n_seconds = max(1, len({fb.cause for _, fb in pairs}))
-        for fa2, fb in pairs:
-            two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
-            if gain_db(fa.cv_per_mode, two.cv_per_mode) >= MIN_GAIN_DB:
-                two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
-            c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
-            c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
-                cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]))
-            c["significant"] = bool(c["significant"] and enough)
-            c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
-            c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
-            if c["one_member"] is not None and c["held_out_chi2_per_mode"] > LEAVES_CHI2:
-                c["adequate"] = False
-            c["_pair"] = two
-            c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
-                             "error_after_db": c["error_after_db"]} for name, p in two.changes]
-            c["effect"] = "+".join(two.causes)
-            c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(specs[n]) for n in two.causes)
-            if best is None or (c["significant"] and c["adequate"], -c["_chi2_cv"]) > (
-                    best["significant"] and best["adequate"], -best["_chi2_cv"]):
-                best = c
+        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
         if _named_pair(best):
             break
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
     explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= LEAVES_CHI2 for c in firsts)
+    first_round = best
     if not opened and not explained and not _named_pair(best):
         # a first cause fitted alone may have absorbed the second change (a mass grown at the wrong node, a
         # member's factor pulled by heavier sensors): nothing on top of it helps, refined with it the pair shows
@@ -529,4 +509,70 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         more = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, chosen, opened=True) if chosen else None
         if more is not None and (best is None or _named_pair(more)):
             best = more
+    if alone and not opened and not explained and first_round is not None and not _named_pair(best):
+        # the first round's best pair's second cause as a first cause: beside the pair's other cause it took only
+        # the freedom its own change needs, and fitted alone in that form it leaves the other change in the data
+        name, free = first_round["_pair"].causes[1], first_round["_free"]
+        if all((c["_fit"].cause, c["_fit"].free) != (name, free) for c in firsts):
+            first = _as_first(sim, specs, mm, fmax, name, free, judge)
+            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
+    return best
+
+
+def _better(best: dict | None, c: dict | None) -> dict | None:
+    """The better of two judged pairs: named (significant and adequate) first, then the lower penalised
+    nested held-out chi2 (``_chi2_cv``)."""
+    if c is None:
+        return best
+    if best is None or (c["significant"] and c["adequate"], -c["_chi2_cv"]) > (
+            best["significant"] and best["adequate"], -best["_chi2_cv"]):
+        return c
+    return best
+
+
+def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, name: str, free: tuple,
+              judge: _Judge) -> dict:
+    """The cause ``name`` with the parameters ``free`` fitted alone on all modes (its choice searched over every
+    option) and cross-validated as the pairs are (:func:`_alone_cv`), judged as a single cause."""
+    spec = specs[name]
+    p, chi2, ranked = fit_cause(sim, spec, free, mm, np.ones(mm.freq_hz.size, bool), fmax)
+    fit = PhysicalFit(cause=name, params=p, free=free, chi2=chi2, ranked=ranked)
+    cv = fit_pair(sim, [spec], [fit], mm, fmax).cv_per_mode
+    edge = tuple(s.name for s in spec.params if s.name in free and s.at_edge(float(p[s.name])))
+    fit = replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=edge)
+    return {**judge.single(spec, fit), "_alone_cv": cv}
+
+
+def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
+               names: Sequence[str] | None, opened: bool) -> dict | None:
+    """The best pair with the first cause ``first`` (a judged single cause): its second causes
+    (:func:`_seconds`, or :func:`_opened` with its choice held open) refined with it, cross-validated nested
+    and judged (:func:`_second_cause`)."""
+    fa: PhysicalFit = first["_fit"]
+    progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
+    cv_alone = _alone_cv(sim, specs, mm, fmax, first)
+    pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
+             [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
+              for fb in _seconds(sim, specs, mm, fmax, fa, names)])
+    n_seconds = max(1, len({fb.cause for _, fb in pairs}))
+    best: dict | None = None
+    for fa2, fb in pairs:
+        two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+        if gain_db(fa.cv_per_mode, two.cv_per_mode) >= MIN_GAIN_DB:
+            two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
+        c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
+        c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
+            cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]))
+        c["significant"] = bool(c["significant"] and enough)
+        c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
+        c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
+        if c["one_member"] is not None and c["held_out_chi2_per_mode"] > LEAVES_CHI2:
+            c["adequate"] = False
+        c["_pair"] = two
+        c["_free"] = fb.free
+        c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
+                         "error_after_db": c["error_after_db"]} for name, p in two.changes]
+        c["effect"] = "+".join(two.causes)
+        c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(specs[n]) for n in two.causes)
+        best = _better(best, c)
     return best
