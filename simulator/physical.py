@@ -132,7 +132,7 @@ for _row in (
         advice="A mass the model lacks sits at the named node (a fixture, a block, cabling): add it to the "
                "model as a lumped mass there, or remove it from the structure."), _added_mass),
     PhysicalCause(CauseSpec(
-        "support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2), ParamSpec("factor_rotational", 1e-2, 1e2)),
+        "support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2), ParamSpec("factor_rotational", 1e-3, 1e2)),
         description="the base supports' springs, translational and rotational, scaled",
         advice="The supports are softer or stiffer than modelled: check the clamping (bolts' torque, the "
                "foundation) or update the support springs by the fitted factors."), _springs("support")),
