@@ -58,11 +58,11 @@ def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: f
     and stiffness lines, deltas at t = 0) are not truncated. (n_out, n_ref, n_freq) complex."""
     lam = np.asarray(model.poles, complex)
     N = np.asarray(model.residues, complex) * (lam ** float(_POWER[quantity] - _POWER[model.quantity]))[None, None, :]
-    g = np.exp(lam * record_s)
-    a = N * g[None, None, :]
-    den = 1.0 / (s[None, :] - lam[:, None])
-    denc = 1.0 / (s[None, :] - np.conj(lam)[:, None])
-    tail = np.einsum("orm,mk->ork", a, den) + np.einsum("orm,mk->ork", np.conj(a), denc)
+    a = N * np.exp(lam * record_s)[None, None, :]
+    n_out, n_ref, _ = a.shape
+    both = np.concatenate([lam, np.conj(lam)])               # the poles and their conjugates, one product
+    den = 1.0 / (s[None, :] - both[:, None])
+    tail = (np.concatenate([a, np.conj(a)], axis=2).reshape(n_out * n_ref, both.size) @ den).reshape(n_out, n_ref, s.size)
     return tail * np.exp(-s * record_s)[None, None, :]
 
 
