@@ -477,6 +477,11 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     mode free; the smallest cost wins. A pseudo-mode above the band (``meta["above_band_modes"]``, the last
     modes; :mod:`.above_band`) is not coupled: its shape is known at the outputs only as a tail, so it stays
     the fixed term it was fitted as."""
+    if not all(r in ctx.base.outputs for r in ctx.base.references):
+        # the resonator's own mode is told from the structure's by its shape at the driving point (the
+        # first-order start); without one the many starts below would search blind
+        raise EffectError("local_resonator: the test has no driving point (the hammer's point is not among the "
+                          "outputs) to tell the resonator's mode from the structure's; measure it to try one")
     n_all = ctx.base.poles.size
     n_real = n_all - int(ctx.base.meta.get("above_band_modes", 0))
     phi = np.asarray(ctx.base.meta["output_shapes"], float)[:, :n_real]
