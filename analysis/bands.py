@@ -136,12 +136,11 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     (:func:`check_band_edges`). Neither are the analyser's band, the excitation band and the end of
     the data: they are hard limits.
     """
+    if frf.coherence is None:
+        return hi
     f = frf.freq_hz
     n = f.size
-    H = frf.H.reshape(-1, n)
-    p2 = np.einsum("ij,ij->j", H.real, H.real) + np.einsum("ij,ij->j", H.imag, H.imag)
-    p2 = np.nan_to_num(p2)
-    db = 10.0 * np.log10(np.maximum(p2, np.max(p2) * 1e-24 + 1e-300))
+    db = _summed_power_db(frf.H.reshape(-1, n))
     w = max(3, int(POWER_SMOOTH_FRACTION * n)) | 1
     db = np.convolve(np.pad(db, w // 2, mode="edge"), np.ones(w) / w, mode="valid")
     peaks, _ = find_peaks(db, prominence=EDGE_PEAK_DB)
@@ -157,7 +156,7 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
         bw = max(float(top.size) * frf.line_spacing_hz, frf.line_spacing_hz)
         if bw <= 0.1 * f[p] and abs(hi - f[p]) < EDGE_BANDWIDTHS * bw:
             near.append((abs(hi - f[p]), int(p), a, b, bw))
-    if not near or frf.coherence is None:
+    if not near:
         return hi
     _, p, a, b, bw = min(near)
     coh = np.nanmedian(np.asarray(frf.coherence).reshape(-1, n)[:, a:b + 1], axis=0)
@@ -174,6 +173,16 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     log.info("band edge %.6g Hz moved to %.6g Hz off the resonance at %.6g Hz", hi, new, f[p])
     return new
 
+def _summed_power_db(H: np.ndarray) -> np.ndarray:
+    """10 log10 of the summed power of the FRFs ``H`` (n_frf, n_lines) per line (dB re 1 unit of H squared),
+    NaN values left out, floored 240 dB below the largest line. Summed in place (einsum): a large set
+    makes no squared copy."""
+    p2 = np.einsum("ij,ij->j", H.real, H.real) + np.einsum("ij,ij->j", H.imag, H.imag)
+    if not np.all(np.isfinite(p2)):
+        p2 = np.nansum(H.real ** 2 + H.imag ** 2, axis=0)
+    return 10.0 * np.log10(np.maximum(p2, np.max(p2) * 1e-24 + 1e-300)) if p2.size else p2
+
+
 def default_max_modes(frf: FRFSet, band: tuple[float, float]) -> int:
     """Largest model size for the stabilization: ``2 * peaks + 8`` clipped to [12, 60], where
     ``peaks`` counts the peaks of the summed FRF magnitude (dB) with 3 dB prominence in ``band``,
@@ -182,12 +191,7 @@ def default_max_modes(frf: FRFSet, band: tuple[float, float]) -> int:
     sel = (frf.freq_hz >= band[0]) & (frf.freq_hz <= band[1])
     i = np.flatnonzero(sel)
     H = frf.H[..., i[0]:i[-1] + 1].reshape(-1, i.size) if i.size else frf.H[..., sel].reshape(-1, 0)
-    p2 = np.einsum("ij,ij->j", H.real, H.real) + np.einsum("ij,ij->j", H.imag, H.imag)   # in place: a large set
-    if not np.all(np.isfinite(p2)):
-        p2 = np.nansum(H.real ** 2 + H.imag ** 2, axis=0)
-    s = np.sqrt(p2)
-    s = 20 * np.log10(np.maximum(s, np.max(s) * 1e-12 + 1e-300))
-    peaks, _ = find_peaks(s, prominence=3.0)
+    peaks, _ = find_peaks(_summed_power_db(H), prominence=3.0)
     return int(max(1, min(np.clip(2 * peaks.size + 8, 12, 60), int(sel.sum()) // LINES_PER_MODE)))
 
 
