@@ -138,6 +138,10 @@ class CauseSpec:
     description: str = ""
     advice: str = ""
 
+    def at_edge(self, params: Mapping, free: tuple) -> tuple[str, ...]:
+        """The names of the free parameters whose fitted values ``params`` lie at an edge of their range."""
+        return tuple(s.name for s in self.params if s.name in free and s.at_edge(float(params[s.name])))
+
 
 class PhysicalSimulation(Protocol):
     """What the physical diagnosis needs of a simulation (see :class:`simulator.physical.FrameVariants`)."""
@@ -355,7 +359,7 @@ def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, 
         options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
         starts = {o: q for _, o, q in ranked} if ranked else p
         cv = _cross_validate(sim, cause, free, mm, fmax, options, starts)
-        edge = tuple(s.name for s in cause.params if s.name in free and s.at_edge(float(p[s.name])))
+        edge = cause.at_edge(p, free)
         fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
                           cv_per_mode=cv, at_edge=edge, ranked=ranked)
         if best is None or fit.chi2_cv < best.chi2_cv:

@@ -538,7 +538,7 @@ def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
     p, chi2, ranked = fit_cause(sim, spec, free, mm, np.ones(mm.freq_hz.size, bool), fmax)
     fit = PhysicalFit(cause=name, params=p, free=free, chi2=chi2, ranked=ranked)
     cv = fit_pair(sim, [spec], [fit], mm, fmax).cv_per_mode
-    edge = tuple(s.name for s in spec.params if s.name in free and s.at_edge(float(p[s.name])))
+    edge = spec.at_edge(p, free)
     fit = replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=edge)
     return {**judge.single(spec, fit), "_alone_cv": cv}
 
