@@ -33,18 +33,17 @@ DATA = ROOT.parent / "shared" / "data"
 
 
 def unesp_frfset(level: str) -> FRFSet:
-    """Accelerometer FRFs (g/V) and coherence of one random-excitation level ("0p05" or "0p30")."""
-    import scipy.io as sio
+    """Accelerometer FRFs (g/V) and coherence of one random-excitation level ("0p05" or "0p30"), read by the
+    validation loader (the coherence matched to each FRF by its channel names), labelled for the UFF files."""
+    import sys
+    from dataclasses import replace
 
-    d = DATA / "unesp_bert_boltedbeam_subset"
-    s = sio.loadmat(d / f"Rand__Rand{level}__FRF.mat")["FRF"][0, 0]
-    x = s["x_values"][0, 0]
-    f = float(x["start_value"][0, 0]) + float(x["increment"][0, 0]) * np.arange(int(x["number_of_values"][0, 0]))
-    H = s["y_values"][0, 0]["values"].T
-    c = sio.loadmat(d / f"Rand__Rand{level}__Coherence.mat")["Coherence"][0, 0]["y_values"][0, 0]["values"].T[:4]
-    return FRFSet(freq_hz=f[1:], H=H[:, None, 1:], coherence=np.real(c)[:, None, 1:], quantity="accelerance",
-                  outputs=[f"n:{i + 1}:X" for i in range(4)], references=["n:100:-X"], unit="g/V",
-                  meta={"averages": 54, "source": f"UNESP BERT Rand {level}"})
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.accuracy.validation.unesp_boltedbeam import load
+
+    frf = load(DATA, level)
+    return replace(frf, outputs=tuple(f"n:{i + 1}:X" for i in range(len(frf.outputs))), references=("n:100:-X",),
+                   meta={"averages": 54, "source": f"UNESP BERT Rand {level}"})
 
 
 def run_unesp(band: str, out: Path) -> int:
