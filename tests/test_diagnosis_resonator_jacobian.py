@@ -106,3 +106,26 @@ def test_the_derivative_keeps_the_resonated_model() -> None:
     down = apply_local_resonator(model, {**params, "coupling": [0.12, -0.2 - h, 0.15, 0.05]})
     fd = (up.residues - down.residues) / (2 * h)
     assert np.max(np.abs(dresidues[..., 3] - fd)) <= 1e-6 * np.max(np.abs(fd))
+
+
+def test_the_overdamped_fallback_is_differentiated_too() -> None:
+    """A heavy resonator damped beyond the fit's range leaves too few oscillating modes: the undamped coupled
+    modes with their projected damping (:func:`coupled_modes`) are the model, and their derivative is exact."""
+    model = _model(0.002, above=False)
+    wn = np.abs(model.poles)
+    theta = np.array([46.26, 0.486, -2.75, -2.90, 1.88, 2.48])
+    assert _damped(*_matrices(wn, -model.poles.real / wn, theta[2:], 2 * np.pi * theta[0], theta[1])) is None
+
+    def moved(t: np.ndarray) -> ModalModel:
+        return apply_local_resonator(model, {"frequency_hz": t[0], "zeta": t[1], "coupling": list(t[2:])})
+    _, dpoles, dresidues = local_resonator_derivative(model, {"frequency_hz": theta[0], "zeta": theta[1],
+                                                              "coupling": list(theta[2:])})
+    for p in range(theta.size):
+        h = 1e-6 * abs(theta[p])
+        up, down = theta.copy(), theta.copy()
+        up[p] += h
+        down[p] -= h
+        a, b = moved(up), moved(down)
+        fd_poles, fd_res = (a.poles - b.poles) / (2 * h), (a.residues - b.residues) / (2 * h)
+        assert np.max(np.abs(dpoles[:, p] - fd_poles)) <= 1e-6 * np.max(np.abs(fd_poles)), p
+        assert np.max(np.abs(dresidues[..., p] - fd_res)) <= 1e-6 * np.max(np.abs(fd_res)), p

@@ -525,7 +525,8 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     the resonator attached at each output (coupling ``sqrt(m) phi_p``, the driving point's shapes, its mass
     screened on :data:`RESONATOR_SCREEN_RATIOS`; the physics of a strongly coupled one, shifts of every mode
     included). The :data:`RESONATOR_REFINED` best starts of each kind are refined with the coupling to every
-    mode free; the smallest cost wins. A pseudo-mode above the band (``meta["above_band_modes"]``, the last
+    mode free (trust-region least squares with the residuals' exact Jacobian, :func:`_resonator_jacobian`);
+    the smallest cost wins. A pseudo-mode above the band (``meta["above_band_modes"]``, the last
     modes; :mod:`.above_band`) is not coupled: its shape is known at the outputs only as a tail, so it stays
     the fixed term it was fitted as."""
     if not all(r in ctx.base.outputs for r in ctx.base.references):

@@ -256,7 +256,8 @@ def local_resonator_derivative(model: ModalModel, params: Mapping
     G = G + G.transpose(0, 2, 1)                        # V^T (e_r u^T + u e_r^T) V
     DK = np.empty((n + 2, n + 1, n + 1))
     DK[0], DK[1], DK[2:] = 4 * np.pi * w_a * UU, 0.0, w_a ** 2 * G
-    dc_scale = np.concatenate([[za / w_a, 2 * w_a], np.full(n, 2 * za / w_a)])   # dC~ = dK~ dc_scale, UU for zeta
+    # dC~_p = DC_p dc_scale_p: dK~_p scaled, and for zeta (which leaves K alone) UU
+    dc_scale = np.concatenate([[za / w_a, 2 * w_a], np.full(n, 2 * za / w_a)])
     DC = DK.copy()
     DC[1] = UU
     dw2 = np.einsum("pii->pi", DK)
