@@ -129,3 +129,23 @@ def test_the_overdamped_fallback_is_differentiated_too() -> None:
         fd_poles, fd_res = (a.poles - b.poles) / (2 * h), (a.residues - b.residues) / (2 * h)
         assert np.max(np.abs(dpoles[:, p] - fd_poles)) <= 1e-6 * np.max(np.abs(fd_poles)), p
         assert np.max(np.abs(dresidues[..., p] - fd_res)) <= 1e-6 * np.max(np.abs(fd_res)), p
+
+
+def test_an_frf_effect_that_mixes_lines_falls_back_to_finite_differences(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The Jacobian passes the FRF effects accepted before as a factor per line; one that is not (here a running
+    sum over the lines) leaves the fit to finite differences."""
+    from dataclasses import replace
+
+    import analysis.diagnosis.effects as effects
+
+    smear = effects.Effect("smear", "frf", lambda frf, params: replace(frf, H=np.cumsum(frf.H, axis=-1)),
+                           lambda ctx, lines: {}, "none", "a running sum over the lines")
+    monkeypatch.setitem(effects.EFFECTS, "smear", smear)
+    model = _model(0.01, above=False)
+    f = np.linspace(3.0, 60.0, 50)
+    meas = predict(model, f, "accelerance")
+    ctx = FitContext(measured=meas, base=model, weights=line_weights(meas), sim=meas)
+    spec = {"effect": "local_resonator", "frequency_hz": 20.0, "zeta": 0.01, "coupling": [0.0] * 4}
+    assert callable(_resonator_jacobian(ctx, f, np.ones((3, 1, f.size)), 4, lambda x: spec))
+    mixed = replace(ctx, prior=({"effect": "smear"},))
+    assert _resonator_jacobian(mixed, f, np.ones((3, 1, f.size)), 4, lambda x: spec) == "2-point"
