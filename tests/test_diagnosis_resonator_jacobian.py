@@ -85,7 +85,14 @@ def test_the_jacobian_of_a_damper_coupling_the_modes_is_exact(prior: tuple) -> N
 
 
 def test_the_jacobian_of_a_weak_resonator_beside_a_pseudo_mode_is_exact() -> None:
+    """Beside a pseudo-mode above the band, with a fixed FRF term (an FRF-file simulation's
+    ``meta["frf_correction"]``, on lines of its own) that the resonator does not move."""
     model = _model(0.01, above=True)
+    fc = np.linspace(1.0, 80.0, 57)
+    corr = FRFSet(freq_hz=fc, H=(2e-7 + 1e-7j * np.sin(fc / 9.0))[None, None, :] * np.array([1.0, -0.5, 0.3])[:, None, None],
+                  quantity="receptance", outputs=OUTS, references=("1",))
+    model = ModalModel(poles=model.poles, residues=model.residues, quantity="receptance", residual_form="none",
+                       outputs=OUTS, references=("1",), meta={**model.meta, "frf_correction": corr})
     wn = np.abs(model.poles)
     fa = float(np.sqrt(wn[0] * wn[1])) / (2 * np.pi)
     _fd_check(model, np.array([fa, np.log(0.01), 0.03, -0.05, 0.02]), PRIOR)
