@@ -76,10 +76,11 @@ from .processing import (
     WINDOW_SHIFT_KEY,
     apply_exponential_window,
     apply_record_length,
+    synthesis_derivative,
     synthesize_windowed,
     truncation_tail,
 )
-from .resonator import apply_local_resonator
+from .resonator import apply_local_resonator, local_resonator_derivative
 
 __all__ = [
     "Effect",
@@ -464,6 +465,56 @@ def _attached_coupling(phi: np.ndarray, point: int, ratio: float) -> np.ndarray:
     return np.sqrt(ratio / load) * phi[point]
 
 
+def _frf_factor(ctx: FitContext, freq_hz: np.ndarray) -> np.ndarray | None:
+    """The FRF effects accepted before (``ctx.prior``'s of kind ``"frf"``) as a factor per line, ``F(H) = G H + B``
+    ((n_out, n_ref, n_freq) G at ``freq_hz``); None when they are not of that form (then a derivative through
+    them is not a product)."""
+    frf_effects = [_lookup(e) for e in ctx.prior if _lookup(e)[0].kind == "frf"]
+    n_out, n_ref = ctx.base.residues.shape[:2]
+
+    def through(H: np.ndarray) -> np.ndarray:
+        frf = FRFSet(freq_hz=freq_hz, H=H, quantity=ctx.measured.quantity, outputs=ctx.base.outputs,
+                     references=ctx.base.references)
+        for eff, params in frf_effects:
+            frf = eff.apply(frf, params)
+        return np.asarray(frf.H, complex)
+
+    shape = (n_out, n_ref, freq_hz.size)
+    added = through(np.zeros(shape, complex))
+    gain = through(np.ones(shape, complex)) - added
+    probe = np.exp(2j * np.pi * np.arange(gain.size) / 7.3).reshape(shape)
+    if not np.allclose(through(probe) - added, gain * probe, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(gain)))):
+        return None
+    return gain
+
+
+def _resonator_jacobian(ctx: FitContext, freq_hz: np.ndarray, sw: np.ndarray, n_free: int,
+                        spec: Callable[[np.ndarray], dict]) -> Callable[[np.ndarray], np.ndarray] | str:
+    """The Jacobian of :func:`fit_local_resonator`'s residual vector ``[Re e, Im e]``, ``e = (H_meas - H(x)) sqrt(w)``,
+    in ``x = (frequency_hz, log zeta, coupling_1 .. coupling_n_free)``, exact: the resonated model's poles and
+    residues by :func:`.resonator.local_resonator_derivative`, the synthesis by :func:`synthesis_derivative`, the
+    FRF effects accepted before as their factor per line (:func:`_frf_factor`; the fixed FRF term and the
+    residual terms do not move). Finite differences (``"2-point"``) when those FRF effects are not a factor."""
+    gain = _frf_factor(ctx, freq_hz)
+    if gain is None:
+        return "2-point"
+    model = ctx.base
+    for e in ctx.prior:                                 # the modal effects before the resonator, once
+        eff, params = _lookup(e)
+        if eff.kind == "modal":
+            model = eff.apply(model, params)
+    scale = (gain * sw)[..., None]
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        params = {k: v for k, v in spec(x).items() if k != "effect"}
+        moved, dpoles, dresidues = local_resonator_derivative(model, params)
+        dH = synthesis_derivative(moved, freq_hz, ctx.measured.quantity, dpoles, dresidues)[..., :n_free + 2]
+        dH[..., 1] *= params["zeta"]                    # x_1 = log zeta
+        dH = (dH * scale).reshape(-1, n_free + 2)
+        return -np.concatenate([dH.real, dH.imag])
+    return jac
+
+
 def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     """The resonator's frequency, damping and coupling to every mode by least squares on ``lines``.
 
@@ -474,7 +525,8 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     the resonator attached at each output (coupling ``sqrt(m) phi_p``, the driving point's shapes, its mass
     screened on :data:`RESONATOR_SCREEN_RATIOS`; the physics of a strongly coupled one, shifts of every mode
     included). The :data:`RESONATOR_REFINED` best starts of each kind are refined with the coupling to every
-    mode free; the smallest cost wins. A pseudo-mode above the band (``meta["above_band_modes"]``, the last
+    mode free (trust-region least squares with the residuals' exact Jacobian, :func:`_resonator_jacobian`);
+    the smallest cost wins. A pseudo-mode above the band (``meta["above_band_modes"]``, the last
     modes; :mod:`.above_band`) is not coupled: its shape is known at the outputs only as a tail, so it stays
     the fixed term it was fitted as."""
     if not all(r in ctx.base.outputs for r in ctx.base.references):
@@ -501,6 +553,7 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     def cost(x: np.ndarray) -> float:
         return float(np.sum(resid(x) ** 2))
 
+    jac = _resonator_jacobian(ctx, f, sw, n_real, spec)
     mm = fit_missing_mode(ctx, lines)
     inband = np.sort(wn[(wn >= 2 * np.pi * lo) & (wn <= 2 * np.pi * hi)]) / (2 * np.pi)
     # the extra mode's frequency and points between each pair of in-band modes (on a log scale)
@@ -527,8 +580,8 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
     bounds = ([lo, np.log(1e-4)] + [-1.0] * wn.size, [hi, np.log(0.3)] + [1.0] * wn.size)
 
     def refine(x0: np.ndarray, nfev: int) -> tuple[float, np.ndarray]:
-        res = least_squares(resid, x0, bounds=bounds, x_scale=[df, 0.3] + [0.01] * wn.size, method="trf",
-                            max_nfev=nfev)
+        res = least_squares(resid, x0, jac=jac, bounds=bounds, x_scale=[df, 0.3] + [0.01] * wn.size,
+                            method="trf", max_nfev=nfev)
         log.debug("local_resonator: from %.1f Hz to %.1f Hz, cost %.4g (%d evaluations)", x0[0], res.x[0],
                   float(np.sum(res.fun ** 2)), res.nfev)
         return float(np.sum(res.fun ** 2)), res.x

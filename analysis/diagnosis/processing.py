@@ -13,7 +13,7 @@ from ..modal import ModalModel, synthesize, transfer
 from .effect_types import EffectError
 
 __all__ = ["WINDOW_SHIFT_KEY", "RECORD_KEY", "apply_exponential_window", "apply_record_length", "truncation_tail",
-           "synthesize_windowed"]
+           "synthesize_windowed", "synthesis_derivative"]
 
 _POWER = QUANTITY_POWER
 WINDOW_SHIFT_KEY = "exp_window_pole_shift_per_s"  # model.meta key: summed 1/tau of the exponential windows (1/s)
@@ -111,3 +111,53 @@ def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
     if record:
         H = H - truncation_tail(model, s, quantity, float(record))
     return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=model.outputs, references=model.references)
+
+
+def _pole_sums(R: np.ndarray, dR: np.ndarray, lam: np.ndarray, dlam: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``sum_i [dR_i k_i + R_i dlambda_i k_i^2] + c.c. of the residues and poles``, ``k_i = 1 / (s - lambda_i)``,
+    (n_out, n_ref, n_s, P) for ``R`` (n_out, n_ref, n), ``dR`` (n_out, n_ref, n, P), ``dlam`` (n, P) of real
+    parameters: with ``E = R dlambda`` and ``kc`` the conjugate poles' kernels, ``k dR + kc conj(dR) =
+    (k + kc) Re dR + j (k - kc) Im dR`` and ``k^2 E + kc^2 conj(E)`` alike, one real matrix product."""
+    n_out, n_ref, n, P = dR.shape
+    k1 = 1.0 / (s[:, None] - lam[None, :])
+    c1 = 1.0 / (s[:, None] - np.conj(lam)[None, :])
+    k2, c2 = k1 * k1, c1 * c1
+    kernels = np.concatenate([k1 + c1, 1j * (k1 - c1), k2 + c2, 1j * (k2 - c2)], axis=1)      # (n_s, 4n)
+    E = R[:, :, :, None] * dlam[None, None]
+    terms = np.concatenate([np.moveaxis(dR, 2, 0).reshape(n, -1), np.moveaxis(E, 2, 0).reshape(n, -1)])
+    terms = np.concatenate([terms[:n].real, terms[:n].imag, terms[n:].real, terms[n:].imag])   # (4n, n_out n_ref P)
+    out = np.ascontiguousarray(kernels.real) @ terms + 1j * (np.ascontiguousarray(kernels.imag) @ terms)
+    return out.reshape(s.size, n_out, n_ref, P).transpose(1, 2, 0, 3)
+
+
+def synthesis_derivative(model: ModalModel, freq_hz: np.ndarray, quantity: str, dpoles: np.ndarray,
+                         dresidues: np.ndarray) -> np.ndarray:
+    """The derivative of :func:`synthesize_windowed` ``(model, freq_hz, quantity).H`` when the poles and residues
+    move by ``dpoles`` (n_modes, P; rad/s per parameter) and ``dresidues`` (n_out, n_ref, n_modes, P; the
+    model's form), the residual terms fixed: (n_out, n_ref, n_freq, P) complex. With ``k = q - p`` and
+    ``s = j w + sigma_w``, ``H = s^k sum_i [R_i / (s - lambda_i) + c.c.] - H_T`` (:func:`truncation_tail`), so
+
+        dH = s^k sum_i [dR_i / (s - lambda_i) + R_i dlambda_i / (s - lambda_i)^2 + c.c.] - dH_T,
+        dH_T = exp(-s T) sum_i [dN_i / (s - lambda_i) + N_i dlambda_i / (s - lambda_i)^2 + c.c.],
+
+    ``N_i = R_i lambda_i^k exp(lambda_i T)``, ``dN_i = exp(lambda_i T) [dR_i lambda_i^k + R_i (k lambda_i^(k-1)
+    + T lambda_i^k) dlambda_i]``."""
+    if quantity not in _POWER:
+        raise EffectError(f"quantity {quantity!r} is not one of {tuple(_POWER)}")
+    sigma_w = float(model.meta.get(WINDOW_SHIFT_KEY, 0.0))
+    s = 2j * np.pi * np.asarray(freq_hz, float) + sigma_w
+    k = float(_POWER[quantity] - _POWER[model.quantity])
+    lam = np.asarray(model.poles, complex)
+    R = np.asarray(model.residues, complex)
+    dlam, dR = np.asarray(dpoles, complex), np.asarray(dresidues, complex)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dH = _pole_sums(R, dR, lam, dlam, s) * (s ** k)[:, None]
+    record = model.meta.get(RECORD_KEY)
+    if record:
+        T = float(record)
+        e = np.exp(lam * T)
+        N = R * (lam ** k * e)[None, None, :]
+        dN = (dR * (lam ** k * e)[None, None, :, None]
+              + (R * ((k * lam ** (k - 1) + T * lam ** k) * e)[None, None, :])[..., None] * dlam[None, None])
+        dH = dH - _pole_sums(N, dN, lam, dlam, s) * np.exp(-s * T)[:, None]
+    return dH
