@@ -18,7 +18,9 @@ Rule (documented in ``docs/diagnosis.md``):
    lines only, e.g. one missing mode, gives heavy-tailed ``d`` and a modest ``z`` although its gain
    is tens of dB). Under noise alone the held-out gain is a few hundredths of a dB (measured in the
    benchmark's null cases), far below both thresholds.
-3. **Verdict.** The significant effect with the largest gain. With none significant: ``none`` when
+3. **Verdict.** The significant effect with the largest gain (a mass at every sensor and a stiffness
+   change, both significant, are first held against each other mode by mode: :func:`_mass_or_stiffness`,
+   :mod:`analysis.diagnosis.mode_vote`). With none significant: ``none`` when
    the typical error of the simulation (median over lines of ``w |e|^2`` / ln 2, robust to a few
    antiresonance lines) is within ``NONE_MARGIN_DB`` (3 dB) of the noise level estimated from the
    data by the same statistic of second differences along frequency (with coherence: the larger of
