@@ -18,7 +18,9 @@ Rule (documented in ``docs/diagnosis.md``):
    lines only, e.g. one missing mode, gives heavy-tailed ``d`` and a modest ``z`` although its gain
    is tens of dB). Under noise alone the held-out gain is a few hundredths of a dB (measured in the
    benchmark's null cases), far below both thresholds.
-3. **Verdict.** The significant effect with the largest gain. With none significant: ``none`` when
+3. **Verdict.** The significant effect with the largest gain (a mass at every sensor and a stiffness
+   change, both significant, are first held against each other mode by mode: :func:`_mass_or_stiffness`,
+   :mod:`analysis.diagnosis.mode_vote`). With none significant: ``none`` when
    the typical error of the simulation (median over lines of ``w |e|^2`` / ln 2, robust to a few
    antiresonance lines) is within ``NONE_MARGIN_DB`` (3 dB) of the noise level estimated from the
    data by the same statistic of second differences along frequency (with coherence: the larger of
@@ -144,21 +146,22 @@ def _jsonable(x: Any) -> Any:
 
 
 def _held_out(ctx: FitContext, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """Per line/FRF weighted squared errors (before, after) on held-out lines, both folds."""
+    """Per line/FRF weighted squared errors (before, after) on held-out lines, both folds. With the
+    default folds each is the raveled (n_out, n_ref, n_freq) array of every line's error as predicted by
+    the fit on the other fold (an effect's own cross-validation may give another layout)."""
     eff = EFFECTS[name]
     own = eff.held_out(ctx) if eff.held_out is not None else None
     if own is not None:
         return own
-    before, after = [], []
     m = ctx.measured
+    before = ctx.weights * np.abs(m.H - ctx.sim.H) ** 2
+    after = np.empty_like(before)
     for train, test in line_folds(m.freq_hz.size):
         params = eff.fit(ctx, train)
         Hx = predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **params}),
                      outputs=m.outputs, references=m.references).H
-        w = ctx.weights[..., test]
-        before.append((w * np.abs(m.H[..., test] - ctx.sim.H[..., test]) ** 2).ravel())
-        after.append((w * np.abs(m.H[..., test] - Hx[..., test]) ** 2).ravel())
-    return np.concatenate(before), np.concatenate(after)
+        after[..., test] = ctx.weights[..., test] * np.abs(m.H[..., test] - Hx[..., test]) ** 2
+    return before.ravel(), after.ravel()
 
 
 def _db(x: float) -> float:
@@ -209,6 +212,7 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
             "effect": name, "parameters": params, "gain_db": gain, "error_before_db": b_db,
             "error_after_db": a_db, "z": z, "significant": bool(gain >= min_gain_db and (z >= z_min or gain >= STRONG_GAIN_DB)),
             "evidence": _evidence(name, params, b_db, a_db, z, band_gain), "_extended": ext,
+            "_held_out_after": after,
         })
         edge = _at_range_edge(name, params, (float(m.freq_hz[0]), float(m.freq_hz[-1])))
         if edge and causes[-1]["significant"]:
@@ -233,6 +237,36 @@ def _resonator_beyond_mass(causes: list) -> None:
         res["significant"] = False
         res["evidence"] += (f"; {more:.1f} dB more than a mass at a sensor (its stiff limit), less than "
                             f"{STRONG_GAIN_DB:g} dB")
+
+
+def _mass_or_stiffness(causes: list, ctx: FitContext, noise_db: float) -> None:
+    """With both a mass at every sensor and a stiffness change significant, the one the modes name: each
+    scored mode by mode on its held-out errors where the two predictions differ beyond the noise
+    (:func:`analysis.diagnosis.mode_vote.mode_vote`); the one with the larger gain stays the verdict
+    unless the other has the smaller held-out error at more of those modes, and then it is not
+    significant (``noise_db``: the noise level, dB)."""
+    from .mode_vote import mode_vote
+
+    by = {c["effect"]: c for c in causes}
+    st, ma = by.get("stiffness_shift"), by.get("mass_loading")
+    if st is None or ma is None or not (st["significant"] and ma["significant"]):
+        return
+    if ma["parameters"].get("sensor") not in (None, "all"):
+        return
+    m = ctx.measured
+    if st["_held_out_after"].size != m.H.size or ma["_held_out_after"].size != m.H.size:
+        return
+    vote = mode_vote(m.freq_hz, ctx.base.freq_hz, st["_held_out_after"].reshape(m.H.shape),
+                     ma["_held_out_after"].reshape(m.H.shape), st["_extended"].H, ma["_extended"].H,
+                     ctx.weights, noise_db)
+    count = {"stiffness_shift": vote["a"], "mass_loading": vote["b"]}
+    first, second = (st, ma) if st["gain_db"] >= ma["gain_db"] else (ma, st)
+    said = (f"mode by mode, of {vote['separable']} modes that separate a mass at every sensor from a stiffness "
+            f"change, {count['mass_loading']} favour the mass and {count['stiffness_shift']} the stiffness")
+    for c in (st, ma):
+        c["evidence"] += f"; {said}"
+    if count[second["effect"]] > count[first["effect"]]:
+        first["significant"] = False
 
 
 def _at_range_edge(name: str, params: dict, band_hz: tuple[float, float] | None = None) -> str:
@@ -469,6 +503,7 @@ def diagnose_frfs(
             phys_doc = {**phys_doc, "causes": outcome.causes}
             names = [n for n in names if n not in ("stiffness_shift", "mass_loading")]
     causes, skipped = _stage(ctx, names, z_min, min_gain_db)
+    _mass_or_stiffness(causes, ctx, noise_db)
     if physical is not None:
         _below_model_form(causes)
     error_before = causes[0]["error_before_db"] if causes else comparison["error_db"]
@@ -500,6 +535,7 @@ def diagnose_frfs(
     unexplained = [b for b in band_errors(measured, extended.H, w) if b["error_db"] - noise_db > none_margin_db]
     for c in causes:
         c.pop("_extended")
+        c.pop("_held_out_after", None)
     reason = ("" if verdict != "unexplained" else partial_reason or
               "no effect of the catalogue gains significantly on held-out lines, and the error stays "
               f"{typical_error_db(measured, sim.H, w) - noise_db:.1f} dB above the noise")
