@@ -15,6 +15,7 @@ converged and lowers the relative misfit (``sum |H - H_model|^2 / |H|^2``) of th
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -28,6 +29,8 @@ log = logging.getLogger(__name__)
 
 #: each pole's damped frequency is held within this fraction of its start
 POLE_WINDOW = 0.1
+#: iterations of each refit
+MAX_ITER = 50
 #: starts of a pseudo-mode above the band, times the band's end
 ABOVE_STARTS = (1.1, 1.3, 1.6, 2.0)
 #: a pseudo-mode found by the refit must cut the relative misfit this many times
@@ -44,17 +47,20 @@ def _refit(model: ModalModel, rec: FRFSet, band: tuple[float, float], poles: np.
            ) -> ModalModel | None:
     """The LSFD refit of ``rec`` (receptance) from ``poles`` on ``band`` (Hz), labelled and with ``model``'s
     meta; None when it fails."""
-    from ..lsfd import fit_lsfd
+    from ..lsfd import LSFDConvergenceWarning, fit_lsfd
 
     rms = np.sqrt(np.mean(np.abs(rec.H) ** 2, axis=(0, 1)))
     weights = np.where(rms > 0, 1.0 / np.where(rms > 0, rms, 1.0), 0.0)
     try:
-        res = fit_lsfd(rec, poles, band=band, residual_form="physical", weights=weights, max_iter=50,
-                       correct_exp_window=False, freq_window_hz=POLE_WINDOW * poles.imag / (2 * np.pi))
+        with warnings.catch_warnings():
+            # an iteration stopped at its cap leaves the model as it was (below)
+            warnings.simplefilter("ignore", LSFDConvergenceWarning)
+            res = fit_lsfd(rec, poles, band=band, residual_form="physical", weights=weights, max_iter=MAX_ITER,
+                           correct_exp_window=False, freq_window_hz=POLE_WINDOW * poles.imag / (2 * np.pi))
     except ValueError as exc:
         log.info("simulation's modal model not refitted in receptance: %s", exc)
         return None
-    if not res.success or res.model.poles.size != poles.size:
+    if not res.success or res.model.poles.size != poles.size or not np.all(np.isfinite(res.model.residues)):
         return None
     return replace(res.model, outputs=model.outputs, references=model.references, meta=dict(model.meta))
 
