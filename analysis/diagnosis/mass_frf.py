@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..frf import FRFSet, convert_quantity
-from ..modal import ModalModel
+from ..modal import ModalModel, transfer
 
 __all__ = ["FRF_MASSES_KEY", "uses_frf_masses", "add_frf_masses"]
 
@@ -49,10 +49,10 @@ def _output_receptances(model: ModalModel, freq_hz: np.ndarray) -> np.ndarray:
     flexibility of the modes outside the band (module docstring)."""
     phi = np.asarray(model.meta["output_shapes"], float)
     lam = np.asarray(model.poles, complex)
-    jw = 2j * np.pi * np.asarray(freq_hz, float)
-    kern = (1 / (jw[None, :] - lam[:, None]) - 1 / (jw[None, :] - np.conj(lam)[:, None])) / (2j * lam.imag)[:, None]
-    H = np.einsum("or,sr,rk->osk", phi, phi, kern)
     outs, refs = list(model.outputs), list(model.references)
+    between = ModalModel(poles=lam, residues=phi[:, None, :] * phi[None, :, :] / (2j * lam.imag), quantity="receptance",
+                         residual_form="none", outputs=tuple(outs), references=tuple(outs))
+    H = transfer(between, 2j * np.pi * np.asarray(freq_hz, float))
     j = next(i for i, r in enumerate(refs) if r in outs)
     d = outs.index(refs[j])
     if model.upper_residual is not None:
