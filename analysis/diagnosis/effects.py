@@ -71,6 +71,7 @@ from .frf_effects import (
     fit_time_delay,
 )
 from .mains import apply_mains_hum, default_hum_width, fit_mains_hum, held_out_mains_hum, hum_kernels
+from .mass_frf import FRF_MASSES_KEY, add_frf_masses, uses_frf_masses
 from .processing import (
     RECORD_KEY,
     WINDOW_SHIFT_KEY,
@@ -271,7 +272,11 @@ def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
     both large). Each mode keeps its damping ratio; its receptance residue becomes
     ``R_r V_rr^2 w_d / w_d' + [(Phi_o V)_r (Phi_ref V)_r - V_rr^2 phi_or phi_ref,r] / (2 j w_d')`` (the fitted
     residue kept where the shapes cannot say more; the coupled part from the shapes, at the references
-    from ``meta["reference_shapes"]`` or the outputs' rows; without them the coupled part is left out)."""
+    from ``meta["reference_shapes"]`` or the outputs' rows; without them the coupled part is left out).
+
+    A simulation given as FRFs (``meta["frf_correction"]``, with a driving point) keeps its modes: the mass
+    is recorded in ``meta`` and added to its predicted FRFs by :func:`predict`, which moves the fixed part of
+    those FRFs with the modes (:mod:`.mass_frf`)."""
     m = float(params.get("mass_kg", 0.0))
     if not m >= 0:
         raise EffectError(f"mass_loading: mass_kg must be >= 0 (kg), got {m!r}")
@@ -279,8 +284,13 @@ def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
     if shapes is None:
         raise EffectError("mass_loading needs the mode shapes at the outputs (model.meta['output_shapes']); "
                           "simulate from a frame configuration (TOML) instead of an FRF file")
+    mask = _mass_sensors(model, params.get("sensor"))
+    if uses_frf_masses(model):
+        meta = dict(model.meta)
+        meta[FRF_MASSES_KEY] = tuple(meta.get(FRF_MASSES_KEY, ())) + ((m, mask),)
+        return replace(model, meta=meta)
     phi = np.asarray(shapes, float)
-    loaded = phi[_mass_sensors(model, params.get("sensor"))]
+    loaded = phi[mask]
     lam = np.asarray(model.poles, complex)
     wn, z = np.abs(lam), -lam.real / np.abs(lam)
     order = np.argsort(wn)
@@ -722,6 +732,8 @@ def predict(
     if corr is not None:
         frf = replace(frf, H=frf.H + _correction(corr, frf.freq_hz, quantity,
                                                  float(model.meta.get("frequency_warp", 1.0))))
+    if model.meta.get(FRF_MASSES_KEY):
+        frf = add_frf_masses(model, frf)
     if outputs is not None:
         frf = replace(frf, outputs=tuple(outputs))
     if references is not None:

@@ -78,17 +78,19 @@ def as_receptance(model: ModalModel) -> ModalModel:
 
 
 def model_with_correction(model: ModalModel, sim: FRFSet, above_band: bool = True,
-                          band_hz: tuple[float, float] | None = None) -> ModalModel:
+                          band_hz: tuple[float, float] | None = None, refit: bool = True) -> ModalModel:
     """The fitted ``model`` (in receptance form, :func:`as_receptance`; with a driving point and
     ``above_band``, plus the pseudo-mode just above the band that the FRFs' tail shows,
     :func:`analysis.diagnosis.above_band.with_above_band_mode`, fitted in ``band_hz``, the band the
-    model was fitted in: default the FRFs' lines) plus, in
+    model was fitted in: default the FRFs' lines; with ``refit``, all of it refitted to ``sim`` in
+    receptance, :func:`analysis.diagnosis.base_refit.refit_in_receptance`) plus, in
     ``meta["frf_correction"]``, what it misses of the simulated FRFs ``sim``, so that the prediction
     without effects is the simulated FRFs themselves (modal effects move only the fitted modes); with a
     driving point also ``meta["output_shapes"]`` (:func:`driving_point_shapes`), so that the
     accelerometers' mass can be fitted."""
     from ..modal import synthesize
     from .above_band import with_above_band_mode
+    from .base_refit import refit_in_receptance
     from .compare import line_weights
 
     model = as_receptance(model)
@@ -96,6 +98,9 @@ def model_with_correction(model: ModalModel, sim: FRFSet, above_band: bool = Tru
         labelled = replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references))
         rec = sim if sim.quantity == model.quantity else sim.as_quantity(model.quantity)
         model = with_above_band_mode(labelled, rec, line_weights(replace(rec, coherence=None)), band_hz)
+    if refit:
+        model = refit_in_receptance(replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references)),
+                                    sim, band_hz)
     syn = synthesize(model, sim.freq_hz)
     same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
     corr = replace(same, H=same.H - syn.H, coherence=None)

@@ -1,0 +1,94 @@
+"""Masses at the outputs added to a simulation given as FRFs, by structural modification of its receptances.
+
+A simulation read from an FRF file is a fitted modal model plus the fixed part of the file's FRFs the model
+does not hold (``meta["frf_correction"]``: the residual terms of the modes outside the band and what the
+fit misses). Moving the fitted modes alone leaves that part where it was, while a mass at a point changes
+the whole receptance matrix; the exact change (the Woodbury identity on the dynamic stiffness
+``D' = D - w^2 P M P^T``, M the diagonal of the added masses at the loaded outputs S) is
+
+    H'(w) = H + H[:, S] (I - w^2 M H[S, S])^-1 w^2 M H[S, :]        (receptance, m/N)
+
+for any linear structure, damping and the modes outside the band included. It needs ``H[o, s]`` for every
+output o and loaded s. The file gives every FRF to its references, and by reciprocity from them
+(``H[o, d] = H[d, o]``): those entries are taken from the simulated FRFs as predicted (modal part and fixed
+part). The others come from the modal model's mass-normalised shapes at the outputs
+(``meta["output_shapes"]``, ``sum_r phi_or phi_sr / (2 j w_d,r) [1/(jw - lambda_r) - 1/(jw - conj lambda_r)]``)
+plus an estimate of the modes outside the band, a quasi-static flexibility ``G`` from the model's upper
+residual at the driving point's column ``u = UR[:, d]`` (m/N): ``G_os = u_o u_s / u_d`` off the diagonal
+(one mode's tail through the driving point) and ``G_ss = max(u_s^2 / u_d, u_d)`` on it (the first is the
+least a positive flexibility matrix allows, the second the driving point's own: the higher modes of a
+structure spread their flexibility over its points). With the mass at the driving point the result is
+exact on the file's FRFs.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..frf import FRFSet, convert_quantity
+from ..modal import ModalModel, transfer
+
+__all__ = ["FRF_MASSES_KEY", "uses_frf_masses", "add_frf_masses"]
+
+#: ``ModalModel.meta`` key of the masses to add at the FRF level: a tuple of (mass kg, outputs mask) pairs
+FRF_MASSES_KEY = "frf_masses"
+
+
+def uses_frf_masses(model: ModalModel) -> bool:
+    """True when a mass on ``model`` is added to its FRFs (:func:`add_frf_masses`): a simulation given as FRFs
+    (``meta["frf_correction"]``), in receptance, with a driving point and a shape per mode at the outputs."""
+    shapes = model.meta.get("output_shapes")
+    return ("frf_correction" in model.meta and shapes is not None and model.quantity == "receptance"
+            and np.shape(shapes) == (len(model.outputs), model.poles.size)
+            and any(r in model.outputs for r in model.references))
+
+
+def _output_receptances(model: ModalModel, freq_hz: np.ndarray) -> np.ndarray:
+    """Receptances between the outputs (n_out, n_out, n_freq, m/N) from the shapes, plus the estimated
+    flexibility of the modes outside the band (module docstring)."""
+    phi = np.asarray(model.meta["output_shapes"], float)
+    lam = np.asarray(model.poles, complex)
+    outs, refs = list(model.outputs), list(model.references)
+    between = ModalModel(poles=lam, residues=phi[:, None, :] * phi[None, :, :] / (2j * lam.imag), quantity="receptance",
+                         residual_form="none", outputs=tuple(outs), references=tuple(outs))
+    H = transfer(between, 2j * np.pi * np.asarray(freq_hz, float))
+    j = next(i for i, r in enumerate(refs) if r in outs)
+    d = outs.index(refs[j])
+    if model.upper_residual is not None:
+        u = np.real(np.asarray(model.upper_residual)[:, j])
+        if u[d] > 0:
+            G = np.outer(u, u) / u[d]
+            G[np.diag_indices_from(G)] = np.maximum(u ** 2 / u[d], u[d])
+            H = H + G[:, :, None]
+    return H
+
+
+def add_frf_masses(model: ModalModel, frf: FRFSet) -> FRFSet:
+    """``frf`` (the prediction of ``model`` with its fixed part, any quantity) with the masses of
+    ``model.meta[FRF_MASSES_KEY]`` added at the outputs (module docstring). Lines at 0 Hz are left as they
+    are (a mass has no effect there)."""
+    masses = model.meta.get(FRF_MASSES_KEY) or ()
+    m = np.zeros(len(model.outputs))
+    for kg, mask in masses:
+        m = m + float(kg) * np.asarray(mask, float)
+    S = np.flatnonzero(m > 0)
+    f = np.asarray(frf.freq_hz, float)
+    keep = f > 0
+    if S.size == 0 or not keep.any():
+        return frf
+    fk = f[keep]
+    H = convert_quantity(frf.H[..., keep], fk, frf.quantity, "receptance")      # (n_out, n_ref, n_f)
+    Hoo = _output_receptances(model, fk)
+    outs = list(model.outputs)
+    for j, r in enumerate(model.references):           # the file's FRFs where it has them (reciprocity)
+        if r in outs:
+            Hoo[:, outs.index(r)] = H[:, j]
+            Hoo[outs.index(r), :] = H[:, j]
+    w2m = (2 * np.pi * fk) ** 2 * m[S][:, None]                                  # (n_S, n_f)
+    A = np.eye(S.size)[:, :, None] - w2m[:, None, :] * Hoo[np.ix_(S, S)]         # I - w^2 M H_SS
+    X = np.linalg.solve(A.transpose(2, 0, 1), (w2m[:, None, :] * H[S]).transpose(2, 0, 1))   # (n_f, n_S, n_ref)
+    dH = np.einsum("osk,ksj->ojk", Hoo[:, S], X)
+    out = np.array(frf.H, copy=True)
+    out[..., keep] = convert_quantity(H + dH, fk, "receptance", frf.quantity)
+    return replace(frf, H=out)
