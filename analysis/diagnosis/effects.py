@@ -504,7 +504,9 @@ def _resonator_jacobian(ctx: FitContext, freq_hz: np.ndarray, sw: np.ndarray, n_
     in ``x = (frequency_hz, log zeta, coupling_1 .. coupling_n_free)``, exact: the resonated model's poles and
     residues by :func:`.resonator.local_resonator_derivative`, the synthesis by :func:`synthesis_derivative`, the
     FRF effects accepted before as their factor per line (:func:`_frf_factor`; the fixed FRF term and the
-    residual terms do not move). Finite differences (``"2-point"``) when those FRF effects are not a factor."""
+    residual terms do not move). Finite differences (``"2-point"``) when those FRF effects are not a factor, or
+    when a mass before it is added to an FRF-file simulation's FRFs (:mod:`.mass_frf`), which the resonator's
+    modes then move."""
     gain = _frf_factor(ctx, freq_hz)
     if gain is None:
         return "2-point"
@@ -513,6 +515,8 @@ def _resonator_jacobian(ctx: FitContext, freq_hz: np.ndarray, sw: np.ndarray, n_
         eff, params = _lookup(e)
         if eff.kind == "modal":
             model = eff.apply(model, params)
+    if model.meta.get(FRF_MASSES_KEY):
+        return "2-point"                                # a mass added to the FRFs after them (:mod:`.mass_frf`)
     scale = (gain * sw)[..., None]
 
     def jac(x: np.ndarray) -> np.ndarray:
