@@ -401,9 +401,10 @@ def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
     df = ctx.measured.line_spacing_hz
     # a resonance just past a band edge still shows inside the band: allow 5 % beyond the edges
     lo, hi = f[lines][0] / 1.05, f[lines][-1] * 1.05
-    # candidates: the largest local maxima of the weighted residual power (all lines, smoothed)
+    # candidates: the largest local maxima of the weighted residual power (all lines, smoothed) within the
+    # frequencies the fit may take (a peak beyond them cannot start it)
     sm = np.convolve(power, np.ones(3) / 3, mode="same")
-    order = np.argsort(sm)[::-1]
+    order = [k for k in np.argsort(sm)[::-1] if lo <= f[k] <= hi]
     cands: list[float] = []
     for k in order:
         if len(cands) >= 3:

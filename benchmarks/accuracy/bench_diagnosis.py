@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -48,9 +49,13 @@ def run(per_effect: int, n_null: int, seed: int) -> dict:
         d = diagnose(meas, base)
         dt = time.perf_counter() - t
         perr = float("nan")
-        if eff and d.causes:
-            fitted = next(c for c in d.causes if c["effect"] == name)["parameters"]
+        fitted = next((c["parameters"] for c in d.causes if c["effect"] == name), None) if eff else None
+        if fitted is not None:
             perr = primary_error(eff[0], fitted)
+        elif eff:
+            # the hidden effect was not among the causes fitted (not tried, or its fit failed): not named
+            print(f"case {i}: {name} hidden, not among the fitted causes "
+                  f"({', '.join(c['effect'] for c in d.causes) or 'none'}); verdict {d.verdict}", file=sys.stderr)
         rows.append({"truth": "none" if name == "null" else name, "verdict": d.verdict, "param_error": perr,
                      "time_s": dt, "gain_db": d.causes[0]["gain_db"] if d.causes else 0.0})
     return {"rows": rows}
