@@ -202,3 +202,33 @@ def test_missing_mode_starts_within_the_lines_it_is_fitted_on():
     got = EFFECTS["missing_mode"].fit(ctx, lines)
     # the strong mode's tail, not in the fitted model, pulls it a little
     assert got["freq_hz"] == pytest.approx(45.0, rel=0.01)
+
+
+def test_mains_hum_fitted_on_part_of_the_band_predicts_the_whole_band():
+    """Mains lines fitted below 60 Hz (one harmonic seen, at 50 Hz) and predicted on 1-100 Hz: the fitted
+    harmonic keeps its amplitude, the harmonic the fit did not see (100 Hz) has none."""
+    from analysis.diagnosis.compare import line_weights
+    from analysis.diagnosis.effects import FitContext, hum_kernels
+    from analysis.frf import FRFSet
+
+    m = _model()
+    sim = predict(m, F, "receptance")
+    fk, _ = hum_kernels(F, 50.0, 0.0)
+    A = np.zeros((2, 1, fk.size, 2))
+    A[:, 0, 0] = [[2e-5, 1e-5], [-1e-5, 3e-5]]
+    H = predict(m, F, "receptance", [{"effect": "mains_hum", "base_hz": 50.0, "width_hz": 0.0, "amplitudes": A.tolist()}]).H
+    low = F <= 60.0
+    meas = FRFSet(freq_hz=F[low], H=H[..., low], quantity="receptance", outputs=m.outputs, references=m.references)
+    ctx = FitContext(measured=meas, base=m, weights=line_weights(meas), sim=_lines_of(sim, low))
+    got = EFFECTS["mains_hum"].fit(ctx, np.ones(low.sum(), bool))
+    assert got["harmonics_hz"] == [pytest.approx(50.0, abs=0.2)]
+    whole = predict(m, F, "receptance", [{"effect": "mains_hum", **got}]).H
+    np.testing.assert_allclose(whole, H, rtol=0, atol=1e-9)
+    with pytest.raises(EffectError, match="harmonics_hz"):
+        predict(m, F, "receptance", [{"effect": "mains_hum", **got, "harmonics_hz": [50.0, 100.0]}])
+
+
+def _lines_of(frf, lines):
+    """``frf`` on the boolean mask ``lines``."""
+    from dataclasses import replace
+    return replace(frf, freq_hz=frf.freq_hz[lines], H=frf.H[..., lines])

@@ -57,8 +57,25 @@ def default_hum_width(freq_hz: np.ndarray) -> float:
     return 2.0 * float(np.median(np.diff(freq_hz)))
 
 
+def _on_harmonics(A: np.ndarray, given_hz: np.ndarray, fk: np.ndarray, frfs: tuple) -> np.ndarray:
+    """Amplitudes ``A`` (n_out, n_ref, len(given_hz), 2) of the harmonics ``given_hz`` (Hz) placed on the
+    harmonics ``fk`` of another band: a harmonic the fit did not see has no amplitude, one outside the band
+    is dropped."""
+    if A.shape != tuple(frfs) + (given_hz.size, 2):
+        raise EffectError(f"mains_hum: amplitudes must have shape {tuple(frfs) + (given_hz.size, 2)} "
+                          f"(outputs, references, harmonics_hz {list(given_hz)}, [re, im]); got {A.shape}")
+    out = np.zeros(tuple(frfs) + (fk.size, 2))
+    for i, h in enumerate(given_hz):
+        j = np.flatnonzero(np.abs(fk - h) <= 1e-9 * max(abs(h), 1.0))
+        if j.size:
+            out[..., j[0], :] = A[..., i, :]
+    return out
+
+
 def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
-    """Add lines at the harmonics of ``base_hz``: ``amplitudes[o][r][k] = [re, im]`` (FRF units)."""
+    """Add lines at the harmonics of ``base_hz``: ``amplitudes[o][r][k] = [re, im]`` (FRF units), one per
+    harmonic in the FRFs' band, or one per harmonic of ``harmonics_hz`` (Hz; the fit's band) when given
+    (then a harmonic of this band the fit did not see has none)."""
     f0 = _check_positive("base_hz", params.get("base_hz"), "mains_hum") + float(params.get("offset_hz", 0.0))
     w = params.get("width_hz")
     width = default_hum_width(frf.freq_hz) if w is None else float(w)
@@ -66,6 +83,9 @@ def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
         raise EffectError(f"mains_hum: width_hz must be >= 0 (0: single lines), got {w!r}")
     fk, K = hum_kernels(frf.freq_hz, f0, width, str(params.get("shape", "lorentzian")))
     A = np.asarray(params.get("amplitudes"), float)
+    given = params.get("harmonics_hz")
+    if given is not None:
+        A = _on_harmonics(A, np.asarray(given, float), fk, frf.H.shape[:2])
     if A.shape != frf.H.shape[:2] + (fk.size, 2):
         raise EffectError(f"mains_hum: amplitudes must have shape {frf.H.shape[:2] + (fk.size, 2)} "
                           f"(outputs, references, harmonics {list(fk)}, [re, im]); got {A.shape}")
@@ -145,7 +165,7 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
             best = (total, base, off, width, A, complexity, shape)
     if best is None:
         return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(f), "shape": "lorentzian",
-                "amplitudes": np.zeros(ctx.measured.H.shape[:2] + (0, 2)).tolist()}
+                "amplitudes": np.zeros(ctx.measured.H.shape[:2] + (0, 2)).tolist(), "harmonics_hz": []}
     off = best[2]
     if best[3] == 0.0 and off != 0.0:
         # single lines: the offsets that put the lines with interference on the same bins fit alike, up to
@@ -158,8 +178,10 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
         refit = _fit_candidate(ctx, E, lines, best[1] + off, 0.0, "line")
         assert refit is not None          # the run holds the best offset, whose harmonics were seen
         best = best[:4] + (refit[0],) + best[5:]
-    return {"base_hz": best[1], "offset_hz": off, "width_hz": best[3],
-            "shape": best[6] if best[3] else "line", "amplitudes": best[4].tolist()}
+    shape = best[6] if best[3] else "line"
+    fk = hum_kernels(f, best[1] + off, best[3], shape)[0]
+    return {"base_hz": best[1], "offset_hz": off, "width_hz": best[3], "shape": shape,
+            "amplitudes": best[4].tolist(), "harmonics_hz": [float(x) for x in fk]}
 
 
 def held_out_mains_hum(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
