@@ -35,7 +35,8 @@ name                     kind   model extension
 ``time_delay``           frf    ``H *= exp(-j w delay_s)``
 ``sensitivity_error``    frf    ``H[o] *= gains[o]`` (a wrong calibration of output channel o)
 ``mains_hum``            frf    ``H += sum_k A_ok / (1 + j (f - k f0) / width_hz)``, lines at the
-                                harmonics of ``base_hz`` (50 or 60 Hz)
+                                harmonics of ``base_hz`` (50 or 60 Hz); ``harmonics_hz`` those of
+                                the band it was fitted on
 =======================  =====  ==============================================================
 
 Modules: :mod:`.effect_types` (``Effect``, ``FitContext``, ``EffectError``, shared fit helpers),
