@@ -22,6 +22,7 @@ from scipy.optimize import minimize_scalar
 
 from ..frf import FRFSet
 from ..modal import ModalModel
+from .effect_types import driving_point
 
 __all__ = ["above_band_mode", "with_above_band_mode", "MIN_GAIN"]
 
@@ -110,9 +111,8 @@ def with_above_band_mode(model: ModalModel, sim: FRFSet, weights: np.ndarray,
     as it is without a driving point or without such a mode."""
     from ..modal import synthesize
 
-    refs = list(model.references)
-    pairs = [(i, refs.index(o)) for i, o in enumerate(model.outputs) if o in refs]
-    if not pairs or model.quantity != "receptance":
+    dp = driving_point(model)
+    if dp is None or model.quantity != "receptance":
         return model
     syn = synthesize(model, sim.freq_hz)
     same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
@@ -126,7 +126,7 @@ def with_above_band_mode(model: ModalModel, sim: FRFSet, weights: np.ndarray,
     lines = (f >= start) & (f <= hi)
     if np.count_nonzero(lines) < 16:
         lines = (f >= max(lo, TAIL_FROM * hi)) & (f <= hi)
-    found = above_band_mode(corr, weights, float(np.clip(zeta, 1e-4, 0.1)), pairs[0], lines)
+    found = above_band_mode(corr, weights, float(np.clip(zeta, 1e-4, 0.1)), dp, lines)
     if found is None:
         return model
     pole, R = found

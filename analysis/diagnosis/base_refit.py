@@ -22,6 +22,7 @@ import numpy as np
 
 from ..frf import FRFSet
 from ..modal import ModalModel, synthesize
+from .effect_types import driving_point
 
 __all__ = ["refit_in_receptance", "POLE_WINDOW", "ABOVE_STARTS", "MIN_GAIN"]
 
@@ -66,11 +67,10 @@ def _refit(model: ModalModel, rec: FRFSet, band: tuple[float, float], poles: np.
 
 
 def _driving_residue_positive(model: ModalModel, mode: int) -> bool:
-    refs = list(model.references)
-    pairs = [(i, refs.index(o)) for i, o in enumerate(model.outputs) if o in refs]
-    if not pairs:
+    dp = driving_point(model)
+    if dp is None:
         return False
-    i, j = pairs[0]
+    i, j = dp
     lam = complex(model.poles[mode])
     return bool(np.real(2j * lam.imag * model.residues[i, j, mode]) > 0)
 
@@ -100,8 +100,7 @@ def refit_in_receptance(model: ModalModel, sim: FRFSet, band_hz: tuple[float, fl
     fitted = _refit(model, rec, (lo, hi), poles)
     if fitted is not None and _relative_misfit(fitted, rec, lines) < best_cost:
         best, best_cost = fitted, _relative_misfit(fitted, rec, lines)
-    has_dp = any(r in model.outputs for r in model.references)
-    if has_dp and not model.meta.get("above_band_modes"):
+    if driving_point(model) is not None and not model.meta.get("above_band_modes"):
         zeta = float(np.clip(np.median(-poles.real / np.abs(poles)), 1e-4, 0.1))
         meta = dict(model.meta)
         meta["above_band_modes"] = 1

@@ -88,6 +88,13 @@ def fit_scalar(cost: Callable[[float], float], grid: np.ndarray) -> float:
     res = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-6 * max(abs(hi), 1e-12)})
     return float(res.x) if res.fun <= vals[i] else float(grid[i])
 
+def driving_point(model: ModalModel) -> tuple[int, int] | None:
+    """(output, reference) indices of the model's first driving point (an output with the label of a
+    reference: same node and direction); None without one."""
+    refs = list(model.references)
+    return next(((i, refs.index(o)) for i, o in enumerate(model.outputs) if o in refs), None)
+
+
 def shapes_at_references(model: ModalModel, phi: np.ndarray) -> np.ndarray | None:
     """Mass-normalised shapes at the references, (n_ref, n_modes): ``meta["reference_shapes"]``, else the
     outputs' rows for references that are outputs; None when a reference has none."""

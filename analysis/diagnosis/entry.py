@@ -40,12 +40,12 @@ def driving_point_shapes(model: ModalModel, at: str = "outputs") -> np.ndarray |
     ``at="references"``: the shapes at the references instead, (n_ref, n_modes), from the driving point's
     row (``phi_r = A_dr / sqrt(A_d)``)."""
     from ..frf import QUANTITY_POWER
+    from .effect_types import driving_point
 
-    refs = list(model.references)
-    pairs = [(i, refs.index(o)) for i, o in enumerate(model.outputs) if o in refs]
-    if not pairs:
+    dp = driving_point(model)
+    if dp is None:
         return None
-    i_d, j_d = pairs[0]
+    i_d, j_d = dp
     lam = np.asarray(model.poles, complex)
     A = 2j * lam.imag[None, None, :] * np.asarray(model.residues) / lam[None, None, :] ** QUANTITY_POWER[model.quantity]
     a_d = A[i_d, j_d]

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..frf import FRFSet, convert_quantity
 from ..modal import ModalModel, transfer
+from .effect_types import driving_point
 
 __all__ = ["FRF_MASSES_KEY", "uses_frf_masses", "add_frf_masses"]
 
@@ -41,7 +42,7 @@ def uses_frf_masses(model: ModalModel) -> bool:
     shapes = model.meta.get("output_shapes")
     return ("frf_correction" in model.meta and shapes is not None and model.quantity == "receptance"
             and np.shape(shapes) == (len(model.outputs), model.poles.size)
-            and any(r in model.outputs for r in model.references))
+            and driving_point(model) is not None)
 
 
 def _output_receptances(model: ModalModel, freq_hz: np.ndarray) -> np.ndarray:
@@ -49,13 +50,13 @@ def _output_receptances(model: ModalModel, freq_hz: np.ndarray) -> np.ndarray:
     flexibility of the modes outside the band (module docstring)."""
     phi = np.asarray(model.meta["output_shapes"], float)
     lam = np.asarray(model.poles, complex)
-    outs, refs = list(model.outputs), list(model.references)
+    outs = list(model.outputs)
     between = ModalModel(poles=lam, residues=phi[:, None, :] * phi[None, :, :] / (2j * lam.imag), quantity="receptance",
                          residual_form="none", outputs=tuple(outs), references=tuple(outs))
     H = transfer(between, 2j * np.pi * np.asarray(freq_hz, float))
-    j = next(i for i, r in enumerate(refs) if r in outs)
-    d = outs.index(refs[j])
-    if model.upper_residual is not None:
+    dp = driving_point(model)
+    if dp is not None and model.upper_residual is not None:
+        d, j = dp
         u = np.real(np.asarray(model.upper_residual)[:, j])
         if u[d] > 0:
             G = np.outer(u, u) / u[d]
