@@ -98,8 +98,10 @@ def refit_in_receptance(model: ModalModel, sim: FRFSet, band_hz: tuple[float, fl
     poles = np.asarray(model.poles, complex)
     best, best_cost = model, _relative_misfit(model, rec, lines)
     fitted = _refit(model, rec, (lo, hi), poles)
-    if fitted is not None and _relative_misfit(fitted, rec, lines) < best_cost:
-        best, best_cost = fitted, _relative_misfit(fitted, rec, lines)
+    if fitted is not None:
+        c = _relative_misfit(fitted, rec, lines)
+        if c < best_cost:
+            best, best_cost = fitted, c
     if driving_point(model) is not None and not model.meta.get("above_band_modes"):
         zeta = float(np.clip(np.median(-poles.real / np.abs(poles)), 1e-4, 0.1))
         meta = dict(model.meta)

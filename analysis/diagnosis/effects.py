@@ -481,7 +481,7 @@ def _frf_factor(ctx: FitContext, freq_hz: np.ndarray) -> np.ndarray | None:
     """The FRF effects accepted before (``ctx.prior``'s of kind ``"frf"``) as a factor per line, ``F(H) = G H + B``
     ((n_out, n_ref, n_freq) G at ``freq_hz``); None when they are not of that form (then a derivative through
     them is not a product)."""
-    frf_effects = [_lookup(e) for e in ctx.prior if _lookup(e)[0].kind == "frf"]
+    frf_effects = [(eff, params) for eff, params in map(_lookup, ctx.prior) if eff.kind == "frf"]
     n_out, n_ref = ctx.base.residues.shape[:2]
 
     def through(H: np.ndarray) -> np.ndarray:
