@@ -170,19 +170,20 @@ def run_station(args: argparse.Namespace, out_stream: TextIO | None = None, read
         serving.start()
         if ready is not None:
             ready.set()
+        finished = False
         try:
             while not stop.wait(1.0):
                 pass
         except KeyboardInterrupt:
             pass
         finally:
+            finished = engine.state.get("phase") == "finished"  # ended on the page before the stop (else: early)
             server.shutdown()
             server.server_close()
             engine.stop()
-        finished = engine.state.get("phase") == "finished"
         if not Path(job["out"]).exists():
             print("station stopped before the first hit: nothing was recorded", file=out_stream, flush=True)
-            return 0
+            return 0 if finished else 130  # stopped (Ctrl-C, SIGTERM) before the test ended: early, as documented
         print(f"station stopped; {job['out']} keeps every hit written"
               + ("" if finished else " (continue with 'python -m acquisition station --resume FILE' or "
                                      "'python -m acquisition capture --resume FILE')"), file=out_stream, flush=True)

@@ -312,7 +312,7 @@ class CaptureSession:
                 result.accepted += 1
             else:
                 result.rejected.append((m.index, m.point, idx, reasons))
-                self._event("INFO", f"hit {idx} at {m.point} rejected: {'; '.join(reasons)}")
+                self._event("INFO", f"hit {idx + 1} at {m.point} rejected: {'; '.join(reasons)}")  # numbered from 1
             self.operator.progress(f"  progress: point {m.index + 1}/{len(self.measurements)}, "
                           f"{avg.n_averages}/{self.plan.hits_per_point} accepted here, "
                           f"{result.accepted} accepted and {len(result.rejected)} rejected in total")
@@ -331,7 +331,7 @@ class CaptureSession:
         result.rejected.append((avg.index, avg.point, idx, [reason]))
         if self.writer is not None:
             self.writer.withdraw_hit(idx, reason)
-        self._event("INFO", f"hit {idx} at {avg.point} withdrawn: {reason}")
+        self._event("INFO", f"hit {idx + 1} at {avg.point} withdrawn: {reason}")
         return idx
 
     def withdraw_point(self, avg: MeasurementAverage, result: SessionResult, reason: str) -> None:

@@ -84,11 +84,23 @@ class Api:
         assert status == 200, st
         return st
 
-    def lease(self, take: bool = False) -> int:
-        return self.request("POST", "/api/lease", {"client": self.client, "take": take})[0]
+    def lease(self, take: bool = False) -> tuple[int, bool | None]:
+        """(status, control): 200 and whether this client now controls the session."""
+        status, body = self.request("POST", "/api/lease", {"client": self.client, "take": take})
+        return status, body.get("control") if isinstance(body, dict) else None
 
     def act(self, action: str, **extra: Any) -> tuple[int, Any]:
         return self.request("POST", "/api/action", {"client": self.client, "action": action, **extra})
+
+    def act_here(self, action: str, **extra: Any) -> tuple[int, Any]:
+        """``action`` naming what the state shows now, as the page does: the hit waiting for a decision
+        (``hit``, its number) or the point on now (``point``, its plan index)."""
+        st = self.state()
+        if action in ("accept", "reject"):
+            extra.setdefault("hit", (st.get("verdict") or {}).get("number"))
+        elif action in ("next-point", "undo", "remeasure", "arm"):
+            extra.setdefault("point", st["current"])
+        return self.act(action, **extra)
 
     def wait(self, pred, what: str, timeout_s: float = WAIT_S) -> dict:
         """Poll the state until ``pred(state)``: a condition, never a fixed delay."""

@@ -36,7 +36,7 @@ def _raw(station, data: bytes) -> bytes:
 
 def test_bad_requests_with_the_token_get_4xx_not_a_dropped_connection(station):
     api = Api(station, "rel-bad")
-    assert api.lease(take=True) == 200
+    assert api.lease(take=True) == (200, True)
     status, blob = api.request("GET", "/api/blob/setup")
     setup = blob["setup"]
     nul = _raw(station, b"GET /static/a\x00b.js HTTP/1.1\r\nHost: x\r\nX-Station-Token: " + station.token.encode()
@@ -60,7 +60,7 @@ def test_bad_requests_with_the_token_get_4xx_not_a_dropped_connection(station):
 
 def test_a_nan_channel_name_is_rejected_before_anything_is_applied(station):
     api = Api(station, "rel-nan")
-    assert api.lease(take=True) == 200
+    assert api.lease(take=True) == (200, True)
     before = api.request("GET", "/api/blob/setup")[1]["setup"]
     body = json.dumps({"client": "rel-nan", "action": "setup", "setup": before}).replace(
         f'"name": {json.dumps(before["channels"][1]["name"])}', '"name": NaN', 1)

@@ -26,7 +26,7 @@ def accept_until_complete(api: Api) -> None:
         if st["phase"] == "complete":
             return
         if st["phase"] == "decide":
-            assert api.act("accept")[0] == 200
+            assert api.act_here("accept")[0] == 200
             api.wait(lambda x: x["phase"] in ("ready", "complete"), "the accept")
         else:
             assert api.act("arm")[0] == 200
@@ -85,7 +85,7 @@ def test_the_event_stream_sends_the_state_at_once_and_on_each_change(station):
     first = next_event()
     assert first["phase"] == "setup" and "allowed" in first
     api = Api(station, "sse-tab")
-    assert api.lease(take=True) == 200
+    assert api.lease(take=True) == (200, True)
     assert api.act("pause")[0] == 200
     while not (ev := next_event())["paused"]:
         pass
@@ -96,11 +96,11 @@ def test_the_event_stream_sends_the_state_at_once_and_on_each_change(station):
 
 def test_bad_requests_get_4xx_and_change_nothing(station):
     api = Api(station, "bad-requests")
-    assert api.lease(take=True) == 200
+    assert api.lease(take=True) == (200, True)
     before = _key(api.state())
     cases = [
         api.act("explode"),                                                     # unknown action
-        api.act("accept"),                                                      # not possible in this phase
+        api.act_here("accept"),                                                      # not possible in this phase
         api.request("POST", "/api/action", raw=b"{not json"),                    # malformed JSON
         api.request("POST", "/api/action", raw=b"[1, 2]"),                       # not an object
         api.request("POST", "/api/action", raw=b"\xff\xfe"),                     # not UTF-8
@@ -127,18 +127,18 @@ def test_bad_requests_get_4xx_and_change_nothing(station):
 
 def test_only_the_controlling_tab_acts(station):
     a, b = Api(station, "tab-a"), Api(station, "tab-b")
-    assert a.lease(take=True) == 200
-    assert b.lease() == 409                       # a second tab is read-only ...
+    assert a.lease(take=True) == (200, True)
+    assert b.lease() == (200, False)              # a second tab is read-only ...
     assert b.act("pause")[0] == 409
     assert b.state()["controller"] == "tab-a"     # ... but sees the same session
-    assert b.lease(take=True) == 200              # until it takes control explicitly
+    assert b.lease(take=True) == (200, True)              # until it takes control explicitly
     assert a.act("pause")[0] == 409
     assert b.act("resume")[0] == 200
 
 
 def test_setup_is_validated_against_the_analyser_before_it_is_sent(station):
     api = Api(station, "setup-tab")
-    assert api.lease(take=True) == 200
+    assert api.lease(take=True) == (200, True)
     status, blob = api.request("GET", "/api/blob/setup")
     assert status == 200 and blob["editable"] is True and blob["capabilities"]["ranges_v"]
     setup = blob["setup"]
@@ -161,7 +161,7 @@ def test_hits_undo_and_the_recording(station):
     from analysis.recording import Recording
 
     api = Api(station, "operator")
-    assert api.lease(take=True) == 200
+    assert api.lease(take=True) == (200, True)
     assert api.act("arm")[0] == 200
     st = api.wait(lambda s: s["phase"] in ("decide", "ready") and s["hit_seq"] >= 1, "the first hit")
     while st["phase"] != "decide":  # a hit rejected by the checks: arm again
@@ -171,11 +171,11 @@ def test_hits_undo_and_the_recording(station):
     for name in ("hit", "frf"):
         status, _blob = api.request("GET", f"/api/blob/{name}")
         assert status == 200
-    assert api.act("accept")[0] == 200
+    assert api.act_here("accept")[0] == 200
     st = api.wait(lambda s: s["phase"] == "ready" and s["point_hits"] == 1, "the accepted hit")
-    assert api.act("undo")[0] == 200
+    assert api.act_here("undo")[0] == 200
     st = api.wait(lambda s: s["point_hits"] == 0 and s["phase"] == "ready", "the undo")
-    assert api.act("undo")[0] == 409  # nothing left to undo
+    assert api.act_here("undo")[0] == 409  # nothing left to undo
     assert api.act("auto", on=True)[0] == 200
     st = api.wait(lambda s: s["phase"] == "finished", "the plan to finish in auto mode")
     code, _out, err = station.stop()
@@ -216,13 +216,13 @@ def test_overload_advice_pause_remeasure_and_skip(tmp_path):
                         "--points", POINTS, "--hits", "2"], tmp_path)
     try:
         api = Api(s)
-        assert api.lease() == 200
+        assert api.lease() == (200, True)
         advice = None
         while advice is None or api.state()["point_hits"] < 1:
             st = api.state()
             assert st["phase"] in ("setup", "decide", "ready"), st["phase"]
             if st["phase"] == "decide":
-                assert api.act("reject" if st["point_hits"] else "accept")[0] == 200
+                assert api.act_here("reject" if st["point_hits"] else "accept")[0] == 200
                 api.wait(lambda x: x["phase"] == "ready", "the decision")
                 continue
             seq = st["hit_seq"]
@@ -235,9 +235,9 @@ def test_overload_advice_pause_remeasure_and_skip(tmp_path):
         assert api.act("pause")[0] == 200
         assert api.act("arm")[0] == 409 and api.state()["paused"] is True
         assert api.act("resume")[0] == 200
-        assert api.act("remeasure")[0] == 200
+        assert api.act_here("remeasure")[0] == 200
         api.wait(lambda x: x["point_hits"] == 0 and x["phase"] == "ready", "the point cleared")
-        assert api.act("next-point")[0] == 200  # skip it
+        assert api.act_here("next-point")[0] == 200  # skip it
         api.wait(lambda x: x["current"] == 1 and x["phase"] == "ready", "the second point")
         assert api.act("auto", on=True)[0] == 200
         api.wait(lambda x: x["phase"] == "finished", "the end")
@@ -263,21 +263,21 @@ def test_an_earlier_point_is_measured_again_during_and_after_the_test(tmp_path):
 
     try:
         api = Api(s)
-        assert api.lease() == 200
+        assert api.lease() == (200, True)
         one_hit(api)
-        assert api.act("next-point")[0] == 200
+        assert api.act_here("next-point")[0] == 200
         api.wait(lambda x: x["current"] == 1 and x["phase"] == "ready", "point 2")
         one_hit(api)
         assert api.act("remeasure", point=5)[0] == 400
         assert api.act("remeasure", point=0)[0] == 200          # back to point 1 before moving on
         api.wait(lambda x: x["current"] == 0 and x["phase"] == "ready" and x["point_hits"] == 0, "point 1 again")
         one_hit(api)
-        assert api.act("next-point")[0] == 200
+        assert api.act_here("next-point")[0] == 200
         api.wait(lambda x: x["phase"] == "finished", "the end (point 2 kept its hit)")
         assert api.act("remeasure", point=1)[0] == 200          # and point 2 after the end
         api.wait(lambda x: x["current"] == 1 and x["phase"] == "ready" and x["point_hits"] == 0, "point 2 again")
         one_hit(api)
-        assert api.act("next-point")[0] == 200
+        assert api.act_here("next-point")[0] == 200
         api.wait(lambda x: x["phase"] == "finished", "the end")
     finally:
         code, _out, err = s.stop()
@@ -299,7 +299,7 @@ def test_a_test_hit_is_shown_with_range_advice_and_not_recorded(tmp_path):
                         "--points", POINTS, "--hits", "2"], tmp_path)
     try:
         api = Api(s)
-        assert api.lease() == 200
+        assert api.lease() == (200, True)
         assert api.act("test-hit")[0] == 200
         st = api.wait(lambda x: x["hit_seq"] >= 1 and x["phase"] == "setup", "the test hit")
         v = st["verdict"]
@@ -310,7 +310,7 @@ def test_a_test_hit_is_shown_with_range_advice_and_not_recorded(tmp_path):
         assert not rec.exists()  # nothing recorded before the test starts
     finally:
         code, out, err = s.stop()
-    assert code == 0, err
+    assert code == 130, err  # stopped before the test ended: early
     assert "nothing was recorded" in out
 
 
@@ -325,7 +325,7 @@ def test_finish_on_a_complete_plan_is_not_an_early_end(tmp_path):
                            tmp_path)
         try:
             api = Api(s)
-            assert api.lease() == 200
+            assert api.lease() == (200, True)
             accept_until_complete(api)
             assert api.act("finish")[0] == 200
             st = api.wait(lambda x: x["phase"] == "finished", "the end")

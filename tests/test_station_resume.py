@@ -18,7 +18,7 @@ def _accept_hits(api: Api, n: int) -> None:
         if st["point_hits"] >= target:
             return
         if st["phase"] == "decide":
-            assert api.act("accept")[0] == 200
+            assert api.act_here("accept")[0] == 200
         else:
             assert api.act("arm")[0] == 200
         seq = st["hit_seq"]
@@ -40,7 +40,7 @@ def test_killed_station_resumes_in_the_station_then_in_capture(tmp_path):
     s = StationProcess(["--device", "sim://?seed=5", "--out", str(rec), "--points", POINTS, "--hits", "3"], tmp_path)
     try:
         api = Api(s)
-        assert api.lease() == 200
+        assert api.lease() == (200, True)
         _accept_hits(api, 2)
         assert api.act("arm")[0] == 200
         api.wait(lambda st: st["phase"] == "decide", "a hit waiting for the operator")
@@ -51,7 +51,7 @@ def test_killed_station_resumes_in_the_station_then_in_capture(tmp_path):
     s = StationProcess(["--resume", str(rec)], tmp_path)
     try:
         api = Api(s)
-        assert api.lease() == 200
+        assert api.lease() == (200, True)
         st = api.state()
         assert st["phase"] == "setup" and "arm" in st["allowed"]
         assert api.request("GET", "/api/blob/setup")[1]["editable"] is False
@@ -59,7 +59,7 @@ def test_killed_station_resumes_in_the_station_then_in_capture(tmp_path):
         api.wait(lambda st: st["phase"] in ("decide", "ready") and st["point_hits"] >= 2, "the resumed point")
         _accept_hits(api, 3 - api.state()["point_hits"])
         api.wait(lambda st: st["phase"] == "complete", "point 1 complete")
-        assert api.act("next-point")[0] == 200
+        assert api.act_here("next-point")[0] == 200
         api.wait(lambda st: st["phase"] == "ready" and st["current"] == 1, "point 2")
         _accept_hits(api, 1)
         assert api.state()["current_point"] == "top:4:Z"

@@ -14,6 +14,13 @@ Phases (``state["phase"]``) and the actions each allows:
 ``finished``   the plan is done or ended; ``error``: the session stopped (message says why)
 =============  ==================================================================================
 
+Actions that act on a hit or a point name it, so a click made on a page that is out of date (a
+double click, a second key press before the page caught up) is refused (409) instead of acting on
+the next hit or point: ``accept``/``reject`` carry ``"hit": N`` (the number of the hit waiting for
+the decision, ``verdict.number``), ``next-point``, ``undo`` and ``remeasure`` carry ``"point":
+INDEX`` (the plan row, ``current`` for the point on now), ``arm`` may carry it. While one such
+action waits for the session (or is being carried out: phase ``busy``), the next is refused too.
+
 ``pause``/``resume`` and ``auto`` (on/off) are allowed in every running phase. Auto mode arms,
 accepts every hit that passed the checks and moves to the next point; pause holds it before the
 next arm (the arm action too, until resume). One tab controls at a time (:class:`acquisition.station.state.Lease`).
@@ -44,6 +51,8 @@ log = logging.getLogger(__name__)
 ACTIONS = ("arm", "accept", "reject", "undo", "remeasure", "next-point", "finish", "pause", "resume", "auto",
            "setup", "test-hit")
 _ANYTIME = ("pause", "resume", "auto")
+#: actions that must name the hit (``"hit"``: its number) or the point (``"point"``: its plan index) they act on
+TARGET_OF = {"accept": "hit", "reject": "hit", "next-point": "point", "undo": "point", "remeasure": "point"}
 _ALLOWED = {
     "setup": ("setup", "test-hit", "arm", "finish"),
     "ready": ("arm", "undo", "remeasure", "next-point", "finish"),
@@ -224,6 +233,7 @@ class StationEngine(PagePublisher):
                 if self._cmds:
                     action, params = self._cmds.pop(0)
                     if action == "remeasure" and isinstance(params.get("point"), int):
+                        self.state.update(phase="busy")
                         return int(params["point"])
 
                 self._cond.wait()
@@ -253,7 +263,11 @@ class StationEngine(PagePublisher):
         with self._cond:
             allowed = self.allowed()
             if action not in allowed:
-                raise ActionRefused(f"{action} is not possible now (phase {self.state.get('phase')}; possible: "
+                phase = self.state.get("phase")
+                if phase == "busy":
+                    raise ActionRefused(f"{action} refused: the previous action is still being carried out; look at "
+                                        "the page again and repeat it if it is still wanted")
+                raise ActionRefused(f"{action} is not possible now (phase {phase}; possible: "
                                     f"{', '.join(allowed) or 'nothing'})")
             if action == "pause":
                 self._paused = True
@@ -268,21 +282,49 @@ class StationEngine(PagePublisher):
                 self._apply_setup(params)
             elif action == "finish":
                 self._quit = True
-            elif action == "remeasure" and ("point" in params or self.state.get("phase") == "finished"):
-                self._check_redo(params.get("point"))
-                self._cmds.append((action, params))
             else:
-                if action in ("undo", "remeasure") and not self.state.get("point_hits"):
-                    raise ActionRefused(f"{action}: this point has no accepted hit")
+                self._check_target(action, params)
                 self._cmds.append((action, params))
             self.state.update(auto=self._auto, paused=self._paused)
             self._cond.notify_all()
         return action
 
-    def _check_redo(self, point: Any) -> None:
+    def _check_target(self, action: str, params: dict) -> None:
+        """Refuse a queued action made on a page that is out of date (409) or that does not name what it
+        acts on (400): the hit waiting for the decision, the point on now (or, for ``remeasure``, the
+        point to go back to); and any such action while an earlier one still waits for the session."""
+        if self._cmds:
+            raise ActionRefused(f"{action} refused: the previous action ({self._cmds[0][0]}) is still being carried "
+                                "out; look at the page again and repeat it if it is still wanted")
+        key = TARGET_OF.get(action)
+        if key is None and "point" not in params:
+            return
+        if key is not None and key not in params:
+            raise ActionRefused(f"{action} must name the {key} it acts on: give {{\"{key}\": "
+                                + ("N}} (the number of the hit on screen, verdict.number)" if key == "hit" else
+                                   "INDEX}} (the plan row's index; current for the point on now)"), 400)
+        value = params[key or "point"]
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise ActionRefused(f"{action}: {key or 'point'} must be an integer, not {value!r}", 400)
+        if key == "hit":
+            verdict = self.state.get("verdict") or {}
+            waiting = verdict.get("number") if verdict.get("state") == "decide" else None
+            if value != waiting:
+                raise ActionRefused(f"{action} refused: hit {value} is not waiting for a decision"
+                                    + (f" (hit {waiting} is)" if waiting is not None else "")
+                                    + "; look at the page again")
+            return
         n = len(self.state.get("plan") or [])
-        if not isinstance(point, int) or isinstance(point, bool) or not 0 <= point < n:
-            raise ActionRefused(f"remeasure: point must be an index 0..{n - 1}", 400)
+        if not 0 <= value < n:
+            raise ActionRefused(f"{action}: point must be an index 0..{n - 1}", 400)
+        current = self.state.get("current")
+        if action == "remeasure" and (value != current or self.state.get("phase") == "finished"):
+            return  # go back to a point measured earlier (or, after the end, to any point)
+        if value != current:
+            raise ActionRefused(f"{action} refused: it names point {value + 1} but point {int(current or 0) + 1} "
+                                "is on now; look at the page again")
+        if action in ("undo", "remeasure") and not self.state.get("point_hits"):
+            raise ActionRefused(f"{action}: this point has no accepted hit")
 
     # -- set-up ------------------------------------------------------------------------------------
     def check_setup(self, params: dict) -> tuple[AcquisitionSetup, WindowSettings]:
@@ -321,10 +363,12 @@ class StationEngine(PagePublisher):
                 if self._cmds:
                     action, params = self._cmds.pop(0)
                     if action in wanted:
+                        self.state.update(phase="busy")  # no action acts on what the page showed until it is redrawn
                         return action, params
                     self.state.message("WARNING", f"{action} ignored: not possible now")
                     continue
                 if auto_answer is not None and self._auto and not self._paused:
+                    self.state.update(phase="busy")
                     return auto_answer, {}
                 self._cond.wait()
 

@@ -175,9 +175,10 @@ def range_advice(check: Any, setup: Any, ranges_v: Sequence[float], data: np.nda
     return out
 
 
-def verdict_payload(summary: Any, pending: bool, advice: Sequence[str] = ()) -> dict:
+def verdict_payload(summary: Any, pending: bool, advice: Sequence[str] = (), number: int | None = None) -> dict:
     """The verdict line of a hit (``acquisition.session.HitSummary``): state accepted / rejected /
-    decide, reasons, and the measured properties."""
+    decide, reasons, and the measured properties. ``number``: the hit's number in the recording,
+    counted from 1 as the session's log and the report count (None for a test hit, never recorded)."""
     c = summary.check
     if pending:
         state = "decide"
@@ -200,6 +201,8 @@ def verdict_payload(summary: Any, pending: bool, advice: Sequence[str] = ()) -> 
         "coherence": None if summary.coherence_so_far is None else round(float(summary.coherence_so_far), 4),
         "attempt": summary.attempt,
         "hit_index": summary.hit_index,
+        "number": None if state == "test" else number,
+        "point": summary.point,
         "advice": list(advice),
     }
 

@@ -85,7 +85,10 @@ class PagePublisher:
             self.state.set_blob("hit", hit)
             self._pending_hit = summary
         advice = payloads.range_advice(summary.check, setup, self.caps.ranges_v, summary.data)
-        verdict = payloads.verdict_payload(summary, pending, advice)
+        writer = getattr(self.session, "writer", None)
+        number = (summary.hit_index + 1 if summary.hit_index >= 0 else None) if not pending else \
+            (writer.n_hits + 1 if writer is not None else None)  # a pending hit is written next
+        verdict = payloads.verdict_payload(summary, pending, advice, number)
         verdict["seq"] = self._shown_seq
         hits_here = (summary.average.n_averages - (1 if pending else 0)) if summary.average is not None else 0
         if summary.average is not None:

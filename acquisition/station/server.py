@@ -10,21 +10,32 @@ the answer is 403 and nothing else is looked at. Routes:
 ``GET /api/state``          the small state (phase, point, counts, verdict, messages, versions)
 ``GET /api/blob/NAME``      plot data: ``hit``, ``frf``, ``setup``, ``geometry``
 ``GET /api/events``         server-sent events: ``state`` on every change, a comment every 10 s
-``POST /api/lease``         ``{"client": ID, "take": bool}``: ask for (or take) control
-``POST /api/action``        ``{"client": ID, "action": NAME, ...}``: 409 when not possible now or
-                            another tab controls, 400 unknown action or malformed request
+``POST /api/lease``         ``{"client": ID, "take": bool}``: ask for (or take) control; 200 with
+                            ``{"control": bool, "controller": ID}`` (false: another tab has it)
+``POST /api/action``        ``{"client": ID, "action": NAME, ...}``: 409 when not possible now,
+                            another tab controls, or the hit/point the action names is not the one
+                            on now; 400 unknown action, malformed request, target not named
 ``POST /api/setup/check``   ``{"setup": {...}, "windows": {...}}``: 200 or 422 with the problem
+``GET /favicon.ico``        204 (no token needed: browsers ask for it on their own)
 ==========================  ====================================================================
+
+Connections are bounded: a client has ``REQUEST_DEADLINE_S`` to send each request's head and body
+(408, or the connection closed, after that), and at most ``MAX_CONNECTIONS`` are served at once.
+When that many are open, the one that has waited longest for its next request (an idle or
+half-sent one) is closed to make room; when every one is busy (event streams, requests being
+answered) the new one gets 503 naming the limit.
 """
 from __future__ import annotations
 
 import hmac
+import io
 import json
 import logging
 import secrets
 import socket
 import sys
 import threading
+import time
 from collections.abc import Callable
 from http.cookies import CookieError, SimpleCookie
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -49,6 +60,13 @@ SSE_KEEPALIVE_S = 10.0
 #: connections the listening socket queues while the handler threads accept (the standard library's 5
 #: reset clients when a few tabs and scripts connect at once)
 LISTEN_BACKLOG = 128
+#: most connections served at once (each holds a thread): a few tabs (an event stream and a request or
+#: two each) and scripts fit many times over
+MAX_CONNECTIONS = 64
+#: seconds a client has to send a request's head and body, counted from when the server waits for it
+REQUEST_DEADLINE_S = 10.0
+#: seconds one write to a client may block (a client that stopped reading is dropped)
+SEND_TIMEOUT_S = 30.0
 #: what a malformed request body makes the engine's checks raise beyond their own errors (answered 422)
 _BAD_VALUES = (TypeError, ValueError, KeyError, AttributeError, OverflowError, IndexError, RecursionError)
 
@@ -69,11 +87,17 @@ class StationServer(ThreadingHTTPServer):
     request_queue_size = LISTEN_BACKLOG
 
     def __init__(self, address: tuple, engine: StationEngine, token: str,
-                 plotly_js: Callable[[], Path] | None = None) -> None:
+                 plotly_js: Callable[[], Path] | None = None, *, max_connections: int = MAX_CONNECTIONS,
+                 request_deadline_s: float = REQUEST_DEADLINE_S) -> None:
         self.engine = engine
         self.token = token
         self.plotly_js = plotly_js
         self.closing = threading.Event()
+        self.max_connections = int(max_connections)
+        self.request_deadline_s = float(request_deadline_s)
+        self._conn_lock = threading.Lock()
+        #: open connection -> since when (time.monotonic) it waits for a request head; None while it is served
+        self._conns: dict[socket.socket, float | None] = {}
         if ":" in str(address[0]):  # an IPv6 address such as ::1
             self.address_family = socket.AF_INET6
         super().__init__(address, _Handler)
@@ -88,6 +112,72 @@ class StationServer(ThreadingHTTPServer):
         else:
             log.warning("request from %s failed: %s: %s", who, type(exc).__name__, exc)
 
+    # -- the connection bound ---------------------------------------------------------------------
+    def process_request(self, request: Any, client_address: Any) -> None:
+        """Serve the connection in a thread of its own while fewer than ``max_connections`` are open;
+        past that, close the longest-waiting idle or half-sent one, else answer 503."""
+        with self._conn_lock:
+            room = len(self._conns) < self.max_connections or self._evict_one()
+            if room:
+                self._conns[request] = time.monotonic()
+        if not room:
+            self._refuse(request, client_address)
+            return
+        try:
+            super().process_request(request, client_address)
+        except RuntimeError as exc:  # no thread to be had
+            with self._conn_lock:
+                self._conns.pop(request, None)
+            log.warning("cannot serve %s: %s", client_address, exc)
+            self._refuse(request, client_address)
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            with self._conn_lock:
+                self._conns.pop(request, None)
+
+    def mark_waiting(self, connection: socket.socket, waiting: bool) -> None:
+        """Note that ``connection`` waits for its next request (``waiting``) or is being served."""
+        with self._conn_lock:
+            if connection in self._conns:
+                self._conns[connection] = time.monotonic() if waiting else None
+
+    def _evict_one(self) -> bool:
+        """Close the connection that has waited longest for a request (lock held); False when none waits."""
+        waiting = [(since, id(c), c) for c, since in self._conns.items() if since is not None]
+        if not waiting:
+            return False
+        since, _, victim = min(waiting)
+        del self._conns[victim]
+        try:
+            victim.shutdown(socket.SHUT_RDWR)  # its thread reads the end of the stream and finishes
+        except OSError:
+            pass
+        log.info("closed a connection idle or half-sent for %.1f s to serve a new one (%d connections at most)",
+                 time.monotonic() - since, self.max_connections)
+        return True
+
+    def _refuse(self, request: socket.socket, client_address: Any) -> None:
+        """503 on a connection over the bound, written from the accepting thread (a few hundred bytes)."""
+        who = client_address[0] if isinstance(client_address, tuple) and client_address else client_address
+        log.warning("refused a connection from %s: %d connections are being served", who, self.max_connections)
+        body = json.dumps({"error": f"the station serves {self.max_connections} connections at once and all are "
+                                    "busy: close other tabs or scripts of this station and try again"}).encode()
+        head = (f"HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nContent-Length: {len(body)}"
+                "\r\nRetry-After: 1\r\nConnection: close\r\n\r\n").encode()
+        try:
+            request.settimeout(0.2)
+            try:
+                request.recv(MAX_BODY)  # the request, if it came: closing with it unread would reset the answer
+            except TimeoutError:
+                pass
+            request.sendall(head + body)
+        except OSError:
+            pass
+        self.shutdown_request(request)
+
     @property
     def url(self) -> str:
         host, port = str(self.server_address[0]), int(self.server_address[1])
@@ -101,9 +191,50 @@ class StationServer(ThreadingHTTPServer):
         super().shutdown()
 
 
+class _DeadlineReader(io.RawIOBase):
+    """A connection's incoming bytes, each read bounded by the ``deadline`` (time.monotonic) of the
+    request being read: a client that sends slowly cannot hold its thread past it."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        super().__init__()
+        self._sock = sock
+        self.deadline = time.monotonic()
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: Any) -> int:
+        remaining = self.deadline - time.monotonic()
+        if remaining <= 0:
+            raise TimeoutError("the request was not complete in time")
+        self._sock.settimeout(remaining)
+        try:
+            return self._sock.recv_into(buffer)
+        finally:
+            self._sock.settimeout(SEND_TIMEOUT_S)
+
+
 class _Handler(BaseHTTPRequestHandler):
     server: StationServer
     protocol_version = "HTTP/1.1"
+
+    def setup(self) -> None:
+        super().setup()
+        self._reader = _DeadlineReader(self.connection)
+        self.rfile = io.BufferedReader(self._reader)
+        self.connection.settimeout(SEND_TIMEOUT_S)
+
+    def handle_one_request(self) -> None:
+        """One request: its head and body must come within the server's deadline."""
+        self._reader.deadline = time.monotonic() + self.server.request_deadline_s
+        self.server.mark_waiting(self.connection, True)
+        super().handle_one_request()
+
+    def parse_request(self) -> bool:
+        ok = super().parse_request()
+        if ok:
+            self.server.mark_waiting(self.connection, False)
+        return ok
 
     def log_message(self, fmt: str, *args: Any) -> None:  # quiet: the station prints only its URL
         log.debug("%s - %s", self.address_string(), fmt % args)
@@ -159,7 +290,16 @@ class _Handler(BaseHTTPRequestHandler):
             self.close_connection = True
             self._error(413, f"request body over {MAX_BODY} bytes")
             return None
-        raw = self.rfile.read(n) if n > 0 else b""
+        try:
+            raw = self.rfile.read(n) if n > 0 else b""
+        except TimeoutError:
+            self.close_connection = True
+            self._error(408, f"the request body did not come within {self.server.request_deadline_s:g} s")
+            return None
+        if len(raw) < n:
+            self.close_connection = True
+            self._error(400, f"the request body ended after {len(raw)} of {n} bytes")
+            return None
         try:
             data = json.loads(raw.decode("utf-8"), parse_constant=_no_constant)
         except (UnicodeDecodeError, ValueError) as exc:
@@ -176,6 +316,12 @@ class _Handler(BaseHTTPRequestHandler):
     # -- verbs -------------------------------------------------------------------------------------
     def do_GET(self) -> None:
         parts = urlsplit(self.path)
+        if parts.path == "/favicon.ico":  # browsers ask on their own, without the token: nothing to show
+            self.send_response(204)
+            self.send_header("Content-Length", "0")
+            self.send_header("Cache-Control", "max-age=86400")
+            self.end_headers()
+            return
         query = parse_qs(parts.query)
         if not self._authorised(query, cookie_ok=parts.path == "/" or parts.path.startswith("/static/")):
             self._error(403, "missing or wrong token: open the URL the station printed")
@@ -226,7 +372,7 @@ class _Handler(BaseHTTPRequestHandler):
             with eng.state.cond:
                 ok = eng.state.lease.acquire(client, take)
                 eng.state.update()  # tabs learn who controls
-            self._json(200 if ok else 409, {"control": ok, "controller": eng.state.lease.holder})
+            self._json(200, {"control": ok, "controller": eng.state.lease.holder})  # read-only is an answer, not an error
         elif parts.path == "/api/action":
             action = body.get("action")
             if not isinstance(action, str):

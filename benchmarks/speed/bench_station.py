@@ -61,7 +61,7 @@ def main() -> int:
             c0, t0 = _cpu_s(s.proc.pid), time.monotonic()
             time.sleep(args.idle_s)
             idle_pct = 100 * (_cpu_s(s.proc.pid) - c0) / (time.monotonic() - t0)
-            assert api.lease(take=True) == 200
+            assert api.lease(take=True) == (200, True)
             while len(lat_ms) < args.hits:
                 st = api.state()
                 if st["phase"] == "complete":
@@ -83,7 +83,7 @@ def main() -> int:
                 assert hit["seq"] == seq
                 lat_ms.append(shown - 1000 * hit["t_block"])
                 if st["phase"] == "decide":
-                    assert api.act("accept")[0] == 200
+                    assert api.act_here("accept")[0] == 200
                     api.wait(lambda x: x["phase"] in ("ready", "complete"), "the accept")
             size = len(api.request("GET", "/api/blob/hit", raw=None)[1].__repr__())
         finally:

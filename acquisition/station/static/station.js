@@ -43,20 +43,38 @@
   }
 
   // -- control lease ------------------------------------------------------------------------------
-  function lease(take) {
-    return api("/api/lease", { take: !!take }).then((r) => { inControl = r.control; render(); })
-      .catch((e) => { inControl = false; if (e.status !== 409) note("control: " + e.message, "WARNING"); render(); });
+  function lease(take) {  // 200 either way: {control: false} while another tab controls
+    return api("/api/lease", { take: !!take }).then((r) => { inControl = !!r.control; render(); })
+      .catch((e) => { inControl = false; note("control: " + e.message, "WARNING"); render(); });
   }
   setInterval(() => { if (inControl) lease(false); }, 5000);
   $("#take-control").addEventListener("click", () => lease(true));
 
   // -- actions ------------------------------------------------------------------------------------
+  // Each action names the hit or point it acts on, as this page shows it: the server refuses (409) one
+  // made on a page that is out of date (a double click) instead of acting on the next hit or point.
+  // One action at a time: clicks and keys while one is on its way (or until the page shows its
+  // outcome) are dropped.
+  let sending = null;  // the state version an action was sent from, while it is on its way
+  const NAMES_HIT = ["accept", "reject"];
+  const NAMES_POINT = ["arm", "next-point", "undo", "remeasure"];
   function act(action, extra) {
     if (!state || !inControl || !(state.allowed || []).includes(action)) return;
-    api("/api/action", Object.assign({ action: action }, extra || {})).catch((e) => {
-      note(`${action}: ${e.message}`, "WARNING");
-      if (e.status === 409) lease(false);
-    });
+    if (sending !== null) return;
+    const body = Object.assign({ action: action }, extra || {});
+    if (NAMES_HIT.includes(action)) {
+      if (!state.verdict || state.verdict.number == null) return;
+      body.hit = state.verdict.number;
+    } else if (NAMES_POINT.includes(action) && body.point === undefined) {
+      body.point = state.current || 0;
+    }
+    sending = state.version;
+    api("/api/action", body).then(() => { if (state && state.version === sending) state.allowed = []; })
+      .catch((e) => {
+        note(`${action} not done: ${e.message}`, "WARNING");
+        if (e.status === 409) lease(false);
+      })
+      .finally(() => { sending = null; render(); });
   }
   document.querySelectorAll("button[data-action]").forEach((b) => b.addEventListener("click", () => act(b.dataset.action)));
   $("#auto").addEventListener("change", (ev) => act("auto", { on: ev.target.checked }));
@@ -122,7 +140,7 @@
     if (!v) { el.dataset.state = "none"; el.textContent = "no hit yet"; ul.innerHTML = ""; return; }
     el.dataset.state = v.state;
     const words = { accepted: "ACCEPTED", rejected: "REJECTED", decide: "accept or reject?", test: "TEST HIT" };
-    el.textContent = (v.state === "test" ? "" : `hit ${v.attempt}: `) + `${words[v.state] || v.state}` + (v.reasons.length ? " - " + v.reasons.join("; ") : "");
+    el.textContent = (v.state === "test" || v.number == null ? "" : `hit ${v.number} at ${v.point}: `) + `${words[v.state] || v.state}` + (v.reasons.length ? " - " + v.reasons.join("; ") : "");
     const items = [
       `force peak ${v.force_peak_n} N, pulse ${v.pulse_width_ms} ms`,
       `double hit: ${v.double_hit ? "YES" : "no"} (second peak ${v.second_peak_pct} %)`,
@@ -230,20 +248,21 @@
       xs.push(nodes[a][0], nodes[b][0], null); ys.push(nodes[a][1], nodes[b][1], null); zs.push(nodes[a][2], nodes[b][2], null);
     });
     const traces = [{ type: "scatter3d", mode: "lines", x: xs, y: ys, z: zs, name: "frame", line: { color: "#7d8b98", width: 4 }, hoverinfo: "skip" }];
-    const groups = { done: [], todo: [], current: [], sensor: [] };
+    // the accelerometers first, as open squares: a point's dot drawn after stays visible inside one
+    const groups = { sensor: [], done: [], todo: [], current: [] };
     (state.plan || []).forEach((r) => {
       const k = r.index === state.current && state.phase !== "finished" ? "current" : (r.done ? "done" : "todo");
       groups[k].push(r.point);
     });
     (state.outputs || []).forEach((p) => groups.sensor.push(p));
-    const style = { done: ["#1f8a3b", 6], todo: ["#9aa7b3", 5], current: ["#e07b00", 11], sensor: ["#1c5fb8", 6] };
+    const style = { done: ["#1f8a3b", 6], todo: ["#9aa7b3", 5], current: ["#e07b00", 11], sensor: ["#1c5fb8", 9] };
     const names = { done: "done", todo: "to do", current: "strike here", sensor: "accelerometers" };
     Object.keys(groups).forEach((k) => {
       const pts = groups[k].filter((p) => nodes[nodeOf(p)]);
       if (!pts.length) return;
       traces.push({ type: "scatter3d", mode: "markers", name: names[k], text: pts, hoverinfo: "text",
         x: pts.map((p) => nodes[nodeOf(p)][0]), y: pts.map((p) => nodes[nodeOf(p)][1]), z: pts.map((p) => nodes[nodeOf(p)][2]),
-        marker: { color: style[k][0], size: style[k][1], symbol: k === "sensor" ? "square" : "circle" } });
+        marker: { color: style[k][0], size: style[k][1], symbol: k === "sensor" ? "square-open" : "circle" } });
     });
     Plotly.react(el, traces, { margin: { l: 0, r: 0, t: 0, b: 0 }, showlegend: true, legend: { orientation: "h", y: 0, font: { size: 10 } },
       uirevision: "geometry", scene: { aspectmode: "data", xaxis: { visible: false }, yaxis: { visible: false }, zaxis: { visible: false },
