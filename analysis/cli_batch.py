@@ -152,7 +152,7 @@ def _run(args: argparse.Namespace, paths: list[Path], skipped: list[str], out: P
     from .atomic import write_json_atomic
     from .batch.fleet import assess_fleet
     from .batch.outputs import fleet_document, modes_rows, plot_fleet, write_modes_parquet
-    from .batch.run import open_client, plan_inputs, run_batch
+    from .batch.run import close_client, open_client, plan_inputs, run_batch
     from .batch.unit_modes import modes_from_fit
 
     inputs = plan_inputs(paths)
@@ -168,10 +168,7 @@ def _run(args: argparse.Namespace, paths: list[Path], skipped: list[str], out: P
                 print(f"... Dask dashboard: {client.dashboard_link}", file=sys.stderr)
         run = run_batch(inputs, out, client, band=band, estimator=args.estimator, on_result=_progress(args.quiet, t0))
     finally:
-        cluster = getattr(client, "cluster", None)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        close_client(client)
     units = [modes_from_fit(d["fit"]) if d.get("status") == "ok" else None for d in run.results]
     errors = [d.get("error") for d in run.results]
     files = [i.path.name for i in inputs]

@@ -14,6 +14,7 @@
 """
 from __future__ import annotations
 
+import logging
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -24,8 +25,8 @@ from typing import Any
 from ..atomic import write_json_atomic
 from .task import file_sha256, fit_one, options_key, result_is_current
 
-__all__ = ["BatchInput", "BatchRun", "DASK_CONFIG_DIR", "dask_settings", "plan_inputs", "open_client", "run_batch",
-           "run_serial"]
+__all__ = ["BatchInput", "BatchRun", "DASK_CONFIG_DIR", "HEARTBEAT_FAILED", "close_client", "dask_settings",
+           "open_client", "plan_inputs", "quiet_heartbeat", "run_batch", "run_serial"]
 
 #: Dask settings for the workers (a YAML folder; for ``dask worker``: ``export DASK_CONFIG=<this folder>``)
 DASK_CONFIG_DIR = Path(__file__).with_name("dask-config")
@@ -129,6 +130,47 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                                    scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
     return Client(cluster)
+
+
+#: the message of a worker whose heartbeat the cluster's teardown cut off (logged with a traceback)
+HEARTBEAT_FAILED = "Failed to communicate with scheduler during heartbeat."
+
+
+class _NoTeardownHeartbeat(logging.Filter):
+    """Drops the heartbeat failure of a worker whose cluster is being closed (nothing failed)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.msg != HEARTBEAT_FAILED
+
+
+def quiet_heartbeat(dask_worker: Any) -> bool:
+    """On a worker of a local cluster about to close: stop its heartbeat to the scheduler, and keep a
+    heartbeat already under way (cut off when the scheduler stops) out of the log. True when done."""
+    beat = dask_worker.periodic_callbacks.get("heartbeat")
+    if beat is not None:
+        beat.stop()
+    log = logging.getLogger("distributed.worker")
+    if not any(isinstance(f, _NoTeardownHeartbeat) for f in log.filters):
+        log.addFilter(_NoTeardownHeartbeat())
+    return beat is None or not beat.is_running()
+
+
+def close_client(client: Any) -> None:
+    """Close ``client`` and, when it opened a local cluster, that cluster: the workers' heartbeats are
+    stopped first (a heartbeat cut off by the teardown would print a traceback after a good run), then
+    the client is closed before the cluster (the client would otherwise try to reconnect to a
+    scheduler that is going away). A cluster given by ``--scheduler`` is left running as it was."""
+    cluster = getattr(client, "cluster", None)
+    try:
+        if cluster is not None:
+            try:
+                client.run(quiet_heartbeat, on_error="ignore")
+            except (OSError, TimeoutError):  # a worker already gone: nothing of it to quieten
+                pass
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def _reuse(inputs: Sequence[BatchInput], fits_dir: Path, key: str) -> dict[str, dict[str, Any]]:
