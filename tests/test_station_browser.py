@@ -130,3 +130,74 @@ def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
     import numpy as np
 
     assert all(np.isfinite(f.H[:, 0, 1:]).all() for f in frfs)
+
+
+def test_the_page_numbers_hits_from_1_refuses_a_double_click_and_logs_no_errors(tmp_path):
+    """A second tab and the favicon leave no error in the browser's log; the verdict and the log give a
+    hit the same number (from 1); a double click of Next point moves one point on; a done point's dot
+    stays visible where an accelerometer sits (top:4 carries one)."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    driver = chrome(tmp_path)
+    s = StationProcess(["--device", "sim://?seed=1", "--out", str(tmp_path / "rec.h5"), "--points",
+                        "top:4:Z,right:6:-X", "--hits", "1"], tmp_path)
+    try:
+        wait = WebDriverWait(driver, WAIT_S, poll_frequency=0.05)
+        driver.get(s.url)
+        body = driver.find_element(By.TAG_NAME, "body")
+        wait.until(lambda d: d.find_element(By.ID, "control").text == "in control"
+                   and body.get_attribute("data-phase") == "setup")
+        first = driver.current_window_handle
+        driver.switch_to.new_window("tab")
+        driver.get(s.url)
+        wait.until(lambda d: "read-only" in d.find_element(By.ID, "control").text)
+        second_tab_errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+        driver.close()
+        driver.switch_to.window(first)
+        body = driver.find_element(By.TAG_NAME, "body")
+        verdict = driver.find_element(By.ID, "hit-verdict")
+
+        def press(action: str) -> None:
+            wait.until(lambda d: d.find_element(By.CSS_SELECTOR, f'button[data-action="{action}"]').is_enabled())
+            driver.find_element(By.CSS_SELECTOR, f'button[data-action="{action}"]').click()
+
+        press("arm")
+        wait.until(lambda d: verdict.get_attribute("data-state") in ("decide", "rejected"))
+        if verdict.get_attribute("data-state") == "decide":
+            press("reject")
+            wait.until(lambda d: verdict.get_attribute("data-state") == "rejected")
+        shown = verdict.text
+        assert shown.startswith("hit ") and " at top:4:Z: REJECTED" in shown, shown
+        number = shown.split()[1]
+        wait.until(lambda d: f"hit {number} at top:4:Z rejected" in d.find_element(By.ID, "messages").text)
+        while driver.find_element(By.ID, "accepted-count").text != "1":
+            wait.until(lambda d: body.get_attribute("data-phase") in ("ready", "decide"))
+            if body.get_attribute("data-phase") == "ready":
+                seq = int(verdict.get_attribute("data-seq"))
+                press("arm")
+                wait.until(lambda d, q=seq: int(verdict.get_attribute("data-seq")) > q
+                           and body.get_attribute("data-phase") in ("decide", "ready"))
+            else:
+                press("accept")
+                wait.until(lambda d: body.get_attribute("data-phase") in ("ready", "complete"))
+        wait.until(lambda d: body.get_attribute("data-phase") == "complete")
+        driver.execute_script("const b = document.querySelector('button[data-action=\"next-point\"]'); b.click(); b.click();")
+        wait.until(lambda d: d.find_element(By.ID, "current-point").text == "right:6:-X"
+                   and body.get_attribute("data-phase") == "ready")
+        assert driver.find_element(By.ID, "accepted-count").text == "0"  # point 2 waits: not skipped
+        traces = wait.until(lambda d: (t := d.execute_script(
+            "return (document.querySelector('[data-plot=\"geometry\"]').data || []).map("
+            "t => [t.name, t.marker ? t.marker.symbol : null, t.text || []])")) and any(x[0] == "done" for x in t) and t)
+        names = [t[0] for t in traces]
+        sensor, done = traces[names.index("accelerometers")], traces[names.index("done")]
+        assert "top:4:Z" in done[2] and sensor[1] == "square-open"
+        assert names.index("accelerometers") < names.index("done")  # the dots are drawn over the squares
+        press("finish")
+        wait.until(lambda d: body.get_attribute("data-phase") == "finished")
+        errors = second_tab_errors + [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+        assert not errors, errors  # no 403 for the favicon, no 409 for the second tab's lease or a second click
+    finally:
+        driver.quit()
+        code, _out, err = s.stop()
+    assert code == 0, err
