@@ -21,7 +21,6 @@ import socket
 import threading
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import pytest
 from station_support import WAIT_S, Api, StationProcess
@@ -182,7 +181,7 @@ class _Engine:
 def small_server():
     from acquisition.station.server import StationServer
 
-    server = StationServer(("127.0.0.1", 0), _Engine(), "tok", max_connections=4, request_deadline_s=0.5)  # type: ignore[arg-type]
+    server = StationServer(("127.0.0.1", 0), _Engine(), "tok", max_connections=4, request_deadline_s=0.5)
     thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
     thread.start()
     yield server
