@@ -196,6 +196,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return run_station(args)
+    except KeyboardInterrupt:  # Ctrl-C while the station was starting (the analyser opening)
+        print("station: stopped while starting; nothing was recorded", file=sys.stderr)
+        return 130
     except (UsageError, InvalidDeviceURL, SetupError, RecordingError) as exc:
         print(f"station: {exc}", file=sys.stderr)
         return 2

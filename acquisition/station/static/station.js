@@ -98,7 +98,8 @@
     $("#device").textContent = s.device || "";
     $("#recording").textContent = s.recording ? "recording " + s.recording : "";
     const phaseText = { armed: `armed: strike at ${s.current_point || "the point"}`, ready: "ready: arm for the next hit",
-      decide: "accept or reject the hit", complete: "point complete: next point (or undo, again)", setup: "set-up: test hits, then arm to start" };
+      decide: "accept or reject the hit", complete: "point complete: next point (or undo, again)", setup: "set-up: test hits, then arm to start",
+      busy: "working: carrying out the last action" };
     $("#phase").textContent = (phaseText[s.phase] || s.phase) + (s.phase === "error" && s.error ? ": " + s.error : "");
     $("#paused").hidden = !s.paused;
     $("#current-point").textContent = s.current_point || (s.plan && s.plan[s.current] ? s.plan[s.current].point : "-");
