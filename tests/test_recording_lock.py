@@ -225,3 +225,24 @@ def test_a_stale_lock_of_a_killed_writer_is_taken_over_with_a_note(tmp_path, cap
             assert w.n_hits == 2 and lock.read_text().strip() == str(os.getpid())
     assert f"stale lock of process {proc.pid}" in caplog.text
     assert not lock.exists()
+
+
+def test_an_output_that_a_live_writer_holds_is_refused_by_every_face(tmp_path):
+    done = tmp_path / "done.h5"  # a finished recording with FRFs, the input
+    assert run("-m", "acquisition", "capture", "--device", "sim://?seed=1", "--out", str(done), "--hits", "1",
+               "--auto", "-q").returncode == 0
+    live = tmp_path / "live.h5"
+    proc = start_writer(live)
+    try:
+        assert ask(proc, "1") == "1"
+        for argv in (("-m", "acquisition", "export", str(done), "--uff", str(live), "--overwrite"),
+                     ("-m", "acquisition", "replay", str(done), "--out", str(live), "--overwrite"),
+                     ("-m", "analysis", "fit", str(done), "--json", str(live), "--overwrite")):
+            got = run(*argv)
+            lines = got.stderr.strip().splitlines()
+            assert got.returncode == 1 and len(lines) == 1, got.stderr
+            assert f"live.h5 is being recorded by process {proc.pid}" in lines[0]
+        assert ask(proc, "1") == "2"
+    finally:
+        assert stop(proc) == 0
+    assert n_hits(live) == 2
