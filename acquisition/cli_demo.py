@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from analysis.command_line import with_examples
+from analysis.command_line import cli_entry, with_examples
 
 __all__ = ["main", "DemoContext", "ScriptedStand", "STEPS", "DEMO_POINTS"]
 
@@ -207,6 +207,7 @@ def report_step(ctx: DemoContext) -> None:
 STEPS: list[Callable[[DemoContext], None]] = [capture_step, summary_step, export_step, fit_step, report_step]
 
 
+@cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition demo", description=__doc__.split("\n\n")[0])
     with_examples(p)

@@ -63,9 +63,10 @@ def lock_path(path: str | Path) -> Path:
 
 def open_lock_file(path: str | Path, *, write: bool, error: type[Exception] = RecordingError) -> int | None:
     """Open the lock file ``path`` without following a link: created when ``write``; None when it is
-    missing (reading) or its folder cannot be written (writing: the output cannot be written either,
-    the writer reports that). Raises ``error`` (one line, what to do) when ``path`` is a symbolic
-    link, not a regular file, or a file with other names (a hard link)."""
+    missing (reading) or it cannot be created in its folder (writing: the output cannot be written
+    either, the writer reports that). Raises ``error`` (one line, what to do) when ``path`` is a
+    symbolic link, not a regular file, a file with other names (a hard link) or one that exists but
+    cannot be opened for writing."""
     p = Path(path)
     flags = (os.O_RDWR | os.O_CREAT if write else os.O_RDONLY) | getattr(os, "O_NOFOLLOW", 0) \
         | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
@@ -77,6 +78,9 @@ def open_lock_file(path: str | Path, *, write: bool, error: type[Exception] = Re
         if exc.errno == errno.ENOENT and not write:
             return None
         if exc.errno in (errno.EACCES, errno.EROFS, errno.EPERM):
+            if write and os.path.lexists(p):  # another user's lock file: never ignored
+                raise error(f"{p} cannot be opened for writing ({exc.strerror}): it belongs to another user's "
+                            "writer; wait for it to finish or choose another output file") from None
             return None
         raise
     st = os.fstat(fd)
@@ -184,6 +188,8 @@ class WriterLock:
         self._depth = 0
         self._fd: int | None = None
         existed = os.path.lexists(self.path)
+        if existed and writer_alive(self.recording):  # seen read-only too (another user's writer)
+            raise busy_error(self.recording)
         for _ in range(100):  # another writer may remove the file between our open and our lock
             fd = open_lock_file(self.path, write=True)
             if fd is None:

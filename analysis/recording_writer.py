@@ -266,11 +266,15 @@ class RecordingWriter:
         self._f.attrs[str(key)] = value
         self._f.flush()
 
-    def close(self) -> None:
+    def close(self, discard: bool = False) -> None:
+        """Close the recording (``discard``: and delete it, still holding its lock, so that a writer
+        that has started on the same path since is never touched)."""
         if self._f.id.valid:
             with self._lock.changing():
                 self._f.attrs["closed_utc"] = _now_iso()
                 self._f.close()
+        if discard:
+            self.path.unlink(missing_ok=True)
         self._lock.release()
 
     def __enter__(self) -> RecordingWriter:
