@@ -206,9 +206,12 @@ class WriterLock:
         self._fd = fd
         if existed:
             left = _pid_in(fd)
-            log.warning("%s: removed the stale lock of %s, which no longer has the recording open (a writer that was "
-                        "killed); the recording is checked as it is opened", self.path,
-                        f"process {left}" if left is not None else "a writer")
+            if left is None:
+                log.warning("%s: removed a stale empty lock file (left by a writer killed before its recording "
+                            "existed)", self.path)
+            else:
+                log.warning("%s: removed the stale lock of process %d, which no longer has the recording open (a "
+                            "writer that was killed)", self.path, left)
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         os.fsync(fd)
