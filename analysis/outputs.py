@@ -13,7 +13,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from .errors import UsageError
-from .recording_lock import busy_error, locked_by_writer
+from .recording_lock import busy_error, writer_alive
 
 __all__ = ["same_file", "check_outputs"]
 
@@ -66,5 +66,5 @@ def check_outputs(outputs: Iterable[PathLike | None], inputs: Iterable[PathLike 
                                  "file")
             if k is not None:
                 seen[k] = out
-        if locked_by_writer(out):
+        if writer_alive(out):
             raise busy_error(out)

@@ -42,7 +42,7 @@ from typing import Any, TypeVar
 
 from analysis.errors import OutputBusy, RecordingError
 
-__all__ = ["WriterLock", "locked", "lock_path", "open_lock_file", "writer_alive", "locked_by_writer", "live_copy",
+__all__ = ["WriterLock", "locked", "lock_path", "open_lock_file", "writer_alive", "live_copy",
            "holder_pid", "locked_error", "busy_error", "is_lock_error", "held_by_other_program"]
 
 log = logging.getLogger(__name__)
@@ -216,9 +216,6 @@ class WriterLock:
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         os.fsync(fd)
 
-    def claim(self) -> None:
-        """Kept for callers of the earlier protocol: the process id is written when the lock is taken."""
-
     @contextlib.contextmanager
     def changing(self) -> Iterator[None]:
         """Hold byte 1 exclusively while the body changes and flushes the recording (re-entrant)."""
@@ -317,10 +314,6 @@ def writer_alive(path: str | Path) -> bool:
         return _held_exclusively(fd, ALIVE_BYTE)
     finally:
         os.close(fd)
-
-
-#: the earlier name of :func:`writer_alive`
-locked_by_writer = writer_alive
 
 
 def held_by_other_program(path: str | Path) -> bool:
