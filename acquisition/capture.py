@@ -65,8 +65,8 @@ def capture_to_file(
                 writer.log("ERROR", str(exc))
                 raise
         finally:
-            writer.close()
-            if result is None and writer.n_hits == 0:  # failed before its first hit: nothing to keep
-                out.unlink(missing_ok=True)
+            empty = result is None and writer.n_hits == 0  # failed before its first hit: nothing to keep
+            writer.close(discard=empty)
+            if empty:
                 log.info("removed %s: the capture failed before its first hit", out)
     return result

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from analysis.command_line import add_overwrite, cli_entry, exit_on, with_examples
+from analysis.outputs import check_outputs
 
 from .capture import capture_to_file, open_analyser
 from .capture_options import continue_stream, plan_from_options, recorded_plan, recorded_test, with_seed
@@ -89,10 +90,11 @@ def run_capture(args: argparse.Namespace, out_stream: TextIO | None = None) -> t
         raise UsageError("give --device URL and --out REC.h5 (or --resume REC.h5 to continue a capture)")
     url = with_seed(args.device, args.seed)
     out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise UsageError(f"{out} exists: choose another --out file or add --overwrite")
     parsed = parse_device_url(url)
     replay_path = parsed.options.get("replay") if isinstance(parsed, SimURL) else None
+    check_outputs([out], [args.setup, replay_path])
+    if out.exists() and not args.overwrite:
+        raise UsageError(f"{out} exists: choose another --out file or add --overwrite")
     replay_plan = None
     if args.setup:
         setup = load_setup(args.setup)

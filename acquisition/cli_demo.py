@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from analysis.command_line import with_examples
+from analysis.command_line import cli_entry, with_examples
 
 __all__ = ["main", "DemoContext", "ScriptedStand", "STEPS", "DEMO_POINTS"]
 
@@ -112,16 +112,14 @@ def capture_step(ctx: DemoContext) -> None:
     plan = TestPlan(mode="roving_hammer", points=ctx.points, hits_per_point=ctx.hits)
     windows = parse_windows(DEFAULT_FORCE_WINDOW, DEMO_EXP_WINDOW, setup.sample_rate_hz).resolved(
         setup.block_size, setup.sample_rate_hz, setup.trigger.pretrigger_samples)
-    ctx.recording = ctx.out_dir / "demo.h5"
-    if ctx.recording.exists():
-        ctx.recording.unlink()
+    ctx.recording = ctx.out_dir / "demo.h5"  # the demo's own: replaced, unless a live writer has it open
     with Analyser(LoopbackTransport(fw, url=f"sim://?seed={ctx.seed}")) as analyser:
         identity = analyser.identify()
         ctx.say(f"analyser: {identity}  (simulated frame, seed {ctx.seed}; strike {DOUBLE_HIT_STRIKE} is a double "
                 f"hit and strike {OVERLOAD_STRIKE} an overload, on purpose)")
         with RecordingWriter(ctx.recording, instrument=identity.as_dict(), setup=setup.to_dict(),
                              channels=channel_table(setup), windows=windows,
-                             plan={**plan.to_dict(), "device": "sim:// (demo, scripted stand)"}) as writer:
+                             plan={**plan.to_dict(), "device": "sim:// (demo, scripted stand)"}, overwrite=True) as writer:
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=auto_accept,
                                      progress=ctx.say)
             ctx.result = session.run()
@@ -201,13 +199,15 @@ def report_step(ctx: DemoContext) -> None:
     from simulator.geometry import frame_geometry
 
     assert ctx.recording is not None, "the capture step comes first"
-    index = make_report(ctx.recording, ctx.out_dir / "report", fit_json=ctx.out_dir / "fit.json", geometry=frame_geometry())
+    index = make_report(ctx.recording, ctx.out_dir / "report", fit_json=ctx.out_dir / "fit.json", geometry=frame_geometry(),
+                        overwrite=True)  # the demo's own report folder
     ctx.say(f"report: {index} (open {index.resolve().as_uri()} in a browser)")
 
 
 STEPS: list[Callable[[DemoContext], None]] = [capture_step, summary_step, export_step, fit_step, report_step]
 
 
+@cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m acquisition demo", description=__doc__.split("\n\n")[0])
     with_examples(p)

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from analysis.command_line import add_estimator, add_overwrite, cli_entry, errors_to_exit, with_examples
+from analysis.outputs import check_outputs
 
 __all__ = ["main", "export"]
 
@@ -90,6 +91,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("export: give --uff OUT.uff and/or --sep005 OUT.json", file=sys.stderr)
         return 2
     with errors_to_exit("export", (RecordingError, UFFError, SEP005Error, ValueError)):
+        check_outputs([args.uff, args.sep005], [args.recording])
         if args.uff:
             n = export(args.recording, args.uff, time_data=args.time, estimator=args.estimator,
                        overwrite=args.overwrite)

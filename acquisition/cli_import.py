@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, with_examples
+from analysis.outputs import check_outputs
 
 from .errors import RecordingError, UsageError
 from .window_options import parse_windows
@@ -71,6 +72,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     drop = args.drop_nonfinite
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
+        check_outputs([args.out], [*args.files, args.describe])
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
         if fmt == "lvm":
             tests = [_read(read_lvm, f, drop=drop) for f in args.files]

@@ -23,6 +23,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from analysis.command_line import with_examples
+from analysis.errors import OutputBusy
+from analysis.outputs import check_outputs
 
 from .capture import open_analyser
 from .capture_options import plan_from_options, recorded_test, with_seed
@@ -96,6 +98,7 @@ def _prepare(args: argparse.Namespace) -> dict:
         raise UsageError("give --device URL and --out REC.h5 (or --resume REC.h5 to continue a recording)")
     url = with_seed(args.device, args.seed)
     out = Path(args.out)
+    check_outputs([out], [args.setup])
     if out.exists() and not args.overwrite:
         raise UsageError(f"{out} exists: choose another --out file or add --overwrite")
     setup = load_setup(args.setup) if args.setup else default_setup()
@@ -199,6 +202,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl-C while the station was starting (the analyser opening)
         print("station: stopped while starting; nothing was recorded", file=sys.stderr)
         return 130
+    except OutputBusy as exc:
+        print(f"station: {exc}", file=sys.stderr)
+        return 1
     except (UsageError, InvalidDeviceURL, SetupError, RecordingError) as exc:
         print(f"station: {exc}", file=sys.stderr)
         return 2

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from analysis.outputs import check_outputs
 from analysis.spectra import WindowSettings
 
 from .errors import UsageError
@@ -22,8 +23,7 @@ def replay(src: str | Path, out: str | Path, *, windows: WindowSettings | None =
     from .session import average_recorded_hits
 
     src, out = Path(src), Path(out)
-    if src.resolve() == out.resolve():
-        raise UsageError("--out must differ from the input: replay never modifies the original")
+    check_outputs([out], [src])  # replay never modifies the original, also through a link
     with Recording(src) as rec:
         win = windows or rec.windows
         all_hits = list(rec.hits())

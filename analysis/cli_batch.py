@@ -29,7 +29,9 @@ from pathlib import Path
 from typing import Any
 
 from .command_line import Parser, add_threads, cli_entry, errors_to_exit, exit_on, parse_args, with_examples
+from .errors import UsageError
 from .inputs import InputError, parse_band_text
+from .outputs import check_outputs
 from .threads import ENV_VAR as THREADS_ENV_VAR
 
 __all__ = ["main", "build_parser", "expand_inputs"]
@@ -114,6 +116,12 @@ def _progress(quiet: bool, t0: float) -> Callable[[dict[str, Any], int, int], No
     return show
 
 
+def _written(out: Path) -> list[Path]:
+    """The files a batch writes into ``out`` (its fits: those already there)."""
+    fits = sorted((out / "fits").glob("*.json")) if (out / "fits").is_dir() else []
+    return [out / "modes.parquet", out / "fleet.json", out / "fleet.png", *fits]
+
+
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(build_parser(), argv)
@@ -122,8 +130,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .batch.unit_modes import read_reference
 
     skipped: list[str] = []
-    with errors_to_exit("analysis batch", InputError):
+    with errors_to_exit("analysis batch", (InputError, UsageError)):
         paths = expand_inputs(args.inputs, skipped)
+        check_outputs(_written(Path(args.out)), [*paths, args.reference])
         if skipped:
             print(f"analysis batch: skipped {len(skipped)} match(es) that are not regular files: "
                   f"{', '.join(skipped[:10])}{' ...' if len(skipped) > 10 else ''}", file=sys.stderr)

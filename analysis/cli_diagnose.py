@@ -28,6 +28,7 @@ if TYPE_CHECKING:
 
 from .command_line import Parser as _Parser
 from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, parse_args, with_examples
+from .outputs import check_outputs
 
 __all__ = ["main", "build_parser", "load_simulations", "joint_simulation"]
 
@@ -110,6 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return args
     try:
         check_out_dir(args.json, error=InputError)
+        check_outputs([args.json, *_report_files(args.report)], [args.measured, args.simulated])
         effects = None
         if args.effects:
             effects = [e.strip() for e in args.effects.split(",") if e.strip()]
@@ -147,6 +149,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     for c in diag.causes[:5]:
         print(f"  {'*' if c['significant'] else ' '} {c['evidence']}")
     return 0
+
+
+def _report_files(folder: str | None) -> list[Path]:
+    """The files ``--report DIR`` writes that can be named before the diagnosis runs (its FRF plots:
+    those already there)."""
+    if folder is None:
+        return []
+    out = Path(folder)
+    return [out / "report.md", out / "diagnosis.json", out / "bands.png", *sorted(out.glob("frf_*.png"))]
 
 
 def _recording(path: str) -> Path | None:

@@ -23,6 +23,7 @@ __all__ = ["main", "build_parser"]
 from .command_line import Parser as _Parser
 from .command_line import UsageError as _UsageError
 from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, errors_to_exit, parse_args, with_examples
+from .outputs import check_outputs
 
 if TYPE_CHECKING:
     from .frf import FRFSet
@@ -161,6 +162,7 @@ def _check_options(args: argparse.Namespace) -> tuple:
     mains = () if str(args.mains).strip().lower() == "none" else tuple(parse_float_list(args.mains))
     if any(m <= 0 for m in mains) or (args.exclude_mains is not None and not args.exclude_mains > 0):
         raise InputError("mains frequencies must be > 0 Hz (or --mains none)")
+    check_outputs([args.json, args.plot, args.uff], [args.input, args.poles, args.geometry])
     for path, what in ((args.json, "JSON"), (args.plot, "plot"), (args.uff, "UFF file")):
         check_out_dir(path, what)
         if path and Path(path).exists() and not args.overwrite:

@@ -25,6 +25,8 @@ import numpy as np
 
 from .command_line import Parser as _Parser
 from .command_line import add_estimator, check_out_dir, parse_args, with_examples
+from .errors import OutputBusy
+from .outputs import check_outputs
 
 __all__ = ["main", "build_parser"]
 
@@ -69,6 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return args
     try:
         check_out_dir(args.json, error=InputError)
+        check_outputs([args.json], args.inputs)
         band = parse_band_text(args.band)
         levels = _levels(args, len(args.inputs))
         if len(args.inputs) == 1:
@@ -90,6 +93,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     raise InputError("give --levels (one per input): the level cannot be read from every input")
                 levels = [float(np.median([np.max(np.abs(h.force)) for h in f[0]])) for f in found if f is not None]
         result = compare_levels(sets, levels, band=band, z=args.z)
+    except OutputBusy as exc:
+        print(f"analysis linearity: {exc}", file=sys.stderr)
+        return 1
     except (InputError, RecordingError, FitError, ValueError, OSError) as exc:
         print(f"analysis linearity: {exc}", file=sys.stderr)
         return 2

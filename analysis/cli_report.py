@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ._cli_dispatch import Parser, parse_args
-from .command_line import add_estimator, add_threads, cli_entry, with_examples
-from .errors import ImpactlabError
+from .command_line import add_estimator, add_overwrite, add_threads, cli_entry, with_examples
+from .errors import ImpactlabError, OutputBusy
 
 if TYPE_CHECKING:
     from .geometry import Geometry
@@ -36,6 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--geometry", metavar="G",
                    help="UFF file with nodes (15) and trace lines (82), 'frame' or a simulator config .toml "
                         "(default: the simulated frame for simulator recordings, else the points on a line)")
+    add_overwrite(p, "replace the report files (index.html and its assets) already in DIR")
     add_estimator(p)
     add_threads(p)
     return p
@@ -77,7 +78,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if detect_format(args.input) == "recording":
             device = recording_device(args.input)
         index = make_report(args.input, args.out, fit_json=args.fit, diagnosis=args.diagnosis,
-                            geometry=choose_geometry(args.geometry, device), estimator=args.estimator)
+                            geometry=choose_geometry(args.geometry, device), estimator=args.estimator,
+                            overwrite=args.overwrite, inputs=[args.geometry])
+    except OutputBusy as exc:
+        print(f"analysis report: {exc}", file=sys.stderr)
+        return 1
     except (ImpactlabError, ValueError, OSError) as exc:
         print(f"analysis report: {exc}", file=sys.stderr)
         return 2

@@ -17,6 +17,8 @@ __all__ = ["main", "build_parser"]
 
 from .command_line import Parser as _Parser
 from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, errors_to_exit, parse_args, with_examples
+from .errors import UsageError
+from .outputs import check_outputs
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -46,7 +48,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
-    with errors_to_exit("analysis stabilization", InputError):
+    with errors_to_exit("analysis stabilization", (InputError, UsageError)):
+        check_outputs([args.png, args.json], [args.input])
         band = parse_band_text(args.band)
         if args.max_order is not None and args.max_order < 1:
             raise InputError(f"--max-order must be >= 1; got {args.max_order}")

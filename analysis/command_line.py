@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TypeVar
 
-from .errors import UsageError
+from .errors import OutputBusy, UsageError
 
 __all__ = ["UsageError", "Parser", "parse_args", "with_examples", "add_overwrite", "add_estimator", "add_json_flag",
            "add_threads", "add_verbose", "set_verbosity", "check_out_dir", "CliExit", "exit_on", "errors_to_exit", "cli_entry"]
@@ -195,11 +195,15 @@ Rule = tuple[Errors, int] | tuple[Errors, int, str]
 def exit_on(prog: str, *rules: Rule) -> Iterator[None]:
     """Inside the block, an error matching a rule ``(errors, code[, prefix])`` (the first that
     matches, in order) prints ``PROG: PREFIXERROR`` on stderr and ends the command with ``code``
-    (raises :class:`CliExit`, which :func:`cli_entry` turns into the return value)."""
+    (raises :class:`CliExit`, which :func:`cli_entry` turns into the return value). An output a live
+    writer holds (:class:`~analysis.errors.OutputBusy`) always ends it with 1, before any rule."""
     try:
         yield
     except CliExit:
         raise
+    except OutputBusy as exc:  # every command alike: a runtime failure, never written over
+        print(f"{prog}: {exc}", file=sys.stderr)
+        raise CliExit(1) from None
     except BaseException as exc:
         for rule in rules:
             if isinstance(exc, rule[0]):
@@ -248,6 +252,9 @@ def cli_entry(main: F) -> F:
                 return main(*args, **kwargs)
         except CliExit as done:
             return done.code
+        except OutputBusy as exc:
+            print(f"{_prog_of(main)}: {exc}", file=sys.stderr)
+            return 1
         except (KeyboardInterrupt, MemoryError, RecursionError) as exc:
             return _last_resort(_prog_of(main), exc)
         except OSError as exc:

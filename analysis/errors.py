@@ -24,6 +24,7 @@ __all__ = [
     "ChildCrashed",
     "ChildTimeout",
     "FolderBusy",
+    "OutputBusy",
     "WorkLimitError",
 ]
 
@@ -90,6 +91,11 @@ class ChildTimeout(ImpactlabError, RuntimeError):
 
 class FolderBusy(ImpactlabError, OSError):
     """Another process holds an output folder's lock (a batch writing there); the message names its pid."""
+
+
+class OutputBusy(ImpactlabError, OSError):
+    """An output file that a live writer holds (a recording being captured, recorded by the station or
+    imported): nothing is written to it; the message names the writer's pid. Commands exit with 1."""
 
 
 class WorkLimitError(UsageError):

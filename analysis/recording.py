@@ -26,7 +26,7 @@ from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.spectra import WindowSettings, excitation_limit_hz
 
-from .recording_lock import is_lock_error, live_copy, locked_by_writer, locked_error
+from .recording_lock import is_lock_error, live_copy, locked_error, writer_alive
 from .recording_schema import _DAMAGE, CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _as_str, _h5py, counts_crc32, scale_counts
 
 __all__ = [
@@ -69,12 +69,15 @@ class Recording:
                 "'python -m acquisition capture' or 'python -m acquisition import'"
             )
         self._live_copy: Path | None = None
-        try:
-            self._f = h5py.File(self.path, "r")
-        except OSError as exc:
-            if not is_lock_error(exc):
-                raise self._unopenable(exc) from None
+        if writer_alive(self.path):  # our own lock, also where libhdf5's is off (HDF5_USE_FILE_LOCKING=FALSE)
             self._f = self._open_live()
+        else:
+            try:
+                self._f = h5py.File(self.path, "r")
+            except OSError as exc:
+                if not is_lock_error(exc):
+                    raise self._unopenable(exc) from None
+                self._f = self._open_live()
         self._file_bytes = Path(self._f.filename).stat().st_size
         try:
             self._validate()
@@ -88,7 +91,7 @@ class Recording:
 
     def _open_live(self) -> Any:
         """Open a consistent copy of a recording a writer has open (``analysis.recording_lock``)."""
-        if not locked_by_writer(self.path):
+        if not writer_alive(self.path):
             raise locked_error(self.path)
         try:
             self._live_copy = live_copy(self.path)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -18,7 +19,8 @@ from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.spectra import AveragedSpectra, WindowSettings
 
-from .recording_lock import WriterLock, is_lock_error, locked, locked_error
+from .atomic import atomic_path
+from .recording_lock import WriterLock, held_by_other_program, is_lock_error, locked, locked_error
 from .recording_schema import _DAMAGE, SCHEMA, SCHEMA_VERSION, _as_str, _channel_table, _h5py, _now_iso, counts_crc32
 
 __all__ = ["RecordingWriter", "FRFPoint"]
@@ -62,12 +64,32 @@ class RecordingWriter:
         overwrite: bool = False,
     ) -> None:
         self.path = Path(path)
-        if self.path.exists() and not overwrite:
-            raise RecordingError(f"{self.path} exists: choose another --out file or delete it first")
-        self._lock = WriterLock(self.path)
-        with self._lock.changing():
-            self._open_locked("w", lambda exc: RecordingError(f"cannot create recording {self.path}: {exc}"))
-            self._create(instrument, setup, channels, windows, plan, software)
+        self._lock = WriterLock(self.path)  # OutputBusy when a live writer has the recording open
+        try:
+            if os.path.lexists(self.path) and not overwrite:
+                raise RecordingError(f"{self.path} exists: choose another --out file or delete it first")
+            if held_by_other_program(self.path):
+                raise locked_error(self.path)
+            with self._lock.changing():
+                self._create_beside(instrument, setup, channels, windows, plan, software)
+        except BaseException:
+            self._lock.release()
+            raise
+
+    def _create_beside(self, instrument: dict, setup: dict, channels: Sequence[dict], windows: WindowSettings,
+                       plan: dict | None, software: str) -> None:
+        """Create the new recording in a temporary file beside the target and rename it into place (a
+        file there, replaced with ``overwrite``, stays whole until then); the writer keeps it open."""
+        with atomic_path(self.path) as tmp:
+            try:
+                self._f = _h5py().File(tmp, "x")
+            except OSError as exc:
+                raise RecordingError(f"cannot create recording {self.path}: {exc}") from None
+            try:
+                self._create(instrument, setup, channels, windows, plan, software)
+            except BaseException:
+                self._f.close()
+                raise
 
     def _open_locked(self, mode: str, failed: Any) -> None:
         """Open the HDF5 file for writing holding the lock readers follow (``analysis.recording_lock``)."""
@@ -77,7 +99,6 @@ class RecordingWriter:
         except OSError as exc:
             self._lock.release()
             raise (locked_error(self.path) if is_lock_error(exc) else failed(exc)) from None
-        self._lock.claim()
 
     def _create(self, instrument: dict, setup: dict, channels: Sequence[dict], windows: WindowSettings,
                 plan: dict | None, software: str) -> None:
@@ -119,7 +140,7 @@ class RecordingWriter:
         verify_recording(path)  # in a child process: damage (even a libhdf5 crash) becomes RecordingError
         self = cls.__new__(cls)
         self.path = Path(path)
-        self._lock = WriterLock(self.path)
+        self._lock = WriterLock(self.path)  # OutputBusy when a live writer has the recording open
         with self._lock.changing():
             self._open_locked("r+", lambda exc: RecordingError(
                 f"cannot open {self.path} for appending ({exc}); copy it and resume the copy, or start a new "
@@ -245,11 +266,15 @@ class RecordingWriter:
         self._f.attrs[str(key)] = value
         self._f.flush()
 
-    def close(self) -> None:
+    def close(self, discard: bool = False) -> None:
+        """Close the recording (``discard``: and delete it, still holding its lock, so that a writer
+        that has started on the same path since is never touched)."""
         if self._f.id.valid:
             with self._lock.changing():
                 self._f.attrs["closed_utc"] = _now_iso()
                 self._f.close()
+        if discard:
+            self.path.unlink(missing_ok=True)
         self._lock.release()
 
     def __enter__(self) -> RecordingWriter:

@@ -1,13 +1,15 @@
 """One batch at a time per output folder: ``DIR/.batch.lock`` holds the running batch's process id
 under an exclusive ``flock`` (released by the operating system when the process ends, even when
 it is killed), so a second ``analysis batch --out DIR`` refuses at once naming the holder instead
-of mixing its results with the first one's."""
+of mixing its results with the first one's. The lock file is never written through a link
+(:func:`analysis.recording_lock.open_lock_file`)."""
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
 from ..errors import FolderBusy
+from ..recording_lock import open_lock_file
 
 __all__ = ["FolderLock", "FolderBusy"]
 
@@ -19,7 +21,9 @@ class FolderLock:
 
     def __init__(self, folder: str | Path) -> None:
         self.path = Path(folder) / LOCK_NAME
-        self._fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        self._fd: int | None = open_lock_file(self.path, write=True, error=FolderBusy)  # never through a link
+        if self._fd is None:  # a folder that cannot be written: the results cannot be either (reported there)
+            return
         try:
             import fcntl
         except ImportError:  # no flock on this platform: no protection, as before

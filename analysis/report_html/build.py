@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import shutil
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 
@@ -15,7 +17,7 @@ from .collect import frf_section, modal_section, points_section, shape_vectors, 
 from .page import render_page, written_stamp
 from .sources import FitData, ReportInputError, TestRecord, load_diagnosis, load_fit_json, read_test_record, run_fit
 
-__all__ = ["build_document", "make_report", "write_report"]
+__all__ = ["build_document", "make_report", "write_report", "report_files", "check_report_folder"]
 
 log = logging.getLogger(__name__)
 _OWN_ASSETS = ("report.js", "report.css")
@@ -101,14 +103,38 @@ def _default(x: object) -> bool | int | float | list:
     raise TypeError(f"{type(x).__name__} is not JSON serialisable")
 
 
+def report_files(out_dir: str | Path) -> list[Path]:
+    """The files a report writes into ``out_dir`` (``index.html`` and its assets)."""
+    out = Path(out_dir)
+    return [out / name for name in ("index.html", "report-data.js", *_OWN_ASSETS, "plotly.min.js")]
+
+
+def check_report_folder(out_dir: str | Path, inputs: Sequence[str | Path | None] = (), overwrite: bool = False) -> None:
+    """Refuse, before any work, a report folder whose files are inputs or held by a live writer
+    (:func:`analysis.outputs.check_outputs`), or that already holds a report file without ``overwrite``
+    (the user's own ``index.html`` is never replaced unasked)."""
+    from ..outputs import check_outputs
+
+    files = report_files(out_dir)
+    check_outputs(files, inputs)
+    there = [f.name for f in files if os.path.lexists(f)]
+    if there and not overwrite:
+        raise ReportInputError(f"{out_dir} already holds {', '.join(there)}: add --overwrite to replace them, or give "
+                               "another --out folder")
+
+
 def make_report(input_path: str | Path, out_dir: str | Path, *, fit_json: str | Path | None = None,
                 diagnosis: str | Path | None = None, geometry: Geometry | None = None,
-                estimator: str | None = None) -> Path:
+                estimator: str | None = None, overwrite: bool = False, inputs: Sequence[str | Path | None] = ()) -> Path:
     """Write the report of a recording or UFF file into ``out_dir``; returns ``index.html``.
 
     Without ``fit_json`` the automatic fit runs here; ``geometry`` None puts the points on a line.
+    Report files already in ``out_dir`` are replaced only with ``overwrite``, and never when they are
+    an input (``input_path``, ``fit_json``, ``diagnosis`` or one of ``inputs``: :func:`check_report_folder`).
     """
     from ..inputs import detect_format, load_input
+
+    check_report_folder(out_dir, [input_path, fit_json, diagnosis, *inputs], overwrite)
 
     frf = load_input(input_path, estimator=estimator)
     record = read_test_record(input_path) if detect_format(input_path) == "recording" else None
