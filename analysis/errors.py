@@ -25,6 +25,7 @@ __all__ = [
     "ChildTimeout",
     "FolderBusy",
     "WorkLimitError",
+    "DiskFullError",
 ]
 
 
@@ -95,3 +96,8 @@ class FolderBusy(ImpactlabError, OSError):
 class WorkLimitError(UsageError):
     """A request for more work than the data support or the machine can hold (the message names the
     largest accepted value)."""
+
+
+class DiskFullError(ImpactlabError, OSError):
+    """A file could not be written for want of room (disk full, file size limit, quota); the message
+    says what was kept and what to do. Commands end with exit code 1."""
