@@ -21,6 +21,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from .disk_space import disk_full_cause
+from .errors import DiskFullError
+
 __all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_json_atomic", "temporary_beside",
            "remove_stale_temporaries"]
 
@@ -93,9 +96,12 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        full = disk_full_cause(exc)
+        if full is not None and not isinstance(full, DiskFullError):  # named by the file the user asked for
+            raise OSError(full.errno, full.strerror, str(target)) from None
         raise
     _fsync_folder(target.parent)
 

@@ -220,7 +220,8 @@ def disk_full_line(prog: str, exc: BaseException) -> str:
         return f"{prog}: {exc}"
     cause = disk_full_cause(exc)
     assert cause is not None
-    where = f" {cause.filename}" if getattr(cause, "filename", None) else " an output"
+    name = getattr(cause, "filename2", None) or getattr(cause, "filename", None)  # a copy's target is filename2
+    where = f" {name}" if name else " an output"
     return (f"{prog}: cannot write{where}: {cause.strerror or cause} (the disk is full or the file size limit is "
             "reached); free space or write elsewhere, then run the command again")
 

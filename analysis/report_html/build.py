@@ -73,7 +73,13 @@ def write_report(out_dir: str | Path, doc: dict) -> Path:
             raise
         raise ReportInputError(f"cannot create the report folder {out}: {exc.strerror}") from None
     try:
-        _write_files(tmp, doc)
+        try:
+            _write_files(tmp, doc)
+        except OSError as exc:
+            full = disk_full_cause(exc)
+            if full is None:
+                raise
+            raise OSError(full.errno, full.strerror, str(out)) from None  # named by the folder asked for
         if not out.exists():
             os.replace(tmp, out)
         else:
