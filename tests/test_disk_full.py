@@ -8,13 +8,18 @@ from __future__ import annotations
 
 import contextlib
 import os
+import resource
+import signal
 import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import numpy as np
 import pytest
-from disk_full_support import CAPTURE, one_line_exit_1, one_point_recording, run
+from disk_full_support import CAPTURE, POINTS, one_line_exit_1, one_point_recording, run
+from station_support import WAIT_S, Api
 
 from analysis.recording import Recording, verify_recording
 
@@ -55,6 +60,37 @@ def test_capture_on_a_full_disk_keeps_every_hit_and_the_test_resumes(tmp_path):
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     with Recording(tmp_path / "rec.h5") as rec:
         assert sum(h.accepted for h in rec.hits()) == 6 and len(rec.measurement_names()) == 3
+
+
+class LimitedStation:
+    """The station in a child process with the file size limit ``limit`` (bytes); what
+    :class:`station_support.Api` needs of it: ``host``, ``port``, ``token``."""
+
+    def __init__(self, args: list[str], cwd: Path, limit: int) -> None:
+        def limited() -> None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+        self.proc = subprocess.Popen([sys.executable, "-m", "acquisition", "station", *args], cwd=cwd, text=True,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=limited)
+        assert self.proc.stdout is not None
+        parts = urlsplit(self.proc.stdout.readline().strip())
+        self.host, self.port, self.token = parts.hostname, parts.port, parts.query.split("token=", 1)[1]
+
+
+def test_the_station_on_a_full_disk_ends_with_one_line_and_keeps_every_hit(tmp_path):
+    station = LimitedStation(["--device", "sim://?seed=1", "--out", "rec.h5", "--hits", "2", "--auto", "-q",
+                              "--points", POINTS], tmp_path, LIMIT)
+    try:
+        st = Api(station).wait(lambda s: s.get("phase") in ("error", "finished"), "the disk to fill")
+    finally:
+        station.proc.send_signal(signal.SIGTERM)
+        _, err = station.proc.communicate(timeout=WAIT_S)
+    assert st["phase"] == "error" and "no room on the disk" in st["error"]
+    assert station.proc.returncode == 1 and "Traceback" not in err
+    assert [ln for ln in err.splitlines() if ln.startswith("station:")] == [f"station: {st['error']}"]
+    n, accepted = check_every_hit_readable(tmp_path / "rec.h5")
+    assert 1 <= accepted < 6
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.h5"]
 
 
 def test_replay_and_import_onto_a_full_disk_leave_no_partial_recording(tmp_path):
