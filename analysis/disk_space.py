@@ -18,8 +18,10 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
+import functools
 import os
 from pathlib import Path
+from typing import Any
 
 from .errors import DiskFullError
 
@@ -53,16 +55,24 @@ def _file_size_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else int(soft)
 
 
+@functools.lru_cache(maxsize=1)
+def _fallocate() -> Any:
+    """The C library's ``fallocate`` (Linux), None where there is none."""
+    try:
+        fallocate = ctypes.CDLL(None, use_errno=True).fallocate
+    except (OSError, AttributeError, TypeError):
+        return None
+    fallocate.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64]
+    fallocate.restype = ctypes.c_int
+    return fallocate
+
+
 def _fallocate_keep_size(fd: int, offset: int, nbytes: int) -> bool:
     """Reserve ``nbytes`` from ``offset`` without changing the file's size; False when the system
     cannot (no ``fallocate``, or not on this file system); raises ``OSError`` when it has no room."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        fallocate = libc.fallocate
-    except (OSError, AttributeError):
+    fallocate = _fallocate()
+    if fallocate is None:
         return False
-    fallocate.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64]
-    fallocate.restype = ctypes.c_int
     if fallocate(fd, _FALLOC_FL_KEEP_SIZE, offset, nbytes) == 0:
         return True
     code = ctypes.get_errno()
@@ -84,6 +94,8 @@ def reserve(fd: int, nbytes: int, path: str | os.PathLike[str]) -> None:
             return
     except OSError as exc:
         raise OSError(exc.errno, exc.strerror, os.fspath(path)) from None
+    if not hasattr(os, "fstatvfs"):  # Windows: no way to ask; the write itself will tell
+        return
     st = os.fstatvfs(fd)
     if st.f_bavail * st.f_frsize < nbytes:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), os.fspath(path))

@@ -1,20 +1,22 @@
 """Disk-full soak: capture, station, replay, import, export, report and batch onto a small disk that
 fills up at a different moment in each run.
 
-    .venv/bin/python benchmarks/reliability/soak_disk_full.py [--runs 8] [--size-mb 8] [--only capture,...]
-        [--json]
+    .venv/bin/python benchmarks/reliability/soak_disk_full.py [--runs 12] [--size-mb 8] [--max-free-mb 5]
+        [--only capture,...] [--limit] [--json]
 
 Each run mounts a tmpfs of ``--size-mb`` (as root; elsewhere a file size limit on the child stands
-in for it, ``--limit``), fills it with a file so that a different amount of room is left (from a
-20 kB to almost all of it), and runs one command writing onto it. Afterwards it checks:
+in for it, ``--limit``), fills it with a file so that a different amount of room is left (from
+20 kB to ``--max-free-mb``; the last run has all the room), and runs one command writing onto it.
+Afterwards it checks:
 
 * the exit code (0 when everything fitted, else 1) and that stderr holds one line, no traceback;
 * capture and station: every hit in the recording is readable (its CRC-32 matches its counts) and
   identical to the same hit of a run with room (the simulated analyser is seeded), the accepted
   hits are all in the FRF results, no lock file is left, and once the filler is removed the test
   resumes (``capture --resume``) to the full plan;
-* replay, import, export, report, batch: the output is either complete or absent, and an output
-  that existed before (an earlier export or report) is byte for byte unchanged;
+* replay, import, export, report: the output is either complete or absent, and an output that
+  existed before (an earlier export or report) is byte for byte unchanged; batch: its output folder
+  stays for the next run (finished results are reused), every file in it whole;
 * files left: anything on the disk besides the filler, the outputs and the earlier outputs.
 
 Prints one row per command: runs, exit codes, hits accepted vs readable, problems, files left.
@@ -54,7 +56,8 @@ class Row:
     command: str
     runs: int = 0
     codes: collections.Counter = field(default_factory=collections.Counter)
-    accepted: int = 0          # accepted hits written before the disk filled (capture, station)
+    stopped: int = 0           # runs a full disk stopped (exit 1) that left a recording (capture, station)
+    accepted: int = 0          # accepted hits those recordings hold
     readable: int = 0          # of those, readable and identical to the run with room
     in_frfs: int = 0           # of those, in the recording's FRF results
     resumed: int = 0           # runs whose test was resumed to the full plan once there was room
@@ -132,8 +135,8 @@ def check_recording(row: Row, rec_path: Path, ref: list[tuple[int, bool]], disk:
     from analysis.errors import RecordingError
     from analysis.recording import Recording
 
-    if not rec_path.exists():
-        return  # no room for the first hit: nothing recorded, nothing to lose
+    if not rec_path.exists() or not stopped:
+        return  # no room for the first hit: nothing recorded, nothing to lose; or a run with room
     try:
         got = reference_hits(rec_path)
         with Recording(rec_path) as rec:
@@ -142,13 +145,12 @@ def check_recording(row: Row, rec_path: Path, ref: list[tuple[int, bool]], disk:
     except (RecordingError, OSError, ValueError) as exc:
         row.problems.append(f"recording unreadable: {exc}")
         return
+    row.stopped += 1
     row.accepted += sum(a for _, a in got)
     row.readable += sum(1 for k, g in enumerate(got) if k < len(ref) and g == ref[k] and g[1])
     row.in_frfs += len(in_frfs & set(accepted))
     if (disk / (rec_path.name + ".lock")).exists():
         row.problems.append("lock file left")
-    if not stopped:
-        return
     copy = disk.parent / f"resume-{os.getpid()}.h5"
     shutil.copyfile(rec_path, copy)  # resume with room: a copy on the big disk
     try:
@@ -233,7 +235,9 @@ def launch(command: str, disk: Path, scratch: Path, limit: int | None, row: Row)
 def one_run(command: str, k: int, runs: int, args: argparse.Namespace, scratch: Path, row: Row,
             ref: list[tuple[int, bool]]) -> None:
     total = int(args.size_mb * 1024 * 1024)
-    free = int(20_000 + (total - 120_000) * k / max(1, runs - 1))  # from 20 kB to nearly all of it
+    top = min(total, int(args.max_free_mb * 1024 * 1024))
+    # from 20 kB to --max-free-mb over the runs but the last, which has all the room
+    free = total if k == runs - 1 else int(20_000 + (top - 20_000) * k / max(1, runs - 2))
     with small_disk(args.size_mb, free, args.limit) as (disk, limit):
         code, err, outputs, earlier = launch(command, disk, scratch, limit, row)
         row.runs += 1
@@ -251,10 +255,30 @@ def one_run(command: str, k: int, runs: int, args: argparse.Namespace, scratch: 
                 row.problems.append(f"earlier {name} changed")
         if command in ("capture", "station"):
             check_recording(row, disk / "rec.h5", ref, disk, code != 0)
+        elif command == "batch":
+            if code != 0:
+                check_batch_folder(row, disk / "batch")
         elif code != 0:
             row.problems.extend(f"partial {name} left" for name in outputs - set(earlier) - {"rep"}
                                 if (disk / name).exists())
         files_left(row, disk, outputs)
+
+
+def check_batch_folder(row: Row, folder: Path) -> None:
+    """A batch's output folder stays for the next run (its results are reused): every file in it is
+    whole (no temporary left, every JSON parses)."""
+    if not folder.is_dir():
+        return
+    for p in folder.rglob("*"):
+        if p.name.endswith(".part"):
+            row.problems.append(f"temporary {p.relative_to(folder)} left in the batch folder")
+        elif p.suffix == ".json":
+            try:
+                json.loads(p.read_text())
+            except ValueError:
+                row.problems.append(f"half-written {p.relative_to(folder)}")
+        elif p.is_file() and not p.name.startswith("."):
+            row.left[f"batch/{p.relative_to(folder)}"] += 1
 
 
 def files_left(row: Row, disk: Path, outputs: set) -> None:
@@ -296,8 +320,9 @@ def mount_permitted() -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--runs", type=int, default=8, help="runs per command (the room left is spread over them)")
+    p.add_argument("--runs", type=int, default=12, help="runs per command (the room left is spread over them)")
     p.add_argument("--size-mb", type=float, default=8.0, help="size of the small disk (MB)")
+    p.add_argument("--max-free-mb", type=float, default=5.0, help="most room left in a run but the last (MB)")
     p.add_argument("--only", default=",".join(COMMANDS), help="commands to run, comma-separated")
     p.add_argument("--limit", action="store_true", help="a file size limit instead of a tmpfs (no root needed)")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
@@ -323,12 +348,14 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     print(f"disk: {'file size limit' if args.limit else 'tmpfs'} {args.size_mb:g} MB, room left spread over "
           f"{args.runs} runs per command; {wall:.0f} s")
-    print(f"{'command':14s} {'runs':>4s}  {'exit codes':14s} {'accepted':>8s} {'readable':>8s} {'in FRFs':>7s} "
-          f"{'resumed':>7s} {'kept':>4s}  problems / files left")
+    print("stopped: runs ended by the full disk that left a recording; accepted, readable, in FRFs: its hits;\n"
+          "resumed: of those, completed with room; kept: earlier outputs left unchanged by a stopped run")
+    print(f"{'command':14s} {'runs':>4s}  {'exit codes':14s} {'stopped':>7s} {'accepted':>8s} {'readable':>8s} "
+          f"{'in FRFs':>7s} {'resumed':>7s} {'kept':>4s}  problems / files left")
     for r in rows:
         codes = " ".join(f"{c}x{n}" for c, n in sorted(r.codes.items()))
         left = ", ".join(f"{k} x{n}" for k, n in sorted(r.left.items())) or "none"
-        print(f"{r.command:14s} {r.runs:4d}  {codes:14s} {r.accepted:8d} {r.readable:8d} {r.in_frfs:7d} "
+        print(f"{r.command:14s} {r.runs:4d}  {codes:14s} {r.stopped:7d} {r.accepted:8d} {r.readable:8d} {r.in_frfs:7d} "
               f"{r.resumed:7d} {r.kept:4d}  {len(r.problems)} problem(s); left: {left}")
         for prob in r.problems[:5]:
             print(f"{'':16s}- {prob}")
