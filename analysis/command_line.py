@@ -246,9 +246,6 @@ def _last_resort(prog: str, exc: BaseException) -> int:
         print(f"{prog}: an input is nested too deeply to be read ({exc}); check the files given", file=sys.stderr)
         return 2
     assert isinstance(exc, OSError)
-    if disk_full_cause(exc) is not None:
-        print(disk_full_line(prog, exc), file=sys.stderr)
-        return 1
     where = f": {exc.filename}" if getattr(exc, "filename", None) else ""
     print(f"{prog}: {exc.strerror or exc}{where}; check the disk space, permissions and paths", file=sys.stderr)
     return 1
