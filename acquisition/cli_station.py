@@ -191,6 +191,7 @@ def run_station(args: argparse.Namespace, out_stream: TextIO | None = None, read
               + ("" if finished else " (continue with 'python -m acquisition station --resume FILE' or "
                                      "'python -m acquisition capture --resume FILE')"), file=out_stream, flush=True)
         if engine.state.get("phase") == "error":
+            print(f"station: {engine.state.get('error')}", file=sys.stderr, flush=True)
             return 1
         return 0 if finished else 130
 

@@ -47,7 +47,7 @@ import numpy as np
 from analysis.finite_checks import describe_nonfinite
 from analysis.hit import Hit
 from analysis.points import PointLabelError, parse_point
-from analysis.recording_writer import RecordingWriter
+from analysis.recording_writer import RecordingWriter, whole_recording
 from analysis.spectra import WindowSettings
 
 from .errors import ImportDataError, NonFiniteSamples
@@ -666,8 +666,9 @@ def write_imported(
     setup = {"sample_rate_hz": test.fs_hz, "block_size": int(test.hits[0].shape[1]),
              "channels": chans, "imported_from": test.source, "format": test.meta.get("format")}
     instrument = {"vendor": "imported", "model": str(test.meta.get("format", "")), "source": test.source}
-    with RecordingWriter(out, instrument=instrument, setup=setup, channels=chans, windows=windows,
-                         plan={"mode": "imported", "points": [ref]}, overwrite=overwrite) as w:
+    with whole_recording(out, overwrite) as tmp, RecordingWriter(
+            tmp, instrument=instrument, setup=setup, channels=chans, windows=windows,
+            plan={"mode": "imported", "points": [ref]}, overwrite=True) as w:
         w.log("INFO", f"imported {len(test.hits)} hit(s) from {test.source}; " + "; ".join(roles.describe()))
         kept: list[Hit] = []
         for k, hit in enumerate(imported_hits(test, roles)):

@@ -18,7 +18,7 @@ def replay(src: str | Path, out: str | Path, *, windows: WindowSettings | None =
            exclude: Sequence[int] | set[int] = (), estimator: str = "H1", overwrite: bool = False) -> list:
     """Recompute the FRFs of ``src`` into a new recording ``out``; returns the new averages."""
     from analysis.recording import Recording
-    from analysis.recording_writer import RecordingWriter
+    from analysis.recording_writer import RecordingWriter, whole_recording
 
     from .session import average_recorded_hits
 
@@ -34,8 +34,9 @@ def replay(src: str | Path, out: str | Path, *, windows: WindowSettings | None =
         keep = [h for h in all_hits if h.accepted and h.index not in set(exclude)]
         averages = average_recorded_hits(keep, win, rec.channels, record_s=rec.record_s,
                                          pretrigger_s=rec.pretrigger_s)
-        with RecordingWriter(out, instrument=rec.instrument, setup=rec.setup, channels=rec.channels,
-                             windows=averages[0].windows, plan=rec.plan, overwrite=overwrite) as w:
+        with whole_recording(out, overwrite) as tmp, RecordingWriter(
+                tmp, instrument=rec.instrument, setup=rec.setup, channels=rec.channels,
+                windows=averages[0].windows, plan=rec.plan, overwrite=True) as w:
             for t, level, msg in rec.events():
                 w.log(level, f"[original {t:.3f}] {msg}")
             for h in all_hits:

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from analysis.errors import DiskFullError
 from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.recording import merge_frfsets
@@ -304,7 +305,11 @@ class CaptureSession:
                     reasons = ["rejected by the operator"]
             else:
                 self.operator.progress(summary.text())
-            idx = self._write_hit(hit.with_verdict(accepted, reasons, check.to_dict()))
+            try:
+                idx = self._write_hit(hit.with_verdict(accepted, reasons, check.to_dict()))
+            except DiskFullError:
+                self._keep_point_on_full_disk(avg, accepted)
+                raise
             summary.decision, summary.reasons, summary.hit_index = accepted, reasons, idx
             self.operator.on_hit(summary)
             if accepted:
@@ -347,6 +352,17 @@ class CaptureSession:
         self.link_faults += 1
         recover_link(self.analyser, m.setup, m.point, exc, faults_here,
                      self.max_attempts_factor * self.plan.hits_per_point, self.max_link_failures, self._event)
+
+    def _keep_point_on_full_disk(self, avg: MeasurementAverage, hit_in_average: bool) -> None:
+        """The disk is full (the hit was not written): the FRFs of the point's hits written so far go
+        to the recording, in the room the writer kept for them, so every accepted hit is in the FRFs."""
+        if hit_in_average:
+            avg.acc.rollback()
+        if self.writer is not None and avg.n_averages > 0:
+            try:
+                avg.write(self.writer)
+            except DiskFullError:
+                log.warning("no room left for the FRFs of point %s: resume the test to compute them", avg.point)
 
     def _write_hit(self, hit: Hit) -> int:
         return -1 if self.writer is None else self.writer.write_hit(hit)

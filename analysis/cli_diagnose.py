@@ -128,7 +128,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2
     doc = diag.to_json()
-    Path(args.json).write_text(json.dumps(doc, indent=1, default=_json_default))
+    from .atomic import write_text_atomic
+
+    write_text_atomic(args.json, json.dumps(doc, indent=1, default=_json_default))
     if args.report:
         from .diagnosis.report import write_report
 

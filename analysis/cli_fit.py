@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 import warnings
 from collections.abc import Sequence
 from dataclasses import replace
@@ -103,6 +102,7 @@ def _write_uff(path: str, frf: FRFSet, result: LSFDResult, geometry: Geometry | 
     and 82 trace lines; ``geometry`` or the measured points on a line), then UFF 58 synthesised FRFs
     appended in the same file. The FRFs are synthesised *as measured* (raw poles, the exponential
     window's damping included, comparable with the input FRFs); their ID line 2 says which."""
+    from .atomic import atomic_path, temporary_beside
     from .geometry import points_on_a_line, write_uff_geometry
     from .modal import synthesize
     from .uff import write_uff55, write_uff58
@@ -112,7 +112,6 @@ def _write_uff(path: str, frf: FRFSet, result: LSFDResult, geometry: Geometry | 
     shapes = result.mode_shapes
     if shapes is None:
         shapes = model.residues[:, 0, :]
-    write_uff55(path, model.poles, np.asarray(shapes), list(model.outputs), overwrite=True)
     synth = synthesize(result.model_raw, frf.freq_hz[sel])
     which = (f"exp. window tau {frf.exp_window_tau_s:.6g} s: raw poles, as measured" if frf.exp_window_tau_s
              else "no window: model poles")
@@ -120,14 +119,18 @@ def _write_uff(path: str, frf: FRFSet, result: LSFDResult, geometry: Geometry | 
     points = list(dict.fromkeys(list(model.outputs) + list(model.references)))
     if geometry is None or geometry.covers(points):
         geometry = points_on_a_line(points)
-    with tempfile.TemporaryDirectory(dir=str(Path(path).resolve().parent)) as tmp:
-        geo = Path(tmp) / "geometry.uff"
-        write_uff_geometry(geo, geometry)
-        part = Path(tmp) / "frf58.uff"
-        write_uff58(part, synth, id_lines=("impactlab LSFD synthesised FRF", which, "synthesis"))
-        with open(path, "ab") as out:
-            for piece in (geo, part):
-                out.write(piece.read_bytes())
+    with atomic_path(path) as whole:  # the three parts make one file, replaced at the end
+        geo, part = temporary_beside(path), temporary_beside(path)
+        try:
+            write_uff55(whole, model.poles, np.asarray(shapes), list(model.outputs), overwrite=True)
+            write_uff_geometry(geo, geometry)
+            write_uff58(part, synth, id_lines=("impactlab LSFD synthesised FRF", which, "synthesis"))
+            with open(whole, "ab") as out:
+                for piece in (geo, part):
+                    out.write(piece.read_bytes())
+        finally:
+            geo.unlink(missing_ok=True)
+            part.unlink(missing_ok=True)
 
 
 def _given_poles(text: str) -> tuple:

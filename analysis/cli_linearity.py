@@ -19,7 +19,6 @@ import argparse
 import json
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
@@ -100,7 +99,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"analysis linearity: {exc}", file=sys.stderr)
         return 2
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=1))
+        from .atomic import write_text_atomic
+
+        write_text_atomic(args.json, json.dumps(result.to_dict(), indent=1))
     lv = result.levels
     print(f"levels {', '.join(f'{v:.4g}' for v in lv)}; band {result.band[0]:.5g}-{result.band[1]:.5g} Hz")
     print(f"{'f [Hz]':>10s} {'df [%]':>8s} {'+-':>6s} {'dzeta [%]':>9s} {'+-':>6s} {'df/dec':>7s}  significant")

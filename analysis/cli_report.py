@@ -15,7 +15,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ._cli_dispatch import Parser, parse_args
-from .command_line import add_estimator, add_overwrite, add_threads, cli_entry, with_examples
+from .command_line import add_estimator, add_overwrite, add_threads, cli_entry, disk_full_line, with_examples
+from .disk_space import disk_full_cause
 from .errors import ImpactlabError, OutputBusy
 
 if TYPE_CHECKING:
@@ -66,7 +67,7 @@ def choose_geometry(spec: str | None, device: str = "") -> Geometry | None:
 
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command; returns the exit code (0 written, 2 bad input)."""
+    """Run the command; returns the exit code (0 written, 2 bad input, 1 no room on the disk)."""
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
@@ -84,6 +85,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"analysis report: {exc}", file=sys.stderr)
         return 1
     except (ImpactlabError, ValueError, OSError) as exc:
+        if disk_full_cause(exc) is not None:
+            print(disk_full_line("analysis report", exc), file=sys.stderr)
+            return 1
         print(f"analysis report: {exc}", file=sys.stderr)
         return 2
     print(f"report written to {index}")

@@ -25,7 +25,8 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TypeVar
 
-from .errors import OutputBusy, UsageError
+from .disk_space import disk_full_cause
+from .errors import DiskFullError, OutputBusy, UsageError
 
 __all__ = ["UsageError", "Parser", "parse_args", "with_examples", "add_overwrite", "add_estimator", "add_json_flag",
            "add_threads", "add_verbose", "set_verbosity", "check_out_dir", "CliExit", "exit_on", "errors_to_exit", "cli_entry"]
@@ -205,12 +206,28 @@ def exit_on(prog: str, *rules: Rule) -> Iterator[None]:
         print(f"{prog}: {exc}", file=sys.stderr)
         raise CliExit(1) from None
     except BaseException as exc:
+        if disk_full_cause(exc) is not None:  # whatever the rules: a runtime failure, one line, exit 1
+            print(disk_full_line(prog, exc), file=sys.stderr)
+            raise CliExit(1) from None
         for rule in rules:
             if isinstance(exc, rule[0]):
                 prefix = rule[2] if len(rule) > 2 else ""
                 print(f"{prog}: {prefix}{exc}", file=sys.stderr)
                 raise CliExit(rule[1]) from None
         raise
+
+
+def disk_full_line(prog: str, exc: BaseException) -> str:
+    """The one line for an output that a full disk (or the file size limit) stopped: a writer's own
+    :class:`~analysis.errors.DiskFullError` message, else the file and what to do."""
+    if isinstance(exc, DiskFullError):
+        return f"{prog}: {exc}"
+    cause = disk_full_cause(exc)
+    assert cause is not None
+    name = getattr(cause, "filename2", None) or getattr(cause, "filename", None)  # a copy's target is filename2
+    where = f" {name}" if name else " an output"
+    return (f"{prog}: cannot write{where}: {cause.strerror or cause} (the disk is full or the file size limit is "
+            "reached); free space or write elsewhere, then run the command again")
 
 
 def errors_to_exit(prog: str, errors: type[BaseException] | tuple[type[BaseException], ...], code: int = 2,

@@ -26,6 +26,7 @@ __all__ = [
     "FolderBusy",
     "OutputBusy",
     "WorkLimitError",
+    "DiskFullError",
 ]
 
 
@@ -101,3 +102,8 @@ class OutputBusy(ImpactlabError, OSError):
 class WorkLimitError(UsageError):
     """A request for more work than the data support or the machine can hold (the message names the
     largest accepted value)."""
+
+
+class DiskFullError(ImpactlabError, OSError):
+    """A file could not be written for want of room (disk full, file size limit, quota); the message
+    says what was kept and what to do. Commands end with exit code 1."""

@@ -179,18 +179,21 @@ def write_uff_geometry(path: str | Path, geometry: Geometry, *, overwrite: bool 
     """Write data set 15 (nodes, m) and one data set 82 per trace line of ``geometry``."""
     import pyuff
 
+    from .atomic import atomic_path
+
     p = Path(path)
-    if p.exists() and overwrite:
-        p.unlink()
+    if p.exists() and not overwrite:
+        raise GeometryError(f"{p} exists: choose another output file, or replace it")
     nums = [_uff_of_label(s) for s in geometry.labels]
-    uff = pyuff.UFF(str(p))
     x = geometry.xyz
-    uff.write_sets(pyuff.prepare_15(node_nums=nums, def_cs=[0] * len(nums), disp_cs=[0] * len(nums),
-                                    color=[1] * len(nums), x=x[:, 0].tolist(), y=x[:, 1].tolist(),
-                                    z=x[:, 2].tolist()), mode="add")
-    for k, (a, b) in enumerate(geometry.lines, start=1):
-        uff.write_sets(pyuff.prepare_82(trace_num=k, n_nodes=2, color=1, id=f"line {k}",
-                                        nodes=np.array([_uff_of_label(a), _uff_of_label(b)])), mode="add")
+    with atomic_path(p) as tmp:
+        uff = pyuff.UFF(str(tmp))
+        uff.write_sets(pyuff.prepare_15(node_nums=nums, def_cs=[0] * len(nums), disp_cs=[0] * len(nums),
+                                        color=[1] * len(nums), x=x[:, 0].tolist(), y=x[:, 1].tolist(),
+                                        z=x[:, 2].tolist()), mode="add")
+        for k, (a, b) in enumerate(geometry.lines, start=1):
+            uff.write_sets(pyuff.prepare_82(trace_num=k, n_nodes=2, color=1, id=f"line {k}",
+                                            nodes=np.array([_uff_of_label(a), _uff_of_label(b)])), mode="add")
     return p
 
 

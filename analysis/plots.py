@@ -44,8 +44,11 @@ def _figure(width_in: float, height_in: float) -> Figure:
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
+    from .atomic import atomic_path
+
     p = Path(path)
-    fig.savefig(str(p), format="png")
+    with atomic_path(p) as tmp:
+        fig.savefig(str(tmp), format="png")
     return p
 
 

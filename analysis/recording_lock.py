@@ -351,7 +351,7 @@ def live_copy(path: str | Path) -> Path:
         raise locked_error(p)
     try:
         _set(fd, "sh", CHANGING_BYTE, wait=True)
-        tmp_fd, tmp_name = tempfile.mkstemp(prefix=f".{p.stem}-live-", suffix=".h5")
+        tmp_fd, tmp_name = _live_copy_file(p)
         try:
             with open(p, "rb") as src, os.fdopen(tmp_fd, "wb") as dst:
                 shutil.copyfileobj(src, dst, 1 << 20)
@@ -363,6 +363,29 @@ def live_copy(path: str | Path) -> Path:
     finally:
         _set(fd, "un", CHANGING_BYTE, wait=False)
         os.close(fd)
+
+
+def _live_copy_file(path: Path) -> tuple[int, str]:
+    """A new file for the live copy of ``path`` (open fd, name): ``.REC.h5.PID-RANDOM.part`` beside the
+    recording, where copies left by killed readers are removed first
+    (:func:`analysis.atomic.remove_stale_temporaries`); in the temporary folder when the recording's
+    folder cannot be written or has less room than twice the recording (the copy must never take the
+    writer's last room)."""
+    from .atomic import remove_stale_temporaries, temporary_beside
+
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL
+    remove_stale_temporaries(path)
+    try:
+        st = os.statvfs(path.parent)
+        if st.f_bavail * st.f_frsize >= 2 * path.stat().st_size:
+            name = temporary_beside(path)
+            return os.open(name, flags, 0o600), str(name)
+    except OSError:
+        pass  # a folder this reader cannot write: the temporary folder
+    folder = Path(tempfile.gettempdir())
+    remove_stale_temporaries(path, folder)
+    name = temporary_beside(path, folder)
+    return os.open(name, flags, 0o600), str(name)
 
 
 def locked_error(path: str | Path, why: str = "") -> RecordingError:

@@ -1,31 +1,44 @@
 """The recording's writer: appends hits and FRF results as the test goes, each flushed before the
 analyser is armed again (``docs/recording-format.md``); :class:`RecordingWriter.resume` reopens an
-interrupted file."""
+interrupted file.
+
+A full disk stops the writer cleanly: each change first reserves the room it needs on the disk
+(:func:`analysis.disk_space.reserve`, with :data:`SLACK_BYTES` more for the file's own bookkeeping
+and for closing it); when the disk has no room the change raises :class:`DiskFullError` before
+anything of it is written, every later change raises it too, and :meth:`RecordingWriter.close`
+closes the file in the room kept back. Every hit written before stays readable and the test can be
+resumed."""
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from analysis.errors import RecordingError
+from analysis.atomic import atomic_path
+from analysis.disk_space import release_reserve, reserve
+from analysis.errors import DiskFullError, RecordingError
 from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.spectra import AveragedSpectra, WindowSettings
 
-from .atomic import atomic_path
-from .recording_lock import WriterLock, held_by_other_program, is_lock_error, locked, locked_error
+from .recording_lock import WriterLock, busy_error, held_by_other_program, is_lock_error, locked, locked_error, writer_alive
 from .recording_schema import _DAMAGE, SCHEMA, SCHEMA_VERSION, _as_str, _channel_table, _h5py, _now_iso, counts_crc32
 
-__all__ = ["RecordingWriter", "FRFPoint"]
+__all__ = ["RecordingWriter", "FRFPoint", "SLACK_BYTES", "whole_recording"]
 
 log = logging.getLogger(__name__)
+
+#: room (bytes) reserved after the recording's end beyond a change's own data: the HDF5 groups,
+#: attributes and index blocks the change adds, and what closing the file writes
+SLACK_BYTES = 256 * 1024
 
 
 @dataclass(frozen=True)
@@ -36,6 +49,36 @@ class FRFPoint:
     measurement: int
     label: str
     hits: tuple = ()
+
+
+@contextlib.contextmanager
+def whole_recording(path: str | Path, overwrite: bool = False) -> Iterator[Path]:
+    """A recording written whole at once (``import``, ``replay``): yield a temporary path beside
+    ``path`` to write it to, which replaces ``path`` only when the body ends normally; a failure (a
+    full disk included) removes it and leaves ``path`` as it was. An existing ``path`` is replaced
+    only with ``overwrite``, and never while a writer has it open."""
+    p = Path(path)
+    if p.exists() and not overwrite:
+        raise RecordingError(f"{p} exists: choose another --out file or delete it first")
+    if writer_alive(p):
+        raise busy_error(p)
+    existed = p.exists()
+    try:
+        with atomic_path(p) as tmp:
+            yield tmp
+    except DiskFullError:
+        raise DiskFullError(f"no room on the disk to write {p}: nothing was written"
+                            + (", the file there is unchanged" if existed else "")
+                            + "; free space (or raise the file size limit) or write elsewhere, then run the command "
+                              "again") from None
+
+
+def _frf_room(counts_shape: tuple) -> int:
+    """Bytes the FRF results of a point need whose hits have counts of ``counts_shape`` (channels,
+    samples): each hit keeps this room, so the point in progress can be written when the disk fills."""
+    n_channels, n_samples = (int(counts_shape[0]), int(counts_shape[-1])) if len(counts_shape) == 2 else (1, 1)
+    n_freq = n_samples // 2 + 1
+    return n_freq * (16 + 64 * n_channels)  # freq, Gff; H1, H2, Gfx complex, coherence, Gxx per output
 
 
 class RecordingWriter:
@@ -64,6 +107,8 @@ class RecordingWriter:
         overwrite: bool = False,
     ) -> None:
         self.path = Path(path)
+        self._full: DiskFullError | None = None
+        self._n_hits = 0
         self._lock = WriterLock(self.path)  # OutputBusy when a live writer has the recording open
         try:
             if os.path.lexists(self.path) and not overwrite:
@@ -79,17 +124,39 @@ class RecordingWriter:
     def _create_beside(self, instrument: dict, setup: dict, channels: Sequence[dict], windows: WindowSettings,
                        plan: dict | None, software: str) -> None:
         """Create the new recording in a temporary file beside the target and rename it into place (a
-        file there, replaced with ``overwrite``, stays whole until then); the writer keeps it open."""
+        file there, replaced with ``overwrite``, stays whole until then; a disk without room for its
+        header leaves it as it was); the writer keeps it open."""
         with atomic_path(self.path) as tmp:
             try:
                 self._f = _h5py().File(tmp, "x")
             except OSError as exc:
                 raise RecordingError(f"cannot create recording {self.path}: {exc}") from None
             try:
+                self._room(_channel_table(channels).nbytes + 4 * len(json.dumps(setup, default=str)),
+                           "its header")
                 self._create(instrument, setup, channels, windows, plan, software)
             except BaseException:
-                self._f.close()
+                with contextlib.suppress(*_DAMAGE):
+                    self._f.close()
                 raise
+
+    def _room(self, nbytes: int, what: str, *, after_full: bool = False) -> None:
+        """Reserve room on the disk for a change writing ``nbytes`` of data (``what`` names it in the
+        message), before any of it is written; raises :class:`DiskFullError` (and keeps raising it)
+        when the disk or the file size limit has no room. ``after_full``: try even after that (the
+        FRFs of the point in progress, in the room each hit keeps for them)."""
+        if self._full is not None and not after_full:
+            raise self._full
+        try:
+            reserve(self._f.id.get_vfd_handle(), int(nbytes) + SLACK_BYTES, self.path)
+        except OSError as exc:
+            full = DiskFullError(
+                f"no room on the disk to write {what} to {self.path} ({exc.strerror}): the recording is closed "
+                f"with the {self._n_hits} hit(s) written before it, all readable. Free space (or raise the file "
+                f"size limit), then resume the test (capture --resume {self.path}, or station --resume)")
+            if not after_full:
+                self._full = full
+            raise full from None
 
     def _open_locked(self, mode: str, failed: Any) -> None:
         """Open the HDF5 file for writing holding the lock readers follow (``analysis.recording_lock``)."""
@@ -145,6 +212,15 @@ class RecordingWriter:
             self._open_locked("r+", lambda exc: RecordingError(
                 f"cannot open {self.path} for appending ({exc}); copy it and resume the copy, or start a new "
                 "recording"))
+            self._full = None
+            self._n_hits = 0
+            try:
+                self._room(0, "the resumed test")
+            except DiskFullError:
+                self._f.close()
+                self._lock.release()
+                raise DiskFullError(f"no room on the disk to continue {self.path}: free space (or raise the file "
+                                    "size limit) and resume again; the recording is unchanged") from None
             self._drop_cut_hits()
         return self
 
@@ -175,6 +251,7 @@ class RecordingWriter:
     @locked
     def log(self, level: str, message: str) -> None:
         """Append an event (time, level, message) and flush."""
+        self._room(8 * len(str(message)) + 64, "an event")
         ev = self._f["events"]
         n = ev["time_unix_s"].shape[0]
         for name, value in (("time_unix_s", time.time()), ("level", str(level)), ("message", str(message))):
@@ -188,6 +265,8 @@ class RecordingWriter:
         flush; returns its index in the recording."""
         c = hit.counts
         idx = self._n_hits
+        self._room(np.asarray(c).nbytes + 8 * len(json.dumps(hit.check, default=float)) + _frf_room(np.shape(c)),
+                   f"hit {idx}")
         g = self._f["hits"].create_group(f"{idx:06d}")
         g.create_dataset("counts", data=c)
         a = g.attrs
@@ -219,6 +298,7 @@ class RecordingWriter:
         name = f"{int(index):06d}"
         if name not in self._f["hits"]:
             raise RecordingError(f"{self.path} has no hit {index} to withdraw")
+        self._room(4096, f"the withdrawal of hit {index}")
         a = self._f["hits"][name].attrs
         a["accepted"] = False  # first: a crash between the two writes leaves the hit out, not in
         a["reasons"] = json.dumps(json.loads(_as_str(a["reasons"])) + [str(reason)])
@@ -236,8 +316,11 @@ class RecordingWriter:
         if frfset.n_references != 1:
             raise RecordingError(f"write_frf takes the FRFs of one measurement point (one reference); got "
                                  f"{frfset.n_references} references")
-        grp = self._f["frf"]
         name = f"m{int(point.measurement):03d}"
+        arrays = (frfset.freq_hz, frfset.H, frfset.coherence, spectra.H2, spectra.Gff, spectra.Gxx, spectra.Gfx)
+        self._room(sum(np.asarray(a).nbytes for a in arrays if a is not None), f"the FRFs of point {point.label}",
+                   after_full=True)
+        grp = self._f["frf"]
         if name in grp:
             del grp[name]
         g = grp.create_group(name)
@@ -263,6 +346,7 @@ class RecordingWriter:
     @locked
     def set_attr(self, key: str, value: Any) -> None:
         """Set a root attribute (str, number or bool) and flush."""
+        self._room(len(str(value)) + 64, f"attribute {key}")
         self._f.attrs[str(key)] = value
         self._f.flush()
 
@@ -271,8 +355,9 @@ class RecordingWriter:
         that has started on the same path since is never touched)."""
         if self._f.id.valid:
             with self._lock.changing():
-                self._f.attrs["closed_utc"] = _now_iso()
+                self._f.attrs["closed_utc"] = _now_iso()  # in the room the last change kept back
                 self._f.close()
+                release_reserve(self.path)
         if discard:
             self.path.unlink(missing_ok=True)
         self._lock.release()

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from .atomic import write_text_atomic
 from .errors import SEP005Error
 from .finite_checks import describe_nonfinite
 
@@ -86,9 +87,7 @@ def write_sep005(path: str | Path, channels: Sequence[Mapping[str, Any]], *, ove
     doc = []
     for ch in check_sep005(list(channels), str(p)):
         doc.append({k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in ch.items()})
-    tmp = p.with_name(p.name + ".part")
-    tmp.write_text(json.dumps(doc))
-    tmp.replace(p)
+    write_text_atomic(p, json.dumps(doc))
     return p
 
 

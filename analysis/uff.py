@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import gc
 import logging
-import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,6 +27,8 @@ from types import ModuleType
 
 import numpy as np
 
+from .atomic import atomic_path
+from .disk_space import disk_full_cause
 from .errors import UFFError
 from .finite_checks import describe_nonfinite
 from .frf import FRFSet
@@ -49,13 +50,23 @@ def _pyuff() -> ModuleType:
 
 
 def _write_sets(path: Path, sets: list) -> None:
-    """pyuff's binary dataset-58 writer reopens the file and leaves that handle to the garbage
-    collector (a ResourceWarning when it is released, right after the call); the data are
-    complete by then. Silence only that warning, only around the call."""
-    with warnings.catch_warnings():
+    """Write ``sets`` as the whole file ``path``, atomically (:func:`analysis.atomic.atomic_path`: a
+    failure, a full disk included, leaves ``path`` as it was). pyuff's binary dataset-58 writer
+    reopens the file and leaves that handle to the garbage collector (a ResourceWarning when it is
+    released, right after the call); the data are complete by then. Silence only that warning, only
+    around the call. pyuff reports a failed write as a bare ``Exception``: the ``OSError`` it hides
+    (disk full, permission) is raised instead."""
+    with atomic_path(path) as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore", ResourceWarning)
-        _pyuff().UFF(str(path)).write_sets(sets, "add", force_double=True)
-        gc.collect()
+        try:
+            _pyuff().UFF(str(tmp)).write_sets(sets, "add", force_double=True)
+        except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception around the real error
+            cause = exc.__cause__ or exc.__context__
+            if isinstance(cause, OSError):
+                raise OSError(cause.errno, cause.strerror, str(path)) from None
+            raise
+        finally:
+            gc.collect()
 
 
 def _id(text: str) -> str:
@@ -134,16 +145,16 @@ def write_uff58(
     ``id_lines``: (title, windows description, source). Returns the number of datasets written.
     """
     p = Path(path)
-    if p.exists():
-        if not overwrite:
-            raise UFFError(f"{p} exists: choose another output file, or replace it (--overwrite)")
-        os.remove(p)
+    if p.exists() and not overwrite:
+        raise UFFError(f"{p} exists: choose another output file, or replace it (--overwrite)")
     sets = (_frf_set_dicts(frf, id_lines) if frf is not None else []) + list(extra_sets)
     if not sets:
         raise UFFError("nothing to write: no FRFs and no time records")
     try:
         _write_sets(p, sets)
     except OSError as exc:
+        if disk_full_cause(exc) is not None:
+            raise  # a runtime failure (exit 1), not a bad request
         raise UFFError(f"cannot write {p}: {exc}") from None
     return len(sets)
 
@@ -281,10 +292,8 @@ def write_uff55(
         if n not in nodes:
             nodes.append(n)
     p = Path(path)
-    if p.exists():
-        if not overwrite:
-            raise UFFError(f"{p} exists: choose another output file, or replace it (--overwrite)")
-        os.remove(p)
+    if p.exists() and not overwrite:
+        raise UFFError(f"{p} exists: choose another output file, or replace it (--overwrite)")
     sets = []
     for r in range(lam.size):
         xyz = np.zeros((len(nodes), 3), complex)

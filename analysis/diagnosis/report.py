@@ -12,6 +12,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..atomic import atomic_path, write_text_atomic
 from .compare import band_errors
 from .verdict import Diagnosis
 
@@ -41,7 +42,8 @@ ACTIONS = _actions()
 
 def _save(fig: Figure, path: Path) -> None:
     FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
 
 
 def _extension_name(diag: Diagnosis) -> str:
@@ -175,7 +177,7 @@ def write_report(diag: Diagnosis, outdir: str | Path, max_frf_plots: int = 6) ->
             n += 1
     _save(band_figure(diag), out / "bands.png")
     text = report_text(diag) + "\n## Plots\n\n![bands](bands.png)\n\n" + "\n\n".join(f"![{i}]({i})" for i in images) + "\n"
-    (out / "report.md").write_text(text)
-    (out / "diagnosis.json").write_text(json.dumps(diag.to_json(), indent=1))
+    write_text_atomic(out / "report.md", text)
+    write_text_atomic(out / "diagnosis.json", json.dumps(diag.to_json(), indent=1))
     log.info("report written to %s", out)
     return out / "report.md"

@@ -60,17 +60,28 @@ def write_report(out_dir: str | Path, doc: dict) -> Path:
     The files are built in a temporary folder beside ``out_dir`` and moved into place at the end
     (``index.html`` last), so a report that fails while being built writes nothing."""
     import os
-    import tempfile
+
+    from ..atomic import remove_stale_temporaries, temporary_beside
+    from ..disk_space import disk_full_cause
 
     out = Path(out_dir)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.part-", dir=out.parent))
+        remove_stale_temporaries(out)  # left by a report that was killed while being built
+        tmp = temporary_beside(out)
+        tmp.mkdir(mode=0o755)
     except OSError as exc:
+        if disk_full_cause(exc) is not None:
+            raise
         raise ReportInputError(f"cannot create the report folder {out}: {exc.strerror}") from None
     try:
-        os.chmod(tmp, 0o755)
-        _write_files(tmp, doc)
+        try:
+            _write_files(tmp, doc)
+        except OSError as exc:
+            full = disk_full_cause(exc)
+            if full is None:
+                raise
+            raise OSError(full.errno, full.strerror, str(out)) from None  # named by the folder asked for
         if not out.exists():
             os.replace(tmp, out)
         else:
