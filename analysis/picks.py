@@ -85,6 +85,11 @@ def _from_json(doc: Any, where: str) -> PolePicks:
         if not 0 <= z < 1:
             raise InputError(f"{at}: damping {z} must be a ratio in [0, 1) (not %); {_HOW}")
         damps.append(z)
+    if damps and all(d is not None for d in damps):
+        for k, (f, z) in enumerate(zip(freqs, damps), start=1):
+            if not pole_from_fz(f, float(z)).imag > 0:  # an oscillation: the pole is not on the real axis
+                raise InputError(f"{where}, pole {k}: freq_hz {f:.6g} Hz with damping {z:.6g} gives no oscillation "
+                                 f"(its damped frequency is 0 Hz); {_HOW}")
     band = doc.get("band_hz")
     band_hz = None
     if isinstance(band, list) and len(band) == 2 and all(isinstance(b, (int, float)) for b in band):
@@ -96,11 +101,12 @@ def _from_json(doc: Any, where: str) -> PolePicks:
 def read_picks(path: str | Path) -> PolePicks:
     """Read a picked-poles file (JSON, schema :data:`PICKS_SCHEMA`) or a text file of frequencies
     (Hz). Raises :class:`analysis.inputs.InputError` naming the file and the problem."""
+    from .input_limits import DOCUMENT_LIMIT_BYTES, read_bounded_text
     from .inputs import parse_float_list
 
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = read_bounded_text(p, "--poles file", DOCUMENT_LIMIT_BYTES, InputError)
     except FileNotFoundError:
         raise InputError(f"poles file {p} not found: check the path, or give the frequencies as F1,F2,...") from None
     except (OSError, UnicodeDecodeError) as exc:
