@@ -25,6 +25,7 @@ __all__ = [
     "ChildTimeout",
     "FolderBusy",
     "WorkLimitError",
+    "LevelsDoNotPair",
 ]
 
 
@@ -90,6 +91,11 @@ class ChildTimeout(ImpactlabError, RuntimeError):
 
 class FolderBusy(ImpactlabError, OSError):
     """Another process holds an output folder's lock (a batch writing there); the message names its pid."""
+
+
+class LevelsDoNotPair(ImpactlabError, ValueError):
+    """FRF sets compared across excitation levels whose modes do not pair by frequency and MAC: not
+    measurements of one structure (the message says how many paired)."""
 
 
 class WorkLimitError(UsageError):
