@@ -84,12 +84,10 @@ def _from_json(doc: Any, where: str) -> PolePicks:
         z = _number(z, "damping", at)
         if not 0 <= z < 1:
             raise InputError(f"{at}: damping {z} must be a ratio in [0, 1) (not %); {_HOW}")
+        if not pole_from_fz(f, z).imag > 0:  # an oscillation: the pole is not on the real axis
+            raise InputError(f"{at}: freq_hz {f:.6g} Hz with damping {z:.6g} gives no oscillation (its damped "
+                             f"frequency is 0 Hz); {_HOW}")
         damps.append(z)
-    if damps and all(d is not None for d in damps):
-        for k, (f, z) in enumerate(zip(freqs, damps), start=1):
-            if not pole_from_fz(f, float(z)).imag > 0:  # an oscillation: the pole is not on the real axis
-                raise InputError(f"{where}, pole {k}: freq_hz {f:.6g} Hz with damping {z:.6g} gives no oscillation "
-                                 f"(its damped frequency is 0 Hz); {_HOW}")
     band = doc.get("band_hz")
     band_hz = None
     if isinstance(band, list) and len(band) == 2 and all(isinstance(b, (int, float)) for b in band):
