@@ -57,6 +57,7 @@ def _readers() -> list[tuple[str, Callable[[Path], object], str]]:
     from analysis.report_html.sources import load_diagnosis, load_fit_json
     from analysis.sep005 import read_sep005
     from simulator.config import FrameConfig
+    from simulator.serve import firmware_factory
 
     return [("--poles file", read_picks, "4 MiB"),
             ("--fit file", lambda p: load_fit_json(p, _frf()), "256 MiB"),
@@ -67,11 +68,12 @@ def _readers() -> list[tuple[str, Callable[[Path], object], str]]:
             ("config file", FrameConfig.load, "4 MiB"),
             (".lvm file", read_lvm, "at most"),
             ("SEP005 file", read_sep005, "at most"),
-            ("--geometry file", read_uff_geometry, "at most")]
+            ("--geometry file", read_uff_geometry, "at most"),
+            ("--precomputed file", lambda p: firmware_factory({}, str(p)), "at most")]
 
 
 @pytest.mark.timeout(30)
-@pytest.mark.parametrize("k", range(10))
+@pytest.mark.parametrize("k", range(11))
 def test_a_fifo_is_refused_at_once_naming_the_option_and_the_limit(fifo, k):
     from analysis.errors import ImpactlabError
 
