@@ -54,6 +54,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_files(files: Sequence[str], fmt: str, error: type[Exception]) -> None:
+    """Refuse an input that is not a regular file (a FIFO would block the reader, a device never end)
+    or larger than its parsing may take: text (.lvm, SEP005) within
+    :func:`analysis.input_limits.text_data_limit_bytes`, arrays within the memory one computation may use."""
+    from analysis.input_limits import check_input_file, text_data_limit_bytes
+    from analysis.work_limits import memory_budget_bytes
+
+    limit = text_data_limit_bytes() if fmt in ("lvm", "sep005", "json") else memory_budget_bytes()
+    for f in files:
+        if Path(f).exists():  # a missing file is named by its reader
+            check_input_file(f, f"input file (.{fmt})", limit, error)
+
+
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
@@ -74,6 +87,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
         check_outputs([args.out], [*args.files, args.describe])
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
+        _check_files(args.files, fmt, ImportDataError)
         if fmt == "lvm":
             tests = [_read(read_lvm, f, drop=drop) for f in args.files]
         elif fmt == "mat":

@@ -46,6 +46,7 @@ import numpy as np
 
 from analysis.finite_checks import describe_nonfinite
 from analysis.hit import Hit
+from analysis.input_limits import read_bounded_text, text_data_limit_bytes
 from analysis.points import PointLabelError, parse_point
 from analysis.recording_writer import RecordingWriter, whole_recording
 from analysis.spectra import WindowSettings
@@ -242,7 +243,7 @@ def read_lvm(path: str | Path) -> ImportedTest:
 def _read_lvm(path: str | Path) -> ImportedTest:
     p = Path(path)
     try:
-        lines = p.read_text(encoding="latin-1").splitlines()
+        lines = read_bounded_text(p, ".lvm file", text_data_limit_bytes(), ImportDataError, "latin-1").splitlines()
     except OSError as exc:
         raise ImportDataError(f"cannot read {p}: {exc.strerror}") from None
     if not lines or not lines[0].startswith("LabVIEW Measurement"):
@@ -383,7 +384,7 @@ def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:
 def load_description(path: str | Path) -> dict:
     """Read a JSON or TOML channel description (see module doc)."""
     p = Path(path)
-    out = read_document(p, "description", ImportDataError)
+    out = read_document(p, "description (--describe)", ImportDataError)
     if not isinstance(out, dict):
         raise ImportDataError(f"description {p} must be a JSON object / TOML table with 'channels', got "
                               f"{type(out).__name__}")

@@ -136,9 +136,23 @@ class AcquisitionSetup:
             raise SetupError("set-up 'trigger' must be a table")
         _check_keys("trigger", trig, set(), set(TriggerSetup.__dataclass_fields__))
         try:
-            return cls(float(data["sample_rate_hz"]), int(data["block_size"]), tuple(channels), TriggerSetup(**trig))
-        except (TypeError, ValueError) as exc:
+            setup = cls(float(data["sample_rate_hz"]), int(data["block_size"]), tuple(channels), TriggerSetup(**trig))
+        except (TypeError, ValueError, OverflowError) as exc:
             raise SetupError(f"set-up has a value of the wrong type: {exc}") from None
+        _check_timing(setup, data["block_size"])
+        return setup
+
+
+def _check_timing(setup: AcquisitionSetup, block_size: Any) -> None:
+    """The sample rate and the block read from a file, each with its own message, before anything (a
+    window, the analyser's offer) is derived from them: a positive rate, a whole block that holds samples
+    after the trigger's pre-trigger samples."""
+    if not (math.isfinite(setup.sample_rate_hz) and setup.sample_rate_hz > 0):
+        raise SetupError(f"set-up sample_rate_hz = {setup.sample_rate_hz:g} must be a positive number of Hz")
+    pre = setup.trigger.pretrigger_samples
+    if isinstance(block_size, bool) or block_size != setup.block_size or setup.block_size <= max(pre, 1):
+        raise SetupError(f"set-up block_size = {block_size!r} must be a whole number of samples above the "
+                         f"trigger's pretrigger_samples ({pre}): give one of the analyser's block sizes, e.g. 8192")
 
 
 def _check_keys(what: str, data: Mapping[str, Any], required: set[str], optional: set[str]) -> None:
@@ -352,5 +366,5 @@ def load_setup(path: str | Path) -> AcquisitionSetup:
     """Read a set-up from a ``.json`` or ``.toml`` file (the layout of :meth:`AcquisitionSetup.to_dict`)."""
     from .textdoc import read_document
 
-    data = read_document(path, "set-up file", SetupError)
+    data = read_document(path, "set-up file (--setup)", SetupError)
     return AcquisitionSetup.from_dict(data)

@@ -5,18 +5,22 @@ import json
 from pathlib import Path
 from typing import Any
 
+from analysis.input_limits import DOCUMENT_LIMIT_BYTES, read_bounded_text
+
 __all__ = ["read_document"]
 
 
 def read_document(path: str | Path, what: str, error: type[Exception]) -> Any:
     """Parse ``path`` as TOML (``.toml``) or JSON (anything else).
 
-    ``what`` names the document in messages ("set-up file", "description"); every failure
-    (unreadable, not UTF-8, malformed) raises ``error`` with a message naming the file and the problem.
+    ``what`` names the document and its option in messages ("set-up file (--setup)"); every failure
+    (unreadable, not UTF-8, malformed, not a regular file, larger than
+    :data:`analysis.input_limits.DOCUMENT_LIMIT_BYTES`) raises ``error`` with a message naming the file and the
+    problem.
     """
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = read_bounded_text(p, what, DOCUMENT_LIMIT_BYTES, error)
     except OSError as exc:
         raise error(f"cannot read {what} {p}: {exc.strerror}") from None
     except UnicodeDecodeError as exc:

@@ -67,11 +67,9 @@ def _not_regular(path: Path) -> str | None:
         if path.is_symlink():
             return "a symbolic link that loops" if getattr(exc, "errno", None) == 40 else "a dangling symbolic link"
         return exc.strerror or "unreadable"
-    if path.is_dir():
-        return "a folder"
-    import stat as _stat
+    from .input_limits import not_regular_kind
 
-    return None if _stat.S_ISREG(st.st_mode) else "not a regular file"
+    return not_regular_kind(st.st_mode)
 
 
 def expand_inputs(items: Sequence[str], skipped: list[str] | None = None) -> list[Path]:
@@ -94,6 +92,8 @@ def expand_inputs(items: Sequence[str], skipped: list[str] | None = None) -> lis
             raise InputError(f"{item} is a folder: give its files, e.g. '{item}/*.h5'")
         elif not Path(item).exists():
             raise InputError(f"input {item} not found: check the path")
+        elif (why := _not_regular(Path(item))) is not None:
+            raise InputError(f"input {item} is {why}, not a regular file: give recordings (.h5) or UFF 58 files")
         else:
             out.append(Path(item))
     if not out:

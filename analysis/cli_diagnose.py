@@ -71,12 +71,14 @@ def load_simulations(path: str, measured: FRFSet, estimator: str | None = None) 
     p = Path(path)
     if p.suffix.lower() != ".toml":
         return p
-    from simulator.config import ConfigError
+    from simulator.config import ConfigError, FrameConfig
     from simulator.fem import ModelError
-    from simulator.physical import FrameVariants
+    from simulator.physical import FrameVariants, check_diagnosis_size
 
     try:
-        return FrameVariants(p, measured.outputs, measured.references)
+        config = FrameConfig.load(p)
+        check_diagnosis_size(config)
+        return FrameVariants(config, measured.outputs, measured.references)
     except (ConfigError, ModelError, OSError) as exc:
         raise InputError(f"simulator config {p}: {exc}") from None
 

@@ -141,7 +141,7 @@ def _given_poles(text: str) -> tuple:
     from .inputs import parse_float_list
     from .picks import read_picks
 
-    if Path(text).is_file() or "/" in text or Path(text).suffix.lower() in (".json", ".txt"):
+    if Path(text).exists() or "/" in text or Path(text).suffix.lower() in (".json", ".txt"):
         picks = read_picks(text)
         return picks.initial(), True, picks.band_hz
     return parse_float_list(text), False, None
@@ -184,7 +184,9 @@ def _load(args: argparse.Namespace, band: tuple[float, float] | None) -> tuple[F
     if band is not None:
         f = frf.freq_hz
         if band[1] <= f[0] or band[0] >= f[-1]:
-            raise InputError(f"band {args.band} Hz lies outside the data ({f[0]:.6g}..{f[-1]:.6g} Hz)")
+            whence = "" if args.band else f" (the band the --poles file {args.poles} was picked in)"
+            raise InputError(f"band {band[0]:.6g}..{band[1]:.6g} Hz{whence} lies outside the data "
+                             f"({f[0]:.6g}..{f[-1]:.6g} Hz): give --band LO:HI within it")
     if args.frf is not None and args.frf not in frf.outputs:
         raise InputError(f"--frf {args.frf!r} is not an output of {args.input}; outputs: {', '.join(frf.outputs)}")
     return frf, frf_pairs_by_level(frf, args.frf)

@@ -11,12 +11,14 @@ highest level, its standard deviation from the fits and its significance
      "modes": [{"freq_hz", "df_percent", "df_std_percent", "dzeta_percent", "significant", ...}],
      "levels": [...], "band_hz": [lo, hi], ...}
 
-``freq_hz`` at the lowest level, changes from lowest to highest. Exit codes: 0 done, 2 bad input.
+``freq_hz`` at the lowest level, changes from lowest to highest. Exit codes: 0 done, 1 the levels' modes
+do not pair by frequency and MAC (not one structure: no verdict), 2 bad input.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
 
@@ -41,10 +43,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--levels", metavar="L1,L2,...",
                    help="excitation level of each input in its own unit (N, V...), in the order of the inputs")
     p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: from the lowest level's data)")
-    p.add_argument("--z", type=float, default=3.0, help="significance in standard deviations (default 3)")
+    p.add_argument("--z", type=_z_value, default=3.0,
+                   help="significance in standard deviations, a finite number > 0 (default 3)")
     p.add_argument("--json", metavar="L.json", help="write the comparison as JSON")
     add_estimator(p)
     return p
+
+
+def _z_value(text: str) -> float:
+    """``--z``: a finite number of standard deviations > 0 (a usage error otherwise)."""
+    try:
+        z = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of standard deviations (e.g. 3)") from None
+    if not (math.isfinite(z) and z > 0):
+        raise argparse.ArgumentTypeError(f"{text} must be a finite number of standard deviations > 0 (e.g. 3)")
+    return z
 
 
 def _levels(args: argparse.Namespace, n: int) -> list[float] | None:
@@ -59,10 +73,10 @@ def _levels(args: argparse.Namespace, n: int) -> list[float] | None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command; returns the exit code (0 done, 2 bad input)."""
+    """Run the command; returns the exit code (0 done, 1 the levels' modes do not pair, 2 bad input)."""
     from .bands import FitError
     from .inputs import InputError, load_input, parse_band_text
-    from .linearity import compare_levels, recording_hits
+    from .linearity import LevelsDoNotPair, compare_levels, recording_hits
     from .recording import RecordingError
 
     args = parse_args(build_parser(), argv)
@@ -92,7 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     raise InputError("give --levels (one per input): the level cannot be read from every input")
                 levels = [float(np.median([np.max(np.abs(h.force)) for h in f[0]])) for f in found if f is not None]
         result = compare_levels(sets, levels, band=band, z=args.z)
-    except OutputBusy as exc:
+    except (OutputBusy, LevelsDoNotPair) as exc:
         print(f"analysis linearity: {exc}", file=sys.stderr)
         return 1
     except (InputError, RecordingError, FitError, ValueError, OSError) as exc:

@@ -27,6 +27,7 @@ __all__ = [
     "OutputBusy",
     "WorkLimitError",
     "DiskFullError",
+    "LevelsDoNotPair",
 ]
 
 
@@ -97,6 +98,11 @@ class FolderBusy(ImpactlabError, OSError):
 class OutputBusy(ImpactlabError, OSError):
     """An output file that a live writer holds (a recording being captured, recorded by the station or
     imported): nothing is written to it; the message names the writer's pid. Commands exit with 1."""
+
+
+class LevelsDoNotPair(ImpactlabError, ValueError):
+    """FRF sets compared across excitation levels whose modes do not pair by frequency and MAC: not
+    measurements of one structure (the message says how many paired)."""
 
 
 class WorkLimitError(UsageError):

@@ -143,9 +143,12 @@ def read_uff_geometry(path: str | Path) -> Geometry:
     lines (data set 82) of a UFF file; GeometryError when the file holds no data set 15."""
     import pyuff
 
+    from .input_limits import check_input_file, text_data_limit_bytes
+
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise GeometryError(f"geometry file {p} not found: check the path")
+    check_input_file(p, "--geometry file", text_data_limit_bytes(), GeometryError)
     try:
         sets = pyuff.UFF(str(p)).read_sets()
     except (OSError, ValueError, KeyError, IndexError, TypeError, UnicodeDecodeError, AttributeError) as exc:

@@ -62,6 +62,9 @@ def load_input(path: str | Path, *, estimator: str | None = None) -> FRFSet:
         except (OSError, ValueError, KeyError) as exc:
             raise InputError(f"cannot read recording {path}: {exc}") from None
     else:
+        from .input_limits import check_input_file, text_data_limit_bytes
+
+        check_input_file(path, "input", text_data_limit_bytes(), InputError)  # the UFF reader holds it all
         try:
             from .uff import read_uff58
         except ImportError as exc:  # pragma: no cover - depends on the installed tree

@@ -15,6 +15,13 @@ ran to the edge of its ``MAX_SHIFT`` window at a higher level) is not judged; th
 any mode is, else "linear" (within the noise). Changes are also given per decade of excitation level
 (``df % / log10(level_hi / level_lo)``).
 
+Before any verdict the two measurements must be of one structure: the resonance peaks of the lowest and
+the highest level in the band pair by frequency (within ``MAX_SHIFT``) and MAC of the FRF vectors at the
+peaks (>= ``PAIR_MIN_MAC``; :func:`analysis.diagnosis.compare.pair_modes`). When fewer than
+``MIN_PAIRED_SHARE`` of the lowest level's peaks find a partner, :class:`LevelsDoNotPair` is raised
+instead of a verdict: a difference between two structures (or between other points) is no evidence about
+linearity.
+
 Hits of one recording at different forces (the operator's soft and hard hits, or the natural spread)
 are grouped by their peak force (:func:`group_by_force`) and averaged to one H1 per group
 (:func:`level_frfsets`).
@@ -28,11 +35,13 @@ from typing import Any
 
 import numpy as np
 
+from .errors import LevelsDoNotPair
 from .frf import FRFSet
 
-__all__ = ["ModeShift", "LinearityResult", "LevelHit", "compare_levels", "group_by_force", "level_frfsets",
-           "recording_hits", "level_spread",
-           "Z_SIGNIFICANT", "MIN_DF_PERCENT", "MIN_DZETA_PERCENT", "MIN_LEVEL_RATIO"]
+__all__ = ["ModeShift", "LinearityResult", "LevelHit", "LevelsDoNotPair", "compare_levels", "group_by_force",
+           "level_frfsets", "recording_hits", "level_spread", "check_levels_pair",
+           "Z_SIGNIFICANT", "MIN_DF_PERCENT", "MIN_DZETA_PERCENT", "MIN_LEVEL_RATIO", "PAIR_MIN_MAC",
+           "MIN_PAIRED_SHARE"]
 
 Z_SIGNIFICANT = 3.0
 MIN_DF_PERCENT = 0.05
@@ -41,6 +50,11 @@ MIN_LEVEL_RATIO = 1.5  # hits whose peak forces span less than this ratio are on
 MAX_DF_STD_PERCENT = 0.5  # a mode whose frequency is less certain than this at a level is not judged
 MAX_DZETA_STD_PERCENT = 50.0
 MAX_SHIFT = 0.05  # relative frequency window of each level's pole around the lowest level's
+#: the MAC (FRF vectors at the peaks) above which a peak of the highest level partners one of the lowest
+#: (the same structure: 0.98 and above; another structure's peaks within MAX_SHIFT: 0.6 to 0.94)
+PAIR_MIN_MAC = 0.9
+#: the share of the lowest level's peaks that must find a partner for the levels to be one structure's
+MIN_PAIRED_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -143,12 +157,14 @@ def compare_levels(
     start every level's fit from these instead (e.g. another comparison's ``poles``). Inputs are not
     modified. Raises ValueError on mismatched inputs.
     """
-    from .bands import FitError
+    from .bands import FitError, default_band
     from .lsfd import fit_lsfd
     from .pipeline import fit_auto
 
     if len(frfs) != len(levels) or len(frfs) < 2:
         raise ValueError(f"need at least two FRF sets and one level each; got {len(frfs)} sets, {len(levels)} levels")
+    if not (np.isfinite(z) and z > 0):
+        raise ValueError(f"z must be a finite number of standard deviations > 0; got {z}")
     lv = np.asarray(levels, float)
     if not np.all(np.isfinite(lv) & (lv > 0)):
         raise ValueError(f"levels must be positive numbers; got {list(levels)}")
@@ -157,6 +173,8 @@ def compare_levels(
     order = np.argsort(lv)
     sets = [frfs[i] for i in order]
     lv = lv[order]
+    # one structure at two levels, or no verdict: before anything is fitted (in the default band when none is given)
+    check_levels_pair(sets[0], sets[-1], band if band is not None else default_band(sets[0]), (float(lv[0]), float(lv[-1])))
     notes: list[str] = []
     if poles is None:
         base = None
@@ -215,6 +233,31 @@ def compare_levels(
     return LinearityResult(levels=tuple(float(v) for v in lv), modes=tuple(modes), verdict=verdict, band=band_used,
                            freq_hz=f, zeta=zt, freq_hz_std=fs, zeta_std=zs, z=float(z), notes=tuple(notes),
                            poles=fits[0].poles_raw[idx])
+
+
+def check_levels_pair(low: FRFSet, high: FRFSet, band: Sequence[float], levels: Sequence[float] = (0.0, 0.0)) -> int:
+    """Raise :class:`LevelsDoNotPair` unless the lowest level's FRFs ``low`` and the highest's ``high`` are
+    measurements of one structure: at least :data:`MIN_PAIRED_SHARE` of the resonance peaks of ``low`` in
+    ``band`` (Hz) pair with peaks of ``high`` within :data:`MAX_SHIFT` in frequency and with MAC >=
+    :data:`PAIR_MIN_MAC` (module docstring). ``levels`` (their excitation levels) only name them in the
+    message. Returns the number of pairs (0 when ``low`` shows no peak in the band: nothing to pair)."""
+    from .diagnosis.compare import pair_modes
+
+    if set(low.outputs) != set(high.outputs) or set(low.references) != set(high.references):
+        raise LevelsDoNotPair(f"the levels hold different FRFs (outputs {', '.join(low.outputs)} / references "
+                              f"{', '.join(low.references)} against {', '.join(high.outputs)} / "
+                              f"{', '.join(high.references)}): compare measurements of the same points")
+    lo, hi = float(band[0]), float(band[1])
+    paired = pair_modes(low.band(lo, hi), high.select(low.outputs, low.references).band(lo, hi),
+                        max_rel_df=MAX_SHIFT, min_mac=PAIR_MIN_MAC)
+    n_pairs, n_low = len(paired["pairs"]), len(paired["pairs"]) + len(paired["only_measured"])
+    if n_low and n_pairs < MIN_PAIRED_SHARE * n_low:
+        raise LevelsDoNotPair(
+            f"the modes of the two measurements do not pair: {n_pairs} of the {n_low} resonance peaks in "
+            f"{lo:.5g}..{hi:.5g} Hz at level {levels[0]:.3g} have a partner at level {levels[-1]:.3g} (within "
+            f"{100 * MAX_SHIFT:g} % in frequency, MAC >= {PAIR_MIN_MAC:g}); they look like different structures "
+            "or points, not one structure at two levels: compare measurements of one structure")
+    return n_pairs
 
 
 def group_by_force(peaks_n: Sequence[float] | np.ndarray, min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:

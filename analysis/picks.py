@@ -84,6 +84,9 @@ def _from_json(doc: Any, where: str) -> PolePicks:
         z = _number(z, "damping", at)
         if not 0 <= z < 1:
             raise InputError(f"{at}: damping {z} must be a ratio in [0, 1) (not %); {_HOW}")
+        if not pole_from_fz(f, z).imag > 0:  # an oscillation: the pole is not on the real axis
+            raise InputError(f"{at}: freq_hz {f:.6g} Hz with damping {z:.6g} gives no oscillation (its damped "
+                             f"frequency is 0 Hz); {_HOW}")
         damps.append(z)
     band = doc.get("band_hz")
     band_hz = None
@@ -96,11 +99,12 @@ def _from_json(doc: Any, where: str) -> PolePicks:
 def read_picks(path: str | Path) -> PolePicks:
     """Read a picked-poles file (JSON, schema :data:`PICKS_SCHEMA`) or a text file of frequencies
     (Hz). Raises :class:`analysis.inputs.InputError` naming the file and the problem."""
+    from .input_limits import DOCUMENT_LIMIT_BYTES, read_bounded_text
     from .inputs import parse_float_list
 
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = read_bounded_text(p, "--poles file", DOCUMENT_LIMIT_BYTES, InputError)
     except FileNotFoundError:
         raise InputError(f"poles file {p} not found: check the path, or give the frequencies as F1,F2,...") from None
     except (OSError, UnicodeDecodeError) as exc:

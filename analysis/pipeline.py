@@ -99,6 +99,7 @@ from .selection import poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
 from .visibility import VisiblePeak, visible_peaks
+from .work_limits import check_model_order
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
            "exclude_lines", "mains_harmonics"]
@@ -187,6 +188,10 @@ def fit_auto(
     warnings_out: list[str] = []
 
     stab_method, given_complex, given_freqs = _initial_kind(initial)
+    given = given_complex if given_complex is not None else given_freqs
+    if given is not None:  # before anything is built for them: as many modes as the band's lines support
+        check_model_order(int(given.size), int(np.sum((frf.freq_hz >= lo) & (frf.freq_hz <= hi))),
+                          frf.n_outputs * frf.n_references, "the given poles:", band_hz=(lo, hi))
     progress("fit: band %.6g..%.6g Hz (%d lines, %d FRFs)", lo, hi,
              int(np.sum((frf.freq_hz >= lo) & (frf.freq_hz <= hi))), frf.n_outputs * frf.n_references)
     stab: StabilizationResult | None = None

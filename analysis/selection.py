@@ -150,7 +150,8 @@ def poles_from_frequencies(
     """
     fr = np.asarray([float(x) for x in freqs_hz], dtype=float)
     if fr.size == 0 or np.any(~np.isfinite(fr)) or np.any(fr <= 0):
-        raise ValueError(f"frequencies must be positive numbers in Hz; got {list(freqs_hz)}")
+        raise ValueError("frequencies must be positive numbers in Hz; got "
+                         f"{', '.join(f'{x:.6g}' for x in fr)} Hz")
     out = pole_from_fz(fr, np.full(fr.size, default_damping))
     if stab is not None:
         p, _ = stab.stable_poles(STABLE_DAMP)

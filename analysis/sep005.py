@@ -23,6 +23,7 @@ import numpy as np
 from .atomic import write_text_atomic
 from .errors import SEP005Error
 from .finite_checks import describe_nonfinite
+from .input_limits import read_bounded_text, text_data_limit_bytes
 
 __all__ = ["SEP005Error", "QUANTITY_CODES", "check_sep005", "read_sep005", "write_sep005"]
 
@@ -95,10 +96,10 @@ def read_sep005(path: str | Path) -> list[dict]:
     """The checked channels of a JSON SEP005 file (a list of channels, or an object holding one
     under ``"channels"``)."""
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise SEP005Error(f"{p} not found: check the path")
     try:
-        doc = json.loads(p.read_text())
+        doc = json.loads(read_bounded_text(p, "SEP005 file", text_data_limit_bytes(), SEP005Error))
     except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise SEP005Error(f"{p} is not a JSON SEP005 file ({type(exc).__name__}: {exc})") from None
     except OSError as exc:

@@ -57,16 +57,19 @@ def lscf_work_bytes(n_frfs: int, max_modes: int) -> float:
     return 8.0 * q * q * (3.0 * q + 2.0 * n_frfs)
 
 
-def check_model_order(max_modes: int, n_lines: int, n_frfs: int, what: str = "model order") -> None:
+def check_model_order(max_modes: int, n_lines: int, n_frfs: int, what: str = "model order",
+                      band_hz: tuple[float, float] | None = None) -> None:
     """Refuse a model of ``max_modes`` modes that the ``n_lines`` lines of ``n_frfs`` FRFs cannot
     determine (2n+1 denominator coefficients need as many lines) or whose normal equations do not
-    fit in memory; the message gives the largest accepted order."""
+    fit in memory; the message gives the largest accepted order (and the band ``band_hz`` in Hz the
+    lines are counted in, when given)."""
     by_data = max(0, (n_lines - 1) // 2)
     by_memory = largest_within(lambda n: lscf_work_bytes(n_frfs, n), memory_budget_bytes(), max(by_data, 1))
     largest = min(by_data, by_memory)
     if max_modes > largest:
+        band = f" in the band {band_hz[0]:.6g}..{band_hz[1]:.6g} Hz" if band_hz is not None else ""
         why = (f"the band holds {n_lines} lines" if largest == by_data else
                f"its equations need {lscf_work_bytes(n_frfs, max_modes) / 2**30:.3g} GiB and "
                f"{memory_budget_bytes() / 2**30:.3g} GiB may be used now")
-        raise WorkLimitError(f"{what} {max_modes} modes is too large: {why}; the largest accepted here is {largest} "
+        raise WorkLimitError(f"{what} {max_modes} modes{band} is too large: {why}; the largest accepted here is {largest} "
                              "(or widen the band)")

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from analysis.input_limits import DOCUMENT_LIMIT_BYTES, read_bounded_text
 from analysis.points import PointLabelError, parse_point
 
 from .errors import ConfigError
@@ -54,6 +55,7 @@ __all__ = [
     "NonlinearConfig",
     "NONLINEAR_LAWS",
     "overrides_to_toml",
+    "check_fe_memory",
 ]
 
 DEFAULT_CONFIG_PATH = Path(__file__).with_name("frame.toml")
@@ -403,12 +405,13 @@ def _read_toml(path: Path) -> dict:
     if _toml is None:  # pragma: no cover
         raise ConfigError("reading TOML needs Python 3.11+ (tomllib) or the 'tomli' package: pip install tomli")
     try:
-        with open(path, "rb") as fh:
-            return _toml.load(fh)
+        return _toml.loads(read_bounded_text(path, "config file", DOCUMENT_LIMIT_BYTES, ConfigError))
     except FileNotFoundError:
         raise ConfigError(f"config file {path} not found: give the path of a TOML file like simulator/frame.toml") from None
     except OSError as exc:
         raise ConfigError(f"config file {path} cannot be read ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"config file {path} is not UTF-8 text ({exc})") from None
     except _toml.TOMLDecodeError as exc:
         raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
     except RecursionError:
@@ -524,14 +527,25 @@ def _build(d: dict, source: str) -> FrameConfig:
     return cfg
 
 
-def _first_nonfinite_key(d: Any, prefix: str = "") -> str | None:
-    """The dotted key of the first NaN or infinite number in a parsed TOML document, or None."""
+#: the largest magnitude of any number in a configuration: far beyond every physical value the keys
+#: name (stiffnesses of 1e9 N/m, E of 2e11 Pa), far below where squares and products overflow
+MAX_CONFIG_MAGNITUDE = 1e20
+#: the range of ``[modes] max_freq_hz`` (Hz): from the lowest mode the eigen-solver keeps (omega^2 > 1) to
+#: beyond every analyser's band by far
+MODES_FREQ_RANGE_HZ = (1.0, 1e6)
+#: the largest coordinate (m) of a member's end: a laboratory structure, not a bridge across a continent
+MAX_COORDINATE_M = 1e3
+
+
+def _first_bad_number(d: Any, prefix: str = "") -> tuple[str, Any] | None:
+    """The dotted key and value of the first NaN, infinite or larger than :data:`MAX_CONFIG_MAGNITUDE`
+    number in a parsed TOML document, or None."""
     items = d.items() if isinstance(d, Mapping) else enumerate(d) if isinstance(d, (list, tuple)) else ()
     for k, v in items:
         key = f"{prefix}.{k}" if prefix and isinstance(k, str) else f"{prefix}[{k}]" if prefix else str(k)
-        if isinstance(v, float) and not np.isfinite(v):
-            return key
-        found = _first_nonfinite_key(v, key) if isinstance(v, (Mapping, list, tuple)) else None
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and not abs(v) <= MAX_CONFIG_MAGNITUDE:
+            return key, v
+        found = _first_bad_number(v, key) if isinstance(v, (Mapping, list, tuple)) else None
         if found:
             return found
     return None
@@ -539,6 +553,25 @@ def _first_nonfinite_key(d: Any, prefix: str = "") -> str | None:
 
 #: bytes per squared degree of freedom of the dense eigenproblem (K, M, shapes and the solver's copies)
 FE_BYTES_PER_DOF2 = 5 * 8
+
+
+def check_fe_memory(cfg: FrameConfig, bytes_per_dof2: float, what: str, source: str | None = None) -> None:
+    """Refuse (:class:`ConfigError`) a frame whose FE work, ``bytes_per_dof2`` bytes per squared degree of
+    freedom (``what`` it is in the message), does not fit in the memory one computation may use now
+    (:func:`analysis.work_limits.memory_budget_bytes`); the message gives the largest accepted total of
+    elements."""
+    from analysis.work_limits import memory_budget_bytes
+
+    n_dof = 6.0 * sum(float(c.n_elements) + 1 for c in cfg.components.values())
+    budget = memory_budget_bytes()
+    max_dof = (budget / bytes_per_dof2) ** 0.5
+    if n_dof > max_dof:
+        largest = int(max_dof) // 6 - len(cfg.components)
+        gib = bytes_per_dof2 * n_dof * n_dof / 2**30  # inf, not an error, beyond float range
+        _check(False, f"{source or cfg.source}: the components' n_elements add up to "
+                      f"{n_dof / 6 - len(cfg.components):.6g} elements ({n_dof:.6g} degrees of freedom, {gib:.3g} GiB "
+                      f"for {what}, {budget / 2**30:.3g} GiB may be used now); the largest accepted total here is "
+                      f"{max(largest, 0)} elements")
 
 
 def _structure_mass_kg(cfg: FrameConfig) -> float:
@@ -554,20 +587,13 @@ def _structure_mass_kg(cfg: FrameConfig) -> float:
 def _validate_bounds(cfg: FrameConfig, source: str) -> None:
     """Finite numbers everywhere, an FE model whose eigenproblem fits in memory, a sensor lighter
     than the structure (checked before anything is built)."""
-    from analysis.work_limits import memory_budget_bytes
-
-    bad = _first_nonfinite_key(cfg.raw)
-    _check(bad is None, f"{source}: {bad} is not a finite number; give a value in the units the key names")
-    n_dof = 6.0 * sum(float(c.n_elements) + 1 for c in cfg.components.values())
-    budget = memory_budget_bytes()
-    max_dof = (budget / FE_BYTES_PER_DOF2) ** 0.5
-    if n_dof > max_dof:
-        largest = int(max_dof) // 6 - len(cfg.components)
-        gib = FE_BYTES_PER_DOF2 * n_dof * n_dof / 2**30  # inf, not an error, beyond float range
-        _check(False, f"{source}: the components' n_elements add up to {n_dof / 6 - len(cfg.components):.6g} elements "
-                      f"({n_dof:.6g} degrees of freedom, {gib:.3g} GiB for the "
-                      f"eigenproblem, {budget / 2**30:.3g} GiB may be used now); the largest accepted total here is "
-                      f"{max(largest, 0)} elements")
+    bad = _first_bad_number(cfg.raw)
+    if bad is not None:
+        key, value = bad
+        what = ("is not a finite number" if isinstance(value, float) and not np.isfinite(value) else
+                f"= {value:.6g} is beyond the {MAX_CONFIG_MAGNITUDE:.0e} accepted for any value")
+        _check(False, f"{source}: {key} {what}; give a value in the units the key names")
+    check_fe_memory(cfg, FE_BYTES_PER_DOF2, "the eigenproblem", source)
     mass = _structure_mass_kg(cfg)
     _check(cfg.sensors.accelerometer.mass_kg < mass,
            f"{source}: sensors.accelerometer.mass_kg = {cfg.sensors.accelerometer.mass_kg:g} kg is not below the "
@@ -595,6 +621,8 @@ def _validate(cfg: FrameConfig, source: str) -> None:
                f"{p} components.{name}.section = {c.section!r} is not one of [sections.*]: {', '.join(cfg.sections)}")
         _check(len(c.start_m) == 3 and len(c.end_m) == 3,
                f"{p} components.{name}: start_m and end_m must be [x, y, z] in metres")
+        _check(all(isinstance(x, (int, float)) and abs(x) <= MAX_COORDINATE_M for x in (*c.start_m, *c.end_m)),
+               f"{p} components.{name}: start_m and end_m must be numbers within +-{MAX_COORDINATE_M:g} m")
         _check(c.n_elements >= 1, f"{p} components.{name}.n_elements must be >= 1")
         _check(float(np.linalg.norm(np.subtract(c.end_m, c.start_m))) > 0,
                f"{p} components.{name}: start_m and end_m coincide")
@@ -615,6 +643,10 @@ def _validate(cfg: FrameConfig, source: str) -> None:
     for where, k in (("supports.stiffness", cfg.supports.stiffness), ("joints.stiffness", cfg.joints.stiffness)):
         _check(len(k) == 6 and all(isinstance(x, (int, float)) and x >= 0 for x in k),
                f"{p} {where} must be 6 values >= 0: [kx, ky, kz] N/m, [krx, kry, krz] N m/rad")
+    _check(len(cfg.supports.nodes) > 0 and all(float(x) > 0 for x in cfg.supports.stiffness[:3]),
+           f"{p} [supports] holds the frame in no direction or not in all three (nodes {list(cfg.supports.nodes)}, "
+           f"stiffness {list(cfg.supports.stiffness)}): the frame would float free with a singular stiffness; give "
+           "support nodes and kx, ky, kz > 0 N/m")
     dm = cfg.damage
     for places, factors, name, what in (
         (dm.cracked_elements, dm.crack_bending_factor, "cracked_elements", "element"),
@@ -640,7 +672,9 @@ def _validate(cfg: FrameConfig, source: str) -> None:
     _check(all(0 <= z < 1 for z in d.zeta) and 0 <= d.zeta_default < 1,
            f"{p} damping ratios must be in [0, 1) (ratios, not percent)")
     _check(d.rayleigh_alpha >= 0 and d.rayleigh_beta >= 0, f"{p} rayleigh_alpha and rayleigh_beta must be >= 0")
-    _check(cfg.modes.max_freq_hz > 0, f"{p} modes.max_freq_hz must be > 0")
+    lo, hi = MODES_FREQ_RANGE_HZ
+    _check(lo <= cfg.modes.max_freq_hz <= hi,
+           f"{p} modes.max_freq_hz = {cfg.modes.max_freq_hz:.6g} must be in [{lo:g}, {hi:.0e}] Hz")
     a, fs = cfg.sensors.accelerometer, cfg.sensors.force
     _check(a.mass_kg >= 0 and a.sensitivity_mv_per_g > 0 and a.noise_density_g_per_rthz >= 0 and a.iepe_highpass_hz >= 0,
            f"{p} [sensors.accelerometer] values must be >= 0 (sensitivity > 0)")

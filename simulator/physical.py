@@ -51,11 +51,12 @@ from analysis.diagnosis.physical import CauseSpec, ParamSpec
 from analysis.modal import ModalModel, pole_from_fz
 from analysis.points import parse_point
 
-from .config import FrameConfig
+from .config import FrameConfig, check_fe_memory
 from .fem import FrameModel, ModelError, element_matrices, member_nodes_xyz, section_properties, stamp_spring
 from .ritz import Part, ReducedSpace, RitzReduction
 
-__all__ = ["FrameVariants", "CAUSES", "PhysicalCause", "Assembly", "register_cause"]
+__all__ = ["FrameVariants", "CAUSES", "PhysicalCause", "Assembly", "register_cause", "DIAGNOSIS_BYTES_PER_DOF2",
+           "check_diagnosis_size"]
 
 
 @dataclass
@@ -179,6 +180,23 @@ def _part(dofs: np.ndarray, block: np.ndarray) -> Part:
     """A part on ``dofs`` trimmed to the DOFs where ``block`` is nonzero."""
     nz = np.flatnonzero(np.any(block != 0, axis=0) | np.any(block != 0, axis=1))
     return Part(np.asarray(dofs)[nz], block[np.ix_(nz, nz)])
+
+
+#: bytes per squared degree of freedom of the configured model that a diagnosis holds at its peak: the
+#: model's parts and matrices, its Ritz bases, and the copy with every member's elements twice as fine
+#: (:meth:`FrameVariants.refined`: four times the squares) that judges the mesh's convergence, each with its
+#: eigenproblem. Measured: 317 and 336 B for the default frame with 10 and 20 times its elements (1698 and
+#: 3378 degrees of freedom) in ``python -m analysis diagnose``; a single eigenproblem takes
+#: :data:`simulator.config.FE_BYTES_PER_DOF2`.
+DIAGNOSIS_BYTES_PER_DOF2 = 400
+
+
+def check_diagnosis_size(config: FrameConfig) -> None:
+    """Refuse (:class:`simulator.config.ConfigError`, naming the largest accepted total of elements) a
+    frame whose diagnosis (:data:`DIAGNOSIS_BYTES_PER_DOF2`) does not fit in the memory one computation
+    may use now, before anything of it is built."""
+    check_fe_memory(config, DIAGNOSIS_BYTES_PER_DOF2,
+                    "a diagnosis (the model, its twice finer copy and their eigenproblems)")
 
 
 def _one(cause: str | None, params: Mapping) -> list[tuple[str, Mapping]]:

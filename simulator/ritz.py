@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from .errors import ModelError
+
 __all__ = ["Part", "RitzReduction", "ReducedSpace", "N_MODES", "LOCAL_DOFS"]
 
 #: Nominal modes in every basis (on the default frame up to ~1.5 kHz, twice the highest mode the
@@ -117,13 +119,22 @@ class ReducedSpace:
         return w2[keep], Y[:, keep]
 
 
+#: the message of a frame whose stiffness matrix is singular (it moves freely: nothing holds it)
+SINGULAR_STIFFNESS = ("the frame's stiffness matrix is singular: the frame can move without deforming (a rigid-body "
+                      "or mechanism mode at 0 Hz); give [supports] nodes and stiffness values > 0 that hold it "
+                      "(and [joints] stiffness > 0 where members meet)")
+
+
 class RitzReduction:
     """Builds the Ritz bases of the nominal frame ``K0, M0`` (module docstring)."""
 
     def __init__(self, K0: np.ndarray, M0: np.ndarray) -> None:
         self.K0, self.M0 = K0, M0
         self.w2, self.modes = scipy.linalg.eigh(K0, M0)
-        self._chol = scipy.linalg.cho_factor(K0)
+        try:
+            self._chol = scipy.linalg.cho_factor(K0)
+        except np.linalg.LinAlgError:
+            raise ModelError(SINGULAR_STIFFNESS) from None
 
     def n_modes(self, w2_max: float) -> int:
         """Nominal modes a basis needs for eigenvalues up to ``w2_max`` (rad/s)^2: ``N_MODES``, or more

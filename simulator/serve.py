@@ -157,6 +157,12 @@ def firmware_factory(options: dict, precomputed: str | None = None) -> Callable[
     if precomputed is not None:
         import numpy as np
 
+        from analysis.input_limits import check_input_file
+        from analysis.work_limits import memory_budget_bytes
+
+        from .errors import ConfigError
+
+        check_input_file(precomputed, "--precomputed file", memory_budget_bytes(), ConfigError)  # a FIFO would block
         with np.load(precomputed) as data:
             if "volts" not in data or "fs_hz" not in data:
                 raise ValueError(f"{precomputed}: a precomputed stand file needs arrays 'volts' and 'fs_hz'")

@@ -177,9 +177,9 @@ def test_simulator_config_files(changes, junk):
         except ConfigError as exc:
             assert str(exc)
             return
-    from simulator.config import _first_nonfinite_key
+    from simulator.config import _first_bad_number
 
-    assert _first_nonfinite_key(cfg.raw) is None
+    assert _first_bad_number(cfg.raw) is None  # every accepted number finite and within the bound
 
 
 # ---------------------------------------------------------------------- the station's JSON API

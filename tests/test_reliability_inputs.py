@@ -200,7 +200,7 @@ def test_model_order_beyond_the_lines_or_the_memory_is_refused_before_allocating
 @pytest.mark.parametrize("text, pattern", [
     ("[material]\nyoungs_modulus_pa = inf\n", "material.youngs_modulus_pa is not a finite number"),
     ("[components.left]\nn_elements = 1000000\n", "the largest accepted total here is"),
-    ("[sensors.accelerometer]\nmass_kg = 1e30\n", "not below the structure's mass"),
+    ("[sensors.accelerometer]\nmass_kg = 1e6\n", "not below the structure's mass"),
     ("a = " + "[" * 50000 + "]" * 50000 + "\n", "nested too deeply"),
 ])
 def test_simulator_config_bounds(tmp_path, text, pattern):

@@ -72,9 +72,13 @@ def modes_from_fit(doc: Mapping[str, Any]) -> UnitModes:
 
 def read_reference(path: str | Path) -> UnitModes:
     """The modes of a reference fit: an ``analysis fit --json`` file or a batch result JSON."""
+    from ..input_limits import RESULT_LIMIT_BYTES, read_bounded_text
+
     p = Path(path)
     try:
-        doc = json.loads(p.read_text())
+        doc = json.loads(read_bounded_text(p, "--reference file", RESULT_LIMIT_BYTES, InputError))
+    except InputError:
+        raise
     except FileNotFoundError:
         raise InputError(f"reference fit {p} not found: give the JSON of 'analysis fit --json' of a good unit") from None
     except (OSError, ValueError) as exc:

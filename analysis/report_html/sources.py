@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import ReportInputError
 from ..frf import FRFSet
+from ..input_limits import RESULT_LIMIT_BYTES, read_bounded_text
 from ..modal import ModalModel
 
 if TYPE_CHECKING:
@@ -148,7 +149,7 @@ def load_fit_json(path: str | Path, frf: FRFSet) -> FitData:
 
     p = Path(path)
     try:
-        doc = json.loads(p.read_text())
+        doc = json.loads(read_bounded_text(p, "--fit file", RESULT_LIMIT_BYTES, ReportInputError))
         poles = np.array([_cpx(q["pole"]) for q in doc["poles"]])
         fstd = np.array([np.nan if q.get("freq_hz_std") is None else q["freq_hz_std"] for q in doc["poles"]], float)
         zstd = np.array([np.nan if q.get("damping_std") is None else q["damping_std"] for q in doc["poles"]], float)
@@ -224,7 +225,9 @@ def load_diagnosis(path: str | Path | None) -> dict | None:
         return None
     p = Path(path)
     try:
-        doc = json.loads(p.read_text())
+        doc = json.loads(read_bounded_text(p, "--diagnosis file", RESULT_LIMIT_BYTES, ReportInputError))
+    except ReportInputError:
+        raise
     except FileNotFoundError:
         raise ReportInputError(f"diagnosis file {p} not found: check the path") from None
     except (OSError, ValueError) as exc:
