@@ -108,19 +108,21 @@ def _harmonic_lines(frf: FRFSet, c: float, tol: float) -> np.ndarray | None:
         return None
     n_frf = frf.n_outputs * frf.n_references
     sides = np.concatenate([left, right])
-    a = np.abs(np.asarray(frf.H).reshape(n_frf, -1))
+    H = np.asarray(frf.H).reshape(n_frf, -1)
+    a_win, a_side = np.abs(H[:, window]), np.abs(H[:, sides])   # only the lines the rule reads
     with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)   # an FRF never measured (all NaN) shows no line
-        level = np.nanmedian(a[:, sides], axis=1)
-        spike = 20.0 * np.log10(np.nanmax(a[:, window], axis=1) / np.nanmax(a[:, sides], axis=1)) >= LINE_DB
+        level = np.nanmedian(a_side, axis=1)
+        spike = 20.0 * np.log10(np.nanmax(a_win, axis=1) / np.nanmax(a_side, axis=1)) >= LINE_DB
         if frf.coherence is None:
             return np.asarray(spike & np.isfinite(level))
-        g = np.asarray(frf.coherence).reshape(n_frf, -1)
-        g_side = np.nanmedian(g[:, sides], axis=1)
-        spread = MAD_TO_STD * np.nanmedian(np.abs(g[:, sides] - g_side[:, None]), axis=1)
-        k = np.argmin(np.where(np.isfinite(g[:, window]), g[:, window], np.inf), axis=1)
-        g_min = g[:, window][np.arange(n_frf), k]
-        at_dip = a[:, window][np.arange(n_frf), k]
+        C = np.asarray(frf.coherence).reshape(n_frf, -1)
+        g_win, g_sides = C[:, window], C[:, sides]
+        g_side = np.nanmedian(g_sides, axis=1)
+        spread = MAD_TO_STD * np.nanmedian(np.abs(g_sides - g_side[:, None]), axis=1)
+        k = np.argmin(np.where(np.isfinite(g_win), g_win, np.inf), axis=1)
+        g_min = g_win[np.arange(n_frf), k]
+        at_dip = a_win[np.arange(n_frf), k]
         dip = ((g_side - g_min >= np.maximum(COHERENCE_DIP, DIP_SPREADS * spread))
                & (20.0 * np.log10(at_dip / level) >= -DIP_LEVEL_DB))
     return np.asarray((spike | dip) & np.isfinite(level))
