@@ -4,8 +4,10 @@
 
 Writes every measured FRF (function type 4) with its coherence (type 6); ``--time`` adds the
 accepted hits' time histories (type 1, one record per channel and hit). Nodes and directions
-follow ``analysis.points.uff_node/uff_direction``; the ID lines carry the estimator, averages and
-windows. Read back with ``analysis.uff.read_uff58``.
+follow ``analysis.points.uff_dofs``; the ID lines carry the estimator and averages (line 2), the
+exponential window (line 3, ``exp_window_tau_s=<tau s>``) and the point labels (line 4,
+``out=<label> ref=<label>``), so ``analysis.uff.read_uff58`` reads back what a fit needs: a fit of
+the export removes the same window damping as a fit of the recording.
 """
 from __future__ import annotations
 

@@ -6,7 +6,8 @@
 
 Formats (by extension unless ``--format``): LabVIEW ``.lvm`` (segments = hits), DataPhysics
 ``.mat`` (``X1..Xn`` blocks, or the analyser-windowed ``W1..Wn`` with ``--windowed``), numpy
-``.npy`` (one file per hit, needs ``--describe``). Channel numbers are 1-based.
+``.npy`` (one file per hit, needs ``--describe``). Channel numbers are 1-based. Raw blocks get
+capture's windows unless ``--force-window``/``--exp-window`` say otherwise (:func:`import_windows`).
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, with
 from analysis.outputs import check_outputs
 
 from .errors import RecordingError, UsageError
-from .window_options import parse_windows
+from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
 
 __all__ = ["main", "build_parser", "FORMATS"]
 
@@ -43,11 +44,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", metavar="POINT", help="point label of the hammer (e.g. n:1:Z)")
     p.add_argument("--outputs", metavar="P1,P2", help="point labels of the responses, comma-separated")
     p.add_argument("--windowed", action="store_true", help="DataPhysics: import the analyser-windowed blocks Wk")
-    p.add_argument("--force-window", default="none", metavar="WIDTH[,TAPER]|none",
-                   help="force window after the trigger, e.g. 10ms,2ms (s, ms or samples; default none)")
-    p.add_argument("--exp-window", default="none", metavar="TAU|PCT%|none",
+    p.add_argument("--force-window", metavar="WIDTH[,TAPER]|none",
+                   help="force window after the trigger, e.g. 10ms,2ms (s, ms or samples; default: capture's, "
+                        f"{DEFAULT_FORCE_WINDOW}; none with --windowed, whose blocks carry the analyser's windows)")
+    p.add_argument("--exp-window", metavar="TAU|PCT%|none",
                    help="exponential window on the responses: the time constant (e.g. 0.3s) or the value it "
-                        "decays to at the block end (e.g. 5%%); default none")
+                        f"decays to at the block end (e.g. 5%%); default: capture's, {DEFAULT_EXP_WINDOW.replace('%', '%%')}; "
+                        "none with --windowed")
     p.add_argument("--drop-nonfinite", action="store_true",
                    help="leave out hits holding NaN or infinite samples (counted) instead of refusing the file")
     add_overwrite(p, "replace an existing --out file")
@@ -65,6 +68,15 @@ def _check_files(files: Sequence[str], fmt: str, error: type[Exception]) -> None
     for f in files:
         if Path(f).exists():  # a missing file is named by its reader
             check_input_file(f, f"input file (.{fmt})", limit, error)
+
+
+def import_windows(force: str | None, exp: str | None, windowed: bool) -> tuple[str, str]:
+    """The ``--force-window`` and ``--exp-window`` texts of an import: as given, else capture's
+    defaults (raw time data get the windows a capture of the same hits would: the force window keeps
+    the pulse and drops the noise of the rest of the block, so the force spectrum, and with it the
+    fit's band, is the pulse's); ``none`` for blocks the analyser already windowed (``windowed``)."""
+    default_force, default_exp = ("none", "none") if windowed else (DEFAULT_FORCE_WINDOW, DEFAULT_EXP_WINDOW)
+    return (force if force is not None else default_force), (exp if exp is not None else default_exp)
 
 
 @cli_entry
@@ -101,7 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json (or --format)")
         test = combine_imports(tests)
-        windows = parse_windows(args.force_window, args.exp_window, test.fs_hz)
+        windows = parse_windows(*import_windows(args.force_window, args.exp_window, args.windowed), test.fs_hz)
         fch = args.force_channel - 1 if args.force_channel else None
         rch = [int(x) - 1 for x in args.responses.split(",")] if args.responses else None
         outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None

@@ -21,7 +21,7 @@ from .modal import damping_ratio, natural_freq_hz
 from .peaks import find_peaks
 
 __all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges",
-           "mains_harmonics", "exclude_lines", "mains_harmonic_index", "MAINS_HZ"]
+           "mains_harmonics", "exclude_lines", "mains_harmonic_index", "harmonic_tolerance_hz", "MAINS_HZ"]
 
 log = logging.getLogger(__name__)
 
@@ -263,12 +263,18 @@ def exclude_lines(frf: FRFSet, freqs_hz: Sequence[float], n_lines: float = EXCLU
     return replace(frf, freq_hz=f[keep], H=frf.H[..., keep], coherence=coh), int(drop.sum())
 
 
+def harmonic_tolerance_hz(k: int, df: float) -> float:
+    """How far (Hz) a line may lie from the k-th mains harmonic and still be on it: ``MAINS_LINES``
+    line spacings ``df`` (Hz) or the grid's frequency deviation ``k MAINS_DEVIATION_HZ``."""
+    return max(MAINS_LINES * float(df), k * MAINS_DEVIATION_HZ)
+
+
 def mains_harmonic_index(freq_hz: float, mains: Sequence[float], df: float) -> tuple[int, float] | None:
-    """``(k, m)`` when ``freq_hz`` lies on the k-th harmonic of the mains frequency ``m`` (Hz): within
-    ``MAINS_LINES`` line spacings ``df`` or the grid's deviation ``k MAINS_DEVIATION_HZ``; else None."""
+    """``(k, m)`` when ``freq_hz`` lies on the k-th harmonic of the mains frequency ``m`` (Hz), within
+    :func:`harmonic_tolerance_hz`; else None."""
     for m in mains:
         k = int(round(float(freq_hz) / m))
-        if k >= 1 and abs(freq_hz - k * m) <= max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ):
+        if k >= 1 and abs(freq_hz - k * m) <= harmonic_tolerance_hz(k, df):
             return k, float(m)
     return None
 

@@ -74,9 +74,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "costs one LSFD per group, see docs/fitting.md")
     p.add_argument("--exclude-lines", metavar="F1,F2,...",
                    help="leave the lines within 2 lines of these frequencies (Hz) out of the LSFD (zero weight)")
-    p.add_argument("--mains", metavar="50|60|none", default="50,60",
-                   help="mains frequencies (Hz, comma separated) whose narrow harmonic lines the misfit step never "
-                        "fits as modes (default 50,60; none: no guard)")
+    p.add_argument("--mains", metavar="auto|50|60|none", default="auto",
+                   help="the mains grid (Hz) whose narrow harmonic lines are never fitted as modes: auto (default) "
+                        "finds it from the narrow lines in the FRFs and coherence (both 50 and 60 Hz when they do not "
+                        "tell), 50 or 60 gives it, none turns the check off; see docs/fitting.md")
     p.add_argument("--exclude-mains", metavar="HZ", type=float,
                    help="leave every harmonic of this mains frequency (Hz) in the band out of the LSFD")
     add_estimator(p)
@@ -152,6 +153,7 @@ def _check_options(args: argparse.Namespace) -> tuple:
     frequencies or None, whether they are picked poles, excluded lines (Hz), mains frequencies (Hz)).
     Raises InputError naming the option."""
     from .inputs import InputError, parse_band_text, parse_float_list
+    from .mains_grid import parse_mains_option
 
     band = parse_band_text(args.band)
     for name in ("modes", "order", "max_iter"):
@@ -162,9 +164,12 @@ def _check_options(args: argparse.Namespace) -> tuple:
     if band is None and picked_band is not None:
         band = picked_band  # the band of the diagram the poles were picked on
     exclude = parse_float_list(args.exclude_lines) if args.exclude_lines else []
-    mains = () if str(args.mains).strip().lower() == "none" else tuple(parse_float_list(args.mains))
-    if any(m <= 0 for m in mains) or (args.exclude_mains is not None and not args.exclude_mains > 0):
-        raise InputError("mains frequencies must be > 0 Hz (or --mains none)")
+    try:
+        mains = parse_mains_option(args.mains)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    if args.exclude_mains is not None and not args.exclude_mains > 0:
+        raise InputError(f"--exclude-mains {args.exclude_mains:g}: the mains frequency must be > 0 Hz (50 or 60)")
     check_outputs([args.json, args.plot, args.uff], [args.input, args.poles, args.geometry])
     for path, what in ((args.json, "JSON"), (args.plot, "plot"), (args.uff, "UFF file")):
         check_out_dir(path, what)

@@ -75,7 +75,8 @@ def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str
     ``rms_weights`` its FRF weights (:func:`analysis.pipeline.rms_weights`)."""
     from .compression import principal_responses
     from .lsfd import lsfd_at_poles, sorted_by_frequency
-    from .missing_modes import MAINS_HZ, unfitted_resonances
+    from .mains_grid import mains_for_fit
+    from .missing_modes import unfitted_resonances
     from .visibility import visible_peaks
 
     band = options.get("band")
@@ -99,7 +100,10 @@ def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str
     selection = options.get("selection_options")
     if selection is None:
         selection = {"tol_freq": SELECTION_TOL_FREQ}
-    inner = fit(comp.frf, **{**options, "frf_weighting": "none", "max_modes": mm, "selection_options": selection})
+    # the mains grid from the FRFs themselves (their coherence shows it), not from their principal responses
+    mains, grid = mains_for_fit(options.get("mains_hz", "auto"), frf)
+    inner = fit(comp.frf, **{**options, "frf_weighting": "none", "max_modes": mm, "selection_options": selection,
+                             "mains_hz": mains})
     band_fit = inner.band
     full = frf
     exclude_hz = options.get("exclude_hz")
@@ -113,10 +117,9 @@ def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str
     if not inner.lsfd.success:   # the search's own verdict on convergence carries over
         lsfd = replace(lsfd, status=inner.lsfd.status, success=False, message=inner.lsfd.message)
     lsfd = sorted_by_frequency(lsfd)
-    mains = options.get("mains_hz", MAINS_HZ)
-    mains = tuple(float(m) for m in (mains or ()))
     problems = assess_fit(lsfd, band_fit)
     left, notes = unfitted_resonances(full, visible_peaks(full, band_fit), lsfd, mains)
-    warnings_out = [comp.describe(), *inner.warnings, *notes]
+    said = grid.fit_note() if grid is not None else []
+    warnings_out = [comp.describe(), *said, *inner.warnings, *notes]
     return FitResult(lsfd=lsfd, stabilization=inner.stabilization, band=band_fit, selected_poles=inner.selected_poles,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems + left))

@@ -3,7 +3,7 @@
 Node labels are ``component:node`` (the first two parts of a point label ``component:node:direction``,
 see :mod:`analysis.points`). Files: UFF data set 15 (nodes) and 82 (trace lines) through pyuff; a
 UFF node number maps to a label with :func:`analysis.points.point_from_uff` and back with
-:func:`analysis.points.uff_node`. Without a geometry, :func:`points_on_a_line` puts the measured
+:func:`analysis.points.uff_dofs`. Without a geometry, :func:`points_on_a_line` puts the measured
 points on a line, 0.1 m apart, joined in order.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import GeometryError
-from .points import PointLabelError, point_from_uff, uff_node
+from .points import point_from_uff, uff_dofs
 
 __all__ = ["Geometry", "GeometryError", "node_label", "points_on_a_line", "read_uff_geometry",
            "write_uff_geometry"]
@@ -132,10 +132,10 @@ def _label_of_uff(node: int) -> str:
 
 
 def _uff_of_label(label: str) -> int:
-    try:
-        return uff_node(f"{label}:Z")
-    except PointLabelError as exc:
-        raise GeometryError(f"node {label!r} has no UFF node number: {exc}") from None
+    """The UFF node number of a node label ``component:node``: that of its points in UFF 55/58
+    records (:func:`analysis.points.uff_dofs`, also for labels of other tools such as ``view0:acc``)."""
+    point = f"{label}:Z"
+    return uff_dofs([point])[point][0]
 
 
 def read_uff_geometry(path: str | Path) -> Geometry:

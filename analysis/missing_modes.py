@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .bands import MAINS_DEVIATION_HZ, MAINS_HZ, MAINS_LINES, mains_harmonic_index
+from .bands import MAINS_HZ, harmonic_tolerance_hz, mains_harmonic_index
 from .bounded_fit import bad_poles, trust_window_hz
 from .fit_checks import DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, bandwidth_hz
 from .fit_result import MAX_DAMPING
@@ -170,8 +170,8 @@ def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, ma
                 max_lines: int = MAINS_TOP_LINES) -> str | None:
     """Why the misfit peak at ``c`` Hz is a mains line (step 7), or None.
 
-    On a harmonic ``k m`` of a mains frequency ``m`` (within ``MAINS_LINES`` lines or the grid's
-    frequency deviation ``k MAINS_DEVIATION_HZ``) *and* narrower than a mode would be: its
+    On a harmonic ``k m`` of a mains frequency ``m`` (within :func:`analysis.bands.harmonic_tolerance_hz`)
+    *and* narrower than a mode would be: its
     half-power width (of ``e^2``) is below ``MAINS_WIDTH_FRACTION`` of ``2 zeta c`` with zeta the
     median damping of the fitted poles, and at most ``max_lines`` lines wide (the widest a steady
     line is in the record, :func:`mains_line_max_lines`). A structural mode at that damping has a
@@ -180,7 +180,7 @@ def _mains_line(c: float, f: np.ndarray, e: np.ndarray, df: float, z0: float, ma
 
     for m in mains:
         k = int(round(c / m))
-        if k < 1 or abs(c - k * m) > max(MAINS_LINES * df, k * MAINS_DEVIATION_HZ):
+        if k < 1 or abs(c - k * m) > harmonic_tolerance_hz(k, df):
             continue
         i = int(np.argmin(np.abs(f - c)))
         width = float(peak_widths(e ** 2, [i], rel_height=0.5)[0]) * df

@@ -92,7 +92,8 @@ from .compressed_fit import with_compression
 from .fit_result import FitResult, assess_fit
 from .frf import FRFSet, window_pole_shift
 from .lscf import parse_band
-from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
+from .mains_grid import mains_for_fit
+from .missing_modes import add_missing_modes, unfitted_resonances
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .progress import progress
 from .selection import poles_from_frequencies, select_poles
@@ -123,7 +124,7 @@ def fit_auto(
     selection_options: dict | None = None,
     add_missing: bool = True,
     frf_weighting: str = "rms",
-    mains_hz: Sequence[float] | None = MAINS_HZ,
+    mains_hz: Sequence[float] | str | None = "auto",
     exclude_hz: Sequence[float] | None = None,
     compress: bool | None = None,
 ) -> FitResult:
@@ -152,7 +153,9 @@ def fit_auto(
         given); not done when ``n_modes`` is given (the user chose the model size).
     mains_hz : mains frequencies (Hz) of the guard of step 7: a misfit peak on a harmonic of one
         of them that is much narrower than a mode is not fitted as a mode (reported in the
-        warnings). None or () disables the guard.
+        warnings). "auto" (default): the grid the data show (:func:`analysis.mains_grid.detect_mains_grid`;
+        both 50 and 60 Hz when it is unknown; a detected grid is named in the warnings). None or
+        () disables the guard.
     exclude_hz : frequencies (Hz) whose lines (within ``EXCLUDE_LINES`` lines) are left out of
         the LSFD and of the misfit of step 7 altogether (zero weight), e.g. mains harmonics;
         see :func:`mains_harmonics`. The stabilization still sees all lines.
@@ -175,9 +178,7 @@ def fit_auto(
     weighting = str(frf_weighting).lower()
     if weighting not in ("rms", "none"):
         raise ValueError(f"frf_weighting must be 'rms' or 'none'; got {frf_weighting!r}")
-    mains = tuple(float(m) for m in (mains_hz or ()))
-    if any(not np.isfinite(m) or m <= 0 for m in mains):
-        raise ValueError(f"mains_hz must hold positive frequencies in Hz (or be None); got {mains_hz!r}")
+    mains, grid = mains_for_fit(mains_hz, frf)
     user_band = band is not None
     if user_band:
         lo, hi = parse_band(band, frf.freq_hz)
@@ -186,6 +187,8 @@ def fit_auto(
     # how far an automatic edge may move: within what the data support (default_band)
     limits = default_band(frf) if not user_band else (lo, float(frf.freq_hz[-1]))
     warnings_out: list[str] = []
+    if grid is not None:
+        warnings_out += grid.fit_note()
 
     stab_method, given_complex, given_freqs = _initial_kind(initial)
     given = given_complex if given_complex is not None else given_freqs

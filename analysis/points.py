@@ -8,19 +8,31 @@ negative for the opposite sense). :func:`uff_node` maps a component and node to 
 single node number: known components get a base (left=1000, top=2000, right=3000),
 a component ``n`` or ``node`` maps to the bare node number, any other component
 gets a stable base from its name.
+
+Labels of other shapes (e.g. ``view0:acc:Z`` or ``f16:shaker:Z`` from other tools' files) still
+get a UFF degree of freedom (:func:`uff_dofs`): the direction from the label's last ``:`` part when
+it is a signed X/Y/Z (else +Z), and a node number of their own from ``FREE_NODE_BASE`` on.
 """
 from __future__ import annotations
 
 import re
 import zlib
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from .errors import PointLabelError
 
-__all__ = ["Point", "PointLabelError", "parse_point", "uff_node", "uff_direction", "point_from_uff"]
+__all__ = ["Point", "PointLabelError", "parse_point", "uff_node", "uff_direction", "point_from_uff",
+           "label_direction", "uff_dofs", "FREE_NODE_BASE"]
 
 _DIRECTIONS = {"X": 1, "Y": 2, "Z": 3}
 _COMPONENT_BASE = {"left": 1000, "top": 2000, "right": 3000}
+#: first UFF node number of labels that are not ``component:node:direction`` (and of a label whose
+#: degree of freedom another label of the same file took); above every number :func:`uff_node` gives
+#: a component's nodes below 1 000 000
+FREE_NODE_BASE = 2_000_000
+#: how many node numbers the free labels spread over (a label's number is stable: from its name)
+_FREE_NODE_SPAN = 1_000_000
 _PATTERN = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*:\s*(\d+)\s*:\s*([+-]?)([XYZxyz])\s*$")
 
 
@@ -94,3 +106,53 @@ def point_from_uff(node: int, direction: int) -> Point:
         if base <= node < base + 1000:
             return Point(comp, node - base, d)
     return Point("n", int(node), d)
+
+
+def label_direction(label: str | Point) -> int:
+    """UFF direction code (+-1, +-2, +-3 for X, Y, Z) of any point label: that of a
+    ``component:node:direction`` label, else the label's last ``:`` part when it is a signed X, Y
+    or Z (``view0:acc:-Y`` -> -2), else +3 (+Z)."""
+    try:
+        return uff_direction(label)
+    except PointLabelError:
+        last = str(label).rsplit(":", 1)[-1].strip().upper()
+        axis = last.lstrip("+-")
+        if axis in _DIRECTIONS and len(last) - len(axis) <= 1:
+            return -_DIRECTIONS[axis] if last.startswith("-") else _DIRECTIONS[axis]
+        return _DIRECTIONS["Z"]
+
+
+def _free_node(label: str) -> int:
+    """A stable node number for a label :func:`uff_node` cannot number: from its name without the
+    direction part, so the directions of one location share a node."""
+    stem = str(label)
+    last = stem.rsplit(":", 1)
+    if len(last) == 2 and last[1].strip().upper().lstrip("+-") in _DIRECTIONS:
+        stem = last[0]
+    return FREE_NODE_BASE + zlib.crc32(stem.encode("utf-8", "surrogatepass")) % _FREE_NODE_SPAN
+
+
+def uff_dofs(labels: Iterable[str | Point]) -> dict[str, tuple[int, int]]:
+    """``{label: (UFF node number, direction code)}`` for every label, distinct labels on distinct
+    degrees of freedom. ``component:node:direction`` labels get :func:`uff_node` and
+    :func:`uff_direction`; any other label (e.g. ``view0:acc:Z``) gets :func:`label_direction` and
+    a node number of its own from ``FREE_NODE_BASE`` on; a label whose degree of freedom an earlier
+    label took moves to the next free node number. UFF records hold only the numbers: a writer keeps
+    the labels themselves beside them (the ID lines, :mod:`analysis.uff`) to read them back."""
+    out: dict[str, tuple[int, int]] = {}
+    taken: set[tuple[int, int]] = set()
+    for item in labels:
+        label = str(item)
+        if label in out:
+            continue
+        try:
+            node, direction = uff_node(label), uff_direction(label)
+        except PointLabelError:
+            node, direction = _free_node(label), label_direction(label)
+        if (node, direction) in taken:
+            node = max(node, FREE_NODE_BASE)
+            while (node, direction) in taken:
+                node += 1
+        taken.add((node, direction))
+        out[label] = (node, direction)
+    return out

@@ -10,16 +10,27 @@ func type  content             ordinate / denominator specific data types
 6          ordinary coherence  0 (dimensionless); x in Hz
 =========  ==================  =============================================================
 
-Node numbers and direction codes come from :func:`analysis.points.uff_node` and
-:func:`analysis.points.uff_direction` (response = output point, reference = excitation point).
-ID line 1 names the content, line 2 the estimator and averages, line 3 the windows, line 4 the
-point labels, line 5 the source. :func:`read_uff58` reads FRFs (type 4) and matching coherence
-(type 6) back into an :class:`~analysis.frf.FRFSet`, matching them by node and direction.
+Node numbers and direction codes come from :func:`analysis.points.uff_dofs` (response = output
+point, reference = excitation point): ``component:node:direction`` labels get
+:func:`~analysis.points.uff_node` and :func:`~analysis.points.uff_direction`, any other label a node
+number of its own. ID line 1 names the content, line 2 the estimator and averages, line 3 the
+windows, line 4 the point labels, line 5 the source. Two ID lines are read back as ``key=value``:
+
+- line 3 starts ``exp_window_tau_s=<tau>`` (the exponential window's time constant in s, written
+  exactly; ``none`` without a window), then the windows in words;
+- line 4 is ``out=<output label> ref=<reference label>`` (labels up to 76 characters together).
+
+:func:`read_uff58` reads FRFs (type 4) and matching coherence (type 6) back into an
+:class:`~analysis.frf.FRFSet`, matching them by node and direction; the labels come from line 4
+(else from the node numbers) and the exponential window from line 3, so a fit corrects the damping
+of the read-back FRFs as it would the recording's.
 """
 from __future__ import annotations
 
 import gc
 import logging
+import math
+import re
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -32,7 +43,7 @@ from .disk_space import disk_full_cause
 from .errors import UFFError
 from .finite_checks import describe_nonfinite
 from .frf import FRFSet
-from .points import parse_point, point_from_uff, uff_direction, uff_node
+from .points import point_from_uff, uff_dofs
 
 __all__ = ["write_uff58", "time_records", "read_uff58", "write_uff55", "read_uff55", "UFFError"]
 
@@ -69,12 +80,41 @@ def _write_sets(path: Path, sets: list) -> None:
             gc.collect()
 
 
+#: characters of a UFF ID line
+ID_LINE_CHARS = 80
+#: ID line 3's key of the exponential window's time constant (s), and ID line 4's label keys
+WINDOW_KEY = "exp_window_tau_s"
+_WINDOW_RE = re.compile(WINDOW_KEY + r"=([^\s;]+)")
+#: the windows in words of files written before the key (``exp tau 0.25 s``, 6 digits)
+_WINDOW_WORDS_RE = re.compile(r"\bexp tau ([0-9.eE+-]+) s\b")
+_ESTIMATOR_RE = re.compile(r"\bestimator (\S+) averages (\d+)\b")
+_LABELS_RE = re.compile(r"^out=(\S.*?) ref=(\S.*)$")
+
+
 def _id(text: str) -> str:
-    return str(text)[:80] if text else "NONE"
+    return str(text)[:ID_LINE_CHARS] if text else "NONE"
 
 
 def _entity(point: str) -> str:
-    return parse_point(point).component[:10]
+    return str(point).split(":", 1)[0].strip()[:10] or "NONE"
+
+
+def window_id_line(exp_window_tau_s: float | None, words: str = "") -> str:
+    """ID line 3: ``exp_window_tau_s=<tau s, exact>`` (``none`` without a window), then ``words``
+    (the windows in words), cut to the line's 80 characters (the key is never cut)."""
+    tau = "none" if not exp_window_tau_s else repr(float(exp_window_tau_s))
+    return _id(f"{WINDOW_KEY}={tau}" + (f"; {words}" if words else ""))
+
+
+def _labels_id_line(rsp: str, ref: str) -> str:
+    """ID line 4: ``out=<label> ref=<label>``; when the two do not fit the line, the labels are
+    left out (they read back from the node numbers) and a warning is logged."""
+    line = f"out={rsp} ref={ref}"
+    if len(line) <= ID_LINE_CHARS and not any(c in line for c in "\r\n"):
+        return line
+    log.warning("point labels %r and %r do not fit a UFF ID line (%d characters): they read back as node "
+                "numbers", rsp, ref, ID_LINE_CHARS)
+    return "labels: see the node numbers"
 
 
 def _frf_set_dicts(frf: FRFSet, id_lines: Sequence[str]) -> list[dict]:
@@ -83,18 +123,18 @@ def _frf_set_dicts(frf: FRFSet, id_lines: Sequence[str]) -> list[dict]:
     est = str(frf.meta.get("estimator", ""))
     navg = frf.meta.get("n_averages", "")
     ids = list(id_lines) + [""] * 5
+    dofs = uff_dofs(list(frf.outputs) + list(frf.references))
     out = []
     for j, ref in enumerate(frf.references):
         for i, rsp in enumerate(frf.outputs):
             if np.all(np.isnan(frf.H[i, j])):
                 continue  # never measured
-            labels = f"out={rsp} ref={ref}"
             common = dict(
-                binary=1, rsp_node=uff_node(rsp), rsp_dir=uff_direction(rsp), ref_node=uff_node(ref),
-                ref_dir=uff_direction(ref), rsp_ent_name=_entity(rsp), ref_ent_name=_entity(ref),
+                binary=1, rsp_node=dofs[rsp][0], rsp_dir=dofs[rsp][1], ref_node=dofs[ref][0],
+                ref_dir=dofs[ref][1], rsp_ent_name=_entity(rsp), ref_ent_name=_entity(ref),
                 x=np.asarray(frf.freq_hz, float), abscissa_spacing=1, abscissa_spec_data_type=18,
-                abscissa_axis_units_lab="Hz", id4=_id(labels), id5=_id(ids[2] or "impactlab"),
-                id3=_id(ids[1] or "windows: none"),
+                abscissa_axis_units_lab="Hz", id4=_id(_labels_id_line(rsp, ref)), id5=_id(ids[2] or "impactlab"),
+                id3=window_id_line(frf.exp_window_tau_s, ids[1] or "windows: none"),
             )
             navg_i = navg[j] if isinstance(navg, (list, tuple)) and j < len(navg) else navg
             out.append(pyuff.prepare_58(
@@ -117,14 +157,15 @@ def time_records(
     """Dataset-58 dicts (function type 1) for one hit's channels ``data[n_ch, n]`` in EU."""
     pyuff = _pyuff()
     d = np.asarray(data, float)
+    dofs = uff_dofs(list(points[:d.shape[0]]) + [reference])
     out = []
     for ch in range(d.shape[0]):
         p = points[ch]
         unit = units[ch] if ch < len(units) else ""
         out.append(pyuff.prepare_58(
             binary=1, func_type=1, data=d[ch], x=t0_s + np.arange(d.shape[1]) / fs_hz, abscissa_spacing=1,
-            abscissa_spec_data_type=17, abscissa_axis_units_lab="s", rsp_node=uff_node(p), rsp_dir=uff_direction(p),
-            ref_node=uff_node(reference), ref_dir=uff_direction(reference), rsp_ent_name=_entity(p),
+            abscissa_spec_data_type=17, abscissa_axis_units_lab="s", rsp_node=dofs[p][0], rsp_dir=dofs[p][1],
+            ref_node=dofs[reference][0], ref_dir=dofs[reference][1], rsp_ent_name=_entity(p),
             ref_ent_name=_entity(reference), ordinate_spec_data_type=_UNIT_TYPE.get(unit, 1),
             orddenom_spec_data_type=0, ordinate_axis_units_lab=unit[:20] or "NONE",
             id1=_id(id_line or "time response"), id4=_id(f"channel {ch + 1} {p} [{unit}]"), id5=_id("impactlab"),
@@ -257,13 +298,82 @@ def _frfset_from_sets(path: str | Path, sets: list) -> FRFSet:
     quantity = _TYPE_QUANTITY.get(qt, "accelerance")
     unit = str(frfs[0].get("ordinate_axis_units_lab", ""))
     meta = {"source": str(path), "id1": frfs[0].get("id1", ""), "id2": frfs[0].get("id2", ""),
-            "id3": frfs[0].get("id3", "")}
+            "id3": frfs[0].get("id3", ""), **_estimator_from_ids(frfs, refs)}
+    out_labels, ref_labels = _labels_from_ids(path, frfs, outs, refs)
     return FRFSet(
-        freq_hz=f, H=H, quantity=quantity,
-        outputs=tuple(str(point_from_uff(n, d)) for n, d in outs),
-        references=tuple(str(point_from_uff(n, d)) for n, d in refs),
-        unit="" if unit == "NONE" else unit, coherence=coh, meta=meta,
+        freq_hz=f, H=H, quantity=quantity, outputs=out_labels, references=ref_labels,
+        unit="" if unit == "NONE" else unit, coherence=coh, exp_window_tau_s=_window_from_ids(path, frfs), meta=meta,
     )
+
+
+def _labels_from_ids(path: str | Path, frfs: list[dict], outs: list, refs: list) -> tuple[tuple, tuple]:
+    """The output and reference labels of the (node, direction) keys ``outs``/``refs``: from the
+    records' ID line 4 (``out=<label> ref=<label>``) when every record has one and they name each
+    degree of freedom by one label and each label one degree of freedom; else, for all of them, from
+    the node numbers (:func:`analysis.points.point_from_uff`)."""
+    named: dict[tuple[int, int], str] = {}
+    consistent = True
+    for s in frfs:
+        m = _LABELS_RE.match(str(s.get("id4", "")).strip())
+        if m is None:
+            consistent = False
+            break
+        o, r = ((int(s["rsp_node"]), int(s["rsp_dir"])), (int(s["ref_node"]), int(s["ref_dir"])))
+        for dof, label in ((o, m.group(1).strip()), (r, m.group(2).strip())):
+            if named.setdefault(dof, label) != label:
+                consistent = False
+    labels = list(named.values())
+    if consistent and len(set(labels)) == len(labels):
+        return tuple(named[k] for k in outs), tuple(named[k] for k in refs)
+    if named:
+        log.info("%s: the ID lines' point labels are missing or do not match the node numbers; labels from the "
+                 "node numbers", path)
+    return (tuple(str(point_from_uff(n, d)) for n, d in outs), tuple(str(point_from_uff(n, d)) for n, d in refs))
+
+
+def _estimator_from_ids(frfs: list[dict], refs: list) -> dict:
+    """``{"estimator": ..., "n_averages": [per reference]}`` from the FRF records' ID line 2 as this
+    module writes it (``estimator H1 averages 3 ...``): the fit trusts a coherence by the number of
+    averages behind it. Empty when a reference's records do not say."""
+    found: dict[tuple[int, int], tuple[str, int]] = {}
+    for s in frfs:
+        m = _ESTIMATOR_RE.search(str(s.get("id2", "")))
+        if m is not None:
+            found.setdefault((int(s["ref_node"]), int(s["ref_dir"])), (m.group(1), int(m.group(2))))
+    if not refs or any(r not in found for r in refs) or len({found[r][0] for r in refs}) != 1:
+        return {}
+    return {"estimator": found[refs[0]][0], "n_averages": [found[r][1] for r in refs]}
+
+
+def _window_from_ids(path: str | Path, frfs: list[dict]) -> float | None:
+    """The exponential window's time constant (s) from the FRF records' ID line 3
+    (``exp_window_tau_s=<tau>|none``; in files without the key, the words ``exp tau <tau> s``);
+    None when no record names one. UFFError when a value is not a positive time or the records
+    name different windows (one FRF set has one window)."""
+    found: set[float | None] = set()
+    for s in frfs:
+        line = str(s.get("id3", ""))
+        m = _WINDOW_RE.search(line) or _WINDOW_WORDS_RE.search(line)
+        if m is None:
+            found.add(None)
+            continue
+        text = m.group(1)
+        if text.lower() == "none":
+            found.add(None)
+            continue
+        try:
+            tau = float(text)
+        except ValueError:
+            tau = math.nan
+        if not (math.isfinite(tau) and tau > 0):
+            raise UFFError(f"{path}: ID line 3 gives the exponential window {WINDOW_KEY}={text!r}, not a positive "
+                           f"time in s; correct it (or write {WINDOW_KEY}=none) and read the file again")
+        found.add(tau)
+    if len(found) > 1:
+        taus = ", ".join("none" if t is None else f"{t:.6g} s" for t in sorted(found, key=lambda t: t or 0.0))
+        raise UFFError(f"{path}: its FRFs were measured with different exponential windows ({taus}); one FRF set has "
+                       "one window: export the FRFs of each window to a file of their own")
+    return found.pop() if found else None
 
 
 def write_uff55(
@@ -286,9 +396,10 @@ def write_uff55(
     phi = np.asarray(shapes, complex)
     if phi.ndim != 2 or phi.shape != (len(points), lam.size):
         raise UFFError(f"shapes must have shape (n_points={len(points)}, n_modes={lam.size}); got {phi.shape}")
+    dofs = uff_dofs(points)
     nodes: list[int] = []
     for pt in points:
-        n = uff_node(pt)
+        n = dofs[str(pt)][0]
         if n not in nodes:
             nodes.append(n)
     p = Path(path)
@@ -298,8 +409,8 @@ def write_uff55(
     for r in range(lam.size):
         xyz = np.zeros((len(nodes), 3), complex)
         for k, pt in enumerate(points):
-            q = parse_point(pt)
-            xyz[nodes.index(uff_node(q)), q.axis] += q.sign * phi[k, r]
+            node, direction = dofs[str(pt)]
+            xyz[nodes.index(node), abs(direction) - 1] += np.sign(direction) * phi[k, r]
         sets.append(pyuff.prepare_55(
             id1=_id(title), id2=_id(f"mode {r + 1}"), id3="NONE", id4="NONE", id5="NONE",
             model_type=1, analysis_type=3, data_ch=2, spec_data_type=8, data_type=5, n_data_per_node=3,

@@ -14,7 +14,7 @@ from ..mac import mac_matrix
 from ..mif import indicator_summary
 from ..modal import ModalModel, damping_ratio, natural_freq_hz, synthesize
 from ..plots import summed_magnitude_db
-from ..points import PointLabelError, parse_point
+from ..points import label_direction
 from ..spectra import excitation_band as spectra_excitation_band
 from ..spectra import hit_spectra
 from ..stabilization import CLASS_NAMES
@@ -183,14 +183,9 @@ def stabilization_data(frf: FRFSet, fit: FitData) -> dict:
 def _axis_sign(label: str) -> tuple[int, int]:
     """Axis (0, 1, 2 for X, Y, Z) and sign of a point label; a label that is not
     ``component:node:direction`` (e.g. ``view0:acc:Z`` of another tool) keeps a direction written
-    as its last part, else it moves along Z."""
-    try:
-        p = parse_point(label)
-        return p.axis, p.sign
-    except PointLabelError:
-        d = str(label).rsplit(":", 1)[-1].strip().upper()
-        axis = {"X": 0, "Y": 1, "Z": 2}.get(d.lstrip("+-"), 2)
-        return axis, -1 if d.startswith("-") and d.lstrip("+-") in ("X", "Y", "Z") else 1
+    as its last part, else it moves along Z (:func:`analysis.points.label_direction`)."""
+    d = label_direction(label)
+    return abs(d) - 1, 1 if d > 0 else -1
 
 
 def shapes_section(fit: FitData, geometry: Geometry) -> dict:
