@@ -12,7 +12,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     ),
     "python -m acquisition replay": (
         "replay rec.h5 --out h2.h5 --estimator H2 --exp-window 5%",
-        'replay rec.h5 --out clean.h5 --exclude-hits 3,7-9 --window "force=10ms,2ms;exp=none"',
+        'replay rec.h5 --out clean.h5 --exclude-hits 2,3-4 --window "force=10ms,2ms;exp=none"',
     ),
     "python -m acquisition export": (
         "export rec.h5 --uff rec.uff --time        # FRFs (UFF 58) and the hits' time data",
