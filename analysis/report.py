@@ -77,7 +77,9 @@ def format_table(result: LSFDResult, frf: FRFSet | None = None, *, output: int =
     model = result.model
     outs, refs = model.outputs, model.references
     label = f"{outs[output]} / {refs[reference]}" if outs and refs else "FRF"
-    head = title or f"LSFD ({result.method}) fit, residues of {label}"
+    est = frf.meta.get("estimator") if frf is not None else None
+    of = f" of {est}" if isinstance(est, str) and est else ""
+    head = title or f"LSFD ({result.method}) fit{of}, residues of {label}"
     init = None if initial is None or np.size(initial) == 0 else np.asarray(initial, dtype=complex)
     if init is not None:
         init = init + float(model.meta.get("exp_window_shift_rad_s", 0.0) or 0.0)

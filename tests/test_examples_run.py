@@ -210,7 +210,7 @@ def _served() -> Iterator[str]:
         yield url.group(0)
     finally:
         serve.terminate()
-        serve.wait(timeout=30)
+        serve.communicate(timeout=30)  # reaps it and closes its pipes
 
 
 def _served_capture(line: str) -> None:
