@@ -86,7 +86,16 @@ from typing import Any
 
 import numpy as np
 
-from .bands import FitError, check_band_edges, default_band, default_max_modes, exclude_lines, mains_harmonics
+from .bands import (
+    FitError,
+    check_band_edges,
+    default_band,
+    default_max_modes,
+    exclude_lines,
+    mains_harmonics,
+    unsupported_band_text,
+    upper_limits,
+)
 from .bounded_fit import drop_bad_poles, fit_bounded
 from .compressed_fit import with_compression
 from .fit_result import FitResult, assess_fit
@@ -202,10 +211,8 @@ def fit_auto(
     else:
         poles = given_complex
 
-    (lo2, hi2), warn = check_band_edges(poles, (lo, hi), limits, (not user_band, not user_band))
-    warnings_out += warn
-    for w in warn:
-        log.warning(w)
+    # the start poles move the edges; whether a mode ends up near an edge is said from the fitted poles
+    (lo2, hi2), _ = check_band_edges(poles, (lo, hi), limits, (not user_band, not user_band))
     if (lo2, hi2) != (lo, hi):
         log.info("band moved from %.6g..%.6g Hz to %.6g..%.6g Hz to keep resonances off its edges", lo, hi, lo2, hi2)
     sel = (frf.freq_hz >= lo2) & (frf.freq_hz <= hi2)
@@ -243,7 +250,14 @@ def fit_auto(
         warnings_out.append("one average per point: the coherence is 1 everywhere and says nothing about the noise; "
                             "the standard deviations and weights rest on the misfit alone (take several hits per point)")
     result = sorted_by_frequency(result)
+    _, edge_warn = check_band_edges(result.poles_raw, (lo2, hi2), (lo2, hi2), (False, False))
+    warnings_out += edge_warn
+    for w in edge_warn:
+        log.warning(w)
     problems = assess_fit(result, (lo2, hi2))
+    beyond = unsupported_band_text(hi2, upper_limits(frf), where="the structure") if user_band else None
+    if beyond:   # the default band stops at these limits; a user's band may not
+        problems.append(beyond)
     left, notes = unfitted_resonances(fit_frf, visible, result, mains)
     warnings_out += notes
     problems += left
@@ -279,7 +293,7 @@ def _start_poles(frf: FRFSet, band: tuple[float, float], stab: StabilizationResu
     Raises FitError when there is no start at all."""
     lo, hi = band
     if given_freqs is not None:
-        poles = poles_from_frequencies(given_freqs, stab)
+        poles = poles_from_frequencies(given_freqs, stab, window_shift=window_pole_shift(frf.exp_window_tau_s))
     else:
         poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
     if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only

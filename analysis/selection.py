@@ -141,26 +141,34 @@ def select_poles(
 
 
 def poles_from_frequencies(
-    freqs_hz: Sequence[float] | np.ndarray, stab: StabilizationResult | None = None, *, default_damping: float = 0.01
+    freqs_hz: Sequence[float] | np.ndarray, stab: StabilizationResult | None = None, *, default_damping: float = 0.01,
+    window_shift: float = 0.0,
 ) -> np.ndarray:
-    """Poles for user-given natural frequencies (Hz).
+    """Poles (rad/s, as measured) for user-given natural frequencies (Hz).
 
-    With a stabilization result, each frequency takes the nearest stable pole (within 5 %)
-    so its damping is estimated from the data; otherwise ``default_damping`` is used.
+    With a stabilization result, each frequency takes the damping of the nearest stable poles (within
+    5 %) so its damping is estimated from the data; otherwise ``default_damping`` is used (of the
+    structure: the measured start adds the window's decay). ``window_shift`` (1/s,
+    :func:`analysis.frf.window_pole_shift`): the decay an exponential window adds to every measured pole;
+    a stabilization pole that decays no faster than the window alone would have negative damping once the
+    window is removed, so it cannot give a start and is not used.
     """
     fr = np.asarray([float(x) for x in freqs_hz], dtype=float)
     if fr.size == 0 or np.any(~np.isfinite(fr)) or np.any(fr <= 0):
         raise ValueError(f"frequencies must be positive numbers in Hz; got {list(freqs_hz)}")
-    out = pole_from_fz(fr, np.full(fr.size, default_damping))
+    out = pole_from_fz(fr, np.full(fr.size, default_damping)) - float(window_shift)
     if stab is not None:
         p, _ = stab.stable_poles(STABLE_DAMP)
         if p.size == 0:
             p, _ = stab.stable_poles(1)
+        p = p[-p.real > float(window_shift)] if p.size else p   # decays faster than the window: a structure's pole
         if p.size:
             f = natural_freq_hz(p)
             for i, x in enumerate(fr):
                 k = np.abs(f - x) / x < 0.05
                 if np.any(k):
-                    z = float(np.median(damping_ratio(p[k][np.argsort(np.abs(f[k] - x))[:10]])))
-                    out[i] = pole_from_fz(x, z)
+                    near = p[k][np.argsort(np.abs(f[k] - x))[:10]]
+                    # the median decay rate (1/s) of the nearest poles, at the user's frequency
+                    sigma = float(np.median(-near.real))
+                    out[i] = complex(-sigma, np.sqrt(max((2 * np.pi * x) ** 2 - sigma ** 2, 0.0)))
     return out

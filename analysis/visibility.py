@@ -48,7 +48,7 @@ from .frf import FRFSet
 from .mif import cmif
 from .peaks import find_peaks, prominences
 
-__all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "VISIBLE_PROMINENCE_DB", "VISIBLE_COHERENCE",
+__all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "coherence_measured", "VISIBLE_PROMINENCE_DB", "VISIBLE_COHERENCE",
            "MATCH_FRACTION", "MATCH_LINES", "reproduced"]
 
 VISIBLE_PROMINENCE_DB = 10.0
@@ -157,14 +157,21 @@ def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.
     return data > 0 and misfit <= REPRODUCED_FRACTION * data
 
 
+def coherence_measured(frf: FRFSet) -> bool:
+    """Whether ``frf``'s coherence comes from more than one average, so that a visible peak (coherence at
+    least ``VISIBLE_COHERENCE`` over its top) is response the force caused: a resonance, even on a mains
+    harmonic (hum in the response is not coherent with the force and makes no such peak in H1)."""
+    n = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    return frf.coherence is not None and n.size > 0 and bool(np.all(n > 1))
+
+
 def _error_variance(frf: FRFSet) -> np.ndarray | None:
     """The random-error variance of each FRF line (:func:`analysis.reciprocity.frf_error_variance`), or
     None when the set carries no coherence or does not say it averaged more than one hit (one average
     has a coherence of 1 and no error estimate)."""
     from .reciprocity import frf_error_variance
 
-    n = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
-    if frf.coherence is None or n.size == 0 or not np.all(n > 1):
+    if not coherence_measured(frf):
         return None
     return frf_error_variance(frf)
 
