@@ -344,8 +344,8 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
         nonlocal model, added
         tried.append(c)
         f, e, _ = _scaled_misfit(frf, model, band)
-        # a visible peak wider than a mains line, or one the coherence confirms, is a resonance whatever
-        # the misfit's shape
+        # a visible peak wider than a mains line is a resonance whatever the misfit's shape; one the coherence
+        # confirms is tried, and its fitted pole (resolved far finer than a line) tells a mode from a line
         wide = peak is not None and ((peak.top_hz[1] - peak.top_hz[0]) / df - 1.0 > mains_lines + 0.5
                                      or coherent)
         mains_why = None if wide else _mains_line(c, f, e, df, z0, mains, mains_lines)
@@ -360,8 +360,10 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
         fit = t.fit
         assert fit is not None  # an accepted trial carries its local fit
         f_new, z_new = float(fit.freq_hz[-1]), float(fit.damping[-1])
-        if mains_harmonic_index(f_new, mains, df) is not None and z_new < MAINS_WIDTH_FRACTION * z0 and not (
-                peak is not None and coherent):
+        # a tried visible peak the coherence confirms: on the harmonic itself (the grid's deviation), not
+        # within lines of it
+        reach = 0.0 if peak is not None and coherent else df
+        if mains_harmonic_index(f_new, mains, reach) is not None and z_new < MAINS_WIDTH_FRACTION * z0:
             msg = (f"a pole tried at {f_new:.6g} Hz ({100 * z_new:.3g} %) sits on a mains line and is much "
                    f"sharper than the modes ({100 * z0:.3g} %): not added")
             log.info(msg)
@@ -463,13 +465,11 @@ def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSF
     """The visible peaks the LSFD ``result`` leaves unaccounted for (:mod:`analysis.visibility`), in
     words: ``(problems, notes)``. A peak on a mains harmonic no wider than a steady line of the
     record (:func:`mains_line_max_lines`: 2 lines within 3 dB of its top, more through a strong
-    exponential window) is a note (an electrical line, not a resonance) unless the coherence of several
-    averages confirms it (:func:`analysis.visibility.coherence_measured`); any other is a problem: the fit is not
+    exponential window) is a note (an electrical line, not a resonance); any other is a problem: the fit is not
     complete. A peak with a fitted pole within ``PAIR_FRACTION`` of it that another peak of its
     curve took is named a possible close pair."""
     df = float(frf.line_spacing_hz)
     mains_lines = mains_line_max_lines(df, frf.exp_window_tau_s)
-    coherent = coherence_measured(frf)   # a coherent visible peak is a resonance, on a mains line too
     model = result.model_raw
     fitted = np.asarray(result.freq_hz, float)
     missed, pairs = unaccounted_peaks(visible, fitted, df,
@@ -483,8 +483,7 @@ def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSF
         seen.append(v.freq_hz)
         where = f"a peak {v.prominence_db:.0f} dB above its neighbouring minima in {v.curve}"
         width_lines = (v.top_hz[1] - v.top_hz[0]) / df - 1.0
-        if (mains_harmonic_index(v.freq_hz, mains, df) is not None and width_lines <= mains_lines + 0.5
-                and not coherent):
+        if mains_harmonic_index(v.freq_hz, mains, df) is not None and width_lines <= mains_lines + 0.5:
             notes.append(f"the peak at {v.freq_hz:.5g} Hz ({where}) lies on a mains line and is "
                          f"{width_lines:.0f} line(s) wide: not a resonance")
             continue

@@ -167,8 +167,7 @@ def poles_from_frequencies(
             for i, x in enumerate(fr):
                 k = np.abs(f - x) / x < 0.05
                 if np.any(k):
-                    near = p[k][np.argsort(np.abs(f[k] - x))[:10]]
-                    # the median decay rate (1/s) of the nearest poles, at the user's frequency
-                    sigma = float(np.median(-near.real))
-                    out[i] = complex(-sigma, np.sqrt(max((2 * np.pi * x) ** 2 - sigma ** 2, 0.0)))
+                    z = float(np.median(damping_ratio(p[k][np.argsort(np.abs(f[k] - x))[:10]])))
+                    z_window = float(window_shift) / (2 * np.pi * x)   # what the window alone gives at x
+                    out[i] = pole_from_fz(x, z if z > z_window else z_window + default_damping)
     return out
