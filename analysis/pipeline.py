@@ -104,7 +104,7 @@ from .lscf import parse_band
 from .missing_modes import MAINS_HZ, add_missing_modes, unfitted_resonances
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .progress import progress
-from .selection import poles_from_frequencies, select_poles
+from .selection import faster_than_window, poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
 from .visibility import VisiblePeak, visible_peaks
@@ -210,6 +210,8 @@ def fit_auto(
                              warnings_out)
     else:
         poles = given_complex
+    # no start slower than the exponential window alone (negative damping once it is removed)
+    poles = faster_than_window(poles, window_pole_shift(frf.exp_window_tau_s))
 
     # the start poles move the edges; whether a mode ends up near an edge is said from the fitted poles
     (lo2, hi2), _ = check_band_edges(poles, (lo, hi), limits, (not user_band, not user_band))

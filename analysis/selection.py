@@ -39,7 +39,7 @@ from .clustering import complete_linkage_labels
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .stabilization import STABLE_DAMP, StabilizationResult
 
-__all__ = ["select_poles", "SelectedCluster", "select_clusters", "poles_from_frequencies"]
+__all__ = ["select_poles", "SelectedCluster", "select_clusters", "poles_from_frequencies", "faster_than_window"]
 
 log = logging.getLogger(__name__)
 
@@ -168,6 +168,18 @@ def poles_from_frequencies(
                 k = np.abs(f - x) / x < 0.05
                 if np.any(k):
                     z = float(np.median(damping_ratio(p[k][np.argsort(np.abs(f[k] - x))[:10]])))
-                    z_window = float(window_shift) / (2 * np.pi * x)   # what the window alone gives at x
-                    out[i] = pole_from_fz(x, z if z > z_window else z_window + default_damping)
+                    out[i] = pole_from_fz(x, z)
+    return faster_than_window(out, window_shift, default_damping)
+
+
+def faster_than_window(poles: np.ndarray, window_shift: float, default_damping: float = 0.01) -> np.ndarray:
+    """Start poles (rad/s, as measured) that all decay faster than the exponential window alone: a pole
+    whose decay rate is not above ``window_shift`` (1/s, :func:`analysis.frf.window_pole_shift`) would
+    have zero or negative damping once the window is removed; it gets the window's decay plus
+    ``default_damping`` of the structure at its natural frequency. A copy; the others unchanged."""
+    out = np.array(poles, dtype=complex)
+    slow = -out.real <= float(window_shift)
+    if np.any(slow):
+        f = natural_freq_hz(out[slow])
+        out[slow] = pole_from_fz(f, float(window_shift) / (2 * np.pi * f) + default_damping)
     return out
