@@ -20,7 +20,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "export rec.h5 --uff rec.uff --overwrite   # replace an earlier export",
     ),
     "python -m acquisition import": (
-        "import ../shared/data/ladisk_beam_impact/acceleration.lvm --out beam.h5",
+        "import ../shared/data/ladisk_beam_impact/acceleration.lvm --out beam.h5 --force-window 2ms,1ms",
         "import hits.mat --format mat --out test.h5 --overwrite",
     ),
     "python -m acquisition identify": (

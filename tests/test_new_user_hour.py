@@ -219,3 +219,24 @@ def test_the_automatic_fit_never_shows_a_negative_starting_damping(tmp_path, cap
     rows = [ln.split("|") for ln in capsys.readouterr().out.splitlines() if ln.startswith("pole ")]
     starts = [float(r[2]) for r in rows if r[2].strip() != "-"]
     assert len(starts) >= 8 and min(starts) > 0, starts
+
+
+def test_the_readmes_beam_import_and_fit_give_the_six_bending_modes(shared_data, tmp_path, monkeypatch, capsys) -> None:
+    """The README's two lines for the LADISK beam (real data, ../shared/data), as written: six modes
+    695.7-5975 Hz as docs/validation.md reports, and a successful fit."""
+    import re
+    import shlex
+
+    from impactlab import main as impactlab
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    lines = [m.group(1) for m in re.finditer(r"\.venv/bin/python -m \w+ ((?:import|fit) \S*beam\S*[^\n]*)", readme)]
+    assert [ln.split()[0] for ln in lines] == ["import", "fit"], lines
+    monkeypatch.chdir(tmp_path)
+    for line in lines:
+        args = shlex.split(line.replace("../shared/data", str(shared_data)), comments=True)
+        assert impactlab([*args, "--json", "beam.json"] if args[0] == "fit" else args) == 0
+    doc = json.loads((tmp_path / "beam.json").read_text())
+    freqs = sorted(p["freq_hz"] for p in doc["poles"])
+    assert len(freqs) == 6 and abs(freqs[0] - 695.7) < 1 and abs(freqs[-1] - 5975) < 2, freqs
+    assert doc["success"] is True, doc.get("problems")
