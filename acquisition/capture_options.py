@@ -9,7 +9,8 @@ from typing import Any
 
 from .errors import SetupError, UsageError
 
-__all__ = ["with_seed", "with_levels", "recorded_auto", "SOFT_HARD", "continue_stream", "plan_from_options", "recorded_plan", "recorded_test"]
+__all__ = ["with_seed", "with_levels", "recorded_auto", "SOFT_HARD", "continue_stream", "plan_from_options",
+           "recorded_plan", "recorded_test"]
 
 
 def with_seed(url: str, seed: int | None) -> str:

@@ -22,9 +22,10 @@ def create_analyser(options: Mapping[str, Any] | None = None,
     ``noise`` (bool, default True: sensor and ADC noise on), ``plan`` (ignored by the firmware;
     the stand uses it), ``replay`` (path of a recording: ``simulator.replay_stand.ReplayStand``
     plays its hits back instead of simulating), ``packetized`` (bool), ``serial`` (str), ``polls`` (GET STATUS polls
-    before the strike, default 1), ``max_strikes`` (default 3); ``faults``, ``fault_seed``,
-    ``levels``, ``per_level``: the simulated operator strikes ``per_level`` hits at each of these factors of
-    the usual force in turn (:mod:`simulator.operator_levels`); ``fault_gone_calls``, ``fault_slow_s``: fault injection, the firmware comes wrapped in
+    before the strike, default 1), ``max_strikes`` (default 3); ``levels``, ``per_level``: the
+    simulated operator strikes ``per_level`` hits at each of these factors of the usual force in turn
+    (:mod:`simulator.operator_levels`); ``faults``, ``fault_seed``, ``fault_gone_calls``,
+    ``fault_slow_s``: fault injection, the firmware comes wrapped in
     :class:`simulator.faults.FaultyFirmware` (same interface). ``stand`` injects a ready stand
     (e.g. a :class:`PrecomputedStand`); otherwise ``simulator.stand.TestStand`` is built.
     """

@@ -170,8 +170,8 @@ def pick_peaks(frf: FRFSet, prominence_db: float = 6.0, window_shift: float | No
 
     The half-power frequencies are interpolated between lines (linearly in power), and the decay an
     exponential window added (``window_shift`` 1/s, by default ``frf.exp_window_tau_s``'s,
-    :func:`analysis.frf.window_pole_shift`) is taken off, so the damping is the structure's as the fit reports it; a peak narrower than the
-    window alone makes (resolution-limited) gives None."""
+    :func:`analysis.frf.window_pole_shift`) is taken off, so the damping is the structure's as the fit
+    reports it; a peak narrower than the window alone makes (resolution-limited) gives None."""
     f = frf.freq_hz
     s = np.sqrt(np.sum(np.abs(frf.H) ** 2, axis=(0, 1)))
     sdb = 20 * np.log10(s + 1e-300)
