@@ -193,18 +193,28 @@ def pick_peaks(frf: FRFSet, prominence_db: float = 6.0, window_shift: float | No
         j = k
         while j < f.size - 1 and s[j] > half:
             j += 1
-        zeta = _half_power_damping(f, s ** 2, i, j, fk, shift)
+        zeta = _half_power_damping(f, s ** 2, i, j, fk, shift, k)
         peaks.append({"freq_hz": fk, "damping": zeta, "magnitude": float(s[k]),
                       "vector": frf.H[..., k].ravel().copy()})
     return peaks
 
 
-def _half_power_damping(f: np.ndarray, p: np.ndarray, i: int, j: int, fk: float, shift: float) -> float | None:
-    """Damping ratio from the half-power band of the power curve ``p`` around a peak at ``fk`` Hz whose
-    lines ``i+1..j-1`` lie above half its maximum: the crossings interpolated between lines ``i, i+1`` and
-    ``j-1, j``, less the window's decay ``shift`` (1/s); None when nothing is left of it."""
+def _half_power_damping(f: np.ndarray, p: np.ndarray, i: int, j: int, fk: float, shift: float,
+                        k: int) -> float | None:
+    """Damping ratio from the half-power band of the power curve ``p`` around its peak line ``k`` at
+    ``fk`` Hz, whose lines ``i+1..j-1`` lie above half the peak line's power, less the window's decay
+    ``shift`` (1/s); None when nothing is left of it. Near a resonance ``1 / p`` is a parabola in
+    frequency (a Lorentzian), so the width follows from the three lines at the top whatever the line
+    spacing: ``2 sqrt(min / curvature)``; when they do not make an upward parabola, the half-power
+    crossings interpolated between lines."""
     if not fk > 0:
         return None
+    if 0 < k < f.size - 1 and np.all(p[k - 1:k + 2] > 0):
+        a, b, c = np.polyfit(f[k - 1:k + 2] - f[k], 1.0 / p[k - 1:k + 2], 2)
+        low = c - b * b / (4 * a) if a > 0 else -1.0
+        if low > 0:
+            zeta = float(np.sqrt(low / a)) / fk - shift / (2.0 * np.pi * fk)
+            return zeta if zeta > 0 else None
     half = float(np.max(p[i:j + 1])) / 2.0
 
     def cross(a: int, b: int) -> float:
