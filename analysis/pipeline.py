@@ -93,6 +93,7 @@ from .bands import (
     default_max_modes,
     exclude_lines,
     mains_harmonics,
+    measured_up_to,
     unsupported_band_text,
     upper_limits,
 )
@@ -257,9 +258,14 @@ def fit_auto(
     for w in edge_warn:
         log.warning(w)
     problems = assess_fit(result, (lo2, hi2))
-    beyond = unsupported_band_text(hi2, upper_limits(frf), where="the structure") if user_band else None
+    limits_hz = upper_limits(frf)
+    beyond = unsupported_band_text(hi2, limits_hz, where="the structure") if user_band else None
     if beyond:   # the default band stops at these limits; a user's band may not
-        problems.append(beyond)
+        if np.any(np.asarray(result.freq_hz) > (measured_up_to(limits_hz) or np.inf)):   # a mode where nothing was measured
+            problems.append(beyond)
+        else:
+            warnings_out.append(beyond)
+            log.warning(beyond)
     left, notes = unfitted_resonances(fit_frf, visible, result, mains)
     warnings_out += notes
     problems += left
