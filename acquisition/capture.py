@@ -54,7 +54,8 @@ def capture_to_file(
         instrument = identity.as_dict() if hasattr(identity, "as_dict") else dict(vars(identity))
         progress(f"analyser: {identity}; {len(measurements)} point(s) x {plan.hits_per_point} hits, {plan.mode}")
         writer = RecordingWriter(out, instrument=instrument, setup=setup.to_dict(), channels=channel_table(setup),
-                                 windows=resolved, plan={**plan.to_dict(), "device": url}, overwrite=overwrite)
+                                 windows=resolved, plan={**plan.to_dict(), "device": url, "auto": decide is auto_accept},
+                                 overwrite=overwrite)
         result = None
         try:
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=resolved, decide=decide,

@@ -9,7 +9,8 @@ from typing import Any
 
 from .errors import SetupError, UsageError
 
-__all__ = ["with_seed", "continue_stream", "plan_from_options", "recorded_plan", "recorded_test"]
+__all__ = ["with_seed", "with_levels", "recorded_auto", "SOFT_HARD", "continue_stream", "plan_from_options",
+           "recorded_plan", "recorded_test"]
 
 
 def with_seed(url: str, seed: int | None) -> str:
@@ -21,6 +22,27 @@ def with_seed(url: str, seed: int | None) -> str:
     if "seed=" in url:
         raise UsageError(f"the URL {url!r} already has a seed; drop --seed or the URL's seed")
     return url + ("&" if "?" in url else "?") + f"seed={seed}"
+
+
+#: the force levels of ``--soft-hard``, struck in this order at each point
+SOFT_HARD = ("soft", "hard")
+#: the simulated operator's strikes of a soft-then-hard plan (``levels``: amplitude scales; the
+#: simulated hammer's hard hits are about 95 N, so soft ones about 38 N, above the 20 N trigger)
+SIM_SOFT_HARD_SCALES = "0.4,1"
+
+
+def with_levels(url: str, plan: Any) -> str:
+    """``url`` of a simulated device with its operator striking ``plan``'s force levels in series
+    (``levels=`` and ``per_level=``), unless the URL sets them; other devices and plans: unchanged (a
+    real operator follows the prompts)."""
+    if not getattr(plan, "levels", ()) or not url.startswith(("sim://", "usbsim://")) or "levels=" in url \
+            or "replay=" in url:
+        return url
+    if len(plan.levels) != 2:
+        raise UsageError(f"the simulated operator strikes soft then hard; {len(plan.levels)} levels need levels= in "
+                         "the URL")
+    per = plan.hits_per_point // len(plan.levels)
+    return url + ("&" if "?" in url else "?") + f"levels={SIM_SOFT_HARD_SCALES}&per_level={per}"
 
 
 def continue_stream(url: str, n_recorded: int) -> str:
@@ -56,8 +78,10 @@ def plan_from_options(args: argparse.Namespace, replay_plan: dict | None = None)
             reference = replay_plan.get("reference")
     if hits < 1:
         raise UsageError(f"--hits {hits}: need at least one hit per point")
+    levels = SOFT_HARD if getattr(args, "soft_hard", False) else ()
     try:
-        return TestPlan(mode=mode, points=points, hits_per_point=hits, reference=reference)
+        return TestPlan(mode=mode, points=points, hits_per_point=hits * max(len(levels), 1), reference=reference,
+                        levels=levels)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
 
@@ -101,10 +125,20 @@ def recorded_test(args: argparse.Namespace) -> tuple:
             planned = dict(rec.plan)
             device = planned.pop("device", None)
             fields: dict[str, Any] = {k: (tuple(v) if k == "points" else v) for k, v in planned.items()
-                                      if k in ("mode", "points", "hits_per_point", "reference")}
+                                      if k in ("mode", "points", "hits_per_point", "reference", "levels")}
+            fields["levels"] = tuple(fields.get("levels", ()))
             plan = TestPlan(**fields)
         except (SetupError, TypeError, ValueError) as exc:
             raise UsageError(f"{path} does not hold a capture plan and set-up to resume ({exc})") from None
         windows = rec.windows
         hits = list(rec.hits(skip_damaged=True))
     return setup, plan, windows, hits, device
+
+
+def recorded_auto(path: str | Path) -> bool:
+    """Whether the recording's hits were accepted automatically (``capture --auto``): its resume then
+    goes on without asking the operator."""
+    from analysis.recording import Recording
+
+    with Recording(path) as rec:
+        return bool(dict(rec.plan).get("auto", False))

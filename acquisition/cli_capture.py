@@ -28,7 +28,15 @@ from analysis.command_line import add_overwrite, cli_entry, exit_on, with_exampl
 from analysis.outputs import check_outputs
 
 from .capture import capture_to_file, open_analyser
-from .capture_options import continue_stream, plan_from_options, recorded_plan, recorded_test, with_seed
+from .capture_options import (
+    continue_stream,
+    plan_from_options,
+    recorded_auto,
+    recorded_plan,
+    recorded_test,
+    with_levels,
+    with_seed,
+)
 from .errors import ImpactlabError, InvalidDeviceURL, RecordingError, SetupError, UsageError
 from .terminal import summary_text, terminal_decider
 from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
@@ -48,13 +56,18 @@ def build_parser() -> argparse.ArgumentParser:
                                     "(with --resume: default, the recording's device)")
     p.add_argument("--out", help="recording to write (HDF5)")
     p.add_argument("--resume", metavar="REC.h5",
-                   help="continue an interrupted capture: same set-up, plan and windows, appending to REC.h5")
+                   help="continue an interrupted capture: same set-up, plan, windows and device, appending to "
+                        "REC.h5; a capture made with --auto goes on with --auto")
     p.add_argument("--points", help="comma-separated measurement points (component:node:direction)")
     p.add_argument("--reference", help="hammer point of a roving-accelerometer test")
     p.add_argument("--mode", choices=("roving-hammer", "roving-accelerometer"),
                    help="default: roving-accelerometer with --reference, else roving-hammer")
     p.add_argument("--hits", type=int, help="accepted hits per point (default 5, or as recorded for a replay)")
-    p.add_argument("--auto", action="store_true", help="accept every hit that passes the automatic checks")
+    p.add_argument("--soft-hard", action="store_true",
+                   help="strike each point --hits times softly, then --hits times hard (the prompts say which): "
+                        "one recording for 'analysis linearity REC.h5'; a simulated device's operator does the same")
+    p.add_argument("--auto", action="store_true",
+                   help="accept every hit that passes the automatic checks (recorded: --resume goes on automatically)")
     p.add_argument("--seed", type=int, help="random seed of a simulated device (sim://, usbsim://)")
     p.add_argument("--setup", help="set-up file (JSON/TOML of AcquisitionSetup.to_dict()); default: default_setup()")
     p.add_argument("--print-setup", action="store_true",
@@ -108,6 +121,7 @@ def run_capture(args: argparse.Namespace, out_stream: TextIO | None = None) -> t
     else:
         setup = default_setup()
     plan = plan_from_options(args, replay_plan)
+    url = with_levels(url, plan)
     windows = parse_windows(args.force_window, args.exp_window, setup.sample_rate_hz)
     measurements = plan.measurements(setup)  # checks the set-up has a force channel and responses
     try:
@@ -164,7 +178,10 @@ def run_resume(args: argparse.Namespace, out_stream: TextIO | None = None) -> tu
         n_acc = sum(1 for h in hits if h.accepted)
         say(f"analyser: {identity}; resuming {path}: {n_acc} accepted hit(s) recorded, "
             f"{len(plan.measurements(setup))} point(s) x {plan.hits_per_point} hits, {plan.mode}")
-        decide = auto_accept if args.auto else terminal_decider()
+        auto = args.auto or recorded_auto(path)
+        if auto and not args.auto:
+            say("hits accepted automatically, as when the recording was made (--auto)")
+        decide = auto_accept if auto else terminal_decider()
         with RecordingWriter.resume(path) as writer:
             writer.log("INFO", f"capture resumed on {url} with {n_acc} accepted hits recorded")
             session = CaptureSession(analyser, setup, plan, writer=writer, windows=windows, decide=decide,

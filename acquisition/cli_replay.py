@@ -70,7 +70,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--exp-window", help="PCT%%, TAU or none (default: the recording's)")
     p.add_argument("--window", help="shorthand 'force=10ms,2ms;exp=1%%'")
     p.add_argument("--exclude-hits", help="hit indices to leave out, e.g. 3,7-9")
-    p.add_argument("--estimator", choices=("H1", "H2", "h1", "h2"), default="H1")
+    p.add_argument("--estimator", choices=("H1", "H2", "h1", "h2"), default="H1",
+                   help="the FRF estimate the new recording prefers: H1 (noise on the response, the default) or H2 "
+                        "(noise on the force, e.g. a light hammer tip); fit, report, linearity and diagnose then use it")
     add_overwrite(p, "replace an existing --out file")
     args = p.parse_args(argv)
     with errors_to_exit("replay", (UsageError, RecordingError, ValueError)):

@@ -42,7 +42,10 @@ class Measurement:
 class TestPlan:
     """mode: ``roving_hammer`` or ``roving_accelerometer``; points: where the roving item goes
     (empty: the set-up's own points, one measurement); hits_per_point: accepted hits to average;
-    reference: the hammer point for a roving accelerometer (default: the set-up's force channel)."""
+    reference: the hammer point for a roving accelerometer (default: the set-up's force channel);
+    levels: force levels struck in series at each point (e.g. ``("soft", "hard")``: the first
+    ``hits_per_point / len(levels)`` hits soft, then the hard ones, so one recording holds both for
+    ``analysis linearity``); empty: one level."""
 
     __test__ = False  # not a pytest test class despite the name
 
@@ -50,12 +53,17 @@ class TestPlan:
     points: tuple = ()
     hits_per_point: int = 5
     reference: str | None = None
+    levels: tuple = ()
 
     def __post_init__(self) -> None:
         if self.mode not in PLAN_MODES:
             raise ValueError(f"test plan mode {self.mode!r} must be one of {PLAN_MODES}")
         if self.hits_per_point < 1:
             raise ValueError(f"hits per point must be >= 1, got {self.hits_per_point}")
+        object.__setattr__(self, "levels", tuple(str(v) for v in self.levels))
+        if self.levels and self.hits_per_point % len(self.levels):
+            raise ValueError(f"{self.hits_per_point} hits per point do not split into {len(self.levels)} equal "
+                             f"series ({', '.join(self.levels)}): give a multiple of {len(self.levels)}")
         pts = tuple(str(parse_point(p)) for p in self.points)
         object.__setattr__(self, "points", pts)
         if self.reference is not None:
@@ -65,6 +73,15 @@ class TestPlan:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    def level_of(self, n_accepted: int) -> tuple[str, int, int] | None:
+        """The force level of the next hit at a point with ``n_accepted`` accepted hits: (level, number
+        of the hit in its series from 1, hits in the series); None for a plan of one level."""
+        if not self.levels:
+            return None
+        per = self.hits_per_point // len(self.levels)
+        k = min(n_accepted // per, len(self.levels) - 1)
+        return self.levels[k], n_accepted - k * per + 1, per
 
     def measurements(self, setup: Any) -> list[Measurement]:
         """The measurement list for a base set-up (``acquisition.setup.AcquisitionSetup``)."""

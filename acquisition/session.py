@@ -254,7 +254,10 @@ class CaptureSession:
                                    "check the set-up (ranges, trigger level) and the hammer")
             try:
                 self.analyser.arm()
-                self.operator.progress(f"  strike {m.reference} now (hit {attempts + 1} at this point)")
+                level = self.plan.level_of(avg.n_averages)
+                how, series = ("", "") if level is None else (f" {level[0].upper()}",
+                                                              f"; {level[0]} hit {level[1]}/{level[2]}")
+                self.operator.progress(f"  strike {m.reference} now{how} (hit {attempts + 1} at this point{series})")
                 try:
                     triggered = self.analyser.wait_for_trigger(self.timeout_s)
                 except TriggerTimeout:
@@ -266,10 +269,9 @@ class CaptureSession:
                 continue
             if triggered is False:
                 timeouts += 1
-                self._event("WARNING", f"no trigger within {self.timeout_s:g} s at {m.point}")
+                self._event("WARNING", f"no trigger within {self.timeout_s:g} s at {m.point}: {self._trigger_advice()}")
                 if timeouts >= self.max_timeouts:
-                    raise SessionError(f"no trigger in {timeouts} tries at {m.point}: check the trigger level and "
-                                       "channel, or hit the structure")
+                    raise SessionError(f"no trigger in {timeouts} tries at {m.point}: {self._trigger_advice()}")
                 abort = getattr(self.analyser, "abort", None)
                 if abort is not None:
                     try:
@@ -324,6 +326,14 @@ class CaptureSession:
         if self.writer is not None and avg.n_averages > 0:
             avg.write(self.writer)
         self._event("INFO", f"point {m.point} done: {avg.n_averages} averages")
+
+    def _trigger_advice(self) -> str:
+        """What a missed trigger waited for and how to change it (the set-up's level, channel and unit)."""
+        trig = self.setup.trigger
+        ch = self.setup.channels[trig.channel]
+        return (f"the {ch.name} channel did not cross the trigger level {trig.level:g} {ch.unit} ({trig.slope}); "
+                f"strike harder, or lower [trigger] level in a --setup file (capture --print-setup > setup.toml "
+                f"writes one); --timeout sets the wait")
 
     def withdraw_last(self, avg: MeasurementAverage, result: SessionResult, reason: str) -> int:
         """Undo the last accepted hit of ``avg`` (a front end's "undo"): out of the average, marked not

@@ -8,6 +8,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from analysis.bands import unsupported_band_text
 from analysis.spectra import excitation_band
 
 from .operator import HitSummary
@@ -104,8 +105,7 @@ def summary_text(result: Any, estimator: str = "H1", n_peaks: int = 8, quiet: bo
         lines.append("  excitation band (force spectrum): "
                      + ", ".join(f"-{d:g} dB at {'beyond ' + format(hi, '.0f') if e is None or e > hi else format(e, '.0f')} Hz"
                                  for d, e in ((10, e10), (20, e20))))
-        if e20 is not None and e20 < hi:
-            lines.append(f"  warning: the hammer excites this point only up to {e20:.0f} Hz of the analyser's "
-                         f"0..{hi:.0f} Hz band: modes above it are not measured well (fit below {e20:.0f} Hz, "
-                         "or use a harder tip)")
+        short = None if e20 is None else unsupported_band_text(hi, {"excitation": e20}, where="this point")
+        if short:
+            lines.append(f"  warning: {short}")
     return "\n".join(lines)

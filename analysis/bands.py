@@ -20,7 +20,8 @@ from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
 from .peaks import find_peaks
 
-__all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges",
+__all__ = ["FitError", "default_band", "upper_limits", "unsupported_band_text", "measured_up_to",
+           "MEASURED_LIMITS", "default_max_modes", "check_band_edges",
            "mains_harmonics", "exclude_lines", "mains_harmonic_index", "harmonic_tolerance_hz", "MAINS_HZ"]
 
 log = logging.getLogger(__name__)
@@ -78,6 +79,37 @@ def upper_limits(frf: FRFSet) -> dict[str, float]:
             if good.size and good[-1] < f.size - 1:
                 out["coherence"] = float(f[good[-1]])
     return out
+
+
+#: the upper limits (keys of :func:`upper_limits`) beyond which a hit measures nothing: the hammer's
+#: excitation and the analyser's flat band (the coherence's edge is a judgement of the data, not such a limit)
+MEASURED_LIMITS = ("excitation", "analyser")
+
+
+def measured_up_to(limits: dict[str, float]) -> float | None:
+    """The highest frequency (Hz) a hit measures, from :func:`upper_limits`: the lowest of
+    :data:`MEASURED_LIMITS` known, or None when neither is."""
+    known = [v for k, v in limits.items() if k in MEASURED_LIMITS]
+    return min(known) if known else None
+
+
+def unsupported_band_text(hi_hz: float, limits: dict[str, float], where: str = "the structure") -> str | None:
+    """The one rule for a band that reaches above what a hit measures: the hammer's excitation
+    (``limits["excitation"]``, the force spectrum ``EXCITATION_DROP_DB`` down) or the analyser's flat band
+    (``limits["analyser"]``) below the band's top ``hi_hz`` (Hz). Returns the warning (what limits the
+    band, what to do) or None when the band stays within both. ``where`` names the struck point(s)."""
+    tol = 1e-9 * abs(hi_hz)
+    exc, ana = limits.get("excitation"), limits.get("analyser")
+    parts = []
+    if exc is not None and exc < hi_hz - tol:
+        parts.append(f"the hammer excites {where} only up to {exc:.0f} Hz")
+    if ana is not None and ana < hi_hz - tol:
+        parts.append(f"the analyser's flat band ends at {ana:.0f} Hz")
+    if not parts:
+        return None
+    top = measured_up_to(limits)
+    return (f"{' and '.join(parts)}, below the band's top {hi_hz:.0f} Hz: modes above {top:.0f} Hz are not measured "
+            f"well (fit below {top:.0f} Hz, or use a harder tip)")
 
 
 def default_band(frf: FRFSet) -> tuple[float, float]:

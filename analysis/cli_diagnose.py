@@ -1,4 +1,4 @@
-"""``python -m analysis diagnose --measured M --simulated S --json OUT.json [--report DIR]``.
+"""``python -m analysis diagnose --measured M --simulated S [--json OUT.json] [--report DIR]``.
 
 M is a recording (``.h5``) or a UFF 58 file. S is a recording or UFF 58 file with the same points
 (matched by ``component:node:direction`` labels of outputs and references), or a simulator
@@ -51,7 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--measured", required=True, metavar="M", help="recording (.h5) or UFF 58 file")
     p.add_argument("--simulated", required=True, metavar="S",
                    help="recording or UFF 58 file with the same points, or a simulator config (.toml)")
-    p.add_argument("--json", required=True, metavar="OUT.json", help="write the diagnosis as JSON")
+    p.add_argument("--json", metavar="OUT.json",
+                   help="also write the diagnosis as JSON (default: the verdict on the terminal only)")
     p.add_argument("--report", metavar="DIR", help="write report.md and plots into DIR")
     p.add_argument("--band", metavar="LO:HI",
                    help="frequency band in Hz (default: from the data: the analyser's band, the hammer's "
@@ -112,7 +113,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if isinstance(args, int):
         return args
     try:
-        check_out_dir(args.json, error=InputError)
+        if args.json:
+            check_out_dir(args.json, error=InputError)
         check_outputs([args.json, *_report_files(args.report)], [args.measured, args.simulated])
         effects = None
         if args.effects:
@@ -130,9 +132,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2
     doc = diag.to_json()
-    from .atomic import write_text_atomic
+    if args.json:
+        from .atomic import write_text_atomic
 
-    write_text_atomic(args.json, json.dumps(doc, indent=1, default=_json_default))
+        write_text_atomic(args.json, json.dumps(doc, indent=1, default=_json_default))
     if args.report:
         from .diagnosis.report import write_report
 
@@ -151,7 +154,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"error before {diag.error_before_db:.1f} dB, after {diag.error_after_db:.1f} dB "
           f"(noise {max(diag.noise_db.values()):.1f} dB)")
     for c in diag.causes[:5]:
-        print(f"  {'*' if c['significant'] else ' '} {c['evidence']}")
+        print(f"  {'*' if c['significant'] else ' '} {c['evidence']}" + ("" if c["significant"] else NOT_SIGNIFICANT))
     return 0
 
 
@@ -162,6 +165,10 @@ def _report_files(folder: str | None) -> list[Path]:
         return []
     out = Path(folder)
     return [out / "report.md", out / "diagnosis.json", out / "bands.png", *sorted(out.glob("frf_*.png"))]
+
+
+#: the words after a cause of the list that is not significant (its held-out gain is too small to name it)
+NOT_SIGNIFICANT = " (not significant)"
 
 
 def _recording(path: str) -> Path | None:

@@ -264,8 +264,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not fit.success:
         print(f"warning: {fit.message}", file=sys.stderr)
     initial = fit.selected_poles if stab is not None else None
-    label = (stab.method.split("+")[0].upper() if stab is not None else "initial")
-    print(format_table(result, frf, output=shown[0], reference=shown[1], initial=initial, initial_label=label))
+    label = (stab.method.split("+")[0].upper() if stab is not None and freqs is None else "start")
+    print(format_table(result, frf, output=shown[0], reference=shown[1], initial=initial, initial_label=label,
+                       status=fit.status))
     scatter = None
     if args.scatter_std:
         from .scatter import subset_scatter

@@ -9,6 +9,7 @@ import argparse
 import sys
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -76,10 +77,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"warning: {w.message}", file=sys.stderr)
     poles = np.array([c.pole for c in clusters], dtype=complex)
     print(f"stabilization ({stab.method}) in {stab.band[0]:.6g}..{stab.band[1]:.6g} Hz, orders 1..{n}")
-    print(f"{'':4s} {'f [Hz]':>10s} {'zeta [%]':>9s} {'orders':>7s}")
-    for k in np.argsort(natural_freq_hz(poles)) if poles.size else []:
+    print(f"{'pole':>4s} {'f [Hz]':>10s} {'zeta [%]':>9s} {'orders':>7s}")
+    for i, k in enumerate(np.argsort(natural_freq_hz(poles)) if poles.size else [], start=1):
         c = clusters[k]
-        print(f"{k + 1:4d} {natural_freq_hz(c.pole):10.4f} {100 * damping_ratio(c.pole):9.3f} {c.n_orders:7d}")
+        print(f"{i:4d} {natural_freq_hz(c.pole):10.4f} {100 * damping_ratio(c.pole):9.3f} {c.n_orders:7d}")
+    missed = _visible_without_pole(frf, stab.band, natural_freq_hz(poles) if poles.size else np.zeros(0))
+    if missed:
+        print(f"warning: resonance(s) the data show at {', '.join(f'{x:.4g}' for x in missed)} Hz have no stable "
+              f"pole up to order {n}: raise --max-order, narrow --band around them (weak modes beside strong ones "
+              "need it), or pick them on the report's diagram", file=sys.stderr)
     with errors_to_exit("analysis stabilization", (OSError, ValueError), prefix="cannot write the outputs: "):
         plot_stabilization(stab, frf, args.png, selected=poles, log_freq=args.log_freq)
         print(f"diagram written to {args.png}")
@@ -93,6 +99,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             write_json(args.json, doc)
             print(f"poles written to {args.json}")
     return 0
+
+
+def _visible_without_pole(frf: Any, band: Sequence[float], pole_hz: np.ndarray) -> list[float]:
+    """Frequencies (Hz) of the resonances the data show (:func:`analysis.visibility.visible_peaks`, the
+    fit's completeness rule) that no selected pole accounts for."""
+    from .visibility import unaccounted_peaks, visible_peaks
+
+    df = float(np.median(np.diff(frf.freq_hz))) if frf.freq_hz.size > 1 else 0.0
+    missed, _ = unaccounted_peaks(visible_peaks(frf, band), pole_hz, df)
+    return sorted(p.freq_hz for p in missed)
 
 
 if __name__ == "__main__":  # pragma: no cover

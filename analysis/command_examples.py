@@ -8,18 +8,19 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "python -m acquisition capture": (
         'capture --device "sim://?seed=1" --out rec.h5 --hits 5 --auto          # simulated frame, accept every good hit',
         "capture --device socket://127.0.0.1:5025 --out rec.h5 --points right:6:-X,top:4:Z --hits 5",
+        "capture --device \"sim://?seed=1\" --out levels.h5 --hits 5 --soft-hard --auto   # 5 soft, then 5 hard hits",
         "capture --resume rec.h5                                                  # after a crash or 'q'",
     ),
     "python -m acquisition replay": (
         "replay rec.h5 --out h2.h5 --estimator H2 --exp-window 5%",
-        'replay rec.h5 --out clean.h5 --exclude-hits 3,7-9 --window "force=10ms,2ms;exp=none"',
+        'replay rec.h5 --out clean.h5 --exclude-hits 2,3-4 --window "force=10ms,2ms;exp=none"',
     ),
     "python -m acquisition export": (
         "export rec.h5 --uff rec.uff --time        # FRFs (UFF 58) and the hits' time data",
         "export rec.h5 --uff rec.uff --overwrite   # replace an earlier export",
     ),
     "python -m acquisition import": (
-        "import ../shared/data/ladisk_beam_impact/acceleration.lvm --out beam.h5",
+        "import ../shared/data/ladisk_beam_impact/acceleration.lvm --out beam.h5 --force-window 2ms,1ms",
         "import hits.mat --format mat --out test.h5 --overwrite",
     ),
     "python -m acquisition identify": (
@@ -53,7 +54,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "python -m analysis linearity": (
         "linearity soft.h5 hard.h5 --json lin.json        # levels read from the hits' peak forces",
         "linearity low.uff high.uff --levels 0.05,0.30 --band 10:400",
-        "linearity rec.h5                                 # one recording: its soft and hard hits",
+        "linearity levels.h5                              # one recording: its soft and hard hits (capture --soft-hard)",
     ),
     "python -m analysis batch": (
         "batch fleet/*.h5 --out results/                       # a local Dask cluster, one worker per core",

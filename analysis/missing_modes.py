@@ -22,7 +22,7 @@ from .lscf import EQUAL_NOISE
 from .mac import mac
 from .modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz, transfer
 from .peaks import find_peaks
-from .visibility import VisiblePeak, reproduced, unaccounted_peaks
+from .visibility import VisiblePeak, coherence_measured, reproduced, unaccounted_peaks
 
 if TYPE_CHECKING:
     from .lsfd import LSFDResult
@@ -335,6 +335,7 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
     model = result.model_raw
     z0 = float(np.median(damping_ratio(result.poles_raw)))
     mains_lines = mains_line_max_lines(df, frf.exp_window_tau_s)
+    coherent = coherence_measured(frf)
     tried: list[float] = []
     on_mains: list[tuple[float, str]] = []  # reported once at the end, with a count
     added = 0
@@ -343,8 +344,10 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
         nonlocal model, added
         tried.append(c)
         f, e, _ = _scaled_misfit(frf, model, band)
-        # a visible peak wider than a mains line is a resonance whatever the misfit's shape
-        wide = peak is not None and (peak.top_hz[1] - peak.top_hz[0]) / df - 1.0 > mains_lines + 0.5
+        # a visible peak wider than a mains line is a resonance whatever the misfit's shape; one the coherence
+        # confirms is tried, and its fitted pole (resolved far finer than a line) tells a mode from a line
+        wide = peak is not None and ((peak.top_hz[1] - peak.top_hz[0]) / df - 1.0 > mains_lines + 0.5
+                                     or coherent)
         mains_why = None if wide else _mains_line(c, f, e, df, z0, mains, mains_lines)
         if mains_why is not None:
             log.debug(mains_why)
@@ -357,7 +360,10 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
         fit = t.fit
         assert fit is not None  # an accepted trial carries its local fit
         f_new, z_new = float(fit.freq_hz[-1]), float(fit.damping[-1])
-        if mains_harmonic_index(f_new, mains, df) is not None and z_new < MAINS_WIDTH_FRACTION * z0:
+        # a tried visible peak the coherence confirms: on the harmonic itself (the grid's deviation), not
+        # within lines of it
+        reach = 0.0 if peak is not None and coherent else df
+        if mains_harmonic_index(f_new, mains, reach) is not None and z_new < MAINS_WIDTH_FRACTION * z0:
             msg = (f"a pole tried at {f_new:.6g} Hz ({100 * z_new:.3g} %) sits on a mains line and is much "
                    f"sharper than the modes ({100 * z0:.3g} %): not added")
             log.info(msg)

@@ -86,7 +86,17 @@ from typing import Any
 
 import numpy as np
 
-from .bands import FitError, check_band_edges, default_band, default_max_modes, exclude_lines, mains_harmonics
+from .bands import (
+    FitError,
+    check_band_edges,
+    default_band,
+    default_max_modes,
+    exclude_lines,
+    mains_harmonics,
+    measured_up_to,
+    unsupported_band_text,
+    upper_limits,
+)
 from .bounded_fit import drop_bad_poles, fit_bounded
 from .compressed_fit import with_compression
 from .fit_result import FitResult, assess_fit
@@ -96,7 +106,7 @@ from .mains_grid import mains_for_fit
 from .missing_modes import add_missing_modes, unfitted_resonances
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .progress import progress
-from .selection import poles_from_frequencies, select_poles
+from .selection import faster_than_window, poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
 from .visibility import VisiblePeak, visible_peaks
@@ -209,11 +219,11 @@ def fit_auto(
                              warnings_out)
     else:
         poles = given_complex
+    # no start slower than the exponential window alone (negative damping once it is removed)
+    poles = faster_than_window(poles, window_pole_shift(frf.exp_window_tau_s))
 
-    (lo2, hi2), warn = check_band_edges(poles, (lo, hi), limits, (not user_band, not user_band))
-    warnings_out += warn
-    for w in warn:
-        log.warning(w)
+    # the start poles move the edges; whether a mode ends up near an edge is said from the fitted poles
+    (lo2, hi2), _ = check_band_edges(poles, (lo, hi), limits, (not user_band, not user_band))
     if (lo2, hi2) != (lo, hi):
         log.info("band moved from %.6g..%.6g Hz to %.6g..%.6g Hz to keep resonances off its edges", lo, hi, lo2, hi2)
     sel = (frf.freq_hz >= lo2) & (frf.freq_hz <= hi2)
@@ -251,7 +261,19 @@ def fit_auto(
         warnings_out.append("one average per point: the coherence is 1 everywhere and says nothing about the noise; "
                             "the standard deviations and weights rest on the misfit alone (take several hits per point)")
     result = sorted_by_frequency(result)
+    _, edge_warn = check_band_edges(result.poles_raw, (lo2, hi2), (lo2, hi2), (False, False))
+    warnings_out += edge_warn
+    for w in edge_warn:
+        log.warning(w)
     problems = assess_fit(result, (lo2, hi2))
+    limits_hz = upper_limits(frf)
+    beyond = unsupported_band_text(hi2, limits_hz, where="the structure") if user_band else None
+    if beyond:   # the default band stops at these limits; a user's band may not
+        if np.any(np.asarray(result.freq_hz) > (measured_up_to(limits_hz) or np.inf)):   # a mode where nothing was measured
+            problems.append(beyond)
+        else:
+            warnings_out.append(beyond)
+            log.warning(beyond)
     left, notes = unfitted_resonances(fit_frf, visible, result, mains)
     warnings_out += notes
     problems += left
@@ -287,7 +309,7 @@ def _start_poles(frf: FRFSet, band: tuple[float, float], stab: StabilizationResu
     Raises FitError when there is no start at all."""
     lo, hi = band
     if given_freqs is not None:
-        poles = poles_from_frequencies(given_freqs, stab)
+        poles = poles_from_frequencies(given_freqs, stab, window_shift=window_pole_shift(frf.exp_window_tau_s))
     else:
         poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
     if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only

@@ -62,7 +62,7 @@ def _cstr(z: complex, digits: int = 4) -> str:
 
 def format_table(result: LSFDResult, frf: FRFSet | None = None, *, output: int = 0, reference: int = 0,
                  title: str | None = None, initial: np.ndarray | None = None,
-                 initial_label: str = "initial") -> str:
+                 initial_label: str = "initial", status: str | None = None) -> str:
     """The paper's Table 1 for one FRF (``output``, ``reference`` indices) of an LSFD result.
 
     Columns: pole | [initial f, zeta] | f [Hz] | zeta [%] | f std [Hz] | zeta std [%] | parameter |
@@ -72,12 +72,16 @@ def format_table(result: LSFDResult, frf: FRFSet | None = None, *, output: int =
     pairs first, within 3 half-power bandwidths of the fitted pole or 1 % in frequency); a fitted
     pole without a match (added by the pipeline for a missed resonance) shows "-". The exponential
     window's decay that the fit removed from its poles (``meta["exp_window_shift_rad_s"]``, 1/s) is
-    removed from the initial poles too, so both columns speak of the structure.
+    removed from the initial poles too, so both columns speak of the structure. ``status``: the whole
+    fit's :attr:`analysis.fit_result.FitResult.status`; other than "converged" it replaces the word
+    "success" (the LSFD converging is not the fit succeeding).
     """
     model = result.model
     outs, refs = model.outputs, model.references
     label = f"{outs[output]} / {refs[reference]}" if outs and refs else "FRF"
-    head = title or f"LSFD ({result.method}) fit, residues of {label}"
+    est = frf.meta.get("estimator") if frf is not None else None
+    of = f" of {est}" if isinstance(est, str) and est else ""
+    head = title or f"LSFD ({result.method}) fit{of}, residues of {label}"
     init = None if initial is None or np.size(initial) == 0 else np.asarray(initial, dtype=complex)
     if init is not None:
         init = init + float(model.meta.get("exp_window_shift_rad_s", 0.0) or 0.0)
@@ -120,8 +124,10 @@ def format_table(result: LSFDResult, frf: FRFSet | None = None, *, output: int =
         if i == 0:
             lines.append(sep)
     lines.append(sep)
-    lines.append(f"sum of square errors: S = {result.sse:.6g} (all FRFs, {result.iterations} iterations, "
-                 f"{'success' if result.success else 'NOT converged'}: {result.message})")
+    state = f"{'success' if result.success else 'NOT converged'}: {result.message}"
+    if status is not None and status != "converged":
+        state = f"fit {status.upper()} (see the warnings); LSFD {result.message}"
+    lines.append(f"sum of square errors: S = {result.sse:.6g} (all FRFs, {result.iterations} iterations, {state})")
     if model.upper_residual is not None:
         lines.append(f"upper residual term UR: {_cstr(model.upper_residual[output, reference])}")
     if model.lower_residual is not None:

@@ -39,7 +39,7 @@ from .clustering import complete_linkage_labels
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .stabilization import STABLE_DAMP, StabilizationResult
 
-__all__ = ["select_poles", "SelectedCluster", "select_clusters", "poles_from_frequencies"]
+__all__ = ["select_poles", "SelectedCluster", "select_clusters", "poles_from_frequencies", "faster_than_window"]
 
 log = logging.getLogger(__name__)
 
@@ -141,22 +141,28 @@ def select_poles(
 
 
 def poles_from_frequencies(
-    freqs_hz: Sequence[float] | np.ndarray, stab: StabilizationResult | None = None, *, default_damping: float = 0.01
+    freqs_hz: Sequence[float] | np.ndarray, stab: StabilizationResult | None = None, *, default_damping: float = 0.01,
+    window_shift: float = 0.0,
 ) -> np.ndarray:
-    """Poles for user-given natural frequencies (Hz).
+    """Poles (rad/s, as measured) for user-given natural frequencies (Hz).
 
-    With a stabilization result, each frequency takes the nearest stable pole (within 5 %)
-    so its damping is estimated from the data; otherwise ``default_damping`` is used.
+    With a stabilization result, each frequency takes the damping of the nearest stable poles (within
+    5 %) so its damping is estimated from the data; otherwise ``default_damping`` is used (of the
+    structure: the measured start adds the window's decay). ``window_shift`` (1/s,
+    :func:`analysis.frf.window_pole_shift`): the decay an exponential window adds to every measured pole;
+    a stabilization pole that decays no faster than the window alone would have negative damping once the
+    window is removed, so it cannot give a start and is not used.
     """
     fr = np.asarray([float(x) for x in freqs_hz], dtype=float)
     if fr.size == 0 or np.any(~np.isfinite(fr)) or np.any(fr <= 0):
         raise ValueError("frequencies must be positive numbers in Hz; got "
                          f"{', '.join(f'{x:.6g}' for x in fr)} Hz")
-    out = pole_from_fz(fr, np.full(fr.size, default_damping))
+    out = pole_from_fz(fr, np.full(fr.size, default_damping)) - float(window_shift)
     if stab is not None:
         p, _ = stab.stable_poles(STABLE_DAMP)
         if p.size == 0:
             p, _ = stab.stable_poles(1)
+        p = p[-p.real > float(window_shift)] if p.size else p   # decays faster than the window: a structure's pole
         if p.size:
             f = natural_freq_hz(p)
             for i, x in enumerate(fr):
@@ -164,4 +170,17 @@ def poles_from_frequencies(
                 if np.any(k):
                     z = float(np.median(damping_ratio(p[k][np.argsort(np.abs(f[k] - x))[:10]])))
                     out[i] = pole_from_fz(x, z)
+    return faster_than_window(out, window_shift, default_damping)
+
+
+def faster_than_window(poles: np.ndarray, window_shift: float, default_damping: float = 0.01) -> np.ndarray:
+    """Start poles (rad/s, as measured) that all decay faster than the exponential window alone: a pole
+    whose decay rate is not above ``window_shift`` (1/s, :func:`analysis.frf.window_pole_shift`) would
+    have zero or negative damping once the window is removed; it gets the window's decay plus
+    ``default_damping`` of the structure at its natural frequency. A copy; the others unchanged."""
+    out = np.array(poles, dtype=complex)
+    slow = -out.real <= float(window_shift)
+    if np.any(slow):
+        f = natural_freq_hz(out[slow])
+        out[slow] = pole_from_fz(f, float(window_shift) / (2 * np.pi * f) + default_damping)
     return out

@@ -13,7 +13,10 @@ maximum of a curve inside the band is a visible peak when
   top (the lines within 3 dB of its maximum, and one more line on each side) in that FRF (for
   the CMIF: the median over the FRFs): a resonance is measured clean across its top, while a
   noise-level FRF shows "peaks" between random dips where the coherence of a few averages
-  reaches 0.9 at single lines by chance, and
+  reaches 0.9 at single lines by chance. A top of ``VISIBLE_MIN_LINES`` lines or more (a
+  resonance spans lines) is clean too when the coherence is at least 0.9 at the peak's line and
+  in the mean over the top, and no line falls below ``VISIBLE_COHERENCE_FLOOR`` (0.85): a weak
+  mode's broad top may hold a line just below 0.9 (:func:`_coherent_top`), and
 - without coherence, it is at least ``VISIBLE_MIN_LINES`` lines wide at 3 dB below its top
   (a resonance spans lines; a noise spike is one line). Without coherence only the CMIF curve
   is searched when there are more than ``MAX_CURVES_WITHOUT_COHERENCE`` FRFs: it averages the
@@ -48,11 +51,13 @@ from .frf import FRFSet
 from .mif import cmif
 from .peaks import find_peaks, prominences
 
-__all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "VISIBLE_PROMINENCE_DB", "VISIBLE_COHERENCE",
+__all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "coherence_measured", "VISIBLE_PROMINENCE_DB",
+           "VISIBLE_COHERENCE", "VISIBLE_COHERENCE_FLOOR",
            "MATCH_FRACTION", "MATCH_LINES", "reproduced"]
 
 VISIBLE_PROMINENCE_DB = 10.0
 VISIBLE_COHERENCE = 0.9
+VISIBLE_COHERENCE_FLOOR = 0.85
 VISIBLE_MIN_LINES = 2
 MAX_CURVES_WITHOUT_COHERENCE = 8
 MATCH_FRACTION = 0.005
@@ -103,6 +108,16 @@ def _top(db: np.ndarray, i: int, drop_db: float = 3.0) -> tuple[int, int]:
     return lo, hi
 
 
+def _coherent_top(coh: np.ndarray, at_peak: float, wide: bool) -> bool:
+    """Whether a peak's top (``coh``: its lines and one more on each side) is measured clean: every
+    line at least ``VISIBLE_COHERENCE``, or, for a top of ``VISIBLE_MIN_LINES`` lines or more, the peak's
+    line and the mean that high and no line below ``VISIBLE_COHERENCE_FLOOR`` (module docstring)."""
+    if np.all(coh >= VISIBLE_COHERENCE):
+        return True
+    return bool(wide and at_peak >= VISIBLE_COHERENCE and np.mean(coh) >= VISIBLE_COHERENCE
+                and np.min(coh) >= VISIBLE_COHERENCE_FLOOR)
+
+
 def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
     """The visible peaks of ``frf`` in ``band`` (lo, hi Hz) of every curve, most prominent first
     (see module docstring)."""
@@ -124,10 +139,11 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
             if p < VISIBLE_PROMINENCE_DB:
                 continue
             a, b = _top(db, int(i))
-            if coh is None and b - a + 1 < VISIBLE_MIN_LINES:
+            wide = b - a + 1 >= VISIBLE_MIN_LINES
+            if coh is None and not wide:
                 continue
             a, b = max(a - 1, 0), min(b + 1, f.size - 1)
-            if coh is not None and not np.all(coh[a:b + 1] >= VISIBLE_COHERENCE):
+            if coh is not None and not _coherent_top(coh[a:b + 1], float(coh[i]), wide):
                 continue
             index = -1 if name == "CMIF" else ci
             found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b]))))
@@ -157,14 +173,21 @@ def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.
     return data > 0 and misfit <= REPRODUCED_FRACTION * data
 
 
+def coherence_measured(frf: FRFSet) -> bool:
+    """Whether ``frf``'s coherence comes from more than one average, so that a visible peak (coherence at
+    least ``VISIBLE_COHERENCE`` over its top) is response the force caused: a resonance, even on a mains
+    harmonic (hum in the response is not coherent with the force and makes no such peak in H1)."""
+    n = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    return frf.coherence is not None and n.size > 0 and bool(np.all(n > 1))
+
+
 def _error_variance(frf: FRFSet) -> np.ndarray | None:
     """The random-error variance of each FRF line (:func:`analysis.reciprocity.frf_error_variance`), or
     None when the set carries no coherence or does not say it averaged more than one hit (one average
     has a coherence of 1 and no error estimate)."""
     from .reciprocity import frf_error_variance
 
-    n = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
-    if frf.coherence is None or n.size == 0 or not np.all(n > 1):
+    if not coherence_measured(frf):
         return None
     return frf_error_variance(frf)
 

@@ -22,8 +22,10 @@ def create_analyser(options: Mapping[str, Any] | None = None,
     ``noise`` (bool, default True: sensor and ADC noise on), ``plan`` (ignored by the firmware;
     the stand uses it), ``replay`` (path of a recording: ``simulator.replay_stand.ReplayStand``
     plays its hits back instead of simulating), ``packetized`` (bool), ``serial`` (str), ``polls`` (GET STATUS polls
-    before the strike, default 1), ``max_strikes`` (default 3); ``faults``, ``fault_seed``,
-    ``fault_gone_calls``, ``fault_slow_s``: fault injection, the firmware comes wrapped in
+    before the strike, default 1), ``max_strikes`` (default 3); ``levels``, ``per_level``: the
+    simulated operator strikes ``per_level`` hits at each of these factors of the usual force in turn
+    (:mod:`simulator.operator_levels`); ``faults``, ``fault_seed``, ``fault_gone_calls``,
+    ``fault_slow_s``: fault injection, the firmware comes wrapped in
     :class:`simulator.faults.FaultyFirmware` (same interface). ``stand`` injects a ready stand
     (e.g. a :class:`PrecomputedStand`); otherwise ``simulator.stand.TestStand`` is built.
     """
@@ -42,12 +44,18 @@ def create_analyser(options: Mapping[str, Any] | None = None,
 
 def _create_firmware(opts: Mapping[str, Any], stand: StandLike | None) -> Firmware:
     """The plain firmware from the options without the fault keys."""
-    known = {"seed", "config", "noise", "plan", "packetized", "serial", "polls", "max_strikes", "replay"}
+    from simulator.operator_levels import LEVEL_OPTION_KEYS, LevelledStand, levels_from_options
+
+    known = {"seed", "config", "noise", "plan", "packetized", "serial", "polls", "max_strikes", "replay",
+             *LEVEL_OPTION_KEYS}
     unknown = set(opts) - known
     if unknown:
         raise ValueError(f"unknown simulator option(s) {sorted(unknown)}; known: {', '.join(sorted(known))}")
+    levels = levels_from_options(opts)
     if stand is None:
         stand = _build_stand(opts)
+    if levels is not None:
+        stand = LevelledStand(stand, *levels)
     try:
         polls = int(opts.get("polls", 1))
         max_strikes = int(opts.get("max_strikes", 3))

@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..frf import FRFSet
+from ..frf import FRFSet, window_pole_shift
 from ..mac import mac as mac_of
 from ..peaks import find_peaks
 
@@ -164,12 +164,18 @@ def channel_errors(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray) -
     return out
 
 
-def pick_peaks(frf: FRFSet, prominence_db: float = 6.0) -> list[dict]:
+def pick_peaks(frf: FRFSet, prominence_db: float = 6.0, window_shift: float | None = None) -> list[dict]:
     """Resonance peaks of the summed magnitude: frequency (Hz, parabolic interpolation), half-power
-    damping ratio, peak magnitude and the complex FRF vector at the peak (for MAC)."""
+    damping ratio, peak magnitude and the complex FRF vector at the peak (for MAC).
+
+    The half-power frequencies are interpolated between lines (linearly in power), and the decay an
+    exponential window added (``window_shift`` 1/s, by default ``frf.exp_window_tau_s``'s,
+    :func:`analysis.frf.window_pole_shift`) is taken off, so the damping is the structure's as the fit
+    reports it; a peak narrower than the window alone makes (resolution-limited) gives None."""
     f = frf.freq_hz
     s = np.sqrt(np.sum(np.abs(frf.H) ** 2, axis=(0, 1)))
     sdb = 20 * np.log10(s + 1e-300)
+    shift = window_pole_shift(frf.exp_window_tau_s) if window_shift is None else float(window_shift)
     idx, _ = find_peaks(sdb, prominence=prominence_db)
     peaks = []
     for k in idx:
@@ -187,10 +193,38 @@ def pick_peaks(frf: FRFSet, prominence_db: float = 6.0) -> list[dict]:
         j = k
         while j < f.size - 1 and s[j] > half:
             j += 1
-        zeta = float((f[j] - f[i]) / (2 * fk)) if fk > 0 else float("nan")
+        zeta = _half_power_damping(f, s ** 2, i, j, fk, shift, k)
         peaks.append({"freq_hz": fk, "damping": zeta, "magnitude": float(s[k]),
                       "vector": frf.H[..., k].ravel().copy()})
     return peaks
+
+
+def _half_power_damping(f: np.ndarray, p: np.ndarray, i: int, j: int, fk: float, shift: float,
+                        k: int) -> float | None:
+    """Damping ratio from the half-power band of the power curve ``p`` around its peak line ``k`` at
+    ``fk`` Hz, whose lines ``i+1..j-1`` lie above half the peak line's power, less the window's decay
+    ``shift`` (1/s); None when nothing is left of it. Near a resonance ``1 / p`` is a parabola in
+    frequency (a Lorentzian), so the width follows from the three lines at the top whatever the line
+    spacing: ``2 sqrt(min / curvature)``; when they do not make an upward parabola, the half-power
+    crossings interpolated between lines."""
+    if not fk > 0:
+        return None
+    if 0 < k < f.size - 1 and np.all(p[k - 1:k + 2] > 0):
+        a, b, c = np.polyfit(f[k - 1:k + 2] - f[k], 1.0 / p[k - 1:k + 2], 2)
+        low = c - b * b / (4 * a) if a > 0 else -1.0
+        if low > 0:
+            zeta = float(np.sqrt(low / a)) / fk - shift / (2.0 * np.pi * fk)
+            return zeta if zeta > 0 else None
+    half = float(np.max(p[i:j + 1])) / 2.0
+
+    def cross(a: int, b: int) -> float:
+        if p[a] == p[b] or not (min(p[a], p[b]) <= half <= max(p[a], p[b])):
+            return float(f[a])
+        return float(f[a] + (half - p[a]) / (p[b] - p[a]) * (f[b] - f[a]))
+
+    width = cross(j - 1, j) - cross(i, i + 1) if j - i >= 2 else float(f[j] - f[i])
+    zeta = width / (2.0 * fk) - shift / (2.0 * np.pi * fk)
+    return float(zeta) if zeta > 0 else None
 
 
 def pair_modes(measured: FRFSet, simulated: FRFSet, max_rel_df: float = 0.15, min_mac: float = 0.5) -> dict:
@@ -201,7 +235,9 @@ def pair_modes(measured: FRFSet, simulated: FRFSet, max_rel_df: float = 0.15, mi
     (simulated / measured peak), ``phase_deg`` (mean phase of the simulated vector against the measured)
     and ``mac``.
     """
-    pm, ps = pick_peaks(measured), pick_peaks(simulated)
+    # the simulation is predicted as measured (the measurement's window on it): one window to take off
+    shift = window_pole_shift(measured.exp_window_tau_s)
+    pm, ps = pick_peaks(measured, window_shift=shift), pick_peaks(simulated, window_shift=shift)
     cand = []
     for i, a in enumerate(pm):
         for j, b in enumerate(ps):

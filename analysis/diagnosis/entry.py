@@ -114,9 +114,11 @@ def model_with_correction(model: ModalModel, sim: FRFSet, above_band: bool = Tru
     return replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references), meta=meta)
 
 
-def simulation_model(sim: FRFSet, measured: FRFSet, source: str = "the simulation") -> ModalModel:
-    """A simulation given as FRFs, at the measured points, as a modal model (automatic fit) with the
-    correction of :func:`model_with_correction`. Raises :class:`InputError` when points are missing."""
+def simulation_model(sim: FRFSet, measured: FRFSet, source: str = "the simulation",
+                     band: tuple[float, float] | None = None) -> ModalModel:
+    """A simulation given as FRFs, at the measured points, as a modal model (automatic fit, in ``band``
+    (Hz) when the user gave one: its warnings then speak of that band) with the correction of
+    :func:`model_with_correction`. Raises :class:`InputError` when points are missing."""
     from ..inputs import InputError
     from ..pipeline import FitError, fit_auto
     from .compare import common_points
@@ -127,7 +129,7 @@ def simulation_model(sim: FRFSet, measured: FRFSet, source: str = "the simulatio
                          f"{list(sim.references)}; measured {list(measured.outputs)} / {list(measured.references)}")
     sim = sim.select(outs, refs)
     try:
-        result = fit_auto(sim)
+        result = fit_auto(sim, band=band)
     except FitError as exc:
         raise InputError(f"cannot build a modal model of the simulated FRFs in {source}: {exc}") from None
     return model_with_correction(result.lsfd.model, sim, band_hz=result.band)
@@ -205,7 +207,8 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
     elif isinstance(simulated, (FRFSet, str, Path)):
         source = str(simulated) if not isinstance(simulated, FRFSet) else "the simulation"
         sim = simulated if isinstance(simulated, FRFSet) else load_input(Path(simulated), estimator=estimator)
-        base = simulation_model(sim, measured, source)
+        user_band = (float(band[0]), float(band[1])) if band is not None and not isinstance(band, str) else None
+        base = simulation_model(sim, measured, source, band=user_band)
     else:
         raise InputError(f"the simulation is a {type(simulated).__name__}; give a modal model, an FRF set or file, "
                          "or an FE model with physical causes")

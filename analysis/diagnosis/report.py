@@ -122,11 +122,11 @@ def report_text(diag: Diagnosis) -> str:
         L += ["", "Not tried: " + "; ".join(f"{k} ({v})" for k, v in diag.skipped.items())]
     modes = diag.comparison["modes"]
     L += ["", "## Modes (simulation vs measurement)", "",
-          "| measured Hz | simulated Hz | df % | damping measured % | damping simulated % | amplitude dB | "
+          "| measured Hz | simulated Hz | df % | damping measured % (half-power) | damping simulated % | amplitude dB | "
           "phase deg | MAC |", "|---|---|---|---|---|---|---|---|"]
     for p in modes["pairs"]:
         L.append(f"| {p['measured_hz']:.3f} | {p['simulated_hz']:.3f} | {p['df_percent']:+.2f} | "
-                 f"{100 * p['measured_damping']:.2f} | {100 * p['simulated_damping']:.2f} | {p['amplitude_db']:+.1f} | "
+                 f"{_percent(p['measured_damping'])} | {_percent(p['simulated_damping'])} | {p['amplitude_db']:+.1f} | "
                  f"{p['phase_deg']:+.0f} | {p['mac']:.2f} |")
     if modes["only_measured"]:
         L.append("\nPeaks only in the measurement: " + ", ".join(f"{m['freq_hz']:.2f} Hz" for m in modes["only_measured"]))
@@ -181,3 +181,8 @@ def write_report(diag: Diagnosis, outdir: str | Path, max_frf_plots: int = 6) ->
     write_text_atomic(out / "diagnosis.json", json.dumps(diag.to_json(), indent=1))
     log.info("report written to %s", out)
     return out / "report.md"
+
+
+def _percent(ratio: float | None) -> str:
+    """A damping ratio in %, or "-" when the peak is too narrow for the line spacing to measure it."""
+    return "-" if ratio is None else f"{100 * ratio:.2f}"

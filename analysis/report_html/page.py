@@ -84,7 +84,8 @@ def _test_html(test: dict | None, meta: dict) -> str:
 #: human labels of the instrument's and the plan's keys (other keys: underscores become spaces)
 _INSTRUMENT_LABELS = {"vendor": "", "model": "", "firmware": "firmware", "serial": "serial number",
                       "protocol_version": "protocol version"}
-_PLAN_LABELS = {"mode": "", "hits_per_point": "hits per point", "reference": "reference"}
+_PLAN_LABELS = {"mode": "", "hits_per_point": "hits per point", "reference": "reference",
+                "levels": "force levels", "auto": "hits accepted automatically"}
 
 
 def _described(d: dict, labels: dict, skip: Sequence[str] = ()) -> str:
@@ -95,6 +96,10 @@ def _described(d: dict, labels: dict, skip: Sequence[str] = ()) -> str:
         if k in skip or v is None or v == "" or v == []:
             continue
         label = labels.get(k, str(k).replace("_", " "))
+        if isinstance(v, bool):
+            v = "yes" if v else "no"
+        elif isinstance(v, (list, tuple)):
+            v = " then ".join(str(x) for x in v)   # e.g. the force levels, struck in this order
         parts.append(f"{label} {v}" if label else str(v))
     return escape(", ".join(parts)) or "&ndash;"
 

@@ -1,6 +1,6 @@
 """Frames changed in one physical way, each captured through ``sim://?config=...`` (the default test
 plan's six points, 3 hits each) and diagnosed against the unchanged frame.toml with the command line
-(``python -m analysis diagnose``). Prints the table of docs/diagnosis.md ("Frames changed in one physical way").
+(``python -m analysis diagnose``). Prints the table of its results file, ``diagnosis_changed_frames_table.md`` beside it.
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/diagnosis_changed_frames_table.py
 """
