@@ -87,13 +87,25 @@ def model_with_correction(model: ModalModel, sim: FRFSet, above_band: bool = Tru
     ``meta["frf_correction"]``, what it misses of the simulated FRFs ``sim``, so that the prediction
     without effects is the simulated FRFs themselves (modal effects move only the fitted modes); with a
     driving point also ``meta["output_shapes"]`` (:func:`driving_point_shapes`), so that the
-    accelerometers' mass can be fitted."""
-    from ..modal import synthesize
+    accelerometers' mass can be fitted.
+
+    ``model`` describes the structure (window-corrected poles, as :attr:`analysis.lsfd.LSFDResult.model`).
+    FRFs that carry their own processing (a recording's exponential window ``sim.exp_window_tau_s`` and
+    finite record, :func:`analysis.diagnosis.verdict.known_processing`) are fitted as they show the modes
+    (the window's decay in every pole) and the model returned is again the structure's; the correction is
+    what the model *seen through that processing* misses, so that a measurement processed alike is
+    predicted as the simulated FRFs themselves and the window is not counted twice."""
+    from ..frf import window_pole_shift
+    from ..lsfd import seen_through_window
     from .above_band import with_above_band_mode
     from .base_refit import refit_in_receptance
     from .compare import line_weights
+    from .effects import predict
+    from .verdict import known_processing
 
-    model = as_receptance(model)
+    # fitted as the simulated FRFs show the modes (through their window), then back to the structure's poles
+    shift = window_pole_shift(sim.exp_window_tau_s)
+    model = seen_through_window(as_receptance(model), sim.exp_window_tau_s)
     if above_band:
         labelled = replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references))
         rec = sim if sim.quantity == model.quantity else sim.as_quantity(model.quantity)
@@ -101,7 +113,8 @@ def model_with_correction(model: ModalModel, sim: FRFSet, above_band: bool = Tru
     if refit:
         model = refit_in_receptance(replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references)),
                                     sim, band_hz)
-    syn = synthesize(model, sim.freq_hz)
+    model = replace(model, poles=np.asarray(model.poles, complex) + shift)
+    syn = predict(model, sim.freq_hz, model.quantity, known_processing(sim))
     same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
     corr = replace(same, H=same.H - syn.H, coherence=None)
     meta = dict(model.meta)
