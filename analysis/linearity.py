@@ -8,7 +8,10 @@ highest level against the fits' own standard deviations:
     df %      = 100 (f_hi - f_lo) / f_lo,           sd = 100 sqrt(sd_f,lo^2 + sd_f,hi^2) / f_lo
     dzeta %   = 100 (zeta_hi - zeta_lo) / zeta_lo,  sd likewise from sd_zeta
 
-A mode is ``significant`` when either change exceeds ``z`` standard deviations (default 3) *and* a
+The standard deviations are the fits' own, widened per mode to the noise the data show on that mode's
+lines (:func:`data_noise_factor`: the coherence's per-line noise, the exponential window's correlation of
+neighbouring lines; :mod:`analysis.uncertainty`): near the top of the band a soft hit excites, a fit's
+one noise level for the whole band understates them several times. A mode is ``significant`` when either change exceeds ``z`` standard deviations (default 3) *and* a
 floor of practical size (``min_df_percent``, ``min_dzeta_percent``); a mode the fits leave poorly
 determined (standard deviation above ``MAX_DF_STD_PERCENT`` or ``MAX_DZETA_STD_PERCENT``, or a pole that
 ran to the edge of its ``MAX_SHIFT`` window at a higher level) is not judged; the verdict is "nonlinear" when
@@ -188,8 +191,11 @@ def compare_levels(
                          "compared as they are")
     f = np.array([r.freq_hz for r in fits])
     zt = np.array([r.damping for r in fits])
-    fs = np.array([r.freq_hz_std for r in fits])
-    zs = np.array([r.damping_std for r in fits])
+    # the fits' standard deviations, each mode's widened to the noise its own lines carry (honest at the
+    # band's top, where a soft hit barely excites a mode)
+    grow = np.array([np.sqrt(np.fmax(data_noise_factor(r, s, band_used), 1.0)) for r, s in zip(fits, sets)])
+    fs = np.array([r.freq_hz_std for r in fits]) * grow
+    zs = np.array([r.damping_std for r in fits]) * grow
     idx = np.argsort(f[0])
     f, zt, fs, zs = f[:, idx], zt[:, idx], fs[:, idx], zs[:, idx]
     decades = float(np.log10(lv[-1] / lv[0]))
@@ -215,6 +221,24 @@ def compare_levels(
     return LinearityResult(levels=tuple(float(v) for v in lv), modes=tuple(modes), verdict=verdict, band=band_used,
                            freq_hz=f, zeta=zt, freq_hz_std=fs, zeta_std=zs, z=float(z), notes=tuple(notes),
                            poles=fits[0].poles_raw[idx])
+
+
+def data_noise_factor(fit: Any, frf: FRFSet, band: Sequence[float]) -> np.ndarray:
+    """Per mode of ``fit`` (an :class:`analysis.lsfd.LSFDResult` of ``frf`` on ``band`` Hz), the factor by which
+    its pole's variance exceeds the fit's own (:func:`analysis.uncertainty.mode_noise_factor`): the per-line
+    noise from the coherence and the averages (``meta["n_averages"]``, the fewest of the points; without
+    coherence or with fewer than two averages the fit's noise on every line) and the lines' correlation from
+    the recorded exponential window."""
+    from .uncertainty import h1_noise_variance, mode_noise_factor
+
+    sub = frf.band(float(band[0]), float(band[1]))
+    n = sub.meta.get("n_averages", sub.meta.get("averages"))
+    n_avg = min((float(x) for x in n if x), default=0.0) if isinstance(n, (list, tuple)) else float(n or 0.0)
+    line_var = None
+    if sub.coherence is not None and n_avg >= 2 and np.all(np.isfinite(sub.coherence)):
+        line_var = h1_noise_variance(sub.H, sub.coherence, n_avg)
+    return mode_noise_factor(fit.poles_raw, fit.model.residues, sub.freq_hz, float(fit.noise_var), line_var,
+                             sub.exp_window_tau_s)
 
 
 def group_by_force(peaks_n: Sequence[float] | np.ndarray, min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:
