@@ -11,7 +11,9 @@ highest level against the fits' own standard deviations:
 The standard deviations are the fits' own, widened per mode to the noise the data show on that mode's
 lines (:func:`data_noise_factor`: the coherence's per-line noise, the exponential window's correlation of
 neighbouring lines; :mod:`analysis.uncertainty`): near the top of the band a soft hit excites, a fit's
-one noise level for the whole band understates them several times. A mode is ``significant`` when either change exceeds ``z`` standard deviations (default 3) *and* a
+one noise level for the whole band understates them several times.
+
+A mode is ``significant`` when either change exceeds ``z`` standard deviations (default 3) *and* a
 floor of practical size (``min_df_percent``, ``min_dzeta_percent``); a mode the fits leave poorly
 determined (standard deviation above ``MAX_DF_STD_PERCENT`` or ``MAX_DZETA_STD_PERCENT``, or a pole that
 ran to the edge of its ``MAX_SHIFT`` window at a higher level) is not judged; the verdict is "nonlinear" when
