@@ -77,3 +77,28 @@ def test_widened_standard_deviation_of_damping_matches_monte_carlo_at_a_noisy_ba
     scatter = float(np.std(zeta, ddof=1))
     assert np.median(own) < 0.6 * scatter                       # the fit alone: too certain
     assert np.median(wide) == pytest.approx(scatter, rel=0.3)   # widened to the data's noise: honest
+
+
+def test_linear_frame_struck_at_40_and_200_n_is_linear(tmp_path, capsys):
+    """Two recordings of the linear frame through sim:// (three points, five hits each) at 40 N and 200 N: with
+    the fits' own standard deviations the damping of the 997 Hz mode, near the top of the soft hits' band,
+    moved "+48 %" beyond 3 of them; the widened ones call the frame linear."""
+    import contextlib
+    import io
+
+    from acquisition.cli_capture import main as capture
+    from analysis.cli_linearity import main
+
+    paths = []
+    for force, seed in ((40.0, 5006), (200.0, 5007)):
+        cfg = tmp_path / f"f{force:.0f}.toml"
+        cfg.write_text(f"[hammer]\namplitude_n = {force}\n")
+        paths.append(str(tmp_path / f"f{force:.0f}.h5"))
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert capture(["--device", f"sim://?seed={seed}&config={cfg}", "--out", paths[-1], "--points",
+                            "right:6:-X,left:6:X,top:4:Z", "--hits", "5", "--auto", "-q"]) == 0
+    assert main(paths) == 0
+    out = capsys.readouterr().out
+    assert "verdict: linear within the noise" in out
+    row = next(line for line in out.splitlines() if line.strip().startswith("997"))
+    assert row.split()[-1] == "no" and abs(float(row.split()[3])) > 20     # a large change, and its sd says so
