@@ -3,7 +3,7 @@
 A linear structure has the same FRF at every force. The check fits one modal model at each level
 (the lowest level's automatic fit, then LSFD at every level from those poles, so modes pair by
 index) and compares, per mode, the natural frequency and the damping ratio from the lowest to the
-highest level against the fits' own standard deviations:
+highest level against their standard deviations:
 
     df %      = 100 (f_hi - f_lo) / f_lo,           sd = 100 sqrt(sd_f,lo^2 + sd_f,hi^2) / f_lo
     dzeta %   = 100 (zeta_hi - zeta_lo) / zeta_lo,  sd likewise from sd_zeta
@@ -228,17 +228,15 @@ def compare_levels(
 def data_noise_factor(fit: Any, frf: FRFSet, band: Sequence[float]) -> np.ndarray:
     """Per mode of ``fit`` (an :class:`analysis.lsfd.LSFDResult` of ``frf`` on ``band`` Hz), the factor by which
     its pole's variance exceeds the fit's own (:func:`analysis.uncertainty.mode_noise_factor`): the per-line
-    noise from the coherence and the averages (``meta["n_averages"]``, the fewest of the points; without
-    coherence or with fewer than two averages the fit's noise on every line) and the lines' correlation from
-    the recorded exponential window."""
-    from .uncertainty import h1_noise_variance, mode_noise_factor
+    noise from the coherence and the averages (:func:`analysis.reciprocity.frf_error_variance`; without
+    coherence the fit's noise on every line) and the lines' correlation from the recorded exponential window."""
+    from .reciprocity import frf_error_variance
+    from .uncertainty import mode_noise_factor
 
     sub = frf.band(float(band[0]), float(band[1]))
-    n = sub.meta.get("n_averages", sub.meta.get("averages"))
-    n_avg = min((float(x) for x in n if x), default=0.0) if isinstance(n, (list, tuple)) else float(n or 0.0)
-    line_var = None
-    if sub.coherence is not None and n_avg >= 2 and np.all(np.isfinite(sub.coherence)):
-        line_var = h1_noise_variance(sub.H, sub.coherence, n_avg)
+    line_var = frf_error_variance(sub)
+    if line_var is not None and not np.all(np.isfinite(line_var)):
+        line_var = None
     return mode_noise_factor(fit.poles_raw, fit.model.residues, sub.freq_hz, float(fit.noise_var), line_var,
                              sub.exp_window_tau_s)
 

@@ -39,8 +39,8 @@ force spectrum falls, the noise relative to the FRF grows there (a soft hit's mo
 top sit in lines ten times noisier than the band's average), and the exponential window on the
 responses makes neighbouring lines' noise correlated. :func:`mode_noise_factor` gives, per mode, the
 factor by which the variance of its pole is larger than the fit says, from the data: the per-line
-noise variance of each FRF ``v_k`` (:func:`h1_noise_variance`, from the coherence and the averages;
-without coherence the fit's own) and the lines' correlation ``rho_m`` from the recorded window. For
+noise variance of each FRF ``v_k`` (:func:`analysis.reciprocity.frf_error_variance`, from the coherence
+and the averages; without coherence the fit's own) and the lines' correlation ``rho_m`` from the recorded window. For
 one pole with the sensitivity ``g_k = dH_k / dlambda = R / (j w_k - lambda)^2`` of each FRF, the
 least-squares estimate moves by ``Re(sum g_k^* e_k) / sum |g_k|^2``, whose variance over the fit's
 ``noise_var / (2 sum |g_k|^2)`` is
@@ -72,7 +72,6 @@ __all__ = [
     "fisher_information",
     "crlb_poles",
     "CRLB",
-    "h1_noise_variance",
     "window_line_correlation",
     "mode_noise_factor",
 ]
@@ -223,18 +222,6 @@ def crlb_poles(model: ModalModel, freq_hz: np.ndarray, noise_var: float) -> CRLB
     return CRLB(freq_hz_std=v[0::2].copy(), damping_std=v[1::2].copy(), cov_poles=cov, cov_fz=cfz)
 
 
-def h1_noise_variance(H: np.ndarray, coherence: np.ndarray, n_averages: float) -> np.ndarray:
-    """Per-line noise variance ``E|e|^2`` (FRF units squared) of H1 estimates ``H`` averaged over
-    ``n_averages`` hits with ordinary ``coherence`` g^2: ``(1 - g^2) |H|^2 / ((n - 1) g^2)`` (the
-    residual spectrum ``G_xx (1 - g^2)`` with its ``n - 1`` degrees of freedom over ``n G_ff``).
-    Raises ValueError for fewer than two averages."""
-    n = float(n_averages)
-    if not n >= 2:
-        raise ValueError(f"the noise of an H1 estimate needs at least two averages; got {n_averages!r}")
-    g2 = np.clip(np.asarray(coherence, float), 1e-6, 1.0)
-    return (1.0 - g2) * np.abs(np.asarray(H)) ** 2 / ((n - 1.0) * g2)
-
-
 def window_line_correlation(exp_window_tau_s: float | None, line_spacing_hz: float, n_lags: int) -> np.ndarray:
     """Correlation ``rho_m = E[e_k e_(k+m)^*] / E|e_k|^2`` (m = 0..n_lags) of the noise of lines m apart
     when the responses carry an exponential window ``exp(-t / tau)`` over the record ``T = 1 / line
@@ -260,7 +247,7 @@ def mode_noise_factor(poles_raw: np.ndarray, residues: np.ndarray, freq_hz: np.n
     residues : (n_out, n_ref, m) of the fitted pole-residue model in the data's quantity.
     freq_hz : (N,) the lines fitted (Hz, equally spaced).
     noise_var : the fit's ``E|e|^2`` per line (:attr:`analysis.lsfd.LSFDResult.noise_var`).
-    line_var : (n_out, n_ref, N) per-line ``E|e|^2`` (:func:`h1_noise_variance`); None: ``noise_var``
+    line_var : (n_out, n_ref, N) per-line ``E|e|^2`` (:func:`analysis.reciprocity.frf_error_variance`); None: ``noise_var``
         on every line (only the window's correlation then counts).
     exp_window_tau_s : the responses' exponential window (s), or None.
     Returns (m,) factors; NaN for a mode with no sensitivity or a fit without a noise estimate.

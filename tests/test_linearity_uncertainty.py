@@ -1,5 +1,5 @@
-"""The noise the data show at each mode (analysis.uncertainty: h1_noise_variance, window_line_correlation,
-mode_noise_factor), against Monte Carlo: seeded, small, fast."""
+"""The noise the data show at each mode (analysis.uncertainty: window_line_correlation, mode_noise_factor; the
+per-line noise of analysis.reciprocity.frf_error_variance), against Monte Carlo: seeded, small, fast."""
 from __future__ import annotations
 
 import warnings
@@ -10,10 +10,13 @@ import pytest
 from analysis.frf import FRFSet
 from analysis.lsfd import fit_lsfd
 from analysis.modal import ModalModel, pole_from_fz, synthesize
-from analysis.uncertainty import h1_noise_variance, mode_noise_factor, window_line_correlation
+from analysis.reciprocity import frf_error_variance
+from analysis.uncertainty import mode_noise_factor, window_line_correlation
 
 
-def test_h1_noise_variance_from_the_coherence_matches_the_scatter_of_h1():
+def test_frf_error_variance_from_the_coherence_matches_the_scatter_of_h1():
+    """The per-line noise the widening uses (analysis.reciprocity.frf_error_variance) against the scatter of
+    H1 over repeated sets of 6 averages."""
     rng = np.random.default_rng(3)
     n_avg, trials, H = 6, 4000, 0.8 - 0.3j
     F = rng.normal(size=(trials, n_avg)) + 1j * rng.normal(size=(trials, n_avg))
@@ -21,10 +24,10 @@ def test_h1_noise_variance_from_the_coherence_matches_the_scatter_of_h1():
     gff, gxx = np.sum(np.abs(F) ** 2, 1), np.sum(np.abs(X) ** 2, 1)
     gfx = np.sum(np.conj(F) * X, 1)
     h1, coh = gfx / gff, np.abs(gfx) ** 2 / (gff * gxx)
+    frf = FRFSet(freq_hz=np.arange(1.0, trials + 1.0), H=h1[None, None, :], quantity="receptance", outputs=("o",),
+                 references=("r",), coherence=coh[None, None, :], meta={"n_averages": [n_avg]})
     scatter = np.mean(np.abs(h1 - H) ** 2)
-    assert np.mean(h1_noise_variance(h1, coh, n_avg)) == pytest.approx(scatter, rel=0.1)
-    with pytest.raises(ValueError, match="two averages"):
-        h1_noise_variance(h1, coh, 1)
+    assert np.mean(frf_error_variance(frf)) == pytest.approx(scatter, rel=0.1)
 
 
 def test_window_line_correlation_matches_windowed_white_noise():

@@ -205,8 +205,7 @@ def diagnose(
         :class:`simulator.physical.FrameVariants`), whose unchanged model is the simulation.
     band : ``(lo, hi)`` Hz; None: a file gets the band from its data (analyser, hammer, coherence)
         and an FRF set is used on its own lines (but a 0 Hz line); ``"data"``: from the data for an FRF
-        set too. With an
-        FE model and a band from the data, the band stops where the FE mesh has converged.
+        set too. With an FE model and a band from the data, the band stops where the FE mesh has converged.
     effects : only these causes (names of the catalogue or of the physical causes).
     physical : the FE model when ``simulated`` is its :class:`ModalModel` already.
     recording : the recording whose hits made ``measured`` (a file given as ``measured`` is used when
