@@ -3,10 +3,15 @@
 A linear structure has the same FRF at every force. The check fits one modal model at each level
 (the lowest level's automatic fit, then LSFD at every level from those poles, so modes pair by
 index) and compares, per mode, the natural frequency and the damping ratio from the lowest to the
-highest level against the fits' own standard deviations:
+highest level against their standard deviations:
 
     df %      = 100 (f_hi - f_lo) / f_lo,           sd = 100 sqrt(sd_f,lo^2 + sd_f,hi^2) / f_lo
     dzeta %   = 100 (zeta_hi - zeta_lo) / zeta_lo,  sd likewise from sd_zeta
+
+The standard deviations are the fits' own, widened per mode to the noise the data show on that mode's
+lines (:func:`data_noise_factor`: the coherence's per-line noise, the exponential window's correlation of
+neighbouring lines; :mod:`analysis.uncertainty`): near the top of the band a soft hit excites, a fit's
+one noise level for the whole band understates them several times.
 
 A mode is ``significant`` when either change exceeds ``z`` standard deviations (default 3) *and* a
 floor of practical size (``min_df_percent``, ``min_dzeta_percent``); a mode the fits leave poorly
@@ -206,8 +211,11 @@ def compare_levels(
                          "compared as they are")
     f = np.array([r.freq_hz for r in fits])
     zt = np.array([r.damping for r in fits])
-    fs = np.array([r.freq_hz_std for r in fits])
-    zs = np.array([r.damping_std for r in fits])
+    # the fits' standard deviations, each mode's widened to the noise its own lines carry (honest at the
+    # band's top, where a soft hit barely excites a mode)
+    grow = np.array([np.sqrt(np.fmax(data_noise_factor(r, s, band_used), 1.0)) for r, s in zip(fits, sets)])
+    fs = np.array([r.freq_hz_std for r in fits]) * grow
+    zs = np.array([r.damping_std for r in fits]) * grow
     idx = np.argsort(f[0])
     f, zt, fs, zs = f[:, idx], zt[:, idx], fs[:, idx], zs[:, idx]
     decades = float(np.log10(lv[-1] / lv[0]))
@@ -258,6 +266,22 @@ def check_levels_pair(low: FRFSet, high: FRFSet, band: Sequence[float], levels: 
             f"{100 * MAX_SHIFT:g} % in frequency, MAC >= {PAIR_MIN_MAC:g}); they look like different structures "
             "or points, not one structure at two levels: compare measurements of one structure")
     return n_pairs
+
+
+def data_noise_factor(fit: Any, frf: FRFSet, band: Sequence[float]) -> np.ndarray:
+    """Per mode of ``fit`` (an :class:`analysis.lsfd.LSFDResult` of ``frf`` on ``band`` Hz), the factor by which
+    its pole's variance exceeds the fit's own (:func:`analysis.uncertainty.mode_noise_factor`): the per-line
+    noise from the coherence and the averages (:func:`analysis.reciprocity.frf_error_variance`; without
+    coherence the fit's noise on every line) and the lines' correlation from the recorded exponential window."""
+    from .reciprocity import frf_error_variance
+    from .uncertainty import mode_noise_factor
+
+    sub = frf.band(float(band[0]), float(band[1]))
+    line_var = frf_error_variance(sub)
+    if line_var is not None and not np.all(np.isfinite(line_var)):
+        line_var = None
+    return mode_noise_factor(fit.poles_raw, fit.model.residues, sub.freq_hz, float(fit.noise_var), line_var,
+                             sub.exp_window_tau_s)
 
 
 def group_by_force(peaks_n: Sequence[float] | np.ndarray, min_ratio: float = MIN_LEVEL_RATIO) -> np.ndarray:

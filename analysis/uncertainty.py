@@ -30,6 +30,30 @@ Propagation to natural frequency and damping
     dzeta/dsigma = -omega^2 / |lambda|^3,     dzeta/domega = sigma omega / |lambda|^3
 
 and ``cov(f, zeta) = G cov(sigma, omega) G^T`` (first order).
+
+The noise the data show at each mode
+------------------------------------
+A fit's covariance takes one noise variance for every line (its residual's mean square) and lines
+whose noise is independent. Neither holds for an impact test near the top of the hammer's band: the
+force spectrum falls, the noise relative to the FRF grows there (a soft hit's modes near the band's
+top sit in lines ten times noisier than the band's average), and the exponential window on the
+responses makes neighbouring lines' noise correlated. :func:`mode_noise_factor` gives, per mode, the
+factor by which the variance of its pole is larger than the fit says, from the data: the per-line
+noise variance of each FRF ``v_k`` (:func:`analysis.reciprocity.frf_error_variance`, from the coherence
+and the averages; without coherence the fit's own) and the lines' correlation ``rho_m`` from the recorded window. For
+one pole with the sensitivity ``g_k = dH_k / dlambda = R / (j w_k - lambda)^2`` of each FRF, the
+least-squares estimate moves by ``Re(sum g_k^* e_k) / sum |g_k|^2``, whose variance over the fit's
+``noise_var / (2 sum |g_k|^2)`` is
+
+    c = sum_FRF Re(g^H D Rho D g) / (noise_var sum_FRF |g|^2),   D = diag(sqrt(v_k)),
+    Rho_kl = E[e_k e_l^*] / sqrt(v_k v_l) = rho_(l-k),  rho_m = x / (x - 2 pi j m),  x = 2 T / tau
+
+(windowed white noise: ``rho_m = sum_n w_n^2 exp(2 pi j m n / N) / sum_n w_n^2`` with
+``w = exp(-t / tau)`` over the record ``T = 1 / line spacing``). The mode's standard deviations of
+frequency and damping are the fit's times ``sqrt(max(c, 1))``: never more certain than the fit says.
+It is a one-pole (diagonal) approximation of the sandwich covariance; it stops working where two
+modes share their lines so closely that their poles' errors are strongly correlated, and where the
+coherence is near 1 for reasons other than a small noise (a distortion repeated in every hit).
 """
 from __future__ import annotations
 
@@ -48,6 +72,8 @@ __all__ = [
     "fisher_information",
     "crlb_poles",
     "CRLB",
+    "window_line_correlation",
+    "mode_noise_factor",
 ]
 
 #: refuse to build dense Fisher matrices larger than this many elements
@@ -194,3 +220,69 @@ def crlb_poles(model: ModalModel, freq_hz: np.ndarray, noise_var: float) -> CRLB
     cfz = fz_covariance(poles, cov)
     v = np.sqrt(np.clip(np.diag(cfz), 0.0, None))
     return CRLB(freq_hz_std=v[0::2].copy(), damping_std=v[1::2].copy(), cov_poles=cov, cov_fz=cfz)
+
+
+def window_line_correlation(exp_window_tau_s: float | None, line_spacing_hz: float, n_lags: int) -> np.ndarray:
+    """Correlation ``rho_m = E[e_k e_(k+m)^*] / E|e_k|^2`` (m = 0..n_lags) of the noise of lines m apart
+    when the responses carry an exponential window ``exp(-t / tau)`` over the record ``T = 1 / line
+    spacing``: ``x / (x - 2 pi j m)``, ``x = 2 T / tau`` (module docstring); ``rho_0 = 1`` and no
+    correlation without a window (``exp_window_tau_s`` None or 0)."""
+    m = np.arange(n_lags + 1)
+    if not exp_window_tau_s or not line_spacing_hz > 0:
+        return (m == 0).astype(complex)
+    x = 2.0 / (float(exp_window_tau_s) * float(line_spacing_hz))
+    return x / (x - 2j * np.pi * m)
+
+
+#: lines each side of a mode whose noise enters :func:`mode_noise_factor` (its sensitivity has fallen by
+#: 1/LAG_LINES^2 at the window's edge, and the window correlation is summed over as many lags)
+LAG_LINES = 64
+
+
+def mode_noise_factor(poles_raw: np.ndarray, residues: np.ndarray, freq_hz: np.ndarray, noise_var: float,
+                      line_var: np.ndarray | None = None, exp_window_tau_s: float | None = None) -> np.ndarray:
+    """Per mode, the factor ``c`` by which its pole's variance exceeds the fit's (module docstring).
+
+    poles_raw : (m,) rad/s as fitted to the data (the window's decay included).
+    residues : (n_out, n_ref, m) of the fitted pole-residue model in the data's quantity.
+    freq_hz : (N,) the lines fitted (Hz, equally spaced).
+    noise_var : the fit's ``E|e|^2`` per line (:attr:`analysis.lsfd.LSFDResult.noise_var`).
+    line_var : (n_out, n_ref, N) per-line ``E|e|^2`` (:func:`analysis.reciprocity.frf_error_variance`); None: ``noise_var``
+        on every line (only the window's correlation then counts).
+    exp_window_tau_s : the responses' exponential window (s), or None.
+    Returns (m,) factors; NaN for a mode with no sensitivity or a fit without a noise estimate.
+    """
+    lam = np.atleast_1d(np.asarray(poles_raw, complex))
+    R = np.asarray(residues, complex)
+    f = np.asarray(freq_hz, float)
+    jw = 2j * np.pi * f
+    n_frf = R.shape[0] * R.shape[1]
+    Rf = R.reshape(n_frf, lam.size)
+    sd = (np.full((n_frf, f.size), np.sqrt(noise_var)) if line_var is None
+          else np.sqrt(np.asarray(line_var, float).reshape(n_frf, f.size)))
+    df = float(f[1] - f[0]) if f.size > 1 else 0.0
+    rho = window_line_correlation(exp_window_tau_s, df, LAG_LINES)
+    out = np.full(lam.size, np.nan)
+    if not (noise_var > 0 and np.isfinite(noise_var)):
+        return out
+    for r in range(lam.size):
+        k0 = int(np.argmin(np.abs(f - abs(lam[r].imag) / (2 * np.pi))))
+        sel = slice(max(k0 - 4 * LAG_LINES, 0), min(k0 + 4 * LAG_LINES + 1, f.size))
+        kern = 1.0 / (jw[sel] - lam[r]) ** 2
+        num = den = 0.0
+        for i in range(n_frf):
+            g = Rf[i, r] * kern
+            u = sd[i, sel] * g                      # D g
+            if not np.all(np.isfinite(u)):
+                continue
+            # u^H Rho u with Rho_kl = rho_(l-k): the lag-0 term plus twice the real part of each positive lag
+            q = float(np.sum(np.abs(u) ** 2))
+            for m in range(1, min(LAG_LINES, u.size - 1) + 1):
+                if rho[m] == 0:
+                    break
+                q += 2.0 * float(np.real(rho[m] * np.sum(np.conj(u[:-m]) * u[m:])))
+            num += q
+            den += float(np.sum(np.abs(g) ** 2))
+        if den > 0:
+            out[r] = num / (noise_var * den)
+    return out

@@ -78,13 +78,19 @@ def line_weights(measured: FRFSet, floor_fraction: float = FLOOR_FRACTION,
 
     With coherence, a line whose H1 relative variance ``v`` exceeds ``reference_noise^2`` is
     down-weighted in proportion: ``w = 1 / (|H|^2 (1 + v / reference_noise^2) + floor^2)``
-    (inverse-variance weighting where the measurement is doubtful)."""
-    mag2 = np.abs(measured.H) ** 2
-    floor = floor_fraction * np.median(np.abs(measured.H), axis=2, keepdims=True)
+    (inverse-variance weighting where the measurement is doubtful). A line that is not finite (the
+    0 Hz line of an accelerance turned into receptance) gets weight 0 and stays out of the floor's median,
+    so one such line does not turn every weight of its FRF into NaN."""
+    finite = np.isfinite(measured.H)
+    mag = np.where(finite, np.abs(measured.H), np.nan)
+    some = np.any(finite, axis=2, keepdims=True)
+    with np.errstate(invalid="ignore"):
+        mid = np.nanmedian(np.where(some, mag, 0.0), axis=2, keepdims=True)
+    floor = floor_fraction * mid
     v = coherence_variance(measured)
     scale = 1.0 if v is None else 1.0 + v / reference_noise ** 2
-    w = 1.0 / (mag2 * scale + floor ** 2 + 1e-300)
-    w[~np.isfinite(measured.H)] = 0.0
+    w = 1.0 / (np.where(finite, mag, 0.0) ** 2 * scale + floor ** 2 + 1e-300)
+    w[~finite] = 0.0
     return w
 
 

@@ -26,7 +26,8 @@ from ..threads import blas_threads
 from .joint_nonlinearity import JointSimulationFactory
 from .verdict import Diagnosis, diagnose_frfs
 
-__all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_point_shapes", "as_receptance"]
+__all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_point_shapes", "as_receptance",
+           "noise_with_simulated_frfs"]
 
 log = logging.getLogger(__name__)
 
@@ -87,13 +88,25 @@ def model_with_correction(model: ModalModel, sim: FRFSet, above_band: bool = Tru
     ``meta["frf_correction"]``, what it misses of the simulated FRFs ``sim``, so that the prediction
     without effects is the simulated FRFs themselves (modal effects move only the fitted modes); with a
     driving point also ``meta["output_shapes"]`` (:func:`driving_point_shapes`), so that the
-    accelerometers' mass can be fitted."""
-    from ..modal import synthesize
+    accelerometers' mass can be fitted.
+
+    ``model`` describes the structure (window-corrected poles, as :attr:`analysis.lsfd.LSFDResult.model`).
+    FRFs that carry their own processing (a recording's exponential window ``sim.exp_window_tau_s`` and
+    finite record, :func:`analysis.diagnosis.verdict.known_processing`) are fitted as they show the modes
+    (the window's decay in every pole) and the model returned is again the structure's; the correction is
+    what the model *seen through that processing* misses, so that a measurement processed alike is
+    predicted as the simulated FRFs themselves and the window is not counted twice."""
+    from ..frf import window_pole_shift
+    from ..lsfd import seen_through_window
     from .above_band import with_above_band_mode
     from .base_refit import refit_in_receptance
     from .compare import line_weights
+    from .effects import predict
+    from .verdict import known_processing
 
-    model = as_receptance(model)
+    # fitted as the simulated FRFs show the modes (through their window), then back to the structure's poles
+    shift = window_pole_shift(sim.exp_window_tau_s)
+    model = seen_through_window(as_receptance(model), sim.exp_window_tau_s)
     if above_band:
         labelled = replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references))
         rec = sim if sim.quantity == model.quantity else sim.as_quantity(model.quantity)
@@ -101,9 +114,11 @@ def model_with_correction(model: ModalModel, sim: FRFSet, above_band: bool = Tru
     if refit:
         model = refit_in_receptance(replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references)),
                                     sim, band_hz)
-    syn = synthesize(model, sim.freq_hz)
-    same = sim if sim.quantity == syn.quantity else sim.as_quantity(syn.quantity)
-    corr = replace(same, H=same.H - syn.H, coherence=None)
+    model = replace(model, poles=np.asarray(model.poles, complex) + shift)
+    # in the simulated FRFs' own quantity: a windowed model converted to another form is not the window
+    # seen in that form, so the correction is exact only where the window acted
+    syn = predict(model, sim.freq_hz, sim.quantity, known_processing(sim))
+    corr = replace(sim, H=sim.H - syn.H, coherence=None)
     meta = dict(model.meta)
     meta["frf_correction"] = corr
     labelled = replace(model, outputs=tuple(sim.outputs), references=tuple(sim.references))
@@ -135,6 +150,37 @@ def simulation_model(sim: FRFSet, measured: FRFSet, source: str = "the simulatio
     return model_with_correction(result.lsfd.model, sim, band_hz=result.band)
 
 
+def noise_with_simulated_frfs(measured: FRFSet, sim: FRFSet, extra_noise_db: dict) -> float | None:
+    """The noise level (dB, :func:`analysis.diagnosis.compare.error_db`'s scale) of the difference between
+    ``measured`` and a simulation given as *measured-like* FRFs ``sim`` (another capture, an exported
+    test): the measurement's own level (the largest of :func:`~analysis.diagnosis.compare.noise_level`
+    and ``extra_noise_db``) plus the simulated FRFs' (their :func:`~analysis.diagnosis.compare.noise_level`
+    on the measured lines and points, with the measured weights), added as powers: two noisy captures of
+    one structure differ by both noises. None when ``sim`` lacks the measured lines (another line spacing)
+    or points."""
+    from .compare import common_points, line_weights, noise_level
+
+    f = measured.freq_hz
+    outs, refs = common_points(measured, sim)
+    if len(outs) != measured.n_outputs or len(refs) != measured.n_references:
+        return None
+    at = np.searchsorted(sim.freq_hz, f)
+    if np.any(at >= sim.freq_hz.size) or not np.allclose(sim.freq_hz[np.minimum(at, sim.freq_hz.size - 1)], f,
+                                                         rtol=0.0, atol=1e-9 * max(float(f[-1]), 1.0)):
+        return None
+    picked = sim.select(list(measured.outputs), list(measured.references))
+    if picked.quantity != measured.quantity:
+        picked = picked.as_quantity(measured.quantity)
+    picked = replace(picked, freq_hz=f.copy(), H=picked.H[..., at],
+                     coherence=None if picked.coherence is None else picked.coherence[..., at])
+    if not np.all(np.isfinite(picked.H)):
+        return None
+    w = line_weights(measured)
+    own = max(list(noise_level(measured, w).values()) + [float(v) for v in extra_noise_db.values() if v is not None])
+    theirs = max(noise_level(picked, w).values())
+    return float(10 * np.log10(10 ** (own / 10) + 10 ** (theirs / 10)))
+
+
 def _is_physical(x: Any) -> bool:
     return all(hasattr(x, a) for a in ("causes", "modes", "model"))
 
@@ -160,8 +206,8 @@ def diagnose(
         FE model with physical causes (``causes``, ``modes``, ``model``: e.g.
         :class:`simulator.physical.FrameVariants`), whose unchanged model is the simulation.
     band : ``(lo, hi)`` Hz; None: a file gets the band from its data (analyser, hammer, coherence)
-        and an FRF set is used on its own lines; ``"data"``: from the data for an FRF set too. With an
-        FE model and a band from the data, the band stops where the FE mesh has converged.
+        and an FRF set is used on its own lines (but a 0 Hz line); ``"data"``: from the data for an FRF
+        set too. With an FE model and a band from the data, the band stops where the FE mesh has converged.
     effects : only these causes (names of the catalogue or of the physical causes).
     physical : the FE model when ``simulated`` is its :class:`ModalModel` already.
     recording : the recording whose hits made ``measured`` (a file given as ``measured`` is used when
@@ -200,6 +246,7 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
     from ..inputs import InputError, load_input
     from .compare import common_points
 
+    sim_frfs: FRFSet | None = None
     if _is_physical(simulated):
         physical, base = simulated, simulated.model(None, {})
     elif isinstance(simulated, ModalModel):
@@ -209,6 +256,7 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
         sim = simulated if isinstance(simulated, FRFSet) else load_input(Path(simulated), estimator=estimator)
         user_band = (float(band[0]), float(band[1])) if band is not None and not isinstance(band, str) else None
         base = simulation_model(sim, measured, source, band=user_band)
+        sim_frfs = sim
     else:
         raise InputError(f"the simulation is a {type(simulated).__name__}; give a modal model, an FRF set or file, "
                          "or an FE model with physical causes")
@@ -224,6 +272,11 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
         measured = measured.band(lo, hi)
     elif band is not None:
         measured = measured.band(float(band[0]), float(band[1]))
+    positive = measured.freq_hz > 0
+    if not positive.all() and np.count_nonzero(positive) >= 2:
+        # the 0 Hz line (an FRF set used on all its lines): no modal content, and undefined in receptance,
+        # the form the simulation's modes are compared in
+        measured = measured.band(float(measured.freq_hz[positive][0]), float(measured.freq_hz[-1]))
     finite = np.all(np.isfinite(measured.H), axis=(0, 1))
     if not finite.all():
         raise InputError(f"the measurement holds NaN/inf lines at {np.count_nonzero(~finite)} frequencies; "
@@ -236,6 +289,10 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
         from .hit_noise import hit_scatter_noise_db
 
         noise["hits"] = hit_scatter_noise_db(recording, measured, line_weights(measured))
+    if sim_frfs is not None:
+        both = noise_with_simulated_frfs(measured, sim_frfs, noise)
+        if both is not None:
+            noise["simulation"] = both
     diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise, **rule)
     if recording is None:
         return diag
