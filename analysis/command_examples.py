@@ -49,7 +49,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     ),
     "python -m analysis report": (
         "report rec.h5 --out report/",
-        "report rec.h5 --out report/ --fit fit.json --diagnosis diag.json --geometry frame",
+        "report rec.h5 --out full-report/ --fit fit.json --diagnosis diag.json --geometry frame",
     ),
     "python -m analysis linearity": (
         "linearity soft.h5 hard.h5 --json lin.json        # levels read from the hits' peak forces",
