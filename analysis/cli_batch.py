@@ -279,14 +279,16 @@ def _run(args: argparse.Namespace, paths: list[Path], skipped: list[str], out: P
     wall = time.perf_counter() - t0
     info = {"inputs": len(inputs), "fitted": run.fitted, "reused": run.reused, "failed": run.failed,
             "flagged": sum(u.flagged for u in fleet.units), "seconds": round(wall, 3),
-            "fit_seconds": round(run.fit_seconds, 3), "workers": run.workers, "scheduler": run.where}
+            "fit_seconds": round(run.fit_seconds, 3), "fit_cpu_seconds": round(run.fit_cpu_seconds, 3),
+            "workers": run.workers, "scheduler": run.where}
     summaries: dict[str, Any] = {}
     phrases: dict[str, str] = {}
     if diag is not None:
         from .batch.diagnose import describe_diagnosis
 
         info.update(diagnosed=diag.done, diagnoses_reused=diag.reused, diagnosis_failed=diag.failed,
-                    diagnosis_seconds=round(diag.seconds, 3), simulated=str(sim.path if sim else ""))
+                    diagnosis_seconds=round(diag.seconds, 3), diagnosis_cpu_seconds=round(diag.cpu_seconds, 3),
+                    simulated=str(sim.path if sim else ""))
         for name, doc in diag.results.items():
             summaries[name] = doc["diagnosis"] if doc.get("status") == "ok" else \
                 {"verdict": "error", "named": [], "trace": [], "error": doc.get("error")}
@@ -317,13 +319,15 @@ def _run(args: argparse.Namespace, paths: list[Path], skipped: list[str], out: P
 
 @dataclass
 class _Diagnoses:
-    """The flagged units' diagnoses of a run: result documents by unit name, counts, work (s)."""
+    """The flagged units' diagnoses of a run: result documents by unit name, counts, and the new
+    diagnoses' wall and CPU times summed (s)."""
 
     results: dict[str, dict[str, Any]]
     done: int
     reused: int
     failed: int
     seconds: float
+    cpu_seconds: float
     lost: list[str]
 
 
@@ -374,4 +378,5 @@ def _diagnose_flagged(args: argparse.Namespace, sim: SimCheck, client: Any, inpu
     results = {i.name: (have.get(i.name) or got[i.name]) for i in targets}
     return _Diagnoses(results=results, done=len(todo) - len(gone), reused=len(have),
                       failed=sum(d.get("status") != "ok" for d in results.values()),
-                      seconds=float(sum(float(got[n].get("seconds") or 0.0) for n in got)), lost=gone)
+                      seconds=float(sum(float(got[n].get("seconds") or 0.0) for n in got)),
+                      cpu_seconds=float(sum(float(got[n].get("cpu_seconds") or 0.0) for n in got)), lost=gone)

@@ -89,14 +89,15 @@ def diagnose_one(path: str, name: str, sha256: str, simulated: str, key: str, ru
                  band: Sequence[float] | None = None, estimator: str | None = None) -> dict[str, Any]:
     """Diagnose one unit (the function a Dask worker runs): ``run(path, simulated, band=, estimator=)``
     is ``analysis diagnose``'s own function; returns the result document ``{schema, input, path, sha256,
-    key, simulated, status: "ok"|"error", error, diagnosis, seconds, worker}`` with ``diagnosis`` as
-    :func:`diagnosis_summary` and ``seconds`` the wall time (s)."""
+    key, simulated, status: "ok"|"error", error, diagnosis, seconds, cpu_seconds, worker}`` with
+    ``diagnosis`` as :func:`diagnosis_summary`, ``seconds`` the wall time and ``cpu_seconds`` the
+    worker process's CPU time (s) of the diagnosis."""
     import warnings
 
     from ..bands import FitError
     from ..errors import ImpactlabError
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     doc: dict[str, Any] = {"schema": DIAGNOSIS_SCHEMA, "input": name, "path": str(path), "sha256": sha256,
                            "key": key, "simulated": str(simulated), "status": "ok", "error": None,
                            "diagnosis": None, "worker": f"{socket.gethostname()}:{os.getpid()}"}
@@ -115,6 +116,7 @@ def diagnose_one(path: str, name: str, sha256: str, simulated: str, key: str, ru
     finally:
         quiet.setLevel(level)
     doc["seconds"] = time.perf_counter() - t0
+    doc["cpu_seconds"] = time.process_time() - c0
     return doc
 
 

@@ -73,6 +73,7 @@ class BatchRun:
     failed: int = 0
     seconds: float = 0.0
     fit_seconds: float = 0.0                  # the sum of the fits' own wall times (work done)
+    fit_cpu_seconds: float = 0.0              # the sum of the fits' CPU times (s)
     workers: int = 0
     where: str = ""
     lost: list[str] = field(default_factory=list)   # inputs whose task Dask gave up on (no result file)
@@ -247,6 +248,7 @@ def run_batch(inputs: Sequence[BatchInput], out_dir: str | Path, client: Any, *,
     run.fitted = len(todo) - len(run.lost)
     run.failed = sum(d.get("status") != "ok" for d in run.results)
     run.fit_seconds = float(sum(float(got[i.name].get("seconds") or 0.0) for i in todo))
+    run.fit_cpu_seconds = float(sum(float(got[i.name].get("cpu_seconds") or 0.0) for i in todo))
     run.seconds = time.perf_counter() - t0
     return run
 
