@@ -162,6 +162,8 @@ def test_describe_diagnosis_says_the_named_cause_in_words():
                                                            "(all), x0.30 translational, x0.05 rotational")
     mass = {"effect": "added_mass", "parameters": {"point": "left:5", "mass_kg": 2.94}}
     assert describe_diagnosis("u", doc(mass)) == "u flagged: added mass at left:5, 2.9 kg"
+    shift = {"effect": "stiffness_shift", "parameters": {"factor": 1.004, "stiffness_factor": 1.0081}}
+    assert describe_diagnosis("u", doc(shift)) == "u flagged: stiffer material, x1.008"   # the stiffness's factor
     assert describe_diagnosis("u", doc(verdict="unexplained")) == "u flagged: no cause named (verdict unexplained)"
     assert describe_diagnosis("u", {"status": "error", "error": "FitError: no modes"}) == \
         "u flagged: diagnosis failed (FitError: no modes)"

@@ -134,6 +134,9 @@ def diagnosis_is_current(path: Path, sha256: str, key: str) -> dict[str, Any] | 
 
 
 def _times(v: float) -> str:
+    """``x0.18``; a factor within 5 % of one with three decimals (``x0.995``), a large one ``x84``."""
+    if abs(v - 1.0) < 0.05:
+        return f"x{v:.3f}"
     return f"x{v:.2f}" if abs(v) < 10 else f"x{v:.3g}"
 
 
@@ -142,7 +145,9 @@ def _factors(params: Mapping[str, Any]) -> str:
     ``factor``); ``x0.27 translational, x0.05 rotational`` for ``factor_translational`` and
     ``factor_rotational`` (one ``x0.18`` when they agree within 1 %); masses in kg."""
     parts = []
-    plain = False
+    plain = "stiffness_factor" in params            # the stiffness's factor before a derived frequency factor
+    if plain:
+        parts.append(_times(float(params["stiffness_factor"])))
     split = [float(v) for k, v in params.items() if k.startswith("factor_") and isinstance(v, (int, float))]
     if len(split) > 1 and max(split) <= 1.01 * min(split):        # one factor for all of them: say it once
         params = {**{k: v for k, v in params.items() if not k.startswith("factor_")}, "factor": split[0]}
@@ -161,7 +166,9 @@ def _factors(params: Mapping[str, Any]) -> str:
 
 
 def _lowers(params: Mapping[str, Any]) -> bool:
-    f = [float(v) for k, v in params.items() if "factor" in k and isinstance(v, (int, float))]
+    """Whether the cause lowers what it scales (its stiffness factor, else its first factor, below one)."""
+    f = [float(v) for k, v in sorted(params.items(), key=lambda kv: kv[0] != "stiffness_factor")
+         if "factor" in k and isinstance(v, (int, float))]
     return not f or f[0] < 1.0
 
 
