@@ -23,6 +23,7 @@ import numpy as np
 if TYPE_CHECKING:
     from simulator.physical import FrameVariants
 
+    from .diagnosis import Diagnosis
     from .diagnosis.joint_nonlinearity import JointSimulation, JointSimulationFactory
     from .frf import FRFSet
 
@@ -30,7 +31,7 @@ from .command_line import Parser as _Parser
 from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, parse_args, with_examples
 from .outputs import check_outputs
 
-__all__ = ["main", "build_parser", "load_simulations", "joint_simulation"]
+__all__ = ["main", "build_parser", "load_simulations", "joint_simulation", "run_diagnosis"]
 
 log = logging.getLogger(__name__)
 
@@ -101,12 +102,29 @@ def joint_simulation(path: str) -> JointSimulationFactory | None:
     return build
 
 
+def run_diagnosis(measured_path: str | Path, simulated_path: str | Path, *, band: Sequence[float] | None = None,
+                  effects: Sequence[str] | None = None, estimator: str | None = None) -> Diagnosis:
+    """The diagnosis of ``python -m analysis diagnose --measured M --simulated S``: load M (a recording
+    or UFF 58 file, FRFs by ``estimator``), S (an FRF file, or a simulator config simulated at M's
+    points), and compare them in ``band`` (Hz; None: the band the data support) with the catalogue's
+    ``effects`` (None: all). Raises the library's errors (InputError, EffectError, ValueError, FitError)
+    for bad input."""
+    from .diagnosis import diagnose
+    from .inputs import load_input
+
+    measured = load_input(str(measured_path), estimator=estimator)
+    simulated = load_simulations(str(simulated_path), measured, estimator)
+    return diagnose(measured, simulated, band=tuple(band) if band is not None else "data",
+                    effects=list(effects) if effects is not None else None, estimator=estimator,
+                    recording=_recording(str(measured_path)), joint_simulation=joint_simulation(str(simulated_path)))
+
+
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError
-    from .diagnosis import EFFECTS, EffectError, diagnose
-    from .inputs import InputError, load_input, parse_band_text
+    from .diagnosis import EFFECTS, EffectError
+    from .inputs import InputError, parse_band_text
 
     parser = build_parser()
     args = parse_args(parser, argv)
@@ -122,12 +140,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             bad = [e for e in effects if e not in EFFECTS]
             if bad:
                 raise InputError(f"unknown effect(s) {bad}; the catalogue has {', '.join(EFFECTS)}")
-        measured = load_input(args.measured, estimator=args.estimator)
-        band = parse_band_text(args.band)
-        simulated = load_simulations(args.simulated, measured, args.estimator)
-        diag = diagnose(measured, simulated, band=band if band is not None else "data", effects=effects,
-                        estimator=args.estimator, recording=_recording(args.measured),
-                        joint_simulation=joint_simulation(args.simulated))
+        diag = run_diagnosis(args.measured, args.simulated, band=parse_band_text(args.band), effects=effects,
+                             estimator=args.estimator)
     except (InputError, EffectError, ValueError, FitError) as exc:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2

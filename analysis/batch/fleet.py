@@ -38,9 +38,13 @@ from ..mac import mac_matrix
 from .unit_modes import UnitModes
 
 __all__ = ["Pairing", "FleetMode", "UnitFlags", "FleetResult", "pair_modes", "median_unit", "assess_fleet",
-           "robust_center_spread"]
+           "robust_center_spread", "MIN_PAIRED_FRACTION"]
 
 _MAD_TO_SIGMA = 1.4826
+
+#: a unit (or a simulation) whose modes pair with fewer than this fraction of the reference's judged
+#: modes is not the same structure (-)
+MIN_PAIRED_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -245,7 +249,7 @@ def assess_fleet(units: Sequence[UnitModes | None], names: Sequence[str], files:
                                  f"({abs(f.z[k]):.0f} robust sigma; fleet spread {100 * spread[k]:.3f} %)")
         judged = [k for k, m in enumerate(modes) if m.assessed]
         n_pair = sum(np.isfinite(D[i, k]) for k in judged)
-        if judged and n_pair < 0.5 * len(judged):
+        if judged and n_pair < MIN_PAIRED_FRACTION * len(judged):
             f.reasons.append(f"only {n_pair} of the fleet's {len(judged)} modes pair with the reference's "
                              f"(within {100 * tol:g} % after the unit's common shift): a different structure?")
         zc = (cs[ok.index(i)] - c_med) / c_spread

@@ -10,12 +10,13 @@ common shift and the fleet's median), ``z`` (in robust standard deviations), ``f
 ``fleet.json``: ``{"schema", "reference", "rules", "common_shift", "units": [{"name", "file",
 "status", "flagged", "reasons", "notes", "error", "common_shift_pct"}], "modes": [{"mode", "ref_freq_hz",
 "found", "found_fraction", "assessed", "freq_median_hz", "shift_median_pct", "shift_spread_pct",
-"damping_median", "damping_spread"}]}``.
+"damping_median", "damping_spread"}]}``; a flagged unit diagnosed (``analysis batch --diagnose``)
+also has ``"diagnosis": {"verdict", "named": [{"effect", "parameters"}], "trace"}``.
 """
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -79,9 +80,11 @@ def _num(x: float, nd: int = 6) -> float | None:
     return round(float(x), nd) if x is not None and np.isfinite(x) else None
 
 
-def fleet_document(fleet: FleetResult, run_info: dict[str, Any]) -> dict[str, Any]:
-    """The fleet.json document."""
-    return {
+def fleet_document(fleet: FleetResult, run_info: dict[str, Any],
+                   diagnoses: Mapping[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """The fleet.json document; ``diagnoses`` (unit name -> ``{"verdict", "named", "trace"}``, the
+    flagged units diagnosed) become those units' ``diagnosis``."""
+    doc = {
         "schema": "impactlab.fleet/1",
         "reference": fleet.reference,
         "rules": fleet.rules,
@@ -96,19 +99,26 @@ def fleet_document(fleet: FleetResult, run_info: dict[str, Any]) -> dict[str, An
                    "shift_spread_pct": _num(m.shift_spread_pct), "damping_median": _num(m.damping_median),
                    "damping_spread": _num(m.damping_spread)} for m in fleet.modes],
     }
+    for u in doc["units"]:
+        if diagnoses and u["name"] in diagnoses:
+            u["diagnosis"] = diagnoses[u["name"]]
+    return doc
 
 
-def plot_fleet(path: str | Path, fleet: FleetResult) -> None:
+def plot_fleet(path: str | Path, fleet: FleetResult, captions: Sequence[str] = ()) -> None:
     """fleet.png: per reference mode, every unit's shift beyond its common shift (%), flagged units
     in red with their names (at their largest departure), the fleet's +-z_limit robust band in grey;
-    the units' common shifts in a second panel (flagged units named)."""
+    the units' common shifts in a second panel (flagged units named); ``captions`` (one line each,
+    e.g. what the diagnosis of each flagged unit named) under the panels."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     modes = fleet.modes
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.8), gridspec_kw={"width_ratios": [4, 1]})
+    shown = list(captions[:12]) + ([f"... and {len(captions) - 12} more"] if len(captions) > 12 else [])
+    extra = 0.17 * len(shown) + (0.1 if shown else 0.0)            # inches of caption lines
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.8 + extra), gridspec_kw={"width_ratios": [4, 1]})
     x = np.arange(1, len(modes) + 1)
     zl = float(fleet.rules["z_limit"])
     lim = np.array([max(zl * m.shift_spread_pct, fleet.rules["min_shift_pct"]) for m in modes])
@@ -150,7 +160,9 @@ def plot_fleet(path: str | Path, fleet: FleetResult) -> None:
     ax2.set_ylabel("common shift of all modes (%)")
     ax2.set_title("material scatter")
     ax2.grid(True, alpha=0.3)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, extra / (4.8 + extra), 1.0, 1.0))
+    if shown:
+        fig.text(0.01, 0.01, "\n".join(shown), fontsize=8, va="bottom", ha="left", color="tab:red", family="monospace")
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)

@@ -26,7 +26,7 @@ from ..atomic import write_json_atomic
 from .task import file_sha256, fit_one, options_key, result_is_current
 
 __all__ = ["BatchInput", "BatchRun", "DASK_CONFIG_DIR", "HEARTBEAT_FAILED", "close_client", "dask_settings",
-           "open_client", "plan_inputs", "quiet_heartbeat", "run_batch", "run_serial"]
+           "open_client", "plan_inputs", "quiet_heartbeat", "run_batch", "run_serial", "run_tasks", "Task"]
 
 #: Dask settings for the workers (a YAML folder; for ``dask worker``: ``export DASK_CONFIG=<this folder>``)
 DASK_CONFIG_DIR = Path(__file__).with_name("dask-config")
@@ -73,6 +73,7 @@ class BatchRun:
     failed: int = 0
     seconds: float = 0.0
     fit_seconds: float = 0.0                  # the sum of the fits' own wall times (work done)
+    fit_cpu_seconds: float = 0.0              # the sum of the fits' CPU times (s)
     workers: int = 0
     where: str = ""
     lost: list[str] = field(default_factory=list)   # inputs whose task Dask gave up on (no result file)
@@ -182,14 +183,45 @@ def _reuse(inputs: Sequence[BatchInput], fits_dir: Path, key: str) -> dict[str, 
     return done
 
 
+#: one task of :func:`run_tasks`: (result name, Dask key, the function a worker runs, its arguments)
+Task = tuple[str, str, Callable[..., dict[str, Any]], tuple[Any, ...]]
+
+
+def run_tasks(client: Any, tasks: Sequence[Task], store: Callable[[str, dict[str, Any]], None],
+              lost: Callable[[str, BaseException], dict[str, Any]],
+              on_result: Callable[[dict[str, Any], int, int], None] | None = None
+              ) -> tuple[dict[str, dict[str, Any]], list[str]]:
+    """Run ``tasks`` on the Dask ``client``'s cluster and collect their result documents as they
+    finish: each is handed to ``store(name, doc)`` (which puts it on disk) before ``on_result(doc,
+    done, total)``. A task Dask gave up on (its workers kept dying) is not stored: its document is
+    ``lost(name, exception)`` and its name is in the returned list (the next run retries it).
+    Returns ``({name: doc}, lost names)``."""
+    from distributed import as_completed
+
+    futures = {client.submit(fn, *args, key=key, pure=False): name for name, key, fn, args in tasks}
+    got: dict[str, dict[str, Any]] = {}
+    gone: list[str] = []
+    for done, fut in enumerate(as_completed(list(futures)), start=1):
+        name = futures[fut]
+        try:
+            doc = fut.result()
+        except Exception as exc:   # Dask gave up on the task: no result file, retried next run
+            doc = lost(name, exc)
+            gone.append(name)
+        else:
+            store(name, doc)
+        got[name] = doc
+        if on_result is not None:
+            on_result(doc, done, len(futures))
+    return got, gone
+
+
 def run_batch(inputs: Sequence[BatchInput], out_dir: str | Path, client: Any, *,
               band: Sequence[float] | None = None, estimator: str | None = None,
               on_result: Callable[[dict[str, Any], int, int], None] | None = None) -> BatchRun:
     """Fit every input on the Dask ``client``'s cluster; results in ``out_dir/fits/``.
 
     ``on_result(doc, done, total)`` is called after each new result is on disk (progress)."""
-    from distributed import as_completed
-
     t0 = time.perf_counter()
     fits_dir = Path(out_dir) / "fits"
     fits_dir.mkdir(parents=True, exist_ok=True)
@@ -198,32 +230,25 @@ def run_batch(inputs: Sequence[BatchInput], out_dir: str | Path, client: Any, *,
     todo = [i for i in inputs if i.name not in have]
     run = BatchRun(results=[], reused=len(have), workers=len(client.scheduler_info().get("workers", {})),
                    where=str(client.scheduler.address))
-    futures = {}
-    for inp in todo:
-        fut = client.submit(fit_one, str(inp.path), inp.name, inp.sha256, band, estimator,
-                            key=f"impactlab-fit-{inp.name}-{inp.sha256[:12]}-{key}", pure=False)
-        futures[fut] = inp
+    jobs = [(inp.name, f"impactlab-fit-{inp.name}-{inp.sha256[:12]}-{key}", fit_one,
+             (str(inp.path), inp.name, inp.sha256, band, estimator)) for inp in todo]
+    by_name = {inp.name: inp for inp in todo}
+
+    def lost(name: str, exc: BaseException) -> dict[str, Any]:
+        inp = by_name[name]
+        return {"schema": "impactlab.batch-fit/1", "input": inp.name, "path": str(inp.path), "sha256": inp.sha256,
+                "status": "error", "error": f"the task failed on the cluster ({type(exc).__name__}: {exc}); "
+                                            "run the same command again to retry it", "fit": None, "seconds": 0.0}
+
     got: dict[str, dict[str, Any]] = dict(have)
-    done = 0
-    for fut in as_completed(list(futures)):
-        inp = futures[fut]
-        try:
-            doc = fut.result()
-        except Exception as exc:   # Dask gave up on the task (its workers kept dying): no result file, retried next run
-            doc = {"schema": "impactlab.batch-fit/1", "input": inp.name, "path": str(inp.path), "sha256": inp.sha256,
-                   "status": "error", "error": f"the task failed on the cluster ({type(exc).__name__}: {exc}); "
-                                               "run the same command again to retry it", "fit": None, "seconds": 0.0}
-            run.lost.append(inp.name)
-        else:
-            write_json_atomic(fits_dir / inp.result_file, doc)
-        got[inp.name] = doc
-        done += 1
-        if on_result is not None:
-            on_result(doc, done, len(todo))
+    new_docs, run.lost = run_tasks(client, jobs, lambda name, doc: write_json_atomic(fits_dir / by_name[name].result_file,
+                                                                                    doc), lost, on_result)
+    got.update(new_docs)
     run.results = [got[i.name] for i in inputs]
     run.fitted = len(todo) - len(run.lost)
     run.failed = sum(d.get("status") != "ok" for d in run.results)
     run.fit_seconds = float(sum(float(got[i.name].get("seconds") or 0.0) for i in todo))
+    run.fit_cpu_seconds = float(sum(float(got[i.name].get("cpu_seconds") or 0.0) for i in todo))
     run.seconds = time.perf_counter() - t0
     return run
 
