@@ -6,12 +6,15 @@ leading low-coherence lines) to the top of what the data support (:func:`default
 analyser's flat band ``fs / 2.56``, the hammer's excitation band (force spectrum 20 dB down) and
 the coherence (:func:`upper_limits`), so no pole is fitted to lines the data cannot support; an
 edge the coherence sets takes a resonance whole or not at all (:func:`_coherence_edge_off_peak`).
+FRFs without force spectra and without an informative coherence (a UFF export of single hits, an
+analyser's FRFs alone) are bounded by their own noise floor (:func:`noise_limit_hz`).
 """
 from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
 from dataclasses import replace
+from math import comb
 
 import numpy as np
 
@@ -19,9 +22,11 @@ from .errors import FitError
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
 from .peaks import find_peaks
+from .spectra import EXCITATION_DROP_DB
 
 __all__ = ["FitError", "default_band", "upper_limits", "default_max_modes", "check_band_edges",
-           "mains_harmonics", "exclude_lines", "mains_harmonic_index", "harmonic_tolerance_hz", "MAINS_HZ"]
+           "mains_harmonics", "exclude_lines", "mains_harmonic_index", "harmonic_tolerance_hz", "MAINS_HZ", "noise_limit_hz",
+           "coherence_informative"]
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +52,16 @@ TOP_COHERENCE = 0.25
 EDGE_PEAK_DB = 10.0
 #: running-mean length (dB) of the summed FRF power for the edge's peaks, as a fraction of the lines
 POWER_SMOOTH_FRACTION = 0.001
+#: the FRFs' noise floor is taken over blocks of this fraction of the lines (at least NOISE_MIN_LINES)
+NOISE_BLOCK_FRACTION = 0.01
+NOISE_MIN_LINES = 15
+#: order of the line-to-line differences the noise floor is estimated from (a third difference
+#: leaves a resonance a few lines wide nearly untouched, and passes white noise at sqrt(20) times its level)
+NOISE_DIFF_ORDER = 3
+#: a block's response stands above the noise when its median magnitude is this many dB above the floor
+NOISE_SNR_DB = 10.0
+#: a noise floor this far below the FRF's RMS is no noise at all (exact synthetic data, rounding)
+NOISE_RELATIVE_MIN = 1e-9
 
 
 def upper_limits(frf: FRFSet) -> dict[str, float]:
@@ -59,7 +74,10 @@ def upper_limits(frf: FRFSet) -> dict[str, float]:
       low-frequency level (the lowest over the measurement points; from the recording's force
       autospectra, :func:`analysis.spectra.excitation_limit_hz`);
     - ``"coherence"``: where the median coherence over the FRFs (a running mean over
-      ``COHERENCE_SMOOTH_FRACTION`` of the lines) falls below ``TAIL_COHERENCE`` for good.
+      ``COHERENCE_SMOOTH_FRACTION`` of the lines) falls below ``TAIL_COHERENCE`` for good
+      (only when it is informative: :func:`coherence_informative`);
+    - ``"noise"``: only without force spectra and without an informative coherence: where the
+      FRFs' own noise floor ends the band (:func:`noise_limit_hz`).
     """
     f = frf.freq_hz
     out = {"data": float(f[-1])}
@@ -69,22 +87,113 @@ def upper_limits(frf: FRFSet) -> dict[str, float]:
            if x is not None and np.isfinite(float(x))]
     if exc:
         out["excitation"] = min(exc)
-    if frf.coherence is not None and np.any(np.isfinite(frf.coherence)) and f.size >= 16:
-        c = np.nanmedian(frf.coherence.reshape(-1, f.size), axis=0)
-        if np.nanmin(c) < 1.0 - 1e-9:  # one average: coherence 1 everywhere says nothing
-            n = max(5, int(COHERENCE_SMOOTH_FRACTION * f.size))
-            smooth = np.convolve(np.nan_to_num(c), np.ones(n) / n, mode="same")
-            good = np.flatnonzero(smooth >= TAIL_COHERENCE)
-            if good.size and good[-1] < f.size - 1:
-                out["coherence"] = float(f[good[-1]])
+    informative = coherence_informative(frf)
+    if informative and f.size >= 16:
+        c = np.nanmedian(np.asarray(frf.coherence).reshape(-1, f.size), axis=0)
+        n = max(5, int(COHERENCE_SMOOTH_FRACTION * f.size))
+        smooth = np.convolve(np.nan_to_num(c), np.ones(n) / n, mode="same")
+        good = np.flatnonzero(smooth >= TAIL_COHERENCE)
+        if good.size and good[-1] < f.size - 1:
+            out["coherence"] = float(f[good[-1]])
+    if not exc and not informative:
+        noise = noise_limit_hz(frf)
+        if noise is not None:
+            out["noise"] = noise
     return out
+
+
+def _n_averages(frf: FRFSet) -> np.ndarray:
+    """The averages per FRF the set's metadata carries (empty when it does not say)."""
+    return np.atleast_1d(np.asarray(frf.meta.get("n_averages", []) or [], dtype=float))
+
+
+def coherence_informative(frf: FRFSet) -> bool:
+    """Whether the coherence of ``frf`` says anything about the noise: the set carries one, it is not
+    1 on every line, and the set does not say it holds one average per FRF (the coherence of a single
+    hit is 1 whatever the noise)."""
+    if frf.coherence is None or not np.any(np.isfinite(frf.coherence)):
+        return False
+    n_avg = _n_averages(frf)
+    if n_avg.size and np.all(n_avg <= 1):
+        return False
+    return bool(np.nanmin(frf.coherence) < 1.0 - 1e-9)
+
+
+def noise_limit_hz(frf: FRFSet) -> float | None:
+    """The top of the band (Hz) from the FRFs' own noise floor, for FRFs that carry neither force
+    spectra nor an informative coherence; None when the noise bounds nothing.
+
+    The lines are cut in blocks of ``NOISE_BLOCK_FRACTION`` of the lines (at least
+    ``NOISE_MIN_LINES``; an edge is interpolated between the blocks' middles). Per FRF and block the *noise floor* is the median magnitude of the
+    ``NOISE_DIFF_ORDER``-th line-to-line difference of the complex FRF, scaled to the noise per line
+    (``/ sqrt(C(2k, k))``): a resonance is smooth over its bandwidth and its differences are small,
+    noise is not; floored at ``NOISE_RELATIVE_MIN`` of the FRF's RMS. The *level* is the block's median
+    magnitude. Two limits, the lower one is taken:
+
+    - **the structure drowns**: the band ends with the last block whose level (median over the FRFs)
+      stands ``NOISE_SNR_DB`` above its noise floor; above it the FRFs are noise;
+    - **the force has ended** (FRFs that say they hold one average each, where the coherence is 1 and
+      cannot show it): an H1 estimate's noise is the response's noise over the force spectrum, so its
+      floor rises as the force falls. The band ends before the first block from which on the floor
+      stays ``EXCITATION_DROP_DB`` (the force spectrum's rule) above its lowest level at lower
+      frequencies (median rise over the FRFs). On the LADISK beam's single hit (exported to UFF) the
+      floor tracks the force within a few dB and ends the band at 6.67 kHz; the force is 20 dB down at 6.42 kHz.
+
+    FRFs whose averages are not stated (an analyser's export) are not cut by the rise: their span is
+    the operator's choice, and their modes stand 10-20 dB clear of a floor that rises 30 dB (ModeLAB's
+    beam).
+    """
+    f = frf.freq_hz
+    n = f.size
+    k = NOISE_DIFF_ORDER
+    w = max(NOISE_MIN_LINES, int(NOISE_BLOCK_FRACTION * n))
+    start = LOW_LINES
+    n_blocks = (n - start - k) // w
+    if n_blocks < 3:
+        return None
+    H = np.asarray(frf.H).reshape(-1, n)
+    H = H[np.all(np.isfinite(H), axis=1)]
+    if H.shape[0] == 0:
+        return None
+    scale = float(np.sqrt(comb(2 * k, k)))
+    rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=1, keepdims=True))
+    d = np.abs(np.diff(H[:, start:], n=k, axis=1))[:, :n_blocks * w] / scale
+    mag = np.abs(H[:, start + k // 2:start + k // 2 + n_blocks * w])
+    with np.errstate(divide="ignore"):
+        floor_db = 20.0 * np.log10(np.maximum(np.median(d.reshape(H.shape[0], n_blocks, w), axis=2),
+                                              NOISE_RELATIVE_MIN * rms))
+        level_db = 20.0 * np.log10(np.maximum(np.median(mag.reshape(H.shape[0], n_blocks, w), axis=2),
+                                              NOISE_RELATIVE_MIN * rms))
+    centre = f[start + k // 2 + np.arange(n_blocks) * w + w // 2]   # each block's middle line (Hz)
+    edges: list[float] = []
+    snr = np.median(level_db - floor_db, axis=0)
+    above = np.flatnonzero(snr >= NOISE_SNR_DB)
+    if above.size and above[-1] < n_blocks - 1:
+        edges.append(_crossing(centre, snr, int(above[-1]), NOISE_SNR_DB))
+    n_avg = _n_averages(frf)
+    if n_avg.size and np.all(n_avg <= 1):
+        rise = np.median(floor_db - np.minimum.accumulate(floor_db, axis=1), axis=0)
+        below = np.flatnonzero(rise < EXCITATION_DROP_DB)
+        if below.size and below[-1] < n_blocks - 1:
+            edges.append(_crossing(centre, rise, int(below[-1]), EXCITATION_DROP_DB))
+    if not edges:
+        return None
+    log.info("the FRFs' noise floor ends the band at %.6g Hz", min(edges))
+    return min(edges)
+
+
+def _crossing(x: np.ndarray, y: np.ndarray, j: int, level: float) -> float:
+    """Where ``y`` crosses ``level`` between samples ``j`` and ``j + 1`` (linear in ``x``)."""
+    y0, y1 = float(y[j]), float(y[j + 1])
+    t = (level - y0) / (y1 - y0) if y1 != y0 else 0.0
+    return float(x[j] + (x[j + 1] - x[j]) * min(max(t, 0.0), 1.0))
 
 
 def default_band(frf: FRFSet) -> tuple[float, float]:
     """Default band (Hz) from what the data support: from the lowest reliable line (past the lowest
     ``LOW_LINES`` lines and leading low-coherence lines) to the lowest of :func:`upper_limits`
-    (the analyser's band, the hammer's excitation band, the coherence), never narrower than 16
-    lines."""
+    (the analyser's band, the hammer's excitation band, the coherence, the FRFs' noise floor), never
+    narrower than 16 lines."""
     f = frf.freq_hz
     if f.size < 16:
         raise FitError(f"the FRFs hold only {f.size} lines; at least 16 are needed")
@@ -100,7 +209,7 @@ def default_band(frf: FRFSet) -> tuple[float, float]:
     lo_line = float(f[f >= lo - 1e-9 * abs(lo)][0])
     limits = upper_limits(frf)
     hi = min(limits.values())
-    hard = min(v for k, v in limits.items() if k != "coherence")
+    hard = min(v for k, v in limits.items() if k != "coherence")   # the noise limit is hard too
     if hi < hard:   # the coherence ends the band: not on a resonance's flank
         hi = _coherence_edge_off_peak(frf, lo_line, hi, hard)
     i_lo = int(np.searchsorted(f, lo_line))
