@@ -12,6 +12,7 @@ analyser's FRFs alone) are bounded by their own noise floor (:func:`noise_limit_
 from __future__ import annotations
 
 import logging
+import warnings
 from collections.abc import Sequence
 from dataclasses import replace
 from math import comb
@@ -60,7 +61,9 @@ NOISE_MIN_LINES = 15
 NOISE_DIFF_ORDER = 3
 #: a block's response stands above the noise when its median magnitude is this many dB above the floor
 NOISE_SNR_DB = 10.0
-#: a noise floor this far below the FRF's RMS is no noise at all (exact synthetic data, rounding)
+#: the floor's rise must hold over this many blocks in a row (a resonance a few lines wide lifts one or two)
+NOISE_RISE_BLOCKS = 3
+#: a noise floor this far below the FRF's median magnitude is no noise at all (exact synthetic data, rounding)
 NOISE_RELATIVE_MIN = 1e-9
 
 
@@ -127,16 +130,16 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
     ``NOISE_MIN_LINES``; an edge is interpolated between the blocks' middles). Per FRF and block the *noise floor* is the median magnitude of the
     ``NOISE_DIFF_ORDER``-th line-to-line difference of the complex FRF, scaled to the noise per line
     (``/ sqrt(C(2k, k))``): a resonance is smooth over its bandwidth and its differences are small,
-    noise is not; floored at ``NOISE_RELATIVE_MIN`` of the FRF's RMS. The *level* is the block's median
+    noise is not; floored at ``NOISE_RELATIVE_MIN`` of the FRF's median magnitude. The *level* is the block's median
     magnitude. Two limits, the lower one is taken:
 
     - **the structure drowns**: the band ends with the last block whose level (median over the FRFs)
       stands ``NOISE_SNR_DB`` above its noise floor; above it the FRFs are noise;
     - **the force has ended** (FRFs that say they hold one average each, where the coherence is 1 and
       cannot show it): an H1 estimate's noise is the response's noise over the force spectrum, so its
-      floor rises as the force falls. The band ends before the first block from which on the floor
-      stays ``EXCITATION_DROP_DB`` (the force spectrum's rule) above its lowest level at lower
-      frequencies (median rise over the FRFs). On the LADISK beam's single hit (exported to UFF) the
+      floor rises as the force falls. The band ends where the floor first stands ``EXCITATION_DROP_DB``
+      (the force spectrum's rule, :func:`analysis.spectra.excitation_band`) above its lowest level at
+      lower frequencies (median rise over the FRFs) and stays so for ``NOISE_RISE_BLOCKS`` blocks. On the LADISK beam's single hit (exported to UFF) the
       floor tracks the force within a few dB and ends the band at 6.67 kHz; the force is 20 dB down at 6.42 kHz.
 
     FRFs whose averages are not stated (an analyser's export) are not cut by the rise: their span is
@@ -152,18 +155,23 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
     if n_blocks < 3:
         return None
     H = np.asarray(frf.H).reshape(-1, n)
-    H = H[np.all(np.isfinite(H), axis=1)]
-    if H.shape[0] == 0:
+    mag_all = np.where(np.isfinite(H), np.abs(H), np.nan)   # a non-finite line (0/0 at DC) is left out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # an FRF of NaN only: left out below
+        typical = np.nanmedian(mag_all, axis=1, keepdims=True)   # not the RMS: one line near a force zero can be huge
+    keep = np.isfinite(typical[:, 0]) & (typical[:, 0] > 0)
+    if not np.any(keep):
         return None
+    H, mag_all, typical = H[keep], mag_all[keep], typical[keep]
     scale = float(np.sqrt(comb(2 * k, k)))
-    rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=1, keepdims=True))
     d = np.abs(np.diff(H[:, start:], n=k, axis=1))[:, :n_blocks * w] / scale
-    mag = np.abs(H[:, start + k // 2:start + k // 2 + n_blocks * w])
-    with np.errstate(divide="ignore"):
-        floor_db = 20.0 * np.log10(np.maximum(np.median(d.reshape(H.shape[0], n_blocks, w), axis=2),
-                                              NOISE_RELATIVE_MIN * rms))
-        level_db = 20.0 * np.log10(np.maximum(np.median(mag.reshape(H.shape[0], n_blocks, w), axis=2),
-                                              NOISE_RELATIVE_MIN * rms))
+    mag = mag_all[:, start + k // 2:start + k // 2 + n_blocks * w]
+    with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # an all-NaN block: its floor is NaN, not counted
+        floor_db = 20.0 * np.log10(np.fmax(np.nanmedian(d.reshape(H.shape[0], n_blocks, w), axis=2),
+                                           NOISE_RELATIVE_MIN * typical))
+        level_db = 20.0 * np.log10(np.fmax(np.nanmedian(mag.reshape(H.shape[0], n_blocks, w), axis=2),
+                                           NOISE_RELATIVE_MIN * typical))
     centre = f[start + k // 2 + np.arange(n_blocks) * w + w // 2]   # each block's middle line (Hz)
     edges: list[float] = []
     snr = np.median(level_db - floor_db, axis=0)
@@ -173,9 +181,10 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
     n_avg = _n_averages(frf)
     if n_avg.size and np.all(n_avg <= 1):
         rise = np.median(floor_db - np.minimum.accumulate(floor_db, axis=1), axis=0)
-        below = np.flatnonzero(rise < EXCITATION_DROP_DB)
-        if below.size and below[-1] < n_blocks - 1:
-            edges.append(_crossing(centre, rise, int(below[-1]), EXCITATION_DROP_DB))
+        up = rise >= EXCITATION_DROP_DB
+        runs = np.flatnonzero(np.convolve(up, np.ones(NOISE_RISE_BLOCKS, dtype=int), mode="valid") == NOISE_RISE_BLOCKS)
+        if runs.size and runs[0] > 0:
+            edges.append(_crossing(centre, rise, int(runs[0]) - 1, EXCITATION_DROP_DB))
     if not edges:
         return None
     log.info("the FRFs' noise floor ends the band at %.6g Hz", min(edges))
