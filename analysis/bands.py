@@ -61,6 +61,9 @@ NOISE_MIN_LINES = 15
 NOISE_DIFF_ORDER = 3
 #: a block's response stands above the noise when its median magnitude is this many dB above the floor
 NOISE_SNR_DB = 10.0
+#: a block's differences are noise when those of the next order are at least this many times larger
+#: (white noise: sqrt(C(2k+2, k+1) / C(2k, k)), 1.87 for k = 3; a smooth FRF: well below 1)
+NOISE_LIKE_RATIO = 1.2
 #: the floor's rise must hold over this many blocks in a row (a resonance a few lines wide lifts one or two)
 NOISE_RISE_BLOCKS = 3
 #: a noise floor this far below the FRF's median magnitude is no noise at all (exact synthetic data, rounding)
@@ -127,11 +130,18 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
     spectra nor an informative coherence; None when the noise bounds nothing.
 
     The lines are cut in blocks of ``NOISE_BLOCK_FRACTION`` of the lines (at least
-    ``NOISE_MIN_LINES``; an edge is interpolated between the blocks' middles). Per FRF and block the *noise floor* is the median magnitude of the
-    ``NOISE_DIFF_ORDER``-th line-to-line difference of the complex FRF, scaled to the noise per line
-    (``/ sqrt(C(2k, k))``): a resonance is smooth over its bandwidth and its differences are small,
-    noise is not; floored at ``NOISE_RELATIVE_MIN`` of the FRF's median magnitude. The *level* is the block's median
-    magnitude. Two limits, the lower one is taken:
+    ``NOISE_MIN_LINES``; an edge is interpolated between the blocks' middles). Per FRF and block:
+
+    - the *noise floor*: the median magnitude of the ``NOISE_DIFF_ORDER``-th line-to-line
+      difference ``k`` of the complex FRF, scaled to the noise per line (``/ sqrt(C(2k, k) ln 2)``,
+      the RMS of complex noise): a resonance is smooth over its bandwidth and its differences are
+      small, noise is not; floored at ``NOISE_RELATIVE_MIN`` of the FRF's median magnitude. A block
+      counts only where its differences are noise's: those of order ``k + 1`` at least
+      ``NOISE_LIKE_RATIO`` times those of order ``k`` (noise grows with the order, a smooth FRF
+      shrinks); elsewhere the FRF is cleaner than the differences can tell and stands above its noise;
+    - the *level*: the block's median magnitude.
+
+    Two limits, the lower one is taken:
 
     - **the structure drowns**: the band ends with the last block whose level (median over the FRFs)
       stands ``NOISE_SNR_DB`` above its noise floor; above it the FRFs are noise;
@@ -139,8 +149,9 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
       cannot show it): an H1 estimate's noise is the response's noise over the force spectrum, so its
       floor rises as the force falls. The band ends where the floor first stands ``EXCITATION_DROP_DB``
       (the force spectrum's rule, :func:`analysis.spectra.excitation_band`) above its lowest level at
-      lower frequencies (median rise over the FRFs) and stays so for ``NOISE_RISE_BLOCKS`` blocks. On the LADISK beam's single hit (exported to UFF) the
-      floor tracks the force within a few dB and ends the band at 6.67 kHz; the force is 20 dB down at 6.42 kHz.
+      lower frequencies (median rise over the FRFs) and stays so for ``NOISE_RISE_BLOCKS`` blocks.
+      On the LADISK beam's single hit exported to UFF the floor tracks the force within a few dB
+      and ends the band at 6.67 kHz; the force is 20 dB down at 6.42 kHz.
 
     FRFs whose averages are not stated (an analyser's export) are not cut by the rise: their span is
     the operator's choice, and their modes stand 10-20 dB clear of a floor that rises 30 dB (ModeLAB's
@@ -163,24 +174,29 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
     if not np.any(keep):
         return None
     H, mag_all, typical = H[keep], mag_all[keep], typical[keep]
-    scale = float(np.sqrt(comb(2 * k, k)))
-    d = np.abs(np.diff(H[:, start:], n=k, axis=1))[:, :n_blocks * w] / scale
-    mag = mag_all[:, start + k // 2:start + k // 2 + n_blocks * w]
+    shape = (H.shape[0], n_blocks, w)
+    dk = np.abs(np.diff(H[:, start:], n=k, axis=1))[:, :n_blocks * w].reshape(shape)
+    dk1 = np.abs(np.diff(H[:, start:], n=k + 1, axis=1))[:, :n_blocks * w].reshape(shape)
+    mag = mag_all[:, start + k // 2:start + k // 2 + n_blocks * w].reshape(shape)
     with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)   # an all-NaN block: its floor is NaN, not counted
-        floor_db = 20.0 * np.log10(np.fmax(np.nanmedian(d.reshape(H.shape[0], n_blocks, w), axis=2),
-                                           NOISE_RELATIVE_MIN * typical))
-        level_db = 20.0 * np.log10(np.fmax(np.nanmedian(mag.reshape(H.shape[0], n_blocks, w), axis=2),
-                                           NOISE_RELATIVE_MIN * typical))
+        med_k, med_k1 = np.nanmedian(dk, axis=2), np.nanmedian(dk1, axis=2)
+        # the noise per line (RMS): the median of a complex Gaussian's magnitude is sqrt(ln 2) of its RMS
+        floor = np.fmax(med_k / np.sqrt(comb(2 * k, k) * np.log(2.0)), NOISE_RELATIVE_MIN * typical)
+        # a block whose differences are not noise's (smoother than noise: the floor lies below what they show)
+        noise_like = med_k1 >= NOISE_LIKE_RATIO * med_k
+        floor_db = np.where(noise_like, 20.0 * np.log10(floor), np.nan)
+        level_db = 20.0 * np.log10(np.fmax(np.nanmedian(mag, axis=2), NOISE_RELATIVE_MIN * typical))
     centre = f[start + k // 2 + np.arange(n_blocks) * w + w // 2]   # each block's middle line (Hz)
     edges: list[float] = []
-    snr = np.median(level_db - floor_db, axis=0)
+    snr = np.nan_to_num(_nanmedian0(level_db - floor_db), nan=np.inf)   # no noise seen: the response stands above it
     above = np.flatnonzero(snr >= NOISE_SNR_DB)
     if above.size and above[-1] < n_blocks - 1:
         edges.append(_crossing(centre, snr, int(above[-1]), NOISE_SNR_DB))
     n_avg = _n_averages(frf)
     if n_avg.size and np.all(n_avg <= 1):
-        rise = np.median(floor_db - np.minimum.accumulate(floor_db, axis=1), axis=0)
+        lowest = np.fmin.accumulate(np.where(np.isnan(floor_db), np.inf, floor_db), axis=1)
+        rise = np.nan_to_num(_nanmedian0(floor_db - lowest), nan=-np.inf)
         up = rise >= EXCITATION_DROP_DB
         runs = np.flatnonzero(np.convolve(up, np.ones(NOISE_RISE_BLOCKS, dtype=int), mode="valid") == NOISE_RISE_BLOCKS)
         if runs.size and runs[0] > 0:
@@ -189,6 +205,13 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
         return None
     log.info("the FRFs' noise floor ends the band at %.6g Hz", min(edges))
     return min(edges)
+
+
+def _nanmedian0(x: np.ndarray) -> np.ndarray:
+    """The median over axis 0 without NaN values (NaN where a column holds nothing else), silently."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.asarray(np.nanmedian(x, axis=0))
 
 
 def _crossing(x: np.ndarray, y: np.ndarray, j: int, level: float) -> float:
