@@ -150,6 +150,10 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
       floor rises as the force falls. The band ends where the floor first stands ``EXCITATION_DROP_DB``
       (the force spectrum's rule, :func:`analysis.spectra.excitation_band`) above its lowest level at
       lower frequencies (median rise over the FRFs) and stays so for ``NOISE_RISE_BLOCKS`` blocks.
+      The response's noise is additive: its floor changes less from block to block than its ratio to
+      the FRF's level. Where the ratio is the steadier one (noise relative to the FRF, as noise on the
+      force gives), the ratio's rise is taken instead: a floor that only follows the FRF's
+      resonances and antiresonances says nothing about the force.
       On the LADISK beam's single hit exported to UFF the floor tracks the force within a few dB
       and ends the band at 6.67 kHz; the force is 20 dB down at 6.42 kHz.
 
@@ -195,8 +199,11 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
         edges.append(_crossing(centre, snr, int(above[-1]), NOISE_SNR_DB))
     n_avg = _n_averages(frf)
     if n_avg.size and np.all(n_avg <= 1):
-        lowest = np.fmin.accumulate(np.where(np.isnan(floor_db), np.inf, floor_db), axis=1)
-        rise = np.nan_to_num(_nanmedian0(floor_db - lowest), nan=-np.inf)
+        noise_db = floor_db
+        if _roughness_db(floor_db - level_db) < _roughness_db(floor_db):
+            noise_db = floor_db - level_db   # relative noise (the floor follows the FRF): its ratio to the FRF rises
+        lowest = np.fmin.accumulate(np.where(np.isnan(noise_db), np.inf, noise_db), axis=1)
+        rise = np.nan_to_num(_nanmedian0(noise_db - lowest), nan=-np.inf)
         up = rise >= EXCITATION_DROP_DB
         runs = np.flatnonzero(np.convolve(up, np.ones(NOISE_RISE_BLOCKS, dtype=int), mode="valid") == NOISE_RISE_BLOCKS)
         if runs.size and runs[0] > 0:
@@ -212,6 +219,14 @@ def _nanmedian0(x: np.ndarray) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         return np.asarray(np.nanmedian(x, axis=0))
+
+
+def _roughness_db(x_db: np.ndarray) -> float:
+    """How much ``x_db`` (n_frf, n_blocks; dB, NaN for no value) changes from block to block: the median
+    over the FRFs of the median absolute step (dB)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return float(np.nanmedian(np.nanmedian(np.abs(np.diff(x_db, axis=1)), axis=1)))
 
 
 def _crossing(x: np.ndarray, y: np.ndarray, j: int, level: float) -> float:

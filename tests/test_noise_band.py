@@ -96,6 +96,19 @@ def test_noise_free_frfs_are_not_cut():
     assert default_band(clean)[1] == F[-1]
 
 
+def test_noise_relative_to_the_frf_with_a_steady_force_is_not_cut():
+    """One average, noise 1 % of the FRF (noise on a force that does not fall): the floor follows the
+    resonances and antiresonances by 40 dB, its ratio to the FRF is steady; nothing ends the band."""
+    freqs = np.array([40.0, 75.0, 78.0, 130.0, 180.0, 240.0, 310.0, 390.0])
+    clean = synthesize(two_point_model(freqs, np.ones(freqs.size), "accelerance"), F)
+    rng = np.random.default_rng(0)
+    noisy = replace(clean, H=clean.H * (1 + 0.01 * (rng.standard_normal(clean.H.shape)
+                                                    + 1j * rng.standard_normal(clean.H.shape)) / np.sqrt(2)),
+                    meta={"n_averages": [1]})
+    assert noise_limit_hz(noisy) is None
+    assert default_band(noisy)[1] == F[-1]
+
+
 def test_an_informative_coherence_takes_precedence_over_the_noise_floor():
     hit, _, _ = single_hit_set()
     averaged = replace(hit, coherence=np.full(hit.H.shape, 0.95), meta={"n_averages": [5]})
