@@ -6,12 +6,16 @@ leading low-coherence lines) to the top of what the data support (:func:`default
 analyser's flat band ``fs / 2.56``, the hammer's excitation band (force spectrum 20 dB down) and
 the coherence (:func:`upper_limits`), so no pole is fitted to lines the data cannot support; an
 edge the coherence sets takes a resonance whole or not at all (:func:`_coherence_edge_off_peak`).
+FRFs without force spectra and without an informative coherence (a UFF export of single hits, an
+analyser's FRFs alone) are bounded by their own noise floor (:func:`noise_limit_hz`).
 """
 from __future__ import annotations
 
 import logging
+import warnings
 from collections.abc import Sequence
 from dataclasses import replace
+from math import comb
 
 import numpy as np
 
@@ -19,10 +23,11 @@ from .errors import FitError
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
 from .peaks import find_peaks
+from .spectra import EXCITATION_DROP_DB
 
 __all__ = ["FitError", "default_band", "upper_limits", "unsupported_band_text", "measured_up_to",
-           "MEASURED_LIMITS", "default_max_modes", "check_band_edges",
-           "mains_harmonics", "exclude_lines", "mains_harmonic_index", "harmonic_tolerance_hz", "MAINS_HZ"]
+           "MEASURED_LIMITS", "default_max_modes", "check_band_edges", "mains_harmonics", "exclude_lines",
+           "mains_harmonic_index", "harmonic_tolerance_hz", "MAINS_HZ", "noise_limit_hz", "coherence_informative"]
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +53,21 @@ TOP_COHERENCE = 0.25
 EDGE_PEAK_DB = 10.0
 #: running-mean length (dB) of the summed FRF power for the edge's peaks, as a fraction of the lines
 POWER_SMOOTH_FRACTION = 0.001
+#: the FRFs' noise floor is taken over blocks of this fraction of the lines (at least NOISE_MIN_LINES)
+NOISE_BLOCK_FRACTION = 0.01
+NOISE_MIN_LINES = 15
+#: order of the line-to-line differences the noise floor is estimated from (a third difference
+#: leaves a resonance a few lines wide nearly untouched, and passes white noise at sqrt(20) times its level)
+NOISE_DIFF_ORDER = 3
+#: a block's response stands above the noise when its median magnitude is this many dB above the floor
+NOISE_SNR_DB = 10.0
+#: a block's differences are noise when those of the next order are at least this many times larger
+#: (white noise: sqrt(C(2k+2, k+1) / C(2k, k)), 1.87 for k = 3; a smooth FRF: well below 1)
+NOISE_LIKE_RATIO = 1.2
+#: the floor's rise must hold over this many blocks in a row (a resonance a few lines wide lifts one or two)
+NOISE_RISE_BLOCKS = 3
+#: a noise floor this far below the FRF's median magnitude is no noise at all (exact synthetic data, rounding)
+NOISE_RELATIVE_MIN = 1e-9
 
 
 def upper_limits(frf: FRFSet) -> dict[str, float]:
@@ -60,7 +80,10 @@ def upper_limits(frf: FRFSet) -> dict[str, float]:
       low-frequency level (the lowest over the measurement points; from the recording's force
       autospectra, :func:`analysis.spectra.excitation_limit_hz`);
     - ``"coherence"``: where the median coherence over the FRFs (a running mean over
-      ``COHERENCE_SMOOTH_FRACTION`` of the lines) falls below ``TAIL_COHERENCE`` for good.
+      ``COHERENCE_SMOOTH_FRACTION`` of the lines) falls below ``TAIL_COHERENCE`` for good
+      (only when it is informative: :func:`coherence_informative`);
+    - ``"noise"``: only without force spectra and without an informative coherence: where the
+      FRFs' own noise floor ends the band (:func:`noise_limit_hz`).
     """
     f = frf.freq_hz
     out = {"data": float(f[-1])}
@@ -70,14 +93,18 @@ def upper_limits(frf: FRFSet) -> dict[str, float]:
            if x is not None and np.isfinite(float(x))]
     if exc:
         out["excitation"] = min(exc)
-    if frf.coherence is not None and np.any(np.isfinite(frf.coherence)) and f.size >= 16:
-        c = np.nanmedian(frf.coherence.reshape(-1, f.size), axis=0)
-        if np.nanmin(c) < 1.0 - 1e-9:  # one average: coherence 1 everywhere says nothing
-            n = max(5, int(COHERENCE_SMOOTH_FRACTION * f.size))
-            smooth = np.convolve(np.nan_to_num(c), np.ones(n) / n, mode="same")
-            good = np.flatnonzero(smooth >= TAIL_COHERENCE)
-            if good.size and good[-1] < f.size - 1:
-                out["coherence"] = float(f[good[-1]])
+    informative = coherence_informative(frf)
+    if informative and f.size >= 16:
+        c = np.nanmedian(np.asarray(frf.coherence).reshape(-1, f.size), axis=0)
+        n = max(5, int(COHERENCE_SMOOTH_FRACTION * f.size))
+        smooth = np.convolve(np.nan_to_num(c), np.ones(n) / n, mode="same")
+        good = np.flatnonzero(smooth >= TAIL_COHERENCE)
+        if good.size and good[-1] < f.size - 1:
+            out["coherence"] = float(f[good[-1]])
+    if not exc and not informative:
+        noise = noise_limit_hz(frf)
+        if noise is not None:
+            out["noise"] = noise
     return out
 
 
@@ -112,11 +139,139 @@ def unsupported_band_text(hi_hz: float, limits: dict[str, float], where: str = "
             f"well (fit below {top:.0f} Hz, or use a harder tip)")
 
 
+def _n_averages(frf: FRFSet) -> np.ndarray:
+    """The averages per FRF the set's metadata carries (empty when it does not say)."""
+    return np.atleast_1d(np.asarray(frf.meta.get("n_averages", []) or [], dtype=float))
+
+
+def coherence_informative(frf: FRFSet) -> bool:
+    """Whether the coherence of ``frf`` says anything about the noise: the set carries one, it is not
+    1 on every line, and the set does not say it holds one average per FRF (the coherence of a single
+    hit is 1 whatever the noise)."""
+    if frf.coherence is None or not np.any(np.isfinite(frf.coherence)):
+        return False
+    n_avg = _n_averages(frf)
+    if n_avg.size and np.all(n_avg <= 1):
+        return False
+    return bool(np.nanmin(frf.coherence) < 1.0 - 1e-9)
+
+
+def noise_limit_hz(frf: FRFSet) -> float | None:
+    """The top of the band (Hz) from the FRFs' own noise floor, for FRFs that carry neither force
+    spectra nor an informative coherence; None when the noise bounds nothing.
+
+    The lines are cut in blocks of ``NOISE_BLOCK_FRACTION`` of the lines (at least
+    ``NOISE_MIN_LINES``; an edge is interpolated between the blocks' middles). Per FRF and block:
+
+    - the *noise floor*: the median magnitude of the ``NOISE_DIFF_ORDER``-th line-to-line
+      difference ``k`` of the complex FRF, scaled to the noise per line (``/ sqrt(C(2k, k) ln 2)``,
+      the RMS of complex noise): a resonance is smooth over its bandwidth and its differences are
+      small, noise is not; floored at ``NOISE_RELATIVE_MIN`` of the FRF's median magnitude. A block
+      counts only where its differences are noise's: those of order ``k + 1`` at least
+      ``NOISE_LIKE_RATIO`` times those of order ``k`` (noise grows with the order, a smooth FRF
+      shrinks); elsewhere the FRF is cleaner than the differences can tell and stands above its noise;
+    - the *level*: the block's median magnitude.
+
+    Two limits, the lower one is taken:
+
+    - **the structure drowns**: the band ends with the last block whose level (median over the FRFs)
+      stands ``NOISE_SNR_DB`` above its noise floor; above it the FRFs are noise;
+    - **the force has ended** (FRFs that say they hold one average each, where the coherence is 1 and
+      cannot show it): an H1 estimate's noise is the response's noise over the force spectrum, so its
+      floor rises as the force falls. The band ends where the floor first stands ``EXCITATION_DROP_DB``
+      (the force spectrum's rule, :func:`analysis.spectra.excitation_band`) above its lowest level at
+      lower frequencies (median rise over the FRFs) and stays so for ``NOISE_RISE_BLOCKS`` blocks.
+      The response's noise is additive: its floor changes less from block to block than its ratio to
+      the FRF's level. Where the ratio is the steadier one (noise relative to the FRF, as noise on the
+      force gives), the ratio's rise is taken instead: a floor that only follows the FRF's
+      resonances and antiresonances says nothing about the force.
+      On the LADISK beam's single hit exported to UFF the floor tracks the force within a few dB
+      and ends the band at 6.67 kHz; the force is 20 dB down at 6.42 kHz.
+
+    FRFs whose averages are not stated (an analyser's export) are not cut by the rise: their span is
+    the operator's choice, and their modes stand 10-20 dB clear of a floor that rises 30 dB (ModeLAB's
+    beam).
+    """
+    f = frf.freq_hz
+    n = f.size
+    k = NOISE_DIFF_ORDER
+    w = max(NOISE_MIN_LINES, int(NOISE_BLOCK_FRACTION * n))
+    start = LOW_LINES
+    n_blocks = (n - start - k) // w
+    if n_blocks < 3:
+        return None
+    H = np.asarray(frf.H).reshape(-1, n)
+    mag_all = np.where(np.isfinite(H), np.abs(H), np.nan)   # a non-finite line (0/0 at DC) is left out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # an FRF of NaN only: left out below
+        typical = np.nanmedian(mag_all, axis=1, keepdims=True)   # not the RMS: one line near a force zero can be huge
+    keep = np.isfinite(typical[:, 0]) & (typical[:, 0] > 0)
+    if not np.any(keep):
+        return None
+    H, mag_all, typical = H[keep], mag_all[keep], typical[keep]
+    shape = (H.shape[0], n_blocks, w)
+    dk = np.abs(np.diff(H[:, start:], n=k, axis=1))[:, :n_blocks * w].reshape(shape)
+    dk1 = np.abs(np.diff(H[:, start:], n=k + 1, axis=1))[:, :n_blocks * w].reshape(shape)
+    mag = mag_all[:, start + k // 2:start + k // 2 + n_blocks * w].reshape(shape)
+    with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # an all-NaN block: its floor is NaN, not counted
+        med_k, med_k1 = np.nanmedian(dk, axis=2), np.nanmedian(dk1, axis=2)
+        # the noise per line (RMS): the median of a complex Gaussian's magnitude is sqrt(ln 2) of its RMS
+        floor = np.fmax(med_k / np.sqrt(comb(2 * k, k) * np.log(2.0)), NOISE_RELATIVE_MIN * typical)
+        # a block whose differences are not noise's (smoother than noise: the floor lies below what they show)
+        noise_like = med_k1 >= NOISE_LIKE_RATIO * med_k
+        floor_db = np.where(noise_like, 20.0 * np.log10(floor), np.nan)
+        level_db = 20.0 * np.log10(np.fmax(np.nanmedian(mag, axis=2), NOISE_RELATIVE_MIN * typical))
+    centre = f[start + k // 2 + np.arange(n_blocks) * w + w // 2]   # each block's middle line (Hz)
+    edges: list[float] = []
+    snr = np.nan_to_num(_nanmedian0(level_db - floor_db), nan=np.inf)   # no noise seen: the response stands above it
+    above = np.flatnonzero(snr >= NOISE_SNR_DB)
+    if above.size and above[-1] < n_blocks - 1:
+        edges.append(_crossing(centre, snr, int(above[-1]), NOISE_SNR_DB))
+    n_avg = _n_averages(frf)
+    if n_avg.size and np.all(n_avg <= 1):
+        noise_db = floor_db
+        if _roughness_db(floor_db - level_db) < _roughness_db(floor_db):
+            noise_db = floor_db - level_db   # relative noise (the floor follows the FRF): its ratio to the FRF rises
+        lowest = np.fmin.accumulate(np.where(np.isnan(noise_db), np.inf, noise_db), axis=1)
+        rise = np.nan_to_num(_nanmedian0(noise_db - lowest), nan=-np.inf)
+        up = rise >= EXCITATION_DROP_DB
+        runs = np.flatnonzero(np.convolve(up, np.ones(NOISE_RISE_BLOCKS, dtype=int), mode="valid") == NOISE_RISE_BLOCKS)
+        if runs.size and runs[0] > 0:
+            edges.append(_crossing(centre, rise, int(runs[0]) - 1, EXCITATION_DROP_DB))
+    if not edges:
+        return None
+    log.info("the FRFs' noise floor ends the band at %.6g Hz", min(edges))
+    return min(edges)
+
+
+def _nanmedian0(x: np.ndarray) -> np.ndarray:
+    """The median over axis 0 without NaN values (NaN where a column holds nothing else), silently."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.asarray(np.nanmedian(x, axis=0))
+
+
+def _roughness_db(x_db: np.ndarray) -> float:
+    """How much ``x_db`` (n_frf, n_blocks; dB, NaN for no value) changes from block to block: the median
+    over the FRFs of the median absolute step (dB)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return float(np.nanmedian(np.nanmedian(np.abs(np.diff(x_db, axis=1)), axis=1)))
+
+
+def _crossing(x: np.ndarray, y: np.ndarray, j: int, level: float) -> float:
+    """Where ``y`` crosses ``level`` between samples ``j`` and ``j + 1`` (linear in ``x``)."""
+    y0, y1 = float(y[j]), float(y[j + 1])
+    t = (level - y0) / (y1 - y0) if y1 != y0 else 0.0
+    return float(x[j] + (x[j + 1] - x[j]) * min(max(t, 0.0), 1.0))
+
+
 def default_band(frf: FRFSet) -> tuple[float, float]:
     """Default band (Hz) from what the data support: from the lowest reliable line (past the lowest
     ``LOW_LINES`` lines and leading low-coherence lines) to the lowest of :func:`upper_limits`
-    (the analyser's band, the hammer's excitation band, the coherence), never narrower than 16
-    lines."""
+    (the analyser's band, the hammer's excitation band, the coherence, the FRFs' noise floor), never
+    narrower than 16 lines."""
     f = frf.freq_hz
     if f.size < 16:
         raise FitError(f"the FRFs hold only {f.size} lines; at least 16 are needed")
@@ -132,7 +287,7 @@ def default_band(frf: FRFSet) -> tuple[float, float]:
     lo_line = float(f[f >= lo - 1e-9 * abs(lo)][0])
     limits = upper_limits(frf)
     hi = min(limits.values())
-    hard = min(v for k, v in limits.items() if k != "coherence")
+    hard = min(v for k, v in limits.items() if k != "coherence")   # the noise limit is hard too
     if hi < hard:   # the coherence ends the band: not on a resonance's flank
         hi = _coherence_edge_off_peak(frf, lo_line, hi, hard)
     i_lo = int(np.searchsorted(f, lo_line))

@@ -33,6 +33,7 @@ from .fit_result import FitResult, assess_fit
 from .frf import FRFSet
 from .lscf import parse_band
 from .progress import progress
+from .suspension import split_suspension
 from .threads import limits_blas_threads
 
 __all__ = ["fit_compressed", "with_compression", "MAX_MODES"]
@@ -118,8 +119,10 @@ def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str
         lsfd = replace(lsfd, status=inner.lsfd.status, success=False, message=inner.lsfd.message)
     lsfd = sorted_by_frequency(lsfd)
     problems = assess_fit(lsfd, band_fit)
-    left, notes = unfitted_resonances(full, visible_peaks(full, band_fit), lsfd, mains)
+    elastic_visible, suspension, sus_notes = split_suspension(visible_peaks(full, band_fit), lsfd.freq_hz)
+    left, notes = unfitted_resonances(full, elastic_visible, lsfd, mains)
     said = grid.fit_note() if grid is not None else []
-    warnings_out = [comp.describe(), *said, *inner.warnings, *notes]
+    warnings_out = [comp.describe(), *said, *inner.warnings, *sus_notes, *notes]
     return FitResult(lsfd=lsfd, stabilization=inner.stabilization, band=band_fit, selected_poles=inner.selected_poles,
-                     warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems + left))
+                     warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems + left),
+                     suspension_hz=suspension)

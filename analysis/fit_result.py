@@ -11,7 +11,9 @@ stabilization diagram, the band, the warnings, and an honest verdict.
 - complete (:func:`analysis.missing_modes.unfitted_resonances`, called by the pipeline): every
   resonance the data show (:mod:`analysis.visibility`: a peak >= 10 dB above its neighbouring
   minima, clean in the coherence) has a pole of its own or is reproduced by the model; a peak
-  left over is named with its frequency (or as a possible close pair).
+  left over is named with its frequency (or as a possible close pair). Suspension modes (the
+  structure as a rigid body on its supports, far below its first elastic mode:
+  :mod:`analysis.suspension`) are named as such in ``suspension_hz`` and the warnings, not as missed.
 
 Anything else is reported in ``problems`` and ``success`` is False. FRFs of a single average are
 flagged in the warnings: their coherence is 1 everywhere and says nothing about the noise.
@@ -66,6 +68,9 @@ class FitResult:
         a single average), each once.
     problems : why the model is not physically sensible (:func:`assess_fit`) or not complete (a
         visible resonance left without a pole); empty when it is both.
+    suspension_hz : the suspension (rigid-body) modes, Hz (:mod:`analysis.suspension`): resonances
+        of the structure on its supports below its first elastic mode, fitted or not; they are
+        named in the warnings and are no problem.
 
     ``success`` = converged and no problems; ``status`` "converged", "not converged" or
     "implausible"; ``message`` says why in words. The result unpacks as
@@ -78,6 +83,7 @@ class FitResult:
     selected_poles: np.ndarray
     warnings: tuple = ()
     problems: tuple = field(default=())
+    suspension_hz: tuple = ()
 
     @property
     def converged(self) -> bool:

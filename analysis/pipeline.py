@@ -71,7 +71,9 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    band an unbounded fit turns weak modes into very damped poles that absorb broadband misfit).
    The step also runs with the user's frequencies/poles (poles are only added). Lines given in
    ``exclude_hz`` are left out of the LSFD and of this step (:func:`exclude_lines`).
-8. **Verdict**: every visible peak the final model leaves unaccounted for is named in the
+8. **Verdict**: suspension modes (:mod:`analysis.suspension`: resonances at most a fifth of the
+   first elastic mode's frequency, up to six) are named in the warnings and ``suspension_hz``, not
+   counted as missed resonances; every other visible peak the final model leaves unaccounted for is named in the
    result's ``problems`` (``success`` is then False): "a resonance at F Hz ... is neither
    fitted by a pole nor reproduced by the model", or "a possible close pair" when a pole within
    2 % stands for it and a neighbour. When the stabilization keeps no pole but the data (with
@@ -108,6 +110,7 @@ from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .progress import progress
 from .selection import faster_than_window, poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
+from .suspension import split_suspension
 from .threads import limits_blas_threads
 from .visibility import VisiblePeak, visible_peaks
 from .work_limits import check_model_order
@@ -274,13 +277,15 @@ def fit_auto(
         else:
             warnings_out.append(beyond)
             log.warning(beyond)
-    left, notes = unfitted_resonances(fit_frf, visible, result, mains)
+    elastic_visible, suspension, said = split_suspension(visible, result.freq_hz)
+    warnings_out += said
+    left, notes = unfitted_resonances(fit_frf, elastic_visible, result, mains)
     warnings_out += notes
     problems += left
     for p in problems:
         log.warning("implausible fit: %s", p)
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
-                     warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems))
+                     warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems), suspension_hz=suspension)
 
 
 def _initial_kind(initial: str | Sequence[complex] | Sequence[float] | np.ndarray

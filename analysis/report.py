@@ -229,6 +229,7 @@ def result_to_dict(result: LSFDResult | FitResult, frf: FRFSet | None = None,
         doc["success"] = bool(fit.success)
         doc["fit_status"] = fit.status
         doc["problems"] = list(fit.problems)
+        doc["suspension_modes_hz"] = [float(x) for x in fit.suspension_hz]
         if not fit.success:
             doc["message"] = fit.message
     if scatter is not None:

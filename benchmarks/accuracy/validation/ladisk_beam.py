@@ -33,6 +33,18 @@ G = 9.80665
 BETA_L = np.array([4.7300, 7.8532, 10.9956, 14.1372])
 BAND_SINGLE = (300.0, 6500.0)
 BAND_MULTI = (200.0, 3000.0)
+#: the analyst's key for the single hit, written from the evidence before the band rule for FRFs without
+#: force spectra was tuned: the bending series 1-4 (ratios 1, 2.728, 5.277, 8.588 to the first against
+#: Euler-Bernoulli's 2.757, 5.404, 8.933, lowered by shear as expected); two weak modes outside the series
+#: (residues 1/30 and 1/80 of their neighbours', stable to 0.01 % between the recording's and the UFF
+#: export's fits: torsion or the other bending plane); the two suspension modes of the free-free beam
+#: (peaks 14 and 25 dB high, 19 times below the first bending mode); the force's end: its autospectrum
+#: 20 dB below its low-frequency level at 6.42 kHz (import's default windows) to 6.58 kHz (WIN_SINGLE).
+#: Above it the FRF still shows the fifth bending mode (8.75 kHz) but the force is 30 dB down: no pole there.
+KEY_SINGLE_BENDING_HZ = (695.7, 1898.1, 3671.2, 5975.0)
+KEY_SINGLE_WEAK_HZ = (2777.8, 5608.0)
+KEY_SINGLE_SUSPENSION_HZ = (18.0, 37.0)
+KEY_SINGLE_FORCE_END_HZ = 6600.0
 WIN_SINGLE = WindowSettings(force_width_s=0.002, force_taper_s=0.001)
 #: the multi-hit records still ring at 1.5 % of the peak at the block end: exponential window to 10 %
 WIN_MULTI = WindowSettings(force_width_s=0.002, force_taper_s=0.001, exp_window_tau_s=1.0 / np.log(10.0))
