@@ -14,17 +14,19 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, with_examples
 from analysis.outputs import check_outputs
 
-from .errors import RecordingError, UsageError
+from .errors import ImportDataError, RecordingError, UsageError
+from .frf_importers import FRF_FORMATS
 from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
 
 __all__ = ["main", "build_parser", "FORMATS"]
 
 #: the input formats ``--format`` names (by extension otherwise; ``.json`` is SEP005)
-FORMATS = ("lvm", "mat", "npy", "sep005")
+FORMATS = ("lvm", "mat", "npy", "sep005") + tuple(r.name for r in FRF_FORMATS)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -35,7 +37,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="REC.h5", help="the recording to write (HDF5)")
     p.add_argument("--format", choices=FORMATS,
                    help="input format: lvm (LabVIEW text), mat (DataPhysics SignalCalc export), npy (numpy "
-                        "arrays with --describe), sep005 (SEP005 JSON); default: from the extension")
+                        "arrays with --describe), sep005 (SEP005 JSON); analyser FRF exports: "
+                        + "; ".join(f"{r.name} ({r.description})" for r in FRF_FORMATS)
+                        + "; default: from the extension and content")
+    p.add_argument("--variables", metavar="NAME[,NAME]",
+                   help="analyser FRF exports: the FRF variables to import (e.g. H1_2,H1_3 or FRF)")
     p.add_argument("--describe", metavar="DESC.json|toml", help="JSON/TOML channel description (needed for .npy)")
     p.add_argument("--force-channel", type=int, metavar="K",
                    help="1-based index of the hammer channel (default: the one channel with a force unit)")
@@ -82,8 +88,8 @@ def import_windows(force: str | None, exp: str | None, windowed: bool) -> tuple[
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from .frf_importers import frf_format_for
     from .importers import (
-        ImportDataError,
         channel_roles,
         combine_imports,
         load_description,
@@ -98,6 +104,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
         check_outputs([args.out], [*args.files, args.describe])
+        frf_row = frf_format_for(args.format, args.files[0])
+        if frf_row is not None:
+            return _import_frfs(frf_row, args)
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
         _check_files(args.files, fmt, ImportDataError)
         if fmt == "lvm":
@@ -111,7 +120,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise UsageError("numpy input needs --describe DESC.json|toml naming the channels and sample rate")
             tests = [_read(read_numpy, args.files, load_description(args.describe), drop=drop)]
         else:
-            raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json (or --format)")
+            raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json, or --format "
+                             + "|".join(r.name for r in FRF_FORMATS) + " for an analyser's FRF export")
         test = combine_imports(tests)
         windows = parse_windows(*import_windows(args.force_window, args.exp_window, args.windowed), test.fs_hz)
         fch = args.force_channel - 1 if args.force_channel else None
@@ -127,5 +137,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"left out {dropped} hit(s) holding non-finite samples")
     for a in averages:
         print(f"imported {a.n_averages} accepted hit(s): reference {a.reference}, outputs {', '.join(a.outputs)}")
+    print(f"recording written: {args.out}")
+    return 0
+
+
+def _import_frfs(row: Any, args: argparse.Namespace) -> int:
+    """``import`` of an analyser's FRF export (``row``: its :data:`FRF_FORMATS` row): each file's
+    H1 and coherence, relabelled with ``--reference``/``--outputs``, written as a recording."""
+    from .frf_importers import combine_frf_imports, relabel, write_frf_recording
+
+    time_only = [o for o, v in (("--describe", args.describe), ("--force-channel", args.force_channel),
+                                ("--responses", args.responses), ("--windowed", args.windowed),
+                                ("--force-window", args.force_window), ("--exp-window", args.exp_window),
+                                ("--drop-nonfinite", args.drop_nonfinite)) if v]
+    if time_only:
+        raise UsageError(f"{', '.join(time_only)}: for time data only; {row.name} holds the analyser's FRFs")
+    _check_files(args.files, "mat", ImportDataError)
+    variables = [v.strip() for v in args.variables.split(",")] if args.variables else None
+    outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
+    if args.reference and len(args.files) > 1:
+        raise UsageError("--reference labels the reference of one file; several files need --points MAP.csv")
+    imports = [relabel(row.read(Path(f), variables), args.reference, outs) for f in args.files]
+    imp = combine_frf_imports(imports)
+    write_frf_recording(imp, args.out, overwrite=args.overwrite)
+    for s, n in zip(imp.sets, imp.n_averages):
+        print(f"imported {s.n_outputs} FRF(s) {s.unit} of reference {s.references[0]}: outputs "
+              f"{', '.join(s.outputs)}; {'averages not stated in the file' if n is None else f'{n} averages'}")
     print(f"recording written: {args.out}")
     return 0
