@@ -291,7 +291,7 @@ def _numbers(a: Any) -> list:
     return [float(np.asarray(x, float).ravel()[0]) for x in np.asarray(a, dtype=object).ravel()]
 
 
-def testlab_point(label: str) -> str:
+def point_of_testlab_label(label: str) -> str:
     """The point label of a Test.Lab channel label: ``Acc1:+X`` -> ``Acc:1:X``, ``Shaker:-X`` ->
     ``Shaker:1:-X`` (no number: node 1). Raises :class:`ImportDataError` for another form."""
     m = _TL_LABEL.match(label)
@@ -418,7 +418,7 @@ def read_testlab_frf(path: Path, variables: Sequence[str] | None = None) -> Impo
         if len(avgs) != 1 or not (next(iter(avgs)) >= 1):
             raise _fail(p, f"reference {rf}: the FRFs give {sorted(avgs)} averages; one count per reference is stored")
         sets.append(FRFSet(freq_hz=freq, H=np.stack([h for _, h, _, _ in rr])[:, None, :], quantity=q,
-                           outputs=tuple(testlab_point(pr) for pr, *_ in rr), references=(testlab_point(rf),),
+                           outputs=tuple(point_of_testlab_label(pr) for pr, *_ in rr), references=(point_of_testlab_label(rf),),
                            unit=unit, coherence=np.stack([c for _, _, c, _ in rr])[:, None, :],
                            record_s=1.0 / float(freq[1] - freq[0]), meta={"estimator": "H1", "source": str(p)}))
         n_avg.append(int(next(iter(avgs))))
