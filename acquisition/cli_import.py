@@ -32,14 +32,18 @@ FORMATS = ("lvm", "mat", "npy", "sep005") + tuple(r.name for r in FRF_FORMATS)
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m acquisition import", description=__doc__.split("\n\n")[0])
     with_examples(p)
-    p.add_argument("files", nargs="+", metavar="FILE",
-                   help="the measured time data (several files of one format are one test: their hits add up)")
+    p.add_argument("files", nargs="*", metavar="FILE",
+                   help="the measured time data (several files of one format are one test: their hits add up), or "
+                        "an analyser's FRF exports (several files: a roving test, see --points)")
     p.add_argument("--out", required=True, metavar="REC.h5", help="the recording to write (HDF5)")
     p.add_argument("--format", choices=FORMATS,
                    help="input format: lvm (LabVIEW text), mat (DataPhysics SignalCalc export), npy (numpy "
                         "arrays with --describe), sep005 (SEP005 JSON); analyser FRF exports: "
                         + "; ".join(f"{r.name} ({r.description})" for r in FRF_FORMATS)
                         + "; default: from the extension and content")
+    p.add_argument("--points", metavar="MAP.csv",
+                   help="analyser FRF exports of a roving test: CSV 'file,reference[,outputs]' giving each file "
+                        "(relative to the map) its reference point and, optionally, its channels' output points")
     p.add_argument("--variables", metavar="NAME[,NAME]",
                    help="analyser FRF exports: the FRF variables to import (e.g. H1_2,H1_3 or FRF)")
     p.add_argument("--describe", metavar="DESC.json|toml", help="JSON/TOML channel description (needed for .npy)")
@@ -88,7 +92,7 @@ def import_windows(force: str | None, exp: str | None, windowed: bool) -> tuple[
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from .frf_importers import frf_format_for
+    from .frf_importers import frf_format_for, read_point_map
     from .importers import (
         channel_roles,
         combine_imports,
@@ -103,10 +107,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     drop = args.drop_nonfinite
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
-        check_outputs([args.out], [*args.files, args.describe])
+        point_map = read_point_map(args.points) if args.points else None
+        if point_map is not None:
+            if args.files:
+                raise UsageError("give the files either on the command line or in --points MAP.csv, not both")
+            args.files = [str(r.file) for r in point_map]
+        if not args.files:
+            raise UsageError("no input file: give FILE(s), or --points MAP.csv for a roving test's FRF exports")
+        check_outputs([args.out], [*args.files, args.describe, args.points])
         frf_row = frf_format_for(args.format, args.files[0])
+        if frf_row is None and point_map is not None:
+            raise UsageError("--points maps analyser FRF exports (--format "
+                             + "|".join(r.name for r in FRF_FORMATS) + "); time data take --reference/--outputs")
         if frf_row is not None:
-            return _import_frfs(frf_row, args)
+            return _import_frfs(frf_row, args, point_map)
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
         _check_files(args.files, fmt, ImportDataError)
         if fmt == "lvm":
@@ -141,9 +155,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _import_frfs(row: Any, args: argparse.Namespace) -> int:
+def _import_frfs(row: Any, args: argparse.Namespace, point_map: list | None) -> int:
     """``import`` of an analyser's FRF export (``row``: its :data:`FRF_FORMATS` row): each file's
-    H1 and coherence, relabelled with ``--reference``/``--outputs``, written as a recording."""
+    H1 and coherence, relabelled with ``--reference``/``--outputs`` or the ``--points`` map's row
+    (``point_map``), written as a recording."""
     from .frf_importers import combine_frf_imports, relabel, write_frf_recording
 
     time_only = [o for o, v in (("--describe", args.describe), ("--force-channel", args.force_channel),
@@ -155,9 +170,12 @@ def _import_frfs(row: Any, args: argparse.Namespace) -> int:
     _check_files(args.files, "mat", ImportDataError)
     variables = [v.strip() for v in args.variables.split(",")] if args.variables else None
     outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
-    if args.reference and len(args.files) > 1:
+    if args.reference and (len(args.files) > 1 or point_map):
         raise UsageError("--reference labels the reference of one file; several files need --points MAP.csv")
-    imports = [relabel(row.read(Path(f), variables), args.reference, outs) for f in args.files]
+    if point_map:
+        imports = [relabel(row.read(r.file, variables), r.reference, r.outputs or outs) for r in point_map]
+    else:
+        imports = [relabel(row.read(Path(f), variables), args.reference, outs) for f in args.files]
     imp = combine_frf_imports(imports)
     write_frf_recording(imp, args.out, overwrite=args.overwrite)
     for s, n in zip(imp.sets, imp.n_averages):

@@ -40,7 +40,8 @@ from analysis.spectra import WindowSettings
 from .errors import ImportDataError
 
 __all__ = ["FRFFormat", "FRF_FORMATS", "ImportedFRFs", "read_signalcalc_frf", "read_testlab_frf", "frf_format_for",
-           "relabel", "combine_frf_imports", "write_frf_recording", "COHERENCE_TOLERANCE"]
+           "relabel", "combine_frf_imports", "write_frf_recording", "COHERENCE_TOLERANCE", "PointMapRow",
+           "read_point_map"]
 
 #: how far a stored coherence may stray outside [0, 1] (rounding of the export) before it is refused
 COHERENCE_TOLERANCE = 1e-6
@@ -492,6 +493,60 @@ def combine_frf_imports(imports: Sequence[ImportedFRFs]) -> ImportedFRFs:
             sets.append(s)
             n_avg.append(n)
     return ImportedFRFs(sets, n_avg, ", ".join(i.source for i in imports), imports[0].fmt, dict(imports[0].meta))
+
+
+@dataclass(frozen=True)
+class PointMapRow:
+    """One row of a ``--points`` map: the file, the reference point it holds the FRFs of, and the
+    output points of its response channels in file order (None: as in the file or ``--outputs``)."""
+
+    file: Path
+    reference: str
+    outputs: tuple | None
+
+
+def read_point_map(path: str | Path) -> list[PointMapRow]:
+    """Read a roving test's point map: CSV with a header ``file,reference[,outputs]``, one row per
+    file (``file`` relative to the map's folder; ``outputs`` the response channels' point labels,
+    separated by spaces or ``;``). Raises :class:`ImportDataError` naming the map and the line."""
+    import csv
+
+    from analysis.input_limits import read_bounded_text, text_data_limit_bytes
+
+    p = Path(path)
+    try:
+        text = read_bounded_text(p, "point map (--points)", text_data_limit_bytes(), ImportDataError)
+    except OSError as exc:
+        raise ImportDataError(f"cannot read the point map {p}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise ImportDataError(f"{p}: the point map is not UTF-8 text; save it as CSV") from None
+    rows = list(csv.reader(text.splitlines()))
+    header = [h.strip().lower() for h in rows[0]] if rows else []
+    if header[:2] != ["file", "reference"] or any(h not in ("file", "reference", "outputs") for h in header):
+        raise ImportDataError(f"{p}: the point map's first line must be the header file,reference[,outputs]; "
+                              f"got {rows[0] if rows else 'an empty file'}")
+    out: list[PointMapRow] = []
+    seen: set = set()
+    for line, cells in enumerate(rows[1:], 2):
+        if not any(c.strip() for c in cells):
+            continue
+        if len(cells) != len(header):
+            raise ImportDataError(f"{p}, line {line}: {len(cells)} fields, the header has {len(header)}")
+        rec = dict(zip(header, (c.strip() for c in cells)))
+        file = p.parent / rec["file"]
+        if file in seen:
+            raise ImportDataError(f"{p}, line {line}: {rec['file']} is listed twice")
+        seen.add(file)
+        try:
+            ref = str(parse_point(rec["reference"]))
+            outs = (tuple(str(parse_point(o)) for o in re.split(r"[;\s]+", rec["outputs"]) if o)
+                    if rec.get("outputs") else None)
+        except PointLabelError as exc:
+            raise ImportDataError(f"{p}, line {line}: {exc}") from None
+        out.append(PointMapRow(file, ref, outs))
+    if not out:
+        raise ImportDataError(f"{p}: the point map lists no file")
+    return out
 
 
 def write_frf_recording(imp: ImportedFRFs, out: str | Path, overwrite: bool = False) -> None:

@@ -188,6 +188,44 @@ def test_time_options_are_refused_for_frf_exports(tmp_path, capsys):
     assert code == 2 and "--exp-window: for time data only" in err
 
 
+# -- a roving test: --points MAP.csv -------------------------------------------------------------
+
+def test_points_map_gives_each_file_its_reference_and_outputs(tmp_path, capsys):
+    a, b = _signalcalc(tmp_path / "h1.mat"), _signalcalc(tmp_path / "h2.mat", drop=("H1_2", "C1_2"))
+    (tmp_path / "map.csv").write_text("file,reference,outputs\nh1.mat,plane:1:Z,acc:1:Z;acc:2:Z;acc:3:Z\n"
+                                      "h2.mat,plane:29:Z,acc:2:Z acc:3:Z\n")
+    out = tmp_path / "roving.h5"
+    code, stdout, err = _run(["--points", tmp_path / "map.csv", "--out", out], capsys)
+    assert code == 0, err
+    s = load_frfset(out)
+    assert s.references == ("plane:1:Z", "plane:29:Z") and s.outputs == ("acc:1:Z", "acc:2:Z", "acc:3:Z")
+    np.testing.assert_array_equal(s.H[0, 0], a["H1_2"][:, 1])
+    np.testing.assert_array_equal(s.H[2, 1], b["H1_4"][:, 1])
+    assert np.all(np.isnan(s.H[0, 1]))  # h2.mat has no FRF to acc:1:Z: never measured, not invented
+
+
+@pytest.mark.parametrize("text, words", [
+    ("file,point\nh1.mat,plane:1:Z\n", "first line must be the header file,reference[,outputs]"),
+    ("file,reference\nh1.mat,plane-1\n", "line 2: bad point label 'plane-1'"),
+    ("file,reference\nh1.mat,plane:1:Z\nh2.mat,plane:1:Z\n", "both hold FRFs of reference plane:1:Z"),
+    ("file,reference\nh1.mat,plane:1:Z\nh1.mat,plane:2:Z\n", "line 3: h1.mat is listed twice"),
+    ("file,reference,outputs\nh1.mat,plane:1:Z,acc:1:Z\n", "1 output labels for 3 FRFs"),
+])
+def test_bad_points_map_is_one_line(tmp_path, capsys, text, words):
+    _signalcalc(tmp_path / "h1.mat")
+    _signalcalc(tmp_path / "h2.mat")
+    (tmp_path / "map.csv").write_text(text)
+    code, _, err = _run(["--points", tmp_path / "map.csv", "--out", tmp_path / "r.h5"], capsys)
+    assert code == 2 and err.count("\n") == 1 and words in err, err
+
+
+def test_points_map_is_for_frf_exports(tmp_path, capsys):
+    np.save(tmp_path / "hit.npy", np.zeros((2, 64)))
+    (tmp_path / "map.csv").write_text("file,reference\nhit.npy,plane:1:Z\n")
+    code, _, err = _run(["--points", tmp_path / "map.csv", "--out", tmp_path / "r.h5"], capsys)
+    assert code == 2 and "--points maps analyser FRF exports" in err
+
+
 # -- LMS Test.Lab structs (UNESP) --------------------------------------------------------------
 
 def test_point_of_testlab_label_labels():
@@ -269,3 +307,20 @@ def test_unesp_testlab_frf_structs_reach_the_modes(shared_data, tmp_path, capsys
     f = _fitted(tmp_path, out)
     for mode in (18.80, 98.38, 271.2):  # the bolted beam's bending modes in the random test
         assert min(abs(x - mode) for x in f) < 0.003 * mode, (mode, f)
+
+
+@pytest.mark.realdata
+def test_uliege_roving_files_with_a_points_map_reach_the_modes(shared_data, tmp_path, capsys):
+    """Two second-lab files: DPsv00001 is the 1st impact point of node_shock.csv, DPsv00031 the 29th."""
+    d = shared_data / "uliege_meca0062_plane_hammer" / "sec_lab_original"
+    (tmp_path / "map.csv").write_text("file,reference,outputs\n"
+                                      f"{d / 'DPsv00001.mat'},plane:1:Z,acc:1:Z;acc:2:Z;acc:3:Z\n"
+                                      f"{d / 'DPsv00031.mat'},plane:29:Z,acc:1:Z;acc:2:Z;acc:3:Z\n")
+    out = tmp_path / "plane.h5"
+    code, _, err = _run(["--points", tmp_path / "map.csv", "--format", "signalcalc-frf", "--out", out], capsys)
+    assert code == 0, err
+    s = load_frfset(out)
+    assert s.H.shape == (3, 2, 1601) and s.references == ("plane:1:Z", "plane:29:Z")
+    f = _fitted(tmp_path, out)
+    for mode in (18.85, 40.17, 87.81, 89.61, 97.14, 105.27, 143.45):
+        assert min(abs(x - mode) for x in f) < 0.002 * mode, (mode, f)
