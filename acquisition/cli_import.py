@@ -1,4 +1,4 @@
-"""``python -m acquisition import``: measured time data from other systems -> a recording.
+"""``python -m acquisition import``: measured time data or an analyser's FRF exports -> a recording.
 
     python -m acquisition import FILE [FILE...] --out REC.h5 [--format lvm|mat|npy|sep005] [--describe DESC.json|toml]
         [--force-channel K] [--responses K,K] [--reference POINT] [--outputs P1,P2] [--windowed]
@@ -8,6 +8,11 @@ Formats (by extension unless ``--format``): LabVIEW ``.lvm`` (segments = hits), 
 ``.mat`` (``X1..Xn`` blocks, or the analyser-windowed ``W1..Wn`` with ``--windowed``), numpy
 ``.npy`` (one file per hit, needs ``--describe``). Channel numbers are 1-based. Raw blocks get
 capture's windows unless ``--force-window``/``--exp-window`` say otherwise (:func:`import_windows`).
+
+Analyser FRF exports (H1 and coherence, :data:`acquisition.frf_importers.FRF_FORMATS`, one row per
+format): ``--format signalcalc-frf|testlab-frf`` or detected from a ``.mat`` file's variables;
+``--variables`` picks FRFs, ``--points MAP.csv`` labels a roving test's files
+(``docs/recording-format.md``, "Importing analyser FRF exports").
 """
 from __future__ import annotations
 

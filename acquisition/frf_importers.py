@@ -428,7 +428,7 @@ def read_testlab_frf(path: Path, variables: Sequence[str] | None = None) -> Impo
 
 #: the analyser FRF export formats of ``import`` (one row each)
 FRF_FORMATS: tuple[FRFFormat, ...] = (
-    FRFFormat("signalcalc-frf", "DataPhysics SignalCalc .mat H1 and coherence (H{r}_{k}, C{r}_{k})", (".mat",),
+    FRFFormat("signalcalc-frf", "DataPhysics SignalCalc .mat H1 and coherence, H{r}_{k} and C{r}_{k}", (".mat",),
               _signalcalc_detect, read_signalcalc_frf),
     FRFFormat("testlab-frf", "LMS Test.Lab .mat FRF structs, with the ...Coherence.mat beside", (".mat",),
               _testlab_detect, read_testlab_frf),
