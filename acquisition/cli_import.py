@@ -49,6 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--points", metavar="MAP.csv",
                    help="analyser FRF exports of a roving test: CSV 'file,reference[,outputs]' giving each file "
                         "(relative to the map) its reference point and, optionally, its channels' output points")
+    p.add_argument("--analyser-exp-window", metavar="TAU|PCT%",
+                   help="analyser FRF exports: the exponential window the analyser applied to the responses, as "
+                        "its time constant (e.g. 14.4s) or its value at the block end (e.g. 32.9%%); recorded, and "
+                        "removed from the damping by the fit (the exports do not store it)")
     p.add_argument("--variables", metavar="NAME[,NAME]",
                    help="analyser FRF exports: the FRF variables to import (e.g. H1_2,H1_3 or FRF)")
     p.add_argument("--describe", metavar="DESC.json|toml", help="JSON/TOML channel description (needed for .npy)")
@@ -124,6 +128,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if frf_row is None and point_map is not None:
             raise UsageError("--points maps analyser FRF exports (--format "
                              + "|".join(r.name for r in FRF_FORMATS) + "); time data take --reference/--outputs")
+        frf_only = [o for o, v in (("--variables", args.variables), ("--analyser-exp-window", args.analyser_exp_window))
+                    if v]
+        if frf_row is None and frf_only:
+            raise UsageError(f"{', '.join(frf_only)}: for analyser FRF exports only (--format "
+                             + "|".join(r.name for r in FRF_FORMATS) + ")")
         if frf_row is not None:
             return _import_frfs(frf_row, args, point_map)
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
@@ -164,14 +173,15 @@ def _import_frfs(row: Any, args: argparse.Namespace, point_map: list | None) -> 
     """``import`` of an analyser's FRF export (``row``: its :data:`FRF_FORMATS` row): each file's
     H1 and coherence, relabelled with ``--reference``/``--outputs`` or the ``--points`` map's row
     (``point_map``), written as a recording."""
-    from .frf_importers import combine_frf_imports, relabel, write_frf_recording
+    from .frf_importers import combine_frf_imports, relabel, with_analyser_window, write_frf_recording
 
     time_only = [o for o, v in (("--describe", args.describe), ("--force-channel", args.force_channel),
                                 ("--responses", args.responses), ("--windowed", args.windowed),
                                 ("--force-window", args.force_window), ("--exp-window", args.exp_window),
                                 ("--drop-nonfinite", args.drop_nonfinite)) if v]
     if time_only:
-        raise UsageError(f"{', '.join(time_only)}: for time data only; {row.name} holds the analyser's FRFs")
+        raise UsageError(f"{', '.join(time_only)}: for time data only; {row.name} holds the analyser's FRFs"
+                         + (" (the window it applied: --analyser-exp-window)" if args.exp_window else ""))
     _check_files(args.files, "mat", ImportDataError)
     variables = [v.strip() for v in args.variables.split(",")] if args.variables else None
     outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
@@ -181,6 +191,11 @@ def _import_frfs(row: Any, args: argparse.Namespace, point_map: list | None) -> 
         imports = [relabel(row.read(r.file, variables), r.reference, r.outputs or outs) for r in point_map]
     else:
         imports = [relabel(row.read(Path(f), variables), args.reference, outs) for f in args.files]
+    if args.analyser_exp_window:
+        window = parse_windows(None, args.analyser_exp_window, imports[0].sets[0].sample_rate_hz)
+        if window.exp_window_tau_s is None and window.exp_window_end_fraction is None:
+            raise UsageError("--analyser-exp-window none: leave the option out when the analyser applied no window")
+        imports = [with_analyser_window(i, window) for i in imports]
     imp = combine_frf_imports(imports)
     write_frf_recording(imp, args.out, overwrite=args.overwrite)
     for s, n in zip(imp.sets, imp.n_averages):

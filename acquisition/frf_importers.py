@@ -35,13 +35,13 @@ import numpy as np
 from analysis.frf import FRFSet
 from analysis.points import PointLabelError, parse_point
 from analysis.recording_writer import FRFPoint, RecordingWriter, whole_recording
-from analysis.spectra import WindowSettings
+from analysis.spectra import WindowSettings, tau_from_end_fraction
 
 from .errors import ImportDataError
 
 __all__ = ["FRFFormat", "FRF_FORMATS", "ImportedFRFs", "read_signalcalc_frf", "read_testlab_frf", "frf_format_for",
            "relabel", "combine_frf_imports", "write_frf_recording", "COHERENCE_TOLERANCE", "PointMapRow",
-           "read_point_map"]
+           "read_point_map", "with_analyser_window"]
 
 #: how far a stored coherence may stray outside [0, 1] (rounding of the export) before it is refused
 COHERENCE_TOLERANCE = 1e-6
@@ -470,6 +470,26 @@ def relabel(imp: ImportedFRFs, reference: str | None, outputs: Sequence[str] | N
     return ImportedFRFs(sets, list(imp.n_averages), imp.source, imp.fmt, dict(imp.meta))
 
 
+def with_analyser_window(imp: ImportedFRFs, window: WindowSettings) -> ImportedFRFs:
+    """``imp`` with the exponential window the analyser applied to the responses recorded on every
+    FRF (``--analyser-exp-window``): the fit removes its decay, ``1/tau``, from the damping. A window
+    given by its end value needs the record length and pre-trigger the export states (the time block
+    of a SignalCalc file); raises :class:`ImportDataError` when they are not known."""
+    sets = []
+    for s in imp.sets:
+        tau = window.exp_window_tau_s
+        if tau is None and window.exp_window_end_fraction is not None:
+            if s.record_s is None or s.pretrigger_s is None:
+                raise ImportDataError(f"{imp.source}: the export does not state its record length and pre-trigger, "
+                                      "so a window given by its end value cannot be turned into a time constant; give "
+                                      "--analyser-exp-window as tau in s")
+            tau = tau_from_end_fraction(window.exp_window_end_fraction, s.record_s - s.pretrigger_s)
+        sets.append(FRFSet(freq_hz=s.freq_hz, H=s.H, quantity=s.quantity, outputs=s.outputs, references=s.references,
+                           unit=s.unit, coherence=s.coherence, exp_window_tau_s=tau, meta=dict(s.meta),
+                           sample_rate_hz=s.sample_rate_hz, record_s=s.record_s, pretrigger_s=s.pretrigger_s))
+    return ImportedFRFs(sets, list(imp.n_averages), imp.source, imp.fmt, dict(imp.meta))
+
+
 def combine_frf_imports(imports: Sequence[ImportedFRFs]) -> ImportedFRFs:
     """One import from several files (a roving test): their reference sets in order. The files must
     share the frequency axis, unit and sample rate, and each reference must come from one file."""
@@ -482,8 +502,9 @@ def combine_frf_imports(imports: Sequence[ImportedFRFs]) -> ImportedFRFs:
     for imp in imports:
         for s, n in zip(imp.sets, imp.n_averages):
             if (s.freq_hz.shape != first.freq_hz.shape or not np.allclose(s.freq_hz, first.freq_hz)
-                    or s.unit != first.unit or s.sample_rate_hz != first.sample_rate_hz):
-                raise ImportDataError(f"{imp.source} differs in frequency axis, unit or sample rate from "
+                    or s.unit != first.unit or s.sample_rate_hz != first.sample_rate_hz
+                    or s.exp_window_tau_s != first.exp_window_tau_s):
+                raise ImportDataError(f"{imp.source} differs in frequency axis, unit, sample rate or window from "
                                       f"{imports[0].source}; import the files separately")
             r = s.references[0]
             if r in seen:
@@ -568,8 +589,10 @@ def write_frf_recording(imp: ImportedFRFs, out: str | Path, overwrite: bool = Fa
     refs = [s.references[0] for s in imp.sets]
     instrument = {"vendor": "imported", "model": imp.fmt, "source": imp.source}
     with whole_recording(out, overwrite) as tmp, RecordingWriter(
-            tmp, instrument=instrument, setup=setup, channels=chans, windows=WindowSettings(),
+            tmp, instrument=instrument, setup=setup, channels=chans,
+            windows=WindowSettings(exp_window_tau_s=first.exp_window_tau_s),
             plan={"mode": "imported", "points": refs}, overwrite=True) as w:
         w.log("INFO", f"imported the analyser's FRFs of {len(refs)} reference(s) from {imp.source} ({imp.fmt})")
         for j, (s, n) in enumerate(zip(imp.sets, imp.n_averages)):
-            w.write_frf(FRFPoint(j, s.references[0]), s, None, n_averages=n)
+            w.write_frf(FRFPoint(j, s.references[0]), s, None, n_averages=n,
+                        windows=WindowSettings(exp_window_tau_s=s.exp_window_tau_s))
