@@ -188,10 +188,31 @@ def _channel_units(path: Path, m: dict) -> dict:
     return dict(zip(nums, units))
 
 
+#: what malformed content makes the parsing code raise; the readers turn it into ImportDataError
+_MALFORMED = (KeyError, IndexError, ValueError, TypeError, AttributeError, OverflowError, ZeroDivisionError)
+
+
+def _guarded(read: Callable[[Path, Sequence[str] | None], ImportedFRFs], path: Path,
+             variables: Sequence[str] | None, what: str) -> ImportedFRFs:
+    """``read(path, variables)``; content the checks did not foresee (a field of another type) becomes
+    one :class:`ImportDataError` naming the file, ``what`` it should be, and the parser's words."""
+    try:
+        return read(path, variables)
+    except ImportDataError:
+        raise
+    except _MALFORMED as exc:
+        raise ImportDataError(f"{path} is not a well-formed {what} ({type(exc).__name__}: {exc}); export it "
+                              "again") from None
+
+
 def read_signalcalc_frf(path: Path, variables: Sequence[str] | None = None) -> ImportedFRFs:
     """Read the H1 and coherence of a DataPhysics SignalCalc ``.mat`` export (see module doc):
     one :class:`FRFSet` per reference channel ``r``; ``variables`` (e.g. ``H1_2,H1_3``) limits the
     FRFs read. Raises :class:`ImportDataError` naming the file and variable for anything else."""
+    return _guarded(_read_signalcalc_frf, Path(path), variables, "SignalCalc FRF export")
+
+
+def _read_signalcalc_frf(path: Path, variables: Sequence[str] | None = None) -> ImportedFRFs:
     p = Path(path)
     m = _variables(p)
     names = sorted((n for n in m if _SC_H.fullmatch(n)), key=lambda n: tuple(int(x) for x in _SC_H.findall(n)[0]))
@@ -373,6 +394,10 @@ def read_testlab_frf(path: Path, variables: Sequence[str] | None = None) -> Impo
     """Read the H1 FRF structs of a Test.Lab ``...FRF.mat`` and their coherence from the
     ``...Coherence.mat`` beside it (see module doc); ``variables`` names the FRF structs to read
     (default: every ``FRF*`` struct; they must share one quantity). Raises :class:`ImportDataError`."""
+    return _guarded(_read_testlab_frf, Path(path), variables, "Test.Lab FRF export")
+
+
+def _read_testlab_frf(path: Path, variables: Sequence[str] | None = None) -> ImportedFRFs:
     p = Path(path)
     m = _variables(p)
     structs = [n for n in m if n.startswith("FRF") and isinstance(m[n], np.ndarray) and m[n].dtype.names]

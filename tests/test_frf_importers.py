@@ -203,6 +203,24 @@ def test_malformed_signalcalc_export_is_one_line_naming_file_and_variable(tmp_pa
     assert not out.exists()
 
 
+@pytest.mark.parametrize("key, value", [("H1_2", "text"), ("H1_3", np.zeros((3, 2, 2))), ("ChanNum", "x"),
+                                        ("C1_2", np.array(["a", "b"]))])
+def test_variables_of_another_type_are_one_line(tmp_path, capsys, key, value):
+    src = tmp_path / "swapped.mat"
+    _signalcalc(src, **{key: value})
+    code, _, err = _run([src, "--format", "signalcalc-frf", "--out", tmp_path / "r.h5"], capsys)
+    assert code == 2 and err.count("\n") == 1 and str(src) in err, err
+
+
+def test_testlab_struct_without_its_values_is_one_line(tmp_path, capsys):
+    _testlab(tmp_path, prefix="R__")
+    s = scipy.io.loadmat(tmp_path / "R__FRF.mat")["FRF"][0, 0]
+    scipy.io.savemat(tmp_path / "R__FRF.mat", {"FRF": {n: s[n] for n in s.dtype.names if n != "y_values"}})
+    src = tmp_path / "R__FRF.mat"
+    code, _, err = _run([src, "--out", tmp_path / "r.h5"], capsys)
+    assert code == 2 and err.count("\n") == 1 and str(src) in err and "y_values" in err, err
+
+
 def test_damaged_mat_file_is_refused_in_one_line(tmp_path, capsys):
     src = tmp_path / "cut.mat"
     _signalcalc(src)
