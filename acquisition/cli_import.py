@@ -1,4 +1,4 @@
-"""``python -m acquisition import``: measured time data from other systems -> a recording.
+"""``python -m acquisition import``: measured time data or an analyser's FRF exports -> a recording.
 
     python -m acquisition import FILE [FILE...] --out REC.h5 [--format lvm|mat|npy|sep005] [--describe DESC.json|toml]
         [--force-channel K] [--responses K,K] [--reference POINT] [--outputs P1,P2] [--windowed]
@@ -8,34 +8,53 @@ Formats (by extension unless ``--format``): LabVIEW ``.lvm`` (segments = hits), 
 ``.mat`` (``X1..Xn`` blocks, or the analyser-windowed ``W1..Wn`` with ``--windowed``), numpy
 ``.npy`` (one file per hit, needs ``--describe``). Channel numbers are 1-based. Raw blocks get
 capture's windows unless ``--force-window``/``--exp-window`` say otherwise (:func:`import_windows`).
+
+Analyser FRF exports (H1 and coherence, :data:`acquisition.frf_importers.FRF_FORMATS`, one row per
+format): ``--format signalcalc-frf|testlab-frf`` or detected from a ``.mat`` file's variables;
+``--variables`` picks FRFs, ``--points MAP.csv`` labels a roving test's files
+(``docs/recording-format.md``, "Importing analyser FRF exports").
 """
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, with_examples
 from analysis.outputs import check_outputs
 
-from .errors import RecordingError, UsageError
+from .errors import ImportDataError, RecordingError, UsageError
+from .frf_importers import FRF_FORMATS
 from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
 
 __all__ = ["main", "build_parser", "FORMATS"]
 
 #: the input formats ``--format`` names (by extension otherwise; ``.json`` is SEP005)
-FORMATS = ("lvm", "mat", "npy", "sep005")
+FORMATS = ("lvm", "mat", "npy", "sep005") + tuple(r.name for r in FRF_FORMATS)
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m acquisition import", description=__doc__.split("\n\n")[0])
     with_examples(p)
-    p.add_argument("files", nargs="+", metavar="FILE",
-                   help="the measured time data (several files of one format are one test: their hits add up)")
+    p.add_argument("files", nargs="*", metavar="FILE",
+                   help="the measured time data (several files of one format are one test: their hits add up), or "
+                        "an analyser's FRF exports (several files: a roving test, see --points)")
     p.add_argument("--out", required=True, metavar="REC.h5", help="the recording to write (HDF5)")
     p.add_argument("--format", choices=FORMATS,
                    help="input format: lvm (LabVIEW text), mat (DataPhysics SignalCalc export), npy (numpy "
-                        "arrays with --describe), sep005 (SEP005 JSON); default: from the extension")
+                        "arrays with --describe), sep005 (SEP005 JSON); analyser FRF exports: "
+                        + "; ".join(f"{r.name} ({r.description})" for r in FRF_FORMATS)
+                        + "; default: from the extension and content")
+    p.add_argument("--points", metavar="MAP.csv",
+                   help="analyser FRF exports of a roving test: CSV 'file,reference[,outputs]' giving each file "
+                        "(relative to the map) its reference point and, optionally, its channels' output points")
+    p.add_argument("--analyser-exp-window", metavar="TAU|PCT%",
+                   help="analyser FRF exports: the exponential window the analyser applied to the responses, as "
+                        "its time constant (e.g. 14.4s) or its value at the block end (e.g. 32.9%%); recorded, and "
+                        "removed from the damping by the fit (the exports do not store it)")
+    p.add_argument("--variables", metavar="NAME[,NAME]",
+                   help="analyser FRF exports: the FRF variables to import (e.g. H1_2,H1_3 or FRF)")
     p.add_argument("--describe", metavar="DESC.json|toml", help="JSON/TOML channel description (needed for .npy)")
     p.add_argument("--force-channel", type=int, metavar="K",
                    help="1-based index of the hammer channel (default: the one channel with a force unit)")
@@ -82,8 +101,8 @@ def import_windows(force: str | None, exp: str | None, windowed: bool) -> tuple[
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from .frf_importers import frf_format_for, read_point_map
     from .importers import (
-        ImportDataError,
         channel_roles,
         combine_imports,
         load_description,
@@ -97,7 +116,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     drop = args.drop_nonfinite
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
-        check_outputs([args.out], [*args.files, args.describe])
+        point_map = read_point_map(args.points) if args.points else None
+        if point_map is not None:
+            if args.files:
+                raise UsageError("give the files either on the command line or in --points MAP.csv, not both")
+            args.files = [str(r.file) for r in point_map]
+        if not args.files:
+            raise UsageError("no input file: give FILE(s), or --points MAP.csv for a roving test's FRF exports")
+        check_outputs([args.out], [*args.files, args.describe, args.points])
+        frf_row = frf_format_for(args.format, args.files[0])
+        if frf_row is None and point_map is not None:
+            raise UsageError("--points maps analyser FRF exports (--format "
+                             + "|".join(r.name for r in FRF_FORMATS) + "); time data take --reference/--outputs")
+        frf_only = [o for o, v in (("--variables", args.variables), ("--analyser-exp-window", args.analyser_exp_window))
+                    if v]
+        if frf_row is None and frf_only:
+            raise UsageError(f"{', '.join(frf_only)}: for analyser FRF exports only (--format "
+                             + "|".join(r.name for r in FRF_FORMATS) + ")")
+        if frf_row is not None:
+            return _import_frfs(frf_row, args, point_map)
         fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
         _check_files(args.files, fmt, ImportDataError)
         if fmt == "lvm":
@@ -111,7 +148,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise UsageError("numpy input needs --describe DESC.json|toml naming the channels and sample rate")
             tests = [_read(read_numpy, args.files, load_description(args.describe), drop=drop)]
         else:
-            raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json (or --format)")
+            raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json, or --format "
+                             + "|".join(r.name for r in FRF_FORMATS) + " for an analyser's FRF export")
         test = combine_imports(tests)
         windows = parse_windows(*import_windows(args.force_window, args.exp_window, args.windowed), test.fs_hz)
         fch = args.force_channel - 1 if args.force_channel else None
@@ -127,5 +165,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"left out {dropped} hit(s) holding non-finite samples")
     for a in averages:
         print(f"imported {a.n_averages} accepted hit(s): reference {a.reference}, outputs {', '.join(a.outputs)}")
+    print(f"recording written: {args.out}")
+    return 0
+
+
+def _import_frfs(row: Any, args: argparse.Namespace, point_map: list | None) -> int:
+    """``import`` of an analyser's FRF export (``row``: its :data:`FRF_FORMATS` row): each file's
+    H1 and coherence, relabelled with ``--reference``/``--outputs`` or the ``--points`` map's row
+    (``point_map``), written as a recording."""
+    from .frf_importers import combine_frf_imports, relabel, with_analyser_window, write_frf_recording
+
+    time_only = [o for o, v in (("--describe", args.describe), ("--force-channel", args.force_channel),
+                                ("--responses", args.responses), ("--windowed", args.windowed),
+                                ("--force-window", args.force_window), ("--exp-window", args.exp_window),
+                                ("--drop-nonfinite", args.drop_nonfinite)) if v]
+    if time_only:
+        raise UsageError(f"{', '.join(time_only)}: for time data only; {row.name} holds the analyser's FRFs"
+                         + (" (the window it applied: --analyser-exp-window)" if args.exp_window else ""))
+    _check_files(args.files, "mat", ImportDataError)
+    variables = [v.strip() for v in args.variables.split(",")] if args.variables else None
+    outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
+    if args.reference and (len(args.files) > 1 or point_map):
+        raise UsageError("--reference labels the reference of one file; several files need --points MAP.csv")
+    if point_map:
+        imports = [relabel(row.read(r.file, variables), r.reference, r.outputs or outs) for r in point_map]
+    else:
+        imports = [relabel(row.read(Path(f), variables), args.reference, outs) for f in args.files]
+    if args.analyser_exp_window:
+        window = parse_windows(None, args.analyser_exp_window, imports[0].sets[0].sample_rate_hz)
+        if window.exp_window_tau_s is None and window.exp_window_end_fraction is None:
+            raise UsageError("--analyser-exp-window none: leave the option out when the analyser applied no window")
+        imports = [with_analyser_window(i, window) for i in imports]
+    imp = combine_frf_imports(imports)
+    write_frf_recording(imp, args.out, overwrite=args.overwrite)
+    for s, n in zip(imp.sets, imp.n_averages):
+        print(f"imported {s.n_outputs} FRF(s) {s.unit} of reference {s.references[0]}: outputs "
+              f"{', '.join(s.outputs)}; {'averages not stated in the file' if n is None else f'{n} averages'}")
     print(f"recording written: {args.out}")
     return 0

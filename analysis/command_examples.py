@@ -22,6 +22,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "python -m acquisition import": (
         "import ../shared/data/ladisk_beam_impact/acceleration.lvm --out beam.h5 --force-window 2ms,1ms",
         "import hits.mat --format mat --out test.h5 --overwrite",
+        "import ../shared/data/uliege_meca0062_plane_hammer/first_lab/DPsv00001.mat --format signalcalc-frf "
+        "--out plane.h5",
     ),
     "python -m acquisition identify": (
         'identify --device "sim://?seed=1"',

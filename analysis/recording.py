@@ -287,6 +287,9 @@ class Recording:
         return sets
 
     def _frfset(self, name: str, g: dict, est: str) -> FRFSet:
+        if est not in g:
+            raise RecordingError(f"{self.path} holds the analyser's {', '.join(k for k in ('H1', 'H2') if k in g)} "
+                                 f"only (FRFs imported from an analyser export), no {est}: use the H1 estimate")
         record_s, pretrigger_s = g.get("record_s"), g.get("pretrigger_s")
         if record_s is None:  # FRFs written before the FRF group stored them: the set-up's
             record_s, pretrigger_s = self._setup_record()
@@ -295,7 +298,8 @@ class Recording:
             references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
             exp_window_tau_s=g["exp_window_tau_s"], sample_rate_hz=g["sample_rate_hz"] or self._hit_sample_rate(),
             record_s=record_s, pretrigger_s=pretrigger_s,
-            meta={"estimator": est, "n_averages": int(g["n_averages"]), "source": str(self.path),
+            meta={"estimator": est, "source": str(self.path),
+                  **({"n_averages": int(g["n_averages"])} if int(g["n_averages"]) > 0 else {}),
                   "excitation_limit_hz": excitation_limit_hz(g["freq_hz"], g["Gff"]) if "Gff" in g else None,
                   "measurement": name, "point": g["point"]},
         )
@@ -426,7 +430,11 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
     meta = dict(sets[0].meta)
     meta.pop("measurement", None)
     meta.pop("point", None)
-    meta["n_averages"] = [s.meta.get("n_averages") for s in sets]
+    n_avg = [s.meta.get("n_averages") for s in sets]
+    if all(n is not None for n in n_avg):  # averages not known for a point (an analyser export): none said
+        meta["n_averages"] = n_avg
+    else:
+        meta.pop("n_averages", None)
     meta["excitation_limit_hz"] = [s.meta.get("excitation_limit_hz") for s in sets]
     if len(ests) > 1:
         meta["estimator"] = "mixed"

@@ -305,18 +305,26 @@ class RecordingWriter:
         self._f.flush()
 
     @locked
-    def write_frf(self, point: FRFPoint, frfset: FRFSet, spectra: AveragedSpectra) -> None:
+    def write_frf(self, point: FRFPoint, frfset: FRFSet, spectra: AveragedSpectra | None, *,
+                  n_averages: int | None = None, windows: WindowSettings | None = None) -> None:
         """Write (or replace) the FRF results of one measurement point and flush.
 
         ``frfset``: the point's H1 estimate with one reference (``H[n_out, 1, n_freq]``), its
         coherence, window time constant, sample rate, record length and pre-trigger (all stored so
         that readers never recompute them); ``spectra``: the averaged spectra, the H2 estimate and the
         windows they were computed with.
+
+        ``spectra`` None: FRFs an analyser computed (an imported FRF export): only ``freq_hz``, ``H1``
+        and ``coherence`` are written, with ``n_averages`` (None: not known, stored as 0) and the
+        ``windows`` the analyser is known to have used (default: none known).
         """
         if frfset.n_references != 1:
             raise RecordingError(f"write_frf takes the FRFs of one measurement point (one reference); got "
                                  f"{frfset.n_references} references")
         name = f"m{int(point.measurement):03d}"
+        if spectra is None:
+            self._write_frf_only(name, point, frfset, n_averages, windows or WindowSettings())
+            return
         arrays = (frfset.freq_hz, frfset.H, frfset.coherence, spectra.H2, spectra.Gff, spectra.Gxx, spectra.Gfx)
         self._room(sum(np.asarray(a).nbytes for a in arrays if a is not None), f"the FRFs of point {point.label}",
                    after_full=True)
@@ -328,20 +336,42 @@ class RecordingWriter:
         for key, val in (("freq_hz", frfset.freq_hz), ("H1", frfset.H[:, 0, :]), ("H2", spectra.H2),
                          ("coherence", coh), ("Gff", spectra.Gff), ("Gxx", spectra.Gxx), ("Gfx", spectra.Gfx)):
             g.create_dataset(key, data=np.asarray(val))
+        self._frf_attrs(g, point, frfset, int(spectra.n_averages), spectra.windows)
+        self._f.flush()
+
+    def _write_frf_only(self, name: str, point: FRFPoint, frfset: FRFSet, n_averages: int | None,
+                        windows: WindowSettings) -> None:
+        """The FRF group of an analyser's FRFs: frequencies, H1 and coherence (no spectra, no H2)."""
+        if frfset.coherence is None:
+            raise RecordingError(f"the FRFs of point {point.label} have no coherence; an imported FRF needs the "
+                                 "analyser's coherence")
+        self._room(sum(np.asarray(a).nbytes for a in (frfset.freq_hz, frfset.H, frfset.coherence)),
+                   f"the FRFs of point {point.label}", after_full=True)
+        grp = self._f["frf"]
+        if name in grp:
+            del grp[name]
+        g = grp.create_group(name)
+        for key, val in (("freq_hz", frfset.freq_hz), ("H1", frfset.H[:, 0, :]), ("coherence", frfset.coherence[:, 0, :])):
+            g.create_dataset(key, data=np.asarray(val))
+        self._frf_attrs(g, point, frfset, 0 if n_averages is None else int(n_averages), windows)
+        g.attrs["imported_frf"] = True
+        self._f.flush()
+
+    @staticmethod
+    def _frf_attrs(g: Any, point: FRFPoint, frfset: FRFSet, n_averages: int, windows: WindowSettings) -> None:
         a = g.attrs
         a["measurement"] = int(point.measurement)
         a["point"] = str(point.label)
         a["outputs"] = json.dumps(list(frfset.outputs))
         a["reference"] = frfset.references[0]
-        a["n_averages"] = int(spectra.n_averages)
+        a["n_averages"] = n_averages
         a["hits"] = np.asarray(list(point.hits), dtype=np.int64)
         a["quantity"] = frfset.quantity
         a["unit"] = frfset.unit
-        a["windows_json"] = json.dumps(spectra.windows.to_dict())
+        a["windows_json"] = json.dumps(windows.to_dict())
         for key in ("exp_window_tau_s", "sample_rate_hz", "record_s", "pretrigger_s"):
             value = getattr(frfset, key)
             a[key] = float("nan") if value is None else float(value)
-        self._f.flush()
 
     @locked
     def set_attr(self, key: str, value: Any) -> None:
