@@ -24,7 +24,9 @@ resolve (a close pair merged, a spurious peak) counts as one large error; ``chi2
 
 Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
 cause's search range); a choice (the node of an added mass, the member of a member change) by trying
-every option on a coarse grid of its parameter, the ``N_SCREEN`` best refined. A cause with two
+every option on a coarse grid of its parameter, the ``N_SCREEN`` best refined; a choice of at most
+``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option gets the full
+search of its parameters (from the nominal and from the best point of a grid), with its own model. A cause with two
 parameters is also fitted with each alone (the other at its nominal value): nested models, the one
 that predicts best (leave one mode out) wins.
 
@@ -305,18 +307,25 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
               sel: np.ndarray, fmax: float, options: Sequence[str] | None = None,
               start: dict | None = None) -> tuple[dict, float, list]:
     """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
-    With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted.
+    With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted (at most
+    ``N_SCREEN`` options: each fitted in full, no screen).
     Returns (params, chi2, [(chi2, option, params)] of the fitted options, sorted)."""
     specs = [s for s in cause.params if s.name in free]
     fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
     if cause.choice is None:
         p, c = _fit_continuous(sim, cause, specs, fixed, mm, sel, fmax, start)
         return p, c, []
+    todo = options if options is not None else cause.options
+    screened: list[tuple[float, str, dict | None]]
     if isinstance(start, dict) and options is not None and set(options) <= set(start):
         # the options' own fits as starts (a fold of the cross-validation): no coarse screen again
         screened = [(0.0, opt, start[opt]) for opt in options]
+    elif len(todo) <= N_SCREEN:
+        # few options (a support, a joint, all of them): each gets the full search of its own parameters,
+        # no screen to drop one whose exact fit could still win
+        screened = [(0.0, opt, None) for opt in todo]
     else:
-        screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, options if options is not None else cause.options)
+        screened = list(_screen(sim, cause, specs, fixed, mm, sel, fmax, todo))
     ranked = []
     best: tuple[dict, float] = ({}, np.inf)
     for _, opt, p0 in screened[:N_SCREEN]:
