@@ -27,7 +27,7 @@ def _specs(fv: FrameVariants) -> dict:
 
 
 def _supports(rot: float) -> dict:
-    return {"factor_translational": 1.0, "factor_rotational": rot}
+    return {"support": "all", "factor_translational": 1.0, "factor_rotational": rot}
 
 
 def test_a_pairs_choice_is_made_again_where_both_causes_are_refined() -> None:
