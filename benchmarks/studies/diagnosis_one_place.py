@@ -36,7 +36,6 @@ import os
 import sys
 import tempfile
 import time
-import tomllib
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -60,8 +59,13 @@ EXPECTED = {"loose_support": ("support_stiffness", "support"), "soft_joint": ("j
 
 
 def frame() -> dict:
+    """``simulator/frame.toml`` as read by any TOML reader (the configuration file, not the simulator's code)."""
+    try:
+        import tomllib as toml
+    except ImportError:  # Python 3.10
+        import tomli as toml  # type: ignore[no-redef]
     with open(FRAME, "rb") as fh:
-        return tomllib.load(fh)
+        return toml.load(fh)
 
 
 def places(family: str, cfg: dict) -> list[str]:
