@@ -130,7 +130,8 @@ class ParamSpec:
 @dataclass(frozen=True)
 class CauseSpec:
     """A physical cause: its continuous parameters and, optionally, a choice (``"point"``: a node,
-    ``"component"``: a member, ``"element"``: an element ``member:e``) among ``options``; what it
+    ``"component"``: a member, ``"element"``: an element ``member:e``, ``"support"`` / ``"joint"``: one
+    support or joint, or ``"all"``) among ``options``; what it
     is (``description``) and what to do when it is named (``advice``)."""
 
     name: str
