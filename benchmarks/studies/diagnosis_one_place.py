@@ -15,6 +15,11 @@ Families and ranges (fixed before any run; factors log-uniform):
 * ``soft_joint``: one node of a joint pair (``[joints] pairs``: either node names the pair),
   ``soft_joint_factor`` in 0.02..0.2;
 * ``cracked_element``: one element away from its member's ends (1..n-2), ``crack_bending_factor`` in 0.3..0.6;
+* ``attached_block``: a steel block of its own size (1-5 kg; a plate, a bar or a cube: two sides drawn
+  from 2..20 cm and the third from the mass) fixed across a member at an inner node: in the
+  configuration an extra component of two elements with the block's own section, its middle node
+  joined to the frame's node by the joint springs (``[joints] pairs`` extended). Right: ``added_mass``
+  at that node or a neighbour on the same member, mass within 25 %;
 * ``null``: the unchanged frame at another capture seed, with the default test plan's points or with six
   hammer points drawn from the frame's nodes (any of X, Y, Z across the member).
 
@@ -49,6 +54,9 @@ FRAME = ROOT / "simulator" / "frame.toml"
 #: The points of the damage cases' captures (the physical benchmark's six hammer points).
 POINTS = ("right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y")
 RANGES = {"loose_support": (0.05, 0.3), "soft_joint": (0.02, 0.2), "cracked_element": (0.3, 0.6)}
+#: Attached blocks: mass (kg) and the two drawn sides (m); steel density of frame.toml's [material].
+BLOCK_MASS_KG = (1.0, 5.0)
+BLOCK_SIDE_M = (0.02, 0.20)
 #: The ``[damage]`` lists of each family: (places, factors).
 DAMAGE_KEYS = {"loose_support": ("loose_supports", "loose_support_factor"),
                "soft_joint": ("soft_joints", "soft_joint_factor"),
@@ -87,6 +95,50 @@ def hammer_points(cfg: dict, rng: np.random.Generator, n: int = 6) -> list[str]:
     return [str(p) for p in rng.choice(pool, size=n, replace=False)]
 
 
+def draw_blocks(seed: int, n: int) -> list[dict]:
+    """``n`` attached blocks: an inner node, a mass, two sides, the direction the block spans (across its member)."""
+    rng = np.random.default_rng(seed)
+    cfg = frame()
+    rho = float(cfg["material"]["density_kg_m3"])
+    out = []
+    for i in range(n):
+        comp = str(rng.choice(sorted(cfg["components"])))
+        c = cfg["components"][comp]
+        node = f"{comp}:{int(rng.integers(1, int(c['n_elements'])))}"
+        axis = int(np.argmax(np.abs(np.subtract(c["end_m"], c["start_m"]))))
+        mass = float(rng.uniform(*BLOCK_MASS_KG))
+        while True:         # two sides drawn, the third from the mass, all within the range
+            b, h = np.exp(rng.uniform(np.log(BLOCK_SIDE_M[0]), np.log(BLOCK_SIDE_M[1]), 2))
+            span = mass / (rho * b * h)
+            if BLOCK_SIDE_M[0] <= span <= BLOCK_SIDE_M[1]:
+                break
+        along = int(rng.choice([a for a in range(3) if a != axis]))
+        out.append({"name": f"attached_block-{i:02d}", "family": "attached_block", "place": node, "mass_kg": round(mass, 4),
+                    "span_m": round(float(span), 4), "section_m": [round(float(b), 4), round(float(h), 4)],
+                    "span_axis": "XYZ"[along], "seed": int(rng.integers(1, 10 ** 6)), "points": list(POINTS)})
+    return out
+
+
+def block_toml(case: dict, cfg: dict) -> str:
+    """An attached block as the configuration states it: a component of two elements spanning the block across
+    its member, centred on the node, with the block's own rectangular section; its middle node joined to the node
+    by joint springs."""
+    comp, i = case["place"].split(":")
+    c = cfg["components"][comp]
+    start, end = np.asarray(c["start_m"], float), np.asarray(c["end_m"], float)
+    xyz = start + (end - start) * int(i) / int(c["n_elements"])
+    half = np.zeros(3)
+    half["XYZ".index(case["span_axis"])] = case["span_m"] / 2
+    b, h = case["section_m"]
+    a, t = max(b, h), min(b, h)
+    j = a * t ** 3 * (1 / 3 - 0.21 * t / a * (1 - t ** 4 / (12 * a ** 4)))     # a rectangle's torsion constant
+    pairs = [list(p) for p in cfg["joints"]["pairs"]] + [[case["place"], "block:1"]]
+    return (f"[sections.block]\nshape = \"explicit\"\narea_m2 = {b * h!r}\niy_m4 = {b * h ** 3 / 12!r}\n"
+            f"iz_m4 = {h * b ** 3 / 12!r}\nj_m4 = {j!r}\n\n[components.block]\nsection = \"block\"\n"
+            f"start_m = {[float(x) for x in xyz - half]}\nend_m = {[float(x) for x in xyz + half]}\n"
+            f"n_elements = 2\nroll_deg = 0.0\n\n[joints]\npairs = {json.dumps(pairs)}\n")
+
+
 def draw(seed: int, n_damage: int, n_nulls: int) -> list[dict]:
     """The case list: ``n_damage`` damage cases (families in turn), ``n_nulls`` nulls (half with drawn points)."""
     rng = np.random.default_rng(seed)
@@ -107,9 +159,12 @@ def draw(seed: int, n_damage: int, n_nulls: int) -> list[dict]:
 
 
 def frame_toml(case: dict) -> str:
-    """The case's frame configuration (a user file merged over frame.toml): its ``[damage]`` table."""
+    """The case's frame configuration (a user file merged over frame.toml): its ``[damage]`` table, or the
+    attached block."""
     if case["family"] == "null":
         return "# the unchanged frame\n"
+    if case["family"] == "attached_block":
+        return block_toml(case, frame())
     where, factors = DAMAGE_KEYS[case["family"]]
     return f'[damage]\n{where} = ["{case["place"]}"]\n{factors} = [{case["factor"]}]\n'
 
@@ -125,6 +180,20 @@ def score(case: dict, doc: dict, cfg: dict) -> dict:
     named = doc.get("named") or []
     if case["family"] == "null":
         return {"right": verdict == "none", "named_among": verdict == "none"}
+    if case["family"] == "attached_block":
+        comp, i = case["place"].split(":")
+
+        def near(p: dict) -> bool:
+            c, k = str(p.get("point", "")).split(":")[:2] if ":" in str(p.get("point", "")) else ("", "-9")
+            return c == comp and abs(int(k) - int(i)) <= 1 and abs(float(p["mass_kg"]) / case["mass_kg"] - 1) <= 0.25
+
+        hits = [c for c in named if c["effect"] == "added_mass" and near(c["parameters"])]
+        out = {"right": verdict == "added_mass" and bool(hits), "named_among": bool(hits)}
+        mass = [c["parameters"]["mass_kg"] for c in named if c["effect"] == "added_mass"]
+        if mass:
+            out["factor_fitted"] = mass[0]
+            out["factor_error"] = abs(float(mass[0]) / case["mass_kg"] - 1.0)
+        return out
     cause, key = EXPECTED[case["family"]]
     hits = [c for c in named if c["effect"] == cause and same_place(case, str(c["parameters"].get(key)), cfg)]
     out = {"right": verdict == cause and bool(hits), "named_among": bool(hits)}
@@ -164,7 +233,8 @@ def run_case(case: dict, cfg: dict) -> dict:
 
 def line(r: dict) -> str:
     mark = "ok " if r["right"] else ("~  " if r.get("named_among") else "BAD")
-    what = "unchanged" if r["family"] == "null" else f"{r['place']} x{r['factor']}"
+    what = ("unchanged" if r["family"] == "null" else f"{r['place']} {r['mass_kg']} kg" if "mass_kg" in r
+            else f"{r['place']} x{r['factor']}")
     named = "; ".join(f"{c['effect']} {c['parameters']}" for c in r.get("named", []))
     return f"{mark} {r['name']:20s} {what:22s} -> {r['verdict']} {named} ({r.get('time_s', 0):.1f} s)"
 
@@ -196,14 +266,16 @@ def main() -> None:
     d.add_argument("--seed", type=int, required=True)
     d.add_argument("--damage", type=int, default=20)
     d.add_argument("--nulls", type=int, default=10)
+    d.add_argument("--blocks", type=int, default=0, help="attached blocks (drawn from their own seed, seed + 1)")
     d.add_argument("--out", required=True)
     r = sub.add_parser("run", help="capture and diagnose every case of a list")
     r.add_argument("cases")
     r.add_argument("--json", help="write every case's result")
     args = ap.parse_args()
     if args.cmd == "draw":
-        cases = draw(args.seed, args.damage, args.nulls)
-        Path(args.out).write_text(json.dumps({"seed": args.seed, "ranges": RANGES, "cases": cases}, indent=1) + "\n")
+        cases = draw(args.seed, args.damage, args.nulls) + draw_blocks(args.seed + 1, args.blocks)
+        ranges = {**RANGES, "attached_block": {"mass_kg": BLOCK_MASS_KG, "side_m": BLOCK_SIDE_M}}
+        Path(args.out).write_text(json.dumps({"seed": args.seed, "ranges": ranges, "cases": cases}, indent=1) + "\n")
         print(f"{len(cases)} cases -> {args.out}")
         return
     cfg = frame()
