@@ -23,7 +23,8 @@ The causes are the rows of the registry :data:`CAUSES` (:class:`PhysicalCause`: 
 name                   parameters                                   change
 =====================  ===========================================  =======================================
 ``added_mass``         ``point`` (node ``component:node``),          lumped mass on the node's translations
-                       ``mass_kg``                                  and a steel cube's rotary inertia
+                       ``mass_kg``, ``inertia_factor``              and a rotary inertia about each axis:
+                                                                    a steel cube's of that mass x factor
 ``support_stiffness``  ``support`` (``all`` or one support node),   the support's (every support's) springs
                        ``factor_translational``, ``factor_rotational``  x factor
 ``joint_stiffness``    ``joint`` (``all`` or one joint, named by    the joint's (every joint's) column-beam
@@ -73,7 +74,8 @@ class Assembly:
     springs: dict = field(default_factory=dict)                       # (kind, part, place) -> factor (place
                                                                       # None: every support / joint)
     sensor_mass_kg: float | None = None                             # accelerometer mass (None: the config's)
-    lumped: list = field(default_factory=list)                        # [(node, kg, rotary inertia?)]
+    lumped: list = field(default_factory=list)                        # [(node, kg, rotary inertia as a
+                                                                      # multiple of a steel cube's; 0: none)]
 
 
 @dataclass(frozen=True)
@@ -87,7 +89,7 @@ class PhysicalCause:
 
 
 def _added_mass(a: Assembly, p: Mapping) -> None:
-    a.lumped.append((str(p["point"]), float(p["mass_kg"]), True))
+    a.lumped.append((str(p["point"]), float(p["mass_kg"]), float(p.get("inertia_factor", 1.0))))
 
 
 #: The choice of the spring causes: every support / joint at once, or the one named.
@@ -139,8 +141,10 @@ def register_cause(row: PhysicalCause) -> None:
 
 for _row in (
     PhysicalCause(CauseSpec(
-        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),), choice="point",
-        description="a mass fixed on the frame at one node (all three translations)",
+        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),
+                       ParamSpec("inertia_factor", 0.1, 30.0, requires="mass_kg")), choice="point",
+        description="a mass fixed on the frame at one node (all three translations), with the rotary inertia of "
+                    "a steel cube of that mass times inertia_factor (a plate or a bar: more than a cube's)",
         advice="A mass the model lacks sits at the named node (a fixture, a block, cabling): add it to the "
                "model as a lumped mass there, or remove it from the structure."), _added_mass),
     PhysicalCause(CauseSpec(
@@ -513,16 +517,17 @@ class FrameVariants:
             kind, part, place = key[1:]
             k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
-        lumped = [(node, sensor_mass, False) for node in self.sensor_nodes] + list(a.lumped)
+        lumped = [(node, sensor_mass, 0.0) for node in self.sensor_nodes] + list(a.lumped)
         for node, mass, rotary in lumped:
             if mass < 0:
                 raise ModelError(f"a mass of {mass} kg at {node}: masses must be >= 0")
             node = node if node in self._node_set else self.nodes[self.frame.node(node)]  # validates, names
             m[("lump", node)] = m.get(("lump", node), 0.0) + mass
             if rotary:
-                # a compact steel block centred on the node: m a^2 / 6 about each axis, a = (m / rho)^(1/3)
+                # a compact steel block centred on the node: m a^2 / 6 about each axis, a = (m / rho)^(1/3),
+                # times the factor (a plate or a bar of the same mass has more)
                 side = (mass / self.config.material.density_kg_m3) ** (1.0 / 3.0)
-                m[("rot", node)] = m.get(("rot", node), 0.0) + mass * side * side / 6.0
+                m[("rot", node)] = m.get(("rot", node), 0.0) + float(rotary) * mass * side * side / 6.0
         return E, k, m
 
     def _changed(self, k: dict, m: dict) -> tuple[dict, dict]:

@@ -96,7 +96,8 @@ _EDGE = 0.01            # a parameter within 1 % of its (log) range from an edge
 @dataclass(frozen=True)
 class ParamSpec:
     """A continuous parameter: search range ``lo..hi`` (log scale when ``log``), nominal value (the
-    unchanged frame; None: the middle), unit."""
+    unchanged frame; None: the middle), unit; ``requires``: the parameter without which this one changes
+    nothing (a mass's rotary inertia needs the mass): it is freed only together with that one."""
 
     name: str
     lo: float
@@ -104,6 +105,7 @@ class ParamSpec:
     nominal: float | None = 1.0
     unit: str = ""
     log: bool = True
+    requires: str | None = None
 
     def to_x(self, v: float) -> float:
         return float(np.log(v)) if self.log else float(v)
@@ -339,10 +341,13 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
 
 
 def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
+    """The nested variants of a cause: every set of its parameters set free (fewest first), a parameter only
+    with the one it ``requires``."""
     names = [s.name for s in cause.params]
+    needs = {s.name: s.requires for s in cause.params}
     out: list[tuple[str, ...]] = []
     for k in range(1, len(names) + 1):
-        out += list(combinations(names, k))
+        out += [c for c in combinations(names, k) if all(needs[n] is None or needs[n] in c for n in c)]
     return out
 
 
