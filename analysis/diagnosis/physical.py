@@ -366,10 +366,29 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
 
 
 def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float) -> PhysicalFit | None:
-    """The cause's nested variants fitted and cross-validated; the one with the least held-out chi2."""
+    """The cause's nested variants fitted and cross-validated; the one with the least held-out chi2. A variant
+    that frees a refinement (a parameter that ``requires`` another: a mass's rotary inertia) must earn it: it
+    replaces the best variant without refinements only when it predicts the held-out modes ``MIN_GAIN_DB``
+    better and none of its parameters stops at an edge of its range."""
+    plain = _best_of(sim, cause, mm, fmax, [v for v in variants(cause) if not _refines(cause, v)])
+    refined = _best_of(sim, cause, mm, fmax, [v for v in variants(cause) if _refines(cause, v)])
+    if plain is None or (refined is not None and not refined.at_edge
+                         and gain_db(plain.cv_per_mode, refined.cv_per_mode) >= MIN_GAIN_DB):
+        return refined
+    return plain
+
+
+def _refines(cause: CauseSpec, free: Sequence[str]) -> bool:
+    """Does the variant ``free`` set a refinement free (a parameter that ``requires`` another)?"""
+    return any(s.requires is not None for s in cause.params if s.name in free)
+
+
+def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
+             frees: Sequence[tuple[str, ...]]) -> PhysicalFit | None:
+    """Of the variants ``frees``, fitted and cross-validated, the one with the least held-out chi2."""
     allsel = np.ones(mm.freq_hz.size, bool)
     best: PhysicalFit | None = None
-    for free in variants(cause):
+    for free in frees:
         p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
         options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
         starts = {o: q for _, o, q in ranked} if ranked else p
