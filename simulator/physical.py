@@ -23,9 +23,12 @@ The causes are the rows of the registry :data:`CAUSES` (:class:`PhysicalCause`: 
 name                   parameters                                   change
 =====================  ===========================================  =======================================
 ``added_mass``         ``point`` (node ``component:node``),          lumped mass on the node's translations
-                       ``mass_kg``                                  and a steel cube's rotary inertia
-``support_stiffness``  ``factor_translational``, ``factor_rotational``  support springs x factor
-``joint_stiffness``    ``factor_translational``, ``factor_rotational``  column-beam joint springs x factor
+                       ``mass_kg``, ``inertia_factor``              and a rotary inertia about each axis:
+                                                                    a steel cube's of that mass x factor
+``support_stiffness``  ``support`` (``all`` or one support node),   the support's (every support's) springs
+                       ``factor_translational``, ``factor_rotational``  x factor
+``joint_stiffness``    ``joint`` (``all`` or one joint, named by    the joint's (every joint's) column-beam
+                       its pair's first node), factors as above     springs x factor
 ``member_mass``        ``component``, ``factor``                     density (mass) of one member x factor
 ``member_stiffness``   ``component``, ``factor``                     bending stiffness EI of one member x factor
 ``element_stiffness``  ``element`` (``member:e``), ``factor``        bending stiffness EI of one element x factor
@@ -51,12 +54,12 @@ from analysis.diagnosis.physical import CauseSpec, ParamSpec
 from analysis.modal import ModalModel, pole_from_fz
 from analysis.points import parse_point
 
-from .config import FrameConfig, check_fe_memory
+from .config import DamageConfig, FrameConfig, check_fe_memory
 from .fem import FrameModel, ModelError, element_matrices, member_nodes_xyz, section_properties, stamp_spring
 from .ritz import Part, ReducedSpace, RitzReduction
 
 __all__ = ["FrameVariants", "CAUSES", "PhysicalCause", "Assembly", "register_cause", "DIAGNOSIS_BYTES_PER_DOF2",
-           "check_diagnosis_size"]
+           "check_diagnosis_size", "ALL_PLACES", "DAMAGE_CAUSES", "damage_changes"]
 
 
 @dataclass
@@ -68,9 +71,11 @@ class Assembly:
     bending: dict = field(default_factory=dict)                       # member -> EI factor
     element_bending: dict = field(default_factory=dict)               # "member:e" -> EI factor of that element
     mass: dict = field(default_factory=dict)                          # member -> mass factor
-    springs: dict = field(default_factory=dict)                       # (kind, part) -> factor
+    springs: dict = field(default_factory=dict)                       # (kind, part, place) -> factor (place
+                                                                      # None: every support / joint)
     sensor_mass_kg: float | None = None                             # accelerometer mass (None: the config's)
-    lumped: list = field(default_factory=list)                        # [(node, kg, rotary inertia?)]
+    lumped: list = field(default_factory=list)                        # [(node, kg, rotary inertia as a
+                                                                      # multiple of a steel cube's; 0: none)]
 
 
 @dataclass(frozen=True)
@@ -84,13 +89,21 @@ class PhysicalCause:
 
 
 def _added_mass(a: Assembly, p: Mapping) -> None:
-    a.lumped.append((str(p["point"]), float(p["mass_kg"]), True))
+    a.lumped.append((str(p["point"]), float(p["mass_kg"]), float(p.get("inertia_factor", 1.0))))
+
+
+#: The choice of the spring causes: every support / joint at once, or the one named.
+ALL_PLACES = "all"
 
 
 def _springs(kind: str) -> Callable[[Assembly, Mapping], None]:
+    """The springs of one support or joint (``p[kind]``, a node) or of all (``"all"``, or no choice given)."""
     def apply(a: Assembly, p: Mapping) -> None:
+        place = p.get(kind, ALL_PLACES)
+        where = None if place == ALL_PLACES else str(place)
         for part in ("translational", "rotational"):
-            a.springs[(kind, part)] = a.springs.get((kind, part), 1.0) * float(p.get(f"factor_{part}", 1.0))
+            key = (kind, part, where)
+            a.springs[key] = a.springs.get(key, 1.0) * float(p.get(f"factor_{part}", 1.0))
     return apply
 
 
@@ -128,20 +141,25 @@ def register_cause(row: PhysicalCause) -> None:
 
 for _row in (
     PhysicalCause(CauseSpec(
-        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),), choice="point",
-        description="a mass fixed on the frame at one node (all three translations)",
+        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),
+                       ParamSpec("inertia_factor", 0.1, 30.0, requires="mass_kg")), choice="point",
+        description="a mass fixed on the frame at one node (all three translations), with the rotary inertia of "
+                    "a steel cube of that mass times inertia_factor (a plate or a bar: more than a cube's)",
         advice="A mass the model lacks sits at the named node (a fixture, a block, cabling): add it to the "
                "model as a lumped mass there, or remove it from the structure."), _added_mass),
     PhysicalCause(CauseSpec(
         "support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2), ParamSpec("factor_rotational", 1e-3, 1e2)),
-        description="the base supports' springs, translational and rotational, scaled",
-        advice="The supports are softer or stiffer than modelled: check the clamping (bolts' torque, the "
-               "foundation) or update the support springs by the fitted factors."), _springs("support")),
+        choice="support",
+        description="the base supports' springs (all, or the one named), translational and rotational, scaled",
+        advice="The named support (all: every support) is softer or stiffer than modelled: check its clamping "
+               "(bolts' torque, the foundation) or update its springs by the fitted factors."), _springs("support")),
     PhysicalCause(CauseSpec(
         "joint_stiffness", (ParamSpec("factor_translational", 1e-4, 1e2), ParamSpec("factor_rotational", 1e-3, 1e2)),
-        description="the column-beam joints' springs, translational and rotational, scaled",
-        advice="The column-beam joints are softer or stiffer than modelled: check the joints' bolts and "
-               "welds, or update the joint springs by the fitted factors."), _springs("joint")),
+        choice="joint",
+        description="the column-beam joints' springs (all, or the one named by a node of its pair), translational "
+                    "and rotational, scaled",
+        advice="The named column-beam joint (all: every joint) is softer or stiffer than modelled: check its bolts "
+               "and welds, or update its springs by the fitted factors."), _springs("joint")),
     PhysicalCause(CauseSpec(
         "member_mass", (ParamSpec("factor", 0.5, 2.0),), choice="component",
         description="the mass (density or area) of one member scaled",
@@ -170,6 +188,28 @@ for _row in (
                "section's second moments) by the fitted stiffness factor."), _stiffness_shift),
 ):
     register_cause(_row)
+
+
+#: The frame's ``[damage]`` table (:class:`simulator.config.DamageConfig`) in the causes' words: each list of
+#: places -> (its list of factors, the cause that expresses one such damage, the cause's choice that names the
+#: place, the cause's parameters the damage's factor sets). Every kind of damage the simulator can make has a
+#: row (``tests/test_damage_causes.py`` walks the table and the fleet's defect kinds).
+DAMAGE_CAUSES: dict[str, tuple[str, str, str, tuple[str, ...]]] = {
+    "cracked_elements": ("crack_bending_factor", "element_stiffness", "element", ("factor",)),
+    "soft_joints": ("soft_joint_factor", "joint_stiffness", "joint", ("factor_translational", "factor_rotational")),
+    "loose_supports": ("loose_support_factor", "support_stiffness", "support",
+                       ("factor_translational", "factor_rotational")),
+}
+
+
+def damage_changes(damage: DamageConfig) -> list[tuple[str, dict]]:
+    """The damage of a frame's ``[damage]`` table as changes ``[(cause, params)]`` of the causes
+    (:data:`DAMAGE_CAUSES`): one change per damaged place, its factor (-) on the cause's parameters."""
+    out: list[tuple[str, dict]] = []
+    for places_field, (factors_field, cause, choice, params) in DAMAGE_CAUSES.items():
+        for place, factor in zip(getattr(damage, places_field), getattr(damage, factors_field)):
+            out.append((cause, {choice: str(place), **{p: float(factor) for p in params}}))
+    return out
 
 
 #: Candidates' modes kept (:meth:`FrameVariants.modes_of`) before the store is emptied.
@@ -255,16 +295,23 @@ class FrameVariants:
             self._kparts[("bend", name)] = _part(dofs, k_bend)
             self._mparts[("mass", name)] = _part(dofs, m)
         self.elements = tuple(elements)
+        #: the places of the spring causes' choice: each support by its node, each joint by its pair's first node
+        self.places: dict[str, tuple[str, ...]] = {
+            "support": tuple(str(a) for a in cfg.supports.nodes), "joint": tuple(str(a) for a, _ in cfg.joints.pairs)}
+        #: every node that names a place (a joint by either node of its pair) -> the place
+        self._place_of: dict[str, dict[str, str]] = {
+            "support": {a: a for a in self.places["support"]},
+            "joint": {str(x): str(a) for a, b in cfg.joints.pairs for x in (a, b)}}
         for kind, pairs, k6 in (("support", [(a, None) for a in cfg.supports.nodes], cfg.supports.stiffness),
                                 ("joint", list(cfg.joints.pairs), cfg.joints.stiffness)):
             for part, axes in (("translational", slice(0, 3)), ("rotational", slice(3, 6))):
-                K = np.zeros((n, n))
                 k = np.zeros(6)
                 k[axes] = np.asarray(k6, float)[axes]
                 for a, b in pairs:
+                    K = np.zeros((n, n))
                     f = cfg.damage.spring_factor(kind, (a,) if b is None else (a, b))
                     stamp_spring(K, self.frame.node(a), None if b is None else self.frame.node(b), k * f)
-                self._kparts[("spring", kind, part)] = _part(np.arange(n), K)
+                    self._kparts[("spring", kind, part, str(a))] = _part(np.arange(n), K)
         index = self.frame.node_index
         self.nodes = tuple(f"{c}:{i}" for (c, i) in sorted(index, key=lambda k: index[k]))
         sens = cfg.sensors
@@ -293,7 +340,8 @@ class FrameVariants:
     # ------------------------------------------------------------------ protocol of the diagnosis
     def causes(self) -> tuple[CauseSpec, ...]:
         """The physical causes with their choices filled in (every node, member, element)."""
-        options = {"point": self.nodes, "component": self.components, "element": self.elements}
+        options = {"point": self.nodes, "component": self.components, "element": self.elements,
+                   **{kind: (ALL_PLACES, *places) for kind, places in self.places.items()}}
         out = []
         for row in CAUSES.values():
             c = row.spec
@@ -474,19 +522,29 @@ class FrameVariants:
             if ("elem", e) not in self._kparts:
                 raise ModelError(f"element {e!r} is not on the frame; its elements are {', '.join(self.elements)}")
             k[("elem", e)] = a.bending.get(e.partition(":")[0], 1.0) * (float(f) - 1.0)
+        local: dict[tuple, float] = {}
+        for (kind, part, where), f in a.springs.items():
+            if where is not None:
+                place = self._place_of[kind].get(where)
+                if place is None:
+                    raise ModelError(f"{where!r} is not a {kind} of the frame; its {kind}s are "
+                                     f"{', '.join(self.places[kind])} (or {ALL_PLACES!r})")
+                local[(kind, part, place)] = local.get((kind, part, place), 1.0) * float(f)
         for key in (key for key in self._kparts if key[0] == "spring"):
-            k[key] = a.springs.get(key[1:], 1.0) / E
+            kind, part, place = key[1:]
+            k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
-        lumped = [(node, sensor_mass, False) for node in self.sensor_nodes] + list(a.lumped)
+        lumped = [(node, sensor_mass, 0.0) for node in self.sensor_nodes] + list(a.lumped)
         for node, mass, rotary in lumped:
             if mass < 0:
                 raise ModelError(f"a mass of {mass} kg at {node}: masses must be >= 0")
             node = node if node in self._node_set else self.nodes[self.frame.node(node)]  # validates, names
             m[("lump", node)] = m.get(("lump", node), 0.0) + mass
             if rotary:
-                # a compact steel block centred on the node: m a^2 / 6 about each axis, a = (m / rho)^(1/3)
+                # a compact steel block centred on the node: m a^2 / 6 about each axis, a = (m / rho)^(1/3),
+                # times the factor (a plate or a bar of the same mass has more)
                 side = (mass / self.config.material.density_kg_m3) ** (1.0 / 3.0)
-                m[("rot", node)] = m.get(("rot", node), 0.0) + mass * side * side / 6.0
+                m[("rot", node)] = m.get(("rot", node), 0.0) + float(rotary) * mass * side * side / 6.0
         return E, k, m
 
     def _changed(self, k: dict, m: dict) -> tuple[dict, dict]:

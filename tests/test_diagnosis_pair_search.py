@@ -27,13 +27,13 @@ def _specs(fv: FrameVariants) -> dict:
 
 
 def _supports(rot: float) -> dict:
-    return {"factor_translational": 1.0, "factor_rotational": rot}
+    return {"support": "all", "factor_translational": 1.0, "factor_rotational": rot}
 
 
 def test_a_pairs_choice_is_made_again_where_both_causes_are_refined() -> None:
     """A 1.2 kg mass at top:3 with the supports x 0.28: a pair refined with the mass at top:5 (the node
     chosen beside the supports' rougher single fit) is searched again with the refined supports applied and
-    gives both back; the options searched are kept for the choice (none for the supports)."""
+    gives both back; the options searched are kept for each choice (the supports: all of them first)."""
     fv = FrameVariants(None, OUTS, REFS)
     specs = _specs(fv)
     mm = _noise_free_modes(fv, [("added_mass", {"point": "top:3", "mass_kg": 1.2}),
@@ -48,7 +48,8 @@ def test_a_pairs_choice_is_made_again_where_both_causes_are_refined() -> None:
     assert again.params[1]["mass_kg"] == pytest.approx(1.2, rel=1e-3)
     assert again.params[0]["factor_rotational"] == pytest.approx(0.28, rel=1e-3)
     assert again.chi2 < 1e-3 < wrong.chi2
-    assert again.ranked[0] == [] and again.ranked[1][0][1] == "top:3"
+    assert again.params[0]["support"] == "all"
+    assert again.ranked[0][0][1] == "all" and again.ranked[1][0][1] == "top:3"
 
 
 def test_a_first_cause_that_absorbed_the_second_finds_its_option_when_held_open() -> None:

@@ -130,10 +130,11 @@ def _noise_free_modes(fv: FrameVariants, changes: list) -> MeasuredModes:
 
 
 def test_two_noise_free_causes_are_found_together() -> None:
-    """A crack and a softer support at once: the pair of the forward selection, refined together, gives
-    both back (choices searched, nested leave-one-mode-out error near zero)."""
+    """A crack and softer supports at once: the pair of the forward selection, refined together with its
+    choices searched again there (:func:`rechoose`: beside the first, rougher crack the supports' fit
+    prefers one support), gives both back (nested leave-one-mode-out error near zero)."""
     from analysis.diagnosis.physical import PhysicalFit
-    from analysis.diagnosis.physical_pairs import OnTop, fit_pair
+    from analysis.diagnosis.physical_pairs import OnTop, fit_pair, rechoose
 
     fv = FrameVariants(None, OUTS, REFS)
     mm = _noise_free_modes(fv, [("element_stiffness", {"element": "left:2", "factor": 0.3}),
@@ -144,10 +145,11 @@ def test_two_noise_free_causes_are_found_together() -> None:
     top = OnTop(fv, [("element_stiffness", pa)])
     pb, cb, _ = fit_cause(top, specs["support_stiffness"], ("factor_rotational",), mm, allsel, 700.0)
     assert cb < ca
-    pair = fit_pair(fv, [specs["element_stiffness"], specs["support_stiffness"]],
-                    [PhysicalFit("element_stiffness", pa, ("factor",), ca),
-                     PhysicalFit("support_stiffness", pb, ("factor_rotational",), cb)], mm, 700.0)
-    assert pair.params[0]["element"] == "left:2"
+    pair_specs = [specs["element_stiffness"], specs["support_stiffness"]]
+    fits = [PhysicalFit("element_stiffness", pa, ("factor",), ca),
+            PhysicalFit("support_stiffness", pb, ("factor_rotational",), cb)]
+    pair = rechoose(fv, pair_specs, fits, fit_pair(fv, pair_specs, fits, mm, 700.0), mm, 700.0)
+    assert pair.params[0]["element"] == "left:2" and pair.params[1]["support"] == "all"
     assert pair.params[0]["factor"] == pytest.approx(0.3, rel=1e-3)
     assert pair.params[1]["factor_rotational"] == pytest.approx(0.3, rel=1e-3)
     assert pair.chi2_cv < 1e-3
@@ -156,9 +158,10 @@ def test_two_noise_free_causes_are_found_together() -> None:
 def test_a_mass_placed_wrong_beside_a_second_change_finds_its_node() -> None:
     """Noise-free modes of a 2 kg mass at top:6 with the supports' rotational springs x 0.3. A first fit of
     the mass put at top:4 (as a single-cause fit pulled aside by the supports may): with the supports'
-    change applied, the mass is searched over every node again and the pair gives both back."""
+    change applied, the mass is searched over every node again and the pair, its choices made again where
+    both are refined (:func:`rechoose`), gives both back."""
     from analysis.diagnosis.physical import PhysicalFit
-    from analysis.diagnosis.physical_pairs import OnTop, fit_pair, refit_on_top
+    from analysis.diagnosis.physical_pairs import OnTop, fit_pair, rechoose, refit_on_top
 
     fv = FrameVariants(None, OUTS, REFS)
     mm = _noise_free_modes(fv, [("added_mass", {"point": "top:6", "mass_kg": 2.0}),
@@ -171,13 +174,15 @@ def test_a_mass_placed_wrong_beside_a_second_change_finds_its_node() -> None:
     second = PhysicalFit("support_stiffness", pb, ("factor_rotational",), cb)
     again = refit_on_top(fv, specs["added_mass"], wrong, second, mm, 700.0)
     assert again.params["point"] == "top:6" and again.ranked[0][1] == "top:6"
-    pair = fit_pair(fv, [specs["added_mass"], specs["support_stiffness"]], [again, second], mm, 700.0)
-    assert pair.params[0]["point"] == "top:6"
+    pair_specs = [specs["added_mass"], specs["support_stiffness"]]
+    pair = rechoose(fv, pair_specs, [again, second], fit_pair(fv, pair_specs, [again, second], mm, 700.0), mm, 700.0)
+    assert pair.params[0]["point"] == "top:6" and pair.params[1]["support"] == "all"
     assert pair.params[0]["mass_kg"] == pytest.approx(2.0, rel=1e-3)
     assert pair.params[1]["factor_rotational"] == pytest.approx(0.3, rel=1e-3)
     assert pair.chi2_cv < 1e-3
     # a cause without a choice is left to the pair's refinement
-    assert refit_on_top(fv, specs["support_stiffness"], second, again, mm, 700.0) is second
+    shift = PhysicalFit("stiffness_shift", {"stiffness_factor": 1.0}, ("stiffness_factor",), np.inf)
+    assert refit_on_top(fv, specs["stiffness_shift"], shift, again, mm, 700.0) is shift
 
 
 def test_modes_of_another_structure_do_not_pair() -> None:

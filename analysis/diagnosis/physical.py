@@ -24,7 +24,9 @@ resolve (a close pair merged, a spurious peak) counts as one large error; ``chi2
 
 Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
 cause's search range); a choice (the node of an added mass, the member of a member change) by trying
-every option on a coarse grid of its parameter, the ``N_SCREEN`` best refined. A cause with two
+every option on a coarse grid of its parameter, the ``N_SCREEN`` best refined; a choice of at most
+``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option gets the full
+search of its parameters (from the nominal and from the best point of a grid), with its own model. A cause with two
 parameters is also fitted with each alone (the other at its nominal value): nested models, the one
 that predicts best (leave one mode out) wins.
 
@@ -94,7 +96,8 @@ _EDGE = 0.01            # a parameter within 1 % of its (log) range from an edge
 @dataclass(frozen=True)
 class ParamSpec:
     """A continuous parameter: search range ``lo..hi`` (log scale when ``log``), nominal value (the
-    unchanged frame; None: the middle), unit."""
+    unchanged frame; None: the middle), unit; ``requires``: the parameter without which this one changes
+    nothing (a mass's rotary inertia needs the mass): it is freed only together with that one."""
 
     name: str
     lo: float
@@ -102,6 +105,7 @@ class ParamSpec:
     nominal: float | None = 1.0
     unit: str = ""
     log: bool = True
+    requires: str | None = None
 
     def to_x(self, v: float) -> float:
         return float(np.log(v)) if self.log else float(v)
@@ -128,7 +132,8 @@ class ParamSpec:
 @dataclass(frozen=True)
 class CauseSpec:
     """A physical cause: its continuous parameters and, optionally, a choice (``"point"``: a node,
-    ``"component"``: a member, ``"element"``: an element ``member:e``) among ``options``; what it
+    ``"component"``: a member, ``"element"``: an element ``member:e``, ``"support"`` / ``"joint"``: one
+    support or joint, or ``"all"``) among ``options``; what it
     is (``description``) and what to do when it is named (``advice``)."""
 
     name: str
@@ -305,18 +310,25 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
               sel: np.ndarray, fmax: float, options: Sequence[str] | None = None,
               start: dict | None = None) -> tuple[dict, float, list]:
     """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
-    With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted.
+    With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted (at most
+    ``N_SCREEN`` options: each fitted in full, no screen).
     Returns (params, chi2, [(chi2, option, params)] of the fitted options, sorted)."""
     specs = [s for s in cause.params if s.name in free]
     fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
     if cause.choice is None:
         p, c = _fit_continuous(sim, cause, specs, fixed, mm, sel, fmax, start)
         return p, c, []
+    todo = options if options is not None else cause.options
+    screened: list[tuple[float, str, dict | None]]
     if isinstance(start, dict) and options is not None and set(options) <= set(start):
         # the options' own fits as starts (a fold of the cross-validation): no coarse screen again
         screened = [(0.0, opt, start[opt]) for opt in options]
+    elif len(todo) <= N_SCREEN:
+        # few options (a support, a joint, all of them): each gets the full search of its own parameters,
+        # no screen to drop one whose exact fit could still win
+        screened = [(0.0, opt, None) for opt in todo]
     else:
-        screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, options if options is not None else cause.options)
+        screened = list(_screen(sim, cause, specs, fixed, mm, sel, fmax, todo))
     ranked = []
     best: tuple[dict, float] = ({}, np.inf)
     for _, opt, p0 in screened[:N_SCREEN]:
@@ -329,10 +341,13 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
 
 
 def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
+    """The nested variants of a cause: every set of its parameters set free (fewest first), a parameter only
+    with the one it ``requires``."""
     names = [s.name for s in cause.params]
+    needs = {s.name: s.requires for s in cause.params}
     out: list[tuple[str, ...]] = []
     for k in range(1, len(names) + 1):
-        out += list(combinations(names, k))
+        out += [c for c in combinations(names, k) if all(needs[n] is None or needs[n] in c for n in c)]
     return out
 
 
@@ -351,10 +366,29 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
 
 
 def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float) -> PhysicalFit | None:
-    """The cause's nested variants fitted and cross-validated; the one with the least held-out chi2."""
+    """The cause's nested variants fitted and cross-validated; the one with the least held-out chi2. A variant
+    that frees a refinement (a parameter that ``requires`` another: a mass's rotary inertia) must earn it: it
+    replaces the best variant without refinements only when it predicts the held-out modes ``MIN_GAIN_DB``
+    better and none of its parameters stops at an edge of its range."""
+    plain = _best_of(sim, cause, mm, fmax, [v for v in variants(cause) if not _refines(cause, v)])
+    refined = _best_of(sim, cause, mm, fmax, [v for v in variants(cause) if _refines(cause, v)])
+    if plain is None or (refined is not None and not refined.at_edge
+                         and gain_db(plain.cv_per_mode, refined.cv_per_mode) >= MIN_GAIN_DB):
+        return refined
+    return plain
+
+
+def _refines(cause: CauseSpec, free: Sequence[str]) -> bool:
+    """Does the variant ``free`` set a refinement free (a parameter that ``requires`` another)?"""
+    return any(s.requires is not None for s in cause.params if s.name in free)
+
+
+def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
+             frees: Sequence[tuple[str, ...]]) -> PhysicalFit | None:
+    """Of the variants ``frees``, fitted and cross-validated, the one with the least held-out chi2."""
     allsel = np.ones(mm.freq_hz.size, bool)
     best: PhysicalFit | None = None
-    for free in variants(cause):
+    for free in frees:
         p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
         options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
         starts = {o: q for _, o, q in ranked} if ranked else p

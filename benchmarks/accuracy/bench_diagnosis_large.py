@@ -189,7 +189,9 @@ def _param_ok(truth: dict, p: dict) -> bool:
         dist = float(np.linalg.norm(_node_xyz(p["point"]) - _node_xyz(truth["point"])))
         return dist <= 1.01 * elem and abs(p["mass_kg"] / truth["mass_kg"] - 1) <= 0.25
     if cause in ("support_stiffness", "joint_stiffness"):
-        return abs(p["factor_rotational"] / truth["factor_rotational"] - 1) <= 0.10
+        # every support (joint) was changed: the place named must be all of them
+        place = p.get("support" if cause == "support_stiffness" else "joint", "all")
+        return place == "all" and abs(p["factor_rotational"] / truth["factor_rotational"] - 1) <= 0.10
     if cause == "member_stiffness":
         return p["component"] == truth["component"] and abs(p["factor"] / truth["factor"] - 1) <= 0.10
     if cause == "mass_loading":

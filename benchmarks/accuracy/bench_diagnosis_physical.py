@@ -244,7 +244,9 @@ def score(truth: dict, verdict: str, p: dict) -> dict:
         dist = float(np.linalg.norm(_node_xyz(p["point"]) - _node_xyz(truth["point"])))
         ok = dist <= 1.01 * elem and abs(p["mass_kg"] / truth["mass_kg"] - 1) <= 0.25
     elif cause in ("support_stiffness", "joint_stiffness"):
-        ok = abs(p["factor_rotational"] / truth["factor_rotational"] - 1) <= 0.10
+        # every support (joint) was changed: the place named must be all of them
+        place = p.get("support" if cause == "support_stiffness" else "joint", "all")
+        ok = place == "all" and abs(p["factor_rotational"] / truth["factor_rotational"] - 1) <= 0.10
     elif cause in ("member_mass", "member_stiffness"):
         ok = p["component"] == truth["component"] and abs(p["factor"] / truth["factor"] - 1) <= 0.10
     elif cause == "mass_loading":
