@@ -605,16 +605,31 @@ def int16_rest_change(data: np.ndarray, counts: np.ndarray, eu_per_count: np.nda
     d = np.asarray(data, float)
     out = np.zeros(d.shape[0])
     for c in range(d.shape[0]):
-        rest = np.abs(d[c]) < INT16_REST_FRACTION * np.max(np.abs(d[c]))
-        level = float(np.sqrt(np.mean(d[c, rest] ** 2))) if np.any(rest) else 0.0
-        if level > 0:
-            err = counts[c, rest] * eu_per_count[c] - d[c, rest]
-            out[c] = float(np.sqrt(np.mean(err ** 2))) / level
+        ax = np.abs(d[c])
+        rest = ax < INT16_REST_FRACTION * np.max(ax)
+        scale = float(np.max(ax[rest])) if np.any(rest) else 0.0
+        if scale > 0:  # the rounding error never exceeds the sample: both ratios stay <= 1 (no overflow)
+            err = (counts[c, rest] * eu_per_count[c] - d[c, rest]) / scale
+            out[c] = float(np.sqrt(np.mean(err ** 2) / np.mean((d[c, rest] / scale) ** 2)))
     return out
 
 
-def _require_int16_keeps(test: ImportedTest, k: int, data: np.ndarray, counts: np.ndarray, eu: np.ndarray) -> None:
-    """Refuse hit ``k`` when its 16-bit counts would lose part of a channel (:func:`int16_rest_change`)."""
+#: the smallest channel peak :func:`quantize` scales (a smaller one would need a subnormal step)
+INT16_MIN_PEAK = float(np.finfo(float).tiny) * 32767.0
+#: the largest channel peak :func:`quantize` scales (counts * step must stay a finite float)
+INT16_MAX_PEAK = float(np.finfo(float).max) / 2
+
+
+def _quantized(test: ImportedTest, k: int, data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`quantize` of hit ``k``, refused (:class:`ImportDataError` naming the hit, channel and
+    sample) when the 16-bit counts would not keep a channel: its peak too small or too large to
+    scale, or part of it lost beside a far larger sample (:func:`int16_rest_change`)."""
+    peaks = np.max(np.abs(data), axis=1)
+    for c in np.flatnonzero(((peaks > 0) & (peaks < INT16_MIN_PEAK)) | (peaks > INT16_MAX_PEAK)):
+        raise ImportDataError(f"{test.source}: hit {k + 1}, channel {c + 1} ({test.channels[c].get('name', '')}): "
+                              f"its largest sample is {peaks[c]:.3g}, outside what 16-bit samples can be scaled to "
+                              f"({INT16_MIN_PEAK:.3g} to {INT16_MAX_PEAK:.3g}); check the units of the file")
+    counts, eu = quantize(data)
     change = int16_rest_change(data, counts, eu)
     for c in np.flatnonzero(change > INT16_MAX_REST_CHANGE):
         x = np.abs(data[c])
@@ -626,6 +641,7 @@ def _require_int16_keeps(test: ImportedTest, k: int, data: np.ndarray, counts: n
             f"{int(np.sum(rest))} of its {x.size} samples stay within +-{np.max(x[rest]):.3g}; the recording's "
             f"16-bit samples scaled to that peak (step {eu[c]:.3g}) would change those by {change[c]:.0%} rms: "
             "remove the glitch from the file (or cut the block short of it) and import again")
+    return counts, eu
 
 
 def detect_trigger(force: np.ndarray, level: float = 0.1) -> int:
@@ -838,8 +854,7 @@ def imported_hits(test: ImportedTest, roles: ChannelRoles) -> list[Hit]:
     hits = []
     for k, data in enumerate(test.hits):
         trig = test.trigger_indices[k] if k < len(test.trigger_indices) else detect_trigger(data[fch])
-        counts, eu = quantize(data)
-        _require_int16_keeps(test, k, data, counts, eu)
+        counts, eu = _quantized(test, k, data)
         hits.append(Hit(counts=counts, eu_per_count=eu, volts_per_count=eu * sens * 1e-3, sample_rate_hz=test.fs_hz,
                         trigger_index=trig, force_channel=fch, response_channels=rch, point=ref, reference=ref,
                         outputs=outs, measurement=0, channel_names=names, timestamp=time.time(), sequence=k))

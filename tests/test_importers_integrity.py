@@ -334,3 +334,16 @@ def test_cli_refuses_a_glitch_in_one_line_and_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "channel 2 (ch2): sample 201 is 1e+04" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("peak", [1.7976931348623157e308, 5e-324])
+def test_a_peak_16_bit_steps_cannot_scale_is_refused(tmp_path, peak):
+    """Found by fuzzing: the largest float overflowed the stored samples to inf, a subnormal one
+    divided by a zero step."""
+    test = glitch_test(0.1)
+    test.hits[0][1] = 0.0
+    test.hits[0][1][3] = peak
+    out = tmp_path / "rec.h5"
+    with pytest.raises(ImportDataError, match=r"glitch\.lvm: hit 1, channel 2 \(acc\): its largest sample is .*units"):
+        write_imported(test, out)
+    assert not out.exists()
