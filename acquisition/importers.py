@@ -407,6 +407,8 @@ def _read_lvm(path: str | Path) -> ImportedTest:
         hits.append(_lvm_in_first_order(p, k, seg, first))
     test = ImportedTest(1.0 / dx, channels, hits, [], str(p), {"format": "lvm", "segments": len(hits)})
     return test
+
+
 def read_dataphysics_mat(path: str | Path, windowed: bool = False) -> ImportedTest:
     """Read a DataPhysics SignalCalc ``.mat`` export: ``Xk`` (or ``Wk`` with ``windowed``) blocks
     of two columns (time s, value). Raises :class:`ImportDataError` for anything else."""
@@ -456,9 +458,9 @@ def _real_values(p: Path, what: str, value: Any) -> np.ndarray:
     if np.iscomplexobj(a):
         imag = np.abs(np.imag(a))
         if np.any(imag != 0):
-            raise ImportDataError(f"{p}: {what} holds complex values (imaginary part up to {np.max(imag[imag != 0]):.3g}); "
-                                  "measured time data and sensitivities are real: export the time signals "
-                                  "(not spectra) again")
+            worst = float(np.max(imag[imag != 0]))
+            raise ImportDataError(f"{p}: {what} holds complex values (imaginary part up to {worst:.3g}); measured "
+                                  "time data and sensitivities are real: export the time signals (not spectra) again")
         a = np.real(a)
     return np.asarray(a, float)
 

@@ -195,7 +195,8 @@ def _block(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
 
 @FUZZ
 @given(kinds=st.lists(ARRAYS, min_size=1, max_size=3), n=st.integers(1, 12), windowed=st.booleans(),
-       sens=st.sampled_from([None, "short", "ok", "str", "inf", "zero", "complex"]), unit=st.sampled_from([None, "ok", "num", "long"]),
+       sens=st.sampled_from([None, "short", "ok", "str", "inf", "zero", "complex"]),
+       unit=st.sampled_from([None, "ok", "num", "long"]),
        gap=st.booleans())
 def test_mat_files_with_odd_blocks(kinds, n, windowed, sens, unit, gap):
     rng = np.random.default_rng(n)
