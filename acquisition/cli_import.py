@@ -7,6 +7,11 @@
 Formats (by extension unless ``--format``): LabVIEW ``.lvm`` (segments = hits), DataPhysics
 ``.mat`` (``X1..Xn`` blocks, or the analyser-windowed ``W1..Wn`` with ``--windowed``), numpy
 ``.npy`` (one file per hit, needs ``--describe``). Channel numbers are 1-based.
+
+The recording holds the file's numbers or is not written: what cannot be stored as read (complex
+values, an infinite sensitivity, hits sampled or ordered differently, a glitch 16-bit samples
+cannot hold beside the rest of its channel) is refused with one line naming the file and the field
+(exit 2). ``.lvm`` columns are matched by heading and SEP005 channels by name in every hit.
 """
 from __future__ import annotations
 
