@@ -13,6 +13,11 @@ Analyser FRF exports (H1 and coherence, :data:`acquisition.frf_importers.FRF_FOR
 format): ``--format signalcalc-frf|testlab-frf`` or detected from a ``.mat`` file's variables;
 ``--variables`` picks FRFs, ``--points MAP.csv`` labels a roving test's files
 (``docs/recording-format.md``, "Importing analyser FRF exports").
+
+The recording holds the file's numbers or is not written: what cannot be stored as read (complex
+values, an infinite sensitivity, hits sampled or ordered differently, a glitch 16-bit samples
+cannot hold beside the rest of its channel) is refused with one line naming the file and the field
+(exit 2). ``.lvm`` columns are matched by heading and SEP005 channels by name in every hit.
 """
 from __future__ import annotations
 

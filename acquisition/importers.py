@@ -9,12 +9,14 @@ by the same code path as a capture.
 Formats
 -------
 * LabVIEW ``.lvm`` text (:func:`read_lvm`): header keys ``Separator``, ``Decimal_Separator``
-  (``,`` or ``.``), each segment (= one hit) with its own channel header (``Channels``,
-  ``Samples``, ``Y_Unit_Label``, ``Delta_X``) and a data table whose first column is the
-  X value (possibly empty) and a trailing ``Comment`` column.
+  (``,`` or ``.``; not both a comma), each segment (= one hit) with its own channel header
+  (``Channels``, ``Samples``, ``Y_Unit_Label``, ``Delta_X``) and a data table whose first column is
+  the X value (possibly empty) and a trailing ``Comment`` column. Every segment must share the first
+  one's ``Delta_X`` and column headings; columns in another order are matched by heading.
 * DataPhysics SignalCalc ``.mat`` exports (:func:`read_dataphysics_mat`): ``X1..Xn`` raw blocks
   ``[t, value]`` (``t < 0`` is the pre-trigger), ``W1..Wn`` the analyser-windowed blocks,
   ``Sensitivity`` (mV/EU), ``Unit``.
+* SEP005 JSON (:func:`read_sep005_test`): one ``group`` per hit, channels matched by name.
 * numpy arrays (:func:`read_numpy`): ``.npy`` files, one per hit, shaped ``(n_ch, n)`` or
   ``(n, n_ch)``, with a description (JSON or TOML, :func:`load_description`)::
 
@@ -27,9 +29,15 @@ Formats
       name = "acc"; quantity = "acceleration"; unit = "m/s^2"; point = "n:2:Z"
 
 Quantisation: each hit and channel gets ``eu_per_count = max|x| / 32767`` (a full-scale range
-fitted to the hit); the relative quantisation error is below 2e-5 of the peak, far under the
-noise of any hammer test. ``volts_per_count = eu_per_count * sensitivity`` when the sensitivity
-is known (NaN otherwise).
+fitted to the hit); the quantisation error is below 2e-5 of the peak, far under the noise of any
+hammer test. A hit where that is not so (one glitch far above the rest of a channel, which the
+counts would turn into zeros) is refused (:func:`int16_rest_change`). ``volts_per_count =
+eu_per_count * sensitivity`` when the sensitivity is known (NaN otherwise; infinite or zero
+sensitivities are refused).
+
+Nothing is stored altered: what cannot be read as the file holds it (complex time values,
+channels that change order or sampling between hits, two different records for one channel) is
+refused with :class:`ImportDataError` naming the file, the field and what to do.
 """
 from __future__ import annotations
 
@@ -167,6 +175,12 @@ def _checked(test: ImportedTest) -> ImportedTest:
             raise ImportDataError(f"{test.source}: hit {k + 1} has shape {h.shape}; expected ({n_ch} channels, "
                                   f">= 2 samples), the same for every hit")
     _require_finite_hits(test)
+    for k, c in enumerate(test.channels):
+        s = c.get("sensitivity", math.nan) if isinstance(c, dict) else math.nan
+        if not (isinstance(s, (int, float)) and (math.isnan(s) or (math.isfinite(s) and s != 0))):
+            raise ImportDataError(f"{test.source}: channel {k + 1} ({c.get('name', '')}): the Sensitivity {s!r} "
+                                  "(mV/EU) is not a finite nonzero number; correct it in the file or the description "
+                                  "(or leave it out: unknown)")
     return test
 
 
@@ -240,6 +254,95 @@ def read_lvm(path: str | Path) -> ImportedTest:
                    "export it again from LabVIEW (Write To Measurement File)")
 
 
+#: LabVIEW's names of the field separators (header key ``Separator``)
+LVM_SEPARATORS = {"Tab": "\t", "Comma": ",", "Semicolon": ";", "Space": " "}
+
+
+def _lvm_header_entry(line: str) -> tuple[str, str]:
+    """(key, value) of an .lvm file-header line: the key ends at the first tab, comma, semicolon or
+    space (LabVIEW writes the header with the file's own separator)."""
+    m = re.match(r"([^\t,; ]*)[\t,; ]?(.*)", line)
+    return (m.group(1), m.group(2)) if m else ("", "")
+
+
+def _lvm_row(header: dict[str, list[str]], key: str, n_ch: int) -> list[str] | None:
+    """The ``n_ch`` cells of a segment-header row (stripped, missing cells empty), None without the row."""
+    if key not in header:
+        return None
+    cells = [c.strip() for c in header[key][:n_ch]]
+    return cells + [""] * (n_ch - len(cells))
+
+
+@dataclass
+class _LvmSegment:
+    """One .lvm segment as read: its header rows, column headings and data ``(n_ch, n)``."""
+
+    header: dict[str, list[str]]
+    headings: list[str]
+    data: np.ndarray
+
+
+def _lvm_delta_x(p: Path, k: int, seg: _LvmSegment, decimal: str) -> float:
+    """The sample interval (s) of segment ``k`` (1-based): its channels' ``Delta_X``, which must agree."""
+    cells = _lvm_row(seg.header, "Delta_X", seg.data.shape[0]) or []
+    values = [_num(c, decimal) for c in cells if c]
+    if not values:
+        raise ImportDataError(f"{p}: segment {k} has no Delta_X (sample interval) in its header; export it again "
+                              "from LabVIEW")
+    if any(not math.isclose(v, values[0], rel_tol=1e-9) for v in values):
+        raise ImportDataError(f"{p}: segment {k} gives its channels different Delta_X ({', '.join(cells)} s); one "
+                              "hit has one sample rate: save the channels at one rate, or import them separately")
+    return values[0]
+
+
+def _lvm_in_first_order(p: Path, k: int, seg: _LvmSegment, first: _LvmSegment) -> np.ndarray:
+    """Segment ``k``'s data with its columns in the order of segment 1, matched by heading; its
+    ``Y_Unit_Label`` must then be segment 1's. Raises :class:`ImportDataError` when the segments
+    hold other channels."""
+    n_ch = first.data.shape[0]
+    heads, first_heads = seg.headings, first.headings
+    if heads == first_heads:
+        order = list(range(n_ch))
+    elif sorted(heads) == sorted(first_heads) and len(set(first_heads)) == n_ch:
+        order = [heads.index(h) for h in first_heads]
+    else:
+        raise ImportDataError(f"{p}: segment {k} holds the columns {heads}, segment 1 {first_heads}; every segment "
+                              "must hold the same channels: import the segments separately")
+    units, first_units = _lvm_row(seg.header, "Y_Unit_Label", n_ch), _lvm_row(first.header, "Y_Unit_Label", n_ch)
+    if units is not None and first_units is not None and [units[i] for i in order] != first_units:
+        raise ImportDataError(f"{p}: segment {k} gives the columns {first_heads} the Y_Unit_Label "
+                              f"{[units[i] for i in order]}, segment 1 {first_units}; a channel keeps its unit in "
+                              "every segment: correct the labels, or import the segments separately")
+    return seg.data[order]
+
+
+def _lvm_file_header(p: Path, lines: list[str]) -> tuple[str, str, int]:
+    """(field separator, decimal mark, index of the first line after it) from the file header of an
+    .lvm; refuses a separator LabVIEW does not write and one that is also the decimal mark."""
+    sep_name, decimal = "Tab", "."
+    i = 0
+    while i < len(lines) and not lines[i].startswith("***End_of_Header***"):
+        key, val = _lvm_header_entry(lines[i])
+        if key == "Separator":
+            sep_name = val.strip(" \t,;")
+            if sep_name not in LVM_SEPARATORS:
+                raise ImportDataError(f"{p}: Separator {sep_name!r} is not one LabVIEW writes "
+                                      f"({', '.join(LVM_SEPARATORS)}); correct the header line")
+        elif key == "Decimal_Separator":
+            decimal = val.strip(" \t")[:1] or "."
+        elif key == "X_Columns" and val.strip(" \t,;") == "Multi":
+            raise ImportDataError(f"{p}: X_Columns = Multi (one time column per channel) is not supported; "
+                                  "save the file from LabVIEW with X_Columns One or No")
+        i += 1
+    sep = LVM_SEPARATORS[sep_name]
+    if decimal == sep:
+        raise ImportDataError(f"{p}: Separator is {sep_name} and Decimal_Separator is {decimal!r}: a number's "
+                              "decimal mark cannot be told from the field separator; save the file again from "
+                              "LabVIEW with another Separator (Tab) or the decimal point")
+    i += 1
+    return sep, decimal, i
+
+
 def _read_lvm(path: str | Path) -> ImportedTest:
     p = Path(path)
     try:
@@ -248,20 +351,8 @@ def _read_lvm(path: str | Path) -> ImportedTest:
         raise ImportDataError(f"cannot read {p}: {exc.strerror}") from None
     if not lines or not lines[0].startswith("LabVIEW Measurement"):
         raise ImportDataError(f"{p} is not a LabVIEW .lvm file (first line should be 'LabVIEW Measurement')")
-    sep, decimal = "\t", "."
-    i = 0
-    while i < len(lines) and not lines[i].startswith("***End_of_Header***"):
-        key, _, val = lines[i].partition("\t")
-        if key == "Separator":
-            sep = {"Tab": "\t", "Comma": ",", "Semicolon": ";", "Space": " "}.get(val.strip(), "\t")
-        elif key == "Decimal_Separator":
-            decimal = val.strip() or "."
-        elif key == "X_Columns" and val.strip() == "Multi":
-            raise ImportDataError(f"{p}: X_Columns = Multi (one time column per channel) is not supported; "
-                                  "save the file from LabVIEW with X_Columns One or No")
-        i += 1
-    i += 1
-    segments: list[tuple[dict, np.ndarray]] = []
+    sep, decimal, i = _lvm_file_header(p, lines)
+    segments: list[_LvmSegment] = []
     while i < len(lines):
         while i < len(lines) and not lines[i].startswith("Channels"):
             i += 1
@@ -275,8 +366,10 @@ def _read_lvm(path: str | Path) -> ImportedTest:
         i += 1  # end of header
         if i >= len(lines) or not lines[i].startswith("X_Value"):
             raise ImportDataError(f"{p}: segment {len(segments) + 1} has no 'X_Value' column line after its header")
-        i += 1
         n_ch = int(header["Channels"][0])
+        headings = [h.strip() for h in lines[i].split(sep)[1:1 + n_ch]]
+        headings += [""] * (n_ch - len(headings))
+        i += 1
         rows = []
         while i < len(lines) and lines[i].strip() and not lines[i].startswith(("Channels", "***")):
             cells = lines[i].split(sep)
@@ -286,27 +379,33 @@ def _read_lvm(path: str | Path) -> ImportedTest:
                 raise ImportDataError(f"{p}: line {i + 1} is not numeric: {lines[i][:60]!r}") from None
             i += 1
         data = np.asarray(rows, dtype=float).T
+        k = len(segments) + 1
         if data.shape[0] != n_ch:
-            raise ImportDataError(f"{p}: segment {len(segments) + 1} has {data.shape[0]} data columns, header says {n_ch}")
-        segments.append((header, data))
+            raise ImportDataError(f"{p}: segment {k} has {data.shape[0]} data columns, header says {n_ch}")
+        declared = {c for c in (_lvm_row(header, "Samples", n_ch) or []) if c}
+        if declared and declared != {str(data.shape[1])}:
+            raise ImportDataError(f"{p}: segment {k} holds {data.shape[1]} rows but its header says Samples "
+                                  f"{', '.join(sorted(declared))}: the file is cut short or damaged; export it again")
+        segments.append(_LvmSegment(header, headings, data))
     if not segments:
         raise ImportDataError(f"{p}: no data segment found")
-    h0 = segments[0][0]
-    try:
-        dx = _num(h0["Delta_X"][0], decimal)
-    except (KeyError, IndexError, ValueError):
-        raise ImportDataError(f"{p}: the segment header has no Delta_X (sample interval)") from None
-    labels = [u for u in h0.get("Y_Unit_Label", [])][: segments[0][1].shape[0]]
+    first = segments[0]
+    dx = _lvm_delta_x(p, 1, first, decimal)
+    labels = _lvm_row(first.header, "Y_Unit_Label", first.data.shape[0]) or []
     channels = []
-    for k in range(segments[0][1].shape[0]):
+    for k in range(first.data.shape[0]):
         q, unit = _unit_info(labels[k] if k < len(labels) else "")
         channels.append({"name": f"ch{k + 1}", "quantity": q, "unit": unit, "sensitivity": math.nan,
                          "point": f"n:{k + 1}:Z"})
-    hits = []
-    for k, (_, d) in enumerate(segments):
-        if d.shape != segments[0][1].shape:
-            raise ImportDataError(f"{p}: segment {k + 1} has shape {d.shape}, segment 1 {segments[0][1].shape}")
-        hits.append(d)
+    hits = [first.data]
+    for k, seg in enumerate(segments[1:], start=2):
+        if seg.data.shape != first.data.shape:
+            raise ImportDataError(f"{p}: segment {k} has shape {seg.data.shape}, segment 1 {first.data.shape}")
+        dx_k = _lvm_delta_x(p, k, seg, decimal)
+        if not math.isclose(dx_k, dx, rel_tol=1e-9):
+            raise ImportDataError(f"{p}: segment {k} has Delta_X {dx_k:.9g} s, segment 1 {dx:.9g} s; one recording "
+                                  "has one sample rate: import the segments sampled at other rates separately")
+        hits.append(_lvm_in_first_order(p, k, seg, first))
     test = ImportedTest(1.0 / dx, channels, hits, [], str(p), {"format": "lvm", "segments": len(hits)})
     return test
 
@@ -353,12 +452,26 @@ def _loadmat_isolated(p: Path) -> dict:
                                           "file is damaged or not a MATLAB file"))
 
 
+def _real_values(p: Path, what: str, value: Any) -> np.ndarray:
+    """``value`` as a float array; complex values are accepted only with a zero imaginary part (else
+    :class:`ImportDataError` naming ``what``: dropping the imaginary part would change the data)."""
+    a = np.asarray(value)
+    if np.iscomplexobj(a):
+        imag = np.abs(np.imag(a))
+        if np.any(imag != 0):
+            worst = float(np.max(imag[imag != 0]))
+            raise ImportDataError(f"{p}: {what} holds complex values (imaginary part up to {worst:.3g}); measured "
+                                  "time data and sensitivities are real: export the time signals (not spectra) again")
+        a = np.real(a)
+    return np.asarray(a, float)
+
+
 def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:
     key = "W" if windowed else "X"
     ks = sorted(int(k[1:]) for k in m if re.fullmatch(key + r"\d+", k))
     if not ks:
         raise ImportDataError(f"{p} holds no '{key}1..{key}n' time blocks: is it a DataPhysics time export?")
-    blocks = [np.asarray(m[f"{key}{k}"], float) for k in ks]
+    blocks = [_real_values(p, f"block {key}{k}", m[f"{key}{k}"]) for k in ks]
     for k, b in zip(ks, blocks):
         if b.ndim != 2 or b.shape[1] != 2 or b.shape[0] < 2 or b.shape != blocks[0].shape:
             raise ImportDataError(f"{p}: block {key}{k} has shape {b.shape}; each block must be (n >= 2, 2) columns "
@@ -369,7 +482,7 @@ def _dataphysics_from(p: Path, m: dict, windowed: bool) -> ImportedTest:
         raise ImportDataError(f"{p}: the time column of {key}{ks[0]} is not strictly increasing")
     data = np.stack([b[:, 1] for b in blocks])
     fs = 1.0 / float(np.median(np.diff(t)))
-    sens = np.asarray(m.get("Sensitivity", np.full(len(ks), np.nan)), float).ravel()
+    sens = _real_values(p, "Sensitivity", m.get("Sensitivity", np.full(len(ks), np.nan))).ravel()
     units = [str(u).strip() for u in np.asarray(m.get("Unit", [""] * len(ks))).ravel()]
     channels = []
     for j, k in enumerate(ks):
@@ -480,6 +593,60 @@ def quantize(data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return counts, eu
 
 
+#: the part of a channel :func:`int16_rest_change` looks at: the samples below this fraction of its peak
+INT16_REST_FRACTION = 1e-2
+#: the largest rms change 16-bit counts may make to that part of a channel, relative to its rms; real
+#: hammer tests stay near 0.02 (the rest spans tens of counts), a glitch 1e5 times the signal gives 1
+INT16_MAX_REST_CHANGE = 0.1
+
+
+def int16_rest_change(data: np.ndarray, counts: np.ndarray, eu_per_count: np.ndarray) -> np.ndarray:
+    """Per channel of ``data[n_ch, n]`` stored as ``counts * eu_per_count`` (:func:`quantize`): the
+    rms of the rounding error over the samples below :data:`INT16_REST_FRACTION` of the channel's
+    peak, relative to their rms (0 where those samples are all zero or there are none). Near 1 means
+    the counts lose that part of the channel: one sample (a glitch) sets a scale the rest is below."""
+    d = np.asarray(data, float)
+    out = np.zeros(d.shape[0])
+    for c in range(d.shape[0]):
+        ax = np.abs(d[c])
+        rest = ax < INT16_REST_FRACTION * np.max(ax)
+        scale = float(np.max(ax[rest])) if np.any(rest) else 0.0
+        if scale > 0:  # the rounding error never exceeds the sample: both ratios stay <= 1 (no overflow)
+            err = (counts[c, rest] * eu_per_count[c] - d[c, rest]) / scale
+            out[c] = float(np.sqrt(np.mean(err ** 2) / np.mean((d[c, rest] / scale) ** 2)))
+    return out
+
+
+#: the smallest channel peak :func:`quantize` scales (a smaller one would need a subnormal step)
+INT16_MIN_PEAK = float(np.finfo(float).tiny) * 32767.0
+#: the largest channel peak :func:`quantize` scales (counts * step must stay a finite float)
+INT16_MAX_PEAK = float(np.finfo(float).max) / 2
+
+
+def _quantized(test: ImportedTest, k: int, data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`quantize` of hit ``k``, refused (:class:`ImportDataError` naming the hit, channel and
+    sample) when the 16-bit counts would not keep a channel: its peak too small or too large to
+    scale, or part of it lost beside a far larger sample (:func:`int16_rest_change`)."""
+    peaks = np.max(np.abs(data), axis=1)
+    for c in np.flatnonzero(((peaks > 0) & (peaks < INT16_MIN_PEAK)) | (peaks > INT16_MAX_PEAK)):
+        raise ImportDataError(f"{test.source}: hit {k + 1}, channel {c + 1} ({test.channels[c].get('name', '')}): "
+                              f"its largest sample is {peaks[c]:.3g}, outside what 16-bit samples can be scaled to "
+                              f"({INT16_MIN_PEAK:.3g} to {INT16_MAX_PEAK:.3g}); check the units of the file")
+    counts, eu = quantize(data)
+    change = int16_rest_change(data, counts, eu)
+    for c in np.flatnonzero(change > INT16_MAX_REST_CHANGE):
+        x = np.abs(data[c])
+        i = int(np.argmax(x))
+        rest = x < INT16_REST_FRACTION * x[i]
+        name = test.channels[c].get("name", f"ch{c + 1}")
+        raise ImportDataError(
+            f"{test.source}: hit {k + 1}, channel {c + 1} ({name}): sample {i + 1} is {data[c, i]:.3g} while "
+            f"{int(np.sum(rest))} of its {x.size} samples stay within +-{np.max(x[rest]):.3g}; the recording's "
+            f"16-bit samples scaled to that peak (step {eu[c]:.3g}) would change those by {change[c]:.0%} rms: "
+            "remove the glitch from the file (or cut the block short of it) and import again")
+    return counts, eu
+
+
 def detect_trigger(force: np.ndarray, level: float = 0.1) -> int:
     """First sample where |force| reaches ``level`` times its peak (the window origin of an import)."""
     f = np.abs(np.asarray(force, float))
@@ -496,6 +663,41 @@ def read_sep005_test(path: str | Path) -> ImportedTest:
                    "check the groups, fs and trigger_index of its channels")
 
 
+#: the keys of an SEP005 channel that must be the same, for one channel name, in every hit
+_SEP005_SAME_IN_EVERY_HIT = ("unit_str", "quantity", "point")
+
+
+def _sep005_hit(path: str | Path, g: str, chans: list[dict], first_g: str, first: list[dict]) -> list[dict]:
+    """The channels of hit (group) ``g`` in the order of the first hit's, matched by name; refuses
+    other names, a name given twice, another unit, quantity or point under one name, channels of
+    different lengths."""
+    names, first_names = [str(c["name"]) for c in chans], [str(c["name"]) for c in first]
+    if chans is first:
+        ordered = chans
+    else:
+        if len(set(names)) != len(names):
+            twice = sorted({n for n in names if names.count(n) > 1})
+            raise ImportDataError(f"{path}: hit {g!r} names more than one channel {twice}; the hits' channels are "
+                                  "matched by name: give each channel of a hit its own name")
+        if sorted(names) != sorted(first_names):
+            raise ImportDataError(f"{path}: hit {g!r} has the channels {names}, hit {first_g!r} {first_names}; "
+                                  "every hit needs the same channel names: correct the names, or import the hits "
+                                  "separately")
+        by_name = {str(c["name"]): c for c in chans}
+        ordered = [by_name[n] for n in first_names]
+    for c, c1 in zip(ordered, first):
+        for key in _SEP005_SAME_IN_EVERY_HIT:
+            if str(c.get(key, "")) != str(c1.get(key, "")):
+                raise ImportDataError(f"{path}: channel {c['name']!r} has {key} {c.get(key)!r} in hit {g!r} but "
+                                      f"{c1.get(key)!r} in hit {first_g!r}; a channel keeps its {key} in every hit: "
+                                      "correct the file, or import the hits separately")
+        if c["data"].size != ordered[0]["data"].size:
+            raise ImportDataError(f"{path}: hit {g!r}: channel {c['name']!r} holds {c['data'].size} samples, "
+                                  f"{ordered[0]['name']!r} {ordered[0]['data'].size}; the channels of a hit are "
+                                  "sampled together: export them whole")
+    return ordered
+
+
 def _read_sep005_test(path: str | Path) -> ImportedTest:
     from analysis.sep005 import QUANTITY_CODES, SEP005Error, read_sep005
 
@@ -507,20 +709,24 @@ def _read_sep005_test(path: str | Path) -> ImportedTest:
     groups: dict[str, list[dict]] = {}
     for ch in channels:
         groups.setdefault(str(ch.get("group", "")), []).append(ch)
-    first = next(iter(groups.values()))
-    names = [str(c["name"]) for c in first]
+    first_g, first = next(iter(groups.items()))
     fs = float(first[0]["fs"])
     hits, triggers = [], []
     for g, chans in groups.items():
         if len(chans) != len(first) or any(float(c["fs"]) != fs for c in chans):
             raise ImportDataError(f"{path}: hit {g!r} has {len(chans)} channels at {[c['fs'] for c in chans]} Hz; "
                                   f"every hit needs the {len(first)} channels of the first at {fs:g} Hz")
-        n = min(c["data"].size for c in chans)
-        hits.append(np.vstack([c["data"][:n] for c in chans]))
+        chans = _sep005_hit(path, g, chans, first_g, first)  # the first hit is checked against itself
+        hits.append(np.vstack([c["data"] for c in chans]))
         if all("trigger_index" in c for c in chans):
-            triggers.append(int(chans[0]["trigger_index"]))
+            marks = {int(c["trigger_index"]) for c in chans}
+            if len(marks) != 1:
+                raise ImportDataError(f"{path}: hit {g!r}: its channels give different trigger_index values "
+                                      f"{sorted(marks)}; a hit has one trigger: correct the file")
+            triggers.append(marks.pop())
     meta_chans = []
-    for c, name in zip(first, names):
+    for c in first:
+        name = str(c["name"])
         quantity = by_code.get(str(c.get("quantity", "")), None)
         if quantity is None:
             quantity, _ = _unit_info(str(c["unit_str"]))
@@ -600,9 +806,21 @@ def channel_roles(
     return ChannelRoles(chans, fch, rch)
 
 
+#: what a channel of every file of one import must share (:func:`combine_imports`)
+_SAME_IN_EVERY_FILE = ("name", "quantity", "unit", "point", "sensitivity")
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    """``a == b``, NaN equal to NaN (an unknown sensitivity)."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return bool(a == b)
+
+
 def combine_imports(tests: Sequence[ImportedTest]) -> ImportedTest:
     """One test from several files read alike (e.g. one .lvm per hit): the hits in the order given.
-    The files must share the sample rate and the block shape; the files' trigger samples are kept
+    The files must share the sample rate, the block shape and the channels (name, quantity, unit,
+    point, sensitivity, in order); the files' trigger samples are kept
     for the leading hits that all have one (the others' triggers are found on the force). Raises
     :class:`ImportDataError` naming the file that differs."""
     if not tests:
@@ -614,6 +832,12 @@ def combine_imports(tests: Sequence[ImportedTest]) -> ImportedTest:
         if t.fs_hz != first.fs_hz or t.hits[0].shape != first.hits[0].shape:
             raise ImportDataError(f"{t.source} differs in sample rate or block size from {first.source}; "
                                   "import the files separately")
+        for c, (a, b) in enumerate(zip(t.channels, first.channels)):
+            differ = [key for key in _SAME_IN_EVERY_FILE if not _same_value(a.get(key), b.get(key))]
+            if differ:
+                raise ImportDataError(f"{t.source}: channel {c + 1} has {differ[0]} {a.get(differ[0])!r}, in "
+                                      f"{first.source} {b.get(differ[0])!r}; the files of one import hold the same "
+                                      "channels in the same order: import the files separately")
         triggers = triggers + list(t.trigger_indices) if len(triggers) == len(hits) else []
         hits += t.hits
     return ImportedTest(first.fs_hz, first.channels, hits, triggers, first.source, dict(first.meta))
@@ -623,7 +847,9 @@ def imported_hits(test: ImportedTest, roles: ChannelRoles) -> list[Hit]:
     """The hits of ``test`` with the channel ``roles`` (:func:`channel_roles`), not yet checked:
     each block quantised to int16 counts (:func:`quantize`), its trigger from the file or found on
     the force (:func:`detect_trigger`), ``volts_per_count`` from the sensitivities (NaN unknown),
-    ``sequence`` the import order, ``timestamp`` the time of the import (s since the epoch)."""
+    ``sequence`` the import order, ``timestamp`` the time of the import (s since the epoch).
+    Raises :class:`ImportDataError` naming the hit, channel and sample when the 16-bit counts would
+    lose part of a channel (:func:`int16_rest_change`, e.g. a glitch far above the rest)."""
     chans, fch, rch = roles.channels, roles.force_channel, roles.response_channels
     ref, outs = roles.reference, roles.outputs
     names = tuple(str(c["name"]) for c in chans)
@@ -631,7 +857,7 @@ def imported_hits(test: ImportedTest, roles: ChannelRoles) -> list[Hit]:
     hits = []
     for k, data in enumerate(test.hits):
         trig = test.trigger_indices[k] if k < len(test.trigger_indices) else detect_trigger(data[fch])
-        counts, eu = quantize(data)
+        counts, eu = _quantized(test, k, data)
         hits.append(Hit(counts=counts, eu_per_count=eu, volts_per_count=eu * sens * 1e-3, sample_rate_hz=test.fs_hz,
                         trigger_index=trig, force_channel=fch, response_channels=rch, point=ref, reference=ref,
                         outputs=outs, measurement=0, channel_names=names, timestamp=time.time(), sequence=k))
@@ -667,12 +893,13 @@ def write_imported(
     setup = {"sample_rate_hz": test.fs_hz, "block_size": int(test.hits[0].shape[1]),
              "channels": chans, "imported_from": test.source, "format": test.meta.get("format")}
     instrument = {"vendor": "imported", "model": str(test.meta.get("format", "")), "source": test.source}
+    hits = imported_hits(test, roles)  # refuses what 16-bit counts cannot hold before the file is opened
     with whole_recording(out, overwrite) as tmp, RecordingWriter(
             tmp, instrument=instrument, setup=setup, channels=chans, windows=windows,
             plan={"mode": "imported", "points": [ref]}, overwrite=True) as w:
         w.log("INFO", f"imported {len(test.hits)} hit(s) from {test.source}; " + "; ".join(roles.describe()))
         kept: list[Hit] = []
-        for k, hit in enumerate(imported_hits(test, roles)):
+        for k, hit in enumerate(hits):
             chk = check_hit(hit.force, hit.sample_rate_hz, [False] * len(chans), list(hit.channel_names),
                             check_settings)
             hit = hit.with_verdict(chk.verdict.accept is not False, chk.verdict.reasons, chk.to_dict())

@@ -219,13 +219,14 @@ def read_uff58(path: str | Path) -> FRFSet:
     Outputs are the response node/directions, references the reference node/directions, in the
     order of first appearance; missing combinations are NaN. All FRFs must share the frequency axis.
     """
-    sets = [s for s in _read_sets(path) if isinstance(s, dict) and s.get("type") == 58]
-    if sets:
+    numbered = [(k, s) for k, s in enumerate(_read_sets(path), start=1)
+                if isinstance(s, dict) and s.get("type") == 58]
+    if numbered:
         _require_complete_file(path)
     try:
-        for s in sets:
+        for _, s in numbered:
             _check_record(path, s)
-        return _frfset_from_sets(path, sets)
+        return _frfset_from_sets(path, numbered)
     except UFFError:
         raise
     except (KeyError, IndexError, ValueError, TypeError, OverflowError, AttributeError) as exc:
@@ -265,15 +266,50 @@ def _check_record(path: str | Path, s: dict) -> None:
             raise UFFError(f"{where}: {key} {what}; measured values must be finite: fix or re-export the file")
 
 
-def _frfset_from_sets(path: str | Path, sets: list) -> FRFSet:
-    frfs = [s for s in sets if int(s.get("func_type", -1)) == 4]
-    if not frfs:
+def _pair(s: dict) -> tuple[tuple[int, int], tuple[int, int]]:
+    """((response node, direction), (reference node, direction)) of a dataset-58 record."""
+    return (int(s["rsp_node"]), int(s["rsp_dir"])), (int(s["ref_node"]), int(s["ref_dir"]))
+
+
+def _one_record_per_pair(path: str | Path, numbered: list, what: str) -> list[tuple[int, dict]]:
+    """The records of ``numbered`` ((dataset number in the file, record)), one per response/reference
+    pair: a record repeated exactly is read once; two different records for one pair raise
+    :class:`UFFError` naming both (keeping either would drop the other silently)."""
+    seen: dict = {}
+    out = []
+    for k, s in numbered:
+        pair = _pair(s)
+        if pair in seen:
+            k0, s0 = seen[pair]
+            if np.array_equal(np.asarray(s0["x"]), np.asarray(s["x"])) and np.array_equal(
+                    np.asarray(s0["data"]), np.asarray(s["data"])):
+                continue
+            o, r = (point_from_uff(*pt) for pt in pair)
+            raise UFFError(f"{path}: records {k0} and {k} are both the {what} of response {o} reference {r} and they "
+                           "differ; keep the one to use (export the file again, or split it) and read it again")
+        seen[pair] = (k, s)
+        out.append((k, s))
+    return out
+
+
+def _frfset_from_sets(path: str | Path, numbered: list) -> FRFSet:
+    """One FRFSet from ``numbered`` dataset-58 records ((dataset number in the file, record))."""
+    numbered_frfs = _one_record_per_pair(path, [(k, s) for k, s in numbered if int(s.get("func_type", -1)) == 4],
+                                         "FRF")
+    if not numbered_frfs:
         raise UFFError(f"{path} holds no dataset-58 FRF (function type 4)")
-    key = lambda s: ((int(s["rsp_node"]), int(s["rsp_dir"])), (int(s["ref_node"]), int(s["ref_dir"])))  # noqa: E731
+    k0, s0 = numbered_frfs[0]
+    for k, s in numbered_frfs[1:]:
+        for field in ("ordinate_spec_data_type", "ordinate_axis_units_lab"):
+            if str(s.get(field, "")).strip() != str(s0.get(field, "")).strip():
+                raise UFFError(f"{path}: records {k0} and {k} are FRFs of different kinds ({field} "
+                               f"{s0.get(field)!r} and {s.get(field)!r}); one FRF set holds one quantity in one unit: "
+                               "split the file by quantity")
+    frfs = [s for _, s in numbered_frfs]
     outs: list = []
     refs: list = []
     for s in frfs:
-        o, r = key(s)
+        o, r = _pair(s)
         if o not in outs:
             outs.append(o)
         if r not in refs:
@@ -283,14 +319,15 @@ def _frfset_from_sets(path: str | Path, sets: list) -> FRFSet:
     for s in frfs:
         if np.asarray(s["x"]).size != f.size or not np.allclose(s["x"], f, rtol=1e-9, atol=0):
             raise UFFError(f"{path}: FRFs have different frequency axes; read them one by one")
-        o, r = key(s)
+        o, r = _pair(s)
         H[outs.index(o), refs.index(r)] = np.asarray(s["data"], complex)
     coh = None
-    cohs = [s for s in sets if int(s.get("func_type", -1)) == 6]
+    cohs = [s for _, s in _one_record_per_pair(path, [(k, s) for k, s in numbered
+                                                      if int(s.get("func_type", -1)) == 6], "coherence")]
     if cohs:
         C = np.full(H.shape, np.nan)
         for s in cohs:
-            o, r = key(s)
+            o, r = _pair(s)
             if o in outs and r in refs and np.asarray(s["data"]).size == f.size:
                 C[outs.index(o), refs.index(r)] = np.real(np.asarray(s["data"]))
         coh = C

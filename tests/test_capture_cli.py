@@ -257,8 +257,13 @@ def test_sep005_export_import_round_trip(captured, tmp_path, capsys):
         pass
     else:
         assert_sep005(doc)
-    # only the accepted hits go back into a recording with the same averages
-    accepted = [c for c in doc if c["accepted"]]
+    # only the accepted hits of one point go back into a recording with the same averages (the hits
+    # of the other point are refused: one import is one measurement, never hits relabelled)
+    (tmp_path / "all.json").write_text(json.dumps([c for c in doc if c["accepted"]]))
+    assert import_main([str(tmp_path / "all.json"), "--out", str(tmp_path / "mixed.h5")]) == 2
+    assert "channel 'force' has point 'top:4:Z'" in capsys.readouterr().err
+    at_first = {c["group"] for c in doc if c["name"] == "force" and c["point"] == "right:6:-X"}
+    accepted = [c for c in doc if c["accepted"] and c["group"] in at_first]
     (tmp_path / "acc.json").write_text(json.dumps(accepted))
     back = tmp_path / "back.h5"
     assert import_main([str(tmp_path / "acc.json"), "--out", str(back), "--reference", "right:6:-X",

@@ -1,9 +1,11 @@
-"""Fuzzing the importers (LabVIEW .lvm text, numpy + description, DataPhysics-like .mat).
+"""Fuzzing the importers (LabVIEW .lvm text, numpy + description, DataPhysics-like .mat) and the
+16-bit counts an import stores.
 
 Whatever the file holds, a reader either returns a consistent :class:`ImportedTest` (finite
-positive sample rate, every hit ``(n_channels, n)``) or raises :class:`ImportDataError` with a
-message; never a KeyError/IndexError/ZeroDivisionError/numpy error. Cases per test:
-``IMPACTLAB_FUZZ_EXAMPLES`` (default 200).
+positive sample rate, every hit ``(n_channels, n)``, sensitivities finite and nonzero or unknown)
+or raises :class:`ImportDataError` with a message; never a KeyError/IndexError/ZeroDivisionError/
+numpy error. The counts of an imported hit give back every sample within half a step, or the hit
+is refused. Cases per test: ``IMPACTLAB_FUZZ_EXAMPLES`` (default 200).
 """
 from __future__ import annotations
 
@@ -19,7 +21,16 @@ import scipy.io
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from acquisition.importers import ImportDataError, load_description, read_dataphysics_mat, read_lvm, read_numpy
+from acquisition.importers import (
+    ImportDataError,
+    ImportedTest,
+    channel_roles,
+    imported_hits,
+    load_description,
+    read_dataphysics_mat,
+    read_lvm,
+    read_numpy,
+)
 
 N = int(os.environ.get("IMPACTLAB_FUZZ_EXAMPLES", "200"))
 FUZZ = settings(max_examples=N, derandomize=True, deadline=None, database=None,
@@ -32,6 +43,9 @@ def _check(test) -> None:
     for h in test.hits:
         assert h.ndim == 2 and h.shape[0] == len(test.channels) and h.shape == test.hits[0].shape
         assert np.all(np.isfinite(h)), "non-finite samples passed on"
+    for c in test.channels:
+        s = c["sensitivity"]
+        assert math.isnan(s) or (math.isfinite(s) and s != 0), f"sensitivity {s!r} passed on"
 
 
 def _valid_lvm(decimal: str = ",", n: int = 6) -> str:
@@ -165,7 +179,8 @@ def test_numpy_garbage_files_and_descriptions(raw):
 
 
 # ---------------------------------------------------------------------- DataPhysics-like .mat
-ARRAYS = st.sampled_from(["good", "1d", "3col", "empty", "one_row", "const_t", "nan_t", "str", "bad_dt"])
+ARRAYS = st.sampled_from(["good", "1d", "3col", "empty", "one_row", "const_t", "nan_t", "str", "bad_dt", "complex",
+                          "real_complex"])
 
 
 def _block(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -174,12 +189,14 @@ def _block(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
     return {"good": np.column_stack([t, x]), "1d": x, "3col": np.column_stack([t, x, x]), "empty": np.zeros((0, 2)),
             "one_row": np.column_stack([t, x])[:1], "const_t": np.column_stack([np.zeros(n), x]),
             "nan_t": np.column_stack([t * np.nan, x]), "str": np.array(["abc"]),
-            "bad_dt": np.column_stack([-t, x])}[kind]
+            "bad_dt": np.column_stack([-t, x]), "complex": np.column_stack([t, x + 1j * x]),
+            "real_complex": np.column_stack([t, x]).astype(complex)}[kind]
 
 
 @FUZZ
 @given(kinds=st.lists(ARRAYS, min_size=1, max_size=3), n=st.integers(1, 12), windowed=st.booleans(),
-       sens=st.sampled_from([None, "short", "ok", "str"]), unit=st.sampled_from([None, "ok", "num", "long"]),
+       sens=st.sampled_from([None, "short", "ok", "str", "inf", "zero", "complex"]),
+       unit=st.sampled_from([None, "ok", "num", "long"]),
        gap=st.booleans())
 def test_mat_files_with_odd_blocks(kinds, n, windowed, sens, unit, gap):
     rng = np.random.default_rng(n)
@@ -188,7 +205,9 @@ def test_mat_files_with_odd_blocks(kinds, n, windowed, sens, unit, gap):
         content[f"X{k + 1 + (2 if gap and k else 0)}"] = _block(kind, n, rng)
         content[f"W{k + 1}"] = _block(kinds[-1 - k], n, rng)
     if sens is not None:
-        content["Sensitivity"] = {"short": np.array([1.0]), "ok": np.ones(len(kinds)), "str": np.array(["x"])}[sens]
+        content["Sensitivity"] = {"short": np.array([1.0]), "ok": np.ones(len(kinds)), "str": np.array(["x"]),
+                                  "inf": np.full(len(kinds), np.inf), "zero": np.zeros(len(kinds)),
+                                  "complex": np.ones(len(kinds)) * (1 + 1j)}[sens]
     if unit is not None:
         content["Unit"] = {"ok": np.array(["N"] * len(kinds)), "num": np.arange(3.0), "long": np.array(["g"] * 9)}[unit]
     with tempfile.TemporaryDirectory() as tmp:
@@ -219,3 +238,26 @@ def test_mat_mutated_bytes(data):
             _check(read_dataphysics_mat(p))
         except ImportDataError as exc:
             assert str(exc)
+
+
+# ---------------------------------------------------------------------- 16-bit counts of an import
+SAMPLE = (st.floats(allow_nan=False, allow_infinity=False)
+          | st.sampled_from([1e308, -1e308, 1.7976931348623157e308, 5e-324, 1e-310, 0.0, 1e4, 0.1, -0.1]))
+
+
+@FUZZ
+@given(force=st.lists(SAMPLE, min_size=2, max_size=16), response=st.lists(SAMPLE, min_size=2, max_size=16))
+def test_imported_hits_give_back_every_sample_within_half_a_step_or_refuse(force, response):
+    n = min(len(force), len(response))
+    data = np.array([force[:n], response[:n]])
+    channels = [{"name": "f", "quantity": "force", "unit": "N", "sensitivity": math.nan, "point": "n:1:Z"},
+                {"name": "a", "quantity": "acceleration", "unit": "g", "sensitivity": math.nan, "point": "n:2:Z"}]
+    test = ImportedTest(1000.0, channels, [data], [], "fuzz.npy")
+    try:
+        (hit,) = imported_hits(test, channel_roles(test))
+    except ImportDataError as exc:
+        assert str(exc).startswith("fuzz.npy: hit 1, channel ")
+        return
+    step = np.asarray(hit.eu_per_count)[:, None]
+    assert np.all(np.isfinite(hit.data)) and np.all(step > 0)
+    assert np.all(np.abs(hit.data - data) <= 0.5 * step * (1 + 1e-9)), "a sample moved by more than half a step"
