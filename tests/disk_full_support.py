@@ -25,9 +25,9 @@ def run(args: list[str], cwd: Path, limit: int | None = None) -> subprocess.Comp
 
 def one_line_exit_1(done: subprocess.CompletedProcess) -> str:
     """The stderr line of a command a full disk stopped: exit 1 and one line besides the progress
-    lines and the fit's notes, no traceback."""
+    lines and the fit's notes and warnings (what the fit found, not the failure), no traceback."""
     assert done.returncode == 1, (done.returncode, done.stderr[-2000:])
-    lines = [ln for ln in done.stderr.strip().splitlines() if not ln.startswith(("... ", "note: "))]
+    lines = [ln for ln in done.stderr.strip().splitlines() if not ln.startswith(("... ", "note: ", "warning: ", "WARNING analysis."))]
     assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr[-2000:]
     return lines[0]
 

@@ -99,11 +99,13 @@ def test_replay_and_import_onto_a_full_disk_leave_no_partial_recording(tmp_path)
     replayed = run(["acquisition", "replay", "src.h5", "--out", "old.h5", "--overwrite"], tmp_path, 400_000)
     assert "no room on the disk" in one_line_exit_1(replayed)
     assert (tmp_path / "old.h5").read_bytes() == b"the user's earlier file"
-    assert run(["acquisition", "export", "src.h5", "--sep005", "hits.json"], tmp_path).returncode == 0
+    # the hits of one point (an import names one reference point)
+    assert run([*CAPTURE[:-2], "--points", "right:6:-X", "--out", "one.h5"], tmp_path).returncode == 0
+    assert run(["acquisition", "export", "one.h5", "--sep005", "hits.json"], tmp_path).returncode == 0
     imported = run(["acquisition", "import", "hits.json", "--out", "imp.h5", "--reference", "right:6:-X"],
                    tmp_path, 400_000)
     assert "no room on the disk" in one_line_exit_1(imported)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["hits.json", "old.h5", "src.h5"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hits.json", "old.h5", "one.h5", "src.h5"]
 
 
 @pytest.fixture(scope="module")
