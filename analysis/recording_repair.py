@@ -7,7 +7,7 @@ the whole file ("truncated file: eof < stored_eof") although the hits written be
 with zeros to the recorded end of file when it is short, reads every hit, keeps those that are
 complete and pass their CRC-32 check (:func:`analysis.recording_schema.counts_crc32`; a hit cut
 off by the failure reads back as zeros and fails it), drops the FRF results that were computed from
-a dropped hit (``replay`` recomputes them), and writes a clean recording through
+a dropped hit (``capture --resume`` of the repaired file measures them again), and writes a clean recording through
 :func:`analysis.atomic.atomic_path`.
 """
 from __future__ import annotations
@@ -51,8 +51,8 @@ class RepairResult:
         """The one-line outcome the command prints."""
         text = f"{len(self.kept)} hits kept, {len(self.dropped)} cut-off hits dropped"
         if self.dropped_frf:
-            text += (f"; FRF results {', '.join(self.dropped_frf)} dropped (they used a dropped hit: recompute them "
-                     "with 'python -m acquisition replay')")
+            text += (f"; FRF results {', '.join(self.dropped_frf)} dropped (they used a dropped hit: 'capture --resume' "
+                     "of the repaired file measures the point again, 'replay' recomputes them from the kept hits)")
         return text
 
 

@@ -110,6 +110,11 @@ def test_a_damaged_hit_is_dropped_with_the_frf_results_computed_from_it(recordin
     with Recording(tmp_path / "fixed.h5") as fixed:
         assert [h.index for h in fixed.hits()] == [0, 1, 2]
         assert fixed.measurement_names() == ["m000"]
+    done = _run(["acquisition", "capture", "--resume", "fixed.h5", "--auto", "-q"], tmp_path)  # the test goes on
+    assert done.returncode == 0, done.stderr[-2000:]
+    with Recording(tmp_path / "fixed.h5") as fixed:
+        assert [h.point for h in fixed.hits()] == ["right:6:-X", "right:6:-X", "top:4:Z", "top:4:Z"]
+        assert fixed.measurement_names() == ["m000", "m001"]
     with pytest.raises(RecordingError, match="exists"):
         repair_recording(bad, tmp_path / "fixed.h5")
     from analysis.errors import UsageError
