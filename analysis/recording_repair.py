@@ -57,8 +57,9 @@ class RepairResult:
 
 
 def stored_eof(path: str | os.PathLike[str]) -> int | None:
-    """The end of file (bytes) the HDF5 superblock of ``path`` records, None when no superblock
-    is found (not an HDF5 file). Superblocks sit at 0, 512, 1024, 2048, ... bytes."""
+    """The end of file (bytes from the file's start, a user block included) the HDF5 superblock of
+    ``path`` records, as libhdf5 checks it; None when no superblock is found (not an HDF5 file).
+    Superblocks sit at 0, 512, 1024, 2048, ... bytes (versions 0-3 are read)."""
     with open(path, "rb") as fh:
         size = os.fstat(fh.fileno()).st_size
         at = 0
@@ -82,9 +83,7 @@ def _eof_from_superblock(head: bytes) -> int | None:
     if width not in (2, 4, 8) or len(head) < first + 3 * width:
         return None
     fmt = {2: "<H", 4: "<I", 8: "<Q"}[width]
-    base = struct.unpack_from(fmt, head, first)[0]
-    eof = struct.unpack_from(fmt, head, first + 2 * width)[0]
-    return int(base + eof)
+    return int(struct.unpack_from(fmt, head, first + 2 * width)[0])  # after base and free-space/extension addresses
 
 
 def _pad(copy: Path, source: Path) -> int:

@@ -132,3 +132,20 @@ def test_a_file_whose_index_is_lost_is_refused_with_one_line_and_exit_1(recordin
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("repair: ") and "cannot be repaired" in lines[0], done.stderr
     assert sorted(os.listdir(tmp_path)) == ["lost.h5"]  # nothing written, no temporaries left
+
+
+@pytest.mark.parametrize("libver", ["earliest", "latest"])  # superblock versions 0 and 3
+@pytest.mark.parametrize("userblock", [0, 512])
+def test_stored_eof_reads_the_end_of_file_libhdf5_checks(tmp_path, libver, userblock):
+    import numpy as np
+
+    p = tmp_path / "x.h5"
+    with h5py.File(p, "w", libver=libver, userblock_size=userblock) as f:
+        f["x"] = np.arange(3000)
+    size = p.stat().st_size
+    assert stored_eof(p) == size
+    os.truncate(p, size - 1000)
+    with pytest.raises(OSError, match=f"stored_eof = {size}"):
+        h5py.File(p, "r")
+    (tmp_path / "not.h5").write_bytes(b"plain text, no superblock" * 40)
+    assert stored_eof(tmp_path / "not.h5") is None
