@@ -8,6 +8,7 @@ from analysis._cli_dispatch import dispatch
 COMMANDS = {
     "capture": ("acquisition.cli_capture", "run an impact test and write a recording (HDF5)"),
     "replay": ("acquisition.cli_replay", "recompute FRFs from a recording with other settings"),
+    "repair": ("acquisition.cli_repair", "recover the intact hits of a recording that no longer opens (full disk, crash)"),
     "export": ("acquisition.cli_export", "write a recording's FRFs (and time data) as UFF 58"),
     "import": ("acquisition.cli_import", "turn .lvm, DataPhysics .mat or numpy time data into a recording"),
     "identify": ("acquisition.cli_identify", "open a device URL and print identity and capabilities"),

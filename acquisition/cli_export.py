@@ -24,7 +24,9 @@ __all__ = ["main", "export"]
 
 def export(rec_path: str | Path, uff_path: str | Path, *, time_data: bool = False, estimator: str | None = None,
            overwrite: bool = False) -> int:
-    """Write the UFF file; returns the number of datasets written."""
+    """Write the UFF file; returns the number of datasets written. Refused before anything is
+    written when ``uff_path`` is the recording or a file a live writer holds (:func:`check_outputs`)."""
+    check_outputs([uff_path], [rec_path])
     from analysis.recording import Recording, merge_frfsets
     from analysis.uff import time_records, write_uff58
 
@@ -51,7 +53,8 @@ def export(rec_path: str | Path, uff_path: str | Path, *, time_data: bool = Fals
 def export_sep005(rec_path: str | Path, out_path: str | Path, *, overwrite: bool = False,
                   accepted_only: bool = False) -> int:
     """Write the recording's hits as SEP005 channels (:mod:`analysis.sep005`, one group per hit, in
-    engineering units); returns the number of channels written."""
+    engineering units); returns the number of channels written. Refused like :func:`export`."""
+    check_outputs([out_path], [rec_path])
     from analysis.recording import Recording
     from analysis.sep005 import QUANTITY_CODES, write_sep005
 

@@ -55,6 +55,7 @@ import numpy as np
 from analysis.finite_checks import describe_nonfinite
 from analysis.hit import Hit
 from analysis.input_limits import read_bounded_text, text_data_limit_bytes
+from analysis.outputs import check_outputs
 from analysis.points import PointLabelError, parse_point
 from analysis.recording_writer import RecordingWriter, whole_recording
 from analysis.spectra import WindowSettings
@@ -69,6 +70,7 @@ __all__ = [
     "drop_nonfinite_hits",
     "read_dropping_nonfinite",
     "ImportedTest",
+    "source_files",
     "read_lvm",
     "read_dataphysics_mat",
     "read_sep005_test",
@@ -563,7 +565,8 @@ def _read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
     for h in hits[1:]:
         if h.shape != hits[0].shape:
             raise ImportDataError(f"hits have different shapes {hits[0].shape} and {h.shape}; import them separately")
-    return ImportedTest(float(fs), channels, hits, [], ", ".join(str(p) for p in paths), {"format": "numpy"})
+    return ImportedTest(float(fs), channels, hits, [], ", ".join(str(p) for p in paths),
+                        {"format": "numpy", "sources": [str(p) for p in paths]})
 
 
 def _load_npy(path: Path) -> np.ndarray:
@@ -840,7 +843,14 @@ def combine_imports(tests: Sequence[ImportedTest]) -> ImportedTest:
                                       "channels in the same order: import the files separately")
         triggers = triggers + list(t.trigger_indices) if len(triggers) == len(hits) else []
         hits += t.hits
-    return ImportedTest(first.fs_hz, first.channels, hits, triggers, first.source, dict(first.meta))
+    meta = dict(first.meta)
+    meta["sources"] = [src for t in tests for src in source_files(t)]
+    return ImportedTest(first.fs_hz, first.channels, hits, triggers, first.source, meta)
+
+
+def source_files(test: ImportedTest) -> list[str]:
+    """The files ``test`` was read from (``meta["sources"]`` when several, else ``source``)."""
+    return [str(p) for p in test.meta.get("sources", ())] or [test.source]
 
 
 def imported_hits(test: ImportedTest, roles: ChannelRoles) -> list[Hit]:
@@ -879,6 +889,9 @@ def write_imported(
 ) -> list:
     """Write ``test`` as a recording (one measurement) and return its averages.
 
+    Refused before anything is written (:func:`analysis.outputs.check_outputs`) when ``out`` is
+    one of the files ``test`` was read from or a recording a live writer holds.
+
     Hits failing the automatic checks (double hits) are stored as rejected with the reason.
     ``reference``/``outputs`` relabel the force and response channels (point labels); ``roles``,
     when given, are the channel roles already made by :func:`channel_roles` (the four relabelling
@@ -886,6 +899,7 @@ def write_imported(
     """
     from .session import average_recorded_hits  # session imports this module's siblings; keep it local
 
+    check_outputs([out], source_files(test))  # never onto a file it was read from, nor one a live writer holds
     if roles is None:
         roles = channel_roles(test, reference=reference, outputs=outputs, force_channel=force_channel,
                               response_channels=response_channels)

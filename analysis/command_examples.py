@@ -15,6 +15,9 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "replay rec.h5 --out h2.h5 --estimator H2 --exp-window 5%",
         'replay rec.h5 --out clean.h5 --exclude-hits 2,3-4 --window "force=10ms,2ms;exp=none"',
     ),
+    "python -m acquisition repair": (
+        "repair rec.h5 --out fixed.h5        # a recording that no longer opens: keep every intact hit",
+    ),
     "python -m acquisition export": (
         "export rec.h5 --uff rec.uff --time        # FRFs (UFF 58) and the hits' time data",
         "export rec.h5 --uff rec.uff --overwrite   # replace an earlier export",

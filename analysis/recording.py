@@ -109,8 +109,8 @@ class Recording:
             raise self._unopenable(exc) from None
 
     def _unopenable(self, exc: OSError) -> RecordingError:
-        return RecordingError(f"{self.path} is damaged or truncated and cannot be opened ({exc}); "
-                              "use a backup or re-run the test")
+        return RecordingError(f"{self.path} is damaged or truncated and cannot be opened ({exc}); recover its intact "
+                              f"hits with 'python -m acquisition repair {self.path} --out FIXED.h5', or use a backup")
 
     def _validate(self) -> None:
         a = self._f.attrs

@@ -88,6 +88,7 @@ _NOT_WHOLE_FILES = {
     ("analysis/recording_lock.py", "live_copy"): "a reader's temporary copy, removed after reading",
     ("analysis/recording_lock.py", "_live_copy_file"): "the same temporary copy, created",
     ("analysis/recording_writer.py", "_open_locked"): "the recording, appended to hit by hit (room reserved first)",
+    ("analysis/recording_repair.py", "_rewrite"): "the temporary atomic_path gave repair_recording, written in a child",
     ("analysis/report_html/build.py", "_write_files"): "files of a new temporary folder moved into place whole",
 }
 
