@@ -155,11 +155,8 @@ def run_diagnosis(measured_path: str | Path, simulated_path: str | Path, *, band
     points), and compare them in ``band`` (Hz; None: the band the data support) with the catalogue's
     ``effects`` (None: all). Raises the library's errors (InputError, EffectError, ValueError, FitError)
     for bad input."""
-    from .diagnosis import diagnose
-    from .inputs import load_input
-
-    from .diagnosis import EFFECTS
-    from .inputs import InputError
+    from .diagnosis import EFFECTS, diagnose
+    from .inputs import InputError, load_input
 
     measured = load_input(str(measured_path), estimator=estimator)
     simulated = load_simulations(str(simulated_path), measured, estimator)
