@@ -4,9 +4,12 @@ M is a recording (``.h5``) or a UFF 58 file. S is a recording or UFF 58 file wit
 (matched by ``component:node:direction`` labels of outputs and references), or a simulator
 configuration (``.toml``), simulated on the fly at M's points and lines; then the physical causes
 (:mod:`simulator.physical`: added mass, support and joint stiffness, member mass and stiffness,
-accelerometer mass, modulus) are fitted by re-running the FE model. A simulated FRF file is
+accelerometer mass, modulus) are fitted by re-running the FE model. A TOML with an ``[fe]`` table is the
+user's own FE model (:mod:`analysis.fe_model`: Matrix Market K and M, a DOF map) with the causes of any FE
+model. The kinds of simulation are the rows of :data:`SIMULATION_KINDS`. A simulated FRF file is
 first turned into a modal model by the automatic fit (:func:`analysis.pipeline.fit_auto`), so the
-modal effects can act on it. Exit codes: 0 done, 2 bad input (message on stderr).
+modal effects can act on it. Exit codes: 0 done, 2 bad input (message on stderr), 1 an FE model whose
+files cannot be used (one line naming the file and row).
 """
 from __future__ import annotations
 
@@ -14,7 +17,7 @@ import argparse
 import json
 import logging
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,13 +28,15 @@ if TYPE_CHECKING:
 
     from .diagnosis import Diagnosis
     from .diagnosis.joint_nonlinearity import JointSimulation, JointSimulationFactory
+    from .fe_model import FEVariants
     from .frf import FRFSet
 
 from .command_line import Parser as _Parser
 from .command_line import add_estimator, add_threads, check_out_dir, cli_entry, parse_args, with_examples
 from .outputs import check_outputs
 
-__all__ = ["main", "build_parser", "load_simulations", "joint_simulation", "run_diagnosis"]
+__all__ = ["main", "build_parser", "load_simulations", "joint_simulation", "run_diagnosis", "SIMULATION_KINDS",
+           "simulation_kind"]
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
     with_examples(p)
     p.add_argument("--measured", required=True, metavar="M", help="recording (.h5) or UFF 58 file")
     p.add_argument("--simulated", required=True, metavar="S",
-                   help="recording or UFF 58 file with the same points, or a simulator config (.toml)")
+                   help="recording or UFF 58 file with the same points, a simulator config (.toml), or "
+                        "a TOML with an [fe] table: your own FE model (Matrix Market K, M and a DOF map)")
     p.add_argument("--json", metavar="OUT.json",
                    help="also write the diagnosis as JSON (default: the verdict on the terminal only)")
     p.add_argument("--report", metavar="DIR", help="write report.md and plots into DIR")
@@ -64,32 +70,72 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def load_simulations(path: str, measured: FRFSet, estimator: str | None = None) -> Path | FrameVariants:
-    """The simulation for :func:`analysis.diagnosis.diagnose`: for a simulator config (``.toml``) its FE
-    model split by physical cause (:class:`simulator.physical.FrameVariants`) at the measured points;
-    otherwise the path itself (an FRF file, read by the library)."""
-    from .inputs import InputError
+def _is_fe_config(path: Path) -> bool:
+    from .fe_model import is_fe_config
 
-    p = Path(path)
-    if p.suffix.lower() != ".toml":
-        return p
+    return is_fe_config(path)
+
+
+def _is_frame_config(path: Path) -> bool:
+    return path.suffix.lower() == ".toml"
+
+
+def _fe_simulation(path: Path, measured: FRFSet) -> FEVariants:
+    """The user's FE model (:class:`analysis.fe_model.FEVariants`) at the measured points; its modes reach
+    the model's ``[modes] max_freq_hz``, else twice the measurement's top line."""
+    from .fe_model import FEVariants, load_fe_model
+
+    fe = load_fe_model(path)
+    return FEVariants(fe, measured.outputs, measured.references,
+                      fe.max_freq_hz if fe.max_freq_hz is not None else 2.0 * float(measured.freq_hz[-1]))
+
+
+def _frame_simulation(path: Path, measured: FRFSet) -> FrameVariants:
+    """The simulator's frame of the config ``path`` split by physical cause at the measured points."""
     from simulator.config import ConfigError, FrameConfig
     from simulator.fem import ModelError
     from simulator.physical import FrameVariants, check_diagnosis_size
 
+    from .inputs import InputError
+
     try:
-        config = FrameConfig.load(p)
+        config = FrameConfig.load(path)
         check_diagnosis_size(config)
         return FrameVariants(config, measured.outputs, measured.references)
     except (ConfigError, ModelError, OSError) as exc:
-        raise InputError(f"simulator config {p}: {exc}") from None
+        raise InputError(f"simulator config {path}: {exc}") from None
+
+
+#: The kinds of simulation ``--simulated`` accepts, tried in order: (name, is it this kind?, the simulation
+#: built at the measured points). A path no row claims is an FRF file, read by the library.
+SIMULATION_KINDS: tuple[tuple[str, Callable[[Path], bool], Callable[[Path, FRFSet], Any]], ...] = (
+    ("fe_model", _is_fe_config, _fe_simulation),
+    ("frame_config", _is_frame_config, _frame_simulation),
+)
+
+
+def simulation_kind(path: str) -> str:
+    """The name of the row of :data:`SIMULATION_KINDS` that claims ``path``; ``"frf_file"`` when none does."""
+    return next((name for name, claims, _ in SIMULATION_KINDS if claims(Path(path))), "frf_file")
+
+
+def load_simulations(path: str, measured: FRFSet, estimator: str | None = None) -> Any:
+    """The simulation for :func:`analysis.diagnosis.diagnose`: the row of :data:`SIMULATION_KINDS` that
+    claims ``path`` builds it at the measured points (a simulator config: its FE model split by physical
+    cause, :class:`simulator.physical.FrameVariants`; a TOML with ``[fe]``: the user's FE model,
+    :class:`analysis.fe_model.FEVariants`); otherwise the path itself (an FRF file, read by the library)."""
+    p = Path(path)
+    for _, claims, build in SIMULATION_KINDS:
+        if claims(p):
+            return build(p, measured)
+    return p
 
 
 def joint_simulation(path: str) -> JointSimulationFactory | None:
-    """For a simulator config (``.toml``): the factory that re-simulates the recorded test's hits with
+    """For a simulator config (``.toml`` without ``[fe]``): the factory that re-simulates the recorded test's hits with
     :class:`simulator.nonlinear_simulation.JointHitSimulation` (the ``joint_nonlinearity`` cause); None
     for FRF files."""
-    if Path(path).suffix.lower() != ".toml":
+    if simulation_kind(path) != "frame_config":
         return None
 
     def build(hits: Sequence[Any], levels: Sequence[float], sets: Sequence[FRFSet]) -> JointSimulation:
@@ -109,11 +155,17 @@ def run_diagnosis(measured_path: str | Path, simulated_path: str | Path, *, band
     points), and compare them in ``band`` (Hz; None: the band the data support) with the catalogue's
     ``effects`` (None: all). Raises the library's errors (InputError, EffectError, ValueError, FitError)
     for bad input."""
-    from .diagnosis import diagnose
-    from .inputs import load_input
+    from .diagnosis import EFFECTS, diagnose
+    from .inputs import InputError, load_input
 
     measured = load_input(str(measured_path), estimator=estimator)
     simulated = load_simulations(str(simulated_path), measured, estimator)
+    if effects is not None and hasattr(simulated, "causes"):
+        # the catalogue's effects and the simulation's own physical causes
+        known = [*EFFECTS, *(c.name for c in simulated.causes() if c.name not in EFFECTS)]
+        bad = [e for e in effects if e not in known]
+        if bad:
+            raise InputError(f"unknown effect(s) {bad}; the catalogue has {', '.join(known)}")
     return diagnose(measured, simulated, band=tuple(band) if band is not None else "data",
                     effects=list(effects) if effects is not None else None, estimator=estimator,
                     recording=_recording(str(measured_path)), joint_simulation=joint_simulation(str(simulated_path)))
@@ -124,6 +176,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError
     from .diagnosis import EFFECTS, EffectError
+    from .errors import FEModelError
     from .inputs import InputError, parse_band_text
 
     parser = build_parser()
@@ -138,10 +191,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.effects:
             effects = [e.strip() for e in args.effects.split(",") if e.strip()]
             bad = [e for e in effects if e not in EFFECTS]
-            if bad:
+            # an FE simulation's physical causes are checked once it is loaded (run_diagnosis)
+            if bad and simulation_kind(args.simulated) == "frf_file":
                 raise InputError(f"unknown effect(s) {bad}; the catalogue has {', '.join(EFFECTS)}")
         diag = run_diagnosis(args.measured, args.simulated, band=parse_band_text(args.band), effects=effects,
                              estimator=args.estimator)
+    except FEModelError as exc:
+        print(f"analysis diagnose: {exc}", file=sys.stderr)
+        return 1
     except (InputError, EffectError, ValueError, FitError) as exc:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 2

@@ -28,6 +28,7 @@ __all__ = [
     "WorkLimitError",
     "DiskFullError",
     "LevelsDoNotPair",
+    "FEModelError",
 ]
 
 
@@ -113,3 +114,8 @@ class WorkLimitError(UsageError):
 class DiskFullError(ImpactlabError, OSError):
     """A file could not be written for want of room (disk full, file size limit, quota); the message
     says what was kept and what to do. Commands end with exit code 1."""
+
+
+class FEModelError(ImpactlabError):
+    """A finite-element model (matrices, DOF map, its TOML) that cannot be used: the message names the file,
+    the row and what to do. Not a usage error: the command runs, the model's files are wrong (exit 1)."""

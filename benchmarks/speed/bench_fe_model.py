@@ -1,0 +1,153 @@
+"""Time of ``diagnose`` on a user's FE model of 10^4 DOF with one cause (an added mass).
+
+    nice -n 10 .venv/bin/python benchmarks/speed/bench_fe_model.py [--nx 40 --ny 84] [--threads 2]
+
+The model: a rectangular net of nx x ny nodes with three translations each (3 nx ny DOF, 10080 by
+default), springs between neighbours (out-of-plane Z soft, in-plane X, Y a hundred times stiffer, so
+the band holds the Z modes), diagonal springs coupling X and Y, each edge node held by springs to
+ground; lumped masses. Written as Matrix Market K.mtx, M.mtx, a DOF map and a model.toml in a temporary
+folder. The "measured" FRFs: the model with 3 kg (2 % of its mass) added at one node, solved in full (every mode below
+twice the band's top) and synthesised with hysteretic damping (not the modal damping the model
+declares) plus 1 % noise, at 5 outputs and one reference. Timed: the command's work, read to verdict
+(``load_fe_model`` + ``FEVariants`` + ``diagnose`` with ``effects=["added_mass"]``), with ``threads``
+BLAS threads, as wall time and as this process's CPU time (on a shared machine the wall time also holds
+the other programs' share). Prints the figures; run by hand, nothing here is a test.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+
+def build(nx: int, ny: int) -> tuple:
+    """K (N/m) and M (kg) of the net, and the node label of each DOF (``n:{node}:{X|Y|Z}``)."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    n_nodes = nx * ny
+    node = np.arange(n_nodes).reshape(ny, nx)
+    k_axis = {0: 2.0e8, 1: 2.0e8, 2: 2.0e6}            # N/m per spring, X, Y, Z
+    rows, cols, vals = [], [], []
+
+    def spring(a: np.ndarray, b: np.ndarray, axis: int, k: float) -> None:
+        ia, ib = 3 * a + axis, 3 * b + axis
+        rows.extend([ia, ib, ia, ib])
+        cols.extend([ia, ib, ib, ia])
+        vals.extend([np.full(a.size, k), np.full(a.size, k), np.full(a.size, -k), np.full(a.size, -k)])
+
+    for axis, k in k_axis.items():
+        spring(node[:, :-1].ravel(), node[:, 1:].ravel(), axis, k)
+        spring(node[:-1, :].ravel(), node[1:, :].ravel(), axis, k)
+    # diagonal braces: a spring along (1, 1) couples X and Y
+    a, b = node[:-1, :-1].ravel(), node[1:, 1:].ravel()
+    kd = 0.25e8
+    for i, j, s in ((0, 0, 1), (1, 1, 1), (0, 1, 1), (1, 0, 1)):
+        rows.extend([3 * a + i, 3 * b + i, 3 * a + i, 3 * b + i])
+        cols.extend([3 * a + j, 3 * b + j, 3 * b + j, 3 * a + j])
+        vals.extend([np.full(a.size, s * kd), np.full(a.size, s * kd), np.full(a.size, -s * kd), np.full(a.size, -s * kd)])
+    edge = np.unique(np.concatenate([node[0], node[-1], node[:, 0], node[:, -1]]))
+    for axis in range(3):
+        rows.append(3 * edge + axis)
+        cols.append(3 * edge + axis)
+        vals.append(np.full(edge.size, 5.0e6))
+    n = 3 * n_nodes
+    K = sp.coo_matrix((np.concatenate([np.asarray(v, float).ravel() for v in vals]),
+                       (np.concatenate([np.asarray(r).ravel() for r in rows]),
+                        np.concatenate([np.asarray(c).ravel() for c in cols]))), shape=(n, n)).tocsr()
+    M = sp.identity(n, format="csr") * 0.05
+    labels = [f"n:{i + 1}:{'XYZ'[d]}" for i in range(n_nodes) for d in range(3)]
+    return K, M, labels
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--nx", type=int, default=40)
+    ap.add_argument("--ny", type=int, default=84)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--mass-kg", type=float, default=3.0, help="the added mass (kg; the model's is 168 kg)")
+    ap.add_argument("--map-every", type=int, default=1,
+                    help="the DOF map lists every k-th node (and the measured ones): the added mass's candidates")
+    args = ap.parse_args()
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", str(args.threads))
+
+    import numpy as np
+    import scipy.io
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from analysis.diagnosis import diagnose
+    from analysis.fe_model import FEVariants, load_fe_model, sparse_modes
+    from analysis.frf import FRFSet
+    from analysis.threads import blas_threads  # noqa: F401  (the diagnosis sets its own thread count)
+
+    K, M, labels = build(args.nx, args.ny)
+    n = K.shape[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        scipy.io.mmwrite(str(d / "K.mtx"), K.tocoo(), symmetry="symmetric")
+        scipy.io.mmwrite(str(d / "M.mtx"), M.tocoo(), symmetry="symmetric")
+        first = (args.ny // 3) * args.nx + args.nx // 4           # an interior node, a mapped one
+        mass_node = 1 + first + (-first % args.map_every)
+        outs = [f"n:{(args.ny * j // 6) * args.nx + args.nx * (j + 1) // 7 + 1}:Z" for j in range(1, 6)]
+        keep = {int(o.split(":")[1]) for o in outs}
+        mapped = [(i, lbl) for i, lbl in enumerate(labels)
+                  if (int(lbl.split(":")[1]) - 1) % args.map_every == 0 or int(lbl.split(":")[1]) in keep]
+        (d / "dofs.csv").write_text("dof,point\n" + "".join(f"{i},{lbl}\n" for i, lbl in mapped))
+        n_mapped = len({lbl.rsplit(":", 1)[0] for _, lbl in mapped})
+        (d / "model.toml").write_text('[fe]\nstiffness = "K.mtx"\nmass = "M.mtx"\ndofs = "dofs.csv"\n\n'
+                                      "[damping]\nzeta_default = 0.01\n")
+        # the measurement: a mass at one node, every mode to 2x the band's top, hysteretic damping, noise
+        dm = np.zeros(n)
+        dm[3 * (mass_node - 1):3 * mass_node] = args.mass_kg
+        t0 = time.perf_counter()
+        w2 = np.sort(spla.eigsh(K, k=10, M=M, sigma=0.0, which="LM")[0])
+        f0 = np.sqrt(w2) / (2 * np.pi)
+        band_top = float(0.5 * (f0[7] + f0[8]))         # eight modes in the band
+        f_all, phi = sparse_modes(K, M + sp.diags(dm), 2 * band_top)
+        t_truth = time.perf_counter() - t0
+        ref = outs[-1]
+        idx = {lbl: i for i, lbl in enumerate(labels)}
+        freq = np.linspace(band_top / 400, band_top, 800)
+        w = 2 * np.pi * freq[None, :]
+        wn = 2 * np.pi * f_all[:, None]
+        eta = 0.02
+        po = phi[[idx[o] for o in outs]]
+        pr = phi[idx[ref]]
+        H = -(w ** 2) * np.einsum("om,m,mk->ok", po, pr, 1.0 / (wn ** 2 * (1 + 1j * eta) - w ** 2))
+        rng = np.random.default_rng(7)
+        H = H * (1 + 0.01 * (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape)) / np.sqrt(2))
+        measured = FRFSet(freq_hz=freq, H=H[:, None, :], quantity="accelerance", outputs=tuple(outs),
+                          references=(ref,))
+        t0 = time.perf_counter()
+        c0 = time.process_time()
+        fe = load_fe_model(d / "model.toml")
+        t_read = time.perf_counter() - t0
+        sim = FEVariants(fe, measured.outputs, measured.references, 2 * band_top)
+        t1 = time.perf_counter()
+        diag = diagnose(measured, sim, band=(float(freq[2]), float(freq[-1])), effects=["added_mass"])
+        t_diag = time.perf_counter() - t1
+        cpu = time.process_time() - c0
+    named = diag.named[0] if diag.named else {}
+    print(f"model: {n} DOF ({args.nx} x {args.ny} nodes x 3), {K.nnz} stiffness entries; band to {band_top:.1f} Hz "
+          f"({int(np.sum(f0 <= band_top))} modes)")
+    print(f"DOF map: {n_mapped} nodes (the added mass's candidates)")
+    print(f"truth: {args.mass_kg} kg at n:{mass_node}; measured at {len(outs)} outputs, reference {ref} "
+          f"(set-up {t_truth:.1f} s, not timed)")
+    print(f"verdict: {diag.verdict} {named.get('parameters', {})} {diag.reason}")
+    phys = diag.physical or {}
+    print(f"measured modes {np.round(phys.get('measured_modes_hz', []), 2).tolist()}, "
+          f"simulated {phys.get('simulated_modes_hz')}, skipped: {phys.get('skipped', '')}")
+    print(f"time: read {t_read:.2f} s, diagnose {t_diag:.2f} s, total {t_read + t_diag:.2f} s "
+          f"(OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}); CPU time of this process {cpu:.2f} s "
+          "(the wall time on a machine others share is longer)")
+
+
+if __name__ == "__main__":
+    main()
