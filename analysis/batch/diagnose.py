@@ -16,10 +16,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-import logging
 import os
 import socket
-import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -27,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from .fleet import MIN_PAIRED_FRACTION, pair_modes
+from .task import batch_row, stored_if_current
 from .unit_modes import UnitModes
 
 __all__ = ["DIAGNOSIS_SCHEMA", "PLACE_KEYS", "diagnosis_key", "diagnose_one", "diagnosis_summary",
@@ -94,43 +93,20 @@ def diagnose_one(path: str, name: str, sha256: str, simulated: str, key: str, ru
     worker process's CPU time (s) of the diagnosis."""
     import warnings
 
-    from ..bands import FitError
-    from ..errors import ImpactlabError
-
-    t0, c0 = time.perf_counter(), time.process_time()
     doc: dict[str, Any] = {"schema": DIAGNOSIS_SCHEMA, "input": name, "path": str(path), "sha256": sha256,
                            "key": key, "simulated": str(simulated), "status": "ok", "error": None,
                            "diagnosis": None, "worker": f"{socket.gethostname()}:{os.getpid()}"}
-    quiet = logging.getLogger("analysis")        # its progress lines stay out of a worker's stderr
-    level = quiet.level
-    quiet.setLevel(logging.ERROR)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            diag = run(path, simulated, band=band, estimator=estimator)
+    with batch_row(doc), warnings.catch_warnings():   # its progress lines stay out of a worker's stderr
+        warnings.simplefilter("ignore")
+        diag = run(path, simulated, band=band, estimator=estimator)
         doc["diagnosis"] = diagnosis_summary(diag.to_json())
-    except (ImpactlabError, FitError, OSError, ValueError, KeyError, IndexError, TypeError, ArithmeticError,
-            RuntimeError) as exc:
-        # a unit the diagnosis cannot handle is a row of the batch, not the end of it
-        doc.update(status="error", error=f"{type(exc).__name__}: {exc}")
-    finally:
-        quiet.setLevel(level)
-    doc["seconds"] = time.perf_counter() - t0
-    doc["cpu_seconds"] = time.process_time() - c0
     return doc
 
 
 def diagnosis_is_current(path: Path, sha256: str, key: str) -> dict[str, Any] | None:
     """The stored diagnosis at ``path`` if it is of this unit's content (``sha256``) with this SIM
     and options (``key``) and complete; None otherwise."""
-    try:
-        doc = json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        return None
-    if (isinstance(doc, dict) and doc.get("schema") == DIAGNOSIS_SCHEMA and doc.get("sha256") == sha256
-            and doc.get("key") == key and doc.get("status") in ("ok", "error")):
-        return doc
-    return None
+    return stored_if_current(path, DIAGNOSIS_SCHEMA, sha256, key, lambda d: d.get("key"))
 
 
 def _times(v: float) -> str:

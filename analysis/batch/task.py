@@ -7,19 +7,63 @@ batch restartable: a result is reused only for the same content and the same opt
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
 import os
 import socket
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["RESULT_SCHEMA", "file_sha256", "options_key", "fit_one", "result_is_current"]
+from ..errors import ImpactlabError
+
+__all__ = ["RESULT_SCHEMA", "ROW_ERRORS", "file_sha256", "options_key", "fit_one", "result_is_current", "batch_row",
+           "stored_if_current"]
 
 RESULT_SCHEMA = "impactlab.batch-fit/1"
+
+#: what one unit's work may raise that makes its row an error (a bad input, a numerical failure on it),
+#: not the end of the batch
+ROW_ERRORS: tuple[type[BaseException], ...] = (ImpactlabError, OSError, ValueError, KeyError, IndexError, TypeError,
+                                               ArithmeticError, RuntimeError)
+
+
+@contextlib.contextmanager
+def batch_row(doc: dict[str, Any]) -> Iterator[None]:
+    """Run one unit's work (a fit, a diagnosis) as a row of the batch: the ``analysis`` logger quiet
+    below ERROR meanwhile (its messages go into the row, not a worker's stderr); an error of
+    :data:`ROW_ERRORS` becomes the row's ``status = "error"`` and ``error`` (its type and message);
+    ``doc["seconds"]`` and ``doc["cpu_seconds"]`` get the wall and process CPU time (s) of the work."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    quiet = logging.getLogger("analysis")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
+    try:
+        yield
+    except ROW_ERRORS as exc:
+        doc.update(status="error", error=f"{type(exc).__name__}: {exc}")
+    finally:
+        quiet.setLevel(level)
+    doc["seconds"] = time.perf_counter() - t0
+    doc["cpu_seconds"] = time.process_time() - c0
+
+
+def stored_if_current(path: str | os.PathLike[str], schema: str, sha256: str, key: str,
+                      key_of: Callable[[dict], Any]) -> dict[str, Any] | None:
+    """The stored row at ``path`` if it is complete (status ok or error), of ``schema``, of this
+    content (``sha256``) and of these options (``key_of(doc) == key``); None otherwise (missing,
+    unreadable, another input version or other options)."""
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+    if (isinstance(doc, dict) and doc.get("schema") == schema and doc.get("sha256") == sha256
+            and key_of(doc) == key and doc.get("status") in ("ok", "error")):
+        return doc
+    return None
 
 
 def file_sha256(path: str | os.PathLike[str], chunk: int = 1 << 20) -> str:
@@ -51,21 +95,16 @@ def fit_one(path: str, name: str, sha256: str, band: Sequence[float] | None = No
     load and fit (on a busy machine the CPU time is the work, the wall time also the waiting)."""
     import warnings
 
-    from ..errors import ImpactlabError
     from ..inputs import load_input
     from ..pipeline import fit_auto
     from ..report import result_to_dict
 
-    t0, c0 = time.perf_counter(), time.process_time()
     doc: dict[str, Any] = {"schema": RESULT_SCHEMA, "input": name, "path": str(path), "sha256": sha256,
                            "options": {"band": None if band is None else [float(b) for b in band],
                                        "estimator": estimator, "key": options_key(band, estimator)},
                            "status": "ok", "error": None, "fit": None,
                            "worker": f"{socket.gethostname()}:{os.getpid()}"}
-    quiet = logging.getLogger("analysis")        # its warnings go into the result, not a worker's stderr
-    level = quiet.level
-    quiet.setLevel(logging.ERROR)
-    try:
+    with batch_row(doc):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             frf = load_input(path, estimator=estimator)
@@ -74,25 +113,10 @@ def fit_one(path: str, name: str, sha256: str, band: Sequence[float] | None = No
         doc["fit"] = result_to_dict(fit, frf, extra={"input": str(path), "warnings": notes})
         if not doc["fit"]["poles"]:
             doc.update(status="error", error="the fit found no modes in the band")
-    except (ImpactlabError, OSError, ValueError, KeyError, IndexError, TypeError, ArithmeticError,
-            RuntimeError) as exc:
-        # a bad input (or a numerical failure on it) is a row of the batch, not the end of it
-        doc.update(status="error", error=f"{type(exc).__name__}: {exc}")
-    finally:
-        quiet.setLevel(level)
-    doc["seconds"] = time.perf_counter() - t0
-    doc["cpu_seconds"] = time.process_time() - c0
     return doc
 
 
 def result_is_current(path: Path, sha256: str, key: str) -> dict[str, Any] | None:
     """The stored result at ``path`` if it is for this content (``sha256``) and options (``key``)
     and is complete; None otherwise (missing, another input version, unreadable)."""
-    try:
-        doc = json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        return None
-    if (isinstance(doc, dict) and doc.get("schema") == RESULT_SCHEMA and doc.get("sha256") == sha256
-            and (doc.get("options") or {}).get("key") == key and doc.get("status") in ("ok", "error")):
-        return doc
-    return None
+    return stored_if_current(path, RESULT_SCHEMA, sha256, key, lambda d: (d.get("options") or {}).get("key"))
