@@ -168,20 +168,22 @@ def run_station(args: argparse.Namespace, out_stream: TextIO | None = None, read
 
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, _term)
-        engine.start()
-        serving = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.5}, daemon=True)
-        serving.start()
-        if ready is not None:
-            ready.set()
         finished = False
-        try:
+        serving: threading.Thread | None = None
+        try:  # from the engine's start on, a Ctrl-C (or SIGTERM) at any moment stops the threads it started
+            engine.start()
+            serving = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.5}, daemon=True)
+            serving.start()
+            if ready is not None:
+                ready.set()
             while not stop.wait(1.0):
                 pass
         except KeyboardInterrupt:
             pass
         finally:
             finished = engine.state.get("phase") == "finished"  # ended on the page before the stop (else: early)
-            server.shutdown()
+            if serving is not None:  # shutdown() waits for serve_forever: only once it was started
+                server.shutdown()
             server.server_close()
             engine.stop()
         if not Path(job["out"]).exists():
