@@ -168,6 +168,9 @@ def run_station(args: argparse.Namespace, out_stream: TextIO | None = None, read
 
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, _term)
+            # Ctrl-C stops the station even where the parent started it with SIGINT ignored (a job started
+            # in the background by a script, a test runner's worker): Python then installs no handler of its own
+            signal.signal(signal.SIGINT, _term)
         finished = False
         serving: threading.Thread | None = None
         try:  # from the engine's start on, a Ctrl-C (or SIGTERM) at any moment stops the threads it started

@@ -25,10 +25,14 @@ WAIT_S = 90.0
 class StationProcess:
     """``python -m acquisition station ARGS`` in a child process; ``url``, ``base``, ``token``."""
 
-    def __init__(self, args: list, cwd: Path) -> None:
+    def __init__(self, args: list, cwd: Path, sigint_ignored: bool = False) -> None:
+        """``sigint_ignored``: start it as a script's background job is started (SIGINT ignored, which
+        a child inherits and Python then leaves without its own Ctrl-C handler)."""
         env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
+        ignore = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None
         self.proc = subprocess.Popen([sys.executable, "-m", "acquisition", "station", *args], cwd=cwd,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                                     preexec_fn=ignore)
         line = self.proc.stdout.readline().strip()  # the URL is the first line (blocks until printed)
         if not line.startswith("http://"):
             self.proc.kill()

@@ -239,9 +239,10 @@ def test_the_favicon_request_is_answered_without_the_token(small_server):
     assert _get(small_server, "/api/state", token=None)[0] == 403
 
 
-def test_ctrl_c_before_the_first_hit_exits_130(tmp_path):
+@pytest.mark.parametrize("sigint_ignored", [False, True], ids=["plain", "started-with-sigint-ignored"])
+def test_ctrl_c_before_the_first_hit_exits_130(tmp_path, sigint_ignored):
     s = StationProcess(["--device", "sim://?seed=1", "--out", str(tmp_path / "rec.h5"), "--points", "right:6:-X"],
-                       tmp_path)
+                       tmp_path, sigint_ignored=sigint_ignored)
     assert Api(s).state()["phase"] == "setup"
     s.proc.send_signal(signal.SIGINT)
     out, err = s.proc.communicate(timeout=WAIT_S)
