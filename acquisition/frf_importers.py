@@ -91,13 +91,19 @@ def _motion_quantity(path: Path, var: str, unit: str) -> str:
     return q
 
 
+def _real(path: Path, var: str, x: np.ndarray, refused: str) -> np.ndarray:
+    """``x`` as real numbers: a complex array with a zero imaginary part read exactly, any other complex
+    array refused with ``refused`` (what the values are, what to do)."""
+    x = np.asarray(x)
+    if np.iscomplexobj(x):
+        if np.any(x.imag != 0):
+            raise _fail(path, f"{var}: {refused}")
+        x = x.real
+    return x.astype(float)
+
+
 def _coherence(path: Path, var: str, c: np.ndarray) -> np.ndarray:
-    c = np.asarray(c)
-    if np.iscomplexobj(c):
-        if np.any(c.imag != 0):
-            raise _fail(path, f"{var}: the coherence is complex; export the coherence magnitude")
-        c = c.real
-    c = c.astype(float)
+    c = _real(path, var, c, "the coherence is complex; export the coherence magnitude")
     if not np.all(np.isfinite(c)):
         raise _fail(path, f"{var}: the coherence holds NaN or infinite values; export it again")
     if c.min() < -COHERENCE_TOLERANCE or c.max() > 1 + COHERENCE_TOLERANCE:
@@ -115,12 +121,7 @@ def _finite_frf(path: Path, var: str, h: np.ndarray) -> np.ndarray:
 
 
 def _check_axis(path: Path, var: str, f: np.ndarray) -> np.ndarray:
-    f = np.asarray(f)
-    if np.iscomplexobj(f):
-        if np.any(f.imag != 0):
-            raise _fail(path, f"{var}: the frequency column is complex")
-        f = f.real
-    f = f.astype(float)
+    f = _real(path, var, f, "the frequency column is complex")
     if f.size < 2 or not np.all(np.isfinite(f)) or np.any(np.diff(f) <= 0) or f[0] < 0:
         raise _fail(path, f"{var}: the frequencies are not a non-negative, strictly increasing axis")
     return f
