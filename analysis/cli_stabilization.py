@@ -71,7 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             warnings.simplefilter("always")
             b = parse_band(band, frf.freq_hz) if band is not None else default_band(frf)
             n = args.max_order or default_max_modes(frf, b)
-            stab = stabilization(frf, n, method=args.method, band=b, refine_lsfd=args.lsfd)
+            stab = stabilization(frf, n, method=args.method, band=b, refine_lsfd=args.lsfd, wide_band=True)
             clusters = select_clusters(stab)
     for w in wlist:
         print(f"warning: {w.message}", file=sys.stderr)

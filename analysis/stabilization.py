@@ -25,6 +25,15 @@ decimation of the band) and the FRFs projected on an orthonormal basis of their 
 column space (randomized range finder; MAC is unchanged by that orthonormal projection,
 up to the discarded noise).
 
+A wide band (``wide_band=True``, the ``stabilization`` command's choice) is taken in sub-bands: a
+band whose top is more than ``MAX_BAND_RATIO`` times its bottom holds weak low modes beside strong
+high ones, and one model of the whole band spends its poles on the strong modes (a modal-test
+engineer zooms in). The band is cut into sub-bands of equal logarithmic width (at most
+``MAX_BAND_RATIO`` each), each cut moved to the lowest line of the summed FRF power within
+``CUT_SEARCH`` of it (between resonances, never through one); each sub-band is fitted with
+``SUB_BAND_OVERLAP`` more on either side and keeps the poles of its own part. The diagram's order n
+is then the model size of each sub-band (none above what its lines support).
+
 ``refine_lsfd=True`` refines the physical poles of every order with a few iterations of
 the nonlinear LSFD fitter (:func:`analysis.lsfd.fit_lsfd`), which gives the paper's LSFD
 stabilization diagram (Fig. 8: "estimated pole lines are straight, not branched off");
@@ -65,6 +74,14 @@ METHODS = ("lsce", "lscf")
 MAX_SHAPE_LINES = 1024
 #: absolute damping-ratio tolerance of the damping-stability test (0.05 % of critical)
 ABS_TOL_DAMP = 5e-4
+#: ``wide_band``: largest top-to-bottom frequency ratio of one sub-band
+MAX_BAND_RATIO = 8.0
+#: ``wide_band``: a cut moves to the lowest summed FRF power within this factor of its place
+CUT_SEARCH = 1.25
+#: ``wide_band``: each sub-band is fitted this fraction wider on either side than the part it keeps
+SUB_BAND_OVERLAP = 0.1
+#: ``wide_band``: fewest lines a sub-band may hold (fewer: it joins its neighbour)
+MIN_SUB_BAND_LINES = 48
 
 
 @dataclass(frozen=True)
@@ -198,6 +215,61 @@ def _initial_poles(bd: BandData, max_modes: int, method: str) -> list[np.ndarray
     return lscf_poles_all_orders(bd, max_modes)
 
 
+def sub_band_cuts(bd: BandData) -> list[float]:
+    """The cuts (Hz) of a wide band into sub-bands (module docstring); [] when one band will do."""
+    lo, hi = bd.band
+    f = bd.freq_hz
+    k = int(np.ceil(np.log(hi / lo) / np.log(MAX_BAND_RATIO))) if lo > 0 else 1
+    if k <= 1:
+        return []
+    power = np.sum(bd.H.real ** 2 + bd.H.imag ** 2, axis=0)
+    cuts: list[float] = []
+    for j in range(1, k):
+        c = lo * (hi / lo) ** (j / k)
+        near = np.flatnonzero((f >= c / CUT_SEARCH) & (f <= c * CUT_SEARCH))
+        if near.size:
+            c = float(f[near[np.argmin(power[near])]])
+        edges = [lo, *cuts, c]
+        if np.count_nonzero((f >= edges[-2]) & (f < c)) >= MIN_SUB_BAND_LINES:
+            cuts.append(c)
+    while cuts and np.count_nonzero(f >= cuts[-1]) < MIN_SUB_BAND_LINES:
+        cuts.pop()
+    return cuts
+
+
+def _sub_band_poles(bd: BandData, max_modes: int, method: str) -> list[np.ndarray]:
+    """Poles per order n = 1..max_modes of a wide band taken in sub-bands (module docstring): the
+    union over sub-bands of each one's model of n modes (none above what its lines support), keeping the
+    poles whose damped frequency lies in its own part."""
+    from .bands import LINES_PER_MODE
+
+    lo, hi = bd.band
+    edges = [lo, *sub_band_cuts(bd), hi]
+    parts: list[tuple[float, float, list[np.ndarray]]] = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        ext = (max(lo, a * (1 - SUB_BAND_OVERLAP)), min(hi, b * (1 + SUB_BAND_OVERLAP)))
+        keep = (bd.freq_hz >= ext[0]) & (bd.freq_hz <= ext[1])
+        sub = BandData(bd.freq_hz[keep], bd.H[:, keep], ext)
+        n_lines = int(sub.freq_hz.size)
+        # the most modes its lines determine (LSCF: 2n + 1 coefficients; LSCE: its Hankel matrix)
+        n_sub = max(1, min(max_modes, n_lines // LINES_PER_MODE if method == "lsce" else (n_lines - 1) // 2))
+        parts.append((a, b, _initial_poles(sub, n_sub, method)))
+    out = []
+    for n in range(1, max_modes + 1):
+        ps: list[np.ndarray] = []
+        for j, (a, b, poles) in enumerate(parts):
+            if n > len(poles):  # no repeated model above what the sub-band supports: a repeat is no evidence
+                continue
+            p = poles[n - 1]
+            fd = p.imag / (2 * np.pi)
+            own_lo = a if j > 0 else -np.inf              # the outer edges: the band's test (_physical)
+            own_hi = b if j < len(parts) - 1 else np.inf
+            ps.append(p[(fd >= own_lo) & (fd < own_hi)])
+        allp = np.concatenate(ps) if ps else np.zeros(0, complex)
+        out.append(allp[np.argsort(allp.imag)])
+    return out
+
+
 def _refine(frf: FRFSet, poles: np.ndarray, band: tuple[float, float],
             iterations: int) -> tuple[np.ndarray, np.ndarray | None]:
     """A few LSFD iterations from the given poles; returns (poles, flattened residues)."""
@@ -230,6 +302,7 @@ def stabilization(
     max_damping: float = 0.2,
     min_modes: int = 1,
     abs_tol_damp: float = ABS_TOL_DAMP,
+    wide_band: bool = False,
 ) -> StabilizationResult:
     """Stabilization diagram of models with n = min_modes..max_modes modes.
 
@@ -244,6 +317,8 @@ def stabilization(
     abs_tol_damp : absolute damping-ratio tolerance (a damping change below it always counts
         as stable; default 5e-4 = 0.05 % of critical).
     max_damping : damping ratios at or above this are not physical.
+    wide_band : take a band wider than ``MAX_BAND_RATIO`` in sub-bands (module docstring); order n
+        is then the model size of each sub-band.
 
     Returns
     -------
@@ -261,7 +336,8 @@ def stabilization(
         raise ValueError(f"abs_tol_damp must be >= 0; got {abs_tol_damp}")
     bd = prepare_band(frf, band)
     lo, hi = bd.band
-    all_poles = _initial_poles(bd, max_modes, method)
+    all_poles = (_sub_band_poles(bd, max_modes, method) if wide_band and sub_band_cuts(bd)
+                 else _initial_poles(bd, max_modes, method))
     omega_s, Ys = _shape_data(bd, max_modes)
     orders, poles_out, phys_out, status_out, mac_out = [], [], [], [], []
     prev_p = np.zeros(0, complex)

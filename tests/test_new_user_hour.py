@@ -91,19 +91,6 @@ def test_replay_estimator_is_explained_and_the_fit_table_says_which_estimate(rec
     assert "LSFD (lm) fit of H1, residues of" in capsys.readouterr().out
 
 
-def test_stabilization_heads_its_columns_and_names_visible_modes_without_a_pole(rec, tmp_path, capsys) -> None:
-    """The README's 'stabilization rec.h5 --max-order 30': the weak low modes beside the strong ones
-    get no stable pole in 12.5-1102 Hz; the command says so and how to get them."""
-    from analysis.cli_stabilization import main as stab_main
-
-    assert stab_main([str(rec), "--png", str(tmp_path / "s.png"), "--max-order", "30"]) == 0
-    got = capsys.readouterr()
-    header = got.out.splitlines()[1].split()
-    assert header[0] == "pole" and header[1:3] == ["f", "[Hz]"]
-    warn = [ln for ln in got.err.splitlines() if "have no stable pole up to order 30" in ln]
-    assert warn and all(f in warn[0] for f in ("35.", "50.", "81.")), got.err
-
-
 def test_diagnose_prints_its_verdict_without_json_and_says_what_is_not_significant(rec, capsys) -> None:
     from analysis.cli_diagnose import main as diagnose_main
 
