@@ -247,6 +247,7 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
     from .compare import common_points
 
     sim_frfs: FRFSet | None = None
+    user_band = (float(band[0]), float(band[1])) if band is not None and not isinstance(band, str) else None
     if _is_physical(simulated):
         physical, base = simulated, simulated.model(None, {})
     elif isinstance(simulated, ModalModel):
@@ -254,7 +255,6 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
     elif isinstance(simulated, (FRFSet, str, Path)):
         source = str(simulated) if not isinstance(simulated, FRFSet) else "the simulation"
         sim = simulated if isinstance(simulated, FRFSet) else load_input(Path(simulated), estimator=estimator)
-        user_band = (float(band[0]), float(band[1])) if band is not None and not isinstance(band, str) else None
         base = simulation_model(sim, measured, source, band=user_band)
         sim_frfs = sim
     else:
@@ -293,11 +293,25 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
         both = noise_with_simulated_frfs(measured, sim_frfs, noise)
         if both is not None:
             noise["simulation"] = both
+    if physical is not None and user_band is not None and rule.get("measured_modes") is None:
+        rule["measured_modes"] = _measured_modes_in(measured, user_band)
     diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise, **rule)
     if recording is None:
         return diag
     band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
     return _level_stage(_time_data_stage(diag, recording, band_hz, base), recording, band_hz, joint_simulation)
+
+
+def _measured_modes_in(measured: FRFSet, band: tuple[float, float]) -> Any:
+    """The measured modes fitted in the user's ``band`` (Hz), so the fit's warnings name its edges, not
+    those of a band from the data; None when the fit fails (the physical stage then says why)."""
+    from ..errors import ImpactlabError
+    from .physical_verdict import measure_modes
+
+    try:
+        return measure_modes(measured, band)
+    except (ImpactlabError, ValueError, np.linalg.LinAlgError):
+        return None
 
 
 def _time_data_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, float],

@@ -87,11 +87,12 @@ class PhysicalOutcome:
     on_top: dict | None = None
 
 
-def measure_modes(measured: FRFSet) -> MeasuredModes:
-    """The measured modes from the automatic fit (:func:`analysis.pipeline.fit_auto`)."""
+def measure_modes(measured: FRFSet, band: tuple[float, float] | None = None) -> MeasuredModes:
+    """The measured modes from the automatic fit (:func:`analysis.pipeline.fit_auto`) in ``band`` (Hz;
+    None: the band from the data), so that its warnings speak of the band the user gave."""
     from ..pipeline import fit_auto
 
-    res = fit_auto(measured)
+    res = fit_auto(measured, band=band)
     lf = res.lsfd
     return MeasuredModes.from_model(lf.model, lf.freq_hz_std)
 
