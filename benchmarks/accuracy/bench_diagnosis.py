@@ -22,10 +22,18 @@ import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+from pathlib import Path  # noqa: E402
+
 import numpy as np  # noqa: E402
 
 from analysis.diagnosis import EFFECTS, diagnose  # noqa: E402
 from simulator.effects import TOLERANCES, add_frf_noise, base_model, draw_effect, primary_error, simulate_with_effects  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_diagnosis.md")
 
 OUTS = ["left:9:Y", "top:4:X", "right:6:-X", "left:6:X"]
 REFS = ["right:6:-X"]
@@ -172,7 +180,14 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--timedata", type=int, nargs="?", const=10, default=None, metavar="N",
                     help="run the time-data effects instead: N cases per effect and N clean (default 10)")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        _run(args)
+
+
+def _run(args: argparse.Namespace) -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     t = time.perf_counter()
     if args.timedata is not None:
         print(table_timedata(run_timedata(args.timedata, args.seed)))

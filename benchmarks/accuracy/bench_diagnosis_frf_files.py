@@ -25,6 +25,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from frf_beam_cases import FAMILIES, SEED, Case, describe, draw_cases, node_numbers, write_case  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_diagnosis_frf_files.md")
+
 TOL = {"mass_loading": 0.25, "stiffness_shift": 0.02, "damping_change": 0.15, "missing_mode": 0.05}
 
 
@@ -116,7 +122,14 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--only", default="", help="comma-separated case indices")
     ap.add_argument("--family", default="", help="only this family")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        _run(args)
+
+
+def _run(args: argparse.Namespace) -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     cases = draw_cases(args.seed)
     if args.only:
         keep = {int(x) for x in args.only.split(",")}

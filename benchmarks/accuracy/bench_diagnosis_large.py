@@ -55,6 +55,12 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_diagnosis_physical import POINTS, _explicit, _node_xyz, _relabel, capture_case, null_case, run_all, steel_block  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_diagnosis_large.md")
+
 FAMILIES = ("large:added_mass", "large:support_stiffness", "crack", "pair:mass+support", "pair:damping+modulus",
             "pair:member+sensors", "pair:mass+joint", "pair:mass+damping")
 
@@ -303,11 +309,18 @@ def main() -> None:
     ap.add_argument("--json", help="write every case's result")
     ap.add_argument("--seed", type=int, default=SEED,
                     help=f"the generator's seed (default {SEED}, the tuning draw; {HOLDOUT_SEED}, {HOLDOUT2_SEED}: hold-out draws)")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
     fams = [f for f in args.families.split(",") if f]
     bad = [f for f in fams if f not in FAMILIES]
     if bad:
         ap.error(f"unknown families {bad}; choose from {', '.join(FAMILIES)}")
+    with recorded(RESULTS, args.write):
+        _run(args, fams)
+
+
+def _run(args: argparse.Namespace, fams: list[str]) -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     todo = cases(args.per_family, args.nulls, [] if args.nulls_only else fams, seed=args.seed, large=args.large)
     rank = [sum(d["family"] == c["family"] for d in todo[:i]) for i, c in enumerate(todo)]
     todo = [c for c, k in zip(todo, rank) if k >= args.skip and (args.first is None or k < args.first)]

@@ -45,7 +45,15 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+import sys  # noqa: E402
+
 import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_diagnosis_physical.md")
 
 POINTS = ("right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y")
 FAMILIES = ("added_mass", "support_stiffness", "joint_stiffness", "member_mass", "member_stiffness",
@@ -301,7 +309,14 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="write every case's result")
     ap.add_argument("--families", default=",".join(FAMILIES), help="comma-separated families to run")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        _run(args)
+
+
+def _run(args: argparse.Namespace) -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     todo = cases(args.per_family, args.nulls, families=[f for f in args.families.split(",") if f])
     run_all(run_case, todo, args.workers, _case_line, args.json)
 

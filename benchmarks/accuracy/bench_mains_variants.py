@@ -28,6 +28,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_mains_variants.md")
+
 OUTS = ["left:9:Y", "top:4:X", "right:6:-X", "left:6:X"]
 REFS = ["right:6:-X"]
 F = np.arange(2.0, 200.0, 0.25)
@@ -50,7 +56,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--amplitude", default="0.05,0.2", help="range of the lines' amplitude relative to |H| (default 0.05,0.2)")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        _run(args)
+
+
+def _run(args: argparse.Namespace) -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     amp = tuple(float(x) for x in args.amplitude.split(","))
 
     from analysis.diagnosis import diagnose

@@ -41,6 +41,12 @@ from acquisition.cli_capture import main as capture  # noqa: E402
 from analysis import linearity  # noqa: E402
 from analysis.inputs import load_input  # noqa: E402
 
+sys.path.insert(0, str(ROOT))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("linearity_false_alarms.results.md")
+
 POINTS = "right:6:-X,left:6:X,top:4:Z"
 LEVELS_N = (40.0, 200.0)
 JOINT = ('[nonlinear]\nlaw = "iwan"\njoint = "right:10"\naxis = "ry"\nslip_moment_nm = 1.5\n'
@@ -99,7 +105,14 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=30, help="pairs of the linear frame (default 30)")
     ap.add_argument("--joint-pairs", type=int, default=10, help="pairs of the frame with the friction joint")
     ap.add_argument("-v", "--verbose", action="store_true", help="one line per pair")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        _run(args)
+
+
+def _run(args: argparse.Namespace) -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         lin = pairs(args.pairs, False, 5000, Path(tmp))

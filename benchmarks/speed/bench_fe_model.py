@@ -24,6 +24,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_fe_model.md")
 
 
 def build(nx: int, ny: int) -> tuple:
@@ -74,7 +78,14 @@ def main() -> None:
     ap.add_argument("--mass-kg", type=float, default=3.0, help="the added mass (kg; the model's is 168 kg)")
     ap.add_argument("--map-every", type=int, default=1,
                     help="the DOF map lists every k-th node (and the measured ones): the added mass's candidates")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        _run(args)
+
+
+def _run(args: argparse.Namespace) -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", str(args.threads))
 
     import numpy as np

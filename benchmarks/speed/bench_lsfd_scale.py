@@ -22,12 +22,20 @@ import tracemalloc
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+from pathlib import Path  # noqa: E402
+
 import numpy as np  # noqa: E402
 
 import analysis._lsfd_kernels as kernels  # noqa: E402
 from analysis.frf import FRFSet  # noqa: E402
 from analysis.lsfd import fit_lsfd  # noqa: E402
 from analysis.modal import ModalModel, pole_from_fz, synthesize  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_lsfd_scale.md")
 
 
 def build(n_out: int, n_ref: int, n_lines: int, n_modes: int, noise: float, seed: int):
@@ -63,7 +71,14 @@ def main(argv=None) -> int:
     ap.add_argument("--method", default="lm")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--precise-only", action="store_true", help="disable the fast (Gram-based) evaluations")
+    add_write_option(ap, RESULTS)
     a = ap.parse_args(argv)
+    with recorded(RESULTS, a.write):
+        return _run(a)
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The run itself (what :func:`main` records with ``--write``)."""
     if a.precise_only:
         kernels.gram_form_pays = lambda *sizes, **kw: False   # the cost model never picks the Gram form
     frf, lam, p0, nv = build(a.outputs, a.refs, a.lines, a.modes, a.noise, seed=7)

@@ -49,12 +49,19 @@ import sys  # noqa: E402
 import time  # noqa: E402
 import tracemalloc  # noqa: E402
 import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from analysis.frf import FRFSet  # noqa: E402
 from analysis.modal import ModalModel, pole_from_fz, synthesize  # noqa: E402
 from analysis.pipeline import fit_auto  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_vs_sdypy.md")
 
 F_IN = np.array([40.0, 75.0, 78.0, 130.0, 180.0, 240.0, 310.0, 390.0])
 Z_IN = np.array([0.005, 0.007, 0.009, 0.011, 0.013, 0.015, 0.018, 0.02])
@@ -245,7 +252,14 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-large", action="store_true", help="skip the 300 x 8000 run")
     ap.add_argument("--noise", choices=("proportional", "additive"), default="additive",
                     help="noise model: 1 %% of each FRF's RMS on every line (default) or 1 %% of |H| per line")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args(argv)
+    with recorded(RESULTS, args.write):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The run itself (what :func:`main` records with ``--write``)."""
     global NOISE_KIND
     NOISE_KIND = args.noise
     print(f"noise model: {NOISE_KIND}")

@@ -1,11 +1,13 @@
 """Frames changed in one physical way, each captured through ``sim://?config=...`` (the default test
 plan's six points, 3 hits each) and diagnosed against the unchanged frame.toml with the command line
-(``python -m analysis diagnose``). Prints the table of its results file, ``diagnosis_changed_frames_table.md`` beside it.
+(``python -m analysis diagnose``). Prints the table; ``--write`` replaces its results file,
+``diagnosis_changed_frames_table.md`` beside it, with this run.
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/diagnosis_changed_frames_table.py
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/diagnosis_changed_frames_table.py --write
 """
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
 import json
@@ -22,9 +24,12 @@ sys.path.insert(0, str(ROOT / "benchmarks" / "accuracy"))
 
 import bench_diagnosis_physical as bench  # noqa: E402
 
+from benchmarks.results import add_write_option, recorded  # noqa: E402
 from simulator.config import FrameConfig, overrides_to_toml  # noqa: E402
 from simulator.fem import section_properties  # noqa: E402
 
+#: this study's results file (``--write`` replaces it with the run's table)
+RESULTS = Path(__file__).with_name("diagnosis_changed_frames_table.md")
 POINTS = "right:6:-X,right:4:-X,left:6:X,top:4:Z,top:2:Z,left:9:Y"
 
 
@@ -54,6 +59,15 @@ def cases() -> list[tuple[str, dict, list]]:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_write_option(ap, RESULTS)
+    args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        _run()
+
+
+def _run() -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     from acquisition.cli_capture import main as capture
     from analysis.cli_diagnose import main as diagnose
 

@@ -28,8 +28,11 @@ damaged node; the element) - ``named`` with kind and place. A null is right when
 
     # draw a hold-out list (commit it before running it)
     python benchmarks/studies/diagnosis_one_place.py draw --seed 33 --damage 20 --nulls 10 --out CASES.json
-    # run it (one case after the other; the diagnosis forks its own processes)
-    OPENBLAS_NUM_THREADS=1 nice -n 10 python benchmarks/studies/diagnosis_one_place.py run CASES.json --json OUT.json
+    # run it (one case after the other; the diagnosis forks its own processes); --write: the results go to
+    # CASES.results.json beside the list (replaced after every case, atomically)
+    OPENBLAS_NUM_THREADS=1 nice -n 10 python benchmarks/studies/diagnosis_one_place.py run CASES.json --write
+
+The hold-out lists kept beside this script (:data:`CASE_LISTS`) each have their results beside them.
 """
 from __future__ import annotations
 
@@ -50,7 +53,12 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from analysis.atomic import write_text_atomic  # noqa: E402
+from benchmarks.results import results_of_cases  # noqa: E402
+
 FRAME = ROOT / "simulator" / "frame.toml"
+#: the hold-out case lists drawn by this script and kept beside it (their results: results_of_cases)
+CASE_LISTS = "diagnosis_*_holdout_seed*.json"
 #: The points of the damage cases' captures (the physical benchmark's six hammer points).
 POINTS = ("right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y")
 RANGES = {"loose_support": (0.05, 0.3), "soft_joint": (0.02, 0.2), "cracked_element": (0.3, 0.6)}
@@ -271,11 +279,13 @@ def main() -> None:
     r = sub.add_parser("run", help="capture and diagnose every case of a list")
     r.add_argument("cases")
     r.add_argument("--json", help="write every case's result")
+    r.add_argument("--write", action="store_true",
+                   help="write every case's result to CASES.results.json beside the case list")
     args = ap.parse_args()
     if args.cmd == "draw":
         cases = draw(args.seed, args.damage, args.nulls) + draw_blocks(args.seed + 1, args.blocks)
         ranges = {**RANGES, "attached_block": {"mass_kg": BLOCK_MASS_KG, "side_m": BLOCK_SIDE_M}}
-        Path(args.out).write_text(json.dumps({"seed": args.seed, "ranges": ranges, "cases": cases}, indent=1) + "\n")
+        write_text_atomic(args.out, json.dumps({"seed": args.seed, "ranges": ranges, "cases": cases}, indent=1) + "\n")
         print(f"{len(cases)} cases -> {args.out}")
         return
     cfg = frame()
@@ -286,8 +296,8 @@ def main() -> None:
         res = run_case(case, cfg)
         results.append(res)
         print(line(res), flush=True)
-        if args.json:
-            Path(args.json).write_text(json.dumps(results, indent=1, default=str))
+        for out in [args.json] * bool(args.json) + [results_of_cases(args.cases)] * args.write:
+            write_text_atomic(out, json.dumps(results, indent=1, default=str))
     print(table(results))
     print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} cases")
 

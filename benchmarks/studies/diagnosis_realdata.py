@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -29,6 +30,11 @@ from analysis.mac import mac_matrix  # noqa: E402
 from analysis.uff import write_uff58  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))  # the repository, for benchmarks.results
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this study's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("diagnosis_realdata.md")
 DATA = ROOT.parent / "shared" / "data"
 
 
@@ -130,7 +136,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("case", choices=("unesp", "uliege"))
     ap.add_argument("--band", default=None)
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        _run(args)
+
+
+def _run(args: argparse.Namespace) -> None:
+    """The run itself (what :func:`main` records with ``--write``)."""
     out = ROOT / "docs" / "diagnosis" / f"diagnosis_realdata_{args.case}"
     out.mkdir(parents=True, exist_ok=True)
     if args.case == "unesp":
