@@ -321,11 +321,18 @@ class CaptureSession:
                 result.rejected.append((m.index, m.point, idx, reasons))
                 self._event("INFO", f"hit {idx + 1} at {m.point} rejected: {'; '.join(reasons)}")  # numbered from 1
             self.operator.progress(f"  progress: point {m.index + 1}/{len(self.measurements)}, "
-                          f"{avg.n_averages}/{self.plan.hits_per_point} accepted here, "
-                          f"{result.accepted} accepted and {len(result.rejected)} rejected in total")
+                                   f"{avg.n_averages}/{self.plan.hits_per_point} accepted here, "
+                                   f"{result.accepted} accepted and {len(result.rejected)} rejected in total; "
+                                   f"per point {self.tally(result)}")
         if self.writer is not None and avg.n_averages > 0:
             avg.write(self.writer)
         self._event("INFO", f"point {m.point} done: {avg.n_averages} averages")
+
+    def tally(self, result: SessionResult) -> str:
+        """Accepted hits of every point of the plan against the hits asked, in plan order:
+        ``right:6:-X 3/3, top:4:Z 2/3, left:9:Y 0/3`` (points not reached yet count 0)."""
+        got = [a.n_averages for a in result.averages] + [0] * (len(self.measurements) - len(result.averages))
+        return ", ".join(f"{m.point} {n}/{self.plan.hits_per_point}" for m, n in zip(self.measurements, got))
 
     def _trigger_advice(self) -> str:
         """What a missed trigger waited for and how to change it (the set-up's level, channel and unit)."""
