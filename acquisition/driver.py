@@ -86,6 +86,18 @@ class Analyser:
 
     ``timeout_s`` bounds each command; ``poll_interval_s`` is the longest sleep between status
     polls in :meth:`wait_for_trigger`. Use as a context manager or call :meth:`close`.
+
+    Examples
+    --------
+    The simulated analyser (``usb://1209:0001`` or ``socket://HOST:PORT`` for another door):
+
+    >>> from acquisition import Analyser
+    >>> with Analyser("sim://?seed=1") as analyser:
+    ...     print(analyser.identify())
+    ...     caps = analyser.capabilities()
+    IMPACTLB SIGLAB-SIM 2042 rev 0100 serial SL2042-0000001
+    >>> caps.n_inputs, max(caps.sample_rates_hz), caps.adc_bits       # channels, Hz, bits
+    (4, 51200.0, 16)
     """
 
     def __init__(self, url_or_transport: str | Transport, timeout_s: float = 2.0,

@@ -20,10 +20,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled, theta_to_poles
+from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, solve_scaled, theta_to_poles
+from .fit_messages import stop
 
 __all__ = ["run_gn", "check_poles", "relative_step", "roundoff_floor", "theta_box", "project_to_bounds", "freeze_active",
-           "pred_tolerance", "stationary_message", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
+           "pred_tolerance", "stationary_stop", "SWITCH_TO_PRECISE", "PRED_FLOOR"]
 
 
 def roundoff_floor(problem: ProjectedProblem) -> float:
@@ -126,12 +127,11 @@ def pred_tolerance(problem: ProjectedProblem, n_modes: int, ftol: float, sdtol: 
     return tol, dof
 
 
-def stationary_message(pred: float, S: float, dof: int, ftol: float, sdtol: float | None) -> str:
-    """The message of a verdict of the predicted-decrease test (:func:`pred_tolerance`)."""
+def stationary_stop(pred: float, S: float, dof: int, ftol: float, sdtol: float | None) -> tuple[int, str]:
+    """``(status, message)`` of a verdict of the predicted-decrease test (:func:`pred_tolerance`)."""
     if sdtol and dof > 0 and pred <= float(sdtol) ** 2 * S / dof and pred > max(ftol, PRED_FLOOR) * S:
-        return (f"converged: the step still to go is {np.sqrt(max(pred, 0.0) * dof / S):.2g} standard deviations "
-                f"of the poles <= sdtol")
-    return f"converged: predicted decrease of S {pred / S:.2g} S <= ftol"
+        return stop("stationary_sd", sd=float(np.sqrt(max(pred, 0.0) * dof / S)))
+    return stop("stationary", pred_rel=pred / S)
 
 
 def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: float,
@@ -141,11 +141,11 @@ def convergence_verdict(S: float, floor: float, step: float, xtol: float, rel: f
     S at the round-off floor, relative step <= xtol, or relative decrease of S <= ftol.
     """
     if S <= floor:
-        return (Status.ROUNDOFF, "converged: S at round-off level")
+        return stop("roundoff")
     if step <= xtol:
-        return (Status.XTOL, f"converged: relative step {step:.2g} <= xtol")
+        return stop("xtol", step=step)
     if rel <= ftol:
-        return (Status.FTOL, f"converged: relative change of S {rel:.2g} <= ftol")
+        return stop("ftol", rel=rel)
     return None
 
 
@@ -164,10 +164,9 @@ def start_iteration(problem: ProjectedProblem, theta0: np.ndarray
     floor = roundoff_floor(problem)
     early: NLSOutcome | None = None
     if not ev.rank_ok:
-        early = NLSOutcome(theta, ev, history, 0, 1, Status.COLLAPSED,
-                           f"initial poles give a rank-deficient basis (rcond {ev.rcond:.2g})")
+        early = NLSOutcome(theta, ev, history, 0, 1, *stop("initial_rank", rcond=ev.rcond))
     elif ev.S <= floor:
-        early = NLSOutcome(theta, ev, history, 0, 1, Status.ROUNDOFF, "initial fit already at round-off level")
+        early = NLSOutcome(theta, ev, history, 0, 1, *stop("initial_roundoff"))
     return theta, fast, ev, history, floor, early
 
 
@@ -199,15 +198,12 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
                 ev = problem.evaluate(theta)
                 nfev += 1
             if not ev.rank_ok:
-                return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
-                                  f"GN stopped: poles collapsed (basis rcond {ev.rcond:.2g})")
+                return NLSOutcome(theta, ev, history, it - 1, nfev, *stop("collapsed", method="GN", rcond=ev.rcond))
         elif verdict is not None:
             return NLSOutcome(theta, ev, history, it - 1, nfev, *verdict)
         JtJ, g = freeze_active(theta, *problem.normal_equations(ev), box)
         if not (np.isfinite(ev.S) and np.all(np.isfinite(JtJ)) and np.all(np.isfinite(g))):
-            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
-                              "GN stopped: the fit became non-finite (poles nearly coincide or the basis is "
-                              "ill-conditioned); drop near-duplicate initial poles")
+            return NLSOutcome(theta, ev, history, it - 1, nfev, *stop("non_finite", method="GN"))
         D = np.sqrt(np.diag(JtJ))
         D[D == 0] = 1.0
         d, _ = solve_scaled(JtJ, g, D)
@@ -215,32 +211,30 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         if 0.0 <= pred <= pred_tol * ev.S:
             if fast:
                 # confirmed with a precise evaluation at the loop top
-                verdict = (Status.FTOL, stationary_message(pred, ev.S, dof, ftol, sdtol))
+                verdict = stationary_stop(pred, ev.S, dof, ftol, sdtol)
                 history.append(ev.S)
                 continue
-            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL, stationary_message(pred, ev.S, dof, ftol, sdtol))
+            return NLSOutcome(theta, ev, history, it - 1, nfev, *stationary_stop(pred, ev.S, dof, ftol, sdtol))
         trial = project_to_bounds(theta + d, box)
         d = trial - theta
         step = relative_step(theta, d)
         reason = check_poles(trial)
         if reason:
             history.append(ev.S)
-            verdict = (Status.UNSTABLE, "GN stopped: " + reason)
+            verdict = stop("unstable", method="GN", reason=reason)
             continue
         new = problem.evaluate(trial, fast=fast)
         nfev += 1
         if not new.rank_ok:
             history.append(ev.S)
-            verdict = (Status.COLLAPSED, f"GN stopped: poles collapsed (basis rcond {new.rcond:.2g})")
+            verdict = stop("collapsed", method="GN", rcond=new.rcond)
             continue
         if new.S > ev.S:
             history.append(ev.S)
             if step <= xtol:
-                verdict = (Status.XTOL, f"converged: relative step {step:.2g} <= xtol (S at its floor)")
+                verdict = stop("xtol_at_floor", step=step)
             else:
-                verdict = (Status.S_INCREASED,
-                           f"GN step increased S from {ev.S:.6g} to {new.S:.6g} at iteration {it}; the method is "
-                           "not converging from these initial poles (try method='lm' or better poles)")
+                verdict = stop("s_increased", S=ev.S, S_new=new.S, iteration=it)
             continue
         rel = (ev.S - new.S) / ev.S if ev.S > 0 else 0.0
         theta, ev = trial, new
@@ -260,5 +254,4 @@ def run_gn(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             nfev += 1
         if ev.rank_ok:
             return NLSOutcome(theta, ev, history, max_iter, nfev, *verdict)
-    return NLSOutcome(theta, ev, history, max_iter, nfev, Status.MAX_ITER,
-                      f"GN reached max_iter={max_iter} without meeting ftol/xtol")
+    return NLSOutcome(theta, ev, history, max_iter, nfev, *stop("max_iter", method="GN", max_iter=max_iter))

@@ -39,10 +39,11 @@ from ._gn import (
     project_to_bounds,
     relative_step,
     start_iteration,
-    stationary_message,
+    stationary_stop,
     theta_box,
 )
 from ._lsfd_kernels import Evaluation, NLSOutcome, ProjectedProblem, Status, solve_scaled
+from .fit_messages import stop
 
 __all__ = ["run_lm", "MU_MIN", "MU_MAX", "MU0_DEFAULT"]
 
@@ -64,7 +65,8 @@ def _evaluate_trial(problem: ProjectedProblem, trial: np.ndarray, fast: bool) ->
         return None, reason, Status.UNSTABLE
     new = problem.evaluate(trial, fast=fast)
     if not new.rank_ok:
-        return new, f"poles would collapse (basis rcond {new.rcond:.2g})", Status.COLLAPSED
+        status, text = stop("would_collapse", rcond=new.rcond)
+        return new, text, status
     return new, "", Status.NO_PROGRESS
 
 
@@ -80,14 +82,14 @@ def _rejected(reason: str, step: float, xtol: float, fast: bool, mu: float, nu: 
     step of a fast evaluation is re-checked precisely (an empty verdict message); otherwise mu grows,
     and past ``MU_MAX`` the iteration gives up (with the last ``fail_status``/``fail_reason``)."""
     if not reason and step <= xtol and mu <= 1.0:
-        return (Status.XTOL, f"converged: relative step {step:.2g} <= xtol (no further decrease of S)"), mu, nu
+        return stop("xtol_no_decrease", step=step), mu, nu
     if fast and not reason and step <= SWITCH_TO_PRECISE:
         return (Status.NO_PROGRESS, ""), mu, nu   # re-evaluated precisely at the top of the loop
     mu, nu = mu * nu, nu * 2.0
     if mu <= MU_MAX:
         return None, mu, nu
-    msg = "LM could not decrease S (mu reached its ceiling)"
-    return ((fail_status, msg + ": " + fail_reason) if fail_reason else (Status.NO_PROGRESS, msg)), mu, nu
+    status, msg = stop("no_progress")
+    return ((fail_status, msg + ": " + fail_reason) if fail_reason else (status, msg)), mu, nu
 
 
 def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol: float, xtol: float,
@@ -133,20 +135,18 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
             mu = min(mu, 1.0)
             nu = 2.0
         if not _finite(ev, JtJ, g):
-            return NLSOutcome(theta, ev, history, it - 1, nfev, Status.COLLAPSED,
-                              "LM stopped: the fit became non-finite (poles nearly coincide or the basis is "
-                              "ill-conditioned); drop near-duplicate initial poles")
+            return NLSOutcome(theta, ev, history, it - 1, nfev, *stop("non_finite", method="LM"))
         if check_pred:
             # Gauss-Newton predicted decrease at a new point: a stationary point to round-off?
             check_pred = False
             d_gn, _ = solve_scaled(JtJ, g, D)
             pred_gn = -float(g @ d_gn)
             if 0.0 <= pred_gn <= pred_tol * ev.S:
-                msg = stationary_message(pred_gn, ev.S, dof, ftol, sdtol)
+                stationary = stationary_stop(pred_gn, ev.S, dof, ftol, sdtol)
                 if not fast:
-                    return NLSOutcome(theta, ev, history, it - 1, nfev, Status.FTOL, msg)
+                    return NLSOutcome(theta, ev, history, it - 1, nfev, *stationary)
                 history.append(ev.S)
-                verdict = (Status.FTOL, msg)
+                verdict = stationary
                 continue
         d, x = solve_scaled(JtJ, g, D, mu)
         pred = float(x @ (mu * x - g / D))
@@ -185,5 +185,4 @@ def run_lm(problem: ProjectedProblem, theta0: np.ndarray, *, max_iter: int, ftol
         nfev += 1
     if verdict is not None and ev.rank_ok and verdict[1]:
         return NLSOutcome(theta, ev, history, max_iter, nfev, *verdict)
-    return NLSOutcome(theta, ev, history, max_iter, nfev, Status.MAX_ITER,
-                      f"LM reached max_iter={max_iter} without meeting ftol/xtol")
+    return NLSOutcome(theta, ev, history, max_iter, nfev, *stop("max_iter", method="LM", max_iter=max_iter))

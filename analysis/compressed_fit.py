@@ -29,6 +29,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from .bands import default_band, default_max_modes, exclude_lines
+from .fit_messages import stop
 from .fit_result import FitResult, assess_fit
 from .frf import FRFSet
 from .lscf import parse_band
@@ -113,8 +114,7 @@ def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str
     progress("fit: residues of %d FRFs at %d poles", shape[0] * shape[1], inner.lsfd.poles.size)
     lsfd = lsfd_at_poles(full, inner.lsfd.poles_raw, band=band_fit, residual_form=residual_form, weights=weights,
                          method=inner.lsfd.method,
-                         message=f"poles from the principal response functions ({inner.lsfd.message}); "
-                                 "residues of every FRF solved at them")
+                         message=stop("compressed", inner=inner.lsfd.message)[1])
     if not inner.lsfd.success:   # the search's own verdict on convergence carries over
         lsfd = replace(lsfd, status=inner.lsfd.status, success=False, message=inner.lsfd.message)
     lsfd = sorted_by_frequency(lsfd)

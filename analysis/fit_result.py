@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from .fit_messages import verdict_message
+
 __all__ = ["FitResult", "assess_fit", "MAX_DAMPING", "MAX_FREQ_STD_FRACTION"]
 
 #: largest damping ratio taken as a structural mode (above it a pole is noise or a fitting artefact)
@@ -101,12 +103,8 @@ class FitResult:
 
     @property
     def message(self) -> str:
-        if not self.converged:
-            return f"the LSFD did not converge: {self.lsfd.message}"
-        if self.problems:
-            return "the fit converged but is not physically sensible: " + "; ".join(self.problems)
-        return f"converged ({self.lsfd.message}); {self.lsfd.freq_hz.size} mode(s) in {self.band[0]:.5g}.." \
-               f"{self.band[1]:.5g} Hz"
+        return verdict_message(self.status, lsfd=self.lsfd.message, problems="; ".join(self.problems),
+                               n_modes=self.lsfd.freq_hz.size, lo=self.band[0], hi=self.band[1])
 
     @property
     def model(self) -> Any:

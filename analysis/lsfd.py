@@ -34,6 +34,7 @@ import numpy as np
 from ._gn import run_gn
 from ._lm import run_lm
 from ._lsfd_kernels import NLSOutcome, ProjectedProblem, Status, poles_to_theta, theta_to_poles
+from .fit_messages import STOPS, stop
 from .frf import FRFSet, window_pole_shift
 from .modal import RESIDUAL_FORMS, ModalModel, damped_freq_hz, damping_ratio, natural_freq_hz
 from .threads import limits_blas_threads
@@ -238,7 +239,24 @@ def fit_lsfd(
     Returns
     -------
     :class:`LSFDResult`. Non-convergence, divergence of GN, unstable or collapsing poles are
-    reported in ``status`` / ``message`` / ``success``, never raised.
+    reported in ``status`` / ``message`` / ``success``, never raised (the messages:
+    :mod:`analysis.fit_messages`).
+
+    Examples
+    --------
+    The FRFs of two modes, fitted from poles 1 Hz off and at the wrong damping:
+
+    >>> import numpy as np
+    >>> from analysis import ModalModel, fit_lsfd, synthesize
+    >>> from analysis.modal import pole_from_fz
+    >>> model = ModalModel(pole_from_fz([40.0, 95.0], [0.01, 0.02]), [[[-20j, 50j]], [[30j, 25j]]],
+    ...                    quantity="receptance")
+    >>> frf = synthesize(model, np.arange(1.0, 200.0, 0.25))
+    >>> res = fit_lsfd(frf, pole_from_fz([41.0, 94.0], [0.015, 0.015]), method="lm")
+    >>> res.success, res.message
+    (True, 'converged: S at round-off level')
+    >>> np.round(res.freq_hz, 6), np.round(res.damping, 6)          # Hz, ratio
+    (array([40., 95.]), array([0.01, 0.02]))
     """
     if not isinstance(frf, FRFSet):
         raise TypeError(f"frf must be an analysis.frf.FRFSet; got {type(frf).__name__}")
@@ -310,7 +328,7 @@ def lsfd_at_poles(
     weights: np.ndarray | None = None,
     correct_exp_window: bool = True,
     method: str = "lm",
-    message: str = "poles given; residues solved at them",
+    message: str = STOPS["fixed_poles"][1],
 ) -> LSFDResult:
     """The LSFD result at fixed ``poles`` (raw, rad/s, as seen in the data): residues and residual
     terms by linear least squares over all FRFs, the weighted S, and the poles' standard deviations
@@ -337,7 +355,7 @@ def lsfd_at_poles(
     prob = ProjectedProblem(frf.omega[i0:i1], H.reshape(n_out * n_ref, N), frf.quantity, residual_form, line_w, frf_w)
     theta = poles_to_theta(lam0)
     ev = prob.evaluate(theta, fast=prob.prefers_gram(lam0.size))
-    status, text = (Status.FIXED_POLES, message) if ev.rank_ok else (Status.COLLAPSED, "the poles' basis is rank deficient")
+    status, text = (STOPS["fixed_poles"][0], message) if ev.rank_ok else stop("fixed_rank")
     oc = NLSOutcome(theta, ev, [float(ev.S)], 0, 1, status, text)
     return _result(frf, prob, oc, str(method), residual_form, correct_exp_window, lam0, None, band_hz=(f[i0], f[i1 - 1]))
 
@@ -376,8 +394,7 @@ def _run(frf: FRFSet, lam0: np.ndarray, method: str, residual_form: str, line_w:
         oc = run_lm(prob, theta0, max_iter=max_iter, ftol=ftol, xtol=xtol, mu0=mu0, bounds=bounds, sdtol=sdtol)
     if oc.status == Status.MAX_ITER:
         warnings.warn(
-            f"LSFD ({method}) stopped at max_iter={max_iter} before converging (S = {oc.evaluation.S:.6g}); "
-            "raise max_iter, loosen ftol/xtol or improve the initial poles",
+            stop("max_iter_warning", method=method, max_iter=max_iter, S=oc.evaluation.S)[1],
             LSFDConvergenceWarning,
             stacklevel=3,
         )

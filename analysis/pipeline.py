@@ -101,6 +101,7 @@ from .bands import (
 )
 from .bounded_fit import drop_bad_poles, fit_bounded
 from .compressed_fit import with_compression
+from .fit_messages import verdict_message
 from .fit_result import FitResult, assess_fit
 from .frf import FRFSet, window_pole_shift
 from .lscf import parse_band
@@ -183,6 +184,22 @@ def fit_auto(
     (None when complex poles were given), ``.band`` (the fitted band), ``.selected_poles``,
     ``.warnings``, and the verdict ``.success`` (converged *and* physically sensible), ``.status``,
     ``.problems``, ``.message``. Non-convergence is a status, never an exception.
+
+    Examples
+    --------
+    Two modes (40 Hz at 1 %, 95 Hz at 2 % of critical damping) seen at two points:
+
+    >>> import numpy as np
+    >>> from analysis import ModalModel, fit_auto, synthesize
+    >>> from analysis.modal import pole_from_fz
+    >>> model = ModalModel(pole_from_fz([40.0, 95.0], [0.01, 0.02]), [[[-20j, 50j]], [[30j, 25j]]],
+    ...                    quantity="receptance")
+    >>> frf = synthesize(model, np.arange(1.0, 200.0, 0.25))       # lines in Hz
+    >>> fit = fit_auto(frf)
+    >>> fit.success, fit.status
+    (True, 'converged')
+    >>> np.round(fit.freq_hz, 3), np.round(100 * fit.damping, 3)   # Hz, % of critical
+    (array([40., 95.]), array([1., 2.]))
     """
     from .lsfd import LSFDConvergenceWarning, fit_lsfd, sorted_by_frequency  # lazy: this module imports alone
 
@@ -257,8 +274,8 @@ def fit_auto(
         result = add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz,
                                    visible=visible)
     if not result.success:
-        warnings_out.append(f"LSFD did not converge: {result.message}")
-        log.warning("LSFD did not converge: %s", result.message)
+        warnings_out.append(verdict_message("not converged", lsfd=result.message))
+        log.warning("%s", warnings_out[-1])
     n_avg = _n_averages(frf)
     if n_avg.size and np.all(n_avg == 1):
         warnings_out.append("one average per point: the coherence is 1 everywhere and says nothing about the noise; "

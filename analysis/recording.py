@@ -50,7 +50,31 @@ class Recording:
     """Read-only view of a recording; validates the schema on open. Use as a context manager.
 
     A recording an impactlab writer has open is read live: the reader sees every hit flushed
-    before it opened (``live`` is True; ``analysis.recording_lock``)."""
+    before it opened (``live`` is True; ``analysis.recording_lock``).
+
+    Examples
+    --------
+    A recording of two hits on the simulated frame (``python -m acquisition capture``), read back:
+
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from acquisition.cli_capture import main as capture
+    >>> folder = tempfile.TemporaryDirectory()
+    >>> path = Path(folder.name) / "rec.h5"
+    >>> capture(["--device", "sim://?seed=1", "--out", str(path), "--hits", "2", "--auto", "-q"])
+    hits accepted: 2, rejected: 0
+    ...
+    recording written: ...rec.h5
+    0
+    >>> from analysis import Recording
+    >>> with Recording(path) as rec:
+    ...     print(rec.n_hits, [h.accepted for h in rec.hits()], rec.measurement_names())
+    ...     frf = rec.frfsets()[0]                    # H1 of the two hits, (outputs, references, lines)
+    2 [True, True] ['m000']
+    >>> frf.H.shape, frf.references, frf.quantity
+    ((3, 1, 4097), ('right:6:-X',), 'accelerance')
+    >>> folder.cleanup()
+    """
 
     live = False
 
