@@ -30,7 +30,7 @@ class _Terminal:
     def read_until(self, needle: str, start: int) -> int:
         """Position just past the next ``needle`` after ``start`` (fails the test if the program ends first)."""
         while needle not in self.text[start:]:
-            ready, _, _ = select.select([self.master], [], [], 120)   # a hang guard only, never a timing check
+            ready, _, _ = select.select([self.master], [], [], 60)   # a hang guard only, never a timing check
             assert ready, f"no {needle!r} in:\n{self.text[start:]}"
             try:
                 chunk = os.read(self.master, 4096)
@@ -43,18 +43,24 @@ class _Terminal:
     def type(self, key: str) -> None:
         os.write(self.master, key.encode())
 
-    def close(self) -> int:
+    def finish(self) -> int:
+        """Read to the end of the program's output; its exit code."""
         try:
             while True:
                 chunk = os.read(self.master, 4096)
                 if not chunk:
                     break
                 self.text += chunk.decode(errors="replace").replace("\r\n", "\n")
-        except OSError:
+        except OSError:   # the child closed the pty
             pass
-        code = self.proc.wait()
+        return self.proc.wait()
+
+    def kill(self) -> None:
+        """End the program if it still runs (a failed test) and release the pty."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
         os.close(self.master)
-        return code
 
 
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
@@ -71,8 +77,9 @@ def test_the_terminal_counts_accepted_hits_per_point_as_the_operator_keys_them(t
             pos = term.read_until("per point ", pos)
             end = term.read_until("\n", pos)
             tallies.append(term.text[pos:end].strip())
+        code = term.finish()
     finally:
-        code = term.close()
+        term.kill()
     assert code == 0, term.text[-2000:]
     assert tallies == ["right:6:-X 1/2, top:4:Z 0/2",
                        "right:6:-X 1/2, top:4:Z 0/2",    # the rejected hit counts for nothing

@@ -30,6 +30,7 @@ if __package__ in (None, ""):  # run as a script: make the project root importab
 
 import numpy as np  # noqa: E402
 
+from analysis.atomic import write_text_atomic  # noqa: E402
 from benchmarks.accuracy.validation.case import summary_row, summary_row_header  # noqa: E402
 from benchmarks.accuracy.validation.common import md_table  # noqa: E402
 from benchmarks.accuracy.validation.peer import _version, peer_available  # noqa: E402
@@ -205,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
         doc += [f"## {r.name}: {r.title}", "", f"Source: {r.source}.", "", r.markdown, ""]
     for name, tb in failures:
         doc += [f"## {name}: FAILED", "", "```", tb.strip(), "```", ""]
-    (out / "validation.md").write_text("\n".join(doc), encoding="utf-8")
+    write_text_atomic(out / "validation.md", "\n".join(doc))   # a run cut short leaves the previous page
     print(f"wrote {out / 'validation.md'} ({len(reports)} cases, {len(failures)} failed)", file=sys.stderr)
     return 1 if failures else 0
 
