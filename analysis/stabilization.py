@@ -237,14 +237,16 @@ def sub_band_cuts(bd: BandData) -> list[float]:
     return cuts
 
 
-def _sub_band_poles(bd: BandData, max_modes: int, method: str) -> list[np.ndarray]:
-    """Poles per order n = 1..max_modes of a wide band taken in sub-bands (module docstring): the
-    union over sub-bands of each one's model of n modes (none above what its lines support), keeping the
-    poles whose damped frequency lies in its own part."""
+def _sub_band_poles(bd: BandData, cuts: Sequence[float], max_modes: int, method: str) -> list[np.ndarray]:
+    """Poles per order n = 1..max_modes of a wide band taken in sub-bands at ``cuts`` (Hz, module
+    docstring): the union over sub-bands of each one's model of n modes (none above what its lines
+    support), keeping the poles whose damped frequency lies in its own part. The FRFs keep the scaling of
+    the whole band (unit RMS there): scaled again within a sub-band, an FRF that holds mostly noise
+    there would weigh as much as one that shows its modes."""
     from .bands import LINES_PER_MODE
 
     lo, hi = bd.band
-    edges = [lo, *sub_band_cuts(bd), hi]
+    edges = [lo, *cuts, hi]
     parts: list[tuple[float, float, list[np.ndarray]]] = []
     for a, b in zip(edges[:-1], edges[1:]):
         ext = (max(lo, a * (1 - SUB_BAND_OVERLAP)), min(hi, b * (1 + SUB_BAND_OVERLAP)))
@@ -336,8 +338,8 @@ def stabilization(
         raise ValueError(f"abs_tol_damp must be >= 0; got {abs_tol_damp}")
     bd = prepare_band(frf, band)
     lo, hi = bd.band
-    all_poles = (_sub_band_poles(bd, max_modes, method) if wide_band and sub_band_cuts(bd)
-                 else _initial_poles(bd, max_modes, method))
+    cuts = sub_band_cuts(bd) if wide_band else []
+    all_poles = _sub_band_poles(bd, cuts, max_modes, method) if cuts else _initial_poles(bd, max_modes, method)
     omega_s, Ys = _shape_data(bd, max_modes)
     orders, poles_out, phys_out, status_out, mac_out = [], [], [], [], []
     prev_p = np.zeros(0, complex)
