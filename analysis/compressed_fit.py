@@ -74,9 +74,9 @@ def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str
     as it fits a set uncompressed; ``options`` its keyword arguments (without ``compress``);
     ``rms_weights`` its FRF weights (:func:`analysis.pipeline.rms_weights`)."""
     from .compression import principal_responses
+    from .fit_checks import unsupported_poles
     from .lsfd import lsfd_at_poles, sorted_by_frequency
     from .mains_grid import mains_for_fit
-    from .fit_checks import unsupported_poles
     from .missing_modes import structure_verdict
     from .visibility import visible_peaks
 

@@ -100,8 +100,8 @@ from .bands import (
     upper_limits,
 )
 from .bounded_fit import drop_bad_poles, fit_bounded
-from .fit_checks import unsupported_poles
 from .compressed_fit import with_compression
+from .fit_checks import unsupported_poles
 from .fit_result import FitResult, assess_fit
 from .frf import FRFSet, window_pole_shift
 from .lscf import parse_band

@@ -17,12 +17,16 @@ maximum of a curve inside the band is a visible peak when
   resonance spans lines) is clean too when the coherence is at least 0.9 at the peak's line and
   in the mean over the top, and no line falls below ``VISIBLE_COHERENCE_FLOOR`` (0.85): a weak
   mode's broad top may hold a line just below 0.9 (:func:`_coherent_top`), and
-- without coherence, it is at least ``VISIBLE_MIN_LINES`` lines wide at 3 dB below its top
-  (a resonance spans lines; a noise spike is one line). Without coherence only the CMIF curve
+- without coherence (or with the coherence of one average, 1 on every line), it is at least
+  ``VISIBLE_MIN_LINES`` lines wide at 3 dB below its top (a resonance spans lines), or, one line
+  wide, at least ``ONE_LINE_HALF_WIDTH_LINES`` lines wide at half its prominence (in dB): a lightly
+  damped mode on coarse lines has flanks that stand above the noise, a noise spike has none. Without coherence only the CMIF curve
   is searched when there are more than ``MAX_CURVES_WITHOUT_COHERENCE`` FRFs: it averages the
   FRFs' noise, where each noisy FRF alone would show peaks of noise.
 
-The peaks of every curve are kept (a resonance shows in several curves).
+The peaks of every curve are kept (a resonance shows in several curves). A resonance is the
+structure's (:func:`structure_resonances`) when the CMIF shows it or at least ``STRUCTURE_MIN_SHARE``
+of the FRFs do; peaks of a few FRFs of a large set are named, not counted.
 
 **Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
 a peak of the resonance (the most prominent first) are one resonance seen through different FRFs
@@ -49,12 +53,12 @@ import numpy as np
 
 from .frf import FRFSet
 from .mif import cmif
-from .peaks import PEAK_RULES, find_peaks, prominences
+from .peaks import PEAK_RULES, find_peaks, peak_widths, prominences
 
 __all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "coherence_measured", "VISIBLE_PROMINENCE_DB",
            "VISIBLE_COHERENCE", "VISIBLE_COHERENCE_FLOOR",
            "MATCH_FRACTION", "MATCH_LINES", "MATCH_BANDWIDTHS", "reproduced", "resonances", "structure_resonances",
-           "STRUCTURE_MIN_SHARE", "ONE_LINE_PROMINENCE_DB", "n_averages"]
+           "STRUCTURE_MIN_SHARE", "ONE_LINE_HALF_WIDTH_LINES", "n_averages"]
 
 VISIBLE_PROMINENCE_DB = PEAK_RULES["visible"].prominence_db
 VISIBLE_COHERENCE = 0.9
@@ -65,7 +69,7 @@ MATCH_FRACTION = 0.005
 MATCH_LINES = 1.5
 MATCH_BANDWIDTHS = 1.0
 STRUCTURE_MIN_SHARE = 0.05
-ONE_LINE_PROMINENCE_DB = 20.0
+ONE_LINE_HALF_WIDTH_LINES = 1.5
 SAME_LINES = 2.5
 SAME_FRACTION = 0.002
 REPRODUCED_FRACTION = 0.03
@@ -147,8 +151,8 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
                 continue
             a, b = _top(db, int(i))
             wide = b - a + 1 >= VISIBLE_MIN_LINES
-            if coh is None and not wide and p < ONE_LINE_PROMINENCE_DB:
-                continue   # one line wide: a resonance only when it stands far above the noise
+            if coh is None and not wide and peak_widths(db, [int(i)], 0.5)[0] < ONE_LINE_HALF_WIDTH_LINES:
+                continue   # one line wide: a resonance only when its flanks stand above the noise too
             a, b = max(a - 1, 0), min(b + 1, f.size - 1)
             if coh is not None and not _coherent_top(coh[a:b + 1], float(coh[i]), wide):
                 continue
@@ -206,14 +210,15 @@ def _error_variance(frf: FRFSet) -> np.ndarray | None:
 
 def resonances(peaks: Sequence[VisiblePeak], df: float) -> list[list[VisiblePeak]]:
     """The visible ``peaks`` grouped by resonance, each group most prominent peak first: peaks of
-    different curves within ``max(SAME_LINES df, SAME_FRACTION f, half the wider top's half-power width)``
-    of a peak of the group are one resonance seen through different FRFs (module docstring)."""
+    different curves within ``max(SAME_LINES df, SAME_FRACTION f, half the narrower top's half-power width)``
+    of a peak of the group (each within the other's half-power band) are one resonance seen through
+    different FRFs (module docstring)."""
     groups: list[list[VisiblePeak]] = []
     for v in sorted(peaks, key=lambda v: -v.prominence_db):
         for g in groups:
             if all(u.curve_index != v.curve_index for u in g) and any(
                     abs(u.freq_hz - v.freq_hz) <= max(SAME_LINES * df, SAME_FRACTION * v.freq_hz,
-                                                      0.5 * max(_half_power_width(u, df), _half_power_width(v, df)))
+                                                      0.5 * min(_half_power_width(u, df), _half_power_width(v, df)))
                     for u in g):
                 g.append(v)
                 break
