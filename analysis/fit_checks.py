@@ -18,7 +18,7 @@ Duplicate pair
     described twice. Two genuine close modes have different shapes (low MAC) and are kept.
 
 Unsupported pole
-    a pole with no peak of the first two CMIF curves (prominence >= ``CMIF_SUPPORT_DB``) within its
+    a pole with no peak of the first CMIF curve (prominence >= ``CMIF_SUPPORT_DB``) within its
     half-power bandwidth (at least two lines), a peak (prominence >= the visible peaks' 10 dB) within
     it in fewer than ``FRF_SUPPORT_SHARE`` of the FRFs, *and* a residue matrix (outputs x references) far from
     rank one (the largest singular value carries less than ``SHAPE_RANK_ONE_MIN`` of its energy): a
@@ -137,8 +137,7 @@ def unsupported_poles(frf: FRFSet, poles_raw: np.ndarray, residues: np.ndarray,
             db = 20.0 * np.log10(np.maximum(np.nan_to_num(curve, nan=0.0), 1e-300))
         return f[PEAK_RULES[rule].find(db)[0]]
 
-    S = cmif(frf)
-    cmif_hz = np.concatenate([peaks_hz(S[:, c], "cmif_support") for c in range(min(2, S.shape[1]))])
+    cmif_hz = peaks_hz(cmif(frf)[:, 0], "cmif_support")
     H = np.abs(np.asarray(frf.H)).reshape(-1, f.size)
     frf_hz = [peaks_hz(h, "visible") for h in H]
     why: list[str] = []
