@@ -16,8 +16,9 @@ maximum of a curve inside the band is a visible peak when
   reaches 0.9 at single lines by chance. A top of ``VISIBLE_MIN_LINES`` lines or more (a
   resonance spans lines) is clean too when the coherence is at least 0.9 at the peak's line and
   in the mean over the top, and no line falls below ``VISIBLE_COHERENCE_FLOOR`` (0.85), or when
-  it is at least 0.9 at the peak's line and on half the top's own lines (the median, without the
-  line on each side): a weak mode's broad top may hold a line just below 0.9, and its flanks sink
+  it is at least 0.9 at the peak's line and on half the lines of a top of ``BROAD_TOP_LINES`` (5)
+  lines or more (the median, without the line on each side): a weak mode's broad top may hold a
+  line just below 0.9, and its flanks sink
   into the noise where the peak does not (:func:`_coherent_top`; noise of five averages reaches 0.9
   on one line in ten thousand, never on half of a broad top), and
 - without coherence (or with the coherence of one average, 1 on every line), it is at least
@@ -66,6 +67,7 @@ __all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "coherence_measu
 VISIBLE_PROMINENCE_DB = PEAK_RULES["visible"].prominence_db
 VISIBLE_COHERENCE = 0.9
 VISIBLE_COHERENCE_FLOOR = 0.85
+BROAD_TOP_LINES = 5
 VISIBLE_MIN_LINES = 2
 MAX_CURVES_WITHOUT_COHERENCE = 8
 MATCH_FRACTION = 0.005
@@ -125,15 +127,15 @@ def _top(db: np.ndarray, i: int, drop_db: float = 3.0) -> tuple[int, int]:
 def _coherent_top(coh: np.ndarray, at_peak: float, wide: bool) -> bool:
     """Whether a peak's top (``coh``: its lines and one more on each side) is measured clean: every
     line at least ``VISIBLE_COHERENCE``, or, for a top of ``VISIBLE_MIN_LINES`` lines or more, the peak's
-    line that high and either the mean with no line below ``VISIBLE_COHERENCE_FLOOR``, or the median
-    over the top's own lines (module docstring)."""
+    line that high and either the mean with no line below ``VISIBLE_COHERENCE_FLOOR``, or, for a top of
+    ``BROAD_TOP_LINES`` lines or more, the median over the top's own lines (module docstring)."""
     if np.all(coh >= VISIBLE_COHERENCE):
         return True
     if not wide or at_peak < VISIBLE_COHERENCE:
         return False
     if np.mean(coh) >= VISIBLE_COHERENCE and np.min(coh) >= VISIBLE_COHERENCE_FLOOR:
         return True
-    return bool(coh.size > 2 and np.median(coh[1:-1]) >= VISIBLE_COHERENCE)
+    return bool(coh.size - 2 >= BROAD_TOP_LINES and np.median(coh[1:-1]) >= VISIBLE_COHERENCE)
 
 
 def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
