@@ -222,17 +222,24 @@ def resonances(peaks: Sequence[VisiblePeak], df: float) -> list[list[VisiblePeak
     different curves within ``max(SAME_LINES df, SAME_FRACTION f, half the narrower top's half-power width)``
     of a peak of the group (each within the other's half-power band) are one resonance seen through
     different FRFs (module docstring)."""
+    ordered = sorted(peaks, key=lambda v: -v.prominence_db)
+    n = len(ordered)
+    freq = np.array([v.freq_hz for v in ordered], dtype=float)
+    width = np.array([_half_power_width(v, df) for v in ordered], dtype=float)
+    group_of = np.full(n, -1, dtype=np.intp)        # the group of each peak placed so far
     groups: list[list[VisiblePeak]] = []
-    for v in sorted(peaks, key=lambda v: -v.prominence_db):
-        for g in groups:
-            if all(u.curve_index != v.curve_index for u in g) and any(
-                    abs(u.freq_hz - v.freq_hz) <= max(SAME_LINES * df, SAME_FRACTION * v.freq_hz,
-                                                      0.5 * min(_half_power_width(u, df), _half_power_width(v, df)))
-                    for u in g):
-                g.append(v)
-                break
-        else:
-            groups.append([v])
+    curves: list[set[int]] = []
+    for i, v in enumerate(ordered):
+        reach = np.maximum(max(SAME_LINES * df, SAME_FRACTION * v.freq_hz), 0.5 * np.minimum(width[:i], width[i]))
+        near = np.unique(group_of[:i][np.abs(freq[:i] - v.freq_hz) <= reach])   # in the order the groups began
+        g = next((int(k) for k in near if v.curve_index not in curves[int(k)]), -1)
+        if g < 0:
+            g = len(groups)
+            groups.append([])
+            curves.append(set())
+        groups[g].append(v)
+        curves[g].add(v.curve_index)
+        group_of[i] = g
     return groups
 
 
