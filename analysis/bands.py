@@ -22,8 +22,9 @@ import numpy as np
 from .errors import FitError
 from .frf import FRFSet
 from .modal import damping_ratio, natural_freq_hz
-from .peaks import find_peaks
+from .peaks import PEAK_RULES
 from .spectra import EXCITATION_DROP_DB
+from .visibility import n_averages
 
 __all__ = ["FitError", "default_band", "upper_limits", "unsupported_band_text", "measured_up_to",
            "MEASURED_LIMITS", "default_max_modes", "check_band_edges", "mains_harmonics", "exclude_lines",
@@ -50,7 +51,7 @@ COHERENCE_SMOOTH_FRACTION = 0.02
 #: median coherence over a resonance's half-power band that still lets a coherence edge take it in whole
 TOP_COHERENCE = 0.25
 #: prominence (dB) of a peak of the summed FRF power that a coherence edge must not cut
-EDGE_PEAK_DB = 10.0
+EDGE_PEAK_DB = PEAK_RULES["band_edge"].prominence_db
 #: running-mean length (dB) of the summed FRF power for the edge's peaks, as a fraction of the lines
 POWER_SMOOTH_FRACTION = 0.001
 #: the FRFs' noise floor is taken over blocks of this fraction of the lines (at least NOISE_MIN_LINES)
@@ -139,18 +140,13 @@ def unsupported_band_text(hi_hz: float, limits: dict[str, float], where: str = "
             f"well (fit below {top:.0f} Hz, or use a harder tip)")
 
 
-def _n_averages(frf: FRFSet) -> np.ndarray:
-    """The averages per FRF the set's metadata carries (empty when it does not say)."""
-    return np.atleast_1d(np.asarray(frf.meta.get("n_averages", []) or [], dtype=float))
-
-
 def coherence_informative(frf: FRFSet) -> bool:
     """Whether the coherence of ``frf`` says anything about the noise: the set carries one, it is not
     1 on every line, and the set does not say it holds one average per FRF (the coherence of a single
     hit is 1 whatever the noise)."""
     if frf.coherence is None or not np.any(np.isfinite(frf.coherence)):
         return False
-    n_avg = _n_averages(frf)
+    n_avg = n_averages(frf)
     if n_avg.size and np.all(n_avg <= 1):
         return False
     return bool(np.nanmin(frf.coherence) < 1.0 - 1e-9)
@@ -228,7 +224,7 @@ def noise_limit_hz(frf: FRFSet) -> float | None:
     above = np.flatnonzero(snr >= NOISE_SNR_DB)
     if above.size and above[-1] < n_blocks - 1:
         edges.append(_crossing(centre, snr, int(above[-1]), NOISE_SNR_DB))
-    n_avg = _n_averages(frf)
+    n_avg = n_averages(frf)
     if n_avg.size and np.all(n_avg <= 1):
         noise_db = floor_db
         if _roughness_db(floor_db - level_db) < _roughness_db(floor_db):
@@ -330,7 +326,7 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     db = _summed_power_db(frf.H.reshape(-1, n))
     w = max(3, int(POWER_SMOOTH_FRACTION * n)) | 1
     db = np.convolve(np.pad(db, w // 2, mode="edge"), np.ones(w) / w, mode="valid")
-    peaks, _ = find_peaks(db, prominence=EDGE_PEAK_DB)
+    peaks, _ = PEAK_RULES["band_edge"].find(db)
     near = []
     for p in peaks[np.abs(hi - f[peaks]) < EDGE_BANDWIDTHS * 0.1 * f[peaks]]:   # bandwidths <= 10 % of f
         a, b = int(p), int(p)   # the peak's flanks down to EDGE_PEAK_DB below its top (within its bases)
@@ -378,7 +374,7 @@ def default_max_modes(frf: FRFSet, band: tuple[float, float]) -> int:
     sel = (frf.freq_hz >= band[0]) & (frf.freq_hz <= band[1])
     i = np.flatnonzero(sel)
     H = frf.H[..., i[0]:i[-1] + 1].reshape(-1, i.size) if i.size else frf.H[..., sel].reshape(-1, 0)
-    peaks, _ = find_peaks(_summed_power_db(H), prominence=3.0)
+    peaks, _ = PEAK_RULES["mode_count"].find(_summed_power_db(H))
     return int(max(1, min(np.clip(2 * peaks.size + 8, 12, 60), int(sel.sum()) // LINES_PER_MODE)))
 
 

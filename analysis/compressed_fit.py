@@ -34,7 +34,6 @@ from .fit_result import FitResult, assess_fit
 from .frf import FRFSet
 from .lscf import parse_band
 from .progress import progress
-from .suspension import split_suspension
 from .threads import limits_blas_threads
 
 __all__ = ["fit_compressed", "with_compression", "MAX_MODES"]
@@ -76,9 +75,10 @@ def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str
     as it fits a set uncompressed; ``options`` its keyword arguments (without ``compress``);
     ``rms_weights`` its FRF weights (:func:`analysis.pipeline.rms_weights`)."""
     from .compression import principal_responses
+    from .fit_checks import unsupported_poles
     from .lsfd import lsfd_at_poles, sorted_by_frequency
     from .mains_grid import mains_for_fit
-    from .missing_modes import unfitted_resonances
+    from .missing_modes import structure_verdict
     from .visibility import visible_peaks
 
     band = options.get("band")
@@ -115,14 +115,19 @@ def fit_compressed(frf: FRFSet, fit: Callable[..., FitResult], options: dict[str
     lsfd = lsfd_at_poles(full, inner.lsfd.poles_raw, band=band_fit, residual_form=residual_form, weights=weights,
                          method=inner.lsfd.method,
                          message=stop("compressed", inner=inner.lsfd.message)[1])
+    bad, why = unsupported_poles(full, lsfd.poles_raw, lsfd.model_raw.residues, weights)
+    dropped: list[str] = []
+    if np.any(bad) and not np.all(bad):
+        dropped.append("dropped pole(s) without support in the structure's response: " + "; ".join(why))
+        lsfd = lsfd_at_poles(full, np.asarray(lsfd.poles_raw)[~bad], band=band_fit, residual_form=residual_form,
+                             weights=weights, method=inner.lsfd.method, message=lsfd.message)
     if not inner.lsfd.success:   # the search's own verdict on convergence carries over
         lsfd = replace(lsfd, status=inner.lsfd.status, success=False, message=inner.lsfd.message)
     lsfd = sorted_by_frequency(lsfd)
     problems = assess_fit(lsfd, band_fit)
-    elastic_visible, suspension, sus_notes = split_suspension(visible_peaks(full, band_fit), lsfd.freq_hz)
-    left, notes = unfitted_resonances(full, elastic_visible, lsfd, mains)
+    left, notes, suspension = structure_verdict(full, visible_peaks(full, band_fit), lsfd, mains)
     said = grid.fit_note() if grid is not None else []
-    warnings_out = [comp.describe(), *said, *inner.warnings, *sus_notes, *notes]
+    warnings_out = [comp.describe(), *said, *inner.warnings, *dropped, *notes]
     return FitResult(lsfd=lsfd, stabilization=inner.stabilization, band=band_fit, selected_poles=inner.selected_poles,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems + left),
                      suspension_hz=suspension)

@@ -14,13 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .frf import FRFSet
-from .peaks import find_peaks
+from .peaks import PEAK_RULES, find_peaks
 from .reciprocity import finite_or_none, frf_error_variance, same_dof
 
 __all__ = ["DrivingPointCheck", "driving_points", "check_driving_point"]
 
 PHASE_TOLERANCE_DEG = 10.0
-PEAK_PROMINENCE_DB = 6.0
+PEAK_PROMINENCE_DB = PEAK_RULES["modal_peaks"].prominence_db
 ANTIRESONANCE_DEPTH_DB = 3.0
 MIN_PHASE_RISE_DEG = 20.0
 MIN_COHERENCE = 0.5
@@ -89,7 +89,7 @@ def check_driving_point(frf: FRFSet, output: int, reference: int, sign: int = 1,
     outside = np.abs(ph) > lim + 3.0 * sd
     share = float(np.mean(outside)) if fb.size else 0.0
     mag = 20.0 * np.log10(np.maximum(np.abs(mob), 1e-300))
-    peaks, _ = find_peaks(mag, prominence=prominence_db)
+    peaks, _ = find_peaks(mag, **PEAK_RULES["modal_peaks"].options(prominence_db))
     anti, missing = [], []
     for p1, p2 in zip(peaks[:-1], peaks[1:]):
         # the mobility's phase falls by up to 180 degrees through each resonance and rises again at the

@@ -17,6 +17,15 @@ Duplicate pair
     (all output/reference pairs, flattened) of MAC > ``DUPLICATE_MAC``: one resonance
     described twice. Two genuine close modes have different shapes (low MAC) and are kept.
 
+Unsupported pole
+    a pole with no peak of the first CMIF curve (prominence >= ``CMIF_SUPPORT_DB``) within its
+    half-power bandwidth (at least two lines), a peak (prominence >= the visible peaks' 10 dB) within
+    it in fewer than ``FRF_SUPPORT_SHARE`` of the FRFs, *and* a residue matrix (outputs x references) far from
+    rank one (the largest singular value carries less than ``SHAPE_RANK_ONE_MIN`` of its energy): a
+    mode of the structure has one shape, whichever output sees it (``R_r = psi_r L_r^T``), and a
+    structure's resonance shows in the CMIF; a pole with neither is fitted to noise or to leakage
+    between modes. Only sets with at least two outputs and two references can say so.
+
 Hidden close pairs and weak modes missed by the stabilization are found from the misfit
 (:mod:`analysis.pipeline`, step 7).
 """
@@ -24,6 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .frf import FRFSet
 from .mac import mac
 from .modal import damping_ratio, natural_freq_hz
 
@@ -34,11 +44,18 @@ __all__ = [
     "MIGRATE_BANDWIDTHS",
     "DUPLICATE_BANDWIDTHS",
     "DUPLICATE_MAC",
+    "unsupported_poles",
+    "CMIF_SUPPORT_DB",
+    "SHAPE_RANK_ONE_MIN",
+    "FRF_SUPPORT_SHARE",
 ]
 
 MIGRATE_BANDWIDTHS = 3.0
 DUPLICATE_BANDWIDTHS = 1.0
 DUPLICATE_MAC = 0.8
+CMIF_SUPPORT_DB = 3.0
+SHAPE_RANK_ONE_MIN = 0.7
+FRF_SUPPORT_SHARE = 0.1
 
 
 def bandwidth_hz(poles: np.ndarray, df_hz: float = 0.0) -> np.ndarray:
@@ -91,3 +108,51 @@ def duplicate_poles(poles: np.ndarray, residues: np.ndarray, df_hz: float = 0.0,
                 drop = i if norm[i] < norm[j] else j
             out[drop] = True
     return out
+
+
+def unsupported_poles(frf: FRFSet, poles_raw: np.ndarray, residues: np.ndarray,
+                      weights: np.ndarray | None = None) -> tuple[np.ndarray, list[str]]:
+    """Mask of the poles neither the CMIF nor a consistent shape supports (module docstring), and a
+    reason for each. ``poles_raw`` : (m,) complex rad/s as fitted to the data; ``residues`` : (n_out,
+    n_ref, m); ``weights`` : (n_out, n_ref) the fit's FRF weights (1 / noise level): the shape is judged
+    as measured against each FRF's noise. Sets with fewer than two outputs or two references: nothing
+    is flagged."""
+    from .mif import cmif
+    from .peaks import PEAK_RULES
+
+    p = np.asarray(poles_raw, dtype=complex)
+    R = np.asarray(residues, dtype=complex)
+    if weights is not None:
+        R = R * np.asarray(weights, dtype=float)[..., None]
+    out = np.zeros(p.size, dtype=bool)
+    if R.ndim != 3 or R.shape[0] < 2 or R.shape[1] < 2 or p.size == 0:
+        return out, []
+    f = frf.freq_hz
+    df = float(frf.line_spacing_hz)
+    fn = natural_freq_hz(p)
+    bw = bandwidth_hz(p, df)
+
+    def peaks_hz(curve: np.ndarray, rule: str) -> np.ndarray:
+        with np.errstate(divide="ignore"):
+            db = 20.0 * np.log10(np.maximum(np.nan_to_num(curve, nan=0.0), 1e-300))
+        return f[PEAK_RULES[rule].find(db)[0]]
+
+    cmif_hz = peaks_hz(cmif(frf)[:, 0], "cmif_support")
+    H = np.abs(np.asarray(frf.H)).reshape(-1, f.size)
+    frf_hz = [peaks_hz(h, "visible") for h in H]
+    why: list[str] = []
+    for k in range(p.size):
+        if cmif_hz.size and np.min(np.abs(cmif_hz - fn[k])) <= bw[k]:
+            continue
+        share = float(np.mean([x.size > 0 and np.min(np.abs(x - fn[k])) <= bw[k] for x in frf_hz]))
+        if share >= FRF_SUPPORT_SHARE:
+            continue
+        s = np.linalg.svd(R[:, :, k], compute_uv=False)
+        energy = float(np.sum(s ** 2))
+        rank_one = float(s[0] ** 2) / energy if energy > 0 else 0.0
+        if rank_one < SHAPE_RANK_ONE_MIN:
+            out[k] = True
+            why.append(f"{fn[k]:.5g} Hz: no CMIF peak within its bandwidth, a peak there in {100 * share:.0f} % of "
+                       f"the FRFs, and shapes that disagree between outputs (rank-one share {rank_one:.2f} < "
+                       f"{SHAPE_RANK_ONE_MIN:g})")
+    return out, why

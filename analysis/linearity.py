@@ -372,7 +372,7 @@ def level_spread(hits: Sequence[Any], band: Sequence[float] | None = None, n_pea
     hard hits' H1 relative to the soft hits' (parabola through the top three lines of ``|H1|``, in %).
     None until the hits span two levels. No modal fit: :func:`compare_levels` gives the changes with
     their uncertainty."""
-    from scipy.signal import find_peaks
+    from .peaks import PEAK_RULES
 
     if len(hits) < 2:
         return None
@@ -389,8 +389,8 @@ def level_spread(hits: Sequence[Any], band: Sequence[float] | None = None, n_pea
         gfx = sum(h.Gfx[0] for h, lab in zip(hits, labels) if lab == g)
         h1.append(np.abs(gfx / np.where(gff > 0, gff, np.inf)))
     mag = np.where(sel, h1[0], 0.0)
-    pk, prop = find_peaks(mag, prominence=0.05 * float(np.max(mag)))
-    top = np.sort(pk[np.argsort(prop["prominences"])[::-1][:n_peaks]])
+    pk, prom = PEAK_RULES["level_peaks"].find(mag)
+    top = np.sort(pk[np.argsort(prom)[::-1][:n_peaks]])
 
     def vertex(y: np.ndarray, k: int) -> float:
         a, b, c = np.log(np.maximum(y[k - 1:k + 2], 1e-300))

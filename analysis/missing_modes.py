@@ -22,12 +22,12 @@ from .lscf import EQUAL_NOISE
 from .mac import mac
 from .modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz, transfer
 from .peaks import find_peaks
-from .visibility import VisiblePeak, coherence_measured, reproduced, unaccounted_peaks
+from .visibility import VisiblePeak, coherence_measured, reproduced, structure_resonances, unaccounted_peaks
 
 if TYPE_CHECKING:
     from .lsfd import LSFDResult
 
-__all__ = ["add_missing_modes", "unfitted_resonances", "mains_line_max_lines", "MAINS_HZ"]
+__all__ = ["add_missing_modes", "unfitted_resonances", "structure_verdict", "mains_line_max_lines", "MAINS_HZ"]
 
 log = logging.getLogger(__name__)
 
@@ -460,6 +460,29 @@ def _unaccounted(frf: FRFSet, visible: Sequence[VisiblePeak], model: ModalModel,
     return sorted(missed + [v for v, _ in pairs], key=lambda v: -v.prominence_db)
 
 
+def structure_verdict(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSFDResult,
+                      mains: Sequence[float] = MAINS_HZ) -> tuple[list[str], list[str], tuple[float, ...]]:
+    """The verdict of step 8 on the resonances of the structure: ``(problems, notes, suspension Hz)``.
+    The visible peaks are first split into suspension modes (:func:`analysis.suspension.split_suspension`),
+    resonances of the structure and peaks only a few FRFs show (:func:`analysis.visibility.structure_resonances`,
+    named in the notes, not counted); the structure's resonances the fit leaves unaccounted for are the
+    problems (:func:`unfitted_resonances`)."""
+    from .suspension import split_suspension
+
+    elastic, suspension, notes = split_suspension(visible, result.freq_hz)
+    kept, left = structure_resonances(elastic, frf.n_outputs * frf.n_references, float(frf.line_spacing_hz))
+    fitted = np.asarray(result.freq_hz, float)
+    lone = [g[0] for g in left if not fitted.size or np.min(np.abs(fitted - g[0].freq_hz)) > PAIR_FRACTION * g[0].freq_hz]
+    if lone:
+        n = frf.n_outputs * frf.n_references
+        shown = ", ".join(f"{g[0].freq_hz:.5g} Hz ({len({u.curve_index for u in g})} of {n})" for g in left
+                          if g[0] in lone)
+        notes = [*notes, f"peaks that only a few FRFs show, not in the CMIF, not counted as resonances of the "
+                         f"structure: {shown} (a local feature at those points, or an FRF near an antiresonance)"]
+    problems, said = unfitted_resonances(frf, kept, result, mains)
+    return problems, [*notes, *said], suspension
+
+
 def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSFDResult,
                         mains: Sequence[float] = MAINS_HZ) -> tuple[list[str], list[str]]:
     """The visible peaks the LSFD ``result`` leaves unaccounted for (:mod:`analysis.visibility`), in
@@ -473,7 +496,8 @@ def unfitted_resonances(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSF
     model = result.model_raw
     fitted = np.asarray(result.freq_hz, float)
     missed, pairs = unaccounted_peaks(visible, fitted, df,
-                                      lambda v: reproduced(frf, v, lambda f: transfer(model, 2j * np.pi * f)))
+                                      lambda v: reproduced(frf, v, lambda f: transfer(model, 2j * np.pi * f)),
+                                      fitted_bandwidth_hz=bandwidth_hz(result.poles_raw, df))
     problems: list[str] = []
     notes: list[str] = []
     seen: list[float] = []

@@ -9,9 +9,11 @@ its top.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["find_peaks", "prominences", "peak_widths"]
+__all__ = ["find_peaks", "prominences", "peak_widths", "PeakRule", "PEAK_RULES"]
 
 
 def _local_maxima(x: np.ndarray) -> np.ndarray:
@@ -130,3 +132,48 @@ def find_peaks(x: np.ndarray, prominence: float | None = None) -> tuple[np.ndarr
     prom = _bases(x, peaks)[0]
     keep = prom >= float(prominence)
     return peaks[keep], {"prominences": prom[keep]}
+
+
+@dataclass(frozen=True)
+class PeakRule:
+    """One named rule for the peaks of a curve: the least prominence a peak needs, in dB on a dB curve
+    (``prominence_db``) or, when given, as a fraction of the curve's maximum on a linear one (``fraction_of_max``),
+    and what it is for. :meth:`find` applies it; :meth:`options` gives its ``find_peaks`` options."""
+
+    name: str
+    purpose: str
+    prominence_db: float = 0.0
+    fraction_of_max: float | None = None
+
+    def threshold(self, x: np.ndarray) -> float:
+        """The least prominence (in the curve's units) a peak of ``x`` needs."""
+        if self.fraction_of_max is not None:
+            return self.fraction_of_max * float(np.max(x)) if np.size(x) else 0.0
+        return float(self.prominence_db)
+
+    def options(self, prominence_db: float | None = None) -> dict[str, float]:
+        """``find_peaks`` options of a dB rule (``prominence_db``: a caller's own level instead)."""
+        if self.fraction_of_max is not None:
+            raise ValueError(f"peak rule {self.name!r} is relative to the curve's maximum; use PeakRule.find")
+        return {"prominence": float(self.prominence_db if prominence_db is None else prominence_db)}
+
+    def find(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Indices of the peaks of the 1-D curve ``x`` this rule keeps, and their prominences."""
+        x = np.asarray(x, dtype=float)
+        pk, prop = find_peaks(x, prominence=self.threshold(x))
+        return pk, prop["prominences"]
+
+
+#: every peak rule of the analysis, by name (one place for their levels)
+PEAK_RULES: dict[str, PeakRule] = {r.name: r for r in (
+    PeakRule("visible", "a resonance the data show (analysis.visibility), on |H| and the CMIF in dB", 10.0),
+    PeakRule("band_edge", "a resonance on the band's edge (analysis.bands), on the smoothed summed power in dB", 10.0),
+    PeakRule("mode_count", "how many modes a band holds, for the stabilization's size (analysis.bands), summed power "
+             "in dB", 3.0),
+    PeakRule("cmif_support", "a CMIF peak that supports a fitted pole (analysis.fit_checks), first CMIF curve in dB",
+             3.0),
+    PeakRule("modal_peaks", "resonances picked for the half-power damping and the diagnosis (diagnosis.compare, "
+             "diagnosis.timedata, driving_point), summed magnitude in dB", 6.0),
+    PeakRule("level_peaks", "the strongest resonances compared between soft and hard hits (analysis.linearity), "
+             "linear |H1|", fraction_of_max=0.05),
+)}

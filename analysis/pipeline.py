@@ -101,19 +101,19 @@ from .bands import (
 )
 from .bounded_fit import drop_bad_poles, fit_bounded
 from .compressed_fit import with_compression
+from .fit_checks import unsupported_poles
 from .fit_messages import verdict_message
 from .fit_result import FitResult, assess_fit
 from .frf import FRFSet, window_pole_shift
 from .lscf import parse_band
 from .mains_grid import mains_for_fit
-from .missing_modes import add_missing_modes, unfitted_resonances
+from .missing_modes import add_missing_modes, structure_verdict
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .progress import progress
 from .selection import faster_than_window, poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
-from .suspension import split_suspension
 from .threads import limits_blas_threads
-from .visibility import VisiblePeak, visible_peaks
+from .visibility import VisiblePeak, n_averages, visible_peaks
 from .work_limits import check_model_order
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
@@ -273,10 +273,12 @@ def fit_auto(
         progress("fit: looking for resonances the model misses")
         result = add_missing_modes(fit_frf, result, fit_kw, warnings_out, mains, df=frf.line_spacing_hz,
                                    visible=visible)
+    if given_complex is None:
+        result = _drop_unsupported(fit_frf, result, fit_kw, warnings_out)
     if not result.success:
         warnings_out.append(verdict_message("not converged", lsfd=result.message))
         log.warning("%s", warnings_out[-1])
-    n_avg = _n_averages(frf)
+    n_avg = n_averages(frf)
     if n_avg.size and np.all(n_avg == 1):
         warnings_out.append("one average per point: the coherence is 1 everywhere and says nothing about the noise; "
                             "the standard deviations and weights rest on the misfit alone (take several hits per point)")
@@ -294,15 +296,25 @@ def fit_auto(
         else:
             warnings_out.append(beyond)
             log.warning(beyond)
-    elastic_visible, suspension, said = split_suspension(visible, result.freq_hz)
-    warnings_out += said
-    left, notes = unfitted_resonances(fit_frf, elastic_visible, result, mains)
+    left, notes, suspension = structure_verdict(fit_frf, visible, result, mains)
     warnings_out += notes
     problems += left
     for p in problems:
         log.warning("implausible fit: %s", p)
     return FitResult(lsfd=result, stabilization=stab, band=(lo2, hi2), selected_poles=selected,
                      warnings=tuple(dict.fromkeys(warnings_out)), problems=tuple(problems), suspension_hz=suspension)
+
+
+def _drop_unsupported(frf: FRFSet, result: Any, fit_kw: dict[str, Any], warnings_out: list[str]) -> Any:
+    """The poles neither the CMIF nor a consistent shape supports (:func:`analysis.fit_checks.unsupported_poles`)
+    dropped and the rest refitted from where they ended, the drop named in the warnings."""
+    bad, why = unsupported_poles(frf, result.poles_raw, result.model_raw.residues, fit_kw.get("weights"))
+    if not np.any(bad) or np.all(bad):
+        return result
+    msg = "dropped pole(s) without support in the structure's response: " + "; ".join(why)
+    log.info(msg)
+    warnings_out.append(msg)
+    return fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw)
 
 
 def _initial_kind(initial: str | Sequence[complex] | Sequence[float] | np.ndarray
@@ -355,11 +367,6 @@ SDTOL = 0.01
 SEED_MIN_AVERAGES = 3
 
 
-def _n_averages(frf: FRFSet) -> np.ndarray:
-    """The averages per FRF the set's metadata carries (empty when it does not say)."""
-    return np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
-
-
 def _peaks_trusted(frf: FRFSet) -> bool:
     """Whether the visible peaks of ``frf`` may start the fit: the set carries coherence, and it comes
     from at least ``SEED_MIN_AVERAGES`` averages per FRF or the number of averages is not known (FRFs
@@ -369,7 +376,7 @@ def _peaks_trusted(frf: FRFSet) -> bool:
     are left to step 7's local trials."""
     if frf.coherence is None:
         return False
-    n_avg = _n_averages(frf)
+    n_avg = n_averages(frf)
     return n_avg.size == 0 or bool(np.all(n_avg >= SEED_MIN_AVERAGES))
 
 

@@ -15,14 +15,22 @@ maximum of a curve inside the band is a visible peak when
   noise-level FRF shows "peaks" between random dips where the coherence of a few averages
   reaches 0.9 at single lines by chance. A top of ``VISIBLE_MIN_LINES`` lines or more (a
   resonance spans lines) is clean too when the coherence is at least 0.9 at the peak's line and
-  in the mean over the top, and no line falls below ``VISIBLE_COHERENCE_FLOOR`` (0.85): a weak
-  mode's broad top may hold a line just below 0.9 (:func:`_coherent_top`), and
-- without coherence, it is at least ``VISIBLE_MIN_LINES`` lines wide at 3 dB below its top
-  (a resonance spans lines; a noise spike is one line). Without coherence only the CMIF curve
+  in the mean over the top, and no line falls below ``VISIBLE_COHERENCE_FLOOR`` (0.85), or when
+  it is at least 0.9 at the peak's line and on half the lines of a top of ``BROAD_TOP_LINES`` (5)
+  lines or more (the median, without the line on each side): a weak mode's broad top may hold a
+  line just below 0.9, and its flanks sink
+  into the noise where the peak does not (:func:`_coherent_top`; noise of five averages reaches 0.9
+  on one line in ten thousand, never on half of a broad top), and
+- without coherence (or with the coherence of one average, 1 on every line), it is at least
+  ``VISIBLE_MIN_LINES`` lines wide at 3 dB below its top (a resonance spans lines), or, one line
+  wide, at least ``ONE_LINE_HALF_WIDTH_LINES`` lines wide at half its prominence (in dB): a lightly
+  damped mode on coarse lines has flanks that stand above the noise, a noise spike has none. Without coherence only the CMIF curve
   is searched when there are more than ``MAX_CURVES_WITHOUT_COHERENCE`` FRFs: it averages the
   FRFs' noise, where each noisy FRF alone would show peaks of noise.
 
-The peaks of every curve are kept (a resonance shows in several curves).
+The peaks of every curve are kept (a resonance shows in several curves). A resonance is the
+structure's (:func:`structure_resonances`) when the CMIF shows it or at least ``STRUCTURE_MIN_SHARE``
+of the FRFs do; peaks of a few FRFs of a large set are named, not counted.
 
 **Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
 a peak of the resonance (the most prominent first) are one resonance seen through different FRFs
@@ -49,19 +57,24 @@ import numpy as np
 
 from .frf import FRFSet
 from .mif import cmif
-from .peaks import find_peaks, prominences
+from .peaks import PEAK_RULES, find_peaks, peak_widths, prominences
 
 __all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "coherence_measured", "VISIBLE_PROMINENCE_DB",
            "VISIBLE_COHERENCE", "VISIBLE_COHERENCE_FLOOR",
-           "MATCH_FRACTION", "MATCH_LINES", "reproduced"]
+           "MATCH_FRACTION", "MATCH_LINES", "MATCH_BANDWIDTHS", "reproduced", "resonances", "structure_resonances",
+           "STRUCTURE_MIN_SHARE", "ONE_LINE_HALF_WIDTH_LINES", "n_averages"]
 
-VISIBLE_PROMINENCE_DB = 10.0
+VISIBLE_PROMINENCE_DB = PEAK_RULES["visible"].prominence_db
 VISIBLE_COHERENCE = 0.9
 VISIBLE_COHERENCE_FLOOR = 0.85
+BROAD_TOP_LINES = 5
 VISIBLE_MIN_LINES = 2
 MAX_CURVES_WITHOUT_COHERENCE = 8
 MATCH_FRACTION = 0.005
 MATCH_LINES = 1.5
+MATCH_BANDWIDTHS = 1.0
+STRUCTURE_MIN_SHARE = 0.05
+ONE_LINE_HALF_WIDTH_LINES = 1.5
 SAME_LINES = 2.5
 SAME_FRACTION = 0.002
 REPRODUCED_FRACTION = 0.03
@@ -84,7 +97,10 @@ class VisiblePeak:
 def _curves(frf: FRFSet, sel: np.ndarray) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
     """(name, magnitude, coherence or None) of each curve searched, over the lines ``sel``."""
     n = frf.freq_hz.size
-    coh = None if frf.coherence is None else np.asarray(frf.coherence, float).reshape(-1, n)[:, sel]
+    # one average's coherence is 1 on every line and bounds nothing: the set is searched as without it
+    one_average = n_averages(frf).size > 0 and bool(np.all(n_averages(frf) <= 1))
+    coh = (None if frf.coherence is None or one_average
+           else np.asarray(frf.coherence, float).reshape(-1, n)[:, sel])
     out: list[tuple[str, np.ndarray, np.ndarray | None]] = []
     if coh is not None or frf.n_outputs * frf.n_references <= MAX_CURVES_WITHOUT_COHERENCE:
         H = np.asarray(frf.H).reshape(-1, n)[:, sel]   # only when the FRFs are searched one by one
@@ -111,11 +127,15 @@ def _top(db: np.ndarray, i: int, drop_db: float = 3.0) -> tuple[int, int]:
 def _coherent_top(coh: np.ndarray, at_peak: float, wide: bool) -> bool:
     """Whether a peak's top (``coh``: its lines and one more on each side) is measured clean: every
     line at least ``VISIBLE_COHERENCE``, or, for a top of ``VISIBLE_MIN_LINES`` lines or more, the peak's
-    line and the mean that high and no line below ``VISIBLE_COHERENCE_FLOOR`` (module docstring)."""
+    line that high and either the mean with no line below ``VISIBLE_COHERENCE_FLOOR``, or, for a top of
+    ``BROAD_TOP_LINES`` lines or more, the median over the top's own lines (module docstring)."""
     if np.all(coh >= VISIBLE_COHERENCE):
         return True
-    return bool(wide and at_peak >= VISIBLE_COHERENCE and np.mean(coh) >= VISIBLE_COHERENCE
-                and np.min(coh) >= VISIBLE_COHERENCE_FLOOR)
+    if not wide or at_peak < VISIBLE_COHERENCE:
+        return False
+    if np.mean(coh) >= VISIBLE_COHERENCE and np.min(coh) >= VISIBLE_COHERENCE_FLOOR:
+        return True
+    return bool(coh.size - 2 >= BROAD_TOP_LINES and np.median(coh[1:-1]) >= VISIBLE_COHERENCE)
 
 
 def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
@@ -140,8 +160,8 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
                 continue
             a, b = _top(db, int(i))
             wide = b - a + 1 >= VISIBLE_MIN_LINES
-            if coh is None and not wide:
-                continue
+            if coh is None and not wide and peak_widths(db, [int(i)], 0.5)[0] < ONE_LINE_HALF_WIDTH_LINES:
+                continue   # one line wide: a resonance only when its flanks stand above the noise too
             a, b = max(a - 1, 0), min(b + 1, f.size - 1)
             if coh is not None and not _coherent_top(coh[a:b + 1], float(coh[i]), wide):
                 continue
@@ -173,11 +193,16 @@ def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.
     return data > 0 and misfit <= REPRODUCED_FRACTION * data
 
 
+def n_averages(frf: FRFSet) -> np.ndarray:
+    """The averages per FRF the set's metadata carries (empty when it does not say)."""
+    return np.atleast_1d(np.asarray(frf.meta.get("n_averages", []) or [], dtype=float))
+
+
 def coherence_measured(frf: FRFSet) -> bool:
     """Whether ``frf``'s coherence comes from more than one average, so that a visible peak (coherence at
     least ``VISIBLE_COHERENCE`` over its top) is response the force caused: a resonance, even on a mains
     harmonic (hum in the response is not coherent with the force and makes no such peak in H1)."""
-    n = np.atleast_1d(np.asarray(frf.meta.get("n_averages", []), dtype=float))
+    n = n_averages(frf)
     return frf.coherence is not None and n.size > 0 and bool(np.all(n > 1))
 
 
@@ -192,29 +217,80 @@ def _error_variance(frf: FRFSet) -> np.ndarray | None:
     return frf_error_variance(frf)
 
 
+def resonances(peaks: Sequence[VisiblePeak], df: float) -> list[list[VisiblePeak]]:
+    """The visible ``peaks`` grouped by resonance, each group most prominent peak first: peaks of
+    different curves within ``max(SAME_LINES df, SAME_FRACTION f, half the narrower top's half-power width)``
+    of a peak of the group (each within the other's half-power band) are one resonance seen through
+    different FRFs (module docstring)."""
+    ordered = sorted(peaks, key=lambda v: -v.prominence_db)
+    n = len(ordered)
+    freq = np.array([v.freq_hz for v in ordered], dtype=float)
+    width = np.array([_half_power_width(v, df) for v in ordered], dtype=float)
+    group_of = np.full(n, -1, dtype=np.intp)        # the group of each peak placed so far
+    groups: list[list[VisiblePeak]] = []
+    curves: list[set[int]] = []
+    for i, v in enumerate(ordered):
+        reach = np.maximum(max(SAME_LINES * df, SAME_FRACTION * v.freq_hz), 0.5 * np.minimum(width[:i], width[i]))
+        near = np.unique(group_of[:i][np.abs(freq[:i] - v.freq_hz) <= reach])   # in the order the groups began
+        g = next((int(k) for k in near if v.curve_index not in curves[int(k)]), -1)
+        if g < 0:
+            g = len(groups)
+            groups.append([])
+            curves.append(set())
+        groups[g].append(v)
+        curves[g].add(v.curve_index)
+        group_of[i] = g
+    return groups
+
+
+def _half_power_width(v: VisiblePeak, df: float) -> float:
+    """A visible peak's width (Hz) within 3 dB of its top (its ``top_hz`` less the line on each side)."""
+    return max(v.top_hz[1] - v.top_hz[0] - 2.0 * df, df)
+
+
+def structure_resonances(peaks: Sequence[VisiblePeak], n_frf: int, df: float
+                         ) -> tuple[list[VisiblePeak], list[list[VisiblePeak]]]:
+    """The visible ``peaks`` that are resonances of the structure, not of one FRF: ``(kept peaks, the
+    groups left out)``. A resonance (:func:`resonances`) is the structure's when the CMIF shows it or
+    at least ``STRUCTURE_MIN_SHARE`` of the ``n_frf`` FRFs do (one FRF of a small set): a hump that 1-3 of
+    222 FRFs show is not a mode of the structure (the hammer point sits on a local feature, or the
+    FRF is near an antiresonance)."""
+    need = max(1, int(np.ceil(STRUCTURE_MIN_SHARE * int(n_frf) - 1e-9)))
+    kept: list[VisiblePeak] = []
+    left: list[list[VisiblePeak]] = []
+    for g in resonances(peaks, df):
+        if any(u.curve_index < 0 for u in g) or len({u.curve_index for u in g}) >= need:
+            kept += g
+        else:
+            left.append(g)
+    return kept, left
+
+
 def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: float,
                       is_reproduced: Callable[[VisiblePeak], bool] | None = None,
+                      fitted_bandwidth_hz: np.ndarray | None = None,
                       ) -> tuple[list[VisiblePeak], list[tuple[VisiblePeak, float]]]:
     """Visible peaks the fitted natural frequencies ``fitted_hz`` (Hz) leave unaccounted for:
     ``(missed, pairs)``; ``pairs`` holds (peak, frequency of the pole it would share with another
     resonance). ``is_reproduced(peak)`` (e.g. :func:`reproduced` with the model) tells whether
-    the model makes a peak without a pole of its own. See module docstring."""
-    groups: list[list[VisiblePeak]] = []   # one per resonance, most prominent peak first
-    for v in sorted(peaks, key=lambda v: -v.prominence_db):
-        reach = max(SAME_LINES * df, SAME_FRACTION * v.freq_hz)
-        for g in groups:
-            if any(abs(u.freq_hz - v.freq_hz) <= reach for u in g) and all(u.curve_index != v.curve_index for u in g):
-                g.append(v)
-                break
-        else:
-            groups.append([v])
+    the model makes a peak without a pole of its own. ``fitted_bandwidth_hz``: each pole's half-power
+    bandwidth ``2 zeta f`` (Hz, as the data show it), widening its reach to ``MATCH_BANDWIDTHS`` of it.
+    See module docstring."""
+    groups = resonances(peaks, df)
     poles = [float(x) for x in np.asarray(fitted_hz, float).ravel()]
+    bws = (np.zeros(len(poles)) if fitted_bandwidth_hz is None
+           else np.asarray(fitted_bandwidth_hz, float).ravel())
     free = list(range(len(poles)))
-    tols = [max(MATCH_FRACTION * g[0].freq_hz, MATCH_LINES * df) for g in groups]
+
+    def reach(gi: int, k: int) -> float:
+        """How far pole ``k`` reaches to account for resonance ``gi`` (Hz): a fixed fraction or a few
+        lines, or within the pole's half-power bandwidth (a neighbouring mode shifts an FRF's peak by up
+        to that much)."""
+        return max(MATCH_FRACTION * groups[gi][0].freq_hz, MATCH_LINES * df, MATCH_BANDWIDTHS * float(bws[k]))
     # each pole goes to the resonance nearest to it (the nearest pairs first), not to the most
     # prominent resonance within reach: a pole between two resonances is the nearer one's
     links = sorted((min(abs(poles[k] - u.freq_hz) for u in g), gi, k) for gi, g in enumerate(groups)
-                   for k in free if min(abs(poles[k] - u.freq_hz) for u in g) <= tols[gi])
+                   for k in free if min(abs(poles[k] - u.freq_hz) for u in g) <= reach(gi, k))
     owner: dict[int, int] = {}
     for _, gi, k in links:
         if gi not in owner and k not in owner.values():
@@ -224,10 +300,9 @@ def unaccounted_peaks(peaks: Sequence[VisiblePeak], fitted_hz: np.ndarray, df: f
     pairs: list[tuple[VisiblePeak, float]] = []
     for gi, g in enumerate(groups):
         v = g[0]
-        tol = tols[gi]
         if gi in owner:
             continue
-        taken = [x for k, x in enumerate(poles) if k not in free and abs(x - v.freq_hz) <= tol]
+        taken = [x for k, x in enumerate(poles) if k not in free and abs(x - v.freq_hz) <= reach(gi, k)]
         if taken:
             if is_reproduced is None or not all(is_reproduced(u) for u in g):
                 pairs.append((v, min(taken, key=lambda x: abs(x - v.freq_hz))))

@@ -50,3 +50,24 @@ def test_short_and_2d_curves():
     assert find_peaks(np.array([1.0, 2.0]))[0].size == 0
     with pytest.raises(ValueError, match="1-D"):
         find_peaks(np.zeros((2, 3)))
+
+
+def test_every_peak_rule_is_named_once_and_applies_its_level():
+    """One table of peak rules: a dB rule keeps peaks by their prominence in dB, a relative rule by a
+    fraction of the curve's maximum; the modules read their levels from it."""
+    from analysis import bands, driving_point, visibility
+    from analysis.peaks import PEAK_RULES
+
+    assert {r.name for r in PEAK_RULES.values()} == set(PEAK_RULES)
+    assert visibility.VISIBLE_PROMINENCE_DB == PEAK_RULES["visible"].prominence_db
+    assert bands.EDGE_PEAK_DB == PEAK_RULES["band_edge"].prominence_db
+    assert driving_point.PEAK_PROMINENCE_DB == PEAK_RULES["modal_peaks"].prominence_db
+    x = np.zeros(50)
+    x[10], x[30] = 100.0, 4.0          # 4 % of the maximum: below the 5 % of the level rule
+    pk, prom = PEAK_RULES["level_peaks"].find(x)
+    assert list(pk) == [10] and list(prom) == [100.0]
+    db = np.zeros(50)
+    db[10], db[30] = 7.0, 5.0          # 6 dB rule: one of the two
+    assert list(PEAK_RULES["modal_peaks"].find(db)[0]) == [10]
+    with pytest.raises(ValueError, match="relative"):
+        PEAK_RULES["level_peaks"].options()

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..frf import FRFSet, window_pole_shift
 from ..mac import mac as mac_of
-from ..peaks import find_peaks
+from ..peaks import PEAK_RULES, find_peaks
 
 __all__ = [
     "BLOCK_LINES",
@@ -170,7 +170,7 @@ def channel_errors(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray) -
     return out
 
 
-def pick_peaks(frf: FRFSet, prominence_db: float = 6.0, window_shift: float | None = None) -> list[dict]:
+def pick_peaks(frf: FRFSet, prominence_db: float | None = None, window_shift: float | None = None) -> list[dict]:
     """Resonance peaks of the summed magnitude: frequency (Hz, parabolic interpolation), half-power
     damping ratio, peak magnitude and the complex FRF vector at the peak (for MAC).
 
@@ -182,7 +182,7 @@ def pick_peaks(frf: FRFSet, prominence_db: float = 6.0, window_shift: float | No
     s = np.sqrt(np.sum(np.abs(frf.H) ** 2, axis=(0, 1)))
     sdb = 20 * np.log10(s + 1e-300)
     shift = window_pole_shift(frf.exp_window_tau_s) if window_shift is None else float(window_shift)
-    idx, _ = find_peaks(sdb, prominence=prominence_db)
+    idx, _ = find_peaks(sdb, **PEAK_RULES["modal_peaks"].options(prominence_db))
     peaks = []
     for k in idx:
         if 0 < k < f.size - 1:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..peaks import find_peaks
+from ..peaks import PEAK_RULES
 
 __all__ = ["pulse_bounds", "detect_double_hit", "detect_overload", "detect_input_noise",
            "detect_amplitude_nonlinearity", "diagnose_hits", "Hits", "TimeEffect", "TIME_EFFECTS", "FORCE_WINDOW_S",
@@ -159,7 +159,7 @@ def _h1_peaks(force: np.ndarray, resp: np.ndarray, fs_hz: float, band: Sequence[
     sel = (freq >= band[0]) & (freq <= band[1])
     s = 20 * np.log10(np.sqrt(np.sum(np.abs(H[:, sel]) ** 2, axis=0)) + 1e-300)
     fb = freq[sel]
-    idx, _ = find_peaks(s, prominence=6.0)
+    idx, _ = PEAK_RULES["modal_peaks"].find(s)
     out = []
     for k in idx:
         if 0 < k < s.size - 1:
