@@ -131,10 +131,10 @@ def _check_axis(path: Path, var: str, f: np.ndarray) -> np.ndarray:
 
 def _variables(path: Path) -> dict:
     """The MATLAB variables of ``path`` as loaded (in a child process, see
-    :func:`acquisition.importers._loadmat_isolated`)."""
-    from .importers import _loadmat_isolated
+    :func:`acquisition.importers_parse.loadmat_isolated`)."""
+    from .importers_parse import loadmat_isolated
 
-    return _loadmat_isolated(path)
+    return loadmat_isolated(path)
 
 
 def _whos(path: str) -> dict:
@@ -152,7 +152,7 @@ def mat_variables(path: str | Path) -> dict:
     scipy's reader); raises :class:`ImportDataError` for an unreadable file."""
     from analysis._isolated import call_isolated
 
-    from .importers import LOADMAT_TIMEOUT_S
+    from .importers_parse import LOADMAT_TIMEOUT_S
 
     p = Path(path)
     if not p.is_file():
