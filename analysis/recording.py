@@ -295,7 +295,8 @@ class Recording:
             record_s, pretrigger_s = self._setup_record()
         return FRFSet(
             freq_hz=g["freq_hz"], H=g[est][:, None, :], quantity=g["quantity"], outputs=tuple(g["outputs"]),
-            references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
+            references=(g["reference"],), unit=g["unit"],
+            coherence=g["coherence"][:, None, :] if "coherence" in g else None,  # an export without coherence
             exp_window_tau_s=g["exp_window_tau_s"], sample_rate_hz=g["sample_rate_hz"] or self._hit_sample_rate(),
             record_s=record_s, pretrigger_s=pretrigger_s,
             meta={"estimator": est, "source": str(self.path),
@@ -408,12 +409,12 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
         outs += [o for o in s.outputs if o not in outs]
         refs += [r for r in s.references if r not in refs]
     H = np.full((len(outs), len(refs), f0.size), np.nan + 0j)
-    C = np.full((len(outs), len(refs), f0.size), np.nan)
+    C: np.ndarray | None = np.full((len(outs), len(refs), f0.size), np.nan)
     for s in sets:
         for i, o in enumerate(s.outputs):
             for j, r in enumerate(s.references):
                 H[outs.index(o), refs.index(r)] = s.H[i, j]
-                if s.coherence is not None:
+                if s.coherence is not None and C is not None:
                     C[outs.index(o), refs.index(r)] = s.coherence[i, j]
     taus = {s.exp_window_tau_s for s in sets}
     if len(taus) > 1:
@@ -438,6 +439,8 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
     meta["excitation_limit_hz"] = [s.meta.get("excitation_limit_hz") for s in sets]
     if len(ests) > 1:
         meta["estimator"] = "mixed"
+    if all(s.coherence is None for s in sets):  # an analyser export without coherence: none stated
+        C = None
     return FRFSet(freq_hz=f0, H=H, quantity=sets[0].quantity, outputs=tuple(outs), references=tuple(refs),
                   unit=sets[0].unit, coherence=C, exp_window_tau_s=sets[0].exp_window_tau_s, meta=meta,
                   sample_rate_hz=next(iter(rates)) if rates else None, record_s=sets[0].record_s,
