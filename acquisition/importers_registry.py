@@ -204,12 +204,12 @@ def check_options(row: ImportFormat, given: Sequence[str]) -> None:
     """Refuse an option of ``given`` (the command-line options used) that the format of ``row`` does
     not take, and a missing option it requires: one :class:`UsageError` naming the option and the
     formats it belongs to."""
-    missing = [o for o in row.requires if o not in given]
-    if missing:
-        raise UsageError(f"{row.name} input needs {' '.join(missing)} ({row.help})")
     row_options = {o for r in IMPORT_FORMATS for o in r.options}
     foreign = [o for o in given if o in row_options and o not in row.options]
     if not foreign:
+        missing = [o for o in row.requires if o not in given]
+        if missing:
+            raise UsageError(f"{row.name} input needs {' '.join(missing)} ({row.help})")
         return
     takers = {r.kind for o in foreign for r in IMPORT_FORMATS if o in r.options}
     names = ", ".join(foreign)
