@@ -116,8 +116,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not args.files:
             raise UsageError("no input file: give FILE(s), or --points MAP.csv for a roving test's FRF exports")
         check_outputs([args.out], [*args.files, args.describe, args.points])
-        row = format_for(args.format, Path(args.files[0]))
-        check_options(row, _given_options(parser, args))
+        given = _given_options(parser, args)
+        row = format_for(args.format, Path(args.files[0]), given)
+        check_options(row, given)
         _check_files(args.files, row, ImportDataError)
         options = ReadOptions(windowed=args.windowed, describe=args.describe, drop_nonfinite=args.drop_nonfinite,
                               variables=tuple(v.strip() for v in args.variables.split(",")) if args.variables else None)

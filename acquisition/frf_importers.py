@@ -165,9 +165,10 @@ _SC_H = re.compile(r"H(\d+)_(\d+)")
 
 
 def signalcalc_detect(whos: dict) -> bool:
-    """A SignalCalc FRF export: ``H{r}_{k}`` variables and no time blocks ``X{k}`` (a file with
-    time blocks imports as time data unless ``--format signalcalc-frf``)."""
-    return any(_SC_H.fullmatch(n) for n in whos) and not any(re.fullmatch(r"X\d+", n) for n in whos)
+    """A SignalCalc FRF export: ``H{r}_{k}`` variables (a file that also holds time blocks ``X{k}``
+    is read as time data first, unless ``--format signalcalc-frf`` or an FRF option says otherwise:
+    the registry's row order)."""
+    return any(_SC_H.fullmatch(n) for n in whos)
 
 
 def _channel_units(path: Path, m: dict) -> dict:

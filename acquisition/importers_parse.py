@@ -24,7 +24,7 @@ from .errors import ImportDataError
 from .importers_data import ImportedTest, _parsed, unit_info
 from .textdoc import read_document
 
-__all__ = ["read_lvm", "read_dataphysics_mat", "read_sep005_test", "read_numpy", "load_description",
+__all__ = ["read_lvm", "read_dataphysics_mat", "dataphysics_detect", "read_sep005_test", "read_numpy", "load_description",
            "LVM_SEPARATORS", "LOADMAT_TIMEOUT_S", "loadmat_isolated"]
 
 def _num(text: str, decimal: str) -> float:
@@ -198,6 +198,11 @@ def _read_lvm(path: str | Path) -> ImportedTest:
         hits.append(_lvm_in_first_order(p, k, seg, first))
     test = ImportedTest(1.0 / dx, channels, hits, [], str(p), {"format": "lvm", "segments": len(hits)})
     return test
+
+
+def dataphysics_detect(whos: dict) -> bool:
+    """A DataPhysics time export: time blocks ``X{k}`` among a MATLAB file's variables (name -> class)."""
+    return any(re.fullmatch(r"X\d+", n) for n in whos)
 
 
 def read_dataphysics_mat(path: str | Path, windowed: bool = False) -> ImportedTest:

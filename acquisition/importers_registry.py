@@ -118,13 +118,14 @@ def _frf_reader(module: str, name: str) -> Callable[[Sequence[Path], ReadOptions
     return read
 
 
-def _mat_detect(name: str) -> Callable[[Path], bool]:
-    """The content test of a ``.mat`` FRF row: ``frf_importers.<name>`` on the file's variables."""
+def _mat_detect(module: str, name: str) -> Callable[[Path], bool]:
+    """The content test of a ``.mat`` row: ``acquisition.<module>.<name>`` on the file's variables
+    (name -> MATLAB class, listed in a child process: a damaged file cannot crash the command)."""
     def detect(path: Path) -> bool:
-        from . import frf_importers
+        from .frf_importers import mat_variables
 
-        test: Callable[[dict], bool] = getattr(frf_importers, name)
-        return test(frf_importers.mat_variables(path))
+        test: Callable[[dict], bool] = getattr(importlib.import_module(f"acquisition.{module}"), name)
+        return test(mat_variables(path))
     return detect
 
 
@@ -138,14 +139,15 @@ def _ascii_detect(path: Path) -> bool:
 IMPORT_FORMATS: tuple[ImportFormat, ...] = (
     ImportFormat("lvm", "time", "LabVIEW measurement text, one segment per hit", (".lvm",),
                  _read_lvm, TIME_OPTIONS, text=True),
+    ImportFormat("mat", "time", "DataPhysics SignalCalc .mat time blocks X1..Xn", (".mat",),
+                 _read_dataphysics, TIME_OPTIONS + ("--windowed",),
+                 detect=_mat_detect("importers_parse", "dataphysics_detect")),
     ImportFormat("signalcalc-frf", "frf", "DataPhysics SignalCalc .mat H1 and coherence, H{r}_{k} and C{r}_{k}",
                  (".mat",), _frf_reader("frf_importers", "read_signalcalc_frf"), FRF_OPTIONS + ("--variables",),
-                 detect=_mat_detect("signalcalc_detect")),
+                 detect=_mat_detect("frf_importers", "signalcalc_detect")),
     ImportFormat("testlab-frf", "frf", "LMS Test.Lab .mat FRF structs, with the ...Coherence.mat beside", (".mat",),
                  _frf_reader("frf_importers", "read_testlab_frf"), FRF_OPTIONS + ("--variables",),
-                 detect=_mat_detect("testlab_detect")),
-    ImportFormat("mat", "time", "DataPhysics SignalCalc .mat time blocks X1..Xn", (".mat",),
-                 _read_dataphysics, TIME_OPTIONS + ("--windowed",)),
+                 detect=_mat_detect("frf_importers", "testlab_detect")),
     ImportFormat("npy", "time", "numpy arrays, one file per hit, described by --describe", (".npy",),
                  _read_numpy, TIME_OPTIONS + ("--describe",), requires=("--describe",)),
     ImportFormat("sep005", "time", "SEP005 JSON time channels, one group per hit", (".json",),
@@ -180,10 +182,12 @@ def unknown_format_error(path: Path, tried: Sequence[ImportFormat] = ()) -> Usag
     return UsageError(f"{path}: unknown input format: {why}; give --format NAME, one of: {listing}")
 
 
-def format_for(fmt: str | None, path: Path) -> ImportFormat:
-    """The row of ``--format fmt``, or (no ``fmt``) the first row whose extension ``path`` has and
-    whose content test it passes. Raises :class:`UsageError` (the rows listed) when none does, and
-    :class:`ImportDataError` when ``path`` is missing and its format cannot be told."""
+def format_for(fmt: str | None, path: Path, given: Sequence[str] = ()) -> ImportFormat:
+    """The row of ``--format fmt``, or (no ``fmt``) the first row whose extension ``path`` has, that
+    takes the format-specific options of ``given`` (the options used: ``--points`` makes a ``.mat``
+    an FRF export) and whose content test the file passes. Raises :class:`UsageError` (the rows
+    listed) when none does, and :class:`ImportDataError` when ``path`` is missing and its format
+    cannot be told."""
     if fmt is not None:
         for r in IMPORT_FORMATS:
             if r.name == fmt:
@@ -192,9 +196,11 @@ def format_for(fmt: str | None, path: Path) -> ImportFormat:
     rows = [r for r in IMPORT_FORMATS if path.suffix.lower() in r.extensions]
     if not rows:
         raise unknown_format_error(path)
+    specific = {o for r in IMPORT_FORMATS for o in r.options} & set(given)
+    taking = [r for r in rows if specific <= set(r.options)]
     if any(r.detect is not None for r in rows) and not path.is_file():
         raise ImportDataError(f"{path} not found: check the path")
-    for r in rows:
+    for r in taking + [r for r in rows if r not in taking]:  # the content decides; check_options names a clash
         if r.detect is None or r.detect(path):
             return r
     raise unknown_format_error(path, rows)

@@ -167,7 +167,8 @@ def test_analyser_exp_window_by_end_value_needs_the_record_layout(tmp_path, caps
 
 def test_frf_options_are_refused_for_time_data(tmp_path, capsys):
     src = tmp_path / "t.mat"
-    _signalcalc(src, with_time=True)  # time blocks: a time import without --format
+    t = np.arange(64) / 512.0
+    scipy.io.savemat(src, {"X1": np.column_stack([t, np.sin(t)]), "Unit": np.array(["N"])})  # time blocks only
     code, _, err = _run([src, "--variables", "H1_2", "--out", tmp_path / "r.h5"], capsys)
     assert code == 2 and "--variables: for analyser FRF exports only" in err
 
