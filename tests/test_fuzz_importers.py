@@ -1,5 +1,5 @@
-"""Fuzzing the importers (LabVIEW .lvm text, numpy + description, DataPhysics-like .mat) and the
-16-bit counts an import stores.
+"""Fuzzing the importers (LabVIEW .lvm text, numpy + description, DataPhysics-like .mat, SignalCalc ASCII
+and UFF 58 FRF exports) and the 16-bit counts an import stores.
 
 Whatever the file holds, a reader either returns a consistent :class:`ImportedTest` (finite
 positive sample rate, every hit ``(n_channels, n)``, sensitivities finite and nonzero or unknown)
@@ -261,3 +261,89 @@ def test_imported_hits_give_back_every_sample_within_half_a_step_or_refuse(force
     step = np.asarray(hit.eu_per_count)[:, None]
     assert np.all(np.isfinite(hit.data)) and np.all(step > 0)
     assert np.all(np.abs(hit.data - data) <= 0.5 * step * (1 + 1e-9)), "a sample moved by more than half a step"
+
+
+# ---------------------------------------------------------------------- analyser FRF exports as text
+def _check_frfs(imp) -> None:
+    """An import of an analyser's FRFs is consistent: one reference per set, finite values on a
+    strictly increasing axis, a coherence (when there is one) within [0, 1] of the FRFs' shape."""
+    assert imp.sets and len(imp.sets) == len(imp.n_averages)
+    for s in imp.sets:
+        assert s.n_references == 1 and s.H.shape == (s.n_outputs, 1, s.freq_hz.size)
+        assert np.all(np.isfinite(s.H)) and np.all(np.diff(s.freq_hz) > 0)
+        if s.coherence is not None:
+            assert s.coherence.shape == s.H.shape and np.all((s.coherence >= 0) & (s.coherence <= 1))
+
+
+def _mutated_lines(draw, lines: list[str], sep: str) -> list[str]:
+    """``lines`` after 1..6 random drops, duplicates, cuts, swaps or cell edits (cells split at ``sep``)."""
+    lines = list(lines)
+    for _ in range(draw(st.integers(1, 6))):
+        if not lines:
+            break
+        op = draw(st.sampled_from(("drop", "dup", "edit", "cut", "swap")))
+        k = draw(st.integers(0, len(lines) - 1))
+        if op == "drop":
+            del lines[k]
+        elif op == "dup":
+            lines.insert(k, lines[k])
+        elif op == "cut":
+            lines = lines[:k]
+        elif op == "swap":
+            j = draw(st.integers(0, len(lines) - 1))
+            lines[k], lines[j] = lines[j], lines[k]
+        else:
+            cells = lines[k].split(sep) if sep else [lines[k]]
+            c = draw(st.integers(0, len(cells) - 1))
+            cells[c] = draw(st.sampled_from(TOKENS + ["Units:", "Hz", "Real", "Imaginary", "-1", "58", "1e400"])
+                            | st.text(max_size=6))
+            lines[k] = (sep or "").join(cells)
+    return lines
+
+
+def _ascii_lines() -> list[str]:
+    from test_importers_registry import _frf, signalcalc_ascii_text
+
+    f = np.arange(6) * 0.5
+    return signalcalc_ascii_text(f, _frf(f)).split("\r\n")
+
+
+def _uff_lines() -> list[str]:
+    from uff58_text import Record58, record_text
+
+    f = np.arange(5) * 0.5
+    h = (1 + np.arange(5)) * (1 - 0.5j)
+    return (record_text(Record58(4, (2, 3), (1, 3), 0.0, 0.5, h, ("FRF", "estimator H1 averages 3")))
+            + record_text(Record58(6, (2, 3), (1, 3), 0.0, 0.5, np.linspace(0.2, 0.9, f.size)))).split("\n")
+
+
+ASCII_LINES = _ascii_lines()
+UFF_LINES = _uff_lines()
+
+
+@FUZZ
+@given(data=st.data())
+def test_signalcalc_ascii_mutated_text(data):
+    from acquisition.frf_importers_ascii import read_signalcalc_ascii
+
+    text = "\r\n".join(_mutated_lines(data.draw, ASCII_LINES, "\t"))
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), "Hxysv00001.txt", text)
+        try:
+            _check_frfs(read_signalcalc_ascii(p))
+        except ImportDataError as exc:
+            assert str(exc)
+
+
+@FUZZ
+@given(data=st.data())
+def test_uff58_frf_export_mutated_text(data):
+    from acquisition.frf_importers import read_uff58_frfs
+
+    text = "\n".join(_mutated_lines(data.draw, UFF_LINES, ""))
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), "frfs.uff", text)
+        try:
+            _check_frfs(read_uff58_frfs(p))
+        except ImportDataError as exc:
+            assert str(exc)
