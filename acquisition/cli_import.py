@@ -95,7 +95,8 @@ def import_windows(force: str | None, exp: str | None, windowed: bool) -> tuple[
     """The ``--force-window`` and ``--exp-window`` texts of an import: as given, else capture's
     defaults (raw time data get the windows a capture of the same hits would: the force window keeps
     the pulse and drops the noise of the rest of the block, so the force spectrum, and with it the
-    fit's band, is the pulse's); ``none`` for blocks the analyser already windowed (``windowed``)."""
+    fit's band, is the pulse's); ``none`` for blocks the analyser already windowed or a shaker's
+    continuous excitation (``windowed``)."""
     default_force, default_exp = ("none", "none") if windowed else (DEFAULT_FORCE_WINDOW, DEFAULT_EXP_WINDOW)
     return (force if force is not None else default_force), (exp if exp is not None else default_exp)
 
@@ -126,7 +127,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _import_frfs(row, options, args, point_map)
         tests = row.read([Path(f) for f in args.files], options)
         test = combine_imports(tests)
-        windows = parse_windows(*import_windows(args.force_window, args.exp_window, args.windowed), test.fs_hz)
+        continuous = test.meta.get("excitation") == "continuous"  # a shaker's blocks: no hammer windows
+        windows = parse_windows(*import_windows(args.force_window, args.exp_window, args.windowed or continuous),
+                                test.fs_hz)
         fch = args.force_channel - 1 if args.force_channel else None
         rch = [int(x) - 1 for x in args.responses.split(",")] if args.responses else None
         outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
@@ -166,7 +169,7 @@ def _import_frfs(row: ImportFormat, options: ReadOptions, args: argparse.Namespa
     imp = combine_frf_imports(imports)
     write_frf_recording(imp, args.out, overwrite=args.overwrite)
     for s, n in zip(imp.sets, imp.n_averages):
-        print(f"imported {s.n_outputs} FRF(s) {s.unit} of reference {s.references[0]}: outputs "
+        print(f"imported {s.n_outputs} FRF(s) {s.unit or '(unit not stated)'} of reference {s.references[0]}: outputs "
               f"{', '.join(s.outputs)}; {'averages not stated in the file' if n is None else f'{n} averages'}"
               + ("" if s.coherence is not None else "; no coherence in the file"))
     print(f"recording written: {args.out}")

@@ -24,7 +24,8 @@ from .errors import ImportDataError
 from .importers_data import ImportedTest, _parsed, unit_info
 from .textdoc import read_document
 
-__all__ = ["read_lvm", "read_dataphysics_mat", "dataphysics_detect", "read_sep005_test", "read_numpy", "load_description",
+__all__ = ["read_lvm", "read_dataphysics_mat", "dataphysics_detect", "read_csv_table", "read_hdf5_dataset",
+           "read_described", "read_sep005_test", "read_numpy", "load_description",
            "LVM_SEPARATORS", "LOADMAT_TIMEOUT_S", "loadmat_isolated"]
 
 def _num(text: str, decimal: str) -> float:
@@ -303,19 +304,126 @@ def read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
     """Read ``.npy`` hits (one file per hit) described by ``description`` (see module doc).
 
     Raises :class:`ImportDataError` for unreadable arrays or a description that does not fit them."""
+    return read_described(paths, description, "numpy")
+
+
+def read_csv_table(paths: Sequence[str | Path], description: dict) -> ImportedTest:
+    """Read CSV tables of time data (a heading row, one column per signal, one row per sample) with
+    the ``columns`` of ``description`` naming, by heading, the columns that are its ``channels``
+    (the others, e.g. a sample-rate column, are left out). Raises :class:`ImportDataError`."""
+    return read_described(paths, description, "csv")
+
+
+def read_hdf5_dataset(paths: Sequence[str | Path], description: dict) -> ImportedTest:
+    """Read the 2-D HDF5 dataset ``description["dataset"]`` (e.g. ``InputTask/data``) of each file;
+    ``sample_rate_hz`` may name a dataset of the file holding it. Raises :class:`ImportDataError`."""
+    return read_described(paths, description, "hdf5")
+
+
+#: the array loaders of :func:`read_described`: format -> (what the files are, loader)
+_ARRAY_FORMATS = ("numpy", "csv", "hdf5")
+
+
+def read_described(paths: Sequence[str | Path], description: dict, fmt: str) -> ImportedTest:
+    """Time data in files of arrays (``fmt``: numpy ``.npy``, ``csv`` tables, ``hdf5`` datasets)
+    described by ``description`` (the channels, the layout, the sample rate; for a continuous
+    excitation the block length: see the module doc of :mod:`acquisition.importers`)."""
     if not isinstance(description, dict):
         raise ImportDataError(f"the description must be a mapping with 'channels', got {type(description).__name__}")
-    return _parsed(lambda: _read_numpy(paths, description), "the arrays do not fit the description",
-                   "check channels, layout, time_row and sample_rate_hz")
+    if fmt not in _ARRAY_FORMATS:
+        raise ValueError(f"unknown array format {fmt!r}")
+    return _parsed(lambda: _read_described(paths, description, fmt), "the arrays do not fit the description",
+                   "check channels, columns, layout, time_row, sample_rate_hz and block_samples")
 
 
-def _read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
+def _load_array(path: Path, description: dict, fmt: str) -> tuple[np.ndarray, float | None]:
+    """The 2-D array of one file as the description's ``layout`` has it, and the sample rate (Hz)
+    when the file states it (an HDF5 dataset named by ``sample_rate_hz``)."""
+    if fmt == "numpy":
+        return _load_npy(path), None
+    if fmt == "csv":
+        return _load_csv(path, description), None
+    return _load_hdf5(path, description)
+
+
+def _load_csv(path: Path, description: dict) -> np.ndarray:
+    """The ``columns`` (headings) of a CSV table as a (samples, columns) array."""
+    import csv
+
+    columns = description.get("columns")
+    if not isinstance(columns, list) or not columns or not all(isinstance(c, str) for c in columns):
+        raise ImportDataError("a CSV import needs 'columns' in the description: the headings of the columns to "
+                              "import, in the order of its channels")
+    try:
+        text = read_bounded_text(path, "CSV file", text_data_limit_bytes(), ImportDataError, "utf-8")
+    except OSError as exc:
+        raise ImportDataError(f"cannot read {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise ImportDataError(f"{path} is not UTF-8 text; save it as CSV") from None
+    rows = csv.reader(text.splitlines())
+    heading = [h.strip() for h in next(rows, [])]
+    missing = [c for c in columns if c not in heading]
+    if missing:
+        raise ImportDataError(f"{path}: no column {', '.join(repr(c) for c in missing)} (its headings: {heading}); "
+                              "correct 'columns' in the description")
+    index = [heading.index(c) for c in columns]
+    values = []
+    for line, cells in enumerate(rows, 2):
+        if not any(c.strip() for c in cells):
+            continue
+        try:
+            values.append([float(cells[i]) for i in index])
+        except (ValueError, IndexError):
+            raise ImportDataError(f"{path}, line {line}: the columns {columns} do not all hold a number; the file is "
+                                  "damaged or cut short: export it again") from None
+    if layout := description.get("layout"):
+        if layout != "samples_first":
+            raise ImportDataError(f"a CSV table holds one sample per row: layout {layout!r} must be 'samples_first' "
+                                  "or left out")
+    return np.asarray(values, float).reshape(-1, len(columns))
+
+
+def _load_hdf5(path: Path, description: dict) -> tuple[np.ndarray, float | None]:
+    """The dataset ``description["dataset"]`` of an HDF5 file, and its sample rate when
+    ``sample_rate_hz`` names a dataset of the file."""
+    import h5py
+
+    from analysis.work_limits import memory_budget_bytes
+
+    name = description.get("dataset")
+    if not isinstance(name, str) or not name:
+        raise ImportDataError("an HDF5 import needs 'dataset' in the description: the path of the 2-D dataset "
+                              "of time data (e.g. InputTask/data)")
+    try:
+        with h5py.File(path, "r") as f:
+            ds = f.get(name)
+            if not isinstance(ds, h5py.Dataset) or ds.ndim != 2 or ds.dtype.kind not in "biuf":
+                raise ImportDataError(f"{path}: no 2-D numeric dataset {name!r} (it holds {sorted(f.keys())}); correct "
+                                      "'dataset' in the description")
+            if ds.size * 8 > memory_budget_bytes():
+                raise ImportDataError(f"{path}: dataset {name!r} of shape {ds.shape} is larger than the memory one "
+                                      "import may use")
+            data = np.asarray(ds[()], float)
+            rate = description.get("sample_rate_hz")
+            fs = None
+            if isinstance(rate, str):
+                r = f.get(rate)
+                if not isinstance(r, h5py.Dataset) or r.size != 1:
+                    raise ImportDataError(f"{path}: sample_rate_hz names {rate!r}, which is not a one-value dataset "
+                                          "of the file")
+                fs = float(np.asarray(r[()]).ravel()[0])
+    except OSError as exc:
+        raise ImportDataError(f"{path} is not a readable HDF5 file ({exc})") from None
+    return data, fs
+
+
+def _read_described(paths: Sequence[str | Path], description: dict, fmt: str) -> ImportedTest:
     if not paths:
-        raise ImportDataError("no .npy file given")
+        raise ImportDataError(f"no {fmt} file given")
     chans = description.get("channels")
     if not isinstance(chans, list) or not chans:
         raise ImportDataError("the description needs a 'channels' list (name, quantity or unit, point per channel)")
-    layout = description.get("layout", "channels_first")
+    layout = description.get("layout", "samples_first" if fmt == "csv" else "channels_first")
     if layout not in ("channels_first", "samples_first"):
         raise ImportDataError(f"description layout {layout!r} must be 'channels_first' or 'samples_first'")
     time_row = description.get("time_row")
@@ -323,19 +431,14 @@ def _read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
     hits = []
     for path in paths:
         try:
-            a = _load_npy(Path(path))
+            a, file_fs = _load_array(Path(path), description, fmt)
         except ImportDataError:
             raise
         except (OSError, ValueError, EOFError) as exc:
             raise ImportDataError(f"cannot read {path} as a numpy array ({type(exc).__name__}: {exc})") from None
-        if not isinstance(a, np.ndarray) or a.dtype.kind not in "biuf":
-            raise ImportDataError(f"{path}: expected a real numeric array, got "
-                                  f"{getattr(a, 'dtype', type(a).__name__)}")
-        a = np.asarray(a, float)
-        if a.ndim != 2:
-            raise ImportDataError(f"{path}: expected a 2-D array (channels x samples), got shape {a.shape}")
-        if layout == "samples_first":
-            a = a.T
+        if file_fs is not None:
+            fs = file_fs
+        a = _signals(Path(path), a, layout, description.get("columns") if fmt == "hdf5" else None)
         if time_row is not None:
             t = a[int(time_row)]
             if fs is None:
@@ -346,8 +449,8 @@ def _read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
             a = np.delete(a, int(time_row), axis=0)
         if a.shape[0] != len(chans):
             raise ImportDataError(f"{path}: {a.shape[0]} channels but the description lists {len(chans)}")
-        hits.append(a)
-    if fs is None or not float(fs) > 0:
+        hits += _blocks(Path(path), a, description)
+    if isinstance(fs, str) or fs is None or not float(fs) > 0:
         raise ImportDataError("the description needs sample_rate_hz (or time_row, a row of times in s)")
     channels = []
     for k, c in enumerate(chans):
@@ -358,8 +461,47 @@ def _read_numpy(paths: Sequence[str | Path], description: dict) -> ImportedTest:
     for h in hits[1:]:
         if h.shape != hits[0].shape:
             raise ImportDataError(f"hits have different shapes {hits[0].shape} and {h.shape}; import them separately")
-    return ImportedTest(float(fs), channels, hits, [], ", ".join(str(p) for p in paths),
-                        {"format": "numpy", "sources": [str(p) for p in paths]})
+    excitation = description.get("excitation", "impact")
+    if excitation not in ("impact", "continuous"):
+        raise ImportDataError(f"description excitation {excitation!r} must be 'impact' (hammer hits) or 'continuous' "
+                              "(a shaker's periodic, random or swept excitation)")
+    triggers = [0] * len(hits) if excitation == "continuous" else []
+    return ImportedTest(float(fs), channels, hits, triggers, ", ".join(str(p) for p in paths),
+                        {"format": fmt, "sources": [str(p) for p in paths], "excitation": excitation})
+
+
+def _signals(path: Path, a: Any, layout: str, columns: Any) -> np.ndarray:
+    """``a`` as a float (signals x samples) array: transposed for ``samples_first``, only the
+    ``columns`` (signal indices) when given."""
+    if not isinstance(a, np.ndarray) or a.dtype.kind not in "biuf":
+        raise ImportDataError(f"{path}: expected a real numeric array, got {getattr(a, 'dtype', type(a).__name__)}")
+    a = np.asarray(a, float)
+    if a.ndim != 2:
+        raise ImportDataError(f"{path}: expected a 2-D array (channels x samples), got shape {a.shape}")
+    if layout == "samples_first":
+        a = a.T
+    if columns is not None:
+        if not isinstance(columns, list) or not all(isinstance(c, int) and 0 <= c < a.shape[0] for c in columns):
+            raise ImportDataError(f"{path}: 'columns' must list signal indices 0..{a.shape[0] - 1} of the dataset")
+        a = a[columns]
+    return a
+
+
+def _blocks(path: Path, a: np.ndarray, description: dict) -> list[np.ndarray]:
+    """``a`` (channels x samples) as the blocks the description asks for: whole (no
+    ``block_samples``), or cut into blocks of ``block_samples`` after leaving out ``skip_blocks``
+    (e.g. the transient first period of a periodic excitation); a rest shorter than a block is left out."""
+    n = description.get("block_samples")
+    if n is None:
+        return [a]
+    skip = description.get("skip_blocks", 0)
+    if not (isinstance(n, int) and n >= 2 and isinstance(skip, int) and skip >= 0):
+        raise ImportDataError("block_samples must be a whole number >= 2 and skip_blocks a whole number >= 0")
+    count = a.shape[1] // n
+    if count <= skip:
+        raise ImportDataError(f"{path}: {a.shape[1]} samples make {count} block(s) of {n}, none left after skipping "
+                              f"{skip}")
+    return [a[:, k * n:(k + 1) * n] for k in range(skip, count)]
 
 
 def _load_npy(path: Path) -> np.ndarray:

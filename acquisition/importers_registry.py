@@ -101,6 +101,20 @@ def _read_numpy(paths: Sequence[Path], o: ReadOptions) -> list[Any]:
     return [read_dropping_nonfinite(read_numpy, list(paths), load_description(o.describe), drop=o.drop_nonfinite)]
 
 
+def _described_reader(fmt: str) -> Callable[[Sequence[Path], ReadOptions], list[Any]]:
+    """The reader of a described-array row (``.csv``, ``.hdf5``): all files read as one test with
+    the description of ``--describe``."""
+    def read(paths: Sequence[Path], o: ReadOptions) -> list[Any]:
+        from .importers_data import read_dropping_nonfinite
+        from .importers_parse import load_description, read_described
+
+        assert o.describe is not None  # the row requires --describe (check_options)
+        return [read_dropping_nonfinite(read_described, list(paths), load_description(o.describe), fmt,
+                                        drop=o.drop_nonfinite)]
+    read.__name__ = f"read_{fmt}"
+    return read
+
+
 def _read_sep005(paths: Sequence[Path], o: ReadOptions) -> list[Any]:
     from .importers_data import read_dropping_nonfinite
     from .importers_parse import read_sep005_test
@@ -152,6 +166,12 @@ IMPORT_FORMATS: tuple[ImportFormat, ...] = (
                  _read_numpy, TIME_OPTIONS + ("--describe",), requires=("--describe",)),
     ImportFormat("sep005", "time", "SEP005 JSON time channels, one group per hit", (".json",),
                  _read_sep005, TIME_OPTIONS, text=True),
+    ImportFormat("csv", "time", "CSV table, one column per signal, described by --describe (columns, channels, "
+                 "sample rate; block_samples for a continuous excitation)", (".csv",), _described_reader("csv"),
+                 TIME_OPTIONS + ("--describe",), requires=("--describe",), text=True),
+    ImportFormat("hdf5", "time", "a 2-D dataset of HDF5 files, described by --describe (dataset, channels, sample "
+                 "rate)", (".hdf5", ".hdf"), _described_reader("hdf5"), TIME_OPTIONS + ("--describe",),
+                 requires=("--describe",)),
     ImportFormat("signalcalc-ascii", "frf", "DataPhysics SignalCalc ASCII FRF export Hxy*.txt, no coherence",
                  (".txt",), _frf_reader("frf_importers_ascii", "read_signalcalc_ascii"), FRF_OPTIONS,
                  detect=_ascii_detect, text=True),

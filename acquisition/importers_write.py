@@ -35,7 +35,9 @@ def write_imported(
     Refused before anything is written (:func:`analysis.outputs.check_outputs`) when ``out`` is
     one of the files ``test`` was read from or a recording a live writer holds.
 
-    Hits failing the automatic checks (double hits) are stored as rejected with the reason.
+    Hits failing the automatic checks (double hits) are stored as rejected with the reason; blocks of
+    a continuous excitation (``test.meta["excitation"] == "continuous"``: a shaker) have no hammer
+    pulse and are all kept.
     ``reference``/``outputs`` relabel the force and response channels (point labels); ``roles``,
     when given, are the channel roles already made by :func:`channel_roles` (the four relabelling
     arguments are then not used).
@@ -56,13 +58,17 @@ def write_imported(
             plan={"mode": "imported", "points": [ref]}, overwrite=True) as w:
         w.log("INFO", f"imported {len(test.hits)} hit(s) from {test.source}; " + "; ".join(roles.describe()))
         kept: list[Hit] = []
+        continuous = test.meta.get("excitation") == "continuous"  # a shaker's blocks: no hammer pulse to check
         for k, hit in enumerate(hits):
-            chk = check_hit(hit.force, hit.sample_rate_hz, [False] * len(chans), list(hit.channel_names),
-                            check_settings)
-            hit = hit.with_verdict(chk.verdict.accept is not False, chk.verdict.reasons, chk.to_dict())
+            if continuous:
+                hit = hit.with_verdict(True, [], {"excitation": "continuous", "accept": True, "reasons": []})
+            else:
+                chk = check_hit(hit.force, hit.sample_rate_hz, [False] * len(chans), list(hit.channel_names),
+                                check_settings)
+                hit = hit.with_verdict(chk.verdict.accept is not False, chk.verdict.reasons, chk.to_dict())
             hit = hit.with_index(w.write_hit(hit))
             if not hit.accepted:
-                w.log("INFO", f"hit {k} rejected: {'; '.join(chk.verdict.reasons)}")
+                w.log("INFO", f"hit {k} rejected: {'; '.join(hit.reasons)}")
             else:
                 kept.append(hit)
         if not kept:

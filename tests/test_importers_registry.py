@@ -127,7 +127,51 @@ def sample_uff58(d: Path) -> tuple[list[Path], list[str]]:
     return [write_uff58_text(d / "frfs.uff", recs)], []
 
 
+def _shaker_blocks(n_blocks: int = 3, n: int = 512, fs: float = 512.0) -> tuple[np.ndarray, np.ndarray]:
+    """A periodic multisine force (N) and the response (g) of one resonance at 31 Hz, ``n_blocks``
+    periods of ``n`` samples plus one transient period first: (force, response), each 1-D."""
+    rng = np.random.default_rng(5)
+    f = np.fft.rfftfreq(n, 1 / fs)
+    spec = np.where((f >= 5) & (f <= 100), np.exp(2j * np.pi * rng.uniform(size=f.size)), 0)
+    one = np.fft.irfft(spec, n) * n / 10
+    force = np.tile(one, n_blocks + 1)
+    resp_spec = np.fft.rfft(one) * _frf(f)
+    resp = np.tile(np.fft.irfft(resp_spec, n), n_blocks + 1)
+    return force, resp
+
+
+SHAKER_DESCRIPTION = {"sample_rate_hz": 512.0, "excitation": "continuous", "block_samples": 512, "skip_blocks": 1,
+                      "channels": [{"name": "Force", "quantity": "force", "unit": "N", "point": "n:1:Z"},
+                                   {"name": "Acc", "quantity": "acceleration", "unit": "g", "point": "n:2:Z"}]}
+
+
+def sample_csv(d: Path) -> tuple[list[Path], list[str]]:
+    force, resp = _shaker_blocks()
+    p = d / "shaker.csv"
+    rows = ['"Force","Voltage","Acc","Fs",'] + [f"{float(a)!r},0.0,{float(b)!r},{'512' if k == 0 else ''},"
+                                              for k, (a, b) in enumerate(zip(force, resp))]
+    p.write_text("\n".join(rows) + "\n")
+    desc = d / "shaker.json"
+    desc.write_text(json.dumps({**SHAKER_DESCRIPTION, "columns": ["Force", "Acc"]}))
+    return [p], ["--describe", str(desc)]
+
+
+def sample_hdf5(d: Path) -> tuple[list[Path], list[str]]:
+    import h5py
+
+    force, resp = _shaker_blocks()
+    p = d / "sweep.hdf5"
+    with h5py.File(p, "w") as f:
+        f["InputTask/data"] = np.column_stack([force, resp, np.zeros_like(force)])
+        f["InputTask/sample_rate"] = 512
+    desc = d / "sweep.json"
+    desc.write_text(json.dumps({**SHAKER_DESCRIPTION, "dataset": "InputTask/data", "layout": "samples_first",
+                                "sample_rate_hz": "InputTask/sample_rate", "columns": [0, 1]}))
+    return [p], ["--describe", str(desc)]
+
+
 SAMPLES: dict[str, Callable[[Path], tuple[list[Path], list[str]]]] = {
+    "csv": sample_csv, "hdf5": sample_hdf5,
     "lvm": sample_lvm, "mat": sample_mat, "npy": sample_npy, "sep005": sample_sep005,
     "signalcalc-frf": sample_signalcalc_frf, "testlab-frf": sample_testlab_frf,
     "signalcalc-ascii": sample_signalcalc_ascii, "uff58": sample_uff58,
@@ -201,7 +245,7 @@ def test_an_option_of_another_row_is_refused_by_the_command(tmp_path, capsys):
 
 def test_sample_rate_is_finite_in_every_time_sample(tmp_path):
     """The time samples are what a capture would record: the registry's readers see real hits."""
-    for name in ("lvm", "mat", "npy", "sep005"):
+    for name in ("lvm", "mat", "npy", "sep005", "csv", "hdf5"):
         files, extra = SAMPLES[name](tmp_path)
         row = format_for(None, files[0])
         from acquisition.importers_registry import ReadOptions
@@ -209,3 +253,67 @@ def test_sample_rate_is_finite_in_every_time_sample(tmp_path):
         describe = extra[1] if extra else None
         tests = row.read(files, ReadOptions(describe=describe))
         assert all(math.isfinite(t.fs_hz) and t.fs_hz > 0 for t in tests)
+
+
+# -- the commands docs/validation.md shows ------------------------------------------------------------
+
+COMMANDS_MD = Path(__file__).resolve().parents[1] / "benchmarks" / "accuracy" / "validation" / "commands.md"
+
+
+def _documented_commands(prog: str) -> list[list[str]]:
+    """The ``python -m <prog>`` command lines of the validation commands (continuation lines joined,
+    shell braces ``{1,2}`` expanded as the shell would, outputs left out)."""
+    import re
+    import shlex
+
+    text = COMMANDS_MD.read_text(encoding="utf-8").replace("\\\n", " ")
+    out = []
+    for line in text.splitlines():
+        if line.startswith(f"python -m {prog} "):
+            m = re.search(r"(\S*)\{([\d,]+)\}(\S*)", line)
+            if m:
+                line = line.replace(m.group(0), " ".join(f"{m.group(1)}{k}{m.group(3)}" for k in m.group(2).split(",")))
+            out.append(shlex.split(line)[2 + len(prog.split()):])
+    return out
+
+
+def test_the_documented_import_commands_parse_and_name_registry_formats():
+    parser = build_parser()
+    commands = _documented_commands("acquisition import")
+    assert len(commands) >= 8
+    for argv in commands:
+        args = parser.parse_args(argv)  # an unknown option or --format exits here
+        for f in args.files:
+            if Path(f).suffix in {e for r in IMPORT_FORMATS for e in r.extensions}:
+                continue
+            assert Path(f).suffix in (".csv", ".hdf5"), f  # shown refused: no row reads them
+
+
+def test_every_shared_dataset_has_its_commands():
+    text = COMMANDS_MD.read_text(encoding="utf-8")
+    for name in ("ladisk_beam_impact", "pyfrf_hammer_5impacts", "pyuff_3frf", "modelab_beam_roving_hammer",
+                 "uliege_meca0062_plane_hammer", "f16_gvt_multisine", "unesp_bert_boltedbeam_subset",
+                 "ladisk_plate_sweep"):
+        assert f"### {name}" in text or f"{name} and" in text or f"and {name}" in text, name
+    for command in ("fit", "report", "linearity", "diagnose"):
+        assert len(_documented_commands(f"analysis {command}")) >= 4, command
+
+
+@pytest.mark.parametrize("name", ["csv", "hdf5"])
+def test_a_continuous_excitation_is_cut_into_blocks_kept_whole_and_unwindowed(tmp_path, capsys, name):
+    """A shaker's periodic record: every period after the transient one is a block, none is refused as
+    a double hit, no hammer window is applied, and the FRF is the periods' H1 (the structure's FRF)."""
+    from analysis.recording import Recording
+
+    files, extra = SAMPLES[name](tmp_path)
+    out = tmp_path / "r.h5"
+    code, stdout, err = _run([*files, *extra, "--out", out], capsys)
+    assert code == 0, err
+    assert "imported 3 accepted hit(s)" in stdout
+    with Recording(out) as rec:
+        assert rec.n_hits == 3
+        assert rec.windows.force_width_s is None and rec.windows.exp_window_tau_s is None
+    s = load_frfset(out)
+    band = (s.freq_hz >= 5) & (s.freq_hz <= 100)
+    rel = np.abs(s.H[0, 0, band] / _frf(s.freq_hz[band]) - 1)
+    assert np.median(rel) < 1e-3 and rel.max() < 1e-2  # the 16-bit counts' rounding, no window, no leakage
