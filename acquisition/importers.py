@@ -37,6 +37,15 @@ Formats
       [[channels]]
       name = "acc"; quantity = "acceleration"; unit = "m/s^2"; point = "n:2:Z"
 
+* CSV tables (:func:`read_csv_table`): a heading row, one column per signal; the description's
+  ``columns`` name (by heading) the columns that are its channels, in order.
+* HDF5 datasets (:func:`read_hdf5_dataset`): ``dataset`` names the 2-D dataset, ``columns`` the
+  signal indices to keep, ``sample_rate_hz`` a number or the name of a one-value dataset.
+
+A shaker's continuous excitation (periodic, random, swept) is described with ``excitation =
+"continuous"``: the record is cut into blocks of ``block_samples`` after ``skip_blocks`` (the
+transient), every block is kept (no hammer pulse to check) and no hammer window is applied.
+
 Quantisation (:mod:`acquisition.importers_quantise`): each hit and channel gets ``eu_per_count =
 max|x| / 32767``; a hit whose counts would lose part of a channel is refused. ``volts_per_count =
 eu_per_count * sensitivity`` when the sensitivity is known (NaN otherwise; infinite or zero
@@ -61,7 +70,9 @@ from .importers_parse import (
     LOADMAT_TIMEOUT_S,
     LVM_SEPARATORS,
     load_description,
+    read_csv_table,
     read_dataphysics_mat,
+    read_hdf5_dataset,
     read_lvm,
     read_numpy,
     read_sep005_test,
@@ -91,6 +102,8 @@ __all__ = [
     "read_dataphysics_mat",
     "read_sep005_test",
     "read_numpy",
+    "read_csv_table",
+    "read_hdf5_dataset",
     "load_description",
     "LVM_SEPARATORS",
     "LOADMAT_TIMEOUT_S",

@@ -347,3 +347,26 @@ def test_uff58_frf_export_mutated_text(data):
             _check_frfs(read_uff58_frfs(p))
         except ImportDataError as exc:
             assert str(exc)
+
+
+CSV_LINES = ['"Force","Acc","Fs",'] + [f"{math.sin(k):.6f},{math.cos(k):.6f},{'100' if k == 0 else ''},"
+                                     for k in range(12)]
+CSV_DESCRIPTION = {"sample_rate_hz": 100.0, "columns": ["Force", "Acc"], "excitation": "continuous",
+                   "block_samples": 4, "skip_blocks": 1,
+                   "channels": [{"name": "Force", "unit": "N"}, {"name": "Acc", "unit": "g"}]}
+
+
+@FUZZ
+@given(data=st.data(), block=st.sampled_from([None, 1, 4, 5, 40, "x"]), columns=st.sampled_from(
+    [["Force", "Acc"], ["Acc"], ["Nope"], [], "Force", [1, 2]]))
+def test_csv_tables_mutated_text_and_descriptions(data, block, columns):
+    from acquisition.importers import read_csv_table
+
+    text = "\n".join(_mutated_lines(data.draw, CSV_LINES, ","))
+    description = {**CSV_DESCRIPTION, "block_samples": block, "columns": columns}
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), "x.csv", text)
+        try:
+            _check(read_csv_table([p], description))
+        except ImportDataError as exc:
+            assert str(exc)
