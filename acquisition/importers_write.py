@@ -50,7 +50,8 @@ def write_imported(
                               response_channels=response_channels)
     chans, ref = roles.channels, roles.reference
     setup = {"sample_rate_hz": test.fs_hz, "block_size": int(test.hits[0].shape[1]),
-             "channels": chans, "imported_from": test.source, "format": test.meta.get("format")}
+             "channels": chans, "imported_from": test.source, "format": test.meta.get("format"),
+             "excitation": test.meta.get("excitation", "impact")}
     instrument = {"vendor": "imported", "model": str(test.meta.get("format", "")), "source": test.source}
     hits = imported_hits(test, roles)  # refuses what 16-bit counts cannot hold before the file is opened
     with whole_recording(out, overwrite) as tmp, RecordingWriter(

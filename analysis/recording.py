@@ -24,7 +24,7 @@ import numpy as np
 from analysis.errors import RecordingError
 from analysis.frf import FRFSet
 from analysis.hit import Hit
-from analysis.spectra import WindowSettings, excitation_limit_hz
+from analysis.spectra import WindowSettings, excitation_limit_hz, excited_top_hz
 
 from .recording_lock import is_lock_error, live_copy, locked_error, writer_alive
 from .recording_schema import _DAMAGE, CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _as_str, _h5py, counts_crc32, scale_counts
@@ -301,9 +301,20 @@ class Recording:
             record_s=record_s, pretrigger_s=pretrigger_s,
             meta={"estimator": est, "source": str(self.path),
                   **({"n_averages": int(g["n_averages"])} if int(g["n_averages"]) > 0 else {}),
-                  "excitation_limit_hz": excitation_limit_hz(g["freq_hz"], g["Gff"]) if "Gff" in g else None,
+                  "excitation_limit_hz": self._excitation_limit(g),
                   "measurement": name, "point": g["point"]},
         )
+
+    def _excitation_limit(self, g: dict) -> float | None:
+        """The top of the band the force excites (Hz) from a measurement's force autospectrum ``Gff``:
+        a hammer pulse's fall (:func:`analysis.spectra.excitation_limit_hz`), or for the blocks of a
+        shaker's continuous excitation (an import described so) the top of its excited band
+        (:func:`analysis.spectra.excited_top_hz`); None without force spectra."""
+        if "Gff" not in g:
+            return None
+        if isinstance(self.setup, dict) and self.setup.get("excitation") == "continuous":
+            return excited_top_hz(g["freq_hz"], g["Gff"])
+        return excitation_limit_hz(g["freq_hz"], g["Gff"])
 
     def _setup_record(self) -> tuple[float | None, float | None]:
         """Record length (s) and pre-trigger (s) of the analyser's set-up, when the recording holds

@@ -317,3 +317,5 @@ def test_a_continuous_excitation_is_cut_into_blocks_kept_whole_and_unwindowed(tm
     band = (s.freq_hz >= 5) & (s.freq_hz <= 100)
     rel = np.abs(s.H[0, 0, band] / _frf(s.freq_hz[band]) - 1)
     assert np.median(rel) < 1e-3 and rel.max() < 1e-2  # the 16-bit counts' rounding, no window, no leakage
+    # the band the shaker excites (5-100 Hz) ends the fit's band, not a hammer pulse's fall
+    assert s.meta["excitation_limit_hz"] == [pytest.approx(100.0, abs=1.0)]
