@@ -170,7 +170,7 @@ IMPORT_FORMATS: tuple[ImportFormat, ...] = (
                  "sample rate; block_samples for a continuous excitation)", (".csv",), _described_reader("csv"),
                  TIME_OPTIONS + ("--describe",), requires=("--describe",), text=True),
     ImportFormat("hdf5", "time", "a 2-D dataset of HDF5 files, described by --describe (dataset, channels, sample "
-                 "rate)", (".hdf5", ".hdf"), _described_reader("hdf5"), TIME_OPTIONS + ("--describe",),
+                 "rate)", (".hdf5",), _described_reader("hdf5"), TIME_OPTIONS + ("--describe",),
                  requires=("--describe",)),
     ImportFormat("signalcalc-ascii", "frf", "DataPhysics SignalCalc ASCII FRF export Hxy*.txt, no coherence",
                  (".txt",), _frf_reader("frf_importers_ascii", "read_signalcalc_ascii"), FRF_OPTIONS,

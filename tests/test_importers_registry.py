@@ -319,3 +319,9 @@ def test_a_continuous_excitation_is_cut_into_blocks_kept_whole_and_unwindowed(tm
     assert np.median(rel) < 1e-3 and rel.max() < 1e-2  # the 16-bit counts' rounding, no window, no leakage
     # the band the shaker excites (5-100 Hz) ends the fit's band, not a hammer pulse's fall
     assert s.meta["excitation_limit_hz"] == [pytest.approx(100.0, abs=1.0)]
+
+
+def test_docs_validation_shows_the_commands_section_as_generated():
+    """docs/validation.md holds commands.md whole (run_all puts it there; a hand edit of either shows)."""
+    validation = COMMANDS_MD.parents[3] / "docs" / "validation.md"
+    assert COMMANDS_MD.read_text(encoding="utf-8").strip() in validation.read_text(encoding="utf-8")
