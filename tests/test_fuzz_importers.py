@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 import scipy.io
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -67,14 +68,14 @@ TOKENS = ["\t", ",", ".", "0", "-1", "nan", "inf", "1e309", "Channels", "X_Value
           "", "abc", "\u00e9"]
 
 
-@st.composite
-def lvm_texts(draw) -> str:
-    lines = list(LVM_LINES)
+def _mutated_lines(draw, lines: list[str], sep: str) -> list[str]:
+    """``lines`` after 1..6 random drops, duplicates, cuts, swaps or cell edits (cells split at ``sep``)."""
+    lines = list(lines)
     for _ in range(draw(st.integers(1, 6))):
-        op = draw(st.sampled_from(("drop", "dup", "edit", "cut", "swap")))
-        k = draw(st.integers(0, len(lines) - 1)) if lines else 0
         if not lines:
             break
+        op = draw(st.sampled_from(("drop", "dup", "edit", "cut", "swap")))
+        k = draw(st.integers(0, len(lines) - 1))
         if op == "drop":
             del lines[k]
         elif op == "dup":
@@ -85,11 +86,17 @@ def lvm_texts(draw) -> str:
             j = draw(st.integers(0, len(lines) - 1))
             lines[k], lines[j] = lines[j], lines[k]
         else:
-            cells = lines[k].split("\t")
+            cells = lines[k].split(sep) if sep else [lines[k]]
             c = draw(st.integers(0, len(cells) - 1))
-            cells[c] = draw(st.sampled_from(TOKENS) | st.text(max_size=6))
-            lines[k] = "\t".join(cells)
-    return "\n".join(lines) + "\n"
+            cells[c] = draw(st.sampled_from(TOKENS + ["Units:", "Hz", "Real", "Imaginary", "-1", "58", "1e400"])
+                            | st.text(max_size=6))
+            lines[k] = (sep or "").join(cells)
+    return lines
+
+
+@st.composite
+def lvm_texts(draw) -> str:
+    return "\n".join(_mutated_lines(draw, LVM_LINES, "\t")) + "\n"
 
 
 def _write(tmp: Path, name: str, data: str | bytes) -> Path:
@@ -275,32 +282,6 @@ def _check_frfs(imp) -> None:
             assert s.coherence.shape == s.H.shape and np.all((s.coherence >= 0) & (s.coherence <= 1))
 
 
-def _mutated_lines(draw, lines: list[str], sep: str) -> list[str]:
-    """``lines`` after 1..6 random drops, duplicates, cuts, swaps or cell edits (cells split at ``sep``)."""
-    lines = list(lines)
-    for _ in range(draw(st.integers(1, 6))):
-        if not lines:
-            break
-        op = draw(st.sampled_from(("drop", "dup", "edit", "cut", "swap")))
-        k = draw(st.integers(0, len(lines) - 1))
-        if op == "drop":
-            del lines[k]
-        elif op == "dup":
-            lines.insert(k, lines[k])
-        elif op == "cut":
-            lines = lines[:k]
-        elif op == "swap":
-            j = draw(st.integers(0, len(lines) - 1))
-            lines[k], lines[j] = lines[j], lines[k]
-        else:
-            cells = lines[k].split(sep) if sep else [lines[k]]
-            c = draw(st.integers(0, len(cells) - 1))
-            cells[c] = draw(st.sampled_from(TOKENS + ["Units:", "Hz", "Real", "Imaginary", "-1", "58", "1e400"])
-                            | st.text(max_size=6))
-            lines[k] = (sep or "").join(cells)
-    return lines
-
-
 def _ascii_lines() -> list[str]:
     from test_importers_registry import _frf, signalcalc_ascii_text
 
@@ -321,30 +302,32 @@ ASCII_LINES = _ascii_lines()
 UFF_LINES = _uff_lines()
 
 
-@FUZZ
-@given(data=st.data())
-def test_signalcalc_ascii_mutated_text(data):
+def _read_ascii(p: Path):
     from acquisition.frf_importers_ascii import read_signalcalc_ascii
 
-    text = "\r\n".join(_mutated_lines(data.draw, ASCII_LINES, "\t"))
-    with tempfile.TemporaryDirectory() as tmp:
-        p = _write(Path(tmp), "Hxysv00001.txt", text)
-        try:
-            _check_frfs(read_signalcalc_ascii(p))
-        except ImportDataError as exc:
-            assert str(exc)
+    return read_signalcalc_ascii(p)
 
 
-@FUZZ
-@given(data=st.data())
-def test_uff58_frf_export_mutated_text(data):
+def _read_uff(p: Path):
     from acquisition.frf_importers import read_uff58_frfs
 
-    text = "\n".join(_mutated_lines(data.draw, UFF_LINES, ""))
+    return read_uff58_frfs(p)
+
+
+#: the FRF-export readers fuzzed on mutated text: (file name, base lines, cell separator, line end, reader)
+FRF_TEXTS = {"signalcalc-ascii": ("Hxysv00001.txt", ASCII_LINES, "\t", "\r\n", _read_ascii),
+             "uff58": ("frfs.uff", UFF_LINES, "", "\n", _read_uff)}
+
+
+@pytest.mark.parametrize("fmt", sorted(FRF_TEXTS))
+@FUZZ
+@given(data=st.data())
+def test_frf_exports_mutated_text(fmt, data):
+    name, lines, sep, end, read = FRF_TEXTS[fmt]
     with tempfile.TemporaryDirectory() as tmp:
-        p = _write(Path(tmp), "frfs.uff", text)
+        p = _write(Path(tmp), name, end.join(_mutated_lines(data.draw, lines, sep)))
         try:
-            _check_frfs(read_uff58_frfs(p))
+            _check_frfs(read(p))
         except ImportDataError as exc:
             assert str(exc)
 
