@@ -325,3 +325,9 @@ def test_docs_validation_shows_the_commands_section_as_generated():
     """docs/validation.md holds commands.md whole (run_all puts it there; a hand edit of either shows)."""
     validation = COMMANDS_MD.parents[3] / "docs" / "validation.md"
     assert COMMANDS_MD.read_text(encoding="utf-8").strip() in validation.read_text(encoding="utf-8")
+
+
+def test_every_row_has_its_line_in_the_recording_format_docs():
+    text = (COMMANDS_MD.parents[3] / "docs" / "recording-format.md").read_text(encoding="utf-8")
+    for r in IMPORT_FORMATS:
+        assert f"| `{r.name}` |" in text, r.name
