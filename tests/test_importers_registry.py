@@ -331,3 +331,17 @@ def test_every_row_has_its_line_in_the_recording_format_docs():
     text = (COMMANDS_MD.parents[3] / "docs" / "recording-format.md").read_text(encoding="utf-8")
     for r in IMPORT_FORMATS:
         assert f"| `{r.name}` |" in text, r.name
+
+
+@pytest.mark.parametrize("name, damage", [
+    ("csv", lambda b: b[: len(b) // 2 - 7]),          # cut inside a line
+    ("csv", lambda b: b.replace(b"Acc", b"Acx", 1)),   # the described column is gone
+    ("hdf5", lambda b: b[:900]),                       # cut short
+])
+def test_a_damaged_described_file_is_one_line_naming_it(tmp_path, capsys, name, damage):
+    files, extra = SAMPLES[name](tmp_path)
+    files[0].write_bytes(damage(files[0].read_bytes()))
+    out = tmp_path / "r.h5"
+    code, _, err = _run([*files, *extra, "--out", out], capsys)
+    assert code == 2 and err.count("\n") == 1 and str(files[0]) in err, err
+    assert not out.exists()
