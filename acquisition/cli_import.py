@@ -1,18 +1,16 @@
 """``python -m acquisition import``: measured time data or an analyser's FRF exports -> a recording.
 
-    python -m acquisition import FILE [FILE...] --out REC.h5 [--format lvm|mat|npy|sep005] [--describe DESC.json|toml]
-        [--force-channel K] [--responses K,K] [--reference POINT] [--outputs P1,P2] [--windowed]
-        [--force-window WIDTH[,TAPER]|none] [--exp-window TAU|PCT%|none] [--overwrite]
+    python -m acquisition import FILE [FILE...] --out REC.h5 [--format NAME] [--reference POINT] [--outputs P1,P2]
+        [time data: --force-channel K --responses K,K --force-window W --exp-window W --windowed --describe D]
+        [FRF exports: --points MAP.csv --variables NAME,... --analyser-exp-window W] [--overwrite]
 
-Formats (by extension unless ``--format``): LabVIEW ``.lvm`` (segments = hits), DataPhysics
-``.mat`` (``X1..Xn`` blocks, or the analyser-windowed ``W1..Wn`` with ``--windowed``), numpy
-``.npy`` (one file per hit, needs ``--describe``). Channel numbers are 1-based. Raw blocks get
+The formats are the rows of :data:`acquisition.importers_registry.IMPORT_FORMATS` (one row each:
+reader, extensions, options, help text): the format comes from ``--format`` or from the first
+file's extension and content, the options a format does not take are refused, and ``--help``
+and the error of an unknown file list the rows. Channel numbers are 1-based. Raw blocks get
 capture's windows unless ``--force-window``/``--exp-window`` say otherwise (:func:`import_windows`).
-
-Analyser FRF exports (H1 and coherence, :data:`acquisition.frf_importers.FRF_FORMATS`, one row per
-format): ``--format signalcalc-frf|testlab-frf`` or detected from a ``.mat`` file's variables;
-``--variables`` picks FRFs, ``--points MAP.csv`` labels a roving test's files
-(``docs/recording-format.md``, "Importing analyser FRF exports").
+An analyser's FRF exports are written as they are (``docs/recording-format.md``, "Importing
+analyser FRF exports"); ``--points MAP.csv`` labels a roving test's files.
 
 The recording holds the file's numbers or is not written: what cannot be stored as read (complex
 values, an infinite sensitivity, hits sampled or ordered differently, a glitch 16-bit samples
@@ -24,19 +22,15 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, with_examples
 from analysis.outputs import check_outputs
 
 from .errors import ImportDataError, RecordingError, UsageError
-from .frf_importers import FRF_FORMATS
+from .importers_registry import ImportFormat, ReadOptions, check_options, format_for, format_names, formats_help
 from .window_options import DEFAULT_EXP_WINDOW, DEFAULT_FORCE_WINDOW, parse_windows
 
-__all__ = ["main", "build_parser", "FORMATS"]
-
-#: the input formats ``--format`` names (by extension otherwise; ``.json`` is SEP005)
-FORMATS = ("lvm", "mat", "npy", "sep005") + tuple(r.name for r in FRF_FORMATS)
+__all__ = ["main", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -46,11 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the measured time data (several files of one format are one test: their hits add up), or "
                         "an analyser's FRF exports (several files: a roving test, see --points)")
     p.add_argument("--out", required=True, metavar="REC.h5", help="the recording to write (HDF5)")
-    p.add_argument("--format", choices=FORMATS,
-                   help="input format: lvm (LabVIEW text), mat (DataPhysics SignalCalc export), npy (numpy "
-                        "arrays with --describe), sep005 (SEP005 JSON); analyser FRF exports: "
-                        + "; ".join(f"{r.name} ({r.description})" for r in FRF_FORMATS)
-                        + "; default: from the extension and content")
+    p.add_argument("--format", choices=format_names(), metavar="NAME",
+                   help="input format, one of: " + formats_help().replace("%", "%%"))
     p.add_argument("--points", metavar="MAP.csv",
                    help="analyser FRF exports of a roving test: CSV 'file,reference[,outputs]' giving each file "
                         "(relative to the map) its reference point and, optionally, its channels' output points")
@@ -81,44 +72,41 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _check_files(files: Sequence[str], fmt: str, error: type[Exception]) -> None:
+def _check_files(files: Sequence[str], row: ImportFormat, error: type[Exception]) -> None:
     """Refuse an input that is not a regular file (a FIFO would block the reader, a device never end)
-    or larger than its parsing may take: text (.lvm, SEP005) within
+    or larger than its parsing may take: text formats within
     :func:`analysis.input_limits.text_data_limit_bytes`, arrays within the memory one computation may use."""
     from analysis.input_limits import check_input_file, text_data_limit_bytes
     from analysis.work_limits import memory_budget_bytes
 
-    limit = text_data_limit_bytes() if fmt in ("lvm", "sep005", "json") else memory_budget_bytes()
+    limit = text_data_limit_bytes() if row.text else memory_budget_bytes()
     for f in files:
         if Path(f).exists():  # a missing file is named by its reader
-            check_input_file(f, f"input file (.{fmt})", limit, error)
+            check_input_file(f, f"input file ({row.name})", limit, error)
+
+
+def _given_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
+    """The long options of ``args`` set to something other than their default."""
+    return [a.option_strings[-1] for a in parser._actions
+            if a.option_strings and a.dest != "help" and getattr(args, a.dest, a.default) not in (a.default, None)]
 
 
 def import_windows(force: str | None, exp: str | None, windowed: bool) -> tuple[str, str]:
     """The ``--force-window`` and ``--exp-window`` texts of an import: as given, else capture's
     defaults (raw time data get the windows a capture of the same hits would: the force window keeps
     the pulse and drops the noise of the rest of the block, so the force spectrum, and with it the
-    fit's band, is the pulse's); ``none`` for blocks the analyser already windowed (``windowed``)."""
+    fit's band, is the pulse's); ``none`` for blocks the analyser already windowed or a shaker's
+    continuous excitation (``windowed``)."""
     default_force, default_exp = ("none", "none") if windowed else (DEFAULT_FORCE_WINDOW, DEFAULT_EXP_WINDOW)
     return (force if force is not None else default_force), (exp if exp is not None else default_exp)
 
 
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    from .frf_importers import frf_format_for, read_point_map
-    from .importers import (
-        channel_roles,
-        combine_imports,
-        load_description,
-        read_dataphysics_mat,
-        read_lvm,
-        read_numpy,
-        read_sep005_test,
-        write_imported,
-    )
-    from .importers import read_dropping_nonfinite as _read
-    drop = args.drop_nonfinite
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from .frf_importers import read_point_map
+    from .importers import channel_roles, combine_imports, write_imported
 
     with errors_to_exit("import", (UsageError, ImportDataError, RecordingError, ValueError)):
         point_map = read_point_map(args.points) if args.points else None
@@ -129,34 +117,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not args.files:
             raise UsageError("no input file: give FILE(s), or --points MAP.csv for a roving test's FRF exports")
         check_outputs([args.out], [*args.files, args.describe, args.points])
-        frf_row = frf_format_for(args.format, args.files[0])
-        if frf_row is None and point_map is not None:
-            raise UsageError("--points maps analyser FRF exports (--format "
-                             + "|".join(r.name for r in FRF_FORMATS) + "); time data take --reference/--outputs")
-        frf_only = [o for o, v in (("--variables", args.variables), ("--analyser-exp-window", args.analyser_exp_window))
-                    if v]
-        if frf_row is None and frf_only:
-            raise UsageError(f"{', '.join(frf_only)}: for analyser FRF exports only (--format "
-                             + "|".join(r.name for r in FRF_FORMATS) + ")")
-        if frf_row is not None:
-            return _import_frfs(frf_row, args, point_map)
-        fmt = args.format or Path(args.files[0]).suffix.lower().lstrip(".")
-        _check_files(args.files, fmt, ImportDataError)
-        if fmt == "lvm":
-            tests = [_read(read_lvm, f, drop=drop) for f in args.files]
-        elif fmt == "mat":
-            tests = [_read(read_dataphysics_mat, f, windowed=args.windowed, drop=drop) for f in args.files]
-        elif fmt in ("sep005", "json"):
-            tests = [_read(read_sep005_test, f, drop=drop) for f in args.files]
-        elif fmt == "npy":
-            if not args.describe:
-                raise UsageError("numpy input needs --describe DESC.json|toml naming the channels and sample rate")
-            tests = [_read(read_numpy, args.files, load_description(args.describe), drop=drop)]
-        else:
-            raise UsageError(f"unknown input format {fmt!r}: use .lvm, .mat, .npy or SEP005 .json, or --format "
-                             + "|".join(r.name for r in FRF_FORMATS) + " for an analyser's FRF export")
+        given = _given_options(parser, args)
+        row = format_for(args.format, Path(args.files[0]), given)
+        check_options(row, given)
+        _check_files(args.files, row, ImportDataError)
+        options = ReadOptions(windowed=args.windowed, describe=args.describe, drop_nonfinite=args.drop_nonfinite,
+                              variables=tuple(v.strip() for v in args.variables.split(",")) if args.variables else None)
+        if row.kind == "frf":
+            return _import_frfs(row, options, args, point_map)
+        tests = row.read([Path(f) for f in args.files], options)
         test = combine_imports(tests)
-        windows = parse_windows(*import_windows(args.force_window, args.exp_window, args.windowed), test.fs_hz)
+        continuous = test.meta.get("excitation") == "continuous"  # a shaker's blocks: no hammer windows
+        windows = parse_windows(*import_windows(args.force_window, args.exp_window, args.windowed or continuous),
+                                test.fs_hz)
         fch = args.force_channel - 1 if args.force_channel else None
         rch = [int(x) - 1 for x in args.responses.split(",")] if args.responses else None
         outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
@@ -174,28 +147,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _import_frfs(row: Any, args: argparse.Namespace, point_map: list | None) -> int:
-    """``import`` of an analyser's FRF export (``row``: its :data:`FRF_FORMATS` row): each file's
-    H1 and coherence, relabelled with ``--reference``/``--outputs`` or the ``--points`` map's row
+def _import_frfs(row: ImportFormat, options: ReadOptions, args: argparse.Namespace, point_map: list | None) -> int:
+    """``import`` of an analyser's FRF export (``row``: its registry row): each file's H1 and
+    coherence, relabelled with ``--reference``/``--outputs`` or the ``--points`` map's row
     (``point_map``), written as a recording."""
     from .frf_importers import combine_frf_imports, relabel, with_analyser_window, write_frf_recording
 
-    time_only = [o for o, v in (("--describe", args.describe), ("--force-channel", args.force_channel),
-                                ("--responses", args.responses), ("--windowed", args.windowed),
-                                ("--force-window", args.force_window), ("--exp-window", args.exp_window),
-                                ("--drop-nonfinite", args.drop_nonfinite)) if v]
-    if time_only:
-        raise UsageError(f"{', '.join(time_only)}: for time data only; {row.name} holds the analyser's FRFs"
-                         + (" (the window it applied: --analyser-exp-window)" if args.exp_window else ""))
-    _check_files(args.files, "mat", ImportDataError)
-    variables = [v.strip() for v in args.variables.split(",")] if args.variables else None
     outs = [x.strip() for x in args.outputs.split(",")] if args.outputs else None
     if args.reference and (len(args.files) > 1 or point_map):
         raise UsageError("--reference labels the reference of one file; several files need --points MAP.csv")
     if point_map:
-        imports = [relabel(row.read(r.file, variables), r.reference, r.outputs or outs) for r in point_map]
+        imports = [relabel(imp, r.reference, r.outputs or outs)
+                   for r in point_map for imp in row.read([r.file], options)]
     else:
-        imports = [relabel(row.read(Path(f), variables), args.reference, outs) for f in args.files]
+        imports = [relabel(imp, args.reference, outs) for imp in row.read([Path(f) for f in args.files], options)]
     if args.analyser_exp_window:
         window = parse_windows(None, args.analyser_exp_window, imports[0].sets[0].sample_rate_hz)
         if window.exp_window_tau_s is None and window.exp_window_end_fraction is None:
@@ -204,7 +169,8 @@ def _import_frfs(row: Any, args: argparse.Namespace, point_map: list | None) -> 
     imp = combine_frf_imports(imports)
     write_frf_recording(imp, args.out, overwrite=args.overwrite)
     for s, n in zip(imp.sets, imp.n_averages):
-        print(f"imported {s.n_outputs} FRF(s) {s.unit} of reference {s.references[0]}: outputs "
-              f"{', '.join(s.outputs)}; {'averages not stated in the file' if n is None else f'{n} averages'}")
+        print(f"imported {s.n_outputs} FRF(s) {s.unit or '(unit not stated)'} of reference {s.references[0]}: outputs "
+              f"{', '.join(s.outputs)}; {'averages not stated in the file' if n is None else f'{n} averages'}"
+              + ("" if s.coherence is not None else "; no coherence in the file"))
     print(f"recording written: {args.out}")
     return 0

@@ -5,7 +5,8 @@ holds no hits, only what the analyser averaged. Its recording has no ``/hits``; 
 point is one FRF group with ``freq_hz``, ``H1``, ``coherence``, the number of averages when the
 file says it (0 = not known) and the point labels (``docs/recording-format.md``).
 
-Formats (one :class:`FRFFormat` row each in :data:`FRF_FORMATS`):
+Formats (each one row of :data:`acquisition.importers_registry.IMPORT_FORMATS`; the SignalCalc ASCII
+export's parser is :mod:`acquisition.frf_importers_ascii`):
 
 * ``signalcalc-frf``: DataPhysics SignalCalc ``.mat``: ``H{r}_{k}`` (two complex columns
   [f Hz, H]) and ``C{r}_{k}`` ([f Hz, coherence]) from reference channel ``r`` to channel ``k``;
@@ -16,6 +17,11 @@ Formats (one :class:`FRFFormat` row each in :data:`FRF_FORMATS`):
   ``...Coherence.mat`` with the ``Coherence`` struct. The values are MKS; they are stored in the
   struct's display unit (its ``label``, via ``unit_transformation.factor``). Channel labels
   ``Acc1:+X`` become point labels ``Acc:1:X``.
+* ``signalcalc-ascii``: one FRF per ``Hxy*.txt`` file, no coherence (:mod:`acquisition.frf_importers_ascii`).
+* ``uff58``: Universal File Format dataset 58 (:func:`analysis.uff.read_uff58`): FRF records
+  (function type 4) and their ordinary coherence (type 6), matched by node and direction; the
+  number of averages from ID line 2 (``... averages N ...``) when every reference's records state
+  it; one import set per reference.
 
 Anything that cannot be stored as read (a missing coherence, axes that differ, a unit that is
 not a motion per excitation, non-finite values, a coherence outside [0, 1]) is refused with one
@@ -39,9 +45,9 @@ from analysis.spectra import WindowSettings, tau_from_end_fraction
 
 from .errors import ImportDataError
 
-__all__ = ["FRFFormat", "FRF_FORMATS", "ImportedFRFs", "read_signalcalc_frf", "read_testlab_frf", "frf_format_for",
-           "relabel", "combine_frf_imports", "write_frf_recording", "COHERENCE_TOLERANCE", "PointMapRow",
-           "read_point_map", "with_analyser_window"]
+__all__ = ["ImportedFRFs", "read_signalcalc_frf", "read_testlab_frf", "read_uff58_frfs", "signalcalc_detect",
+           "testlab_detect", "mat_variables", "relabel", "combine_frf_imports", "write_frf_recording",
+           "COHERENCE_TOLERANCE", "PointMapRow", "read_point_map", "with_analyser_window", "point_of_testlab_label"]
 
 #: how far a stored coherence may stray outside [0, 1] (rounding of the export) before it is refused
 COHERENCE_TOLERANCE = 1e-6
@@ -62,19 +68,6 @@ class ImportedFRFs:
     source: str
     fmt: str
     meta: dict = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class FRFFormat:
-    """One analyser FRF export format of ``import``: its ``--format`` name, the text of the help
-    list, the file extensions it comes in, ``detect`` (from a file's MATLAB variables, name ->
-    class, whether a file of that extension holds this format) and ``read(path, variables)``."""
-
-    name: str
-    description: str
-    extensions: tuple
-    detect: Callable[[dict], bool]
-    read: Callable[[Path, Sequence[str] | None], ImportedFRFs]
 
 
 def _fail(path: Path, what: str) -> ImportDataError:
@@ -131,10 +124,10 @@ def _check_axis(path: Path, var: str, f: np.ndarray) -> np.ndarray:
 
 def _variables(path: Path) -> dict:
     """The MATLAB variables of ``path`` as loaded (in a child process, see
-    :func:`acquisition.importers._loadmat_isolated`)."""
-    from .importers import _loadmat_isolated
+    :func:`acquisition.importers_parse.loadmat_isolated`)."""
+    from .importers_parse import loadmat_isolated
 
-    return _loadmat_isolated(path)
+    return loadmat_isolated(path)
 
 
 def _whos(path: str) -> dict:
@@ -152,7 +145,7 @@ def mat_variables(path: str | Path) -> dict:
     scipy's reader); raises :class:`ImportDataError` for an unreadable file."""
     from analysis._isolated import call_isolated
 
-    from .importers import LOADMAT_TIMEOUT_S
+    from .importers_parse import LOADMAT_TIMEOUT_S
 
     p = Path(path)
     if not p.is_file():
@@ -171,10 +164,11 @@ def mat_variables(path: str | Path) -> dict:
 _SC_H = re.compile(r"H(\d+)_(\d+)")
 
 
-def _signalcalc_detect(whos: dict) -> bool:
-    """A SignalCalc FRF export: ``H{r}_{k}`` variables and no time blocks ``X{k}`` (a file with
-    time blocks imports as time data unless ``--format signalcalc-frf``)."""
-    return any(_SC_H.fullmatch(n) for n in whos) and not any(re.fullmatch(r"X\d+", n) for n in whos)
+def signalcalc_detect(whos: dict) -> bool:
+    """A SignalCalc FRF export: ``H{r}_{k}`` variables (a file that also holds time blocks ``X{k}``
+    is read as time data first, unless ``--format signalcalc-frf`` or an FRF option says otherwise:
+    the registry's row order)."""
+    return any(_SC_H.fullmatch(n) for n in whos)
 
 
 def _channel_units(path: Path, m: dict) -> dict:
@@ -286,7 +280,7 @@ _TL_FIELDS = ("x_values", "y_values", "function_record")
 _TL_LABEL = re.compile(r"^\s*([A-Za-z_]+?)(\d*)\s*:\s*([+-]?)([XYZxyz])\s*$")
 
 
-def _testlab_detect(whos: dict) -> bool:
+def testlab_detect(whos: dict) -> bool:
     """A Test.Lab FRF export: struct variables whose name starts with ``FRF``."""
     return any(n.startswith("FRF") and cls == "struct" for n, cls in whos.items())
 
@@ -452,26 +446,41 @@ def _read_testlab_frf(path: Path, variables: Sequence[str] | None = None) -> Imp
     return ImportedFRFs(sets, n_avg, str(p), "testlab-frf", {"variables": structs, "coherence_file": str(cp)})
 
 
-#: the analyser FRF export formats of ``import`` (one row each)
-FRF_FORMATS: tuple[FRFFormat, ...] = (
-    FRFFormat("signalcalc-frf", "DataPhysics SignalCalc .mat H1 and coherence, H{r}_{k} and C{r}_{k}", (".mat",),
-              _signalcalc_detect, read_signalcalc_frf),
-    FRFFormat("testlab-frf", "LMS Test.Lab .mat FRF structs, with the ...Coherence.mat beside", (".mat",),
-              _testlab_detect, read_testlab_frf),
-)
+def read_uff58_frfs(path: Path, variables: Sequence[str] | None = None) -> ImportedFRFs:
+    """The FRFs and coherence of a UFF 58 file (see module doc), one set per reference with the
+    outputs it was measured at. A file with coherence records must have one for every FRF (else
+    refused, naming the FRF); without any, the import holds no coherence. ``variables`` is not used.
+    Raises :class:`ImportDataError` naming the file for a damaged or incomplete file."""
+    return _guarded(_read_uff58_frfs, Path(path), variables, "UFF 58 file")
 
 
-def frf_format_for(fmt: str | None, path: str | Path) -> FRFFormat | None:
-    """The FRF export row of ``--format fmt``, or (no ``fmt``) the row whose extension and content
-    ``path`` has; None when the input is not an FRF export (time data)."""
-    if fmt is not None:
-        return next((r for r in FRF_FORMATS if r.name == fmt), None)
-    p = Path(path)
-    rows = [r for r in FRF_FORMATS if p.suffix.lower() in r.extensions]
-    if not rows or not p.is_file():
-        return None
-    whos = mat_variables(p)
-    return next((r for r in rows if r.detect(whos)), None)
+def _read_uff58_frfs(p: Path, variables: Sequence[str] | None = None) -> ImportedFRFs:
+    from analysis.uff import UFFError, read_uff58
+
+    try:
+        s = read_uff58(p)
+    except UFFError as exc:
+        raise ImportDataError(str(exc)) from None
+    if s.quantity not in _MOTION_QUANTITY.values():
+        raise _fail(p, f"its FRFs are {s.quantity}; only accelerance, mobility and receptance FRFs can be imported")
+    averages = s.meta.get("n_averages")
+    sets, n_avg = [], []
+    for j, ref in enumerate(s.references):
+        rows = [i for i in range(s.n_outputs) if np.all(np.isfinite(s.H[i, j]))]
+        coh = None
+        if s.coherence is not None:
+            missing = [s.outputs[i] for i in rows if not np.all(np.isfinite(s.coherence[i, j]))]
+            if missing:
+                raise _fail(p, f"the FRF of {missing[0]}/{ref} has no coherence record while other FRFs have one; "
+                               "export the coherence of every FRF (or of none)")
+            coh = np.stack([_coherence(p, f"coherence {s.outputs[i]}/{ref}", s.coherence[i, j]) for i in rows])[:, None]
+        sets.append(FRFSet(freq_hz=s.freq_hz, H=s.H[rows, j][:, None, :], quantity=s.quantity,
+                           outputs=tuple(s.outputs[i] for i in rows), references=(ref,), unit=s.unit, coherence=coh,
+                           exp_window_tau_s=s.exp_window_tau_s,
+                           meta={"source": str(p), **({"estimator": s.meta["estimator"]} if "estimator" in s.meta
+                                                      else {})}))
+        n_avg.append(int(averages[j]) if isinstance(averages, list) and averages[j] else None)
+    return ImportedFRFs(sets, n_avg, str(p), "uff58", {})
 
 
 def relabel(imp: ImportedFRFs, reference: str | None, outputs: Sequence[str] | None) -> ImportedFRFs:

@@ -24,7 +24,7 @@ import numpy as np
 from analysis.errors import RecordingError
 from analysis.frf import FRFSet
 from analysis.hit import Hit
-from analysis.spectra import WindowSettings, excitation_limit_hz
+from analysis.spectra import WindowSettings, excitation_limit_hz, excited_top_hz
 
 from .recording_lock import is_lock_error, live_copy, locked_error, writer_alive
 from .recording_schema import _DAMAGE, CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _as_str, _h5py, counts_crc32, scale_counts
@@ -319,14 +319,26 @@ class Recording:
             record_s, pretrigger_s = self._setup_record()
         return FRFSet(
             freq_hz=g["freq_hz"], H=g[est][:, None, :], quantity=g["quantity"], outputs=tuple(g["outputs"]),
-            references=(g["reference"],), unit=g["unit"], coherence=g["coherence"][:, None, :],
+            references=(g["reference"],), unit=g["unit"],
+            coherence=g["coherence"][:, None, :] if "coherence" in g else None,  # an export without coherence
             exp_window_tau_s=g["exp_window_tau_s"], sample_rate_hz=g["sample_rate_hz"] or self._hit_sample_rate(),
             record_s=record_s, pretrigger_s=pretrigger_s,
             meta={"estimator": est, "source": str(self.path),
                   **({"n_averages": int(g["n_averages"])} if int(g["n_averages"]) > 0 else {}),
-                  "excitation_limit_hz": excitation_limit_hz(g["freq_hz"], g["Gff"]) if "Gff" in g else None,
+                  "excitation_limit_hz": self._excitation_limit(g),
                   "measurement": name, "point": g["point"]},
         )
+
+    def _excitation_limit(self, g: dict) -> float | None:
+        """The top of the band the force excites (Hz) from a measurement's force autospectrum ``Gff``:
+        a hammer pulse's fall (:func:`analysis.spectra.excitation_limit_hz`), or for the blocks of a
+        shaker's continuous excitation (an import described so) the top of its excited band
+        (:func:`analysis.spectra.excited_top_hz`); None without force spectra."""
+        if "Gff" not in g:
+            return None
+        if isinstance(self.setup, dict) and self.setup.get("excitation") == "continuous":
+            return excited_top_hz(g["freq_hz"], g["Gff"])
+        return excitation_limit_hz(g["freq_hz"], g["Gff"])
 
     def _setup_record(self) -> tuple[float | None, float | None]:
         """Record length (s) and pre-trigger (s) of the analyser's set-up, when the recording holds
@@ -432,12 +444,12 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
         outs += [o for o in s.outputs if o not in outs]
         refs += [r for r in s.references if r not in refs]
     H = np.full((len(outs), len(refs), f0.size), np.nan + 0j)
-    C = np.full((len(outs), len(refs), f0.size), np.nan)
+    C: np.ndarray | None = np.full((len(outs), len(refs), f0.size), np.nan)
     for s in sets:
         for i, o in enumerate(s.outputs):
             for j, r in enumerate(s.references):
                 H[outs.index(o), refs.index(r)] = s.H[i, j]
-                if s.coherence is not None:
+                if s.coherence is not None and C is not None:
                     C[outs.index(o), refs.index(r)] = s.coherence[i, j]
     taus = {s.exp_window_tau_s for s in sets}
     if len(taus) > 1:
@@ -462,6 +474,8 @@ def merge_frfsets(sets: Sequence[FRFSet]) -> FRFSet:
     meta["excitation_limit_hz"] = [s.meta.get("excitation_limit_hz") for s in sets]
     if len(ests) > 1:
         meta["estimator"] = "mixed"
+    if all(s.coherence is None for s in sets):  # an analyser export without coherence: none stated
+        C = None
     return FRFSet(freq_hz=f0, H=H, quantity=sets[0].quantity, outputs=tuple(outs), references=tuple(refs),
                   unit=sets[0].unit, coherence=C, exp_window_tau_s=sets[0].exp_window_tau_s, meta=meta,
                   sample_rate_hz=next(iter(rates)) if rates else None, record_s=sets[0].record_s,

@@ -341,17 +341,17 @@ class RecordingWriter:
 
     def _write_frf_only(self, name: str, point: FRFPoint, frfset: FRFSet, n_averages: int | None,
                         windows: WindowSettings) -> None:
-        """The FRF group of an analyser's FRFs: frequencies, H1 and coherence (no spectra, no H2)."""
-        if frfset.coherence is None:
-            raise RecordingError(f"the FRFs of point {point.label} have no coherence; an imported FRF needs the "
-                                 "analyser's coherence")
-        self._room(sum(np.asarray(a).nbytes for a in (frfset.freq_hz, frfset.H, frfset.coherence)),
-                   f"the FRFs of point {point.label}", after_full=True)
+        """The FRF group of an analyser's FRFs: frequencies, H1 and coherence (no spectra, no H2); an
+        export that holds no coherence (e.g. SignalCalc ASCII) gets no coherence dataset."""
+        arrays = [("freq_hz", frfset.freq_hz), ("H1", frfset.H[:, 0, :])]
+        if frfset.coherence is not None:
+            arrays.append(("coherence", frfset.coherence[:, 0, :]))
+        self._room(sum(np.asarray(a).nbytes for _, a in arrays), f"the FRFs of point {point.label}", after_full=True)
         grp = self._f["frf"]
         if name in grp:
             del grp[name]
         g = grp.create_group(name)
-        for key, val in (("freq_hz", frfset.freq_hz), ("H1", frfset.H[:, 0, :]), ("coherence", frfset.coherence[:, 0, :])):
+        for key, val in arrays:
             g.create_dataset(key, data=np.asarray(val))
         self._frf_attrs(g, point, frfset, 0 if n_averages is None else int(n_averages), windows)
         g.attrs["imported_frf"] = True

@@ -41,6 +41,7 @@ from .frf import FRFSet
 __all__ = [
     "excitation_band",
     "excitation_limit_hz",
+    "excited_top_hz",
     "EXCITATION_DROP_DB",
     "WindowSettings",
     "AveragedSpectra",
@@ -454,6 +455,19 @@ def excitation_band(freq_hz: np.ndarray, gff_db: np.ndarray, drops_db: Sequence[
 
 #: the force spectrum's fall (dB below its low-frequency level) taken as the end of the band a fit may use
 EXCITATION_DROP_DB = 20.0
+
+
+def excited_top_hz(freq_hz: np.ndarray, gff: np.ndarray, drop_db: float = EXCITATION_DROP_DB) -> float | None:
+    """Upper end (Hz) of a shaker's excitation band in a force autospectrum ``gff`` (linear) at
+    ``freq_hz``: the last line within ``drop_db`` of the spectrum's peak (a multisine or a sweep
+    excites a band that need not start at DC, unlike a hammer's pulse, :func:`excitation_limit_hz`);
+    None for an all-zero spectrum."""
+    g = np.asarray(gff, dtype=float)
+    peak = float(np.nanmax(g)) if g.size else 0.0
+    if not peak > 0:
+        return None
+    within = np.flatnonzero(g >= peak * 10.0 ** (-drop_db / 10.0))
+    return float(np.asarray(freq_hz, dtype=float)[within[-1]])
 
 
 def excitation_limit_hz(freq_hz: np.ndarray, gff: np.ndarray, drop_db: float = EXCITATION_DROP_DB) -> float | None:

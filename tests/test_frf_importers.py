@@ -13,9 +13,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from acquisition.cli_import import build_parser
 from acquisition.cli_import import main as import_main
-from acquisition.frf_importers import FRF_FORMATS, point_of_testlab_label
+from acquisition.frf_importers import point_of_testlab_label
 from analysis.recording import Recording, load_frfset
 
 #: two modes (Hz, damping) of the synthetic structure
@@ -96,17 +95,6 @@ def _run(argv: list, capsys) -> tuple[int, str, str]:
     return code, out, err
 
 
-# -- the registry ------------------------------------------------------------------------------
-
-def test_every_frf_format_is_one_row_in_the_help_and_choices():
-    p = build_parser()
-    text = p.format_help()
-    choices = next(a.choices for a in p._actions if a.dest == "format")
-    for row in FRF_FORMATS:
-        assert row.name in choices
-        assert row.description.split(" (")[0] in " ".join(text.split())
-
-
 # -- DataPhysics SignalCalc --------------------------------------------------------------------
 
 def test_signalcalc_frf_export_imports_h1_coherence_and_labels(tmp_path, capsys):
@@ -179,7 +167,8 @@ def test_analyser_exp_window_by_end_value_needs_the_record_layout(tmp_path, caps
 
 def test_frf_options_are_refused_for_time_data(tmp_path, capsys):
     src = tmp_path / "t.mat"
-    _signalcalc(src, with_time=True)  # time blocks: a time import without --format
+    t = np.arange(64) / 512.0
+    scipy.io.savemat(src, {"X1": np.column_stack([t, np.sin(t)]), "Unit": np.array(["N"])})  # time blocks only
     code, _, err = _run([src, "--variables", "H1_2", "--out", tmp_path / "r.h5"], capsys)
     assert code == 2 and "--variables: for analyser FRF exports only" in err
 
@@ -271,7 +260,7 @@ def test_points_map_is_for_frf_exports(tmp_path, capsys):
     np.save(tmp_path / "hit.npy", np.zeros((2, 64)))
     (tmp_path / "map.csv").write_text("file,reference\nhit.npy,plane:1:Z\n")
     code, _, err = _run(["--points", tmp_path / "map.csv", "--out", tmp_path / "r.h5"], capsys)
-    assert code == 2 and "--points maps analyser FRF exports" in err
+    assert code == 2 and "--points: for analyser FRF exports only" in err
 
 
 # -- LMS Test.Lab structs (UNESP) --------------------------------------------------------------

@@ -1,5 +1,5 @@
-"""Fuzzing the importers (LabVIEW .lvm text, numpy + description, DataPhysics-like .mat) and the
-16-bit counts an import stores.
+"""Fuzzing the importers (LabVIEW .lvm text, numpy + description, DataPhysics-like .mat, SignalCalc ASCII
+and UFF 58 FRF exports) and the 16-bit counts an import stores.
 
 Whatever the file holds, a reader either returns a consistent :class:`ImportedTest` (finite
 positive sample rate, every hit ``(n_channels, n)``, sensitivities finite and nonzero or unknown)
@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 import scipy.io
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -67,14 +68,14 @@ TOKENS = ["\t", ",", ".", "0", "-1", "nan", "inf", "1e309", "Channels", "X_Value
           "", "abc", "\u00e9"]
 
 
-@st.composite
-def lvm_texts(draw) -> str:
-    lines = list(LVM_LINES)
+def _mutated_lines(draw, lines: list[str], sep: str) -> list[str]:
+    """``lines`` after 1..6 random drops, duplicates, cuts, swaps or cell edits (cells split at ``sep``)."""
+    lines = list(lines)
     for _ in range(draw(st.integers(1, 6))):
-        op = draw(st.sampled_from(("drop", "dup", "edit", "cut", "swap")))
-        k = draw(st.integers(0, len(lines) - 1)) if lines else 0
         if not lines:
             break
+        op = draw(st.sampled_from(("drop", "dup", "edit", "cut", "swap")))
+        k = draw(st.integers(0, len(lines) - 1))
         if op == "drop":
             del lines[k]
         elif op == "dup":
@@ -85,11 +86,17 @@ def lvm_texts(draw) -> str:
             j = draw(st.integers(0, len(lines) - 1))
             lines[k], lines[j] = lines[j], lines[k]
         else:
-            cells = lines[k].split("\t")
+            cells = lines[k].split(sep) if sep else [lines[k]]
             c = draw(st.integers(0, len(cells) - 1))
-            cells[c] = draw(st.sampled_from(TOKENS) | st.text(max_size=6))
-            lines[k] = "\t".join(cells)
-    return "\n".join(lines) + "\n"
+            cells[c] = draw(st.sampled_from(TOKENS + ["Units:", "Hz", "Real", "Imaginary", "-1", "58", "1e400"])
+                            | st.text(max_size=6))
+            lines[k] = (sep or "").join(cells)
+    return lines
+
+
+@st.composite
+def lvm_texts(draw) -> str:
+    return "\n".join(_mutated_lines(draw, LVM_LINES, "\t")) + "\n"
 
 
 def _write(tmp: Path, name: str, data: str | bytes) -> Path:
@@ -261,3 +268,88 @@ def test_imported_hits_give_back_every_sample_within_half_a_step_or_refuse(force
     step = np.asarray(hit.eu_per_count)[:, None]
     assert np.all(np.isfinite(hit.data)) and np.all(step > 0)
     assert np.all(np.abs(hit.data - data) <= 0.5 * step * (1 + 1e-9)), "a sample moved by more than half a step"
+
+
+# ---------------------------------------------------------------------- analyser FRF exports as text
+def _check_frfs(imp) -> None:
+    """An import of an analyser's FRFs is consistent: one reference per set, finite values on a
+    strictly increasing axis, a coherence (when there is one) within [0, 1] of the FRFs' shape."""
+    assert imp.sets and len(imp.sets) == len(imp.n_averages)
+    for s in imp.sets:
+        assert s.n_references == 1 and s.H.shape == (s.n_outputs, 1, s.freq_hz.size)
+        assert np.all(np.isfinite(s.H)) and np.all(np.diff(s.freq_hz) > 0)
+        if s.coherence is not None:
+            assert s.coherence.shape == s.H.shape and np.all((s.coherence >= 0) & (s.coherence <= 1))
+
+
+def _ascii_lines() -> list[str]:
+    from test_importers_registry import _frf, signalcalc_ascii_text
+
+    f = np.arange(6) * 0.5
+    return signalcalc_ascii_text(f, _frf(f)).split("\r\n")
+
+
+def _uff_lines() -> list[str]:
+    from uff58_text import Record58, record_text
+
+    f = np.arange(5) * 0.5
+    h = (1 + np.arange(5)) * (1 - 0.5j)
+    return (record_text(Record58(4, (2, 3), (1, 3), 0.0, 0.5, h, ("FRF", "estimator H1 averages 3")))
+            + record_text(Record58(6, (2, 3), (1, 3), 0.0, 0.5, np.linspace(0.2, 0.9, f.size)))).split("\n")
+
+
+ASCII_LINES = _ascii_lines()
+UFF_LINES = _uff_lines()
+
+
+def _read_ascii(p: Path):
+    from acquisition.frf_importers_ascii import read_signalcalc_ascii
+
+    return read_signalcalc_ascii(p)
+
+
+def _read_uff(p: Path):
+    from acquisition.frf_importers import read_uff58_frfs
+
+    return read_uff58_frfs(p)
+
+
+#: the FRF-export readers fuzzed on mutated text: (file name, base lines, cell separator, line end, reader)
+FRF_TEXTS = {"signalcalc-ascii": ("Hxysv00001.txt", ASCII_LINES, "\t", "\r\n", _read_ascii),
+             "uff58": ("frfs.uff", UFF_LINES, "", "\n", _read_uff)}
+
+
+@pytest.mark.parametrize("fmt", sorted(FRF_TEXTS))
+@FUZZ
+@given(data=st.data())
+def test_frf_exports_mutated_text(fmt, data):
+    name, lines, sep, end, read = FRF_TEXTS[fmt]
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), name, end.join(_mutated_lines(data.draw, lines, sep)))
+        try:
+            _check_frfs(read(p))
+        except ImportDataError as exc:
+            assert str(exc)
+
+
+CSV_LINES = ['"Force","Acc","Fs",'] + [f"{math.sin(k):.6f},{math.cos(k):.6f},{'100' if k == 0 else ''},"
+                                     for k in range(12)]
+CSV_DESCRIPTION = {"sample_rate_hz": 100.0, "columns": ["Force", "Acc"], "excitation": "continuous",
+                   "block_samples": 4, "skip_blocks": 1,
+                   "channels": [{"name": "Force", "unit": "N"}, {"name": "Acc", "unit": "g"}]}
+
+
+@FUZZ
+@given(data=st.data(), block=st.sampled_from([None, 1, 4, 5, 40, "x"]), columns=st.sampled_from(
+    [["Force", "Acc"], ["Acc"], ["Nope"], [], "Force", [1, 2]]))
+def test_csv_tables_mutated_text_and_descriptions(data, block, columns):
+    from acquisition.importers import read_csv_table
+
+    text = "\n".join(_mutated_lines(data.draw, CSV_LINES, ","))
+    description = {**CSV_DESCRIPTION, "block_samples": block, "columns": columns}
+    with tempfile.TemporaryDirectory() as tmp:
+        p = _write(Path(tmp), "x.csv", text)
+        try:
+            _check(read_csv_table([p], description))
+        except ImportDataError as exc:
+            assert str(exc)

@@ -127,7 +127,7 @@ def test_commands_refuse_a_fifo_in_one_line(tmp_path, fifo, uff):
     for cmd, says in ((["analysis", "fit", str(uff), "--poles", str(fifo)], "--poles file"),
                       (["analysis", "batch", str(fifo), "--out", str(tmp_path / "b")], f"input {fifo} is a FIFO"),
                       (["acquisition", "import", str(fifo), "--format", "npy", "--describe", str(tmp_path / "d.json"),
-                        "--out", str(tmp_path / "x.h5")], "input file (.npy)"),
+                        "--out", str(tmp_path / "x.h5")], "input file (npy)"),
                       (["acquisition", "capture", "--device", "sim://", "--setup", str(fifo), "--out",
                         str(tmp_path / "c.h5")], "set-up file (--setup)")):
         run = subprocess.run([sys.executable, "-m", *cmd], capture_output=True, text=True, timeout=50, env=env,

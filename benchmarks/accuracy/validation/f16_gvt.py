@@ -4,7 +4,8 @@ Source: GitHub emckenzie11/F16_Benchmark_Restoring_Force_ODE (HEAD e45e0a98),
 ``diagnostics/F16Data_FullMSine_Level1.csv``. Original: F-16 ground vibration test benchmark measured at
 the Siemens LMS GVT Master Class 2014; cite J.P. Noel, M. Schoukens, "F-16 aircraft benchmark based on
 ground vibration test data", Workshop on Nonlinear System Identification Benchmarks, Brussels, 2017.
-No project importer reads this CSV, so :func:`read_f16_csv` does.
+The project imports it with ``acquisition import --describe`` (a CSV row, blocks of one period);
+:func:`read_f16_csv` reads it here for the independent period-averaged FRF below.
 
 FRF by period averaging
 -----------------------

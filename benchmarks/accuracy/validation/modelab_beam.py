@@ -2,8 +2,9 @@
 
 Source: GitHub alxhslm/ModeLAB (HEAD 4a27c982), ``Example/SignalCalc/ASCII0000{1..9}/Hxysv0000{1..9}.txt``
 and ``setup.csv``, GPL-3.0. DataPhysics SignalCalc ASCII FRF exports (9 header lines, then
-frequency Hz, Re, Im), accelerance (m/s^2)/N, 0..1000 Hz, df 0.01953 Hz (51 201 lines). No project
-importer reads these (they are FRFs, not time data), so :func:`read_signalcalc_ascii` does.
+frequency Hz, Re, Im), accelerance (m/s^2)/N, 0..1000 Hz, df 0.01953 Hz (51 201 lines), read by the
+project's importer :func:`acquisition.frf_importers_ascii.read_signalcalc_ascii` (``acquisition import
+--points``, docs/validation.md).
 
 Known truth used: the accelerometer sits at 0.5 m = hammer position 4, so FRF 4 is a driving point.
 For a lightly damped (nearly normal-mode) structure its modal constants ``A_r = psi_r^2`` are real and
@@ -30,14 +31,11 @@ BAND = (65.0, 1000.0)
 
 
 def read_signalcalc_ascii(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """One SignalCalc ASCII FRF export: (freq_hz, H complex). Raises ValueError naming the file when malformed."""
-    try:
-        a = np.loadtxt(path, skiprows=9, encoding="latin-1")
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: not a SignalCalc ASCII FRF export (9 header lines, then f, Re, Im): {exc}") from None
-    if a.ndim != 2 or a.shape[1] != 3:
-        raise ValueError(f"{path}: expected 3 columns (f, Re, Im), got shape {a.shape}")
-    return a[:, 0], a[:, 1] + 1j * a[:, 2]
+    """One SignalCalc ASCII FRF export: (freq_hz, H complex), read by the project's importer."""
+    from acquisition.frf_importers_ascii import read_signalcalc_ascii as read
+
+    s = read(Path(path)).sets[0]
+    return s.freq_hz, s.H[0, 0]
 
 
 def load(data_dir: Path, band: tuple[float, float] | None = None) -> FRFSet:
@@ -82,7 +80,7 @@ def run(data_dir: Path, out_dir: Path) -> CaseReport:
         "Nine accelerance FRFs (one accelerometer at 0.5 m, hammer at 0.1..1.2 m), 51 201 lines with df = 0.0195 Hz "
         "and very light damping: a half-power bandwidth of 2 zeta f = 0.04 Hz at 100 Hz and zeta = 0.02 % spans "
         "two lines, so the peaks are barely resolved. The band 65..1000 Hz is `setup.csv`'s fMin..fMax. "
-        "Loader: `read_signalcalc_ascii` in this package (no project importer reads FRF exports).",
+        "Loader: the project's importer (`acquisition import --points`, `acquisition.frf_importers_ascii`).",
         "",
         block,
         "",

@@ -2,8 +2,8 @@
 
 Source: GitHub ladisk/mssp-image-tutorial (HEAD f74a3cc8), ``data/measured_signals/view_*.hdf5``, MIT.
 Group ``InputTask``: ``data`` (51200, 3) = [force N, acceleration m/s^2, trigger], ``sample_rate``.
-Four repetitions of view 0, one of view 1. No project importer reads this HDF5 layout, so
-:func:`read_plate_hdf5` does.
+Four repetitions of view 0, one of view 1. The project imports them with ``acquisition import
+--describe`` (an HDF5 row); :func:`read_plate_hdf5` reads them here for the independent FRF below.
 
 The sweep is exponential (measured: about 60 Hz at 0.15 s to 500 Hz at 1.85 s).
 FRF of a sweep: one 2 s block, ``H = X / F`` line by line (``H1`` of one block, rectangular window,
