@@ -19,7 +19,9 @@ from benchmarks.results import RESULTS_SUFFIX, recorded, results_of_cases  # noq
 
 #: files under benchmarks/ that a script reads rather than writes -> (the script, why)
 INPUTS = {"accuracy/validation/discussion.md": ("accuracy/validation/run_all.py",
-                                                "the discussion text run_all fills in with its figures for docs/validation.md")}
+                                                "the discussion text run_all fills in with its figures for docs/validation.md"),
+          "accuracy/validation/commands.md": ("accuracy/validation/run_all.py",
+                                              "the commands section run_all inserts into docs/validation.md")}
 
 RESULTS_DECL = re.compile(r'^RESULTS = Path\(__file__\)\.with_name\("([^"]+)"\)', re.M)
 CASES_DECL = re.compile(r'^CASE_LISTS = "([^"]+)"', re.M)
