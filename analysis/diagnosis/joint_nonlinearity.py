@@ -33,6 +33,11 @@ its chi2 is at most ``1 / MIN_LIKELIHOOD_RATIO`` of the global candidate's; cand
 modes). The law's parameters are the screening's stiffness change (softening when negative), the
 loss-factor change (friction when positive: micro-slip; none: a nonlinear spring) and, when simulated,
 the Iwan slip moment.
+
+Measurements at several drive levels without a simulation of the test (FRF files, each with its level:
+``diagnose --measured A B --levels LA,LB``): :func:`measured_levels` compares them and
+:func:`amplitude_dependence` names the cause when a mode moves beyond its uncertainty, with the kind of
+law the changes show and every mode's shift per level (:func:`level_shifts`); no joint is located.
 """
 from __future__ import annotations
 

@@ -18,8 +18,8 @@ Steps:
 2. The model we write (``benchmarks/studies/beam_model.py``): an Euler-Bernoulli beam. What it gets wrong:
    the frequency ratios f_n / f_1.
 3. Extensions, each with the stiffness scale free (the section is not known) and one parameter: the
-   accelerometer's mass at 0.5 m (kg), or Timoshenko's shear deformation and rotary inertia (the
-   section's height h: its slenderness). Each measured mode is predicted by the extension fitted to the
+   accelerometer's mass at 0.5 m (kg), or the section's rotary inertia, its shear deformation, or both
+   (Timoshenko), each with the section's height h (its slenderness) as the parameter. Each measured mode is predicted by the extension fitted to the
    other three (leave one mode out); gain = 20 log10(rms held-out error of the plain model / of the
    extension).
 4. With ``--diagnose``: ``python -m analysis diagnose`` on the real FRFs (written as UFF 58) with the
@@ -140,7 +140,10 @@ def main() -> None:
     cands = {
         "Euler-Bernoulli (scale)": (lambda p: beam_hz("euler", h, width_m=width)[0], None),
         "+ sensor mass at 0.5 m (scale, kg)": (lambda p: beam_hz("euler", h, p, width_m=width)[0], (0.0, 0.2 * mass)),
-        "Timoshenko (scale, h)": (lambda p: beam_hz("timoshenko", p, width_m=width)[0], (0.3 * h, 3 * h)),
+        "rotary inertia (scale, h)": (lambda p: beam_hz("rotary", p, width_m=width)[0], (0.3 * h, 6 * h)),
+        "shear deformation (scale, h)": (lambda p: beam_hz("shear", p, width_m=width)[0], (0.3 * h, 6 * h)),
+        "Timoshenko: shear + rotary inertia (scale, h)": (lambda p: beam_hz("timoshenko", p, width_m=width)[0],
+                                                          (0.3 * h, 6 * h)),
     }
     base = None
     print("| model (free parameters) | fitted | held-out errors % (modes 1-4) | rms % | gain dB |")
@@ -153,10 +156,14 @@ def main() -> None:
         shown = "-" if bounds is None else (f"{p:.3g} kg" if "kg" in name else f"h = {1e3 * p:.2f} mm")
         print(f"| {name} | {shown} | {' '.join(f'{e:+.3f}' for e in err)} | {rms:.3f} | "
               f"{20 * np.log10(base / rms):+.1f} | ({time.perf_counter() - t0:.1f} s)")
-    f_t = beam_hz("timoshenko", h, width_m=width)[0]
-    s = fit_scale(f_t, f_meas)
-    print("Timoshenko, h from the first mode (no fit but the scale):", " ".join(f"{s * f:.2f}" for f in f_t),
-          "errors %", " ".join(f"{100 * (s * f / m - 1):+.3f}" for f, m in zip(f_t, f_meas)))
+    # the section's height from the first mode with steel's E / rho (no fit but the stiffness scale)
+    for theory in ("rotary", "shear", "timoshenko"):
+        f_t = beam_hz(theory, h, width_m=width)[0]
+        s = fit_scale(f_t, f_meas)
+        err = 100 * (s * f_t / f_meas - 1)
+        print(f"{theory}, h = {1e3 * h:.2f} mm (steel's E / rho and the first mode), scale only: "
+              + " ".join(f"{s * f:.2f}" for f in f_t) + " Hz, errors % " + " ".join(f"{e:+.3f}" for e in err)
+              + f", rms {np.sqrt(np.mean(err ** 2)):.3f} %")
     if a.diagnose:
         diagnose_real(a.data, h, width)
 
