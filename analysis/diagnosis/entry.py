@@ -186,7 +186,7 @@ def _is_physical(x: Any) -> bool:
 
 
 def diagnose(
-    measured: FRFSet | str | Path,
+    measured: FRFSet | str | Path | Sequence[FRFSet | str | Path],
     simulated: Any,
     *,
     band: tuple | str | None = None,
@@ -201,7 +201,8 @@ def diagnose(
 ) -> Diagnosis:
     """Compare a measurement with a simulation and name what differs (``docs/diagnosis.md``).
 
-    measured : FRF set, or a file (recording ``.h5`` or UFF 58) read with ``estimator``.
+    measured : FRF set, or a file (recording ``.h5`` or UFF 58) read with ``estimator``; with ``levels``
+        a sequence of them.
     simulated : a :class:`ModalModel` at the measured points (any quantity); an :class:`FRFSet`
         or FRF file with the measured points (turned into a modal model by the automatic fit); or an
         FE model with physical causes (``causes``, ``modes``, ``model``: e.g.
@@ -229,12 +230,15 @@ def diagnose(
     Raises :class:`analysis.inputs.InputError` for unreadable or inconsistent input and
     :class:`analysis.diagnosis.EffectError` for unknown effects. Neither input is modified.
     """
-    from ..inputs import detect_format, load_input
+    from ..inputs import InputError, detect_format, load_input
 
     if levels is not None:
         return _diagnose_levels(measured, simulated, levels, band=band, effects=effects, estimator=estimator,
                                 physical=physical, extra_noise_db=extra_noise_db, joint_simulation=joint_simulation,
                                 **rule)
+    if not isinstance(measured, (FRFSet, str, Path)):
+        raise InputError(f"{len(measured)} measurements: give levels (one drive level each) to compare one "
+                         "structure at several levels, or one measurement")
     if isinstance(measured, (str, Path)):
         path = Path(measured)
         if recording is None and detect_format(path) == "recording":
