@@ -244,7 +244,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"  level dependence: {diag.level_dependence['cause']['evidence']}")
         for row in diag.level_dependence["cause"].get("per_level", []):
             print(f"    level {row['level']:.4g}: " + ", ".join(
-                f"{m['freq_hz']:.4g} Hz {m['df_percent']:+.2f} % (+-{m['df_std_percent']:.2f})" for m in row["modes"]))
+                f"{m['freq_hz']:.4g} Hz {m['df_percent']:+.2f} % (+-{m['df_std_percent']:.2f})"
+                for m in row["modes"] if m["determined"]))
     print(f"verdict: {doc['verdict']}" + (f" ({diag.reason})" if diag.reason else ""))
     for c in diag.named:
         print(f"  named: {c['effect']} {c['parameters']}")

@@ -284,7 +284,8 @@ def _simulated(linearity: Any, simulation: Any, screened: list, f: np.ndarray, d
 
 def level_shifts(linearity: Any) -> list[dict]:
     """Per level above the lowest, per mode: the frequency and damping change from the lowest level (%) with
-    its standard deviation (the two levels' fits, as :func:`analysis.linearity.compare_levels` widens them).
+    its standard deviation (the two levels' fits, as :func:`analysis.linearity.compare_levels` widens them),
+    and ``determined`` (False: a mode the fits leave too uncertain to judge, its numbers meaningless).
     ``linearity`` is a :class:`analysis.linearity.LinearityResult`; modes in its order."""
     f, z = np.asarray(linearity.freq_hz, float), np.asarray(linearity.zeta, float)
     fs, zs = np.asarray(linearity.freq_hz_std, float), np.asarray(linearity.zeta_std, float)
@@ -297,7 +298,8 @@ def level_shifts(linearity: Any) -> list[dict]:
                           "df_std_percent": float(100.0 * np.hypot(fs[0, k], fs[lv, k]) / f[0, k]),
                           "dzeta_percent": float(100.0 * (z[lv, k] - z[0, k]) / z[0, k]) if z[0, k] else None,
                           "dzeta_std_percent": float(100.0 * np.hypot(zs[0, k], zs[lv, k]) / z[0, k])
-                          if z[0, k] else None})
+                          if z[0, k] else None,
+                          "determined": bool(linearity.modes[k].determined)})
         out.append({"level": float(linearity.levels[lv]), "modes": modes})
     return out
 
