@@ -193,20 +193,23 @@ def _fit_penalty(err: np.ndarray, noise_lines: np.ndarray, on: np.ndarray, n_par
     owes to be a prediction: under noise alone its residual is ``(n - p) sigma^2`` and a prediction's error
     ``(n + p) sigma^2``, so ``2 p sigma^2`` is added, spread over the ``n`` lines (Mallows' Cp). ``sigma^2``
     of a line, per FRF: the median weighted error ``err`` (n_out, n_ref, n_lines) over the lines of
-    ``noise_lines`` (mask: lines near no mains harmonic) within ``NOISE_HALF_WIDTH_LINES`` of it, over
-    ln 2 (the mean of a complex Gaussian's squared modulus): the noise there, which near a resonance is
-    larger than elsewhere. Returns (n_out, n_ref, n_lines), zero off ``on``."""
+    ``noise_lines`` (mask: lines near no mains harmonic) in its block of ``2 NOISE_HALF_WIDTH_LINES + 1``
+    lines (all of them when the block has none), over ln 2 (the mean of a complex Gaussian's squared
+    modulus): the noise there, which near a resonance is larger than elsewhere. Returns (n_out, n_ref,
+    n_lines), zero off ``on``."""
     out = np.zeros(err.shape)
     n = int(on.sum())
-    if n == 0 or n_params == 0:
+    if n == 0 or n_params == 0 or not noise_lines.any():
         return out
-    idx = np.flatnonzero(noise_lines)
-    for j in np.flatnonzero(on):
-        near = idx[np.abs(idx - j) <= NOISE_HALF_WIDTH_LINES]
-        if near.size == 0:
-            near = idx
-        if near.size:
-            out[..., j] = 2.0 * n_params / n * np.median(err[..., near], axis=-1) / np.log(2.0)
+    overall = np.median(err[..., noise_lines], axis=-1)
+    width = 2 * NOISE_HALF_WIDTH_LINES + 1
+    for lo in range(0, err.shape[-1], width):
+        block = slice(lo, lo + width)
+        if not on[block].any():
+            continue
+        quiet = noise_lines[block]
+        sigma2 = np.median(err[..., block][..., quiet], axis=-1) if quiet.any() else overall
+        out[..., block] = np.where(on[block], (2.0 * n_params / n * sigma2 / np.log(2.0))[..., None], 0.0)
     return out
 
 
