@@ -1,6 +1,10 @@
-"""``python -m analysis diagnose --measured M --simulated S [--json OUT.json] [--report DIR]``.
+"""``python -m analysis diagnose --measured M [M2 ...] [--levels L1,L2,...] --simulated S [--json OUT.json] [--report DIR]``.
 
-M is a recording (``.h5``) or a UFF 58 file. S is a recording or UFF 58 file with the same points
+M is a recording (``.h5``) or a UFF 58 file; several, with ``--levels`` (one drive level each), are one
+structure measured at several drive levels: the lowest level is compared with S, and the levels with one
+another mode by mode (:func:`analysis.diagnosis.joint_nonlinearity.measured_levels`); modes that move beyond
+their uncertainty are named ``joint_nonlinearity`` (an amplitude-dependent stiffness and damping) with
+their shifts per level. S is a recording or UFF 58 file with the same points
 (matched by ``component:node:direction`` labels of outputs and references), or a simulator
 configuration (``.toml``), simulated on the fly at M's points and lines; then the physical causes
 (:mod:`simulator.physical`: added mass, support and joint stiffness, member mass and stiffness,
@@ -54,7 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
                 description="Compare a measurement with a simulation, name the physical cause of the "
                             "difference from a catalogue of effects, extend the model and measure the gain.")
     with_examples(p)
-    p.add_argument("--measured", required=True, metavar="M", help="recording (.h5) or UFF 58 file")
+    p.add_argument("--measured", required=True, nargs="+", metavar="M",
+                   help="recording (.h5) or UFF 58 file; or several, one structure at several drive levels "
+                        "(with --levels)")
+    p.add_argument("--levels", metavar="LA,LB,...",
+                   help="the drive level of each --measured file, in their order (any unit: N, V...): the lowest "
+                        "level is compared with the simulation, the levels with one another (an amplitude-"
+                        "dependent stiffness and damping is named joint_nonlinearity)")
     p.add_argument("--simulated", required=True, metavar="S",
                    help="recording or UFF 58 file with the same points, a simulator config (.toml), or "
                         "a TOML with an [fe] table: your own FE model (Matrix Market K, M and a DOF map)")
@@ -148,17 +158,29 @@ def joint_simulation(path: str) -> JointSimulationFactory | None:
     return build
 
 
-def run_diagnosis(measured_path: str | Path, simulated_path: str | Path, *, band: Sequence[float] | None = None,
-                  effects: Sequence[str] | None = None, estimator: str | None = None) -> Diagnosis:
+def run_diagnosis(measured_path: str | Path | Sequence[str | Path], simulated_path: str | Path, *,
+                  band: Sequence[float] | None = None, effects: Sequence[str] | None = None,
+                  estimator: str | None = None, levels: Sequence[float] | None = None) -> Diagnosis:
     """The diagnosis of ``python -m analysis diagnose --measured M --simulated S``: load M (a recording
     or UFF 58 file, FRFs by ``estimator``), S (an FRF file, or a simulator config simulated at M's
     points), and compare them in ``band`` (Hz; None: the band the data support) with the catalogue's
-    ``effects`` (None: all). Raises the library's errors (InputError, EffectError, ValueError, FitError)
-    for bad input."""
+    ``effects`` (None: all). With ``levels``: M is one file per drive level (``--measured A B --levels
+    LA,LB``), the lowest compared with S and the levels with one another. Raises the library's errors
+    (InputError, EffectError, ValueError, FitError) for bad input."""
     from .diagnosis import EFFECTS, diagnose
     from .inputs import InputError, load_input
 
-    measured = load_input(str(measured_path), estimator=estimator)
+    paths = [measured_path] if isinstance(measured_path, (str, Path)) else list(measured_path)
+    if levels is None and len(paths) != 1:
+        raise InputError(f"{len(paths)} measured files: give --levels (one drive level per file) to compare one "
+                         "structure at several levels, or one --measured file")
+    if levels is not None and len(levels) != len(paths):
+        raise InputError(f"--levels gives {len(levels)} level(s) for {len(paths)} measured file(s): give one level "
+                         "per file, in their order")
+    if levels is not None and len(paths) < 2:
+        raise InputError("--levels needs at least two --measured files (one per drive level)")
+    lowest = str(paths[int(np.argmin(levels))] if levels is not None else paths[0])
+    measured = load_input(lowest, estimator=estimator)
     simulated = load_simulations(str(simulated_path), measured, estimator)
     if effects is not None and hasattr(simulated, "causes"):
         # the catalogue's effects and the simulation's own physical causes
@@ -166,9 +188,12 @@ def run_diagnosis(measured_path: str | Path, simulated_path: str | Path, *, band
         bad = [e for e in effects if e not in known]
         if bad:
             raise InputError(f"unknown effect(s) {bad}; the catalogue has {', '.join(known)}")
-    return diagnose(measured, simulated, band=tuple(band) if band is not None else "data",
-                    effects=list(effects) if effects is not None else None, estimator=estimator,
-                    recording=_recording(str(measured_path)), joint_simulation=joint_simulation(str(simulated_path)))
+    common: dict[str, Any] = {"band": tuple(band) if band is not None else "data",
+                              "effects": list(effects) if effects is not None else None, "estimator": estimator,
+                              "joint_simulation": joint_simulation(str(simulated_path))}
+    if levels is not None:
+        return diagnose([str(p) for p in paths], simulated, levels=list(levels), **common)
+    return diagnose(measured, simulated, recording=_recording(lowest), **common)
 
 
 @cli_entry
@@ -177,7 +202,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .bands import FitError
     from .diagnosis import EFFECTS, EffectError
     from .errors import FEModelError
-    from .inputs import InputError, parse_band_text
+    from .inputs import InputError, parse_band_text, parse_float_list
 
     parser = build_parser()
     args = parse_args(parser, argv)
@@ -186,7 +211,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.json:
             check_out_dir(args.json, error=InputError)
-        check_outputs([args.json, *_report_files(args.report)], [args.measured, args.simulated])
+        check_outputs([args.json, *_report_files(args.report)], [*args.measured, args.simulated])
         effects = None
         if args.effects:
             effects = [e.strip() for e in args.effects.split(",") if e.strip()]
@@ -194,8 +219,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             # an FE simulation's physical causes are checked once it is loaded (run_diagnosis)
             if bad and simulation_kind(args.simulated) == "frf_file":
                 raise InputError(f"unknown effect(s) {bad}; the catalogue has {', '.join(EFFECTS)}")
+        levels = parse_float_list(args.levels, "levels") if args.levels else None
         diag = run_diagnosis(args.measured, args.simulated, band=parse_band_text(args.band), effects=effects,
-                             estimator=args.estimator)
+                             estimator=args.estimator, levels=levels)
     except FEModelError as exc:
         print(f"analysis diagnose: {exc}", file=sys.stderr)
         return 1
@@ -216,6 +242,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"  time data ({c['reference']}): {c['evidence']}")
     if diag.level_dependence is not None and "cause" in diag.level_dependence:
         print(f"  level dependence: {diag.level_dependence['cause']['evidence']}")
+        for row in diag.level_dependence["cause"].get("per_level", []):
+            print(f"    level {row['level']:.4g}: " + ", ".join(
+                f"{m['freq_hz']:.4g} Hz {m['df_percent']:+.2f} % (+-{m['df_std_percent']:.2f})"
+                for m in row["modes"] if m["determined"]))
     print(f"verdict: {doc['verdict']}" + (f" ({diag.reason})" if diag.reason else ""))
     for c in diag.named:
         print(f"  named: {c['effect']} {c['parameters']}")

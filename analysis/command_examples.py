@@ -51,6 +51,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "python -m analysis diagnose": (
         "diagnose --measured rec.h5 --simulated simulator/frame.toml",
         "diagnose --measured rec.h5 --simulated sim.uff --json diag.json --report diag/",
+        "diagnose --measured low.uff high.uff --levels 0.25,1 --simulated sim.uff   # one structure at two drive levels",
     ),
     "python -m analysis report": (
         "report rec.h5 --out report/",

@@ -145,3 +145,61 @@ def test_a_measured_point_the_map_lacks_is_named(tmp_path: Path) -> None:
         FEVariants(fe, ["n:2:Z", "n:9:Z"], ["n:5:Z"], max_freq_hz=300.0)
     with pytest.raises(FEModelError, match=r"no row for the measured point n:2:X"):
         FEVariants(fe, ["n:2:X"], ["n:5:Z"], max_freq_hz=300.0)
+
+
+def test_two_pass_screen_keeps_the_single_pass_choice(tmp_path: Path) -> None:
+    """Over many nodes the screen first ranks every node with the kept modes alone (no sparse solve per
+    node), then judges its best ``N_PRESCREEN`` again in the full Ritz space: the node and the order at the
+    top are those of screening every node in the full Ritz space."""
+    from analysis.diagnosis import physical
+    from analysis.diagnosis.physical import MeasuredModes
+
+    toml = write_chain(tmp_path, 120)
+    sim = FEVariants(load_fe_model(toml), ["n:30:Z", "n:75:Z", "n:120:Z"], ["n:120:Z"], max_freq_hz=300.0)
+    f, P = sim.exact_modes_of([("added_mass", {"point": "n:47", "mass_kg": 2.0})], 40.0)
+    mm = MeasuredModes(f, 1e-4 * f, P.astype(complex))
+    cause = next(c for c in sim.causes() if c.name == "added_mass")
+    sel = np.ones(f.size, bool)
+    options = list(cause.options)
+    assert len(options) > physical.N_PRESCREEN
+    calls = []
+
+    class FullOnly:                     # the same simulation without the cheap first pass
+        def modes(self, *a):
+            calls.append(a)
+            return sim.modes(*a)
+
+    two = physical._screen(sim, cause, list(cause.params), {}, mm, sel, 40.0, options)
+    one = physical._screen(FullOnly(), cause, list(cause.params), {}, mm, sel, 40.0, options)
+    assert len(calls) == 5 * len(options)          # the full pass: every node on the grid
+    assert len(two) == physical.N_PRESCREEN
+    assert two[0][1] == one[0][1] == "n:47"
+    assert [o for _, o, _ in two[:3]] == [o for _, o, _ in one[:3]]
+    np.testing.assert_allclose([c for c, _, _ in two[:3]], [c for c, _, _ in one[:3]], rtol=1e-9)
+
+
+def test_one_change_is_solved_once_on_the_full_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The full model of a change checked (``exact_modes_of``) and then simulated (``model_of``, a lower top)
+    is one sparse solution; the unchanged model reuses the kept modes of the Ritz space."""
+    import analysis.fe_model as fm
+
+    toml = write_chain(tmp_path, 400)
+    sim = FEVariants(load_fe_model(toml), ["n:100:Z", "n:400:Z"], ["n:400:Z"], max_freq_hz=30.0)
+    solved = []
+    real = fm.sparse_modes
+
+    def counting(*a, **k):
+        solved.append(a[2])
+        return real(*a, **k)
+
+    monkeypatch.setattr(fm, "sparse_modes", counting)
+    sim.modes(None, {}, 40.0)                        # the kept modes, to RITZ_FACTOR x 40 Hz
+    assert len(solved) == 1
+    nominal = sim.model(None, {})
+    assert len(solved) == 1
+    np.testing.assert_allclose(nominal.freq_hz, chain_exact_hz(400)[chain_exact_hz(400) <= 30.0], rtol=1e-9)
+    change = [("added_mass", {"point": "n:37", "mass_kg": 3.0})]
+    f, _ = sim.exact_modes_of(change, 40.0)
+    model = sim.model_of(change)
+    assert len(solved) == 2
+    np.testing.assert_allclose(model.freq_hz, f[f <= 30.0], rtol=1e-12)

@@ -186,7 +186,7 @@ def _is_physical(x: Any) -> bool:
 
 
 def diagnose(
-    measured: FRFSet | str | Path,
+    measured: FRFSet | str | Path | Sequence[FRFSet | str | Path],
     simulated: Any,
     *,
     band: tuple | str | None = None,
@@ -196,11 +196,13 @@ def diagnose(
     recording: str | Path | None = None,
     extra_noise_db: dict | None = None,
     joint_simulation: JointSimulationFactory | None = None,
+    levels: Sequence[float] | None = None,
     **rule: Any,
 ) -> Diagnosis:
     """Compare a measurement with a simulation and name what differs (``docs/diagnosis.md``).
 
-    measured : FRF set, or a file (recording ``.h5`` or UFF 58) read with ``estimator``.
+    measured : FRF set, or a file (recording ``.h5`` or UFF 58) read with ``estimator``; with ``levels``
+        a sequence of them.
     simulated : a :class:`ModalModel` at the measured points (any quantity); an :class:`FRFSet`
         or FRF file with the measured points (turned into a modal model by the automatic fit); or an
         FE model with physical causes (``causes``, ``modes``, ``model``: e.g.
@@ -216,6 +218,13 @@ def diagnose(
     joint_simulation : builds the simulation of the recorded test for the ``joint_nonlinearity`` cause
         (:data:`analysis.diagnosis.joint_nonlinearity.JointSimulationFactory`; the face builds it, e.g.
         from a simulator config); without it a recording's levels are compared but no joint is named.
+    levels : one structure measured at several drive levels: ``measured`` is then a sequence (FRF sets or
+        files), one per level (any positive unit: N, V...). The lowest level is compared with the simulation
+        as above; the levels are compared with one another mode by mode
+        (:func:`analysis.diagnosis.joint_nonlinearity.measured_levels`) and, when the modes move beyond their
+        uncertainty, ``joint_nonlinearity`` (an amplitude-dependent stiffness and damping) becomes the verdict,
+        with the per-mode shifts per level in ``level_dependence`` (the comparison's verdict kept as
+        ``linear_verdict``).
     rule : the decision rule's settings of :func:`diagnose_frfs` (``z_min``, ``min_gain_db``, ...).
 
     Raises :class:`analysis.inputs.InputError` for unreadable or inconsistent input and
@@ -239,8 +248,15 @@ def diagnose(
     >>> diag.verdict, round(diag.causes[0]["parameters"]["factor"], 2)
     ('damping_change', 2.0)
     """
-    from ..inputs import detect_format, load_input
+    from ..inputs import InputError, detect_format, load_input
 
+    if levels is not None:
+        return _diagnose_levels(measured, simulated, levels, band=band, effects=effects, estimator=estimator,
+                                physical=physical, extra_noise_db=extra_noise_db, joint_simulation=joint_simulation,
+                                **rule)
+    if not isinstance(measured, (FRFSet, str, Path)):
+        raise InputError(f"{len(measured)} measurements: give levels (one drive level each) to compare one "
+                         "structure at several levels, or one measurement")
     if isinstance(measured, (str, Path)):
         path = Path(measured)
         if recording is None and detect_format(path) == "recording":
@@ -254,6 +270,34 @@ def diagnose(
         return _diagnose_set(measured, simulated, band=band, effects=effects, estimator=estimator, physical=physical,
                              recording=recording, extra_noise_db=extra_noise_db, joint_simulation=joint_simulation,
                              **rule)
+
+
+def _diagnose_levels(measured: Any, simulated: Any, levels: Sequence[float], *, band: tuple | str | None,
+                     **kw: Any) -> Diagnosis:
+    """:func:`diagnose` of one structure measured at several drive ``levels`` (``measured``: one FRF set or
+    file per level): the lowest level against the simulation, then the levels against one another in the
+    diagnosis band; a present ``joint_nonlinearity`` becomes the verdict (the comparison's kept as
+    ``linear_verdict``, its named causes after it)."""
+    from ..inputs import InputError, load_input
+    from .joint_nonlinearity import measured_levels, named_levels
+
+    items = [measured] if isinstance(measured, (FRFSet, str, Path)) else list(measured)
+    lv = [float(v) for v in levels]
+    if len(items) < 2 or len(items) != len(lv):
+        raise InputError(f"{len(items)} measurement(s) and {len(lv)} level(s): give at least two measurements of "
+                         "one structure, one level each")
+    if not all(np.isfinite(v) and v > 0 for v in lv) or len(set(lv)) < len(lv):
+        raise InputError(f"levels {lv}: give one positive, different drive level per measurement")
+    sets = [m if isinstance(m, FRFSet) else load_input(Path(m), estimator=kw.get("estimator")) for m in items]
+    low = int(np.argmin(lv))
+    diag = diagnose(items[low], simulated, band=band, **kw)          # a recording's hits feed its noise
+    band_hz = (float(diag.measured.freq_hz[0]), float(diag.measured.freq_hz[-1]))
+    found = measured_levels(sets, lv, band_hz)
+    cause = found["cause"]
+    if not cause["present"]:
+        return replace(diag, level_dependence=found)
+    return replace(diag, level_dependence=found, linear_verdict=diag.verdict, verdict="joint_nonlinearity",
+                   named=[named_levels(cause), *diag.named])
 
 
 def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None, effects: Sequence[str] | None,

@@ -33,6 +33,11 @@ its chi2 is at most ``1 / MIN_LIKELIHOOD_RATIO`` of the global candidate's; cand
 modes). The law's parameters are the screening's stiffness change (softening when negative), the
 loss-factor change (friction when positive: micro-slip; none: a nonlinear spring) and, when simulated,
 the Iwan slip moment.
+
+Measurements at several drive levels without a simulation of the test (FRF files, each with its level:
+``diagnose --measured A B --levels LA,LB``): :func:`measured_levels` compares them and
+:func:`amplitude_dependence` names the cause when a mode moves beyond its uncertainty, with the kind of
+law the changes show and every mode's shift per level (:func:`level_shifts`); no joint is located.
 """
 from __future__ import annotations
 
@@ -46,7 +51,8 @@ import numpy as np
 from ..frf import FRFSet
 
 __all__ = ["JointCandidate", "JointSimulation", "JointSimulationFactory", "joint_nonlinearity", "level_dependence",
-           "named_joint", "MODEL_FRACTION", "MIN_MARGIN"]
+           "named_joint", "MODEL_FRACTION", "MIN_MARGIN", "measured_levels", "amplitude_dependence", "named_levels",
+           "level_shifts"]
 
 #: Model error of the share pattern as a fraction of each change.
 MODEL_FRACTION = 0.3
@@ -274,3 +280,84 @@ def _simulated(linearity: Any, simulation: Any, screened: list, f: np.ndarray, d
         out.append((chi_f + chi_z, cand, a, b, slip / c_f if c_f > 0 else slip))
     out.sort(key=lambda r: r[0])
     return out
+
+
+def level_shifts(linearity: Any) -> list[dict]:
+    """Per level above the lowest, per mode: the frequency and damping change from the lowest level (%) with
+    its standard deviation (the two levels' fits, as :func:`analysis.linearity.compare_levels` widens them),
+    and ``determined`` (False: a mode the fits leave too uncertain to judge, its numbers meaningless).
+    ``linearity`` is a :class:`analysis.linearity.LinearityResult`; modes in its order."""
+    f, z = np.asarray(linearity.freq_hz, float), np.asarray(linearity.zeta, float)
+    fs, zs = np.asarray(linearity.freq_hz_std, float), np.asarray(linearity.zeta_std, float)
+    out = []
+    for lv in range(1, f.shape[0]):
+        modes = []
+        for k in range(f.shape[1]):
+            modes.append({"freq_hz": float(f[0, k]),
+                          "df_percent": float(100.0 * (f[lv, k] - f[0, k]) / f[0, k]),
+                          "df_std_percent": float(100.0 * np.hypot(fs[0, k], fs[lv, k]) / f[0, k]),
+                          "dzeta_percent": float(100.0 * (z[lv, k] - z[0, k]) / z[0, k]) if z[0, k] else None,
+                          "dzeta_std_percent": float(100.0 * np.hypot(zs[0, k], zs[lv, k]) / z[0, k])
+                          if z[0, k] else None,
+                          "determined": bool(linearity.modes[k].determined)})
+        out.append({"level": float(linearity.levels[lv]), "modes": modes})
+    return out
+
+
+def amplitude_dependence(linearity: Any) -> dict:
+    """The ``joint_nonlinearity`` cause from measurements at several drive levels without a simulation of
+    the test (FRF files, each with its level): present when the level comparison says "nonlinear" (a mode's
+    frequency or damping moves beyond its uncertainty, :func:`analysis.linearity.compare_levels`). Keys:
+    ``effect``, ``present``, ``evidence`` (one sentence), ``law`` (``kind``: "micro-slip friction" when the
+    moving modes soften and damp more, "softening spring", "hardening spring" or "amplitude-dependent
+    damping"; ``levels``; the mean frequency change of the moving modes ``stiffness_change_percent`` (twice
+    it: the modal stiffness), their damping change ``damping_change_percent``), ``modes`` (the moving modes:
+    frequency, change and its sd, lowest to highest level) and ``per_level`` (:func:`level_shifts`). No
+    joint is located (that needs a model of the joints: a simulator configuration and the test's hits)."""
+    base = {"effect": "joint_nonlinearity", "present": False, "per_level": level_shifts(linearity)}
+    lv = linearity.levels
+    if linearity.verdict != "nonlinear":
+        return {**base, "evidence": f"the modes do not change between the drive levels {lv[0]:.3g} and {lv[-1]:.3g} "
+                                    "beyond their uncertainty: linear within the noise"}
+    moving = [m for m in linearity.modes if m.significant]
+    df = np.array([m.df_percent for m in moving])
+    dz = np.array([m.dzeta_percent for m in moving], float)
+    soft, damps = bool(np.mean(df) < 0), bool(np.nanmean(dz) > 0)
+    moved_f = any(abs(m.df_percent) > Z_LEVELS * m.df_std_percent for m in moving)
+    kind = ("micro-slip friction" if soft and damps else "softening spring" if soft else "hardening spring") \
+        if moved_f else "amplitude-dependent damping"
+    parts = [f"{m.freq_hz:.4g} Hz {m.df_percent:+.2f} % (+-{m.df_std_percent:.2f}), damping {m.dzeta_percent:+.0f} % "
+             f"(+-{m.dzeta_std_percent:.0f})" for m in moving]
+    evidence = (f"the modes move with the drive level ({lv[0]:.3g} -> {lv[-1]:.3g}) beyond their uncertainty: "
+                + "; ".join(parts) + f": an amplitude-dependent stiffness and damping ({kind}, e.g. a bolted or "
+                "clamped joint); the model is linear and compared at the lowest level")
+    law = {"kind": kind, "levels": [float(v) for v in lv], "stiffness_change_percent": float(2.0 * np.mean(df)),
+           "frequency_change_percent": float(np.mean(df)), "damping_change_percent": float(np.nanmean(dz))}
+    return {**base, "present": True, "evidence": evidence, "law": law, "method": "drive levels",
+            "modes": [m.to_dict() for m in moving]}
+
+
+#: A moving mode's frequency change counts (for the law's kind) beyond this many standard deviations.
+Z_LEVELS = 3.0
+
+
+def named_levels(cause: dict) -> dict:
+    """A present :func:`amplitude_dependence` cause as a named cause of the diagnosis: ``effect`` and
+    ``parameters`` (the law's kind, the levels, and per moving mode its frequency and changes)."""
+    law = cause["law"]
+    params = {"kind": law["kind"], "levels": law["levels"],
+              "freq_hz": [m["freq_hz"] for m in cause["modes"]],
+              "df_percent": [m["df_percent"] for m in cause["modes"]],
+              "dzeta_percent": [m["dzeta_percent"] for m in cause["modes"]]}
+    return {"effect": "joint_nonlinearity", "parameters": params, "evidence": cause["evidence"]}
+
+
+def measured_levels(sets: Sequence[FRFSet], levels: Sequence[float], band: tuple[float, float]) -> dict:
+    """The level dependence of one structure measured at several drive ``levels`` (one FRF set each, any
+    order; the data's unit: N, V...) in ``band`` (Hz): ``{"linearity": ..., "cause": amplitude_dependence}``
+    (:func:`analysis.linearity.compare_levels`; raises its errors: LevelsDoNotPair when the sets are not one
+    structure, FitError when no mode can be fitted)."""
+    from ..linearity import compare_levels
+
+    lin = compare_levels(list(sets), list(levels), band=band)
+    return {"linearity": lin.to_dict(), "cause": amplitude_dependence(lin)}

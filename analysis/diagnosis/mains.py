@@ -184,6 +184,35 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
             "amplitudes": best[4].tolist(), "harmonics_hz": [float(x) for x in fk]}
 
 
+#: Half-width (lines) of the neighbourhood whose median error is a line's noise in :func:`_fit_penalty`.
+NOISE_HALF_WIDTH_LINES = 25
+
+
+def _fit_penalty(err: np.ndarray, noise_lines: np.ndarray, on: np.ndarray, n_params: int) -> np.ndarray:
+    """Per line, what a fit of ``n_params`` complex amplitudes to the lines ``on`` (mask) and scored on them
+    owes to be a prediction: under noise alone its residual is ``(n - p) sigma^2`` and a prediction's error
+    ``(n + p) sigma^2``, so ``2 p sigma^2`` is added, spread over the ``n`` lines (Mallows' Cp). ``sigma^2``
+    of a line, per FRF: the median weighted error ``err`` (n_out, n_ref, n_lines) over the lines of
+    ``noise_lines`` (mask: lines near no mains harmonic) in its block of ``2 NOISE_HALF_WIDTH_LINES + 1``
+    lines (all of them when the block has none), over ln 2 (the mean of a complex Gaussian's squared
+    modulus): the noise there, which near a resonance is larger than elsewhere. Returns (n_out, n_ref,
+    n_lines), zero off ``on``."""
+    out = np.zeros(err.shape)
+    n = int(on.sum())
+    if n == 0 or n_params == 0 or not noise_lines.any():
+        return out
+    overall = np.median(err[..., noise_lines], axis=-1)
+    width = 2 * NOISE_HALF_WIDTH_LINES + 1
+    for lo in range(0, err.shape[-1], width):
+        block = slice(lo, lo + width)
+        if not on[block].any():
+            continue
+        quiet = noise_lines[block]
+        sigma2 = np.median(err[..., block][..., quiet], axis=-1) if quiet.any() else overall
+        out[..., block] = np.where(on[block], (2.0 * n_params / n * sigma2 / np.log(2.0))[..., None], 0.0)
+    return out
+
+
 def held_out_mains_hum(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     """The cross-validation of ``mains_hum``: by harmonics (:func:`held_out_by_harmonics`), for single
     lines and lines with a width alike (neighbouring lines of a line with a width are not independent,
@@ -198,15 +227,22 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     fitted with the lines near the other fold's harmonics left out, and must *predict where* the
     held-out harmonics lie and their line shape; only their amplitudes are then fitted on the lines
     next to them (the training harmonics' on the training lines), and the line shapes' tails are
-    predicted on every line. Every line is scored (before, after) in each fold: a model that only
-    removes the noise of the few lines it points at gains about ``4.34 n_harm / n_lines`` dB
-    (hundredths), while interference at the predicted lines gives tens of dB."""
+    predicted on every line. Every line is scored (before, after) in each fold; where amplitudes were fitted
+    to the lines they are scored on (the training harmonics' on the training lines, the held-out ones' next
+    to them) the residual gets :func:`_fit_penalty` (a fit scored on its own lines understates the error
+    of a prediction): a model that only removes noise gains nothing on average, while interference at the
+    predicted lines gives tens of dB."""
     m = ctx.measured
     f = m.freq_hz
     df = float(np.median(np.diff(f)))
     E = m.H - ctx.sim.H
     w_all = ctx.weights
     before, after = [], []
+    err = w_all * np.abs(E) ** 2
+    quiet = np.ones(f.size, bool)       # lines near no harmonic of either base: the noise of the penalty
+    for b in HUM_BASES_HZ:
+        for fh in b * np.arange(1, int(f[-1] // b) + 2):
+            quiet &= np.abs(f - fh) > 0.6 + 2 * df
     for parity in (0, 1):
         # the held-out harmonics' neighbourhoods (both mains bases) are left out of the fit
         near = np.zeros(f.size, bool)
@@ -219,16 +255,20 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
         order = np.rint(fk / params["base_hz"]).astype(int)
         test_k = (order % 2) == parity
         if not test_k.any():
-            before.append((w_all * np.abs(E) ** 2).ravel())
-            after.append((w_all * np.abs(E) ** 2).ravel())
+            before.append(err.ravel())
+            after.append(err.ravel())
             continue
         R = E.copy()
         # the training harmonics' amplitudes from the training lines, the held-out harmonics' from the
-        # lines next to them; each line shape's tails are then predicted on every line
+        # lines next to them; each line shape's tails are then predicted on every line. Both sets of
+        # amplitudes are scored on the lines they were fitted to: each fit owes its penalty there
+        penalty = np.zeros(E.shape)
         for sel, on in ((~test_k, ~near), (test_k, np.any(np.abs(K[test_k]) > 1e-3, axis=0) & near)):
             if sel.any() and on.any():
                 A, _ = _hum_amplitudes(ctx, E, K[sel], on)
                 R = R - np.einsum("ork,kf->orf", A[..., 0] + 1j * A[..., 1], K[sel])
-        before.append((w_all * np.abs(E) ** 2).ravel())
-        after.append((w_all * np.abs(R) ** 2).ravel())
+                seen = int(np.count_nonzero(np.any(np.abs(K[sel][:, on]) > 1e-3, axis=1)))
+                penalty += _fit_penalty(err, quiet, on, seen)
+        before.append(err.ravel())
+        after.append((w_all * np.abs(R) ** 2 + penalty).ravel())
     return np.concatenate(before), np.concatenate(after)

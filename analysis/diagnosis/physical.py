@@ -53,7 +53,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from itertools import combinations
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from scipy.optimize import least_squares, linear_sum_assignment
@@ -289,16 +289,33 @@ def _nominal(cause: CauseSpec) -> dict:
     return {s.name: s.nominal for s in cause.params if s.nominal is not None}
 
 
+#: A simulation with a cheap first pass (``screen_modes``) has every option screened by it, and the best this
+#: many judged again by its ``modes`` (the screen's order decides which options are fitted).
+N_PRESCREEN = 4 * N_SCREEN
+
+
 def _screen(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict, mm: MeasuredModes,
             sel: np.ndarray, fmax: float, options: Sequence[str]) -> list[tuple[float, str, dict]]:
-    """Each option on a coarse grid of its (single) parameter: [(chi2, option, params)] sorted."""
+    """Each option on a coarse grid of its (single) parameter: [(chi2, option, params)] sorted. With a
+    simulation's ``screen_modes`` (a cheaper approximation) every option first by it, then its best
+    ``N_PRESCREEN`` by ``modes``."""
+    first = getattr(sim, "screen_modes", None)
+    if first is not None and len(options) > N_PRESCREEN:
+        rough = _screen_with(first, cause, specs, fixed, mm, sel, fmax, options)
+        options = [opt for _, opt, _ in rough[:N_PRESCREEN]]
+    return _screen_with(sim.modes, cause, specs, fixed, mm, sel, fmax, options)
+
+
+def _screen_with(modes: Any, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict, mm: MeasuredModes,
+                 sel: np.ndarray, fmax: float, options: Sequence[str]) -> list[tuple[float, str, dict]]:
+    """:func:`_screen` with the solver ``modes`` (``sim.modes`` or ``sim.screen_modes``)."""
     grid = [np.linspace(*s.x_bounds, 7)[1:-1] for s in specs]
     out = []
     for opt in options:
         best: tuple[float, str, dict] = (np.inf, opt, {})
         for xs in np.array(np.meshgrid(*grid)).reshape(len(specs), -1).T:
             p = {**fixed, cause.choice: opt, **{s.name: s.from_x(float(x)) for s, x in zip(specs, xs)}}
-            f, P = sim.modes(cause.name, p, fmax)
+            f, P = modes(cause.name, p, fmax)
             c = float(np.sum(residuals(mm, f, P)[sel] ** 2))
             if c < best[0]:
                 best = (c, opt, p)
