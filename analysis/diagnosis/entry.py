@@ -24,6 +24,7 @@ from ..frf import FRFSet
 from ..modal import ModalModel
 from ..threads import blas_threads
 from .joint_nonlinearity import JointSimulationFactory
+from .rule import DEFAULT_RULE, DecisionRule, step
 from .verdict import Diagnosis, diagnose_frfs
 
 __all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_point_shapes", "as_receptance",
@@ -196,7 +197,7 @@ def diagnose(
     recording: str | Path | None = None,
     extra_noise_db: dict | None = None,
     joint_simulation: JointSimulationFactory | None = None,
-    **rule: Any,
+    rule: DecisionRule = DEFAULT_RULE,
 ) -> Diagnosis:
     """Compare a measurement with a simulation and name what differs (``docs/diagnosis.md``).
 
@@ -216,7 +217,9 @@ def diagnose(
     joint_simulation : builds the simulation of the recorded test for the ``joint_nonlinearity`` cause
         (:data:`analysis.diagnosis.joint_nonlinearity.JointSimulationFactory`; the face builds it, e.g.
         from a simulator config); without it a recording's levels are compared but no joint is named.
-    rule : the decision rule's settings of :func:`diagnose_frfs` (``z_min``, ``min_gain_db``, ...).
+    rule : the decision rule (:class:`analysis.diagnosis.rule.DecisionRule`): every threshold of every
+        stage (FRF-level catalogue, physical causes, time data), one object; the result's ``trace`` lists
+        the rules that decided, in order.
 
     Raises :class:`analysis.inputs.InputError` for unreadable or inconsistent input and
     :class:`analysis.diagnosis.EffectError` for unknown effects. Neither input is modified.
@@ -235,12 +238,12 @@ def diagnose(
     with blas_threads(float(measured.H.size)):
         return _diagnose_set(measured, simulated, band=band, effects=effects, estimator=estimator, physical=physical,
                              recording=recording, extra_noise_db=extra_noise_db, joint_simulation=joint_simulation,
-                             **rule)
+                             rule=rule)
 
 
 def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None, effects: Sequence[str] | None,
                   estimator: str | None, physical: Any, recording: str | Path | None, extra_noise_db: dict | None,
-                  joint_simulation: JointSimulationFactory | None, **rule: Any) -> Diagnosis:
+                  joint_simulation: JointSimulationFactory | None, rule: DecisionRule = DEFAULT_RULE) -> Diagnosis:
     """:func:`diagnose` of a measurement read already (``recording``: the file when it is one)."""
     from ..bands import default_band
     from ..inputs import InputError, load_input
@@ -293,7 +296,7 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
         both = noise_with_simulated_frfs(measured, sim_frfs, noise)
         if both is not None:
             noise["simulation"] = both
-    diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise, **rule)
+    diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise, rule=rule)
     if recording is None:
         return diag
     band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
@@ -302,12 +305,12 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
 
 def _time_data_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, float],
                      base: ModalModel) -> Diagnosis:
-    """``diag`` with the recording's time-data causes in ``band_hz`` (Hz); an ``unexplained`` verdict becomes
-    the one that counts."""
+    """``diag`` with the recording's time-data causes in ``band_hz`` (Hz), judged by ``diag.rule``; an
+    ``unexplained`` verdict becomes the one that counts."""
     from .timedata_stage import time_data_causes
 
     try:
-        timed = time_data_causes(recording, band_hz, base)
+        timed = time_data_causes(recording, band_hz, base, diag.rule)
     except ValueError as exc:
         log.warning("time data not analysed: %s", exc)
         return diag
@@ -320,7 +323,11 @@ def _time_data_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[floa
         verdict = counted[0]["effect"]
     elif verdict == "unexplained" and any(c["effect"] == "amplitude_nonlinearity" for c in present):
         verdict = "amplitude_nonlinearity"
-    return replace(diag, verdict=verdict, time_data=timed,
+    trace = [*diag.trace, step("time_data", counted[0]["effect"] if counted else None,
+                               {"present": [c["effect"] for c in present], "counted": [c["effect"] for c in counted],
+                                "frf_verdict": diag.verdict},
+                               f"verdict {verdict}" if verdict != diag.verdict else "verdict kept")]
+    return replace(diag, verdict=verdict, time_data=timed, trace=trace,
                    time_data_verdict=counted[0]["effect"] if counted else "none")
 
 
@@ -342,5 +349,8 @@ def _level_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, f
     cause = levels.get("cause") or {}
     if not cause.get("present"):
         return replace(diag, level_dependence=levels)
+    trace = [*diag.trace, step("joint_nonlinearity", "joint_nonlinearity",
+                               {k: v for k, v in cause.items() if isinstance(v, (int, float, str, bool))},
+                               f"verdict joint_nonlinearity (the FRF comparison said {diag.verdict})")]
     return replace(diag, level_dependence=levels, linear_verdict=diag.verdict, verdict="joint_nonlinearity",
-                   named=[named_joint(cause)])
+                   named=[named_joint(cause)], trace=trace)
