@@ -22,13 +22,13 @@ used in every mode residual; a property of the FE model, not of the decision) an
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 
-__all__ = ["DecisionRule", "DEFAULT_RULE", "RULES", "db", "gain_db", "paired_z", "step"]
+__all__ = ["DecisionRule", "DEFAULT_RULE", "RULES", "db", "gain_db", "paired_z", "step", "why_lines"]
 
 
 @dataclass(frozen=True)
@@ -169,3 +169,39 @@ def step(rule: str, cause: str | None, values: Mapping, outcome: str) -> dict:
     clean = {k: (float(v) if isinstance(v, (float, np.floating)) else int(v) if isinstance(v, (np.integer,))
                  else bool(v) if isinstance(v, np.bool_) else v) for k, v in values.items()}
     return {"rule": rule, "cause": cause, "values": clean, "outcome": outcome}
+
+
+def _shown(v: Any) -> str:
+    """A trace value in words: numbers with 3 significant digits, lists joined."""
+    if isinstance(v, bool) or v is None:
+        return str(v).lower()
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_shown(x) for x in v) + "]"
+    return str(v)
+
+
+def _line(s: Mapping) -> str:
+    who = f" {s['cause']}" if s.get("cause") else ""
+    values = ", ".join(f"{k} {_shown(v)}" for k, v in (s.get("values") or {}).items())
+    return f"{s['rule']}{who}: {s['outcome']}" + (f" ({values})" if values else "")
+
+
+def why_lines(trace: Sequence[Mapping]) -> list[str]:
+    """"Why this verdict": one line per step of a ``trace`` (:attr:`Diagnosis.trace`, or its JSON form), in
+    its order; a run of effects found not significant is one line (each with its held-out gain)."""
+    out: list[str] = []
+    run: list[str] = []
+    for s in trace:
+        if s["rule"] in ("significance", "physical_significance") and s["outcome"] == "not significant":
+            gain = (s.get("values") or {}).get("gain_db")
+            run.append(f"{s['cause']} {gain:+.2f} dB" if isinstance(gain, (int, float)) else str(s["cause"]))
+            continue
+        if run:
+            out.append(f"not significant: {', '.join(run)}")
+            run = []
+        out.append(_line(s))
+    if run:
+        out.append(f"not significant: {', '.join(run)}")
+    return out
