@@ -130,7 +130,8 @@ class CauseSpec:
     """A physical cause: its continuous parameters and, optionally, a choice (``"point"``: a node,
     ``"component"``: a member, ``"element"``: an element ``member:e``, ``"support"`` / ``"joint"``: one
     support or joint, or ``"all"``) among ``options``; what it
-    is (``description``) and what to do when it is named (``advice``)."""
+    is (``description``) and what to do when it is named (``advice``); its level is ``"physical"``
+    (:data:`analysis.diagnosis.effect_types.LEVELS`)."""
 
     name: str
     params: tuple
@@ -138,6 +139,7 @@ class CauseSpec:
     options: tuple = ()
     description: str = ""
     advice: str = ""
+    level: str = "physical"
 
     def at_edge(self, params: Mapping, free: tuple) -> tuple[str, ...]:
         """The names of the free parameters whose fitted values ``params`` lie at an edge of their range."""
