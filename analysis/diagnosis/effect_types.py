@@ -12,7 +12,37 @@ from ..errors import EffectError
 from ..frf import FRFSet
 from ..modal import ModalModel
 
-__all__ = ["Effect", "EffectError", "FitContext", "ParamRange", "check_positive", "fit_scalar", "shapes_at_references"]
+__all__ = ["Effect", "EffectError", "FitContext", "ParamRange", "check_positive", "fit_scalar", "shapes_at_references",
+           "applied", "named", "split", "stage_entry"]
+
+
+# --------------------------------------------------------------------------- the two shapes of an effect
+# An effect is *applied* as one flat dict ``{"effect": name, **parameters}`` (what :func:`predict` and the
+# simulator take) and *named* as ``{"effect": name, "parameters": {...}}`` (what a diagnosis reports: its
+# causes, ``named``, ``combined``). These four functions are the only conversions between them.
+
+
+def applied(cause: Mapping) -> dict:
+    """The applied form ``{"effect": name, **parameters}`` of a named cause (any dict with ``effect`` and
+    ``parameters``)."""
+    return {"effect": cause["effect"], **cause["parameters"]}
+
+
+def split(spec: Mapping) -> tuple[str, dict]:
+    """(name, parameters) of an applied effect ``{"effect": name, **parameters}``."""
+    return spec["effect"], {k: v for k, v in spec.items() if k != "effect"}
+
+
+def named(cause: Mapping) -> dict:
+    """The named form ``{"effect", "parameters"}`` of a cause (any dict with those keys, and more)."""
+    return {"effect": cause["effect"], "parameters": cause["parameters"]}
+
+
+def stage_entry(cause: Mapping, error_after_db: float | None = None) -> dict:
+    """A cause as a stage of ``Diagnosis.combined``: its named form, held-out gain and the FRF error after it
+    (dB; default the cause's own ``error_after_db``)."""
+    return {**named(cause), "gain_db": cause["gain_db"],
+            "error_after_db": cause["error_after_db"] if error_after_db is None else error_after_db}
 
 
 # --------------------------------------------------------------------------- containers

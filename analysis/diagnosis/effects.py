@@ -58,7 +58,7 @@ from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
 from ..modal import ModalModel, pole_from_fz
-from .effect_types import Effect, EffectError, FitContext, ParamRange, shapes_at_references
+from .effect_types import Effect, EffectError, FitContext, ParamRange, shapes_at_references, split
 from .effect_types import check_positive as _check_positive
 from .effect_types import fit_scalar as _fit_scalar
 from .frf_effects import (
@@ -526,7 +526,7 @@ def _resonator_jacobian(ctx: FitContext, freq_hz: np.ndarray, sw: np.ndarray, n_
     scale = (gain * sw)[..., None]
 
     def jac(x: np.ndarray) -> np.ndarray:
-        params = {k: v for k, v in spec(x).items() if k != "effect"}
+        _, params = split(spec(x))
         moved, dpoles, dresidues = local_resonator_derivative(model, params)
         dH = synthesis_derivative(moved, freq_hz, ctx.measured.quantity, dpoles, dresidues)[..., :n_free + 2]
         dH[..., 1] *= params["zeta"]                    # x_1 = log zeta
@@ -614,8 +614,7 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
         if best is None or c < best[0]:
             best = (c, x)
     assert best is not None
-    out = spec(best[1])
-    del out["effect"]
+    _, out = split(spec(best[1]))
     g = np.asarray(out["coupling"])
     out["mass_ratio"] = float(np.max(g ** 2))
     return out
@@ -691,12 +690,12 @@ PROCESSING: dict[str, Effect] = {e.name: e for e in (
 def _lookup(spec: Mapping) -> tuple[Effect, dict]:
     if not isinstance(spec, Mapping) or "effect" not in spec:
         raise EffectError(f"an effect is a dict {{'effect': NAME, ...parameters}}; got {spec!r}")
-    name = spec["effect"]
+    name, params = split(spec)
     if name in PROCESSING:
-        return PROCESSING[name], {k: v for k, v in spec.items() if k != "effect"}
+        return PROCESSING[name], params
     if name not in EFFECTS:
         raise EffectError(f"unknown effect {name!r}; the catalogue has {', '.join(EFFECTS)}")
-    return EFFECTS[name], {k: v for k, v in spec.items() if k != "effect"}
+    return EFFECTS[name], params
 
 
 def _correction(corr: FRFSet, freq_hz: np.ndarray, quantity: str, warp: float = 1.0) -> np.ndarray:

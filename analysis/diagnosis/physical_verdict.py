@@ -40,6 +40,8 @@ import numpy as np
 from ..frf import FRFSet
 from ..progress import progress
 from .compare import typical_error_db
+from .effect_types import named as named_form
+from .effect_types import stage_entry
 from .effects import predict
 from .next_measurement import pair_rivals, propose, rivals
 from .physical import (
@@ -228,8 +230,8 @@ def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
-        out.combined = [_stage_entry(best)]
-        out.named = [{"effect": best["effect"], "parameters": best["parameters"]}]
+        out.combined = [stage_entry(best)]
+        out.named = [named_form(best)]
         trace.append(step("largest_gain", best["effect"], {"gain_db": best["gain_db"], "named": len(named)},
                           f"verdict {best['effect']}"))
         # adequate, yet the held-out modes may keep a small real mismatch (joint springs beside a block): a
@@ -244,8 +246,8 @@ def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence
             _trace_pair(trace, two, rule)
         if two is not None and two["significant"] and two["adequate"]:
             out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
-            out.combined = [_stage_entry(c) for c in two["_stages"]]
-            out.named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in two["_stages"]]
+            out.combined = [stage_entry(c) for c in two["_stages"]]
+            out.named = [named_form(c) for c in two["_stages"]]
     if named and out.verdict != "combined" and named[0]["error_after_db"] - noise_db > rule.on_top_margin_db:
         out.on_top = named[0]          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
         trace.append(step("on_top", named[0]["effect"], {"error_after_db": named[0]["error_after_db"],
@@ -401,11 +403,6 @@ def _trace_single(trace: list, c: dict, rule: DecisionRule) -> None:
                            "error_after_db": c["error_after_db"], "none_margin_db": rule.none_margin_db,
                            "removed": c["_removed"], "adequate_fraction": rule.adequate_fraction},
                           "adequate" if c["adequate"] else "not adequate"))
-
-
-def _stage_entry(c: dict) -> dict:
-    return {"effect": c["effect"], "parameters": c["parameters"], "gain_db": c["gain_db"],
-            "error_after_db": c["error_after_db"]}
 
 
 def _shown(params: dict) -> str:

@@ -44,6 +44,7 @@ from ..modal import ModalModel
 from ..progress import progress
 from ..threads import limits_blas_threads
 from .compare import band_errors, compare, held_out_errors, line_weights, noise_level, typical_error_db
+from .effect_types import applied, named, stage_entry
 from .effects import EFFECTS, EffectError, FitContext, predict
 from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
 
@@ -106,7 +107,7 @@ class Diagnosis:
         """The JSON document of ``python -m analysis diagnose``."""
         doc = {
             "verdict": self.verdict,
-            "named": [{"effect": c["effect"], "parameters": c["parameters"]} for c in self.named],
+            "named": [named(c) for c in self.named],
             "causes": [{k: c[k] for k in ("effect", "parameters", "gain_db", "evidence", "error_before_db",
                                           "error_after_db", "z", "significant")}
                        | {k: c[k] for k in ("kind", "adequate", "description", "advice") if k in c} for c in self.causes],
@@ -337,7 +338,7 @@ def _frf_on_top(ctx: FitContext, physical: PhysicalSimulation, outcome: Any, nam
         trace.append(step("on_top", first["effect"], {"min_gain_db": min_gain_db}, "no FRF-level effect significant"))
         return None
     nxt = sig[0]
-    nxt["_extended"] = predict(base, m.freq_hz, m.quantity, ctx.effects({"effect": nxt["effect"], **nxt["parameters"]}),
+    nxt["_extended"] = predict(base, m.freq_hz, m.quantity, ctx.effects(applied(nxt)),
                                outputs=m.outputs, references=m.references)
     after = typical_error_db(m, nxt["_extended"].H, w)
     before = outcome.error_before_db
@@ -350,10 +351,7 @@ def _frf_on_top(ctx: FitContext, physical: PhysicalSimulation, outcome: Any, nam
                       "named as a pair" if adequate else "not adequate"))
     if not adequate:
         return None
-    combined = [{"effect": first["effect"], "parameters": first["parameters"], "gain_db": first["gain_db"],
-                 "error_after_db": first["error_after_db"]},
-                {"effect": nxt["effect"], "parameters": nxt["parameters"], "gain_db": nxt["gain_db"],
-                 "error_after_db": after}]
+    combined = [stage_entry(first), stage_entry(nxt, after)]
     return combined, nxt["_extended"]
 
 
@@ -496,7 +494,7 @@ def diagnose_frfs(
                                  unexplained=[b for b in band_errors(measured, ext.H, w)
                                               if not rule.explained(b["error_db"], noise_db)],
                                  extended=ext, combined=combined, physical=phys_doc,
-                                 named=[{"effect": c["effect"], "parameters": c["parameters"]} for c in combined],
+                                 named=[named(c) for c in combined],
                                  **common)
         if outcome.decided and outcome.extended is not None:
             return Diagnosis(verdict=outcome.verdict, causes=outcome.causes, error_before_db=outcome.error_before_db,
@@ -524,9 +522,8 @@ def diagnose_frfs(
     if sig:
         best = sig[0]
         verdict, extended, after_db = best["effect"], best["_extended"], best["error_after_db"]
-        accepted = [*prior, {"effect": best["effect"], **best["parameters"]}]
-        combined.append({"effect": best["effect"], "parameters": best["parameters"], "gain_db": best["gain_db"],
-                         "error_after_db": after_db})
+        accepted = [*prior, applied(best)]
+        combined.append(stage_entry(best))
         trace.append(step("largest_gain", best["effect"], {"gain_db": best["gain_db"], "significant": len(sig)},
                           f"verdict {verdict}"))
         left = [n for n in names if n != best["effect"]]
@@ -547,10 +544,9 @@ def diagnose_frfs(
             if not more:
                 break
             nxt = more[0]
-            accepted.append({"effect": nxt["effect"], **nxt["parameters"]})
+            accepted.append(applied(nxt))
             extended, after_db = nxt["_extended"], nxt["error_after_db"]
-            combined.append({"effect": nxt["effect"], "parameters": nxt["parameters"], "gain_db": nxt["gain_db"],
-                             "error_after_db": after_db})
+            combined.append(stage_entry(nxt))
             left.remove(nxt["effect"])
     else:
         extended, after_db = sim, error_before
@@ -570,7 +566,6 @@ def diagnose_frfs(
         reason = f"{reason}; " if reason else ""
         reason += skipped["mass_loading"]
     # the FRF-level further stages are listed (``combined``) but not named: only the first is
-    named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in combined[:1]]
     return Diagnosis(verdict=verdict, causes=causes, error_before_db=error_before, error_after_db=after_db,
                      unexplained=unexplained, extended=extended, skipped=skipped, combined=combined,
-                     reason=reason, physical=phys_doc, named=named, **common)
+                     reason=reason, physical=phys_doc, named=[named(c) for c in combined[:1]], **common)
