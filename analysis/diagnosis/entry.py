@@ -197,6 +197,7 @@ def diagnose(
     recording: str | Path | None = None,
     extra_noise_db: dict | None = None,
     joint_simulation: JointSimulationFactory | None = None,
+    measured_modes: Any = None,
     rule: DecisionRule = DEFAULT_RULE,
 ) -> Diagnosis:
     """Compare a measurement with a simulation and name what differs (``docs/diagnosis.md``).
@@ -217,6 +218,8 @@ def diagnose(
     joint_simulation : builds the simulation of the recorded test for the ``joint_nonlinearity`` cause
         (:data:`analysis.diagnosis.joint_nonlinearity.JointSimulationFactory`; the face builds it, e.g.
         from a simulator config); without it a recording's levels are compared but no joint is named.
+    measured_modes : the measured modes for the physical stage
+        (:class:`analysis.diagnosis.physical.MeasuredModes`); None: the automatic fit of the measurement.
     rule : the decision rule (:class:`analysis.diagnosis.rule.DecisionRule`): every threshold of every
         stage (FRF-level catalogue, physical causes, time data), one object; the result's ``trace`` lists
         the rules that decided, in order.
@@ -238,12 +241,13 @@ def diagnose(
     with blas_threads(float(measured.H.size)):
         return _diagnose_set(measured, simulated, band=band, effects=effects, estimator=estimator, physical=physical,
                              recording=recording, extra_noise_db=extra_noise_db, joint_simulation=joint_simulation,
-                             rule=rule)
+                             measured_modes=measured_modes, rule=rule)
 
 
 def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None, effects: Sequence[str] | None,
                   estimator: str | None, physical: Any, recording: str | Path | None, extra_noise_db: dict | None,
-                  joint_simulation: JointSimulationFactory | None, rule: DecisionRule = DEFAULT_RULE) -> Diagnosis:
+                  joint_simulation: JointSimulationFactory | None, measured_modes: Any = None,
+                  rule: DecisionRule = DEFAULT_RULE) -> Diagnosis:
     """:func:`diagnose` of a measurement read already (``recording``: the file when it is one)."""
     from ..bands import default_band
     from ..inputs import InputError, load_input
@@ -296,7 +300,8 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
         both = noise_with_simulated_frfs(measured, sim_frfs, noise)
         if both is not None:
             noise["simulation"] = both
-    diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise, rule=rule)
+    diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise,
+                         measured_modes=measured_modes, rule=rule)
     if recording is None:
         return diag
     band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
