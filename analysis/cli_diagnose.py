@@ -201,6 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError
     from .diagnosis import EFFECTS, EffectError
+    from .diagnosis.rule import why_lines
     from .errors import FEModelError
     from .inputs import InputError, parse_band_text, parse_float_list
 
@@ -249,6 +250,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"verdict: {doc['verdict']}" + (f" ({diag.reason})" if diag.reason else ""))
     for c in diag.named:
         print(f"  named: {c['effect']} {c['parameters']}")
+    print("why this verdict:")
+    for line in why_lines(diag.trace):
+        print(f"  {line}")
     if diag.next_measurement:
         nm = diag.next_measurement
         print(f"  next measurement: {nm['point']} ({nm['why']}; {nm['separation_db']:.1f} dB apart)")

@@ -19,8 +19,9 @@ accelerations m/s^2, the analyser's full scale and overload flags) with one time
 
 Without an effect the hits are clean (no double hit, no neighbour hit). Every record also carries the
 stand's own sensor noise (force and acceleration noise densities of the configuration), drawn from a
-generator seeded by ``seed``. ``draw_time_effect`` draws random physical parameters (``TIME_DRAW_RANGES``),
-``time_primary_error`` compares a fitted parameter with the injected one (``TIME_TOLERANCES``).
+generator seeded by ``seed``. The effects are the diagnosis' time-data rows
+(:data:`analysis.diagnosis.timedata.TIME_EFFECTS`); their test oracle (random physical parameters, the
+tolerance of their recovery) is :mod:`simulator.effect_oracle`.
 """
 from __future__ import annotations
 
@@ -30,26 +31,14 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.diagnosis.timedata import TIME_EFFECTS
 from analysis.modal import ModalModel
 
 from .config import FrameConfig
 from .sensors import G_M_S2
 from .stand import StandError, TestStand
 
-__all__ = ["TIME_EFFECTS", "TIME_DRAW_RANGES", "TIME_TOLERANCES", "HitRecord", "NonlinearStand", "simulate_hits",
-           "draw_time_effect", "time_primary_error"]
-
-TIME_EFFECTS = ("amplitude_nonlinearity", "input_noise", "double_hit", "overload")
-
-TIME_DRAW_RANGES = {
-    "amplitude_nonlinearity": "k_per_n in [6e-5, 2.5e-4] 1/N (0.5-2 % softening at 80 N)",
-    "input_noise": "noise_rms_n in [1, 4] % of the nominal peak force",
-    "double_hit": "fraction in [0.25, 0.5] of the hits",
-    "overload": "fraction in [0.25, 0.5] of the hits, struck 2-3 x harder, force clipped at 1.3 x the normal peak",
-}
-
-# Tolerances of the primary parameter (relative error for k and noise; exact hit count for the others).
-TIME_TOLERANCES = {"amplitude_nonlinearity": 0.15, "input_noise": 0.15, "double_hit": 0.0, "overload": 0.0}
+__all__ = ["HitRecord", "NonlinearStand", "simulate_hits"]
 
 
 @dataclass(frozen=True)
@@ -203,28 +192,3 @@ def simulate_hits(
     base = st.model.modal_model(list(outputs), [reference], "receptance")
     return HitRecord(force=F, responses=X, fs_hz=float(fs_hz), pretrigger=int(pretrigger), outputs=outputs,
                      reference=reference, full_scale=full_scale, overload=over, base=base, effect=eff or None, info=info)
-
-
-def draw_time_effect(name: str, rng: np.random.Generator, nominal_n: float = 100.0) -> dict:
-    """A time-data effect with random physical parameters (``TIME_DRAW_RANGES``); ``nominal_n`` is the
-    hammer's nominal peak force (N)."""
-    if name == "amplitude_nonlinearity":
-        return {"effect": name, "k_per_n": float(rng.uniform(6e-5, 2.5e-4))}
-    if name == "input_noise":
-        return {"effect": name, "noise_rms_n": float(rng.uniform(0.01, 0.04) * nominal_n)}
-    if name in ("double_hit", "overload"):
-        return {"effect": name, "fraction": float(rng.uniform(0.25, 0.5))}
-    raise ValueError(f"unknown time-data effect {name!r}; known: {', '.join(TIME_EFFECTS)}")
-
-
-def time_primary_error(injected: Mapping, fitted: Mapping, n_hits: int) -> float:
-    """Error of the primary parameter: relative for ``k_per_n`` and ``noise_rms_n``; for double hits and
-    overloads, the number of hits counted wrong (0 = exact) as a fraction of the hits."""
-    name = injected["effect"]
-    if name == "amplitude_nonlinearity":
-        return abs(float(fitted["k_per_n"]) / float(injected["k_per_n"]) - 1.0)
-    if name == "input_noise":
-        return abs(float(fitted["noise_rms_n"]) / float(injected["noise_rms_n"]) - 1.0)
-    if name in ("double_hit", "overload"):
-        return abs(round(float(fitted["fraction"]) * n_hits) - _count(injected["fraction"], n_hits)) / n_hits
-    raise ValueError(f"unknown time-data effect {name!r}")

@@ -1,5 +1,5 @@
 """Blind diagnosis: an effect drawn at random (seeded) is hidden in simulated measured FRFs; the
-diagnosis must name it, recover its parameter within ``simulator.effects.TOLERANCES`` and show a
+diagnosis must name it, recover its parameter within ``simulator.effect_oracle.TOLERANCES`` and show a
 significant positive held-out gain. Null cases (noise only) must give ``none``. Plus the paper's
 section 3.1 cases."""
 from __future__ import annotations
@@ -11,7 +11,8 @@ import pytest
 
 from analysis.diagnosis import EFFECTS, diagnose
 from analysis.modal import ModalModel
-from simulator.effects import TOLERANCES, add_frf_noise, base_model, draw_effect, primary_error, simulate_with_effects
+from simulator.effect_oracle import TOLERANCES, draw_effect, primary_error
+from simulator.effects import add_frf_noise, base_model, simulate_with_effects
 
 OUTS = ["left:9:Y", "top:4:X", "right:6:-X", "left:6:X"]
 REFS = ["right:6:-X"]

@@ -44,7 +44,15 @@ def test_toml_simulation_json_and_report(files, capsys):
     text = (rep / "report.md").read_text()
     assert "Verdict: `time_delay`" in text
     assert (rep / "bands.png").stat().st_size > 1000 and (rep / "frf_0_0.png").exists()
-    assert "verdict: time_delay" in capsys.readouterr().out
+    terminal = capsys.readouterr().out
+    assert "verdict: time_delay" in terminal
+    # why this verdict: the trace, in the JSON, report.md and on the terminal, the verdict's rule among its steps
+    chosen = [s for s in doc["trace"] if s["rule"] == "largest_gain"]
+    assert chosen and chosen[0]["cause"] == "time_delay" and chosen[0]["outcome"] == "verdict time_delay"
+    assert "## Why this verdict" in text and "largest_gain time_delay: verdict time_delay" in text
+    why = terminal.index("why this verdict:")
+    assert terminal.index("verdict: time_delay") < why < terminal.index("largest_gain time_delay") < terminal.index(
+        "error before")
 
 
 def test_uff_simulation_gives_same_frf_effect(files):

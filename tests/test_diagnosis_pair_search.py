@@ -94,7 +94,9 @@ def test_a_longer_span_leaves_the_pair_of_member_changes_above_the_noise() -> No
     to its ends' stiffness against the columns: the pair fitted to the longer frame's modes leaves more than
     one standard deviation per held-out mode (``LEAVES_CHI2``), while the same pair fitted to a thicker beam
     (in the catalogue) gives its factors back within a fraction of one."""
-    from analysis.diagnosis.physical_verdict import LEAVES_CHI2
+    from analysis.diagnosis.rule import DEFAULT_RULE
+
+    LEAVES_CHI2 = DEFAULT_RULE.leaves_chi2
 
     fv = FrameVariants(None, OUTS, REFS)
     specs = _specs(fv)
@@ -138,7 +140,7 @@ def test_a_longer_span_is_unexplained_and_an_in_catalogue_pair_is_named() -> Non
     for cfg, span in ((_span_config(), True), (_thicker_beam(), False)):
         measured = FrameModel.from_config(cfg, _sensor_masses(cfg)).analytic_frf(OUTS, REFS, f)
         mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
-        out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), -60.0, 3.0, mm,
+        out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), -60.0, mm,
                                causes=causes)
         if span:
             assert out.verdict == "unexplained" and "still leaves the held-out modes" in out.reason
@@ -237,7 +239,7 @@ def test_a_pair_whose_member_is_no_leading_single_cause_is_found() -> None:
 
     measured, mm = _block_beside_softer_supports()
     fv = FrameVariants(None, OUTS, REFS)
-    out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, 3.0, mm,
+    out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, mm,
                            causes=["added_mass", "support_stiffness", "joint_stiffness"])
     alone = {c["effect"]: c for c in out.causes}
     assert alone["added_mass"]["gain_db"] < 0 and alone["added_mass"]["parameters"]["point"] != "top:7"

@@ -428,7 +428,8 @@ def test_a_joint_change_below_both_gates_is_still_named_and_an_unchanged_frame_i
     below the gate and the FRFs are said to be within the noise, yet the joint springs predict the held-out
     modes far better and are named; the unchanged frame's modes give nothing to fit (not decided)."""
     from analysis.diagnosis.compare import line_weights
-    from analysis.diagnosis.physical_verdict import QUIET_CHI2, physical_verdict
+    from analysis.diagnosis.physical_verdict import physical_verdict
+    from analysis.diagnosis.rule import DEFAULT_RULE
     from analysis.diagnosis.verdict import known_processing
 
     cfg = FrameConfig.load()
@@ -439,10 +440,10 @@ def test_a_joint_change_below_both_gates_is_still_named_and_an_unchanged_frame_i
         c = FrameConfig.from_dict(overrides) if overrides else cfg
         measured = FrameModel.from_config(c, _sensor_masses(c)).analytic_frf(OUTS, REFS, f)
         mm = _noise_free_modes(FrameVariants(c, OUTS, REFS), [])
-        out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, 3.0, mm)
+        out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, mm)
         assert out.doc["discrepancy"] == {"modes": False, "frfs": False}
         assert out.decided is changed
         if changed:
-            assert out.doc["chi2_per_mode"] * mm.freq_hz.size >= QUIET_CHI2
+            assert out.doc["chi2_per_mode"] * mm.freq_hz.size >= DEFAULT_RULE.quiet_chi2
             assert out.verdict == "joint_stiffness"
             assert out.named[0]["parameters"]["factor_rotational"] == pytest.approx(0.07, rel=0.05)

@@ -92,15 +92,18 @@ def test_the_attached_starts_reach_a_strongly_coupled_resonator(monkeypatch: pyt
 
 
 def test_a_resonator_is_named_over_a_mass_only_beyond_it_and_inside_the_band() -> None:
-    from analysis.diagnosis.verdict import STRONG_GAIN_DB, _at_range_edge, _resonator_beyond_mass
+    from analysis.diagnosis.rule import DEFAULT_RULE
+    from analysis.diagnosis.verdict import _at_range_edge, _resonator_beyond_mass
+
+    more = DEFAULT_RULE.resonator_over_mass_db
 
     def causes(res_gain: float) -> list:
         return [{"effect": "local_resonator", "gain_db": res_gain, "significant": True, "evidence": ""},
                 {"effect": "mass_loading", "gain_db": 10.0, "significant": True, "evidence": ""}]
-    close = causes(10.0 + STRONG_GAIN_DB - 0.1)
+    close = causes(10.0 + more - 0.1)
     _resonator_beyond_mass(close)
     assert not close[0]["significant"] and "stiff limit" in close[0]["evidence"] and close[1]["significant"]
-    beyond = causes(10.0 + STRONG_GAIN_DB + 0.1)
+    beyond = causes(10.0 + more + 0.1)
     _resonator_beyond_mass(beyond)
     assert beyond[0]["significant"] and beyond[1]["significant"]
     # its own frequency stopped at the band's end is the edge of its range, not inside it

@@ -12,7 +12,8 @@ from benchmark_modules import load_benchmark
 
 from analysis.diagnosis.compare import line_weights
 from analysis.diagnosis.physical import FREQ_FLOOR, MAX_STD_FRACTION, MeasuredModes
-from analysis.diagnosis.physical_verdict import QUIET_CHI2, compared_band_hz, physical_verdict
+from analysis.diagnosis.physical_verdict import compared_band_hz, physical_verdict
+from analysis.diagnosis.rule import DEFAULT_RULE
 from analysis.diagnosis.verdict import known_processing
 from simulator.config import FrameConfig
 from simulator.fem import FrameModel
@@ -46,7 +47,7 @@ def _block_frame(joint_factor: float, scatter_seed: int | None = None):
 
 def _verdict(measured, mm):
     fv = FrameVariants(None, OUTS, REFS)
-    return physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, 3.0, mm,
+    return physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, mm,
                             causes=CAUSES)
 
 
@@ -61,7 +62,7 @@ def test_joint_springs_beside_a_block_are_named_on_top_of_it() -> None:
     assert named["added_mass"]["point"] == "top:3"
     assert named["added_mass"]["mass_kg"] == pytest.approx(2.0, rel=0.05)
     assert named["joint_stiffness"]["factor_rotational"] == pytest.approx(0.05, rel=0.1)
-    assert out.doc["pair"]["removed_over_first_chi2"] >= QUIET_CHI2
+    assert out.doc["pair"]["removed_over_first_chi2"] >= DEFAULT_RULE.quiet_chi2
     assert out.doc["pair"]["gain_over_first_db"] >= 3.0
 
 

@@ -15,19 +15,13 @@ import pytest
 
 from analysis.diagnosis.effects import predict
 from analysis.diagnosis.timedata_gain import diagnose_time_effects, windowed_accelerance
+from simulator.effect_oracle import TIME_ORACLE, TIME_TOLERANCES, draw_time_effect, time_primary_error
 from simulator.stand import TestStand
-from simulator.time_effects import (
-    TIME_EFFECTS,
-    TIME_TOLERANCES,
-    NonlinearStand,
-    draw_time_effect,
-    simulate_hits,
-    time_primary_error,
-)
+from simulator.time_effects import NonlinearStand, simulate_hits
 
 BAND = (5.0, 400.0)
 TOML = Path(__file__).resolve().parents[1] / "simulator" / "frame.toml"
-ORDER = [str(n) for n in np.random.default_rng(2026).permutation(TIME_EFFECTS)]
+ORDER = [str(n) for n in np.random.default_rng(2026).permutation(list(TIME_ORACLE))]
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +34,7 @@ def _diagnose(rec):
                                  outputs=rec.outputs, reference=rec.reference)
 
 
-@pytest.mark.parametrize("i", range(len(TIME_EFFECTS)))
+@pytest.mark.parametrize("i", range(len(TIME_ORACLE)))
 def test_hidden_time_effect_named_measured_and_gains(stand, i):
     rng = np.random.default_rng([2026, i])
     name = ORDER[i]

@@ -18,17 +18,19 @@ With coherence, the H1 variance ``(1 - g^2) / (2 n_avg g^2) |H|^2`` gives a seco
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from ..frf import FRFSet, window_pole_shift
 from ..mac import mac as mac_of
 from ..peaks import PEAK_RULES, find_peaks
+from .rule import db
 
 __all__ = [
     "BLOCK_LINES",
     "line_folds",
+    "held_out_errors",
     "FLOOR_FRACTION",
     "line_weights",
     "averages",
@@ -94,21 +96,17 @@ def line_weights(measured: FRFSet, floor_fraction: float = FLOOR_FRACTION,
     return w
 
 
-def _db(x: float) -> float:
-    return float(10 * np.log10(max(x, 1e-30)))
-
-
 def error_db(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray, lines: np.ndarray | None = None) -> float:
     """10 log10 of the mean weighted squared error over ``lines`` (boolean mask, default all)."""
     sel = np.ones(measured.freq_hz.size, bool) if lines is None else lines
     e = measured.H[..., sel] - model_H[..., sel]
-    return _db(float(np.mean(weights[..., sel] * np.abs(e) ** 2)))
+    return db(float(np.mean(weights[..., sel] * np.abs(e) ** 2)))
 
 
 def typical_error_db(measured: FRFSet, H: np.ndarray, weights: np.ndarray) -> float:
     """Median over lines of ``w |H_meas - H|^2`` / ln 2 (dB): the error of a typical line, robust to a
     few antiresonance lines; comparable with :func:`noise_level`."""
-    return _db(float(np.median(weights * np.abs(measured.H - H) ** 2)) / np.log(2))
+    return db(float(np.median(weights * np.abs(measured.H - H) ** 2)) / np.log(2))
 
 
 def second_difference_gain(measured: FRFSet) -> float:
@@ -135,10 +133,10 @@ def noise_level(measured: FRFSet, weights: np.ndarray) -> dict:
     H = measured.H
     d2 = H[..., :-2] - 2 * H[..., 1:-1] + H[..., 2:]
     q = weights[..., 1:-1] * np.abs(d2) ** 2 / second_difference_gain(measured)
-    out = {"difference": _db(float(np.median(q)) / np.log(2))}
+    out = {"difference": db(float(np.median(q)) / np.log(2))}
     v = coherence_variance(measured)
     if v is not None:
-        out["coherence"] = _db(float(np.mean(weights * v * np.abs(H) ** 2)))
+        out["coherence"] = db(float(np.mean(weights * v * np.abs(H) ** 2)))
     return out
 
 
@@ -166,7 +164,7 @@ def channel_errors(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray) -
         for r, lr in enumerate(measured.references):
             e = measured.H[o, r] - model_H[o, r]
             out.append({"output": lo, "reference": lr,
-                        "error_db": _db(float(np.mean(weights[o, r] * np.abs(e) ** 2)))})
+                        "error_db": db(float(np.mean(weights[o, r] * np.abs(e) ** 2)))})
     return out
 
 
@@ -333,4 +331,22 @@ def line_folds(n: int, block: int = BLOCK_LINES) -> list[tuple[np.ndarray, np.nd
     fitted on would be scored on what it has seen. Every line is scored once."""
     first = (np.arange(n) // max(int(block), 1)) % 2 == 0
     return [(first, ~first), (~first, first)]
+
+
+def held_out_errors(measured_H: np.ndarray, before_H: np.ndarray, weights: np.ndarray,
+                    fitted_on: Callable[[np.ndarray], np.ndarray],
+                    measured_after_H: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The held-out fold loop of the diagnosis: per line and FRF, the weighted squared errors ``w |H_m -
+    H|^2`` (raveled (..., n_freq) arrays, every line once) of the prediction ``before_H`` and of the
+    prediction ``fitted_on(train)`` (an array like ``measured_H``: the model fitted on the boolean line
+    mask ``train``) on the lines of the other fold (:func:`line_folds`), both ways.
+    ``measured_after_H``: the measurement the second is scored against when it differs (an exclusion of
+    hits changes the measured H1 itself); default ``measured_H``."""
+    m_after = measured_H if measured_after_H is None else measured_after_H
+    before = weights * np.abs(measured_H - before_H) ** 2
+    after = np.empty_like(before)
+    for train, test in line_folds(measured_H.shape[-1]):
+        Hx = fitted_on(train)
+        after[..., test] = weights[..., test] * np.abs(m_after[..., test] - Hx[..., test]) ** 2
+    return before.ravel(), after.ravel()
 

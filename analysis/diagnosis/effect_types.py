@@ -12,7 +12,37 @@ from ..errors import EffectError
 from ..frf import FRFSet
 from ..modal import ModalModel
 
-__all__ = ["Effect", "EffectError", "FitContext", "check_positive", "fit_scalar", "shapes_at_references"]
+__all__ = ["Effect", "EffectError", "FitContext", "ParamRange", "check_positive", "fit_scalar", "shapes_at_references",
+           "applied", "named", "split", "stage_entry"]
+
+
+# --------------------------------------------------------------------------- the two shapes of an effect
+# An effect is *applied* as one flat dict ``{"effect": name, **parameters}`` (what :func:`predict` and the
+# simulator take) and *named* as ``{"effect": name, "parameters": {...}}`` (what a diagnosis reports: its
+# causes, ``named``, ``combined``). These four functions are the only conversions between them.
+
+
+def applied(cause: Mapping) -> dict:
+    """The applied form ``{"effect": name, **parameters}`` of a named cause (any dict with ``effect`` and
+    ``parameters``)."""
+    return {"effect": cause["effect"], **cause["parameters"]}
+
+
+def split(spec: Mapping) -> tuple[str, dict]:
+    """(name, parameters) of an applied effect ``{"effect": name, **parameters}``."""
+    return spec["effect"], {k: v for k, v in spec.items() if k != "effect"}
+
+
+def named(cause: Mapping) -> dict:
+    """The named form ``{"effect", "parameters"}`` of a cause (any dict with those keys, and more)."""
+    return {"effect": cause["effect"], "parameters": cause["parameters"]}
+
+
+def stage_entry(cause: Mapping, error_after_db: float | None = None) -> dict:
+    """A cause as a stage of ``Diagnosis.combined``: its named form, held-out gain and the FRF error after it
+    (dB; default the cause's own ``error_after_db``)."""
+    return {**named(cause), "gain_db": cause["gain_db"],
+            "error_after_db": cause["error_after_db"] if error_after_db is None else error_after_db}
 
 
 # --------------------------------------------------------------------------- containers
@@ -45,6 +75,42 @@ class FitContext:
 
 
 @dataclass(frozen=True)
+class ParamRange:
+    """The physical range of a fitted parameter: ``lo``..``hi`` in the parameter's unit, or, with
+    ``band_relative``, ``band_lo * lo``..``band_hi * hi`` (Hz) of the analysed band. ``rtol``: a value within
+    this relative distance of an end is at the edge (the fit stopped there). A dict parameter (a gain per
+    channel) is at the edge when any of its values' magnitudes is. ``label``: the parameter in words."""
+
+    name: str
+    lo: float
+    hi: float
+    label: str
+    rtol: float = 1e-3
+    band_relative: bool = False
+
+    def bounds(self, band_hz: tuple[float, float] | None) -> tuple[float, float] | None:
+        """(lo, hi) in the parameter's unit; None for a band-relative range without a band."""
+        if not self.band_relative:
+            return self.lo, self.hi
+        return None if band_hz is None else (band_hz[0] * self.lo, band_hz[1] * self.hi)
+
+    def at_edge(self, params: Mapping, band_hz: tuple[float, float] | None = None) -> bool:
+        """Does the fitted ``params[name]`` stop at an end of the range?"""
+        b = self.bounds(band_hz)
+        if b is None or self.name not in params:
+            return False
+        v = params[self.name]
+        vals = np.abs(np.asarray(list(v.values()), float)) if isinstance(v, Mapping) else np.asarray([v], float)
+        lo, hi = b
+        return bool(vals.size and (np.any(vals >= hi * (1 - self.rtol)) or np.any(vals <= lo * (1 + self.rtol))))
+
+
+#: The levels of the diagnosis' rows: an FRF-level effect of the catalogue (fitted to the FRFs' lines), a
+#: physical cause (the FE model changed, fitted to the modes), a time-data effect (the hits).
+LEVELS = ("frf", "physical", "time")
+
+
+@dataclass(frozen=True)
 class Effect:
     """One catalogue entry: ``apply(container, params) -> container`` and ``fit(ctx, lines) -> params``.
 
@@ -55,6 +121,16 @@ class Effect:
     held_out : optional ``held_out(ctx) -> (before, after) or None``, the effect's own cross-validation
         when interleaved lines cannot test it (single lines at the mains harmonics:
         :func:`analysis.diagnosis.mains.held_out_mains_hum`); None: the default folds.
+    ranges : the physical ranges of its fitted parameters (:class:`ParamRange`); a fit that stops at an
+        edge is not evidence of the effect (the ``range_edge`` veto).
+    level : "frf" for the catalogue (:data:`LEVELS`).
+    moves_every_mode : the effect moves every mode alike, those far outside the band too (a stiffness
+        scaling, a mass at every sensor): its coarse cost thins the lines instead of fixing far modes.
+    covered_by_physical : the effect is the FRF-level form of a physical cause of the same name: with an FE
+        model, ``"always"`` not tried (the physical cause covers it), ``"when_fitted"`` not tried when the
+        physical stage fitted its causes, ``""`` tried as usual.
+    on_top_of_physical : tried on top of a physical cause that explains the modes (not an effect that moves
+        modes: with an FE model the modes' pairing shows it).
     """
 
     name: str
@@ -66,6 +142,15 @@ class Effect:
     needs: tuple = ()
     held_out: Callable | None = None
     advice: str = ""
+    ranges: tuple[ParamRange, ...] = ()
+    level: str = "frf"
+    moves_every_mode: bool = False
+    covered_by_physical: str = ""
+    on_top_of_physical: bool = True
+
+    def at_range_edge(self, params: Mapping, band_hz: tuple[float, float] | None = None) -> str:
+        """The label of the first fitted parameter at an edge of its range (:attr:`ranges`), "" if none."""
+        return next((r.label for r in self.ranges if r.at_edge(params, band_hz)), "")
 
 
 # --------------------------------------------------------------------------- helpers

@@ -58,10 +58,11 @@ from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
 from ..modal import ModalModel, pole_from_fz
-from .effect_types import Effect, EffectError, FitContext, shapes_at_references
+from .effect_types import Effect, EffectError, FitContext, ParamRange, shapes_at_references, split
 from .effect_types import check_positive as _check_positive
 from .effect_types import fit_scalar as _fit_scalar
 from .frf_effects import (
+    MAX_GAIN_ERROR,
     apply_residual_modes,
     apply_sensitivity_error,
     apply_sensor_highpass,
@@ -117,7 +118,6 @@ def _replace_poles(model: ModalModel, poles: np.ndarray, scale: np.ndarray) -> M
     return replace(model, poles=np.asarray(poles, complex), residues=model.residues * scale[None, None, :])
 
 
-_MOVES_FAR_MODES = ("stiffness_shift", "mass_loading")
 COARSE_LINES = 600
 
 
@@ -127,7 +127,7 @@ def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = 
     every mode alike (stiffness, mass) every ``k``-th line is used (at most ``COARSE_LINES``); for the
     others the modes far outside the band (below f_lo/1.5, above 1.5 f_hi) are a fixed background
     taken from the base model (damping and window changes leave their quasi-static part alone)."""
-    if coarse and effect in _MOVES_FAR_MODES:
+    if coarse and EFFECTS[effect].moves_every_mode:
         # these effects change the quasi-static part of the modes far outside the band too: keep every
         # mode, thin the lines instead (at most COARSE_LINES)
         idx = np.flatnonzero(lines)
@@ -224,10 +224,14 @@ def apply_damping_change(model: ModalModel, params: Mapping) -> ModalModel:
     return _replace_poles(model, new, model.poles.imag / new.imag)
 
 
+#: The damping factors searched (a fit at an end wants more than a damping change can physically be).
+DAMPING_RANGE = (0.1, 10.0)
+
+
 def fit_damping_change(ctx: FitContext, lines: np.ndarray) -> dict:
     coarse = _modal_cost(ctx, lines, "damping_change", coarse=True)
     cost = _modal_cost(ctx, lines, "damping_change")
-    grid = np.linspace(np.log(0.1), np.log(10.0), 47)
+    grid = np.linspace(np.log(DAMPING_RANGE[0]), np.log(DAMPING_RANGE[1]), 47)
     i = int(np.argmin([coarse({"factor": float(np.exp(x))}) for x in grid]))
     g = _fit_scalar(lambda x: cost({"factor": float(np.exp(x))}), grid[max(i - 1, 0):i + 2])
     return {"factor": float(np.exp(g))}
@@ -522,7 +526,7 @@ def _resonator_jacobian(ctx: FitContext, freq_hz: np.ndarray, sw: np.ndarray, n_
     scale = (gain * sw)[..., None]
 
     def jac(x: np.ndarray) -> np.ndarray:
-        params = {k: v for k, v in spec(x).items() if k != "effect"}
+        _, params = split(spec(x))
         moved, dpoles, dresidues = local_resonator_derivative(model, params)
         dH = synthesis_derivative(moved, freq_hz, ctx.measured.quantity, dpoles, dresidues)[..., :n_free + 2]
         dH[..., 1] *= params["zeta"]                    # x_1 = log zeta
@@ -610,8 +614,7 @@ def fit_local_resonator(ctx: FitContext, lines: np.ndarray) -> dict:
         if best is None or c < best[0]:
             best = (c, x)
     assert best is not None
-    out = spec(best[1])
-    del out["effect"]
+    _, out = split(spec(best[1]))
     g = np.asarray(out["coupling"])
     out["mass_ratio"] = float(np.max(g ** 2))
     return out
@@ -632,25 +635,29 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
                   'or sample skew): use matched channels or correct the phase by exp(j w delay).'),
     Effect("mass_loading", "modal", apply_mass_loading, fit_mass_loading, "mass_kg",
            "the accelerometers' mass lowers the frequencies in proportion to the mode shape at their points",
-           needs=("output_shapes",),
+           needs=("output_shapes",), moves_every_mode=True, covered_by_physical="always", on_top_of_physical=False,
            advice="The accelerometers' mass lowers the frequencies: add the sensor masses at their nodes in "
                   'the model, or use lighter sensors.'),
     Effect("local_resonator", "modal", apply_local_resonator, fit_local_resonator, "frequency_hz",
            "a spring-mass attached at a point: a mode more, and the neighbouring modes shifted by it",
            needs=("output_shapes",),
+           ranges=(ParamRange("frequency_hz", 1 / RESONATOR_BEYOND_BAND, RESONATOR_BEYOND_BAND,
+                              "the resonator's own frequency", band_relative=True),),
            advice="A local resonator (a spring-mass at one point: an absorber, a component on a soft mount, a "
                   "loose part) adds a mode near the fitted frequency and shifts its neighbours: add it to the "
                   "model; the largest coupling names the modes it sits on."),
     Effect("missing_mode", "modal", apply_missing_mode, fit_missing_mode, "freq_hz",
-           "a mode the simulation lacks",
+           "a mode the simulation lacks", on_top_of_physical=False,
            advice="The structure has a mode the model lacks: check the model's mode set (a component, a "
                   'local mode, a support or joint degree of freedom) near the fitted frequency.'),
     Effect("stiffness_shift", "modal", apply_stiffness_shift, fit_stiffness_shift, "factor",
            "all natural frequencies scaled alike (stiffness or material off)",
+           moves_every_mode=True, covered_by_physical="when_fitted", on_top_of_physical=False,
            advice='All frequencies are off by the same factor: update the material stiffness or the section '
                   'properties (stiffness scales by the square of the fitted factor).'),
     Effect("damping_change", "modal", apply_damping_change, fit_damping_change, "factor",
            "all damping ratios scaled alike",
+           ranges=(ParamRange("factor", *DAMPING_RANGE, "the damping factor"),),
            advice="The damping ratios are off by a common factor: update the model's damping."),
     Effect("exponential_window", "modal", apply_exponential_window, fit_exponential_window, "exp_window_tau_s",
            "an exponential window added decay 1/tau to every mode",
@@ -658,6 +665,7 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
                   'exp_window_tau_s with the FRFs).'),
     Effect("sensitivity_error", "frf", apply_sensitivity_error, fit_sensitivity_error, "gain",
            "a channel's calibration (sensitivity) is wrong",
+           ranges=(ParamRange("gains", 1 / MAX_GAIN_ERROR, MAX_GAIN_ERROR, "a channel's gain", rtol=1e-9),),
            advice="A channel's calibration is wrong: recalibrate or correct the sensitivity of the named "
                   'channel by the fitted gain.'),
     Effect("mains_hum", "frf", apply_mains_hum, fit_mains_hum, "base_hz",
@@ -682,12 +690,12 @@ PROCESSING: dict[str, Effect] = {e.name: e for e in (
 def _lookup(spec: Mapping) -> tuple[Effect, dict]:
     if not isinstance(spec, Mapping) or "effect" not in spec:
         raise EffectError(f"an effect is a dict {{'effect': NAME, ...parameters}}; got {spec!r}")
-    name = spec["effect"]
+    name, params = split(spec)
     if name in PROCESSING:
-        return PROCESSING[name], {k: v for k, v in spec.items() if k != "effect"}
+        return PROCESSING[name], params
     if name not in EFFECTS:
         raise EffectError(f"unknown effect {name!r}; the catalogue has {', '.join(EFFECTS)}")
-    return EFFECTS[name], {k: v for k, v in spec.items() if k != "effect"}
+    return EFFECTS[name], params
 
 
 def _correction(corr: FRFSet, freq_hz: np.ndarray, quantity: str, warp: float = 1.0) -> np.ndarray:

@@ -24,6 +24,7 @@ from ..frf import FRFSet
 from ..modal import ModalModel
 from ..threads import blas_threads
 from .joint_nonlinearity import JointSimulationFactory
+from .rule import DEFAULT_RULE, DecisionRule, step
 from .verdict import Diagnosis, diagnose_frfs
 
 __all__ = ["diagnose", "model_with_correction", "simulation_model", "driving_point_shapes", "as_receptance",
@@ -197,7 +198,8 @@ def diagnose(
     extra_noise_db: dict | None = None,
     joint_simulation: JointSimulationFactory | None = None,
     levels: Sequence[float] | None = None,
-    **rule: Any,
+    measured_modes: Any = None,
+    rule: DecisionRule = DEFAULT_RULE,
 ) -> Diagnosis:
     """Compare a measurement with a simulation and name what differs (``docs/diagnosis.md``).
 
@@ -225,7 +227,11 @@ def diagnose(
         uncertainty, ``joint_nonlinearity`` (an amplitude-dependent stiffness and damping) becomes the verdict,
         with the per-mode shifts per level in ``level_dependence`` (the comparison's verdict kept as
         ``linear_verdict``).
-    rule : the decision rule's settings of :func:`diagnose_frfs` (``z_min``, ``min_gain_db``, ...).
+    measured_modes : the measured modes for the physical stage
+        (:class:`analysis.diagnosis.physical.MeasuredModes`); None: the automatic fit of the measurement.
+    rule : the decision rule (:class:`analysis.diagnosis.rule.DecisionRule`): every threshold of every
+        stage (FRF-level catalogue, physical causes, time data), one object; the result's ``trace`` lists
+        the rules that decided, in order.
 
     Raises :class:`analysis.inputs.InputError` for unreadable or inconsistent input and
     :class:`analysis.diagnosis.EffectError` for unknown effects. Neither input is modified.
@@ -253,7 +259,7 @@ def diagnose(
     if levels is not None:
         return _diagnose_levels(measured, simulated, levels, band=band, effects=effects, estimator=estimator,
                                 physical=physical, extra_noise_db=extra_noise_db, joint_simulation=joint_simulation,
-                                **rule)
+                                measured_modes=measured_modes, rule=rule)
     if not isinstance(measured, (FRFSet, str, Path)):
         raise InputError(f"{len(measured)} measurements: give levels (one drive level each) to compare one "
                          "structure at several levels, or one measurement")
@@ -269,7 +275,7 @@ def diagnose(
     with blas_threads(float(measured.H.size)):
         return _diagnose_set(measured, simulated, band=band, effects=effects, estimator=estimator, physical=physical,
                              recording=recording, extra_noise_db=extra_noise_db, joint_simulation=joint_simulation,
-                             **rule)
+                             measured_modes=measured_modes, rule=rule)
 
 
 def _diagnose_levels(measured: Any, simulated: Any, levels: Sequence[float], *, band: tuple | str | None,
@@ -294,15 +300,20 @@ def _diagnose_levels(measured: Any, simulated: Any, levels: Sequence[float], *, 
     band_hz = (float(diag.measured.freq_hz[0]), float(diag.measured.freq_hz[-1]))
     found = measured_levels(sets, lv, band_hz)
     cause = found["cause"]
+    values = {"levels": lv, **{k: v for k, v in cause.items() if isinstance(v, (int, float, str, bool))}}
     if not cause["present"]:
-        return replace(diag, level_dependence=found)
+        trace = [*diag.trace, step("levels", None, values, "the modes do not move between the levels: verdict kept")]
+        return replace(diag, level_dependence=found, trace=trace)
+    trace = [*diag.trace, step("levels", "joint_nonlinearity", values,
+                               f"verdict joint_nonlinearity (the comparison with the simulation said {diag.verdict})")]
     return replace(diag, level_dependence=found, linear_verdict=diag.verdict, verdict="joint_nonlinearity",
-                   named=[named_levels(cause), *diag.named])
+                   named=[named_levels(cause), *diag.named], trace=trace)
 
 
 def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None, effects: Sequence[str] | None,
                   estimator: str | None, physical: Any, recording: str | Path | None, extra_noise_db: dict | None,
-                  joint_simulation: JointSimulationFactory | None, **rule: Any) -> Diagnosis:
+                  joint_simulation: JointSimulationFactory | None, measured_modes: Any = None,
+                  rule: DecisionRule = DEFAULT_RULE) -> Diagnosis:
     """:func:`diagnose` of a measurement read already (``recording``: the file when it is one)."""
     from ..bands import default_band
     from ..inputs import InputError, load_input
@@ -355,9 +366,10 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
         both = noise_with_simulated_frfs(measured, sim_frfs, noise)
         if both is not None:
             noise["simulation"] = both
-    if physical is not None and user_band is not None and rule.get("measured_modes") is None:
-        rule["measured_modes"] = _measured_modes_in(measured, user_band)
-    diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise, **rule)
+    if physical is not None and user_band is not None and measured_modes is None:
+        measured_modes = _measured_modes_in(measured, user_band)
+    diag = diagnose_frfs(measured, base, effects=effects, physical=physical, extra_noise_db=noise,
+                         measured_modes=measured_modes, rule=rule)
     if recording is None:
         return diag
     band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
@@ -378,12 +390,12 @@ def _measured_modes_in(measured: FRFSet, band: tuple[float, float]) -> Any:
 
 def _time_data_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, float],
                      base: ModalModel) -> Diagnosis:
-    """``diag`` with the recording's time-data causes in ``band_hz`` (Hz); an ``unexplained`` verdict becomes
-    the one that counts."""
+    """``diag`` with the recording's time-data causes in ``band_hz`` (Hz), judged by ``diag.rule``; an
+    ``unexplained`` verdict becomes the one that counts."""
     from .timedata_stage import time_data_causes
 
     try:
-        timed = time_data_causes(recording, band_hz, base)
+        timed = time_data_causes(recording, band_hz, base, diag.rule)
     except ValueError as exc:
         log.warning("time data not analysed: %s", exc)
         return diag
@@ -396,7 +408,11 @@ def _time_data_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[floa
         verdict = counted[0]["effect"]
     elif verdict == "unexplained" and any(c["effect"] == "amplitude_nonlinearity" for c in present):
         verdict = "amplitude_nonlinearity"
-    return replace(diag, verdict=verdict, time_data=timed,
+    trace = [*diag.trace, step("time_data", counted[0]["effect"] if counted else None,
+                               {"present": [c["effect"] for c in present], "counted": [c["effect"] for c in counted],
+                                "frf_verdict": diag.verdict},
+                               f"verdict {verdict}" if verdict != diag.verdict else "verdict kept")]
+    return replace(diag, verdict=verdict, time_data=timed, trace=trace,
                    time_data_verdict=counted[0]["effect"] if counted else "none")
 
 
@@ -418,5 +434,8 @@ def _level_stage(diag: Diagnosis, recording: str | Path, band_hz: tuple[float, f
     cause = levels.get("cause") or {}
     if not cause.get("present"):
         return replace(diag, level_dependence=levels)
+    trace = [*diag.trace, step("joint_nonlinearity", "joint_nonlinearity",
+                               {k: v for k, v in cause.items() if isinstance(v, (int, float, str, bool))},
+                               f"verdict joint_nonlinearity (the FRF comparison said {diag.verdict})")]
     return replace(diag, level_dependence=levels, linear_verdict=diag.verdict, verdict="joint_nonlinearity",
-                   named=[named_joint(cause)])
+                   named=[named_joint(cause)], trace=trace)

@@ -17,6 +17,7 @@ import numpy as np
 from ..frf import FRFSet
 from ..recording import Recording
 from ..spectra import hit_spectra
+from .rule import db
 
 __all__ = ["hit_scatter_noise_db"]
 
@@ -56,4 +57,4 @@ def hit_scatter_noise_db(path: str | Path, measured: FRFSet, weights: np.ndarray
         n = H.shape[0]
         var[:, j] = np.sum(np.abs(H - H.mean(axis=0)) ** 2, axis=0) / ((n - 1) * n)
     q = float(np.median(weights * var)) / np.log(2)
-    return float(10 * np.log10(max(q, 1e-30)))
+    return db(q)

@@ -20,12 +20,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["mode_regions", "separable", "mode_vote", "SEPARATION_Z"]
+from .rule import DEFAULT_RULE
 
-#: a region separates the two causes when their predictions' weighted squared difference ``D`` there is
-#: ``SEPARATION_Z`` standard deviations of what the noise adds to the difference of their errors
-#: (``sqrt(2 p D)`` for noise of weighted power ``p`` per line and FRF): ``D >= 2 p SEPARATION_Z^2``
-SEPARATION_Z = 3.0
+__all__ = ["mode_regions", "separable", "mode_vote"]
+
+# A region separates the two causes when their predictions' weighted squared difference ``D`` there is
+# ``z`` standard deviations of what the noise adds to the difference of their errors (``sqrt(2 p D)`` for
+# noise of weighted power ``p`` per line and FRF): ``D >= 2 p z^2``, ``z`` the decision rule's
+# ``separation_z`` (:class:`analysis.diagnosis.rule.DecisionRule`).
 
 
 def mode_regions(freq_hz: np.ndarray, mode_hz: np.ndarray) -> np.ndarray:
@@ -40,7 +42,7 @@ def mode_regions(freq_hz: np.ndarray, mode_hz: np.ndarray) -> np.ndarray:
     return np.searchsorted(edges, f)
 
 
-def separable(difference: np.ndarray, noise_power: float, z: float = SEPARATION_Z) -> np.ndarray:
+def separable(difference: np.ndarray, noise_power: float, z: float = DEFAULT_RULE.separation_z) -> np.ndarray:
     """Which regions separate two predictions: their summed weighted squared difference ``difference``
     (per region) at least ``2 noise_power z^2`` (``noise_power``: the mean weighted squared noise of a
     line and FRF, the scale of :func:`analysis.diagnosis.compare.noise_level`)."""
@@ -49,7 +51,7 @@ def separable(difference: np.ndarray, noise_power: float, z: float = SEPARATION_
 
 def mode_vote(freq_hz: np.ndarray, mode_hz: np.ndarray, held_out_a: np.ndarray, held_out_b: np.ndarray,
               pred_a: np.ndarray, pred_b: np.ndarray, weights: np.ndarray, noise_db: float,
-              z: float = SEPARATION_Z) -> dict:
+              z: float = DEFAULT_RULE.separation_z) -> dict:
     """Mode-by-mode comparison of two causes a and b.
 
     freq_hz : the lines (Hz); mode_hz : the simulation's modes (Hz) whose regions are scored.

@@ -34,7 +34,8 @@ Cross-validation: leave one mode out. Each measured mode is predicted by the cau
 other modes (the choice searched again inside the fold among the ``N_SCREEN_FOLD`` best options of the
 full fit, and the parameters refitted), so a cause that only bends to fit some modes predicts the
 left-out mode badly. ``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal
-simulation's. A cause is significant when ``gain_db >= MIN_GAIN_DB``.
+simulation's. A cause is significant when ``gain_db >= physical_min_gain_db`` (a field of the one
+:class:`analysis.diagnosis.rule.DecisionRule`, as the adequacy thresholds below).
 
 Exactness: a simulation may solve candidates approximately (the FE frame by Rayleigh-Ritz reduction,
 :mod:`simulator.ritz`); each cause's chosen fit is then evaluated on the full model
@@ -42,8 +43,8 @@ Exactness: a simulation may solve candidates approximately (the FE frame by Rayl
 is fitted again on the full model.
 
 Adequacy (before a name is given): the extended simulation's FRFs (after the measurement's own
-processing) must bring the typical FRF error within ``ADEQUATE_MARGIN_DB`` of the noise or remove at
-least ``ADEQUATE_FRACTION`` of the excess error in power, and its parameters must lie inside their
+processing) must bring the typical FRF error within ``none_margin_db`` of the noise or remove at
+least ``adequate_fraction`` of the excess error in power, and its parameters must lie inside their
 search range (not at an edge).
 """
 from __future__ import annotations
@@ -61,20 +62,20 @@ from scipy.optimize import least_squares, linear_sum_assignment
 from ..mac import MacReference
 from ..modal import ModalModel
 from ..progress import progress
+from .rule import DEFAULT_RULE, DecisionRule, gain_db
 
 log = logging.getLogger(__name__)
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
-           "fit_cause", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL", "MIN_GAIN_DB",
+           "fit_cause", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL",
            "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
-           "ADEQUATE_MARGIN_DB", "ADEQUATE_FRACTION", "DISCREPANCY_CHI2"]
+           "gain_db"]
 
 FREQ_FLOOR = 0.002
 MAC_TOL = 0.1
 #: Residuals are bounded smoothly by this (``c tanh(r / c)``): one mode the fit could not resolve (a close
 #: pair merged by the window's damping, a spurious peak) counts as a large error, not as all of them.
 RESIDUAL_CAP = 10.0
-MIN_GAIN_DB = 3.0
 N_SCREEN = 5
 #: Options searched again inside each leave-one-mode-out fold (the best of the full fit).
 N_SCREEN_FOLD = 3
@@ -82,11 +83,6 @@ N_SCREEN_FOLD = 3
 MAX_MODES = 10
 #: Modes whose frequency is not determined by the data (standard deviation above this fraction) are left out.
 MAX_STD_FRACTION = 0.001
-ADEQUATE_MARGIN_DB = 3.0
-ADEQUATE_FRACTION = 0.8
-#: Mean chi2 per measured mode of the nominal simulation above which the modes disagree (the
-#: frequencies are off by more than ~2 sigma on average): a physical cause is looked for.
-DISCREPANCY_CHI2 = 4.0
 #: Modes pair when the frequency ratio is within this and their MAC at least PAIR_MIN_MAC.
 PAIR_MAX_LOG_RATIO = 0.25
 PAIR_MIN_MAC = 0.5
@@ -134,7 +130,8 @@ class CauseSpec:
     """A physical cause: its continuous parameters and, optionally, a choice (``"point"``: a node,
     ``"component"``: a member, ``"element"``: an element ``member:e``, ``"support"`` / ``"joint"``: one
     support or joint, or ``"all"``) among ``options``; what it
-    is (``description``) and what to do when it is named (``advice``)."""
+    is (``description``) and what to do when it is named (``advice``); its level is ``"physical"``
+    (:data:`analysis.diagnosis.effect_types.LEVELS`)."""
 
     name: str
     params: tuple
@@ -142,6 +139,7 @@ class CauseSpec:
     options: tuple = ()
     description: str = ""
     advice: str = ""
+    level: str = "physical"
 
     def at_edge(self, params: Mapping, free: tuple) -> tuple[str, ...]:
         """The names of the free parameters whose fitted values ``params`` lie at an edge of their range."""
@@ -382,15 +380,16 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
     return out
 
 
-def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float) -> PhysicalFit | None:
+def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
+                  rule: DecisionRule = DEFAULT_RULE) -> PhysicalFit | None:
     """The cause's nested variants fitted and cross-validated; the one with the least held-out chi2. A variant
     that frees a refinement (a parameter that ``requires`` another: a mass's rotary inertia) must earn it: it
-    replaces the best variant without refinements only when it predicts the held-out modes ``MIN_GAIN_DB``
+    replaces the best variant without refinements only when it predicts the held-out modes ``rule.physical_min_gain_db``
     better and none of its parameters stops at an edge of its range."""
     plain = _best_of(sim, cause, mm, fmax, [v for v in variants(cause) if not _refines(cause, v)])
     refined = _best_of(sim, cause, mm, fmax, [v for v in variants(cause) if _refines(cause, v)])
     if plain is None or (refined is not None and not refined.at_edge
-                         and gain_db(plain.cv_per_mode, refined.cv_per_mode) >= MIN_GAIN_DB):
+                         and gain_db(plain.cv_per_mode, refined.cv_per_mode) >= rule.physical_min_gain_db):
         return refined
     return plain
 
@@ -419,7 +418,8 @@ def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax:
 
 
 def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
-                    names: Sequence[str] | None = None, processes: int | None = None) -> list[PhysicalFit]:
+                    names: Sequence[str] | None = None, processes: int | None = None,
+                    rule: DecisionRule = DEFAULT_RULE) -> list[PhysicalFit]:
     """Every cause (its best nested variant by leave-one-mode-out chi2) fitted; sorted by held-out
     chi2 (best first). The nominal simulation's chi2 is the caller's (``residuals`` of ``sim.modes(None, ...)``).
 
@@ -430,23 +430,23 @@ def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,
     causes = [c for c in sim.causes() if names is None or c.name in names]
     n = _cause_processes(len(causes), processes)
     if n > 1:
-        fits = _fit_causes_forked(sim, causes, mm, fmax, n)
+        fits = _fit_causes_forked(sim, causes, mm, fmax, n, rule)
     else:
-        fits = [_fit_one_cause(sim, causes, i, mm, fmax) for i in range(len(causes))]
+        fits = [_fit_one_cause(sim, causes, i, mm, fmax, rule) for i in range(len(causes))]
     out = [f for f in fits if f is not None]
     out.sort(key=lambda x: x.chi2_cv)
     return out
 
 
 def _fit_one_cause(sim: PhysicalSimulation, causes: Sequence[CauseSpec], i: int, mm: MeasuredModes,
-                   fmax: float) -> PhysicalFit | None:
+                   fmax: float, rule: DecisionRule = DEFAULT_RULE) -> PhysicalFit | None:
     """Cause ``causes[i]``: its best variant, refitted on the full model when the reduced model disagreed."""
     cause = causes[i]
     progress("diagnosis: physical cause %d/%d, %s", i + 1, len(causes), cause.name)
-    best = _best_variant(sim, cause, mm, fmax)
+    best = _best_variant(sim, cause, mm, fmax, rule)
     if best is not None and not _agrees_with_full_model(sim, cause, best, mm, fmax):
         log.warning("diagnosis: %s refitted on the full model (its reduced model disagreed)", cause.name)
-        best = _best_variant(_FullModel(sim), cause, mm, fmax)
+        best = _best_variant(_FullModel(sim), cause, mm, fmax, rule)
     return best
 
 
@@ -466,7 +466,7 @@ def _cause_processes(n_causes: int, processes: int | None) -> int:
     return max(1, min(int(processes), n_causes))
 
 
-#: What the forked processes of :func:`_fit_causes_forked` read: (sim, causes, measured modes, fmax).
+#: What the forked processes of :func:`_fit_causes_forked` read: (sim, causes, measured modes, fmax, rule).
 _FORKED: tuple | None = None
 
 
@@ -480,18 +480,18 @@ def _one_blas_thread() -> None:
 
 
 def _fit_forked_cause(i: int) -> PhysicalFit | None:
-    sim, causes, mm, fmax = _FORKED  # type: ignore[misc]
-    return _fit_one_cause(sim, causes, i, mm, fmax)
+    sim, causes, mm, fmax, rule = _FORKED  # type: ignore[misc]
+    return _fit_one_cause(sim, causes, i, mm, fmax, rule)
 
 
 def _fit_causes_forked(sim: PhysicalSimulation, causes: Sequence[CauseSpec], mm: MeasuredModes, fmax: float,
-                       n: int) -> list[PhysicalFit | None]:
+                       n: int, rule: DecisionRule = DEFAULT_RULE) -> list[PhysicalFit | None]:
     """:func:`_fit_one_cause` of every cause in ``n`` forked processes (they inherit the simulation and
     its kept answers; only the fits come back), in the causes' order."""
     import multiprocessing
 
     global _FORKED
-    _FORKED = (sim, causes, mm, fmax)
+    _FORKED = (sim, causes, mm, fmax, rule)
     try:
         with multiprocessing.get_context("fork").Pool(n, initializer=_one_blas_thread) as pool:
             return pool.map(_fit_forked_cause, range(len(causes)), chunksize=1)
@@ -559,18 +559,6 @@ def same_structure(mm: MeasuredModes, f: np.ndarray, P: np.ndarray,
     return False, (f"not the same structure: only {n} of the {mm.freq_hz.size} measured modes pair with the "
                    f"simulation's by frequency (within {100 * (np.exp(PAIR_MAX_LOG_RATIO) - 1):.0f} %) and MAC "
                    f"(>= {PAIR_MIN_MAC}); check that the measured points are the simulation's points")
-
-
-def gain_db(base: np.ndarray, cv: np.ndarray) -> float:
-    """Held-out gain (dB) of a cause: 10 log10(sum base chi2 / sum held-out chi2)."""
-    return float(10 * np.log10(max(float(np.sum(base)), 1e-30) / max(float(np.sum(cv)), 1e-30)))
-
-
-def z_score(base: np.ndarray, cv: np.ndarray) -> float:
-    """Paired z of the per-mode chi2 differences (base - held out)."""
-    d = np.asarray(base) - np.asarray(cv)
-    sd = float(np.std(d, ddof=1)) if d.size > 1 else 0.0
-    return float(np.mean(d) / (sd / np.sqrt(d.size))) if sd > 0 else 0.0
 
 
 def shown_params(cause: CauseSpec, params: Mapping) -> dict:

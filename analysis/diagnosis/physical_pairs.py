@@ -12,8 +12,8 @@ both choices once more where both causes are refined (:func:`rechoose`). A first
 second change (a mass grown at the wrong node for softer supports) is refined with the second from each
 of the options its own fit ranked (:func:`with_options`).
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
-held-out modes better than the first cause alone by at least ``MIN_GAIN_DB`` and removes at least
-``QUIET_CHI2`` of their chi2 (:func:`analysis.diagnosis.physical_verdict._on_top_enough`).
+held-out modes better than the first cause alone by at least ``physical_min_gain_db`` and removes at least
+``quiet_chi2`` of their chi2 (:func:`analysis.diagnosis.physical_verdict._on_top_enough`).
 """
 from __future__ import annotations
 

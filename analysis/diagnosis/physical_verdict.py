@@ -10,21 +10,24 @@ Steps, each one able to decide:
    no simulated mode (``unpaired_measured_hz``) or stand for a close pair the fit did not resolve
    (``merged_measured_hz``, :func:`merged_pairs`) are reported and left out of the fit.
 3. Discrepancy? Mean chi2 per mode of the nominal simulation (frequency errors in units of their
-   uncertainty with the model-form floor, and shape mismatch) at most ``DISCREPANCY_CHI2`` and the
+   uncertainty with the model-form floor, and shape mismatch) at most ``discrepancy_chi2`` and the
    typical FRF error within the margin of the noise: nothing to explain here unless the modes hold a
-   summed chi2 of at least ``QUIET_CHI2`` (a change that moves a few modes, a joint's springs, is
+   summed chi2 of at least ``quiet_chi2`` (a change that moves a few modes, a joint's springs, is
    diluted in the mean and may hide in the FRFs' typical line); then the causes are fitted and one
-   that removes ``QUIET_CHI2`` of held-out chi2 and is named by step 4 (alone) decides; else the
+   that removes ``quiet_chi2`` of held-out chi2 and is named by step 4 (alone) decides; else the
    FRF-level catalogue is tried (not decided here).
 4. Causes: every physical cause fitted, nested variants and choices selected by leave-one-mode-out
    chi2. Named: the cause with the largest held-out gain among those that are significant
-   (gain >= ``MIN_GAIN_DB``, no parameter at the edge of its range) and adequate (the held-out modes
-   agree, mean chi2 per mode <= ``DISCREPANCY_CHI2``, and the extended simulation's FRFs, through the
-   measurement's processing, leave the typical error within ``ADEQUATE_MARGIN_DB`` of the noise or
-   remove ``ADEQUATE_FRACTION`` of the excess error in power). None named: when the modes differ,
+   (gain >= ``physical_min_gain_db``, no parameter at the edge of its range) and adequate (the held-out modes
+   agree, mean chi2 per mode <= ``discrepancy_chi2``, and the extended simulation's FRFs, through the
+   measurement's processing, leave the typical error within ``none_margin_db`` of the noise or
+   remove ``adequate_fraction`` of the excess error in power). None named: when the modes differ,
    ``unexplained`` with the best partial causes (no FRF-level effect moves natural frequencies);
    when only the FRFs differ, not decided here: the FRF-level catalogue is tried, and the physical
    causes are listed in ``Diagnosis.physical["causes"]``.
+
+Every threshold is a field of the one :class:`analysis.diagnosis.rule.DecisionRule`; the rules applied are
+appended to :attr:`PhysicalOutcome.trace` in order.
 """
 from __future__ import annotations
 
@@ -37,13 +40,11 @@ import numpy as np
 from ..frf import FRFSet
 from ..progress import progress
 from .compare import typical_error_db
+from .effect_types import named as named_form
+from .effect_types import stage_entry
 from .effects import predict
 from .next_measurement import pair_rivals, propose, rivals
 from .physical import (
-    ADEQUATE_FRACTION,
-    ADEQUATE_MARGIN_DB,
-    DISCREPANCY_CHI2,
-    MIN_GAIN_DB,
     RESIDUAL_CAP,
     CauseSpec,
     MeasuredModes,
@@ -58,9 +59,9 @@ from .physical import (
     same_structure,
     shown_params,
     variants,
-    z_score,
 )
 from .physical_pairs import OnTop, fit_pair, rechoose, refit_on_top, with_options
+from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes", "compared_band_hz"]
 
@@ -85,6 +86,13 @@ class PhysicalOutcome:
     named: list = field(default_factory=list)
     next_measurement: dict | None = None
     on_top: dict | None = None
+    trace: list = field(default_factory=list)
+
+
+#: The trace's words for the gates of steps 2 and 3.
+_SAME = {True: "same structure", False: "not the same structure: unexplained unless a cause is named"}
+_DIFFER = {(True, True): "modes differ", (True, False): "modes differ", (False, True): "FRFs differ",
+           (False, False): "neither differs"}
 
 
 def measure_modes(measured: FRFSet, band: tuple[float, float] | None = None) -> MeasuredModes:
@@ -96,17 +104,6 @@ def measure_modes(measured: FRFSet, band: tuple[float, float] | None = None) -> 
     lf = res.lsfd
     return MeasuredModes.from_model(lf.model, lf.freq_hz_std)
 
-
-#: A named physical cause whose FRFs stay more than this (dB) above the noise is tried with the FRF-level
-#: catalogue on top (a damping change or a sensor effect moves no mode, yet leaves the FRFs apart: within
-#: the adequacy margin a second cause is still named when it earns its keep on held-out lines).
-ON_TOP_MARGIN_DB = 1.0
-
-#: When neither discrepancy gate opens, the causes are fitted only when the nominal simulation's chi2 summed
-#: over the modes reaches this, and a cause is named only when it also removes this much on held-out modes
-#: (one mode predicted one standard deviation better, the model-form floor included): the simulation's own
-#: discretisation error (a mesh twice as fine) leaves about 0.3 in all modes together.
-QUIET_CHI2 = 1.0
 
 #: Simulated modes closer than this (relative) are a close pair that a fit may see as one mode.
 CLOSE_PAIR = 0.02
@@ -132,10 +129,20 @@ def _power(db: float) -> float:
 
 
 def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence, weights: np.ndarray,
-                     noise_db: float, none_margin_db: float,
-                     measured_modes: MeasuredModes | None = None,
-                     causes: Sequence[str] | None = None) -> PhysicalOutcome:
-    """Steps 1-4 of the module docstring; ``causes`` limits the physical causes tried (None: all)."""
+                     noise_db: float, measured_modes: MeasuredModes | None = None,
+                     causes: Sequence[str] | None = None, rule: DecisionRule = DEFAULT_RULE) -> PhysicalOutcome:
+    """Steps 1-4 of the module docstring with the thresholds of ``rule``; ``causes`` limits the physical
+    causes tried (None: all). The rules applied are in the outcome's ``trace``, in order."""
+    trace: list = []
+    out = _physical_verdict(measured, sim, prior, weights, noise_db, measured_modes, causes, rule, trace)
+    out.trace = trace
+    return out
+
+
+def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence, weights: np.ndarray,
+                      noise_db: float, measured_modes: MeasuredModes | None, causes: Sequence[str] | None,
+                      rule: DecisionRule, trace: list) -> PhysicalOutcome:
+    """:func:`physical_verdict`, the rules applied appended to ``trace``."""
     from ..errors import ImpactlabError
 
     try:
@@ -161,6 +168,8 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     before_db = typical_error_db(measured, nominal.H, weights)
     good = paired_well(mm, f0, P0)
     same, why = same_structure(mm, f0, P0, good)
+    trace.append(step("same_structure", None, {"paired_modes": int(good.sum()), "measured_modes": int(good.size)},
+                      _SAME[same]))
     other: PhysicalOutcome | None = None
     if not same:
         other = PhysicalOutcome(decided=True, verdict="unexplained", extended=nominal, error_before_db=before_db,
@@ -185,27 +194,34 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     doc["chi2_per_mode"] = float(base[~far].mean())
     # a mode of its own is not evidence of a change while the paired modes agree (a spurious peak, a
     # local mode of something not modelled): the paired modes decide whether the modes differ
-    modes_differ = bool(base[~far].mean() > DISCREPANCY_CHI2)
-    frfs_differ = bool(before_db - noise_db > none_margin_db)
+    modes_differ = bool(base[~far].mean() > rule.discrepancy_chi2)
+    frfs_differ = not rule.explained(before_db, noise_db)
     doc["discrepancy"] = {"modes": modes_differ, "frfs": frfs_differ}
+    trace.append(step("discrepancy", None, {"chi2_per_mode": float(base[~far].mean()),
+                                            "discrepancy_chi2": rule.discrepancy_chi2, "error_db": before_db,
+                                            "noise_db": noise_db, "none_margin_db": rule.none_margin_db},
+                      _DIFFER[modes_differ, frfs_differ]))
     # neither gate: a change that moves a few modes by a few standard deviations each (a joint, a local
     # stiffness) is diluted in the mean over the modes and may hide in the FRFs' typical line; the causes
-    # are still fitted when the modes hold enough mismatch for one to remove QUIET_CHI2 of it
+    # are still fitted when the modes hold enough mismatch for one to remove rule.quiet_chi2 of it
     quiet = not (modes_differ or frfs_differ)
-    if quiet and (other is not None or float(base.sum()) < QUIET_CHI2):
+    if quiet and (other is not None or float(base.sum()) < rule.quiet_chi2):
+        trace.append(step("quiet", None, {"chi2": float(base.sum()), "quiet_chi2": rule.quiet_chi2},
+                          "nothing to explain in the modes: causes not fitted"))
         return other or PhysicalOutcome(decided=False, doc=doc)
     specs = {c.name: c for c in sim.causes()}
-    fits = physical_causes(sim, mm, fmax, causes)
+    fits = physical_causes(sim, mm, fmax, causes, rule=rule)
     if not fits:
         return other or PhysicalOutcome(decided=False, doc=doc)
-    judge = _Judge(measured, frf, weights, base, far, before_db, noise_db)
+    judge = _Judge(measured, frf, weights, base, far, before_db, noise_db, rule)
     found = [judge.single(specs[fit.cause], fit) for fit in fits]
     found.sort(key=lambda c: c["gain_db"], reverse=True)
+    _trace_singles(trace, found, rule)
     named = [c for c in found if c["significant"] and c["adequate"]]
     if quiet:
         doc["quiet"] = [{k: c[k] for k in ("effect", "gain_db", "removed_chi2", "significant", "adequate")}
                         for c in found[:3]]
-        named = [c for c in named if c["removed_chi2"] >= QUIET_CHI2]
+        named = _quiet_named(named, rule, trace)
         if not named:
             return PhysicalOutcome(decided=False, doc=doc)
     out = PhysicalOutcome(decided=True, error_before_db=before_db, doc=doc)
@@ -215,23 +231,29 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
-        out.combined = [_stage_entry(best)]
-        out.named = [{"effect": best["effect"], "parameters": best["parameters"]}]
+        out.combined = [stage_entry(best)]
+        out.named = [named_form(best)]
+        trace.append(step("largest_gain", best["effect"], {"gain_db": best["gain_db"], "named": len(named)},
+                          f"verdict {best['effect']}"))
         # adequate, yet the held-out modes may keep a small real mismatch (joint springs beside a block): a
         # second physical cause is named with it only when the pair predicts the held-out modes clearly
         # better (forward selection, nested: :func:`_on_top_enough`); not tried when it cannot
-        firsts = [best] if pairs_ok and _leaves_evidence(sim, specs, mm, fmax, best, causes) else []
+        firsts = [best] if pairs_ok and _leaves_evidence(sim, specs, mm, fmax, best, causes, rule) else []
     if pairs_ok and firsts != []:
         two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
         if two is not None:
             doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "removed_over_first_chi2",
                                               "significant", "adequate", "held_out_chi2_per_mode", "one_member")}
+            _trace_pair(trace, two, rule)
         if two is not None and two["significant"] and two["adequate"]:
             out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
-            out.combined = [_stage_entry(c) for c in two["_stages"]]
-            out.named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in two["_stages"]]
-    if named and out.verdict != "combined" and named[0]["error_after_db"] - noise_db > ON_TOP_MARGIN_DB:
+            out.combined = [stage_entry(c) for c in two["_stages"]]
+            out.named = [named_form(c) for c in two["_stages"]]
+    if named and out.verdict != "combined" and named[0]["error_after_db"] - noise_db > rule.on_top_margin_db:
         out.on_top = named[0]          # adequate, yet the FRFs stay above the noise: a second, FRF-level cause?
+        trace.append(step("on_top", named[0]["effect"], {"error_after_db": named[0]["error_after_db"],
+                                                         "noise_db": noise_db, "on_top_margin_db": rule.on_top_margin_db},
+                          "an FRF-level effect is tried on top"))
     if not out.named:
         # a cause that explains the modes but not the FRFs: an FRF-level cause (damping, a sensor) may
         # complete it; the caller tries the FRF catalogue on top of it
@@ -246,7 +268,10 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
         differ = (f"the measured modes differ from the simulation's (mean chi2 {base.mean():.1f} per mode)" if modes_differ
                   else f"the FRFs differ from the simulation's by {before_db - noise_db:.1f} dB above the noise")
         out.reason = (f"{differ} but no physical cause, alone or with one other, is both significant and adequate; "
-                      f"best partial causes: {partial}{_beyond_text(doc.get('pair'))}")
+                      f"best partial causes: {partial}{_beyond_text(doc.get('pair'), rule)}")
+        trace.append(step("adequacy", None, {"significant": sum(bool(c["significant"]) for c in found),
+                                             "modes_adequate": len(modal), "modes_differ": modes_differ},
+                          "unexplained" if out.decided else "not decided here: the FRF-level catalogue is tried"))
     close = rivals(found) if out.verdict != "combined" else _pair_rivals(two)
     if close is not None:
         out.next_measurement = propose(sim, measured, prior, noise_db, *close)
@@ -257,14 +282,14 @@ def physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence,
 
 
 def _leaves_evidence(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, best: dict,
-                     names: Sequence[str] | None) -> bool:
+                     names: Sequence[str] | None, rule: DecisionRule = DEFAULT_RULE) -> bool:
     """Could a second physical cause be named on top of the named single cause ``best``? Only when ``best``
-    alone, cross-validated as the pairs are (:func:`_alone_cv`), leaves at least ``QUIET_CHI2`` plus the
+    alone, cross-validated as the pairs are (:func:`_alone_cv`), leaves at least ``rule.quiet_chi2`` plus the
     least freedom of a pair, 2 ln(number of second causes refined): no pair can remove more than that
     (:func:`_on_top_enough`), so the search is skipped (the same noise scale as a first cause below both gates)."""
     others = [c for c in sim.causes() if c.name != best["effect"] and (names is None or c.name in names)]
     n = min(N_SECOND, len(others))
-    return n > 0 and float(np.sum(_alone_cv(sim, specs, mm, fmax, best))) >= QUIET_CHI2 + 2.0 * float(np.log(n))
+    return n > 0 and float(np.sum(_alone_cv(sim, specs, mm, fmax, best))) >= rule.quiet_chi2 + 2.0 * float(np.log(n))
 
 
 def _alone_cv(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict) -> np.ndarray:
@@ -277,19 +302,21 @@ def _alone_cv(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
     return first["_alone_cv"]
 
 
-def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float) -> tuple[float, float, bool]:
+def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float,
+                   rule: DecisionRule = DEFAULT_RULE) -> tuple[float, float, bool]:
     """The pair's nested held-out chi2 per mode ``cv_pair`` against the first cause's alone ``cv_first``,
     cross-validated alike (leave one mode out, the choices kept and every continuous parameter refitted
     in each fold): (gain in dB, chi2 removed net of ``freedom``, enough). ``freedom`` (chi2 units) is what
     the pair chose on all modes, which no fold re-does: the second cause among those refined and its own
-    choice, 2 ln(number of options) each (:func:`_choice_penalty`). Enough: at least ``MIN_GAIN_DB``
-    better (a cause that only bends to fit some modes does not predict the left-out ones) and, net of that
-    freedom, at least ``QUIET_CHI2`` removed (one mode predicted one standard deviation better, the
+    choice, 2 ln(number of options) each (:func:`_choice_penalty`). Enough: at least
+    ``rule.physical_min_gain_db`` better (a cause that only bends to fit some modes does not predict the
+    left-out ones) and, net of that
+    freedom, at least ``rule.quiet_chi2`` removed (one mode predicted one standard deviation better, the
     model-form floor included: a small change on top of a large one, joint springs beside a block, leaves
     little, but that little is real)."""
     over = gain_db(cv_first, cv_pair)
     removed = float(np.sum(cv_first) - np.sum(cv_pair) - freedom)
-    return over, removed, bool(over >= MIN_GAIN_DB and removed >= QUIET_CHI2)
+    return over, removed, bool(over >= rule.physical_min_gain_db and removed >= rule.quiet_chi2)
 
 
 def compared_band_hz(doc: dict, freq_hz: np.ndarray) -> float:
@@ -304,13 +331,6 @@ def compared_band_hz(doc: dict, freq_hz: np.ndarray) -> float:
     return float(np.sqrt(top * above[0])) if np.isfinite(top) and above.size else float("inf")
 
 
-#: Held-out chi2 per counted mode within which a cause leaves the measured modes within their
-#: uncertainty (about one standard deviation per mode): a first cause that does leaves no second
-#: physical change to search for with its choice held open, and two changes of one member must (they
-#: stand in for a change of its geometry, which only the modes they leave tell apart).
-LEAVES_CHI2 = 1.0
-
-
 def _held_out_per_mode(cv: np.ndarray, judge: _Judge) -> float:
     """Held-out chi2 per counted mode (:meth:`_Judge._counted`)."""
     n = judge._counted(cv)
@@ -323,14 +343,15 @@ def _one_member(specs: Sequence[CauseSpec], params: Sequence[dict]) -> str | Non
     return chosen[0] if chosen[0] is not None and all(c == chosen[0] for c in chosen) else None
 
 
-def _beyond_text(pair: dict | None) -> str:
+def _beyond_text(pair: dict | None, rule: DecisionRule = DEFAULT_RULE) -> str:
     """The reason's words for a significant pair of changes of one member that leaves the held-out modes
     above their uncertainty (:func:`_second_cause`)."""
-    if not pair or not pair["significant"] or pair["one_member"] is None or pair["held_out_chi2_per_mode"] <= LEAVES_CHI2:
+    if (not pair or not pair["significant"] or pair["one_member"] is None
+            or pair["held_out_chi2_per_mode"] <= rule.leaves_chi2):
         return ""
     return (f"; the best pair, {pair['effect'].replace('+', ' with ')} of {pair['one_member']}, acts as one change "
             f"of that member's geometry (its length, its section) and still leaves the held-out modes "
-            f"{pair['held_out_chi2_per_mode']:.1f} chi2 per mode (above {LEAVES_CHI2:g}): a change the catalogue "
+            f"{pair['held_out_chi2_per_mode']:.1f} chi2 per mode (above {rule.leaves_chi2:g}): a change the catalogue "
             f"does not hold, left unexplained rather than named as two")
 
 
@@ -347,17 +368,46 @@ def _removed_text(removed: float) -> str:
     return f"{100 * min(removed, 1.0):.0f} % of the FRF error above the noise removed"
 
 
-def _stage_entry(c: dict) -> dict:
-    return {"effect": c["effect"], "parameters": c["parameters"], "gain_db": c["gain_db"],
-            "error_after_db": c["error_after_db"]}
+def _quiet_named(named: list, rule: DecisionRule, trace: list) -> list:
+    """Of the causes ``named`` while neither the modes nor the FRFs differ, those that remove at least
+    ``rule.quiet_chi2`` of the modes' chi2 (each decision appended to ``trace``)."""
+    for c in named:
+        trace.append(step("quiet", c["effect"], {"removed_chi2": c["removed_chi2"], "quiet_chi2": rule.quiet_chi2},
+                          "kept" if c["removed_chi2"] >= rule.quiet_chi2 else "not named: removes too little"))
+    return [c for c in named if c["removed_chi2"] >= rule.quiet_chi2]
+
+
+def _trace_pair(trace: list, two: dict, rule: DecisionRule) -> None:
+    """The ``second_cause`` rule's step for the best pair ``two``."""
+    trace.append(step("second_cause", two["effect"],
+                      {"gain_db": two["gain_db"], "gain_over_first_db": two["gain_over_first_db"],
+                       "removed_over_first_chi2": two["removed_over_first_chi2"],
+                       "physical_min_gain_db": rule.physical_min_gain_db, "quiet_chi2": rule.quiet_chi2,
+                       "significant": two["significant"], "adequate": two["adequate"]},
+                      "both named: verdict combined" if _named_pair(two) else "not named"))
+
+
+def _trace_singles(trace: list, found: list, rule: DecisionRule) -> None:
+    """The physical stage's rules for each judged cause of ``found``: its significance, then its adequacy."""
+    for c in found:
+        _trace_single(trace, c, rule)
+
+
+def _trace_single(trace: list, c: dict, rule: DecisionRule) -> None:
+    """The physical stage's rules for one judged cause ``c``: its significance, then its adequacy."""
+    trace.append(step("physical_significance", c["effect"],
+                      {"gain_db": c["gain_db"], "physical_min_gain_db": rule.physical_min_gain_db,
+                       "at_edge": c["_at_edge"]}, "significant" if c["significant"] else "not significant"))
+    if c["significant"]:
+        trace.append(step("adequacy", c["effect"],
+                          {"modes_adequate": c["modes_adequate"], "discrepancy_chi2": rule.discrepancy_chi2,
+                           "error_after_db": c["error_after_db"], "none_margin_db": rule.none_margin_db,
+                           "removed": c["_removed"], "adequate_fraction": rule.adequate_fraction},
+                          "adequate" if c["adequate"] else "not adequate"))
 
 
 def _shown(params: dict) -> str:
     return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in params.items())
-
-
-def _db(x: float) -> float:
-    return float(10 * np.log10(max(float(x), 1e-30)))
 
 
 @dataclass
@@ -373,6 +423,7 @@ class _Judge:
     far: np.ndarray
     before_db: float
     noise_db: float
+    rule: DecisionRule = DEFAULT_RULE
 
     def _counted(self, cv: np.ndarray) -> np.ndarray:
         lost = self.far & (cv >= 0.5 * RESIDUAL_CAP ** 2)
@@ -386,18 +437,19 @@ class _Judge:
         n = self._counted(cv)
         g = gain_db(self.base[n], cv[n])
         removed_chi2 = float(np.sum(self.base[n]) - np.sum(cv[n]))
-        modes_ok = bool(np.sum(cv[n]) / n.sum() <= DISCREPANCY_CHI2)
+        rule = self.rule
+        modes_ok = bool(np.sum(cv[n]) / n.sum() <= rule.discrepancy_chi2)
         return {"gain_db": g, "error_before_db": self.before_db, "error_after_db": after_db,
-                "z": z_score(self.base[n], cv[n]), "significant": bool(g >= MIN_GAIN_DB and not at_edge),
+                "z": paired_z(self.base[n], cv[n]), "significant": bool(g >= rule.physical_min_gain_db and not at_edge),
                 "modes_adequate": modes_ok, "removed_chi2": removed_chi2,
-                "adequate": bool(modes_ok and (after_db - self.noise_db <= ADEQUATE_MARGIN_DB
-                                               or removed >= ADEQUATE_FRACTION)),
-                "_extended": ext, "_removed": removed}
+                "adequate": bool(modes_ok and (rule.explained(after_db, self.noise_db)
+                                               or removed >= rule.adequate_fraction)),
+                "_extended": ext, "_removed": removed, "_at_edge": list(at_edge)}
 
     def evidence(self, name: str, shown: str, cv: np.ndarray, c: dict, at_edge: tuple) -> str:
         edge = f"; at the edge of its range: {', '.join(at_edge)}" if at_edge else ""
         return (f"{name} ({shown}): mode mismatch (sum over the modes of the squared frequency and shape "
-                f"residuals, in dB) {_db(self.base.sum()):.1f} -> {_db(np.sum(cv)):.1f} dB when each mode is "
+                f"residuals, in dB) {db(self.base.sum()):.1f} -> {db(np.sum(cv)):.1f} dB when each mode is "
                 f"predicted from the others; FRF error {self.before_db:.1f} -> {c['error_after_db']:.1f} dB "
                 f"(noise {self.noise_db:.1f} dB: {_removed_text(c['_removed'])}){edge}")
 
@@ -477,11 +529,11 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
     naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
     change one member (:func:`_one_member`) are adequate only when they also leave the held-out modes within
-    their uncertainty (:func:`_held_out_per_mode` at most ``LEAVES_CHI2``): the stiffness and the mass of
+    their uncertainty (:func:`_held_out_per_mode` at most ``rule.leaves_chi2``): the stiffness and the mass of
     one member scaled together stand in for a change of its geometry (a longer member: EI/L^3 and its
     mass), which the catalogue does not hold and which only the modes they leave tell apart.
     With no pair found and no first cause that leaves the held-out modes within their uncertainty (at most
-    ``LEAVES_CHI2`` per mode: then there is no second physical change to find), the first causes with a
+    ``rule.leaves_chi2`` per mode: then there is no second physical change to find), the first causes with a
     choice are tried again with their choice held open and their parameters refined with the second cause
     (``opened``, :func:`_opened`); a named first cause keeps its choice (it was named on its own) and only
     its parameters are refined with the second. When that names no pair either and no single cause was named,
@@ -500,7 +552,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         if _named_pair(best):
             break
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
-    explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= LEAVES_CHI2 for c in firsts)
+    explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= judge.rule.leaves_chi2 for c in firsts)
     first_round = best
     if not opened and not explained and not _named_pair(best):
         # a first cause fitted alone may have absorbed the second change (a mass grown at the wrong node, a
@@ -559,15 +611,15 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     best: dict | None = None
     for fa2, fb in pairs:
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
-        if gain_db(fa.cv_per_mode, two.cv_per_mode) >= MIN_GAIN_DB:
+        if gain_db(fa.cv_per_mode, two.cv_per_mode) >= judge.rule.physical_min_gain_db:
             two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
-            cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]))
+            cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]), judge.rule)
         c["significant"] = bool(c["significant"] and enough)
         c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
         c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
-        if c["one_member"] is not None and c["held_out_chi2_per_mode"] > LEAVES_CHI2:
+        if c["one_member"] is not None and c["held_out_chi2_per_mode"] > judge.rule.leaves_chi2:
             c["adequate"] = False
         c["_pair"] = two
         c["_free"] = fb.free

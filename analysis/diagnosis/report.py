@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 
 from ..atomic import atomic_path, write_text_atomic
 from .compare import band_errors
+from .rule import why_lines
 from .verdict import Diagnosis
 
 __all__ = ["frf_figure", "band_figure", "report_text", "write_report", "ACTIONS"]
@@ -94,7 +95,8 @@ def band_figure(diag: Diagnosis) -> Figure:
 
 
 def report_text(diag: Diagnosis) -> str:
-    """The ``report.md`` text: verdict, action, evidence, mode table, bands, coherence."""
+    """The ``report.md`` text: verdict, action, why this verdict (the trace), evidence, mode table, bands,
+    coherence."""
     L = ["# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {_action(diag)}", ""]
     advice = {c["effect"]: c.get("advice") for c in diag.causes}
     for c in diag.named:
@@ -102,6 +104,9 @@ def report_text(diag: Diagnosis) -> str:
         L.append(f"- **{c['effect']}** ({shown}): {advice.get(c['effect']) or ACTIONS.get(c['effect'], '')}")
     if diag.named:
         L.append("")
+    L += ["## Why this verdict", "", "The rules that decided, in the order they were applied (docs/diagnosis.md):", ""]
+    L += [f"{i}. {line}" for i, line in enumerate(why_lines(diag.trace), start=1)] or ["(no rule applied)"]
+    L.append("")
     if diag.next_measurement:
         nm = diag.next_measurement
         L += [f"**Next measurement:** {nm['point']}: {nm['why']} (the candidates' FRFs there differ by "

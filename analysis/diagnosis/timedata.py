@@ -230,12 +230,14 @@ class Hits:
 @dataclass(frozen=True)
 class TimeEffect:
     """One row of the time-data registry: name, what it is, what to do when it is found, and its
-    detector ``detect(hits) -> cause dict`` (None when the hits cannot show it, e.g. no full scale)."""
+    detector ``detect(hits) -> cause dict`` (None when the hits cannot show it, e.g. no full scale); its
+    level is ``"time"`` (:data:`analysis.diagnosis.effect_types.LEVELS`)."""
 
     name: str
     description: str
     advice: str
     detect: Callable[[Hits], dict | None]
+    level: str = "time"
 
 
 def _overload(h: Hits) -> dict | None:

@@ -13,8 +13,9 @@ from scipy.optimize import minimize_scalar
 from ..frf import window_pole_shift
 from ..modal import ModalModel
 from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_end_fraction
-from .compare import line_folds
+from .compare import held_out_errors
 from .effects import synthesize_windowed
+from .rule import DEFAULT_RULE, DecisionRule, db, paired_z
 from .timedata import (
     FORCE_TAPER_S,
     FORCE_WINDOW_S,
@@ -139,10 +140,6 @@ def _noise_psd(spec: HitSpectraSet, sigma_n: float, n: int, fs_hz: float) -> np.
     return (c[None, :] / (n * dt)) * dt ** 2 * sigma_n ** 2 * spec.noise_gain[:, None]
 
 
-def _db(x: float) -> float:
-    return float(10 * np.log10(max(x, 1e-30)))
-
-
 def _score(measured: np.ndarray | tuple[np.ndarray, np.ndarray], before: np.ndarray,
            after_of: Callable[[np.ndarray], tuple[np.ndarray, Any]],
            weights: np.ndarray) -> dict:
@@ -150,18 +147,9 @@ def _score(measured: np.ndarray | tuple[np.ndarray, np.ndarray], before: np.ndar
     scored on the other, both ways (as :mod:`analysis.diagnosis.verdict`). ``measured``/``before`` may be
     one array or a (before-measured, after-measured) pair for the exclusion effects."""
     m_b, m_a = measured if isinstance(measured, tuple) else (measured, measured)
-    bs, as_ = [], []
-    for train, test in line_folds(m_b.shape[-1]):
-        Hx, _ = after_of(train)
-        w = weights[..., test]
-        bs.append((w * np.abs(m_b[..., test] - before[..., test]) ** 2).ravel())
-        as_.append((w * np.abs(m_a[..., test] - Hx[..., test]) ** 2).ravel())
-    b, a = np.concatenate(bs), np.concatenate(as_)
-    d = b - a
-    sd = float(np.std(d, ddof=1))
-    z = float(np.mean(d) / (sd / np.sqrt(d.size))) if sd > 0 else 0.0
-    bd, ad = _db(float(np.mean(b))), _db(float(np.mean(a)))
-    return {"error_before_db": bd, "error_after_db": ad, "gain_db": bd - ad, "z": z}
+    b, a = held_out_errors(m_b, before, np.broadcast_to(weights, m_b.shape), lambda train: after_of(train)[0], m_a)
+    bd, ad = db(float(np.mean(b))), db(float(np.mean(a)))
+    return {"error_before_db": bd, "error_after_db": ad, "gain_db": bd - ad, "z": paired_z(b, a)}
 
 
 def _fit_nonlinearity(spec: HitSpectraSet, peaks: np.ndarray, base: ModalModel, measured: np.ndarray,
@@ -204,9 +192,7 @@ def diagnose_time_effects(
     exp_window_end_fraction: float = 1e-3,
     outputs: Sequence[str] | None = None,
     reference: str = "",
-    z_min: float = 3.0,
-    min_gain_db: float = 0.5,
-    strong_gain_db: float = 3.0,
+    rule: DecisionRule = DEFAULT_RULE,
 ) -> dict:
     """The time-data effects of a set of hits at one reference, each with its held-out gain (module
     docs and ``docs/diagnosis.md``).
@@ -228,7 +214,8 @@ def diagnose_time_effects(
     Returns ``{"verdict", "causes", "error_before_db", "error_after_db", "exp_window_tau_s", "n_hits"}``; each cause
     has ``effect, kind, parameters, present, significant, gain_db, error_before_db, error_after_db, z,
     evidence``. A cause counts when its detector finds it and (model effects) its gain is significant
-    (``gain >= min_gain_db`` and (``z >= z_min`` or ``gain >= strong_gain_db``)); the verdict is the
+    by the one rule of the diagnosis (:meth:`analysis.diagnosis.rule.DecisionRule.significant` of ``rule``:
+    ``gain >= min_gain_db`` and (``z >= z_min`` or ``gain >= strong_gain_db``)); the verdict is the
     counted cause with the largest gain, else ``none``.
     """
     f = _check_hits(force)
@@ -248,7 +235,7 @@ def diagnose_time_effects(
     causes = []
 
     def significant(s: dict) -> bool:
-        return bool(s["gain_db"] >= min_gain_db and (s["z"] >= z_min or s["gain_db"] >= strong_gain_db))
+        return rule.significant(s["gain_db"], s["z"])
 
     # amplitude nonlinearity
     peaks = np.abs(f).max(axis=1)
@@ -263,7 +250,7 @@ def diagnose_time_effects(
         ev = det["evidence"] + (f"; softening k = {k:.3g} 1/N (frequencies x (1 - k F_pk))" if k > 0 else
                                 f"; hardening k = {k:.3g} 1/N (frequencies x (1 - k F_pk))")
     else:
-        s = {"error_before_db": _db(float(np.mean(w * np.abs(Hm - sim) ** 2))), "z": 0.0, "gain_db": 0.0}
+        s = {"error_before_db": db(float(np.mean(w * np.abs(Hm - sim) ** 2))), "z": 0.0, "gain_db": 0.0}
         s["error_after_db"] = s["error_before_db"]
         ev = det["evidence"]
     causes.append({"effect": "amplitude_nonlinearity", "kind": "model", "parameters": params,
@@ -276,7 +263,7 @@ def diagnose_time_effects(
     ratio = np.clip((np.sum(spec.Gff, 0) - np.sum(Gnn, 0)) / np.sum(spec.Gff, 0), 0.0, 1.0)
     Hn = sim * ratio[None, None, :]
     s = _score(Hm, sim, lambda tr: (Hn, sigma), w)
-    params = dict(det["parameters"], h1_bias_db_min=float(10 * np.log10(max(ratio.min(), 1e-12))))
+    params = dict(det["parameters"], h1_bias_db_min=db(max(float(ratio.min()), 1e-12)))
     causes.append({"effect": "input_noise", "kind": "model", "parameters": params, "present": bool(det["present"]),
                    **s, "significant": significant(s),
                    "evidence": det["evidence"] + f"; re-simulated H1 bias gains {s['gain_db']:.2f} dB on held-out lines"})
@@ -309,7 +296,7 @@ def diagnose_time_effects(
         c["counts"] = bool(c["present"] and (c["significant"] or c["kind"] == "data_quality"))
     causes.sort(key=lambda c: (not c["counts"], -c["gain_db"]))
     verdict = causes[0]["effect"] if causes[0]["counts"] else "none"
-    before = _db(float(np.mean(w * np.abs(Hm - sim) ** 2)))
+    before = db(float(np.mean(w * np.abs(Hm - sim) ** 2)))
     after = causes[0]["error_after_db"] if verdict != "none" else before
     return {"verdict": verdict, "causes": causes, "error_before_db": before, "error_after_db": after,
             "exp_window_tau_s": spec.exp_window_tau_s, "n_hits": n_hits, "band_hz": [float(band[0]), float(band[1])]}
@@ -320,7 +307,7 @@ def _exclusion(H_all: np.ndarray, spec: HitSpectraSet, bad: np.ndarray, sim: np.
     """Held-out gain of excluding the ``bad`` hits: H1 of all hits against H1 of the others, both
     compared with the simulation (no line is used to choose the hits, so every line is held out)."""
     if not bad.any() or bad.all():
-        e = _db(float(np.mean(w * np.abs(H_all - sim) ** 2)))
+        e = db(float(np.mean(w * np.abs(H_all - sim) ** 2)))
         return {"error_before_db": e, "error_after_db": e, "gain_db": 0.0, "z": 0.0}
     H_keep = spec.h1(~bad)[:, None, :]
     return _score((H_all, H_keep), sim, lambda tr: (sim, None), w)

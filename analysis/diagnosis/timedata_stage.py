@@ -10,19 +10,22 @@ from pathlib import Path
 import numpy as np
 
 from ..modal import ModalModel
+from .rule import DEFAULT_RULE, DecisionRule
 
 __all__ = ["time_data_causes"]
 
 log = logging.getLogger(__name__)
 
 
-def time_data_causes(path: str | Path, band: tuple, base: ModalModel | None = None) -> list:
+def time_data_causes(path: str | Path, band: tuple, base: ModalModel | None = None,
+                     rule: DecisionRule = DEFAULT_RULE) -> list:
     """Time-data causes (:mod:`analysis.diagnosis.timedata`) of a recording's accepted hits (those its
     FRFs were made from; rejected hits changed nothing), per reference point; [] when the file is not
     a recording or holds no accepted hits. With ``base`` (the simulation as a receptance
     pole-residue model holding the hits' points), each cause also gets its held-out ``gain_db``,
     ``error_before_db``, ``error_after_db``, ``significant`` and ``counts`` from
-    :func:`analysis.diagnosis.timedata_gain.diagnose_time_effects` (re-simulated or hits excluded)."""
+    :func:`analysis.diagnosis.timedata_gain.diagnose_time_effects` (re-simulated or hits excluded), judged
+    by ``rule`` (the diagnosis' one :class:`~analysis.diagnosis.rule.DecisionRule`)."""
     from ..inputs import detect_format
     from .timedata import diagnose_hits
 
@@ -45,7 +48,7 @@ def time_data_causes(path: str | Path, band: tuple, base: ModalModel | None = No
         force = np.array([h.data[h.force_channel] for h in hits])
         resp = np.array([h.data[h.response_channels] for h in hits])
         flags = np.array([h.overload for h in hits])
-        gains = _time_gains(force, resp, fs, band, base, hits[0].outputs, ref, flags) if base is not None else {}
+        gains = _time_gains(force, resp, fs, band, base, hits[0].outputs, ref, flags, rule) if base is not None else {}
         for c in diagnose_hits(force, resp, fs, band, overload_flags=flags):
             c["reference"] = ref
             c.update(gains.get(c["effect"], {}))
@@ -54,7 +57,7 @@ def time_data_causes(path: str | Path, band: tuple, base: ModalModel | None = No
 
 
 def _time_gains(force: np.ndarray, resp: np.ndarray, fs: float, band: tuple, base: ModalModel,
-                outputs: Sequence[str], ref: str, flags: np.ndarray) -> dict:
+                outputs: Sequence[str], ref: str, flags: np.ndarray, rule: DecisionRule) -> dict:
     """Held-out gains of the time-data effects per effect name ({} when the simulation cannot be used)."""
     from dataclasses import replace
 
@@ -64,7 +67,8 @@ def _time_gains(force: np.ndarray, resp: np.ndarray, fs: float, band: tuple, bas
         oi = [list(base.outputs).index(o) for o in outputs]
         ri = list(base.references).index(ref)
         sub = replace(base, residues=base.residues[oi][:, [ri]], outputs=tuple(outputs), references=(ref,))
-        d = diagnose_time_effects(force, resp, fs, sub, band, overload_flags=flags, outputs=outputs, reference=ref)
+        d = diagnose_time_effects(force, resp, fs, sub, band, overload_flags=flags, outputs=outputs, reference=ref,
+                                  rule=rule)
     except (ValueError, IndexError) as exc:
         log.info("time-data gains of %s not measured: %s", ref, exc)
         return {}

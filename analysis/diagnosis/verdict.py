@@ -11,18 +11,21 @@ Rule (documented in ``docs/diagnosis.md``):
    simulation on held-out line/FRF ``i``. ``gain_db = 10 log10(mean before / mean after)``.
    A flexible effect that only fits noise cannot predict the other fold, so its held-out gain is
    about zero or negative.
-2. **Significance.** The paired differences ``d_i = before_i - after_i`` give
-   ``z = mean(d) / (std(d) / sqrt(N))``. An effect's gain is significant when
-   ``gain_db >= MIN_GAIN_DB`` (0.5 dB, an 11 % smaller held-out error) *and* either ``z >= Z_MIN`` (3)
-   or ``gain_db >= STRONG_GAIN_DB`` (3 dB: the held-out error halved; an effect that acts on a few
-   lines only, e.g. one missing mode, gives heavy-tailed ``d`` and a modest ``z`` although its gain
-   is tens of dB). Under noise alone the held-out gain is a few hundredths of a dB (measured in the
-   benchmark's null cases), far below both thresholds.
+2. **Significance** (:meth:`analysis.diagnosis.rule.DecisionRule.significant`; every threshold is a
+   field of the one :class:`~analysis.diagnosis.rule.DecisionRule`). The paired differences
+   ``d_i = before_i - after_i`` give ``z = mean(d) / (std(d) / sqrt(N))``. An effect's gain is
+   significant when ``gain_db >= min_gain_db`` (0.5 dB, an 11 % smaller held-out error) *and* either
+   ``z >= z_min`` (3) or ``gain_db >= strong_gain_db`` (3 dB: the held-out error halved; an effect that
+   acts on a few lines only, e.g. one missing mode, gives heavy-tailed ``d`` and a modest ``z`` although
+   its gain is tens of dB). Vetoes (named rules): a parameter at the edge of its physical range, a
+   resonator that gains little more than a mass, a mass or a stiffness the modes disfavour. Under noise
+   alone the held-out gain is a few hundredths of a dB (measured in the benchmark's null cases), far
+   below both thresholds.
 3. **Verdict.** The significant effect with the largest gain (a mass at every sensor and a stiffness
    change, both significant, are first held against each other mode by mode: :func:`_mass_or_stiffness`,
    :mod:`analysis.diagnosis.mode_vote`). With none significant: ``none`` when
    the typical error of the simulation (median over lines of ``w |e|^2`` / ln 2, robust to a few
-   antiresonance lines) is within ``NONE_MARGIN_DB`` (3 dB) of the noise level estimated from the
+   antiresonance lines) is within ``none_margin_db`` (3 dB) of the noise level estimated from the
    data by the same statistic of second differences along frequency (with coherence: the larger of
    that and the coherence estimate), else ``unexplained`` with the bands where the error stands above
    the noise.
@@ -31,7 +34,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -40,20 +43,17 @@ from ..frf import FRFSet
 from ..modal import ModalModel
 from ..progress import progress
 from ..threads import limits_blas_threads
-from .compare import band_errors, compare, line_folds, line_weights, noise_level, typical_error_db
+from .compare import band_errors, compare, held_out_errors, line_weights, noise_level, typical_error_db
+from .effect_types import applied, named, stage_entry
 from .effects import EFFECTS, EffectError, FitContext, predict
+from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
 
 if TYPE_CHECKING:
     from .physical import MeasuredModes, PhysicalSimulation
 
-__all__ = ["Diagnosis", "diagnose_frfs", "named_verdict", "Z_MIN", "MIN_GAIN_DB", "STRONG_GAIN_DB", "NONE_MARGIN_DB"]
+__all__ = ["Diagnosis", "diagnose_frfs", "named_verdict"]
 
 log = logging.getLogger(__name__)
-
-Z_MIN = 3.0
-MIN_GAIN_DB = 0.5
-STRONG_GAIN_DB = 3.0
-NONE_MARGIN_DB = 3.0
 
 
 @dataclass(frozen=True)
@@ -75,6 +75,9 @@ class Diagnosis:
     level_dependence : a recording's soft against hard hits and the ``joint_nonlinearity`` cause
         (:func:`analysis.diagnosis.joint_nonlinearity.level_dependence`), None without levels to compare.
     linear_verdict : the verdict of the FRF comparison when ``joint_nonlinearity`` replaced it, else None.
+    trace : the rules that decided, in the order they were applied, each ``{"rule", "cause", "values",
+        "outcome"}`` (:func:`analysis.diagnosis.rule.step`; the rules: :data:`analysis.diagnosis.rule.RULES`).
+    rule : the :class:`~analysis.diagnosis.rule.DecisionRule` the verdict was reached with.
     """
 
     verdict: str
@@ -97,12 +100,14 @@ class Diagnosis:
     time_data_verdict: str | None = None
     level_dependence: dict | None = None
     linear_verdict: str | None = None
+    trace: list = field(default_factory=list)
+    rule: DecisionRule = DEFAULT_RULE
 
     def to_json(self) -> dict:
         """The JSON document of ``python -m analysis diagnose``."""
         doc = {
             "verdict": self.verdict,
-            "named": [{"effect": c["effect"], "parameters": c["parameters"]} for c in self.named],
+            "named": [named(c) for c in self.named],
             "causes": [{k: c[k] for k in ("effect", "parameters", "gain_db", "evidence", "error_before_db",
                                           "error_after_db", "z", "significant")}
                        | {k: c[k] for k in ("kind", "adequate", "description", "advice") if k in c} for c in self.causes],
@@ -115,6 +120,8 @@ class Diagnosis:
             "reason": self.reason,
             "physical": _jsonable(self.physical),
             "comparison": _jsonable(self.comparison),
+            "trace": _jsonable(self.trace),
+            "rule": self.rule.as_dict(),
         }
         if self.next_measurement is not None:
             doc["next_measurement"] = _jsonable(self.next_measurement)
@@ -154,24 +161,11 @@ def _held_out(ctx: FitContext, name: str) -> tuple[np.ndarray, np.ndarray]:
     if own is not None:
         return own
     m = ctx.measured
-    before = ctx.weights * np.abs(m.H - ctx.sim.H) ** 2
-    after = np.empty_like(before)
-    for train, test in line_folds(m.freq_hz.size):
-        params = eff.fit(ctx, train)
-        Hx = predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **params}),
-                     outputs=m.outputs, references=m.references).H
-        after[..., test] = ctx.weights[..., test] * np.abs(m.H[..., test] - Hx[..., test]) ** 2
-    return before.ravel(), after.ravel()
 
-
-def _db(x: float) -> float:
-    return float(10 * np.log10(max(x, 1e-30)))
-
-
-def _z(before: np.ndarray, after: np.ndarray) -> float:
-    d = before - after
-    sd = float(np.std(d, ddof=1))
-    return float(np.mean(d) / (sd / np.sqrt(d.size))) if sd > 0 else 0.0
+    def fitted_on(train: np.ndarray) -> np.ndarray:
+        return predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **eff.fit(ctx, train)}),
+                       outputs=m.outputs, references=m.references).H
+    return held_out_errors(m.H, ctx.sim.H, ctx.weights, fitted_on)
 
 
 def _evidence(name: str, params: dict, before_db: float, after_db: float, z: float, band_gain: list) -> str:
@@ -182,8 +176,12 @@ def _evidence(name: str, params: dict, before_db: float, after_db: float, z: flo
     return (f"{name} ({ps}): held-out error {before_db:.1f} -> {after_db:.1f} dB, z = {z:.1f}{where}")
 
 
-def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: float) -> tuple[list, dict]:
-    """Fit every effect in ``names`` on top of ``ctx.prior`` with cross-validation; causes sorted by gain."""
+def _stage(ctx: FitContext, names: Sequence[str], rule: DecisionRule, trace: list,
+           min_gain_db: float | None = None) -> tuple[list, dict]:
+    """Fit every effect in ``names`` on top of ``ctx.prior`` with cross-validation; causes sorted by gain.
+    Each effect's significance (``rule``; ``min_gain_db``: another gain floor than ``rule.min_gain_db``, e.g.
+    on top of a named physical cause) and its vetoes are appended to ``trace``."""
+    floor = rule.min_gain_db if min_gain_db is None else min_gain_db
     m, w = ctx.measured, ctx.weights
     causes, skipped = [], {}
     for i, name in enumerate(names, start=1):
@@ -200,9 +198,9 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
             skipped[name] = f"fit failed: {exc}"
             log.info("effect %s skipped: %s", name, exc)
             continue
-        b_db, a_db = _db(float(np.mean(before))), _db(float(np.mean(after)))
+        b_db, a_db = db(float(np.mean(before))), db(float(np.mean(after)))
         gain = b_db - a_db
-        z = _z(before, after)
+        z = paired_z(before, after)
         ext = predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **params}),
                       outputs=m.outputs, references=m.references)
         bb = band_errors(m, ctx.sim.H, w)
@@ -210,36 +208,48 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
         band_gain = [(x["lo_hz"], x["hi_hz"], x["error_db"] - y["error_db"]) for x, y in zip(bb, ba)]
         causes.append({
             "effect": name, "parameters": params, "gain_db": gain, "error_before_db": b_db,
-            "error_after_db": a_db, "z": z, "significant": bool(gain >= min_gain_db and (z >= z_min or gain >= STRONG_GAIN_DB)),
+            "error_after_db": a_db, "z": z,
+            "significant": replace(rule, min_gain_db=floor).significant(gain, z),
             "evidence": _evidence(name, params, b_db, a_db, z, band_gain), "_extended": ext,
             "_held_out_after": after,
         })
-        edge = _at_range_edge(name, params, (float(m.freq_hz[0]), float(m.freq_hz[-1])))
+        trace.append(step("significance", name, {"gain_db": gain, "z": z, "min_gain_db": floor, "z_min": rule.z_min,
+                                                 "strong_gain_db": rule.strong_gain_db},
+                          "significant" if causes[-1]["significant"] else "not significant"))
+        edge = eff.at_range_edge(params, (float(m.freq_hz[0]), float(m.freq_hz[-1])))
         if edge and causes[-1]["significant"]:
             causes[-1]["significant"] = False
             causes[-1]["evidence"] += f"; {edge} at the edge of its physical range"
-    _resonator_beyond_mass(causes)
+            trace.append(step("range_edge", name, {"parameter": edge}, "vetoed: not significant"))
+    _resonator_beyond_mass(causes, rule, trace)
     causes.sort(key=lambda c: c["gain_db"], reverse=True)
     return causes, skipped
 
 
-def _resonator_beyond_mass(causes: list) -> None:
+def _resonator_beyond_mass(causes: list, rule: DecisionRule = DEFAULT_RULE, trace: list | None = None) -> None:
     """A spring-mass tuned high acts in the band as a mass at its point: ``mass_loading`` is the
     ``local_resonator``'s stiff limit, and the resonator's own frequency and free coupling can also stand in
     for what a mass model leaves (modes just above the band it moves). With both significant the resonator
-    counts only when it gains :data:`STRONG_GAIN_DB` more than the mass (the error the mass leaves halved)."""
+    counts only when it gains ``rule.resonator_over_mass_db`` more than the mass (the error the mass leaves
+    halved); the veto is appended to ``trace``."""
     by = {c["effect"]: c for c in causes}
     res, mass = by.get("local_resonator"), by.get("mass_loading")
     if res is None or mass is None or not (res["significant"] and mass["significant"]):
         return
     more = res["gain_db"] - mass["gain_db"]
-    if more < STRONG_GAIN_DB:
+    vetoed = more < rule.resonator_over_mass_db
+    if trace is not None:
+        trace.append(step("resonator_beyond_mass", "local_resonator",
+                          {"gain_over_mass_db": more, "resonator_over_mass_db": rule.resonator_over_mass_db},
+                          "vetoed: not significant" if vetoed else "kept"))
+    if vetoed:
         res["significant"] = False
         res["evidence"] += (f"; {more:.1f} dB more than a mass at a sensor (its stiff limit), less than "
-                            f"{STRONG_GAIN_DB:g} dB")
+                            f"{rule.resonator_over_mass_db:g} dB")
 
 
-def _mass_or_stiffness(causes: list, ctx: FitContext, noise_db: float) -> None:
+def _mass_or_stiffness(causes: list, ctx: FitContext, noise_db: float, rule: DecisionRule = DEFAULT_RULE,
+                       trace: list | None = None) -> None:
     """With both a mass at every sensor and a stiffness change significant, the one the modes name: each
     scored mode by mode on its held-out errors where the two predictions differ beyond the noise
     (:func:`analysis.diagnosis.mode_vote.mode_vote`); the one with the larger gain stays the verdict
@@ -258,40 +268,29 @@ def _mass_or_stiffness(causes: list, ctx: FitContext, noise_db: float) -> None:
         return
     vote = mode_vote(m.freq_hz, ctx.base.freq_hz, st["_held_out_after"].reshape(m.H.shape),
                      ma["_held_out_after"].reshape(m.H.shape), st["_extended"].H, ma["_extended"].H,
-                     ctx.weights, noise_db)
+                     ctx.weights, noise_db, z=rule.separation_z)
     count = {"stiffness_shift": vote["a"], "mass_loading": vote["b"]}
     first, second = (st, ma) if st["gain_db"] >= ma["gain_db"] else (ma, st)
     said = (f"mode by mode, of {vote['separable']} modes that separate a mass at every sensor from a stiffness "
             f"change, {count['mass_loading']} favour the mass and {count['stiffness_shift']} the stiffness")
     for c in (st, ma):
         c["evidence"] += f"; {said}"
-    if count[second["effect"]] > count[first["effect"]]:
+    vetoed = count[second["effect"]] > count[first["effect"]]
+    if trace is not None:
+        trace.append(step("mass_or_stiffness", first["effect"],
+                          {"separable_modes": vote["separable"], "favour_mass": count["mass_loading"],
+                           "favour_stiffness": count["stiffness_shift"], "separation_z": rule.separation_z},
+                          "vetoed: not significant" if vetoed else "kept"))
+    if vetoed:
         first["significant"] = False
 
 
 def _at_range_edge(name: str, params: dict, band_hz: tuple[float, float] | None = None) -> str:
-    """The parameter of an FRF-level fit that stopped at the edge of its physical range ("" if none): a
-    calibration off by :data:`~analysis.diagnosis.frf_effects.MAX_GAIN_ERROR` or more, damping scaled
-    by 10 or 1/10, a local resonator's own frequency at an end of the band ``band_hz`` (Hz; its own mode
-    is its evidence). The data then want more than the effect can physically be, as with the physical
-    causes: such a fit is not evidence of that effect (a simulation far off elsewhere is)."""
-    from .effects import RESONATOR_BEYOND_BAND
-    from .frf_effects import MAX_GAIN_ERROR
-
-    if name == "sensitivity_error":
-        g = np.abs(np.asarray(list(params.get("gains", {}).values()), float))
-        if g.size and (np.any(g >= MAX_GAIN_ERROR * (1 - 1e-9)) or np.any(g <= (1 + 1e-9) / MAX_GAIN_ERROR)):
-            return "a channel's gain"
-    if name == "damping_change":
-        c = float(params.get("factor", 1.0))
-        if c >= 10.0 * (1 - 1e-3) or c <= 0.1 * (1 + 1e-3):
-            return "the damping factor"
-    if name == "local_resonator" and band_hz is not None:
-        fa = float(params.get("frequency_hz", 0.0))
-        lo, hi = band_hz[0] / RESONATOR_BEYOND_BAND, band_hz[1] * RESONATOR_BEYOND_BAND
-        if fa >= hi * (1 - 1e-3) or fa <= lo * (1 + 1e-3):
-            return "the resonator's own frequency"
-    return ""
+    """The parameter of an FRF-level fit that stopped at the edge of its physical range ("" if none), from
+    the effect's row (:attr:`analysis.diagnosis.effect_types.Effect.ranges`; ``band_hz``: the analysed band,
+    Hz, for ranges relative to it). The data then want more than the effect can physically be, as with the
+    physical causes: such a fit is not evidence of that effect (a simulation far off elsewhere is)."""
+    return EFFECTS[name].at_range_edge(params, band_hz)
 
 
 def _missing_needs(name: str, missing: Sequence[str], ctx: FitContext) -> str:
@@ -313,16 +312,15 @@ def _missing_needs(name: str, missing: Sequence[str], ctx: FitContext) -> str:
             f"as FRFs with the driving point {' or '.join(refs)} measured")
 
 
-def _frf_on_top(ctx: FitContext, physical: PhysicalSimulation, outcome: Any, names: Sequence[str], z_min: float,
-                min_gain_db: float, noise_db: float, none_margin_db: float) -> tuple[list, FRFSet] | None:
+def _frf_on_top(ctx: FitContext, physical: PhysicalSimulation, outcome: Any, names: Sequence[str],
+                min_gain_db: float, noise_db: float, rule: DecisionRule, trace: list) -> tuple[list, FRFSet] | None:
     """A physical cause that explains the modes but leaves the FRFs above the noise, completed by one
     FRF-level effect (a damping change, a sensor): the catalogue fitted on top of the physical cause's
     model with the same cross-validation and rule (held-out gain at least ``min_gain_db``) on the lines up
     to where the physical cause's modes were compared with the measured ones
     (:func:`analysis.diagnosis.physical_verdict.compared_band_hz`); named as a pair when the pair is
-    adequate on every line (the FRF error within ``none_margin_db`` of the noise or
-    ``ADEQUATE_FRACTION`` of its excess removed). None otherwise."""
-    from .physical import ADEQUATE_FRACTION
+    adequate on every line (the FRF error within ``rule.none_margin_db`` of the noise or
+    ``rule.adequate_fraction`` of its excess removed). None otherwise. The rules applied go to ``trace``."""
     from .physical_verdict import compared_band_hz
 
     first = outcome.on_top
@@ -334,23 +332,26 @@ def _frf_on_top(ctx: FitContext, physical: PhysicalSimulation, outcome: Any, nam
     lines = m.freq_hz <= hi
     ctx2 = FitContext(measured=m.band(float(m.freq_hz[0]), hi), base=base, weights=w[..., lines],
                       sim=first["_extended"].band(float(m.freq_hz[0]), hi), prior=ctx.prior)
-    more, _ = _stage(ctx2, names, z_min, min_gain_db)
+    more, _ = _stage(ctx2, names, rule, trace, min_gain_db)
     sig = [c for c in more if c["significant"] and c["gain_db"] >= min_gain_db]
     if not sig:
+        trace.append(step("on_top", first["effect"], {"min_gain_db": min_gain_db}, "no FRF-level effect significant"))
         return None
     nxt = sig[0]
-    nxt["_extended"] = predict(base, m.freq_hz, m.quantity, ctx.effects({"effect": nxt["effect"], **nxt["parameters"]}),
+    nxt["_extended"] = predict(base, m.freq_hz, m.quantity, ctx.effects(applied(nxt)),
                                outputs=m.outputs, references=m.references)
     after = typical_error_db(m, nxt["_extended"].H, w)
     before = outcome.error_before_db
     excess = 10 ** (before / 10) - 10 ** (noise_db / 10)
     removed = (10 ** (before / 10) - 10 ** (after / 10)) / excess if excess > 0 else 0.0
-    if not (after - noise_db <= none_margin_db or removed >= ADEQUATE_FRACTION):
+    adequate = rule.explained(after, noise_db) or removed >= rule.adequate_fraction
+    trace.append(step("on_top", f"{first['effect']}+{nxt['effect']}",
+                      {"error_after_db": after, "noise_db": noise_db, "none_margin_db": rule.none_margin_db,
+                       "removed": removed, "adequate_fraction": rule.adequate_fraction},
+                      "named as a pair" if adequate else "not adequate"))
+    if not adequate:
         return None
-    combined = [{"effect": first["effect"], "parameters": first["parameters"], "gain_db": first["gain_db"],
-                 "error_after_db": first["error_after_db"]},
-                {"effect": nxt["effect"], "parameters": nxt["parameters"], "gain_db": nxt["gain_db"],
-                 "error_after_db": after}]
+    combined = [stage_entry(first), stage_entry(nxt, after)]
     return combined, nxt["_extended"]
 
 
@@ -367,7 +368,7 @@ def _other_structure(comparison: dict) -> str:
     return ""
 
 
-def _below_model_form(causes: list) -> None:
+def _below_model_form(causes: list, trace: list) -> None:
     """With the FE model as simulation, a frequency scaling smaller than the model form's accuracy
     (:data:`analysis.diagnosis.physical.FREQ_FLOOR`) is not evidence of a change: not significant."""
     from .physical import FREQ_FLOOR
@@ -376,6 +377,8 @@ def _below_model_form(causes: list) -> None:
         if c["effect"] == "stiffness_shift" and c["significant"] and abs(float(c["parameters"]["factor"]) - 1) < FREQ_FLOOR:
             c["significant"] = False
             c["evidence"] += f"; a frequency change below the model's accuracy ({100 * FREQ_FLOOR:.1f} %)"
+            trace.append(step("below_model_form", c["effect"], {"factor": c["parameters"]["factor"],
+                                                                "freq_floor": FREQ_FLOOR}, "vetoed: not significant"))
 
 
 def known_processing(measured: FRFSet) -> tuple:
@@ -401,10 +404,7 @@ def diagnose_frfs(
     physical: PhysicalSimulation | None = None,
     measured_modes: MeasuredModes | None = None,
     extra_noise_db: dict | None = None,
-    z_min: float = Z_MIN,
-    min_gain_db: float = MIN_GAIN_DB,
-    none_margin_db: float = NONE_MARGIN_DB,
-    max_stages: int = 3,
+    rule: DecisionRule = DEFAULT_RULE,
 ) -> Diagnosis:
     """Compare ``measured`` with the simulation ``base`` (a :class:`ModalModel` at the measured points,
     any quantity), fit every catalogue effect with cross-validation and give the verdict (module
@@ -421,9 +421,12 @@ def diagnose_frfs(
     ``extra_noise_db``: further noise estimates (dB, same scale), e.g. ``{"hits": ...}`` from the scatter
     of a recording's hits (:func:`analysis.diagnosis.hit_noise.hit_scatter_noise_db`); the largest counts.
 
+    ``rule``: the decision rule (:class:`analysis.diagnosis.rule.DecisionRule`), the same for every stage;
+    the rules applied are listed in ``Diagnosis.trace`` in the order they decided.
+
     Further stages: while the extended model still leaves the typical error more than
-    ``none_margin_db`` above the noise, the remaining effects are fitted on top of the accepted ones
-    (up to ``max_stages`` effects in all); each accepted effect is listed in ``Diagnosis.combined``
+    ``rule.none_margin_db`` above the noise, the remaining effects are fitted on top of the accepted ones
+    (up to ``rule.max_stages`` effects in all); each accepted effect is listed in ``Diagnosis.combined``
     with its own held-out gain. The verdict and ``Diagnosis.named`` are the first stage's (the largest
     single cause). Two causes are named (verdict ``"combined"``) by the physical stage: two physical
     causes, or a physical cause that explains the modes completed by an FRF-level effect.
@@ -456,11 +459,18 @@ def diagnose_frfs(
             noise["model_form"] = noise_db + allowance
             noise_db = noise["model_form"]
     comparison = compare(measured, sim, w)
-    common: dict[str, Any] = dict(noise_db=noise, comparison=comparison, measured=measured, simulated=sim)
+    trace: list = []
+    common: dict[str, Any] = dict(noise_db=noise, comparison=comparison, measured=measured, simulated=sim,
+                                  trace=trace, rule=rule)
     phys_doc: dict = {}
     partial_reason = ""
     if physical is None:
         other = _other_structure(comparison)
+        modes = comparison.get("modes") or {}
+        trace.append(step("same_structure", None, {"paired_peaks": len(modes.get("pairs", [])),
+                                                   "measured_peaks": len(modes.get("pairs", []))
+                                                   + len(modes.get("only_measured", []))},
+                          "unexplained: not the same structure" if other else "same structure"))
         if other:
             return Diagnosis(verdict="unexplained", causes=[], error_before_db=comparison["error_db"],
                              error_after_db=comparison["error_db"], unexplained=[], extended=sim, reason=other,
@@ -468,71 +478,83 @@ def diagnose_frfs(
     if physical is not None:
         from .physical_verdict import physical_verdict
 
-        outcome = physical_verdict(measured, physical, prior, w, noise_db, none_margin_db, measured_modes,
-                                   causes=effects)
+        outcome = physical_verdict(measured, physical, prior, w, noise_db, measured_modes, causes=effects, rule=rule)
         phys_doc = outcome.doc
+        trace.extend(outcome.trace)
         if outcome.on_top is not None:
             # on top of a cause already named alone, a second must gain as much as a physical cause must
             # (not missing_mode: with an FE model a mode the model lacks shows in the pairing; on top of a
             # physical cause an extra mode only patches a mode the cause misplaces)
-            top = _frf_on_top(ctx, physical, outcome,
-                              [n for n in names if n not in ("stiffness_shift", "mass_loading", "missing_mode")],
-                              z_min, STRONG_GAIN_DB if outcome.named else min_gain_db, noise_db, none_margin_db)
+            top = _frf_on_top(ctx, physical, outcome, [n for n in names if EFFECTS[n].on_top_of_physical],
+                              rule.physical_min_gain_db if outcome.named else rule.min_gain_db, noise_db, rule, trace)
             if top is not None:
                 combined, ext = top
                 return Diagnosis(verdict="combined", causes=outcome.causes, error_before_db=outcome.error_before_db,
                                  error_after_db=combined[-1]["error_after_db"],
                                  unexplained=[b for b in band_errors(measured, ext.H, w)
-                                              if b["error_db"] - noise_db > none_margin_db],
+                                              if not rule.explained(b["error_db"], noise_db)],
                                  extended=ext, combined=combined, physical=phys_doc,
-                                 named=[{"effect": c["effect"], "parameters": c["parameters"]} for c in combined],
+                                 named=[named(c) for c in combined],
                                  **common)
         if outcome.decided and outcome.extended is not None:
             return Diagnosis(verdict=outcome.verdict, causes=outcome.causes, error_before_db=outcome.error_before_db,
                              error_after_db=outcome.error_after_db,
                              unexplained=[b for b in band_errors(measured, outcome.extended.H, w)
-                                          if b["error_db"] - noise_db > none_margin_db],
+                                          if not rule.explained(b["error_db"], noise_db)],
                              extended=outcome.extended, combined=outcome.combined, reason=outcome.reason,
                              physical=phys_doc, named=outcome.named, next_measurement=outcome.next_measurement,
                              **common)
         partial_reason = outcome.reason
-        names = [n for n in names if n != "mass_loading"]     # the physical cause of that name covers it
+        # the physical cause of that name covers it
+        names = [n for n in names if EFFECTS[n].covered_by_physical != "always"]
         if outcome.causes:
             # fitted, none named: listed with the physical stage, on its own (mode-level) gain scale, and
             # their FRF-level versions are not tried again
             phys_doc = {**phys_doc, "causes": outcome.causes}
-            names = [n for n in names if n not in ("stiffness_shift", "mass_loading")]
-    causes, skipped = _stage(ctx, names, z_min, min_gain_db)
-    _mass_or_stiffness(causes, ctx, noise_db)
+            names = [n for n in names if not EFFECTS[n].covered_by_physical]
+    causes, skipped = _stage(ctx, names, rule, trace)
+    _mass_or_stiffness(causes, ctx, noise_db, rule, trace)
     if physical is not None:
-        _below_model_form(causes)
+        _below_model_form(causes, trace)
     error_before = causes[0]["error_before_db"] if causes else comparison["error_db"]
     sig = [c for c in causes if c["significant"]]
     combined = []
     if sig:
         best = sig[0]
         verdict, extended, after_db = best["effect"], best["_extended"], best["error_after_db"]
-        accepted = [*prior, {"effect": best["effect"], **best["parameters"]}]
-        combined.append({"effect": best["effect"], "parameters": best["parameters"], "gain_db": best["gain_db"],
-                         "error_after_db": after_db})
+        accepted = [*prior, applied(best)]
+        combined.append(stage_entry(best))
+        trace.append(step("largest_gain", best["effect"], {"gain_db": best["gain_db"], "significant": len(sig)},
+                          f"verdict {verdict}"))
         left = [n for n in names if n != best["effect"]]
-        while (len(combined) < max_stages and left
-               and typical_error_db(measured, extended.H, w) - noise_db > none_margin_db):
+        while len(combined) < rule.max_stages and left:
+            typical = typical_error_db(measured, extended.H, w)
+            if rule.explained(typical, noise_db):
+                trace.append(step("further_stage", None, {"error_db": typical, "noise_db": noise_db,
+                                                          "none_margin_db": rule.none_margin_db},
+                                  "explained: no further stage"))
+                break
             ctx2 = FitContext(measured=measured, base=base, weights=w, sim=extended, prior=tuple(accepted))
-            more, _ = _stage(ctx2, left, z_min, min_gain_db)
+            more, _ = _stage(ctx2, left, rule, trace)
             more = [c for c in more if c["significant"]]
+            trace.append(step("further_stage", more[0]["effect"] if more else None,
+                              {"error_db": typical, "noise_db": noise_db, "none_margin_db": rule.none_margin_db,
+                               "stage": len(combined) + 1},
+                              "accepted on top (listed, not named)" if more else "no further effect significant"))
             if not more:
                 break
             nxt = more[0]
-            accepted.append({"effect": nxt["effect"], **nxt["parameters"]})
+            accepted.append(applied(nxt))
             extended, after_db = nxt["_extended"], nxt["error_after_db"]
-            combined.append({"effect": nxt["effect"], "parameters": nxt["parameters"], "gain_db": nxt["gain_db"],
-                             "error_after_db": after_db})
+            combined.append(stage_entry(nxt))
             left.remove(nxt["effect"])
     else:
         extended, after_db = sim, error_before
-        verdict = "none" if typical_error_db(measured, sim.H, w) - noise_db <= none_margin_db else "unexplained"
-    unexplained = [b for b in band_errors(measured, extended.H, w) if b["error_db"] - noise_db > none_margin_db]
+        typical = typical_error_db(measured, sim.H, w)
+        verdict = "none" if rule.explained(typical, noise_db) else "unexplained"
+        trace.append(step("none_margin", None, {"error_db": typical, "noise_db": noise_db,
+                                                "none_margin_db": rule.none_margin_db}, f"verdict {verdict}"))
+    unexplained = [b for b in band_errors(measured, extended.H, w) if not rule.explained(b["error_db"], noise_db)]
     for c in causes:
         c.pop("_extended")
         c.pop("_held_out_after", None)
@@ -544,7 +566,6 @@ def diagnose_frfs(
         reason = f"{reason}; " if reason else ""
         reason += skipped["mass_loading"]
     # the FRF-level further stages are listed (``combined``) but not named: only the first is
-    named = [{"effect": c["effect"], "parameters": c["parameters"]} for c in combined[:1]]
     return Diagnosis(verdict=verdict, causes=causes, error_before_db=error_before, error_after_db=after_db,
                      unexplained=unexplained, extended=extended, skipped=skipped, combined=combined,
-                     reason=reason, physical=phys_doc, named=named, **common)
+                     reason=reason, physical=phys_doc, named=[named(c) for c in combined[:1]], **common)

@@ -215,6 +215,16 @@ def _noise(x: Any) -> str:
     return f"{_num(x, '{:.1f}')} dB"
 
 
+def _why_html(trace: Any) -> str:
+    """"Why this verdict": the diagnosis' trace, the rules that decided in order ("" without one)."""
+    from ..diagnosis.rule import why_lines
+
+    if not trace:
+        return ""
+    items = "".join(f"<li>{escape(line)}</li>" for line in why_lines(trace))
+    return f"<h3>Why this verdict</h3><ol id='diagnosis-why'>{items}</ol>"
+
+
 def _diagnosis_html(diag: dict | None) -> str:
     if diag is None:
         return ""
@@ -233,6 +243,7 @@ def _diagnosis_html(diag: dict | None) -> str:
                    ("error after", f"{_num(diag.get('error_after_db'), '{:.1f}')} dB"),
                    ("noise floor", _noise(diag.get("noise_db")))]
                   + ([("time data", escape(str(diag["time_data_verdict"])))] if "time_data_verdict" in diag else []))
+            + _why_html(diag.get("trace"))
             + "<h3>Causes</h3>"
             + _table(["cause", "gain [dB]", "error before [dB]", "error after [dB]", "significant", "evidence"], rows,
                      " id='causes'")

@@ -2,9 +2,9 @@
 
 Each case: random band (lower edge 1-5 Hz, upper 150-400 Hz), line spacing 0.125 or 0.25 Hz, noise
 0.5-2 % relative (plus a 1e-3 floor), one effect of the catalogue with random physical parameters
-(``simulator.effects.draw_effect``) or none. The diagnosis runs blind; the table gives the confusion
+(``simulator.effect_oracle.draw_effect``) or none. The diagnosis runs blind; the table gives the confusion
 matrix, accuracy per effect, the false-alarm rate on null cases, the primary-parameter errors against
-``simulator.effects.TOLERANCES`` and the time per case.
+``simulator.effect_oracle.TOLERANCES`` and the time per case.
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/accuracy/bench_diagnosis.py [--per-effect 22] [--null 50]
 
@@ -27,7 +27,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from analysis.diagnosis import EFFECTS, diagnose  # noqa: E402
-from simulator.effects import TOLERANCES, add_frf_noise, base_model, draw_effect, primary_error, simulate_with_effects  # noqa: E402
+from simulator.effect_oracle import TOLERANCES, draw_effect, primary_error  # noqa: E402
+from simulator.effects import add_frf_noise, base_model, simulate_with_effects  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, for benchmarks.results
 from benchmarks.results import add_write_option, recorded  # noqa: E402
@@ -113,12 +114,13 @@ def table(rows: list[dict]) -> str:
 def run_timedata(per_effect: int, seed: int) -> list[dict]:
     """Blind time-data cases (module docstring)."""
     from analysis.diagnosis.timedata_gain import diagnose_time_effects
+    from simulator.effect_oracle import TIME_ORACLE, draw_time_effect, time_primary_error
     from simulator.stand import TestStand
-    from simulator.time_effects import TIME_EFFECTS, draw_time_effect, simulate_hits, time_primary_error
+    from simulator.time_effects import simulate_hits
 
     stand = TestStand(seed=seed)
     rng = np.random.default_rng(seed)
-    cases = [n for n in TIME_EFFECTS for _ in range(per_effect)] + ["null"] * per_effect
+    cases = [n for n in TIME_ORACLE for _ in range(per_effect)] + ["null"] * per_effect
     rng.shuffle(cases)
     rows = []
     for i, name in enumerate(cases):
@@ -142,9 +144,9 @@ def run_timedata(per_effect: int, seed: int) -> list[dict]:
 
 
 def table_timedata(rows: list[dict]) -> str:
-    from simulator.time_effects import TIME_EFFECTS, TIME_TOLERANCES
+    from simulator.effect_oracle import TIME_ORACLE, TIME_TOLERANCES
 
-    truths = list(TIME_EFFECTS) + ["none"]
+    truths = list(TIME_ORACLE) + ["none"]
     L = [f"{'effect':24s}{'cases':>6s}{'named':>7s}{'tol':>7s}{'in tol':>7s}{'med err':>10s}{'max err':>10s}"
          f"{'gain min':>9s}{'gain med':>9s}{'t sim':>7s}{'t diag':>7s}"]
     for t in truths:
