@@ -27,7 +27,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..modal import ModalModel
-from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals
+from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals, variants
 
 __all__ = ["OnTop", "PairFit", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose", "with_options"]
 
@@ -195,16 +195,28 @@ def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: Phy
     (``first`` at each option, ``second``) refined together on all modes (every continuous parameter of
     both; no cross-validation). A first cause fitted alone absorbs the second change where it can (a
     mass grown at the wrong node for softer supports), so the second cause applied on top of it explains
-    nothing; at the right option both are refined to the data. Returns ``first`` at the best option and
-    ``second``, both with the refined parameters, and the pair's chi2 there."""
+    nothing; at the right option both are refined to the data. The parameters ``first`` set free were chosen
+    at its own option; at another option it is also refined with all of them free (its largest variant): a
+    support's rotational springs alone stood in for the supports at once, while the loose support elsewhere
+    needs both. Returns ``first`` at the best option (with the parameters set free there) and ``second``,
+    both with the refined parameters, and the pair's chi2 there."""
     best: tuple[PhysicalFit, PhysicalFit, float] = (first, second, np.inf)
     spec = besides(specs[0], [(second.cause, second.params)])
+    widest = max((v for v in variants(specs[0]) if set(first.free) <= set(v)), key=len, default=first.free)
+    own = first.params.get(specs[0].choice) if specs[0].choice else None
     for _, _, params in first.ranked or [(first.chi2, None, first.params)]:
         if spec is None or (spec.choice is not None and params.get(spec.choice) not in spec.options):
             continue                     # the second change's own place: one change, not two
-        a = PhysicalFit(cause=first.cause, params=dict(params), free=first.free, chi2=np.inf)
-        two = fit_pair(sim, specs, [a, second], mm, fmax, folds=False)
-        if two.chi2 < best[2]:
-            best = (PhysicalFit(cause=first.cause, params=two.params[0], free=first.free, chi2=two.chi2),
-                    PhysicalFit(cause=second.cause, params=two.params[1], free=second.free, chi2=two.chi2), two.chi2)
+        elsewhere = own is not None and params.get(specs[0].choice) != own
+        for free in dict.fromkeys([first.free, widest] if elsewhere else [first.free]):
+            start = dict(params)
+            if free != first.free:       # its start at that option with every parameter free, the second applied
+                start, _, _ = fit_cause(OnTop(sim, [(second.cause, second.params)]), specs[0], free, mm,
+                                        np.ones(mm.freq_hz.size, bool), fmax, options=[params[specs[0].choice]])
+            a = PhysicalFit(cause=first.cause, params=start, free=free, chi2=np.inf)
+            two = fit_pair(sim, specs, [a, second], mm, fmax, folds=False)
+            if two.chi2 < best[2]:
+                best = (PhysicalFit(cause=first.cause, params=two.params[0], free=free, chi2=two.chi2),
+                        PhysicalFit(cause=second.cause, params=two.params[1], free=second.free, chi2=two.chi2),
+                        two.chi2)
     return best
