@@ -357,11 +357,20 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
     outs, refs = common_points(measured, base)
     measured = measured.select(outs, refs)
     noise = dict(extra_noise_db or {})
-    if recording is not None and "hits" not in noise:
+    stray = None
+    if recording is not None:
         from .compare import line_weights
+        from .stray_hits import without_stray_hits
+
+        # a hit that measured another FRF than the others of its point (struck elsewhere) is left out
+        stray = without_stray_hits(recording, measured, line_weights(measured))
+        if stray is not None:
+            measured = stray.measured
+    if recording is not None and "hits" not in noise:
         from .hit_noise import hit_scatter_noise_db
 
-        noise["hits"] = hit_scatter_noise_db(recording, measured, line_weights(measured))
+        skip = {i for d in stray.dropped for i in d["hits"]} if stray is not None else set()
+        noise["hits"] = hit_scatter_noise_db(recording, measured, line_weights(measured), skip=skip)
     if sim_frfs is not None:
         both = noise_with_simulated_frfs(measured, sim_frfs, noise)
         if both is not None:
@@ -373,7 +382,12 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
     if recording is None:
         return diag
     band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
-    return _level_stage(_time_data_stage(diag, recording, band_hz, base), recording, band_hz, joint_simulation)
+    diag = _time_data_stage(diag, recording, band_hz, base)
+    if stray is not None:
+        diag = replace(diag, time_data=[stray.cause(), *diag.time_data],
+                       time_data_verdict=diag.time_data_verdict if diag.time_data_verdict not in (None, "none")
+                       else "stray_hit")
+    return _level_stage(diag, recording, band_hz, joint_simulation)
 
 
 def _measured_modes_in(measured: FRFSet, band: tuple[float, float]) -> Any:

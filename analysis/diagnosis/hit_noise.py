@@ -10,6 +10,7 @@ everything that varies from hit to hit (sensor noise, strike position and direct
 from __future__ import annotations
 
 import logging
+from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
@@ -24,16 +25,20 @@ __all__ = ["hit_scatter_noise_db"]
 log = logging.getLogger(__name__)
 
 
-def hit_scatter_noise_db(path: str | Path, measured: FRFSet, weights: np.ndarray) -> float | None:
+def hit_scatter_noise_db(path: str | Path, measured: FRFSet, weights: np.ndarray,
+                         skip: Collection[int] = ()) -> float | None:
     """Noise level (dB) of ``measured`` (FRFs of the recording ``path``, in its band and point order)
-    from the scatter of the recording's accepted hits; None when a point has fewer than two hits or the
-    hits cannot be matched to the FRFs."""
+    from the scatter of the recording's accepted hits but those whose index is in ``skip`` (hits the
+    FRFs were made without); None when a point has fewer than two hits or the hits cannot be matched
+    to the FRFs."""
     try:
         with Recording(path) as rec:
             windows = rec.windows
             pre = int(rec.setup["trigger"]["pretrigger_samples"])
             per_ref: dict = {}
             for h in rec.hits(accepted_only=True, skip_damaged=True):
+                if h.index in skip:
+                    continue
                 sp = hit_spectra(h.data[h.force_channel], h.data[h.response_channels], h.sample_rate_hz, pre, windows)
                 per_ref.setdefault(h.reference, []).append((tuple(h.outputs), sp.freq_hz, sp.Gfx / sp.Gff))
     except (OSError, KeyError, TypeError, ValueError) as exc:

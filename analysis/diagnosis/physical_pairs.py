@@ -11,6 +11,9 @@ it is made again with the second cause applied (:func:`refit_on_top`) before the
 both choices once more where both causes are refined (:func:`rechoose`). A first cause that absorbed the
 second change (a mass grown at the wrong node for softer supports) is refined with the second from each
 of the options its own fit ranked (:func:`with_options`).
+A cause with a choice may be the second cause of its own kind at another place (two loose supports, two
+soft joints, two cracks): the second change of it searches only the options the first does not hold
+(:func:`besides`).
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
 held-out modes better than the first cause alone by at least ``physical_min_gain_db`` and removes at least
 ``quiet_chi2`` of their chi2 (:func:`analysis.diagnosis.physical_verdict._on_top_enough`).
@@ -18,15 +21,15 @@ held-out modes better than the first cause alone by at least ``physical_min_gain
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..modal import ModalModel
-from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals
+from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals, variants
 
-__all__ = ["OnTop", "PairFit", "fit_pair", "changes_of", "refit_on_top", "rechoose", "with_options"]
+__all__ = ["OnTop", "PairFit", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose", "with_options"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -35,16 +38,31 @@ def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], 
     return sim.modes_of(list(changes), fmax)
 
 
+def besides(spec: CauseSpec, taken: Sequence[tuple[str, Mapping]]) -> CauseSpec | None:
+    """``spec`` as a further change beside the changes ``taken`` ((cause, params) pairs): itself when none of
+    them is this cause; with a choice, the same cause at the options none of them holds (a second loose
+    support is another support); None when nothing is left (a cause without a choice, or every option
+    taken: a further change of it would only refine the first)."""
+    held = [p for c, p in taken if c == spec.name]
+    if not held:
+        return spec
+    if spec.choice is None:
+        return None
+    used = {str(p.get(spec.choice)) for p in held}
+    options = tuple(o for o in spec.options if str(o) not in used)
+    return replace(spec, options=options) if options else None
+
+
 class OnTop:
-    """The simulation ``sim`` with the changes ``first`` applied: every cause is fitted on top of them."""
+    """The simulation ``sim`` with the changes ``first`` applied: every cause is fitted on top of them (a
+    cause already among them only at its other options, :func:`besides`)."""
 
     def __init__(self, sim: PhysicalSimulation, first: Sequence[tuple[str, Mapping]]) -> None:
         self.sim = sim
         self.first = [(c, dict(p)) for c, p in first]
 
     def causes(self) -> Sequence[CauseSpec]:
-        taken = {c for c, _ in self.first}
-        return [c for c in self.sim.causes() if c.name not in taken]
+        return [s for s in (besides(c, self.first) for c in self.sim.causes()) if s is not None]
 
     def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
         more = [] if cause is None else [(cause, params)]
@@ -138,10 +156,11 @@ def refit_on_top(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, oth
     a choice (node, member, element) is searched over every option again, so a first cause whose choice
     was pulled aside by the second change in the data finds its place. ``fit`` itself when the cause has
     no choice (its parameters are refined with the pair anyway)."""
-    if spec.choice is None:
+    beside = besides(spec, [(other.cause, other.params)])
+    if spec.choice is None or beside is None:
         return fit
     top = OnTop(sim, [(other.cause, other.params)])
-    p, chi2, ranked = fit_cause(top, spec, fit.free, mm, np.ones(mm.freq_hz.size, bool), fmax)
+    p, chi2, ranked = fit_cause(top, beside, fit.free, mm, np.ones(mm.freq_hz.size, bool), fmax)
     return PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=chi2, ranked=ranked)
 
 
@@ -176,13 +195,28 @@ def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: Phy
     (``first`` at each option, ``second``) refined together on all modes (every continuous parameter of
     both; no cross-validation). A first cause fitted alone absorbs the second change where it can (a
     mass grown at the wrong node for softer supports), so the second cause applied on top of it explains
-    nothing; at the right option both are refined to the data. Returns ``first`` at the best option and
-    ``second``, both with the refined parameters, and the pair's chi2 there."""
+    nothing; at the right option both are refined to the data. The parameters ``first`` set free were chosen
+    at its own option; at another option it is also refined with all of them free (its largest variant): a
+    support's rotational springs alone stood in for the supports at once, while the loose support elsewhere
+    needs both. Returns ``first`` at the best option (with the parameters set free there) and ``second``,
+    both with the refined parameters, and the pair's chi2 there."""
     best: tuple[PhysicalFit, PhysicalFit, float] = (first, second, np.inf)
+    spec = besides(specs[0], [(second.cause, second.params)])
+    widest = max((v for v in variants(specs[0]) if set(first.free) <= set(v)), key=len, default=first.free)
+    own = first.params.get(specs[0].choice) if specs[0].choice else None
     for _, _, params in first.ranked or [(first.chi2, None, first.params)]:
-        a = PhysicalFit(cause=first.cause, params=dict(params), free=first.free, chi2=np.inf)
-        two = fit_pair(sim, specs, [a, second], mm, fmax, folds=False)
-        if two.chi2 < best[2]:
-            best = (PhysicalFit(cause=first.cause, params=two.params[0], free=first.free, chi2=two.chi2),
-                    PhysicalFit(cause=second.cause, params=two.params[1], free=second.free, chi2=two.chi2), two.chi2)
+        if spec is None or (spec.choice is not None and params.get(spec.choice) not in spec.options):
+            continue                     # the second change's own place: one change, not two
+        elsewhere = own is not None and params.get(specs[0].choice) != own
+        for free in dict.fromkeys([first.free, widest] if elsewhere else [first.free]):
+            start = dict(params)
+            if free != first.free:       # its start at that option with every parameter free, the second applied
+                start, _, _ = fit_cause(OnTop(sim, [(second.cause, second.params)]), specs[0], free, mm,
+                                        np.ones(mm.freq_hz.size, bool), fmax, options=[params[specs[0].choice]])
+            a = PhysicalFit(cause=first.cause, params=start, free=free, chi2=np.inf)
+            two = fit_pair(sim, specs, [a, second], mm, fmax, folds=False)
+            if two.chi2 < best[2]:
+                best = (PhysicalFit(cause=first.cause, params=two.params[0], free=free, chi2=two.chi2),
+                        PhysicalFit(cause=second.cause, params=two.params[1], free=second.free, chi2=two.chi2),
+                        two.chi2)
     return best

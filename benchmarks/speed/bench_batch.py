@@ -9,6 +9,14 @@ the scheduling overhead (wall x workers - the fits' own summed time) / the fits'
 with the workers set up as ``analysis batch`` sets them (:func:`analysis.batch.run.dask_settings`),
 and the peak resident memory of each worker process (ru_maxrss). Every run starts from an empty
 results folder (no reuse). Run by hand on an otherwise idle machine; nothing here is a test.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/speed/bench_batch.py --diagnose [--units 12] [--fleet DIR]
+
+times what ``--diagnose`` adds instead: the fleet (by default 12 units, 3 defective) goes through
+``python -m analysis batch 'DIR/unit-*.h5' --out OUT --workers 2 --diagnose nominal.toml`` as a user
+runs it, once without and once with ``--diagnose`` (each into an empty folder), and the table gives the
+fits' own time per unit and the diagnoses' own time per flagged unit (wall and CPU seconds of the work,
+from fleet.json's ``run``), and the two batches' wall times.
 """
 from __future__ import annotations
 
@@ -41,10 +49,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=200)
     ap.add_argument("--fleet", help="an existing fleet folder (default: make one in a temporary folder)")
+    ap.add_argument("--diagnose", action="store_true",
+                    help="time what 'analysis batch --diagnose' adds per flagged unit (default fleet: 12 units)")
     add_write_option(ap, RESULTS)
     args = ap.parse_args()
     with recorded(RESULTS, args.write):
-        _run(args)
+        if args.diagnose:
+            diagnose_timing(args.units if args.units != ap.get_default("units") else 12, args.fleet)
+        else:
+            _run(args)
 
 
 def _run(args: argparse.Namespace) -> None:
@@ -101,6 +114,41 @@ def _run(args: argparse.Namespace) -> None:
               f"{100 * overhead:.1f} % | {mem:.0f} |")
     per_fit = rows[0][3] / len(inputs)
     print(f"\nmean fit time per unit (serial loop): {per_fit:.3f} s; cluster start-up is inside the Dask wall times")
+
+
+def diagnose_timing(units: int, fleet_dir: str | None) -> None:
+    """The fits' own time per unit against the diagnoses' own time per flagged unit (module docs)."""
+    import json
+
+    with tempfile.TemporaryDirectory() as tmp:
+        fleet = Path(fleet_dir) if fleet_dir else Path(tmp) / "fleet"
+        if not fleet_dir:
+            subprocess.run([sys.executable, "-m", "simulator", "fleet", "--units", str(units), "--defects",
+                            str(max(1, units // 4)), "--out", str(fleet), "--seed", "3", "-q"], check=True)
+        sim = Path(tmp) / "nominal.toml"
+        sim.write_text("# the frame as designed: simulator/frame.toml's defaults\n")
+        runs = {}
+        for name, extra in (("fits only", []), ("fits + --diagnose", ["--diagnose", str(sim)])):
+            out = Path(tmp) / name.replace(" ", "_")
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "analysis", "batch", str(fleet / "unit-*.h5"), "--out", str(out),
+                            "--workers", "2", "-q", *extra], check=True, capture_output=True)
+            runs[name] = (time.perf_counter() - t0, json.loads((out / "fleet.json").read_text())["run"])
+    info = runs["fits + --diagnose"][1]
+    n, k = int(info["fitted"]), int(info.get("diagnosed", 0))
+    print(f"fleet {fleet_dir or f'of {units} units (simulator fleet --seed 3)'}: {n} units fitted, {k} flagged and diagnosed")
+    print("\n| batch | wall (s) | fits: work per unit (s) | fits: CPU per unit (s) | diagnoses: work per flagged "
+          "unit (s) | diagnoses: CPU per flagged unit (s) |")
+    print("|---|---|---|---|---|---|")
+    for name, (wall, r) in runs.items():
+        d = int(r.get("diagnosed", 0))
+        diag = (f"{r['diagnosis_seconds'] / d:.1f} | {r['diagnosis_cpu_seconds'] / d:.1f}" if d else "- | -")
+        print(f"| {name} | {wall:.1f} | {r['fit_seconds'] / n:.2f} | {r['fit_cpu_seconds'] / n:.2f} | {diag} |")
+    if k:
+        print(f"\nper flagged unit the diagnosis adds {info['diagnosis_seconds'] / k:.1f} s of work "
+              f"({info['diagnosis_seconds'] / k / (info['fit_seconds'] / n):.1f} x one unit's fit, "
+              f"{info['diagnosis_seconds'] / k / info['fit_seconds']:.2f} x the whole fleet's fits); wall time of the "
+              f"batch {runs['fits + --diagnose'][0] - runs['fits only'][0]:+.1f} s with --diagnose on 2 workers")
 
 
 if __name__ == "__main__":
