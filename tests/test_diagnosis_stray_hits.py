@@ -14,8 +14,12 @@ import numpy as np
 from acquisition.cli_capture import main as capture
 from analysis.cli_diagnose import main as diagnose
 from analysis.diagnosis.compare import line_weights
-from analysis.diagnosis.stray_hits import MIN_HITS, STRAY_EXCESS_DB, stray_excess_db, without_stray_hits
+from analysis.diagnosis.rule import DEFAULT_RULE
+from analysis.diagnosis.stray_hits import stray_excess_db, without_stray_hits
 from analysis.inputs import load_input
+
+MIN_HITS = DEFAULT_RULE.stray_min_hits
+STRAY_EXCESS_DB = DEFAULT_RULE.stray_excess_db
 
 
 def _hits(rng: np.random.Generator, n: int, noise: np.ndarray | float = 0.01) -> np.ndarray:

@@ -363,7 +363,7 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
         from .stray_hits import without_stray_hits
 
         # a hit that measured another FRF than the others of its point (struck elsewhere) is left out
-        stray = without_stray_hits(recording, measured, line_weights(measured))
+        stray = without_stray_hits(recording, measured, line_weights(measured), rule)
         if stray is not None:
             measured = stray.measured
     if recording is not None and "hits" not in noise:
@@ -384,7 +384,10 @@ def _diagnose_set(measured: FRFSet, simulated: Any, *, band: tuple | str | None,
     band_hz = (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
     diag = _time_data_stage(diag, recording, band_hz, base)
     if stray is not None:
-        diag = replace(diag, time_data=[stray.cause(), *diag.time_data],
+        left_out = [{"reference": d["reference"], "hits": d["hits"], "excess_db": d["excess_db"]} for d in stray.dropped]
+        trace = [step("stray_hits", "stray_hit", {"left_out": left_out, "stray_excess_db": rule.stray_excess_db},
+                      "the hits left out before the comparison"), *diag.trace]
+        diag = replace(diag, trace=trace, time_data=[stray.cause(), *diag.time_data],
                        time_data_verdict=diag.time_data_verdict if diag.time_data_verdict not in (None, "none")
                        else "stray_hit")
     return _level_stage(diag, recording, band_hz, joint_simulation)

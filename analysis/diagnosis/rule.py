@@ -74,6 +74,14 @@ class DecisionRule:
         and two changes of one member must reach it.
     on_top_margin_db : a named physical cause whose FRF error stays more than this (dB) above the noise is
         tried with an FRF-level effect on top.
+
+    Hits before the comparison (:mod:`.stray_hits`):
+
+    stray_excess_db : a hit whose FRF stands this far (dB) beyond its point's spread from the consensus hit
+        measured another FRF (struck elsewhere) and is left out: 6 dB is four times the spread; clean hits
+        stand within about 1.3 dB, hits struck on a neighbouring node 10-20 dB out.
+    stray_min_hits : hits (count) a point needs before one can be told apart from the others (two that
+        disagree have no majority).
     """
 
     z_min: float = 3.0
@@ -89,6 +97,8 @@ class DecisionRule:
     quiet_chi2: float = 1.0
     leaves_chi2: float = 1.0
     on_top_margin_db: float = 1.0
+    stray_excess_db: float = 6.0
+    stray_min_hits: int = 3
 
     def __post_init__(self) -> None:
         for k, v in asdict(self).items():
@@ -140,6 +150,8 @@ RULES: dict[str, str] = {
                    "unexplained",
     "time_data": "an unexplained verdict becomes the time-data cause that counts",
     "joint_nonlinearity": "a nonlinear joint named by the hits' force levels replaces the verdict",
+    "stray_hits": "a hit standing stray_excess_db beyond its point's spread is left out before the comparison "
+                  "(fewer than half of the point's hits, at least stray_min_hits hits)",
     "levels": "measurements at several drive levels: modes moving beyond their uncertainty between levels "
               "name joint_nonlinearity in place of the verdict",
 }

@@ -8,7 +8,7 @@ reads it as a cause (a sensor's sensitivity, a missing mode at a mode the two st
 differently). Sensor noise alone never does that: every hit of a point measures the same FRF.
 
 The test, per group of hits with the same reference and outputs (at least
-:data:`MIN_HITS` hits), on the diagnosis' band and line weights (``w``, the relative error's):
+:attr:`~.rule.DecisionRule.stray_min_hits` hits), on the diagnosis' band and line weights (``w``, the relative error's):
 
 * the distance of two hits ``i, j`` is the median over lines and outputs of ``w |H_i - H_j|^2``,
   divided by ``1/g_i + 1/g_j`` (``g``: each hit's median force power relative to the group's, so a
@@ -16,7 +16,7 @@ The test, per group of hits with the same reference and outputs (at least
 * the consensus hit is the one with the smallest median distance to the others; the group's spread
   is its distance to its nearest other hit;
 * a hit is stray when its distance to the consensus hit exceeds the spread by
-  :data:`STRAY_EXCESS_DB` (6 dB: four times the spread; two hits of the same FRF differ by their
+  :attr:`~.rule.DecisionRule.stray_excess_db` (6 dB: four times the spread; two hits of the same FRF differ by their
   noise alone, whose median over hundreds of lines varies by well under 1 dB), and only while the
   stray hits are fewer than half of the group (otherwise there is no consensus to keep: e.g. soft and
   hard hits of a nonlinear joint, which the level stage compares instead).
@@ -36,15 +36,12 @@ import numpy as np
 from ..frf import FRFSet
 from ..recording import Recording, RecordingError
 from ..spectra import hit_spectra
+from .rule import DEFAULT_RULE, DecisionRule
 
-__all__ = ["MIN_HITS", "STRAY_EXCESS_DB", "StrayHits", "stray_excess_db", "without_stray_hits"]
+__all__ = ["StrayHits", "stray_excess_db", "without_stray_hits"]
 
 log = logging.getLogger(__name__)
 
-#: hits a group needs before one can be told apart from the others (two disagree without a majority)
-MIN_HITS = 3
-#: a hit's distance to the consensus hit beyond the group's spread by this much (dB) makes it stray
-STRAY_EXCESS_DB = 6.0
 
 
 @dataclass(frozen=True)
@@ -72,13 +69,14 @@ class StrayHits:
                              "the FRFs were compared without them (measure the point again to replace them)")}
 
 
-def stray_excess_db(H: np.ndarray, force_power: np.ndarray, weights: np.ndarray) -> np.ndarray:
+def stray_excess_db(H: np.ndarray, force_power: np.ndarray, weights: np.ndarray,
+                    min_hits: int = DEFAULT_RULE.stray_min_hits) -> np.ndarray:
     """Each hit's distance (dB) to the consensus hit above the group's spread (module docs): ``H``
     (n_hits, n_out, n_freq) the hits' FRFs, ``force_power`` (n_hits,) their force power (any common
     scale, e.g. the median of G_ff), ``weights`` (n_out, n_freq) the line weights. Zero for the
-    consensus hit and for every hit of a group of fewer than :data:`MIN_HITS`."""
+    consensus hit and for every hit of a group of fewer than ``min_hits``."""
     n = H.shape[0]
-    if n < MIN_HITS:
+    if n < min_hits:
         return np.zeros(n)
     g = np.asarray(force_power, float) / float(np.median(force_power))
     D = np.zeros((n, n))
@@ -101,7 +99,8 @@ def _estimate(Gff: np.ndarray, Gxx: np.ndarray, Gfx: np.ndarray, estimator: str)
     return Gxx.sum(0) / np.conj(Gfx.sum(0))
 
 
-def without_stray_hits(path: str | Path, measured: FRFSet, weights: np.ndarray) -> StrayHits | None:
+def without_stray_hits(path: str | Path, measured: FRFSet, weights: np.ndarray,
+                       rule: DecisionRule = DEFAULT_RULE) -> StrayHits | None:
     """``measured`` (the FRFs of the recording ``path`` in the diagnosis' band, ``weights`` its line
     weights) made again without the stray hits of each group (module docs); None when no hit is stray
     or the recording's hits cannot be read or matched to the FRFs."""
@@ -123,7 +122,7 @@ def without_stray_hits(path: str | Path, measured: FRFSet, weights: np.ndarray) 
     kept: dict[str, list[int]] = {}
     for (ref, outs), hits in groups.items():
         kept.setdefault(ref, []).extend(i for i, _ in hits)
-        if ref not in measured.references or len(hits) < MIN_HITS:
+        if ref not in measured.references or len(hits) < rule.stray_min_hits:
             continue
         fh = hits[0][1].freq_hz
         idx = np.searchsorted(fh, f)
@@ -142,8 +141,9 @@ def without_stray_hits(path: str | Path, measured: FRFSet, weights: np.ndarray) 
         if est is None:
             log.info("stray hits at %s not looked for: the stored FRFs are not the hits' H1 or H2", ref)
             continue
-        excess = stray_excess_db(Gfx / Gff[:, None, :], np.median(Gff, axis=1), weights[rows, j])
-        stray = excess > STRAY_EXCESS_DB
+        excess = stray_excess_db(Gfx / Gff[:, None, :], np.median(Gff, axis=1), weights[rows, j],
+                                 rule.stray_min_hits)
+        stray = excess > rule.stray_excess_db
         if not stray.any() or 2 * int(stray.sum()) >= len(hits):
             continue
         keep = ~stray
