@@ -130,7 +130,9 @@ def _stiffness_shift(a: Assembly, p: Mapping) -> None:
     a.modulus *= float(p.get("stiffness_factor", 1.0))
 
 
-#: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function.
+#: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function. Every
+#: parameter here adds a mass or a stiffness as it grows (a positive semi-definite part times a growing
+#: coefficient), so each natural frequency moves one way only: ``monotone`` (the search bounds a choice by it).
 CAUSES: dict[str, PhysicalCause] = {}
 
 
@@ -141,48 +143,50 @@ def register_cause(row: PhysicalCause) -> None:
 
 for _row in (
     PhysicalCause(CauseSpec(
-        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),
-                       ParamSpec("inertia_factor", 0.1, 30.0, requires="mass_kg")), choice="point",
+        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg", monotone=True),
+                       ParamSpec("inertia_factor", 0.1, 30.0, requires="mass_kg", monotone=True)), choice="point",
         description="a mass fixed on the frame at one node (all three translations), with the rotary inertia of "
                     "a steel cube of that mass times inertia_factor (a plate or a bar: more than a cube's)",
         advice="A mass the model lacks sits at the named node (a fixture, a block, cabling): add it to the "
                "model as a lumped mass there, or remove it from the structure."), _added_mass),
     PhysicalCause(CauseSpec(
-        "support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2), ParamSpec("factor_rotational", 1e-3, 1e2)),
+        "support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2, monotone=True),
+                             ParamSpec("factor_rotational", 1e-3, 1e2, monotone=True)),
         choice="support",
         description="the base supports' springs (all, or the one named), translational and rotational, scaled",
         advice="The named support (all: every support) is softer or stiffer than modelled: check its clamping "
                "(bolts' torque, the foundation) or update its springs by the fitted factors."), _springs("support")),
     PhysicalCause(CauseSpec(
-        "joint_stiffness", (ParamSpec("factor_translational", 1e-4, 1e2), ParamSpec("factor_rotational", 1e-3, 1e2)),
+        "joint_stiffness", (ParamSpec("factor_translational", 1e-4, 1e2, monotone=True),
+                           ParamSpec("factor_rotational", 1e-3, 1e2, monotone=True)),
         choice="joint",
         description="the column-beam joints' springs (all, or the one named by a node of its pair), translational "
                     "and rotational, scaled",
         advice="The named column-beam joint (all: every joint) is softer or stiffer than modelled: check its bolts "
                "and welds, or update its springs by the fitted factors."), _springs("joint")),
     PhysicalCause(CauseSpec(
-        "member_mass", (ParamSpec("factor", 0.5, 2.0),), choice="component",
+        "member_mass", (ParamSpec("factor", 0.5, 2.0, monotone=True),), choice="component",
         description="the mass (density or area) of one member scaled",
         advice="One member is heavier or lighter than modelled: check its section and material, or add the "
                "attached mass spread along it."), _member_mass),
     PhysicalCause(CauseSpec(
-        "member_stiffness", (ParamSpec("factor", 0.3, 2.0),), choice="component",
+        "member_stiffness", (ParamSpec("factor", 0.3, 2.0, monotone=True),), choice="component",
         description="the bending stiffness EI of one member scaled",
         advice="One member bends more or less easily than modelled: check its section (second moments) and "
                "orientation, or update its EI by the fitted factor."), _member_stiffness),
     PhysicalCause(CauseSpec(
-        "element_stiffness", (ParamSpec("factor", 0.02, 2.0),), choice="element",
+        "element_stiffness", (ParamSpec("factor", 0.02, 2.0, monotone=True),), choice="element",
         description="the bending stiffness EI of one element scaled (a crack or local damage)",
         advice="One short piece of a member has lost (or gained) bending stiffness: inspect the named element "
                "(between nodes e and e+1) for a crack, a notch, corrosion or a loose attachment."),
         _element_stiffness),
     PhysicalCause(CauseSpec(
-        "mass_loading", (ParamSpec("mass_kg", 0.0, 1.0, nominal=None, unit="kg", log=False),),
+        "mass_loading", (ParamSpec("mass_kg", 0.0, 1.0, nominal=None, unit="kg", log=False, monotone=True),),
         description="the accelerometers' mass at every measured output (all three translations)",
         advice="The accelerometers' mass lowers the frequencies: put the sensors' mass at their nodes in the "
                "model (the channel set-up's accelerometer mass), or use lighter sensors."), _mass_loading),
     PhysicalCause(CauseSpec(
-        "stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6),),
+        "stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6, monotone=True),),
         description="the material's Young's modulus scaled (every member; springs unchanged)",
         advice="Every member is stiffer or softer by the same factor: update Young's modulus (or every "
                "section's second moments) by the fitted stiffness factor."), _stiffness_shift),
