@@ -451,7 +451,16 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
         held.setdefault(str(q[cause.choice]), []).append(q)
     todo = options if options is not None else cause.options
     screened: list[_Screened]
-    if isinstance(start, dict) and options is not None and set(options) <= set(start):
+    if held and options is None and any(s.requires is not None for s in specs):
+        # a refinement refines the fits it is nested in, where they are, from there (its own nominal)
+        def chi2(q: Mapping) -> float:
+            return float(np.sum(residuals(mm, *sim.modes(cause.name, q, fmax))[sel] ** 2))
+
+        screened = sorted((_Screened(c, opt, dict(q), -np.inf) for opt in todo if opt in held
+                           for c, q in [min(((chi2(q), q) for q in held[opt]), key=lambda t: t[0])]),
+                          key=lambda t: t.chi2)
+        held = {}
+    elif isinstance(start, dict) and options is not None and set(options) <= set(start):
         # the options' own fits as starts (a fold of the cross-validation): no coarse screen again
         screened = [_Screened(0.0, opt, start[opt], -np.inf) for opt in options]
     elif len(todo) <= N_SCREEN:
@@ -483,14 +492,11 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
 
 
 def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
-    """The nested variants of a cause: every set of its parameters set free (fewest first), a parameter only
-    with the one it ``requires``."""
-    names = [s.name for s in cause.params]
-    needs = {s.name: s.requires for s in cause.params}
-    out: list[tuple[str, ...]] = []
-    for k in range(1, len(names) + 1):
-        out += [c for c in combinations(names, k) if all(needs[n] is None or needs[n] in c for n in c)]
-    return out
+    """The nested variants of a cause without refinements: every set of its parameters that ``require`` no other
+    set free (fewest first). A refinement (a parameter that ``requires`` another: a mass's rotary inertia about
+    one axis) is freed one at a time on top of the best of these, where it earns its keep (:func:`_best_variant`)."""
+    names = [s.name for s in cause.params if s.requires is None]
+    return [c for k in range(1, len(names) + 1) for c in combinations(names, k)]
 
 
 def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
@@ -508,11 +514,13 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
 
 
 def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float) -> PhysicalFit | None:
-    """The cause's nested variants fitted (each also from the fits of the variants it contains,
-    :func:`fit_cause`'s ``nested``) and cross-validated; the one with the least held-out chi2. A variant
-    that frees a refinement (a parameter that ``requires`` another: a mass's rotary inertia) must earn it: it
-    replaces the best variant without refinements only when it predicts the held-out modes ``MIN_GAIN_DB``
-    better and none of its parameters stops at an edge of its range.
+    """The cause's nested variants (:func:`variants`) fitted (each also from the fits of the variants it contains,
+    :func:`fit_cause`'s ``nested``) and cross-validated; the one with the least held-out chi2. Then its
+    refinements (parameters that ``require`` one of its free parameters: a mass's rotary inertia about X, Y, Z),
+    one parameter more at a time: the best variant with one refinement more replaces the current one only when it
+    predicts the held-out modes ``MIN_GAIN_DB`` better and none of its parameters stops at an edge of its range.
+    A refinement refines the current fit where it was made: its choice is searched among the options the current
+    variant fitted (every option whose chi2 could come below that variant's best, :func:`fit_cause`).
 
     A fit's held-out chi2 is at least its chi2 on all modes (each fold starts from the full fit and can only
     descend on the other modes, so what it gains there the left-out mode pays at least back: the full fit is the
@@ -528,29 +536,25 @@ def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, 
             fits[free] = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, ranked=ranked)
 
     for free in variants(cause):
-        if not _refines(cause, free):
-            fit(free, np.inf)
-    plain = _best_of(sim, cause, mm, fmax, list(fits.values()), np.inf)
-    # a refinement must bring the held-out chi2 MIN_GAIN_DB below the plain variant's: its chi2 on all modes too
-    bar = np.inf if plain is None else plain.chi2_cv * 10 ** (-MIN_GAIN_DB / 10)
-    for free in variants(cause):
-        if _refines(cause, free):
+        fit(free, np.inf)
+    best = _best_of(sim, cause, mm, fmax, list(fits.values()), np.inf)
+    while best is not None:
+        more = [s.name for s in cause.params if s.requires in best.free and s.name not in best.free]
+        # one refinement more must bring the held-out chi2 MIN_GAIN_DB below the current's: its chi2 on all modes too
+        bar = best.chi2_cv * 10 ** (-MIN_GAIN_DB / 10)
+        frees = [tuple(n for n in (s.name for s in cause.params) if n in best.free or n == extra) for extra in more]
+        for free in frees:
             fit(free, bar)
-    refined = _best_of(sim, cause, mm, fmax, [f for v, f in fits.items() if _refines(cause, v)], bar)
-    if plain is None or (refined is not None and not refined.at_edge
-                         and gain_db(plain.cv_per_mode, refined.cv_per_mode) >= MIN_GAIN_DB):
-        return refined
-    return plain
+        refined = _best_of(sim, cause, mm, fmax, [fits[v] for v in frees if v in fits], bar)
+        if refined is None or refined.at_edge or gain_db(best.cv_per_mode, refined.cv_per_mode) < MIN_GAIN_DB:
+            break
+        best = refined
+    return best
 
 
 def _fitted_params(fit: PhysicalFit) -> list[dict]:
     """The parameters of a fit at each option it fitted (its own, without a choice)."""
     return [q for _, _, q in fit.ranked] if fit.ranked else [fit.params]
-
-
-def _refines(cause: CauseSpec, free: Sequence[str]) -> bool:
-    """Does the variant ``free`` set a refinement free (a parameter that ``requires`` another)?"""
-    return any(s.requires is not None for s in cause.params if s.name in free)
 
 
 def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
