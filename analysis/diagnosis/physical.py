@@ -23,12 +23,21 @@ bounded smoothly, ``c tanh(r / c)`` with ``c = RESIDUAL_CAP`` (10), so one mode 
 resolve (a close pair merged, a spurious peak) counts as one large error; ``chi2 = sum r^2``.
 
 Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
-cause's search range); a choice (the node of an added mass, the member of a member change) by trying
-every option on a coarse grid of its parameter, the ``N_SCREEN`` best refined; a choice of at most
-``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option gets the full
-search of its parameters (from the nominal and from the best point of a grid), with its own model. A cause with two
-parameters is also fitted with each alone (the other at its nominal value): nested models, the one
-that predicts best (leave one mode out) wins.
+cause's search range); a choice (the node of an added mass, the element of a crack) of more than
+``N_SCREEN`` options by a screen that orders the work and a bound that keeps every option that could win:
+each option on a grid of its parameters (the range's ends included), then fitted from its best grid point in
+that order, the ``N_SCREEN`` best and every further option whose chi2 could still come below the best fit so
+far. The bound: a parameter declared ``monotone`` (a mass or a stiffness added: each natural frequency moves
+one way only) keeps every frequency inside a box of the grid between its values at the box's corners, so a
+measured mode is at least as far from the candidate's modes as from those intervals (:func:`_chi2_bound`);
+a box whose bound is below the best fit is halved (``TIGHTEN_SPLITS``) before the option is fitted instead.
+A choice of at most ``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option
+gets the full search of its parameters (from the nominal and from the best point of a grid), with its own
+model. A cause with several parameters is also fitted with each subset alone (the others at their nominal
+value, each variant started also from the fits of the variants it contains): nested models, the one that
+predicts best (leave one mode out) wins. A refinement (a parameter that ``requires`` another: a mass's
+rotary inertia, about every axis or one) is freed one at a time on top of the best variant, at the options
+that variant fitted, and kept only when it predicts the held-out modes ``MIN_GAIN_DB`` better.
 
 Cross-validation: leave one mode out. Each measured mode is predicted by the cause fitted to the
 other modes (the choice searched again inside the fold among the ``N_SCREEN_FOLD`` best options of the
