@@ -78,3 +78,28 @@ def test_the_bound_of_a_box_is_below_the_chi2_everywhere_inside_it(cause, free, 
             p = {**fixed, spec.choice: option, **{s.name: s.from_x(xi) for s, xi in zip(specs, x)}}
             chi2 = float(np.sum(residuals(mm, *fv.modes(cause, p, FMAX))[sel] ** 2))
             assert chi2 >= bound - 1e-9
+
+
+def test_a_stiffer_right_column_is_that_member() -> None:
+    """The right column's second moments x 1.4 (its section in the configuration, its mass unchanged): every
+    member is fitted in full and the right column comes back with its factor; the left column, the closest
+    other option, fits far worse."""
+    from test_diagnosis_physical import _sensor_masses
+
+    from analysis.diagnosis.physical import MeasuredModes
+    from simulator.config import FrameConfig
+    from simulator.fem import FrameModel, section_properties
+
+    base = FrameConfig.load()
+    sp = section_properties(base.sections[base.components["right"].section])
+    cfg = base.with_overrides({"sections": {"stiff": {"shape": "explicit", "area_m2": sp.A, "iy_m4": 1.4 * sp.Iy,
+                                                      "iz_m4": 1.4 * sp.Iz, "j_m4": sp.J}},
+                               "components": {"right": {"section": "stiff"}}})
+    model = FrameModel.from_config(cfg, _sensor_masses(cfg)).modal_model(OUTS, REFS, "receptance")
+    keep = (model.freq_hz > 1.0) & (model.freq_hz < 460.0)
+    mm = MeasuredModes(model.freq_hz[keep], np.zeros(int(keep.sum())), model.residues[..., keep].reshape(-1, int(keep.sum())))
+    fv = FrameVariants(None, OUTS, REFS)
+    spec = {c.name: c for c in fv.causes()}["member_stiffness"]
+    p, chi2, ranked = fit_cause(fv, spec, ("factor",), mm, np.ones(mm.freq_hz.size, bool), FMAX)
+    assert p["component"] == "right" and p["factor"] == pytest.approx(1.4, rel=0.01)
+    assert [o for _, o, _ in ranked] == ["right", "left", "top"] and ranked[1][0] > 100 * max(chi2, 1.0)
