@@ -458,34 +458,34 @@ def _mass_loading(c: Change, p: Mapping) -> None:
 #: The causes offered on any FE model (ranges of masses relative to the model's mass, of springs to the
 #: median diagonal stiffness; :meth:`FEVariants.causes` scales them). Adding a cause: one row.
 FE_CAUSES: dict[str, FECause] = {row.spec.name: row for row in (
-    FECause(CauseSpec("added_mass", (ParamSpec("mass_kg", 1e-3, 1.0, nominal=0.0, unit="kg"),), choice="point",
+    FECause(CauseSpec("added_mass", (ParamSpec("mass_kg", 1e-3, 1.0, nominal=0.0, unit="kg", monotone=True),), choice="point",
                       description="a lumped mass at one node (every mapped direction)",
                       advice="A mass the model lacks sits at the named node (a fixture, a block, cabling): add it "
                              "to the model as a lumped mass there, or remove it from the structure."), _added_mass),
-    FECause(CauseSpec("ground_spring", (ParamSpec("stiffness_n_m", 1e-4, 1e2, nominal=0.0, unit="N/m"),),
+    FECause(CauseSpec("ground_spring", (ParamSpec("stiffness_n_m", 1e-4, 1e2, nominal=0.0, unit="N/m", monotone=True),),
                       choice="point",
                       description="a spring to ground at one node (a support or contact the model lacks)",
                       advice="The structure is held at the named node (a support, a contact, a cable): model the "
                              "support there with the fitted stiffness, or free the structure."), _ground_spring),
-    FECause(CauseSpec("stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6),),
+    FECause(CauseSpec("stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6, monotone=True),),
                       description="the whole stiffness matrix scaled (Young's modulus, every section)",
                       advice="Every part is stiffer or softer by the same factor: update Young's modulus (or the "
                              "sections) by the fitted stiffness factor."), _stiffness_shift),
-    FECause(CauseSpec("mass_scale", (ParamSpec("factor", 0.6, 1.6),),
+    FECause(CauseSpec("mass_scale", (ParamSpec("factor", 0.6, 1.6, monotone=True),),
                       description="the whole mass matrix scaled (density, every section)",
                       advice="Every part is heavier or lighter by the same factor: update the density by the "
                              "fitted factor (a uniform mass and a uniform stiffness change move the frequencies "
                              "alike; the FRFs' level tells them apart)."), _mass_scale),
-    FECause(CauseSpec("group_stiffness", (ParamSpec("factor", 0.3, 3.0),), choice="group",
+    FECause(CauseSpec("group_stiffness", (ParamSpec("factor", 0.3, 3.0, monotone=True),), choice="group",
                       description="the stiffness between one group's DOFs scaled",
                       advice="One group of the model is stiffer or softer than modelled: check its section, "
                              "material and connections, or update its stiffness by the fitted factor."),
             _group_stiffness),
-    FECause(CauseSpec("group_mass", (ParamSpec("factor", 0.3, 3.0),), choice="group",
+    FECause(CauseSpec("group_mass", (ParamSpec("factor", 0.3, 3.0, monotone=True),), choice="group",
                       description="the mass between one group's DOFs scaled",
                       advice="One group of the model is heavier or lighter than modelled: check its density and "
                              "attached masses, or update its mass by the fitted factor."), _group_mass),
-    FECause(CauseSpec("mass_loading", (ParamSpec("mass_kg", 0.0, 0.1, nominal=None, unit="kg", log=False),),
+    FECause(CauseSpec("mass_loading", (ParamSpec("mass_kg", 0.0, 0.1, nominal=None, unit="kg", log=False, monotone=True),),
                       description="the sensors' mass at every measured output's node",
                       advice="The accelerometers' mass lowers the frequencies: add the sensors' mass at their "
                              "nodes to the model ([sensors] mass_kg), or use lighter sensors."), _mass_loading),

@@ -23,8 +23,9 @@ The causes are the rows of the registry :data:`CAUSES` (:class:`PhysicalCause`: 
 name                   parameters                                   change
 =====================  ===========================================  =======================================
 ``added_mass``         ``point`` (node ``component:node``),          lumped mass on the node's translations
-                       ``mass_kg``, ``inertia_factor``              and a rotary inertia about each axis:
-                                                                    a steel cube's of that mass x factor
+                       ``mass_kg``, ``inertia_factor``,             and a rotary inertia about each axis:
+                       ``inertia_x``, ``inertia_y``, ``inertia_z``  a steel cube's of that mass x
+                                                                    inertia_factor x the axis' factor
 ``support_stiffness``  ``support`` (``all`` or one support node),   the support's (every support's) springs
                        ``factor_translational``, ``factor_rotational``  x factor
 ``joint_stiffness``    ``joint`` (``all`` or one joint, named by    the joint's (every joint's) column-beam
@@ -74,8 +75,9 @@ class Assembly:
     springs: dict = field(default_factory=dict)                       # (kind, part, place) -> factor (place
                                                                       # None: every support / joint)
     sensor_mass_kg: float | None = None                             # accelerometer mass (None: the config's)
-    lumped: list = field(default_factory=list)                        # [(node, kg, rotary inertia as a
-                                                                      # multiple of a steel cube's; 0: none)]
+    lumped: list = field(default_factory=list)                        # [(node, kg, rotary inertia about X,
+                                                                      # Y, Z as multiples of a steel cube's;
+                                                                      # None: none)]
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,8 @@ class PhysicalCause:
 
 
 def _added_mass(a: Assembly, p: Mapping) -> None:
-    a.lumped.append((str(p["point"]), float(p["mass_kg"]), float(p.get("inertia_factor", 1.0))))
+    every = float(p.get("inertia_factor", 1.0))
+    a.lumped.append((str(p["point"]), float(p["mass_kg"]), tuple(every * float(p.get(f"inertia_{x}", 1.0)) for x in "xyz")))
 
 
 #: The choice of the spring causes: every support / joint at once, or the one named.
@@ -130,7 +133,9 @@ def _stiffness_shift(a: Assembly, p: Mapping) -> None:
     a.modulus *= float(p.get("stiffness_factor", 1.0))
 
 
-#: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function.
+#: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function. Every
+#: parameter here adds a mass or a stiffness as it grows (a positive semi-definite part times a growing
+#: coefficient), so each natural frequency moves one way only: ``monotone`` (the search bounds a choice by it).
 CAUSES: dict[str, PhysicalCause] = {}
 
 
@@ -141,48 +146,53 @@ def register_cause(row: PhysicalCause) -> None:
 
 for _row in (
     PhysicalCause(CauseSpec(
-        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg"),
-                       ParamSpec("inertia_factor", 0.1, 30.0, requires="mass_kg")), choice="point",
+        "added_mass", (ParamSpec("mass_kg", 0.05, 30.0, nominal=0.0, unit="kg", monotone=True),
+                       ParamSpec("inertia_factor", 0.1, 30.0, requires="mass_kg", monotone=True),
+                       *(ParamSpec(f"inertia_{x}", 0.005, 50.0, requires="mass_kg", monotone=True) for x in "xyz")),
+        choice="point",
         description="a mass fixed on the frame at one node (all three translations), with the rotary inertia of "
-                    "a steel cube of that mass times inertia_factor (a plate or a bar: more than a cube's)",
+                    "a steel cube of that mass about each axis X, Y, Z times inertia_factor and that axis' "
+                    "inertia_x, inertia_y, inertia_z (a plate or a bar: more about some axes, less about others)",
         advice="A mass the model lacks sits at the named node (a fixture, a block, cabling): add it to the "
                "model as a lumped mass there, or remove it from the structure."), _added_mass),
     PhysicalCause(CauseSpec(
-        "support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2), ParamSpec("factor_rotational", 1e-3, 1e2)),
+        "support_stiffness", (ParamSpec("factor_translational", 1e-3, 1e2, monotone=True),
+                             ParamSpec("factor_rotational", 1e-3, 1e2, monotone=True)),
         choice="support",
         description="the base supports' springs (all, or the one named), translational and rotational, scaled",
         advice="The named support (all: every support) is softer or stiffer than modelled: check its clamping "
                "(bolts' torque, the foundation) or update its springs by the fitted factors."), _springs("support")),
     PhysicalCause(CauseSpec(
-        "joint_stiffness", (ParamSpec("factor_translational", 1e-4, 1e2), ParamSpec("factor_rotational", 1e-3, 1e2)),
+        "joint_stiffness", (ParamSpec("factor_translational", 1e-4, 1e2, monotone=True),
+                           ParamSpec("factor_rotational", 1e-3, 1e2, monotone=True)),
         choice="joint",
         description="the column-beam joints' springs (all, or the one named by a node of its pair), translational "
                     "and rotational, scaled",
         advice="The named column-beam joint (all: every joint) is softer or stiffer than modelled: check its bolts "
                "and welds, or update its springs by the fitted factors."), _springs("joint")),
     PhysicalCause(CauseSpec(
-        "member_mass", (ParamSpec("factor", 0.5, 2.0),), choice="component",
+        "member_mass", (ParamSpec("factor", 0.5, 2.0, monotone=True),), choice="component",
         description="the mass (density or area) of one member scaled",
         advice="One member is heavier or lighter than modelled: check its section and material, or add the "
                "attached mass spread along it."), _member_mass),
     PhysicalCause(CauseSpec(
-        "member_stiffness", (ParamSpec("factor", 0.3, 2.0),), choice="component",
+        "member_stiffness", (ParamSpec("factor", 0.3, 2.0, monotone=True),), choice="component",
         description="the bending stiffness EI of one member scaled",
         advice="One member bends more or less easily than modelled: check its section (second moments) and "
                "orientation, or update its EI by the fitted factor."), _member_stiffness),
     PhysicalCause(CauseSpec(
-        "element_stiffness", (ParamSpec("factor", 0.02, 2.0),), choice="element",
+        "element_stiffness", (ParamSpec("factor", 0.02, 2.0, monotone=True),), choice="element",
         description="the bending stiffness EI of one element scaled (a crack or local damage)",
         advice="One short piece of a member has lost (or gained) bending stiffness: inspect the named element "
                "(between nodes e and e+1) for a crack, a notch, corrosion or a loose attachment."),
         _element_stiffness),
     PhysicalCause(CauseSpec(
-        "mass_loading", (ParamSpec("mass_kg", 0.0, 1.0, nominal=None, unit="kg", log=False),),
+        "mass_loading", (ParamSpec("mass_kg", 0.0, 1.0, nominal=None, unit="kg", log=False, monotone=True),),
         description="the accelerometers' mass at every measured output (all three translations)",
         advice="The accelerometers' mass lowers the frequencies: put the sensors' mass at their nodes in the "
                "model (the channel set-up's accelerometer mass), or use lighter sensors."), _mass_loading),
     PhysicalCause(CauseSpec(
-        "stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6),),
+        "stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6, monotone=True),),
         description="the material's Young's modulus scaled (every member; springs unchanged)",
         advice="Every member is stiffer or softer by the same factor: update Young's modulus (or every "
                "section's second moments) by the fitted stiffness factor."), _stiffness_shift),
@@ -321,7 +331,8 @@ class FrameVariants:
         for node in self.nodes:
             first = 6 * self.frame.node(node)
             self._mparts[("lump", node)] = Part(first + np.arange(3), np.eye(3))
-            self._mparts[("rot", node)] = Part(first + np.arange(3, 6), np.eye(3))
+            for i, axis in enumerate("xyz"):
+                self._mparts[("rot", node, axis)] = Part(first + np.array([3 + i]), np.eye(1))
         self._refined_frames: dict[int, FrameVariants] = {}
         #: candidates' modes by Rayleigh-Ritz reduction (:mod:`simulator.ritz`); False: the full model
         self.reduced = True
@@ -534,17 +545,18 @@ class FrameVariants:
             kind, part, place = key[1:]
             k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
-        lumped = [(node, sensor_mass, 0.0) for node in self.sensor_nodes] + list(a.lumped)
+        lumped = [(node, sensor_mass, None) for node in self.sensor_nodes] + list(a.lumped)
         for node, mass, rotary in lumped:
             if mass < 0:
                 raise ModelError(f"a mass of {mass} kg at {node}: masses must be >= 0")
             node = node if node in self._node_set else self.nodes[self.frame.node(node)]  # validates, names
             m[("lump", node)] = m.get(("lump", node), 0.0) + mass
-            if rotary:
+            if rotary is not None:
                 # a compact steel block centred on the node: m a^2 / 6 about each axis, a = (m / rho)^(1/3),
-                # times the factor (a plate or a bar of the same mass has more)
+                # times each axis' factor (a plate or a bar of the same mass has more about some axes)
                 side = (mass / self.config.material.density_kg_m3) ** (1.0 / 3.0)
-                m[("rot", node)] = m.get(("rot", node), 0.0) + float(rotary) * mass * side * side / 6.0
+                for axis, factor in zip("xyz", rotary):
+                    m[("rot", node, axis)] = m.get(("rot", node, axis), 0.0) + float(factor) * mass * side * side / 6.0
         return E, k, m
 
     def _changed(self, k: dict, m: dict) -> tuple[dict, dict]:

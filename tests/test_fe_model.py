@@ -171,11 +171,11 @@ def test_two_pass_screen_keeps_the_single_pass_choice(tmp_path: Path) -> None:
 
     two = physical._screen(sim, cause, list(cause.params), {}, mm, sel, 40.0, options)
     one = physical._screen(FullOnly(), cause, list(cause.params), {}, mm, sel, 40.0, options)
-    assert len(calls) == 5 * len(options)          # the full pass: every node on the grid
+    assert len(calls) == physical.SCREEN_GRID * len(options)     # the full pass: every node on the grid
     assert len(two) == physical.N_PRESCREEN
-    assert two[0][1] == one[0][1] == "n:47"
-    assert [o for _, o, _ in two[:3]] == [o for _, o, _ in one[:3]]
-    np.testing.assert_allclose([c for c, _, _ in two[:3]], [c for c, _, _ in one[:3]], rtol=1e-9)
+    assert two[0].option == one[0].option == "n:47"
+    assert [s.option for s in two[:3]] == [s.option for s in one[:3]]
+    np.testing.assert_allclose([s.chi2 for s in two[:3]], [s.chi2 for s in one[:3]], rtol=1e-9)
 
 
 def test_one_change_is_solved_once_on_the_full_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

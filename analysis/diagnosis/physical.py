@@ -23,12 +23,21 @@ bounded smoothly, ``c tanh(r / c)`` with ``c = RESIDUAL_CAP`` (10), so one mode 
 resolve (a close pair merged, a spurious peak) counts as one large error; ``chi2 = sum r^2``.
 
 Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
-cause's search range); a choice (the node of an added mass, the member of a member change) by trying
-every option on a coarse grid of its parameter, the ``N_SCREEN`` best refined; a choice of at most
-``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option gets the full
-search of its parameters (from the nominal and from the best point of a grid), with its own model. A cause with two
-parameters is also fitted with each alone (the other at its nominal value): nested models, the one
-that predicts best (leave one mode out) wins.
+cause's search range); a choice (the node of an added mass, the element of a crack) of more than
+``N_SCREEN`` options by a screen that orders the work and a bound that keeps every option that could win:
+each option on a grid of its parameters (the range's ends included), then fitted from its best grid point in
+that order, the ``N_SCREEN`` best and every further option whose chi2 could still come below the best fit so
+far. The bound: a parameter declared ``monotone`` (a mass or a stiffness added: each natural frequency moves
+one way only) keeps every frequency inside a box of the grid between its values at the box's corners, so a
+measured mode is at least as far from the candidate's modes as from those intervals (:func:`_chi2_bound`);
+a box whose bound is below the best fit is halved (``TIGHTEN_SPLITS``) before the option is fitted instead.
+A choice of at most ``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option
+gets the full search of its parameters (from the nominal and from the best point of a grid), with its own
+model. A cause with several parameters is also fitted with each subset alone (the others at their nominal
+value, each variant started also from the fits of the variants it contains): nested models, the one that
+predicts best (leave one mode out) wins. A refinement (a parameter that ``requires`` another: a mass's
+rotary inertia, about every axis or one) is freed one at a time on top of the best variant, at the options
+that variant fitted, and kept only when it predicts the held-out modes ``physical_min_gain_db`` better.
 
 Cross-validation: leave one mode out. Each measured mode is predicted by the cause fitted to the
 other modes (the choice searched again inside the fold among the ``N_SCREEN_FOLD`` best options of the
@@ -51,9 +60,9 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
-from itertools import combinations
+from itertools import combinations, product
 from typing import Any, Protocol
 
 import numpy as np
@@ -102,6 +111,10 @@ class ParamSpec:
     unit: str = ""
     log: bool = True
     requires: str | None = None
+    #: the simulation's natural frequencies, each by its order, move one way only as this parameter grows (a
+    #: mass or a stiffness added: Rayleigh's monotonicity): the frequencies at the corners of a box of such
+    #: parameters bound every frequency inside it, so a choice's chi2 is bounded from below (:func:`_chi2_bound`)
+    monotone: bool = False
 
     def to_x(self, v: float) -> float:
         return float(np.log(v)) if self.log else float(v)
@@ -251,10 +264,17 @@ class PhysicalFit:
     ranked: list = field(default_factory=list)       # [(chi2, option, params)] of a choice, best first
 
 
+#: Relative tolerance of the least squares on chi2 and on the (log) parameters: a chi2 is compared with others to
+#: about 0.01, a factor reported to 4 digits (the default 1e-8 spent a quarter of the fits' solves beyond that).
+FIT_TOL = 1e-6
+
+
 def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[ParamSpec], fixed: dict,
-                    mm: MeasuredModes, sel: np.ndarray, fmax: float, start: dict | None = None) -> tuple[dict, float]:
+                    mm: MeasuredModes, sel: np.ndarray, fmax: float, start: dict | None = None,
+                    also: Sequence[Mapping] = ()) -> tuple[dict, float]:
     """Least squares over the free parameters (log-factors) from ``start`` (else from the nominal and
-    from the best point of a 7-point-per-parameter grid)."""
+    from the best point of a grid inside the range: 7 points, 5 per parameter for two) and from each of
+    ``also`` (a nested variant's fit: the parameters it left at their nominal start there); the best."""
     def full(x: np.ndarray) -> dict:
         p = dict(fixed)
         for s, xi in zip(free, x):
@@ -270,13 +290,16 @@ def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[Pa
     first = start or {}
     starts = [np.array([s.to_x(float(first.get(s.name, s.start()))) for s in free])]
     if start is None:      # and the best point of a coarse grid over the range
-        grid = np.array(np.meshgrid(*[np.linspace(a, b, 9)[1:-1] for a, b in zip(lo, hi)])).reshape(len(free), -1).T
+        inner = 9 if len(free) == 1 else 7
+        grid = np.array(np.meshgrid(*[np.linspace(a, b, inner)[1:-1] for a, b in zip(lo, hi)])).reshape(len(free), -1).T
         costs = [float(np.sum(resid(x) ** 2)) for x in grid]
         starts.append(grid[int(np.argmin(costs))])
+    starts += [np.array([s.to_x(float(q.get(s.name, s.start()))) for s in free]) for q in also]
     best: tuple[dict, float] = ({}, np.inf)
     for x0 in starts:
         x0 = np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
-        res = least_squares(resid, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=30 * len(free))
+        res = least_squares(resid, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=30 * len(free), ftol=FIT_TOL,
+                            xtol=FIT_TOL)
         cost = float(2 * res.cost)
         if cost < best[1]:
             best = (full(res.x), cost)
@@ -287,68 +310,216 @@ def _nominal(cause: CauseSpec) -> dict:
     return {s.name: s.nominal for s in cause.params if s.nominal is not None}
 
 
-#: A simulation with a cheap first pass (``screen_modes``) has every option screened by it, and the best this
-#: many judged again by its ``modes`` (the screen's order decides which options are fitted).
+#: A simulation with a cheap first pass (``screen_modes``: a user's FE model of many nodes) has every option
+#: ranked by it first, and only the best this many screened by its ``modes`` (a ranking, not a bound: an option
+#: the first pass ranks below it is not fitted; ``docs/diagnosis-fe-model.md``).
 N_PRESCREEN = 4 * N_SCREEN
 
 
+def _prescreened(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict,
+                 mm: MeasuredModes, sel: np.ndarray, fmax: float, options: Sequence[str]) -> list[str]:
+    """``options`` ranked by the simulation's cheap ``screen_modes`` on an inner grid of each free parameter, the
+    best ``N_PRESCREEN`` kept (all of them when the simulation has no first pass or few options)."""
+    first: Any = getattr(sim, "screen_modes", None)
+    if first is None or len(options) <= N_PRESCREEN:
+        return list(options)
+    grid = [np.linspace(*sp.x_bounds, 7)[1:-1] for sp in specs]
+    scored = []
+    for opt in options:
+        best = np.inf
+        for xs in product(*grid):
+            p = {**fixed, cause.choice: opt, **{sp.name: sp.from_x(float(x)) for sp, x in zip(specs, xs)}}
+            f, P = first(cause.name, p, fmax)
+            best = min(best, float(np.sum(residuals(mm, f, P)[sel] ** 2)))
+        scored.append((best, opt))
+    scored.sort(key=lambda t: t[0])
+    return [opt for _, opt in scored[:N_PRESCREEN]]
+
+
+#: Grid points per parameter of a choice's screen, the range's ends included (one parameter; two: ``SCREEN_GRID_2``).
+SCREEN_GRID = 9
+SCREEN_GRID_2 = 5
+#: Relative slack on the frequencies bounding a box (:func:`_chi2_bound`): a reduced model's rounding (1e-6).
+_BOUND_SLACK = 1e-5
+
+
+def _chi2_bound(mm: MeasuredModes, sel: np.ndarray, corners: Sequence[np.ndarray]) -> float:
+    """A lower bound of chi2 on the modes ``sel`` over a box of monotone parameters (:attr:`ParamSpec.monotone`)
+    given the candidate frequencies at its corners: the j-th frequency lies between its least and largest
+    corner value everywhere in the box (above the computed band where a corner lacks it), so a measured mode
+    is at least as far from every candidate mode as from the nearest such interval; the shapes' residual is
+    counted as 0. Every pairing (:func:`pair`) is bounded: an unpaired mode gets the cap."""
+    n = max(f.size for f in corners)
+    lo = np.full(n, np.inf)
+    hi = np.full(n, -np.inf)
+    for f in corners:
+        lo[:f.size] = np.minimum(lo[:f.size], f)
+        hi[:f.size] = np.maximum(hi[:f.size], f)
+        hi[f.size:] = np.inf
+    lo, hi = lo * (1 - _BOUND_SLACK), hi * (1 + _BOUND_SLACK)
+    fk = mm.freq_hz[sel][:, None]
+    gap = np.maximum(lo[None, :] - fk, 0.0) + np.maximum(fk - hi[None, :], 0.0)
+    r = (gap.min(axis=1) if n else np.full(fk.shape[0], np.inf)) / mm.freq_hz[sel] / mm.sigma[sel]
+    return float(np.sum((RESIDUAL_CAP * np.tanh(r / RESIDUAL_CAP)) ** 2))
+
+
+@dataclass
+class _Screened:
+    """One option on the screen's grid: the least chi2 at a grid point (an upper bound of its exact fit), the
+    parameters there, and a lower bound of chi2 over the whole range (0: none known) with the cells it comes
+    from (``[(bound, box)]``, a box a tuple of ``(x_lo, x_hi)`` per free parameter)."""
+
+    chi2: float
+    option: str
+    params: dict
+    bound: float
+    cells: list = field(default_factory=list)
+    at: _Chi2 | None = None
+
+
+class _Chi2:
+    """The chi2 and the frequencies of one option at points ``x`` of its free parameters (the simulation keeps
+    its answers, so a corner shared by two boxes is solved once)."""
+
+    def __init__(self, sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict,
+                 mm: MeasuredModes, sel: np.ndarray, fmax: float, option: str) -> None:
+        self.sim, self.cause, self.specs, self.mm, self.sel, self.fmax = sim, cause, specs, mm, sel, fmax
+        self.fixed = {**fixed, cause.choice: option}
+        self._kept: dict[tuple, tuple[float, np.ndarray]] = {}
+
+    def params(self, x: Sequence[float]) -> dict:
+        return {**self.fixed, **{s.name: s.from_x(float(xi)) for s, xi in zip(self.specs, x)}}
+
+    def at(self, x: Sequence[float]) -> tuple[float, np.ndarray]:
+        key = tuple(float(xi) for xi in x)
+        if key not in self._kept:
+            f, P = self.sim.modes(self.cause.name, self.params(x), self.fmax)
+            self._kept[key] = (float(np.sum(residuals(self.mm, f, P)[self.sel] ** 2)), f)
+        return self._kept[key]
+
+    def bound(self, box: Sequence[tuple[float, float]]) -> float:
+        """:func:`_chi2_bound` over ``box`` from its corners."""
+        return _chi2_bound(self.mm, self.sel, [self.at(x)[1] for x in product(*box)])
+
+
 def _screen(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict, mm: MeasuredModes,
-            sel: np.ndarray, fmax: float, options: Sequence[str]) -> list[tuple[float, str, dict]]:
-    """Each option on a coarse grid of its (single) parameter: [(chi2, option, params)] sorted. With a
-    simulation's ``screen_modes`` (a cheaper approximation) every option first by it, then its best
-    ``N_PRESCREEN`` by ``modes``."""
-    first = getattr(sim, "screen_modes", None)
-    if first is not None and len(options) > N_PRESCREEN:
-        rough = _screen_with(first, cause, specs, fixed, mm, sel, fmax, options)
-        options = [opt for _, opt, _ in rough[:N_PRESCREEN]]
-    return _screen_with(sim.modes, cause, specs, fixed, mm, sel, fmax, options)
-
-
-def _screen_with(modes: Any, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict, mm: MeasuredModes,
-                 sel: np.ndarray, fmax: float, options: Sequence[str]) -> list[tuple[float, str, dict]]:
-    """:func:`_screen` with the solver ``modes`` (``sim.modes`` or ``sim.screen_modes``)."""
-    grid = [np.linspace(*s.x_bounds, 7)[1:-1] for s in specs]
+            sel: np.ndarray, fmax: float, options: Sequence[str]) -> list[_Screened]:
+    """Each option on a grid of its free parameters, the range's ends included (``SCREEN_GRID`` points, two
+    parameters ``SCREEN_GRID_2`` each), with its own model and pairing; with monotone parameters the grid's
+    cells also bound the option's chi2 from below (:func:`_chi2_bound`, the least over its cells). Sorted by
+    the grid's least chi2. A simulation with a cheap first pass has its options ranked by it first
+    (:func:`_prescreened`)."""
+    options = _prescreened(sim, cause, specs, fixed, mm, sel, fmax, options)
+    n = SCREEN_GRID if len(specs) == 1 else SCREEN_GRID_2
+    axes = [np.linspace(*s.x_bounds, n) for s in specs]
+    bounded = all(s.monotone for s in specs)
     out = []
     for opt in options:
-        best: tuple[float, str, dict] = (np.inf, opt, {})
-        for xs in np.array(np.meshgrid(*grid)).reshape(len(specs), -1).T:
-            p = {**fixed, cause.choice: opt, **{s.name: s.from_x(float(x)) for s, x in zip(specs, xs)}}
-            f, P = modes(cause.name, p, fmax)
-            c = float(np.sum(residuals(mm, f, P)[sel] ** 2))
-            if c < best[0]:
-                best = (c, opt, p)
-        out.append(best)
-    return sorted(out, key=lambda t: t[0])
+        at = _Chi2(sim, cause, specs, fixed, mm, sel, fmax, opt)
+        c, x = min((at.at(x)[0], x) for x in product(*axes))
+        cells = []
+        if bounded:
+            for idx in np.ndindex(*(a.size - 1 for a in axes)):
+                box = tuple((float(a[i]), float(a[i + 1])) for a, i in zip(axes, idx))
+                cells.append((at.bound(box), box))
+        bound = min(b for b, _ in cells) if cells else 0.0
+        out.append(_Screened(c, opt, at.params(x), bound, cells, at))
+    return sorted(out, key=lambda t: t.chi2)
+
+
+#: Boxes split (each into two halves) to lift an option's bound above the best fit before it is fitted instead.
+TIGHTEN_SPLITS = 12
+
+
+def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLITS) -> None:
+    """Lift ``s.bound`` towards ``target`` by splitting its lowest box in halves (along its widest parameter,
+    relative to the range) at most ``splits`` times; a corner with a lower chi2 than the grid's best becomes the
+    option's best point."""
+    widths = [max(b - a, 1e-30) for a, b in (sp.x_bounds for sp in at.specs)]
+    for _ in range(splits):
+        if not s.cells or s.bound >= target:
+            return
+        s.cells.sort(key=lambda t: t[0])
+        _, box = s.cells.pop(0)
+        d = int(np.argmax([(b - a) / w for (a, b), w in zip(box, widths)]))
+        mid = 0.5 * (box[d][0] + box[d][1])
+        for half in ((box[d][0], mid), (mid, box[d][1])):
+            part = box[:d] + (half,) + box[d + 1:]
+            s.cells.append((at.bound(part), part))
+            for x in product(*part):
+                c = at.at(x)[0]
+                if c < s.chi2:
+                    s.chi2, s.params = c, at.params(x)
+        s.bound = min(b for b, _ in s.cells)
+
+
+def _inside(s: _Screened, specs: Sequence[ParamSpec]) -> list[dict]:
+    """With several parameters (whose least squares may stop in a local minimum from the grid's best point, a
+    corner of a rugged surface): the middle of the box with the lowest bound, where the frequencies can agree."""
+    if len(specs) < 2 or not s.cells:
+        return []
+    box = min(s.cells, key=lambda t: t[0])[1]
+    return [{sp.name: sp.from_x(0.5 * (a + b)) for sp, (a, b) in zip(specs, box)}]
 
 
 def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm: MeasuredModes,
               sel: np.ndarray, fmax: float, options: Sequence[str] | None = None,
-              start: dict | None = None) -> tuple[dict, float, list]:
+              start: dict | None = None, nested: Sequence[Mapping] = (), below: float = np.inf
+              ) -> tuple[dict, float, list]:
     """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
-    With a choice: every option (or ``options``) on a coarse grid, then the ``N_SCREEN`` best fitted (at most
-    ``N_SCREEN`` options: each fitted in full, no screen).
+    With a choice of at most ``N_SCREEN`` options: each fitted in full (:func:`_fit_continuous`), no screen.
+    More: every option screened on a grid (:func:`_screen`), then fitted from its best grid point in the
+    screen's order: the ``N_SCREEN`` best, and after them every option whose chi2 could still be below the best
+    fit so far (its lower bound from the screen; an option without one always could). No option is dropped
+    that could win. ``nested``: fits of a variant with fewer free parameters (with the choice, at their option):
+    each is a start too (a screened option's best point when its chi2 there is lower), so a variant's chi2 is
+    never above a nested one's. ``below``: only a fit below this chi2 is of use (:func:`_best_variant`): an
+    option whose bound is not below it is not fitted (none fitted: chi2 inf).
     Returns (params, chi2, [(chi2, option, params)] of the fitted options, sorted)."""
     specs = [s for s in cause.params if s.name in free]
     fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
     if cause.choice is None:
-        p, c = _fit_continuous(sim, cause, specs, fixed, mm, sel, fmax, start)
+        p, c = _fit_continuous(sim, cause, specs, fixed, mm, sel, fmax, start, nested)
         return p, c, []
+    held: dict[str, list[Mapping]] = {}
+    for q in nested:
+        held.setdefault(str(q[cause.choice]), []).append(q)
     todo = options if options is not None else cause.options
-    screened: list[tuple[float, str, dict | None]]
-    if isinstance(start, dict) and options is not None and set(options) <= set(start):
+    screened: list[_Screened]
+    if held and options is None and any(s.requires is not None for s in specs):
+        # a refinement refines the fits it is nested in, where they are, from there (its own nominal)
+        def chi2(q: Mapping) -> float:
+            return float(np.sum(residuals(mm, *sim.modes(cause.name, q, fmax))[sel] ** 2))
+
+        screened = sorted((_Screened(c, opt, dict(q), -np.inf) for opt in todo if opt in held
+                           for c, q in [min(((chi2(q), q) for q in held[opt]), key=lambda t: t[0])]),
+                          key=lambda t: t.chi2)
+        held = {}
+    elif isinstance(start, dict) and options is not None and set(options) <= set(start):
         # the options' own fits as starts (a fold of the cross-validation): no coarse screen again
-        screened = [(0.0, opt, start[opt]) for opt in options]
+        screened = [_Screened(0.0, opt, start[opt], -np.inf) for opt in options]
     elif len(todo) <= N_SCREEN:
-        # few options (a support, a joint, all of them): each gets the full search of its own parameters,
-        # no screen to drop one whose exact fit could still win
-        screened = [(0.0, opt, None) for opt in todo]
+        # few options (a support, a joint, all of them): each gets the full search of its own parameters
+        screened = [_Screened(0.0, opt, {}, -np.inf) for opt in todo]
     else:
-        screened = list(_screen(sim, cause, specs, fixed, mm, sel, fmax, todo))
+        screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, todo)
+        for s in screened:          # a nested fit better than the option's grid: its best point
+            for q in held.pop(s.option, ()):
+                c = float(np.sum(residuals(mm, *sim.modes(cause.name, q, fmax))[sel] ** 2))
+                if c < s.chi2:
+                    s.chi2, s.params = c, dict(q)
+        screened.sort(key=lambda t: t.chi2)
     ranked = []
     best: tuple[dict, float] = ({}, np.inf)
-    for _, opt, p0 in screened[:N_SCREEN]:
-        p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: opt}, mm, sel, fmax, p0)
-        ranked.append((c, opt, p))
+    for i, s in enumerate(screened):
+        target = below if i < N_SCREEN else min(below, best[1])
+        if s.bound < target and s.at is not None:
+            _tighten(s.at, s, target)
+        if s.bound >= target:
+            continue                    # its chi2 cannot come below the best fit's (or ``below``) in its range
+        p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: s.option}, mm, sel, fmax, s.params or None,
+                               [*held.get(s.option, ()), *_inside(s, specs)])
+        ranked.append((c, s.option, p))
         if c < best[1]:
             best = (p, c)
     ranked.sort(key=lambda t: t[0])
@@ -356,14 +527,11 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
 
 
 def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
-    """The nested variants of a cause: every set of its parameters set free (fewest first), a parameter only
-    with the one it ``requires``."""
-    names = [s.name for s in cause.params]
-    needs = {s.name: s.requires for s in cause.params}
-    out: list[tuple[str, ...]] = []
-    for k in range(1, len(names) + 1):
-        out += [c for c in combinations(names, k) if all(needs[n] is None or needs[n] in c for n in c)]
-    return out
+    """The nested variants of a cause without refinements: every set of its parameters that ``require`` no other
+    set free (fewest first). A refinement (a parameter that ``requires`` another: a mass's rotary inertia about
+    one axis) is freed one at a time on top of the best of these, where it earns its keep (:func:`_best_variant`)."""
+    names = [s.name for s in cause.params if s.requires is None]
+    return [c for k in range(1, len(names) + 1) for c in combinations(names, k)]
 
 
 def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
@@ -382,38 +550,64 @@ def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: 
 
 def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
                   rule: DecisionRule = DEFAULT_RULE) -> PhysicalFit | None:
-    """The cause's nested variants fitted and cross-validated; the one with the least held-out chi2. A variant
-    that frees a refinement (a parameter that ``requires`` another: a mass's rotary inertia) must earn it: it
-    replaces the best variant without refinements only when it predicts the held-out modes ``rule.physical_min_gain_db``
-    better and none of its parameters stops at an edge of its range."""
-    plain = _best_of(sim, cause, mm, fmax, [v for v in variants(cause) if not _refines(cause, v)])
-    refined = _best_of(sim, cause, mm, fmax, [v for v in variants(cause) if _refines(cause, v)])
-    if plain is None or (refined is not None and not refined.at_edge
-                         and gain_db(plain.cv_per_mode, refined.cv_per_mode) >= rule.physical_min_gain_db):
-        return refined
-    return plain
+    """The cause's nested variants (:func:`variants`) fitted (each also from the fits of the variants it contains,
+    :func:`fit_cause`'s ``nested``) and cross-validated; the one with the least held-out chi2. Then its
+    refinements (parameters that ``require`` one of its free parameters: a mass's rotary inertia about X, Y, Z),
+    one parameter more at a time: the best variant with one refinement more replaces the current one only when it
+    predicts the held-out modes ``rule.physical_min_gain_db`` better and none of its parameters stops at an edge of its range.
+    A refinement refines the current fit where it was made: its choice is searched among the options the current
+    variant fitted (every option whose chi2 could come below that variant's best, :func:`fit_cause`).
+
+    A fit's held-out chi2 is at least its chi2 on all modes (each fold starts from the full fit and can only
+    descend on the other modes, so what it gains there the left-out mode pays at least back: the full fit is the
+    least chi2 on all modes), so a variant whose chi2 on all modes already exceeds the held-out chi2 it would
+    have to beat is not cross-validated: it cannot win."""
+    fits: dict[tuple[str, ...], PhysicalFit] = {}
+    allsel = np.ones(mm.freq_hz.size, bool)
+
+    def fit(free: tuple[str, ...], below: float) -> None:
+        inner = [q for v, f in fits.items() if set(v) < set(free) for q in _fitted_params(f)]
+        p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax, nested=inner, below=below)
+        if np.isfinite(chi2):
+            fits[free] = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, ranked=ranked)
+
+    for free in variants(cause):
+        fit(free, np.inf)
+    best = _best_of(sim, cause, mm, fmax, list(fits.values()), np.inf)
+    while best is not None:
+        more = [s.name for s in cause.params if s.requires in best.free and s.name not in best.free]
+        # one refinement more must bring the held-out chi2 physical_min_gain_db below the current's: its chi2 on all modes too
+        bar = best.chi2_cv * 10 ** (-rule.physical_min_gain_db / 10)
+        frees = [tuple(n for n in (s.name for s in cause.params) if n in best.free or n == extra) for extra in more]
+        for free in frees:
+            fit(free, bar)
+        refined = _best_of(sim, cause, mm, fmax, [fits[v] for v in frees if v in fits], bar)
+        if refined is None or refined.at_edge or gain_db(best.cv_per_mode, refined.cv_per_mode) < rule.physical_min_gain_db:
+            break
+        best = refined
+    return best
 
 
-def _refines(cause: CauseSpec, free: Sequence[str]) -> bool:
-    """Does the variant ``free`` set a refinement free (a parameter that ``requires`` another)?"""
-    return any(s.requires is not None for s in cause.params if s.name in free)
+def _fitted_params(fit: PhysicalFit) -> list[dict]:
+    """The parameters of a fit at each option it fitted (its own, without a choice)."""
+    return [q for _, _, q in fit.ranked] if fit.ranked else [fit.params]
 
 
 def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
-             frees: Sequence[tuple[str, ...]]) -> PhysicalFit | None:
-    """Of the variants ``frees``, fitted and cross-validated, the one with the least held-out chi2."""
-    allsel = np.ones(mm.freq_hz.size, bool)
+             fits: Sequence[PhysicalFit], bar: float) -> PhysicalFit | None:
+    """Of the fitted variants ``fits``, cross-validated, the one with the least held-out chi2 below ``bar``
+    (None: none can be). They are taken by their chi2 on all modes, and one whose chi2 there is not below the
+    best held-out chi2 so far (or ``bar``) is left out (:func:`_best_variant`: its held-out chi2 cannot be)."""
     best: PhysicalFit | None = None
-    for free in frees:
-        p, chi2, ranked = fit_cause(sim, cause, free, mm, allsel, fmax)
-        options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]] if ranked else None
-        starts = {o: q for _, o, q in ranked} if ranked else p
-        cv = _cross_validate(sim, cause, free, mm, fmax, options, starts)
-        edge = cause.at_edge(p, free)
-        fit = PhysicalFit(cause=cause.name, params=p, free=free, chi2=chi2, chi2_cv=float(cv.sum()),
-                          cv_per_mode=cv, at_edge=edge, ranked=ranked)
-        if best is None or fit.chi2_cv < best.chi2_cv:
-            best = fit
+    for fit in sorted(fits, key=lambda f: f.chi2):
+        if fit.chi2 >= min(bar, np.inf if best is None else best.chi2_cv):
+            break
+        options = [o for _, o, _ in fit.ranked[:N_SCREEN_FOLD]] if fit.ranked else None
+        starts = {o: q for _, o, q in fit.ranked} if fit.ranked else fit.params
+        cv = _cross_validate(sim, cause, fit.free, mm, fmax, options, starts)
+        done = replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=cause.at_edge(fit.params, fit.free))
+        if best is None or done.chi2_cv < best.chi2_cv:
+            best = done
     return best
 
 

@@ -298,7 +298,8 @@ def _alone_cv(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
     credited with what searching the choice again in a fold costs the single cause."""
     if "_alone_cv" not in first:
         fa: PhysicalFit = first["_fit"]
-        first["_alone_cv"] = fit_pair(sim, [specs[fa.cause]], [fa], mm, fmax).cv_per_mode
+        alone = fit_pair(sim, [specs[fa.cause]], [fa], mm, fmax)
+        first["_alone_cv"], first["_alone_chi2"] = alone.cv_per_mode, alone.chi2
     return first["_alone_cv"]
 
 
@@ -590,10 +591,11 @@ def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
     spec = specs[name]
     p, chi2, ranked = fit_cause(sim, spec, free, mm, np.ones(mm.freq_hz.size, bool), fmax)
     fit = PhysicalFit(cause=name, params=p, free=free, chi2=chi2, ranked=ranked)
-    cv = fit_pair(sim, [spec], [fit], mm, fmax).cv_per_mode
+    alone = fit_pair(sim, [spec], [fit], mm, fmax)
+    cv = alone.cv_per_mode
     edge = spec.at_edge(p, free)
     fit = replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=edge)
-    return {**judge.single(spec, fit), "_alone_cv": cv}
+    return {**judge.single(spec, fit), "_alone_cv": cv, "_alone_chi2": alone.chi2}
 
 
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
@@ -616,7 +618,10 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
             cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]), judge.rule)
-        c["significant"] = bool(c["significant"] and enough)
+        # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
+        # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
+        kept = first["_alone_chi2"] - two.chi2 >= _freedom(specs[fb.cause], fb.free)
+        c["significant"] = bool(c["significant"] and enough and kept)
         c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
         c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
         if c["one_member"] is not None and c["held_out_chi2_per_mode"] > judge.rule.leaves_chi2:
