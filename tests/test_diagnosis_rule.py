@@ -156,11 +156,15 @@ def test_the_second_cause_rule_and_a_refinement_take_the_physical_gain_from_the_
     plain = PhysicalFit(cause="added_mass", params={}, free=("mass_kg",), chi2=1.0, cv_per_mode=np.full(5, 1.0))
     refined = PhysicalFit(cause="added_mass", params={}, free=("mass_kg", "inertia_factor"), chi2=0.5,
                           cv_per_mode=np.full(5, 0.4))           # 4 dB better on held-out modes
-    monkeypatch.setattr(physical, "_best_of", lambda sim, cause, mm, fmax, frees:
-                        refined if any("inertia_factor" in v for v in frees) else plain)
-    nothing: Any = None                                          # no simulation, no modes: _best_of stands in
-    assert _best_variant(nothing, spec, nothing, 0.0) is refined
-    assert _best_variant(nothing, spec, nothing, 0.0, DecisionRule(physical_min_gain_db=5.0)) is plain
+    chi2 = {plain.free: plain.chi2, refined.free: refined.chi2}
+    # fit_cause and the cross-validation stand in: each variant's fit and held-out chi2 as above
+    monkeypatch.setattr(physical, "fit_cause", lambda sim, cause, free, *a, **k: ({}, chi2[tuple(free)], []))
+    monkeypatch.setattr(physical, "_best_of", lambda sim, cause, mm, fmax, fits, bar:
+                        refined if any("inertia_factor" in f.free for f in fits) else plain)
+    nothing: Any = None                                          # no simulation: the stand-ins answer
+    modes: Any = SimpleNamespace(freq_hz=np.arange(5.0))
+    assert _best_variant(nothing, spec, modes, 0.0) is refined
+    assert _best_variant(nothing, spec, modes, 0.0, DecisionRule(physical_min_gain_db=5.0)) is plain
 
 
 def test_the_mode_vote_takes_its_separation_from_the_rule() -> None:
