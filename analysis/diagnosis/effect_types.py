@@ -55,6 +55,8 @@ class Effect:
     held_out : optional ``held_out(ctx) -> (before, after) or None``, the effect's own cross-validation
         when interleaved lines cannot test it (single lines at the mains harmonics:
         :func:`analysis.diagnosis.mains.held_out_mains_hum`); None: the default folds.
+    applies : optional ``applies(ctx) -> str``, why the effect cannot act on the measured band ("" when
+        it can; mains lines need a mains harmonic in the band): a non-empty reason skips the effect.
     """
 
     name: str
@@ -66,6 +68,7 @@ class Effect:
     needs: tuple = ()
     held_out: Callable | None = None
     advice: str = ""
+    applies: Callable | None = None
 
 
 # --------------------------------------------------------------------------- helpers

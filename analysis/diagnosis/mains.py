@@ -11,7 +11,7 @@ from ..frf import FRFSet
 from .effect_types import EffectError, FitContext
 from .effect_types import check_positive as _check_positive
 
-__all__ = ["HUM_BASES_HZ", "hum_kernels", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
+__all__ = ["HUM_BASES_HZ", "hum_kernels", "mains_hum_applies", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
            "held_out_mains_hum", "held_out_by_harmonics"]
 
 HUM_BASES_HZ = (50.0, 60.0)
@@ -104,6 +104,22 @@ def _on_harmonics(A: np.ndarray, given_hz: np.ndarray, fk: np.ndarray, frfs: tup
     return out
 
 
+def mains_hum_applies(ctx: FitContext) -> str:
+    """Why mains lines cannot act on the measured band ("" when they can): no harmonic of any mains base
+    (:data:`HUM_BASES_HZ`, up to :data:`MAX_OFFSET_HZ` off nominal) lies on the band's lines or just below
+    them, where a line with a width would still reach in (a shaker's band of 2-15 Hz holds none)."""
+    f = np.asarray(ctx.measured.freq_hz, float)
+    if f.size < 2:
+        return f"the band has {f.size} line(s)"
+    lo, hi = f[0] - 2 * default_hum_width(f), f[-1] + _line_spacing(f) / 2
+    for b in HUM_BASES_HZ:
+        k = np.arange(1, int(hi // (b - MAX_OFFSET_HZ)) + 1)
+        if np.any((k * (b + MAX_OFFSET_HZ) >= lo) & (k * (b - MAX_OFFSET_HZ) <= hi)):
+            return ""
+    return (f"no mains harmonic ({' or '.join(f'{b:g}' for b in HUM_BASES_HZ)} Hz and their multiples) lies in "
+            f"the band {f[0]:.4g}-{f[-1]:.4g} Hz")
+
+
 def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
     """Add lines at the harmonics of ``base_hz``: ``amplitudes[o][r][k] = [re, im]`` (FRF units), one per
     harmonic in the FRFs' band, or one per harmonic of ``harmonics_hz`` (Hz; the fit's band) when given
@@ -115,6 +131,8 @@ def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
         raise EffectError(f"mains_hum: width_hz must be >= 0 (0: single lines), got {w!r}")
     fk, K = hum_kernels(frf.freq_hz, f0, width, str(params.get("shape", "lorentzian")))
     A = np.asarray(params.get("amplitudes"), float)
+    if A.size == 0:                     # no harmonic: JSON's nested empty lists lose the last axis
+        A = A.reshape(frf.H.shape[:2] + (0, 2)) if A.ndim >= 2 and A.shape[:2] == frf.H.shape[:2] else A
     given = params.get("harmonics_hz")
     if given is not None:
         A = _on_harmonics(A, np.asarray(given, float), fk, frf.H.shape[:2])

@@ -54,6 +54,8 @@ Z_MIN = 3.0
 MIN_GAIN_DB = 0.5
 STRONG_GAIN_DB = 3.0
 NONE_MARGIN_DB = 3.0
+#: how ``Diagnosis.skipped`` begins the reason of an effect that cannot act on the measured band
+NOT_APPLICABLE = "not applicable"
 
 
 @dataclass(frozen=True)
@@ -192,6 +194,11 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
         missing = [k for k in eff.needs if k not in ctx.base.meta]
         if missing:
             skipped[name] = _missing_needs(name, missing, ctx)
+            continue
+        why = eff.applies(ctx) if eff.applies is not None else ""
+        if why:
+            skipped[name] = f"{NOT_APPLICABLE}: {why}"
+            log.info("effect %s not applicable: %s", name, why)
             continue
         try:
             before, after = _held_out(ctx, name)
