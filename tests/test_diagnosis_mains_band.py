@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analysis.diagnosis import predict
-from analysis.diagnosis import mains
+from analysis.diagnosis import mains, predict
 from analysis.diagnosis.compare import line_weights
 from analysis.diagnosis.effects import FitContext
 from analysis.diagnosis.verdict import NOT_APPLICABLE, diagnose_frfs
