@@ -7,8 +7,9 @@ import pytest
 
 from analysis.diagnosis import mains, predict
 from analysis.diagnosis.compare import line_weights
+from analysis.diagnosis.effect_types import NOT_APPLICABLE
 from analysis.diagnosis.effects import FitContext
-from analysis.diagnosis.verdict import NOT_APPLICABLE, diagnose_frfs
+from analysis.diagnosis.verdict import diagnose_frfs
 from analysis.frf import FRFSet
 from analysis.modal import ModalModel, pole_from_fz
 

@@ -54,8 +54,6 @@ Z_MIN = 3.0
 MIN_GAIN_DB = 0.5
 STRONG_GAIN_DB = 3.0
 NONE_MARGIN_DB = 3.0
-#: how ``Diagnosis.skipped`` begins the reason of an effect that cannot act on the measured band
-NOT_APPLICABLE = "not applicable"
 
 
 @dataclass(frozen=True)
@@ -197,6 +195,8 @@ def _stage(ctx: FitContext, names: Sequence[str], z_min: float, min_gain_db: flo
             continue
         why = eff.applies(ctx) if eff.applies is not None else ""
         if why:
+            from .effect_types import NOT_APPLICABLE
+
             skipped[name] = f"{NOT_APPLICABLE}: {why}"
             log.info("effect %s not applicable: %s", name, why)
             continue
