@@ -41,7 +41,7 @@ import numpy as np
 from analysis.frf import FRFSet
 from analysis.points import PointLabelError, parse_point
 from analysis.recording_writer import FRFPoint, RecordingWriter, whole_recording
-from analysis.spectra import WindowSettings, tau_from_end_fraction
+from analysis.spectra import WindowSettings, same_window_tau, tau_from_end_fraction
 
 from .errors import ImportDataError
 
@@ -538,7 +538,7 @@ def combine_frf_imports(imports: Sequence[ImportedFRFs]) -> ImportedFRFs:
         for s, n in zip(imp.sets, imp.n_averages):
             if (s.freq_hz.shape != first.freq_hz.shape or not np.allclose(s.freq_hz, first.freq_hz)
                     or s.unit != first.unit or s.sample_rate_hz != first.sample_rate_hz
-                    or s.exp_window_tau_s != first.exp_window_tau_s):
+                    or not same_window_tau(s.exp_window_tau_s, first.exp_window_tau_s)):
                 raise ImportDataError(f"{imp.source} differs in frequency axis, unit, sample rate or window from "
                                       f"{imports[0].source}; import the files separately")
             r = s.references[0]

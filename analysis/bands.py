@@ -121,23 +121,27 @@ def measured_up_to(limits: dict[str, float]) -> float | None:
     return min(known) if known else None
 
 
-def unsupported_band_text(hi_hz: float, limits: dict[str, float], where: str = "the structure") -> str | None:
+def unsupported_band_text(hi_hz: float, limits: dict[str, float], where: str = "the structure",
+                          continuous: bool = False) -> str | None:
     """The one rule for a band that reaches above what a hit measures: the hammer's excitation
-    (``limits["excitation"]``, the force spectrum ``EXCITATION_DROP_DB`` down) or the analyser's flat band
-    (``limits["analyser"]``) below the band's top ``hi_hz`` (Hz). Returns the warning (what limits the
-    band, what to do) or None when the band stays within both. ``where`` names the struck point(s)."""
+    (``limits["excitation"]``, the force spectrum ``EXCITATION_DROP_DB`` down; with ``continuous`` a shaker's
+    continuous excitation, whose band ends there) or the analyser's flat band (``limits["analyser"]``) below
+    the band's top ``hi_hz`` (Hz). Returns the warning (what limits the band, what to do) or None when the
+    band stays within both. ``where`` names the struck point(s)."""
     tol = 1e-9 * abs(hi_hz)
     exc, ana = limits.get("excitation"), limits.get("analyser")
     parts = []
     if exc is not None and exc < hi_hz - tol:
-        parts.append(f"the hammer excites {where} only up to {exc:.0f} Hz")
+        parts.append(f"the excitation's band ends at {exc:.0f} Hz" if continuous
+                     else f"the hammer excites {where} only up to {exc:.0f} Hz")
     if ana is not None and ana < hi_hz - tol:
         parts.append(f"the analyser's flat band ends at {ana:.0f} Hz")
     if not parts:
         return None
     top = measured_up_to(limits)
+    remedy = "excite a wider band" if continuous else "use a harder tip"
     return (f"{' and '.join(parts)}, below the band's top {hi_hz:.0f} Hz: modes above {top:.0f} Hz are not measured "
-            f"well (fit below {top:.0f} Hz, or use a harder tip)")
+            f"well (fit below {top:.0f} Hz, or {remedy})")
 
 
 def coherence_informative(frf: FRFSet) -> bool:

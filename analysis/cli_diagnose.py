@@ -260,6 +260,11 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"(noise {max(diag.noise_db.values()):.1f} dB)")
     for c in diag.causes[:5]:
         print(f"  {'*' if c['significant'] else ' '} {c['evidence']}" + ("" if c["significant"] else NOT_SIGNIFICANT))
+    from .diagnosis.effect_types import NOT_APPLICABLE
+
+    for name, why in diag.skipped.items():
+        if why.startswith(NOT_APPLICABLE):
+            print(f"    {name}: {why}")
     return 0
 
 

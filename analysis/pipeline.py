@@ -289,7 +289,8 @@ def fit_auto(
         log.warning(w)
     problems = assess_fit(result, (lo2, hi2))
     limits_hz = upper_limits(frf)
-    beyond = unsupported_band_text(hi2, limits_hz, where="the structure") if user_band else None
+    beyond = (unsupported_band_text(hi2, limits_hz, where="the structure",
+                                    continuous=frf.meta.get("excitation") == "continuous") if user_band else None)
     if beyond:   # the default band stops at these limits; a user's band may not
         if np.any(np.asarray(result.freq_hz) > (measured_up_to(limits_hz) or np.inf)):   # a mode where nothing was measured
             problems.append(beyond)

@@ -326,8 +326,13 @@ class Recording:
             meta={"estimator": est, "source": str(self.path),
                   **({"n_averages": int(g["n_averages"])} if int(g["n_averages"]) > 0 else {}),
                   "excitation_limit_hz": self._excitation_limit(g),
+                  **({"excitation": "continuous"} if self._continuous() else {}),
                   "measurement": name, "point": g["point"]},
         )
+
+    def _continuous(self) -> bool:
+        """Whether the recording's force is a shaker's continuous excitation (an import described so)."""
+        return isinstance(self.setup, dict) and self.setup.get("excitation") == "continuous"
 
     def _excitation_limit(self, g: dict) -> float | None:
         """The top of the band the force excites (Hz) from a measurement's force autospectrum ``Gff``:
@@ -336,7 +341,7 @@ class Recording:
         (:func:`analysis.spectra.excited_top_hz`); None without force spectra."""
         if "Gff" not in g:
             return None
-        if isinstance(self.setup, dict) and self.setup.get("excitation") == "continuous":
+        if self._continuous():
             return excited_top_hz(g["freq_hz"], g["Gff"])
         return excitation_limit_hz(g["freq_hz"], g["Gff"])
 

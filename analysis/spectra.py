@@ -52,7 +52,23 @@ __all__ = [
     "hit_spectra",
     "FRFAccumulator",
     "parse_duration",
+    "WINDOW_TAU_RTOL",
+    "same_window_tau",
 ]
+
+#: Exponential windows whose time constants differ by less than this fraction are one window: a window
+#: given by its end value gets the time constant of each capture's trigger sample, so hits triggered a few
+#: samples apart differ in the fifth digit (a difference of 0.1 % moves a damping ratio by a thousandth of
+#: the window's own decay).
+WINDOW_TAU_RTOL = 1e-3
+
+
+def same_window_tau(a: float | None, b: float | None) -> bool:
+    """Whether exponential windows of time constants ``a`` and ``b`` (s; None: no window) are one window:
+    both absent, or both given and within :data:`WINDOW_TAU_RTOL` of each other."""
+    if a is None or b is None:
+        return a is None and b is None
+    return math.isclose(float(a), float(b), rel_tol=WINDOW_TAU_RTOL, abs_tol=0.0)
 
 
 def parse_duration(text: str | float | int, fs_hz: float | None = None) -> float:
@@ -323,9 +339,10 @@ class FRFAccumulator:
             first = self._hits[0]
             if hit.freq_hz.shape != first.freq_hz.shape or not np.array_equal(hit.freq_hz, first.freq_hz):
                 raise ValueError("hit spectra have a different frequency axis (block length or sample rate changed)")
-            if hit.exp_window_tau_s != first.exp_window_tau_s:
+            if not same_window_tau(hit.exp_window_tau_s, first.exp_window_tau_s):
                 raise ValueError(
-                    f"hit used exponential tau {hit.exp_window_tau_s} s but earlier hits used {first.exp_window_tau_s} s; "
+                    f"hit used exponential tau {hit.exp_window_tau_s} s but earlier hits used {first.exp_window_tau_s} s "
+                    f"(more than {WINDOW_TAU_RTOL:.1%} apart); "
                     "use one window per average (a fixed tau rather than an end fraction with varying triggers)"
                 )
         self._hits.append(hit)

@@ -345,3 +345,20 @@ def test_a_damaged_described_file_is_one_line_naming_it(tmp_path, capsys, name, 
     code, _, err = _run([*files, *extra, "--out", out], capsys)
     assert code == 2 and err.count("\n") == 1 and str(files[0]) in err, err
     assert not out.exists()
+
+
+def test_a_band_above_a_shakers_excitation_names_the_excitation_not_a_hammer(tmp_path, capsys):
+    """A fit band reaching above where a shaker's continuous excitation ends is warned about as the
+    excitation's band, with the remedy of a shaker (a wider band), never as a hammer's reach or tip."""
+    from analysis.pipeline import fit_auto
+
+    files, extra = SAMPLES["csv"](tmp_path)
+    out = tmp_path / "r.h5"
+    code, _, err = _run([*files, *extra, "--out", out], capsys)
+    assert code == 0, err
+    s = load_frfset(out)
+    assert s.meta["excitation"] == "continuous"
+    fit = fit_auto(s, band=(5.0, 180.0))
+    said = [w for w in (*fit.warnings, *fit.problems) if "below the band's top" in w]
+    assert said and all("the excitation's band ends at 100 Hz" in w and "excite a wider band" in w
+                        and "hammer" not in w and "tip" not in w for w in said)

@@ -6,6 +6,11 @@ Sources (see ../shared/data/README.md): ladisk/open_source_research_in_structura
 """
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -141,3 +146,37 @@ def test_uliege_second_lab_all_files_h1_matches_analyser(shared_data):
     assert np.median(mags) == pytest.approx(1.0, abs=0.01)
     assert np.mean(np.abs(mags - 1) < 0.05) > 0.8
     assert abs(np.median(phases)) < 1.0
+
+
+PYFRF_DESCRIPTION = """sample_rate_hz = 25600
+layout = "channels_first"
+time_row = 0
+[[channels]]
+name = "hammer"
+quantity = "force"
+unit = "N"
+point = "n:1:Z"
+[[channels]]
+name = "response"
+quantity = "acceleration"
+unit = "m/s^2"
+point = "n:2:Z"
+"""
+
+
+def test_pyfrf_default_import_is_one_window_for_linearity(shared_data, tmp_path):
+    """The default import windows each hit by the window's end value, so the five hits' time constants
+    differ in the fifth digit: ``linearity`` takes them as one window and gets to the force levels (which
+    do not spread enough in these five hits), instead of refusing them as differently processed."""
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root), "OPENBLAS_NUM_THREADS": "1"}
+    desc, rec = tmp_path / "pyfrf.toml", tmp_path / "pyfrf.h5"
+    desc.write_text(PYFRF_DESCRIPTION)
+    files = [str(p) for p in sorted((shared_data / "pyfrf_hammer_5impacts").glob("measurements_*.npy"))]
+    done = subprocess.run([sys.executable, "-m", "acquisition", "import", *files, "--describe", str(desc),
+                           "--out", str(rec), "-q"], cwd=root, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    done = subprocess.run([sys.executable, "-m", "analysis", "linearity", str(rec)], cwd=root, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert "exponential tau" not in done.stderr
+    assert done.returncode == 2 and "peak forces do not spread enough" in done.stderr

@@ -214,3 +214,21 @@ def test_inputs_not_modified():
     f0, x0 = f.copy(), x.copy()
     hit_spectra(f, x, FS, 10, WindowSettings(force_width_s=0.01, force_taper_s=0.005, exp_window_tau_s=0.5))
     assert np.array_equal(f, f0) and np.array_equal(x, x0)
+
+
+def test_windows_a_few_samples_apart_average_but_different_windows_do_not():
+    """Hits windowed by the window's end value get the time constant of their trigger sample: 0.333560 s
+    and 0.333547 s (pyFRF's five hits) are one window and average; 1 % apart, or a window against none,
+    is refused as differently processed."""
+    from analysis.spectra import WINDOW_TAU_RTOL, HitSpectra, same_window_tau
+
+    f = np.linspace(0.0, 100.0, 11)
+    hit = lambda tau: HitSpectra(f, np.ones(11), np.ones((1, 11)), np.ones((1, 11), complex), tau)  # noqa: E731
+    acc = FRFAccumulator(["n:1:Z"], "n:2:Z")
+    acc.add(hit(0.3335604524213805))
+    acc.add(hit(0.33354741303854085))
+    assert acc.n_averages == 2 and acc.exp_window_tau_s == 0.3335604524213805
+    with pytest.raises(ValueError, match="exponential tau"):
+        acc.add(hit(0.3335604524213805 * 1.01))
+    assert same_window_tau(None, None) and not same_window_tau(0.33, None) and not same_window_tau(None, 0.33)
+    assert same_window_tau(1.0, 1.0 + 0.9 * WINDOW_TAU_RTOL) and not same_window_tau(1.0, 1.0 + 1.1 * WINDOW_TAU_RTOL)

@@ -117,6 +117,8 @@ class Effect:
     kind : "modal" (apply takes/returns a ModalModel) or "frf" (an FRFSet).
     primary : name of the parameter a test checks (the effect's physical size).
     needs : meta keys the base model must carry for the effect to be fitted (e.g. shapes).
+    applies : optional ``applies(ctx) -> str``, why the effect cannot act on the measured band ("" when
+        it can; mains lines need a mains harmonic in the band): a non-empty reason skips the effect.
     advice : what to do when the effect is named (the report's first sentence).
     held_out : optional ``held_out(ctx) -> (before, after) or None``, the effect's own cross-validation
         when interleaved lines cannot test it (single lines at the mains harmonics:
@@ -140,6 +142,7 @@ class Effect:
     primary: str
     description: str
     needs: tuple = ()
+    applies: Callable | None = None
     held_out: Callable | None = None
     advice: str = ""
     ranges: tuple[ParamRange, ...] = ()
@@ -154,6 +157,9 @@ class Effect:
 
 
 # --------------------------------------------------------------------------- helpers
+#: how the diagnosis's ``skipped`` begins the reason of an effect that cannot act on the measured band
+#: (:attr:`Effect.applies`)
+NOT_APPLICABLE = "not applicable"
 
 
 def check_positive(name: str, value: Any, what: str) -> float:

@@ -72,7 +72,7 @@ from .frf_effects import (
     fit_sensor_highpass,
     fit_time_delay,
 )
-from .mains import apply_mains_hum, default_hum_width, fit_mains_hum, held_out_mains_hum, hum_kernels
+from .mains import apply_mains_hum, default_hum_width, fit_mains_hum, held_out_mains_hum, hum_kernels, mains_hum_applies
 from .mass_frf import FRF_MASSES_KEY, add_frf_masses, uses_frf_masses
 from .processing import (
     RECORD_KEY,
@@ -670,6 +670,7 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
                   'channel by the fitted gain.'),
     Effect("mains_hum", "frf", apply_mains_hum, fit_mains_hum, "base_hz",
            "lines at the mains frequency (50/60 Hz) and its harmonics", held_out=held_out_mains_hum,
+           applies=mains_hum_applies,
            advice='Mains hum at the named base frequency and harmonics: check grounding and cable routing; '
                   'ignore those lines in fits.'),
 )}

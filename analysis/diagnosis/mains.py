@@ -11,7 +11,7 @@ from ..frf import FRFSet
 from .effect_types import EffectError, FitContext
 from .effect_types import check_positive as _check_positive
 
-__all__ = ["HUM_BASES_HZ", "hum_kernels", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
+__all__ = ["HUM_BASES_HZ", "hum_kernels", "mains_hum_applies", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
            "held_out_mains_hum", "held_out_by_harmonics"]
 
 HUM_BASES_HZ = (50.0, 60.0)
@@ -22,6 +22,42 @@ MAX_OFFSET_HZ = 0.2
 LINE_SHAPES = ("lorentzian", "sinc")
 #: A line's kernel is cut off this many widths from its centre.
 TAIL_WIDTHS = 6.0
+
+
+def _line_spacing(f: np.ndarray) -> float:
+    """The line spacing (Hz) of the axis ``f``: the median step."""
+    return float(np.median(np.diff(f)))
+
+
+def _harmonics(f: np.ndarray, base_hz: float, width_hz: float, df: float) -> np.ndarray:
+    """The harmonics (Hz) of ``base_hz`` that have lines on the axis ``f`` (spacing ``df`` Hz) in
+    :func:`hum_kernels`."""
+    fk = base_hz * np.arange(1, int(f[-1] // base_hz) + 1)
+    if width_hz == 0:
+        return fk[(fk >= f[0] - df / 2) & (fk <= f[-1] + df / 2)]
+    return fk[fk >= f[0] - 2 * width_hz]
+
+
+def _local_kernels(f: np.ndarray, fk: np.ndarray, width_hz: float, shape: str,
+                   df: float) -> tuple[np.ndarray, np.ndarray]:
+    """The kernels of :func:`hum_kernels` on the lines near each harmonic only: (line indices (n_harm,
+    n_near), kernel values (n_harm, n_near)), an index repeated with value 0 where a harmonic's window runs
+    past the axis. The kernels are zero on every other line, so a fit need not look at them: its cost then
+    scales with the number of harmonics, not of lines."""
+    if width_hz == 0:
+        i = np.clip(np.searchsorted(f, fk), 1, f.size - 1)
+        i = np.where(np.abs(f[i - 1] - fk) <= np.abs(f[i] - fk), i - 1, i)   # the nearest line, the lower on a tie
+        return i[:, None], np.ones((fk.size, 1), complex)
+    if shape not in LINE_SHAPES:
+        raise EffectError(f"mains_hum: shape must be one of {', '.join(LINE_SHAPES)}; got {shape!r}")
+    reach = TAIL_WIDTHS * width_hz
+    n = int(np.ceil(2 * reach / df)) + 3
+    lo = np.searchsorted(f, fk - reach) - 1
+    raw = lo[:, None] + np.arange(n)[None, :]
+    idx = np.clip(raw, 0, f.size - 1)
+    x = (f[idx] - fk[:, None]) / width_hz
+    K = 1.0 / (1 + 1j * x) if shape == "lorentzian" else np.sinc(x).astype(complex)
+    return idx, np.where((np.abs(x) <= TAIL_WIDTHS) & (raw == idx), K, 0.0)
 
 
 def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float,
@@ -37,19 +73,15 @@ def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float,
     widths from its centre, so a line's amplitude is fitted to the lines around it and not to the
     broad structure of the whole band."""
     f = np.asarray(freq_hz, float)
-    fk = base_hz * np.arange(1, int(f[-1] // base_hz) + 1)
-    if width_hz == 0:
-        df = float(np.median(np.diff(f)))
-        fk = fk[(fk >= f[0] - df / 2) & (fk <= f[-1] + df / 2)]
-        K = np.zeros((fk.size, f.size), complex)
-        K[np.arange(fk.size), np.argmin(np.abs(f[None, :] - fk[:, None]), axis=1)] = 1.0
-        return fk, K
-    if shape not in LINE_SHAPES:
+    if width_hz != 0 and shape not in LINE_SHAPES:
         raise EffectError(f"mains_hum: shape must be one of {', '.join(LINE_SHAPES)}; got {shape!r}")
-    fk = fk[fk >= f[0] - 2 * width_hz]
-    x = (f[None, :] - fk[:, None]) / width_hz
-    K = 1.0 / (1 + 1j * x) if shape == "lorentzian" else np.sinc(x).astype(complex)
-    return fk, np.where(np.abs(x) <= TAIL_WIDTHS, K, 0.0)
+    df = _line_spacing(f)
+    fk = _harmonics(f, base_hz, width_hz, df)
+    K = np.zeros((fk.size, f.size), complex)
+    if fk.size:
+        idx, Kl = _local_kernels(f, fk, width_hz, shape, df)
+        np.add.at(K, (np.arange(fk.size)[:, None], idx), Kl)    # a repeated index (past the axis) adds 0
+    return fk, K
 
 
 def default_hum_width(freq_hz: np.ndarray) -> float:
@@ -72,6 +104,22 @@ def _on_harmonics(A: np.ndarray, given_hz: np.ndarray, fk: np.ndarray, frfs: tup
     return out
 
 
+def mains_hum_applies(ctx: FitContext) -> str:
+    """Why mains lines cannot act on the measured band ("" when they can): no harmonic of any mains base
+    (:data:`HUM_BASES_HZ`, up to :data:`MAX_OFFSET_HZ` off nominal) lies on the band's lines or just below
+    them, where a line with a width would still reach in (a shaker's band of 2-15 Hz holds none)."""
+    f = np.asarray(ctx.measured.freq_hz, float)
+    if f.size < 2:
+        return f"the band has {f.size} line(s)"
+    lo, hi = f[0] - 2 * default_hum_width(f), f[-1] + _line_spacing(f) / 2
+    for b in HUM_BASES_HZ:
+        k = np.arange(1, int(hi // (b - MAX_OFFSET_HZ)) + 1)
+        if np.any((k * (b + MAX_OFFSET_HZ) >= lo) & (k * (b - MAX_OFFSET_HZ) <= hi)):
+            return ""
+    return (f"no mains harmonic ({' or '.join(f'{b:g}' for b in HUM_BASES_HZ)} Hz and their multiples) lies in "
+            f"the band {f[0]:.4g}-{f[-1]:.4g} Hz")
+
+
 def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
     """Add lines at the harmonics of ``base_hz``: ``amplitudes[o][r][k] = [re, im]`` (FRF units), one per
     harmonic in the FRFs' band, or one per harmonic of ``harmonics_hz`` (Hz; the fit's band) when given
@@ -83,6 +131,8 @@ def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
         raise EffectError(f"mains_hum: width_hz must be >= 0 (0: single lines), got {w!r}")
     fk, K = hum_kernels(frf.freq_hz, f0, width, str(params.get("shape", "lorentzian")))
     A = np.asarray(params.get("amplitudes"), float)
+    if A.size == 0:                     # no harmonic: JSON's nested empty lists lose the last axis
+        A = A.reshape(frf.H.shape[:2] + (0, 2)) if A.ndim >= 2 and A.shape[:2] == frf.H.shape[:2] else A
     given = params.get("harmonics_hz")
     if given is not None:
         A = _on_harmonics(A, np.asarray(given, float), fk, frf.H.shape[:2])
@@ -93,21 +143,73 @@ def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
     return replace(frf, H=frf.H + np.einsum("ork,kf->orf", Ac, K))
 
 
-def _hum_amplitudes(ctx: FitContext, E: np.ndarray, K: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, float]:
-    """Weighted least-squares amplitudes (n_out, n_ref, n_harm, [re, im]) of the kernels ``K`` fitted to
-    the error ``E`` on ``lines``, and the remaining weighted cost."""
+def _lstsq_amplitudes(W: np.ndarray, E: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, float]:
+    """Weighted least-squares amplitudes (n_out, n_ref, n_harm, [re, im]) of the kernels ``K`` (n_harm,
+    n_lines) fitted per FRF to the error ``E`` with weights ``W`` (n_out, n_ref, n_lines), and the remaining
+    weighted cost on those lines."""
     no, nr = E.shape[:2]
     A = np.zeros((no, nr, K.shape[0], 2))
     total = 0.0
-    Kl = K[:, lines]
     for o in range(no):
         for r in range(nr):
-            sw = np.sqrt(ctx.weights[o, r, lines])
-            M = (Kl * sw).T
-            x, *_ = np.linalg.lstsq(M, E[o, r, lines] * sw, rcond=None)
+            sw = np.sqrt(W[o, r])
+            M = (K * sw).T
+            x, *_ = np.linalg.lstsq(M, E[o, r] * sw, rcond=None)
             A[o, r, :, 0], A[o, r, :, 1] = x.real, x.imag
-            total += float(np.sum(np.abs(E[o, r, lines] * sw - M @ x) ** 2))
+            total += float(np.sum(np.abs(E[o, r] * sw - M @ x) ** 2))
     return A, total
+
+
+def _hum_amplitudes(ctx: FitContext, E: np.ndarray, K: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, float]:
+    """Weighted least-squares amplitudes (n_out, n_ref, n_harm, [re, im]) of the kernels ``K`` fitted to
+    the error ``E`` on ``lines``, and the remaining weighted cost."""
+    return _lstsq_amplitudes(ctx.weights[..., lines], E[..., lines], K[:, lines])
+
+
+class _Search:
+    """What every candidate of one mains search shares (computed once): the axis ``f`` (Hz), its spacing
+    ``df`` (Hz), the error ``E``, the weights with the lines outside ``lines`` set to zero, the error's
+    weighted cost on ``lines`` and the running count of ``lines`` (whether a harmonic has lines near it)."""
+
+    def __init__(self, ctx: FitContext, E: np.ndarray, lines: np.ndarray) -> None:
+        self.f = np.asarray(ctx.measured.freq_hz, float)
+        self.df = _line_spacing(self.f)
+        self.E = E
+        self.W = np.where(lines, ctx.weights, 0.0)
+        self.cost = float(np.sum(self.W * (E.real ** 2 + E.imag ** 2)))
+        self.count = np.concatenate([[0], np.cumsum(lines)])
+        self.lines = lines
+
+    def seen(self, fk: np.ndarray, reach_hz: float) -> np.ndarray:
+        """Per harmonic ``fk`` (Hz), whether a line of ``lines`` lies within ``reach_hz`` of it."""
+        f = self.f
+        n = int(np.ceil(2 * reach_hz / self.df)) + 3
+        raw = (np.searchsorted(f, fk - reach_hz) - 1)[:, None] + np.arange(n)[None, :]
+        idx = np.clip(raw, 0, f.size - 1)
+        return np.any(self.lines[idx] & (raw == idx) & (np.abs(f[idx] - fk[:, None]) <= reach_hz), axis=1)
+
+
+def _local_fit(search: _Search, idx: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`_hum_amplitudes` of kernels given on the lines near their harmonics only (``idx``, ``K`` of
+    :func:`_local_kernels`): the lines no kernel reaches keep their error, so only the kernels' lines are
+    solved. Kernels on lines of their own (the usual case: harmonics tens of Hz apart) are solved in closed
+    form, all FRFs at once; kernels that share lines by least squares on the lines they reach."""
+    nz = idx[K != 0]
+    E, W = search.E[..., idx], search.W[..., idx]           # (n_out, n_ref, n_harm, n_near)
+    no, nr = search.E.shape[:2]
+    if np.unique(nz).size == nz.size:
+        num = np.sum(W * np.conj(K) * E, axis=-1)
+        den = np.sum(W * (K.real ** 2 + K.imag ** 2), axis=-1)
+        ok = den > 0
+        x = np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+        gain = np.where(ok, (num.real ** 2 + num.imag ** 2) / np.where(ok, den, 1.0), 0.0)
+        return np.stack([x.real, x.imag], axis=-1), search.cost - float(np.sum(gain))
+    cols = np.unique(idx)
+    Kc = np.zeros((K.shape[0], cols.size), complex)
+    np.add.at(Kc, (np.arange(K.shape[0])[:, None], np.searchsorted(cols, idx)), K)
+    Wc, Ec = search.W[..., cols], search.E[..., cols]
+    A, rest = _lstsq_amplitudes(Wc, Ec, Kc)
+    return A, search.cost - float(np.sum(Wc * (Ec.real ** 2 + Ec.imag ** 2))) + rest
 
 
 def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
@@ -127,18 +229,21 @@ def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
     return out + [(b, float(o), width, s) for b in HUM_BASES_HZ for s in LINE_SHAPES for o in offsets(df / 8)]
 
 
-def _fit_candidate(ctx: FitContext, E: np.ndarray, lines: np.ndarray, f0_hz: float, width_hz: float,
+def _fit_candidate(search: _Search, f0_hz: float, width_hz: float,
                    shape: str) -> tuple[np.ndarray, float, int] | None:
     """Amplitudes, remaining weighted cost and number of harmonics fitted for mains lines at the
-    harmonics of ``f0_hz`` on ``lines``; None when no harmonic can be fitted there. A harmonic is
-    fitted only where lines within its width are given: its tails alone would fit noise."""
-    f = ctx.measured.freq_hz
-    df = float(np.median(np.diff(f)))
-    fk, K = hum_kernels(f, f0_hz, width_hz, shape)
-    seen = np.array([np.any(lines & (np.abs(f - x) <= max(width_hz, df / 2))) for x in fk], bool)
+    harmonics of ``f0_hz`` on the search's lines; None when no harmonic can be fitted there. A harmonic is
+    fitted only where lines within its width are given: its tails alone would fit noise. Only the lines
+    near the harmonics are looked at (:func:`_local_kernels`)."""
+    f, df = search.f, search.df
+    fk = _harmonics(f, f0_hz, width_hz, df)
+    if fk.size == 0:
+        return None
+    seen = search.seen(fk, max(width_hz, df / 2))
     if not seen.any():
         return None
-    A, total = _hum_amplitudes(ctx, E, np.where(seen[:, None], K, 0.0), lines)
+    idx, K = _local_kernels(f, fk, width_hz, shape, df)
+    A, total = _local_fit(search, idx, np.where(seen[:, None], K, 0.0))
     return A, total, int(seen.sum())
 
 
@@ -154,8 +259,9 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
     line_cost = float(np.median(ctx.weights[..., lines] * np.abs(E[..., lines]) ** 2))
     n_frf = E.shape[0] * E.shape[1]
     tried: list[tuple[float, float, float, str, float]] = []
+    search = _Search(ctx, E, lines)
     for base, off, width, shape in _hum_candidates(f):
-        fitted = _fit_candidate(ctx, E, lines, base + off, width, shape)
+        fitted = _fit_candidate(search, base + off, width, shape)
         if fitted is None:
             continue
         A, total, n_seen = fitted
@@ -175,11 +281,11 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
         tol = 2.0 * line_cost * n_frf
         same = sorted(o for b, o, w, _, t in tried if b == best[1] and w == 0.0 and t <= best[0] + tol)
         off = same[len(same) // 2]
-        refit = _fit_candidate(ctx, E, lines, best[1] + off, 0.0, "line")
+        refit = _fit_candidate(search, best[1] + off, 0.0, "line")
         assert refit is not None          # the run holds the best offset, whose harmonics were seen
         best = best[:4] + (refit[0],) + best[5:]
     shape = best[6] if best[3] else "line"
-    fk = hum_kernels(f, best[1] + off, best[3], shape)[0]
+    fk = _harmonics(f, best[1] + off, best[3], search.df)
     return {"base_hz": best[1], "offset_hz": off, "width_hz": best[3], "shape": shape,
             "amplitudes": best[4].tolist(), "harmonics_hz": [float(x) for x in fk]}
 

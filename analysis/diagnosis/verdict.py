@@ -191,6 +191,13 @@ def _stage(ctx: FitContext, names: Sequence[str], rule: DecisionRule, trace: lis
         if missing:
             skipped[name] = _missing_needs(name, missing, ctx)
             continue
+        why = eff.applies(ctx) if eff.applies is not None else ""
+        if why:
+            from .effect_types import NOT_APPLICABLE
+
+            skipped[name] = f"{NOT_APPLICABLE}: {why}"
+            log.info("effect %s not applicable: %s", name, why)
+            continue
         try:
             before, after = _held_out(ctx, name)
             params = eff.fit(ctx, np.ones(m.freq_hz.size, bool))
