@@ -160,9 +160,10 @@ def draw_effect(name: str, rng: np.random.Generator, model: ModalModel, freq_hz:
         return {"effect": name, "gains": {labels[o]: 1 + _signed(rng, 0.03, 0.15)}}
     if name == "mains_hum":
         base = float(rng.choice([50.0, 60.0]))
-        width = default_hum_width(f)
+        nominal = predict(model, f, quantity)
+        width = default_hum_width(nominal.line_spacing_hz)
         fk, _ = hum_kernels(f, base, width)
-        H = predict(model, f, quantity).H
+        H = nominal.H
         n_on = int(rng.integers(2, 5))
         A = np.zeros((no, nr, fk.size, 2))
         for k, fh in enumerate(fk[:n_on]):

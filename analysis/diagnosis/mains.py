@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..frf import FRFSet
+from ..frf import FRFSet, line_spacing_hz
 from .effect_types import EffectError, FitContext
 from .effect_types import check_positive as _check_positive
 
@@ -39,7 +39,7 @@ def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float,
     f = np.asarray(freq_hz, float)
     fk = base_hz * np.arange(1, int(f[-1] // base_hz) + 1)
     if width_hz == 0:
-        df = float(np.median(np.diff(f)))
+        df = line_spacing_hz(f)
         fk = fk[(fk >= f[0] - df / 2) & (fk <= f[-1] + df / 2)]
         K = np.zeros((fk.size, f.size), complex)
         K[np.arange(fk.size), np.argmin(np.abs(f[None, :] - fk[:, None]), axis=1)] = 1.0
@@ -52,9 +52,10 @@ def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float,
     return fk, np.where(np.abs(x) <= TAIL_WIDTHS, K, 0.0)
 
 
-def default_hum_width(freq_hz: np.ndarray) -> float:
-    """Line width (Hz) of the hum model: two line spacings."""
-    return 2.0 * float(np.median(np.diff(freq_hz)))
+def default_hum_width(spacing_hz: float) -> float:
+    """Line width (Hz) of the hum model: two line spacings (``spacing_hz``: the FRFs'
+    :attr:`~analysis.frf.FRFSet.line_spacing_hz`)."""
+    return 2.0 * float(spacing_hz)
 
 
 def _on_harmonics(A: np.ndarray, given_hz: np.ndarray, fk: np.ndarray, frfs: tuple) -> np.ndarray:
@@ -78,7 +79,7 @@ def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
     (then a harmonic of this band the fit did not see has none)."""
     f0 = _check_positive("base_hz", params.get("base_hz"), "mains_hum") + float(params.get("offset_hz", 0.0))
     w = params.get("width_hz")
-    width = default_hum_width(frf.freq_hz) if w is None else float(w)
+    width = default_hum_width(frf.line_spacing_hz) if w is None else float(w)
     if not (np.isfinite(width) and width >= 0):
         raise EffectError(f"mains_hum: width_hz must be >= 0 (0: single lines), got {w!r}")
     fk, K = hum_kernels(frf.freq_hz, f0, width, str(params.get("shape", "lorentzian")))
@@ -110,11 +111,10 @@ def _hum_amplitudes(ctx: FitContext, E: np.ndarray, K: np.ndarray, lines: np.nda
     return A, total
 
 
-def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
+def _hum_candidates(df: float) -> list[tuple[float, float, float, str]]:
     """(mains base Hz, offset Hz, width Hz, shape) tried: 50 and 60 Hz, offsets up to
     +-``MAX_OFFSET_HZ``, single lines (synchronous, width 0) and lines two lines wide of both shapes
-    (Lorentzian, sinc)."""
-    df = float(np.median(np.diff(f)))
+    (Lorentzian, sinc); ``df``: the FRFs' line spacing (Hz)."""
 
     def offsets(step: float) -> np.ndarray:     # 0, +-1, +-2, ... steps, up to and just past the limit
         k = np.arange(1, int(np.ceil(MAX_OFFSET_HZ / step - 1e-9)) + 1) * step
@@ -123,7 +123,7 @@ def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
     # single lines sit on the bins nearest k (base + offset): finer steps (1/32 line) find the offset
     # that puts every harmonic on its bin; a line with a width moves smoothly, 1/8 line is enough
     out = [(b, float(o), 0.0, "line") for b in HUM_BASES_HZ for o in offsets(df / 32)]
-    width = default_hum_width(f)
+    width = default_hum_width(df)
     return out + [(b, float(o), width, s) for b in HUM_BASES_HZ for s in LINE_SHAPES for o in offsets(df / 8)]
 
 
@@ -132,8 +132,7 @@ def _fit_candidate(ctx: FitContext, E: np.ndarray, lines: np.ndarray, f0_hz: flo
     """Amplitudes, remaining weighted cost and number of harmonics fitted for mains lines at the
     harmonics of ``f0_hz`` on ``lines``; None when no harmonic can be fitted there. A harmonic is
     fitted only where lines within its width are given: its tails alone would fit noise."""
-    f = ctx.measured.freq_hz
-    df = float(np.median(np.diff(f)))
+    f, df = ctx.measured.freq_hz, ctx.measured.line_spacing_hz
     fk, K = hum_kernels(f, f0_hz, width_hz, shape)
     seen = np.array([np.any(lines & (np.abs(f - x) <= max(width_hz, df / 2))) for x in fk], bool)
     if not seen.any():
@@ -154,7 +153,7 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
     line_cost = float(np.median(ctx.weights[..., lines] * np.abs(E[..., lines]) ** 2))
     n_frf = E.shape[0] * E.shape[1]
     tried: list[tuple[float, float, float, str, float]] = []
-    for base, off, width, shape in _hum_candidates(f):
+    for base, off, width, shape in _hum_candidates(ctx.measured.line_spacing_hz):
         fitted = _fit_candidate(ctx, E, lines, base + off, width, shape)
         if fitted is None:
             continue
@@ -164,8 +163,8 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
         if best is None or total + 4 * line_cost * n_frf * n_seen * max(complexity - best[5], 0) < best[0]:
             best = (total, base, off, width, A, complexity, shape)
     if best is None:
-        return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(f), "shape": "lorentzian",
-                "amplitudes": np.zeros(ctx.measured.H.shape[:2] + (0, 2)).tolist(), "harmonics_hz": []}
+        return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(ctx.measured.line_spacing_hz),
+                "shape": "lorentzian", "amplitudes": np.zeros(ctx.measured.H.shape[:2] + (0, 2)).tolist(), "harmonics_hz": []}
     off = best[2]
     if best[3] == 0.0 and off != 0.0:
         # single lines: the offsets that put the lines with interference on the same bins fit alike, up to
@@ -202,8 +201,7 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     removes the noise of the few lines it points at gains about ``4.34 n_harm / n_lines`` dB
     (hundredths), while interference at the predicted lines gives tens of dB."""
     m = ctx.measured
-    f = m.freq_hz
-    df = float(np.median(np.diff(f)))
+    f, df = m.freq_hz, m.line_spacing_hz
     E = m.H - ctx.sim.H
     w_all = ctx.weights
     before, after = [], []
