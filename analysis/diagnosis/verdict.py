@@ -103,9 +103,14 @@ class Diagnosis:
         """The error per band, as the report and ``bands.png`` draw it: ``lo_hz``, ``hi_hz`` (Hz),
         ``simulation_db`` (the comparison's band error) and ``extended_db`` (the same bands of the
         extension: :attr:`extended`, the simulation with the accepted effects), dB."""
+        simulation = (self.comparison or {}).get("bands") or []
+        frfs: list[Any] = [self.measured, self.extended]
+        if any(x is None for x in frfs):   # a diagnosis assembled without its FRF sets: the extension unknown
+            return [{"lo_hz": b["lo_hz"], "hi_hz": b["hi_hz"], "simulation_db": b["error_db"], "extended_db": None}
+                    for b in simulation]
         after = band_errors(self.measured, self.extended.H, line_weights(self.measured))
         return [{"lo_hz": b["lo_hz"], "hi_hz": b["hi_hz"], "simulation_db": b["error_db"], "extended_db": a["error_db"]}
-                for b, a in zip(self.comparison["bands"], after)]
+                for b, a in zip(simulation, after)]
 
     @property
     def noise_level_db(self) -> float:
