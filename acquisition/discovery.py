@@ -70,18 +70,12 @@ def list_serial() -> list[DeviceEntry]:
 
 
 def list_doors() -> list[DeviceEntry]:
-    """The simulated doors installed through the ``impactlab.doors`` entry points."""
-    from importlib.metadata import entry_points
+    """The doors that need no hardware and are installed (:func:`acquisition.urls.installed_doors`:
+    the simulator's and those other packages add through the ``impactlab.doors`` entry points)."""
+    from acquisition.urls import installed_doors
 
-    from acquisition.urls import DOOR_GROUP
-
-    entries = []
-    for ep in sorted(entry_points(group=DOOR_GROUP), key=lambda e: e.name):
-        door = ep.load()
-        kind = getattr(door, "kind", "?")
-        entries.append(DeviceEntry(f"{ep.name}://", "simulated",
-                                   f"simulated analyser ({kind} door from {ep.value}); options ?seed=N&..."))
-    return entries
+    return [DeviceEntry(f"{row.scheme}://", "simulated", f"{row.summary.replace('`', '')} (door from {row.source})")
+            for row in installed_doors()]
 
 
 def list_devices(*, usb_backend: Any = None, all_usb: bool = False) -> tuple[list[DeviceEntry], list[str]]:

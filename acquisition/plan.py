@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from analysis.frf import QUANTITY_UNIT
 from analysis.points import parse_point
 
 from .session_errors import SessionError
@@ -19,11 +20,8 @@ __all__ = ["FRF_QUANTITY", "PLAN_MODES", "Measurement", "TestPlan", "force_chann
            "eu_per_count_for"]
 
 #: channel quantity -> (FRF quantity, FRF unit for SI data)
-FRF_QUANTITY = {
-    "acceleration": ("accelerance", "(m/s^2)/N"),
-    "velocity": ("mobility", "(m/s)/N"),
-    "displacement": ("receptance", "m/N"),
-}
+FRF_QUANTITY = {response: (quantity, QUANTITY_UNIT[quantity]) for response, quantity in
+                (("acceleration", "accelerance"), ("velocity", "mobility"), ("displacement", "receptance"))}
 PLAN_MODES = ("roving_hammer", "roving_accelerometer")
 
 

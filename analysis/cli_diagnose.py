@@ -257,7 +257,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         nm = diag.next_measurement
         print(f"  next measurement: {nm['point']} ({nm['why']}; {nm['separation_db']:.1f} dB apart)")
     print(f"error before {diag.error_before_db:.1f} dB, after {diag.error_after_db:.1f} dB "
-          f"(noise {max(diag.noise_db.values()):.1f} dB)")
+          f"(noise {diag.noise_level_db:.1f} dB)")
     for c in diag.causes[:5]:
         print(f"  {'*' if c['significant'] else ' '} {c['evidence']}" + ("" if c["significant"] else NOT_SIGNIFICANT))
     from .diagnosis.effect_types import NOT_APPLICABLE

@@ -106,7 +106,7 @@ def _visible_without_pole(frf: Any, band: Sequence[float], pole_hz: np.ndarray) 
     fit's completeness rule) that no selected pole accounts for."""
     from .visibility import unaccounted_peaks, visible_peaks
 
-    df = float(np.median(np.diff(frf.freq_hz))) if frf.freq_hz.size > 1 else 0.0
+    df = frf.line_spacing_hz
     missed, _ = unaccounted_peaks(visible_peaks(frf, band), pole_hz, df)
     return sorted(p.freq_hz for p in missed)
 

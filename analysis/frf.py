@@ -27,12 +27,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "convert_quantity", "analyser_band_hz", "window_pole_shift",
-           "frf_pairs_by_level"]
+__all__ = ["FRFSet", "QUANTITIES", "QUANTITY_POWER", "QUANTITY_UNIT", "convert_quantity", "analyser_band_hz", "window_pole_shift",
+           "frf_pairs_by_level", "line_spacing_hz"]
 
 QUANTITIES = ("receptance", "mobility", "accelerance")
 #: the power p of (j omega) that turns a receptance (m/N) into each quantity: H_q = (j omega)^p H_receptance
 QUANTITY_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2}
+#: the SI unit of each quantity, per newton of force (the table above; other units travel in ``FRFSet.unit``)
+QUANTITY_UNIT = {"receptance": "m/N", "mobility": "(m/s)/N", "accelerance": "(m/s^2)/N"}
 
 
 def window_pole_shift(exp_window_tau_s: float | None) -> float:
@@ -45,6 +47,13 @@ def window_pole_shift(exp_window_tau_s: float | None) -> float:
     if not (np.isfinite(tau) and tau > 0):
         raise ValueError(f"exp_window_tau_s must be a positive time in seconds; got {exp_window_tau_s!r}")
     return 1.0 / tau
+
+
+def line_spacing_hz(freq_hz: np.ndarray) -> float:
+    """The line spacing (Hz) of a frequency axis (Hz): the median spacing of its lines, 0 for a single
+    line. An FRF set carries it as :attr:`FRFSet.line_spacing_hz`; this is for a bare axis."""
+    f = np.asarray(freq_hz, float)
+    return float(np.median(np.diff(f))) if f.size > 1 else 0.0
 
 
 def analyser_band_hz(sample_rate_hz: float) -> float:
@@ -179,7 +188,7 @@ class FRFSet:
     @property
     def line_spacing_hz(self) -> float:
         """Frequency resolution (Hz): the median spacing of the lines (0 for a single line)."""
-        return float(np.median(np.diff(self.freq_hz))) if self.freq_hz.size > 1 else 0.0
+        return line_spacing_hz(self.freq_hz)
 
     @property
     def analyser_band_hz(self) -> float | None:

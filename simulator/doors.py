@@ -1,8 +1,9 @@
 """The simulator's device doors, registered with the driver through entry points.
 
 The driver (:mod:`acquisition.urls`) never imports the simulator: it looks a URL's scheme up in the
-entry-point group :data:`DOOR_GROUP` (``impactlab.doors`` in ``pyproject.toml``), as pyvisa-sim
-registers its backend with PyVISA. Two kinds of door exist:
+entry-point group ``acquisition.urls.DOOR_GROUP`` (``impactlab.doors`` in ``pyproject.toml``), as
+pyvisa-sim registers its backend with PyVISA. The simulator uses two of the kinds of door the
+driver opens (``acquisition.urls.plugin_scheme`` describes all three):
 
 * a *pyserial* door names a package of pyserial URL handlers (``protocol_<scheme>`` modules); the
   driver adds it to ``serial.protocol_handler_packages`` and opens the URL with
@@ -18,10 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["DOOR_GROUP", "SerialDoor", "UsbBackendDoor", "SIM", "USBSIM"]
-
-#: the entry-point group the driver searches for a URL scheme
-DOOR_GROUP = "impactlab.doors"
+__all__ = ["SerialDoor", "UsbBackendDoor", "SIM", "USBSIM"]
 
 
 @dataclass(frozen=True)

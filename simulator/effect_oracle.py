@@ -23,6 +23,7 @@ import numpy as np
 
 from analysis.diagnosis.effects import EFFECTS, default_hum_width, hum_kernels, predict
 from analysis.diagnosis.timedata import TIME_EFFECTS
+from analysis.frf import line_spacing_hz
 from analysis.modal import ModalModel
 
 from .time_effects import _count
@@ -146,7 +147,7 @@ def _sensitivity(rng: np.random.Generator, b: _Band, model: ModalModel, quantity
 
 def _hum(rng: np.random.Generator, b: _Band, model: ModalModel, quantity: str) -> dict:
     base = float(rng.choice([50.0, 60.0]))
-    width = default_hum_width(b.f)
+    width = default_hum_width(line_spacing_hz(b.f))
     fk, _ = hum_kernels(b.f, base, width)
     H = predict(model, b.f, quantity).H
     n_on = int(rng.integers(2, 5))

@@ -40,7 +40,7 @@ from dataclasses import replace as _replace
 import numpy as np
 import scipy.linalg
 
-from analysis.frf import QUANTITIES, QUANTITY_POWER, FRFSet
+from analysis.frf import QUANTITIES, QUANTITY_POWER, QUANTITY_UNIT, FRFSet
 from analysis.modal import ModalModel, pole_from_fz
 from analysis.points import Point, parse_point
 
@@ -65,7 +65,6 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 _POWER = QUANTITY_POWER
-_UNITS = {"receptance": "m/N", "mobility": "(m/s)/N", "accelerance": "(m/s^2)/N"}
 
 
 @dataclass(frozen=True)
@@ -445,7 +444,7 @@ class FrameModel:
         den = wr[:, None] ** 2 - w[None, :] ** 2 + 2j * ms.damping[:, None] * wr[:, None] * w[None, :]
         H = np.einsum("om,rm,mk->ork", po, pr, 1.0 / den) * ((1j * w) ** _POWER[quantity])[None, None, :]
         return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=tuple(map(str, outputs)),
-                      references=tuple(map(str, references)), unit=_UNITS[quantity],
+                      references=tuple(map(str, references)), unit=QUANTITY_UNIT[quantity],
                       meta={"source": "simulator.fem analytic"})
 
     def modal_model(

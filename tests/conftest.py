@@ -31,6 +31,49 @@ def report_case(tmp_path_factory) -> dict:
     return make_report_case(tmp_path_factory)
 
 
+@pytest.fixture(scope="session")
+def sim_capture(tmp_path_factory):
+    """``sim_capture(*capture_args)``: the path of a recording that ``acquisition capture`` wrote on the
+    simulated analyser with those arguments (``--device sim://...``, ``--points``, ``--hits``...; ``--out``
+    and ``-q`` are added). Each set of arguments is captured once per test session, whichever process
+    of ``make test`` asks first (the others wait for it and reuse the file). The file is shared: read
+    it, or copy it before changing it."""
+    import contextlib
+    import fcntl
+    import hashlib
+    import io
+
+    shared = tmp_path_factory.getbasetemp().parent if _xdist_worker() else tmp_path_factory.getbasetemp()
+    folder = shared / "sim-captures"
+    folder.mkdir(exist_ok=True)
+
+    def capture(*args: str) -> Path:
+        from acquisition.cli_capture import main
+
+        name = hashlib.sha256("\0".join(args).encode()).hexdigest()[:16]
+        path = folder / f"{name}.h5"
+        with open(folder / f"{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)       # one process captures, the others wait for it
+            if not path.exists():
+                tmp = folder / f"{name}.partial.h5"
+                with contextlib.redirect_stdout(io.StringIO()):
+                    code = main([*args, "--out", str(tmp), "-q"])
+                assert code == 0, f"capture {' '.join(args)} failed"
+                os.replace(tmp, path)
+        return path
+
+    return capture
+
+
+#: a roving-hammer capture on the simulated frame: 2 points x 3 hits, exponential window 5 % (``sim_capture``)
+TWO_POINTS_EXP = ("--device", "sim://", "--seed", "3", "--points", "right:6:-X,top:4:Z", "--hits", "3", "--auto",
+                  "--exp-window", "5%")
+
+
+def _xdist_worker() -> bool:
+    return bool(os.environ.get("PYTEST_XDIST_WORKER"))
+
+
 # --- how `make test` shares the suite between processes (pytest-xdist, --dist loadfile) ---
 # A test file is one unit of work, kept on one process (its module fixtures are made once), except
 # the files of SPREAD: their tests are heavy and independent (no costly module fixture), so each

@@ -32,8 +32,5 @@ def one_line_exit_1(done: subprocess.CompletedProcess) -> str:
     return lines[0]
 
 
-def one_point_recording(folder: Path) -> Path:
-    """``folder/src.h5``: a recording of one point with two hits."""
-    done = run([*CAPTURE[:-2], "--points", "right:6:-X", "--out", "src.h5"], folder)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return folder / "src.h5"
+#: capture arguments of a recording of one point with two hits (for the ``sim_capture`` fixture)
+ONE_POINT = (*CAPTURE[2:-3], "--points", "right:6:-X")

@@ -4,7 +4,6 @@ from __future__ import annotations
 import http.client
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -13,11 +12,9 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-import pytest
+from browser_support import headless_chrome
 
 ROOT = Path(__file__).resolve().parents[1]
-CHROMIUM = "/usr/bin/chromium"
-CHROMEDRIVER = "/usr/bin/chromedriver"
 #: generous bound for every condition wait (the suite shares two cores with other work)
 WAIT_S = 90.0
 
@@ -119,29 +116,7 @@ class Api:
             time.sleep(0.05)
 
 
-def chrome(tmp_path: Path):
-    """A headless Chromium driven by selenium; skips with an install hint when missing (fails under CI=true)."""
-    missing = []
-    try:
-        from selenium import webdriver
-    except ModuleNotFoundError:
-        missing.append("selenium (pip install -e '.[test]')")
-    for exe in (CHROMIUM, CHROMEDRIVER):
-        if not (Path(exe).exists() or shutil.which(Path(exe).name)):
-            missing.append(f"{exe} (apt-get install -y chromium chromium-driver)")
-    if missing:
-        msg = "browser test needs " + ", ".join(missing)
-        if os.environ.get("CI") == "true":
-            pytest.fail(msg)
-        pytest.skip(msg)
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-              "--disable-component-update", "--no-first-run", f"--user-data-dir={tmp_path / 'chromium-profile'}",
-              "--window-size=1500,1100"):
-        opts.add_argument(a)
-    opts.binary_location = CHROMIUM if Path(CHROMIUM).exists() else shutil.which("chromium")
-    return webdriver.Chrome(service=Service(CHROMEDRIVER if Path(CHROMEDRIVER).exists() else shutil.which("chromedriver")),
-                            options=opts)
+def chrome(tmp_path: Path) -> Any:
+    """A headless Chromium for the station's page (:func:`browser_support.headless_chrome`: skips with an
+    install hint when missing, fails under CI=true)."""
+    return headless_chrome(tmp_path / "chromium-profile", window="1500,1100")

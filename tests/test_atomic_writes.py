@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from disk_full_support import one_line_exit_1, one_point_recording, run
+from disk_full_support import ONE_POINT, one_line_exit_1, run
 
 import analysis.atomic as atomic
 from analysis.recording import Recording
@@ -22,8 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def one_point(tmp_path_factory) -> Path:
-    return one_point_recording(tmp_path_factory.mktemp("one_point"))
+def one_point(sim_capture) -> Path:
+    return sim_capture(*ONE_POINT)
 
 
 @pytest.fixture

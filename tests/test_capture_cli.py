@@ -22,14 +22,11 @@ def sha(path) -> str:
 
 
 @pytest.fixture(scope="module")
-def captured(tmp_path_factory):
-    """One roving-hammer capture on the simulated frame: 2 points x 3 hits (module-wide, it costs a second)."""
-    d = tmp_path_factory.mktemp("capture")
-    rec = d / "rec.h5"
-    code = capture_main(["--device", "sim://", "--seed", "3", "--out", str(rec), "--points", "right:6:-X,top:4:Z",
-                                          "--hits", "3", "--auto", "--exp-window", "5%", "-q"])
-    assert code == 0
-    return rec
+def captured(sim_capture):
+    """One roving-hammer capture on the simulated frame: 2 points x 3 hits (made once per session, shared)."""
+    from conftest import TWO_POINTS_EXP
+
+    return sim_capture(*TWO_POINTS_EXP)
 
 
 def test_capture_writes_a_complete_recording(captured):

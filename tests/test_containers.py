@@ -62,3 +62,28 @@ def test_transfer_is_the_one_synthesis_kernel_on_and_off_the_frequency_axis() ->
     a = 3.0
     shifted = ModalModel(poles=lam - a, residues=R, quantity="receptance", residual_form="none")
     assert np.allclose(transfer(model, jw + a), synthesize(shifted, f).H, rtol=1e-13, atol=0)
+
+
+def test_the_quantity_unit_table_exists_once() -> None:
+    """The SI unit of each FRF quantity is written in analysis.frf.QUANTITY_UNIT alone; the test plan, the
+    simulator's FE model and the report take it from there."""
+    import re
+    from pathlib import Path
+
+    from acquisition.plan import FRF_QUANTITY
+    from analysis.frf import QUANTITY_UNIT
+
+    root = Path(__file__).resolve().parents[1]
+    copies = [str(p.relative_to(root)) for pkg in ("analysis", "acquisition", "simulator") for p in (root / pkg).rglob("*.py")
+              if re.search(r"""["'](mobility|velocity)["']\s*:\s*\(?\s*["'](mobility["']\s*,\s*["'])?\(m/s\)/N""",
+                            p.read_text(encoding="utf-8"))]
+    assert copies == ["analysis/frf.py"], copies
+    assert {q: u for q, u in FRF_QUANTITY.values()} == QUANTITY_UNIT
+
+
+def test_line_spacing_of_a_set_and_of_a_bare_axis() -> None:
+    from analysis.frf import line_spacing_hz
+
+    f = np.array([1.0, 1.5, 2.0, 3.0, 3.5])
+    frf = FRFSet(freq_hz=f, H=np.ones((1, 1, f.size), complex), quantity="receptance", outputs=["a"], references=["b"])
+    assert frf.line_spacing_hz == line_spacing_hz(f) == 0.5 and line_spacing_hz(f[:1]) == 0.0

@@ -13,7 +13,7 @@ from simulator.effects import add_frf_noise, base_model, simulate_with_effects
 
 OUTS = ["left:9:Y", "top:4:X", "right:6:-X"]
 REFS = ["right:6:-X"]
-F = np.arange(2.0, 150.0, 0.25)
+F = np.arange(2.0, 150.0, 0.5)
 TOML = str(Path(__file__).resolve().parents[1] / "simulator" / "frame.toml")
 
 

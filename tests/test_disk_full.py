@@ -18,7 +18,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 import pytest
-from disk_full_support import CAPTURE, POINTS, one_line_exit_1, one_point_recording, run
+from disk_full_support import CAPTURE, ONE_POINT, POINTS, one_line_exit_1, run
 from station_support import WAIT_S, Api
 
 from analysis.recording import Recording, verify_recording
@@ -109,9 +109,9 @@ def test_replay_and_import_onto_a_full_disk_leave_no_partial_recording(tmp_path)
 
 
 @pytest.fixture(scope="module")
-def one_point(tmp_path_factory) -> Path:
-    """A recording of one point with two hits."""
-    return one_point_recording(tmp_path_factory.mktemp("one_point"))
+def one_point(sim_capture) -> Path:
+    """A recording of one point with two hits (shared: copied by each test)."""
+    return sim_capture(*ONE_POINT)
 
 
 @pytest.mark.parametrize("command", [["analysis", "fit", "src.h5", "--json", "out.json"],

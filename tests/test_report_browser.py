@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import io
 import json
-import os
-import shutil
 import sys
 from pathlib import Path
 
@@ -22,33 +20,13 @@ _ROOT = str(Path(__file__).resolve().parents[1])
 if _ROOT not in sys.path:
     sys.path.insert(0, _ROOT)
 
+from browser_support import headless_chrome, require_browser  # noqa: E402
+
 from benchmarks.accuracy.validation.datasets import DATASETS  # noqa: E402
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMEDRIVER = "/usr/bin/chromedriver"
-INSTALL = ("install the browser for these tests: apt-get install chromium chromium-driver, and pip install "
-           "selenium (in the test extra: pip install -e '.[test,report]')")
 PLOTS = ("frf", "coherence", "force-spectrum", "force-time", "response-time", "stabilization", "cmif", "synthesis",
          "automac", "mode-shapes", "diagnosis", "diagnosis-bands")
 LOAD_TIMEOUT_S = 60
-
-
-def _missing() -> list[str]:
-    missing = [p for p in (CHROMIUM, CHROMEDRIVER) if not (Path(p).exists() or shutil.which(Path(p).name))]
-    try:
-        import selenium  # noqa: F401
-    except ImportError:
-        missing.append("selenium (Python package)")
-    return missing
-
-
-def require_browser(missing: list[str]) -> None:
-    """Skip (outside CI) or fail (``CI=true``) when something the browser tests need is missing."""
-    if missing:
-        message = f"browser tests need {', '.join(missing)}: {INSTALL}"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail("CI=true: " + message)
-        pytest.skip(message)
 
 
 def test_missing_browser_skips_outside_ci_and_fails_under_ci(monkeypatch):
@@ -63,19 +41,7 @@ def test_missing_browser_skips_outside_ci_and_fails_under_ci(monkeypatch):
 
 @pytest.fixture(scope="module")
 def browser(tmp_path_factory):
-    require_browser(_missing())
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM if Path(CHROMIUM).exists() else shutil.which("chromium")
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                "--disable-component-update", "--no-first-run", "--window-size=1280,1000",
-                f"--user-data-dir={tmp_path_factory.mktemp('chromium-profile')}"):
-        opts.add_argument(arg)
-    opts.set_capability("goog:loggingPrefs", {"browser": "ALL", "performance": "ALL"})
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER if Path(CHROMEDRIVER).exists()
-                                              else shutil.which("chromedriver")), options=opts)
+    driver = headless_chrome(tmp_path_factory.mktemp("chromium-profile"), logs=True)
     driver.set_page_load_timeout(LOAD_TIMEOUT_S)
     yield driver
     driver.quit()

@@ -120,7 +120,7 @@ def test_frame_frf_from_simulated_time_data_matches_analytic():
     modes = model.modes()
     # 32 s: every mode decays below 1e-8 of its peak. The force is linear between samples (first-order
     # hold), which biases the FFT ratio by about (w T)^2 / 12 (0.2 % at 200 Hz here); the stand's
-    # band-limited sampling model removes that bias (tests/test_sim_stand.py)
+    # band-limited sampling model removes that bias (tests/test_stand.py)
     fs, n = 8192.0, 2 ** 18
     t = np.arange(n) / fs
     force = 100.0 * pulse(t - 0.01, 0.0012, "half_sine")

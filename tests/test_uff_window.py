@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 import pyuff
 
-from acquisition.cli_capture import main as capture_main
 from acquisition.cli_export import main as export_main
 from analysis.frf import FRFSet
 from analysis.pipeline import fit_auto
@@ -35,13 +34,12 @@ def frf_set(outputs: tuple, references: tuple, tau: float | None = 0.31415926535
 
 
 @pytest.fixture(scope="module")
-def capture_and_export(tmp_path_factory):
+def capture_and_export(tmp_path_factory, sim_capture):
     """A roving-hammer capture on the simulated frame with an exponential window (5 % at the block
     end), exported by the project's own command."""
-    d = tmp_path_factory.mktemp("uffwin")
-    rec, uff = d / "rec.h5", d / "rec.uff"
-    assert capture_main(["--device", "sim://", "--seed", "3", "--out", str(rec), "--points", "right:6:-X,top:4:Z",
-                         "--hits", "2", "--auto", "--exp-window", "5%", "-q"]) == 0
+    from conftest import TWO_POINTS_EXP
+
+    rec, uff = sim_capture(*TWO_POINTS_EXP), tmp_path_factory.mktemp("uffwin") / "rec.uff"
     assert export_main([str(rec), "--uff", str(uff)]) == 0
     return rec, uff
 

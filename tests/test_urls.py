@@ -1,6 +1,7 @@
 """Device URL parsing: every door's syntax, and clear errors for bad strings."""
 from __future__ import annotations
 
+import sys
 from urllib.parse import quote
 
 import pytest
@@ -154,3 +155,117 @@ def test_socket_url_round_trip(port: int, host: str) -> None:
     shown = f"[{host}]" if ":" in host else host
     u = parse_device_url(f"socket://{shown}:{port}")
     assert (u.host, u.port) == (host, port)
+
+
+# -- the door rows and the plug-in path -------------------------------------------------------------
+def test_every_door_row_generates_the_syntax_and_the_docs_table() -> None:
+    from pathlib import Path
+
+    from acquisition.urls import SCHEMES, URL_SYNTAX, door_table
+
+    for row in SCHEMES:
+        assert row.syntax in URL_SYNTAX
+        assert f"`{row.syntax.replace('|', chr(92) + '|')}`" in door_table()
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "device-urls.md").read_text(encoding="utf-8")
+    assert door_table() in docs, "docs/device-urls.md: replace the door table by acquisition.urls.door_table():\n" + door_table()
+
+
+_DOOR_PACKAGE = '''"""A third-party door package: loopsim:// (a pyserial door) and echo:// (a transport door)."""
+import serial
+
+from acquisition.stream_transport import StreamTransport
+
+
+class PyserialDoor:
+    kind = "pyserial"
+    handler_package = "loopdoor"
+    syntax = "loopsim://[?seed=N]"
+    summary = "the simulated analyser through a plug-in pyserial handler"
+
+
+class EchoDoor:
+    kind = "transport"
+    summary = "a byte loop-back"
+
+    def open(self, target, timeout_s):
+        if set(target.options) - {"tag"}:
+            raise ValueError(f"echo:// knows only the option tag, got {sorted(target.options)}")
+        return StreamTransport(serial.serial_for_url("loop://", timeout=timeout_s), url=target.url)
+
+
+DOOR = PyserialDoor()
+ECHO = EchoDoor()
+'''
+_DOOR_HANDLER = '''"""pyserial handler of loopsim://: the simulator's sim:// port under another scheme."""
+from acquisition.urls import parse_device_url
+from simulator.urlhandlers.protocol_sim import Serial as _SimSerial
+
+
+class Serial(_SimSerial):
+    @staticmethod
+    def from_url(url):
+        return dict(parse_device_url(url).options)
+'''
+
+
+def _install_door_package(root) -> str:
+    """A door package as pip leaves it: its modules and a dist-info whose entry_points.txt registers
+    two doors in the group impactlab.doors. Returns the folder to put on the path."""
+    from acquisition.urls import DOOR_GROUP
+
+    site = root / "site"
+    (site / "loopdoor").mkdir(parents=True)
+    (site / "loopdoor" / "__init__.py").write_text(_DOOR_PACKAGE)
+    (site / "loopdoor" / "protocol_loopsim.py").write_text(_DOOR_HANDLER)
+    dist = site / "loopdoor-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: loopdoor\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{DOOR_GROUP}]\nloopsim = loopdoor:DOOR\necho = loopdoor:ECHO\n")
+    return str(site)
+
+
+@pytest.fixture
+def door_package(tmp_path, monkeypatch) -> str:
+    site = _install_door_package(tmp_path)
+    monkeypatch.syspath_prepend(site)
+    monkeypatch.setattr(serial, "protocol_handler_packages", list(serial.protocol_handler_packages))
+    yield site
+    for name in [m for m in sys.modules if m == "loopdoor" or m.startswith("loopdoor.")]:
+        del sys.modules[name]
+
+
+def test_an_installed_package_adds_a_door_that_opens(door_package) -> None:
+    from acquisition.discovery import list_doors
+    from acquisition.driver import Analyser
+    from acquisition.urls import PluginURL, url_syntax
+
+    assert parse_device_url("loopsim://?seed=3") == PluginURL("loopsim", {"seed": 3}, "loopsim://?seed=3")
+    assert "loopsim://" in url_syntax() and "echo://" in url_syntax()
+    assert {"loopsim://", "echo://"} <= {e.url for e in list_doors()}
+    with Analyser("loopsim://?seed=3") as analyser:            # pyserial door: the package's own handler
+        assert analyser.identify().vendor == "IMPACTLB"
+    with open_transport("echo://?tag=a", timeout_s=0.5) as t:  # transport door: the package opens it
+        t.write(b"ping", 0.5)
+        assert t.read(4, 0.5) == b"ping"
+    with pytest.raises(InvalidDeviceURL, match="knows only the option tag"):
+        open_transport("echo://?bogus=1")
+    with pytest.raises(InvalidDeviceURL, match="echo:// takes no host"):
+        parse_device_url("echo://host")
+
+
+def test_a_door_package_cannot_take_over_a_builtin_scheme(door_package, tmp_path) -> None:
+    from acquisition.urls import DOOR_GROUP
+
+    dist = tmp_path / "site" / "loopdoor-0.1.dist-info" / "entry_points.txt"
+    dist.write_text(f"[{DOOR_GROUP}]\nsocket = loopdoor:ECHO\n")
+    assert isinstance(parse_device_url("socket://h:1"), SocketURL)
+
+
+def test_devices_command_lists_an_installed_door(door_package) -> None:
+    import os
+    import subprocess
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([door_package, os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([sys.executable, "-m", "acquisition", "devices"], capture_output=True, text=True, env=env,
+                         timeout=60, check=True).stdout
+    assert "loopsim://" in out and "plug-in pyserial handler" in out and "sim://" in out

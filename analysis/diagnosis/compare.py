@@ -18,7 +18,7 @@ With coherence, the H1 variance ``(1 - g^2) / (2 n_avg g^2) |H|^2`` gives a seco
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -39,6 +39,7 @@ __all__ = [
     "typical_error_db",
     "second_difference_gain",
     "noise_level",
+    "effective_noise_db",
     "band_errors",
     "channel_errors",
     "pick_peaks",
@@ -138,6 +139,16 @@ def noise_level(measured: FRFSet, weights: np.ndarray) -> dict:
     if v is not None:
         out["coherence"] = db(float(np.mean(weights * v * np.abs(H) ** 2)))
     return out
+
+
+def effective_noise_db(noise_db: Mapping[str, float | None]) -> float:
+    """The one noise level (dB) the diagnosis judges errors against: the largest of the estimates in
+    ``noise_db`` (those of :func:`noise_level`, and the hits' scatter, the simulation's own noise or the
+    model-form allowance when known); an estimate that is None is unknown and left out."""
+    known = [float(v) for v in noise_db.values() if v is not None]
+    if not known:
+        raise ValueError("no noise estimate is known: give the measured FRFs (the difference estimate always exists)")
+    return max(known)
 
 
 def band_errors(measured: FRFSet, model_H: np.ndarray, weights: np.ndarray, n_bands: int = 8) -> list[dict]:

@@ -159,7 +159,7 @@ def noise_with_simulated_frfs(measured: FRFSet, sim: FRFSet, extra_noise_db: dic
     on the measured lines and points, with the measured weights), added as powers: two noisy captures of
     one structure differ by both noises. None when ``sim`` lacks the measured lines (another line spacing)
     or points."""
-    from .compare import common_points, line_weights, noise_level
+    from .compare import common_points, effective_noise_db, line_weights, noise_level
 
     f = measured.freq_hz
     outs, refs = common_points(measured, sim)
@@ -177,8 +177,8 @@ def noise_with_simulated_frfs(measured: FRFSet, sim: FRFSet, extra_noise_db: dic
     if not np.all(np.isfinite(picked.H)):
         return None
     w = line_weights(measured)
-    own = max(list(noise_level(measured, w).values()) + [float(v) for v in extra_noise_db.values() if v is not None])
-    theirs = max(noise_level(picked, w).values())
+    own = effective_noise_db({**extra_noise_db, **noise_level(measured, w)})
+    theirs = effective_noise_db(noise_level(picked, w))
     return float(10 * np.log10(10 ** (own / 10) + 10 ** (theirs / 10)))
 
 

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..frf import FRFSet
+from ..frf import FRFSet, line_spacing_hz
 from .effect_types import EffectError, FitContext
 from .effect_types import check_positive as _check_positive
 
@@ -22,11 +22,6 @@ MAX_OFFSET_HZ = 0.2
 LINE_SHAPES = ("lorentzian", "sinc")
 #: A line's kernel is cut off this many widths from its centre.
 TAIL_WIDTHS = 6.0
-
-
-def _line_spacing(f: np.ndarray) -> float:
-    """The line spacing (Hz) of the axis ``f``: the median step."""
-    return float(np.median(np.diff(f)))
 
 
 def _harmonics(f: np.ndarray, base_hz: float, width_hz: float, df: float) -> np.ndarray:
@@ -75,7 +70,7 @@ def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float,
     f = np.asarray(freq_hz, float)
     if width_hz != 0 and shape not in LINE_SHAPES:
         raise EffectError(f"mains_hum: shape must be one of {', '.join(LINE_SHAPES)}; got {shape!r}")
-    df = _line_spacing(f)
+    df = line_spacing_hz(f)
     fk = _harmonics(f, base_hz, width_hz, df)
     K = np.zeros((fk.size, f.size), complex)
     if fk.size:
@@ -84,9 +79,10 @@ def hum_kernels(freq_hz: np.ndarray, base_hz: float, width_hz: float,
     return fk, K
 
 
-def default_hum_width(freq_hz: np.ndarray) -> float:
-    """Line width (Hz) of the hum model: two line spacings."""
-    return 2.0 * float(np.median(np.diff(freq_hz)))
+def default_hum_width(spacing_hz: float) -> float:
+    """Line width (Hz) of the hum model: two line spacings (``spacing_hz``: the FRFs'
+    :attr:`~analysis.frf.FRFSet.line_spacing_hz`)."""
+    return 2.0 * float(spacing_hz)
 
 
 def _on_harmonics(A: np.ndarray, given_hz: np.ndarray, fk: np.ndarray, frfs: tuple) -> np.ndarray:
@@ -111,7 +107,7 @@ def mains_hum_applies(ctx: FitContext) -> str:
     f = np.asarray(ctx.measured.freq_hz, float)
     if f.size < 2:
         return f"the band has {f.size} line(s)"
-    lo, hi = f[0] - 2 * default_hum_width(f), f[-1] + _line_spacing(f) / 2
+    lo, hi = f[0] - 2 * default_hum_width(line_spacing_hz(f)), f[-1] + line_spacing_hz(f) / 2
     for b in HUM_BASES_HZ:
         k = np.arange(1, int(hi // (b - MAX_OFFSET_HZ)) + 1)
         if np.any((k * (b + MAX_OFFSET_HZ) >= lo) & (k * (b - MAX_OFFSET_HZ) <= hi)):
@@ -126,7 +122,7 @@ def apply_mains_hum(frf: FRFSet, params: Mapping) -> FRFSet:
     (then a harmonic of this band the fit did not see has none)."""
     f0 = _check_positive("base_hz", params.get("base_hz"), "mains_hum") + float(params.get("offset_hz", 0.0))
     w = params.get("width_hz")
-    width = default_hum_width(frf.freq_hz) if w is None else float(w)
+    width = default_hum_width(frf.line_spacing_hz) if w is None else float(w)
     if not (np.isfinite(width) and width >= 0):
         raise EffectError(f"mains_hum: width_hz must be >= 0 (0: single lines), got {w!r}")
     fk, K = hum_kernels(frf.freq_hz, f0, width, str(params.get("shape", "lorentzian")))
@@ -173,7 +169,7 @@ class _Search:
 
     def __init__(self, ctx: FitContext, E: np.ndarray, lines: np.ndarray) -> None:
         self.f = np.asarray(ctx.measured.freq_hz, float)
-        self.df = _line_spacing(self.f)
+        self.df = line_spacing_hz(self.f)
         self.E = E
         self.W = np.where(lines, ctx.weights, 0.0)
         self.cost = float(np.sum(self.W * (E.real ** 2 + E.imag ** 2)))
@@ -225,7 +221,7 @@ def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
     # single lines sit on the bins nearest k (base + offset): finer steps (1/32 line) find the offset
     # that puts every harmonic on its bin; a line with a width moves smoothly, 1/8 line is enough
     out = [(b, float(o), 0.0, "line") for b in HUM_BASES_HZ for o in offsets(df / 32)]
-    width = default_hum_width(f)
+    width = default_hum_width(line_spacing_hz(f))
     return out + [(b, float(o), width, s) for b in HUM_BASES_HZ for s in LINE_SHAPES for o in offsets(df / 8)]
 
 
@@ -270,7 +266,7 @@ def fit_mains_hum(ctx: FitContext, lines: np.ndarray) -> dict:
         if best is None or total + 4 * line_cost * n_frf * n_seen * max(complexity - best[5], 0) < best[0]:
             best = (total, base, off, width, A, complexity, shape)
     if best is None:
-        return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(f), "shape": "lorentzian",
+        return {"base_hz": 50.0, "offset_hz": 0.0, "width_hz": default_hum_width(line_spacing_hz(f)), "shape": "lorentzian",
                 "amplitudes": np.zeros(ctx.measured.H.shape[:2] + (0, 2)).tolist(), "harmonics_hz": []}
     off = best[2]
     if best[3] == 0.0 and off != 0.0:

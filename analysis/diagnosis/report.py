@@ -13,7 +13,6 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..atomic import atomic_path, write_text_atomic
-from .compare import band_errors
 from .rule import why_lines
 from .verdict import Diagnosis
 
@@ -73,20 +72,17 @@ def frf_figure(diag: Diagnosis, output: int = 0, reference: int = 0) -> Figure:
 
 
 def band_figure(diag: Diagnosis) -> Figure:
-    """Error per band (dB) of the simulation and of the extension, with the noise level."""
-    from .compare import line_weights
-
-    w = line_weights(diag.measured)
-    before = band_errors(diag.measured, diag.simulated.H, w)
-    after = band_errors(diag.measured, diag.extended.H, w)
+    """Error per band (dB) of the simulation and of the extension, with the noise level: the rows of
+    :attr:`Diagnosis.bands`, which the HTML report draws too."""
+    bands = diag.bands
     fig = Figure(figsize=(8, 4))
     ax = fig.add_subplot(1, 1, 1)
-    x = np.arange(len(before))
-    ax.bar(x - 0.2, [b["error_db"] for b in before], 0.4, label="simulation")
-    ax.bar(x + 0.2, [b["error_db"] for b in after], 0.4, label=f"extended ({_extension_name(diag)})")
-    ax.axhline(max(diag.noise_db.values()), color="k", ls="--", lw=1, label="noise level")
+    x = np.arange(len(bands))
+    ax.bar(x - 0.2, [b["simulation_db"] for b in bands], 0.4, label="simulation")
+    ax.bar(x + 0.2, [b["extended_db"] for b in bands], 0.4, label=f"extended ({_extension_name(diag)})")
+    ax.axhline(diag.noise_level_db, color="k", ls="--", lw=1, label="noise level")
     ax.set_xticks(x)
-    ax.set_xticklabels([f"{b['lo_hz']:.3g}-{b['hi_hz']:.3g}" for b in before], rotation=30, fontsize=7)
+    ax.set_xticklabels([f"{b['lo_hz']:.3g}-{b['hi_hz']:.3g}" for b in bands], rotation=30, fontsize=7)
     ax.set_ylabel("error (dB)")
     ax.set_xlabel("band (Hz)")
     ax.legend(fontsize=8)
@@ -112,7 +108,7 @@ def report_text(diag: Diagnosis) -> str:
         L += [f"**Next measurement:** {nm['point']}: {nm['why']} (the candidates' FRFs there differ by "
               f"{nm['separation_db']:.1f} dB above the noise).", ""]
     L.append(f"FRF error of the simulation {diag.error_before_db:.1f} dB, after the extension "
-             f"{diag.error_after_db:.1f} dB; noise level {max(diag.noise_db.values()):.1f} dB (dB of the mean "
+             f"{diag.error_after_db:.1f} dB; noise level {diag.noise_level_db:.1f} dB (dB of the mean "
              "squared error relative to the measured |H|, lines weighted as in docs/diagnosis.md; -40 dB is a 1 % "
              "error). The error is a typical value over all lines: bands listed below can stay above the noise.")
     if len(diag.combined) > 1:

@@ -43,7 +43,7 @@ from ..frf import FRFSet
 from ..modal import ModalModel
 from ..progress import progress
 from ..threads import limits_blas_threads
-from .compare import band_errors, compare, held_out_errors, line_weights, noise_level, typical_error_db
+from .compare import band_errors, compare, effective_noise_db, held_out_errors, line_weights, noise_level, typical_error_db
 from .effect_types import applied, named, stage_entry
 from .effects import EFFECTS, EffectError, FitContext, predict
 from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
@@ -103,6 +103,26 @@ class Diagnosis:
     trace: list = field(default_factory=list)
     rule: DecisionRule = DEFAULT_RULE
 
+    @property
+    def bands(self) -> list[dict]:
+        """The error per band, as the report and ``bands.png`` draw it: ``lo_hz``, ``hi_hz`` (Hz),
+        ``simulation_db`` (the comparison's band error) and ``extended_db`` (the same bands of the
+        extension: :attr:`extended`, the simulation with the accepted effects), dB."""
+        simulation = (self.comparison or {}).get("bands") or []
+        frfs: list[Any] = [self.measured, self.extended]
+        if any(x is None for x in frfs):   # a diagnosis assembled without its FRF sets: the extension unknown
+            return [{"lo_hz": b["lo_hz"], "hi_hz": b["hi_hz"], "simulation_db": b["error_db"], "extended_db": None}
+                    for b in simulation]
+        after = band_errors(self.measured, self.extended.H, line_weights(self.measured))
+        return [{"lo_hz": b["lo_hz"], "hi_hz": b["hi_hz"], "simulation_db": b["error_db"], "extended_db": a["error_db"]}
+                for b, a in zip(simulation, after)]
+
+    @property
+    def noise_level_db(self) -> float:
+        """The noise level (dB) the verdict was judged against: :func:`~analysis.diagnosis.compare.effective_noise_db`
+        of :attr:`noise_db`."""
+        return effective_noise_db(self.noise_db)
+
     def to_json(self) -> dict:
         """The JSON document of ``python -m analysis diagnose``."""
         doc = {
@@ -122,6 +142,7 @@ class Diagnosis:
             "comparison": _jsonable(self.comparison),
             "trace": _jsonable(self.trace),
             "rule": self.rule.as_dict(),
+            "bands": self.bands,
         }
         if self.next_measurement is not None:
             doc["next_measurement"] = _jsonable(self.next_measurement)
@@ -456,7 +477,7 @@ def diagnose_frfs(
     ctx = FitContext(measured=measured, base=base, weights=w, sim=sim, prior=prior)
     noise = noise_level(measured, w)
     noise.update({k: float(v) for k, v in (extra_noise_db or {}).items() if v is not None})
-    noise_db = max(noise.values())   # with coherence (or the hits' scatter), the largest estimate
+    noise_db = effective_noise_db(noise)   # with coherence (or the hits' scatter), the largest estimate
     if physical is not None and hasattr(physical, "refined_model"):
         # the simulation's own discretisation error: what a finer mesh alone removes of the typical error
         # is not evidence of a physical change; the level is raised by it ("model_form")

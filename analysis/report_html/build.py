@@ -13,8 +13,9 @@ from pathlib import Path
 from ..frf import FRFSet
 from ..geometry import Geometry, points_on_a_line
 from ..web_assets import plotly_js_path
-from .collect import frf_section, modal_section, points_section, shape_vectors, shapes_section, test_section
-from .page import render_page, written_stamp
+from .collect import shape_vectors
+from .page import written_stamp
+from .sections import ReportInputs, collect_sections, render_page
 from .sources import FitData, ReportInputError, TestRecord, load_diagnosis, load_fit_json, read_test_record, run_fit
 
 __all__ = ["build_document", "make_report", "write_report", "report_files", "check_report_folder"]
@@ -26,7 +27,8 @@ _OWN_ASSETS = ("report.js", "report.css")
 def build_document(frf: FRFSet, fit: FitData, *, geometry: Geometry | None = None,
                    record: TestRecord | None = None, diagnosis: dict | None = None,
                    input_name: str = "", title: str = "", quality: dict | None = None) -> dict:
-    """The report's content as one JSON-able dict (see :mod:`analysis.report_html.collect`)."""
+    """The report's content as one JSON-able dict: ``meta``, then one entry per section of
+    :data:`analysis.report_html.sections.SECTIONS` (its collector's data) and ``drawers``."""
     notes = []
     labels, _ = shape_vectors(fit.model)
     geo = geometry
@@ -43,13 +45,7 @@ def build_document(frf: FRFSet, fit: FitData, *, geometry: Geometry | None = Non
                  "frf_count": f"{frf.n_outputs} x {frf.n_references} FRFs, {frf.freq_hz.size} lines "
                               f"{frf.freq_hz[0]:.4g}-{frf.freq_hz[-1]:.4g} Hz",
                  "written": written_stamp(), "notes": notes},
-        "test": test_section(record) if record is not None else None,
-        "points": points_section(record) if record is not None else None,
-        "frf": frf_section(frf),
-        "modal": modal_section(frf, fit),
-        "shapes": shapes_section(fit, geo),
-        "diagnosis": diagnosis,
-        "quality": quality,
+        **collect_sections(ReportInputs(frf, fit, geo, record=record, diagnosis=diagnosis, quality=quality)),
     }
     return doc
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..frf import FRFSet
+from ..frf import QUANTITY_UNIT, FRFSet
 from ..geometry import Geometry, node_label
 from ..mac import mac_matrix
 from ..mif import indicator_summary
@@ -82,12 +82,9 @@ def frf_section(frf: FRFSet) -> dict:
             t["coh"] = _r(frf.coherence[o, r], 3)
         traces.append(t)
     return {"freq_hz": _r(frf.freq_hz, 4), "traces": traces, "quantity": frf.quantity,
-            "unit": frf.unit or _UNITS.get(frf.quantity, ""), "has_coherence": frf.coherence is not None,
+            "unit": frf.unit or QUANTITY_UNIT.get(frf.quantity, ""), "has_coherence": frf.coherence is not None,
             "n_outputs": frf.n_outputs, "n_references": frf.n_references,
             "exp_window_tau_s": frf.exp_window_tau_s}
-
-
-_UNITS = {"receptance": "m/N", "mobility": "(m/s)/N", "accelerance": "(m/s^2)/N"}
 
 
 def mpc(phi: np.ndarray) -> float:

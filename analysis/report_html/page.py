@@ -1,6 +1,6 @@
-"""The report page: HTML tables written here, plots drawn in the browser by ``report.js`` from
-``report-data.js`` (``window.REPORT_DATA = {...}``; a script, not a fetched JSON, so the page works
-from ``file://``)."""
+"""The HTML of the report's sections (tables written here; plots drawn in the browser by
+``report.js`` from ``report-data.js``). Each function writes the body of one section; the sections,
+their headings, numbering and navigation come from :data:`analysis.report_html.sections.SECTIONS`."""
 from __future__ import annotations
 
 import datetime as _dt
@@ -8,9 +8,8 @@ from collections.abc import Sequence
 from html import escape
 from typing import Any
 
-from .quality_section import quality_html
-
-__all__ = ["render_page", "written_stamp"]
+__all__ = ["test_html", "points_html", "frf_html", "modes_html", "shapes_html", "diagnosis_html", "written_stamp",
+           "plot"]
 
 
 def _num(x: Any, fmt: str = "{:.4g}") -> str:
@@ -28,7 +27,7 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[str]], attrs: str = "") 
     return f"<table{attrs}><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>"
 
 
-def _plot(name: str, caption: str, height: int = 380) -> str:
+def plot(name: str, caption: str, height: int = 380) -> str:
     return (f'<figure><div class="plot" data-plot="{name}" style="height:{height}px"></div>'
             f"<figcaption>{escape(caption)}</figcaption></figure>")
 
@@ -37,11 +36,13 @@ def _dl(items: Sequence[tuple[str, str]]) -> str:
     return "<dl>" + "".join(f"<dt>{escape(k)}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
 
 
-def _test_html(test: dict | None, meta: dict) -> str:
+def test_html(test: dict | None, doc: dict) -> str:
+    """The test: device, date, sampling, trigger, windows, plan; the channel and hit tables."""
     if test is None:
-        return ("<section id='test'><h2>1. The test</h2><p class='note'>The input holds FRFs only (a UFF file): no "
+        meta = doc["meta"]
+        return ("<p class='note'>The input holds FRFs only (a UFF file): no "
                 "record of the test (channels, windows, hits). Give the recording (.h5) for this section.</p>"
-                + _dl([("input", escape(meta["input"])), ("FRFs", escape(meta["frf_count"]))]) + "</section>")
+                + _dl([("input", escape(meta["input"])), ("FRFs", escape(meta["frf_count"]))]))
     win = test["windows"]
     tau, end = win.get("exp_window_tau_s"), win.get("exp_window_end_fraction")
     exp = (f"tau {_num(tau)} s" if tau else
@@ -73,12 +74,11 @@ def _test_html(test: dict | None, meta: dict) -> str:
         hit_rows.append([str(int(h["index"]) + 1), escape(h["point"]), str(at_point[h["point"]]),
                          "accepted" if h["accepted"] else "<b>rejected</b>", _num(h["peak_n"], "{:.1f}"),
                          escape("; ".join(h["reasons"])) or "&ndash;"])
-    return ("<section id='test'><h2>1. The test</h2>" + _dl(items) + "<h3>Channels</h3>"
+    return (_dl(items) + "<h3>Channels</h3>"
             + _table(["channel", "point", "direction", "quantity", "sensitivity", "range", "coupling", "IEPE"],
                      ch_rows, " id='channels'")
             + "<h3>Hits</h3>" + _table(["hit", "point", "hit at the point", "decision", "peak force [N]", "reason"], hit_rows,
-                                        " id='hits'")
-            + "</section>")
+                                        " id='hits'"))
 
 
 #: human labels of the instrument's and the plan's keys (other keys: underscores become spaces)
@@ -130,22 +130,22 @@ def _trigger(trig: dict, channels: list, fs: Any) -> str:
     return escape(text + (", " + ", ".join(f"{str(k).replace('_', ' ')} {v}" for k, v in rest.items()) if rest else ""))
 
 
-def _points_html(points: list | None) -> str:
+def points_html(points: list | None, doc: dict) -> str:
+    """Force spectra and time histories per point (a note without time data)."""
     if not points:
-        return ("<section id='points'><h2>2. Excitation and responses</h2><p class='note'>No time data in the input "
-                "(FRFs only): the force spectra and time histories need the recording.</p></section>")
-    return ("<section id='points'><h2>2. Excitation and responses</h2>"
-            "<p>Force autospectrum of each point (mean of the accepted hits, force window applied) with the "
+        return ("<p class='note'>No time data in the input "
+                "(FRFs only): the force spectra and time histories need the recording.</p>")
+    return ("<p>Force autospectrum of each point (mean of the accepted hits, force window applied) with the "
             "excitation band marked where it has fallen 10 dB (dashed) and 20 dB (dotted) below its low-frequency "
             "level; the force pulse and the response time histories of the last accepted hit (click the legend to "
             "show another point's).</p>"
-            + _plot("force-spectrum", "Force autospectrum per point, dB re 1 N\u00b2/Hz, with the -10/-20 dB marks")
-            + _plot("force-time", "Force pulse per point (last accepted hit)", 300)
-            + _plot("response-time", "Response time histories (last accepted hit of each point)", 320)
-            + "</section>")
+            + plot("force-spectrum", "Force autospectrum per point, dB re 1 N\u00b2/Hz, with the -10/-20 dB marks")
+            + plot("force-time", "Force pulse per point (last accepted hit)", 300)
+            + plot("response-time", "Response time histories (last accepted hit of each point)", 320))
 
 
-def _modes_html(modal: dict) -> str:
+def modes_html(modal: dict, doc: dict) -> str:
+    """The fit: stabilization (with pole picking), mode indicator, mode table, synthesis, AutoMAC."""
     rows = [[str(m["n"]), _num(m["freq_hz"], "{:.3f}"), _num(m["freq_std_hz"], "{:.2g}"),
              _num(m["damping_pct"], "{:.3f}"), _num(m["damping_std_pct"], "{:.2g}"), _num(m["mpc"], "{:.3f}"),
              _num(m["complexity_pct"], "{:.1f}")] for m in modal["modes"]]
@@ -153,7 +153,7 @@ def _modes_html(modal: dict) -> str:
             "complexity [%]"]
     warn = "".join(f"<li>{escape(w)}</li>" for w in modal["warnings"])
     rel = modal["synthesis"]["rel_rms"]
-    stab = _plot("stabilization", "Stabilization diagram: poles per model order by stability class over the summed "
+    stab = plot("stabilization", "Stabilization diagram: poles per model order by stability class over the summed "
                  "FRF; vertical lines: the fitted modes" if modal["stabilization"]["classes"] is not None else
                  "The fitted modes (vertical lines) over the summed FRF; no stabilization diagram: the fit was read "
                  "from a file (--fit)", 420)
@@ -163,23 +163,21 @@ def _modes_html(modal: dict) -> str:
                    "first curve marks a mode, a peak of the second at the same line a second, close mode)"
                    + ("; MIF of the one reference on the right axis (0..1, dips at modes)" if ind["mif"] else "")
                    + "; vertical lines: the fitted modes")
-    return ("<section id='modal'><h2>4. Modal parameters</h2>"
-            f"<p>Fit: {escape(modal['source'])}; band {modal['band_hz'][0]:.4g}&ndash;{modal['band_hz'][1]:.4g} Hz; "
+    return (f"<p>Fit: {escape(modal['source'])}; band {modal['band_hz'][0]:.4g}&ndash;{modal['band_hz'][1]:.4g} Hz; "
             f"{len(modal['modes'])} modes; relative RMS misfit of the synthesis "
             f"{_num(None if rel is None else 100 * rel, '{:.2f}')} %.</p>"
             "<div class='controls'><label><input id='log-frequency' type='checkbox'> logarithmic frequency axis"
             "</label></div>"
-            + stab + (_picks_html() if picking else "") + _plot("cmif", ind_caption, 300)
+            + stab + (_picks_html() if picking else "") + plot("cmif", ind_caption, 300)
             + "<h3>Mode table</h3>" + _table(head, rows, " id='modes'")
             + "<p class='note'>&sigma;: standard deviations of the fit (white-noise, perfect-model lower bounds). "
               "MPC: modal phase collinearity of the shape (1: real mode); complexity = 1 - MPC.</p>"
             + (f"<details><summary>fit warnings ({len(modal['warnings'])})</summary><ul>{warn}</ul></details>"
                if warn else "")
-            + _plot("synthesis", "Measured vs synthesised FRFs (top) and the relative error over all FRFs (bottom)",
+            + plot("synthesis", "Measured vs synthesised FRFs (top) and the relative error over all FRFs (bottom)",
                     480)
-            + _plot("automac", f"AutoMAC of the mode shapes over the {modal['shape_points']} points they are "
-                    "measured at (few points cannot tell every pair of modes apart)", 420)
-            + "</section>")
+            + plot("automac", f"AutoMAC of the mode shapes over the {modal['shape_points']} points they are "
+                    "measured at (few points cannot tell every pair of modes apart)", 420))
 
 
 def _picks_html() -> str:
@@ -191,8 +189,9 @@ def _picks_html() -> str:
             "<button id='clear-picks' type='button' disabled>clear the picks</button></div>")
 
 
-def _shapes_html() -> str:
-    return ("<section id='shapes'><h2>5. Mode shapes</h2><div class='controls'>"
+def shapes_html(shapes: dict, doc: dict) -> str:
+    """The animated mode shapes on the test geometry (drawn on a canvas by ``report.js``)."""
+    return ("<div class='controls'>"
             "<label>mode <select id='mode-select'></select></label>"
             "<button id='play' type='button'>pause</button>"
             "<label>amplitude <input id='amplitude' type='range' min='0' max='1' step='0.01' value='0.5'></label>"
@@ -204,8 +203,7 @@ def _shapes_html() -> str:
             "<figcaption id='shape-caption'>Mode shape on the test geometry (grey: undeformed; red: measured points). "
             "As measured, a node moves only along its measured directions and unmeasured nodes stay still; the "
             "interpolation (an illustration, not data) gives every other direction the mean motion of the "
-            "neighbours along the trace lines.</figcaption></figure>"
-            "</section>")
+            "neighbours along the trace lines.</figcaption></figure>")
 
 
 def _noise(x: Any) -> str:
@@ -225,9 +223,8 @@ def _why_html(trace: Any) -> str:
     return f"<h3>Why this verdict</h3><ol id='diagnosis-why'>{items}</ol>"
 
 
-def _diagnosis_html(diag: dict | None) -> str:
-    if diag is None:
-        return ""
+def diagnosis_html(diag: dict, doc: dict) -> str:
+    """A diagnosis read from its JSON: verdict, the rules that decided, causes with their gains, modes and bands."""
     rows = [[escape(str(c.get("effect", ""))), _num(c.get("gain_db"), "{:.1f}"), _num(c.get("error_before_db"), "{:.1f}"),
              _num(c.get("error_after_db"), "{:.1f}"), "yes" if c.get("significant") else "no",
              escape(str(c.get("evidence", "")))[:300]] for c in diag.get("causes", [])]
@@ -236,9 +233,8 @@ def _diagnosis_html(diag: dict | None) -> str:
     mode_rows = [[_num(q.get("measured_hz"), "{:.3f}"), _num(q.get("simulated_hz"), "{:.3f}"),
                   _num(q.get("df_percent"), "{:+.2f}"), _num(q.get("amplitude_db"), "{:+.1f}"),
                   _num(q.get("mac"), "{:.2f}")] for q in pairs]
-    bands = comparison.get("bands") or []
-    return ("<section id='diagnosis'><h2>6. Diagnosis: what the simulation gets wrong</h2>"
-            + _dl([("verdict", f"<b>{escape(str(diag.get('verdict')))}</b>"),
+    bands = diag.get("bands") or comparison.get("bands") or []
+    return (_dl([("verdict", f"<b>{escape(str(diag.get('verdict')))}</b>"),
                    ("error before", f"{_num(diag.get('error_before_db'), '{:.1f}')} dB"),
                    ("error after", f"{_num(diag.get('error_after_db'), '{:.1f}')} dB"),
                    ("noise floor", _noise(diag.get("noise_db")))]
@@ -247,50 +243,25 @@ def _diagnosis_html(diag: dict | None) -> str:
             + "<h3>Causes</h3>"
             + _table(["cause", "gain [dB]", "error before [dB]", "error after [dB]", "significant", "evidence"], rows,
                      " id='causes'")
-            + _plot("diagnosis", "Gain of each cause: how much the held-out model error falls when the cause is "
+            + plot("diagnosis", "Gain of each cause: how much the held-out model error falls when the cause is "
                     "applied (dB; blue: significant)", 90 + 28 * max(len(rows), 4))
             + ("<h3>Modes: simulation vs measurement</h3>"
                + _table(["measured f [Hz]", "simulated f [Hz]", "&Delta;f [%]", "amplitude [dB]", "MAC"], mode_rows,
                         " id='diagnosis-modes'") if mode_rows else "")
-            + (_plot("diagnosis-bands", "Error of the simulation per frequency band (dB re the measurement)", 300)
-               if bands else "")
-            + "</section>")
+            + (plot("diagnosis-bands", "Error per frequency band of the simulation and of its extension by the named "
+                   "causes (dB re the measurement)", 300)
+               if bands else ""))
 
 
-def render_page(data: dict, *, plotly_src: str = "plotly.min.js") -> str:
-    """The whole ``index.html``; ``data`` is the report document (see :mod:`analysis.report_html.build`)."""
-    meta = data["meta"]
-    title = f"Impact test report: {escape(meta['title'])}"
-    frf = data["frf"]
-    parts = [
-        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
-        ("<meta http-equiv='Content-Security-Policy' content=\"default-src 'self' file: 'unsafe-inline' 'unsafe-eval' "
-         "data: blob:; connect-src 'none'\">"),
-        f"<title>{title}</title><link rel='stylesheet' href='report.css'></head><body>",
-        (f"<header><h1>{title}</h1><p>input <code>{escape(meta['input'])}</code> &middot; {escape(meta['frf_count'])}"
-         f" &middot; written {escape(meta['written'])} by impactlab</p>"),
-        "".join(f"<p class='warn'>note: {escape(n)}</p>" for n in meta.get("notes", [])),
-        "<nav><a href='#test'>test</a> <a href='#points'>excitation</a> <a href='#frf'>FRFs</a> "
-        "<a href='#modal'>modes</a> <a href='#shapes'>shapes</a>"
-        + (" <a href='#diagnosis'>diagnosis</a>" if data.get("diagnosis") else "") + "</nav></header><main>",
-        _test_html(data.get("test"), meta),
-        _points_html(data.get("points")),
-        ("<section id='frf'><h2>3. FRFs</h2><p>The strongest FRFs are drawn first. Click a legend entry to show or "
-         "hide an FRF (the coherence follows), or add any FRF with the list; drag to zoom, double-click to reset.</p>"
-         "<div class='controls'><label>add an FRF <select id='frf-picker'><option value='' disabled selected>"
-         f"{frf['n_outputs'] * frf['n_references']} FRFs (output / reference)</option></select></label></div>"),
-        _plot("frf", f"FRF magnitude and phase, {frf['quantity']} in {frf['unit']}", 560),
-        _plot("coherence", "Coherence", 260) if frf["has_coherence"] else
-        '<div class="plot empty" data-plot="coherence"><p class="note">The input holds no coherence.</p></div>',
-        "</section>",
-        _modes_html(data["modal"]),
-        _shapes_html(),
-        _diagnosis_html(data.get("diagnosis")),
-        quality_html(data.get("quality")),
-        (f"</main><script src='{plotly_src}'></script><script src='report-data.js'></script>"
-         "<script src='report.js'></script></body></html>"),
-    ]
-    return "\n".join(parts)
+def frf_html(frf: dict, doc: dict) -> str:
+    """The FRFs (magnitude, phase) and their coherence, with the picker of FRFs to add."""
+    return ("<p>The strongest FRFs are drawn first. Click a legend entry to show or "
+            "hide an FRF (the coherence follows), or add any FRF with the list; drag to zoom, double-click to reset.</p>"
+            "<div class='controls'><label>add an FRF <select id='frf-picker'><option value='' disabled selected>"
+            f"{frf['n_outputs'] * frf['n_references']} FRFs (output / reference)</option></select></label></div>"
+            + plot("frf", f"FRF magnitude and phase, {frf['quantity']} in {frf['unit']}", 560)
+            + (plot("coherence", "Coherence", 260) if frf["has_coherence"] else
+               '<div class="plot empty" data-plot="coherence"><p class="note">The input holds no coherence.</p></div>'))
 
 
 def written_stamp() -> str:

@@ -77,10 +77,8 @@ def _row(check: str, verdict: str, detail: str) -> str:
     return f"<tr><td>{escape(check)}</td><td><b>{escape(verdict)}</b></td><td>{escape(detail)}</td></tr>"
 
 
-def quality_html(q: dict | None) -> str:
-    """The report's quality section (empty without data)."""
-    if not q:
-        return ""
+def quality_html(q: dict, doc: dict | None = None) -> str:
+    """The body of the report's quality section: the table ``#quality`` and the plots."""
     c = q["checks"]
     rows = []
     lin = c.get("linearity")
@@ -103,8 +101,7 @@ def quality_html(q: dict | None) -> str:
                          + ("" if dp["phase_ok"] else f"; phase outside +-90 deg on {100 * dp['phase_outside']:.0f} %")))
     if not c["driving_points"]:
         rows.append(_row("driving point", "not measured", "no response taken where and along which a hit struck"))
-    parts = ["<section id='quality-checks'><h2>Quality: linear, reciprocal, driving point</h2>",
-             "<table id='quality'><thead><tr><th>check</th><th>result</th><th>detail</th></tr></thead><tbody>",
+    parts = ["<table id='quality'><thead><tr><th>check</th><th>result</th><th>detail</th></tr></thead><tbody>",
              "".join(rows), "</tbody></table>"]
     if q.get("linearity_curves"):
         parts.append("<figure><div class='plot' data-plot='linearity' style='height:360px'></div><figcaption>H1 of "
@@ -112,5 +109,4 @@ def quality_html(q: dict | None) -> str:
     if q.get("reciprocity_curves"):
         parts.append("<figure><div class='plot' data-plot='reciprocity' style='height:360px'></div><figcaption>"
                      "H<sub>ij</sub> and H<sub>ji</sub> of each reciprocal pair</figcaption></figure>")
-    parts.append("</section>")
     return "".join(parts)

@@ -283,16 +283,30 @@
       .concat(drawDiagnosisBands(G));
   }
 
+  /* the rows of the diagnosis' "bands" (simulation and extension per band, as bands.png draws them); a
+     diagnosis written before they existed has the simulation's alone in comparison.bands */
   function drawDiagnosisBands(G) {
-    var div = el("diagnosis-bands"), bands = (G.comparison || {}).bands || [];
-    if (!div || !bands.length) { return []; }
-    var x = [], y = [];
-    bands.forEach(function (b) {  // log axis: a band from 0 Hz starts at a hundredth of its top
-      x.push(b.lo_hz > 0 ? b.lo_hz : b.hi_hz / 100, b.hi_hz, null); y.push(b.error_db, b.error_db, null);
+    var div = el("diagnosis-bands");
+    var rows = G.bands || ((G.comparison || {}).bands || []).map(function (b) {
+      return { lo_hz: b.lo_hz, hi_hz: b.hi_hz, simulation_db: b.error_db, extended_db: null };
     });
-    return [Plotly.newPlot(div, [{ x: x, y: y, type: "scatter", mode: "lines", name: "error per band",
-                                   line: { color: "#d62728", width: 3 } }],
-                           layout({ xaxis: axis(FREQ, { type: "log" }), yaxis: axis("simulation error [dB]"), showlegend: false }), CONFIG)];
+    if (!div || !rows.length) { return []; }
+    function steps(key) {
+      var x = [], y = [];
+      rows.forEach(function (b) {  // log axis: a band from 0 Hz starts at a hundredth of its top
+        x.push(b.lo_hz > 0 ? b.lo_hz : b.hi_hz / 100, b.hi_hz, null); y.push(b[key], b[key], null);
+      });
+      return { x: x, y: y };
+    }
+    var sim = steps("simulation_db"), ext = steps("extended_db");
+    var traces = [{ x: sim.x, y: sim.y, type: "scatter", mode: "lines", name: "simulation",
+                    line: { color: "#d62728", width: 3 } }];
+    if (rows[0].extended_db !== null) {
+      traces.push({ x: ext.x, y: ext.y, type: "scatter", mode: "lines", name: "extended",
+                    line: { color: "#1f77b4", width: 3, dash: "dash" } });
+    }
+    return [Plotly.newPlot(div, traces, layout({ xaxis: axis(FREQ, { type: "log" }), yaxis: axis("error [dB]") }),
+                           CONFIG)];
   }
 
   function drawLinearity() {
@@ -459,17 +473,24 @@
   function attempt(name, fn) {
     try { jobs = jobs.concat(fn()); } catch (err) { console.error("report: cannot draw " + name + ": " + err); }
   }
-  attempt("FRFs", drawFRF);
-  attempt("time data", drawPoints);
-  attempt("stabilization", drawStabilization);
-  attempt("mode indicator", drawIndicator);
-  attempt("log frequency", setupLogFrequency);
-  attempt("synthesis", drawSynthesis);
-  attempt("AutoMAC", drawMAC);
-  attempt("diagnosis", drawDiagnosis);
-  attempt("linearity", drawLinearity);
-  attempt("reciprocity", drawReciprocity);
-  attempt("mode shapes", setupShapes);
+  /* the drawers by name: every report section (analysis/report_html/sections.py) names its own, and the
+     document lists those of the sections shown, in order (D.drawers) */
+  var DRAWERS = {
+    "points": drawPoints,
+    "frf": drawFRF,
+    "stabilization": drawStabilization,
+    "indicator": drawIndicator,
+    "log-frequency": setupLogFrequency,
+    "synthesis": drawSynthesis,
+    "automac": drawMAC,
+    "mode-shapes": setupShapes,
+    "diagnosis": drawDiagnosis,
+    "linearity": drawLinearity,
+    "reciprocity": drawReciprocity
+  };
+  (D.drawers || []).forEach(function (name) {
+    attempt(name, DRAWERS[name] || function () { throw new Error("report.js has no drawer " + name); });
+  });
   Promise.all(jobs).then(function () {
     document.body.dataset.drawnMs = String(Math.round(performance.now()));  // for benchmarks
     document.body.dataset.ready = "1";
