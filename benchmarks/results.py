@@ -34,10 +34,12 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS_SUFFIX = ".results.json"
 
 
-def results_of_cases(cases: str | Path) -> Path:
-    """The results file of a hold-out case list ``CASES.json``: ``CASES.results.json`` beside it."""
+def results_of_cases(cases: str | Path, label: str | None = None) -> Path:
+    """The results file of a hold-out case list ``CASES.json``: ``CASES.results.json`` beside it, or
+    ``CASES.LABEL.results.json`` for a run of part of the list (``pairs``, ``nulls``) or a later run (``later``):
+    the first run as it came keeps its own file."""
     p = Path(cases)
-    return p.with_name(p.name.removesuffix(".json") + RESULTS_SUFFIX)
+    return p.with_name(p.name.removesuffix(".json") + (f".{label}" if label else "") + RESULTS_SUFFIX)
 
 
 def add_write_option(parser: argparse.ArgumentParser, results: Path) -> None:

@@ -39,7 +39,7 @@ def _case_list_owner(path: Path, scripts: dict[Path, str]) -> Path | None:
     """The script beside ``path`` whose CASE_LISTS pattern it matches and that writes results_of_cases."""
     for script, text in scripts.items():
         m = CASES_DECL.search(text)
-        if script.parent == path.parent and m and fnmatch.fnmatch(path.name, m.group(1)) \
+        if script.parent == path.parent and m and any(fnmatch.fnmatch(path.name, pat) for pat in m.group(1).split()) \
                 and "results_of_cases(" in text and '"--write"' in text and "write_text_atomic(" in text:
             return script
     return None
@@ -57,8 +57,11 @@ def test_every_results_file_has_a_script_that_writes_it() -> None:
             assert f'"{f.name}"' in scripts[reader], f"{reader} does not read {rel}"
             continue
         if f.name.endswith(RESULTS_SUFFIX):
-            cases = f.with_name(f.name.removesuffix(RESULTS_SUFFIX) + ".json")
-            if cases.is_file() and results_of_cases(cases) == f and _case_list_owner(cases, scripts):
+            stem = f.name.removesuffix(RESULTS_SUFFIX)
+            # CASES.results.json (the first run) or CASES.LABEL.results.json (a family's run, a later run)
+            heads = [(stem, None)] + ([(stem.rsplit(".", 1)[0], stem.rsplit(".", 1)[1])] if "." in stem else [])
+            if any((f.parent / f"{h}.json").is_file() and results_of_cases(f.parent / f"{h}.json", label) == f
+                   and _case_list_owner(f.parent / f"{h}.json", scripts) for h, label in heads):
                 continue
         elif f.suffix == ".json" and _case_list_owner(f, scripts) is not None:
             continue   # a hold-out case list: an input, drawn by its script, results beside it

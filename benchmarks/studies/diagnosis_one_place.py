@@ -58,7 +58,7 @@ from benchmarks.results import results_of_cases  # noqa: E402
 
 FRAME = ROOT / "simulator" / "frame.toml"
 #: the hold-out case lists drawn by this script and kept beside it (their results: results_of_cases)
-CASE_LISTS = "diagnosis_*_holdout_seed*.json"
+CASE_LISTS = "diagnosis_one_place_holdout_seed*.json diagnosis_attached_block_holdout_seed*.json diagnosis_nulls_holdout_seed*.json"
 #: The points of the damage cases' captures (the physical benchmark's six hammer points).
 POINTS = ("right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y")
 RANGES = {"loose_support": (0.05, 0.3), "soft_joint": (0.02, 0.2), "cracked_element": (0.3, 0.6)}
@@ -281,6 +281,7 @@ def main() -> None:
     r.add_argument("--json", help="write every case's result")
     r.add_argument("--write", action="store_true",
                    help="write every case's result to CASES.results.json beside the case list")
+    r.add_argument("--label", help="a later run: write CASES.LABEL.results.json (the first run keeps its file)")
     args = ap.parse_args()
     if args.cmd == "draw":
         cases = draw(args.seed, args.damage, args.nulls) + draw_blocks(args.seed + 1, args.blocks)
@@ -296,7 +297,7 @@ def main() -> None:
         res = run_case(case, cfg)
         results.append(res)
         print(line(res), flush=True)
-        for out in [args.json] * bool(args.json) + [results_of_cases(args.cases)] * args.write:
+        for out in [args.json] * bool(args.json) + [results_of_cases(args.cases, args.label)] * args.write:
             write_text_atomic(out, json.dumps(results, indent=1, default=str))
     print(table(results))
     print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} cases")

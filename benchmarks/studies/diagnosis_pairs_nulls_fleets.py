@@ -70,6 +70,13 @@ from diagnosis_one_place import (  # noqa: E402  (the one-place study's reading 
     same_place,
 )
 
+from analysis.atomic import write_text_atomic  # noqa: E402
+from benchmarks.results import results_of_cases  # noqa: E402
+
+#: the hold-out case lists drawn by this script and kept beside it (their results: results_of_cases; a run of
+#: one family is labelled with it, ``CASES.pairs.results.json``)
+CASE_LISTS = "diagnosis_pairs_nulls_holdout_seed*.json diagnosis_fleets_holdout_seed*.json"
+
 KINDS = tuple(RANGES)
 #: every unordered pair of kinds, the same kind twice included
 KIND_PAIRS = tuple((a, b) for i, a in enumerate(KINDS) for b in KINDS[i:])
@@ -312,15 +319,19 @@ def main() -> None:
     rf.add_argument("fleets")
     rf.add_argument("--work", required=True, help="folder for the recordings and the batch outputs")
     rf.add_argument("--json", help="write every unit's result")
+    for sub in (r, rf):
+        sub.add_argument("--write", action="store_true",
+                         help="write the results beside the case list (CASES[.LABEL].results.json)")
+        sub.add_argument("--label", help="a later run: CASES.LABEL.results.json (the first run keeps its file)")
     args = ap.parse_args()
     if args.cmd == "draw":
         cases = draw(args.seed, args.pairs, args.nulls)
-        Path(args.out).write_text(json.dumps({"seed": args.seed, "ranges": RANGES, "cases": cases}, indent=1) + "\n")
+        write_text_atomic(args.out, json.dumps({"seed": args.seed, "ranges": RANGES, "cases": cases}, indent=1) + "\n")
         print(f"{len(cases)} cases -> {args.out}")
         return
     if args.cmd == "draw-fleets":
         fleets = draw_fleets(args.seed, args.fleets, args.units, args.defects, args.scatter)
-        Path(args.out).write_text(json.dumps({"seed": args.seed, "fleets": fleets}, indent=1) + "\n")
+        write_text_atomic(args.out, json.dumps({"seed": args.seed, "fleets": fleets}, indent=1) + "\n")
         print(f"{len(fleets)} fleets -> {args.out}")
         return
     cfg = frame()
@@ -335,8 +346,8 @@ def main() -> None:
             for u in res["units"]:
                 if u["defect"] is not None or u["flagged"]:
                     print(fleet_line(u), flush=True)
-            if args.json:
-                Path(args.json).write_text(json.dumps(results, indent=1, default=str))
+            for out in [args.json] * bool(args.json) + [results_of_cases(args.fleets, args.label)] * args.write:
+                write_text_atomic(out, json.dumps(results, indent=1, default=str))
         print(fleet_table(results))
         print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} fleets")
         return
@@ -346,8 +357,9 @@ def main() -> None:
         res = run_case(case, cfg)
         results.append(res)
         print(line(res), flush=True)
-        if args.json:
-            Path(args.json).write_text(json.dumps(results, indent=1, default=str))
+        label = args.label or (f"{args.only}s" if args.only else None)
+        for out in [args.json] * bool(args.json) + [results_of_cases(args.cases, label)] * args.write:
+            write_text_atomic(out, json.dumps(results, indent=1, default=str))
     print(table(results))
     print(f"wall time {time.perf_counter() - t0:.0f} s for {len(results)} cases")
 
