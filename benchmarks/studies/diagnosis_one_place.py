@@ -44,6 +44,7 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -214,17 +215,25 @@ def score(case: dict, doc: dict, cfg: dict) -> dict:
 
 
 def run_case(case: dict, cfg: dict) -> dict:
+    return diagnosed_capture(case, cfg, frame_toml(case), ["--points", ",".join(case["points"]), "--hits", "3"], score)
+
+
+def diagnosed_capture(case: dict, cfg: dict, toml: str, capture_args: list[str],
+                      score_case: Callable[[dict, dict, dict], dict]) -> dict:
+    """The frame ``toml`` (a case's changes) captured through ``sim://`` at the case's seed with ``capture_args``
+    (points, hits) and diagnosed against the frame as designed, as the commands a user runs: the case's row
+    (verdict, named causes without their arrays, wall and CPU seconds of the diagnosis) scored by
+    ``score_case(case, doc, cfg)``."""
     from acquisition.cli_capture import main as capture
     from analysis.cli_diagnose import main as diagnose
 
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
-        (t / "frame.toml").write_text(frame_toml(case))
+        (t / "frame.toml").write_text(toml)
         rec, out = t / "rec.h5", t / "out.json"
         device = f"sim://?seed={case['seed']}&config={t / 'frame.toml'}"
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            rc = capture(["--device", device, "--out", str(rec), "--points", ",".join(case["points"]), "--hits", "3",
-                          "--auto", "-q"])
+            rc = capture(["--device", device, "--out", str(rec), *capture_args, "--auto", "-q"])
             if rc != 0:
                 return {**case, "verdict": f"capture failed ({rc})", "right": False, "named_among": False}
             t0, c0 = time.perf_counter(), time.process_time()
@@ -236,7 +245,7 @@ def run_case(case: dict, cfg: dict) -> dict:
     named = [{"effect": c["effect"], "parameters": {k: v for k, v in c["parameters"].items()
                                                     if not isinstance(v, (list, dict))}} for c in doc.get("named") or []]
     return {**case, "verdict": doc["verdict"], "named": named, "reason": doc.get("reason", ""), "time_s": dt,
-            "cpu_s": cpu, **score(case, doc, cfg)}
+            "cpu_s": cpu, **score_case(case, doc, cfg)}
 
 
 def line(r: dict) -> str:

@@ -41,13 +41,10 @@ Families and ranges (fixed before any run; factors log-uniform in the one-place 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
 import os
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -61,9 +58,9 @@ import numpy as np  # noqa: E402
 from diagnosis_one_place import (  # noqa: E402  (the one-place study's reading of frame.toml)
     DAMAGE_KEYS,
     EXPECTED,
-    FRAME,
     POINTS,
     RANGES,
+    diagnosed_capture,
     frame,
     hammer_points,
     places,
@@ -149,31 +146,8 @@ def score(case: dict, doc: dict, cfg: dict) -> dict:
 
 
 def run_case(case: dict, cfg: dict) -> dict:
-    from acquisition.cli_capture import main as capture
-    from analysis.cli_diagnose import main as diagnose
-
-    with tempfile.TemporaryDirectory() as tmp:
-        t = Path(tmp)
-        (t / "frame.toml").write_text(frame_toml(case))
-        rec, out = t / "rec.h5", t / "out.json"
-        device = f"sim://?seed={case['seed']}&config={t / 'frame.toml'}"
-        args = ["--device", device, "--out", str(rec), "--hits", str(case["hits"]), "--auto", "-q"]
-        if case["points"]:
-            args += ["--points", ",".join(case["points"])]
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            rc = capture(args)
-            if rc != 0:
-                return {**case, "verdict": f"capture failed ({rc})", "right": False, "named_among": False}
-            t0, c0 = time.perf_counter(), time.process_time()
-            rc = diagnose(["--measured", str(rec), "--simulated", str(FRAME), "--json", str(out), "-q"])
-            dt, cpu = time.perf_counter() - t0, time.process_time() - c0
-        if rc != 0:
-            return {**case, "verdict": f"diagnose failed ({rc})", "right": False, "named_among": False}
-        doc = json.loads(out.read_text())
-    named = [{"effect": c["effect"], "parameters": {k: v for k, v in c["parameters"].items()
-                                                    if not isinstance(v, (list, dict))}} for c in doc.get("named") or []]
-    return {**case, "verdict": doc["verdict"], "named": named, "reason": doc.get("reason", ""), "time_s": dt,
-            "cpu_s": cpu, **score(case, doc, cfg)}
+    args = ["--hits", str(case["hits"])] + (["--points", ",".join(case["points"])] if case["points"] else [])
+    return diagnosed_capture(case, cfg, frame_toml(case), args, score)
 
 
 def line(r: dict) -> str:
