@@ -78,7 +78,7 @@ def test_the_frf_stage_takes_min_gain_and_the_none_margin_from_the_one_rule(stif
 
 def test_the_trace_is_ordered_in_the_result_its_json_and_the_reports(named) -> None:
     from analysis.diagnosis.report import report_text
-    from analysis.report_html.page import _diagnosis_html
+    from analysis.report_html.page import diagnosis_html
 
     rules = [s["rule"] for s in named.trace]
     assert rules[0] == "same_structure"
@@ -96,7 +96,7 @@ def test_the_trace_is_ordered_in_the_result_its_json_and_the_reports(named) -> N
     assert "## Why this verdict" in text
     at = [text.index(f"{i}. {line}") for i, line in enumerate(lines, start=1)]
     assert at == sorted(at)
-    html = _diagnosis_html(doc)
+    html = diagnosis_html(doc, {})
     assert "Why this verdict" in html
     at = [html.index(f"<li>{line}</li>") for line in lines]
     assert at == sorted(at)
