@@ -14,6 +14,18 @@ proposed::
 (the weighted relative error of :mod:`analysis.diagnosis.compare` between the two predictions, above
 the measured noise level). A hammer point gives the FRFs from it to every sensor; by reciprocity this is
 also what a sensor there would see from the present hammer points.
+
+The diagnosis decides between the two on the measured modes (their chi2), not on the FRFs: an FRF
+difference carried by a mode the fit does not resolve (a weak mode, one the new point barely excites)
+separates nothing once measured. So when the measured modes are given, the points are ranked by what
+the decision will see: the chi2 of candidate ``b`` against ``a``'s modes taken as the measurement, on the
+modes measured today (``a``'s modes paired with them, the measured frequency uncertainties) and their
+shapes at the present hammer points and the new one (:func:`analysis.diagnosis.physical.residuals`)::
+
+    separation_chi2(p) = sum_k r_k(b | a at refs + p)^2
+
+the point with the largest is proposed (its FRF separation_db is reported with it); the FRF measure ranks
+the points when no point changes that chi2 (or the simulation gives no modes).
 """
 from __future__ import annotations
 
@@ -24,6 +36,7 @@ import numpy as np
 
 from ..frf import FRFSet
 from .effects import predict
+from .physical import MeasuredModes, pair, residuals
 
 __all__ = ["propose", "SEPARATED_CHI2", "rivals", "pair_rivals"]
 
@@ -83,12 +96,43 @@ def _relative_db(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return 10 * np.log10(np.maximum(e, 1e-30))
 
 
+def _modes_of(sim: Any, c: tuple[str, dict] | list, fmax: float) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies (Hz) and shape products of candidate ``c`` (one cause or a list of them)."""
+    return sim.modes_of(list(c), fmax) if isinstance(c, list) else sim.modes(c[0], c[1], fmax)
+
+
+def _separation_chi2(sim: Any, measured: FRFSet, points: Sequence[str], mm: MeasuredModes, fmax: float,
+                     a: tuple[str, dict] | list, b: tuple[str, dict] | list) -> np.ndarray:
+    """Per point of ``points``: the chi2 of ``b`` against ``a``'s modes as the measurement, on the modes
+    measured today (``mm``, their frequency uncertainties) with shapes at the measured references and
+    the point (module docs)."""
+    refs = list(measured.references)
+    n_out, n_ref = len(measured.outputs), len(refs)
+    every = sim.at_points(measured.outputs, refs + list(points))
+    fa, Pa = _modes_of(every, a, fmax)
+    fb, Pb = _modes_of(every, b, fmax)
+    width = n_ref + len(points)
+    today = (np.arange(n_out)[:, None] * width + np.arange(n_ref)[None, :]).ravel()
+    idx, _ = pair(mm, fa, Pa[today])
+    ok = idx >= 0
+    out = np.zeros(len(points))
+    if not ok.any():
+        return out
+    for j in range(len(points)):
+        rows = (np.arange(n_out)[:, None] * width + np.r_[np.arange(n_ref), n_ref + j][None, :]).ravel()
+        as_a = MeasuredModes(fa[idx[ok]], mm.freq_std_hz[ok], Pa[rows][:, idx[ok]])
+        out[j] = float(np.sum(residuals(as_a, fb, Pb[rows]) ** 2))
+    return out
+
+
 def propose(sim: Any, measured: FRFSet, prior: Sequence, noise_db: float, a: tuple[str, dict] | list,
-            b: tuple[str, dict] | list, why: str) -> dict | None:
+            b: tuple[str, dict] | list, why: str, modes: tuple[MeasuredModes, float] | None = None) -> dict | None:
     """The hammer point (``component:node:direction``) whose FRFs to the measured outputs best separate
     candidates ``a`` and ``b`` (``(cause, params)``, or a list of them: two causes at once), as
-    ``{"point", "why", "separation_db", "candidates"}``; None when the simulation cannot be evaluated at
-    other points (no ``points`` / ``at_points``)."""
+    ``{"point", "why", "separation_db", "candidates"}`` (with ``"separation_chi2"`` when ranked on the
+    modes); None when the simulation cannot be evaluated at other points (no ``points`` / ``at_points``).
+    ``modes``: the measured modes the diagnosis compares and the highest frequency (Hz) of the simulated
+    modes paired with them; given, the points are ranked by the chi2 the decision will see (module docs)."""
     if not (hasattr(sim, "points") and hasattr(sim, "at_points")):
         return None
     done = set(measured.references)
@@ -103,10 +147,16 @@ def propose(sim: Any, measured: FRFSet, prior: Sequence, noise_db: float, a: tup
                        outputs=measured.outputs, references=tuple(points)).H
 
     sep = _relative_db(frf(a), frf(b)) - noise_db
-    k = int(np.argmax(sep))
-    return {"point": points[k], "separation_db": float(sep[k]),
-            "why": f"{why}; hammered at {points[k]} their FRFs to the sensors differ by {sep[k]:.1f} dB above the noise",
-            "candidates": [_candidate(c) for c in (a, b)]}
+    chi2 = None if modes is None or not hasattr(sim, "modes") else _separation_chi2(sim, measured, points, *modes, a, b)
+    ranked_on_modes = chi2 is not None and float(np.ptp(chi2)) > 0
+    k = int(np.argmax(chi2 if ranked_on_modes and chi2 is not None else sep))
+    out = {"point": points[k], "separation_db": float(sep[k]),
+           "why": f"{why}; hammered at {points[k]} their FRFs to the sensors differ by {sep[k]:.1f} dB above the noise",
+           "candidates": [_candidate(c) for c in (a, b)]}
+    if ranked_on_modes and chi2 is not None:
+        out["separation_chi2"] = float(chi2[k])
+        out["why"] += f" and their measured modes by chi2 {chi2[k]:.1f}"
+    return out
 
 
 def _candidate(c: tuple[str, dict] | list) -> dict:

@@ -274,7 +274,8 @@ def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence
                           "unexplained" if out.decided else "not decided here: the FRF-level catalogue is tried"))
     close = rivals(found) if out.verdict != "combined" else _pair_rivals(two)
     if close is not None:
-        out.next_measurement = propose(sim, measured, prior, noise_db, *close)
+        a, b, why = close
+        out.next_measurement = propose(sim, measured, prior, noise_db, a, b, why, modes=(mm, fmax))
     if other is not None and not out.named:
         return other
     out.causes = [{k: v for k, v in c.items() if not k.startswith("_")} for c in found]
