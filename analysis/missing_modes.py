@@ -22,7 +22,16 @@ from .lscf import EQUAL_NOISE
 from .mac import mac
 from .modal import ModalModel, damping_ratio, natural_freq_hz, pole_from_fz, transfer
 from .peaks import find_peaks
-from .visibility import VisiblePeak, coherence_measured, reproduced, structure_resonances, unaccounted_peaks
+from .visibility import (
+    SAME_FRACTION,
+    SAME_LINES,
+    VisiblePeak,
+    coherence_measured,
+    reproduced,
+    resonances,
+    structure_resonances,
+    unaccounted_peaks,
+)
 
 if TYPE_CHECKING:
     from .lsfd import LSFDResult
@@ -454,10 +463,24 @@ def _final_fit(frf: FRFSet, poles: np.ndarray, fit_kw: dict, warnings_out: list[
 
 
 def _unaccounted(frf: FRFSet, visible: Sequence[VisiblePeak], model: ModalModel, df: float) -> list[VisiblePeak]:
-    """The visible peaks ``model`` (raw poles) does not account for, most prominent first."""
-    missed, pairs = unaccounted_peaks(visible, natural_freq_hz(model.poles), df,
-                                      lambda v: reproduced(frf, v, lambda f: transfer(model, 2j * np.pi * f)))
-    return sorted(missed + [v for v, _ in pairs], key=lambda v: -v.prominence_db)
+    """The visible peaks ``model`` (raw poles) does not account for, most prominent first: the resonances
+    no pole accounts for, and the peaks of an accounted resonance that the model does not make in their own
+    FRF (a second mode of a close pair whose peak fell within the first one's half-power band: a candidate
+    to try, the local fit decides)."""
+    def made(v: VisiblePeak) -> bool:
+        return reproduced(frf, v, lambda f: transfer(model, 2j * np.pi * f))
+
+    fitted = natural_freq_hz(model.poles)
+    missed, pairs = unaccounted_peaks(visible, fitted, df, made)
+    found = missed + [v for v, _ in pairs]
+    heads = {id(g[0]) for g in resonances(visible, df)}
+
+    def apart(v: VisiblePeak) -> bool:
+        """No pole on the peak itself (within the reach of one peak seen in two FRFs, without the half-power widening)."""
+        return not fitted.size or float(np.min(np.abs(fitted - v.freq_hz))) > max(SAME_LINES * df, SAME_FRACTION * v.freq_hz)
+
+    found += [v for v in visible if id(v) not in heads and not any(v is u for u in found) and apart(v) and not made(v)]
+    return sorted(found, key=lambda v: -v.prominence_db)
 
 
 def structure_verdict(frf: FRFSet, visible: Sequence[VisiblePeak], result: LSFDResult,
