@@ -53,6 +53,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
+from scipy.linalg import eigh
 from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
@@ -270,19 +271,14 @@ def _mass_sensors(model: ModalModel, sensor: object) -> np.ndarray:
 
 
 def _loaded_modes(wn: np.ndarray, loaded: np.ndarray, masses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``K_r V = M_r V diag(w2)`` for ``K_r = diag(wn^2)`` (``wn`` rad/s, ascending, > 0) and ``M_r = I + m L^T L``
-    (``L`` the loaded outputs' shapes), for every mass m of ``masses`` (kg, shape (G,)) at once: w2 (G, n)
-    ascending (rad/s)^2 and V (G, n, n) M_r-normalised (``V^T M_r V = I``).
-
-    Solved as the standard symmetric problem ``A u = nu u``, ``A = D M_r D``, ``D = diag(1 / wn)`` (K_r's inverse
-    square root, exact for a diagonal K_r): ``nu = 1 / w2`` and ``V = D u / sqrt(nu)``; the largest ``nu`` is the
-    lowest mode. One stacked eigenproblem for the whole set of masses, without a Cholesky factor of ``M_r``."""
-    D = 1.0 / wn
-    DL = loaded * D[None, :]
-    A = np.diag(D ** 2)[None] + np.asarray(masses, float)[:, None, None] * (DL.T @ DL)[None]
-    nu, U = np.linalg.eigh(A)
-    nu, U = nu[:, ::-1], U[:, :, ::-1]
-    return 1.0 / nu, U * D[None, :, None] / np.sqrt(nu)[:, None, :]
+    """``K_r V = M_r V diag(w2)`` for ``K_r = diag(wn^2)`` (``wn`` rad/s) and ``M_r = I + m L^T L`` (``L`` the loaded
+    outputs' shapes), for every mass m of ``masses`` (kg, shape (G,)) at once: w2 (G, n) ascending (rad/s)^2 and
+    V (G, n, n) M_r-normalised (``V^T M_r V = I``). One stacked generalized eigenproblem (each mass's the same
+    as solved alone)."""
+    n = wn.size
+    Mr = np.eye(n)[None] + (np.asarray(masses, float)[:, None, None] * loaded.T[None]) @ loaded[None]
+    w2, V = eigh(np.broadcast_to(np.diag(wn ** 2), Mr.shape), Mr)
+    return w2, V
 
 
 def _mass_loaded(model: ModalModel, mask: np.ndarray, masses: np.ndarray) -> list[ModalModel]:
@@ -294,9 +290,9 @@ def _mass_loaded(model: ModalModel, mask: np.ndarray, masses: np.ndarray) -> lis
     lam = np.asarray(model.poles, complex)
     wn, z = np.abs(lam), -lam.real / np.abs(lam)
     order = np.argsort(wn)
-    w2, V = _loaded_modes(wn[order], loaded[:, order], masses)
+    w2, V = _loaded_modes(wn, loaded, masses)
     Vk = np.empty_like(V)
-    Vk[:, order[:, None], order[None, :]] = V           # new mode i is the i-th lowest old mode
+    Vk[:, :, order] = V                                 # new mode i is the i-th lowest old mode
     Vk *= np.where(np.diagonal(Vk, axis1=1, axis2=2) < 0, -1.0, 1.0)[:, None, :]
     wn_new = np.empty_like(wn, shape=w2.shape)
     wn_new[:, order] = np.sqrt(np.maximum(w2, 0.0))
