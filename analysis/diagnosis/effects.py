@@ -121,6 +121,15 @@ def _replace_poles(model: ModalModel, poles: np.ndarray, scale: np.ndarray) -> M
 COARSE_LINES = 600
 
 
+def _thinned(lines: np.ndarray) -> np.ndarray:
+    """Every ``k``-th of the boolean mask ``lines``, at most :data:`COARSE_LINES` of them."""
+    idx = np.flatnonzero(lines)
+    stride = max(1, int(np.ceil(idx.size / COARSE_LINES)))
+    out = np.zeros_like(lines)
+    out[idx[::stride]] = True
+    return out
+
+
 def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = False) -> Callable[[dict], float]:
     """Cost of a modal effect's parameters on ``lines``. The model is synthesised at those lines only.
     With ``coarse=True`` (fast grid searches; the final refinement is exact): for effects that move
@@ -130,11 +139,7 @@ def _modal_cost(ctx: FitContext, lines: np.ndarray, effect: str, coarse: bool = 
     if coarse and EFFECTS[effect].moves_every_mode:
         # these effects change the quasi-static part of the modes far outside the band too: keep every
         # mode, thin the lines instead (at most COARSE_LINES)
-        idx = np.flatnonzero(lines)
-        stride = max(1, int(np.ceil(idx.size / COARSE_LINES)))
-        lines = np.zeros_like(lines)
-        lines[idx[::stride]] = True
-        coarse = False
+        lines, coarse = _thinned(lines), False
     f = ctx.measured.freq_hz[lines]
     Hm, W = ctx.measured.H[..., lines], ctx.weights[..., lines]
     base = ctx.base
@@ -265,6 +270,47 @@ def _mass_sensors(model: ModalModel, sensor: object) -> np.ndarray:
 
 
 
+def _loaded_modes(wn: np.ndarray, loaded: np.ndarray, masses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``K_r V = M_r V diag(w2)`` for ``K_r = diag(wn^2)`` (``wn`` rad/s) and ``M_r = I + m L^T L`` (``L`` the loaded
+    outputs' shapes), for every mass m of ``masses`` (kg, shape (G,)) at once: w2 (G, n) ascending (rad/s)^2 and
+    V (G, n, n) M_r-normalised (``V^T M_r V = I``). One stacked generalized eigenproblem (each mass's the same
+    as solved alone)."""
+    n = wn.size
+    Mr = np.eye(n)[None] + (np.asarray(masses, float)[:, None, None] * loaded.T[None]) @ loaded[None]
+    w2, V = eigh(np.broadcast_to(np.diag(wn ** 2), Mr.shape), Mr)
+    return w2, V
+
+
+def _mass_loaded(model: ModalModel, mask: np.ndarray, masses: np.ndarray) -> list[ModalModel]:
+    """``model`` with the mass m at the outputs ``mask``, for every m of ``masses`` (kg): the re-analysed modes
+    of :func:`apply_mass_loading` (its docstring), the eigenproblems of all masses solved together."""
+    masses = np.asarray(masses, float)
+    phi = np.asarray(model.meta["output_shapes"], float)
+    loaded = phi[mask]
+    lam = np.asarray(model.poles, complex)
+    wn, z = np.abs(lam), -lam.real / np.abs(lam)
+    order = np.argsort(wn)
+    w2, V = _loaded_modes(wn, loaded, masses)
+    Vk = np.empty_like(V)
+    Vk[:, :, order] = V                                 # new mode i is the i-th lowest old mode
+    Vk *= np.where(np.diagonal(Vk, axis1=1, axis2=2) < 0, -1.0, 1.0)[:, None, :]
+    wn_new = np.empty_like(wn, shape=w2.shape)
+    wn_new[:, order] = np.sqrt(np.maximum(w2, 0.0))
+    new = wn_new * (-z + 1j * np.sqrt(1 - z ** 2))[None, :]
+    p = _model_power(model)
+    d = np.diagonal(Vk, axis1=1, axis2=2)
+    R = np.asarray(model.residues, complex)[None] / lam[None, None, None, :] ** p \
+        * (d ** 2 * lam.imag[None, :] / new.imag)[:, None, None, :]
+    ref = shapes_at_references(model, phi)
+    if ref is not None:
+        po, pr = phi[None] @ Vk, ref[None] @ Vk
+        coupled = (po[:, :, None, :] * pr[:, None, :, :]
+                   - (d ** 2)[:, None, None, :] * phi[None, :, None, :] * ref[None, None, :, :])
+        R = R + np.where((masses > 0)[:, None, None, None], coupled / (2j * new.imag)[:, None, None, :], 0.0)
+    Rp = R * new[:, None, None, :] ** p
+    return [replace(model, poles=new[i], residues=Rp[i]) for i in range(masses.size)]
+
+
 def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
     """A mass ``mass_kg`` (kg) at each output sensor, or at the one output ``sensor`` (a label; ``"all"``
     or absent: every output). Needs ``model.meta["output_shapes"]``, the mass-normalised mode shapes
@@ -294,28 +340,31 @@ def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
         meta = dict(model.meta)
         meta[FRF_MASSES_KEY] = tuple(meta.get(FRF_MASSES_KEY, ())) + ((m, mask),)
         return replace(model, meta=meta)
-    phi = np.asarray(shapes, float)
-    loaded = phi[mask]
-    lam = np.asarray(model.poles, complex)
-    wn, z = np.abs(lam), -lam.real / np.abs(lam)
-    order = np.argsort(wn)
-    Mr = np.eye(lam.size) + m * loaded.T @ loaded
-    w2, V = eigh(np.diag(wn ** 2), Mr)
-    Vk = np.empty_like(V)
-    Vk[:, order] = V                                    # new mode i is the i-th lowest old mode
-    Vk *= np.where(np.diag(Vk) < 0, -1.0, 1.0)[None, :]
-    wn_new = np.empty_like(wn)
-    wn_new[order] = np.sqrt(np.maximum(w2, 0.0))
-    new = wn_new * (-z + 1j * np.sqrt(1 - z ** 2))
-    p = _model_power(model)
-    d = np.diag(Vk)
-    R = np.asarray(model.residues, complex) / lam[None, None, :] ** p * (d ** 2 * lam.imag / new.imag)[None, None, :]
-    ref = shapes_at_references(model, phi)
-    if ref is not None and m > 0:
-        po, pr = phi @ Vk, ref @ Vk
-        coupled = po[:, None, :] * pr[None, :, :] - (d ** 2)[None, None, :] * phi[:, None, :] * ref[None, :, :]
-        R = R + coupled / (2j * new.imag)[None, None, :]
-    return replace(model, poles=new, residues=R * new[None, None, :] ** p)
+    return _mass_loaded(model, mask, np.array([m]))[0]
+
+
+def _mass_grid_costs(ctx: FitContext, lines: np.ndarray, place: str, grid: np.ndarray,
+                     coarse: Callable[[dict], float]) -> np.ndarray:
+    """The coarse cost (:func:`_modal_cost`, thinned lines) of the mass ``grid`` (kg) at ``place``: the loaded
+    modes of the whole grid solved at once (:func:`_mass_loaded`) on the model with the modal effects accepted
+    before, each then predicted with the FRF effects accepted before (the order :func:`predict` applies them
+    in). A mass added to an FRF-file simulation's FRFs (:mod:`.mass_frf`) is ``coarse`` point by point."""
+    model, frf_prior = ctx.base, []
+    for e in ctx.prior:
+        eff, params = _lookup(e)
+        if eff.kind == "modal":
+            model = eff.apply(model, params)
+        else:
+            frf_prior.append(dict(e))
+    if uses_frf_masses(model):
+        return np.array([coarse({"mass_kg": x, "sensor": place}) for x in grid])
+    sel = _thinned(lines)
+    f, Hm, W = ctx.measured.freq_hz[sel], ctx.measured.H[..., sel], ctx.weights[..., sel]
+    vals = []
+    for loaded in _mass_loaded(model, _mass_sensors(model, place), grid):
+        e = Hm - predict(loaded, f, ctx.measured.quantity, frf_prior).H
+        vals.append(float(np.sum(W * (e.real ** 2 + e.imag ** 2))))
+    return np.array(vals)
 
 
 def fit_mass_loading(ctx: FitContext, lines: np.ndarray) -> dict:
@@ -335,7 +384,7 @@ def fit_mass_loading(ctx: FitContext, lines: np.ndarray) -> dict:
         if not smax > 0:
             continue
         grid = np.arange(0.0, 0.7 / smax + 0.002 / smax, 0.002 / smax)
-        vals = np.array([coarse({"mass_kg": x, "sensor": place}) for x in grid])
+        vals = _mass_grid_costs(ctx, lines, place, grid, coarse)
         i = int(np.argmin(vals))
         screened.append((float(vals[i]), place, grid[max(i - 1, 0):i + 2]))
     if not screened:

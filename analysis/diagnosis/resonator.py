@@ -191,16 +191,24 @@ def apply_local_resonator(model: ModalModel, params: Mapping) -> ModalModel:
         Vb = V[:-1]                                     # (n_old, n_new): the beam's modal coordinates
         new = W * (-Z + 1j * np.sqrt(1 - Z ** 2))
         Xb, a = Vb.astype(complex), 2j * new.imag
-    p = QUANTITY_POWER[model.quantity]
     c, ref = _kept(model, phi)
     R = np.einsum("orm,mi->ori", c, Xb ** 2) / a[None, None, :]
     if ref is not None:
         R = R + (phi @ Xb)[:, None, :] * (ref @ Xb)[None, :, :] / a[None, None, :]
+    return _resonated(model, new, R, Vb, phi, ref)
+
+
+def _resonated(model: ModalModel, poles: np.ndarray, R: np.ndarray, Vb: np.ndarray, phi: np.ndarray,
+               ref: np.ndarray | None) -> ModalModel:
+    """``model`` with the coupled modes: poles (rad/s), receptance residues ``R`` (in the model's form
+    ``R lambda^p``) and the shapes at the outputs (and references) ``phi Vb`` (``Vb`` the undamped coupled
+    modes' beam rows)."""
     meta = dict(model.meta)
     meta["output_shapes"] = phi @ Vb
     if ref is not None and "reference_shapes" in meta:
         meta["reference_shapes"] = ref @ Vb
-    return replace(model, poles=new, residues=R * new[None, None, :] ** p, meta=meta)
+    p = QUANTITY_POWER[model.quantity]
+    return replace(model, poles=poles, residues=R * poles[None, None, :] ** p, meta=meta)
 
 
 def local_resonator_derivative(model: ModalModel, params: Mapping
@@ -227,8 +235,9 @@ def local_resonator_derivative(model: ModalModel, params: Mapping
       the top-right block of ``P_i``, ``M_i = y_i y_i^T / a_i``, so ``Pi_i = V_S M_i V_S^T`` and
       ``dPi_i = dV_S M_i V_S^T + V_S M_i dV_S^T + V_S dM_i V_S^T`` (no normalisation of eigenvectors enters).
 
-    The residues in the model's form p are ``R lambda^p``: ``d(R lambda^p) = dR lambda^p + p R lambda^(p-1) dlambda``."""
-    out = apply_local_resonator(model, params)
+    The residues in the model's form p are ``R lambda^p``: ``d(R lambda^p) = dR lambda^p + p R lambda^(p-1) dlambda``.
+    The new model is built from the same solution (its modes, residues and shapes, as
+    :func:`apply_local_resonator` computes them), so the eigenproblems are solved once per call."""
     phi, fa, za, g = _inputs(model, params)
     lam0 = np.asarray(model.poles, complex)
     wn, z = np.abs(lam0), -lam0.real / np.abs(lam0)
@@ -315,10 +324,16 @@ def local_resonator_derivative(model: ModalModel, params: Mapping
             dpx, drx = np.moveaxis(phi[None] @ dxb, 0, -1), np.moveaxis(ref[None] @ deb, 0, -1)
             dRS = dRS + (dpx[:, None] * (ref @ eb)[None, :, :, None] + (phi @ xb)[:, None, :, None] * drx[None])
         dR[:, :, S, :] = dRS
-    X = sol.X if sol is not None else V.astype(complex)
-    R = np.einsum("orm,mi->ori", c, X[:-1] ** 2) / a[None, None, :]
+    # R in the order of the coupled modes' frequencies, as apply_local_resonator computes it
+    Xs, as_ = (sol.X[:, order], sol.a[order]) if sol is not None else (V.astype(complex), a)
+    Rs = np.einsum("orm,mi->ori", c, Xs[:-1] ** 2) / as_[None, None, :]
     if ref is not None:
-        R = R + (phi @ X[:-1])[:, None, :] * (ref @ X[:-1])[None, :, :] / a[None, None, :]
+        Rs = Rs + (phi @ Xs[:-1])[:, None, :] * (ref @ Xs[:-1])[None, :, :] / as_[None, None, :]
+    R = np.empty_like(Rs)
+    R[:, :, order] = Rs
     p = QUANTITY_POWER[model.quantity]
     dRp = dR * (lam ** p)[None, None, :, None] + (p * R * lam ** (p - 1))[..., None] * dlam.T[None, None]
+    # the overdamped fallback's model as apply_local_resonator gives it (its projected damping summed otherwise)
+    out = (_resonated(model, lam[order], Rs, V[:-1, order], phi, ref) if sol is not None
+           else apply_local_resonator(model, params))
     return out, dlam.T[order], dRp[:, :, order]
