@@ -24,11 +24,13 @@ def read_key(prompt: str) -> str:
     import termios
     import tty
 
-    print(prompt, end="", flush=True)
     fd = sys.stdin.fileno()
     old = termios.tcgetattr(fd)
     try:
-        tty.setcbreak(fd)
+        # one key at a time before the prompt shows: keys struck before it are discarded (a key pressed
+        # during the hit answers nothing), a key struck once it shows is always read
+        tty.setcbreak(fd, termios.TCSAFLUSH)
+        print(prompt, end="", flush=True)
         key = sys.stdin.read(1)
     finally:
         termios.tcsetattr(fd, termios.TCSADRAIN, old)
