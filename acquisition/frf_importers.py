@@ -207,15 +207,22 @@ def read_signalcalc_frf(path: Path, variables: Sequence[str] | None = None) -> I
     return _guarded(_read_signalcalc_frf, Path(path), variables, "SignalCalc FRF export")
 
 
+def _chosen(path: Path, names: list[str], variables: Sequence[str] | None, what: str) -> list[str]:
+    """The FRFs ``names`` of the file ``path`` limited to the ``variables`` asked for (all when none are);
+    an asked-for name the file lacks is an :class:`ImportDataError` naming ``what`` it is and what it holds."""
+    if not variables:
+        return names
+    missing = [v for v in variables if v not in names]
+    if missing:
+        raise _fail(path, f"no {what} {', '.join(missing)} (it holds {', '.join(names) or 'none'})")
+    return [n for n in names if n in variables]
+
+
 def _read_signalcalc_frf(path: Path, variables: Sequence[str] | None = None) -> ImportedFRFs:
     p = Path(path)
     m = _variables(p)
     names = sorted((n for n in m if _SC_H.fullmatch(n)), key=lambda n: tuple(int(x) for x in _SC_H.findall(n)[0]))
-    if variables:
-        missing = [v for v in variables if v not in names]
-        if missing:
-            raise _fail(p, f"no FRF variable {', '.join(missing)} (it holds {', '.join(names) or 'none'})")
-        names = [n for n in names if n in variables]
+    names = _chosen(p, names, variables, "FRF variable")
     if not names:
         raise _fail(p, "holds no 'H{r}_{k}' FRF variables: is it a SignalCalc FRF export (save H1 and coherence)?")
     units = _channel_units(p, m)
@@ -396,11 +403,7 @@ def _read_testlab_frf(path: Path, variables: Sequence[str] | None = None) -> Imp
     p = Path(path)
     m = _variables(p)
     structs = [n for n in m if n.startswith("FRF") and isinstance(m[n], np.ndarray) and m[n].dtype.names]
-    if variables:
-        missing = [v for v in variables if v not in structs]
-        if missing:
-            raise _fail(p, f"no FRF struct {', '.join(missing)} (it holds {', '.join(structs) or 'none'})")
-        structs = [n for n in structs if n in variables]
+    structs = _chosen(p, structs, variables, "FRF struct")
     if not structs:
         raise _fail(p, "holds no 'FRF*' Test.Lab function structs")
     funcs = [_testlab_function(p, n, m[n], "FRF") for n in structs]
