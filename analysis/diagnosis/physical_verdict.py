@@ -62,6 +62,7 @@ from .physical import (
 )
 from .physical_pairs import OnTop, fit_pair, rechoose, refit_on_top, with_options
 from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
+from .verdict_part import VerdictPart
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes", "compared_band_hz"]
 
@@ -70,21 +71,13 @@ FMAX_FACTOR = 1.5
 
 
 @dataclass
-class PhysicalOutcome:
-    """decided: the physical stage gives the verdict (else the FRF catalogue is tried). verdict,
-    causes (dicts as :class:`Diagnosis` lists them), extended FRFs, errors (dB), reason, doc (JSON)."""
+class PhysicalOutcome(VerdictPart):
+    """decided: the physical stage gives the verdict (else the FRF catalogue is tried); the verdict's
+    fields (:class:`~analysis.diagnosis.verdict_part.VerdictPart`) as the ``Diagnosis`` takes them;
+    doc (JSON), on_top: a named cause an FRF-level effect is tried on top of, trace: the rules applied."""
 
     decided: bool
-    verdict: str = "none"
-    causes: list = field(default_factory=list)
-    extended: FRFSet | None = None
-    error_before_db: float = float("nan")
-    error_after_db: float = float("nan")
-    combined: list = field(default_factory=list)
-    reason: str = ""
     doc: dict = field(default_factory=dict)
-    named: list = field(default_factory=list)
-    next_measurement: dict | None = None
     on_top: dict | None = None
     trace: list = field(default_factory=list)
 

@@ -57,6 +57,8 @@ def frf_figure(diag: Diagnosis, output: int = 0, reference: int = 0) -> Figure:
     f = diag.measured.freq_hz
     for frf, label, style in ((diag.measured, "measured", "k-"), (diag.simulated, "simulated", "b--"),
                               (diag.extended, f"extended ({_extension_name(diag)})", "r:")):
+        if frf is None:       # a diagnosis assembled without its extension
+            continue
         h = frf.H[output, reference]
         ax1.plot(f, 20 * np.log10(np.abs(h) + 1e-300), style, lw=1, label=label)
         ax2.plot(f, np.degrees(np.angle(h)), style, lw=1)

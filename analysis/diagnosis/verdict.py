@@ -47,6 +47,7 @@ from .compare import band_errors, compare, effective_noise_db, held_out_errors, 
 from .effect_types import applied, named, stage_entry
 from .effects import EFFECTS, EffectError, FitContext, predict
 from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
+from .verdict_part import VerdictPart
 
 if TYPE_CHECKING:
     from .physical import MeasuredModes, PhysicalSimulation
@@ -56,8 +57,8 @@ __all__ = ["Diagnosis", "diagnose_frfs", "named_verdict"]
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class Diagnosis:
+@dataclass
+class Diagnosis(VerdictPart):
     """Outcome of :func:`analysis.diagnosis.diagnose`.
 
     verdict : the named cause's name, ``"combined"`` when two causes are named, ``"none"`` or
@@ -80,22 +81,13 @@ class Diagnosis:
     rule : the :class:`~analysis.diagnosis.rule.DecisionRule` the verdict was reached with.
     """
 
-    verdict: str
-    causes: list
-    error_before_db: float
-    error_after_db: float
     noise_db: dict
     comparison: dict
     unexplained: list
     measured: FRFSet
     simulated: FRFSet
-    extended: FRFSet
     skipped: dict = field(default_factory=dict)
-    combined: list = field(default_factory=list)
-    reason: str = ""
     physical: dict = field(default_factory=dict)
-    named: list = field(default_factory=list)
-    next_measurement: dict | None = None
     time_data: list = field(default_factory=list)
     time_data_verdict: str | None = None
     level_dependence: dict | None = None
@@ -109,11 +101,11 @@ class Diagnosis:
         ``simulation_db`` (the comparison's band error) and ``extended_db`` (the same bands of the
         extension: :attr:`extended`, the simulation with the accepted effects), dB."""
         simulation = (self.comparison or {}).get("bands") or []
-        frfs: list[Any] = [self.measured, self.extended]
-        if any(x is None for x in frfs):   # a diagnosis assembled without its FRF sets: the extension unknown
+        measured: Any = self.measured
+        if measured is None or self.extended is None:   # assembled without its FRF sets: the extension unknown
             return [{"lo_hz": b["lo_hz"], "hi_hz": b["hi_hz"], "simulation_db": b["error_db"], "extended_db": None}
                     for b in simulation]
-        after = band_errors(self.measured, self.extended.H, line_weights(self.measured))
+        after = band_errors(measured, self.extended.H, line_weights(measured))
         return [{"lo_hz": b["lo_hz"], "hi_hz": b["hi_hz"], "simulation_db": b["error_db"], "extended_db": a["error_db"]}
                 for b, a in zip(simulation, after)]
 
@@ -525,13 +517,9 @@ def diagnose_frfs(
                                  named=[named(c) for c in combined],
                                  **common)
         if outcome.decided and outcome.extended is not None:
-            return Diagnosis(verdict=outcome.verdict, causes=outcome.causes, error_before_db=outcome.error_before_db,
-                             error_after_db=outcome.error_after_db,
-                             unexplained=[b for b in band_errors(measured, outcome.extended.H, w)
+            return Diagnosis(unexplained=[b for b in band_errors(measured, outcome.extended.H, w)
                                           if not rule.explained(b["error_db"], noise_db)],
-                             extended=outcome.extended, combined=outcome.combined, reason=outcome.reason,
-                             physical=phys_doc, named=outcome.named, next_measurement=outcome.next_measurement,
-                             **common)
+                             physical=phys_doc, **outcome.verdict_fields(), **common)
         partial_reason = outcome.reason
         # the physical cause of that name covers it
         names = [n for n in names if EFFECTS[n].covered_by_physical != "always"]
