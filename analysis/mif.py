@@ -25,7 +25,15 @@ import numpy as np
 
 from .frf import QUANTITY_POWER, FRFSet
 
-__all__ = ["SUMMARY_CURVES", "cmif", "indicator_summary", "mif"]
+__all__ = ["SUMMARY_CURVES", "cmif", "indicator_summary", "mif", "summed_magnitude_db"]
+
+
+def summed_magnitude_db(frf: FRFSet) -> np.ndarray:
+    """20 log10 of the root-sum-square magnitude of all FRFs per line (a CMIF-like background), dB re 1
+    unit of ``frf.H``; zeros floored 240 dB below the largest."""
+    s = np.sqrt(np.nansum(np.abs(frf.H.reshape(-1, frf.freq_hz.size)) ** 2, axis=0))
+    floor = max(float(np.max(s)) * 1e-12, 1e-300)
+    return 20 * np.log10(np.maximum(s, floor))
 
 
 #: outputs per reference from which the CMIF is computed from ``H^H H`` (n_ref x n_ref per line)

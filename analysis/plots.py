@@ -1,6 +1,9 @@
 """Figures of the fit: measured vs synthesised FRFs (paper Fig. 7) and stabilization diagrams (Fig. 8).
 
-Matplotlib is used through :class:`matplotlib.figure.Figure` and the Agg canvas directly, never
+The figures draw the same data as the HTML report's sections (:mod:`analysis.section_data`, which
+:mod:`analysis.report_html.collect` puts in the report: the stabilization rows, the mode indicator, the
+synthesis traces), so a PNG and the report
+show one computation. Matplotlib is used through :class:`matplotlib.figure.Figure` and the Agg canvas directly, never
 through pyplot's global state, so this module is safe in servers, tests and threads.
 """
 from __future__ import annotations
@@ -12,7 +15,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from .frf import FRFSet
-from .modal import ModalModel, natural_freq_hz, synthesize
+from .modal import ModalModel, synthesize
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -21,16 +24,16 @@ if TYPE_CHECKING:
     from .lsfd import LSFDResult
     from .stabilization import StabilizationResult
 
-__all__ = ["fit_figure", "indicator_panel", "label_levels", "plot_fit", "plot_stabilization",
-           "summed_magnitude_db"]
+__all__ = ["fit_figure", "indicator_panel", "label_levels", "plot_fit", "plot_stabilization"]
 
+#: The stability classes as drawn, keyed by the class names of the stabilization rows
+#: (:func:`analysis.section_data.stabilization_rows`): (marker, colour, size, label).
 _STYLE = {
-    # class: (marker, colour, size, label)
-    -1: ("x", "#bbbbbb", 10, "non-physical"),
-    0: ("o", "#999999", 10, "new"),
-    1: ("v", "#1f77b4", 16, "stable f"),
-    2: ("d", "#2ca02c", 18, "stable f, zeta"),
-    3: ("+", "#d62728", 40, "stable f, zeta, MAC"),
+    "non-physical": ("x", "#bbbbbb", 10, "non-physical"),
+    "new": ("o", "#999999", 10, "new"),
+    "freq": ("v", "#1f77b4", 16, "stable f"),
+    "freq+damp": ("d", "#2ca02c", 18, "stable f, zeta"),
+    "freq+damp+mac": ("+", "#d62728", 40, "stable f, zeta, MAC"),
 }
 
 
@@ -52,19 +55,12 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return p
 
 
-def _phase_deg(z: np.ndarray) -> np.ndarray:
-    """Phase in degrees with NaN at the +-180 deg wraps, so no vertical lines are drawn there."""
-    p = np.degrees(np.angle(z))
+def _unwrapped_gaps(phase_deg: Sequence[float | None]) -> np.ndarray:
+    """A phase (deg) with NaN at the +-180 deg wraps, so no vertical lines are drawn there."""
+    p = np.asarray(phase_deg, float)
     jump = np.abs(np.diff(p)) > 180.0
     p[1:][jump] = np.nan
     return p
-
-
-def summed_magnitude_db(frf: FRFSet) -> np.ndarray:
-    """20 log10 of the root-sum-square magnitude of all FRFs per line (a CMIF-like background)."""
-    s = np.sqrt(np.nansum(np.abs(frf.H.reshape(-1, frf.freq_hz.size)) ** 2, axis=0))
-    floor = max(float(np.max(s)) * 1e-12, 1e-300)
-    return 20 * np.log10(np.maximum(s, floor))
 
 
 def _log_limits(lo: float, hi: float, freq_hz: np.ndarray) -> tuple[float, float]:
@@ -110,26 +106,21 @@ def _mark_modes(ax: Axes, modes_hz: np.ndarray, x_lo: float, x_hi: float, log_fr
                 fontsize=fontsize, color="#2ca02c")
 
 
-def indicator_panel(ax: Axes, frf: FRFSet, band: Sequence[float], modes_hz: np.ndarray | None = None,
-                    log_freq: bool = False) -> None:
-    """Draw the mode indicator over ``band`` (Hz) on ``ax``: the CMIF (singular values of the FRF
-    matrix per line, dB re 1 unit of H) when there are several references, else the real-normal MIF
-    of the one reference (0..1, dips at modes; with one reference the CMIF is the summed FRF
-    already drawn). ``modes_hz``: fitted modes as dotted lines."""
-    from .mif import SUMMARY_CURVES, cmif, mif
-
-    f = frf.freq_hz
-    sel = (f >= band[0]) & (f <= band[1])
-    if frf.n_references > 1:
-        s = cmif(frf)[sel, :SUMMARY_CURVES]
-        with np.errstate(divide="ignore"):
-            s_db = 20 * np.log10(s)
-        for k in range(s_db.shape[1]):
-            ax.plot(f[sel], s_db[:, k], lw=0.8, color=_CMIF_COLOURS[k % len(_CMIF_COLOURS)], label=f"CMIF {k + 1}")
-        ax.set_ylabel(f"CMIF [dB {frf.unit or frf.quantity}]", fontsize=8)
-        ax.legend(loc="best", ncol=s_db.shape[1], fontsize=7, framealpha=0.8)
+def indicator_panel(ax: Axes, indicator: dict, band: Sequence[float], modes_hz: np.ndarray | None = None,
+                    log_freq: bool = False, unit: str = "") -> None:
+    """Draw the mode indicator ``indicator`` (:func:`analysis.section_data.indicator_data`) over ``band``
+    (Hz) on ``ax``: the CMIF (singular values of the FRF matrix per line, dB re 1 ``unit`` of H) when there are several
+    references, else the real-normal MIF of the one reference (0..1, dips at modes; with one reference
+    the CMIF is the summed FRF already drawn). ``modes_hz``: fitted modes as dotted lines."""
+    f = np.asarray(indicator["freq_hz"], float)
+    if indicator["mif"] is None:
+        s_db = np.asarray(indicator["cmif_db"], float)
+        for k in range(s_db.shape[0]):
+            ax.plot(f, s_db[k], lw=0.8, color=_CMIF_COLOURS[k % len(_CMIF_COLOURS)], label=f"CMIF {k + 1}")
+        ax.set_ylabel(f"CMIF [dB {unit or indicator['unit']}]", fontsize=8)
+        ax.legend(loc="best", ncol=s_db.shape[0], fontsize=7, framealpha=0.8)
     else:
-        ax.plot(f[sel], mif(frf, 0)[sel], lw=0.8, color="#9467bd")
+        ax.plot(f, np.asarray(indicator["mif"], float), lw=0.8, color="#9467bd")
         ax.set_ylim(-0.02, 1.02)
         ax.set_ylabel("MIF [-]", fontsize=8)
     if log_freq:
@@ -150,31 +141,25 @@ def plot_stabilization(result: StabilizationResult, frf: FRFSet, path_png: str |
     (:func:`indicator_panel`; ``indicator`` False leaves it out). Optional ``selected`` poles (rad/s)
     are drawn as vertical lines. ``log_freq``: a logarithmic frequency axis. The legend sits above
     the diagram, outside the pole columns. Returns the path written."""
-    lo, hi = result.band
+    from .section_data import indicator_data, stabilization_rows
+
+    rows = stabilization_rows(frf, result, result.band, selected, nonphysical=show_nonphysical)
+    lo, hi = rows["band_hz"]
     if log_freq:
         lo, hi = _log_limits(lo, hi, frf.freq_hz)
     fig = _figure(10, 7.5 if indicator else 6)
     gs = fig.add_gridspec(2 if indicator else 1, 1, height_ratios=[4, 1.3] if indicator else [1], hspace=0.08)
     ax = fig.add_subplot(gs[0, 0])
     ax2 = ax.twinx()
-    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
-    ax2.plot(frf.freq_hz[sel], summed_magnitude_db(frf)[sel], color="#444444", lw=0.8, alpha=0.6)
+    ax2.plot(np.asarray(rows["freq_hz"], float), np.asarray(rows["summed_db"], float), color="#444444", lw=0.8,
+             alpha=0.6)
     ax2.set_ylabel("sum of |H| [dB]")
-    classes = [-1, 0, 1, 2, 3] if show_nonphysical else [0, 1, 2, 3]
-    for c in classes:
-        xs, ys = [], []
-        for n, p, st in zip(result.orders, result.poles, result.status):
-            k = st == c
-            if c == -1:
-                fd = p.imag / (2 * np.pi)
-                k = k & (fd >= lo) & (fd <= hi)
-            xs.append(natural_freq_hz(p[k]))
-            ys.append(np.full(int(k.sum()), n))
-        x = np.concatenate(xs) if xs else np.zeros(0)
-        y = np.concatenate(ys) if ys else np.zeros(0)
-        m, col, size, label = _STYLE[c]
-        ax.scatter(x, y, marker=m, c=col, s=size, label=f"{label} ({len(x)})", linewidths=1.0, zorder=3)
-    sel_hz = natural_freq_hz(np.asarray(selected)) if selected is not None else None
+    classes = rows["classes"]
+    for name, c in classes.items():
+        m, col, size, label = _STYLE[name]
+        ax.scatter(c["freq_hz"], c["order"], marker=m, c=col, s=size, label=f"{label} ({len(c['freq_hz'])})",
+                   linewidths=1.0, zorder=3)
+    sel_hz = np.asarray(rows["fitted_hz"], float) if selected is not None else None
     if sel_hz is not None:
         for f in sel_hz:
             ax.axvline(f, color="#d62728", lw=0.6, ls=":", zorder=1)
@@ -192,7 +177,7 @@ def plot_stabilization(result: StabilizationResult, frf: FRFSet, path_png: str |
     if indicator:
         ax.tick_params(labelbottom=False)
         axi = fig.add_subplot(gs[1, 0], sharex=ax)
-        indicator_panel(axi, frf, (lo, hi), sel_hz, log_freq)
+        indicator_panel(axi, indicator_data(frf, (lo, hi)), (lo, hi), sel_hz, log_freq, frf.unit or frf.quantity)
         axi.set_xlim(lo, hi)
         axi.set_xlabel("frequency [Hz]")
     else:
@@ -230,6 +215,7 @@ def fit_figure(frf: FRFSet, model: LSFDResult | ModalModel, *, pairs: Sequence[t
         Returns the matplotlib ``Figure``.
     """
     from .lsfd import LSFDResult, seen_through_window
+    from .section_data import indicator_data, synthesis_traces
 
     if isinstance(model, LSFDResult):
         seen = model.model_raw
@@ -244,7 +230,7 @@ def fit_figure(frf: FRFSet, model: LSFDResult | ModalModel, *, pairs: Sequence[t
     if not pairs:
         raise ValueError("no FRF to plot: give at least one (output, reference) pair")
     f = frf.freq_hz
-    G = synthesize(seen, f).H
+    traces = synthesis_traces(frf, frf.H, synthesize(seen, f).H, pairs, phase=True, floor=False)
     n = len(pairs)
     width_in = 4.2 * n + 1.2
     fig = _figure(width_in, 10 if indicator else 8)
@@ -263,20 +249,16 @@ def fit_figure(frf: FRFSet, model: LSFDResult | ModalModel, *, pairs: Sequence[t
                      fontsize=10)
     gs = fig.add_gridspec(4 if indicator else 3, n, height_ratios=[3, 1.5, 1.5, 2.2][:4 if indicator else 3],
                           hspace=0.08)
-    for c, (o, r) in enumerate(pairs):
-        H = frf.H[o, r]
-        g = G[min(o, G.shape[0] - 1), min(r, G.shape[1] - 1)]
+    for c, ((o, r), t) in enumerate(zip(pairs, traces)):
         axm = fig.add_subplot(gs[0, c])
         axp = fig.add_subplot(gs[1, c], sharex=axm)
         axe = fig.add_subplot(gs[2, c], sharex=axm)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            axm.plot(f, 20 * np.log10(np.abs(H)), "--", color="#555555", lw=1.0, label="measured")
-            axm.plot(f, 20 * np.log10(np.abs(g)), "-", color="#1f77b4", lw=1.0,
-                     label="LSFD model" + (" (as windowed)" if frf.exp_window_tau_s else ""))
-            axp.plot(f, _phase_deg(H), "--", color="#555555", lw=0.8)
-            axp.plot(f, _phase_deg(g), "-", color="#1f77b4", lw=0.8)
-            rel = np.abs(H - g) / np.abs(H)
-            axe.plot(f, 20 * np.log10(rel), color="#d62728", lw=0.8)
+        axm.plot(f, np.asarray(t["measured_db"], float), "--", color="#555555", lw=1.0, label="measured")
+        axm.plot(f, np.asarray(t["synth_db"], float), "-", color="#1f77b4", lw=1.0,
+                 label="LSFD model" + (" (as windowed)" if frf.exp_window_tau_s else ""))
+        axp.plot(f, _unwrapped_gaps(t["measured_phase_deg"]), "--", color="#555555", lw=0.8)
+        axp.plot(f, _unwrapped_gaps(t["synth_phase_deg"]), "-", color="#1f77b4", lw=0.8)
+        axe.plot(f, np.asarray(t["rel_error_db"], float), color="#d62728", lw=0.8)
         if log_freq:
             axm.set_xscale("log")
         axm.set_xlim(x_lo, x_hi)
@@ -302,7 +284,8 @@ def fit_figure(frf: FRFSet, model: LSFDResult | ModalModel, *, pairs: Sequence[t
         axm.set_xlim(x_lo, x_hi)
     if indicator:
         axi = fig.add_subplot(gs[3, :])
-        indicator_panel(axi, frf, (x_lo, x_hi), modes_hz, log_freq)
+        indicator_panel(axi, indicator_data(frf, (x_lo, x_hi)), (x_lo, x_hi), modes_hz, log_freq,
+                        frf.unit or frf.quantity)
         axi.set_xlim(x_lo, x_hi)
         axi.set_xlabel("frequency [Hz]")
     # margins in inches, so that a single narrow column keeps its axis labels

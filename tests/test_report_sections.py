@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
@@ -83,3 +84,67 @@ def test_band_figure_and_the_html_report_draw_the_same_band_rows() -> None:
     assert heights == [r["simulation_db"] for r in rows] + [r["extended_db"] for r in rows]
     assert axes.lines[0].get_ydata()[0] == diag.noise_level_db == max(diag.noise_db.values())
     assert "data-plot=\"diagnosis-bands\"" in diagnosis_html(doc, {})
+
+
+def _two_reference_fit():
+    import numpy as np
+
+    from analysis.modal import ModalModel, pole_from_fz, synthesize
+
+    fz = np.array([30.0, 62.0, 95.0])
+    poles = pole_from_fz(fz, np.full(fz.size, 0.01))
+    model = ModalModel(poles, np.random.default_rng(1).normal(size=(2, 2, fz.size)) * poles.imag / 2j,
+                       quantity="accelerance", residual_form="none", outputs=["n:1:Z", "n:2:Z"],
+                       references=["n:3:Z", "n:4:Z"])
+    return model, synthesize(model, np.linspace(0.0, 150.0, 601))
+
+
+def test_stabilization_png_draws_the_report_sections_rows(tmp_path, monkeypatch) -> None:
+    """stabilization.png and the report's modal section draw one computation: the scatter of each class is
+    the class's rows of section_data.stabilization_rows, the background its summed FRF, the indicator the
+    report's indicator data (two references: its CMIF curves)."""
+    import numpy as np
+
+    import analysis.plots as plots
+    from analysis.section_data import indicator_data, stabilization_rows
+    from analysis.stabilization import stabilization
+
+    model, frf = _two_reference_fit()
+    st = stabilization(frf, 8, band=(10.0, 140.0))
+    figures = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: figures.append(fig))
+    plots.plot_stabilization(st, frf, tmp_path / "stab.png", selected=model.poles, show_nonphysical=True)
+    ax, background, indicator = figures[0].axes[0], figures[0].axes[1], figures[0].axes[2]
+    rows = stabilization_rows(frf, st, st.band, model.poles, nonphysical=True)
+    assert set(rows["classes"]) == {"non-physical", "new", "freq", "freq+damp", "freq+damp+mac"}
+    drawn = [c.get_offsets() for c in ax.collections]
+    assert len(drawn) == len(rows["classes"])
+    for xy, c in zip(drawn, rows["classes"].values()):
+        assert np.array_equal(np.asarray(xy)[:, 0], c["freq_hz"]) and np.array_equal(np.asarray(xy)[:, 1], c["order"])
+    assert sum(len(c["freq_hz"]) for c in rows["classes"].values()) > 0
+    assert np.array_equal(background.lines[0].get_ydata(), rows["summed_db"])
+    summary = indicator_data(frf, st.band)
+    cmif = [line.get_ydata() for line in indicator.lines if line.get_label().startswith("CMIF")]
+    assert len(cmif) == 2 and np.array_equal(cmif[0], np.asarray(summary["cmif_db"][0], float))
+
+
+def test_fit_png_draws_the_report_sections_synthesis_traces() -> None:
+    """fit.png's measured and synthesised curves, phases and relative error are the traces of the
+    collector the report's modal section uses (section_data.synthesis_traces)."""
+    import numpy as np
+
+    from analysis.modal import synthesize
+    from analysis.plots import fit_figure
+    from analysis.section_data import synthesis_traces
+
+    model, frf = _two_reference_fit()
+    noisy = replace(frf, H=frf.H * (1 + 0.01 * np.random.default_rng(2).normal(size=frf.H.shape)))
+    fig = fit_figure(noisy, model, pairs=[(1, 0)], band=(10.0, 140.0))
+    (t,) = synthesis_traces(noisy, noisy.H, synthesize(model, noisy.freq_hz).H, [(1, 0)], phase=True, floor=False)
+    mag, phase, err = fig.axes[0], fig.axes[1], fig.axes[2]
+    assert np.array_equal(mag.lines[0].get_ydata(), np.asarray(t["measured_db"], float))
+    assert np.array_equal(mag.lines[1].get_ydata(), np.asarray(t["synth_db"], float))
+    shown = phase.lines[0].get_ydata()
+    assert np.array_equal(shown[np.isfinite(shown)], np.asarray(t["measured_phase_deg"], float)[np.isfinite(shown)])
+    assert np.array_equal(err.lines[0].get_ydata(), np.asarray(t["rel_error_db"], float), equal_nan=True)
+    assert np.nanmax(err.lines[0].get_ydata()) < -20     # a 1 % error: about -40 dB

@@ -4,20 +4,18 @@ Units: frequencies Hz, magnitudes dB re 1 (FRF unit), phases deg, times ms, forc
 """
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from ..frf import QUANTITY_UNIT, FRFSet
 from ..geometry import Geometry, node_label
 from ..mac import mac_matrix
-from ..mif import indicator_summary
 from ..modal import ModalModel, damping_ratio, natural_freq_hz, synthesize
-from ..plots import summed_magnitude_db
 from ..points import label_direction
+from ..section_data import indicator_data, stabilization_rows, synthesis_traces
+from ..section_data import magnitude_db as _db
+from ..section_data import rounded as _r
 from ..spectra import excitation_band as spectra_excitation_band
 from ..spectra import hit_spectra
-from ..stabilization import CLASS_NAMES
 from .sources import FitData, TestRecord
 
 __all__ = [
@@ -30,6 +28,7 @@ __all__ = [
     "points_section",
     "shape_vectors",
     "shapes_section",
+    "stabilization_data",
     "test_section",
 ]
 
@@ -37,26 +36,8 @@ __all__ = [
 MAX_TIME_POINTS = 1600
 #: FRFs drawn when the page opens (the strongest); the others are one legend click away
 VISIBLE_FRFS = 4
-#: lines of the mode-indicator plot at most (bins keep their CMIF peak)
-INDICATOR_POINTS = 1500
 #: FRFs shown in the synthesis plot
 SYNTHESIS_FRFS = 3
-
-
-def _r(a: Any, decimals: int) -> list:
-    """Rounded nested list; non-finite values become None (JSON null)."""
-    x = np.round(np.asarray(a, dtype=float), decimals)
-    if np.all(np.isfinite(x)):
-        return x.tolist()
-    out = x.astype(object)
-    out[~np.isfinite(x)] = None
-    return out.tolist()
-
-
-def _db(z: np.ndarray) -> np.ndarray:
-    a = np.abs(z)
-    floor = max(float(np.nanmax(a)) * 1e-12, 1e-300) if a.size else 1e-300
-    return 20 * np.log10(np.maximum(a, floor))
 
 
 def _fmt(x: float, digits: int = 4) -> str:
@@ -138,16 +119,13 @@ def modal_section(frf: FRFSet, fit: FitData) -> dict:
     den = np.sqrt(np.nansum(np.where(ok, np.abs(H) ** 2, 0), axis=(0, 1)))
     rel = num / np.where(den > 0, den, np.nan)
     total = float(np.sqrt(np.sum(num ** 2)) / np.sqrt(np.sum(den ** 2))) if np.sum(den) > 0 else float("nan")
-    pairs = _pairs(frf)[:SYNTHESIS_FRFS]
-    synth = [{"name": f"{frf.outputs[o]} / {frf.references[r]}", "measured_db": _r(_db(H[o, r]), 2),
-              "synth_db": _r(_db(G[o, r]), 2)} for o, r in pairs]
+    synth = synthesis_traces(frf, H, G, _pairs(frf)[:SYNTHESIS_FRFS])
     mac = mac_matrix(shapes, shapes) if shapes.size else np.zeros((0, 0))
     return {"band_hz": [float(lo), float(hi)], "modes": modes, "source": fit.source, "warnings": list(fit.warnings),
             "synthesis": {"freq_hz": _r(fb, 4), "frfs": synth, "rel_error_db": _r(20 * np.log10(
                 np.maximum(rel, 1e-6)), 2), "rel_rms": _finite(total)},
             "automac": _r(mac, 3), "shape_points": len(labels), "stabilization": stabilization_data(frf, fit),
-            "indicator": indicator_summary(frf, (lo, hi) if fit.stab is None else fit.stab.band,
-                                           max_points=INDICATOR_POINTS)}
+            "indicator": indicator_data(frf, (lo, hi) if fit.stab is None else fit.stab.band)}
 
 
 def _finite(x: float) -> float | None:
@@ -156,25 +134,9 @@ def _finite(x: float) -> float | None:
 
 
 def stabilization_data(frf: FRFSet, fit: FitData) -> dict:
-    """Poles per order by class (``classes`` None without a stabilization, e.g. a fit read from a
-    file; per class ``freq_hz`` (Hz), ``order`` and ``damping`` (ratio) of every physical pole, for
-    the page's pole picking), the summed FRF (dB), the fitted natural frequencies (Hz) and the band."""
-    stab = fit.stab
-    lo, hi = fit.band if stab is None else stab.band
-    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
-    doc = {"classes": None, "freq_hz": _r(frf.freq_hz[sel], 4), "summed_db": _r(summed_magnitude_db(frf)[sel], 2),
-           "fitted_hz": _r(np.sort(natural_freq_hz(fit.model.poles)), 4), "method": None, "max_order": None,
-           "band_hz": [float(lo), float(hi)]}
-    if stab is None:
-        return doc
-    classes: dict[str, dict] = {name: {"freq_hz": [], "order": [], "damping": []} for name in CLASS_NAMES}
-    for n, p, ph, s in zip(stab.orders, stab.poles, stab.physical, stab.status):
-        for i in np.flatnonzero(ph):
-            c = classes[CLASS_NAMES[int(s[i])]]
-            c["freq_hz"].append(round(float(natural_freq_hz(p[i])), 4))
-            c["order"].append(int(n))
-            c["damping"].append(float(f"{float(damping_ratio(p[i])):.6g}"))
-    return {**doc, "classes": classes, "method": stab.method, "max_order": int(max(stab.orders))}
+    """The stabilization section of a fit: :func:`stabilization_rows` of its stabilization (when it has
+    one), its band and its fitted poles."""
+    return stabilization_rows(frf, fit.stab, fit.band, fit.model.poles)
 
 
 def _axis_sign(label: str) -> tuple[int, int]:
