@@ -9,8 +9,9 @@ import pytest
 from scipy.linalg import eigh
 
 from analysis.diagnosis.compare import line_weights
-from analysis.diagnosis.effects import FitContext, _resonator_jacobian, predict
+from analysis.diagnosis.effects import CATALOGUE, FitContext, predict
 from analysis.diagnosis.resonator import _damped, _matrices, apply_local_resonator, local_resonator_derivative
+from analysis.diagnosis.resonator_search import _resonator_jacobian
 from analysis.frf import FRFSet
 from analysis.modal import ModalModel
 
@@ -53,7 +54,7 @@ def _fd_check(model: ModalModel, x: np.ndarray, prior: tuple) -> None:
         e = (meas.H - predict(model, f, "accelerance", ctx.effects(spec(x))).H) * sw
         return np.concatenate([e.real.ravel(), e.imag.ravel()])
 
-    jac = _resonator_jacobian(ctx, f, sw, n_free, spec)
+    jac = _resonator_jacobian(ctx, f, sw, n_free, spec, CATALOGUE.lookup)
     assert callable(jac)
     J = jac(x)
     assert J.shape == (resid(x).size, n_free + 2)
@@ -153,9 +154,9 @@ def test_an_frf_effect_that_mixes_lines_falls_back_to_finite_differences(monkeyp
     meas = predict(model, f, "accelerance")
     ctx = FitContext(measured=meas, base=model, weights=line_weights(meas), sim=meas)
     spec = {"effect": "local_resonator", "frequency_hz": 20.0, "zeta": 0.01, "coupling": [0.0] * 4}
-    assert callable(_resonator_jacobian(ctx, f, np.ones((3, 1, f.size)), 4, lambda x: spec))
+    assert callable(_resonator_jacobian(ctx, f, np.ones((3, 1, f.size)), 4, lambda x: spec, CATALOGUE.lookup))
     mixed = replace(ctx, prior=({"effect": "smear"},))
-    assert _resonator_jacobian(mixed, f, np.ones((3, 1, f.size)), 4, lambda x: spec) == "2-point"
+    assert _resonator_jacobian(mixed, f, np.ones((3, 1, f.size)), 4, lambda x: spec, CATALOGUE.lookup) == "2-point"
 
 
 def test_a_mass_added_to_an_frf_file_simulation_before_it_falls_back_to_finite_differences() -> None:
@@ -171,8 +172,8 @@ def test_a_mass_added_to_an_frf_file_simulation_before_it_falls_back_to_finite_d
     meas = predict(file_model, f, "accelerance")
     ctx = FitContext(measured=meas, base=file_model, weights=line_weights(meas), sim=meas)
     spec = {"effect": "local_resonator", "frequency_hz": 20.0, "zeta": 0.01, "coupling": [0.0] * 4}
-    assert callable(_resonator_jacobian(ctx, f, np.ones((3, 1, f.size)), 4, lambda x: spec))
+    assert callable(_resonator_jacobian(ctx, f, np.ones((3, 1, f.size)), 4, lambda x: spec, CATALOGUE.lookup))
     loaded = replace(ctx, prior=({"effect": "mass_loading", "mass_kg": 0.1, "sensor": "2"},))
-    assert _resonator_jacobian(loaded, f, np.ones((3, 1, f.size)), 4, lambda x: spec) == "2-point"
+    assert _resonator_jacobian(loaded, f, np.ones((3, 1, f.size)), 4, lambda x: spec, CATALOGUE.lookup) == "2-point"
     on_fe = replace(loaded, base=model)                 # on a modal model the mass moves the modes: exact
-    assert callable(_resonator_jacobian(on_fe, f, np.ones((3, 1, f.size)), 4, lambda x: spec))
+    assert callable(_resonator_jacobian(on_fe, f, np.ones((3, 1, f.size)), 4, lambda x: spec, CATALOGUE.lookup))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.linalg import eigh
 
-import analysis.diagnosis.effects as effects
+import analysis.diagnosis.resonator_search as search
 from analysis.diagnosis.compare import line_weights
 from analysis.diagnosis.effects import FitContext, fit_local_resonator, predict
 from analysis.frf import FRFSet
@@ -75,11 +75,11 @@ def test_the_attached_starts_reach_a_strongly_coupled_resonator(monkeypatch: pyt
     assert found["frequency_hz"] == pytest.approx(fa, rel=0.01)
     # started only from the first-order coupling of an extra mode (midway between the modes, the three
     # cheapest starts each refined to the end), the fit stops at a local minimum
-    monkeypatch.setattr(effects, "RESONATOR_SCREEN_RATIOS", ())
-    monkeypatch.setattr(effects, "RESONATOR_BETWEEN", (0.5,))
-    monkeypatch.setattr(effects, "RESONATOR_REFINED", 3)
-    monkeypatch.setattr(effects, "RESONATOR_SHORT", 60)
-    monkeypatch.setattr(effects, "RESONATOR_CONTINUED", 1)
+    monkeypatch.setattr(search, "RESONATOR_SCREEN_RATIOS", ())
+    monkeypatch.setattr(search, "RESONATOR_BETWEEN", (0.5,))
+    monkeypatch.setattr(search, "RESONATOR_REFINED", 3)
+    monkeypatch.setattr(search, "RESONATOR_SHORT", 60)
+    monkeypatch.setattr(search, "RESONATOR_CONTINUED", 1)
     alone = fit_local_resonator(ctx, lines)
     assert abs(alone["frequency_hz"] / fa - 1) > 0.05
 

@@ -9,11 +9,11 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..errors import EffectError
-from ..frf import FRFSet
-from ..modal import ModalModel
+from ..frf import FRFSet, convert_quantity
+from ..modal import ModalModel, pole_from_fz
 
-__all__ = ["Effect", "EffectError", "FitContext", "ParamRange", "check_positive", "fit_scalar", "shapes_at_references",
-           "applied", "named", "split", "stage_entry"]
+__all__ = ["Effect", "EffectError", "FitContext", "ParamRange", "check_positive", "fit_scalar", "mode_residuals",
+           "shapes_at_references", "applied", "named", "split", "stage_entry"]
 
 
 # --------------------------------------------------------------------------- the two shapes of an effect
@@ -196,3 +196,37 @@ def shapes_at_references(model: ModalModel, phi: np.ndarray) -> np.ndarray | Non
     if not all(r in outs for r in model.references):
         return None
     return phi[[outs.index(r) for r in model.references]]
+
+
+def _mode_kernels(ctx: FitContext, freq_hz: float, zeta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Measured-quantity response of a unit real and a unit imaginary residue (model units)."""
+    f = ctx.measured.freq_hz
+    jw = 2j * np.pi * f
+    lam = complex(pole_from_fz(freq_hz, zeta))
+    k1 = 1 / (jw - lam)
+    k2 = 1 / (jw - np.conj(lam))
+    conv = convert_quantity(np.ones_like(f, dtype=complex), f, ctx.base.quantity, ctx.measured.quantity)
+    return (k1 + k2) * conv, (1j * k1 - 1j * k2) * conv
+
+
+def mode_residuals(ctx: FitContext, lines: np.ndarray, fz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted residual vector and best residues (variable projection: the residues of each FRF are
+    linear, solved in closed form) of one mode ``fz`` = (f Hz, zeta) added to the simulation ``ctx.sim``
+    on ``lines``; residues shape (n_out, n_ref, 2), [re, im] in model units (the ``missing_mode`` effect's
+    fit, and the local resonator's starts)."""
+    a, b = _mode_kernels(ctx, fz[0], fz[1])
+    a, b = a[lines], b[lines]
+    E = ctx.measured.H[..., lines] - ctx.sim.H[..., lines]
+    W = ctx.weights[..., lines]
+    # normal equations per FRF: [[aa, ab], [ab, bb]] x = [ae, be] (real inner products, weighted)
+    aa = np.sum(W * np.abs(a) ** 2, axis=-1)
+    bb = np.sum(W * np.abs(b) ** 2, axis=-1)
+    ab = np.sum(W * np.real(np.conj(a) * b), axis=-1)
+    ae = np.sum(W * np.real(np.conj(a) * E), axis=-1)
+    be = np.sum(W * np.real(np.conj(b) * E), axis=-1)
+    det = aa * bb - ab ** 2
+    det = np.where(det == 0, 1e-300, det)
+    x1 = (bb * ae - ab * be) / det
+    x2 = (aa * be - ab * ae) / det
+    r = (E - x1[..., None] * a - x2[..., None] * b) * np.sqrt(W)
+    return np.concatenate([r.real.ravel(), r.imag.ravel()]), np.stack([x1, x2], axis=-1)
