@@ -21,12 +21,13 @@ from typing import Any
 from acquisition import protocol
 from acquisition.errors import SetupError
 from analysis.frf import analyser_band_hz
+from analysis.modal import decay_time_s
 from analysis.points import PointLabelError, parse_point
 
 __all__ = [
     "G", "ChannelSetup", "TriggerSetup", "AcquisitionSetup", "Capabilities", "validate_setup",
     "default_setup", "setup_to_wire", "setup_from_wire", "load_setup", "DEFAULT_SLOWEST_MODE", "DEFAULT_DECAY_DB",
-    "decay_time_s", "block_size_for_decay", "setup_to_toml",
+    "block_size_for_decay", "setup_to_toml",
 ]
 
 #: standard gravity, m/s^2 (mV/g -> mV/(m/s^2))
@@ -286,23 +287,17 @@ DEFAULT_DECAY_DB = 30.0
 _BLOCK_SIZES = tuple(protocol.SIGLAB_2042.block_sizes)
 
 
-def decay_time_s(freq_hz: float, damping: float, decay_db: float = DEFAULT_DECAY_DB) -> float:
-    """Seconds for the free decay of a mode (natural frequency Hz, viscous damping ratio) to fall by
-    ``decay_db`` dB: ``ln(10^(decay_db/20)) / (damping 2 pi freq_hz)``."""
-    if not (freq_hz > 0 and damping > 0 and decay_db > 0):
-        raise SetupError(f"a decay time needs a positive frequency, damping and decay; got {freq_hz} Hz, "
-                         f"damping {damping}, {decay_db} dB")
-    return math.log(10 ** (decay_db / 20)) / (damping * 2 * math.pi * freq_hz)
-
-
 def block_size_for_decay(sample_rate_hz: float, freq_hz: float, damping: float, *,
                          decay_db: float = DEFAULT_DECAY_DB, pretrigger_samples: int = 0,
                          block_sizes: tuple[int, ...] = _BLOCK_SIZES) -> int:
     """The smallest of ``block_sizes`` whose samples after the trigger (block minus pre-trigger)
-    span :func:`decay_time_s` of the mode at ``sample_rate_hz`` (Hz): a record in which that mode
-    decays by ``decay_db`` dB. SetupError when even the largest block is too short (lower the
-    sample rate or use an exponential window)."""
-    need = decay_time_s(freq_hz, damping, decay_db) * sample_rate_hz + pretrigger_samples
+    span :func:`analysis.modal.decay_time_s` of the mode at ``sample_rate_hz`` (Hz): a record in which
+    that mode decays by ``decay_db`` dB. SetupError when even the largest block is too short (lower the
+    sample rate or use an exponential window), or the mode or decay is not positive."""
+    try:
+        need = decay_time_s(freq_hz, damping, decay_db) * sample_rate_hz + pretrigger_samples
+    except ValueError as exc:
+        raise SetupError(f"{exc}: give the slowest mode's frequency and damping") from exc
     for n in sorted(block_sizes):
         if n >= need:
             return int(n)

@@ -26,6 +26,7 @@ with the residual basis ``(b_U, b_L)`` chosen by ``residual_form``:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,6 +43,7 @@ __all__ = [
     "natural_freq_hz",
     "damping_ratio",
     "damped_freq_hz",
+    "decay_time_s",
 ]
 
 RESIDUAL_FORMS = ("physical", "paper", "none")
@@ -69,6 +71,16 @@ def damping_ratio(poles: np.ndarray | complex) -> np.ndarray:
 def damped_freq_hz(poles: np.ndarray | complex) -> np.ndarray:
     """Im(lambda) / 2 pi (Hz)."""
     return np.imag(np.asarray(poles)) / (2 * np.pi)
+
+
+def decay_time_s(freq_hz: float, damping: float, decay_db: float) -> float:
+    """Seconds for the free decay of a mode (natural frequency Hz, viscous damping ratio) to fall by
+    ``decay_db`` dB: its envelope ``exp(-zeta omega t)`` gives ``ln(10^(decay_db/20)) / (damping 2 pi freq_hz)``
+    (one time constant ``1 / (zeta omega)`` is 8.69 dB). ValueError unless all three are positive."""
+    if not (freq_hz > 0 and damping > 0 and decay_db > 0):
+        raise ValueError(f"a decay time needs a positive frequency, damping and decay; got {freq_hz} Hz, "
+                         f"damping {damping}, {decay_db} dB")
+    return math.log(10 ** (decay_db / 20)) / (damping * 2 * math.pi * freq_hz)
 
 
 def residual_basis(omega: np.ndarray, quantity: str, residual_form: str) -> np.ndarray:

@@ -16,11 +16,11 @@ from acquisition.setup import (
     DEFAULT_SLOWEST_MODE,
     AcquisitionSetup,
     block_size_for_decay,
-    decay_time_s,
     default_setup,
     load_setup,
     setup_to_toml,
 )
+from analysis.modal import decay_time_s
 
 
 def test_decay_time_and_block_size():
@@ -32,8 +32,10 @@ def test_decay_time_and_block_size():
     assert block_size_for_decay(1000.0, 10.0, 0.01, decay_db=40.0, pretrigger_samples=900) == 16384
     with pytest.raises(SetupError, match="lower the sample rate or use an exponential window"):
         block_size_for_decay(51200.0, 1.0, 0.001)
+    with pytest.raises(ValueError, match="positive"):
+        decay_time_s(10.0, 0.0, DEFAULT_DECAY_DB)
     with pytest.raises(SetupError, match="positive"):
-        decay_time_s(10.0, 0.0)
+        block_size_for_decay(1000.0, 10.0, 0.0)
 
 
 def test_the_slowest_mode_and_the_record_it_needs():
