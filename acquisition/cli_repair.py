@@ -10,10 +10,9 @@ opens in ``export``, ``fit``, ``replay`` and ``capture --resume``. Prints one li
 """
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 
-from analysis.command_line import add_overwrite, cli_entry, exit_on, with_examples
+from analysis.command_line import cli_entry, exit_on, recording_in_out
 
 from .errors import RecordingError, UsageError
 
@@ -22,11 +21,8 @@ __all__ = ["main"]
 
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m acquisition repair", description=__doc__.split("\n\n")[0])
-    with_examples(p)
-    p.add_argument("recording", help="the recording that does not open (never modified)")
-    p.add_argument("--out", required=True, help="the repaired recording to write")
-    add_overwrite(p, "replace an existing --out file")
+    p = recording_in_out("python -m acquisition repair", __doc__, "the repaired recording to write",
+                         "the recording that does not open (never modified)")
     args = p.parse_args(argv)
     from analysis.recording_repair import repair_recording
 

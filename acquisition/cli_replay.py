@@ -11,10 +11,9 @@ exclusions the FRFs equal the original ones bit for bit.
 """
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 
-from analysis.command_line import add_overwrite, cli_entry, errors_to_exit, with_examples
+from analysis.command_line import cli_entry, errors_to_exit, recording_in_out
 
 from .errors import RecordingError, UsageError
 from .replay import replay
@@ -62,10 +61,7 @@ def _split_window(text: str) -> tuple[str | None, str | None]:
 
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m acquisition replay", description=__doc__.split("\n\n")[0])
-    with_examples(p)
-    p.add_argument("recording", help="the recording to read (never modified)")
-    p.add_argument("--out", required=True, help="the new recording to write")
+    p = recording_in_out("python -m acquisition replay", __doc__, "the new recording to write")
     p.add_argument("--force-window", help="WIDTH[,TAPER] or none (default: the recording's)")
     p.add_argument("--exp-window", help="PCT%%, TAU or none (default: the recording's)")
     p.add_argument("--window", help="shorthand 'force=10ms,2ms;exp=1%%'")
@@ -73,7 +69,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--estimator", choices=("H1", "H2", "h1", "h2"), default="H1",
                    help="the FRF estimate the new recording prefers: H1 (noise on the response, the default) or H2 "
                         "(noise on the force, e.g. a light hammer tip); fit, report, linearity and diagnose then use it")
-    add_overwrite(p, "replace an existing --out file")
     args = p.parse_args(argv)
     with errors_to_exit("replay", (UsageError, RecordingError, ValueError)):
         from analysis.recording import Recording

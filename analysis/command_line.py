@@ -90,6 +90,20 @@ def add_overwrite(parser: argparse.ArgumentParser, help: str | None = None) -> N
     parser.add_argument("--overwrite", action="store_true", help=help)
 
 
+def recording_in_out(prog: str, doc: str | None, out_help: str,
+                     recording_help: str = "the recording to read (never modified)") -> argparse.ArgumentParser:
+    """The parser of a command that reads one recording and writes another: ``prog``, the first
+    paragraph of the face's docstring ``doc`` as its description, the options and examples every command
+    shares (:func:`with_examples`), the ``recording`` to read (``recording_help``; never modified),
+    ``--out FILE`` (required, ``out_help``) and ``--overwrite``. The command adds its own options."""
+    p = argparse.ArgumentParser(prog=prog, description=(doc or "").split("\n\n")[0])
+    with_examples(p)
+    p.add_argument("recording", help=recording_help)
+    p.add_argument("--out", required=True, help=out_help)
+    add_overwrite(p, "replace an existing --out file")
+    return p
+
+
 def add_estimator(parser: argparse.ArgumentParser) -> None:
     """``--estimator H1|H2``: which FRF estimate of a recording to use (default: the recording's own
     preference, set by ``replay --estimator``, else H1)."""
