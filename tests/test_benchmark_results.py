@@ -35,12 +35,21 @@ def _data_files() -> list[Path]:
     return sorted(p for ext in ("*.md", "*.json") for p in BENCH.rglob(ext))
 
 
+#: the studies' shared command lines: a hold-out study's ``run`` sub-command from ``add_run`` has ``--write``
+STUDY_ARGS = BENCH / "studies" / "study_args.py"
+
+
+def _has_write_option(text: str, scripts: dict[Path, str]) -> bool:
+    """A script with a ``--write`` option: its own, or the ``run`` sub-command of :mod:`study_args`."""
+    return '"--write"' in text or ("add_run(" in text and '"--write"' in scripts.get(STUDY_ARGS, ""))
+
+
 def _case_list_owner(path: Path, scripts: dict[Path, str]) -> Path | None:
     """The script beside ``path`` whose CASE_LISTS pattern it matches and that writes results_of_cases."""
     for script, text in scripts.items():
         m = CASES_DECL.search(text)
         if script.parent == path.parent and m and any(fnmatch.fnmatch(path.name, pat) for pat in m.group(1).split()) \
-                and "results_of_cases(" in text and '"--write"' in text and "write_text_atomic(" in text:
+                and "results_of_cases(" in text and _has_write_option(text, scripts) and "write_text_atomic(" in text:
             return script
     return None
 

@@ -11,7 +11,6 @@ table (the one in docs/validation.md, section "The automatic band on real data")
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -26,15 +25,15 @@ import numpy as np  # noqa: E402
 from analysis.bands import default_band, upper_limits  # noqa: E402
 from analysis.pipeline import fit_auto  # noqa: E402
 from benchmarks.accuracy.validation.datasets import DATASETS  # noqa: E402
+from benchmarks.studies.study_args import add_data, data_folder, study_parser  # noqa: E402
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
+    ap = study_parser(__doc__)
+    add_data(ap)
     args = ap.parse_args()
-    data = Path(args.data)
-    if not data.is_dir():
-        print(f"no data folder {data}: nothing to do", file=sys.stderr)
+    data = data_folder(args)
+    if data is None:
         return 2
     print("| dataset | lines (range Hz) | upper limits from the data [Hz] | default band [Hz] | modes | poles [Hz] | "
           "all inside | success | fit s |")

@@ -36,7 +36,6 @@ The hold-out lists kept beside this script (:data:`CASE_LISTS`) each have their 
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import io
 import json
@@ -56,6 +55,7 @@ import numpy as np  # noqa: E402
 
 from analysis.atomic import write_text_atomic  # noqa: E402
 from benchmarks.results import results_of_cases  # noqa: E402
+from benchmarks.studies.study_args import add_draw, add_run, study_parser  # noqa: E402
 
 FRAME = ROOT / "simulator" / "frame.toml"
 #: the hold-out case lists drawn by this script and kept beside it (their results: results_of_cases)
@@ -277,20 +277,13 @@ def table(results: list[dict]) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = study_parser(__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    d = sub.add_parser("draw", help="draw a case list")
-    d.add_argument("--seed", type=int, required=True)
+    d = add_draw(sub, "draw", "draw a case list")
     d.add_argument("--damage", type=int, default=20)
     d.add_argument("--nulls", type=int, default=10)
     d.add_argument("--blocks", type=int, default=0, help="attached blocks (drawn from their own seed, seed + 1)")
-    d.add_argument("--out", required=True)
-    r = sub.add_parser("run", help="capture and diagnose every case of a list")
-    r.add_argument("cases")
-    r.add_argument("--json", help="write every case's result")
-    r.add_argument("--write", action="store_true",
-                   help="write every case's result to CASES.results.json beside the case list")
-    r.add_argument("--label", help="a later run: write CASES.LABEL.results.json (the first run keeps its file)")
+    add_run(sub, "run", "capture and diagnose every case of a list")
     args = ap.parse_args()
     if args.cmd == "draw":
         cases = draw(args.seed, args.damage, args.nulls) + draw_blocks(args.seed + 1, args.blocks)

@@ -40,7 +40,6 @@ Families and ranges (fixed before any run; factors log-uniform in the one-place 
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -69,6 +68,7 @@ from diagnosis_one_place import (  # noqa: E402  (the one-place study's reading 
 
 from analysis.atomic import write_text_atomic  # noqa: E402
 from benchmarks.results import results_of_cases  # noqa: E402
+from benchmarks.studies.study_args import add_draw, add_run, study_parser  # noqa: E402
 
 #: the hold-out case lists drawn by this script and kept beside it (their results: results_of_cases; a run of
 #: one family is labelled with it, ``CASES.pairs.results.json``)
@@ -271,32 +271,20 @@ def fleet_table(results: list[dict]) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = study_parser(__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    d = sub.add_parser("draw", help="draw a case list of pairs and nulls")
-    d.add_argument("--seed", type=int, required=True)
+    d = add_draw(sub, "draw", "draw a case list of pairs and nulls")
     d.add_argument("--pairs", type=int, default=20)
     d.add_argument("--nulls", type=int, default=60)
-    d.add_argument("--out", required=True)
-    f = sub.add_parser("draw-fleets", help="draw a list of fleets")
-    f.add_argument("--seed", type=int, required=True)
+    f = add_draw(sub, "draw-fleets", "draw a list of fleets")
     f.add_argument("--fleets", type=int, default=3)
     f.add_argument("--units", type=int, default=40)
     f.add_argument("--defects", type=int, default=20)
     f.add_argument("--scatter", type=float, default=2.0, help="manufacturing scatter (%%)")
-    f.add_argument("--out", required=True)
-    r = sub.add_parser("run", help="capture and diagnose every case of a list")
-    r.add_argument("cases")
-    r.add_argument("--json", help="write every case's result")
+    r = add_run(sub, "run", "capture and diagnose every case of a list")
     r.add_argument("--only", choices=("pair", "null"), help="run only this family")
-    rf = sub.add_parser("run-fleets", help="record and batch-diagnose every fleet of a list")
-    rf.add_argument("fleets")
+    rf = add_run(sub, "run-fleets", "record and batch-diagnose every fleet of a list", listed="fleets")
     rf.add_argument("--work", required=True, help="folder for the recordings and the batch outputs")
-    rf.add_argument("--json", help="write every unit's result")
-    for sub in (r, rf):
-        sub.add_argument("--write", action="store_true",
-                         help="write the results beside the case list (CASES[.LABEL].results.json)")
-        sub.add_argument("--label", help="a later run: CASES.LABEL.results.json (the first run keeps its file)")
     args = ap.parse_args()
     if args.cmd == "draw":
         cases = draw(args.seed, args.pairs, args.nulls)

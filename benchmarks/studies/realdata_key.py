@@ -7,7 +7,6 @@ accepted resonance is fitted and no pole is spurious). Prints a markdown table; 
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -21,17 +20,17 @@ sys.path.insert(0, str(ROOT))
 from analysis.pipeline import fit_auto  # noqa: E402
 from benchmarks.accuracy.validation.datasets import DATASETS  # noqa: E402
 from benchmarks.accuracy.validation.key import KEYS, score  # noqa: E402
+from benchmarks.studies.study_args import add_data, data_folder, study_parser  # noqa: E402
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
+    ap = study_parser(__doc__)
+    add_data(ap)
     ap.add_argument("--only", nargs="*", default=None, help="dataset keys to run (default: all)")
     ap.add_argument("--json", default=None, help="write the rows as JSON here")
     args = ap.parse_args()
-    data = Path(args.data)
-    if not data.is_dir():
-        print(f"no data folder {data}: nothing to do", file=sys.stderr)
+    data = data_folder(args)
+    if data is None:
         return 2
     print("| dataset | accepted fitted | missed [Hz] | spurious [Hz] | doubtful/suspension [Hz] | success | key says | "
           "problems | fit s |")
