@@ -19,37 +19,41 @@ from ._lsfd_kernels import Status
 
 __all__ = ["STOPS", "VERDICTS", "stop", "verdict_message"]
 
-#: every stop of the solvers: name -> (status, message template)
-STOPS: dict[str, tuple[int, str]] = {
-    # converged
-    "stationary": (Status.FTOL, "converged: predicted decrease of S {pred_rel:.2g} S <= ftol"),
-    "stationary_sd": (Status.FTOL, "converged: the step still to go is {sd:.2g} standard deviations of the poles "
-                                   "<= sdtol"),
-    "ftol": (Status.FTOL, "converged: relative change of S {rel:.2g} <= ftol"),
-    "xtol": (Status.XTOL, "converged: relative step {step:.2g} <= xtol"),
-    "xtol_at_floor": (Status.XTOL, "converged: relative step {step:.2g} <= xtol (S at its floor)"),
-    "xtol_no_decrease": (Status.XTOL, "converged: relative step {step:.2g} <= xtol (no further decrease of S)"),
-    "roundoff": (Status.ROUNDOFF, "converged: S at round-off level"),
-    "initial_roundoff": (Status.ROUNDOFF, "initial fit already at round-off level"),
-    "fixed_poles": (Status.FIXED_POLES, "poles given; residues solved at them"),
-    "compressed": (Status.FIXED_POLES, "poles from the principal response functions ({inner}); residues of every "
-                                       "FRF solved at them"),
+#: every stop of the solvers by status (> 0: converged): name -> message template
+_STOPS_BY_STATUS: dict[int, dict[str, str]] = {
+    Status.FTOL: {"stationary": "converged: predicted decrease of S {pred_rel:.2g} S <= ftol",
+                  "stationary_sd": "converged: the step still to go is {sd:.2g} standard deviations of the poles "
+                                   "<= sdtol",
+                  "ftol": "converged: relative change of S {rel:.2g} <= ftol"},
+    Status.XTOL: {"xtol": "converged: relative step {step:.2g} <= xtol",
+                  "xtol_at_floor": "converged: relative step {step:.2g} <= xtol (S at its floor)",
+                  "xtol_no_decrease": "converged: relative step {step:.2g} <= xtol (no further decrease of S)"},
+    Status.ROUNDOFF: {"roundoff": "converged: S at round-off level",
+                      "initial_roundoff": "initial fit already at round-off level"},
+    Status.FIXED_POLES: {"fixed_poles": "poles given; residues solved at them",
+                         "compressed": "poles from the principal response functions ({inner}); residues of every "
+                                       "FRF solved at them"},
     # stopped without converging
-    "max_iter": (Status.MAX_ITER, "{method} reached max_iter={max_iter} without meeting ftol/xtol"),
-    "max_iter_warning": (Status.MAX_ITER, "LSFD ({method}) stopped at max_iter={max_iter} before converging "
-                                          "(S = {S:.6g}); raise max_iter, loosen ftol/xtol or improve the initial poles"),
-    "s_increased": (Status.S_INCREASED, "GN step increased S from {S:.6g} to {S_new:.6g} at iteration {iteration}; "
+    Status.MAX_ITER: {"max_iter": "{method} reached max_iter={max_iter} without meeting ftol/xtol",
+                      "max_iter_warning": "LSFD ({method}) stopped at max_iter={max_iter} before converging "
+                                          "(S = {S:.6g}); raise max_iter, loosen ftol/xtol or improve the initial "
+                                          "poles"},
+    Status.S_INCREASED: {"s_increased": "GN step increased S from {S:.6g} to {S_new:.6g} at iteration {iteration}; "
                                         "the method is not converging from these initial poles (try method='lm' or "
-                                        "better poles)"),
-    "unstable": (Status.UNSTABLE, "{method} stopped: {reason}"),
-    "initial_rank": (Status.COLLAPSED, "initial poles give a rank-deficient basis (rcond {rcond:.2g})"),
-    "collapsed": (Status.COLLAPSED, "{method} stopped: poles collapsed (basis rcond {rcond:.2g})"),
-    "would_collapse": (Status.COLLAPSED, "poles would collapse (basis rcond {rcond:.2g})"),
-    "non_finite": (Status.COLLAPSED, "{method} stopped: the fit became non-finite (poles nearly coincide or the "
-                                     "basis is ill-conditioned); drop near-duplicate initial poles"),
-    "fixed_rank": (Status.COLLAPSED, "the poles' basis is rank deficient"),
-    "no_progress": (Status.NO_PROGRESS, "LM could not decrease S (mu reached its ceiling)"),
+                                        "better poles)"},
+    Status.UNSTABLE: {"unstable": "{method} stopped: {reason}"},
+    Status.COLLAPSED: {"initial_rank": "initial poles give a rank-deficient basis (rcond {rcond:.2g})",
+                       "collapsed": "{method} stopped: poles collapsed (basis rcond {rcond:.2g})",
+                       "would_collapse": "poles would collapse (basis rcond {rcond:.2g})",
+                       "non_finite": "{method} stopped: the fit became non-finite (poles nearly coincide or the "
+                                     "basis is ill-conditioned); drop near-duplicate initial poles",
+                       "fixed_rank": "the poles' basis is rank deficient"},
+    Status.NO_PROGRESS: {"no_progress": "LM could not decrease S (mu reached its ceiling)"},
 }
+
+#: every stop of the solvers: name -> (status, message template)
+STOPS: dict[str, tuple[int, str]] = {name: (status, template) for status, rows in _STOPS_BY_STATUS.items()
+                                     for name, template in rows.items()}
 
 #: the automatic fit's verdict (FitResult.status) -> its message template
 VERDICTS: dict[str, str] = {
