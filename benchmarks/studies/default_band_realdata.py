@@ -25,19 +25,17 @@ import numpy as np  # noqa: E402
 from analysis.bands import default_band, upper_limits  # noqa: E402
 from analysis.pipeline import fit_auto  # noqa: E402
 from benchmarks.accuracy.validation.datasets import DATASETS  # noqa: E402
-from benchmarks.studies.study_args import add_data, data_folder, study_parser  # noqa: E402
+from benchmarks.studies.study_args import data_folder, study_parser, table_head  # noqa: E402
 
 
 def main() -> int:
-    ap = study_parser(__doc__)
-    add_data(ap)
+    ap = study_parser(__doc__, data=True)
     args = ap.parse_args()
     data = data_folder(args)
     if data is None:
         return 2
-    print("| dataset | lines (range Hz) | upper limits from the data [Hz] | default band [Hz] | modes | poles [Hz] | "
-          "all inside | success | fit s |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    table_head("dataset", "lines (range Hz)", "upper limits from the data [Hz]", "default band [Hz]", "modes",
+               "poles [Hz]", "all inside", "success", "fit s")
     bad = 0
     for d in DATASETS:
         name = d.label

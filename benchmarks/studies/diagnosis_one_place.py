@@ -55,7 +55,7 @@ import numpy as np  # noqa: E402
 
 from analysis.atomic import write_text_atomic  # noqa: E402
 from benchmarks.results import results_of_cases  # noqa: E402
-from benchmarks.studies.study_args import add_draw, add_run, study_parser  # noqa: E402
+from benchmarks.studies.study_args import add_draw, add_run, study_commands  # noqa: E402
 
 FRAME = ROOT / "simulator" / "frame.toml"
 #: the hold-out case lists drawn by this script and kept beside it (their results: results_of_cases)
@@ -277,11 +277,8 @@ def table(results: list[dict]) -> str:
 
 
 def main() -> None:
-    ap = study_parser(__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    d = add_draw(sub, "draw", "draw a case list")
-    d.add_argument("--damage", type=int, default=20)
-    d.add_argument("--nulls", type=int, default=10)
+    ap, sub = study_commands(__doc__)
+    d = add_draw(sub, "draw", "draw a case list", damage=20, nulls=10)
     d.add_argument("--blocks", type=int, default=0, help="attached blocks (drawn from their own seed, seed + 1)")
     add_run(sub, "run", "capture and diagnose every case of a list")
     args = ap.parse_args()

@@ -68,7 +68,7 @@ from diagnosis_one_place import (  # noqa: E402  (the one-place study's reading 
 
 from analysis.atomic import write_text_atomic  # noqa: E402
 from benchmarks.results import results_of_cases  # noqa: E402
-from benchmarks.studies.study_args import add_draw, add_run, study_parser  # noqa: E402
+from benchmarks.studies.study_args import add_draw, add_run, study_commands  # noqa: E402
 
 #: the hold-out case lists drawn by this script and kept beside it (their results: results_of_cases; a run of
 #: one family is labelled with it, ``CASES.pairs.results.json``)
@@ -271,15 +271,9 @@ def fleet_table(results: list[dict]) -> str:
 
 
 def main() -> None:
-    ap = study_parser(__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    d = add_draw(sub, "draw", "draw a case list of pairs and nulls")
-    d.add_argument("--pairs", type=int, default=20)
-    d.add_argument("--nulls", type=int, default=60)
-    f = add_draw(sub, "draw-fleets", "draw a list of fleets")
-    f.add_argument("--fleets", type=int, default=3)
-    f.add_argument("--units", type=int, default=40)
-    f.add_argument("--defects", type=int, default=20)
+    ap, sub = study_commands(__doc__)
+    add_draw(sub, "draw", "draw a case list of pairs and nulls", pairs=20, nulls=60)
+    f = add_draw(sub, "draw-fleets", "draw a list of fleets", fleets=3, units=40, defects=20)
     f.add_argument("--scatter", type=float, default=2.0, help="manufacturing scatter (%%)")
     r = add_run(sub, "run", "capture and diagnose every case of a list")
     r.add_argument("--only", choices=("pair", "null"), help="run only this family")

@@ -20,21 +20,19 @@ sys.path.insert(0, str(ROOT))
 from analysis.pipeline import fit_auto  # noqa: E402
 from benchmarks.accuracy.validation.datasets import DATASETS  # noqa: E402
 from benchmarks.accuracy.validation.key import KEYS, score  # noqa: E402
-from benchmarks.studies.study_args import add_data, data_folder, study_parser  # noqa: E402
+from benchmarks.studies.study_args import data_folder, study_parser, table_head  # noqa: E402
 
 
 def main() -> int:
-    ap = study_parser(__doc__)
-    add_data(ap)
+    ap = study_parser(__doc__, data=True)
     ap.add_argument("--only", nargs="*", default=None, help="dataset keys to run (default: all)")
     ap.add_argument("--json", default=None, help="write the rows as JSON here")
     args = ap.parse_args()
     data = data_folder(args)
     if data is None:
         return 2
-    print("| dataset | accepted fitted | missed [Hz] | spurious [Hz] | doubtful/suspension [Hz] | success | key says | "
-          "problems | fit s |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    table_head("dataset", "accepted fitted", "missed [Hz]", "spurious [Hz]", "doubtful/suspension [Hz]", "success",
+               "key says", "problems", "fit s")
     rows = []
     for d in DATASETS:
         if args.only and d.key not in args.only:
