@@ -47,3 +47,23 @@ def test_a_closed_stdout_pipe_ends_quietly():
     with proc.stderr:
         err = proc.stderr.read().decode()
     assert proc.wait() == 0 and "Traceback" not in err
+
+
+def test_repair_and_replay_share_the_recording_in_out_parser(capsys):
+    """repair and replay read one recording (never modified) and write another: the same parser
+    (recording_in_out) gives both the positional recording, a required --out and --overwrite."""
+    from acquisition import cli_repair, cli_replay
+    from analysis.command_line import recording_in_out
+
+    p = recording_in_out("python -m x", "x: one line.\n\nMore.", "the output")
+    args = p.parse_args(["in.h5", "--out", "out.h5", "--overwrite"])
+    assert (args.recording, args.out, args.overwrite) == ("in.h5", "out.h5", True)
+    assert p.description == "x: one line." and p.prog == "python -m x"
+    for main in (cli_repair.main, cli_replay.main):
+        with pytest.raises(SystemExit) as usage:     # --out is required: a usage error
+            main(["in.h5"])
+        assert usage.value.code == 2 and "--out" in capsys.readouterr().err
+        with pytest.raises(SystemExit):
+            main(["--help"])
+        text = capsys.readouterr().out
+        assert "recording" in text and "--overwrite" in text and "never modified" in text
