@@ -311,7 +311,9 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     bandwidths (the margin :func:`check_band_edges` asks of a fitted mode)
 
     - past the peak (at most to ``cap``, and only when that clears the peak's half-power band) when
-      the median coherence over the peak's half-power band is at least ``TOP_COHERENCE``: the
+      the median coherence over the peak's half-power band is at least ``TOP_COHERENCE`` and no lower
+      than over the margin below it (a peak whose top is less coherent than its lower flank is response
+      the measured input does not explain: a drive at its noise floor, or another source): the
       resonance lifts the response out of the noise where the coherence fades around it, and the
       averages leave a random error (for H1 of ``n`` averages ``sqrt((1 - g^2) / (2 n g^2))`` of the
       FRF per line) that the fit spreads over the mode's many lines;
@@ -346,12 +348,17 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     if not near:
         return hi
     _, p, a, b, bw = min(near)
-    coh = np.nanmedian(np.asarray(frf.coherence).reshape(-1, n)[:, a:b + 1], axis=0)
+    median_coh = np.nanmedian(np.asarray(frf.coherence).reshape(-1, n), axis=0)
+    coh = median_coh[a:b + 1]
     i_cap = int(np.searchsorted(f, cap + 1e-9 * abs(cap), side="right")) - 1
     i_past = int(np.searchsorted(f, f[p] + EDGE_BANDWIDTHS * bw, side="right")) - 1
     i_before = int(np.searchsorted(f, f[p] - EDGE_BANDWIDTHS * bw))
     i_lo = int(np.searchsorted(f, lo)) + 15
-    if float(np.nanmedian(coh)) >= TOP_COHERENCE and min(i_past, i_cap) > b:
+    flank = median_coh[max(i_before, 0):a]   # the lines below the peak's top, as far as the margin reaches
+    # a resonance the input drives lifts the response out of the noise: its top is no less coherent than the
+    # lines below it; a peak whose top is less coherent is response the measured input does not explain
+    lifted = not flank.size or float(np.nanmedian(coh)) >= float(np.nanmedian(flank))
+    if float(np.nanmedian(coh)) >= TOP_COHERENCE and lifted and min(i_past, i_cap) > b:
         new = float(f[min(i_past, i_cap)])
     elif max(i_before, i_lo) < a:
         new = float(f[max(i_before, i_lo)])

@@ -36,7 +36,8 @@ from .visibility import (
 if TYPE_CHECKING:
     from .lsfd import LSFDResult
 
-__all__ = ["add_missing_modes", "unfitted_resonances", "structure_verdict", "mains_line_max_lines", "MAINS_HZ"]
+__all__ = ["add_missing_modes", "unfitted_resonances", "structure_verdict", "mains_line_max_lines", "MAINS_HZ",
+           "mains_line_poles", "neighbour_damping"]
 
 log = logging.getLogger(__name__)
 
@@ -466,6 +467,23 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
     if not worse_than_data():
         return final
     return _final_fit(frf, np.asarray(model.poles), fit_kw, warnings_out)
+
+
+def mains_line_poles(poles_raw: np.ndarray, mains: Sequence[float], df: float) -> np.ndarray:
+    """Mask of the poles (raw, rad/s) that sit on a harmonic of ``mains`` (Hz, within
+    :func:`analysis.bands.harmonic_tolerance_hz` of lines ``df`` Hz) and are much sharper than the modes (damping
+    below ``MAINS_WIDTH_FRACTION`` of the median of the others): an electrical line fitted as a mode, the rule
+    step 7 applies to the poles it would add."""
+    p = np.asarray(poles_raw, dtype=complex)
+    out = np.zeros(p.size, dtype=bool)
+    if p.size < 2 or not len(mains):
+        return out
+    f, z = natural_freq_hz(p), damping_ratio(p)
+    for k in range(p.size):
+        if mains_harmonic_index(float(f[k]), mains, df) is None:
+            continue
+        out[k] = bool(z[k] < MAINS_WIDTH_FRACTION * float(np.median(np.delete(z, k))))
+    return out
 
 
 def _report_on_mains(on_mains: Sequence[tuple[float, str]], warnings_out: list[str]) -> None:

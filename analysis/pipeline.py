@@ -275,6 +275,8 @@ def fit_auto(
                                    visible=visible)
     if given_complex is None:
         result = _drop_unsupported(fit_frf, result, fit_kw, warnings_out)
+        if grid is None or grid.hz is not None:   # the user's grid, or one the data show
+            result = _drop_mains_lines(fit_frf, result, fit_kw, mains, warnings_out)
     if not result.success:
         warnings_out.append(verdict_message("not converged", lsfd=result.message))
         log.warning("%s", warnings_out[-1])
@@ -313,6 +315,25 @@ def _drop_unsupported(frf: FRFSet, result: Any, fit_kw: dict[str, Any], warnings
     if not np.any(bad) or np.all(bad):
         return result
     msg = "dropped pole(s) without support in the structure's response: " + "; ".join(why)
+    log.info(msg)
+    warnings_out.append(msg)
+    return fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw)
+
+
+def _drop_mains_lines(frf: FRFSet, result: Any, fit_kw: dict[str, Any], mains: Sequence[float],
+                      warnings_out: list[str]) -> Any:
+    """The poles on a line of the mains grid ``mains`` (Hz) much sharper than the modes
+    (:func:`analysis.missing_modes.mains_line_poles`) dropped and the rest refitted, the drop named in the
+    warnings: the selection's poles get the rule step 7 applies to the poles it adds."""
+    from .missing_modes import mains_line_poles
+
+    bad = mains_line_poles(result.poles_raw, mains, float(frf.line_spacing_hz))
+    if not np.any(bad) or np.all(bad):
+        return result
+    fn, z = natural_freq_hz(result.poles_raw[bad]), damping_ratio(result.poles_raw[bad])
+    msg = ("dropped pole(s) on a mains line, much sharper than the modes: "
+           + ", ".join(f"{a:.6g} Hz/{100 * b:.3g} %" for a, b in zip(fn, z))
+           + f" (grid {', '.join(f'{m:g}' for m in mains)} Hz; --mains none keeps them)")
     log.info(msg)
     warnings_out.append(msg)
     return fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw)
