@@ -26,7 +26,11 @@ maximum of a curve inside the band is a visible peak when
   wide, at least ``ONE_LINE_HALF_WIDTH_LINES`` lines wide at half its prominence (in dB): a lightly
   damped mode on coarse lines has flanks that stand above the noise, a noise spike has none. Without coherence only the CMIF curve
   is searched when there are more than ``MAX_CURVES_WITHOUT_COHERENCE`` FRFs: it averages the
-  FRFs' noise, where each noisy FRF alone would show peaks of noise.
+  FRFs' noise, where each noisy FRF alone would show peaks of noise, and
+- on an FRF (not the CMIF, which has no phase), its phase turns by at least ``VISIBLE_PHASE_TURN_DEG``
+  (45 degrees) across its top: a mode's phase turns 90 degrees between its half-power points, and the
+  top spans them; a hump between two antiresonances (each turns the phase the other way) turns it by a
+  few degrees (ULiege: 15 degrees across a 12 dB hump at 101.5 Hz, at least 75 across every resonance).
 
 The peaks of every curve are kept (a resonance shows in several curves). A resonance is the
 structure's (:func:`structure_resonances`) when the CMIF shows it or at least ``STRUCTURE_MIN_SHARE``
@@ -70,6 +74,7 @@ VISIBLE_COHERENCE_FLOOR = 0.85
 BROAD_TOP_LINES = 5
 VISIBLE_MIN_LINES = 2
 MAX_CURVES_WITHOUT_COHERENCE = 8
+VISIBLE_PHASE_TURN_DEG = 45.0
 MATCH_FRACTION = 0.005
 MATCH_LINES = 1.5
 MATCH_BANDWIDTHS = 1.0
@@ -138,6 +143,12 @@ def _coherent_top(coh: np.ndarray, at_peak: float, wide: bool) -> bool:
     return bool(coh.size - 2 >= BROAD_TOP_LINES and np.median(coh[1:-1]) >= VISIBLE_COHERENCE)
 
 
+def _phase_turn_deg(h: np.ndarray) -> float:
+    """How far (degrees) the phase of the complex FRF values ``h`` (a peak's top, in frequency order) turns."""
+    ph = np.unwrap(np.angle(np.asarray(h, dtype=complex)))
+    return float(np.degrees(np.max(ph) - np.min(ph))) if ph.size else 0.0
+
+
 def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
     """The visible peaks of ``frf`` in ``band`` (lo, hi Hz) of every curve, most prominent first
     (see module docstring)."""
@@ -149,6 +160,7 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
     f = f_all[sel]
     found: list[VisiblePeak] = []
     curves = _curves(frf, sel)
+    H_sel = np.asarray(frf.H).reshape(-1, f_all.size)[:, sel]
     for ci, (name, mag, coh) in enumerate(curves):
         db = 20.0 * np.log10(np.maximum(mag, 1e-300))
         pk, _ = find_peaks(db)
@@ -165,6 +177,8 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
             a, b = max(a - 1, 0), min(b + 1, f.size - 1)
             if coh is not None and not _coherent_top(coh[a:b + 1], float(coh[i]), wide):
                 continue
+            if name != "CMIF" and _phase_turn_deg(H_sel[ci, a:b + 1]) < VISIBLE_PHASE_TURN_DEG:
+                continue   # a hump between two antiresonances, not a resonance
             index = -1 if name == "CMIF" else ci
             found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b]))))
     found.sort(key=lambda v: -v.prominence_db)
