@@ -275,7 +275,7 @@ def fit_auto(
                                    visible=visible)
     if given_complex is None:
         result = _drop_unsupported(fit_frf, result, fit_kw, warnings_out)
-        if grid is None or grid.hz is not None:   # the user's grid, or one the data show
+        if len(mains) == 1:   # one grid known (the user's, or the one the data show)
             result = _drop_mains_lines(fit_frf, result, fit_kw, mains, warnings_out)
     if not result.success:
         warnings_out.append(verdict_message("not converged", lsfd=result.message))
@@ -317,7 +317,8 @@ def _drop_unsupported(frf: FRFSet, result: Any, fit_kw: dict[str, Any], warnings
     msg = "dropped pole(s) without support in the structure's response: " + "; ".join(why)
     log.info(msg)
     warnings_out.append(msg)
-    return fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw)
+    # the refit is checked as the first fit was (a pole it moves out of the band is dropped, not reported)
+    return drop_bad_poles(frf, fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw), fit_kw, warnings_out)
 
 
 def _drop_mains_lines(frf: FRFSet, result: Any, fit_kw: dict[str, Any], mains: Sequence[float],
@@ -336,7 +337,7 @@ def _drop_mains_lines(frf: FRFSet, result: Any, fit_kw: dict[str, Any], mains: S
            + f" (grid {', '.join(f'{m:g}' for m in mains)} Hz; --mains none keeps them)")
     log.info(msg)
     warnings_out.append(msg)
-    return fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw)
+    return drop_bad_poles(frf, fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw), fit_kw, warnings_out)
 
 
 def _initial_kind(initial: str | Sequence[complex] | Sequence[float] | np.ndarray
