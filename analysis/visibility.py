@@ -39,7 +39,10 @@ of the FRFs do; peaks of a few FRFs of a large set are named, not counted.
 **Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
 a peak of the resonance (the most prominent first) are one resonance seen through different FRFs
 (a neighbouring mode shifts a peak by a few lines, the most prominent one too, so the reach is
-measured from each of its peaks); two maxima of the same curve are always two resonances. Each fitted
+measured from each of its peaks) when, on a set of several FRFs, their operating shapes (every FRF's
+value at each peak's line) agree with a MAC of at least ``SAME_SHAPE_MAC`` (two peaks of one mode
+show its shape at both lines, two close modes two shapes); two maxima of the same curve are always
+two resonances. Each fitted
 pole accounts for the resonance nearest to it within ``max(MATCH_FRACTION f, MATCH_LINES df)`` of
 one of its peaks (the nearest resonance-pole pairs first: a pole between two resonances is the
 nearer one's, whichever is more prominent). A resonance with no pole within that reach is still
@@ -55,11 +58,12 @@ another resonance, the two are a *possible close pair* fitted as one pole.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .frf import FRFSet
+from .mac import mac
 from .mif import cmif
 from .peaks import PEAK_RULES, find_peaks, peak_widths, prominences
 
@@ -82,6 +86,7 @@ STRUCTURE_MIN_SHARE = 0.05
 ONE_LINE_HALF_WIDTH_LINES = 1.5
 SAME_LINES = 2.5
 SAME_FRACTION = 0.002
+SAME_SHAPE_MAC = 0.5
 REPRODUCED_FRACTION = 0.03
 REPRODUCED_NOISE_FACTOR = 4.0
 
@@ -97,6 +102,9 @@ class VisiblePeak:
     curve: str
     curve_index: int
     top_hz: tuple = (0.0, 0.0)
+    #: the operating shape at the peak's line: every FRF's value there (outputs x references, flattened);
+    #: empty for a set of one FRF
+    shape: tuple = field(default=(), compare=False, repr=False)
 
 
 def _curves(frf: FRFSet, sel: np.ndarray) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
@@ -180,7 +188,8 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
             if name != "CMIF" and _phase_turn_deg(H_sel[ci, a:b + 1]) < VISIBLE_PHASE_TURN_DEG:
                 continue   # a hump between two antiresonances, not a resonance
             index = -1 if name == "CMIF" else ci
-            found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b]))))
+            shape = tuple(H_sel[:, i]) if H_sel.shape[0] > 1 else ()
+            found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b])), shape))
     found.sort(key=lambda v: -v.prominence_db)
     return found
 
@@ -246,7 +255,8 @@ def resonances(peaks: Sequence[VisiblePeak], df: float) -> list[list[VisiblePeak
     for i, v in enumerate(ordered):
         reach = np.maximum(max(SAME_LINES * df, SAME_FRACTION * v.freq_hz), 0.5 * np.minimum(width[:i], width[i]))
         near = np.unique(group_of[:i][np.abs(freq[:i] - v.freq_hz) <= reach])   # in the order the groups began
-        g = next((int(k) for k in near if v.curve_index not in curves[int(k)]), -1)
+        g = next((int(k) for k in near if v.curve_index not in curves[int(k)] and _same_shape(v, groups[int(k)][0])),
+                 -1)
         if g < 0:
             g = len(groups)
             groups.append([])
@@ -255,6 +265,15 @@ def resonances(peaks: Sequence[VisiblePeak], df: float) -> list[list[VisiblePeak
         curves[g].add(v.curve_index)
         group_of[i] = g
     return groups
+
+
+def _same_shape(a: VisiblePeak, b: VisiblePeak) -> bool:
+    """Whether two peaks' operating shapes (every FRF at each peak's line) agree, MAC at least ``SAME_SHAPE_MAC``:
+    two peaks of one mode show its shape at both lines; two close modes show two shapes. True when either peak
+    carries no shape (a set of one FRF) or they lie on the same line."""
+    if len(a.shape) < 2 or len(a.shape) != len(b.shape) or a.freq_hz == b.freq_hz:
+        return True
+    return mac(np.asarray(a.shape), np.asarray(b.shape)) >= SAME_SHAPE_MAC
 
 
 def _half_power_width(v: VisiblePeak, df: float) -> float:
