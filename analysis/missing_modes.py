@@ -458,7 +458,7 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
 
 
     worse_than_data()
-    _report_on_mains(on_mains, warnings_out)
+    _report_on_mains(on_mains, warnings_out, mains, df)
     if not added:
         return result
     final = _final_fit(frf, np.asarray(model.poles), fit_kw, warnings_out)
@@ -486,15 +486,21 @@ def mains_line_poles(poles_raw: np.ndarray, mains: Sequence[float], df: float) -
     return out
 
 
-def _report_on_mains(on_mains: Sequence[tuple[float, str]], warnings_out: list[str]) -> None:
+def _report_on_mains(on_mains: Sequence[tuple[float, str]], warnings_out: list[str], mains: Sequence[float],
+                     df: float) -> None:
     """One warning for the misfit peaks (Hz, reason) step 7 left on mains lines: the first one's reason, and
-    how many more there were."""
+    the others with their harmonic of ``mains`` (Hz; lines ``df`` Hz apart)."""
     if not on_mains:
         return
+
+    def named(c: float) -> str:
+        h = mains_harmonic_index(c, mains, df)
+        return f"{c:.6g}" + (f" ({h[0]} x {h[1]:g} Hz)" if h is not None else "")
+
     msg = on_mains[0][1]
     if len(on_mains) > 1:
         rest = sorted(c for c, _ in on_mains[1:])
-        shown = ", ".join(f"{c:.6g}" for c in rest[:10]) + (", ..." if len(rest) > 10 else "")
+        shown = ", ".join(named(c) for c in rest[:10]) + (", ..." if len(rest) > 10 else "")
         msg += f"; and {len(rest)} more misfit peak(s) on mains lines, not fitted as modes either: {shown} Hz"
     log.info(msg)
     warnings_out.append(msg)

@@ -113,7 +113,7 @@ from .progress import progress
 from .selection import faster_than_window, poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
-from .visibility import VisiblePeak, n_averages, visible_peaks
+from .visibility import VisiblePeak, coherence_bounds_nothing, n_averages, visible_peaks
 from .work_limits import check_model_order
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
@@ -369,7 +369,7 @@ def _start_poles(frf: FRFSet, band: tuple[float, float], stab: StabilizationResu
         poles = poles_from_frequencies(given_freqs, stab, window_shift=window_pole_shift(frf.exp_window_tau_s))
     else:
         poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
-    if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
+    if poles.size == 0 and not coherence_bounds_nothing(frf):   # peaks confirmed by the coherence only
         poles = _poles_from_peaks(frf, band, stab, warnings_out)
     elif poles.size and seed_peaks and _peaks_trusted(frf):
         poles = _with_visible_peaks(frf, band, stab, poles)
@@ -397,7 +397,7 @@ def _peaks_trusted(frf: FRFSet) -> bool:
     visibility). Without coherence a visible peak is only a bump 10 dB high and two lines wide, which
     the noise of a finely resolved FRF shows by the dozen where the excitation has no energy; such peaks
     are left to step 7's local trials."""
-    if frf.coherence is None:
+    if coherence_bounds_nothing(frf):   # none, or one average's (1 on every line)
         return False
     n_avg = n_averages(frf)
     return n_avg.size == 0 or bool(np.all(n_avg >= SEED_MIN_AVERAGES))

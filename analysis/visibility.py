@@ -70,7 +70,7 @@ from .peaks import PEAK_RULES, find_peaks, peak_widths, prominences
 __all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "coherence_measured", "VISIBLE_PROMINENCE_DB",
            "VISIBLE_COHERENCE", "VISIBLE_COHERENCE_FLOOR",
            "MATCH_FRACTION", "MATCH_LINES", "MATCH_BANDWIDTHS", "reproduced", "resonances", "structure_resonances",
-           "STRUCTURE_MIN_SHARE", "ONE_LINE_HALF_WIDTH_LINES", "n_averages"]
+           "STRUCTURE_MIN_SHARE", "ONE_LINE_HALF_WIDTH_LINES", "n_averages", "coherence_bounds_nothing"]
 
 VISIBLE_PROMINENCE_DB = PEAK_RULES["visible"].prominence_db
 VISIBLE_COHERENCE = 0.9
@@ -111,8 +111,7 @@ def _curves(frf: FRFSet, sel: np.ndarray) -> list[tuple[str, np.ndarray, np.ndar
     """(name, magnitude, coherence or None) of each curve searched, over the lines ``sel``."""
     n = frf.freq_hz.size
     # one average's coherence is 1 on every line and bounds nothing: the set is searched as without it
-    one_average = n_averages(frf).size > 0 and bool(np.all(n_averages(frf) <= 1))
-    coh = (None if frf.coherence is None or one_average
+    coh = (None if coherence_bounds_nothing(frf)
            else np.asarray(frf.coherence, float).reshape(-1, n)[:, sel])
     out: list[tuple[str, np.ndarray, np.ndarray | None]] = []
     if coh is not None or frf.n_outputs * frf.n_references <= MAX_CURVES_WITHOUT_COHERENCE:
@@ -219,6 +218,20 @@ def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.
 def n_averages(frf: FRFSet) -> np.ndarray:
     """The averages per FRF the set's metadata carries (empty when it does not say)."""
     return np.atleast_1d(np.asarray(frf.meta.get("n_averages", []) or [], dtype=float))
+
+
+def coherence_bounds_nothing(frf: FRFSet) -> bool:
+    """Whether ``frf``'s coherence says nothing about the noise: there is none, the set says it holds one
+    average per FRF, or (the number of averages unknown, as from a file that does not state it) it is 1 on
+    every line, as one average's is whatever the noise."""
+    if frf.coherence is None:
+        return True
+    n = n_averages(frf)
+    if n.size:
+        return bool(np.all(n <= 1))
+    c = np.asarray(frf.coherence, dtype=float)
+    finite = c[np.isfinite(c)]
+    return not finite.size or bool(np.all(finite >= 1.0 - 1e-9))
 
 
 def coherence_measured(frf: FRFSet) -> bool:
