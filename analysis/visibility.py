@@ -27,10 +27,12 @@ maximum of a curve inside the band is a visible peak when
   damped mode on coarse lines has flanks that stand above the noise, a noise spike has none. Without coherence only the CMIF curve
   is searched when there are more than ``MAX_CURVES_WITHOUT_COHERENCE`` FRFs: it averages the
   FRFs' noise, where each noisy FRF alone would show peaks of noise, and
-- on an FRF (not the CMIF, which has no phase), its phase turns by at least ``VISIBLE_PHASE_TURN_DEG``
-  (45 degrees) across its top: a mode's phase turns 90 degrees between its half-power points, and the
-  top spans them; a hump between two antiresonances (each turns the phase the other way) turns it by a
-  few degrees (ULiege: 15 degrees across a 12 dB hump at 101.5 Hz, at least 75 across every resonance).
+- on one FRF of several (not on the CMIF, which has no phase, nor on a set's only FRF, which is its CMIF),
+  its phase turns by at least ``VISIBLE_PHASE_TURN_DEG`` (45 degrees) across its top: a mode's phase turns
+  90 degrees between its half-power points, and the top spans them; a hump between two antiresonances
+  (each turns the phase the other way) turns it by a few degrees (ULiege: 15 degrees across a 12 dB hump
+  at 101.5 Hz in one FRF of six, at least 75 across every resonance). A lone FRF is not judged so: a
+  swept sine's FRF (the LADISK plate) turns its phase by 10-30 degrees across resonances of 20-40 dB.
 
 The peaks of every curve are kept (a resonance shows in several curves). A resonance is the
 structure's (:func:`structure_resonances`) when the CMIF shows it or at least ``STRUCTURE_MIN_SHARE``
@@ -184,8 +186,9 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
             a, b = max(a - 1, 0), min(b + 1, f.size - 1)
             if coh is not None and not _coherent_top(coh[a:b + 1], float(coh[i]), wide):
                 continue
-            if name != "CMIF" and _phase_turn_deg(H_sel[ci, a:b + 1]) < VISIBLE_PHASE_TURN_DEG:
-                continue   # a hump between two antiresonances, not a resonance
+            if (name != "CMIF" and H_sel.shape[0] > 1
+                    and _phase_turn_deg(H_sel[ci, a:b + 1]) < VISIBLE_PHASE_TURN_DEG):
+                continue   # a hump between two antiresonances in one FRF of several, not a resonance
             index = -1 if name == "CMIF" else ci
             shape = tuple(H_sel[:, i]) if H_sel.shape[0] > 1 else ()
             found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b])), shape))
