@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .bands import MAINS_HZ, harmonic_tolerance_hz, mains_harmonic_index
-from .bounded_fit import bad_poles, trust_window_hz
+from .bounded_fit import DAMPING_WINDOW, bad_poles, trust_window_hz
 from .fit_checks import DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, bandwidth_hz
 from .fit_result import MAX_DAMPING
 from .frf import FRFSet
@@ -289,8 +289,8 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
 
     df = float(frf.line_spacing_hz)
     f_all = natural_freq_hz(model.poles)
-    z_ref = neighbour_damping(model, c, z0)   # the modes near it: the start's damping and the "too broad" scale
-    new = pole_from_fz(c, z_ref)
+    z_ref = neighbour_damping(model, c, z0)   # the modes near it: the "too broad" scale, and a second start
+    new = pole_from_fz(c, z0)
     hw = max(LOCAL_BANDWIDTHS * float(bandwidth_hz(np.array([new]), df)[0]), LOCAL_MIN_LINES * df)
     nb_mask = np.abs(f_all - c) < hw
     nb = np.flatnonzero(nb_mask)
@@ -321,6 +321,11 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
             else:
                 e_old = _residual_terms_only(local, fit_kw.get("residual_form", "physical"), w)
             trial = fit_lsfd(local, start, weights=w, freq_window_hz=trust_window_hz(start, df), **kw)
+            if z_ref > z0 and -trial.poles_raw[-1].real >= 0.99 * DAMPING_WINDOW * -start[-1].real:
+                # the new pole ended on its decay-rate check (four times its start's): the modes near it are
+                # damped more than the whole model; it starts again at their damping
+                start = np.concatenate([start_old, [pole_from_fz(c, z_ref)]])
+                trial = fit_lsfd(local, start, weights=w, freq_window_hz=trust_window_hz(start, df), **kw)
     except (ValueError, np.linalg.LinAlgError) as exc:
         return _Trial(False, f"the local fit failed ({exc})")
     if any(issubclass(x.category, LSFDConvergenceWarning) for x in caught):
