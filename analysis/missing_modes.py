@@ -274,6 +274,79 @@ def neighbour_damping(model: ModalModel, c: float, z0: float) -> float:
     return max(float(z0), float(np.median(damping_ratio(np.asarray(model.poles)[near]))))
 
 
+def _local_problem(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float, hw: float, fit_kw: dict,
+                   extra: int = 0) -> tuple[FRFSet, np.ndarray, np.ndarray | None, dict, tuple[float, float]] | None:
+    """The local problem of step 7 around ``c`` Hz: ``(the data minus the synthesis of every pole farther than
+    ``hw`` Hz from c (and of the residual terms) over the lines within ``hw`` of c and of those neighbours, the
+    neighbours' mask, the FRF weights, the LSFD options of a local verdict, the window (lo, hi Hz))``; None when
+    the window holds too few lines for the neighbours and ``extra`` more poles."""
+    from dataclasses import replace
+
+    f_all = natural_freq_hz(model.poles)
+    nb_mask = np.abs(f_all - c) < hw
+    nb = np.flatnonzero(nb_mask)
+    lo = max(float(band[0]), min([c - hw] + [f_all[k] - hw for k in nb]))
+    hi = min(float(band[1]), max([c + hw] + [f_all[k] + hw for k in nb]))
+    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
+    if int(np.sum(sel)) < 2 * (nb.size + extra) + 4:
+        return None
+    far = _with_poles(model, ~nb_mask)
+    f_loc = frf.freq_hz[sel]
+    D = frf.H[..., sel] - transfer(far, 2j * np.pi * f_loc).reshape(frf.H.shape[:2] + (f_loc.size,))
+    local = replace(frf.band(lo, hi), H=D)
+    kw = {k: v for k, v in fit_kw.items() if k not in ("band", "weights")}
+    kw["max_iter"] = min(int(fit_kw.get("max_iter", 100)), MISSING_TRIAL_ITER)
+    kw["ftol"], kw["xtol"] = LOCAL_TOL, LOCAL_TOL   # a verdict, not the final estimate (the full LSFD follows)
+    return local, nb_mask, fit_kw.get("weights"), kw, (lo, hi)
+
+
+def _reseat_unresolved(frf: FRFSet, model: ModalModel, band: Sequence[float], fit_kw: dict,
+                       df: float) -> tuple[ModalModel, list[str]]:
+    """Poles closer than ``MISSING_MIN_LINES`` lines or a quarter of the smaller bandwidth (the resolution rule
+    of :func:`_new_pole_relation`) where the whole-band fit left them: two close modes squeezed together, the
+    band's far misfit weighed against them (the simulated frame's 995.2 / 1000.2 Hz pair, held at 997.8 and
+    1000.1 Hz). Each such pair and its neighbours are refitted once locally, as step 7's trials are (on the
+    data minus the other poles, over a few bandwidths), and the local poles are taken when they pass step 6's
+    checks, lower the local cost and move a pole by a line or more. Returns the model and a note per pair."""
+    from .lsfd import LSFDConvergenceWarning, fit_lsfd, lsfd_at_poles
+
+    notes: list[str] = []
+    f0 = natural_freq_hz(model.poles)
+    b0 = bandwidth_hz(np.asarray(model.poles), df)
+    o = np.argsort(f0)
+    close = np.diff(f0[o]) < np.maximum(MISSING_MIN_LINES * df, 0.25 * np.minimum(b0[o][:-1], b0[o][1:]))
+    for k in np.flatnonzero(close):
+        fa, fb = float(f0[o[k]]), float(f0[o[k + 1]])
+        f = natural_freq_hz(model.poles)
+        if np.min(np.abs(f - fa)) > 0.5 * df or np.min(np.abs(f - fb)) > 0.5 * df:
+            continue   # a refit of a neighbouring pair has moved them already
+        loc = _local_problem(frf, model, band, 0.5 * (fa + fb),
+                             max(LOCAL_BANDWIDTHS * float(max(b0[o[k]], b0[o[k + 1]])), LOCAL_MIN_LINES * df), fit_kw)
+        if loc is None:
+            continue
+        local, nb_mask, w, kw, _ = loc
+        start = np.asarray(model.poles)[nb_mask]
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", LSFDConvergenceWarning)
+                now = lsfd_at_poles(local, start, residual_form=kw.get("residual_form", "physical"), weights=w)
+                refit = fit_lsfd(local, start, weights=w, freq_window_hz=trust_window_hz(start, df), **kw)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if any(issubclass(x.category, LSFDConvergenceWarning) for x in caught):
+            continue
+        c_now = float(np.sum(_line_costs(local, now, w) ** 2))
+        c_new = float(np.sum(_line_costs(local, refit, w) ** 2))
+        moved = float(np.max(np.abs(natural_freq_hz(refit.poles_raw) - natural_freq_hz(start))))
+        if np.any(bad_poles(refit, start, df)[0]) or not c_new < c_now or moved < df:
+            continue
+        notes.append(f"refitted the poles at {fa:.5g} and {fb:.5g} Hz and their neighbours locally (closer than "
+                     f"the data resolve): {', '.join(f'{x:.5g}' for x in sorted(natural_freq_hz(refit.poles_raw)))} "
+                     f"Hz (local cost {c_now:.4g} -> {c_new:.4g})")
+        model = _with_poles(model, ~nb_mask, refit.poles_raw, refit.model_raw.residues)
+    return model, notes
+
+
 def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float, z0: float, fit_kw: dict,
                  min_gain: float, peak: VisiblePeak | None = None) -> _Trial:
     """Try a pole at ``c`` Hz by an LSFD over the lines around it, fitted to the residual of the
@@ -288,28 +361,15 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
     from .lsfd import LSFDConvergenceWarning, fit_lsfd
 
     df = float(frf.line_spacing_hz)
-    f_all = natural_freq_hz(model.poles)
     z_ref = neighbour_damping(model, c, z0)   # the modes near it: the "too broad" scale, and a second start
     new = pole_from_fz(c, z0)
     hw = max(LOCAL_BANDWIDTHS * float(bandwidth_hz(np.array([new]), df)[0]), LOCAL_MIN_LINES * df)
-    nb_mask = np.abs(f_all - c) < hw
-    nb = np.flatnonzero(nb_mask)
-    lo = max(float(band[0]), min([c - hw] + [f_all[k] - hw for k in nb]))
-    hi = min(float(band[1]), max([c + hw] + [f_all[k] + hw for k in nb]))
-    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
-    n_lines = int(np.sum(sel))
-    if n_lines < 2 * (nb.size + 1) + 4:
+    loc = _local_problem(frf, model, band, c, hw, fit_kw, extra=1)
+    if loc is None:
         return _Trial(False, "too few lines around it")
-    far = _with_poles(model, ~nb_mask)
-    from dataclasses import replace
-
-    f_loc = frf.freq_hz[sel]
-    D = frf.H[..., sel] - transfer(far, 2j * np.pi * f_loc).reshape(frf.H.shape[:2] + (f_loc.size,))
-    local = replace(frf.band(lo, hi), H=D)
-    w = fit_kw.get("weights")
-    kw = {k: v for k, v in fit_kw.items() if k not in ("band", "weights")}
-    kw["max_iter"] = min(int(fit_kw.get("max_iter", 100)), MISSING_TRIAL_ITER)
-    kw["ftol"], kw["xtol"] = LOCAL_TOL, LOCAL_TOL   # a verdict, not the final estimate (the full LSFD follows)
+    local, nb_mask, w, kw, (lo, hi) = loc
+    nb = np.flatnonzero(nb_mask)
+    f_loc = local.freq_hz
     start_old = np.asarray(model.poles)[nb]
     start = np.concatenate([start_old, [new]])
     try:
@@ -464,7 +524,8 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
 
     worse_than_data()
     _report_on_mains(on_mains, warnings_out, mains, df)
-    if not added:
+    model, reseated = _reseat(frf, model, band, fit_kw, df, warnings_out)
+    if not added and not reseated:
         return result
     final = _final_fit(frf, np.asarray(model.poles), fit_kw, warnings_out)
     # the full fit moves every pole a little; where it then misses the data by the data's level, once more
@@ -489,6 +550,16 @@ def mains_line_poles(poles_raw: np.ndarray, mains: Sequence[float], df: float) -
             continue
         out[k] = bool(z[k] < MAINS_WIDTH_FRACTION * float(np.median(np.delete(z, k))))
     return out
+
+
+def _reseat(frf: FRFSet, model: ModalModel, band: Sequence[float], fit_kw: dict, df: float,
+            warnings_out: list[str]) -> tuple[ModalModel, bool]:
+    """:func:`_reseat_unresolved`, its notes logged and kept in ``warnings_out``; whether it moved any pole."""
+    model, notes = _reseat_unresolved(frf, model, band, fit_kw, df)
+    for msg in notes:
+        log.info(msg)
+    warnings_out += notes
+    return model, bool(notes)
 
 
 def _report_on_mains(on_mains: Sequence[tuple[float, str]], warnings_out: list[str], mains: Sequence[float],

@@ -65,10 +65,12 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    (:func:`analysis.missing_modes._pair_is_resolved`). A candidate on a mains harmonic
    (``mains_hz``) much narrower than a mode and no wider than a steady line of the record
    (:func:`analysis.missing_modes.mains_line_max_lines`) is not tried (reported in the warnings). The local
-   trials cost a few milliseconds each (tens of lines instead of the whole band); one LSFD over
-   the whole band follows from all poles, each held within ``FINAL_BANDWIDTHS`` half-power
-   bandwidths and a factor ``FINAL_DAMPING_WINDOW`` in damping of its local estimate (on a wide
-   band an unbounded fit turns weak modes into very damped poles that absorb broadband misfit).
+   trials cost a few milliseconds each (tens of lines instead of the whole band); poles closer than the
+   data resolve are refitted locally with their neighbours
+   (:func:`analysis.missing_modes._reseat_unresolved`); one LSFD over the whole band follows from all
+   poles, each held within ``FINAL_BANDWIDTHS`` half-power bandwidths and a factor
+   ``FINAL_DAMPING_WINDOW`` in damping of its local estimate (on a wide band an unbounded fit turns
+   weak modes into very damped poles that absorb broadband misfit).
    The step also runs with the user's frequencies/poles (poles are only added). Lines given in
    ``exclude_hz`` are left out of the LSFD and of this step (:func:`exclude_lines`).
 8. **Verdict**: suspension modes (:mod:`analysis.suspension`: resonances at most a fifth of the
