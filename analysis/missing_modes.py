@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .bands import MAINS_HZ, harmonic_tolerance_hz, mains_harmonic_index
-from .bounded_fit import bad_poles, trust_window_hz
+from .bounded_fit import DAMPING_WINDOW, bad_poles, trust_window_hz
 from .fit_checks import DUPLICATE_BANDWIDTHS, DUPLICATE_MAC, bandwidth_hz
 from .fit_result import MAX_DAMPING
 from .frf import FRFSet
@@ -36,13 +36,17 @@ from .visibility import (
 if TYPE_CHECKING:
     from .lsfd import LSFDResult
 
-__all__ = ["add_missing_modes", "unfitted_resonances", "structure_verdict", "mains_line_max_lines", "MAINS_HZ"]
+__all__ = ["add_missing_modes", "unfitted_resonances", "structure_verdict", "mains_line_max_lines", "MAINS_HZ",
+           "mains_line_poles", "neighbour_damping"]
 
 log = logging.getLogger(__name__)
 
 
 MISSING_MEDIAN_FACTOR = 4.0
 MISSING_DATA_FRACTION = 0.25
+#: a misfit peak where the model misses the data by at least the data's own level (the model is no better than
+#: none there) is tried even after the strongest misfit peaks failed
+WORSE_THAN_DATA = 1.0
 MAX_ADDED = 40
 MISSING_BANDWIDTH_RATIO = 4.0
 MAX_FAILED_TRIES = 2
@@ -63,6 +67,10 @@ SPLIT_MIN_GAIN = 0.75
 REPRODUCED_MIN_GAIN = 0.2
 MAX_FAILED_VISIBLE = 6
 NOT_A_RESONANCE_DAMPING_RATIO = 6.0
+#: the modes a tried pole's damping is compared with: the model's poles within this fraction of its frequency
+#: (their median, when it is above the whole model's); damping changes over a wide band (a group of modes near
+#: 900 Hz at 0.1 %, the lightly damped ones of 3-6 kHz at 0.03 %) and a mode is broad only against its neighbours
+NEIGHBOUR_DAMPING_FRACTION = 0.1
 SPLIT_MIN_RATIO = 0.01
 LOCAL_TOL = 1e-7
 FINAL_BANDWIDTHS = 0.1
@@ -98,11 +106,13 @@ def _scaled_misfit(frf: FRFSet, model: ModalModel, band: Sequence[float]) -> tup
     return f, e, d
 
 
-def _missing_candidates(f: np.ndarray, e: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Frequencies (Hz) of the misfit peaks of step 7, strongest first."""
+def _missing_candidates(f: np.ndarray, e: np.ndarray, d: np.ndarray,
+                        data_fraction: float = MISSING_DATA_FRACTION) -> np.ndarray:
+    """Frequencies (Hz) of the misfit peaks of step 7 (above ``MISSING_MEDIAN_FACTOR`` times the misfit's
+    median and ``data_fraction`` of the data there), strongest first."""
     level = MISSING_MEDIAN_FACTOR * float(np.median(e))
     pk, _ = find_peaks(e)
-    pk = pk[(e[pk] > level) & (e[pk] > MISSING_DATA_FRACTION * d[pk])]
+    pk = pk[(e[pk] > level) & (e[pk] > data_fraction * d[pk])]
     return f[pk[np.argsort(-e[pk])]]
 
 
@@ -254,6 +264,89 @@ def _makes_peak(frf: FRFSet, model: ModalModel, nb_mask: np.ndarray, trial: LSFD
             and reproduced(frf, peak, lambda f: transfer(new, 2j * np.pi * f)))
 
 
+def neighbour_damping(model: ModalModel, c: float, z0: float) -> float:
+    """The damping ratio a pole tried at ``c`` Hz is compared with: the median of ``model``'s poles (raw) within
+    ``NEIGHBOUR_DAMPING_FRACTION`` of ``c`` when that is above ``z0`` (the whole model's median), else ``z0``."""
+    f = natural_freq_hz(model.poles)
+    near = np.abs(f - float(c)) <= NEIGHBOUR_DAMPING_FRACTION * float(c)
+    if not np.any(near):
+        return float(z0)
+    return max(float(z0), float(np.median(damping_ratio(np.asarray(model.poles)[near]))))
+
+
+def _local_problem(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float, hw: float, fit_kw: dict,
+                   extra: int = 0) -> tuple[FRFSet, np.ndarray, np.ndarray | None, dict, tuple[float, float]] | None:
+    """The local problem of step 7 around ``c`` Hz: ``(the data minus the synthesis of every pole farther than
+    ``hw`` Hz from c (and of the residual terms) over the lines within ``hw`` of c and of those neighbours, the
+    neighbours' mask, the FRF weights, the LSFD options of a local verdict, the window (lo, hi Hz))``; None when
+    the window holds too few lines for the neighbours and ``extra`` more poles."""
+    from dataclasses import replace
+
+    f_all = natural_freq_hz(model.poles)
+    nb_mask = np.abs(f_all - c) < hw
+    nb = np.flatnonzero(nb_mask)
+    lo = max(float(band[0]), min([c - hw] + [f_all[k] - hw for k in nb]))
+    hi = min(float(band[1]), max([c + hw] + [f_all[k] + hw for k in nb]))
+    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
+    if int(np.sum(sel)) < 2 * (nb.size + extra) + 4:
+        return None
+    far = _with_poles(model, ~nb_mask)
+    f_loc = frf.freq_hz[sel]
+    D = frf.H[..., sel] - transfer(far, 2j * np.pi * f_loc).reshape(frf.H.shape[:2] + (f_loc.size,))
+    local = replace(frf.band(lo, hi), H=D)
+    kw = {k: v for k, v in fit_kw.items() if k not in ("band", "weights")}
+    kw["max_iter"] = min(int(fit_kw.get("max_iter", 100)), MISSING_TRIAL_ITER)
+    kw["ftol"], kw["xtol"] = LOCAL_TOL, LOCAL_TOL   # a verdict, not the final estimate (the full LSFD follows)
+    return local, nb_mask, fit_kw.get("weights"), kw, (lo, hi)
+
+
+def _reseat_unresolved(frf: FRFSet, model: ModalModel, band: Sequence[float], fit_kw: dict,
+                       df: float) -> tuple[ModalModel, list[str]]:
+    """Poles closer than ``MISSING_MIN_LINES`` lines or a quarter of the smaller bandwidth (the resolution rule
+    of :func:`_new_pole_relation`) where the whole-band fit left them: two close modes squeezed together, the
+    band's far misfit weighed against them (the simulated frame's 995.2 / 1000.2 Hz pair, held at 997.8 and
+    1000.1 Hz). Each such pair and its neighbours are refitted once locally, as step 7's trials are (on the
+    data minus the other poles, over a few bandwidths), and the local poles are taken when they pass step 6's
+    checks, lower the local cost and move a pole by a line or more. Returns the model and a note per pair."""
+    from .lsfd import LSFDConvergenceWarning, fit_lsfd, lsfd_at_poles
+
+    notes: list[str] = []
+    f0 = natural_freq_hz(model.poles)
+    b0 = bandwidth_hz(np.asarray(model.poles), df)
+    o = np.argsort(f0)
+    close = np.diff(f0[o]) < np.maximum(MISSING_MIN_LINES * df, 0.25 * np.minimum(b0[o][:-1], b0[o][1:]))
+    for k in np.flatnonzero(close):
+        fa, fb = float(f0[o[k]]), float(f0[o[k + 1]])
+        f = natural_freq_hz(model.poles)
+        if np.min(np.abs(f - fa)) > 0.5 * df or np.min(np.abs(f - fb)) > 0.5 * df:
+            continue   # a refit of a neighbouring pair has moved them already
+        loc = _local_problem(frf, model, band, 0.5 * (fa + fb),
+                             max(LOCAL_BANDWIDTHS * float(max(b0[o[k]], b0[o[k + 1]])), LOCAL_MIN_LINES * df), fit_kw)
+        if loc is None:
+            continue
+        local, nb_mask, w, kw, _ = loc
+        start = np.asarray(model.poles)[nb_mask]
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", LSFDConvergenceWarning)
+                now = lsfd_at_poles(local, start, residual_form=kw.get("residual_form", "physical"), weights=w)
+                refit = fit_lsfd(local, start, weights=w, freq_window_hz=trust_window_hz(start, df), **kw)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if any(issubclass(x.category, LSFDConvergenceWarning) for x in caught):
+            continue
+        c_now = float(np.sum(_line_costs(local, now, w) ** 2))
+        c_new = float(np.sum(_line_costs(local, refit, w) ** 2))
+        moved = float(np.max(np.abs(natural_freq_hz(refit.poles_raw) - natural_freq_hz(start))))
+        if np.any(bad_poles(refit, start, df)[0]) or not c_new < c_now or moved < df:
+            continue
+        notes.append(f"refitted the poles at {fa:.5g} and {fb:.5g} Hz and their neighbours locally (closer than "
+                     f"the data resolve): {', '.join(f'{x:.5g}' for x in sorted(natural_freq_hz(refit.poles_raw)))} "
+                     f"Hz (local cost {c_now:.4g} -> {c_new:.4g})")
+        model = _with_poles(model, ~nb_mask, refit.poles_raw, refit.model_raw.residues)
+    return model, notes
+
+
 def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float, z0: float, fit_kw: dict,
                  min_gain: float, peak: VisiblePeak | None = None) -> _Trial:
     """Try a pole at ``c`` Hz by an LSFD over the lines around it, fitted to the residual of the
@@ -268,27 +361,15 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
     from .lsfd import LSFDConvergenceWarning, fit_lsfd
 
     df = float(frf.line_spacing_hz)
-    f_all = natural_freq_hz(model.poles)
+    z_ref = neighbour_damping(model, c, z0)   # the modes near it: the "too broad" scale, and a second start
     new = pole_from_fz(c, z0)
     hw = max(LOCAL_BANDWIDTHS * float(bandwidth_hz(np.array([new]), df)[0]), LOCAL_MIN_LINES * df)
-    nb_mask = np.abs(f_all - c) < hw
-    nb = np.flatnonzero(nb_mask)
-    lo = max(float(band[0]), min([c - hw] + [f_all[k] - hw for k in nb]))
-    hi = min(float(band[1]), max([c + hw] + [f_all[k] + hw for k in nb]))
-    sel = (frf.freq_hz >= lo) & (frf.freq_hz <= hi)
-    n_lines = int(np.sum(sel))
-    if n_lines < 2 * (nb.size + 1) + 4:
+    loc = _local_problem(frf, model, band, c, hw, fit_kw, extra=1)
+    if loc is None:
         return _Trial(False, "too few lines around it")
-    far = _with_poles(model, ~nb_mask)
-    from dataclasses import replace
-
-    f_loc = frf.freq_hz[sel]
-    D = frf.H[..., sel] - transfer(far, 2j * np.pi * f_loc).reshape(frf.H.shape[:2] + (f_loc.size,))
-    local = replace(frf.band(lo, hi), H=D)
-    w = fit_kw.get("weights")
-    kw = {k: v for k, v in fit_kw.items() if k not in ("band", "weights")}
-    kw["max_iter"] = min(int(fit_kw.get("max_iter", 100)), MISSING_TRIAL_ITER)
-    kw["ftol"], kw["xtol"] = LOCAL_TOL, LOCAL_TOL   # a verdict, not the final estimate (the full LSFD follows)
+    local, nb_mask, w, kw, (lo, hi) = loc
+    nb = np.flatnonzero(nb_mask)
+    f_loc = local.freq_hz
     start_old = np.asarray(model.poles)[nb]
     start = np.concatenate([start_old, [new]])
     try:
@@ -300,6 +381,11 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
             else:
                 e_old = _residual_terms_only(local, fit_kw.get("residual_form", "physical"), w)
             trial = fit_lsfd(local, start, weights=w, freq_window_hz=trust_window_hz(start, df), **kw)
+            if z_ref > z0 and -trial.poles_raw[-1].real >= 0.99 * DAMPING_WINDOW * -start[-1].real:
+                # the new pole ended on its decay-rate check (four times its start's): the modes near it are
+                # damped more than the whole model; it starts again at their damping
+                start = np.concatenate([start_old, [pole_from_fz(c, z_ref)]])
+                trial = fit_lsfd(local, start, weights=w, freq_window_hz=trust_window_hz(start, df), **kw)
     except (ValueError, np.linalg.LinAlgError) as exc:
         return _Trial(False, f"the local fit failed ({exc})")
     if any(issubclass(x.category, LSFDConvergenceWarning) for x in caught):
@@ -310,9 +396,9 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
     f_new = float(natural_freq_hz(trial.poles_raw[-1]))
     if not 0.0 < z_new < MAX_DAMPING or not lo <= f_new <= hi:
         return _Trial(False, f"the pole went to {f_new:.5g} Hz/{100 * z_new:.3g} %", not_mode=True)
-    if z_new > NOT_A_RESONANCE_DAMPING_RATIO * max(z0, 0.5 * df / max(c, df)):
-        return _Trial(False, f"too broad for a mode ({100 * z_new:.3g} % against {100 * z0:.3g} % of the modes)",
-                      not_mode=True)
+    if z_new > NOT_A_RESONANCE_DAMPING_RATIO * max(z_ref, 0.5 * df / max(c, df)):
+        return _Trial(False, f"too broad for a mode ({100 * z_new:.3g} % against {100 * z_ref:.3g} % of the modes "
+                             "near it)", not_mode=True)
     bad, _ = bad_poles(trial, start, df, duplicates=False)
     if np.any(bad):
         return _Trial(False, f"{int(np.sum(bad))} pole(s) of the local fit fail the checks")
@@ -421,17 +507,79 @@ def add_missing_modes(frf: FRFSet, result: LSFDResult, fit_kw: dict, warnings_ou
         if not cands:
             break
         failures = 0 if attempt(float(cands[0]), MISFIT_MIN_GAIN) else failures + 1
-    if on_mains:
-        msg = on_mains[0][1]
-        if len(on_mains) > 1:
-            rest = sorted(c for c, _ in on_mains[1:])
-            shown = ", ".join(f"{c:.6g}" for c in rest[:10]) + (", ..." if len(rest) > 10 else "")
-            msg += f"; and {len(rest)} more misfit peak(s) on mains lines, not fitted as modes either: {shown} Hz"
-        log.info(msg)
-        warnings_out.append(msg)
-    if not added:
+
+    def worse_than_data() -> bool:
+        """The strongest misfit peaks of a wide band sit where the FRF is large; a weak mode elsewhere, where
+        the model misses the data by at least the data's own level, is tried once whatever failed before it."""
+        f, e, d = _scaled_misfit(frf, model, band)
+        found = False
+        for c in _missing_candidates(f, e, d, WORSE_THAN_DATA):
+            if added >= MAX_ADDED:
+                break
+            if all(abs(c - x) > 2 * df for x in tried) and attempt(float(c), MISFIT_MIN_GAIN):
+                found = True
+                f, e, d = _scaled_misfit(frf, model, band)
+        return found
+
+
+    worse_than_data()
+    _report_on_mains(on_mains, warnings_out, mains, df)
+    model, reseated = _reseat(frf, model, band, fit_kw, df, warnings_out)
+    if not added and not reseated:
         return result
+    final = _final_fit(frf, np.asarray(model.poles), fit_kw, warnings_out)
+    # the full fit moves every pole a little; where it then misses the data by the data's level, once more
+    model = final.model_raw
+    if not worse_than_data():
+        return final
     return _final_fit(frf, np.asarray(model.poles), fit_kw, warnings_out)
+
+
+def mains_line_poles(poles_raw: np.ndarray, mains: Sequence[float], df: float) -> np.ndarray:
+    """Mask of the poles (raw, rad/s) that sit on a harmonic of ``mains`` (Hz, within
+    :func:`analysis.bands.harmonic_tolerance_hz` of lines ``df`` Hz) and are much sharper than the modes (damping
+    below ``MAINS_WIDTH_FRACTION`` of the median of the others): an electrical line fitted as a mode, the rule
+    step 7 applies to the poles it would add."""
+    p = np.asarray(poles_raw, dtype=complex)
+    out = np.zeros(p.size, dtype=bool)
+    if p.size < 2 or not len(mains):
+        return out
+    f, z = natural_freq_hz(p), damping_ratio(p)
+    for k in range(p.size):
+        if mains_harmonic_index(float(f[k]), mains, df) is None:
+            continue
+        out[k] = bool(z[k] < MAINS_WIDTH_FRACTION * float(np.median(np.delete(z, k))))
+    return out
+
+
+def _reseat(frf: FRFSet, model: ModalModel, band: Sequence[float], fit_kw: dict, df: float,
+            warnings_out: list[str]) -> tuple[ModalModel, bool]:
+    """:func:`_reseat_unresolved`, its notes logged and kept in ``warnings_out``; whether it moved any pole."""
+    model, notes = _reseat_unresolved(frf, model, band, fit_kw, df)
+    for msg in notes:
+        log.info(msg)
+    warnings_out += notes
+    return model, bool(notes)
+
+
+def _report_on_mains(on_mains: Sequence[tuple[float, str]], warnings_out: list[str], mains: Sequence[float],
+                     df: float) -> None:
+    """One warning for the misfit peaks (Hz, reason) step 7 left on mains lines: the first one's reason, and
+    the others with their harmonic of ``mains`` (Hz; lines ``df`` Hz apart)."""
+    if not on_mains:
+        return
+
+    def named(c: float) -> str:
+        h = mains_harmonic_index(c, mains, df)
+        return f"{c:.6g}" + (f" ({h[0]} x {h[1]:g} Hz)" if h is not None else "")
+
+    msg = on_mains[0][1]
+    if len(on_mains) > 1:
+        rest = sorted(c for c, _ in on_mains[1:])
+        shown = ", ".join(named(c) for c in rest[:10]) + (", ..." if len(rest) > 10 else "")
+        msg += f"; and {len(rest)} more misfit peak(s) on mains lines, not fitted as modes either: {shown} Hz"
+    log.info(msg)
+    warnings_out.append(msg)
 
 
 def _final_fit(frf: FRFSet, poles: np.ndarray, fit_kw: dict, warnings_out: list[str]) -> LSFDResult:

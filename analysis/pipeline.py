@@ -65,10 +65,12 @@ Modules: :mod:`analysis.bands` (steps 1 and 4), :mod:`analysis.bounded_fit` (5-6
    (:func:`analysis.missing_modes._pair_is_resolved`). A candidate on a mains harmonic
    (``mains_hz``) much narrower than a mode and no wider than a steady line of the record
    (:func:`analysis.missing_modes.mains_line_max_lines`) is not tried (reported in the warnings). The local
-   trials cost a few milliseconds each (tens of lines instead of the whole band); one LSFD over
-   the whole band follows from all poles, each held within ``FINAL_BANDWIDTHS`` half-power
-   bandwidths and a factor ``FINAL_DAMPING_WINDOW`` in damping of its local estimate (on a wide
-   band an unbounded fit turns weak modes into very damped poles that absorb broadband misfit).
+   trials cost a few milliseconds each (tens of lines instead of the whole band); poles closer than the
+   data resolve are refitted locally with their neighbours
+   (:func:`analysis.missing_modes._reseat_unresolved`); one LSFD over the whole band follows from all
+   poles, each held within ``FINAL_BANDWIDTHS`` half-power bandwidths and a factor
+   ``FINAL_DAMPING_WINDOW`` in damping of its local estimate (on a wide band an unbounded fit turns
+   weak modes into very damped poles that absorb broadband misfit).
    The step also runs with the user's frequencies/poles (poles are only added). Lines given in
    ``exclude_hz`` are left out of the LSFD and of this step (:func:`exclude_lines`).
 8. **Verdict**: suspension modes (:mod:`analysis.suspension`: resonances at most a fifth of the
@@ -113,7 +115,7 @@ from .progress import progress
 from .selection import faster_than_window, poles_from_frequencies, select_poles
 from .stabilization import StabilizationResult, stabilization
 from .threads import limits_blas_threads
-from .visibility import VisiblePeak, n_averages, visible_peaks
+from .visibility import VisiblePeak, coherence_bounds_nothing, n_averages, visible_peaks
 from .work_limits import check_model_order
 
 __all__ = ["fit_auto", "FitResult", "default_band", "default_max_modes", "check_band_edges", "FitError", "rms_weights",
@@ -275,6 +277,8 @@ def fit_auto(
                                    visible=visible)
     if given_complex is None:
         result = _drop_unsupported(fit_frf, result, fit_kw, warnings_out)
+        if len(mains) == 1:   # one grid known (the user's, or the one the data show)
+            result = _drop_mains_lines(fit_frf, result, fit_kw, mains, warnings_out)
     if not result.success:
         warnings_out.append(verdict_message("not converged", lsfd=result.message))
         log.warning("%s", warnings_out[-1])
@@ -315,7 +319,27 @@ def _drop_unsupported(frf: FRFSet, result: Any, fit_kw: dict[str, Any], warnings
     msg = "dropped pole(s) without support in the structure's response: " + "; ".join(why)
     log.info(msg)
     warnings_out.append(msg)
-    return fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw)
+    # the refit is checked as the first fit was (a pole it moves out of the band is dropped, not reported)
+    return drop_bad_poles(frf, fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw), fit_kw, warnings_out)
+
+
+def _drop_mains_lines(frf: FRFSet, result: Any, fit_kw: dict[str, Any], mains: Sequence[float],
+                      warnings_out: list[str]) -> Any:
+    """The poles on a line of the mains grid ``mains`` (Hz) much sharper than the modes
+    (:func:`analysis.missing_modes.mains_line_poles`) dropped and the rest refitted, the drop named in the
+    warnings: the selection's poles get the rule step 7 applies to the poles it adds."""
+    from .missing_modes import mains_line_poles
+
+    bad = mains_line_poles(result.poles_raw, mains, float(frf.line_spacing_hz))
+    if not np.any(bad) or np.all(bad):
+        return result
+    fn, z = natural_freq_hz(result.poles_raw[bad]), damping_ratio(result.poles_raw[bad])
+    msg = ("dropped pole(s) on a mains line, much sharper than the modes: "
+           + ", ".join(f"{a:.6g} Hz/{100 * b:.3g} %" for a, b in zip(fn, z))
+           + f" (grid {', '.join(f'{m:g}' for m in mains)} Hz; --mains none keeps them)")
+    log.info(msg)
+    warnings_out.append(msg)
+    return drop_bad_poles(frf, fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw), fit_kw, warnings_out)
 
 
 def _initial_kind(initial: str | Sequence[complex] | Sequence[float] | np.ndarray
@@ -347,7 +371,7 @@ def _start_poles(frf: FRFSet, band: tuple[float, float], stab: StabilizationResu
         poles = poles_from_frequencies(given_freqs, stab, window_shift=window_pole_shift(frf.exp_window_tau_s))
     else:
         poles = select_poles(stab, n_modes=n_modes, **(selection_options or {}))
-    if poles.size == 0 and frf.coherence is not None:   # peaks confirmed by the coherence only
+    if poles.size == 0 and not coherence_bounds_nothing(frf):   # peaks confirmed by the coherence only
         poles = _poles_from_peaks(frf, band, stab, warnings_out)
     elif poles.size and seed_peaks and _peaks_trusted(frf):
         poles = _with_visible_peaks(frf, band, stab, poles)
@@ -375,7 +399,7 @@ def _peaks_trusted(frf: FRFSet) -> bool:
     visibility). Without coherence a visible peak is only a bump 10 dB high and two lines wide, which
     the noise of a finely resolved FRF shows by the dozen where the excitation has no energy; such peaks
     are left to step 7's local trials."""
-    if frf.coherence is None:
+    if coherence_bounds_nothing(frf):   # none, or one average's (1 on every line)
         return False
     n_avg = n_averages(frf)
     return n_avg.size == 0 or bool(np.all(n_avg >= SEED_MIN_AVERAGES))

@@ -87,7 +87,10 @@ WINDOW_KEY = "exp_window_tau_s"
 _WINDOW_RE = re.compile(WINDOW_KEY + r"=([^\s;]+)")
 #: the windows in words of files written before the key (``exp tau 0.25 s``, 6 digits)
 _WINDOW_WORDS_RE = re.compile(r"\bexp tau ([0-9.eE+-]+) s\b")
-_ESTIMATOR_RE = re.compile(r"\bestimator (\S+) averages (\d+)\b")
+_ESTIMATOR_RE = re.compile(r"\bestimator (\S+)")
+#: the number of averages in an ID line, as a writer may put it in words: ``averages 54``, ``Averages: 54``,
+#: ``averages=54``, ``54 averages`` (dataset 58 has no field for it; its ID lines are free text)
+_AVERAGES_RE = re.compile(r"\baverages?\s*[:=]?\s*(\d+)\b|\b(\d+)\s+averages?\b", re.IGNORECASE)
 _LABELS_RE = re.compile(r"^out=(\S.*?) ref=(\S.*)$")
 
 
@@ -368,18 +371,37 @@ def _labels_from_ids(path: str | Path, frfs: list[dict], outs: list, refs: list)
     return (tuple(str(point_from_uff(n, d)) for n, d in outs), tuple(str(point_from_uff(n, d)) for n, d in refs))
 
 
+def _averages_in(record: dict) -> int | None:
+    """The number of averages an FRF record's ID lines (1-5) state in words (``_AVERAGES_RE``), or None."""
+    for k in range(1, 6):
+        m = _AVERAGES_RE.search(str(record.get(f"id{k}", "")))
+        if m is not None:
+            return int(m.group(1) or m.group(2))
+    return None
+
+
 def _estimator_from_ids(frfs: list[dict], refs: list) -> dict:
-    """``{"estimator": ..., "n_averages": [per reference]}`` from the FRF records' ID line 2 as this
-    module writes it (``estimator H1 averages 3 ...``): the fit trusts a coherence by the number of
-    averages behind it. Empty when a reference's records do not say."""
-    found: dict[tuple[int, int], tuple[str, int]] = {}
+    """``{"estimator": ..., "n_averages": [per reference]}`` from the FRF records' ID lines: the estimator
+    from line 2 as this module writes it (``estimator H1 averages 3 ...``), the number of averages from any
+    ID line that states it in words (``_AVERAGES_RE``; this module's line 2, or another writer's ``Averages:
+    54``): the fit trusts a coherence by the number of averages behind it. Each key is left out when a
+    reference's records do not say (or say differently): the count is then unknown."""
+    estimators: dict[tuple[int, int], str] = {}
+    averages: dict[tuple[int, int], int] = {}
     for s in frfs:
+        ref = (int(s["ref_node"]), int(s["ref_dir"]))
         m = _ESTIMATOR_RE.search(str(s.get("id2", "")))
         if m is not None:
-            found.setdefault((int(s["ref_node"]), int(s["ref_dir"])), (m.group(1), int(m.group(2))))
-    if not refs or any(r not in found for r in refs) or len({found[r][0] for r in refs}) != 1:
-        return {}
-    return {"estimator": found[refs[0]][0], "n_averages": [found[r][1] for r in refs]}
+            estimators.setdefault(ref, m.group(1))
+        n = _averages_in(s)
+        if n is not None:
+            averages.setdefault(ref, n)
+    out: dict = {}
+    if refs and all(r in estimators for r in refs) and len({estimators[r] for r in refs}) == 1:
+        out["estimator"] = estimators[refs[0]]
+    if refs and all(r in averages for r in refs):
+        out["n_averages"] = [averages[r] for r in refs]
+    return out
 
 
 def _window_from_ids(path: str | Path, frfs: list[dict]) -> float | None:

@@ -26,7 +26,13 @@ maximum of a curve inside the band is a visible peak when
   wide, at least ``ONE_LINE_HALF_WIDTH_LINES`` lines wide at half its prominence (in dB): a lightly
   damped mode on coarse lines has flanks that stand above the noise, a noise spike has none. Without coherence only the CMIF curve
   is searched when there are more than ``MAX_CURVES_WITHOUT_COHERENCE`` FRFs: it averages the
-  FRFs' noise, where each noisy FRF alone would show peaks of noise.
+  FRFs' noise, where each noisy FRF alone would show peaks of noise, and
+- on one FRF of several (not on the CMIF, which has no phase, nor on a set's only FRF, which is its CMIF),
+  its phase turns by at least ``VISIBLE_PHASE_TURN_DEG`` (45 degrees) across its top: a mode's phase turns
+  90 degrees between its half-power points, and the top spans them; a hump between two antiresonances
+  (each turns the phase the other way) turns it by a few degrees (ULiege: 15 degrees across a 12 dB hump
+  at 101.5 Hz in one FRF of six, at least 75 across every resonance). A lone FRF is not judged so: a
+  swept sine's FRF (the LADISK plate) turns its phase by 10-30 degrees across resonances of 20-40 dB.
 
 The peaks of every curve are kept (a resonance shows in several curves). A resonance is the
 structure's (:func:`structure_resonances`) when the CMIF shows it or at least ``STRUCTURE_MIN_SHARE``
@@ -35,7 +41,10 @@ of the FRFs do; peaks of a few FRFs of a large set are named, not counted.
 **Accounted for.** Peaks of different curves within ``max(SAME_LINES df, SAME_FRACTION f)`` of
 a peak of the resonance (the most prominent first) are one resonance seen through different FRFs
 (a neighbouring mode shifts a peak by a few lines, the most prominent one too, so the reach is
-measured from each of its peaks); two maxima of the same curve are always two resonances. Each fitted
+measured from each of its peaks) when, on a set of several FRFs, their operating shapes (every FRF's
+value at each peak's line) agree with a MAC of at least ``SAME_SHAPE_MAC`` (two peaks of one mode
+show its shape at both lines, two close modes two shapes); two maxima of the same curve are always
+two resonances. Each fitted
 pole accounts for the resonance nearest to it within ``max(MATCH_FRACTION f, MATCH_LINES df)`` of
 one of its peaks (the nearest resonance-pole pairs first: a pole between two resonances is the
 nearer one's, whichever is more prominent). A resonance with no pole within that reach is still
@@ -51,18 +60,19 @@ another resonance, the two are a *possible close pair* fitted as one pole.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .frf import FRFSet
+from .mac import mac
 from .mif import cmif
 from .peaks import PEAK_RULES, find_peaks, peak_widths, prominences
 
 __all__ = ["VisiblePeak", "visible_peaks", "unaccounted_peaks", "coherence_measured", "VISIBLE_PROMINENCE_DB",
            "VISIBLE_COHERENCE", "VISIBLE_COHERENCE_FLOOR",
            "MATCH_FRACTION", "MATCH_LINES", "MATCH_BANDWIDTHS", "reproduced", "resonances", "structure_resonances",
-           "STRUCTURE_MIN_SHARE", "ONE_LINE_HALF_WIDTH_LINES", "n_averages"]
+           "STRUCTURE_MIN_SHARE", "ONE_LINE_HALF_WIDTH_LINES", "n_averages", "coherence_bounds_nothing"]
 
 VISIBLE_PROMINENCE_DB = PEAK_RULES["visible"].prominence_db
 VISIBLE_COHERENCE = 0.9
@@ -70,6 +80,7 @@ VISIBLE_COHERENCE_FLOOR = 0.85
 BROAD_TOP_LINES = 5
 VISIBLE_MIN_LINES = 2
 MAX_CURVES_WITHOUT_COHERENCE = 8
+VISIBLE_PHASE_TURN_DEG = 45.0
 MATCH_FRACTION = 0.005
 MATCH_LINES = 1.5
 MATCH_BANDWIDTHS = 1.0
@@ -77,6 +88,7 @@ STRUCTURE_MIN_SHARE = 0.05
 ONE_LINE_HALF_WIDTH_LINES = 1.5
 SAME_LINES = 2.5
 SAME_FRACTION = 0.002
+SAME_SHAPE_MAC = 0.5
 REPRODUCED_FRACTION = 0.03
 REPRODUCED_NOISE_FACTOR = 4.0
 
@@ -92,14 +104,16 @@ class VisiblePeak:
     curve: str
     curve_index: int
     top_hz: tuple = (0.0, 0.0)
+    #: the operating shape at the peak's line: every FRF's value there (outputs x references, flattened);
+    #: empty for a set of one FRF
+    shape: tuple = field(default=(), compare=False, repr=False)
 
 
 def _curves(frf: FRFSet, sel: np.ndarray) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
     """(name, magnitude, coherence or None) of each curve searched, over the lines ``sel``."""
     n = frf.freq_hz.size
     # one average's coherence is 1 on every line and bounds nothing: the set is searched as without it
-    one_average = n_averages(frf).size > 0 and bool(np.all(n_averages(frf) <= 1))
-    coh = (None if frf.coherence is None or one_average
+    coh = (None if coherence_bounds_nothing(frf)
            else np.asarray(frf.coherence, float).reshape(-1, n)[:, sel])
     out: list[tuple[str, np.ndarray, np.ndarray | None]] = []
     if coh is not None or frf.n_outputs * frf.n_references <= MAX_CURVES_WITHOUT_COHERENCE:
@@ -138,6 +152,12 @@ def _coherent_top(coh: np.ndarray, at_peak: float, wide: bool) -> bool:
     return bool(coh.size - 2 >= BROAD_TOP_LINES and np.median(coh[1:-1]) >= VISIBLE_COHERENCE)
 
 
+def _phase_turn_deg(h: np.ndarray) -> float:
+    """How far (degrees) the phase of the complex FRF values ``h`` (a peak's top, in frequency order) turns."""
+    ph = np.unwrap(np.angle(np.asarray(h, dtype=complex)))
+    return float(np.degrees(np.max(ph) - np.min(ph))) if ph.size else 0.0
+
+
 def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
     """The visible peaks of ``frf`` in ``band`` (lo, hi Hz) of every curve, most prominent first
     (see module docstring)."""
@@ -149,6 +169,7 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
     f = f_all[sel]
     found: list[VisiblePeak] = []
     curves = _curves(frf, sel)
+    H_sel = np.asarray(frf.H).reshape(-1, f_all.size)[:, sel]
     for ci, (name, mag, coh) in enumerate(curves):
         db = 20.0 * np.log10(np.maximum(mag, 1e-300))
         pk, _ = find_peaks(db)
@@ -165,8 +186,12 @@ def visible_peaks(frf: FRFSet, band: Sequence[float]) -> list[VisiblePeak]:
             a, b = max(a - 1, 0), min(b + 1, f.size - 1)
             if coh is not None and not _coherent_top(coh[a:b + 1], float(coh[i]), wide):
                 continue
+            if (name != "CMIF" and H_sel.shape[0] > 1
+                    and _phase_turn_deg(H_sel[ci, a:b + 1]) < VISIBLE_PHASE_TURN_DEG):
+                continue   # a hump between two antiresonances in one FRF of several, not a resonance
             index = -1 if name == "CMIF" else ci
-            found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b]))))
+            shape = tuple(H_sel[:, i]) if H_sel.shape[0] > 1 else ()
+            found.append(VisiblePeak(float(f[i]), float(p), name, index, (float(f[a]), float(f[b])), shape))
     found.sort(key=lambda v: -v.prominence_db)
     return found
 
@@ -196,6 +221,20 @@ def reproduced(frf: FRFSet, peak: VisiblePeak, synth: Callable[[np.ndarray], np.
 def n_averages(frf: FRFSet) -> np.ndarray:
     """The averages per FRF the set's metadata carries (empty when it does not say)."""
     return np.atleast_1d(np.asarray(frf.meta.get("n_averages", []) or [], dtype=float))
+
+
+def coherence_bounds_nothing(frf: FRFSet) -> bool:
+    """Whether ``frf``'s coherence says nothing about the noise: there is none, the set says it holds one
+    average per FRF, or (the number of averages unknown, as from a file that does not state it) it is 1 on
+    every line, as one average's is whatever the noise."""
+    if frf.coherence is None:
+        return True
+    n = n_averages(frf)
+    if n.size:
+        return bool(np.all(n <= 1))
+    c = np.asarray(frf.coherence, dtype=float)
+    finite = c[np.isfinite(c)]
+    return not finite.size or bool(np.all(finite >= 1.0 - 1e-9))
 
 
 def coherence_measured(frf: FRFSet) -> bool:
@@ -232,7 +271,8 @@ def resonances(peaks: Sequence[VisiblePeak], df: float) -> list[list[VisiblePeak
     for i, v in enumerate(ordered):
         reach = np.maximum(max(SAME_LINES * df, SAME_FRACTION * v.freq_hz), 0.5 * np.minimum(width[:i], width[i]))
         near = np.unique(group_of[:i][np.abs(freq[:i] - v.freq_hz) <= reach])   # in the order the groups began
-        g = next((int(k) for k in near if v.curve_index not in curves[int(k)]), -1)
+        g = next((int(k) for k in near if v.curve_index not in curves[int(k)] and _same_shape(v, groups[int(k)][0])),
+                 -1)
         if g < 0:
             g = len(groups)
             groups.append([])
@@ -241,6 +281,15 @@ def resonances(peaks: Sequence[VisiblePeak], df: float) -> list[list[VisiblePeak
         curves[g].add(v.curve_index)
         group_of[i] = g
     return groups
+
+
+def _same_shape(a: VisiblePeak, b: VisiblePeak) -> bool:
+    """Whether two peaks' operating shapes (every FRF at each peak's line) agree, MAC at least ``SAME_SHAPE_MAC``:
+    two peaks of one mode show its shape at both lines; two close modes show two shapes. True when either peak
+    carries no shape (a set of one FRF) or they lie on the same line."""
+    if len(a.shape) < 2 or len(a.shape) != len(b.shape) or a.freq_hz == b.freq_hz:
+        return True
+    return mac(np.asarray(a.shape), np.asarray(b.shape)) >= SAME_SHAPE_MAC
 
 
 def _half_power_width(v: VisiblePeak, df: float) -> float:
