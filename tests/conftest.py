@@ -84,7 +84,7 @@ SPREAD = ("test_diagnosis_blind.py", "test_diagnosis_physical.py", "test_importe
           "test_recording_fuzz.py", "test_crash_safety.py", "test_station_resume.py",
           "test_diagnosis_frf_beam.py", "test_diagnosis_frf_mass.py", "test_diagnosis_physical_verdict.py",
           "test_diagnosis_frame_untuned.py", "test_station_browser.py")
-HEAVY = ("test_batch_dask.py", "test_cli_diagnose.py", "test_station_api.py")
+HEAVY = ("test_batch_dask.py", "test_diagnosis_cli.py", "test_station_api.py")
 
 
 def _file(nodeid: str) -> str:
