@@ -114,13 +114,14 @@ def _read_signalcalc_ascii(p: Path, variables: Sequence[str] | None = None) -> I
                               "units; export the FRF over frequency")
     unit = _unit(axis_units[1])
     first_data = units + 2
+    rows = [ln for ln in lines[first_data:] if ln.strip() and not ln.lstrip().startswith("#")]
+    if len(rows) < 2:  # counted before numpy reads them: no data at all is this error, not numpy's warning
+        raise ImportDataError(f"{p}: {len(rows)} data line(s); an FRF needs at least two frequencies")
     try:
-        data = np.loadtxt(io.StringIO("\n".join(lines[first_data:])), delimiter="\t", usecols=(0, 1, 2), ndmin=2)
+        data = np.loadtxt(io.StringIO("\n".join(rows)), delimiter="\t", usecols=(0, 1, 2), ndmin=2)
     except ValueError as exc:
         raise ImportDataError(f"{p}: the data after line {first_data} are not three numbers per line ({exc}); the "
                               "file is damaged: export it again") from None
-    if data.shape[0] < 2:
-        raise ImportDataError(f"{p}: {data.shape[0]} data line(s); an FRF needs at least two frequencies")
     ref, out = _points(p, ref_line)
     f = _check_axis(p, "Frequency", data[:, 0])
     h = _finite_frf(p, "Real/Imaginary", data[:, 1] + 1j * data[:, 2])

@@ -401,7 +401,7 @@ def verify_recording(path: str | Path, timeout_s: float = VERIFY_TIMEOUT_S) -> i
     """Read the whole recording in a child process; returns the number of complete hits.
 
     libhdf5 can crash the process (segmentation fault) on some damaged files, which no Python code
-    can catch (found by fuzzing ``tests/test_fuzz_recording.py``). Call this before opening a file
+    can catch (found by fuzzing ``tests/test_recording_fuzz.py``). Call this before opening a file
     of unknown integrity in-process (``capture --resume`` does): a crash, a timeout or any damage
     becomes :class:`RecordingError`. Hits cut short by a crash are skipped, as by
     ``Recording.hits(skip_damaged=True)``."""

@@ -80,9 +80,9 @@ def _xdist_worker() -> bool:
 # test is a unit of its own and both processes share them. The units are handed out heaviest
 # first (the SPREAD tests, then the files of HEAVY, then the rest in file order) and the light
 # files fill in behind, so the two processes end together. Only the speed depends on these lists.
-SPREAD = ("test_diagnosis_blind.py", "test_diagnosis_physical.py", "test_fuzz_importers.py",
-          "test_fuzz_recording.py", "test_crash_safety.py", "test_station_resume.py",
-          "test_diagnosis_frf_beam.py", "test_diagnosis_frf_mass.py", "test_diagnosis_second_cause.py",
+SPREAD = ("test_diagnosis_blind.py", "test_diagnosis_physical.py", "test_importers_fuzz.py",
+          "test_recording_fuzz.py", "test_crash_safety.py", "test_station_resume.py",
+          "test_diagnosis_frf_beam.py", "test_diagnosis_frf_mass.py", "test_diagnosis_physical_verdict.py",
           "test_diagnosis_frame_untuned.py", "test_station_browser.py")
 HEAVY = ("test_batch_dask.py", "test_diagnosis_cli.py", "test_station_api.py")
 

@@ -61,6 +61,7 @@ def test_signalcalc_ascii_keeps_the_file_values_labels_and_unit(tmp_path, capsys
     (lambda t: t.replace("Ref Chan:Resp Chan\t1-Z:4-Z", "Ref Chan:Resp Chan\tA:B"), "node-direction pairs"),
     (lambda t: t.replace("Hz\t", "sec\t"), "does not start with Hz"),
     (lambda t: "\r\n".join(t.split("\r\n")[:10]), "at least two frequencies"),
+    (lambda t: "\r\n".join(t.split("\r\n")[:9]), "0 data line(s)"),  # the header alone: no numpy warning
     (lambda t: t.replace("1.2500000000000e-01", "1.25e-01x"), "not three numbers per line"),
     (lambda t: t.replace("(m/s\u00b2)(N)", "(V)(N)"), "not a motion"),
     (lambda t: "Data written for 2 signals\r\n" + t, "multi-signal"),

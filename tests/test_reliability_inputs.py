@@ -98,7 +98,7 @@ def test_sep005_nan_names_channel_and_sample(tmp_path):
 
 # -- UFF --------------------------------------------------------------------------------------
 def _uff_bytes() -> dict[str, bytes]:
-    from test_fuzz_uff import BASES
+    from test_uff_fuzz import BASES
 
     return BASES
 

@@ -1,6 +1,6 @@
-"""Long fuzzing run: every ``tests/test_fuzz_*.py`` test with 10 000 cases (hypothesis).
+"""Long fuzzing run: every ``tests/test_*fuzz*.py`` test with 10 000 cases (hypothesis).
 
-    .venv/bin/python benchmarks/reliability/fuzz_long.py [--examples 10000] [--files tests/test_fuzz_uff.py ...]
+    .venv/bin/python benchmarks/reliability/fuzz_long.py [--examples 10000] [--files tests/test_uff_fuzz.py ...]
 
 Runs pytest once per fuzz file with ``IMPACTLAB_FUZZ_EXAMPLES`` set and hypothesis statistics
 on, then prints a table: test, cases run (hypothesis "passing examples"), failures, seconds.
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--examples", type=int, default=10000)
     p.add_argument("--files", nargs="*", default=None)
     args = p.parse_args(argv)
-    files = [Path(f).resolve() for f in args.files] if args.files else sorted((ROOT / "tests").glob("test_fuzz_*.py"))
+    files = [Path(f).resolve() for f in args.files] if args.files else sorted((ROOT / "tests").glob("test_*fuzz*.py"))
     ok_all = True
     print("| test | cases | failing | file ok | file seconds |")
     print("|---|---:|---:|---|---:|")
