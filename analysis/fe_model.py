@@ -498,6 +498,140 @@ KEPT_SPACES = 32
 KEPT_EXACT = 4
 
 
+#: Rounding allowed in a node's residual flexibility (of its trace): :meth:`FEVariants.first_pass` lowers it by
+#: this for its upper bounds and raises it for its lower bounds.
+FLEX_RTOL = 1e-9
+#: Nodes of one block of :meth:`FEVariants.first_pass` (bounds the arrays: ~ nodes x frequencies x values).
+FIRST_PASS_CHUNK = 128
+#: A mode count above every model's (:meth:`FEVariants.first_pass` where nothing is known).
+BEYOND_COUNT = 1 << 30
+#: Models up to this many DOF have ``(K0 - sigma M0)^-1`` inverted densely for the residual flexibility.
+DENSE_INVERSE_MAX_DOF = 2000
+#: The banded selected inversion is used while ``n * bandwidth^2`` (after reverse Cuthill-McKee) stays below this;
+#: above it each node's columns are solved with the sparse factorisation (slower, the same answer).
+BAND_WORK_MAX = 4e9
+
+
+def _eig3(a00: np.ndarray, a11: np.ndarray, a22: np.ndarray, a01: np.ndarray, a02: np.ndarray,
+          a12: np.ndarray) -> np.ndarray:
+    """Eigenvalues (3, ...) of the symmetric 3 x 3 matrices with these entries (arrays of one shape), by the
+    trigonometric solution of the characteristic cubic (vectorised; rounding ~1e-8 of the matrix's norm)."""
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p1 = a01 ** 2 + a02 ** 2 + a12 ** 2
+    p = np.sqrt((b00 ** 2 + b11 ** 2 + b22 ** 2 + 2.0 * p1) / 6.0)
+    safe = np.where(p > 0, p, 1.0)
+    det = (b00 * (b11 * b22 - a12 ** 2) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02))
+    r = np.clip(det / (2.0 * safe ** 3), -1.0, 1.0)
+    t = np.arccos(r) / 3.0
+    e1 = q + 2.0 * p * np.cos(t)
+    e3 = q + 2.0 * p * np.cos(t + 2.0 * np.pi / 3.0)
+    return np.stack([e3, 3.0 * q - e1 - e3, e1])
+
+
+def _inverse_blocks(A: sp.spmatrix, dofs: np.ndarray, solve: Callable[[np.ndarray], np.ndarray] | None
+                    ) -> np.ndarray:
+    """The blocks ``A^-1[d, d]`` (o, 3, 3) of a symmetric positive definite ``A`` at the DOF rows ``dofs``
+    (o, 3; -1 pads, its row and column zero). Small models: the dense inverse. Else the selected inversion of
+    the banded ``L D L^T`` after a reverse Cuthill-McKee ordering (``Z = A^-1`` on the band, column by column
+    from the last: ``Z[j+1:, j] = -Z[j+1:, j+1:] l_j``, ``Z[j, j] = 1/d_j - l_j . Z[j+1:, j]``, ~n b^2 flops for
+    half-bandwidth b); two DOFs of one node in different connected parts of ``A`` have ``Z = 0``; two further
+    apart than the band (never for coupled DOFs) are bounded in the Loewner order (the node's block by three
+    times its diagonal, as a positive semi-definite 3 x 3 is). Too wide a band: columns solved by ``solve``."""
+    from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
+
+    n = int(A.shape[0])
+    o = dofs.shape[0]
+    out = np.zeros((o, 3, 3))
+    pad = dofs < 0
+    flat = np.unique(dofs[~pad])
+    if n <= DENSE_INVERSE_MAX_DOF:
+        Zd = np.linalg.inv(_dense(A))
+        idx = np.maximum(dofs, 0)
+        out = Zd[idx[:, :, None], idx[:, None, :]]
+        return np.where(pad[:, :, None] | pad[:, None, :], 0.0, out)
+    A = sp.csr_matrix(A)
+    perm = reverse_cuthill_mckee(A, symmetric_mode=True)
+    Ap = sp.csr_matrix(A[perm][:, perm]).tocoo()
+    b = int(np.max(np.abs(Ap.row - Ap.col), initial=0))
+    if n * float(b) ** 2 > BAND_WORK_MAX or solve is None:
+        if solve is None:
+            solve = spla.splu(A.tocsc()).solve
+        col = {}
+        for lo in range(0, flat.size, 64):
+            part = flat[lo:lo + 64]
+            E = np.zeros((n, part.size))
+            E[part, np.arange(part.size)] = 1.0
+            X = np.asarray(solve(np.asfortranarray(E)))
+            for k, d in enumerate(part):
+                col[int(d)] = X[:, k]
+        for i in range(o):
+            for a in range(3):
+                for c in range(3):
+                    if not (pad[i, a] or pad[i, c]):
+                        out[i, a, c] = col[int(dofs[i, a])][dofs[i, c]]
+        return 0.5 * (out + out.transpose(0, 2, 1))
+    pos = np.empty(n, int)
+    pos[perm] = np.arange(n)
+    _, part_of = connected_components(A, directed=False)
+    # the banded lower Cholesky factor: ab[i, j] = Ap[j + i, j]
+    ab = np.zeros((b + 1, n))
+    low = Ap.row >= Ap.col
+    ab[Ap.row[low] - Ap.col[low], Ap.col[low]] = Ap.data[low]
+    C = scipy.linalg.cholesky_banded(ab, lower=True)
+    d = C[0] ** 2
+    Lb = C[1:] / C[0][None, :]                         # l_j = L[j+1:j+b+1, j] in column j
+    for i in range(b):                                  # entries beyond the matrix
+        Lb[i, n - 1 - i:] = 0.0
+    need_diag = np.zeros(n, bool)
+    need_diag[pos[flat]] = True
+    pairs: dict[int, list[int]] = {}                    # permuted column j -> offsets t of wanted Z[j + t, j]
+    loose = np.zeros(o, bool)
+    for i in range(o):
+        for a in range(3):
+            for c in range(a + 1, 3):
+                if pad[i, a] or pad[i, c]:
+                    continue
+                pa, pc = pos[dofs[i, a]], pos[dofs[i, c]]
+                if part_of[dofs[i, a]] != part_of[dofs[i, c]]:
+                    continue                             # Z = 0 between unconnected parts
+                j, t = min(pa, pc), abs(pa - pc)
+                if t > b:
+                    loose[i] = True
+                else:
+                    pairs.setdefault(int(j), []).append(int(t))
+    diag = np.zeros(n)
+    got: dict[tuple[int, int], float] = {}
+    W = np.zeros((b, b))                                # Z over the permuted indices j+1 .. j+b
+    for j in range(n - 1, -1, -1):
+        lj = Lb[:, j]
+        z = -(W @ lj)
+        zjj = 1.0 / d[j] - float(lj @ z)
+        diag[j] = zjj
+        for t in pairs.get(j, ()):
+            got[(j, t)] = float(z[t - 1])
+        if b:
+            W[1:, 1:] = W[:-1, :-1]
+            W[0, 0] = zjj
+            W[1:, 0] = z[:-1]
+            W[0, 1:] = z[:-1]
+    for i in range(o):
+        for a in range(3):
+            if pad[i, a]:
+                continue
+            out[i, a, a] = diag[pos[dofs[i, a]]]
+            for c in range(a + 1, 3):
+                if pad[i, c] or part_of[dofs[i, a]] != part_of[dofs[i, c]]:
+                    continue
+                pa, pc = pos[dofs[i, a]], pos[dofs[i, c]]
+                t = abs(pa - pc)
+                if t <= b:
+                    out[i, a, c] = out[i, c, a] = got[(min(pa, pc), t)]
+        if loose[i]:
+            out[i] = 3.0 * np.diag(np.diag(out[i]))
+    return out
+
+
 def _keep(store: dict, key: Any, value: Any) -> None:
     """``store[key] = value``, the oldest entry dropped beyond ``KEPT_SPACES``."""
     while len(store) >= KEPT_SPACES:
@@ -576,6 +710,7 @@ class FEVariants:
         self._sigma = 0.0
         self._solve: Callable[[np.ndarray], np.ndarray] | None = None
         self._static: dict[str, np.ndarray] = {}
+        self._flex: dict[str, np.ndarray] = {}       # node -> residual flexibility R(sigma) (first_pass)
         self._spaces: dict[tuple, _Space] = {}
         self._memo: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self._expect: dict[float, int] = {}          # modes below a top found last time (the solver's first ask)
@@ -624,33 +759,124 @@ class FEVariants:
         self._memo[key] = out
         return out
 
-    def screen_modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`modes` for the first pass of a screen over many options (every node of an added mass or a
-        spring to ground): the Rayleigh-Ritz solution in the unchanged model's kept modes alone (up to
-        ``RITZ_FACTOR`` times the top), no static response, so no sparse solve per node; its frequencies are
-        upper bounds of the full model's. The screen's second pass (:func:`analysis.diagnosis.physical.fit_cause`)
-        judges the best options again with :meth:`modes`. Other causes: :meth:`modes` itself."""
-        changes = _one(cause, params)
-        c = self._change(changes)
-        if c.k_factor != 1.0 or c.m_factor != 1.0 or c.k_groups or c.m_groups or c.sensor_mass_kg is not None:
-            return self.modes_of(changes, max_freq_hz)
+    def first_pass(self, cause: str, options: Sequence[str], values: np.ndarray, freq_hz: np.ndarray,
+                   max_freq_hz: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """Bounds of the mode count of every node of ``options`` changed by ``cause`` (``added_mass``: kg,
+        ``ground_spring``: N/m) at each of ``values``, for the first pass of a search over many nodes:
+        ``(at_least, at_most)``, integer arrays (options, values, freqs) with
+
+            at_least <= #{modes below f} <= #{modes at or below f} <= at_most
+
+        for every ``f`` of ``freq_hz`` (Hz), the modes those of the full model changed so *and* of its Ritz
+        solution (:meth:`modes`), rigid ones included. No sparse solve per node: a few small products per
+        node and frequency. Other causes: None (no first pass).
+
+        The mathematics (``E`` the node's mapped DOFs, r <= 3 columns; ``Phi``, ``Lambda`` the kept modes,
+        M0-normalised, every mode of ``(K0, M0)`` up to ``c = (2 pi RITZ_FACTOR max_freq_hz)^2`` rad^2/s^2;
+        a node's rows ``Psi = E^T Phi`` in 1/sqrt(kg)):
+
+        1. Counting. For a pencil ``(K, M)`` of poles ``lambda_i`` (the unchanged eigenvalues), an added mass
+           ``m EE^T`` (kg) and ``lambda > 0`` not a pole, Haynsworth's inertia formula on
+           ``[[K - lambda M, E], [E^T, I/(lambda m)]]`` gives the number of changed eigenvalues below
+           ``lambda``: ``N(lambda) = #{lambda_i < lambda} + #{eigenvalues of G(lambda) above 1/(lambda m)}``,
+           ``G(lambda) = E^T (K - lambda M)^-1 E = sum_i psi_i psi_i^T / (lambda_i - lambda)`` (m/N, r x r).
+           A spring ``k EE^T`` (N/m): ``N = #{lambda_i < lambda} + #{eigenvalues of G above -1/k} - r``.
+           Both counts grow with ``G`` in the Loewner order.
+        2. Upper bounds of the eigenvalues (``at_least``): the Rayleigh-Ritz solution in the kept modes and
+           the residual static response ``x_r = sum_discarded phi_i psi_i^T / (lambda_i - sigma)`` (the part of
+           ``(K0 - sigma M0)^-1 E`` outside the kept modes), whose projections are ``x_r^T (K0 - sigma M0) x_r =
+           R(sigma)`` (below) and ``x_r^T M0 x_r = S >= 0`` (unknown), with ``sigma < 0``. The projected pencil's
+           stiffness ``R + sigma S`` falls and its mass grows as ``S`` grows, so its eigenvalues are at most
+           those at ``S = 0``: the kept modes with the static correction, massless, whose ``G`` is
+           ``G_S = G_U + R(sigma)``, ``G_U = sum over the kept modes`` (the counting above holds for it: its
+           stiffness is positive definite where its mass is singular). Its eigenvalues bound the Ritz solution in
+           ``[Phi, x_r]`` from above, which bounds the full model's (Poincare) and that of any space holding
+           ``[Phi, x_r]`` (:meth:`modes`: Cauchy interlacing) from above; its count is a lower bound of theirs.
+        3. Lower bounds (``at_most``): the full model's ``G = G_U + R(lambda)``, ``R`` the discarded modes'
+           part (``lambda_i >= c``). For ``sigma <= lambda < c`` and ``lambda_i >= c``,
+           ``1 / (lambda_i - lambda) <= (c - sigma) / ((lambda_i - sigma)(c - lambda))`` (cross-multiplied:
+           ``lambda_i (lambda - sigma) >= c (lambda - sigma)``), so ``R(lambda) <= R(sigma) (c - sigma) /
+           (c - lambda)`` with the residual flexibility ``R(sigma) = E^T (K0 - sigma M0)^-1 E - sum_kept
+           psi_i psi_i^T / (lambda_i - sigma)`` (m/N, computed once per node: :func:`_inverse_blocks`).
+           ``G_L = G_U + R(sigma) (c - sigma) / (c - lambda) >= G`` counts at least the full model's
+           eigenvalues below ``lambda``, and the full model's are lower bounds of the Ritz solution's. Above
+           ``c`` nothing is known: ``at_most`` is then a count no model reaches.
+
+        In the band (``lambda << c``) the two differ by ``R lambda / c``: the bounds are tight. Rounding:
+        ``R(sigma)`` is lowered (upper bounds) or raised (lower bounds) by ``FLEX_RTOL`` of its trace; the
+        caller widens its windows."""
+        if cause not in ("added_mass", "ground_spring"):
+            return None
         self._ensure_nominal(max_freq_hz)
         assert self._nominal is not None
         w2, phi = self._nominal
-        Kr = np.diag(w2)
-        Mr = np.eye(w2.size)
-        for node, k in c.springs.items():
-            rows = phi[self._node_dofs[node]]
-            Kr = Kr + k * (rows.T @ rows)
-        for node, mass in c.masses.items():
-            rows = phi[self._node_dofs[node]]
-            Mr = Mr + mass * (rows.T @ rows)
-        w2max = _w2(max_freq_hz)
-        lam, Y = scipy.linalg.eigh(Kr, Mr, subset_by_value=(RIGID_W2_FRACTION * w2max, w2max))
-        at = np.array([sign * phi[d] for d, sign in self._out + self._ref]) @ Y
-        n_out = len(self._out)
-        return (np.sqrt(lam) / (2 * np.pi),
-                (at[:n_out, None, :] * at[None, n_out:, :]).reshape(n_out * len(self._ref), -1))
+        c = _w2(self._nominal_top)
+        sigma = self._sigma
+        vals = np.asarray(values, float)
+        lam = _w2(1.0) * np.asarray(freq_hz, float) ** 2
+        n_opt, n_val, n_q = len(options), vals.size, lam.size
+        at_least = np.zeros((n_opt, n_val, n_q), int)
+        at_most = np.zeros((n_opt, n_val, n_q), int)
+        poles = np.searchsorted(w2, lam, side="left")                # kept eigenvalues below each lambda
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / (w2[:, None] - lam[None, :])                  # (n_kept, Q), s^2
+            tail = (c - sigma) / (c - lam)                            # the residual's factor
+        finite = np.isfinite(inv).all(axis=0)          # lambda on a pole: nothing known there
+        valid = finite & (lam < c)
+        spring = cause == "ground_spring"
+        every = self._padded_dofs(options)                                  # (options, 3), -1: none
+        flex = self._residual_flexibility(list(options), every, phi)        # (options, 3, 3)
+        for lo in range(0, n_opt, FIRST_PASS_CHUNK):
+            nodes = list(options[lo:lo + FIRST_PASS_CHUNK])
+            dofs = every[lo:lo + len(nodes)]
+            Psi = np.where(dofs[:, :, None] >= 0, phi[np.maximum(dofs, 0)], 0.0)     # (o, 3, n_kept)
+            R = flex[lo:lo + len(nodes)]
+            pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+            prod = np.stack([Psi[:, a] * Psi[:, b] for a, b in pairs], axis=1)       # (o, 6, n_kept)
+            GU = (prod.reshape(-1, w2.size) @ np.nan_to_num(inv)).reshape(len(nodes), 6, n_q)
+            Rp = np.stack([R[:, a, b] for a, b in pairs], axis=1)                    # (o, 6)
+            slack = np.zeros((len(nodes), 6))
+            slack[:, :3] = (FLEX_RTOL * np.einsum("oaa->o", R))[:, None] * (dofs >= 0)
+            GS = GU + (Rp - slack)[:, :, None]                           # the static correction: upper bounds
+            GL = GU + (Rp + slack)[:, :, None] * np.where(valid, tail, 0.0)[None, None, :]
+            for G, out, side in ((GS, at_least, -1), (GL, at_most, 1)):
+                e = _eig3(*(G[:, i] for i in range(6)))                # (3, o, Q)
+                if spring:      # #{e > -1/k} - 3  <=>  #{e k > -1} - 3
+                    above = (e[:, :, None, :] * vals[None, None, :, None] > -1.0).sum(axis=0) - 3
+                else:           # #{e > 1/(lambda m)}  <=>  #{e lambda m > 1}
+                    above = (e[:, :, None, :] * vals[None, None, :, None] * lam[None, None, None, :] > 1.0).sum(axis=0)
+                n = poles[None, None, :] + above
+                ok = valid if side > 0 else finite
+                n = np.where(ok[None, None, :], n, BEYOND_COUNT if side > 0 else 0)
+                out[lo:lo + len(nodes)] = n
+        return at_least, at_most
+
+    def _padded_dofs(self, nodes: Sequence[str]) -> np.ndarray:
+        """The mapped DOFs of each node (rows), padded with -1 to three."""
+        out = np.full((len(nodes), 3), -1, int)
+        for i, node in enumerate(nodes):
+            d = self._node_dofs[node]
+            if d.size > 3:
+                raise FEModelError(f"node {node!r} of {self.fe.dofs_file} maps {d.size} directions; a node has at "
+                                   "most three (X, Y, Z)")
+            out[i, :d.size] = d
+        return out
+
+    def _residual_flexibility(self, nodes: Sequence[str], dofs: np.ndarray, phi: np.ndarray) -> np.ndarray:
+        """``R(sigma) = E^T (K0 - sigma M0)^-1 E - sum_kept psi psi^T / (lambda_i - sigma)`` (m/N) of each node
+        (padded 3 x 3, zero where a node has fewer DOFs; ``dofs`` its rows, ``phi`` the kept modes); kept."""
+        idx = [i for i, n in enumerate(nodes) if n not in self._flex]
+        if idx:
+            Z = _inverse_blocks(self.K0 - self._sigma * self.M0, dofs[idx], self._solve)
+            assert self._nominal is not None
+            w2 = self._nominal[0]
+            d = dofs[idx]
+            P = np.where(d[:, :, None] >= 0, phi[np.maximum(d, 0)], 0.0)
+            kept = np.einsum("oai,obi,i->oab", P, P, 1.0 / (w2 - self._sigma))
+            R = Z - kept
+            for i, r in zip(idx, R):
+                self._flex[nodes[i]] = r
+        return np.array([self._flex[n] for n in nodes]).reshape(len(nodes), 3, 3)
 
     def exact_modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -759,6 +985,7 @@ class FEVariants:
         self._nominal = (_w2(1.0) * f ** 2, phi)
         self._nominal_top = top
         self._static.clear()
+        self._flex.clear()
         self._spaces.clear()
 
     def _shifted_solve(self, B: np.ndarray) -> np.ndarray:
