@@ -352,6 +352,18 @@ def _shift_solver(K: sp.spmatrix, M: sp.spmatrix, sigma: float) -> Callable[[np.
                            f"{np.sqrt(max(-sigma, 0.0)) / (2 * np.pi):.3g} Hz or a negative stiffness") from None
 
 
+def _count_below(K: sp.spmatrix, M: sp.spmatrix, w2: float) -> int:
+    """The number of modes below ``w2`` (rad^2/s^2) by Sylvester's law of inertia: the negative pivots of a
+    symmetric factorisation of ``K - w2 M`` (no pivoting, so a guess where a pivot is tiny: the solver's first
+    ask, which it checks); 0 when the factorisation fails."""
+    try:
+        lu = spla.splu(sp.csc_matrix(K - w2 * M), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+    except RuntimeError:
+        return 0
+    return int(np.sum(lu.U.diagonal() < 0))
+
+
 def sparse_modes(K: sp.spmatrix, M: sp.spmatrix, max_freq_hz: float, *, sparse: bool | None = None,
                  solve: Callable[[np.ndarray], np.ndarray] | None = None, sigma: float | None = None,
                  expect: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -498,6 +510,8 @@ KEPT_SPACES = 32
 KEPT_EXACT = 4
 
 
+#: An extra Ritz vector keeping less than this fraction of its M0-norm squared (1e-8 of the norm) outside the kept modes is dropped.
+SPAN_RTOL = 1e-16
 #: Rounding allowed in a node's residual flexibility (of its trace): :meth:`FEVariants.first_pass` lowers it by
 #: this for its upper bounds and raises it for its lower bounds.
 FLEX_RTOL = 1e-9
@@ -981,7 +995,8 @@ class FEVariants:
         sigma = -SHIFT_FRACTION ** 2 * _w2(top)
         self._solve = _shift_solver(self.K0, self.M0, sigma) if self.fe.n_dof > DENSE_MAX_DOF else None
         self._sigma = sigma
-        f, phi = sparse_modes(self.K0, self.M0, top, solve=self._solve, sigma=sigma)
+        expect = _count_below(self.K0, self.M0, _w2(top)) if self._solve is not None else 0
+        f, phi = sparse_modes(self.K0, self.M0, top, solve=self._solve, sigma=sigma, expect=expect)
         self._nominal = (_w2(1.0) * f ** 2, phi)
         self._nominal_top = top
         self._static.clear()
@@ -1036,8 +1051,12 @@ class FEVariants:
         X = np.zeros((phi.shape[0], 0))
         if vecs:
             X = np.column_stack(vecs)
+            before = np.einsum("ij,ij->j", X, np.asarray(self.M0 @ X))
             X = X - phi @ (phi.T @ (self.M0 @ X))                # M0-orthogonal to the kept modes
-            X = X / np.sqrt(np.maximum(np.einsum("ij,ij->j", X, np.asarray(self.M0 @ X)), 1e-300))
+            after = np.einsum("ij,ij->j", X, np.asarray(self.M0 @ X))
+            # a vector (nearly) inside the kept modes' span leaves rounding only: dropped (it would add spurious modes)
+            keep = after > SPAN_RTOL * before
+            X = X[:, keep] / np.sqrt(after[keep])
             G = X.T @ (self.M0 @ X)
             s, U = np.linalg.eigh(0.5 * (G + G.T))
             ok = s > 1e-12 * max(float(s.max(initial=0.0)), 1e-300)
