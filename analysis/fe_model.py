@@ -547,10 +547,11 @@ def _inverse_blocks(A: sp.spmatrix, dofs: np.ndarray, solve: Callable[[np.ndarra
                     ) -> np.ndarray:
     """The blocks ``A^-1[d, d]`` (o, 3, 3) of a symmetric positive definite ``A`` at the DOF rows ``dofs``
     (o, 3; -1 pads, its row and column zero). Small models: the dense inverse. Else the selected inversion of
-    the banded ``L D L^T`` after a reverse Cuthill-McKee ordering (``Z = A^-1`` on the band, column by column
-    from the last: ``Z[j+1:, j] = -Z[j+1:, j+1:] l_j``, ``Z[j, j] = 1/d_j - l_j . Z[j+1:, j]``, ~n b^2 flops for
-    half-bandwidth b); two DOFs of one node in different connected parts of ``A`` have ``Z = 0``; two further
-    apart than the band (never for coupled DOFs) are bounded in the Loewner order (the node's block by three
+    the banded Cholesky factor ``A = C C^T`` after a reverse Cuthill-McKee ordering, by blocks of the
+    half-bandwidth b (``C`` is block-bidiagonal; ``Z = A^-1`` on the diagonal blocks and the next, from the last
+    block: ``Z_(k+1)k = -Z_(k+1)(k+1) C_(k+1)k C_kk^-1``, ``Z_kk = C_kk^-T C_kk^-1 - C_kk^-T C_(k+1)k^T Z_(k+1)k``,
+    ~n b^2 flops); two DOFs of one node in different connected parts of ``A`` have ``Z = 0``; two further
+    apart than a block (never for coupled DOFs) are bounded in the Loewner order (the node's block by three
     times its diagonal, as a positive semi-definite 3 x 3 is). Too wide a band: columns solved by ``solve``."""
     from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
 
@@ -588,59 +589,60 @@ def _inverse_blocks(A: sp.spmatrix, dofs: np.ndarray, solve: Callable[[np.ndarra
     pos = np.empty(n, int)
     pos[perm] = np.arange(n)
     _, part_of = connected_components(A, directed=False)
-    # the banded lower Cholesky factor: ab[i, j] = Ap[j + i, j]
+    # the banded lower Cholesky factor C (A = C C^T): cb[i, j] = C[j + i, j]
     ab = np.zeros((b + 1, n))
     low = Ap.row >= Ap.col
     ab[Ap.row[low] - Ap.col[low], Ap.col[low]] = Ap.data[low]
-    C = scipy.linalg.cholesky_banded(ab, lower=True)
-    d = C[0] ** 2
-    Lb = C[1:] / C[0][None, :]                         # l_j = L[j+1:j+b+1, j] in column j
-    for i in range(b):                                  # entries beyond the matrix
-        Lb[i, n - 1 - i:] = 0.0
-    need_diag = np.zeros(n, bool)
-    need_diag[pos[flat]] = True
-    pairs: dict[int, list[int]] = {}                    # permuted column j -> offsets t of wanted Z[j + t, j]
+    cb = scipy.linalg.cholesky_banded(ab, lower=True)
+    offs = np.arange(b + 1)
+    cols = np.repeat(np.arange(n)[None, :], b + 1, axis=0)
+    inside = cols + offs[:, None] < n
+    C = sp.csr_matrix((cb[inside], ((cols + offs[:, None])[inside], cols[inside])), shape=(n, n))
+    # Z = C^-T C^-1 by blocks of s >= b rows (C block-bidiagonal), from the last: with X = C_kk^-1,
+    # Z_(k+1)k = -Z_(k+1)(k+1) C_(k+1)k X and Z_kk = X^T X - X^T C_(k+1)k^T Z_(k+1)k
+    s = max(b, 1)
+    starts = list(range(0, n, s))
+    diag = np.zeros(n)
+    near: dict[tuple[int, int], float] = {}           # (p, q) permuted, p < q in one block or the next: Z[p, q]
+    want = set()
     loose = np.zeros(o, bool)
     for i in range(o):
         for a in range(3):
             for c in range(a + 1, 3):
-                if pad[i, a] or pad[i, c]:
-                    continue
-                pa, pc = pos[dofs[i, a]], pos[dofs[i, c]]
-                if part_of[dofs[i, a]] != part_of[dofs[i, c]]:
+                if pad[i, a] or pad[i, c] or part_of[dofs[i, a]] != part_of[dofs[i, c]]:
                     continue                             # Z = 0 between unconnected parts
-                j, t = min(pa, pc), abs(pa - pc)
-                if t > b:
+                pa, pc = sorted((int(pos[dofs[i, a]]), int(pos[dofs[i, c]])))
+                if pc // s - pa // s > 1:
                     loose[i] = True
                 else:
-                    pairs.setdefault(int(j), []).append(int(t))
-    diag = np.zeros(n)
-    got: dict[tuple[int, int], float] = {}
-    W = np.zeros((b, b))                                # Z over the permuted indices j+1 .. j+b
-    for j in range(n - 1, -1, -1):
-        lj = Lb[:, j]
-        z = -(W @ lj)
-        zjj = 1.0 / d[j] - float(lj @ z)
-        diag[j] = zjj
-        for t in pairs.get(j, ()):
-            got[(j, t)] = float(z[t - 1])
-        if b:
-            W[1:, 1:] = W[:-1, :-1]
-            W[0, 0] = zjj
-            W[1:, 0] = z[:-1]
-            W[0, 1:] = z[:-1]
+                    want.add((pa, pc))
+    Znext: np.ndarray | None = None
+    for k in range(len(starts) - 1, -1, -1):
+        lo, hi = starts[k], min(starts[k] + s, n)
+        X = scipy.linalg.solve_triangular(C[lo:hi, lo:hi].toarray(), np.eye(hi - lo), lower=True)
+        Zkk = X.T @ X
+        if Znext is not None:
+            nhi = min(hi + s, n)
+            B = C[hi:nhi, lo:hi].toarray()
+            Zlow = -(Znext @ B) @ X                      # Z[hi:nhi, lo:hi]
+            Zkk = Zkk - X.T @ (B.T @ Zlow)
+            for p, q in want:
+                if lo <= p < hi and hi <= q < nhi:
+                    near[(p, q)] = float(Zlow[q - hi, p - lo])
+        for p, q in want:
+            if lo <= p < hi and q < hi:
+                near[(p, q)] = float(Zkk[p - lo, q - lo])
+        diag[lo:hi] = np.diag(Zkk)
+        Znext = Zkk
     for i in range(o):
         for a in range(3):
             if pad[i, a]:
                 continue
             out[i, a, a] = diag[pos[dofs[i, a]]]
             for c in range(a + 1, 3):
-                if pad[i, c] or part_of[dofs[i, a]] != part_of[dofs[i, c]]:
-                    continue
-                pa, pc = pos[dofs[i, a]], pos[dofs[i, c]]
-                t = abs(pa - pc)
-                if t <= b:
-                    out[i, a, c] = out[i, c, a] = got[(min(pa, pc), t)]
+                key = tuple(sorted((int(pos[dofs[i, a]]), int(pos[dofs[i, c]]))))
+                if not pad[i, c] and key in near:
+                    out[i, a, c] = out[i, c, a] = near[key]
         if loose[i]:
             out[i] = 3.0 * np.diag(np.diag(out[i]))
     return out
@@ -974,16 +976,25 @@ class FEVariants:
             w2, phi = self._nominal
             got = (self._nominal_top, np.sqrt(np.maximum(w2, 0.0)) / (2 * np.pi), phi)
         if got is None or got[0] < max_freq_hz:
+            # to the simulated FRFs' top as well: the change checked and then simulated is one solution
+            top = max(float(max_freq_hz), self.max_freq_hz)
             K, M = self._matrices(c)
-            f, phi = sparse_modes(K, M, max_freq_hz, expect=self._expect.get(max_freq_hz, 0))
-            self._expect[max_freq_hz] = f.size
-            got = (float(max_freq_hz), f, phi)
+            f, phi = sparse_modes(K, M, top, expect=self._expect.get(top, self._nominal_count(top)))
+            self._expect[top] = f.size
+            got = (top, f, phi)
             while len(self._exact_kept) >= KEPT_EXACT:
                 self._exact_kept.pop(next(iter(self._exact_kept)))
             self._exact_kept[key] = got
         _, f, phi = got
         keep = (_w2(1.0) * f ** 2 > RIGID_W2_FRACTION * _w2(max_freq_hz)) & (f <= max_freq_hz)
         return f[keep], phi[:, keep]
+
+    def _nominal_count(self, top: float) -> int:
+        """The solver's first ask for a changed model's modes up to ``top`` (Hz): the unchanged model's count there
+        and three more (a change at one node moves at most three modes across), 0 when unknown."""
+        if self._nominal is None or top > self._nominal_top:
+            return 0
+        return int(np.sum(self._nominal[0] <= _w2(top))) + 3
 
     # ------------------------------------------------------------------ reduced solution
     def _ensure_nominal(self, max_freq_hz: float) -> None:
