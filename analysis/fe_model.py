@@ -146,8 +146,9 @@ class FEModel:
     def total_mass_kg(self) -> float:
         """The model's mass (kg): the rigid translation's ``u^T M u`` in the axis of most mapped mass."""
         best = 0.0
+        axes = {lbl: parse_point(lbl).direction.lstrip("-") for lbl in self.dofs}
         for axis in "XYZ":
-            idx = np.array([d for lbl, d in self.dofs.items() if parse_point(lbl).direction.lstrip("-") == axis], int)
+            idx = np.array([d for lbl, d in self.dofs.items() if axes[lbl] == axis], int)
             if idx.size:
                 best = max(best, float(self.M[idx][:, idx].sum()))
         return best
@@ -318,12 +319,12 @@ def _read_dofs(path: Path, n: int) -> tuple[dict, dict]:
             raise FEModelError(f"{path}: row {i}: dof {dof} is outside the matrices' {n} DOFs (0-based: 0 to "
                                f"{n - 1}); the map does not match the matrices")
         try:
-            label = str(parse_point(row[1]))
+            p = parse_point(row[1])
         except PointLabelError as exc:
             raise FEModelError(f"{path}: row {i}: {exc}") from None
+        label = str(p)
         if dof in seen:
             raise FEModelError(f"{path}: row {i}: dof {dof} is mapped already on row {seen[dof]}")
-        p = parse_point(label)
         twin = f"{p.component}:{p.node}:{'' if p.sign < 0 else '-'}{p.direction.lstrip('-')}"
         if label in dofs or twin in dofs:
             raise FEModelError(f"{path}: row {i}: point {label} is mapped already (dof {dofs.get(label, dofs.get(twin))})")
@@ -829,10 +830,12 @@ class FEVariants:
         c = _w2(self._nominal_top)
         sigma = self._sigma
         vals = np.asarray(values, float)
+        if np.any(np.diff(vals) <= 0):
+            raise ValueError("first_pass: give the values in ascending order")
         lam = _w2(1.0) * np.asarray(freq_hz, float) ** 2
         n_opt, n_val, n_q = len(options), vals.size, lam.size
-        at_least = np.zeros((n_opt, n_val, n_q), int)
-        at_most = np.zeros((n_opt, n_val, n_q), int)
+        at_least = np.zeros((n_opt, n_val, n_q), np.int32)
+        at_most = np.zeros((n_opt, n_val, n_q), np.int32)
         poles = np.searchsorted(w2, lam, side="left")                # kept eigenvalues below each lambda
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / (w2[:, None] - lam[None, :])                  # (n_kept, Q), s^2
@@ -855,16 +858,25 @@ class FEVariants:
             slack[:, :3] = (FLEX_RTOL * np.einsum("oaa->o", R))[:, None] * (dofs >= 0)
             GS = GU + (Rp - slack)[:, :, None]                           # the static correction: upper bounds
             GL = GU + (Rp + slack)[:, :, None] * np.where(valid, tail, 0.0)[None, None, :]
+            o_idx = np.arange(len(nodes))[None, :, None]
+            q_idx = np.arange(n_q)[None, None, :]
             for G, out, side in ((GS, at_least, -1), (GL, at_most, 1)):
-                e = _eig3(*(G[:, i] for i in range(6)))                # (3, o, Q)
-                if spring:      # #{e > -1/k} - 3  <=>  #{e k > -1} - 3
-                    above = (e[:, :, None, :] * vals[None, None, :, None] > -1.0).sum(axis=0) - 3
-                else:           # #{e > 1/(lambda m)}  <=>  #{e lambda m > 1}
-                    above = (e[:, :, None, :] * vals[None, None, :, None] * lam[None, None, None, :] > 1.0).sum(axis=0)
-                n = poles[None, None, :] + above
+                e = _eig3(*(G[:, i] for i in range(6)))                # (3, o, Q), m/N
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    if spring:  # #{e > -1/k} - 3 = -#{k >= -1/e, e < 0}: the values from the first at or past -1/e
+                        first = np.where(e < 0, np.searchsorted(vals, (-1.0 / e).ravel(), "left").reshape(e.shape),
+                                         n_val)
+                    else:       # #{e > 1/(lambda m)} = #{m > 1/(e lambda), e > 0}
+                        t = 1.0 / (e * lam[None, None, :])
+                        first = np.where((e > 0) & (lam > 0)[None, None, :],
+                                         np.searchsorted(vals, t.ravel(), "right").reshape(e.shape), n_val)
+                # how many of the three eigenvalues count at each value: a cumulative histogram over the values
+                flat = ((o_idx * (n_val + 1) + first) * n_q + q_idx).ravel()
+                hist = np.bincount(flat, minlength=len(nodes) * (n_val + 1) * n_q).reshape(len(nodes), n_val + 1, n_q)
+                above = np.cumsum(hist, axis=1)[:, :n_val, :]
+                n = poles[None, None, :] + (-above if spring else above)
                 ok = valid if side > 0 else finite
-                n = np.where(ok[None, None, :], n, BEYOND_COUNT if side > 0 else 0)
-                out[lo:lo + len(nodes)] = n
+                out[lo:lo + len(nodes)] = np.where(ok[None, None, :], n, BEYOND_COUNT if side > 0 else 0)
         return at_least, at_most
 
     def _padded_dofs(self, nodes: Sequence[str]) -> np.ndarray:

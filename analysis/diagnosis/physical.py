@@ -352,7 +352,8 @@ def _first_pass(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[Param
     upto_y = at_most[:, :, x.size:].reshape(shape)
     most = np.maximum(upto_y[:, :-1], upto_y[:, 1:])          # (options, cells, modes, levels)
     least = np.minimum(below_x[:, :-1], below_x[:, 1:])
-    empty = np.cumprod(most <= least, axis=-1).sum(axis=-1)     # windows nest: the empty ones lead
+    free = most <= least                                        # windows nest: the empty ones lead
+    empty = np.where(free.all(axis=-1), lv.size, np.argmin(free, axis=-1))
     r = np.concatenate([[0.0], lv])[empty]
     chi2 = np.sum((RESIDUAL_CAP * np.tanh(r / RESIDUAL_CAP)) ** 2, axis=-1)    # (options, cells)
     bound = chi2.min(axis=1)

@@ -81,6 +81,8 @@ def main() -> None:
     ap.add_argument("--mass-kg", type=float, default=3.0, help="the added mass (kg; the model's is 168 kg)")
     ap.add_argument("--map-every", type=int, default=1,
                     help="the DOF map lists every k-th node (and the measured ones): the added mass's candidates")
+    ap.add_argument("--profile", metavar="OUT.prof",
+                    help="run the command under cProfile and write its profile here (the times then include its cost)")
     add_write_option(ap, RESULTS)
     args = ap.parse_args()
     with recorded(RESULTS, args.write):
@@ -140,7 +142,8 @@ def _run(args: argparse.Namespace) -> None:
         write_uff58(uff, measured)
         with open(d / "model.toml", "a") as fh:
             fh.write(f"\n[modes]\nmax_freq_hz = {float(2 * band_top)!r}\n")
-        cmd = [sys.executable, "-m", "analysis", "diagnose", "-q", "--measured", str(uff), "--simulated",
+        prof = ["-m", "cProfile", "-o", str(Path(args.profile).resolve())] if args.profile else []
+        cmd = [sys.executable, *prof, "-m", "analysis", "diagnose", "-q", "--measured", str(uff), "--simulated",
                str(d / "model.toml"), "--effects", "added_mass", "--band", f"{float(freq[2])!r}:{float(freq[-1])!r}",
                "--json", str(d / "diag.json")]
         env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS") and k != "IMPACTLAB_THREADS"}
