@@ -511,7 +511,8 @@ KEPT_SPACES = 32
 KEPT_EXACT = 4
 
 
-#: An extra Ritz vector keeping less than this fraction of its M0-norm squared (1e-8 of the norm) outside the kept modes is dropped.
+#: An extra Ritz vector keeping less than this fraction of its M0-norm squared (1e-8 of the norm) outside the kept
+#: modes is dropped.
 SPAN_RTOL = 1e-16
 #: Rounding allowed in a node's residual flexibility (of its trace): :meth:`FEVariants.first_pass` lowers it by
 #: this for its upper bounds and raises it for its lower bounds.
@@ -548,104 +549,101 @@ def _inverse_blocks(A: sp.spmatrix, dofs: np.ndarray, solve: Callable[[np.ndarra
                     ) -> np.ndarray:
     """The blocks ``A^-1[d, d]`` (o, 3, 3) of a symmetric positive definite ``A`` at the DOF rows ``dofs``
     (o, 3; -1 pads, its row and column zero). Small models: the dense inverse. Else the selected inversion of
-    the banded Cholesky factor ``A = C C^T`` after a reverse Cuthill-McKee ordering, by blocks of the
-    half-bandwidth b (``C`` is block-bidiagonal; ``Z = A^-1`` on the diagonal blocks and the next, from the last
-    block: ``Z_(k+1)k = -Z_(k+1)(k+1) C_(k+1)k C_kk^-1``, ``Z_kk = C_kk^-T C_kk^-1 - C_kk^-T C_(k+1)k^T Z_(k+1)k``,
-    ~n b^2 flops); two DOFs of one node in different connected parts of ``A`` have ``Z = 0``; two further
-    apart than a block (never for coupled DOFs) are bounded in the Loewner order (the node's block by three
-    times its diagonal, as a positive semi-definite 3 x 3 is). Too wide a band: columns solved by ``solve``."""
-    from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
+    the banded Cholesky factor after a reverse Cuthill-McKee ordering (:func:`_banded_inverse`). Too wide a
+    band (``n b^2 > BAND_WORK_MAX``) or no ``solve``: the nodes' columns solved (by ``solve``, else a sparse LU)."""
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
 
     n = int(A.shape[0])
-    o = dofs.shape[0]
-    out = np.zeros((o, 3, 3))
     pad = dofs < 0
-    flat = np.unique(dofs[~pad])
     if n <= DENSE_INVERSE_MAX_DOF:
         Zd = np.linalg.inv(_dense(A))
         idx = np.maximum(dofs, 0)
-        out = Zd[idx[:, :, None], idx[:, None, :]]
-        return np.where(pad[:, :, None] | pad[:, None, :], 0.0, out)
+        return np.where(pad[:, :, None] | pad[:, None, :], 0.0, Zd[idx[:, :, None], idx[:, None, :]])
     A = sp.csr_matrix(A)
     perm = reverse_cuthill_mckee(A, symmetric_mode=True)
     Ap = sp.csr_matrix(A[perm][:, perm]).tocoo()
     b = int(np.max(np.abs(Ap.row - Ap.col), initial=0))
     if n * float(b) ** 2 > BAND_WORK_MAX or solve is None:
-        if solve is None:
-            solve = spla.splu(A.tocsc()).solve
-        col = {}
-        for lo in range(0, flat.size, 64):
-            part = flat[lo:lo + 64]
-            E = np.zeros((n, part.size))
-            E[part, np.arange(part.size)] = 1.0
-            X = np.asarray(solve(np.asfortranarray(E)))
-            for k, d in enumerate(part):
-                col[int(d)] = X[:, k]
-        for i in range(o):
-            for a in range(3):
-                for c in range(3):
-                    if not (pad[i, a] or pad[i, c]):
-                        out[i, a, c] = col[int(dofs[i, a])][dofs[i, c]]
-        return 0.5 * (out + out.transpose(0, 2, 1))
+        return _solved_blocks(A, dofs, solve)
+    return _banded_inverse(A, Ap, perm, b, dofs)
+
+
+def _solved_blocks(A: sp.csr_matrix, dofs: np.ndarray, solve: Callable[[np.ndarray], np.ndarray] | None
+                   ) -> np.ndarray:
+    """:func:`_inverse_blocks` by solving ``A x = e_d`` for every DOF ``d`` of ``dofs`` (64 columns at once)."""
+    n = int(A.shape[0])
+    pad = dofs < 0
+    flat = np.unique(dofs[~pad])
+    if solve is None:
+        solve = spla.splu(A.tocsc()).solve
+    where = {int(d): k for k, d in enumerate(flat)}
+    Zc = np.zeros((n, flat.size))
+    for lo in range(0, flat.size, 64):
+        part = flat[lo:lo + 64]
+        E = np.zeros((n, part.size))
+        E[part, np.arange(part.size)] = 1.0
+        Zc[:, lo:lo + part.size] = np.asarray(solve(np.asfortranarray(E)))
+    out = np.zeros((dofs.shape[0], 3, 3))
+    for i, a, c in np.argwhere(~pad[:, :, None] & ~pad[:, None, :]):
+        out[i, a, c] = Zc[dofs[i, c], where[int(dofs[i, a])]]
+    return 0.5 * (out + out.transpose(0, 2, 1))
+
+
+def _banded_inverse(A: sp.csr_matrix, Ap: sp.coo_matrix, perm: np.ndarray, b: int, dofs: np.ndarray) -> np.ndarray:
+    """:func:`_inverse_blocks` by the banded Cholesky factor ``Ap = C C^T`` of ``Ap = A[perm][:, perm]`` (half-
+    bandwidth ``b``), by blocks of ``s = b`` rows (``C`` is block-bidiagonal; ``Z = A^-1`` on the diagonal blocks
+    and the next, from the last block: ``Z_(k+1)k = -Z_(k+1)(k+1) C_(k+1)k C_kk^-1``, ``Z_kk = C_kk^-T C_kk^-1 -
+    C_kk^-T C_(k+1)k^T Z_(k+1)k``, ~n b^2 flops). Two DOFs of one node in different connected parts of ``A`` have
+    ``Z = 0``; two further apart than a block (never for coupled DOFs) are bounded in the Loewner order (the
+    node's block by three times its diagonal, as a positive semi-definite 3 x 3 is)."""
+    from scipy.sparse.csgraph import connected_components
+
+    n = int(A.shape[0])
+    o = dofs.shape[0]
+    pad = dofs < 0
     pos = np.empty(n, int)
     pos[perm] = np.arange(n)
     _, part_of = connected_components(A, directed=False)
-    # the banded lower Cholesky factor C (A = C C^T): cb[i, j] = C[j + i, j]
-    ab = np.zeros((b + 1, n))
+    ab = np.zeros((b + 1, n))                           # the lower band: ab[i, j] = Ap[j + i, j]
     low = Ap.row >= Ap.col
     ab[Ap.row[low] - Ap.col[low], Ap.col[low]] = Ap.data[low]
     cb = scipy.linalg.cholesky_banded(ab, lower=True)
-    offs = np.arange(b + 1)
-    cols = np.repeat(np.arange(n)[None, :], b + 1, axis=0)
-    inside = cols + offs[:, None] < n
-    C = sp.csr_matrix((cb[inside], ((cols + offs[:, None])[inside], cols[inside])), shape=(n, n))
-    # Z = C^-T C^-1 by blocks of s >= b rows (C block-bidiagonal), from the last: with X = C_kk^-1,
-    # Z_(k+1)k = -Z_(k+1)(k+1) C_(k+1)k X and Z_kk = X^T X - X^T C_(k+1)k^T Z_(k+1)k
+    rows = np.arange(b + 1)[:, None] + np.arange(n)[None, :]
+    inside = rows < n
+    C = sp.csr_matrix((cb[inside], (rows[inside], np.broadcast_to(np.arange(n), rows.shape)[inside])), shape=(n, n))
     s = max(b, 1)
-    starts = list(range(0, n, s))
-    diag = np.zeros(n)
-    near: dict[tuple[int, int], float] = {}           # (p, q) permuted, p < q in one block or the next: Z[p, q]
-    want = set()
+    want = set()                                        # (p, q) permuted, p < q: the nodes' off-diagonal entries
     loose = np.zeros(o, bool)
-    for i in range(o):
-        for a in range(3):
-            for c in range(a + 1, 3):
-                if pad[i, a] or pad[i, c] or part_of[dofs[i, a]] != part_of[dofs[i, c]]:
-                    continue                             # Z = 0 between unconnected parts
-                pa, pc = sorted((int(pos[dofs[i, a]]), int(pos[dofs[i, c]])))
-                if pc // s - pa // s > 1:
-                    loose[i] = True
-                else:
-                    want.add((pa, pc))
+    for i, a, c in np.argwhere(~pad[:, :, None] & ~pad[:, None, :]):
+        if a < c and part_of[dofs[i, a]] == part_of[dofs[i, c]]:      # else Z = 0 between unconnected parts
+            p, q = sorted((int(pos[dofs[i, a]]), int(pos[dofs[i, c]])))
+            if q // s - p // s > 1:
+                loose[i] = True
+            else:
+                want.add((p, q))
+    by_block: dict[int, list[tuple[int, int]]] = {}
+    for p, q in want:
+        by_block.setdefault(p // s, []).append((p, q))
+    diag = np.zeros(n)
+    near: dict[tuple[int, int], float] = {}
     Znext: np.ndarray | None = None
-    for k in range(len(starts) - 1, -1, -1):
-        lo, hi = starts[k], min(starts[k] + s, n)
+    for lo in range((n - 1) // s * s, -1, -s):
+        hi = min(lo + s, n)
         X = scipy.linalg.solve_triangular(C[lo:hi, lo:hi].toarray(), np.eye(hi - lo), lower=True)
         Zkk = X.T @ X
         if Znext is not None:
-            nhi = min(hi + s, n)
-            B = C[hi:nhi, lo:hi].toarray()
-            Zlow = -(Znext @ B) @ X                      # Z[hi:nhi, lo:hi]
+            B = C[hi:hi + s, lo:hi].toarray()
+            Zlow = -(Znext @ B) @ X                    # Z[hi:hi+s, lo:hi]
             Zkk = Zkk - X.T @ (B.T @ Zlow)
-            for p, q in want:
-                if lo <= p < hi and hi <= q < nhi:
-                    near[(p, q)] = float(Zlow[q - hi, p - lo])
-        for p, q in want:
-            if lo <= p < hi and q < hi:
-                near[(p, q)] = float(Zkk[p - lo, q - lo])
+            near.update({(p, q): float(Zlow[q - hi, p - lo]) for p, q in by_block.get(lo // s, ()) if q >= hi})
+        near.update({(p, q): float(Zkk[p - lo, q - lo]) for p, q in by_block.get(lo // s, ()) if q < hi})
         diag[lo:hi] = np.diag(Zkk)
         Znext = Zkk
-    for i in range(o):
-        for a in range(3):
-            if pad[i, a]:
-                continue
-            out[i, a, a] = diag[pos[dofs[i, a]]]
-            for c in range(a + 1, 3):
-                key = tuple(sorted((int(pos[dofs[i, a]]), int(pos[dofs[i, c]]))))
-                if not pad[i, c] and key in near:
-                    out[i, a, c] = out[i, c, a] = near[key]
-        if loose[i]:
-            out[i] = 3.0 * np.diag(np.diag(out[i]))
+    out = np.zeros((o, 3, 3))
+    for i, a, c in np.argwhere(~pad[:, :, None] & ~pad[:, None, :]):
+        p, q = sorted((int(pos[dofs[i, a]]), int(pos[dofs[i, c]])))
+        out[i, a, c] = diag[p] if a == c else near.get((p, q), 0.0)
+    out[loose] = 3.0 * np.einsum("oaa,ab->oab", out[loose], np.eye(3))
     return out
 
 
@@ -875,7 +873,7 @@ class FEVariants:
                 hist = np.bincount(flat, minlength=len(nodes) * (n_val + 1) * n_q).reshape(len(nodes), n_val + 1, n_q)
                 above = np.cumsum(hist, axis=1)[:, :n_val, :]
                 n = poles[None, None, :] + (-above if spring else above)
-                ok = valid if side > 0 else finite
+                ok: np.ndarray = np.asarray(valid if side > 0 else finite, bool)
                 out[lo:lo + len(nodes)] = np.where(ok[None, None, :], n, BEYOND_COUNT if side > 0 else 0)
         return at_least, at_most
 
