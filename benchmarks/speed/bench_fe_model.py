@@ -79,18 +79,24 @@ def main() -> None:
     ap.add_argument("--nx", type=int, default=40)
     ap.add_argument("--ny", type=int, default=84)
     ap.add_argument("--mass-kg", type=float, default=3.0, help="the added mass (kg; the model's is 168 kg)")
-    ap.add_argument("--map-every", type=int, default=1,
-                    help="the DOF map lists every k-th node (and the measured ones): the added mass's candidates")
+    ap.add_argument("--map-every", type=int, nargs="+", default=[1],
+                    help="the DOF map lists every k-th node (and the measured ones): the added mass's candidates; "
+                         "several: one run each and a table")
     ap.add_argument("--profile", metavar="OUT.prof",
-                    help="run the command under cProfile and write its profile here (the times then include its cost)")
+                    help="run the command under cProfile, its profile to OUT.prof.K for --map-every K (the times then "
+                         "include its cost)")
     add_write_option(ap, RESULTS)
     args = ap.parse_args()
     with recorded(RESULTS, args.write):
-        _run(args)
+        rows = [_run(args, every) for every in every]
+        print("\n| DOF map (candidate nodes) | named | truth | wall (load average) | CPU |\n|---|---|---|---|---|")
+        for r in rows:
+            print(r)
 
 
-def _run(args: argparse.Namespace) -> None:
-    """The run itself (what :func:`main` records with ``--write``)."""
+def _run(args: argparse.Namespace, every: int) -> str:
+    """One run with every ``every``-th node mapped (what :func:`main` records with ``--write``): prints its
+    figures and returns its row of the table."""
     import numpy as np
     import scipy.io
     import scipy.sparse as sp
@@ -107,11 +113,11 @@ def _run(args: argparse.Namespace) -> None:
         scipy.io.mmwrite(str(d / "K.mtx"), K.tocoo(), symmetry="symmetric")
         scipy.io.mmwrite(str(d / "M.mtx"), M.tocoo(), symmetry="symmetric")
         first = (args.ny // 3) * args.nx + args.nx // 4           # an interior node, a mapped one
-        mass_node = 1 + first + (-first % args.map_every)
+        mass_node = 1 + first + (-first % every)
         outs = [f"n:{(args.ny * j // 6) * args.nx + args.nx * (j + 1) // 7 + 1}:Z" for j in range(1, 6)]
         keep = {int(o.split(":")[1]) for o in outs}
         mapped = [(i, lbl) for i, lbl in enumerate(labels)
-                  if (int(lbl.split(":")[1]) - 1) % args.map_every == 0 or int(lbl.split(":")[1]) in keep]
+                  if (int(lbl.split(":")[1]) - 1) % every == 0 or int(lbl.split(":")[1]) in keep]
         (d / "dofs.csv").write_text("dof,point\n" + "".join(f"{i},{lbl}\n" for i, lbl in mapped))
         n_mapped = len({lbl.rsplit(":", 1)[0] for _, lbl in mapped})
         (d / "model.toml").write_text('[fe]\nstiffness = "K.mtx"\nmass = "M.mtx"\ndofs = "dofs.csv"\n\n'
@@ -142,7 +148,7 @@ def _run(args: argparse.Namespace) -> None:
         write_uff58(uff, measured)
         with open(d / "model.toml", "a") as fh:
             fh.write(f"\n[modes]\nmax_freq_hz = {float(2 * band_top)!r}\n")
-        prof = ["-m", "cProfile", "-o", str(Path(args.profile).resolve())] if args.profile else []
+        prof = ["-m", "cProfile", "-o", str(Path(f"{args.profile}.{every}").resolve())] if args.profile else []
         cmd = [sys.executable, *prof, "-m", "analysis", "diagnose", "-q", "--measured", str(uff), "--simulated",
                str(d / "model.toml"), "--effects", "added_mass", "--band", f"{float(freq[2])!r}:{float(freq[-1])!r}",
                "--json", str(d / "diag.json")]
@@ -168,7 +174,11 @@ def _run(args: argparse.Namespace) -> None:
           f"--band {freq[2]:.3f}:{freq[-1]:.3f} --json diag.json (no BLAS thread variables)")
     print(f"verdict: {diag.get('verdict')} {named.get('effect', '')} {named.get('parameters', {})}")
     print(f"time: {wall:.2f} s wall, {cpu:.2f} s CPU (the process, its threads and children: start, read, diagnose); "
-          f"load average {load:.1f} at the start on {os.cpu_count()} cores")
+          f"load average {load:.1f} at the start on {os.cpu_count()} cores\n")
+    par = named.get("parameters", {})
+    shown = f"`{named.get('effect')}` {par.get('point')}, {par.get('mass_kg', float('nan')):.3f} kg" if named else "none"
+    return (f"| every {every} ({n_mapped}) | {shown} | n:{mass_node}, {args.mass_kg:g} kg | {wall:.1f} s "
+            f"({load:.1f}) | {cpu:.1f} s |")
 
 if __name__ == "__main__":
     main()
