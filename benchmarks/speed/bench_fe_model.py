@@ -88,7 +88,7 @@ def main() -> None:
     add_write_option(ap, RESULTS)
     args = ap.parse_args()
     with recorded(RESULTS, args.write):
-        rows = [_run(args, every) for every in every]
+        rows = [_run(args, every) for every in args.map_every]
         print("\n| DOF map (candidate nodes) | named | truth | wall (load average) | CPU |\n|---|---|---|---|---|")
         for r in rows:
             print(r)
