@@ -42,7 +42,9 @@ Candidates are solved in a Rayleigh-Ritz space (the unchanged model's modes up t
 the top asked for, plus the static response to the changed DOFs with ``KRYLOV_BLOCKS - 1`` inertia
 corrections, or the group's first-order correction):
 a few small dense eigenproblems instead of a sparse one per candidate. :meth:`FEVariants.exact_modes_of`
-solves the full sparse model (the diagnosis checks each chosen fit with it).
+solves the full sparse model (the diagnosis checks each chosen fit with it). :meth:`FEVariants.first_pass`
+bounds the mode count of every node with a mass or a spring from both sides at once (the kept modes and each
+node's residual flexibility, no sparse solve per node), so a search over every node is exact and cheap.
 """
 from __future__ import annotations
 

@@ -4,6 +4,7 @@ fit could still win (:func:`analysis.diagnosis.physical.fit_cause`)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -32,7 +33,9 @@ def test_first_pass_bounds_the_full_and_the_reduced_model(tmp_path: Path, cause:
     fmax = 1200.0
     nodes = ["n:1", "n:21", "n:27", "n:49"]                          # an edge node, the bracket's, inner, the bracket
     freqs = np.linspace(5.0, fmax, 400)
-    at_least, at_most = sim.first_pass(cause, nodes, np.array(values), freqs, fmax)
+    got = sim.first_pass(cause, nodes, np.array(values), freqs, fmax)
+    assert got is not None
+    at_least, at_most = got
     gaps = []
     name = "mass_kg" if cause == "added_mass" else "stiffness_n_m"
     for i, node in enumerate(nodes):
@@ -113,7 +116,7 @@ def test_a_node_a_first_order_screen_ranks_low_is_still_found() -> None:
     a = rng.uniform(0.01, 0.05, (30, 4))
     a[:25] = 2.0 * (1.0 - ratio) / m_decoy * (1.0 + 1e-4 * rng.standard_normal((25, 4)))
     a[29] = a_true
-    sim = _Toy(a)
+    sim: Any = _Toy(a)
     f, P = sim.modes(None, {"point": "n:29", "mass_kg": 1.0}, 1e3)
     mm = MeasuredModes(f, 1e-4 * f, P.astype(complex))
     sel = np.ones(4, bool)
@@ -160,7 +163,9 @@ def test_chain_nodes_of_one_dof_are_bounded(tmp_path: Path) -> None:
     toml = write_chain(tmp_path, 150)
     sim = FEVariants(load_fe_model(toml), ["n:40:Z"], ["n:150:Z"], max_freq_hz=300.0)
     freqs = np.linspace(1.0, 60.0, 200)
-    lo, hi = sim.first_pass("added_mass", ["n:3", "n:77", "n:150"], np.array([0.1, 5.0, 50.0]), freqs, 60.0)
+    got = sim.first_pass("added_mass", ["n:3", "n:77", "n:150"], np.array([0.1, 5.0, 50.0]), freqs, 60.0)
+    assert got is not None
+    lo, hi = got
     for i, node in enumerate(["n:3", "n:77", "n:150"]):
         for j, m in enumerate([0.1, 5.0, 50.0]):
             K, M = sim.matrices_of([("added_mass", {"point": node, "mass_kg": m})])

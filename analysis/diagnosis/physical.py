@@ -31,7 +31,10 @@ far. The bound: a parameter declared ``monotone`` (a mass or a stiffness added: 
 one way only) keeps every frequency inside a box of the grid between its values at the box's corners, so a
 measured mode is at least as far from the candidate's modes as from those intervals (:func:`_chi2_bound`);
 a box whose bound is below the best fit is halved (``TIGHTEN_SPLITS``) before the option is fitted instead.
-A choice of at most ``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option
+A simulation with a ``first_pass`` (bounds of each option's mode count over a grid: a user's FE model of many
+nodes) has every option's chi2 bounded from below over its whole range first (:func:`_first_pass`); the options
+are then screened and fitted ``FIRST_PASS_BATCH`` at a time, lowest bound first, while a bound is below the best
+fit so far. A choice of at most ``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option
 gets the full search of its parameters (from the nominal and from the best point of a grid), with its own
 model. A cause with several parameters is also fitted with each subset alone (the others at their nominal
 value, each variant started also from the fits of the variants it contains): nested models, the one that
