@@ -171,3 +171,19 @@ def test_chain_nodes_of_one_dof_are_bounded(tmp_path: Path) -> None:
             K, M = sim.matrices_of([("added_mass", {"point": node, "mass_kg": m})])
             below, upto = _exact_counts(K.toarray(), M.toarray(), freqs)
             assert np.all(lo[i, j] <= below) and np.all(upto <= hi[i, j])
+
+
+def test_a_ritz_space_whose_kept_modes_span_a_whole_part_adds_no_spurious_mode(tmp_path: Path) -> None:
+    """When the kept modes already span every out-of-plane (Z) motion of a small net, a node's static response in
+    Z lies in their span: the Ritz space must not add it as a new vector (rounding normalised to unit length),
+    which gave modes the model does not have. The reduced candidate equals the full model."""
+    toml = write_net(tmp_path, 6, 8)
+    sim = FEVariants(load_fe_model(toml), ["n:10:Z"], ["n:30:Z"], max_freq_hz=5000.0)
+    K, M = net_matrices(6, 8)
+    w = np.sqrt(scipy.linalg.eigh(K.toarray(), M.toarray(), eigvals_only=True)) / (2 * np.pi)
+    top = float(w[60])                                   # the kept modes (to twice this) hold every Z mode
+    change = [("added_mass", {"point": "n:20", "mass_kg": 0.3})]
+    f, _ = sim.modes_of(change, top)
+    f_full, _ = sim.exact_modes_of(change, top)
+    assert f.size == f_full.size
+    np.testing.assert_allclose(f, f_full, rtol=1e-7)
