@@ -42,7 +42,9 @@ Candidates are solved in a Rayleigh-Ritz space (the unchanged model's modes up t
 the top asked for, plus the static response to the changed DOFs with ``KRYLOV_BLOCKS - 1`` inertia
 corrections, or the group's first-order correction):
 a few small dense eigenproblems instead of a sparse one per candidate. :meth:`FEVariants.exact_modes_of`
-solves the full sparse model (the diagnosis checks each chosen fit with it).
+solves the full sparse model (the diagnosis checks each chosen fit with it). :meth:`FEVariants.first_pass`
+bounds the mode count of every node with a mass or a spring from both sides at once (the kept modes and each
+node's residual flexibility, no sparse solve per node), so a search over every node is exact and cheap.
 """
 from __future__ import annotations
 
@@ -146,8 +148,9 @@ class FEModel:
     def total_mass_kg(self) -> float:
         """The model's mass (kg): the rigid translation's ``u^T M u`` in the axis of most mapped mass."""
         best = 0.0
+        axes = {lbl: parse_point(lbl).direction.lstrip("-") for lbl in self.dofs}
         for axis in "XYZ":
-            idx = np.array([d for lbl, d in self.dofs.items() if parse_point(lbl).direction.lstrip("-") == axis], int)
+            idx = np.array([d for lbl, d in self.dofs.items() if axes[lbl] == axis], int)
             if idx.size:
                 best = max(best, float(self.M[idx][:, idx].sum()))
         return best
@@ -318,12 +321,12 @@ def _read_dofs(path: Path, n: int) -> tuple[dict, dict]:
             raise FEModelError(f"{path}: row {i}: dof {dof} is outside the matrices' {n} DOFs (0-based: 0 to "
                                f"{n - 1}); the map does not match the matrices")
         try:
-            label = str(parse_point(row[1]))
+            p = parse_point(row[1])
         except PointLabelError as exc:
             raise FEModelError(f"{path}: row {i}: {exc}") from None
+        label = str(p)
         if dof in seen:
             raise FEModelError(f"{path}: row {i}: dof {dof} is mapped already on row {seen[dof]}")
-        p = parse_point(label)
         twin = f"{p.component}:{p.node}:{'' if p.sign < 0 else '-'}{p.direction.lstrip('-')}"
         if label in dofs or twin in dofs:
             raise FEModelError(f"{path}: row {i}: point {label} is mapped already (dof {dofs.get(label, dofs.get(twin))})")
@@ -350,6 +353,18 @@ def _shift_solver(K: sp.spmatrix, M: sp.spmatrix, sigma: float) -> Callable[[np.
     except RuntimeError as exc:
         raise FEModelError(f"the shifted stiffness K - sigma M is singular ({exc}); the model has a mode below "
                            f"{np.sqrt(max(-sigma, 0.0)) / (2 * np.pi):.3g} Hz or a negative stiffness") from None
+
+
+def _count_below(K: sp.spmatrix, M: sp.spmatrix, w2: float) -> int:
+    """The number of modes below ``w2`` (rad^2/s^2) by Sylvester's law of inertia: the negative pivots of a
+    symmetric factorisation of ``K - w2 M`` (no pivoting, so a guess where a pivot is tiny: the solver's first
+    ask, which it checks); 0 when the factorisation fails."""
+    try:
+        lu = spla.splu(sp.csc_matrix(K - w2 * M), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+    except RuntimeError:
+        return 0
+    return int(np.sum(lu.U.diagonal() < 0))
 
 
 def sparse_modes(K: sp.spmatrix, M: sp.spmatrix, max_freq_hz: float, *, sparse: bool | None = None,
@@ -498,6 +513,142 @@ KEPT_SPACES = 32
 KEPT_EXACT = 4
 
 
+#: An extra Ritz vector keeping less than this fraction of its M0-norm squared (1e-8 of the norm) outside the kept
+#: modes is dropped.
+SPAN_RTOL = 1e-16
+#: Rounding allowed in a node's residual flexibility (of its trace): :meth:`FEVariants.first_pass` lowers it by
+#: this for its upper bounds and raises it for its lower bounds.
+FLEX_RTOL = 1e-9
+#: Nodes of one block of :meth:`FEVariants.first_pass` (bounds the arrays: ~ nodes x frequencies x values).
+FIRST_PASS_CHUNK = 128
+#: A mode count above every model's (:meth:`FEVariants.first_pass` where nothing is known).
+BEYOND_COUNT = 1 << 30
+#: Models up to this many DOF have ``(K0 - sigma M0)^-1`` inverted densely for the residual flexibility.
+DENSE_INVERSE_MAX_DOF = 2000
+#: The banded selected inversion is used while ``n * bandwidth^2`` (after reverse Cuthill-McKee) stays below this;
+#: above it each node's columns are solved with the sparse factorisation (slower, the same answer).
+BAND_WORK_MAX = 4e9
+
+
+def _eig3(a00: np.ndarray, a11: np.ndarray, a22: np.ndarray, a01: np.ndarray, a02: np.ndarray,
+          a12: np.ndarray) -> np.ndarray:
+    """Eigenvalues (3, ...) of the symmetric 3 x 3 matrices with these entries (arrays of one shape), by the
+    trigonometric solution of the characteristic cubic (vectorised; rounding ~1e-8 of the matrix's norm)."""
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p1 = a01 ** 2 + a02 ** 2 + a12 ** 2
+    p = np.sqrt((b00 ** 2 + b11 ** 2 + b22 ** 2 + 2.0 * p1) / 6.0)
+    safe = np.where(p > 0, p, 1.0)
+    det = (b00 * (b11 * b22 - a12 ** 2) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02))
+    r = np.clip(det / (2.0 * safe ** 3), -1.0, 1.0)
+    t = np.arccos(r) / 3.0
+    e1 = q + 2.0 * p * np.cos(t)
+    e3 = q + 2.0 * p * np.cos(t + 2.0 * np.pi / 3.0)
+    return np.stack([e3, 3.0 * q - e1 - e3, e1])
+
+
+def _inverse_blocks(A: sp.spmatrix, dofs: np.ndarray, solve: Callable[[np.ndarray], np.ndarray] | None
+                    ) -> np.ndarray:
+    """The blocks ``A^-1[d, d]`` (o, 3, 3) of a symmetric positive definite ``A`` at the DOF rows ``dofs``
+    (o, 3; -1 pads, its row and column zero). Small models: the dense inverse. Else the selected inversion of
+    the banded Cholesky factor after a reverse Cuthill-McKee ordering (:func:`_banded_inverse`). Too wide a
+    band (``n b^2 > BAND_WORK_MAX``) or no ``solve``: the nodes' columns solved (by ``solve``, else a sparse LU)."""
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    n = int(A.shape[0])
+    pad = dofs < 0
+    if n <= DENSE_INVERSE_MAX_DOF:
+        Zd = np.linalg.inv(_dense(A))
+        idx = np.maximum(dofs, 0)
+        return np.where(pad[:, :, None] | pad[:, None, :], 0.0, Zd[idx[:, :, None], idx[:, None, :]])
+    A = sp.csr_matrix(A)
+    perm = reverse_cuthill_mckee(A, symmetric_mode=True)
+    Ap = sp.csr_matrix(A[perm][:, perm]).tocoo()
+    b = int(np.max(np.abs(Ap.row - Ap.col), initial=0))
+    if n * float(b) ** 2 > BAND_WORK_MAX or solve is None:
+        return _solved_blocks(A, dofs, solve)
+    return _banded_inverse(A, Ap, perm, b, dofs)
+
+
+def _solved_blocks(A: sp.csr_matrix, dofs: np.ndarray, solve: Callable[[np.ndarray], np.ndarray] | None
+                   ) -> np.ndarray:
+    """:func:`_inverse_blocks` by solving ``A x = e_d`` for every DOF ``d`` of ``dofs`` (64 columns at once)."""
+    n = int(A.shape[0])
+    pad = dofs < 0
+    flat = np.unique(dofs[~pad])
+    if solve is None:
+        solve = spla.splu(A.tocsc()).solve
+    where = {int(d): k for k, d in enumerate(flat)}
+    Zc = np.zeros((n, flat.size))
+    for lo in range(0, flat.size, 64):
+        part = flat[lo:lo + 64]
+        E = np.zeros((n, part.size))
+        E[part, np.arange(part.size)] = 1.0
+        Zc[:, lo:lo + part.size] = np.asarray(solve(np.asfortranarray(E)))
+    out = np.zeros((dofs.shape[0], 3, 3))
+    for i, a, c in np.argwhere(~pad[:, :, None] & ~pad[:, None, :]):
+        out[i, a, c] = Zc[dofs[i, c], where[int(dofs[i, a])]]
+    return 0.5 * (out + out.transpose(0, 2, 1))
+
+
+def _banded_inverse(A: sp.csr_matrix, Ap: sp.coo_matrix, perm: np.ndarray, b: int, dofs: np.ndarray) -> np.ndarray:
+    """:func:`_inverse_blocks` by the banded Cholesky factor ``Ap = C C^T`` of ``Ap = A[perm][:, perm]`` (half-
+    bandwidth ``b``), by blocks of ``s = b`` rows (``C`` is block-bidiagonal; ``Z = A^-1`` on the diagonal blocks
+    and the next, from the last block: ``Z_(k+1)k = -Z_(k+1)(k+1) C_(k+1)k C_kk^-1``, ``Z_kk = C_kk^-T C_kk^-1 -
+    C_kk^-T C_(k+1)k^T Z_(k+1)k``, ~n b^2 flops). Two DOFs of one node in different connected parts of ``A`` have
+    ``Z = 0``; two further apart than a block (never for coupled DOFs) are bounded in the Loewner order (the
+    node's block by three times its diagonal, as a positive semi-definite 3 x 3 is)."""
+    from scipy.sparse.csgraph import connected_components
+
+    n = int(A.shape[0])
+    o = dofs.shape[0]
+    pad = dofs < 0
+    pos = np.empty(n, int)
+    pos[perm] = np.arange(n)
+    _, part_of = connected_components(A, directed=False)
+    ab = np.zeros((b + 1, n))                           # the lower band: ab[i, j] = Ap[j + i, j]
+    low = Ap.row >= Ap.col
+    ab[Ap.row[low] - Ap.col[low], Ap.col[low]] = Ap.data[low]
+    cb = scipy.linalg.cholesky_banded(ab, lower=True)
+    rows = np.arange(b + 1)[:, None] + np.arange(n)[None, :]
+    inside = rows < n
+    C = sp.csr_matrix((cb[inside], (rows[inside], np.broadcast_to(np.arange(n), rows.shape)[inside])), shape=(n, n))
+    s = max(b, 1)
+    want = set()                                        # (p, q) permuted, p < q: the nodes' off-diagonal entries
+    loose = np.zeros(o, bool)
+    for i, a, c in np.argwhere(~pad[:, :, None] & ~pad[:, None, :]):
+        if a < c and part_of[dofs[i, a]] == part_of[dofs[i, c]]:      # else Z = 0 between unconnected parts
+            p, q = sorted((int(pos[dofs[i, a]]), int(pos[dofs[i, c]])))
+            if q // s - p // s > 1:
+                loose[i] = True
+            else:
+                want.add((p, q))
+    by_block: dict[int, list[tuple[int, int]]] = {}
+    for p, q in want:
+        by_block.setdefault(p // s, []).append((p, q))
+    diag = np.zeros(n)
+    near: dict[tuple[int, int], float] = {}
+    Znext: np.ndarray | None = None
+    for lo in range((n - 1) // s * s, -1, -s):
+        hi = min(lo + s, n)
+        X = scipy.linalg.solve_triangular(C[lo:hi, lo:hi].toarray(), np.eye(hi - lo), lower=True)
+        Zkk = X.T @ X
+        if Znext is not None:
+            B = C[hi:hi + s, lo:hi].toarray()
+            Zlow = -(Znext @ B) @ X                    # Z[hi:hi+s, lo:hi]
+            Zkk = Zkk - X.T @ (B.T @ Zlow)
+            near.update({(p, q): float(Zlow[q - hi, p - lo]) for p, q in by_block.get(lo // s, ()) if q >= hi})
+        near.update({(p, q): float(Zkk[p - lo, q - lo]) for p, q in by_block.get(lo // s, ()) if q < hi})
+        diag[lo:hi] = np.diag(Zkk)
+        Znext = Zkk
+    out = np.zeros((o, 3, 3))
+    for i, a, c in np.argwhere(~pad[:, :, None] & ~pad[:, None, :]):
+        p, q = sorted((int(pos[dofs[i, a]]), int(pos[dofs[i, c]])))
+        out[i, a, c] = diag[p] if a == c else near.get((p, q), 0.0)
+    out[loose] = 3.0 * np.einsum("oaa,ab->oab", out[loose], np.eye(3))
+    return out
+
+
 def _keep(store: dict, key: Any, value: Any) -> None:
     """``store[key] = value``, the oldest entry dropped beyond ``KEPT_SPACES``."""
     while len(store) >= KEPT_SPACES:
@@ -576,6 +727,7 @@ class FEVariants:
         self._sigma = 0.0
         self._solve: Callable[[np.ndarray], np.ndarray] | None = None
         self._static: dict[str, np.ndarray] = {}
+        self._flex: dict[str, np.ndarray] = {}       # node -> residual flexibility R(sigma) (first_pass)
         self._spaces: dict[tuple, _Space] = {}
         self._memo: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self._expect: dict[float, int] = {}          # modes below a top found last time (the solver's first ask)
@@ -624,33 +776,135 @@ class FEVariants:
         self._memo[key] = out
         return out
 
-    def screen_modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`modes` for the first pass of a screen over many options (every node of an added mass or a
-        spring to ground): the Rayleigh-Ritz solution in the unchanged model's kept modes alone (up to
-        ``RITZ_FACTOR`` times the top), no static response, so no sparse solve per node; its frequencies are
-        upper bounds of the full model's. The screen's second pass (:func:`analysis.diagnosis.physical.fit_cause`)
-        judges the best options again with :meth:`modes`. Other causes: :meth:`modes` itself."""
-        changes = _one(cause, params)
-        c = self._change(changes)
-        if c.k_factor != 1.0 or c.m_factor != 1.0 or c.k_groups or c.m_groups or c.sensor_mass_kg is not None:
-            return self.modes_of(changes, max_freq_hz)
+    def first_pass(self, cause: str, options: Sequence[str], values: np.ndarray, freq_hz: np.ndarray,
+                   max_freq_hz: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """Bounds of the mode count of every node of ``options`` changed by ``cause`` (``added_mass``: kg,
+        ``ground_spring``: N/m) at each of ``values``, for the first pass of a search over many nodes:
+        ``(at_least, at_most)``, integer arrays (options, values, freqs) with
+
+            at_least <= #{modes below f} <= #{modes at or below f} <= at_most
+
+        for every ``f`` of ``freq_hz`` (Hz), the modes those of the full model changed so *and* of its Ritz
+        solution (:meth:`modes`), rigid ones included. No sparse solve per node: a few small products per
+        node and frequency. Other causes: None (no first pass).
+
+        The mathematics (``E`` the node's mapped DOFs, r <= 3 columns; ``Phi``, ``Lambda`` the kept modes,
+        M0-normalised, every mode of ``(K0, M0)`` up to ``c = (2 pi RITZ_FACTOR max_freq_hz)^2`` rad^2/s^2;
+        a node's rows ``Psi = E^T Phi`` in 1/sqrt(kg)):
+
+        1. Counting. For a pencil ``(K, M)`` of poles ``lambda_i`` (the unchanged eigenvalues), an added mass
+           ``m EE^T`` (kg) and ``lambda > 0`` not a pole, Haynsworth's inertia formula on
+           ``[[K - lambda M, E], [E^T, I/(lambda m)]]`` gives the number of changed eigenvalues below
+           ``lambda``: ``N(lambda) = #{lambda_i < lambda} + #{eigenvalues of G(lambda) above 1/(lambda m)}``,
+           ``G(lambda) = E^T (K - lambda M)^-1 E = sum_i psi_i psi_i^T / (lambda_i - lambda)`` (m/N, r x r).
+           A spring ``k EE^T`` (N/m): ``N = #{lambda_i < lambda} + #{eigenvalues of G above -1/k} - r``.
+           Both counts grow with ``G`` in the Loewner order.
+        2. Upper bounds of the eigenvalues (``at_least``): the Rayleigh-Ritz solution in the kept modes and
+           the residual static response ``x_r = sum_discarded phi_i psi_i^T / (lambda_i - sigma)`` (the part of
+           ``(K0 - sigma M0)^-1 E`` outside the kept modes), whose projections are ``x_r^T (K0 - sigma M0) x_r =
+           R(sigma)`` (below) and ``x_r^T M0 x_r = S >= 0`` (unknown), with ``sigma < 0``. The projected pencil's
+           stiffness ``R + sigma S`` falls and its mass grows as ``S`` grows, so its eigenvalues are at most
+           those at ``S = 0``: the kept modes with the static correction, massless, whose ``G`` is
+           ``G_S = G_U + R(sigma)``, ``G_U = sum over the kept modes`` (the counting above holds for it: its
+           stiffness is positive definite where its mass is singular). Its eigenvalues bound the Ritz solution in
+           ``[Phi, x_r]`` from above, which bounds the full model's (Poincare) and that of any space holding
+           ``[Phi, x_r]`` (:meth:`modes`: Cauchy interlacing) from above; its count is a lower bound of theirs.
+        3. Lower bounds (``at_most``): the full model's ``G = G_U + R(lambda)``, ``R`` the discarded modes'
+           part (``lambda_i >= c``). For ``sigma <= lambda < c`` and ``lambda_i >= c``,
+           ``1 / (lambda_i - lambda) <= (c - sigma) / ((lambda_i - sigma)(c - lambda))`` (cross-multiplied:
+           ``lambda_i (lambda - sigma) >= c (lambda - sigma)``), so ``R(lambda) <= R(sigma) (c - sigma) /
+           (c - lambda)`` with the residual flexibility ``R(sigma) = E^T (K0 - sigma M0)^-1 E - sum_kept
+           psi_i psi_i^T / (lambda_i - sigma)`` (m/N, computed once per node: :func:`_inverse_blocks`).
+           ``G_L = G_U + R(sigma) (c - sigma) / (c - lambda) >= G`` counts at least the full model's
+           eigenvalues below ``lambda``, and the full model's are lower bounds of the Ritz solution's. Above
+           ``c`` nothing is known: ``at_most`` is then a count no model reaches.
+
+        In the band (``lambda << c``) the two differ by ``R lambda / c``: the bounds are tight. Rounding:
+        ``R(sigma)`` is lowered (upper bounds) or raised (lower bounds) by ``FLEX_RTOL`` of its trace; the
+        caller widens its windows."""
+        if cause not in ("added_mass", "ground_spring"):
+            return None
         self._ensure_nominal(max_freq_hz)
         assert self._nominal is not None
         w2, phi = self._nominal
-        Kr = np.diag(w2)
-        Mr = np.eye(w2.size)
-        for node, k in c.springs.items():
-            rows = phi[self._node_dofs[node]]
-            Kr = Kr + k * (rows.T @ rows)
-        for node, mass in c.masses.items():
-            rows = phi[self._node_dofs[node]]
-            Mr = Mr + mass * (rows.T @ rows)
-        w2max = _w2(max_freq_hz)
-        lam, Y = scipy.linalg.eigh(Kr, Mr, subset_by_value=(RIGID_W2_FRACTION * w2max, w2max))
-        at = np.array([sign * phi[d] for d, sign in self._out + self._ref]) @ Y
-        n_out = len(self._out)
-        return (np.sqrt(lam) / (2 * np.pi),
-                (at[:n_out, None, :] * at[None, n_out:, :]).reshape(n_out * len(self._ref), -1))
+        c = _w2(self._nominal_top)
+        sigma = self._sigma
+        vals = np.asarray(values, float)
+        if np.any(np.diff(vals) <= 0):
+            raise ValueError("first_pass: give the values in ascending order")
+        lam = _w2(1.0) * np.asarray(freq_hz, float) ** 2
+        n_opt, n_val, n_q = len(options), vals.size, lam.size
+        at_least = np.zeros((n_opt, n_val, n_q), np.int32)
+        at_most = np.zeros((n_opt, n_val, n_q), np.int32)
+        poles = np.searchsorted(w2, lam, side="left")                # kept eigenvalues below each lambda
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / (w2[:, None] - lam[None, :])                  # (n_kept, Q), s^2
+            tail = (c - sigma) / (c - lam)                            # the residual's factor
+        finite = np.isfinite(inv).all(axis=0)          # lambda on a pole: nothing known there
+        valid = finite & (lam < c)
+        spring = cause == "ground_spring"
+        every = self._padded_dofs(options)                                  # (options, 3), -1: none
+        flex = self._residual_flexibility(list(options), every, phi)        # (options, 3, 3)
+        for lo in range(0, n_opt, FIRST_PASS_CHUNK):
+            nodes = list(options[lo:lo + FIRST_PASS_CHUNK])
+            dofs = every[lo:lo + len(nodes)]
+            Psi = np.where(dofs[:, :, None] >= 0, phi[np.maximum(dofs, 0)], 0.0)     # (o, 3, n_kept)
+            R = flex[lo:lo + len(nodes)]
+            pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+            prod = np.stack([Psi[:, a] * Psi[:, b] for a, b in pairs], axis=1)       # (o, 6, n_kept)
+            GU = (prod.reshape(-1, w2.size) @ np.nan_to_num(inv)).reshape(len(nodes), 6, n_q)
+            Rp = np.stack([R[:, a, b] for a, b in pairs], axis=1)                    # (o, 6)
+            slack = np.zeros((len(nodes), 6))
+            slack[:, :3] = (FLEX_RTOL * np.einsum("oaa->o", R))[:, None] * (dofs >= 0)
+            GS = GU + (Rp - slack)[:, :, None]                           # the static correction: upper bounds
+            GL = GU + (Rp + slack)[:, :, None] * np.where(valid, tail, 0.0)[None, None, :]
+            o_idx = np.arange(len(nodes))[None, :, None]
+            q_idx = np.arange(n_q)[None, None, :]
+            for G, out, side in ((GS, at_least, -1), (GL, at_most, 1)):
+                e = _eig3(*(G[:, i] for i in range(6)))                # (3, o, Q), m/N
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    if spring:  # #{e > -1/k} - 3 = -#{k >= -1/e, e < 0}: the values from the first at or past -1/e
+                        first = np.where(e < 0, np.searchsorted(vals, (-1.0 / e).ravel(), "left").reshape(e.shape),
+                                         n_val)
+                    else:       # #{e > 1/(lambda m)} = #{m > 1/(e lambda), e > 0}
+                        t = 1.0 / (e * lam[None, None, :])
+                        first = np.where((e > 0) & (lam > 0)[None, None, :],
+                                         np.searchsorted(vals, t.ravel(), "right").reshape(e.shape), n_val)
+                # how many of the three eigenvalues count at each value: a cumulative histogram over the values
+                flat = ((o_idx * (n_val + 1) + first) * n_q + q_idx).ravel()
+                hist = np.bincount(flat, minlength=len(nodes) * (n_val + 1) * n_q).reshape(len(nodes), n_val + 1, n_q)
+                above = np.cumsum(hist, axis=1)[:, :n_val, :]
+                n = poles[None, None, :] + (-above if spring else above)
+                ok: np.ndarray = np.asarray(valid if side > 0 else finite, bool)
+                out[lo:lo + len(nodes)] = np.where(ok[None, None, :], n, BEYOND_COUNT if side > 0 else 0)
+        return at_least, at_most
+
+    def _padded_dofs(self, nodes: Sequence[str]) -> np.ndarray:
+        """The mapped DOFs of each node (rows), padded with -1 to three."""
+        out = np.full((len(nodes), 3), -1, int)
+        for i, node in enumerate(nodes):
+            d = self._node_dofs[node]
+            if d.size > 3:
+                raise FEModelError(f"node {node!r} of {self.fe.dofs_file} maps {d.size} directions; a node has at "
+                                   "most three (X, Y, Z)")
+            out[i, :d.size] = d
+        return out
+
+    def _residual_flexibility(self, nodes: Sequence[str], dofs: np.ndarray, phi: np.ndarray) -> np.ndarray:
+        """``R(sigma) = E^T (K0 - sigma M0)^-1 E - sum_kept psi psi^T / (lambda_i - sigma)`` (m/N) of each node
+        (padded 3 x 3, zero where a node has fewer DOFs; ``dofs`` its rows, ``phi`` the kept modes); kept."""
+        idx = [i for i, n in enumerate(nodes) if n not in self._flex]
+        if idx:
+            Z = _inverse_blocks(self.K0 - self._sigma * self.M0, dofs[idx], self._solve)
+            assert self._nominal is not None
+            w2 = self._nominal[0]
+            d = dofs[idx]
+            P = np.where(d[:, :, None] >= 0, phi[np.maximum(d, 0)], 0.0)
+            kept = np.einsum("oai,obi,i->oab", P, P, 1.0 / (w2 - self._sigma))
+            R = Z - kept
+            for i, r in zip(idx, R):
+                self._flex[nodes[i]] = r
+        return np.array([self._flex[n] for n in nodes]).reshape(len(nodes), 3, 3)
 
     def exact_modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -734,16 +988,25 @@ class FEVariants:
             w2, phi = self._nominal
             got = (self._nominal_top, np.sqrt(np.maximum(w2, 0.0)) / (2 * np.pi), phi)
         if got is None or got[0] < max_freq_hz:
+            # to the simulated FRFs' top as well: the change checked and then simulated is one solution
+            top = max(float(max_freq_hz), self.max_freq_hz)
             K, M = self._matrices(c)
-            f, phi = sparse_modes(K, M, max_freq_hz, expect=self._expect.get(max_freq_hz, 0))
-            self._expect[max_freq_hz] = f.size
-            got = (float(max_freq_hz), f, phi)
+            f, phi = sparse_modes(K, M, top, expect=self._expect.get(top, self._nominal_count(top)))
+            self._expect[top] = f.size
+            got = (top, f, phi)
             while len(self._exact_kept) >= KEPT_EXACT:
                 self._exact_kept.pop(next(iter(self._exact_kept)))
             self._exact_kept[key] = got
         _, f, phi = got
         keep = (_w2(1.0) * f ** 2 > RIGID_W2_FRACTION * _w2(max_freq_hz)) & (f <= max_freq_hz)
         return f[keep], phi[:, keep]
+
+    def _nominal_count(self, top: float) -> int:
+        """The solver's first ask for a changed model's modes up to ``top`` (Hz): the unchanged model's count there
+        and three more (a change at one node moves at most three modes across), 0 when unknown."""
+        if self._nominal is None or top > self._nominal_top:
+            return 0
+        return int(np.sum(self._nominal[0] <= _w2(top))) + 3
 
     # ------------------------------------------------------------------ reduced solution
     def _ensure_nominal(self, max_freq_hz: float) -> None:
@@ -755,10 +1018,12 @@ class FEVariants:
         sigma = -SHIFT_FRACTION ** 2 * _w2(top)
         self._solve = _shift_solver(self.K0, self.M0, sigma) if self.fe.n_dof > DENSE_MAX_DOF else None
         self._sigma = sigma
-        f, phi = sparse_modes(self.K0, self.M0, top, solve=self._solve, sigma=sigma)
+        expect = _count_below(self.K0, self.M0, _w2(top)) if self._solve is not None else 0
+        f, phi = sparse_modes(self.K0, self.M0, top, solve=self._solve, sigma=sigma, expect=expect)
         self._nominal = (_w2(1.0) * f ** 2, phi)
         self._nominal_top = top
         self._static.clear()
+        self._flex.clear()
         self._spaces.clear()
 
     def _shifted_solve(self, B: np.ndarray) -> np.ndarray:
@@ -809,8 +1074,12 @@ class FEVariants:
         X = np.zeros((phi.shape[0], 0))
         if vecs:
             X = np.column_stack(vecs)
+            before = np.einsum("ij,ij->j", X, np.asarray(self.M0 @ X))
             X = X - phi @ (phi.T @ (self.M0 @ X))                # M0-orthogonal to the kept modes
-            X = X / np.sqrt(np.maximum(np.einsum("ij,ij->j", X, np.asarray(self.M0 @ X)), 1e-300))
+            after = np.einsum("ij,ij->j", X, np.asarray(self.M0 @ X))
+            # a vector (nearly) inside the kept modes' span leaves rounding only: dropped (it would add spurious modes)
+            keep = after > SPAN_RTOL * before
+            X = X[:, keep] / np.sqrt(after[keep])
             G = X.T @ (self.M0 @ X)
             s, U = np.linalg.eigh(0.5 * (G + G.T))
             ok = s > 1e-12 * max(float(s.max(initial=0.0)), 1e-300)

@@ -71,3 +71,53 @@ def direct_frfs(K: sp.spmatrix, M: sp.spmatrix, outputs: list[int], reference: i
     H = H * (1 + noise * (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape)) / np.sqrt(2))
     return FRFSet(freq_hz=freq_hz, H=H, quantity="accelerance", unit="(m/s^2)/N",
                   outputs=tuple(f"n:{o + 1}:Z" for o in outputs), references=(f"n:{reference + 1}:Z",))
+
+
+def net_matrices(nx: int, ny: int, bracket: tuple[int, float] | None = None) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """A net of nx x ny nodes (0.05 kg each, X, Y, Z), neighbours joined by springs (Z 2e6 N/m, X and Y a hundred
+    times stiffer), diagonal braces coupling X and Y, the edge nodes held to ground (5e6 N/m); node i (0-based)
+    has DOFs 3i, 3i+1, 3i+2. ``bracket`` = (node, k): one more node of 0.05 kg hung on that node by springs of
+    ``k`` N/m in X, Y and Z (a part on a flexible bracket)."""
+    n_nodes = nx * ny + (bracket is not None)
+    node = np.arange(nx * ny).reshape(ny, nx)
+    rows: list = []
+    cols: list = []
+    vals: list = []
+
+    def spring(a: np.ndarray, b: np.ndarray, i: int, j: int, k: float) -> None:
+        ia, ib, ja, jb = 3 * a + i, 3 * b + i, 3 * a + j, 3 * b + j
+        rows.extend([ia, ib, ia, ib])
+        cols.extend([ja, jb, jb, ja])
+        vals.extend([np.full(a.size, k), np.full(a.size, k), np.full(a.size, -k), np.full(a.size, -k)])
+
+    for axis, k in ((0, 2.0e8), (1, 2.0e8), (2, 2.0e6)):
+        spring(node[:, :-1].ravel(), node[:, 1:].ravel(), axis, axis, k)
+        spring(node[:-1, :].ravel(), node[1:, :].ravel(), axis, axis, k)
+    for i, j in ((0, 0), (1, 1), (0, 1), (1, 0)):
+        spring(node[:-1, :-1].ravel(), node[1:, 1:].ravel(), i, j, 0.25e8)
+    edge = np.unique(np.concatenate([node[0], node[-1], node[:, 0], node[:, -1]]))
+    for axis in range(3):
+        rows.append(3 * edge + axis)
+        cols.append(3 * edge + axis)
+        vals.append(np.full(edge.size, 5.0e6))
+    if bracket is not None:
+        for axis in range(3):
+            spring(np.array([bracket[0]]), np.array([nx * ny]), axis, axis, bracket[1])
+    n = 3 * n_nodes
+    K = sp.coo_matrix((np.concatenate([np.asarray(v, float).ravel() for v in vals]),
+                       (np.concatenate([np.asarray(r).ravel() for r in rows]),
+                        np.concatenate([np.asarray(c).ravel() for c in cols]))), shape=(n, n)).tocsr()
+    return K, sp.identity(n, format="csr") * 0.05
+
+
+def write_net(folder: Path, nx: int, ny: int, bracket: tuple[int, float] | None = None) -> Path:
+    """:func:`net_matrices` as a user's FE model in ``folder`` (node i is ``n:{i+1}``, X, Y and Z mapped)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    K, M = net_matrices(nx, ny, bracket)
+    scipy.io.mmwrite(str(folder / "K.mtx"), sp.coo_matrix(K), symmetry="symmetric")
+    scipy.io.mmwrite(str(folder / "M.mtx"), sp.coo_matrix(M), symmetry="symmetric")
+    rows = [f"{3 * i + a},n:{i + 1}:{'XYZ'[a]}" for i in range(K.shape[0] // 3) for a in range(3)]
+    (folder / "dofs.csv").write_text("\n".join(["dof,point", *rows]) + "\n")
+    toml = folder / "model.toml"
+    toml.write_text('[fe]\nstiffness = "K.mtx"\nmass = "M.mtx"\ndofs = "dofs.csv"\n\n[damping]\nzeta_default = 0.01\n')
+    return toml

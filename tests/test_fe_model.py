@@ -147,37 +147,6 @@ def test_a_measured_point_the_map_lacks_is_named(tmp_path: Path) -> None:
         FEVariants(fe, ["n:2:X"], ["n:5:Z"], max_freq_hz=300.0)
 
 
-def test_two_pass_screen_keeps_the_single_pass_choice(tmp_path: Path) -> None:
-    """Over many nodes the screen first ranks every node with the kept modes alone (no sparse solve per
-    node), then judges its best ``N_PRESCREEN`` again in the full Ritz space: the node and the order at the
-    top are those of screening every node in the full Ritz space."""
-    from analysis.diagnosis import physical
-    from analysis.diagnosis.physical import MeasuredModes
-
-    toml = write_chain(tmp_path, 120)
-    sim = FEVariants(load_fe_model(toml), ["n:30:Z", "n:75:Z", "n:120:Z"], ["n:120:Z"], max_freq_hz=300.0)
-    f, P = sim.exact_modes_of([("added_mass", {"point": "n:47", "mass_kg": 2.0})], 40.0)
-    mm = MeasuredModes(f, 1e-4 * f, P.astype(complex))
-    cause = next(c for c in sim.causes() if c.name == "added_mass")
-    sel = np.ones(f.size, bool)
-    options = list(cause.options)
-    assert len(options) > physical.N_PRESCREEN
-    calls = []
-
-    class FullOnly:                     # the same simulation without the cheap first pass
-        def modes(self, *a):
-            calls.append(a)
-            return sim.modes(*a)
-
-    two = physical._screen(sim, cause, list(cause.params), {}, mm, sel, 40.0, options)
-    one = physical._screen(FullOnly(), cause, list(cause.params), {}, mm, sel, 40.0, options)
-    assert len(calls) == physical.SCREEN_GRID * len(options)     # the full pass: every node on the grid
-    assert len(two) == physical.N_PRESCREEN
-    assert two[0].option == one[0].option == "n:47"
-    assert [s.option for s in two[:3]] == [s.option for s in one[:3]]
-    np.testing.assert_allclose([s.chi2 for s in two[:3]], [s.chi2 for s in one[:3]], rtol=1e-9)
-
-
 def test_one_change_is_solved_once_on_the_full_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The full model of a change checked (``exact_modes_of``) and then simulated (``model_of``, a lower top)
     is one sparse solution; the unchanged model reuses the kept modes of the Ritz space."""

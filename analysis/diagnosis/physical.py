@@ -31,7 +31,10 @@ far. The bound: a parameter declared ``monotone`` (a mass or a stiffness added: 
 one way only) keeps every frequency inside a box of the grid between its values at the box's corners, so a
 measured mode is at least as far from the candidate's modes as from those intervals (:func:`_chi2_bound`);
 a box whose bound is below the best fit is halved (``TIGHTEN_SPLITS``) before the option is fitted instead.
-A choice of at most ``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option
+A simulation with a ``first_pass`` (bounds of each option's mode count over a grid: a user's FE model of many
+nodes) has every option's chi2 bounded from below over its whole range first (:func:`_first_pass`); the options
+are then screened and fitted ``FIRST_PASS_BATCH`` at a time, lowest bound first, while a bound is below the best
+fit so far. A choice of at most ``N_SCREEN`` options (one support or joint, or all of them) is not screened: every option
 gets the full search of its parameters (from the nominal and from the best point of a grid), with its own
 model. A cause with several parameters is also fitted with each subset alone (the others at their nominal
 value, each variant started also from the fits of the variants it contains): nested models, the one that
@@ -310,30 +313,55 @@ def _nominal(cause: CauseSpec) -> dict:
     return {s.name: s.nominal for s in cause.params if s.nominal is not None}
 
 
-#: A simulation with a cheap first pass (``screen_modes``: a user's FE model of many nodes) has every option
-#: ranked by it first, and only the best this many screened by its ``modes`` (a ranking, not a bound: an option
-#: the first pass ranks below it is not fitted; ``docs/diagnosis-fe-model.md``).
-N_PRESCREEN = 4 * N_SCREEN
+#: Options screened at once after the first pass (:func:`_first_pass`): the lowest bounds first, then batches of
+#: this many while a bound is below the best fit so far.
+FIRST_PASS_BATCH = N_SCREEN
+#: Frequency residuals (in units of the mode's sigma, :attr:`MeasuredModes.sigma`) the first pass tests: a mode
+#: whose window ``f_k (1 +- level sigma_k)`` certainly holds no candidate mode has ``|r_f| > level``.
+FIRST_PASS_LEVELS = np.array([0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 14.0, 20.0, 30.0])
+#: Points of the first pass's grid over the parameter's range (ends included): its cells bound the option.
+FIRST_PASS_GRID = 25
 
 
-def _prescreened(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict,
-                 mm: MeasuredModes, sel: np.ndarray, fmax: float, options: Sequence[str]) -> list[str]:
-    """``options`` ranked by the simulation's cheap ``screen_modes`` on an inner grid of each free parameter, the
-    best ``N_PRESCREEN`` kept (all of them when the simulation has no first pass or few options)."""
-    first: Any = getattr(sim, "screen_modes", None)
-    if first is None or len(options) <= N_PRESCREEN:
-        return list(options)
-    grid = [np.linspace(*sp.x_bounds, 7)[1:-1] for sp in specs]
-    scored = []
-    for opt in options:
-        best = np.inf
-        for xs in product(*grid):
-            p = {**fixed, cause.choice: opt, **{sp.name: sp.from_x(float(x)) for sp, x in zip(specs, xs)}}
-            f, P = first(cause.name, p, fmax)
-            best = min(best, float(np.sum(residuals(mm, f, P)[sel] ** 2)))
-        scored.append((best, opt))
-    scored.sort(key=lambda t: t[0])
-    return [opt for _, opt in scored[:N_PRESCREEN]]
+def _first_pass(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict,
+                mm: MeasuredModes, sel: np.ndarray, fmax: float, options: Sequence[str]
+                ) -> list[tuple[float, str]] | None:
+    """A lower bound of each option's chi2 over its whole parameter range, from the simulation's ``first_pass``
+    (bounds of its mode count, :meth:`analysis.fe_model.FEVariants.first_pass`), sorted by the bound; None when
+    the simulation has none for this cause (or it has several free or non-monotone parameters, or few options).
+
+    The bound: on a grid cell ``[v_a, v_b]`` of a monotone parameter each mode count ``N_v(f)`` lies between
+    its values at the two corners, so the modes in a window ``[x, y]`` number at most ``max_corners at_most(y)
+    - min_corners at_least(x)``; none there means every candidate mode is farther than the window from the
+    measured mode, whatever the pairing (:func:`pair`), so ``|r_f| > level`` for the widest empty window
+    of ``FIRST_PASS_LEVELS`` (0 when none is empty; the shapes' residual counted as 0). The chi2 bound of a
+    cell is the sum over the modes of that level, bounded as :func:`residuals` bounds it; an option's is the
+    least over its cells. Windows are widened by ``_BOUND_SLACK`` against rounding."""
+    bounds_of: Any = getattr(sim, "first_pass", None)
+    if bounds_of is None or len(specs) != 1 or not specs[0].monotone or set(fixed) - {cause.choice}:
+        return None
+    s = specs[0]
+    values = np.array([s.from_x(float(x)) for x in np.linspace(*s.x_bounds, FIRST_PASS_GRID)])
+    fk, sk = mm.freq_hz[sel], mm.sigma[sel]
+    lv = FIRST_PASS_LEVELS
+    x = fk[:, None] * np.maximum(1.0 - lv[None, :] * sk[:, None], 0.0) * (1.0 - _BOUND_SLACK)
+    y = fk[:, None] * (1.0 + lv[None, :] * sk[:, None]) * (1.0 + _BOUND_SLACK)
+    got = bounds_of(cause.name, list(options), values, np.concatenate([x.ravel(), y.ravel()]), fmax)
+    if got is None:
+        return None
+    at_least, at_most = (np.asarray(a) for a in got)
+    n_opt, shape = len(options), (len(options), values.size, fk.size, lv.size)
+    below_x = at_least[:, :, :x.size].reshape(shape)
+    upto_y = at_most[:, :, x.size:].reshape(shape)
+    most = np.maximum(upto_y[:, :-1], upto_y[:, 1:])          # (options, cells, modes, levels)
+    least = np.minimum(below_x[:, :-1], below_x[:, 1:])
+    free = most <= least                                        # windows nest: the empty ones lead
+    empty = np.where(free.all(axis=-1), lv.size, np.argmin(free, axis=-1))
+    r = np.concatenate([[0.0], lv])[empty]
+    chi2 = np.sum((RESIDUAL_CAP * np.tanh(r / RESIDUAL_CAP)) ** 2, axis=-1)    # (options, cells)
+    bound = chi2.min(axis=1)
+    order = np.argsort(bound, kind="stable")
+    return [(float(bound[i]), str(options[i])) for i in order[:n_opt]]
 
 
 #: Grid points per parameter of a choice's screen, the range's ends included (one parameter; two: ``SCREEN_GRID_2``).
@@ -407,9 +435,7 @@ def _screen(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec
     """Each option on a grid of its free parameters, the range's ends included (``SCREEN_GRID`` points, two
     parameters ``SCREEN_GRID_2`` each), with its own model and pairing; with monotone parameters the grid's
     cells also bound the option's chi2 from below (:func:`_chi2_bound`, the least over its cells). Sorted by
-    the grid's least chi2. A simulation with a cheap first pass has its options ranked by it first
-    (:func:`_prescreened`)."""
-    options = _prescreened(sim, cause, specs, fixed, mm, sel, fmax, options)
+    the grid's least chi2."""
     n = SCREEN_GRID if len(specs) == 1 else SCREEN_GRID_2
     axes = [np.linspace(*s.x_bounds, n) for s in specs]
     bounded = all(s.monotone for s in specs)
@@ -424,6 +450,20 @@ def _screen(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec
                 cells.append((at.bound(box), box))
         bound = min(b for b, _ in cells) if cells else 0.0
         out.append(_Screened(c, opt, at.params(x), bound, cells, at))
+    return sorted(out, key=lambda t: t.chi2)
+
+
+def _screened(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSpec], fixed: dict,
+              mm: MeasuredModes, sel: np.ndarray, fmax: float, options: Sequence[str],
+              held: dict[str, list[Mapping]]) -> list[_Screened]:
+    """:func:`_screen` of ``options``, each option's nested fits in ``held`` (taken from it) its best point when
+    lower than its grid's."""
+    out = _screen(sim, cause, specs, fixed, mm, sel, fmax, options)
+    for s in out:
+        for q in held.pop(s.option, ()):
+            c = float(np.sum(residuals(mm, *sim.modes(cause.name, q, fmax))[sel] ** 2))
+            if c < s.chi2:
+                s.chi2, s.params = c, dict(q)
     return sorted(out, key=lambda t: t.chi2)
 
 
@@ -486,6 +526,7 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
         held.setdefault(str(q[cause.choice]), []).append(q)
     todo = options if options is not None else cause.options
     screened: list[_Screened]
+    pending: list[tuple[float, str]] = []       # after a first pass: (bound, option) not screened yet, by bound
     if held and options is None and any(s.requires is not None for s in specs):
         # a refinement refines the fits it is nested in, where they are, from there (its own nominal)
         def chi2(q: Mapping) -> float:
@@ -502,26 +543,34 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
         # few options (a support, a joint, all of them): each gets the full search of its own parameters
         screened = [_Screened(0.0, opt, {}, -np.inf) for opt in todo]
     else:
-        screened = _screen(sim, cause, specs, fixed, mm, sel, fmax, todo)
-        for s in screened:          # a nested fit better than the option's grid: its best point
-            for q in held.pop(s.option, ()):
-                c = float(np.sum(residuals(mm, *sim.modes(cause.name, q, fmax))[sel] ** 2))
-                if c < s.chi2:
-                    s.chi2, s.params = c, dict(q)
-        screened.sort(key=lambda t: t.chi2)
+        first = _first_pass(sim, cause, specs, fixed, mm, sel, fmax, todo)
+        if first is None:
+            screened = _screened(sim, cause, specs, fixed, mm, sel, fmax, todo, held)
+        else:
+            pending, screened = first, []
     ranked = []
     best: tuple[dict, float] = ({}, np.inf)
-    for i, s in enumerate(screened):
+    i = 0
+    while True:
+        for s in screened:
+            target = below if i < N_SCREEN else min(below, best[1])
+            i += 1
+            if s.bound < target and s.at is not None:
+                _tighten(s.at, s, target)
+            if s.bound >= target:
+                continue                    # its chi2 cannot come below the best fit's (or ``below``) in its range
+            p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: s.option}, mm, sel, fmax,
+                                   s.params or None, [*held.get(s.option, ()), *_inside(s, specs)])
+            ranked.append((c, s.option, p))
+            if c < best[1]:
+                best = (p, c)
+        # after the first pass: the next options whose bound is below the best fit so far (none: done)
         target = below if i < N_SCREEN else min(below, best[1])
-        if s.bound < target and s.at is not None:
-            _tighten(s.at, s, target)
-        if s.bound >= target:
-            continue                    # its chi2 cannot come below the best fit's (or ``below``) in its range
-        p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: s.option}, mm, sel, fmax, s.params or None,
-                               [*held.get(s.option, ()), *_inside(s, specs)])
-        ranked.append((c, s.option, p))
-        if c < best[1]:
-            best = (p, c)
+        batch = [opt for b, opt in pending if b < target][:FIRST_PASS_BATCH]
+        if not batch:
+            break
+        pending = [(b, opt) for b, opt in pending if opt not in set(batch)]
+        screened = _screened(sim, cause, specs, fixed, mm, sel, fmax, batch, held)
     ranked.sort(key=lambda t: t[0])
     return best[0], best[1], ranked
 
