@@ -167,6 +167,16 @@ def test_a_sim_with_the_fleets_points_but_other_modes_is_refused_before_the_clus
     assert "Dask worker" not in err and not out.exists()           # no cluster started, no fit, nothing written
 
 
+def test_the_fleets_own_frame_and_a_units_recording_pass_the_check_before_any_work(fleet_dir):
+    from analysis.cli_batch import check_sim_points
+
+    units = sorted(fleet_dir.glob("unit-*.h5"))
+    defective = [u for u in units if u.stem in _defective(fleet_dir)]
+    for first in (units, defective + units):           # the check compares with the first unit, good or defective
+        assert check_sim_points(str(fleet_dir / "nominal.toml"), first, None, None).variants is not None
+        assert check_sim_points(str(units[-1]), first, None, None).variants is None      # a recording
+
+
 def test_the_resonance_check_pairs_a_shifted_unit_and_refuses_another_pattern():
     unit = np.array([13.3, 35.2, 128.1, 160.9, 283.6, 446.1, 525.0, 624.2, 775.0])
     assert peaks_problem(unit, unit * 1.02) is None                         # a material's common shift
