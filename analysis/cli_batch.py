@@ -17,7 +17,8 @@ Running the same command again reuses every result whose input content and optio
 ``--diagnose SIM`` (the fleet's frame config ``.toml`` or a good unit's recording) then diagnoses every
 flagged unit on the same workers (``analysis diagnose --measured UNIT --simulated SIM``), stores each in
 ``diagnoses/<unit>.json`` (reused like the fits), and adds ``units[i].diagnosis`` to ``fleet.json``;
-a SIM that is not the fleet's structure is refused (exit 2) before it is used.
+a SIM that is not the fleet's structure (other points, or resonances that do not pair with the first
+unit's) is refused (exit 2) before the cluster starts and any fit runs.
 Exit status: 0 every input has a result (a bad input's result is an error row), 1 some inputs
 have none (the cluster gave up on them; run again), 2 bad usage.
 """
@@ -168,6 +169,8 @@ def check_sim_points(sim: str, inputs: Sequence[Path], estimator: str | None,
     if measured is None:
         return SimCheck(p, sha, None, band or (0.0, float("inf")))
     fleet_band = band or (float(measured.freq_hz[0]), float(measured.freq_hz[-1]))
+    refuse = (f"--diagnose {sim} is not the fleet's structure: {{}}; give the fleet's frame config or a good "
+              "unit's recording")
     simulated = load_simulations(str(p), measured, estimator)      # a config: raises for points it lacks
     if isinstance(simulated, Path):
         try:
@@ -178,10 +181,32 @@ def check_sim_points(sim: str, inputs: Sequence[Path], estimator: str | None,
         why = structure_problem(measured.outputs, measured.references, fleet_band, sim_frf.outputs,
                                 sim_frf.references, sim_frf.freq_hz, measured.line_spacing_hz)
         if why:
-            raise InputError(f"--diagnose {sim} is not the fleet's structure: {why}; give the fleet's frame "
-                             "config or a good unit's recording")
-        return SimCheck(p, sha, None, fleet_band)
-    return SimCheck(p, sha, simulated, fleet_band)
+            raise InputError(refuse.format(why))
+    why = _resonances_problem(measured, None if isinstance(simulated, Path) else simulated,
+                              sim_frf if isinstance(simulated, Path) else None, band)
+    if why:
+        raise InputError(refuse.format(why))
+    return SimCheck(p, sha, None if isinstance(simulated, Path) else simulated, fleet_band)
+
+
+def _resonances_problem(measured: Any, physical: Any, sim_frf: Any, band: tuple[float, float] | None) -> str | None:
+    """Why the SIM's resonances are not those of the fleet's first unit (``measured``), or None, before any
+    fit: the peaks of the first CMIF curve (:func:`~analysis.batch.diagnose.peaks_problem`) of the unit in
+    ``band`` (None: the band its data support, as its fit's) and of the SIM there: a simulation's
+    (``physical``: its FRFs synthesised at the unit's points and lines) or a recording's (``sim_frf``)."""
+    from .bands import default_band
+    from .batch.diagnose import cmif_peaks_hz, peaks_problem
+    from .diagnosis.effects import predict
+    from .errors import ImpactlabError
+
+    try:
+        lo, hi = band or default_band(measured)
+        unit = measured.band(lo, hi)
+        sim = (predict(physical.model(None, {}), unit.freq_hz, unit.quantity) if physical is not None
+               else sim_frf.band(lo, hi))
+    except (ImpactlabError, ValueError):        # too few lines in the band: the unit's own fit says so in its row
+        return None
+    return peaks_problem(cmif_peaks_hz(unit), cmif_peaks_hz(sim))
 
 
 def sim_modes(check: SimCheck, client: Any, band: tuple[float, float] | None, estimator: str | None) -> Any:
@@ -205,6 +230,44 @@ def sim_modes(check: SimCheck, client: Any, band: tuple[float, float] | None, es
     if doc.get("status") != "ok":
         raise InputError(f"--diagnose {check.path}: its fit failed ({doc.get('error')}): give a good unit's recording")
     return modes_from_fit(doc["fit"])
+
+
+#: the simulations a worker process built for the flagged units it diagnosed, by what they depend on: the
+#: SIM's content (SHA-256), the measured points and the FRF estimator (:func:`shared_simulation`)
+_SIMULATIONS: dict[tuple[str, tuple[str, ...], tuple[str, ...], str | None], Any] = {}
+#: simulations kept per process (a worker of a shared cluster may serve batches against other SIMs)
+_SIMULATIONS_KEPT = 2
+
+
+def shared_simulation(path: str, measured: Any, estimator: str | None = None) -> Any:
+    """:func:`~analysis.cli_diagnose.load_simulations` once per SIM content and measured points in this
+    process: every flagged unit of a fleet is compared with the same SIM, so what depends on it alone (the
+    FE model's parts, its nominal and finer-mesh modes, the Ritz bases and factorizations of every cause
+    at every place, the answers of the screens' grids, kept by the simulation) is built by a worker once
+    and used for every unit it diagnoses. The diagnosis never changes the simulation (its answers are
+    functions of their arguments), so a unit's result is the same as with a simulation of its own."""
+    from .batch.task import file_sha256
+    from .cli_diagnose import load_simulations
+
+    key = (file_sha256(path), tuple(measured.outputs), tuple(measured.references), estimator)
+    sim = _SIMULATIONS.get(key)
+    if sim is None:
+        sim = load_simulations(path, measured, estimator)
+        if isinstance(sim, Path):                   # an FRF file: read with the unit, nothing to keep
+            return sim
+        while len(_SIMULATIONS) >= _SIMULATIONS_KEPT:
+            _SIMULATIONS.pop(next(iter(_SIMULATIONS)))
+        _SIMULATIONS[key] = sim
+    return sim
+
+
+def diagnose_unit(measured: str, simulated: str, *, band: Sequence[float] | None = None,
+                  estimator: str | None = None) -> Any:
+    """A flagged unit's diagnosis on a worker: :func:`~analysis.cli_diagnose.run_diagnosis` with the
+    worker's simulation of the SIM (:func:`shared_simulation`)."""
+    from .cli_diagnose import run_diagnosis
+
+    return run_diagnosis(measured, simulated, band=band, estimator=estimator, load=shared_simulation)
 
 
 @cli_entry
@@ -340,7 +403,6 @@ def _diagnose_flagged(args: argparse.Namespace, sim: SimCheck, client: Any, inpu
     from .atomic import write_json_atomic
     from .batch.diagnose import DIAGNOSIS_SCHEMA, diagnose_one, diagnosis_is_current, diagnosis_key, modes_problem
     from .batch.run import run_tasks
-    from .cli_diagnose import run_diagnosis
 
     with errors_to_exit("analysis batch", InputError):
         why = modes_problem(reference, sim_modes(sim, client, band, args.estimator))
@@ -356,7 +418,7 @@ def _diagnose_flagged(args: argparse.Namespace, sim: SimCheck, client: Any, inpu
     todo = [i for i in targets if i.name not in have]
     by_name = {i.name: i for i in todo}
     tasks = [(i.name, f"impactlab-diagnose-{i.name}-{i.sha256[:12]}-{key}", diagnose_one,
-              (str(i.path), i.name, i.sha256, str(sim.path), key, run_diagnosis, band, args.estimator)) for i in todo]
+              (str(i.path), i.name, i.sha256, str(sim.path), key, diagnose_unit, band, args.estimator)) for i in todo]
 
     def store(name: str, doc: dict[str, Any]) -> None:
         write_json_atomic(folder / by_name[name].result_file, doc)

@@ -160,13 +160,16 @@ def joint_simulation(path: str) -> JointSimulationFactory | None:
 
 def run_diagnosis(measured_path: str | Path | Sequence[str | Path], simulated_path: str | Path, *,
                   band: Sequence[float] | None = None, effects: Sequence[str] | None = None,
-                  estimator: str | None = None, levels: Sequence[float] | None = None) -> Diagnosis:
+                  estimator: str | None = None, levels: Sequence[float] | None = None,
+                  load: Callable[[str, FRFSet, str | None], Any] | None = None) -> Diagnosis:
     """The diagnosis of ``python -m analysis diagnose --measured M --simulated S``: load M (a recording
     or UFF 58 file, FRFs by ``estimator``), S (an FRF file, or a simulator config simulated at M's
     points), and compare them in ``band`` (Hz; None: the band the data support) with the catalogue's
     ``effects`` (None: all). With ``levels``: M is one file per drive level (``--measured A B --levels
-    LA,LB``), the lowest compared with S and the levels with one another. Raises the library's errors
-    (InputError, EffectError, ValueError, FitError) for bad input."""
+    LA,LB``), the lowest compared with S and the levels with one another. ``load(S, M, estimator)``
+    builds S at M's points (None: :func:`load_simulations`; a batch hands one that keeps what it built
+    for the next unit). Raises the library's errors (InputError, EffectError, ValueError, FitError) for
+    bad input."""
     from .diagnosis import EFFECTS, diagnose
     from .inputs import InputError, load_input
 
@@ -181,7 +184,7 @@ def run_diagnosis(measured_path: str | Path | Sequence[str | Path], simulated_pa
         raise InputError("--levels needs at least two --measured files (one per drive level)")
     lowest = str(paths[int(np.argmin(levels))] if levels is not None else paths[0])
     measured = load_input(lowest, estimator=estimator)
-    simulated = load_simulations(str(simulated_path), measured, estimator)
+    simulated = (load or load_simulations)(str(simulated_path), measured, estimator)
     if effects is not None and hasattr(simulated, "causes"):
         # the catalogue's effects and the simulation's own physical causes
         known = [*EFFECTS, *(c.name for c in simulated.causes() if c.name not in EFFECTS)]

@@ -24,6 +24,7 @@ from analysis.batch.diagnose import (  # noqa: E402
     describe_diagnosis,
     diagnosis_summary,
     modes_problem,
+    peaks_problem,
     structure_problem,
 )
 from analysis.batch.unit_modes import UnitModes  # noqa: E402
@@ -147,6 +148,44 @@ def test_a_frame_whose_modes_do_not_pair_is_refused_before_any_diagnosis(fleet_d
     err = done.stderr.strip()
     assert len(err.splitlines()) == 1 and "other_frame.toml is not the fleet's structure: only" in err, err
     assert not (mine / "diagnoses").exists() and not (mine / "fleet.json").exists()
+
+
+@pytest.mark.parametrize("name, text", [
+    ("thick_columns.toml", "[sections.column]\ndepth_m = 0.02\n"),                 # the same nodes, stiffer columns
+    ("narrow.toml", "[components.top]\nend_m = [1.2, 0.0, 0.668]\n[components.right]\nstart_m = [1.2, 0.0, 0.0]\n"
+                    "end_m = [1.2, 0.0, 0.668]\n"),                                # the same nodes, a shorter span
+])
+def test_a_sim_with_the_fleets_points_but_other_modes_is_refused_before_the_cluster_or_any_fit(fleet_dir, tmp_path,
+                                                                                                name, text):
+    sim = tmp_path / name
+    sim.write_text(text)
+    out = tmp_path / "out"
+    done = _batch_cli(str(fleet_dir / "unit-*.h5"), "--out", str(out), "--workers", "1", "--diagnose", str(sim))
+    assert done.returncode == 2, done.stdout + done.stderr
+    err = done.stderr.strip()
+    assert len(err.splitlines()) == 1 and f"{name} is not the fleet's structure: only" in err and "resonances" in err, err
+    assert "Dask worker" not in err and not out.exists()           # no cluster started, no fit, nothing written
+
+
+def test_the_fleets_own_frame_and_a_units_recording_pass_the_check_before_any_work(fleet_dir):
+    from analysis.cli_batch import check_sim_points
+
+    units = sorted(fleet_dir.glob("unit-*.h5"))
+    defective = [u for u in units if u.stem in _defective(fleet_dir)]
+    for first in (units, defective + units):           # the check compares with the first unit, good or defective
+        assert check_sim_points(str(fleet_dir / "nominal.toml"), first, None, None).variants is not None
+        assert check_sim_points(str(units[-1]), first, None, None).variants is None      # a recording
+
+
+def test_the_resonance_check_pairs_a_shifted_unit_and_refuses_another_pattern():
+    unit = np.array([13.3, 35.2, 128.1, 160.9, 283.6, 446.1, 525.0, 624.2, 775.0])
+    assert peaks_problem(unit, unit * 1.02) is None                         # a material's common shift
+    moved = unit.copy()
+    moved[[1, 4]] *= (0.95, 1.04)                                           # a defect moves a few modes
+    assert peaks_problem(moved, unit) is None
+    other = np.array([14.8, 18.8, 27.3, 46.9, 79.7, 88.3, 103.9, 125.8, 157.8, 295.3, 342.2, 443.8, 568.0, 732.0])
+    why = peaks_problem(unit, other) or ""
+    assert why.startswith("only ") and "within 3 %" in why, why
 
 
 def test_describe_diagnosis_says_the_named_cause_in_words():

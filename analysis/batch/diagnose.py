@@ -8,9 +8,11 @@ is a result with ``status = "error"`` and the reason. Results live in ``DIR/diag
 and are reused, like the fits, when the unit's content (SHA-256), the SIM's content and the options
 are unchanged (:func:`diagnosis_key`).
 
-The structure check (:func:`structure_problem`) refuses a SIM that is not the fleet's structure
-before any diagnosis runs: other points, a frequency range that does not cover the fleet's band,
-or modes that do not pair with the fleet's reference modes.
+The structure checks refuse a SIM that is not the fleet's structure: before any work
+(:func:`structure_problem`, :func:`peaks_problem`) other points, a frequency range that does not cover
+the fleet's band, or resonances (the peaks of the first CMIF curve, :func:`cmif_peaks_hz`) that do not
+pair with the first unit's within :data:`PEAKS_TOLERANCE`; after the fits (:func:`modes_problem`) modes
+that do not pair with the fleet's reference modes.
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ import os
 import socket
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,10 +30,20 @@ from .fleet import MIN_PAIRED_FRACTION, pair_modes
 from .task import batch_row, stored_if_current
 from .unit_modes import UnitModes
 
-__all__ = ["DIAGNOSIS_SCHEMA", "PLACE_KEYS", "diagnosis_key", "diagnose_one", "diagnosis_summary",
-           "diagnosis_is_current", "describe_diagnosis", "structure_problem", "modes_problem"]
+if TYPE_CHECKING:
+    from ..frf import FRFSet
+
+__all__ = ["DIAGNOSIS_SCHEMA", "PLACE_KEYS", "PEAKS_TOLERANCE", "diagnosis_key", "diagnose_one", "diagnosis_summary",
+           "diagnosis_is_current", "describe_diagnosis", "structure_problem", "modes_problem", "peaks_problem",
+           "cmif_peaks_hz"]
 
 DIAGNOSIS_SCHEMA = "impactlab.batch-diagnosis/1"
+
+#: the largest relative difference (-) of a SIM's resonance from the first unit's, after their common shift,
+#: for the two to pair (:func:`peaks_problem`): on the default frame a unit's defect moves a few modes by up to
+#: ~5 %, which the half of the peaks that must pair tolerates; a frame with other columns, beam or span pairs
+#: fewer than half of its peaks with a unit's at 3 % (at 5 % some did by chance)
+PEAKS_TOLERANCE = 0.03
 
 #: parameters that name where a cause acts (a support, a joint, an element, a node, a member)
 PLACE_KEYS = ("support", "joint", "element", "point", "node", "component", "member")
@@ -194,22 +206,73 @@ def structure_problem(fleet_outputs: Sequence[str], fleet_references: Sequence[s
     return None
 
 
-def modes_problem(reference: UnitModes, sim: UnitModes, tol: float = 0.05) -> str | None:
-    """Why a SIM's modes are not the fleet's (a sentence), or None. The fleet's own pairing
-    (:func:`~analysis.batch.fleet.pair_modes`: common shift, then frequency and MAC within ``tol``)
-    must pair at least :data:`~analysis.batch.fleet.MIN_PAIRED_FRACTION` of the fleet's reference
-    modes, and of the SIM's modes in the same span (the reference's lowest to highest mode, moved by
-    the common shift, widened by ``tol``): a different frame with many more modes pairs some of them
-    by chance, but leaves most of its own unpaired."""
-    p = pair_modes(reference, sim, tol)
-    n = int(np.sum(p.index >= 0))
+def _unpaired(reference: UnitModes, sim: UnitModes, tol: float) -> tuple[int, int, float, float] | None:
+    """How few of ``reference``'s modes pair with ``sim``'s (:func:`~analysis.batch.fleet.pair_modes`:
+    common shift, then frequency and MAC within ``tol``): ``(paired, sim's modes in the span, span lo, hi
+    (Hz))`` when fewer than :data:`~analysis.batch.fleet.MIN_PAIRED_FRACTION` of the reference's modes, or of
+    the SIM's modes in the same span (the reference's lowest to highest mode, moved by the common shift,
+    widened by ``tol``), pair; None when enough do (a different frame with many more modes pairs some of
+    them by chance, but leaves most of its own unpaired)."""
     if reference.n_modes == 0:
         return None
+    p = pair_modes(reference, sim, tol)
+    n = int(np.sum(p.index >= 0))
     shift = float(np.exp(p.common_shift)) if np.isfinite(p.common_shift) else 1.0
     lo, hi = reference.freq_hz.min() * shift / (1 + tol), reference.freq_hz.max() * shift * (1 + tol)
     own = int(np.sum((sim.freq_hz >= lo) & (sim.freq_hz <= hi)))
     if n < MIN_PAIRED_FRACTION * reference.n_modes or n < MIN_PAIRED_FRACTION * own:
-        return (f"only {n} of the fleet's {reference.n_modes} reference modes and of its {own} modes in "
-                f"{lo:.4g}..{hi:.4g} Hz pair (fleet: {', '.join(f'{f:.4g}' for f in reference.freq_hz[:5])} ... Hz; "
-                f"it: {', '.join(f'{f:.4g}' for f in sim.freq_hz[(sim.freq_hz >= lo)][:5])} ... Hz)")
+        return n, own, lo, hi
     return None
+
+
+def _listed(f: np.ndarray) -> str:
+    return ", ".join(f"{x:.4g}" for x in f[:5]) + (" ..." if f.size > 5 else "")
+
+
+def modes_problem(reference: UnitModes, sim: UnitModes, tol: float = 0.05) -> str | None:
+    """Why a SIM's modes are not the fleet's (a sentence), or None: at least
+    :data:`~analysis.batch.fleet.MIN_PAIRED_FRACTION` of the fleet's reference modes, and of the SIM's modes
+    in their span, must pair (:func:`_unpaired`, frequency and MAC within ``tol``)."""
+    bad = _unpaired(reference, sim, tol)
+    if bad is None:
+        return None
+    n, own, lo, hi = bad
+    return (f"only {n} of the fleet's {reference.n_modes} reference modes and of its {own} modes in "
+            f"{lo:.4g}..{hi:.4g} Hz pair (fleet: {_listed(reference.freq_hz)} Hz; "
+            f"it: {_listed(sim.freq_hz[sim.freq_hz >= lo])} Hz)")
+
+
+def _frequencies(f_hz: np.ndarray) -> UnitModes:
+    """Resonances known by their frequency only (Hz) as :class:`UnitModes` (no shapes: paired by frequency)."""
+    f = np.sort(np.asarray(f_hz, float))
+    nan = np.full(f.size, np.nan)
+    return UnitModes(freq_hz=f, damping=nan, freq_std_hz=nan, damping_std=nan, shapes=np.zeros((0, f.size), complex),
+                     outputs=())
+
+
+def cmif_peaks_hz(frf: FRFSet) -> np.ndarray:
+    """The resonances an FRF set shows, before any fit: the frequencies (Hz) of the peaks of its first CMIF
+    curve in dB by the modal-peaks rule (:data:`analysis.peaks.PEAK_RULES`, ``modal_peaks``)."""
+    from ..mif import cmif
+    from ..peaks import PEAK_RULES
+
+    c = cmif(frf)[:, 0]
+    ok = np.isfinite(c) & (c > 0)
+    if np.count_nonzero(ok) < 3:
+        return np.zeros(0)
+    f, db = frf.freq_hz[ok], 20.0 * np.log10(c[ok])
+    return f[PEAK_RULES["modal_peaks"].find(db)[0]]
+
+
+def peaks_problem(unit_peaks_hz: np.ndarray, sim_peaks_hz: np.ndarray, tol: float = PEAKS_TOLERANCE) -> str | None:
+    """Why a SIM's resonances are not those of the fleet's first unit (a sentence), or None: the peaks
+    (Hz, :func:`cmif_peaks_hz` of the unit and of the SIM's FRFs at the unit's points and lines) pair as
+    :func:`modes_problem`'s modes, by frequency only, within ``tol`` (relative, after the common shift)."""
+    unit, sim = _frequencies(unit_peaks_hz), _frequencies(sim_peaks_hz)
+    bad = _unpaired(unit, sim, tol)
+    if bad is None:
+        return None
+    n, own, lo, hi = bad
+    return (f"only {n} of the first unit's {unit.n_modes} resonances and of its {own} in {lo:.4g}..{hi:.4g} Hz "
+            f"pair within {100 * tol:g} % (unit: {_listed(unit.freq_hz)} Hz; it: "
+            f"{_listed(sim.freq_hz[sim.freq_hz >= lo])} Hz)")
