@@ -95,29 +95,18 @@ def upper_limits(frf: FRFSet) -> dict[str, float]:
     if exc:
         out["excitation"] = min(exc)
     informative = coherence_informative(frf)
-    if informative:
-        end = _coherence_end_hz(frf, TAIL_COHERENCE)
-        if end is not None:
-            out["coherence"] = end
+    if informative and f.size >= 16:
+        c = np.nanmedian(np.asarray(frf.coherence).reshape(-1, f.size), axis=0)
+        n = max(5, int(COHERENCE_SMOOTH_FRACTION * f.size))
+        smooth = np.convolve(np.nan_to_num(c), np.ones(n) / n, mode="same")
+        good = np.flatnonzero(smooth >= TAIL_COHERENCE)
+        if good.size and good[-1] < f.size - 1:
+            out["coherence"] = float(f[good[-1]])
     if not exc and not informative:
         noise = noise_limit_hz(frf)
         if noise is not None:
             out["noise"] = noise
     return out
-
-
-def _coherence_end_hz(frf: FRFSet, level: float) -> float | None:
-    """The last line (Hz) where the median coherence over the FRFs (a running mean over
-    ``COHERENCE_SMOOTH_FRACTION`` of the lines) is at least ``level``; None when it holds to the top line,
-    the set has fewer than 16 lines, or it never reaches ``level``."""
-    f = frf.freq_hz
-    if frf.coherence is None or f.size < 16:
-        return None
-    c = np.nanmedian(np.asarray(frf.coherence).reshape(-1, f.size), axis=0)
-    n = max(5, int(COHERENCE_SMOOTH_FRACTION * f.size))
-    smooth = np.convolve(np.nan_to_num(c), np.ones(n) / n, mode="same")
-    good = np.flatnonzero(smooth >= level)
-    return float(f[good[-1]]) if good.size and good[-1] < f.size - 1 else None
 
 
 #: the upper limits (keys of :func:`upper_limits`) beyond which a hit measures nothing: the hammer's
@@ -294,8 +283,8 @@ def default_band(frf: FRFSet) -> tuple[float, float]:
     limits = upper_limits(frf)
     hi = min(limits.values())
     hard = min(v for k, v in limits.items() if k != "coherence")   # the noise limit is hard too
-    if hi < hard:   # the coherence ends the band: not on a resonance's flank, nor past where it holds TOP_COHERENCE
-        hi = _coherence_edge_off_peak(frf, lo_line, hi, min(hard, _coherence_end_hz(frf, TOP_COHERENCE) or hard))
+    if hi < hard:   # the coherence ends the band: not on a resonance's flank
+        hi = _coherence_edge_off_peak(frf, lo_line, hi, hard)
     i_lo = int(np.searchsorted(f, lo_line))
     hi = max(hi, float(f[min(i_lo + 15, f.size - 1)]))
     hi_line = float(f[f <= hi + 1e-9 * abs(hi)][-1])
@@ -305,7 +294,7 @@ def default_band(frf: FRFSet) -> tuple[float, float]:
 def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> float:
     """The band's upper edge ``hi`` (Hz), set by the coherence, moved off the flank of a resonance;
     ``lo`` is the band's lower edge and ``cap`` the highest the other limits (analyser, excitation,
-    data, the coherence's ``TOP_COHERENCE`` end) allow (Hz).
+    data) allow (Hz).
 
     The coherence's edge falls where the coherence fades, and it often fades on the flank of a mode
     near the top of the excitation: the fit would see half a resonance, whose pole is biased (the
@@ -316,11 +305,10 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     bandwidth: its lines within 3 dB of its top, at most 10 % of its frequency) moves ``EDGE_BANDWIDTHS``
     bandwidths (the margin :func:`check_band_edges` asks of a fitted mode)
 
-    - past the peak, only when the whole margin fits under ``cap`` (:func:`default_band` caps it where the
-      smoothed coherence stays at least ``TOP_COHERENCE``: the margin's lines must be lifted out of the noise
-      too; a shorter margin would keep the mode on the flank the move was to take it off; else the mode is
-      left out whole as below: the UNESP beam's 478 Hz mode at 0.30 V, 11 Hz wide, would need the lines to
-      512 Hz, of coherence 0.17 past 506 Hz, and is left out as at 0.05 V), when
+    - past the peak, only when the whole margin fits under ``cap`` (a margin the data's end cuts short
+      keeps the mode on the flank the move was to take it off; the mode is then left out whole as below:
+      the UNESP beam's 478.1 Hz mode at 0.30 V, 11.3 Hz wide at the edge's reckoning, would need the band
+      to 512.06 Hz, its fitted pole's 12 Hz to 514.3 Hz, and the data end at 512 Hz), when
       the median coherence over the peak's half-power band is at least ``TOP_COHERENCE``, and so is it
       over the peak's own lines (the smoothing's width: a narrow line the measured input does not explain,
       such as a mains harmonic in the response, has a coherence near 0 there, the UNESP beam's 480 Hz,
@@ -361,7 +349,6 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     _, p, a, b, bw = min(near)
     median_coh = np.nanmedian(np.asarray(frf.coherence).reshape(-1, n), axis=0)
     coh = median_coh[a:b + 1]
-    i_cap = int(np.searchsorted(f, cap + 1e-9 * abs(cap), side="right")) - 1
     i_past = int(np.searchsorted(f, f[p] + EDGE_BANDWIDTHS * bw, side="right")) - 1
     i_before = int(np.searchsorted(f, f[p] - EDGE_BANDWIDTHS * bw))
     i_lo = int(np.searchsorted(f, lo)) + 15
@@ -369,7 +356,7 @@ def _coherence_edge_off_peak(frf: FRFSet, lo: float, hi: float, cap: float) -> f
     # explain (a mains harmonic in the response, coherence near 0 on its lines) is no resonance to take whole
     core = median_coh[max(p - w // 2, 0):p + w // 2 + 1]
     lifted = float(np.nanmedian(core)) >= TOP_COHERENCE
-    if float(np.nanmedian(coh)) >= TOP_COHERENCE and lifted and i_past <= i_cap:
+    if float(np.nanmedian(coh)) >= TOP_COHERENCE and lifted and f[p] + EDGE_BANDWIDTHS * bw <= cap and i_past > b:
         new = float(f[i_past])
     elif max(i_before, i_lo) < a:
         new = float(f[max(i_before, i_lo)])

@@ -133,10 +133,10 @@ def test_unesp_sharp_54_hz_resonance_is_fitted_with_its_own_damping_and_the_fit_
 
 @pytest.mark.realdata
 def test_unesp_band_rule_is_the_same_at_both_drive_levels(shared_data):
-    """At 0.30 V the coherence ends at 502.5 Hz on the flank of the 478 Hz mode (11 Hz wide); its three-bandwidth
-    margin would need the lines to 512 Hz, past where the coherence holds 0.25 (about 507 Hz): the mode is left
-    out whole, as at 0.05 V (where the 480 Hz line's coherence of 0.01-0.14 leaves it out), instead of the band
-    running to the data's end with a 478.4 Hz pole on its edge."""
+    """At 0.30 V the coherence ends at 502.5 Hz on the flank of the 478 Hz mode (11.3 Hz wide); its three-bandwidth
+    margin would need the band to 512.06 Hz, past the data's end (512 Hz): the mode is left out whole, as at
+    0.05 V (where the 480 Hz line's coherence of 0.01-0.14 leaves it out), instead of the band running to the
+    data's end with a 478.4 Hz pole on its edge."""
     from analysis.bands import default_band, upper_limits
     from benchmarks.accuracy.validation.unesp_boltedbeam import load
 
