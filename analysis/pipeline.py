@@ -109,7 +109,7 @@ from .fit_result import FitResult, assess_fit
 from .frf import FRFSet, window_pole_shift
 from .lscf import parse_band
 from .mains_grid import mains_for_fit
-from .missing_modes import add_missing_modes, structure_verdict
+from .missing_modes import add_missing_modes, final_fit, structure_verdict
 from .modal import damping_ratio, natural_freq_hz, pole_from_fz
 from .progress import progress
 from .selection import faster_than_window, poles_from_frequencies, select_poles
@@ -339,7 +339,8 @@ def _drop_mains_lines(frf: FRFSet, result: Any, fit_kw: dict[str, Any], mains: S
            + f" (grid {', '.join(f'{m:g}' for m in mains)} Hz; --mains none keeps them)")
     log.info(msg)
     warnings_out.append(msg)
-    return drop_bad_poles(frf, fit_bounded(frf, np.asarray(result.poles_raw)[~bad], fit_kw), fit_kw, warnings_out)
+    # a line's pole is sharp and small: the others stay where the fit put them (held as step 7's final fit holds them)
+    return final_fit(frf, np.asarray(result.poles_raw)[~bad], fit_kw, warnings_out)
 
 
 def _initial_kind(initial: str | Sequence[complex] | Sequence[float] | np.ndarray
