@@ -585,10 +585,9 @@ def predict(
                                                  float(model.meta.get("frequency_warp", 1.0))))
     if model.meta.get(FRF_MASSES_KEY):
         frf = add_frf_masses(model, frf)
-    if outputs is not None:
-        frf = replace(frf, outputs=tuple(outputs))
-    if references is not None:
-        frf = replace(frf, references=tuple(references))
+    if outputs is not None or references is not None:
+        frf = replace(frf, outputs=frf.outputs if outputs is None else tuple(outputs),
+                      references=frf.references if references is None else tuple(references))
     for spec in effects:
         eff, params = _lookup(spec)
         if eff.kind == "frf":

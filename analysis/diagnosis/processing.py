@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity, window_pole_shift
-from ..modal import ModalModel, synthesize, transfer
+from ..modal import ModalModel, transfer
 from .effect_types import EffectError
 
 __all__ = ["WINDOW_SHIFT_KEY", "RECORD_KEY", "apply_exponential_window", "apply_record_length", "truncation_tail",
@@ -97,15 +97,11 @@ def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
         raise EffectError(f"exponential window pole shift must be a finite number >= 0 (1/s), got {sigma_w!r}")
     f = np.asarray(freq_hz, float)
     record = model.meta.get(RECORD_KEY)
-    if sigma_w == 0.0 and not record:
-        frf = synthesize(model, f)
-        if frf.quantity != quantity:
-            frf = replace(frf, H=convert_quantity(frf.H, f, frf.quantity, quantity), quantity=quantity)
-        return frf
     s = 2j * np.pi * f + sigma_w
     if sigma_w == 0.0:
-        frf = synthesize(model, f)
-        H = convert_quantity(frf.H, f, frf.quantity, quantity) if frf.quantity != quantity else frf.H
+        # the model's synthesis (eq. 11) in its own quantity, converted: one FRF set built (the fits call this often)
+        H = transfer(model, 2j * np.pi * f)
+        H = convert_quantity(H, f, model.quantity, quantity) if model.quantity != quantity else H
     else:
         H = transfer(model, s) * s ** float(_POWER[quantity] - _POWER[model.quantity])
     if record:

@@ -5,8 +5,9 @@ versions of the code give the same diagnoses.
     .venv/bin/python benchmarks/speed/bench_blind_diagnose.py --compare OLD.json NEW.json
 
 The first form runs ``diagnose`` on every hidden-effect case and on the two noise-only cases, as the test
-builds them (seeded), and writes per case the verdict, every cause's effect, parameters, gain (dB) and
-significance, the held-out error after the extension (dB) and this process's CPU seconds of the call.
+builds them (seeded) but on the frame's whole model (the test keeps its modes up to ``MODES_HZ``), and writes
+per case the verdict, every cause's effect, parameters, gain (dB) and significance, the held-out error after
+the extension (dB) and this process's CPU seconds of the call.
 The second prints a table of the two runs' CPU seconds per case and their totals, and compares them:
 verdicts, causes (names and order) and significance equal, numeric parameters within 1e-6 relative,
 gains and errors within 1e-6 dB. Run each checkout with its own tree on the path (``PYTHONPATH``). CPU
