@@ -184,9 +184,11 @@ def compare_levels(
     sets = [frfs[i] for i in order]
     lv = lv[order]
     # the band every level's data support, unless the user gives one
-    supported = common_band(sets, lv) if band is None else None
+    supported: tuple[float, float] | None = None
+    if band is None:
+        supported = common_band(sets, lv.tolist())
     # one structure at two levels, or no verdict: before anything is fitted
-    check_levels_pair(sets[0], sets[-1], band if band is not None else supported, (float(lv[0]), float(lv[-1])))
+    check_levels_pair(sets[0], sets[-1], supported or band or (), (float(lv[0]), float(lv[-1])))
     notes: list[str] = []
     if poles is None:
         base = None
@@ -226,10 +228,10 @@ def compare_levels(
     fs = np.array([r.freq_hz_std for r in fits]) * grow
     zs = np.array([r.damping_std for r in fits]) * grow
     inside = modes_inside_band(f, band_used)
-    for k in np.flatnonzero(~inside):
+    for j in np.flatnonzero(~inside):
         outside = "; ".join(f"{fk:.5g} Hz, {100 * zk:.3g} % damping at level {v:.3g}"
-                            for v, fk, zk in zip(lv, f[:, k], zt[:, k]) if not band_used[0] <= fk <= band_used[1])
-        notes.append(f"the pole started at {abs(poles[k]) / (2 * np.pi):.5g} Hz left the band "
+                            for v, fk, zk in zip(lv, f[:, j], zt[:, j]) if not band_used[0] <= fk <= band_used[1])
+        notes.append(f"the pole started at {abs(poles[j]) / (2 * np.pi):.5g} Hz left the band "
                      f"{band_used[0]:.5g}-{band_used[1]:.5g} Hz ({outside}): not a mode of the band, left out")
     idx = np.flatnonzero(inside)
     idx = idx[np.argsort(f[0, idx])]
