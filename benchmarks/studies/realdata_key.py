@@ -1,12 +1,13 @@
 """Every real dataset of docs/validation.md fitted over its whole recorded range with the default band, scored
 against the analyst's key (:mod:`benchmarks.accuracy.validation.key`): accepted resonances fitted, spurious
 poles, poles above the excitation, and whether ``success`` says what the key says (true exactly when every
-accepted resonance is fitted and no pole is spurious). Prints a markdown table; ``--json`` writes the rows;
+accepted resonance is fitted and no pole is spurious). Prints a markdown table (``--write``: the run's command
+line and table to ``realdata_key.results.md`` beside the script); ``--json`` writes the rows;
 ``--markdown`` writes the section of docs/validation.md that shows the key's table
 (``benchmarks/accuracy/validation/key_section.md``, which ``run_all`` puts at the end of the page).
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/realdata_key.py [--data ../shared/data] [--only KEY]
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/realdata_key.py --markdown
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/studies/realdata_key.py --markdown --write
 """
 from __future__ import annotations
 
@@ -27,8 +28,10 @@ from analysis.atomic import write_text_atomic  # noqa: E402
 from analysis.pipeline import fit_auto  # noqa: E402
 from benchmarks.accuracy.validation.datasets import DATASETS, RealDataset  # noqa: E402
 from benchmarks.accuracy.validation.key import KEYS, score  # noqa: E402
+from benchmarks.results import add_write_option, recorded  # noqa: E402
 from benchmarks.studies.study_args import data_folder, study_parser, table_head  # noqa: E402
 
+RESULTS = Path(__file__).with_name("realdata_key.results.md")
 #: the section of docs/validation.md this study writes with ``--markdown`` (run_all puts it at the page's end)
 KEY_SECTION = ROOT / "benchmarks" / "accuracy" / "validation" / "key_section.md"
 
@@ -104,12 +107,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None, help="write the rows as JSON here")
     ap.add_argument("--markdown", action="store_true",
                     help=f"write the section of docs/validation.md to {KEY_SECTION.relative_to(ROOT)} (every dataset)")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args(argv)
     if args.markdown and args.only:
         ap.error("--markdown writes the whole table: leave out --only")
     data = data_folder(args)
     if data is None:
         return 2
+    with recorded(RESULTS, args.write, argv):
+        rows = _run(args, data)
+    if args.markdown:
+        write_text_atomic(KEY_SECTION, markdown_section(rows))
+        print(f"wrote {KEY_SECTION}", file=sys.stderr)
+    return 0 if all(r["honest"] and r["success_expected"] for r in rows) else 1
+
+
+def _run(args: Any, data: Path) -> list[dict[str, Any]]:
+    """Every dataset (or those of ``--only``) scored, its table line printed; ``--json`` writes the rows."""
     table_head("dataset", "accepted fitted", "missed [Hz]", "spurious [Hz]", "doubtful/suspension [Hz]", "success",
                "key says", "problems", "fit s")
     rows = []
@@ -123,10 +137,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{s['time_s']:.1f} |", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1), encoding="utf-8")
-    if args.markdown:
-        write_text_atomic(KEY_SECTION, markdown_section(rows))
-        print(f"wrote {KEY_SECTION}", file=sys.stderr)
-    return 0 if all(r["honest"] and r["success_expected"] for r in rows) else 1
+    return rows
 
 
 if __name__ == "__main__":
