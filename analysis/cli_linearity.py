@@ -42,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="recordings (.h5) or UFF 58 files, one per level; or one recording whose hits span levels")
     p.add_argument("--levels", metavar="L1,L2,...",
                    help="excitation level of each input in its own unit (N, V...), in the order of the inputs")
-    p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: from the lowest level's data)")
+    p.add_argument("--band", metavar="LO:HI", help="frequency band in Hz (default: the band every level's data support)")
     p.add_argument("--z", type=_z_value, default=3.0,
                    help="significance in standard deviations, a finite number > 0 (default 3)")
     p.add_argument("--json", metavar="L.json", help="write the comparison as JSON")

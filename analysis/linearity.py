@@ -16,7 +16,12 @@ one noise level for the whole band understates them several times.
 A mode is ``significant`` when either change exceeds ``z`` standard deviations (default 3) *and* a
 floor of practical size (``min_df_percent``, ``min_dzeta_percent``); a mode the fits leave poorly
 determined (standard deviation above ``MAX_DF_STD_PERCENT`` or ``MAX_DZETA_STD_PERCENT``, or a pole that
-ran to the edge of its ``MAX_SHIFT`` window at a higher level) is not judged; the verdict is "nonlinear" when
+ran to the edge of its ``MAX_SHIFT`` window at a higher level) is not judged; a pole whose natural frequency
+leaves the compared band at some level (a start pole the data do not hold, turned into a heavily damped
+background term: its damped frequency stays in its window, its natural frequency does not) is no mode of
+the band and is left out of the table with a note (:func:`modes_inside_band`). Without a given band the
+comparison uses the band every level's data support (:func:`common_band`: the intersection of their
+default bands, from the force spectrum, the coherence and the data's end). The verdict is "nonlinear" when
 any mode is, else "linear" (within the noise). Changes are also given per decade of excitation level
 (``df % / log10(level_hi / level_lo)``).
 
@@ -44,7 +49,7 @@ from .errors import LevelsDoNotPair
 from .frf import FRFSet
 
 __all__ = ["ModeShift", "LinearityResult", "LevelHit", "LevelsDoNotPair", "compare_levels", "group_by_force",
-           "level_frfsets", "recording_hits", "level_spread", "check_levels_pair",
+           "level_frfsets", "recording_hits", "level_spread", "check_levels_pair", "common_band", "modes_inside_band",
            "Z_SIGNIFICANT", "MIN_DF_PERCENT", "MIN_DZETA_PERCENT", "MIN_LEVEL_RATIO", "PAIR_MIN_MAC",
            "MIN_PAIRED_SHARE"]
 
@@ -162,7 +167,7 @@ def compare_levels(
     start every level's fit from these instead (e.g. another comparison's ``poles``). Inputs are not
     modified. Raises ValueError on mismatched inputs.
     """
-    from .bands import FitError, default_band
+    from .bands import FitError
     from .lsfd import fit_lsfd
     from .pipeline import fit_auto
 
@@ -178,8 +183,12 @@ def compare_levels(
     order = np.argsort(lv)
     sets = [frfs[i] for i in order]
     lv = lv[order]
-    # one structure at two levels, or no verdict: before anything is fitted (in the default band when none is given)
-    check_levels_pair(sets[0], sets[-1], band if band is not None else default_band(sets[0]), (float(lv[0]), float(lv[-1])))
+    # the band every level's data support, unless the user gives one
+    supported: tuple[float, float] | None = None
+    if band is None:
+        supported = common_band(sets, lv.tolist())
+    # one structure at two levels, or no verdict: before anything is fitted
+    check_levels_pair(sets[0], sets[-1], supported or band or (), (float(lv[0]), float(lv[-1])))
     notes: list[str] = []
     if poles is None:
         base = None
@@ -193,6 +202,8 @@ def compare_levels(
                 notes.append(f"no poles found at level {lv[k]:.3g}; the modes were found at level {lv[k + 1]:.3g}")
         assert base is not None
         band_used: tuple[float, float] = (float(base.band[0]), float(base.band[1]))
+        if supported is not None:  # the lowest level's band, within what every level's data support
+            band_used = (max(band_used[0], supported[0]), min(band_used[1], supported[1]))
         poles = base.lsfd.poles_raw
     else:
         if band is None:
@@ -216,7 +227,14 @@ def compare_levels(
     grow = np.array([np.sqrt(np.fmax(data_noise_factor(r, s, band_used), 1.0)) for r, s in zip(fits, sets)])
     fs = np.array([r.freq_hz_std for r in fits]) * grow
     zs = np.array([r.damping_std for r in fits]) * grow
-    idx = np.argsort(f[0])
+    inside = modes_inside_band(f, band_used)
+    for j in np.flatnonzero(~inside):
+        outside = "; ".join(f"{fk:.5g} Hz, {100 * zk:.3g} % damping at level {v:.3g}"
+                            for v, fk, zk in zip(lv, f[:, j], zt[:, j]) if not band_used[0] <= fk <= band_used[1])
+        notes.append(f"the pole started at {abs(poles[j]) / (2 * np.pi):.5g} Hz left the band "
+                     f"{band_used[0]:.5g}-{band_used[1]:.5g} Hz ({outside}): not a mode of the band, left out")
+    idx = np.flatnonzero(inside)
+    idx = idx[np.argsort(f[0, idx])]
     f, zt, fs, zs = f[:, idx], zt[:, idx], fs[:, idx], zs[:, idx]
     decades = float(np.log10(lv[-1] / lv[0]))
     modes = []
@@ -241,6 +259,28 @@ def compare_levels(
     return LinearityResult(levels=tuple(float(v) for v in lv), modes=tuple(modes), verdict=verdict, band=band_used,
                            freq_hz=f, zeta=zt, freq_hz_std=fs, zeta_std=zs, z=float(z), notes=tuple(notes),
                            poles=fits[0].poles_raw[idx])
+
+
+def common_band(sets: Sequence[FRFSet], levels: Sequence[float]) -> tuple[float, float]:
+    """The band (Hz) every level's data support: the intersection of the default bands
+    (:func:`analysis.bands.default_band`) of ``sets``, measured at ``levels`` (which only name them in
+    the message). Raises ValueError when the bands do not overlap."""
+    from .bands import default_band
+
+    bands = [default_band(s) for s in sets]
+    lo, hi = max(b[0] for b in bands), min(b[1] for b in bands)
+    if not lo < hi:
+        raise ValueError("the levels' data support no common band (" + ", ".join(
+            f"{b[0]:.5g}-{b[1]:.5g} Hz at level {v:.3g}" for b, v in zip(bands, levels))
+            + "): give the band to compare (--band LO:HI)")
+    return float(lo), float(hi)
+
+
+def modes_inside_band(freq_hz: np.ndarray, band: Sequence[float]) -> np.ndarray:
+    """Per mode (column of ``freq_hz``, natural frequencies in Hz, one row per level), True when it lies inside
+    ``band`` (Hz) at every level: only those are modes the levels' fits in that band compare."""
+    f = np.asarray(freq_hz, float)
+    return np.all((f >= float(band[0])) & (f <= float(band[1])), axis=0)
 
 
 def check_levels_pair(low: FRFSet, high: FRFSet, band: Sequence[float], levels: Sequence[float] = (0.0, 0.0)) -> int:

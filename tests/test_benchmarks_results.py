@@ -21,7 +21,10 @@ from benchmarks.results import RESULTS_SUFFIX, recorded, results_of_cases  # noq
 INPUTS = {"accuracy/validation/discussion.md": ("accuracy/validation/run_all.py",
                                                 "the discussion text run_all fills in with its figures for docs/validation.md"),
           "accuracy/validation/commands.md": ("accuracy/validation/run_all.py",
-                                              "the commands section run_all inserts into docs/validation.md")}
+                                              "the commands section run_all inserts into docs/validation.md"),
+          "accuracy/validation/key_section.md": ("accuracy/validation/run_all.py",
+                                                 "the analyst's key section (studies/realdata_key.py --markdown "
+                                                 "writes it) run_all puts at the end of docs/validation.md")}
 
 RESULTS_DECL = re.compile(r'^RESULTS = Path\(__file__\)\.with_name\("([^"]+)"\)', re.M)
 CASES_DECL = re.compile(r'^CASE_LISTS = "([^"]+)"', re.M)
