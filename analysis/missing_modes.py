@@ -411,8 +411,8 @@ def _local_trial(frf: FRFSet, model: ModalModel, band: Sequence[float], c: float
 
 
 def _peak_start(peak: VisiblePeak, df: float) -> complex:
-    """The start pole (rad/s) the width of a visible peak's top gives (:func:`analysis.pipeline.peak_poles`)."""
-    from .pipeline import peak_poles
+    """The start pole (rad/s) the width of a visible peak's top gives (:func:`analysis.visibility.peak_poles`)."""
+    from .visibility import peak_poles
 
     return complex(peak_poles([peak], df)[0])
 

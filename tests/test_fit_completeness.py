@@ -153,7 +153,7 @@ def test_a_start_pole_at_a_visible_peak_takes_the_modes_damping_or_its_half_powe
     damping its own 3 dB width gives (the diagram's poles near a missed mode are mathematical ones,
     0.001 % or none)."""
     from analysis.modal import damping_ratio, natural_freq_hz
-    from analysis.pipeline import peak_poles
+    from analysis.visibility import peak_poles
 
     frf = modal_frf([100.0, 200.0], [0.01, 0.004], [[1.0, 0.7]], [[1.0], [1.0]])   # df 0.2 Hz
     peaks = visible_peaks(frf, (50.0, 290.0))
