@@ -363,7 +363,8 @@ def _mass_grid_costs(ctx: FitContext, lines: np.ndarray, place: str, grid: np.nd
         bare = replace(model, meta={k: v for k, v in model.meta.items() if k != FRF_MASSES_KEY})
         loading = FRFMassLoading(bare, predict(bare, f, ctx.measured.quantity))
         prior_kg, mask_kg = frf_masses_kg(model), np.asarray(mask, float)
-        predicted = (_frf_effects(loading.loaded(prior_kg + float(x) * mask_kg), frf_prior) for x in grid)
+        loaded_H = loading.loaded_H(prior_kg[None, :] + np.asarray(grid, float)[:, None] * mask_kg[None, :])
+        predicted = (_frf_effects(replace(loading.frf, H=H), frf_prior) for H in loaded_H)
     else:
         predicted = (predict(loaded, f, ctx.measured.quantity, frf_prior) for loaded in _mass_loaded(model, mask, grid))
     vals = []

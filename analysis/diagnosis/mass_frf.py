@@ -100,18 +100,37 @@ class FRFMassLoading:
 
     def loaded(self, m: np.ndarray) -> FRFSet:
         """The FRFs with the mass ``m[o]`` (kg, >= 0) at each output ``o``."""
-        frf = self.frf
-        S = np.flatnonzero(m > 0)
-        if S.size == 0 or not self.keep.any():
-            return frf
-        fk, H, Hoo = self.fk, self.H, self._between_outputs()
-        w2m = (2 * np.pi * fk) ** 2 * m[S][:, None]                                  # (n_S, n_f)
-        A = np.eye(S.size)[:, :, None] - w2m[:, None, :] * Hoo[np.ix_(S, S)]         # I - w^2 M H_SS
-        X = np.linalg.solve(A.transpose(2, 0, 1), (w2m[:, None, :] * H[S]).transpose(2, 0, 1))   # (n_f, n_S, n_ref)
-        dH = np.einsum("osk,ksj->ojk", Hoo[:, S], X)
-        out = np.array(frf.H, copy=True)
-        out[..., self.keep] = convert_quantity(H + dH, fk, "receptance", frf.quantity)
-        return replace(frf, H=out)
+        if not (m > 0).any() or not self.keep.any():
+            return self.frf
+        return replace(self.frf, H=self.loaded_H(np.asarray(m, float)[None])[0])
+
+    def loaded_H(self, ms: np.ndarray, block: int = 32) -> np.ndarray:
+        """The FRFs' ``H`` (n_sets, n_out, n_ref, n_f, in the FRFs' quantity) with the masses ``ms[i, o]``
+        (kg, >= 0) at the outputs, one set per row of ``ms``; rows loading the same outputs are solved
+        together, ``block`` at a time."""
+        frf, fk, H = self.frf, self.fk, self.H
+        out = np.repeat(np.asarray(frf.H)[None], ms.shape[0], axis=0)
+        if not self.keep.any():
+            return out
+        loaded = ms > 0
+        patterns, which = np.unique(loaded, axis=0, return_inverse=True)
+        for k, pattern in enumerate(patterns):
+            S = np.flatnonzero(pattern)
+            if S.size == 0:
+                continue
+            Hoo = self._between_outputs()
+            rows = np.flatnonzero(np.ravel(which) == k)
+            for b in range(0, rows.size, block):
+                r = rows[b:b + block]
+                w2m = (2 * np.pi * fk) ** 2 * ms[np.ix_(r, S)][:, :, None]                 # (n_r, n_S, n_f)
+                A = np.eye(S.size)[None, :, :, None] - w2m[:, :, None, :] * Hoo[np.ix_(S, S)][None]   # I - w^2 M H_SS
+                X = np.linalg.solve(A.transpose(0, 3, 1, 2),
+                                    (w2m[:, :, None, :] * H[S][None]).transpose(0, 3, 1, 2))  # (n_r, n_f, n_S, n_ref)
+                dH = np.einsum("osk,gksj->gojk", Hoo[:, S], X)
+                sub = out[r]
+                sub[..., self.keep] = convert_quantity(H[None] + dH, fk, "receptance", frf.quantity)
+                out[r] = sub
+        return out
 
 
 def add_frf_masses(model: ModalModel, frf: FRFSet) -> FRFSet:
