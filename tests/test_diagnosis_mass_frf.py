@@ -15,8 +15,10 @@ from scipy.linalg import eigh
 from analysis.diagnosis.compare import line_weights
 from analysis.diagnosis.effects import predict
 from analysis.diagnosis.entry import model_with_correction
+from analysis.diagnosis.mass_frf import FRFMassLoading
 from analysis.frf import FRFSet
 from analysis.lsfd import fit_lsfd
+from analysis.modal import ModalModel, transfer
 
 MASSES = np.array([1.0, 1.3, 0.9, 1.2, 1.0, 0.8, 1.1, 1.4, 0.9, 1.0])     # kg
 SPRINGS = np.array([4e5, 3e5, 5e5, 3.5e5, 4.5e5, 3e5, 4e5, 5e5, 3.5e5, 4e5, 3e5])   # N/m, ends to ground
@@ -96,3 +98,28 @@ def test_the_refitted_model_holds_the_simulated_frfs_and_the_next_mode() -> None
     assert np.median(np.abs(corr.H) / np.abs(same.H)) < 3e-3         # the fixed part is small
     assert base.meta.get("above_band_modes") == 1
     assert fn[3] * 1.0 < base.freq_hz[-1] < fn[6]                    # a pseudo-mode above the band, where modes are
+
+
+def test_a_grid_of_masses_solved_together_is_each_solved_alone() -> None:
+    """Grids of masses loading one output, two outputs, every output and none, in blocks smaller than a grid:
+    each row as :meth:`FRFMassLoading.loaded` gives it alone."""
+    K, C, M = _chain()
+    w2, V = eigh(K, M)
+    zeta = np.einsum("ir,ij,jr->r", V, C, V) / (2 * np.sqrt(w2))
+    lam = np.sqrt(w2) * (-zeta + 1j * np.sqrt(1 - zeta ** 2))
+    phi = V[OUTS]
+    model = ModalModel(poles=lam, residues=phi[:, None, :] * V[[DRIVE]][None] / (2j * lam.imag), quantity="receptance",
+                       residual_form="none", outputs=LABELS, references=(f"chain:{DRIVE}:X",),
+                       meta={"output_shapes": phi})
+    freq = np.linspace(0.0, 300.0, 301)
+    frf = FRFSet(freq_hz=freq, H=transfer(model, 2j * np.pi * freq), quantity="receptance", outputs=LABELS,
+                 references=model.references)
+    loading = FRFMassLoading(model, frf)
+    grid = np.linspace(0.0, 0.6, 5)[:, None]                            # kg; the first row loads nothing
+    one, both = np.eye(len(OUTS))[1], np.eye(len(OUTS))[0] + np.eye(len(OUTS))[3]
+    ms = np.vstack([grid * one, grid[1:] * both, np.full((1, len(OUTS)), 0.3)])
+    together = loading.loaded_H(ms, block=2)
+    for m, H in zip(ms[1:], together[1:]):
+        assert np.abs(H - frf.H).max() > 0
+        np.testing.assert_allclose(H, loading.loaded(m).H, rtol=1e-13, atol=0)
+    np.testing.assert_array_equal(together[0], frf.H)

@@ -72,7 +72,7 @@ from .frf_effects import (
     fit_time_delay,
 )
 from .mains import apply_mains_hum, default_hum_width, fit_mains_hum, held_out_mains_hum, hum_kernels, mains_hum_applies
-from .mass_frf import FRF_MASSES_KEY, add_frf_masses, uses_frf_masses
+from .mass_frf import FRF_MASSES_KEY, FRFMassLoading, add_frf_masses, frf_masses_kg, uses_frf_masses
 from .processing import (
     RECORD_KEY,
     WINDOW_SHIFT_KEY,
@@ -342,12 +342,12 @@ def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
     return _mass_loaded(model, mask, np.array([m]))[0]
 
 
-def _mass_grid_costs(ctx: FitContext, lines: np.ndarray, place: str, grid: np.ndarray,
-                     coarse: Callable[[dict], float]) -> np.ndarray:
+def _mass_grid_costs(ctx: FitContext, lines: np.ndarray, place: str, grid: np.ndarray) -> np.ndarray:
     """The coarse cost (:func:`_modal_cost`, thinned lines) of the mass ``grid`` (kg) at ``place``: the loaded
     modes of the whole grid solved at once (:func:`_mass_loaded`) on the model with the modal effects accepted
     before, each then predicted with the FRF effects accepted before (the order :func:`predict` applies them
-    in). A mass added to an FRF-file simulation's FRFs (:mod:`.mass_frf`) is ``coarse`` point by point."""
+    in). A mass added to an FRF-file simulation's FRFs (:mod:`.mass_frf`): the prediction without the masses
+    and the receptances between the outputs are computed once for the grid, only the masses change."""
     model, frf_prior = ctx.base, []
     for e in ctx.prior:
         eff, params = _lookup(e)
@@ -355,13 +355,21 @@ def _mass_grid_costs(ctx: FitContext, lines: np.ndarray, place: str, grid: np.nd
             model = eff.apply(model, params)
         else:
             frf_prior.append(dict(e))
-    if uses_frf_masses(model):
-        return np.array([coarse({"mass_kg": x, "sensor": place}) for x in grid])
     sel = _thinned(lines)
     f, Hm, W = ctx.measured.freq_hz[sel], ctx.measured.H[..., sel], ctx.weights[..., sel]
+    mask = _mass_sensors(model, place)
+    if uses_frf_masses(model):
+        # predict's order: the modal model with its fixed part, the masses, then the FRF effects
+        bare = replace(model, meta={k: v for k, v in model.meta.items() if k != FRF_MASSES_KEY})
+        loading = FRFMassLoading(bare, predict(bare, f, ctx.measured.quantity))
+        prior_kg, mask_kg = frf_masses_kg(model), np.asarray(mask, float)
+        loaded_H = loading.loaded_H(prior_kg[None, :] + np.asarray(grid, float)[:, None] * mask_kg[None, :])
+        predicted = (_frf_effects(replace(loading.frf, H=H), frf_prior) for H in loaded_H)
+    else:
+        predicted = (predict(loaded, f, ctx.measured.quantity, frf_prior) for loaded in _mass_loaded(model, mask, grid))
     vals = []
-    for loaded in _mass_loaded(model, _mass_sensors(model, place), grid):
-        e = Hm - predict(loaded, f, ctx.measured.quantity, frf_prior).H
+    for frf in predicted:
+        e = Hm - frf.H
         vals.append(float(np.sum(W * (e.real ** 2 + e.imag ** 2))))
     return np.array(vals)
 
@@ -370,7 +378,6 @@ def fit_mass_loading(ctx: FitContext, lines: np.ndarray) -> dict:
     """The mass at every output (``sensor`` ``"all"``) or at one output (its label): each placement is
     searched on a grid of the mass (0.1 % frequency steps of its most loaded in-band mode, up to 30 %),
     the two best are refined; the placement with the smaller cost on ``lines`` wins."""
-    coarse = _modal_cost(ctx, lines, "mass_loading", coarse=True)
     cost = _modal_cost(ctx, lines, "mass_loading")
     phi = np.asarray(ctx.base.meta["output_shapes"], float)
     f = ctx.measured.freq_hz[lines]
@@ -383,7 +390,7 @@ def fit_mass_loading(ctx: FitContext, lines: np.ndarray) -> dict:
         if not smax > 0:
             continue
         grid = np.arange(0.0, 0.7 / smax + 0.002 / smax, 0.002 / smax)
-        vals = _mass_grid_costs(ctx, lines, place, grid, coarse)
+        vals = _mass_grid_costs(ctx, lines, place, grid)
         i = int(np.argmin(vals))
         screened.append((float(vals[i]), place, grid[max(i - 1, 0):i + 2]))
     if not screened:
@@ -588,6 +595,11 @@ def predict(
     if outputs is not None or references is not None:
         frf = replace(frf, outputs=frf.outputs if outputs is None else tuple(outputs),
                       references=frf.references if references is None else tuple(references))
+    return _frf_effects(frf, effects)
+
+
+def _frf_effects(frf: FRFSet, effects: Sequence[Mapping]) -> FRFSet:
+    """``frf`` with the FRF effects of ``effects`` applied in list order (the modal ones are skipped)."""
     for spec in effects:
         eff, params = _lookup(spec)
         if eff.kind == "frf":

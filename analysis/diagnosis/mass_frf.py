@@ -30,7 +30,7 @@ from ..frf import FRFSet, convert_quantity
 from ..modal import ModalModel, transfer
 from .effect_types import driving_point
 
-__all__ = ["FRF_MASSES_KEY", "uses_frf_masses", "add_frf_masses"]
+__all__ = ["FRF_MASSES_KEY", "uses_frf_masses", "frf_masses_kg", "FRFMassLoading", "add_frf_masses"]
 
 #: ``ModalModel.meta`` key of the masses to add at the FRF level: a tuple of (mass kg, outputs mask) pairs
 FRF_MASSES_KEY = "frf_masses"
@@ -65,31 +65,79 @@ def _output_receptances(model: ModalModel, freq_hz: np.ndarray) -> np.ndarray:
     return H
 
 
+def frf_masses_kg(model: ModalModel) -> np.ndarray:
+    """The mass added at each output by ``model.meta[FRF_MASSES_KEY]`` (kg, shape (n_out,))."""
+    m = np.zeros(len(model.outputs))
+    for kg, mask in model.meta.get(FRF_MASSES_KEY) or ():
+        m = m + float(kg) * np.asarray(mask, float)
+    return m
+
+
+class FRFMassLoading:
+    """``frf`` (the prediction of ``model`` with its fixed part, any quantity, without the masses) ready to
+    take masses at the outputs (module docstring): what does not depend on the masses (the receptances
+    and those between the outputs) is computed once, :meth:`loaded` adds a given set of masses."""
+
+    def __init__(self, model: ModalModel, frf: FRFSet) -> None:
+        self.frf = frf
+        f = np.asarray(frf.freq_hz, float)
+        self.keep = f > 0
+        self.fk = f[self.keep]
+        self.H = convert_quantity(frf.H[..., self.keep], self.fk, frf.quantity, "receptance")   # (n_out, n_ref, n_f)
+        self._model = model
+        self._Hoo: np.ndarray | None = None
+
+    def _between_outputs(self) -> np.ndarray:
+        if self._Hoo is None:
+            Hoo = _output_receptances(self._model, self.fk)
+            outs = list(self._model.outputs)
+            for j, r in enumerate(self._model.references):     # the file's FRFs where it has them (reciprocity)
+                if r in outs:
+                    Hoo[:, outs.index(r)] = self.H[:, j]
+                    Hoo[outs.index(r), :] = self.H[:, j]
+            self._Hoo = Hoo
+        return self._Hoo
+
+    def loaded(self, m: np.ndarray) -> FRFSet:
+        """The FRFs with the mass ``m[o]`` (kg, >= 0) at each output ``o``."""
+        if not (m > 0).any() or not self.keep.any():
+            return self.frf
+        return replace(self.frf, H=self.loaded_H(np.asarray(m, float)[None])[0])
+
+    def loaded_H(self, ms: np.ndarray, block: int = 32) -> np.ndarray:
+        """The FRFs' ``H`` (n_sets, n_out, n_ref, n_f, in the FRFs' quantity) with the masses ``ms[i, o]``
+        (kg, >= 0) at the outputs, one set per row of ``ms``; rows loading the same outputs are solved
+        together, ``block`` at a time."""
+        frf, fk, H = self.frf, self.fk, self.H
+        out = np.repeat(np.asarray(frf.H)[None], ms.shape[0], axis=0)
+        if not self.keep.any():
+            return out
+        loaded = ms > 0
+        patterns, which = np.unique(loaded, axis=0, return_inverse=True)
+        for k, pattern in enumerate(patterns):
+            S = np.flatnonzero(pattern)
+            if S.size == 0:
+                continue
+            Hoo = self._between_outputs()
+            rows = np.flatnonzero(np.ravel(which) == k)
+            for b in range(0, rows.size, block):
+                r = rows[b:b + block]
+                w2m = (2 * np.pi * fk) ** 2 * ms[np.ix_(r, S)][:, :, None]                 # (n_r, n_S, n_f)
+                A = np.eye(S.size)[None, :, :, None] - w2m[:, :, None, :] * Hoo[np.ix_(S, S)][None]   # I - w^2 M H_SS
+                X = np.linalg.solve(A.transpose(0, 3, 1, 2),
+                                    (w2m[:, :, None, :] * H[S][None]).transpose(0, 3, 1, 2))  # (n_r, n_f, n_S, n_ref)
+                dH = np.einsum("osk,gksj->gojk", Hoo[:, S], X)
+                sub = out[r]
+                sub[..., self.keep] = convert_quantity(H[None] + dH, fk, "receptance", frf.quantity)
+                out[r] = sub
+        return out
+
+
 def add_frf_masses(model: ModalModel, frf: FRFSet) -> FRFSet:
     """``frf`` (the prediction of ``model`` with its fixed part, any quantity) with the masses of
     ``model.meta[FRF_MASSES_KEY]`` added at the outputs (module docstring). Lines at 0 Hz are left as they
     are (a mass has no effect there)."""
-    masses = model.meta.get(FRF_MASSES_KEY) or ()
-    m = np.zeros(len(model.outputs))
-    for kg, mask in masses:
-        m = m + float(kg) * np.asarray(mask, float)
-    S = np.flatnonzero(m > 0)
-    f = np.asarray(frf.freq_hz, float)
-    keep = f > 0
-    if S.size == 0 or not keep.any():
+    m = frf_masses_kg(model)
+    if not (m > 0).any() or not (np.asarray(frf.freq_hz, float) > 0).any():
         return frf
-    fk = f[keep]
-    H = convert_quantity(frf.H[..., keep], fk, frf.quantity, "receptance")      # (n_out, n_ref, n_f)
-    Hoo = _output_receptances(model, fk)
-    outs = list(model.outputs)
-    for j, r in enumerate(model.references):           # the file's FRFs where it has them (reciprocity)
-        if r in outs:
-            Hoo[:, outs.index(r)] = H[:, j]
-            Hoo[outs.index(r), :] = H[:, j]
-    w2m = (2 * np.pi * fk) ** 2 * m[S][:, None]                                  # (n_S, n_f)
-    A = np.eye(S.size)[:, :, None] - w2m[:, None, :] * Hoo[np.ix_(S, S)]         # I - w^2 M H_SS
-    X = np.linalg.solve(A.transpose(2, 0, 1), (w2m[:, None, :] * H[S]).transpose(2, 0, 1))   # (n_f, n_S, n_ref)
-    dH = np.einsum("osk,ksj->ojk", Hoo[:, S], X)
-    out = np.array(frf.H, copy=True)
-    out[..., keep] = convert_quantity(H + dH, fk, "receptance", frf.quantity)
-    return replace(frf, H=out)
+    return FRFMassLoading(model, frf).loaded(m)

@@ -92,24 +92,27 @@ class Case:
     truth: dict = field(default_factory=dict)
 
 
-def segment_stiffness(EI: complex, rhoA: float, omega: float, length: float) -> np.ndarray:
-    """Exact dynamic stiffness (4 x 4, complex) of a beam segment: end forces and moments
-    ``[V0, M0, V1, M1]`` against end deflections and rotations ``[w0, t0, w1, t1]``, from the general
-    solution ``w = a1 cos bx + a2 sin bx + a3 cosh bx + a4 sinh bx``."""
-    b = (rhoA * omega ** 2 / EI) ** 0.25
-    x = np.array([0.0, length])
-    c, s, ch, sh = np.cos(b * x), np.sin(b * x), np.cosh(b * x), np.sinh(b * x)
-    disp = np.zeros((4, 4), complex)     # rows: w(0), w'(0), w(l), w'(l)
-    force = np.zeros((4, 4), complex)    # rows: shear and moment at both ends (nodal sign convention)
-    for e in range(2):
-        disp[2 * e] = [c[e], s[e], ch[e], sh[e]]
-        disp[2 * e + 1] = b * np.array([-s[e], c[e], sh[e], ch[e]])
-        w2 = b ** 2 * np.array([-c[e], -s[e], ch[e], sh[e]])
-        w3 = b ** 3 * np.array([s[e], -c[e], sh[e], ch[e]])
+def segment_stiffness(EI: complex, rhoA: float, omega: float | np.ndarray, length: float) -> np.ndarray:
+    """Exact dynamic stiffness (4 x 4, complex; (n, 4, 4) for n angular frequencies ``omega``, rad/s) of a
+    beam segment: end forces and moments ``[V0, M0, V1, M1]`` against end deflections and rotations
+    ``[w0, t0, w1, t1]``, from the general solution ``w = a1 cos bx + a2 sin bx + a3 cosh bx + a4 sinh bx``."""
+    om = np.atleast_1d(np.asarray(omega, float))
+    bs = [(rhoA * w ** 2 / EI) ** 0.25 for w in om]     # b and its powers as scalars: the array power rounds otherwise
+    b = np.array(bs, complex)
+    b2, b3 = np.array([x ** 2 for x in bs], complex)[:, None], np.array([x ** 3 for x in bs], complex)[:, None]
+    disp = np.zeros((om.size, 4, 4), complex)     # rows: w(0), w'(0), w(l), w'(l)
+    force = np.zeros((om.size, 4, 4), complex)    # rows: shear and moment at both ends (nodal sign convention)
+    for e, x in enumerate((0.0, length)):
+        c, s, ch, sh = np.cos(b * x), np.sin(b * x), np.cosh(b * x), np.sinh(b * x)
+        disp[:, 2 * e] = np.stack([c, s, ch, sh], axis=1)
+        disp[:, 2 * e + 1] = b[:, None] * np.stack([-s, c, sh, ch], axis=1)
+        w2 = b2 * np.stack([-c, -s, ch, sh], axis=1)
+        w3 = b3 * np.stack([s, -c, sh, ch], axis=1)
         sign = 1.0 if e == 0 else -1.0
-        force[2 * e] = sign * EI * w3
-        force[2 * e + 1] = -sign * EI * w2
-    return force @ np.linalg.inv(disp)
+        force[:, 2 * e] = sign * EI * w3
+        force[:, 2 * e + 1] = -sign * EI * w2
+    K = force @ np.linalg.inv(disp)
+    return K if np.ndim(omega) else K[0]
 
 
 def beam_accelerance(beam: Beam, outputs: tuple[float, ...], hammer: float, freq_hz: np.ndarray) -> np.ndarray:
@@ -120,13 +123,15 @@ def beam_accelerance(beam: Beam, outputs: tuple[float, ...], hammer: float, freq
     n = 2 * len(pts)
     keep = np.array([d for d in range(n) if d not in (0, 2 * (len(pts) - 1))])   # pinned: no deflection
     EI = beam.EI * (1 + 1j * beam.eta)
+    omega = 2 * np.pi * np.asarray(freq_hz, float)
+    segments = [segment_stiffness(EI, beam.rhoA, omega, b - a) for a, b in zip(pts[:-1], pts[1:])]
     H = np.zeros((len(outputs), freq_hz.size), complex)
     for k, f in enumerate(freq_hz):
         w = 2 * np.pi * f
         D = np.zeros((n, n), complex)
-        for a, b in zip(pts[:-1], pts[1:]):
+        for a, seg in zip(pts[:-1], segments):
             i = 2 * idx[a]
-            D[i:i + 4, i:i + 4] += segment_stiffness(EI, beam.rhoA, w, b - a)
+            D[i:i + 4, i:i + 4] += seg[k]
         for p, m in beam.masses:
             D[2 * idx[p], 2 * idx[p]] -= w ** 2 * m
         D[2 * idx[beam.dashpot_at], 2 * idx[beam.dashpot_at]] += 1j * w * beam.dashpot
