@@ -13,7 +13,9 @@ second change (a mass grown at the wrong node for softer supports) is refined wi
 of the options its own fit ranked (:func:`with_options`).
 A cause with a choice may be the second cause of its own kind at another place (two loose supports, two
 soft joints, two cracks): the second change of it searches only the options the first does not hold
-(:func:`besides`).
+(:func:`besides`). A cause with an option for every place at once (the supports' ``all``) is also fitted at
+two of its places together, each with its own factors, from the first cause's fit (:func:`split_places`),
+and a pair of it at every place and at one of two places is named as the two places (:func:`as_places`).
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
 held-out modes better than the first cause alone by at least ``physical_min_gain_db`` and removes at least
 ``quiet_chi2`` of their chi2 (:func:`analysis.diagnosis.physical_verdict._on_top_enough`).
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from itertools import combinations
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -29,7 +32,8 @@ from scipy.optimize import least_squares
 from ..modal import ModalModel
 from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals, variants
 
-__all__ = ["OnTop", "PairFit", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose", "with_options"]
+__all__ = ["OnTop", "PairFit", "as_places", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose",
+           "split_places", "with_options"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -51,6 +55,42 @@ def besides(spec: CauseSpec, taken: Sequence[tuple[str, Mapping]]) -> CauseSpec 
     used = {str(p.get(spec.choice)) for p in held}
     options = tuple(o for o in spec.options if str(o) not in used)
     return replace(spec, options=options) if options else None
+
+
+def split_places(spec: CauseSpec, fit: PhysicalFit) -> list[tuple[PhysicalFit, PhysicalFit]]:
+    """The cause of ``fit`` at two of its places at once, each with its own factors (two loose supports, two soft
+    joints), as pairs to refine: every two places (:attr:`CauseSpec.places`; with ``fit`` at one place, that place
+    and each other), both started at ``fit``'s parameters and with its free parameters (from ``fit`` at
+    :attr:`CauseSpec.every` that is the same frame). Searched only as a second change on top of the first, the
+    other place starts from its nominal while the first, fitted alone, sits between the two factors: what is
+    left on top of it is too little to name. Empty for a cause without an option for every place."""
+    if spec.every is None or spec.choice is None:
+        return []
+    own = fit.params.get(spec.choice)
+    twos = [(a, b) for a, b in combinations(spec.places, 2) if own == spec.every or own in (a, b)]
+    return [tuple(PhysicalFit(cause=fit.cause, params={**fit.params, spec.choice: at}, free=fit.free, chi2=np.inf)
+                  for at in two) for two in twos]  # type: ignore[misc]
+
+
+def as_places(specs: Sequence[CauseSpec], params: Sequence[Mapping]) -> tuple[dict, ...]:
+    """A pair of one cause at every place (:attr:`CauseSpec.every`) and at one of exactly two places, as the same
+    frame said place by place: that place with the product of the two factors, the other place with the
+    factors of every place (the factors multiply). Any other pair: its parameters as they are."""
+    out = tuple(dict(p) for p in params)
+    spec = specs[0]
+    if (len(specs) != 2 or specs[1].name != spec.name or spec.every is None or spec.choice is None
+            or len(spec.places) != 2):
+        return out
+    at = [p.get(spec.choice) for p in out]
+    if at.count(spec.every) != 1:
+        return out
+    i = at.index(spec.every)
+    every, one = out[i], out[1 - i]
+    other = next(o for o in spec.places if o != one[spec.choice])
+    factors = [s.name for s in spec.params]
+    both = {**one, **{k: float(one.get(k, 1.0)) * float(every.get(k, 1.0)) for k in factors}}
+    rest = {**every, spec.choice: other}
+    return (both, rest) if i == 1 else (rest, both)
 
 
 class OnTop:

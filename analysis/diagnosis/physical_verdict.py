@@ -60,7 +60,7 @@ from .physical import (
     shown_params,
     variants,
 )
-from .physical_pairs import OnTop, fit_pair, rechoose, refit_on_top, with_options
+from .physical_pairs import OnTop, as_places, fit_pair, rechoose, refit_on_top, split_places, with_options
 from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
 
 __all__ = ["PhysicalOutcome", "physical_verdict", "measure_modes", "compared_band_hz"]
@@ -609,13 +609,14 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
              [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
-              for fb in _seconds(sim, specs, mm, fmax, fa, names)])
+              for fb in _seconds(sim, specs, mm, fmax, fa, names)] + split_places(specs[fa.cause], fa))
     n_seconds = max(1, len({fb.cause for _, fb in pairs}))
     best: dict | None = None
     for fa2, fb in pairs:
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
         if gain_db(fa.cv_per_mode, two.cv_per_mode) >= judge.rule.physical_min_gain_db:
             two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
+        two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
             cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]), judge.rule)

@@ -1,0 +1,94 @@
+"""Two defects of one kind at two places: each named with its own place and factor.
+
+The FE frame's FRFs (no noise) and exact modes with two loose supports or two soft joints, each by its own
+factor, diagnosed with the supports' and the joints' causes: the cause fitted alone sits between the two
+factors (at every support at once), and the second place fitted on top of it from its nominal explained too
+little to be named; fitted at both places together from the single fit, both come back. A pair of one cause at
+every place and at one of two places is the same frame said place by place.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
+
+from analysis.diagnosis.physical import MeasuredModes, PhysicalFit
+from analysis.diagnosis.physical_pairs import as_places, split_places
+from simulator.config import FrameConfig
+from simulator.fem import FrameModel
+from simulator.physical import FrameVariants
+
+SPRINGS = ["support_stiffness", "joint_stiffness"]
+
+
+def _verdict(damage: dict, above_hz: float = 0.0):
+    from analysis.diagnosis.compare import line_weights
+    from analysis.diagnosis.physical_verdict import physical_verdict
+    from analysis.diagnosis.verdict import known_processing
+
+    cfg = FrameConfig.from_dict({"damage": damage})
+    measured = FrameModel.from_config(cfg, _sensor_masses(cfg)).analytic_frf(OUTS, REFS, np.arange(8.0, 500.0, 0.25))
+    mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
+    keep = mm.freq_hz > above_hz
+    mm = MeasuredModes(mm.freq_hz[keep], mm.freq_std_hz[keep], mm.shapes[:, keep])
+    return physical_verdict(measured, FrameVariants(None, OUTS, REFS), known_processing(measured),
+                            line_weights(measured), -60.0, mm, causes=SPRINGS)
+
+
+def _named(out, effect: str, key: str) -> dict:
+    return {c["parameters"][key]: c["parameters"] for c in out.named if c["effect"] == effect}
+
+
+def test_two_loose_supports_far_apart_are_named_each_with_its_factor() -> None:
+    """Supports x 0.1324 and x 0.0691 (a hold-out pair once left unexplained): both named at their nodes, each
+    factor within 1 %."""
+    out = _verdict({"loose_supports": ["left:0", "right:0"], "loose_support_factor": [0.1324, 0.0691]})
+    assert out.verdict == "combined", out.reason
+    got = _named(out, "support_stiffness", "support")
+    assert set(got) == {"left:0", "right:0"}
+    for place, factor in (("left:0", 0.1324), ("right:0", 0.0691)):
+        assert got[place]["factor_rotational"] == pytest.approx(factor, rel=0.01)
+
+
+def test_two_soft_joints_are_named_each_with_its_factor() -> None:
+    """Joints x 0.0908 (top:0, the pair of left:10) and x 0.033 (top:8) with the modes above 20 Hz (the sway
+    mode not determined, as in the hold-out's capture): both joints named, each with its own translational
+    factor within 2 % (the pair on top of the first joint found no second joint worth naming)."""
+    out = _verdict({"soft_joints": ["top:0", "top:8"], "soft_joint_factor": [0.0908, 0.033]}, above_hz=20.0)
+    assert out.verdict == "combined", out.reason
+    got = _named(out, "joint_stiffness", "joint")
+    assert set(got) == {"left:10", "right:10"}
+    assert got["left:10"]["factor_translational"] == pytest.approx(0.0908, rel=0.02)
+    assert got["right:10"]["factor_translational"] == pytest.approx(0.033, rel=0.02)
+
+
+def test_one_cause_at_two_places_is_split_from_its_fit_at_every_place() -> None:
+    """The supports' cause fitted at every support gives one pair to refine, both supports started at its
+    factors; fitted at one support, that support with each other; a cause without an option for every place
+    gives none."""
+    fv = FrameVariants(None, OUTS, REFS)
+    specs = {c.name: c for c in fv.causes()}
+    spec = specs["support_stiffness"]
+    assert spec.every == "all" and spec.places == ("left:0", "right:0")
+    fit = PhysicalFit("support_stiffness", {"support": "all", "factor_rotational": 0.1}, ("factor_rotational",), 1.0)
+    [(a, b)] = split_places(spec, fit)
+    assert (a.params["support"], b.params["support"]) == ("left:0", "right:0")
+    assert a.params["factor_rotational"] == b.params["factor_rotational"] == 0.1
+    assert a.free == b.free == ("factor_rotational",)
+    crack = PhysicalFit("element_stiffness", {"element": "left:3", "factor": 0.5}, ("factor",), 1.0)
+    assert specs["element_stiffness"].every is None and split_places(specs["element_stiffness"], crack) == []
+
+
+def test_every_place_with_one_of_two_places_is_said_place_by_place() -> None:
+    """Every support x 0.2 with left:0 x 0.5 on top is left:0 x 0.1 and right:0 x 0.2: the same modes."""
+    fv = FrameVariants(None, OUTS, REFS)
+    spec = {c.name: c for c in fv.causes()}["support_stiffness"]
+    every = {"support": "all", "factor_translational": 0.2, "factor_rotational": 0.2}
+    one = {"support": "left:0", "factor_translational": 0.5, "factor_rotational": 0.5}
+    a, b = as_places([spec, spec], [every, one])
+    assert a == {"support": "right:0", "factor_translational": 0.2, "factor_rotational": 0.2}
+    assert b["support"] == "left:0" and b["factor_rotational"] == pytest.approx(0.1)
+    f0, _ = fv.modes_of([("support_stiffness", every), ("support_stiffness", one)], 500.0)
+    f1, _ = fv.modes_of([("support_stiffness", a), ("support_stiffness", b)], 500.0)
+    np.testing.assert_allclose(f1, f0, rtol=1e-9)
+    assert as_places([spec, spec], [one, {**one, "support": "right:0"}]) == (one, {**one, "support": "right:0"})
