@@ -1,5 +1,8 @@
 """Two defects of one kind at two places: each named with its own place and factor.
 
+Two cracks in one column: an element fitted alone stands for both by one deeper crack (or the column's mass
+grown stands for them); every two elements of one member on a grid of their factors find both.
+
 The FE frame's FRFs (no noise) and exact modes with two loose supports or two soft joints, each by its own
 factor, diagnosed with the supports' and the joints' causes: the cause fitted alone sits between the two
 factors (at every support at once), and the second place fitted on top of it from its nominal explained too
@@ -21,7 +24,7 @@ from simulator.physical import FrameVariants
 SPRINGS = ["support_stiffness", "joint_stiffness"]
 
 
-def _verdict(damage: dict, above_hz: float = 0.0):
+def _verdict(damage: dict, above_hz: float = 0.0, causes: list[str] = SPRINGS):
     from analysis.diagnosis.compare import line_weights
     from analysis.diagnosis.physical_verdict import physical_verdict
     from analysis.diagnosis.verdict import known_processing
@@ -32,7 +35,7 @@ def _verdict(damage: dict, above_hz: float = 0.0):
     keep = mm.freq_hz > above_hz
     mm = MeasuredModes(mm.freq_hz[keep], mm.freq_std_hz[keep], mm.shapes[:, keep])
     return physical_verdict(measured, FrameVariants(None, OUTS, REFS), known_processing(measured),
-                            line_weights(measured), -60.0, mm, causes=SPRINGS)
+                            line_weights(measured), -60.0, mm, causes=causes)
 
 
 def _named(out, effect: str, key: str) -> dict:
@@ -92,3 +95,30 @@ def test_every_place_with_one_of_two_places_is_said_place_by_place() -> None:
     f1, _ = fv.modes_of([("support_stiffness", a), ("support_stiffness", b)], 500.0)
     np.testing.assert_allclose(f1, f0, rtol=1e-9)
     assert as_places([spec, spec], [one, {**one, "support": "right:0"}]) == (one, {**one, "support": "right:0"})
+
+
+def test_two_cracks_in_one_column_are_two_elements_not_its_mass() -> None:
+    """Cracks at right:6 (x 0.5715) and right:8 (x 0.4808), modes above 20 Hz: the column's mass grown 10 % is
+    named alone (adequate), and an element fitted alone stands for both by one deeper crack; the pair of elements
+    of one member searched on a grid of their factors gives both cracks back and replaces the mass (a hold-out
+    pair named as member_mass x 1.098)."""
+    out = _verdict({"cracked_elements": ["right:6", "right:8"], "crack_bending_factor": [0.5715, 0.4808]},
+                   above_hz=20.0, causes=["member_mass", "element_stiffness"])
+    assert out.verdict == "combined", out.reason
+    got = _named(out, "element_stiffness", "element")
+    assert set(got) == {"right:6", "right:8"}
+    assert got["right:6"]["factor"] == pytest.approx(0.5715, rel=0.01)
+    assert got["right:8"]["factor"] == pytest.approx(0.4808, rel=0.01)
+
+
+def test_two_cracks_apart_in_one_column_are_named_each_at_its_element() -> None:
+    """Cracks at left:5 (x 0.3355) and left:7 (x 0.4446): one crack fitted alone sits at left:3, where neither
+    is, and no second element on top of it explains the rest (unexplained before); the grid of element pairs of
+    the column finds both."""
+    out = _verdict({"cracked_elements": ["left:5", "left:7"], "crack_bending_factor": [0.3355, 0.4446]},
+                   above_hz=20.0, causes=["member_stiffness", "element_stiffness"])
+    assert out.verdict == "combined", out.reason
+    got = _named(out, "element_stiffness", "element")
+    assert set(got) == {"left:5", "left:7"}
+    assert got["left:5"]["factor"] == pytest.approx(0.3355, rel=0.01)
+    assert got["left:7"]["factor"] == pytest.approx(0.4446, rel=0.01)

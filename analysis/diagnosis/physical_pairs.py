@@ -14,7 +14,8 @@ of the options its own fit ranked (:func:`with_options`).
 A cause with a choice may be the second cause of its own kind at another place (two loose supports, two
 soft joints, two cracks): the second change of it searches only the options the first does not hold
 (:func:`besides`). A cause with an option for every place at once (the supports' ``all``) is also fitted at
-two of its places together, each with its own factors, from the first cause's fit (:func:`split_places`),
+two of its places together, each with its own factors, from the first cause's fit (:func:`split_places`; a
+cause of many options, a crack, split in two near its fit: :func:`split_choice`),
 and a pair of it at every place and at one of two places is named as the two places (:func:`as_places`).
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
 held-out modes better than the first cause alone by at least ``physical_min_gain_db`` and removes at least
@@ -24,16 +25,25 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from itertools import combinations
+from itertools import combinations, product
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..modal import ModalModel
-from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals, variants
+from .physical import (
+    N_SCREEN,
+    CauseSpec,
+    MeasuredModes,
+    PhysicalFit,
+    PhysicalSimulation,
+    fit_cause,
+    residuals,
+    variants,
+)
 
 __all__ = ["OnTop", "PairFit", "as_places", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose",
-           "split_places", "with_options"]
+           "split_choice", "split_places", "splits", "with_options"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -70,6 +80,53 @@ def split_places(spec: CauseSpec, fit: PhysicalFit) -> list[tuple[PhysicalFit, P
     twos = [(a, b) for a, b in combinations(spec.places, 2) if own == spec.every or own in (a, b)]
     return [tuple(PhysicalFit(cause=fit.cause, params={**fit.params, spec.choice: at}, free=fit.free, chi2=np.inf)
                   for at in two) for two in twos]  # type: ignore[misc]
+
+
+#: The grid of :func:`split_choice`: each factor at its range's lower end to these powers (a factor of 0.02..2:
+#: 0.61, 0.38, 0.14), every two options of one member on it.
+SPLIT_POWERS = (0.125, 0.25, 0.5)
+
+
+def _member(option: str) -> str:
+    """The member of an element option ``member:e``."""
+    return str(option).rsplit(":", 1)[0]
+
+
+def splits(spec: CauseSpec) -> bool:
+    """Whether :func:`split_choice` searches ``spec`` as two changes of one member: an element's stiffness (a
+    choice ``element`` among more than ``N_SCREEN`` options)."""
+    return spec.choice == "element" and spec.every is None and len(spec.options) > N_SCREEN
+
+
+def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm: MeasuredModes, fmax: float,
+                 n: int = N_SCREEN) -> list[tuple[PhysicalFit, PhysicalFit]]:
+    """The change of ``fit`` as two of its kind on one member (two cracks in one column): an element's
+    stiffness (a choice ``element`` among more than ``N_SCREEN`` options ``member:e``, factors: log, nominal 1)
+    fitted alone stands for two such changes by one deeper change at one element, often neither of theirs, and a
+    second element fitted on top of it explains too little. Pairs to refine: every two elements of one member on a
+    grid of their factors (:data:`SPLIT_POWERS`), the ``n`` with the least chi2 there (each at its best grid
+    point). Two elements of different members are found as a second change on top of the first (:func:`besides`).
+    Empty for any other cause."""
+    free = [s for s in spec.params if s.name in fit.free]
+    if not splits(spec) or len(free) != 1 or not free[0].log or free[0].nominal != 1.0:
+        return []
+    name = free[0].name
+    levels = [free[0].lo ** w for w in SPLIT_POWERS]
+    ranked = []
+    for a, b in combinations(spec.options, 2):
+        if _member(a) != _member(b):
+            continue
+        best: tuple[float, tuple[dict, dict]] = (np.inf, ({}, {}))
+        for fa, fb in product(levels, levels):
+            two = ({**fit.params, spec.choice: a, name: fa}, {**fit.params, spec.choice: b, name: fb})
+            f, P = changes_of(sim, [(fit.cause, two[0]), (fit.cause, two[1])], fmax)
+            c = float(np.sum(residuals(mm, f, P) ** 2))
+            if c < best[0]:
+                best = (c, two)
+        ranked.append(best)
+    ranked.sort(key=lambda t: t[0])
+    return [tuple(PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=np.inf) for p in two)  # type: ignore[misc]
+            for _, two in ranked[:n]]
 
 
 def as_places(specs: Sequence[CauseSpec], params: Sequence[Mapping]) -> tuple[dict, ...]:
