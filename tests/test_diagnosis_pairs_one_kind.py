@@ -16,7 +16,6 @@ import pytest
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
 
 from analysis.diagnosis.physical import MeasuredModes, PhysicalFit
-from analysis.diagnosis.physical_pairs import as_places, split_places
 from simulator.config import FrameConfig
 from simulator.fem import FrameModel
 from simulator.physical import FrameVariants
@@ -69,6 +68,8 @@ def test_one_cause_at_two_places_is_split_from_its_fit_at_every_place() -> None:
     """The supports' cause fitted at every support gives one pair to refine, both supports started at its
     factors; fitted at one support, that support with each other; a cause without an option for every place
     gives none."""
+    from analysis.diagnosis.physical_pairs import split_places
+
     fv = FrameVariants(None, OUTS, REFS)
     specs = {c.name: c for c in fv.causes()}
     spec = specs["support_stiffness"]
@@ -84,6 +85,8 @@ def test_one_cause_at_two_places_is_split_from_its_fit_at_every_place() -> None:
 
 def test_every_place_with_one_of_two_places_is_said_place_by_place() -> None:
     """Every support x 0.2 with left:0 x 0.5 on top is left:0 x 0.1 and right:0 x 0.2: the same modes."""
+    from analysis.diagnosis.physical_pairs import as_places
+
     fv = FrameVariants(None, OUTS, REFS)
     spec = {c.name: c for c in fv.causes()}["support_stiffness"]
     every = {"support": "all", "factor_translational": 0.2, "factor_rotational": 0.2}
@@ -122,3 +125,28 @@ def test_two_cracks_apart_in_one_column_are_named_each_at_its_element() -> None:
     assert set(got) == {"left:5", "left:7"}
     assert got["left:5"]["factor"] == pytest.approx(0.3355, rel=0.01)
     assert got["left:7"]["factor"] == pytest.approx(0.4446, rel=0.01)
+
+
+def test_a_pair_at_every_joint_and_support_moves_to_the_two_places_together() -> None:
+    """One loose support (left:0 x 0.2412) and one soft joint (right:10 x 0.1232): a pair refined at every joint
+    and every support (the joints' translational springs, the supports' rotational ones) is a local optimum of
+    one choice at a time; searched at every two options together it gives both places and factors back (a
+    hold-out pair named as every joint with every support)."""
+    from analysis.diagnosis.physical_pairs import fit_pair, rechoose
+
+    fv = FrameVariants(None, OUTS, REFS)
+    specs = {c.name: c for c in fv.causes()}
+    both = ("factor_translational", "factor_rotational")
+    mm = _noise_free_modes(fv, [("support_stiffness", {"support": "left:0", **dict.fromkeys(both, 0.2412)}),
+                                ("joint_stiffness", {"joint": "right:10", **dict.fromkeys(both, 0.1232)})])
+    fits = [PhysicalFit("joint_stiffness", {"joint": "all", "factor_translational": 0.15, "factor_rotational": 1.0},
+                        ("factor_translational",), np.inf),
+            PhysicalFit("support_stiffness", {"support": "all", "factor_translational": 1.0, "factor_rotational": 0.39},
+                        ("factor_rotational",), np.inf)]
+    pair_specs = [specs["joint_stiffness"], specs["support_stiffness"]]
+    at_all = fit_pair(fv, pair_specs, fits, mm, 700.0, folds=False)
+    again = rechoose(fv, pair_specs, fits, at_all, mm, 700.0)
+    assert (again.params[0]["joint"], again.params[1]["support"]) == ("right:10", "left:0")
+    assert again.params[0]["factor_translational"] == pytest.approx(0.1232, rel=0.01)
+    assert again.params[1]["factor_rotational"] == pytest.approx(0.2412, rel=0.01)
+    assert again.chi2 < 1e-3 < at_all.chi2

@@ -282,8 +282,36 @@ def rechoose(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     if moved:
         again = fit_pair(sim, specs, new, mm, fmax, folds=pair.cv_per_mode.size > 0)
         out = again if again.chi2 < pair.chi2 else pair
+    out = _both_choices(sim, specs, fits, out, mm, fmax)
     return PairFit(causes=out.causes, params=out.params, chi2=out.chi2, cv_per_mode=out.cv_per_mode,
                    at_edge=out.at_edge, ranked=tuple(ranked))
+
+
+def _both_choices(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], pair: PairFit,
+                  mm: MeasuredModes, fmax: float) -> PairFit:
+    """Two causes that each choose among a few options (at most ``N_SCREEN``: a support, a joint, or all of them):
+    every two options refined together (no cross-validation), from the pair's parameters (a cause at another
+    option with all its parameters free: the rotational springs alone stood in for every support). One choice made again
+    with the other kept (:func:`rechoose`) stays where both sit at every place (each softer everywhere, where only
+    one support and one joint are), for neither alone moved does better. The best, when its chi2 on all modes is
+    lower, refined and cross-validated again; else ``pair``."""
+    if len(specs) != 2 or any(s.choice is None or len(s.options) > N_SCREEN for s in specs):
+        return pair
+    own = tuple(p[s.choice] for s, p in zip(specs, pair.params))
+    best: tuple[float, list[PhysicalFit]] = (pair.chi2, [])
+    for at in product(specs[0].options, specs[1].options):
+        if at == own or (specs[0].name == specs[1].name and at[0] == at[1]):
+            continue
+        start = [PhysicalFit(cause=f.cause, params={**p, s.choice: o}, chi2=np.inf,
+                             free=f.free if o == p[s.choice] else max(variants(s), key=len, default=f.free))
+                 for f, p, s, o in zip(fits, pair.params, specs, at)]
+        two = fit_pair(sim, specs, start, mm, fmax, folds=False)
+        if two.chi2 < best[0]:
+            best = (two.chi2, [replace(f, params=p) for f, p in zip(start, two.params)])
+    if not best[1]:
+        return pair
+    again = fit_pair(sim, specs, best[1], mm, fmax, folds=pair.cv_per_mode.size > 0)
+    return again if again.chi2 < pair.chi2 else pair
 
 
 def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: PhysicalFit, second: PhysicalFit,

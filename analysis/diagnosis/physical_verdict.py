@@ -250,9 +250,7 @@ def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence
         # better (forward selection, nested: :func:`_on_top_enough`); not tried when it cannot
         firsts = [best] if pairs_ok and _leaves_evidence(sim, specs, mm, fmax, best, causes, rule) else []
     if pairs_ok and firsts != []:
-        two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
-        if named and not _named_pair(two):
-            two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, causes, named[0]) or two
+        two = _pair_search(sim, specs, mm, fmax, fits, found, judge, causes, firsts, named[0] if named else None)
         if two is not None:
             doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "removed_over_first_chi2",
                                               "significant", "adequate", "held_out_chi2_per_mode", "one_member")}
@@ -590,11 +588,22 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
 N_RIVALS = 3
 
 
+def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
+                 judge: _Judge, names: Sequence[str] | None, firsts: list | None, named: dict | None) -> dict | None:
+    """The best pair (:func:`_second_cause` on top of ``firsts``); with a named single cause ``named`` and no pair
+    named on top of it, a pair of one kind in its place (:func:`_rival_pair`)."""
+    two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=firsts)
+    if named is not None and not _named_pair(two):
+        two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
+    return two
+
+
 def _rival_pair(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
                 judge: _Judge, names: Sequence[str] | None, best: dict) -> dict | None:
     """Two changes of one kind at two places in place of the named single cause ``best`` (two cracks in one column
     for its mass grown 10 %): the pairs on top of the next ``N_RIVALS`` single causes with a choice that gain
-    anything held out, and of an element's stiffness among the others (:func:`splits`; :func:`_second_cause`); the best named pair of one cause twice kept only when it predicts
+    anything held out, and of an element's stiffness among the others (:func:`splits`; :func:`_second_cause`);
+    the best named pair of one cause twice kept only when it predicts
     the held-out modes better than ``best`` alone by the held-out gain rule (:func:`_on_top_enough` against
     ``best`` cross-validated as the pairs are, the freedom of the pair's second cause counted); else None."""
     local = [c for c in found if c["effect"] != best["effect"] and c["gain_db"] > 0 and specs[c["effect"]].choice]
