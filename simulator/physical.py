@@ -357,7 +357,7 @@ class FrameVariants:
         for row in CAUSES.values():
             c = row.spec
             if c.choice is not None:
-                c = replace(c, options=options[c.choice])
+                c = replace(c, options=options[c.choice], every=ALL_PLACES if c.choice in self.places else None)
             if c.name == "mass_loading":
                 c = replace(c, params=(replace(c.params[0], nominal=self.sensor_mass_kg),))
             out.append(c)

@@ -156,6 +156,15 @@ class CauseSpec:
     description: str = ""
     advice: str = ""
     level: str = "physical"
+    #: the option that means every place at once (a support's ``"all"``), None when there is none: the cause at
+    #: two of its other options is two changes of one kind (two loose supports), which
+    #: :func:`analysis.diagnosis.physical_pairs.split_places` fits as a pair
+    every: str | None = None
+
+    @property
+    def places(self) -> tuple:
+        """The options that are one place each (every option but :attr:`every`)."""
+        return tuple(o for o in self.options if o != self.every)
 
     def at_edge(self, params: Mapping, free: tuple) -> tuple[str, ...]:
         """The names of the free parameters whose fitted values ``params`` lie at an edge of their range."""

@@ -13,7 +13,10 @@ second change (a mass grown at the wrong node for softer supports) is refined wi
 of the options its own fit ranked (:func:`with_options`).
 A cause with a choice may be the second cause of its own kind at another place (two loose supports, two
 soft joints, two cracks): the second change of it searches only the options the first does not hold
-(:func:`besides`).
+(:func:`besides`). A cause with an option for every place at once (the supports' ``all``) is also fitted at
+two of its places together, each with its own factors, from the first cause's fit (:func:`split_places`; a
+cause of many options, a crack, split in two near its fit: :func:`split_choice`),
+and a pair of it at every place and at one of two places is named as the two places (:func:`as_places`).
 The pair is named by the same rule as one cause (significant, adequate), and only when it predicts the
 held-out modes better than the first cause alone by at least ``physical_min_gain_db`` and removes at least
 ``quiet_chi2`` of their chi2 (:func:`analysis.diagnosis.physical_verdict._on_top_enough`).
@@ -22,14 +25,25 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from itertools import combinations, product
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..modal import ModalModel
-from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, fit_cause, residuals, variants
+from .physical import (
+    N_SCREEN,
+    CauseSpec,
+    MeasuredModes,
+    PhysicalFit,
+    PhysicalSimulation,
+    fit_cause,
+    residuals,
+    variants,
+)
 
-__all__ = ["OnTop", "PairFit", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose", "with_options"]
+__all__ = ["OnTop", "PairFit", "as_places", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose",
+           "split_choice", "split_places", "splits", "with_options"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -51,6 +65,89 @@ def besides(spec: CauseSpec, taken: Sequence[tuple[str, Mapping]]) -> CauseSpec 
     used = {str(p.get(spec.choice)) for p in held}
     options = tuple(o for o in spec.options if str(o) not in used)
     return replace(spec, options=options) if options else None
+
+
+def split_places(spec: CauseSpec, fit: PhysicalFit) -> list[tuple[PhysicalFit, PhysicalFit]]:
+    """The cause of ``fit`` at two of its places at once, each with its own factors (two loose supports, two soft
+    joints), as pairs to refine: every two places (:attr:`CauseSpec.places`; with ``fit`` at one place, that place
+    and each other), both started at ``fit``'s parameters and with its free parameters (from ``fit`` at
+    :attr:`CauseSpec.every` that is the same frame). Searched only as a second change on top of the first, the
+    other place starts from its nominal while the first, fitted alone, sits between the two factors: what is
+    left on top of it is too little to name. Empty for a cause without an option for every place."""
+    if spec.every is None or spec.choice is None:
+        return []
+    own = fit.params.get(spec.choice)
+    twos = [(a, b) for a, b in combinations(spec.places, 2) if own == spec.every or own in (a, b)]
+    return [tuple(PhysicalFit(cause=fit.cause, params={**fit.params, spec.choice: at}, free=fit.free, chi2=np.inf)
+                  for at in two) for two in twos]  # type: ignore[misc]
+
+
+#: The grid of :func:`split_choice`: each factor at its range's lower end to these powers (a factor of 0.02..2:
+#: 0.61, 0.38, 0.14), every two options of one member on it.
+SPLIT_POWERS = (0.125, 0.25, 0.5)
+
+
+def _member(option: str) -> str:
+    """The member of an element option ``member:e``."""
+    return str(option).rsplit(":", 1)[0]
+
+
+def splits(spec: CauseSpec) -> bool:
+    """Whether :func:`split_choice` searches ``spec`` as two changes of one member: an element's stiffness (a
+    choice ``element`` among more than ``N_SCREEN`` options)."""
+    return spec.choice == "element" and spec.every is None and len(spec.options) > N_SCREEN
+
+
+def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm: MeasuredModes, fmax: float,
+                 n: int = N_SCREEN) -> list[tuple[PhysicalFit, PhysicalFit]]:
+    """The change of ``fit`` as two of its kind on one member (two cracks in one column): an element's
+    stiffness (a choice ``element`` among more than ``N_SCREEN`` options ``member:e``, factors: log, nominal 1)
+    fitted alone stands for two such changes by one deeper change at one element, often neither of theirs, and a
+    second element fitted on top of it explains too little. Pairs to refine: every two elements of one member on a
+    grid of their factors (:data:`SPLIT_POWERS`), the ``n`` with the least chi2 there (each at its best grid
+    point). Two elements of different members are found as a second change on top of the first (:func:`besides`).
+    Empty for any other cause."""
+    free = [s for s in spec.params if s.name in fit.free]
+    if not splits(spec) or len(free) != 1 or not free[0].log or free[0].nominal != 1.0:
+        return []
+    name = free[0].name
+    levels = [free[0].lo ** w for w in SPLIT_POWERS]
+    ranked = []
+    for a, b in combinations(spec.options, 2):
+        if _member(a) != _member(b):
+            continue
+        best: tuple[float, tuple[dict, dict]] = (np.inf, ({}, {}))
+        for fa, fb in product(levels, levels):
+            two = ({**fit.params, spec.choice: a, name: fa}, {**fit.params, spec.choice: b, name: fb})
+            f, P = changes_of(sim, [(fit.cause, two[0]), (fit.cause, two[1])], fmax)
+            c = float(np.sum(residuals(mm, f, P) ** 2))
+            if c < best[0]:
+                best = (c, two)
+        ranked.append(best)
+    ranked.sort(key=lambda t: t[0])
+    return [tuple(PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=np.inf) for p in two)  # type: ignore[misc]
+            for _, two in ranked[:n]]
+
+
+def as_places(specs: Sequence[CauseSpec], params: Sequence[Mapping]) -> tuple[dict, ...]:
+    """A pair of one cause at every place (:attr:`CauseSpec.every`) and at one of exactly two places, as the same
+    frame said place by place: that place with the product of the two factors, the other place with the
+    factors of every place (the factors multiply). Any other pair: its parameters as they are."""
+    out = tuple(dict(p) for p in params)
+    spec = specs[0]
+    if (len(specs) != 2 or specs[1].name != spec.name or spec.every is None or spec.choice is None
+            or len(spec.places) != 2):
+        return out
+    at = [p.get(spec.choice) for p in out]
+    if at.count(spec.every) != 1:
+        return out
+    i = at.index(spec.every)
+    every, one = out[i], out[1 - i]
+    other = next(o for o in spec.places if o != one[spec.choice])
+    factors = [s.name for s in spec.params]
+    both = {**one, **{k: float(one.get(k, 1.0)) * float(every.get(k, 1.0)) for k in factors}}
+    rest = {**every, spec.choice: other}
+    return (both, rest) if i == 1 else (rest, both)
 
 
 class OnTop:
@@ -185,8 +282,36 @@ def rechoose(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     if moved:
         again = fit_pair(sim, specs, new, mm, fmax, folds=pair.cv_per_mode.size > 0)
         out = again if again.chi2 < pair.chi2 else pair
+    out = _both_choices(sim, specs, fits, out, mm, fmax)
     return PairFit(causes=out.causes, params=out.params, chi2=out.chi2, cv_per_mode=out.cv_per_mode,
                    at_edge=out.at_edge, ranked=tuple(ranked))
+
+
+def _both_choices(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], pair: PairFit,
+                  mm: MeasuredModes, fmax: float) -> PairFit:
+    """Two causes that each choose among a few options (at most ``N_SCREEN``: a support, a joint, or all of them):
+    every two options refined together (no cross-validation), from the pair's parameters (a cause at another
+    option with all its parameters free: the rotational springs alone stood in for every support). One choice made again
+    with the other kept (:func:`rechoose`) stays where both sit at every place (each softer everywhere, where only
+    one support and one joint are), for neither alone moved does better. The best, when its chi2 on all modes is
+    lower, refined and cross-validated again; else ``pair``."""
+    if len(specs) != 2 or any(s.choice is None or len(s.options) > N_SCREEN for s in specs):
+        return pair
+    own = tuple(p[s.choice] for s, p in zip(specs, pair.params))
+    best: tuple[float, list[PhysicalFit]] = (pair.chi2, [])
+    for at in product(specs[0].options, specs[1].options):
+        if at == own or (specs[0].name == specs[1].name and at[0] == at[1]):
+            continue
+        start = [PhysicalFit(cause=f.cause, params={**p, s.choice: o}, chi2=np.inf,
+                             free=f.free if o == p[s.choice] else max(variants(s), key=len, default=f.free))
+                 for f, p, s, o in zip(fits, pair.params, specs, at)]
+        two = fit_pair(sim, specs, start, mm, fmax, folds=False)
+        if two.chi2 < best[0]:
+            best = (two.chi2, [replace(f, params=p) for f, p in zip(start, two.params)])
+    if not best[1]:
+        return pair
+    again = fit_pair(sim, specs, best[1], mm, fmax, folds=pair.cv_per_mode.size > 0)
+    return again if again.chi2 < pair.chi2 else pair
 
 
 def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: PhysicalFit, second: PhysicalFit,

@@ -60,7 +60,17 @@ from .physical import (
     shown_params,
     variants,
 )
-from .physical_pairs import OnTop, fit_pair, rechoose, refit_on_top, with_options
+from .physical_pairs import (
+    OnTop,
+    as_places,
+    fit_pair,
+    rechoose,
+    refit_on_top,
+    split_choice,
+    split_places,
+    splits,
+    with_options,
+)
 from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
 from .verdict_part import VerdictPart
 
@@ -233,7 +243,7 @@ def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence
         # better (forward selection, nested: :func:`_on_top_enough`); not tried when it cannot
         firsts = [best] if pairs_ok and _leaves_evidence(sim, specs, mm, fmax, best, causes, rule) else []
     if pairs_ok and firsts != []:
-        two = _second_cause(sim, specs, mm, fmax, fits, found, judge, causes, firsts=firsts)
+        two = _pair_search(sim, specs, mm, fmax, fits, found, judge, causes, firsts, named[0] if named else None)
         if two is not None:
             doc["pair"] = {k: two[k] for k in ("effect", "gain_db", "gain_over_first_db", "removed_over_first_chi2",
                                               "significant", "adequate", "held_out_chi2_per_mode", "one_member")}
@@ -544,8 +554,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     best: dict | None = None
     for first in firsts:
         best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
-        if _named_pair(best):
-            break
+        if _leaves_within(best, judge.rule):
+            break           # a named pair that leaves the held-out modes within their uncertainty: none does better
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
     explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= judge.rule.leaves_chi2 for c in firsts)
     first_round = best
@@ -557,7 +567,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         more = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, chosen, opened=True) if chosen else None
         if more is not None and (best is None or _named_pair(more)):
             best = more
-    if alone and not opened and not explained and first_round is not None and not _named_pair(best):
+    if alone and not opened and not explained and first_round is not None and not _leaves_within(best, judge.rule):
         # the first round's best pair's second cause as a first cause: beside the pair's other cause it took only
         # the freedom its own change needs, and fitted alone in that form it leaves the other change in the data
         name, free = first_round["_pair"].causes[1], first_round["_free"]
@@ -565,6 +575,47 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
             first = _as_first(sim, specs, mm, fmax, name, free, judge)
             best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
     return best
+
+
+#: Other significant single causes tried as the first of a pair in place of a named cause (:func:`_rival_pair`).
+N_RIVALS = 3
+
+
+def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
+                 judge: _Judge, names: Sequence[str] | None, firsts: list | None, named: dict | None) -> dict | None:
+    """The best pair (:func:`_second_cause` on top of ``firsts``); with a named single cause ``named`` and no pair
+    named on top of it, a pair of one kind in its place (:func:`_rival_pair`)."""
+    two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=firsts)
+    if named is not None and not _named_pair(two):
+        two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
+    return two
+
+
+def _rival_pair(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
+                judge: _Judge, names: Sequence[str] | None, best: dict) -> dict | None:
+    """Two changes of one kind at two places in place of the named single cause ``best`` (two cracks in one column
+    for its mass grown 10 %): the pairs on top of the next ``N_RIVALS`` single causes with a choice that gain
+    anything held out, and of an element's stiffness among the others (:func:`splits`; :func:`_second_cause`);
+    the best named pair of one cause twice kept only when it predicts
+    the held-out modes better than ``best`` alone by the held-out gain rule (:func:`_on_top_enough` against
+    ``best`` cross-validated as the pairs are, the freedom of the pair's second cause counted); else None."""
+    local = [c for c in found if c["effect"] != best["effect"] and c["gain_db"] > 0 and specs[c["effect"]].choice]
+    rivals = local[:N_RIVALS] + [c for c in local[N_RIVALS:] if splits(specs[c["effect"]])]
+    if not rivals:
+        return None
+    two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=rivals)
+    if two is None or not _named_pair(two) or len(set(two["_pair"].causes)) != 1:
+        return None
+    freedom = _freedom(specs[two["_pair"].causes[1]], two["_free"])
+    over, removed, enough = _on_top_enough(_alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode, freedom,
+                                           judge.rule)
+    return {**two, "gain_over_first_db": over, "removed_over_first_chi2": removed} if enough else None
+
+
+def _leaves_within(c: dict | None, rule: DecisionRule) -> bool:
+    """A named pair that leaves the held-out modes within their uncertainty (at most ``rule.leaves_chi2`` per
+    counted mode): no other pair can do clearly better."""
+    return _named_pair(c) and c["held_out_chi2_per_mode"] <= rule.leaves_chi2  # type: ignore[index]
 
 
 def _better(best: dict | None, c: dict | None) -> dict | None:
@@ -602,13 +653,15 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
              [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
-              for fb in _seconds(sim, specs, mm, fmax, fa, names)])
+              for fb in _seconds(sim, specs, mm, fmax, fa, names)] + split_places(specs[fa.cause], fa)
+             + split_choice(sim, specs[fa.cause], fa, mm, fmax))
     n_seconds = max(1, len({fb.cause for _, fb in pairs}))
     best: dict | None = None
     for fa2, fb in pairs:
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
         if gain_db(fa.cv_per_mode, two.cv_per_mode) >= judge.rule.physical_min_gain_db:
             two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
+        two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
             cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]), judge.rule)
