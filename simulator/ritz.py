@@ -22,6 +22,23 @@ reduced natural frequencies equal the full model's to 1e-6 relative (the full so
 with the 1e9 N/m springs is ~1e-7) on changes far larger than the diagnosis meets (a 30 kg block, the
 supports' springs x 0.001, an element at 0.02 of its bending stiffness, a member's EI x 0.3), see
 ``tests/test_ritz.py``.
+
+A change of the whole frame costs no basis vector when it is proportional to the nominal matrices:
+``K = s K0`` keeps the eigenvectors and scales the eigenvalues by ``s`` (``ReducedSpace.eigen``'s
+``scale``). Young's modulus times ``E`` scales the members but not the springs of the supports and
+joints: with ``S`` their sum, ``K = E (K0 - S) + S = E (K0 + (1/E - 1) S)``, i.e. ``scale = E`` and the
+local part ``S`` with the coefficient ``1/E - 1`` (how :mod:`simulator.physical` states it). To first
+order the changed modes move along ``K0^-1 (K0 - S) phi_i = phi_i - K0^-1 S phi_i``: only the springs'
+static responses are new directions, so such a change needs the basis of a change of every spring (on
+the default frame 36 DOFs: 72 vectors with the dynamic block) and none for the members. A smaller set
+is not as accurate: the springs' and an element's ranges alone (24 instead of 36 vectors for the
+springs, 4 instead of 12 for an element) leave errors of a few 1e-6 (a joint x 0.001 with the modulus
+x 0.95, an element at 0.02). With a local change as well, a uniform change needs 100-135 unknowns, so
+with the lowest 40 modes (bands above ~750 Hz) it exceeds :data:`MAX_FRACTION` and is solved on the
+full model. Springs stiffened a hundredfold (the spring causes' upper bound) make the full solve
+``eigh(K, M)`` itself inexact: against the inverse pencil ``eigh(M, K)`` (whose largest eigenvalues, the
+lowest modes, keep full relative accuracy) it is off by ~1e-5 with one joint's rotational springs
+x 96 and ~2e-3 with every joint's x 100 on top of that, the reduced model by ~3e-6 and ~4e-4.
 """
 from __future__ import annotations
 
@@ -33,13 +50,18 @@ import scipy.linalg
 
 from .errors import ModelError
 
-__all__ = ["Part", "RitzReduction", "ReducedSpace", "N_MODES", "LOCAL_DOFS"]
+__all__ = ["Part", "RitzReduction", "ReducedSpace", "N_MODES", "LOCAL_DOFS", "MAX_FRACTION"]
 
 #: Nominal modes in every basis (on the default frame up to ~1.5 kHz, twice the highest mode the
 #: diagnosis compares).
 N_MODES = 30
 #: A part on at most this many DOFs contributes their unit vectors; a larger one ``D_p Phi_m``.
 LOCAL_DOFS = 24
+#: The largest basis (a fraction of the frame's unknowns) solved reduced; a larger one goes to the full
+#: model. Measured on the default frame (186 unknowns, one thread): a candidate's reduced solve costs 1.0
+#: ms at 112 unknowns and 2.0 ms at 136 (a changed mass: the generalized problem), the full solve 2.7-3.3
+#: ms; a basis (5-8 ms) is built once per set of changed parts.
+MAX_FRACTION = 0.6
 #: Basis directions whose M0-Gram eigenvalue is below this fraction of the largest are dropped.
 _RANK_TOL = 1e-10
 
@@ -144,10 +166,10 @@ class RitzReduction:
 
     def space(self, kparts: Mapping, mparts: Mapping, n_modes: int = N_MODES) -> ReducedSpace | None:
         """The reduced space for changes on ``kparts`` / ``mparts`` ({key: :class:`Part`}) with the lowest
-        ``n_modes`` nominal modes; None when the basis would not be much smaller than the frame (then
-        the full model is cheaper)."""
+        ``n_modes`` nominal modes; None when the basis would have more than :data:`MAX_FRACTION` of the
+        frame's unknowns (then the full model is solved)."""
         n = self.K0.shape[0]
-        if n_modes > 0.6 * n:
+        if n_modes > MAX_FRACTION * n:
             return None
         phi = self.modes[:, :n_modes]
         X = []
@@ -176,6 +198,6 @@ class RitzReduction:
             V = scipy.linalg.solve_triangular(L, V.T, lower=True).T
         else:
             V = phi
-        if V.shape[1] > 0.6 * n:
+        if V.shape[1] > MAX_FRACTION * n:
             return None
         return ReducedSpace(V, self.K0, self.M0, kparts, mparts)
