@@ -233,13 +233,7 @@ def modes_problem(reference: UnitModes, sim: UnitModes, tol: float = 0.05) -> st
     """Why a SIM's modes are not the fleet's (a sentence), or None: at least
     :data:`~analysis.batch.fleet.MIN_PAIRED_FRACTION` of the fleet's reference modes, and of the SIM's modes
     in their span, must pair (:func:`_unpaired`, frequency and MAC within ``tol``)."""
-    bad = _unpaired(reference, sim, tol)
-    if bad is None:
-        return None
-    n, own, lo, hi = bad
-    return (f"only {n} of the fleet's {reference.n_modes} reference modes and of its {own} modes in "
-            f"{lo:.4g}..{hi:.4g} Hz pair (fleet: {_listed(reference.freq_hz)} Hz; "
-            f"it: {_listed(sim.freq_hz[sim.freq_hz >= lo])} Hz)")
+    return _unpaired_sentence(reference, sim, tol, ("the fleet's", "reference modes", "modes", "", "fleet"))
 
 
 def _frequencies(f_hz: np.ndarray) -> UnitModes:
@@ -268,11 +262,18 @@ def peaks_problem(unit_peaks_hz: np.ndarray, sim_peaks_hz: np.ndarray, tol: floa
     """Why a SIM's resonances are not those of the fleet's first unit (a sentence), or None: the peaks
     (Hz, :func:`cmif_peaks_hz` of the unit and of the SIM's FRFs at the unit's points and lines) pair as
     :func:`modes_problem`'s modes, by frequency only, within ``tol`` (relative, after the common shift)."""
-    unit, sim = _frequencies(unit_peaks_hz), _frequencies(sim_peaks_hz)
-    bad = _unpaired(unit, sim, tol)
+    return _unpaired_sentence(_frequencies(unit_peaks_hz), _frequencies(sim_peaks_hz), tol,
+                              ("the first unit's", "resonances", "", f" within {100 * tol:g} %", "unit"))
+
+
+def _unpaired_sentence(ref: UnitModes, sim: UnitModes, tol: float, words: tuple[str, str, str, str, str]) -> str | None:
+    """The sentence of :func:`modes_problem` and :func:`peaks_problem` (None when the two pair):
+    ``words`` = (whose, what, what of the SIM, how close, the reference's short name)."""
+    bad = _unpaired(ref, sim, tol)
     if bad is None:
         return None
     n, own, lo, hi = bad
-    return (f"only {n} of the first unit's {unit.n_modes} resonances and of its {own} in {lo:.4g}..{hi:.4g} Hz "
-            f"pair within {100 * tol:g} % (unit: {_listed(unit.freq_hz)} Hz; it: "
-            f"{_listed(sim.freq_hz[sim.freq_hz >= lo])} Hz)")
+    whose, what, theirs, within, short = words
+    return (f"only {n} of {whose} {ref.n_modes} {what} and of its {own}{' ' + theirs if theirs else ''} in "
+            f"{lo:.4g}..{hi:.4g} Hz pair{within} ({short}: {_listed(ref.freq_hz)} Hz; "
+            f"it: {_listed(sim.freq_hz[sim.freq_hz >= lo])} Hz)")
