@@ -62,9 +62,10 @@ def test_hidden_effect_is_named_and_measured(base, case):
     assert diag.error_after_db <= diag.comparison["error_db"] - 3.0
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_noise_only_gives_none(base, seed):
-    diag = diagnose(_measure(base, [], 50 + seed), base)
+def test_noise_only_gives_none(base):
+    """One null case: a second seed is the same code path (benchmarks/speed/bench_blind_diagnose.py runs
+    two nulls beside the blind cases)."""
+    diag = diagnose(_measure(base, [], 50), base)
     assert diag.verdict == "none", [c["evidence"] for c in diag.causes[:3]]
     assert not any(c["significant"] for c in diag.causes)
     assert max(c["gain_db"] for c in diag.causes) < 0.2
@@ -104,10 +105,12 @@ def test_paper_resonance_at_band_edge(base):
     assert diag.causes[0]["parameters"]["freq_hz"] == pytest.approx(base.freq_hz[k], rel=2e-3)
 
 
+#: one case per line shape and offset sign, the bases alternating (benchmarks/accuracy/bench_mains_variants.py
+#: runs every shape at 50 and 60 Hz, at and off them, on several seeds)
 @pytest.mark.parametrize("base_hz, offset_hz, width_hz", [
-    (50.0, 0.0, 0.0), (60.0, 0.0, 0.0),                       # synchronous: one line at each harmonic
-    (50.0, 0.0, 0.5), (60.0, 0.0, 0.5),                       # leaked by a rectangular window: a sinc
-    (50.0, 0.1, 0.5), (60.0, -0.15, 0.5), (60.0, 0.2, 0.5),   # ... and off the nominal frequency
+    (60.0, 0.0, 0.0),                                         # synchronous: one line at each harmonic
+    (50.0, 0.0, 0.5),                                         # leaked by a rectangular window: a sinc
+    (50.0, 0.1, 0.5), (60.0, -0.15, 0.5),                     # ... and above or below the nominal frequency
 ])
 def test_mains_interference_not_made_by_the_catalogue_formula(base, base_hz, offset_hz, width_hz) -> None:
     """Mains lines made here, not by the catalogue (whose lines are Lorentzians): synchronous

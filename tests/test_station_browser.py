@@ -6,6 +6,10 @@ every run (the strike sequence does not depend on timing); the test reacts to wh
 Skips with an install hint when chromium/chromedriver/selenium are missing; fails under CI=true."""
 from __future__ import annotations
 
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
 from station_support import WAIT_S, StationProcess, chrome
 
 POINTS = ["right:6:-X", "left:9:Y"]  # the second is struck where a sensor is: its driving point
@@ -13,12 +17,31 @@ HITS = 2
 DEVICE = "sim://?seed=1&faults=double_hit:0.25&fault_seed=4"  # strike 2 is a double hit
 
 
-def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory) -> Iterator[Any]:
+    """One Chromium for the module's tests (each starts its own station); :func:`_fresh` between them."""
+    driver = chrome(tmp_path_factory.mktemp("station-browser"))
+    yield driver
+    driver.quit()
+
+
+def _fresh(driver: Any) -> Any:
+    """The browser with one blank tab and an empty console log, as a test starts it."""
+    for handle in driver.window_handles[1:]:
+        driver.switch_to.window(handle)
+        driver.close()
+    driver.switch_to.window(driver.window_handles[0])
+    driver.get("about:blank")
+    driver.get_log("browser")
+    return driver
+
+
+def test_operator_runs_a_two_point_test_in_the_browser(browser, tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
     from selenium.webdriver.support.ui import Select, WebDriverWait
 
-    driver = chrome(tmp_path)
+    driver = _fresh(browser)
     rec = tmp_path / "rec.h5"
     s = StationProcess(["--device", DEVICE, "--out", str(rec), "--points", ",".join(POINTS), "--hits", str(HITS)],
                        tmp_path)
@@ -110,8 +133,10 @@ def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
         logs = [e for e in driver.get_log("browser") if e["level"] == "SEVERE" and "favicon" not in e["message"]]
         assert not [e for e in logs if "Uncaught" in e["message"]], logs
     finally:
-        driver.quit()
-        code, _out, err = s.stop()
+        try:
+            _fresh(driver)   # off the station's page before it stops
+        finally:
+            code, _out, err = s.stop()
     assert code == 0, err
 
     from analysis.recording import Recording
@@ -132,14 +157,14 @@ def test_operator_runs_a_two_point_test_in_the_browser(tmp_path):
     assert all(np.isfinite(f.H[:, 0, 1:]).all() for f in frfs)
 
 
-def test_the_page_numbers_hits_from_1_refuses_a_double_click_and_logs_no_errors(tmp_path):
+def test_the_page_numbers_hits_from_1_refuses_a_double_click_and_logs_no_errors(browser, tmp_path):
     """A second tab and the favicon leave no error in the browser's log; the verdict and the log give a
     hit the same number (from 1); a double click of Next point moves one point on; a done point's dot
     stays visible where an accelerometer sits (top:4 carries one)."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
-    driver = chrome(tmp_path)
+    driver = _fresh(browser)
     s = StationProcess(["--device", "sim://?seed=1", "--out", str(tmp_path / "rec.h5"), "--points",
                         "top:4:Z,right:6:-X", "--hits", "1"], tmp_path)
     try:
@@ -198,6 +223,8 @@ def test_the_page_numbers_hits_from_1_refuses_a_double_click_and_logs_no_errors(
         errors = second_tab_errors + [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
         assert not errors, errors  # no 403 for the favicon, no 409 for the second tab's lease or a second click
     finally:
-        driver.quit()
-        code, _out, err = s.stop()
+        try:
+            _fresh(driver)   # off the station's page before it stops
+        finally:
+            code, _out, err = s.stop()
     assert code == 0, err
