@@ -43,7 +43,7 @@ from .physical import (
 )
 
 __all__ = ["OnTop", "PairFit", "as_places", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose",
-           "split_choice", "split_places", "splits", "with_options"]
+           "split_choice", "split_places", "splits", "with_options", "pair_starts"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -323,8 +323,10 @@ def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: Phy
     nothing; at the right option both are refined to the data. The parameters ``first`` set free were chosen
     at its own option; at another option it is also refined with all of them free (its largest variant): a
     support's rotational springs alone stood in for the supports at once, while the loose support elsewhere
-    needs both. Returns ``first`` at the best option (with the parameters set free there) and ``second``,
-    both with the refined parameters, and the pair's chi2 there."""
+    needs both. ``first`` is refined from its fit and, where it stopped at an edge, from its nominal
+    (:func:`pair_starts`). Returns ``first``
+    at the best option (with the parameters set free there) and ``second``, both with the refined parameters,
+    and the pair's chi2 there."""
     best: tuple[PhysicalFit, PhysicalFit, float] = (first, second, np.inf)
     spec = besides(specs[0], [(second.cause, second.params)])
     widest = max((v for v in variants(specs[0]) if set(first.free) <= set(v)), key=len, default=first.free)
@@ -338,10 +340,24 @@ def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: Phy
             if free != first.free:       # its start at that option with every parameter free, the second applied
                 start, _, _ = fit_cause(OnTop(sim, [(second.cause, second.params)]), specs[0], free, mm,
                                         np.ones(mm.freq_hz.size, bool), fmax, options=[params[specs[0].choice]])
-            a = PhysicalFit(cause=first.cause, params=start, free=free, chi2=np.inf)
-            two = fit_pair(sim, specs, [a, second], mm, fmax, folds=False)
-            if two.chi2 < best[2]:
-                best = (PhysicalFit(cause=first.cause, params=two.params[0], free=free, chi2=two.chi2),
-                        PhysicalFit(cause=second.cause, params=two.params[1], free=second.free, chi2=two.chi2),
-                        two.chi2)
+            for begin in pair_starts(specs[0], start, free):
+                a = PhysicalFit(cause=first.cause, params=begin, free=free, chi2=np.inf)
+                two = fit_pair(sim, specs, [a, second], mm, fmax, folds=False)
+                if two.chi2 < best[2]:
+                    best = (PhysicalFit(cause=first.cause, params=two.params[0], free=free, chi2=two.chi2),
+                            PhysicalFit(cause=second.cause, params=two.params[1], free=second.free, chi2=two.chi2),
+                            two.chi2)
     return best
+
+
+def pair_starts(spec: CauseSpec, params: Mapping, free: Sequence[str]) -> list[dict]:
+    """Starts for refining a cause fitted alone (``params``) together with a second cause: its own fit, and when
+    some of its ``free`` parameters stopped at an edge of their range (:meth:`CauseSpec.at_edge`: a value the
+    verdict does not accept), the same with those at their own start (:meth:`ParamSpec.start`: the nominal).
+    Fitted alone, a cause absorbs the other change where it can: one joint's rotational springs driven to the
+    x100 edge (rigid) with its translational ones off their value stand in for a material a few per cent
+    stiffer. There the rotational springs hardly move the modes (any spring far stiffer than the joint is
+    rigid), so a refinement started there stays in that basin with the second cause at its nominal; from the
+    nominal both reach the change in the data. The lower chi2 is kept (:func:`with_options`)."""
+    edge = {s.name: s.start() for s in spec.params if s.name in spec.at_edge(params, tuple(free))}
+    return [dict(params)] + ([{**params, **edge}] if edge else [])
