@@ -323,7 +323,7 @@ def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: Phy
     nothing; at the right option both are refined to the data. The parameters ``first`` set free were chosen
     at its own option; at another option it is also refined with all of them free (its largest variant): a
     support's rotational springs alone stood in for the supports at once, while the loose support elsewhere
-    needs both. ``first`` is refined from its fit and, where it stopped at an edge, from its nominal
+    needs both. ``first`` is refined from its fit and from it with one parameter at a time at its nominal
     (:func:`pair_starts`). Returns ``first``
     at the best option (with the parameters set free there) and ``second``, both with the refined parameters,
     and the pair's chi2 there."""
@@ -351,13 +351,15 @@ def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: Phy
 
 
 def pair_starts(spec: CauseSpec, params: Mapping, free: Sequence[str]) -> list[dict]:
-    """Starts for refining a cause fitted alone (``params``) together with a second cause: its own fit, and when
-    some of its ``free`` parameters stopped at an edge of their range (:meth:`CauseSpec.at_edge`: a value the
-    verdict does not accept), the same with those at their own start (:meth:`ParamSpec.start`: the nominal).
-    Fitted alone, a cause absorbs the other change where it can: one joint's rotational springs driven to the
-    x100 edge (rigid) with its translational ones off their value stand in for a material a few per cent
-    stiffer. There the rotational springs hardly move the modes (any spring far stiffer than the joint is
-    rigid), so a refinement started there stays in that basin with the second cause at its nominal; from the
-    nominal both reach the change in the data. The lower chi2 is kept (:func:`with_options`)."""
-    edge = {s.name: s.start() for s in spec.params if s.name in spec.at_edge(params, tuple(free))}
-    return [dict(params)] + ([{**params, **edge}] if edge else [])
+    """Starts for refining a cause fitted alone (``params``) together with a second cause: its own fit, and, when
+    it has more than one ``free`` parameter, its fit with each of them in turn at its own start
+    (:meth:`ParamSpec.start`: the nominal). Fitted alone, a cause absorbs the other change where it can with one
+    parameter: one joint's rotational springs driven towards the x100 edge (rigid) with its translational ones
+    off their value stand in for a material a few per cent stiffer. There the rotational springs hardly move
+    the modes (any spring far stiffer than the joint is rigid), so a refinement started there stays in that
+    basin with the second cause at its nominal; from that parameter's nominal both reach the change in the
+    data. The lower chi2 is kept (:func:`with_options`)."""
+    starts = [dict(params)]
+    if len(free) > 1:
+        starts += [{**params, s.name: s.start()} for s in spec.params if s.name in free]
+    return [q for k, q in enumerate(starts) if q not in starts[:k]]
