@@ -49,7 +49,6 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import scipy.linalg
 
 from analysis.diagnosis.physical import CauseSpec, ParamSpec
 from analysis.modal import ModalModel, pole_from_fz
@@ -57,7 +56,7 @@ from analysis.points import parse_point
 
 from .config import DamageConfig, FrameConfig, check_fe_memory
 from .fem import FrameModel, ModelError, element_matrices, member_nodes_xyz, section_properties, stamp_spring
-from .ritz import Part, ReducedSpace, RitzReduction
+from .ritz import Part, ReducedSpace, RitzReduction, lowest_modes
 
 __all__ = ["FrameVariants", "CAUSES", "PhysicalCause", "Assembly", "register_cause", "DIAGNOSIS_BYTES_PER_DOF2",
            "check_diagnosis_size", "ALL_PLACES", "DAMAGE_CAUSES", "damage_changes"]
@@ -391,7 +390,7 @@ class FrameVariants:
                        ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`modes_of` on the full FE model (no reduction)."""
         K, M = self.matrices_of(changes)
-        w2, phi = scipy.linalg.eigh(K, M, subset_by_value=(1.0, (2 * np.pi * max_freq_hz) ** 2))
+        w2, phi = lowest_modes(K, M, (2 * np.pi * max_freq_hz) ** 2)
         f = np.sqrt(w2) / (2 * np.pi)
         return f, self._products(phi)
 
@@ -428,7 +427,7 @@ class FrameVariants:
         """:meth:`model` of the frame changed by every ``(cause, params)`` of ``changes`` at once."""
         K, M = self.matrices_of(changes)
         fmax = self.config.modes.max_freq_hz
-        w2, phi = scipy.linalg.eigh(K, M, subset_by_value=(1.0, (2 * np.pi * fmax) ** 2))
+        w2, phi = lowest_modes(K, M, (2 * np.pi * fmax) ** 2)
         f = np.sqrt(w2) / (2 * np.pi)
         zeta = self.config.damping.ratios(f)
         lam = pole_from_fz(f, zeta)

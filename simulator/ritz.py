@@ -35,10 +35,13 @@ is not as accurate: the springs' and an element's ranges alone (24 instead of 36
 springs, 4 instead of 12 for an element) leave errors of a few 1e-6 (a joint x 0.001 with the modulus
 x 0.95, an element at 0.02). With a local change as well, a uniform change needs 100-135 unknowns, so
 with the lowest 40 modes (bands above ~750 Hz) it exceeds :data:`MAX_FRACTION` and is solved on the
-full model. Springs stiffened a hundredfold (the spring causes' upper bound) make the full solve
-``eigh(K, M)`` itself inexact: against the inverse pencil ``eigh(M, K)`` (whose largest eigenvalues, the
-lowest modes, keep full relative accuracy) it is off by ~1e-5 with one joint's rotational springs
-x 96 and ~2e-3 with every joint's x 100 on top of that, the reduced model by ~3e-6 and ~4e-4.
+full model. Springs stiffened a hundredfold (the spring causes' upper bound) on the frame's light rotations
+make the direct solve ``eigh(K, M)`` inexact: its eigenvalues' absolute error is the machine precision times
+the largest eigenvalue of the pencil, ~1e13 times the lowest mode's, i.e. 1e-5 (one joint's rotational
+springs x 96) to 5e-4 (every joint's x 100 on top) relative. Both the full and the reduced model therefore
+solve the inverse pencil ``M y = mu K y`` (:func:`inverse_eigh`, :func:`lowest_modes`), whose largest
+eigenvalues are the lowest modes, each to the machine precision relative to itself: on those changes both
+agree to 1e-10 with the energy quotients of the modes (``tests/test_ritz.py``).
 """
 from __future__ import annotations
 
@@ -50,7 +53,8 @@ import scipy.linalg
 
 from .errors import ModelError
 
-__all__ = ["Part", "RitzReduction", "ReducedSpace", "N_MODES", "LOCAL_DOFS", "MAX_FRACTION"]
+__all__ = ["Part", "RitzReduction", "ReducedSpace", "N_MODES", "LOCAL_DOFS", "MAX_FRACTION", "inverse_eigh",
+           "lowest_modes"]
 
 #: Nominal modes in every basis (on the default frame up to ~1.5 kHz, twice the highest mode the
 #: diagnosis compares).
@@ -65,7 +69,7 @@ MAX_FRACTION = 0.6
 #: Basis directions whose M0-Gram eigenvalue is below this fraction of the largest are dropped.
 _RANK_TOL = 1e-10
 
-_sygvd = scipy.linalg.get_lapack_funcs("sygvd", (np.zeros((1, 1)),))
+_sygvd, _potrf, _potri = scipy.linalg.get_lapack_funcs(("sygvd", "potrf", "potri"), (np.zeros((1, 1)),))
 
 
 @dataclass(frozen=True)
@@ -120,25 +124,76 @@ class ReducedSpace:
     def eigen(self, dk: Mapping, dm: Mapping, scale: float, w2_max: float) -> tuple[np.ndarray, np.ndarray]:
         """Eigenvalues ``omega^2`` in ``(1, w2_max)`` (rad/s)^2 of ``(scale (K0 + sum dk_p K_p), M0 + sum
         dm_q M_q)`` in this space and the Ritz vectors' coefficients (r, n_modes), M-normalised."""
+        w2, Y = self.eigen_all(dk, dm)
+        w2 = scale * w2
+        keep = (w2 > 1.0) & (w2 < w2_max)
+        return w2[keep], Y[:, keep]
+
+    def matrices(self, dk: Mapping, dm: Mapping) -> tuple[np.ndarray, np.ndarray | None]:
+        """The candidate's reduced ``K0 + sum dk_p K_p`` and ``M0 + sum dm_q M_q`` (None: ``M0``, the identity
+        to rounding)."""
         K = self.K0.copy()
         for key, c in dk.items():
             K += c * self.kparts[key]
+        M = None
         if dm:
             M = self.M0.copy()
             for key, c in dm.items():
                 M += c * self.mparts[key]
-            # LAPACK's divide-and-conquer driver called directly: the same answer as
-            # ``scipy.linalg.eigh(K, M, driver="gvd")`` without its checks, which cost a third of a solve here
-            w2, Y, info = _sygvd(K, M, itype=1, jobz="V", uplo="L", overwrite_a=1, overwrite_b=1)
-            if info:
-                raise np.linalg.LinAlgError(f"the reduced eigenproblem failed (LAPACK sygvd info {info}): "
-                                            "the changed mass matrix is not positive definite")
-        else:
-            # V is M0-orthonormal: the standard problem (V^T M0 V = I to rounding)
+        return K, M
+
+    def eigen_all(self, dk: Mapping, dm: Mapping) -> tuple[np.ndarray, np.ndarray]:
+        """Every eigenpair of ``(K0 + sum dk_p K_p, M0 + sum dm_q M_q)`` in this space (the modulus' ``scale``
+        not applied), ascending, the vectors M-normalised: by the inverse pencil (:func:`inverse_eigh`)."""
+        K, M = self.matrices(dk, dm)
+        return inverse_eigh(K, M)
+
+
+def inverse_eigh(K: np.ndarray, M: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Every eigenpair of ``K y = omega^2 M y`` (``M`` None: the identity; ``K``, ``M`` symmetric positive
+    definite), ``omega^2`` ascending and the vectors M-normalised, solved as the inverse pencil
+    ``M y = mu K y`` (``mu = 1 / omega^2``) on the Cholesky factor of ``K``.
+
+    Why: a solver's eigenvalues carry an absolute error of about the machine precision times the largest
+    eigenvalue of the pencil it reduces. ``eigh(K, M)`` reduces ``L_M^-1 K L_M^-T``, whose largest eigenvalue
+    with stiff springs on light rotations is ~1e13 times the lowest mode's: the lowest frequencies come out off
+    by 1e-5..1e-3 (relative) with springs x 100. The inverse pencil's largest eigenvalues are the lowest
+    modes, each with an error of the machine precision relative to itself (the Cholesky factor of ``K`` is
+    backward stable entry by entry). A ``K`` that is not positive definite (a mechanism) is solved directly."""
+    K = 0.5 * (K + K.T)
+    if M is None:
+        L, info = _potrf(K, lower=1)
+        if not info:
+            Kinv, info = _potri(L, lower=1)
+        if info:
             w2, Y = np.linalg.eigh(K)
-        w2 = scale * w2
-        keep = (w2 > 1.0) & (w2 < w2_max)
-        return w2[keep], Y[:, keep]
+            return w2, Y
+        mu, Y = np.linalg.eigh(Kinv, UPLO="L")
+        return 1.0 / mu[::-1], Y[:, ::-1]
+    # M y = mu K y, the vectors K-normalised (y^T K y = 1, so y^T M y = mu)
+    mu, Y, info = _sygvd(M, K, itype=1, jobz="V", uplo="L")
+    if info:
+        # not positive definite: LAPACK's divide-and-conquer driver on the direct pencil (without
+        # ``scipy.linalg.eigh``'s checks, which cost a third of a solve here)
+        w2, Y, info = _sygvd(K, M, itype=1, jobz="V", uplo="L")
+        if info:
+            raise np.linalg.LinAlgError(f"the reduced eigenproblem failed (LAPACK sygvd info {info}): "
+                                        "the changed mass matrix is not positive definite")
+        return w2, Y
+    mu, Y = mu[::-1], Y[:, ::-1]
+    return 1.0 / mu, Y / np.sqrt(mu)
+
+
+def lowest_modes(K: np.ndarray, M: np.ndarray, w2_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """The eigenpairs of the full model ``K phi = omega^2 M phi`` with ``1 < omega^2 < w2_max`` (rad/s)^2,
+    ascending, M-normalised: the inverse pencil (:func:`inverse_eigh`'s reason) with only those computed."""
+    try:
+        mu, phi = scipy.linalg.eigh(M, K, subset_by_value=(1.0 / w2_max, 1.0), check_finite=False)
+    except np.linalg.LinAlgError:       # K not positive definite (a mechanism): the direct pencil
+        w2, phi = scipy.linalg.eigh(K, M, subset_by_value=(1.0, w2_max))
+        return w2, phi
+    mu, phi = mu[::-1], phi[:, ::-1]
+    return 1.0 / mu, phi / np.sqrt(mu)
 
 
 #: the message of a frame whose stiffness matrix is singular (it moves freely: nothing holds it)
