@@ -33,15 +33,16 @@ static responses are new directions, so such a change needs the basis of a chang
 the default frame 36 DOFs: 72 vectors with the dynamic block) and none for the members. A smaller set
 is not as accurate: the springs' and an element's ranges alone (24 instead of 36 vectors for the
 springs, 4 instead of 12 for an element) leave errors of a few 1e-6 (a joint x 0.001 with the modulus
-x 0.95, an element at 0.02). With a local change as well, a uniform change needs 100-135 unknowns, so
-with the lowest 40 modes (bands above ~750 Hz) it exceeds :data:`MAX_FRACTION` and is solved on the
-full model. Springs stiffened a hundredfold (the spring causes' upper bound) on the frame's light rotations
-make the direct solve ``eigh(K, M)`` inexact: its eigenvalues' absolute error is the machine precision times
-the largest eigenvalue of the pencil, ~1e13 times the lowest mode's, i.e. 1e-5 (one joint's rotational
-springs x 96) to 5e-4 (every joint's x 100 on top) relative. Both the full and the reduced model therefore
-solve the inverse pencil ``M y = mu K y`` (:func:`inverse_eigh`, :func:`lowest_modes`), whose largest
-eigenvalues are the lowest modes, each to the machine precision relative to itself: on those changes both
-agree to 1e-10 with the energy quotients of the modes (``tests/test_ritz.py``).
+x 0.95, an element at 0.02). With a local change as well, a uniform change needs 100-135 unknowns, which
+stays below :data:`MAX_FRACTION` with the lowest 30 or 40 modes.
+
+Springs stiffened a hundredfold (the spring causes' upper bound) on the frame's light rotations make the
+direct solve ``eigh(K, M)`` inexact: its eigenvalues' absolute error is the machine precision times the
+largest eigenvalue of the pencil, ~1e13 times the lowest mode's, i.e. 1e-5 (one joint's rotational springs x
+96) to 5e-4 (every joint's x 100 on top) relative. Both the full and the reduced model therefore solve the
+inverse pencil ``M y = mu K y`` (:func:`inverse_eigh`, :func:`lowest_modes`), whose largest eigenvalues are
+the lowest modes, each to the machine precision relative to itself: on those changes both agree to 1e-10 with
+the energy quotients of the modes (``tests/test_ritz.py``).
 """
 from __future__ import annotations
 
@@ -62,10 +63,14 @@ N_MODES = 30
 #: A part on at most this many DOFs contributes their unit vectors; a larger one ``D_p Phi_m``.
 LOCAL_DOFS = 24
 #: The largest basis (a fraction of the frame's unknowns) solved reduced; a larger one goes to the full
-#: model. Measured on the default frame (186 unknowns, one thread): a candidate's reduced solve costs 1.0
-#: ms at 112 unknowns and 2.0 ms at 136 (a changed mass: the generalized problem), the full solve 2.7-3.3
-#: ms; a basis (5-8 ms) is built once per set of changed parts.
-MAX_FRACTION = 0.6
+#: model. A reduced solve (every eigenpair of the inverse pencil, :func:`inverse_eigh`) costs ~r^3, the full
+#: one (the lowest modes of the inverse pencil, :func:`lowest_modes`) ~n^3 with a smaller constant; both are
+#: accurate to 1e-10 (the basis's error is below the solve's). Measured on the default frame (186 unknowns,
+#: one thread): 0.3 ms at 46 unknowns, 2.1-2.7 ms at 102-119 (a uniform stiffness change with a local one),
+#: 4.1 ms at 123 (with a changed mass: the generalized problem), the full solve 4.2-7.6 ms; by r^3 the reduced
+#: solve reaches the full one's cost near 0.8 n, so a basis up to 0.75 n is solved reduced (a basis costs 4-16
+#: ms, once per set of changed parts).
+MAX_FRACTION = 0.75
 #: Basis directions whose M0-Gram eigenvalue is below this fraction of the largest are dropped.
 _RANK_TOL = 1e-10
 
@@ -255,4 +260,12 @@ class RitzReduction:
             V = phi
         if V.shape[1] > MAX_FRACTION * n:
             return None
+        return ReducedSpace(V, self.K0, self.M0, kparts, mparts)
+
+    def whole(self, kparts: Mapping, mparts: Mapping) -> ReducedSpace:
+        """The full model as a space: every nominal mode (M0-orthonormal to rounding), the basis in which the
+        full model's candidates are differentiated like a reduced one's."""
+        V = self.modes
+        L = np.linalg.cholesky(V.T @ self.M0 @ V)
+        V = scipy.linalg.solve_triangular(L, V.T, lower=True).T
         return ReducedSpace(V, self.K0, self.M0, kparts, mparts)

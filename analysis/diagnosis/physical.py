@@ -261,6 +261,112 @@ def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
     return RESIDUAL_CAP * np.tanh(r / RESIDUAL_CAP)
 
 
+def residuals_jac(mm: MeasuredModes, f: np.ndarray, P: np.ndarray, df: np.ndarray, dP: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`residuals` (K, 2) and their derivatives (K, 2, n) given the candidate's derivatives ``df``
+    (n_modes, n: Hz per unit) and ``dP`` (n_products, n_modes, n) with respect to n parameters, the pairing
+    held (it changes only where the residuals jump). ``d r_f,k = df_j / (f_k sigma_k)``; with ``s = R_k^H P_j``,
+    ``MAC = |s|^2 / (|R_k|^2 |P_j|^2)``: ``d MAC = 2 Re(conj(s) R_k^H dP_j) / (|R_k|^2 |P_j|^2) - 2 MAC
+    (P_j . dP_j) / |P_j|^2``; an unpaired mode's and a mode without shape's residuals are constant; the cap
+    ``c tanh(r / c)`` multiplies them by ``1 - tanh^2(r / c)``."""
+    idx, macs = pair(mm, f, P)
+    K, n = mm.freq_hz.size, df.shape[1]
+    raw = np.empty((K, 2))
+    J = np.zeros((K, 2, n))
+    ok = idx >= 0
+    j = idx[ok]
+    raw[ok, 0] = (f[j] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
+    raw[~ok, 0] = RESIDUAL_CAP
+    raw[:, 1] = (1.0 - macs) / MAC_TOL
+    J[ok, 0] = df[j] / (mm.freq_hz[ok] * mm.sigma[ok])[:, None]
+    shaped = np.flatnonzero(ok & ~mm._no_shape)
+    if shaped.size:
+        Pj = P[:, idx[shaped]]                                   # (N, m)
+        dPj = dP[:, idx[shaped]]                                 # (N, m, n)
+        Rh = mm._mac.a_h[shaped]                                 # (m, N)
+        s_ = np.einsum("mN,Nm->m", Rh, Pj)
+        bb = np.sum(Pj * Pj, axis=0)
+        ea = mm._mac.energy[shaped]
+        good = (bb > 0) & (ea > 0)
+        cross = np.einsum("mN,Nmn->mn", Rh, dPj)
+        dmac = (2 * np.real(np.conj(s_)[:, None] * cross) / np.where(good, ea * bb, 1.0)[:, None]
+                - 2 * macs[shaped][:, None] * np.einsum("Nm,Nmn->mn", Pj, dPj) / np.where(good, bb, 1.0)[:, None])
+        J[shaped, 1] = np.where(good[:, None], -dmac / MAC_TOL, 0.0)
+    t = np.tanh(raw / RESIDUAL_CAP)
+    return RESIDUAL_CAP * t, J * (1.0 - t * t)[:, :, None]
+
+
+def modes_jac(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float,
+              wrt: Sequence[tuple[int, str]]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The simulation's modes of ``changes`` with their derivatives with respect to the parameters ``wrt``
+    (``(i, name)`` of ``changes[i]``), when it has them (``modes_jac_of``, as
+    :meth:`simulator.physical.FrameVariants.modes_jac_of`); None: not for this candidate."""
+    fn = getattr(sim, "modes_jac_of", None)
+    return None if fn is None else fn(list(changes), fmax, list(wrt))
+
+
+class ResidualsWithJacobian:
+    """The residual vector of the candidates ``changes_at(x)`` on the measured modes ``sel`` and its Jacobian
+    with respect to ``x`` (``dv_dx(x)``: the parameters' derivatives by ``x``, a log-factor's ``v``) for
+    :func:`scipy.optimize.least_squares` (:meth:`options`): one solve per point (the last point's answers
+    kept, for the optimizer asks the residuals and then the Jacobian at a point). ``plain(x)``: the modes
+    without derivatives. A simulation without derivatives (no ``modes_jac_of``) is differentiated by
+    least_squares' own forward differences (``diff_step`` 1e-3), a candidate it gives none for (``modes_jac``:
+    None) by the same differences here, inside ``bounds``."""
+
+    def __init__(self, sim: PhysicalSimulation, changes_at: Any, plain: Any, wrt: Sequence[tuple[int, str]],
+                 dv_dx: Any, mm: MeasuredModes, sel: np.ndarray, fmax: float,
+                 bounds: tuple[np.ndarray, np.ndarray]) -> None:
+        self.sim, self.changes_at, self.plain, self.wrt, self.dv_dx = sim, changes_at, plain, list(wrt), dv_dx
+        self.mm, self.sel, self.fmax, self.bounds = mm, sel, fmax, bounds
+        self.analytic = getattr(sim, "modes_jac_of", None) is not None
+        self._x: bytes | None = None
+        self._r = np.zeros(0)
+        self._J: np.ndarray | None = None
+
+    def options(self) -> dict:
+        """least_squares' ``jac`` (and ``diff_step``) for this simulation."""
+        return {"jac": self.jac} if self.analytic else {"jac": "2-point", "diff_step": 1e-3}
+
+    def _plain(self, x: np.ndarray) -> np.ndarray:
+        f, P = self.plain(x)
+        return residuals(self.mm, f, P)[self.sel].ravel()
+
+    def _at(self, x: np.ndarray) -> None:
+        key = np.asarray(x, float).tobytes()
+        if key == self._x:
+            return
+        got = modes_jac(self.sim, self.changes_at(x), self.fmax, self.wrt) if self.analytic else None
+        if got is None:
+            self._r, self._J = self._plain(x), None
+        else:
+            f, P, df, dP = got
+            d = np.asarray(self.dv_dx(x), float)
+            r, J = residuals_jac(self.mm, f, P, df * d, dP * d)
+            self._r, self._J = r[self.sel].ravel(), J[self.sel].reshape(-1, d.size)
+        self._x = key
+
+    def fun(self, x: np.ndarray) -> np.ndarray:
+        self._at(x)
+        return self._r
+
+    def jac(self, x: np.ndarray) -> np.ndarray:
+        self._at(x)
+        if self._J is not None:
+            return self._J
+        r0 = self._r
+        J = np.empty((r0.size, x.size))
+        lo, hi = self.bounds
+        for i in range(x.size):       # least_squares' own step: 1e-3 max(1, |x|) away from zero, inside the bounds
+            h = 1e-3 * max(abs(float(x[i])), 1.0) * (1.0 if x[i] >= 0 else -1.0)
+            if not lo[i] <= x[i] + h <= hi[i]:
+                h = -h
+            xi = np.array(x, float)
+            xi[i] += h
+            J[:, i] = (self._plain(xi) - r0) / (xi[i] - x[i])
+        return J
+
+
 @dataclass
 class PhysicalFit:
     """One cause (one nested variant) fitted: parameters (incl. the choice), chi2 on all modes,
@@ -307,15 +413,23 @@ def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[Pa
         costs = [float(np.sum(resid(x) ** 2)) for x in grid]
         starts.append(grid[int(np.argmin(costs))])
     starts += [np.array([s.to_x(float(q.get(s.name, s.start()))) for s in free]) for q in also]
+    rj = ResidualsWithJacobian(sim, lambda x: [(cause.name, full(x))], lambda x: sim.modes(cause.name, full(x), fmax),
+                               [(0, s.name) for s in free], lambda x: dv_dx(free, x), mm, sel, fmax, (lo, hi))
     best: tuple[dict, float] = ({}, np.inf)
     for x0 in starts:
         x0 = np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
-        res = least_squares(resid, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=30 * len(free), ftol=FIT_TOL,
-                            xtol=FIT_TOL)
+        res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=30 * len(free), ftol=FIT_TOL, xtol=FIT_TOL,
+                            **rj.options())
         cost = float(2 * res.cost)
         if cost < best[1]:
             best = (full(res.x), cost)
     return best
+
+
+def dv_dx(specs: Sequence[ParamSpec], x: np.ndarray) -> np.ndarray:
+    """The parameters' derivatives by their search variables ``x`` (:meth:`ParamSpec.to_x`): ``v`` for a
+    log-factor, 1 for a plain one."""
+    return np.array([s.from_x(float(xi)) if s.log else 1.0 for s, xi in zip(specs, x)])
 
 
 def _nominal(cause: CauseSpec) -> dict:

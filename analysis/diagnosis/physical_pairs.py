@@ -37,7 +37,10 @@ from .physical import (
     MeasuredModes,
     PhysicalFit,
     PhysicalSimulation,
+    ResidualsWithJacobian,
+    dv_dx,
     fit_cause,
+    modes_jac,
     residuals,
     variants,
 )
@@ -172,6 +175,12 @@ class OnTop:
     def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
         return changes_of(self.sim, self.first + list(changes), max_freq_hz)
 
+    def modes_jac_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float,
+                     wrt: Sequence[tuple[int, str]]) -> tuple | None:
+        """``modes_jac`` of ``sim`` with the first changes applied (the parameters ``wrt`` of ``changes``)."""
+        n = len(self.first)
+        return modes_jac(self.sim, self.first + list(changes), max_freq_hz, [(n + i, name) for i, name in wrt])
+
     def model_of(self, changes: Sequence[tuple[str, Mapping]]) -> ModalModel:
         return self.sim.model_of(self.first + list(changes))
 
@@ -223,13 +232,19 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
             out[i][s.name] = s.from_x(float(xi))
         return out
 
+    def changes(x: np.ndarray) -> list[tuple[str, dict]]:
+        return list(zip([f.cause for f in fits], params(x)))
+
     def resid(x: np.ndarray, sel: np.ndarray) -> np.ndarray:
-        f, P = changes_of(sim, list(zip([f.cause for f in fits], params(x))), fmax)
+        f, P = changes_of(sim, changes(x), fmax)
         return residuals(mm, f, P)[sel].ravel()
 
     def solve(x0: np.ndarray, sel: np.ndarray) -> np.ndarray:
         x0 = _start(x0, lo, hi)
-        return least_squares(resid, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=20 * len(flat), args=(sel,)).x
+        rj = ResidualsWithJacobian(sim, changes, lambda x: changes_of(sim, changes(x), fmax),
+                                   [(i, s.name) for i, s in flat], lambda x: dv_dx([s for _, s in flat], x), mm, sel,
+                                   fmax, (lo, hi))
+        return least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=20 * len(flat), **rj.options()).x
 
     K = mm.freq_hz.size
     x0 = np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat])
