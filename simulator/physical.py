@@ -44,6 +44,7 @@ sees only containers.
 """
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -223,6 +224,8 @@ def damage_changes(damage: DamageConfig) -> list[tuple[str, dict]]:
 
 #: Candidates' modes kept (:meth:`FrameVariants.modes_of`) before the store is emptied.
 _MEMO_SIZE = 20000
+#: Frames with changes applied as their nominal (:meth:`FrameVariants.on_top`) kept before the store is emptied.
+_TOPS_KEPT = 32
 
 
 def _part(dofs: np.ndarray, block: np.ndarray) -> Part:
@@ -335,6 +338,9 @@ class FrameVariants:
         self._refined_frames: dict[int, FrameVariants] = {}
         #: candidates' modes by Rayleigh-Ritz reduction (:mod:`simulator.ritz`); False: the full model
         self.reduced = True
+        #: changes applied before every candidate's (:meth:`on_top`): part of this frame's nominal
+        self._base: list[tuple[str, dict]] = []
+        self._tops: dict[str, FrameVariants] = {}
         self._set_nominal()
 
     def _set_nominal(self) -> None:
@@ -361,6 +367,26 @@ class FrameVariants:
                 c = replace(c, params=(replace(c.params[0], nominal=self.sensor_mass_kg),))
             out.append(c)
         return tuple(out)
+
+    def on_top(self, first: Sequence[tuple[str, Mapping]]) -> FrameVariants:
+        """This frame with the changes ``first`` applied as its nominal: its ``modes_of(changes)`` are this
+        frame's ``modes_of(first + changes)``, with the Ritz bases built on the changed frame, so a candidate
+        needs only the basis of its own parts (a crack searched on top of a uniform stiffness change: ~54
+        unknowns instead of ~107 for the springs' static responses the uniform change brings). Built once per
+        ``first`` (the last :data:`_TOPS_KEPT` kept)."""
+        if not first:
+            return self
+        key = repr([(c, sorted(dict(p).items())) for c, p in first])
+        top = self._tops.get(key)
+        if top is None:
+            top = copy.copy(self)
+            top._base = [*self._base, *((c, dict(p)) for c, p in first)]
+            top._tops, top._refined_frames = {}, {}
+            top._set_nominal()
+            if len(self._tops) >= _TOPS_KEPT:
+                self._tops.clear()
+            self._tops[key] = top
+        return top
 
     def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
         """Natural frequencies (Hz, flexible modes up to ``max_freq_hz``) and the shape products
@@ -600,7 +626,7 @@ class FrameVariants:
         """The frame changed by ``changes`` as coefficients of its parts: ``K = scale sum_p k_p K_p``,
         ``M = sum_q m_q M_q`` (``scale`` the modulus factor; the springs' coefficients are divided by it)."""
         a = Assembly()
-        for cause, params in changes:
+        for cause, params in [*self._base, *changes]:
             if cause not in CAUSES:
                 raise ModelError(f"unknown physical cause {cause!r}; the registry has {', '.join(CAUSES)}")
             CAUSES[cause].apply(a, params)

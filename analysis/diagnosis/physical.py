@@ -420,10 +420,35 @@ def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[Pa
         x0 = np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
         res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=30 * len(free), ftol=FIT_TOL, xtol=FIT_TOL,
                             **rj.options())
-        cost = float(2 * res.cost)
+        x, cost = off_edges(free, res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))
         if cost < best[1]:
-            best = (full(res.x), cost)
+            best = (full(x), cost)
     return best
+
+
+#: Fits whose chi2 differ by less than this are not told apart (:data:`FIT_TOL`: a chi2 is compared with others to
+#: about 0.01).
+CHI2_RESOLUTION = 0.01
+
+
+def off_edges(specs: Sequence[ParamSpec], x: np.ndarray, chi2: float, chi2_at: Any) -> tuple[np.ndarray, float]:
+    """A fit ``x`` (chi2 ``chi2``; ``chi2_at(x)``) with each log-factor that stopped at an edge of its range
+    (:meth:`ParamSpec.at_edge`) moved just inside the edge band (twice its width from the edge) when chi2 there is
+    within :data:`CHI2_RESOLUTION` of the fit's: the data do not tell the edge from there. A spring far stiffer
+    than what it holds is rigid, so a joint's rotational factor creeps up a valley whose floor falls by ~1e-4 per
+    decade to the x 100 edge (an exact derivative follows it; a finite-difference one stopped anywhere on the
+    way); the edge would say the cause wants more than its range allows, which the data do not say."""
+    x = np.array(x, float)
+    for i, s in enumerate(specs):
+        if not s.log or not s.at_edge(s.from_x(float(x[i]))):
+            continue
+        a, b = s.x_bounds
+        y = x.copy()
+        y[i] = b - 2 * _EDGE * (b - a) if x[i] > 0.5 * (a + b) else a + 2 * _EDGE * (b - a)
+        c = chi2_at(y)
+        if c <= chi2 + CHI2_RESOLUTION:
+            x, chi2 = y, c
+    return x, chi2
 
 
 def dv_dx(specs: Sequence[ParamSpec], x: np.ndarray) -> np.ndarray:

@@ -41,6 +41,7 @@ from .physical import (
     dv_dx,
     fit_cause,
     modes_jac,
+    off_edges,
     residuals,
     variants,
 )
@@ -160,24 +161,31 @@ class OnTop:
     def __init__(self, sim: PhysicalSimulation, first: Sequence[tuple[str, Mapping]]) -> None:
         self.sim = sim
         self.first = [(c, dict(p)) for c, p in first]
+        # the simulation with ``first`` as its nominal, when it offers one (``on_top``: the same modes, solved on
+        # bases built on the changed frame), else ``sim`` with ``first`` prepended to every candidate
+        on_top = getattr(sim, "on_top", None)
+        self._top = on_top(self.first) if on_top is not None else None
 
     def causes(self) -> Sequence[CauseSpec]:
         return [s for s in (besides(c, self.first) for c in self.sim.causes()) if s is not None]
 
     def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
-        more = [] if cause is None else [(cause, params)]
-        return changes_of(self.sim, self.first + more, max_freq_hz)
+        return self.modes_of([] if cause is None else [(cause, params)], max_freq_hz)
 
     def model(self, cause: str | None, params: Mapping) -> ModalModel:
         more = [] if cause is None else [(cause, params)]
         return self.sim.model_of(self.first + more)
 
     def modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        if self._top is not None:
+            return changes_of(self._top, list(changes), max_freq_hz)
         return changes_of(self.sim, self.first + list(changes), max_freq_hz)
 
     def modes_jac_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float,
                      wrt: Sequence[tuple[int, str]]) -> tuple | None:
         """``modes_jac`` of ``sim`` with the first changes applied (the parameters ``wrt`` of ``changes``)."""
+        if self._top is not None:
+            return modes_jac(self._top, list(changes), max_freq_hz, wrt)
         n = len(self.first)
         return modes_jac(self.sim, self.first + list(changes), max_freq_hz, [(n + i, name) for i, name in wrt])
 
@@ -244,7 +252,8 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
         rj = ResidualsWithJacobian(sim, changes, lambda x: changes_of(sim, changes(x), fmax),
                                    [(i, s.name) for i, s in flat], lambda x: dv_dx([s for _, s in flat], x), mm, sel,
                                    fmax, (lo, hi))
-        return least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=20 * len(flat), **rj.options()).x
+        res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=20 * len(flat), **rj.options())
+        return off_edges([s for _, s in flat], res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))[0]
 
     K = mm.freq_hz.size
     x0 = np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat])
