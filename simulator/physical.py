@@ -6,7 +6,10 @@ every candidate is ``K = sum_i a_i K_i``, ``M = sum_j b_j M_j`` plus lumped mass
 ``K phi = omega^2 M phi`` for the modes needed. A candidate changes only a few parts, so its modes are
 solved in a Rayleigh-Ritz space built for those parts (:mod:`simulator.ritz`: ~0.2-0.6 ms instead of
 ~3 ms for the full eigenproblem, natural frequencies equal to the full model's to 1e-6);
-:meth:`FrameVariants.exact_modes_of` solves the full model (``reduced = False``: always):
+:meth:`FrameVariants.exact_modes_of` solves the full model (``reduced = False``: always);
+:meth:`FrameVariants.modes_jac_of` adds the derivatives of the frequencies and shape products with respect to
+the parameters (the fits' exact Jacobians), and :meth:`FrameVariants.on_top` is the frame with some changes
+made part of its nominal (a search on top of a first cause):
 
 * ``K_c`` axial + torsion and ``K_c,bend`` bending stiffness of each member ``c`` (``left``, ``right``,
   ``top``), ``M_c`` its mass; the springs of the supports and joints split into their translational

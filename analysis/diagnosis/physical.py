@@ -23,7 +23,10 @@ bounded smoothly, ``c tanh(r / c)`` with ``c = RESIDUAL_CAP`` (10), so one mode 
 resolve (a close pair merged, a spurious peak) counts as one large error; ``chi2 = sum r^2``.
 
 Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
-cause's search range); a choice (the node of an added mass, the element of a crack) of more than
+cause's search range), with the residuals' exact Jacobian when the simulation gives the modes' derivatives
+(``modes_jac_of``: :class:`ResidualsWithJacobian`; else forward differences), a log-factor that stops at an
+edge where chi2 is flat within ``CHI2_RESOLUTION`` moved just inside (:func:`off_edges`);
+a choice (the node of an added mass, the element of a crack) of more than
 ``N_SCREEN`` options by a screen that orders the work and a bound that keeps every option that could win:
 each option on a grid of its parameters (the range's ends included), then fitted from its best grid point in
 that order, the ``N_SCREEN`` best and every further option whose chi2 could still come below the best fit so
