@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analysis.diagnosis.physical import MeasuredModes, residuals, residuals_jac
+from analysis.diagnosis.physical import CHI2_RESOLUTION, MeasuredModes, ParamSpec, off_edges, residuals, residuals_jac
 from simulator.physical import FrameVariants
 
 OUTS = ["right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y"]
@@ -94,3 +94,22 @@ def test_the_residuals_jacobian_is_their_differences(fv: FrameVariants) -> None:
         up = residuals(mm, *fv.exact_modes_of(_moved(changes, i, name, v + h), FMAX))
         dn = residuals(mm, *fv.exact_modes_of(_moved(changes, i, name, v - h), FMAX))
         np.testing.assert_allclose(J[..., j], (up - dn) / (2 * h), atol=1e-4 * np.abs(J[..., j]).max())
+
+
+def test_a_factor_at_a_flat_edge_is_moved_inside() -> None:
+    """:func:`off_edges`: a log-factor stopped at its upper edge where chi2 falls by less than
+    ``CHI2_RESOLUTION`` from just inside is moved just inside (and no longer at the edge); one where chi2
+    falls steeply, a plain parameter and a factor inside its range stay where they are."""
+    rot = ParamSpec("factor_rotational", 1e-3, 1e2)
+    steep = ParamSpec("factor_translational", 1e-4, 1e2)
+    plain = ParamSpec("mass_kg", 0.0, 1.0, log=False)
+    x = np.array([rot.to_x(100.0), steep.to_x(1e-4), plain.to_x(0.0), rot.to_x(3.0)])
+    specs = [rot, steep, plain, rot]
+
+    def chi2_at(y: np.ndarray) -> float:       # flat in the first (1e-4 per decade), steep in the second
+        return 1.0 - 1e-4 * y[0] + 5.0 * (y[1] - steep.x_bounds[0])
+
+    y, c = off_edges(specs, x, chi2_at(x), chi2_at)
+    assert not rot.at_edge(rot.from_x(y[0])) and rot.from_x(y[0]) > 50.0
+    assert c <= chi2_at(x) + CHI2_RESOLUTION
+    np.testing.assert_array_equal(y[1:], x[1:])
