@@ -227,8 +227,11 @@ def damage_changes(damage: DamageConfig) -> list[tuple[str, dict]]:
 
 #: Candidates' modes kept (:meth:`FrameVariants.modes_of`) before the store is emptied.
 _MEMO_SIZE = 20000
-#: Frames with changes applied as their nominal (:meth:`FrameVariants.on_top`) kept before the store is emptied.
-_TOPS_KEPT = 32
+#: Frames with changes applied as their nominal (:meth:`FrameVariants.on_top`) kept before the store is emptied:
+#: each holds four matrices of the frame's size (its K, M, nominal modes and Cholesky factor: 32 bytes per squared
+#: degree of freedom), two of them within the margin of :data:`DIAGNOSIS_BYTES_PER_DOF2` over the measured peak.
+#: A search on top of a first cause uses one at a time.
+_TOPS_KEPT = 2
 
 
 def _part(dofs: np.ndarray, block: np.ndarray) -> Part:
@@ -429,6 +432,8 @@ class FrameVariants:
         :meth:`simulator.ritz.RitzReduction.whole`), built once, and its basis at the measured points, signed:
         outputs then references (None, None: the full model is solved)."""
         skey = (frozenset(dk), frozenset(dm), n_modes)
+        if n_modes is None:                 # the whole model (matrices of the frame's size): the last one kept
+            self._spaces = {k: v for k, v in self._spaces.items() if k[2] is not None or k == skey}
         if skey not in self._spaces:
             assert self._ritz is not None
             kp, mp = {q: self._kparts[q] for q in dk}, {q: self._mparts[q] for q in dm}
