@@ -234,6 +234,22 @@ _MEMO_SIZE = 20000
 _TOPS_KEPT = 2
 
 
+def _differences(after: Mapping, before: Mapping, h: float) -> dict:
+    """The nonzero ``(after - before) / h`` of two coefficient maps (a key missing from one: 0 there)."""
+    keys = after.keys() if after.keys() == before.keys() else after.keys() | before.keys()
+    return {q: d for q in keys if (d := (after.get(q, 0.0) - before.get(q, 0.0)) / h)}
+
+
+def _summed(parts: Mapping, coefficients: Mapping) -> np.ndarray:
+    """``sum_q c_q parts[q]`` over the (nonempty) ``coefficients``."""
+    items = iter(coefficients.items())
+    q, c = next(items)
+    out = c * parts[q]
+    for q, c in items:
+        out += c * parts[q]
+    return out
+
+
 def _part(dofs: np.ndarray, block: np.ndarray) -> Part:
     """A part on ``dofs`` trimmed to the DOFs where ``block`` is nonzero."""
     nz = np.flatnonzero(np.any(block != 0, axis=0) | np.any(block != 0, axis=1))
@@ -490,9 +506,7 @@ class FrameVariants:
             moved = list(changes)
             moved[i] = (cause, {**params, name: v + h})
             s1, k1, m1 = self._coefficients(moved)
-            derivs.append(((s1 - scale) / h,
-                           {q: d for q in k1.keys() | k.keys() if (d := (k1.get(q, 0.0) - k.get(q, 0.0)) / h)},
-                           {q: d for q in m1.keys() | m.keys() if (d := (m1.get(q, 0.0) - m.get(q, 0.0)) / h)}))
+            derivs.append(((s1 - scale) / h, _differences(k1, k, h), _differences(m1, m, h)))
         kset = {q: dk.get(q, 0.0) for q in [*dk, *(q for _, a, _ in derivs for q in a) ]}
         mset = {q: dm.get(q, 0.0) for q in [*dm, *(q for _, _, b in derivs for q in b)]}
         w2_max = (2 * np.pi * max_freq_hz) ** 2
@@ -513,18 +527,19 @@ class FrameVariants:
             inv_gap = np.where(own | (gap == 0), 0.0, 1.0 / np.where(gap == 0, 1.0, gap))
         f = np.sqrt(w2[keep]) / (2 * np.pi)
         df = np.empty((keep.size, len(wrt)))
-        dY = np.empty((Y.shape[0], keep.size, len(wrt)))
+        AY = at @ Y                                             # the Ritz vectors at the measured points
+        drows = np.empty((AY.shape[0], keep.size, len(wrt)))
+        cols = np.arange(keep.size)
         for j, (ds, dkj, dmj) in enumerate(derivs):
-            G = Y.T @ sum((c * space.kparts[q] for q, c in dkj.items()), np.zeros_like(space.K0)) @ Yk
-            H = Y.T @ sum((c * space.mparts[q] for q, c in dmj.items()), np.zeros_like(space.K0)) @ Yk
-            hii = H[keep, np.arange(keep.size)]
-            dlam = G[keep, np.arange(keep.size)] - lk * hii
+            G = Y.T @ (_summed(space.kparts, dkj) @ Yk) if dkj else np.zeros((lam.size, keep.size))
+            H = Y.T @ (_summed(space.mparts, dmj) @ Yk) if dmj else np.zeros((lam.size, keep.size))
+            hii = H[keep, cols]
+            dlam = G[keep, cols] - lk * hii
             df[:, j] = (ds * lk + scale * dlam) / (8 * np.pi ** 2 * f)
             C = (G - lk[None, :] * H) * inv_gap
-            C[keep, np.arange(keep.size)] = -0.5 * hii
-            dY[:, :, j] = Y @ C
-        rows = at @ Yk
-        drows = np.einsum("pr,rmj->pmj", at, dY)
+            C[keep, cols] = -0.5 * hii
+            drows[:, :, j] = AY @ C
+        rows = AY[:, keep]
         n_out, n_ref = len(self._out), len(self._ref)
         P = (rows[:n_out, None, :] * rows[None, n_out:, :]).reshape(n_out * n_ref, -1)
         dP = (drows[:n_out, None] * rows[None, n_out:, :, None]
