@@ -324,9 +324,10 @@ def test_a_first_cause_that_absorbed_the_scatter_is_refined_with_the_second_from
         factor: float, stiffer: float, edge: tuple) -> None:
     """One joint (left:10) at x 0.065, both springs, in a frame 2 % stiffer (a unit's scatter).
     The joint fitted alone drives its rotational springs to the x100 edge to raise every
-    frequency the stiffer material raises; there the springs are rigid whatever they are, so the pair with the
-    material's stiffness refined from there does not move. Held open, the joint is refined with its rotational
-    springs from their nominal too and the pair gives both back."""
+    frequency the stiffer material raises; there the springs are rigid whatever they are. With finite-difference
+    derivatives the pair with the material's stiffness refined from there did not move; with the exact ones
+    (the derivative along the rigid springs' valley is small but not zero) it gives both back, and held open
+    (the joint refined with its rotational springs from their nominal too) the pair gives both back."""
     fv = FrameVariants(None, OUTS, REFS)
     specs = _specs(fv)
     both = ("factor_translational", "factor_rotational")
@@ -335,13 +336,14 @@ def test_a_first_cause_that_absorbed_the_scatter_is_refined_with_the_second_from
                                 ("stiffness_shift", {"stiffness_factor": stiffer})])
     alone, chi2_alone, _ = fit_cause(fv, specs["joint_stiffness"], both, mm, np.ones(mm.freq_hz.size, bool), FMAX,
                                      options=["left:10"])
-    assert specs["joint_stiffness"].at_edge(alone, both) == edge and alone["factor_rotational"] > 50.0
+    # at the edge, or just inside it where chi2 is flat (:func:`analysis.diagnosis.physical.off_edges`)
+    assert alone["factor_rotational"] > 50.0 and (specs["joint_stiffness"].at_edge(alone, both) in (edge, ()))
     first = PhysicalFit("joint_stiffness", alone, both, chi2_alone, ranked=[(chi2_alone, "left:10", alone)])
     second = PhysicalFit("stiffness_shift", {"stiffness_factor": 1.0}, ("stiffness_factor",), np.inf)
     pair_specs = [specs["joint_stiffness"], specs["stiffness_shift"]]
     stuck = fit_pair(fv, pair_specs, [first, second], mm, FMAX, folds=False)
     a, b, chi2 = with_options(fv, pair_specs, first, second, mm, FMAX)
-    assert stuck.chi2 > 0.9 * chi2_alone > 50.0
+    assert chi2_alone > 50.0 and stuck.chi2 < 1e-3
     assert a.params["factor_translational"] == pytest.approx(factor, rel=1e-3)
     assert a.params["factor_rotational"] == pytest.approx(factor, rel=1e-3)
     assert b.params["stiffness_factor"] == pytest.approx(stiffer, rel=1e-4)
