@@ -18,7 +18,7 @@ frame's modes are those of ``(V^T K V, V^T M V)``: ``r`` unknowns (30 to about 1
 frame's ``n`` (186), and the projected parts ``V^T K_p V`` are computed once per set of changed parts,
 so a candidate costs a sum of small matrices and one small eigenproblem. Ritz values bound the
 eigenvalues from above and their error is quadratic in the basis's error: on the default frame the
-reduced natural frequencies equal the full model's to 1e-6 relative (1e-7..1e-12; both solves'
+reduced natural frequencies equal the full model's to 1e-6 relative (1e-12 to 6e-7; both solves'
 own rounding is ~1e-11, see below) on changes far larger than the diagnosis meets (a 30 kg block, the
 supports' springs x 0.001, an element at 0.02 of its bending stiffness, a member's EI x 0.3), see
 ``tests/test_ritz.py``.
