@@ -20,6 +20,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -232,8 +233,22 @@ def _served_capture(line: str) -> None:
         assert "recording written: served.h5" in res.stdout
 
 
+@pytest.fixture
+def no_thread_left() -> Iterator[None]:
+    """The example leaves no thread running in this process: the suite's process stays single-threaded, so
+    analysis._isolated forks its isolated readers (a thread left behind, such as Dask's offload thread
+    after a Dask client, makes each later isolated read of the session start a new interpreter)."""
+    before = set(threading.enumerate())
+    yield
+    left = [t for t in threading.enumerate() if t not in before]
+    for t in left:
+        t.join(5.0)                                    # a thread that is ending gets the time to end
+    running = [t.name for t in left if t.is_alive()]
+    assert not running, f"the example left threads running: {running} (run it in a child process)"
+
+
 @pytest.mark.parametrize(("prog", "line"), _help_examples(), ids=[line for _, line in _help_examples()])
-def test_every_help_example_runs(in_work: Path, work: dict, prog: str, line: str) -> None:
+def test_every_help_example_runs(in_work: Path, work: dict, no_thread_left: None, prog: str, line: str) -> None:
     if line == FIRST_CAPTURE:
         code, text = work["first_capture"]
         assert code == 0 and (in_work / "rec.h5").is_file(), text[-3000:]
