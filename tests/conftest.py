@@ -78,22 +78,25 @@ def _xdist_worker() -> bool:
 # A test file is one unit of work, kept on one process (its module fixtures are made once), except
 # the files of SPREAD: their tests are heavy and independent (no costly module fixture), so each
 # test is a unit of its own and both processes share them. The units are handed out heaviest
-# first (the SPREAD tests, then the files of HEAVY, then the rest in file order) and the light
-# files fill in behind, so the two processes end together. Only the speed depends on these lists.
+# first (the SPREAD tests, then the files of HEAVY in its order, heaviest first, then the rest in
+# file order) and the light files fill in behind, so the two processes end together. Only the
+# speed depends on these lists.
 SPREAD = ("test_diagnosis_blind.py", "test_diagnosis_physical.py", "test_importers_fuzz.py",
           "test_recording_fuzz.py", "test_crash_safety.py", "test_station_resume.py",
           "test_diagnosis_frf_beam.py", "test_diagnosis_frf_mass.py", "test_diagnosis_physical_verdict.py",
-          "test_diagnosis_frame_untuned.py", "test_station_browser.py")
-HEAVY = ("test_batch_dask.py", "test_diagnosis_cli.py", "test_station_api.py")
+          "test_diagnosis_frame_untuned.py", "test_station_browser.py", "test_diagnosis_pairs_one_kind.py",
+          "test_diagnosis_pair_search.py", "test_diagnosis_one_place.py")
+HEAVY = ("test_examples_run.py", "test_batch_diagnose.py", "test_batch_dask.py", "test_faults.py", "test_disk_full.py",
+         "test_fuzz_protocol.py", "test_diagnosis_cli.py", "test_station_api.py")
 
 
 def _file(nodeid: str) -> str:
     return nodeid.split("::")[0].rsplit("/", 1)[-1]
 
 
-def _rank(nodeid: str) -> int:
+def _rank(nodeid: str) -> tuple[int, int]:
     name = _file(nodeid)
-    return 0 if name in SPREAD else 1 if name in HEAVY else 2
+    return (0, 0) if name in SPREAD else (1, HEAVY.index(name)) if name in HEAVY else (2, 0)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

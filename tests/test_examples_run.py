@@ -20,6 +20,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -48,16 +49,25 @@ SPECIAL: dict[str, tuple[str | None, str]] = {
     EXAMPLES["python -m simulator fleet"][0]: (
         "fleet --units 4 --out fleet/ --scatter 2 --defects 1 --seed 1 --hits 2 --jobs 1",
         "200 units take minutes: 4 units, 2 hits each, in this process"),
+    EXAMPLES["python -m analysis batch"][0]: (
+        "CHILD", "a local Dask cluster: run in a child process, as every Dask test does (a process that has used a "
+                 "Dask client keeps its threads, and analysis._isolated forks its readers only from a single-threaded "
+                 "process: the rest of the session would start each isolated read as a new interpreter)"),
     EXAMPLES["python -m analysis batch"][1]: (None, "needs a Dask scheduler at tcp://10.0.0.5:8786"),
 }
 
 
+def _expanded(line: str) -> list[str]:
+    """The arguments of ``line`` after the shell's glob expansion."""
+    expanded: list[str] = []
+    for a in shlex.split(line, comments=True):
+        expanded.extend(sorted(glob.glob(a)) or [a] if "*" in a else [a])
+    return expanded
+
+
 def _run(line: str) -> tuple[int, str]:
     """``impactlab LINE`` in this process, with the shell's glob expansion; (exit code, stdout+stderr)."""
-    args = shlex.split(line, comments=True)
-    expanded: list[str] = []
-    for a in args:
-        expanded.extend(sorted(glob.glob(a)) or [a] if "*" in a else [a])
+    expanded = _expanded(line)
     out, err = _Capture(), _Capture()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):  # type: ignore[type-var]
         try:
@@ -223,8 +233,22 @@ def _served_capture(line: str) -> None:
         assert "recording written: served.h5" in res.stdout
 
 
+@pytest.fixture
+def no_thread_left() -> Iterator[None]:
+    """The example leaves no thread running in this process: the suite's process stays single-threaded, so
+    analysis._isolated forks its isolated readers (a thread left behind, such as Dask's offload thread
+    after a Dask client, makes each later isolated read of the session start a new interpreter)."""
+    before = set(threading.enumerate())
+    yield
+    left = [t for t in threading.enumerate() if t not in before]
+    for t in left:
+        t.join(5.0)                                    # a thread that is ending gets the time to end
+    running = [t.name for t in left if t.is_alive()]
+    assert not running, f"the example left threads running: {running} (run it in a child process)"
+
+
 @pytest.mark.parametrize(("prog", "line"), _help_examples(), ids=[line for _, line in _help_examples()])
-def test_every_help_example_runs(in_work: Path, work: dict, prog: str, line: str) -> None:
+def test_every_help_example_runs(in_work: Path, work: dict, no_thread_left: None, prog: str, line: str) -> None:
     if line == FIRST_CAPTURE:
         code, text = work["first_capture"]
         assert code == 0 and (in_work / "rec.h5").is_file(), text[-3000:]
@@ -244,6 +268,11 @@ def test_every_help_example_runs(in_work: Path, work: dict, prog: str, line: str
     elif instead == "SERVE":
         with _served() as url:
             _ok(f"identify --device {url}")
+    elif instead == "CHILD":
+        _prepare(line)
+        res = subprocess.run([sys.executable, "-m", "impactlab", *_expanded(line)], capture_output=True, text=True,
+                             timeout=240)
+        assert res.returncode == 0 and "Traceback" not in res.stderr, res.stdout[-2000:] + res.stderr[-2000:]
     else:
         _prepare(instead)
         _ok(instead)
