@@ -229,7 +229,7 @@ def damage_changes(damage: DamageConfig) -> list[tuple[str, dict]]:
 _MEMO_SIZE = 20000
 #: Frames with changes applied as their nominal (:meth:`FrameVariants.on_top`) kept before the store is emptied:
 #: each holds four matrices of the frame's size (its K, M, nominal modes and Cholesky factor: 32 bytes per squared
-#: degree of freedom), two of them within the margin of :data:`DIAGNOSIS_BYTES_PER_DOF2` over the measured peak.
+#: degree of freedom) and its reduced spaces; counted in :data:`DIAGNOSIS_BYTES_PER_DOF2`.
 #: A search on top of a first cause uses one at a time.
 _TOPS_KEPT = 2
 
@@ -257,10 +257,15 @@ def _part(dofs: np.ndarray, block: np.ndarray) -> Part:
 
 
 #: bytes per squared degree of freedom of the configured model that a diagnosis holds at its peak: the
-#: model's parts and matrices, its Ritz bases, and the copy with every member's elements twice as fine
-#: (:meth:`FrameVariants.refined`: four times the squares) that judges the mesh's convergence, each with its
-#: eigenproblem. Measured: 317 and 336 B for the default frame with 10 and 20 times its elements (1698 and
-#: 3378 degrees of freedom) in ``python -m analysis diagnose``; a single eigenproblem takes
+#: model's parts and matrices with its nominal modes, the copy with every member's elements twice as fine
+#: (:meth:`FrameVariants.refined`: four times the squares) that judges the mesh's convergence, the frames on
+#: top of first causes (:data:`_TOPS_KEPT`, each with its matrices and modes), and on each frame one reduced
+#: space per set of changed parts (its projected matrices only, :class:`simulator.ritz.ReducedSpace`: a
+#: number of spaces that grows with the frame's nodes and elements, each of a size set by the modes wanted,
+#: not by the frame). Measured (every option's space on the frame and on top of three first causes, the
+#: finer copy solved; tracemalloc's peak): 654 and 453 B at 354 and 690 degrees of freedom (the default
+#: frame's elements x 2 and x 4), i.e. ~241 B per squared and ~146 kB per degree of freedom: within 400 B
+#: from ~900 degrees of freedom on (below, the whole is under ~340 MB); a single eigenproblem takes
 #: :data:`simulator.config.FE_BYTES_PER_DOF2`.
 DIAGNOSIS_BYTES_PER_DOF2 = 400
 
@@ -346,6 +351,7 @@ class FrameVariants:
                     f = cfg.damage.spring_factor(kind, (a,) if b is None else (a, b))
                     stamp_spring(K, self.frame.node(a), None if b is None else self.frame.node(b), k * f)
                     self._kparts[("spring", kind, part, str(a))] = _part(np.arange(n), K)
+        self._spring_keys = tuple(key for key in self._kparts if key[0] == "spring")
         index = self.frame.node_index
         self.nodes = tuple(f"{c}:{i}" for (c, i) in sorted(index, key=lambda k: index[k]))
         sens = cfg.sensors
@@ -453,8 +459,10 @@ class FrameVariants:
         if skey not in self._spaces:
             assert self._ritz is not None
             kp, mp = {q: self._kparts[q] for q in dk}, {q: self._mparts[q] for q in dm}
-            space = self._ritz.whole(kp, mp) if n_modes is None else self._ritz.space(kp, mp, n_modes)
-            at = None if space is None else np.array([s * space.V[d] for d, s in self._out + self._ref])
+            pts = self._out + self._ref
+            rows = [d for d, _ in pts]
+            space = self._ritz.whole(kp, mp, rows) if n_modes is None else self._ritz.space(kp, mp, n_modes, rows)
+            at = None if space is None else np.array([s for _, s in pts], float)[:, None] * space.at
             self._spaces[skey] = (space, at)
         return self._spaces[skey]
 
@@ -668,7 +676,7 @@ class FrameVariants:
                     raise ModelError(f"{where!r} is not a {kind} of the frame; its {kind}s are "
                                      f"{', '.join(self.places[kind])} (or {ALL_PLACES!r})")
                 local[(kind, part, place)] = local.get((kind, part, place), 1.0) * float(f)
-        for key in (key for key in self._kparts if key[0] == "spring"):
+        for key in self._spring_keys:
             kind, part, place = key[1:]
             k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
