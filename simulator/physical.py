@@ -227,6 +227,9 @@ def damage_changes(damage: DamageConfig) -> list[tuple[str, dict]]:
 
 #: Candidates' modes kept (:meth:`FrameVariants.modes_of`) before the store is emptied.
 _MEMO_SIZE = 20000
+#: Candidates' modes with their derivatives kept (:meth:`FrameVariants.modes_jac_of`) before the store is emptied: the
+#: folds of a cross-validation all start from the whole fit's optimum, each asking the same derivatives there.
+_JAC_MEMO_SIZE = 256
 #: Frames with changes applied as their nominal (:meth:`FrameVariants.on_top`) kept before the store is emptied:
 #: each holds four matrices of the frame's size (its K, M, nominal modes and Cholesky factor: 32 bytes per squared
 #: degree of freedom) and its reduced spaces; counted in :data:`DIAGNOSIS_BYTES_PER_DOF2`.
@@ -380,6 +383,7 @@ class FrameVariants:
         self._ritz: RitzReduction | None = None
         self._spaces: dict[tuple, tuple[ReducedSpace | None, np.ndarray | None]] = {}
         self._memo: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+        self._jac_memo: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
 
     # ------------------------------------------------------------------ protocol of the diagnosis
     def causes(self) -> tuple[CauseSpec, ...]:
@@ -493,7 +497,8 @@ class FrameVariants:
         and of the shape products with respect to the parameters ``wrt`` (``(i, name)``: parameter ``name`` of
         ``changes[i]``): ``(f, P, df, dP)``, ``df`` (n_modes, n_wrt), ``dP`` (n_products, n_modes, n_wrt); None
         without changes. A candidate solved on the full model (not :attr:`reduced`, or no reduced space small
-        enough) is differentiated in the basis of every nominal mode, the same way.
+        enough) is differentiated in the basis of every nominal mode, the same way. The answers are kept (the last
+        :data:`_JAC_MEMO_SIZE`, read-only): a candidate asked again is not solved again.
 
         In the Ritz space of every part the parameters move (:mod:`simulator.ritz`), the candidate is
         ``(s K, M)`` with ``K = K0 + sum k_p K_p``, ``M = M0 + sum m_q M_q``; the coefficients ``s, k, m``
@@ -504,6 +509,21 @@ class FrameVariants:
         reduced space), ``omega^2 = s lambda``."""
         if not changes:
             return None
+        key = (tuple((c, tuple(sorted(p.items()))) for c, p in changes), float(max_freq_hz), self.reduced,
+               tuple(wrt))
+        hit = self._jac_memo.get(key)
+        if hit is None:
+            hit = self._modes_jac(changes, max_freq_hz, wrt)
+            for a in hit:
+                a.setflags(write=False)
+            if len(self._jac_memo) >= _JAC_MEMO_SIZE:
+                self._jac_memo.clear()
+            self._jac_memo[key] = hit
+        return hit
+
+    def _modes_jac(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float,
+                   wrt: Sequence[tuple[int, str]]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`modes_jac_of` solved (not kept)."""
         scale, k, m = self._coefficients(changes)
         dk, dm = self._changed(k, m)
         derivs = []
