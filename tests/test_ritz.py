@@ -156,6 +156,19 @@ def test_answers_are_kept_and_read_only(fv: FrameVariants) -> None:
     assert a[0] is b[0] and not a[0].flags.writeable
 
 
+def test_derivatives_are_kept_and_read_only(fv: FrameVariants) -> None:
+    """The folds of a cross-validation all start from the whole fit's optimum: the derivatives there are solved
+    once and given read-only."""
+    changes = [("added_mass", {"point": "top:2", "mass_kg": 1.5, "inertia_factor": 2.0})]
+    wrt = [(0, "mass_kg"), (0, "inertia_factor")]
+    a = fv.modes_jac_of(changes, 500.0, wrt)
+    b = fv.modes_jac_of([("added_mass", dict(changes[0][1]))], 500.0, list(wrt))
+    assert a is not None and b is not None
+    assert all(x is y and not x.flags.writeable for x, y in zip(a, b))
+    c = fv.modes_jac_of(changes, 500.0, wrt[:1])
+    assert c is not None and c[2].shape == (a[2].shape[0], 1) and np.array_equal(c[2][:, 0], a[2][:, 0])
+
+
 def _measured(fv: FrameVariants, changes: list, top_hz: float = 460.0) -> MeasuredModes:
     model = fv.model_of(changes)
     keep = model.freq_hz < top_hz
