@@ -60,10 +60,11 @@ def run(mult: int) -> None:
     fv.refined_model()
     every_option(fv)
     e = fv.elements[3]
-    for first in ([("element_stiffness", {"element": e, "factor": 0.4})],
-                  [("element_stiffness", {"element": e, "factor": 0.41}), ("stiffness_shift", {"stiffness_factor": 1.01})],
-                  [("joint_stiffness", {"joint": fv.places["joint"][0], "factor_translational": 0.1,
-                                        "factor_rotational": 0.2})]):
+    firsts: list[list[tuple[str, dict[str, object]]]] = [
+        [("element_stiffness", {"element": e, "factor": 0.4})],
+        [("element_stiffness", {"element": e, "factor": 0.41}), ("stiffness_shift", {"stiffness_factor": 1.01})],
+        [("joint_stiffness", {"joint": fv.places["joint"][0], "factor_translational": 0.1, "factor_rotational": 0.2})]]
+    for first in firsts:
         every_option(fv.on_top(first))
     now, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
