@@ -227,9 +227,12 @@ def damage_changes(damage: DamageConfig) -> list[tuple[str, dict]]:
 
 #: Candidates' modes kept (:meth:`FrameVariants.modes_of`) before the store is emptied.
 _MEMO_SIZE = 20000
+#: Candidates' modes with their derivatives kept (:meth:`FrameVariants.modes_jac_of`) before the store is emptied: the
+#: folds of a cross-validation all start from the whole fit's optimum, each asking the same derivatives there.
+_JAC_MEMO_SIZE = 256
 #: Frames with changes applied as their nominal (:meth:`FrameVariants.on_top`) kept before the store is emptied:
 #: each holds four matrices of the frame's size (its K, M, nominal modes and Cholesky factor: 32 bytes per squared
-#: degree of freedom), two of them within the margin of :data:`DIAGNOSIS_BYTES_PER_DOF2` over the measured peak.
+#: degree of freedom) and its reduced spaces; counted in :data:`DIAGNOSIS_BYTES_PER_DOF2`.
 #: A search on top of a first cause uses one at a time.
 _TOPS_KEPT = 2
 
@@ -257,10 +260,15 @@ def _part(dofs: np.ndarray, block: np.ndarray) -> Part:
 
 
 #: bytes per squared degree of freedom of the configured model that a diagnosis holds at its peak: the
-#: model's parts and matrices, its Ritz bases, and the copy with every member's elements twice as fine
-#: (:meth:`FrameVariants.refined`: four times the squares) that judges the mesh's convergence, each with its
-#: eigenproblem. Measured: 317 and 336 B for the default frame with 10 and 20 times its elements (1698 and
-#: 3378 degrees of freedom) in ``python -m analysis diagnose``; a single eigenproblem takes
+#: model's parts and matrices with its nominal modes, the copy with every member's elements twice as fine
+#: (:meth:`FrameVariants.refined`: four times the squares) that judges the mesh's convergence, the frames on
+#: top of first causes (:data:`_TOPS_KEPT`, each with its matrices and modes), and on each frame one reduced
+#: space per set of changed parts (its projected matrices only, :class:`simulator.ritz.ReducedSpace`: a
+#: number of spaces that grows with the frame's nodes and elements, each of a size set by the modes wanted,
+#: not by the frame). Measured (every option's space on the frame and on top of three first causes, the
+#: finer copy solved; tracemalloc's peak): 654 and 453 B at 354 and 690 degrees of freedom (the default
+#: frame's elements x 2 and x 4), i.e. ~241 B per squared and ~146 kB per degree of freedom: within 400 B
+#: from ~900 degrees of freedom on (below, the whole is under ~340 MB); a single eigenproblem takes
 #: :data:`simulator.config.FE_BYTES_PER_DOF2`.
 DIAGNOSIS_BYTES_PER_DOF2 = 400
 
@@ -346,6 +354,7 @@ class FrameVariants:
                     f = cfg.damage.spring_factor(kind, (a,) if b is None else (a, b))
                     stamp_spring(K, self.frame.node(a), None if b is None else self.frame.node(b), k * f)
                     self._kparts[("spring", kind, part, str(a))] = _part(np.arange(n), K)
+        self._spring_keys = tuple(key for key in self._kparts if key[0] == "spring")
         index = self.frame.node_index
         self.nodes = tuple(f"{c}:{i}" for (c, i) in sorted(index, key=lambda k: index[k]))
         sens = cfg.sensors
@@ -374,6 +383,7 @@ class FrameVariants:
         self._ritz: RitzReduction | None = None
         self._spaces: dict[tuple, tuple[ReducedSpace | None, np.ndarray | None]] = {}
         self._memo: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+        self._jac_memo: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
 
     # ------------------------------------------------------------------ protocol of the diagnosis
     def causes(self) -> tuple[CauseSpec, ...]:
@@ -453,8 +463,10 @@ class FrameVariants:
         if skey not in self._spaces:
             assert self._ritz is not None
             kp, mp = {q: self._kparts[q] for q in dk}, {q: self._mparts[q] for q in dm}
-            space = self._ritz.whole(kp, mp) if n_modes is None else self._ritz.space(kp, mp, n_modes)
-            at = None if space is None else np.array([s * space.V[d] for d, s in self._out + self._ref])
+            pts = self._out + self._ref
+            rows = [d for d, _ in pts]
+            space = self._ritz.whole(kp, mp, rows) if n_modes is None else self._ritz.space(kp, mp, n_modes, rows)
+            at = None if space is None else np.array([s for _, s in pts], float)[:, None] * space.at
             self._spaces[skey] = (space, at)
         return self._spaces[skey]
 
@@ -485,7 +497,8 @@ class FrameVariants:
         and of the shape products with respect to the parameters ``wrt`` (``(i, name)``: parameter ``name`` of
         ``changes[i]``): ``(f, P, df, dP)``, ``df`` (n_modes, n_wrt), ``dP`` (n_products, n_modes, n_wrt); None
         without changes. A candidate solved on the full model (not :attr:`reduced`, or no reduced space small
-        enough) is differentiated in the basis of every nominal mode, the same way.
+        enough) is differentiated in the basis of every nominal mode, the same way. The answers are kept (the last
+        :data:`_JAC_MEMO_SIZE`, read-only): a candidate asked again is not solved again.
 
         In the Ritz space of every part the parameters move (:mod:`simulator.ritz`), the candidate is
         ``(s K, M)`` with ``K = K0 + sum k_p K_p``, ``M = M0 + sum m_q M_q``; the coefficients ``s, k, m``
@@ -496,6 +509,21 @@ class FrameVariants:
         reduced space), ``omega^2 = s lambda``."""
         if not changes:
             return None
+        key = (tuple((c, tuple(sorted(p.items()))) for c, p in changes), float(max_freq_hz), self.reduced,
+               tuple(wrt))
+        hit = self._jac_memo.get(key)
+        if hit is None:
+            hit = self._modes_jac(changes, max_freq_hz, wrt)
+            for a in hit:
+                a.setflags(write=False)
+            if len(self._jac_memo) >= _JAC_MEMO_SIZE:
+                self._jac_memo.clear()
+            self._jac_memo[key] = hit
+        return hit
+
+    def _modes_jac(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float,
+                   wrt: Sequence[tuple[int, str]]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`modes_jac_of` solved (not kept)."""
         scale, k, m = self._coefficients(changes)
         dk, dm = self._changed(k, m)
         derivs = []
@@ -668,7 +696,7 @@ class FrameVariants:
                     raise ModelError(f"{where!r} is not a {kind} of the frame; its {kind}s are "
                                      f"{', '.join(self.places[kind])} (or {ALL_PLACES!r})")
                 local[(kind, part, place)] = local.get((kind, part, place), 1.0) * float(f)
-        for key in (key for key in self._kparts if key[0] == "spring"):
+        for key in self._spring_keys:
             kind, part, place = key[1:]
             k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg

@@ -46,7 +46,7 @@ the energy quotients of the modes (``tests/test_ritz.py``).
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -110,21 +110,22 @@ class Part:
 
 
 class ReducedSpace:
-    """The frame projected on one Ritz basis ``V`` (n, r): the nominal ``V^T K0 V``, ``V^T M0 V`` and
-    each changed part's projection; :meth:`eigen` solves a candidate in it."""
+    """The frame projected on one Ritz basis ``V`` (n, r): the nominal ``V^T K0 V``, ``V^T M0 V``, each changed
+    part's projection and the basis's rows ``rows`` (global DOFs); :meth:`eigen` solves a candidate in it. The
+    basis itself (the frame's size) is not kept: a search keeps a space per set of changed parts, hundreds on a
+    fine frame, and only these small matrices are used."""
 
-    def __init__(self, V: np.ndarray, K0: np.ndarray, M0: np.ndarray, kparts: Mapping, mparts: Mapping) -> None:
-        self.V = V
+    def __init__(self, V: np.ndarray, K0: np.ndarray, M0: np.ndarray, kparts: Mapping, mparts: Mapping,
+                 rows: Sequence[int] = ()) -> None:
+        self.size = int(V.shape[1])
+        #: ``V[rows]`` (len(rows), r): the basis at the DOFs asked for (the measured points)
+        self.at = V[np.asarray(rows, dtype=int)]
         self.K0 = V.T @ K0 @ V
         self.M0 = V.T @ M0 @ V
         self.K0 = 0.5 * (self.K0 + self.K0.T)
         self.M0 = 0.5 * (self.M0 + self.M0.T)
         self.kparts = {k: p.project(V) for k, p in kparts.items()}
         self.mparts = {k: p.project(V) for k, p in mparts.items()}
-
-    @property
-    def size(self) -> int:
-        return int(self.V.shape[1])
 
     def eigen(self, dk: Mapping, dm: Mapping, scale: float, w2_max: float) -> tuple[np.ndarray, np.ndarray]:
         """Eigenvalues ``omega^2`` in ``(1, w2_max)`` (rad/s)^2 of ``(scale (K0 + sum dk_p K_p), M0 + sum
@@ -224,10 +225,11 @@ class RitzReduction:
         need = int(np.searchsorted(self.w2, 4.0 * w2_max))
         return max(N_MODES, 10 * int(np.ceil(need / 10)))
 
-    def space(self, kparts: Mapping, mparts: Mapping, n_modes: int = N_MODES) -> ReducedSpace | None:
+    def space(self, kparts: Mapping, mparts: Mapping, n_modes: int = N_MODES, rows: Sequence[int] = ()
+              ) -> ReducedSpace | None:
         """The reduced space for changes on ``kparts`` / ``mparts`` ({key: :class:`Part`}) with the lowest
-        ``n_modes`` nominal modes; None when the basis would have more than :data:`MAX_FRACTION` of the
-        frame's unknowns (then the full model is solved)."""
+        ``n_modes`` nominal modes, its basis kept at the DOFs ``rows``; None when the basis would have more than
+        :data:`MAX_FRACTION` of the frame's unknowns (then the full model is solved)."""
         n = self.K0.shape[0]
         if n_modes > MAX_FRACTION * n:
             return None
@@ -260,12 +262,12 @@ class RitzReduction:
             V = phi
         if V.shape[1] > MAX_FRACTION * n:
             return None
-        return ReducedSpace(V, self.K0, self.M0, kparts, mparts)
+        return ReducedSpace(V, self.K0, self.M0, kparts, mparts, rows)
 
-    def whole(self, kparts: Mapping, mparts: Mapping) -> ReducedSpace:
+    def whole(self, kparts: Mapping, mparts: Mapping, rows: Sequence[int] = ()) -> ReducedSpace:
         """The full model as a space: every nominal mode (M0-orthonormal to rounding), the basis in which the
         full model's candidates are differentiated like a reduced one's."""
         V = self.modes
         L = np.linalg.cholesky(V.T @ self.M0 @ V)
         V = scipy.linalg.solve_triangular(L, V.T, lower=True).T
-        return ReducedSpace(V, self.K0, self.M0, kparts, mparts)
+        return ReducedSpace(V, self.K0, self.M0, kparts, mparts, rows)

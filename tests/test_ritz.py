@@ -156,6 +156,19 @@ def test_answers_are_kept_and_read_only(fv: FrameVariants) -> None:
     assert a[0] is b[0] and not a[0].flags.writeable
 
 
+def test_derivatives_are_kept_and_read_only(fv: FrameVariants) -> None:
+    """The folds of a cross-validation all start from the whole fit's optimum: the derivatives there are solved
+    once and given read-only."""
+    changes = [("added_mass", {"point": "top:2", "mass_kg": 1.5, "inertia_factor": 2.0})]
+    wrt = [(0, "mass_kg"), (0, "inertia_factor")]
+    a = fv.modes_jac_of(changes, 500.0, wrt)
+    b = fv.modes_jac_of([("added_mass", dict(changes[0][1]))], 500.0, list(wrt))
+    assert a is not None and b is not None
+    assert all(x is y and not x.flags.writeable for x, y in zip(a, b))
+    c = fv.modes_jac_of(changes, 500.0, wrt[:1])
+    assert c is not None and c[2].shape == (a[2].shape[0], 1) and np.array_equal(c[2][:, 0], a[2][:, 0])
+
+
 def _measured(fv: FrameVariants, changes: list, top_hz: float = 460.0) -> MeasuredModes:
     model = fv.model_of(changes)
     keep = model.freq_hz < top_hz
@@ -264,3 +277,21 @@ def test_causes_fitted_in_forked_processes_are_the_same(fv: FrameVariants) -> No
     for a, b in zip(one, two):
         assert a.params == b.params and a.free == b.free and a.chi2 == b.chi2
         np.testing.assert_array_equal(a.cv_per_mode, b.cv_per_mode)
+
+
+def test_a_kept_space_holds_nothing_of_the_frames_size() -> None:
+    """A search keeps one reduced space per set of changed parts (hundreds on a fine frame): each keeps its
+    projected matrices and its basis at the measured points, not the basis itself (the frame's size), and
+    solves the same modes as the full model."""
+    fv = FrameVariants(None, OUTS, REFS)
+    n = fv.frame.n_dof
+    changes = [("element_stiffness", {"element": "top:3", "factor": 0.4})]
+    f, P = fv.modes_of(changes, 700.0)
+    ((space, at),) = fv._spaces.values()
+    assert space is not None and at is not None
+    arrays = [a for a in vars(space).values() if isinstance(a, np.ndarray)]
+    arrays += [*space.kparts.values(), *space.mparts.values()]
+    assert arrays and max(max(a.shape) for a in arrays) == space.size < n
+    assert np.array_equal(np.abs(at), np.abs(space.at)) and at.shape == (len(OUTS) + len(REFS), space.size)
+    g, Q = fv.exact_modes_of(changes, 700.0)
+    assert_as_the_full_model(f, P, g, Q)
