@@ -22,6 +22,8 @@ pytest.importorskip("pyarrow")
 
 from analysis.batch.diagnose import (  # noqa: E402
     describe_diagnosis,
+    diagnose_one,
+    diagnosis_key,
     diagnosis_summary,
     modes_problem,
     peaks_problem,
@@ -237,3 +239,29 @@ def test_structure_and_modes_checks_name_what_differs():
     dense_f = np.geomspace(9.0, 130.0, 24)                          # another structure: far more modes
     dense = UnitModes(dense_f, np.full(24, 0.01), np.zeros(24), np.zeros(24), np.ones((2, 24), complex), outs)
     assert "pair" in (modes_problem(ref, dense) or "")
+
+
+def test_a_unit_is_diagnosed_at_its_frequency_factor_and_its_stored_result_is_keyed_by_it():
+    seen: list[dict] = []
+
+    class Found:
+        def to_json(self) -> dict:
+            return {"verdict": "element_stiffness", "named": [{"effect": "element_stiffness",
+                                                               "parameters": {"element": "top:2", "factor": 0.5}}],
+                    "trace": [{"rule": "largest_gain", "cause": "element_stiffness", "values": {}, "outcome": "x"}]}
+
+    def run(path: str, simulated: str, **kw: object) -> Found:
+        seen.append(dict(kw))
+        return Found()
+
+    doc = diagnose_one("unit-007.h5", "unit-007", "abc", "frame.toml", "k", run, None, None, 1.0042)
+    assert seen == [{"band": None, "estimator": None, "frequency_factor": 1.0042}]
+    assert doc["status"] == "ok" and doc["frequency_factor"] == 1.0042
+    first = doc["diagnosis"]["trace"][0]
+    assert first["rule"] == "fleet_scatter" and first["values"] == {"frequency_factor": 1.0042}
+    assert [t["rule"] for t in doc["diagnosis"]["trace"][1:]] == ["largest_gain"]
+    plain = diagnose_one("unit-007.h5", "unit-007", "abc", "frame.toml", "k", run)
+    assert seen[-1]["frequency_factor"] == 1.0 and plain["diagnosis"]["trace"][0]["rule"] == "largest_gain"
+    # a stored diagnosis is reused only at the same factor (the SIM it was compared with)
+    assert diagnosis_key("s", None, None, 1.0042) != diagnosis_key("s", None, None)
+    assert diagnosis_key("s", None, None, 1.0042) == diagnosis_key("s", None, None, 1.0042)
