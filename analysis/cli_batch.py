@@ -261,18 +261,22 @@ def shared_simulation(path: str, measured: Any, estimator: str | None = None) ->
     return sim
 
 
+def fleet_simulation(path: str, measured: Any, estimator: str | None = None) -> Any:
+    """The worker's simulation of the SIM (:func:`shared_simulation`) as a fleet's flagged unit is compared
+    with: its global cause scales every stiffness alike, as the fleet's scatter does
+    (:func:`~analysis.batch.scatter.for_fleet`)."""
+    from .batch.scatter import for_fleet
+
+    return for_fleet(shared_simulation(path, measured, estimator))
+
+
 def diagnose_unit(measured: str, simulated: str, *, band: Sequence[float] | None = None,
-                  estimator: str | None = None, frequency_factor: float = 1.0) -> Any:
+                  estimator: str | None = None) -> Any:
     """A flagged unit's diagnosis on a worker: :func:`~analysis.cli_diagnose.run_diagnosis` with the
-    worker's simulation of the SIM (:func:`shared_simulation`), seen at the unit's common
-    ``frequency_factor`` (-) when it is a physical model (:func:`~analysis.batch.scatter.scaled`)."""
-    from .batch.scatter import scaled
+    worker's simulation of the SIM as a fleet's unit is compared with (:func:`fleet_simulation`)."""
     from .cli_diagnose import run_diagnosis
 
-    def load(path: str, unit: Any, est: str | None) -> Any:
-        return scaled(shared_simulation(path, unit, est), frequency_factor)
-
-    return run_diagnosis(measured, simulated, band=band, estimator=estimator, load=load)
+    return run_diagnosis(measured, simulated, band=band, estimator=estimator, load=fleet_simulation)
 
 
 @cli_entry
@@ -399,56 +403,38 @@ class _Diagnoses:
     lost: list[str]
 
 
-def _frequency_factors(sim: SimCheck, modes: Any, reference: Any, fleet: Any) -> dict[str, float]:
-    """Each unit's common frequency factor against a physical SIM's modes ``modes``, within the good units'
-    scatter (:func:`~analysis.batch.scatter.unit_frequency_factors`; the SIM's modes below where its mesh has
-    converged), by unit name; empty for a recording's SIM (its FRFs are compared as they are)."""
-    from .batch.scatter import modes_below, unit_frequency_factors
-
-    if sim.variants is None:
-        return {}
-    top = float(sim.variants.converged_below_hz()) if hasattr(sim.variants, "converged_below_hz") else float("inf")
-    factors = unit_frequency_factors(modes_below(modes, top), reference, fleet)
-    return {u.name: f for u, f in zip(fleet.units, factors)}
-
-
 def _diagnose_flagged(args: argparse.Namespace, sim: SimCheck, client: Any, inputs: Sequence[Any], fleet: Any,
                       reference: Any, band: Any, out: Path) -> _Diagnoses:
     """Check the SIM's modes against the fleet's reference modes (exit 2 in one line before any
-    diagnosis when they do not pair), then diagnose each flagged unit on the cluster against the SIM seen
-    at the unit's common frequency factor (the fleet's scatter, :func:`_frequency_factors`): a stored result
-    for the same unit content, SIM, factor and options is reused; each new one is written to
+    diagnosis when they do not pair), then diagnose each flagged unit on the cluster: a stored result
+    for the same unit content, SIM and options is reused; each new one is written to
     ``diagnoses/<unit>.json`` as it arrives."""
     from .atomic import write_json_atomic
     from .batch.diagnose import DIAGNOSIS_SCHEMA, diagnose_one, diagnosis_is_current, diagnosis_key, modes_problem
     from .batch.run import run_tasks
 
     with errors_to_exit("analysis batch", InputError):
-        modes = sim_modes(sim, client, band, args.estimator)
-        why = modes_problem(reference, modes)
+        why = modes_problem(reference, sim_modes(sim, client, band, args.estimator))
         if why:
             raise InputError(f"--diagnose {sim.path} is not the fleet's structure: {why}; give the fleet's frame "
                              "config or a good unit's recording")
-    factors = _frequency_factors(sim, modes, reference, fleet)
     folder = out / "diagnoses"
     folder.mkdir(parents=True, exist_ok=True)
+    key = diagnosis_key(sim.sha256, band, args.estimator)
     flagged = {u.name for u in fleet.units if u.flagged and u.status == "ok"}
     targets = [i for i in inputs if i.name in flagged]
-    keys = {i.name: diagnosis_key(sim.sha256, band, args.estimator, factors.get(i.name, 1.0)) for i in targets}
-    have = {i.name: d for i in targets
-            if (d := diagnosis_is_current(folder / i.result_file, i.sha256, keys[i.name])) is not None}
+    have = {i.name: d for i in targets if (d := diagnosis_is_current(folder / i.result_file, i.sha256, key)) is not None}
     todo = [i for i in targets if i.name not in have]
     by_name = {i.name: i for i in todo}
-    tasks = [(i.name, f"impactlab-diagnose-{i.name}-{i.sha256[:12]}-{keys[i.name]}", diagnose_one,
-              (str(i.path), i.name, i.sha256, str(sim.path), keys[i.name], diagnose_unit, band, args.estimator,
-               factors.get(i.name, 1.0))) for i in todo]
+    tasks = [(i.name, f"impactlab-diagnose-{i.name}-{i.sha256[:12]}-{key}", diagnose_one,
+              (str(i.path), i.name, i.sha256, str(sim.path), key, diagnose_unit, band, args.estimator)) for i in todo]
 
     def store(name: str, doc: dict[str, Any]) -> None:
         write_json_atomic(folder / by_name[name].result_file, doc)
 
     def lost(name: str, exc: BaseException) -> dict[str, Any]:
         i = by_name[name]
-        return {"schema": DIAGNOSIS_SCHEMA, "input": name, "path": str(i.path), "sha256": i.sha256, "key": keys[name],
+        return {"schema": DIAGNOSIS_SCHEMA, "input": name, "path": str(i.path), "sha256": i.sha256, "key": key,
                 "status": "error", "error": f"the task failed on the cluster ({type(exc).__name__}: {exc}); "
                                             "run the same command again to retry it", "diagnosis": None, "seconds": 0.0}
 

@@ -22,8 +22,6 @@ pytest.importorskip("pyarrow")
 
 from analysis.batch.diagnose import (  # noqa: E402
     describe_diagnosis,
-    diagnose_one,
-    diagnosis_key,
     diagnosis_summary,
     modes_problem,
     peaks_problem,
@@ -241,27 +239,20 @@ def test_structure_and_modes_checks_name_what_differs():
     assert "pair" in (modes_problem(ref, dense) or "")
 
 
-def test_a_unit_is_diagnosed_at_its_frequency_factor_and_its_stored_result_is_keyed_by_it():
-    seen: list[dict] = []
 
-    class Found:
-        def to_json(self) -> dict:
-            return {"verdict": "element_stiffness", "named": [{"effect": "element_stiffness",
-                                                               "parameters": {"element": "top:2", "factor": 0.5}}],
-                    "trace": [{"rule": "largest_gain", "cause": "element_stiffness", "values": {}, "outcome": "x"}]}
+def test_a_flagged_unit_is_compared_with_the_sim_whose_global_cause_is_the_fleets_scatter(fleet_dir):
+    from analysis.batch.scatter import ScatterSimulation
+    from analysis.cli_batch import fleet_simulation, shared_simulation
+    from analysis.inputs import load_input
 
-    def run(path: str, simulated: str, **kw: object) -> Found:
-        seen.append(dict(kw))
-        return Found()
-
-    doc = diagnose_one("unit-007.h5", "unit-007", "abc", "frame.toml", "k", run, None, None, 1.0042)
-    assert seen == [{"band": None, "estimator": None, "frequency_factor": 1.0042}]
-    assert doc["status"] == "ok" and doc["frequency_factor"] == 1.0042
-    first = doc["diagnosis"]["trace"][0]
-    assert first["rule"] == "fleet_scatter" and first["values"] == {"frequency_factor": 1.0042}
-    assert [t["rule"] for t in doc["diagnosis"]["trace"][1:]] == ["largest_gain"]
-    plain = diagnose_one("unit-007.h5", "unit-007", "abc", "frame.toml", "k", run)
-    assert seen[-1]["frequency_factor"] == 1.0 and plain["diagnosis"]["trace"][0]["rule"] == "largest_gain"
-    # a stored diagnosis is reused only at the same factor (the SIM it was compared with)
-    assert diagnosis_key("s", None, None, 1.0042) != diagnosis_key("s", None, None)
-    assert diagnosis_key("s", None, None, 1.0042) == diagnosis_key("s", None, None, 1.0042)
+    unit = load_input(str(sorted(fleet_dir.glob("unit-*.h5"))[0]))
+    toml = str(fleet_dir / "nominal.toml")
+    sim = fleet_simulation(toml, unit)
+    assert isinstance(sim, ScatterSimulation) and sim.simulation is shared_simulation(toml, unit)
+    f0 = sim.modes(None, {}, 2000.0)[0][:8]
+    # every frequency by the square root of the factor: the springs scaled with the members
+    np.testing.assert_allclose(sim.modes("stiffness_shift", {"stiffness_factor": 1.02}, 2000.0)[0][:8] / f0,
+                               np.sqrt(1.02), rtol=1e-6)
+    # the FE model's own modulus leaves the springs: its modes move unevenly
+    ratio = sim.simulation.modes("stiffness_shift", {"stiffness_factor": 1.02}, 2000.0)[0][:8] / f0
+    assert float(np.ptp(ratio)) > 3e-4

@@ -37,7 +37,9 @@ __all__ = ["DIAGNOSIS_SCHEMA", "PLACE_KEYS", "PEAKS_TOLERANCE", "diagnosis_key",
            "diagnosis_is_current", "describe_diagnosis", "structure_problem", "modes_problem", "peaks_problem",
            "cmif_peaks_hz"]
 
-DIAGNOSIS_SCHEMA = "impactlab.batch-diagnosis/1"
+#: version 2: the SIM's global cause scales every stiffness alike (:mod:`analysis.batch.scatter`); a result of
+#: version 1 is diagnosed again
+DIAGNOSIS_SCHEMA = "impactlab.batch-diagnosis/2"
 
 #: the largest relative difference (-) of a SIM's resonance from the first unit's, after their common shift,
 #: for the two to pair (:func:`peaks_problem`): on the default frame a unit's defect moves a few modes by up to
@@ -59,14 +61,12 @@ _WORDS: dict[str, tuple[str, str]] = {
 }
 
 
-def diagnosis_key(simulated_sha256: str, band: Sequence[float] | None, estimator: str | None,
-                  frequency_factor: float = 1.0) -> str:
+def diagnosis_key(simulated_sha256: str, band: Sequence[float] | None, estimator: str | None) -> str:
     """A short fingerprint of what changes a unit's diagnosis besides the unit: the SIM's content
-    (SHA-256), the band (Hz), the FRF estimator and the frequency factor (-) the SIM is seen at
-    (:mod:`analysis.batch.scatter`; to 9 digits)."""
+    (SHA-256), the band (Hz) and the FRF estimator."""
     text = json.dumps({"schema": DIAGNOSIS_SCHEMA, "simulated": simulated_sha256,
-                       "band": None if band is None else [float(b) for b in band], "estimator": estimator,
-                       "frequency_factor": round(float(frequency_factor), 9)}, sort_keys=True)
+                       "band": None if band is None else [float(b) for b in band], "estimator": estimator},
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -99,32 +99,21 @@ def diagnosis_summary(doc: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def diagnose_one(path: str, name: str, sha256: str, simulated: str, key: str, run: Callable[..., Any],
-                 band: Sequence[float] | None = None, estimator: str | None = None,
-                 frequency_factor: float = 1.0) -> dict[str, Any]:
-    """Diagnose one unit (the function a Dask worker runs): ``run(path, simulated, band=, estimator=,
-    frequency_factor=)`` is ``analysis diagnose``'s own function with the SIM seen at the unit's common
-    ``frequency_factor`` (-, :mod:`analysis.batch.scatter`); returns the result document ``{schema, input,
-    path, sha256, key, simulated, frequency_factor, status: "ok"|"error", error, diagnosis, seconds,
-    cpu_seconds, worker}`` with ``diagnosis`` as :func:`diagnosis_summary` (its trace led by a
-    ``fleet_scatter`` step when the factor is not 1), ``seconds`` the wall time and ``cpu_seconds`` the
+                 band: Sequence[float] | None = None, estimator: str | None = None) -> dict[str, Any]:
+    """Diagnose one unit (the function a Dask worker runs): ``run(path, simulated, band=, estimator=)``
+    is ``analysis diagnose``'s own function; returns the result document ``{schema, input, path, sha256,
+    key, simulated, status: "ok"|"error", error, diagnosis, seconds, cpu_seconds, worker}`` with
+    ``diagnosis`` as :func:`diagnosis_summary`, ``seconds`` the wall time and ``cpu_seconds`` the
     worker process's CPU time (s) of the diagnosis."""
     import warnings
 
     doc: dict[str, Any] = {"schema": DIAGNOSIS_SCHEMA, "input": name, "path": str(path), "sha256": sha256,
-                           "key": key, "simulated": str(simulated), "frequency_factor": float(frequency_factor),
-                           "status": "ok", "error": None, "diagnosis": None,
-                           "worker": f"{socket.gethostname()}:{os.getpid()}"}
+                           "key": key, "simulated": str(simulated), "status": "ok", "error": None,
+                           "diagnosis": None, "worker": f"{socket.gethostname()}:{os.getpid()}"}
     with batch_row(doc), warnings.catch_warnings():   # its progress lines stay out of a worker's stderr
         warnings.simplefilter("ignore")
-        diag = run(path, simulated, band=band, estimator=estimator, frequency_factor=frequency_factor)
-        summary = diagnosis_summary(diag.to_json())
-        if frequency_factor != 1.0:
-            from ..diagnosis.rule import step
-
-            scaled = step("fleet_scatter", None, {"frequency_factor": float(frequency_factor)},
-                          "the SIM's natural frequencies times the unit's common factor")
-            summary["trace"] = [scaled, *summary["trace"]]
-        doc["diagnosis"] = summary
+        diag = run(path, simulated, band=band, estimator=estimator)
+        doc["diagnosis"] = diagnosis_summary(diag.to_json())
     return doc
 
 

@@ -152,8 +152,6 @@ RULES: dict[str, str] = {
     "joint_nonlinearity": "a nonlinear joint named by the hits' force levels replaces the verdict",
     "stray_hits": "a hit standing stray_excess_db beyond its point's spread is left out before the comparison "
                   "(fewer than half of the point's hits, at least stray_min_hits hits)",
-    "fleet_scatter": "a fleet's flagged unit is compared with the SIM at the unit's common frequency factor, within "
-                     "the good units' scatter: only what differs beyond the fleet's scatter is diagnosed",
     "levels": "measurements at several drive levels: modes moving beyond their uncertainty between levels "
               "name joint_nonlinearity in place of the verdict",
 }
