@@ -12,12 +12,12 @@ other as a worker takes them, twice:
 
 * ``own simulation``: each unit builds the SIM's simulation afresh (what ``analysis batch --diagnose`` did
   before its workers kept it),
-* ``shared simulation``: the worker's one simulation of the SIM (:func:`analysis.cli_batch.shared_simulation`),
-  seen at the unit's common frequency factor (:mod:`analysis.batch.scatter`), as ``analysis batch --diagnose``
-  runs it now; the first unit builds it.
+* ``shared simulation``: the worker's one simulation of the SIM (:func:`analysis.cli_batch.shared_simulation`)
+  as a fleet's unit is compared with (:func:`analysis.cli_batch.fleet_simulation`: its global cause scales every
+  stiffness alike), as ``analysis batch --diagnose`` runs it now; the first unit builds it.
 
-``--ways shared`` runs the second way only (half the time). The same causes and parameters are expected of
-the two ways only when every factor is 1 (a fleet of fewer than 5 good units).
+``--ways shared`` runs the second way only (half the time). The two ways differ in the global cause (the
+modulus alone, every stiffness), so their causes and parameters may differ a little.
 
 The table gives each flagged unit's diagnosis CPU and wall time (s) both ways against the fits' CPU and
 wall time per unit, and checks that the two ways name the same causes with the same parameters (1e-6).
@@ -85,7 +85,7 @@ def main() -> None:
     from analysis.batch.fleet import assess_fleet
     from analysis.batch.task import fit_one
     from analysis.batch.unit_modes import modes_from_fit
-    from analysis.cli_batch import _frequency_factors, check_sim_points, diagnose_unit, sim_modes
+    from analysis.cli_batch import diagnose_unit
     from analysis.cli_diagnose import run_diagnosis
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -104,25 +104,21 @@ def main() -> None:
         result = assess_fleet(units, [p.stem for p in paths], [p.name for p in paths])
         flagged = [p for p, u in zip(paths, result.units) if u.flagged]
         truth = {u["name"]: u["defect"] for u in json.loads((fleet / "truth.json").read_text())["units"]}
-        check = check_sim_points(str(sim), paths[:1], None, None)
-        reference = units[[p.stem for p in paths].index(result.reference)]
-        factors = _frequency_factors(check, sim_modes(check, None, None, None), reference, result)
         rows = {}
         ways = (("own", run_diagnosis), ("shared", diagnose_unit))[1 if args.ways == "shared" else 0:]
         for way, run in ways:
             for p in flagged:
                 t0, c0 = time.perf_counter(), cpu()
-                scale = {"frequency_factor": factors.get(p.stem, 1.0)} if way == "shared" else {}
-                diag = run(str(p), str(sim), band=None, estimator=None, **scale)
+                diag = run(str(p), str(sim), band=None, estimator=None)
                 rows.setdefault(p.stem, {})[way] = (cpu() - c0, time.perf_counter() - t0,
                                                     diagnosis_summary(diag.to_json()))
                 print(f"... {p.stem} {way}: {rows[p.stem][way][0]:.1f} s CPU", file=sys.stderr, flush=True)
     n_fit = len(fits)
     print(f"fleet of {n_fit} units ({args.defects} defective, seed {args.seed}); {len(flagged)} flagged; "
           f"fits: {sum(fit_cpu) / n_fit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall per unit\n")
-    print("| unit | defect | factor | diagnosis CPU, own simulation (s) | CPU, shared (s) | wall own (s) | "
+    print("| unit | defect | diagnosis CPU, own simulation (s) | CPU, shared (s) | wall own (s) | "
           "wall shared (s) | CPU shared / fit CPU per unit | same causes and parameters |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     tot = {"own": [0.0, 0.0], "shared": [0.0, 0.0]}
     fit_unit = sum(fit_cpu) / n_fit
     none = (float("nan"), float("nan"), {})
@@ -137,10 +133,10 @@ def main() -> None:
                                                      and own[2]["verdict"] == shared[2]["verdict"]) else "NO"
         named = " + ".join(f"{e} {p.get('support') or p.get('joint') or p.get('element') or p.get('component') or ''}"
                            for e, p in _named(shared[2]))
-        print(f"| {name} | {what} | {factors.get(name, 1.0):.4f} | {own[0]:.1f} | {shared[0]:.1f} | {own[1]:.1f} | "
+        print(f"| {name} | {what} | {own[0]:.1f} | {shared[0]:.1f} | {own[1]:.1f} | "
               f"{shared[1]:.1f} | {shared[0] / fit_unit:.0f}x | {same} | {named} |")
     k = max(len(rows), 1)
-    print(f"| per flagged unit | | | {tot['own'][0] / k:.1f} | {tot['shared'][0] / k:.1f} | {tot['own'][1] / k:.1f} | "
+    print(f"| per flagged unit | | {tot['own'][0] / k:.1f} | {tot['shared'][0] / k:.1f} | {tot['own'][1] / k:.1f} | "
           f"{tot['shared'][1] / k:.1f} | {tot['shared'][0] / k / fit_unit:.0f}x | | |")
     print(f"\nper unit of fit: {fit_unit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall")
 
