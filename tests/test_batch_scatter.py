@@ -125,3 +125,40 @@ def test_for_fleet_leaves_an_frf_file_and_a_simulation_without_the_global_cause_
 
     sim = NoGlobal()
     assert for_fleet(sim) is sim
+
+
+class Chain5(Chain):
+    """:class:`Chain` with more causes: each member spring (``m1``, ``m2``) and the last mass (``mass3``)."""
+
+    def causes(self) -> tuple:
+        one = (ParamSpec("factor", 0.1, 10.0),)
+        return (*Chain.causes(self), CauseSpec("m1", one), CauseSpec("m2", one), CauseSpec("mass3", one))
+
+    def _eig(self, changes: list) -> tuple[np.ndarray, np.ndarray]:
+        f = {c: float(p.get("factor", 1.0)) for c, p in changes}
+        member = float(np.prod([float(p["stiffness_factor"]) for c, p in changes if c == GLOBAL_CAUSE]))
+        k0 = 3e4 * f.get("support", 1.0) * f.get("all", 1.0)
+        k1 = 4e4 * member * f.get("m1", 1.0) * f.get("all", 1.0)
+        k2 = 5e4 * member * f.get("m2", 1.0) * f.get("all", 1.0)
+        K = np.array([[k0 + k1, -k1, 0], [-k1, k1 + k2, -k2], [0, -k2, k2]])
+        M = MASS.copy()
+        M[2, 2] *= f.get("mass3", 1.0)
+        w2, phi = scipy.linalg.eigh(K, M)
+        return np.sqrt(w2) / (2 * np.pi), phi
+
+
+def test_the_scatters_global_cause_is_always_tried_on_top_of_a_first_cause():
+    from analysis.diagnosis.physical import MeasuredModes, PhysicalFit
+    from analysis.diagnosis.physical_verdict import _seconds
+
+    truth = Chain5()
+    f, P = truth.modes_of([("support", {"factor": 0.3}), ("m1", {"factor": 0.7})], 1e4)
+    mm = MeasuredModes(freq_hz=f, freq_std_hz=1e-4 * f, shapes=P.astype(complex))
+    first = PhysicalFit(cause="support", params={"factor": 0.3}, free=("factor",), chi2=1.0)
+    plain, fleet = Chain5(), ScatterSimulation(Chain5())
+    specs = {c.name: c for c in plain.causes()}
+    best = [s.cause for s in _seconds(plain, specs, mm, 2 * float(f[-1]), first, None, n=1)]
+    assert best == ["m1"]                                     # the change in the data ranks first
+    tried = [s.cause for s in _seconds(fleet, specs, mm, 2 * float(f[-1]), first, None, n=1)]
+    assert tried == ["m1", GLOBAL_CAUSE]                      # and a fleet's unit tries its scatter's cause too
+    assert [s.cause for s in _seconds(fleet, specs, mm, 2 * float(f[-1]), first, None, n=None)][0] == "m1"
