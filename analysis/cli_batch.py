@@ -261,13 +261,22 @@ def shared_simulation(path: str, measured: Any, estimator: str | None = None) ->
     return sim
 
 
+def fleet_simulation(path: str, measured: Any, estimator: str | None = None) -> Any:
+    """The worker's simulation of the SIM (:func:`shared_simulation`) as a fleet's flagged unit is compared
+    with: its global cause scales every stiffness alike, as the fleet's scatter does
+    (:func:`~analysis.batch.scatter.for_fleet`)."""
+    from .batch.scatter import for_fleet
+
+    return for_fleet(shared_simulation(path, measured, estimator))
+
+
 def diagnose_unit(measured: str, simulated: str, *, band: Sequence[float] | None = None,
                   estimator: str | None = None) -> Any:
     """A flagged unit's diagnosis on a worker: :func:`~analysis.cli_diagnose.run_diagnosis` with the
-    worker's simulation of the SIM (:func:`shared_simulation`)."""
+    worker's simulation of the SIM as a fleet's unit is compared with (:func:`fleet_simulation`)."""
     from .cli_diagnose import run_diagnosis
 
-    return run_diagnosis(measured, simulated, band=band, estimator=estimator, load=shared_simulation)
+    return run_diagnosis(measured, simulated, band=band, estimator=estimator, load=fleet_simulation)
 
 
 @cli_entry

@@ -237,3 +237,22 @@ def test_structure_and_modes_checks_name_what_differs():
     dense_f = np.geomspace(9.0, 130.0, 24)                          # another structure: far more modes
     dense = UnitModes(dense_f, np.full(24, 0.01), np.zeros(24), np.zeros(24), np.ones((2, 24), complex), outs)
     assert "pair" in (modes_problem(ref, dense) or "")
+
+
+
+def test_a_flagged_unit_is_compared_with_the_sim_whose_global_cause_is_the_fleets_scatter(fleet_dir):
+    from analysis.batch.scatter import ScatterSimulation
+    from analysis.cli_batch import fleet_simulation, shared_simulation
+    from analysis.inputs import load_input
+
+    unit = load_input(str(sorted(fleet_dir.glob("unit-*.h5"))[0]))
+    toml = str(fleet_dir / "nominal.toml")
+    sim = fleet_simulation(toml, unit)
+    assert isinstance(sim, ScatterSimulation) and sim.simulation is shared_simulation(toml, unit)
+    f0 = sim.modes(None, {}, 2000.0)[0][:8]
+    # every frequency by the square root of the factor: the springs scaled with the members
+    np.testing.assert_allclose(sim.modes("stiffness_shift", {"stiffness_factor": 1.02}, 2000.0)[0][:8] / f0,
+                               np.sqrt(1.02), rtol=1e-6)
+    # the FE model's own modulus leaves the springs: its modes move unevenly
+    ratio = sim.simulation.modes("stiffness_shift", {"stiffness_factor": 1.02}, 2000.0)[0][:8] / f0
+    assert float(np.ptp(ratio)) > 3e-4

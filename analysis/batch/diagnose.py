@@ -37,7 +37,9 @@ __all__ = ["DIAGNOSIS_SCHEMA", "PLACE_KEYS", "PEAKS_TOLERANCE", "diagnosis_key",
            "diagnosis_is_current", "describe_diagnosis", "structure_problem", "modes_problem", "peaks_problem",
            "cmif_peaks_hz"]
 
-DIAGNOSIS_SCHEMA = "impactlab.batch-diagnosis/1"
+#: version 2: the SIM's global cause scales every stiffness alike (:mod:`analysis.batch.scatter`); a result of
+#: version 1 is diagnosed again
+DIAGNOSIS_SCHEMA = "impactlab.batch-diagnosis/2"
 
 #: the largest relative difference (-) of a SIM's resonance from the first unit's, after their common shift,
 #: for the two to pair (:func:`peaks_problem`): on the default frame a unit's defect moves a few modes by up to

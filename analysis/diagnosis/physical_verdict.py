@@ -488,7 +488,9 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
              names: Sequence[str] | None, n: int | None = N_SECOND) -> list[PhysicalFit]:
     """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
     plus a penalty for its freedom (2 per parameter, 2 ln(number of options) for a choice); the best
-    variant of each cause, the ``n`` best causes (None: all)."""
+    variant of each cause, the ``n`` best causes (None: all), and the simulation's ``scatter_cause`` when it
+    names one (a fleet's unit: the global cause its manufacturing scatter takes is always tried, for the
+    first cause fitted alone absorbs part of the scatter and leaves little for it on top)."""
     top = OnTop(sim, [(first.cause, first.params)])
     allsel = np.ones(mm.freq_hz.size, bool)
     ranked: list[tuple[float, PhysicalFit]] = []
@@ -503,7 +505,8 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
     for _, f in ranked:            # the best variant of each cause
         if all(g.cause != f.cause for g in out):
             out.append(f)
-    return out[:n]
+    scatter = getattr(sim, "scatter_cause", None)
+    return out[:n] + [f for f in out[n:] if f.cause == scatter] if n is not None else out
 
 
 def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,

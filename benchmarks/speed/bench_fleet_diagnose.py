@@ -12,12 +12,17 @@ other as a worker takes them, twice:
 
 * ``own simulation``: each unit builds the SIM's simulation afresh (what ``analysis batch --diagnose`` did
   before its workers kept it),
-* ``shared simulation``: the worker's one simulation of the SIM (:func:`analysis.cli_batch.shared_simulation`),
-  as ``analysis batch --diagnose`` runs it now; the first unit builds it.
+* ``shared simulation``: the worker's one simulation of the SIM (:func:`analysis.cli_batch.shared_simulation`)
+  as a fleet's unit is compared with (:func:`analysis.cli_batch.fleet_simulation`: its global cause scales every
+  stiffness alike), as ``analysis batch --diagnose`` runs it now; the first unit builds it.
+
+``--ways shared`` runs the second way only (half the time). The two ways differ in the global cause (the
+modulus alone, every stiffness), so their causes and parameters may differ a little.
 
 The table gives each flagged unit's diagnosis CPU and wall time (s) both ways against the fits' CPU and
 wall time per unit, and checks that the two ways name the same causes with the same parameters (1e-6).
-CPU time is this process's (``time.process_time``): on a busy machine the wall time also counts the waiting.
+CPU time is this process's and its forked children's (the diagnosis fits its causes in forked processes
+outside a Dask worker): on a busy machine the wall time also counts the waiting.
 """
 from __future__ import annotations
 
@@ -58,12 +63,22 @@ def _same(a: list[tuple[str, dict]], b: list[tuple[str, dict]], tol: float = 1e-
     return True
 
 
+def cpu() -> float:
+    """CPU time (s) of this process and of its children that have ended (the forked cause fits)."""
+    import resource
+
+    c = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + c.ru_utime + c.ru_stime
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=12)
     ap.add_argument("--defects", type=int, default=4)
     ap.add_argument("--seed", type=int, default=159536)
     ap.add_argument("--fleet", help="an existing fleet folder (default: make one in a temporary folder)")
+    ap.add_argument("--ways", choices=("both", "shared"), default="both", help="diagnose each flagged unit both ways "
+                    "or only with the shared simulation")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     from analysis.batch.diagnose import diagnosis_summary
@@ -90,33 +105,39 @@ def main() -> None:
         flagged = [p for p, u in zip(paths, result.units) if u.flagged]
         truth = {u["name"]: u["defect"] for u in json.loads((fleet / "truth.json").read_text())["units"]}
         rows = {}
-        for way, run in (("own", run_diagnosis), ("shared", diagnose_unit)):
+        ways = (("own", run_diagnosis), ("shared", diagnose_unit))[1 if args.ways == "shared" else 0:]
+        for way, run in ways:
             for p in flagged:
-                t0, c0 = time.perf_counter(), time.process_time()
+                t0, c0 = time.perf_counter(), cpu()
                 diag = run(str(p), str(sim), band=None, estimator=None)
-                rows.setdefault(p.stem, {})[way] = (time.process_time() - c0, time.perf_counter() - t0,
+                rows.setdefault(p.stem, {})[way] = (cpu() - c0, time.perf_counter() - t0,
                                                     diagnosis_summary(diag.to_json()))
                 print(f"... {p.stem} {way}: {rows[p.stem][way][0]:.1f} s CPU", file=sys.stderr, flush=True)
     n_fit = len(fits)
     print(f"fleet of {n_fit} units ({args.defects} defective, seed {args.seed}); {len(flagged)} flagged; "
           f"fits: {sum(fit_cpu) / n_fit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall per unit\n")
-    print("| unit | defect | diagnosis CPU, own simulation (s) | CPU, shared (s) | wall own (s) | wall shared (s) | "
-          "CPU shared / fit CPU per unit | same causes and parameters |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| unit | defect | diagnosis CPU, own simulation (s) | CPU, shared (s) | wall own (s) | "
+          "wall shared (s) | CPU shared / fit CPU per unit | same causes and parameters |")
+    print("|---|---|---|---|---|---|---|---|---|")
     tot = {"own": [0.0, 0.0], "shared": [0.0, 0.0]}
     fit_unit = sum(fit_cpu) / n_fit
+    none = (float("nan"), float("nan"), {})
     for name, r in rows.items():
         d = truth.get(name)
         what = "good" if not d else f"{d['kind']} {d.get('support') or d.get('joint') or d.get('element')}"
-        for way in tot:
-            tot[way][0] += r[way][0]
-            tot[way][1] += r[way][1]
-        same = _same(_named(r["own"][2]), _named(r["shared"][2])) and r["own"][2]["verdict"] == r["shared"][2]["verdict"]
-        print(f"| {name} | {what} | {r['own'][0]:.1f} | {r['shared'][0]:.1f} | {r['own'][1]:.1f} | {r['shared'][1]:.1f} | "
-              f"{r['shared'][0] / fit_unit:.0f}x | {'yes' if same else 'NO'} |")
+        own, shared = r.get("own", none), r["shared"]
+        for way, v in (("own", own), ("shared", shared)):
+            tot[way][0] += v[0]
+            tot[way][1] += v[1]
+        same = "-" if "own" not in r else "yes" if (_same(_named(own[2]), _named(shared[2]))
+                                                     and own[2]["verdict"] == shared[2]["verdict"]) else "NO"
+        named = " + ".join(f"{e} {p.get('support') or p.get('joint') or p.get('element') or p.get('component') or ''}"
+                           for e, p in _named(shared[2]))
+        print(f"| {name} | {what} | {own[0]:.1f} | {shared[0]:.1f} | {own[1]:.1f} | "
+              f"{shared[1]:.1f} | {shared[0] / fit_unit:.0f}x | {same} | {named} |")
     k = max(len(rows), 1)
     print(f"| per flagged unit | | {tot['own'][0] / k:.1f} | {tot['shared'][0] / k:.1f} | {tot['own'][1] / k:.1f} | "
-          f"{tot['shared'][1] / k:.1f} | {tot['shared'][0] / k / fit_unit:.0f}x | |")
+          f"{tot['shared'][1] / k:.1f} | {tot['shared'][0] / k / fit_unit:.0f}x | | |")
     print(f"\nper unit of fit: {fit_unit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall")
 
 

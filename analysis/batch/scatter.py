@@ -1,0 +1,137 @@
+"""The fleet's scatter in a flagged unit's diagnosis: its global cause is every stiffness of the unit scaled alike.
+
+Manufacturing scatter (a few percent of modulus, density, joint and support stiffness) moves every natural
+frequency of a unit by nearly one factor: in a fleet of the simulated frame with 2 % scatter the good units'
+frequencies spread by about 0.8 % (standard deviation), and beyond each unit's common shift
+(:func:`analysis.batch.fleet.pair_modes`) by less than 0.08 % per mode: a unit's scatter is one factor common
+to its natural frequencies, which a global cause of the diagnosis takes up beside the unit's defect. The FE
+model's global cause ``stiffness_shift`` scales the material's Young's modulus only (the joint and support
+springs unchanged), which moves the modes unevenly (on the default frame, a 1 % shift moves its first modes
+by up to 0.06 % apart), and its pairs with a local cause are solved in the reduced space of the local cause's
+parts and every spring's.
+
+:class:`ScatterSimulation` is the SIM for a fleet's flagged unit: the same simulation and causes, but its
+``stiffness_shift`` scales every stiffness of the frame (members and springs) by ``stiffness_factor``, i.e.
+every natural frequency by its square root with the mode shapes unchanged: exactly what a common factor of the
+fleet's scatter is. The other causes act on the scaled frame as on the nominal one, and a local cause with the
+global one is the local cause's own answer (its reduced space, kept by the simulation) scaled exactly. The
+global cause is always tried as a second cause on top of a first (``scatter_cause``): a defect's cause fitted
+alone takes up part of the unit's scatter where it can (a crack's factor a little lower), so the global cause on
+top of it seems to add little, while the two refined together fit the unit to its noise.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+__all__ = ["GLOBAL_CAUSE", "ScatterSimulation", "for_fleet"]
+
+#: the cause that scales the whole frame in a fleet diagnosis (its parameter ``stiffness_factor``)
+GLOBAL_CAUSE = "stiffness_shift"
+_DESCRIPTION = ("every stiffness of the unit scaled alike (members and the joint and support springs): every natural "
+                "frequency by the square root of the factor, the mode shapes unchanged - a fleet's manufacturing scatter")
+
+Changes = Sequence[tuple[str, Mapping]]
+
+
+def _split(changes: Changes) -> tuple[float, list[tuple[str, Mapping]]]:
+    """The frequency factor (-) of the global cause among ``changes`` (1 without it) and the other changes."""
+    k = 1.0
+    rest = []
+    for cause, params in changes:
+        if cause == GLOBAL_CAUSE:
+            k *= float(params.get("stiffness_factor", 1.0))
+        else:
+            rest.append((cause, params))
+    return float(np.sqrt(k)), rest
+
+
+class ScatterSimulation:
+    """A physical simulation (the protocol of :class:`analysis.diagnosis.physical.PhysicalSimulation`) whose
+    global cause :data:`GLOBAL_CAUSE` scales every stiffness (module docstring); the other causes, their answers
+    and the simulation's other attributes are the wrapped simulation's. A method it cannot answer exactly for
+    the scaled frame is not offered (a first pass's bounds); a model with residual terms is refused."""
+
+    #: the cause a unit's scatter takes: tried as a second cause on top of every first
+    #: (:func:`analysis.diagnosis.physical_verdict._seconds`)
+    scatter_cause = GLOBAL_CAUSE
+
+    def __init__(self, sim: Any) -> None:
+        self.simulation = sim
+
+    def causes(self) -> tuple:
+        return tuple(replace(c, description=_DESCRIPTION) if c.name == GLOBAL_CAUSE else c
+                     for c in self.simulation.causes())
+
+    def _solved(self, solve: Callable[[list, float], tuple[np.ndarray, np.ndarray]], changes: Changes,
+                max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        s, rest = _split(changes)
+        if s == 1.0:
+            return solve(rest, max_freq_hz)
+        f, P = solve(rest, max_freq_hz / s)
+        return np.asarray(f) * s, P
+
+    def _modes(self, rest: list, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        if not rest:
+            return self.simulation.modes(None, {}, max_freq_hz)
+        if len(rest) == 1:
+            return self.simulation.modes(rest[0][0], rest[0][1], max_freq_hz)
+        return self.simulation.modes_of(rest, max_freq_hz)
+
+    def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        """Natural frequencies (Hz) up to ``max_freq_hz`` and shape products of the frame changed by ``cause``."""
+        return self._solved(self._modes, [] if cause is None else [(cause, params)], max_freq_hz)
+
+    def modes_of(self, changes: Changes, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`modes` of the frame changed by every ``(cause, params)`` of ``changes``."""
+        return self._solved(self._modes, changes, max_freq_hz)
+
+    def model(self, cause: str | None, params: Mapping) -> Any:
+        """The pole-residue model of the frame changed by ``cause``."""
+        return self.model_of([] if cause is None else [(cause, params)])
+
+    def model_of(self, changes: Changes) -> Any:
+        """:meth:`model` of the frame changed by every ``(cause, params)`` of ``changes``."""
+        s, rest = _split(changes)
+        sim = self.simulation
+        model = (sim.model(None, {}) if not rest else sim.model(*rest[0]) if len(rest) == 1 else sim.model_of(rest))
+        return model if s == 1.0 else scaled_model(model, s)
+
+    def __getattr__(self, name: str) -> Any:
+        sim = self.__dict__.get("simulation")
+        if sim is None:
+            raise AttributeError(name)
+        attr = getattr(sim, name)              # AttributeError when the simulation has none
+        if name == "exact_modes_of":
+            return lambda changes, max_freq_hz: self._solved(attr, changes, max_freq_hz)
+        if name == "at_points":
+            return lambda outputs, references: ScatterSimulation(attr(outputs, references))
+        if callable(attr) and name not in ("points", "refined_model", "converged_below_hz"):
+            raise AttributeError(f"{name}: not offered by a fleet's simulation")
+        return attr
+
+
+def scaled_model(model: Any, factor: float) -> Any:
+    """``model`` (a :class:`~analysis.modal.ModalModel` of mass-normalised modes) of the frame with every
+    stiffness times ``factor**2``: its poles times ``factor`` (damping ratios kept) and its residues as that
+    frame's (a receptance residue ``phi phi / (2 j omega_d)`` over the factor, times ``lambda^p`` in the form of
+    power p). A model with residual terms is refused (ValueError)."""
+    from ..frf import QUANTITY_POWER
+
+    if model.upper_residual is not None or model.lower_residual is not None:
+        raise ValueError("a simulation model with residual terms cannot be scaled: give its modes only")
+    p = QUANTITY_POWER[model.quantity]
+    return replace(model, poles=np.asarray(model.poles) * factor, residues=np.asarray(model.residues) * factor ** (p - 1))
+
+
+def for_fleet(sim: Any) -> Any:
+    """``sim`` as a fleet's flagged unit is diagnosed against (:class:`ScatterSimulation`); ``sim`` itself when
+    it is not a physical model (an FRF file's path) or has no :data:`GLOBAL_CAUSE`."""
+    if not all(hasattr(sim, a) for a in ("causes", "modes", "model")):
+        return sim
+    if GLOBAL_CAUSE not in [c.name for c in sim.causes()]:
+        return sim
+    return ScatterSimulation(sim)

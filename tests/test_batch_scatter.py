@@ -1,0 +1,164 @@
+"""The fleet's scatter in a flagged unit's diagnosis (:mod:`analysis.batch.scatter`): the SIM's global cause
+scales every stiffness of the frame alike (members and springs), as a unit's manufacturing scatter does."""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from analysis.batch.scatter import GLOBAL_CAUSE, ScatterSimulation, for_fleet, scaled_model
+from analysis.diagnosis.physical import CauseSpec, ParamSpec
+from analysis.modal import ModalModel, pole_from_fz, synthesize
+
+MASS = np.diag([1.0, 2.0, 1.5])
+
+
+class Chain:
+    """A 3-mass chain of two member springs and one ground spring (a support) as a physical simulation:
+    ``stiffness_shift`` scales the member springs only (a modulus: the support unchanged), ``support``
+    scales the ground spring, ``all`` scales every spring (what the fleet's global cause is)."""
+
+    outputs = ("a:1:X", "a:2:X", "a:3:X")
+    references = ("a:1:X",)
+
+    def causes(self) -> tuple:
+        return (CauseSpec("support", (ParamSpec("factor", 0.01, 10.0),), description="the ground spring"),
+                CauseSpec(GLOBAL_CAUSE, (ParamSpec("stiffness_factor", 0.6, 1.6),), description="the modulus"))
+
+    def _eig(self, changes: list) -> tuple[np.ndarray, np.ndarray]:
+        member, ground, every = 1.0, 1.0, 1.0
+        for cause, p in changes:
+            if cause == GLOBAL_CAUSE:
+                member *= float(p["stiffness_factor"])
+            elif cause == "support":
+                ground *= float(p["factor"])
+            elif cause == "all":
+                every *= float(p["factor"])
+        k0, k1, k2 = 3e4 * ground * every, 4e4 * member * every, 5e4 * member * every
+        K = np.array([[k0 + k1, -k1, 0], [-k1, k1 + k2, -k2], [0, -k2, k2]])
+        w2, phi = scipy.linalg.eigh(K, MASS)
+        return np.sqrt(w2) / (2 * np.pi), phi
+
+    def modes_of(self, changes: list, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        f, phi = self._eig(list(changes))
+        keep = f <= max_freq_hz
+        return f[keep], (phi[:, None, :] * phi[None, :1, :]).reshape(3, -1)[:, keep]
+
+    def modes(self, cause: str | None, params: dict, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        return self.modes_of([] if cause is None else [(cause, params)], max_freq_hz)
+
+    exact_modes_of = modes_of
+
+    def model_of(self, changes: list) -> ModalModel:
+        f, phi = self._eig(list(changes))
+        lam = pole_from_fz(f, 0.01)
+        R = phi[:, None, :] * phi[None, :1, :] / (2j * lam.imag)[None, None, :]
+        return ModalModel(poles=lam, residues=R, quantity="receptance", outputs=self.outputs,
+                          references=self.references)
+
+    def model(self, cause: str | None, params: dict) -> ModalModel:
+        return self.model_of([] if cause is None else [(cause, params)])
+
+    def first_pass(self, *args: object) -> None:       # bounds of the unscaled frame: not to be offered
+        raise AssertionError("not to be called")
+
+
+def test_the_fleets_global_cause_scales_every_stiffness_alike_and_the_other_causes_act_on_that_frame():
+    chain, fleet = Chain(), ScatterSimulation(Chain())
+    k = 1.03 ** 2
+    every = [("all", {"factor": k})]
+    # alone: every spring scaled (the support too), not the modulus only
+    np.testing.assert_allclose(fleet.modes(GLOBAL_CAUSE, {"stiffness_factor": k}, 1e4)[0],
+                               chain.modes_of(every, 1e4)[0], rtol=1e-12)
+    assert not np.allclose(chain.modes(GLOBAL_CAUSE, {"stiffness_factor": k}, 1e4)[0] / chain.modes(None, {}, 1e4)[0],
+                           1.03, rtol=1e-3)                                  # the modulus alone is not one factor
+    # with a support change: the support scaled on the scaled frame; the same for the exact solver
+    pair = [("support", {"factor": 0.2}), (GLOBAL_CAUSE, {"stiffness_factor": k})]
+    for got in (fleet.modes_of(pair, 1e4), fleet.exact_modes_of(pair, 1e4)):
+        want = chain.modes_of([("support", {"factor": 0.2}), *every], 1e4)
+        np.testing.assert_allclose(got[0], want[0], rtol=1e-12)
+        np.testing.assert_allclose(got[1], want[1], rtol=1e-10)
+    # the other causes and the nominal frame are the simulation's own
+    np.testing.assert_array_equal(fleet.modes("support", {"factor": 0.2}, 1e4)[0],
+                                  chain.modes("support", {"factor": 0.2}, 1e4)[0])
+    # the band asked for is the scaled frame's: its second mode just above max_freq_hz stays out
+    f = fleet.modes(GLOBAL_CAUSE, {"stiffness_factor": k}, 1e4)[0]
+    assert fleet.modes(GLOBAL_CAUSE, {"stiffness_factor": k}, float(f[1]) * 0.999)[0].size == 1
+    # the models: FRFs of the stiffer frame, alone and with another cause
+    lines = np.linspace(5.0, 80.0, 500)
+    for changes in ([(GLOBAL_CAUSE, {"stiffness_factor": k})], pair):
+        want = chain.model_of([*(c for c in changes if c[0] != GLOBAL_CAUSE), *every])
+        np.testing.assert_allclose(synthesize(fleet.model_of(changes), lines).H, synthesize(want, lines).H, rtol=1e-9)
+    np.testing.assert_allclose(synthesize(fleet.model(GLOBAL_CAUSE, {"stiffness_factor": k}), lines).H,
+                               synthesize(chain.model_of(every), lines).H, rtol=1e-9)
+    assert not hasattr(fleet, "first_pass")
+    assert fleet.outputs == Chain.outputs
+    described = {c.name: c.description for c in fleet.causes()}
+    assert "springs" in described[GLOBAL_CAUSE] and described["support"] == "the ground spring"
+
+
+def test_a_scaled_model_in_accelerance_is_the_stiffer_frames():
+    lines = np.linspace(5.0, 80.0, 400)
+    chain = Chain()
+
+    def accelerance(m: ModalModel) -> ModalModel:
+        return replace(m, residues=np.asarray(m.residues) * np.asarray(m.poles)[None, None, :] ** 2,
+                       quantity="accelerance")
+
+    got = scaled_model(accelerance(chain.model(None, {})), 1.02)
+    want = accelerance(chain.model_of([("all", {"factor": 1.02 ** 2})]))
+    np.testing.assert_allclose(synthesize(got, lines).H, synthesize(want, lines).H, rtol=1e-9)
+    with pytest.raises(ValueError, match="residual"):
+        scaled_model(replace(chain.model(None, {}), upper_residual=np.ones((3, 1))), 1.02)
+
+
+def test_for_fleet_leaves_an_frf_file_and_a_simulation_without_the_global_cause_alone():
+    assert isinstance(for_fleet(Chain()), ScatterSimulation)
+    assert for_fleet(Path("golden.h5")) == Path("golden.h5")
+
+    class NoGlobal(Chain):
+        def causes(self) -> tuple:
+            return Chain.causes(self)[:1]
+
+    sim = NoGlobal()
+    assert for_fleet(sim) is sim
+
+
+class Chain5(Chain):
+    """:class:`Chain` with more causes: each member spring (``m1``, ``m2``) and the last mass (``mass3``)."""
+
+    def causes(self) -> tuple:
+        one = (ParamSpec("factor", 0.1, 10.0),)
+        return (*Chain.causes(self), CauseSpec("m1", one), CauseSpec("m2", one), CauseSpec("mass3", one))
+
+    def _eig(self, changes: list) -> tuple[np.ndarray, np.ndarray]:
+        f = {c: float(p.get("factor", 1.0)) for c, p in changes}
+        member = float(np.prod([float(p["stiffness_factor"]) for c, p in changes if c == GLOBAL_CAUSE]))
+        k0 = 3e4 * f.get("support", 1.0) * f.get("all", 1.0)
+        k1 = 4e4 * member * f.get("m1", 1.0) * f.get("all", 1.0)
+        k2 = 5e4 * member * f.get("m2", 1.0) * f.get("all", 1.0)
+        K = np.array([[k0 + k1, -k1, 0], [-k1, k1 + k2, -k2], [0, -k2, k2]])
+        M = MASS.copy()
+        M[2, 2] *= f.get("mass3", 1.0)
+        w2, phi = scipy.linalg.eigh(K, M)
+        return np.sqrt(w2) / (2 * np.pi), phi
+
+
+def test_the_scatters_global_cause_is_always_tried_on_top_of_a_first_cause():
+    from analysis.diagnosis.physical import MeasuredModes, PhysicalFit
+    from analysis.diagnosis.physical_verdict import _seconds
+
+    truth = Chain5()
+    f, P = truth.modes_of([("support", {"factor": 0.3}), ("m1", {"factor": 0.7})], 1e4)
+    mm = MeasuredModes(freq_hz=f, freq_std_hz=1e-4 * f, shapes=P.astype(complex))
+    first = PhysicalFit(cause="support", params={"factor": 0.3}, free=("factor",), chi2=1.0)
+    plain, fleet = Chain5(), ScatterSimulation(Chain5())
+    specs = {c.name: c for c in plain.causes()}
+    best = [s.cause for s in _seconds(plain, specs, mm, 2 * float(f[-1]), first, None, n=1)]
+    assert best == ["m1"]                                     # the change in the data ranks first
+    tried = [s.cause for s in _seconds(fleet, specs, mm, 2 * float(f[-1]), first, None, n=1)]
+    assert tried == ["m1", GLOBAL_CAUSE]                      # and a fleet's unit tries its scatter's cause too
+    assert [s.cause for s in _seconds(fleet, specs, mm, 2 * float(f[-1]), first, None, n=None)][0] == "m1"
