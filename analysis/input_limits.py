@@ -15,17 +15,23 @@ option or input, the file and the limit:
 The file is opened without blocking (a FIFO never waits for a writer) and checked on the open
 descriptor, so a file swapped for a pipe between a check and the read cannot slip through; a file
 that grows while read is cut off at the limit and refused too.
+
+A JSON or TOML document nested deeper than :data:`NESTING_LIMIT` brackets and braces is refused by
+its reader before it is parsed (:func:`too_deeply_nested`): Python's parsers descend one call per
+level, so a file of a few kilobytes of ``[`` would otherwise exhaust the interpreter's stack.
 """
 from __future__ import annotations
 
 import os
+import re
 import stat
 from pathlib import Path
 
 from .work_limits import memory_budget_bytes
 
 __all__ = ["DOCUMENT_LIMIT_BYTES", "RESULT_LIMIT_BYTES", "TEXT_DATA_EXPANSION", "text_data_limit_bytes",
-           "size_text", "not_regular_kind", "read_bounded", "read_bounded_text", "check_input_file"]
+           "size_text", "not_regular_kind", "read_bounded", "read_bounded_text", "check_input_file",
+           "NESTING_LIMIT", "nesting_depth", "too_deeply_nested"]
 
 #: the largest set-up, channel description, picked-poles file or simulator configuration (bytes)
 DOCUMENT_LIMIT_BYTES = 4 << 20
@@ -34,6 +40,17 @@ RESULT_LIMIT_BYTES = 256 << 20
 #: bytes of memory that parsing one byte of a text data file (.lvm, SEP005 JSON) may take (a 3.9 MB LabVIEW
 #: file with four segments peaked at 7)
 TEXT_DATA_EXPANSION = 16
+
+#: the deepest nesting of brackets and braces accepted in a JSON or TOML input (levels); the documents
+#: impactlab reads and writes nest four or five levels deep
+NESTING_LIMIT = 64
+
+# what the nesting scan stops at: a bracket or brace, or a whole string (JSON: "..." with backslash
+# escapes; TOML also '...' literal strings, """...""" and '''...''' multi-line strings and # comments),
+# an unterminated string running to the end of the text
+_JSON_TOKENS = re.compile(r'[\[\]{}]|"[^"\\]*(?:\\.[^"\\]*)*(?:"|\\?\Z)', re.S)
+_TOML_TOKENS = re.compile(r'[\[\]{}]|"""(?:\\.|[^\\])*?(?:"""|\\?\Z)|\'\'\'.*?(?:\'\'\'|\Z)'
+                          r'|"[^"\\\n]*(?:\\.[^"\\\n]*)*(?:"|\\?$)|\'[^\'\n]*\'?|#[^\n]*', re.S | re.M)
 
 _KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
           (stat.S_ISBLK, "a block device"), (stat.S_ISDIR, "a folder"), (stat.S_ISSOCK, "a socket"))
@@ -106,3 +123,29 @@ def read_bounded_text(path: str | Path, what: str, limit: int, error: type[Excep
                       encoding: str = "utf-8") -> str:
     """:func:`read_bounded` decoded with ``encoding`` (a ``UnicodeDecodeError`` is raised as is)."""
     return read_bounded(path, what, limit, error).decode(encoding)
+
+
+def nesting_depth(text: str, *, toml: bool = False, stop_above: int | None = None) -> int:
+    """The deepest nesting of ``[``/``{`` in a JSON (or, with ``toml``, TOML) text, brackets and braces
+    inside strings and comments not counted; one linear scan, ended as soon as the depth exceeds
+    ``stop_above`` (then the depth reached, ``stop_above + 1``). A stray closing bracket counts as none."""
+    depth = deepest = 0
+    for match in (_TOML_TOKENS if toml else _JSON_TOKENS).finditer(text):
+        c = match.group()[0]
+        if c in "[{":
+            depth += 1
+            if depth > deepest:
+                deepest = depth
+                if stop_above is not None and deepest > stop_above:
+                    break
+        elif c in "]}" and depth:
+            depth -= 1
+    return deepest
+
+
+def too_deeply_nested(text: str, *, toml: bool = False) -> bool:
+    """Whether a JSON (TOML with ``toml``) text nests deeper than :data:`NESTING_LIMIT`: its reader
+    refuses it, before parsing, with a message naming the file."""
+    if text.count("[") + text.count("{") <= NESTING_LIMIT:   # cannot nest deeper: no scan
+        return False
+    return nesting_depth(text, toml=toml, stop_above=NESTING_LIMIT) > NESTING_LIMIT

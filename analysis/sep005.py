@@ -23,7 +23,7 @@ import numpy as np
 from .atomic import write_text_atomic
 from .errors import SEP005Error
 from .finite_checks import describe_nonfinite
-from .input_limits import read_bounded_text, text_data_limit_bytes
+from .input_limits import NESTING_LIMIT, read_bounded_text, text_data_limit_bytes, too_deeply_nested
 
 __all__ = ["SEP005Error", "QUANTITY_CODES", "check_sep005", "read_sep005", "write_sep005"]
 
@@ -99,8 +99,11 @@ def read_sep005(path: str | Path) -> list[dict]:
     if not p.exists():
         raise SEP005Error(f"{p} not found: check the path")
     try:
-        doc = json.loads(read_bounded_text(p, "SEP005 file", text_data_limit_bytes(), SEP005Error))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        text = read_bounded_text(p, "SEP005 file", text_data_limit_bytes(), SEP005Error)
+        if too_deeply_nested(text):
+            raise SEP005Error(f"{p} is not a JSON SEP005 file (nested deeper than {NESTING_LIMIT} levels)")
+        doc = json.loads(text)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise SEP005Error(f"{p} is not a JSON SEP005 file ({type(exc).__name__}: {exc})") from None
     except OSError as exc:
         raise SEP005Error(f"cannot read {p}: {exc.strerror or exc}") from None

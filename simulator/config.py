@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.input_limits import DOCUMENT_LIMIT_BYTES, read_bounded_text
+from analysis.input_limits import DOCUMENT_LIMIT_BYTES, NESTING_LIMIT, read_bounded_text, too_deeply_nested
 from analysis.points import PointLabelError, parse_point
 
 from .errors import ConfigError
@@ -405,17 +405,20 @@ def _read_toml(path: Path) -> dict:
     if _toml is None:  # pragma: no cover
         raise ConfigError("reading TOML needs Python 3.11+ (tomllib) or the 'tomli' package: pip install tomli")
     try:
-        return _toml.loads(read_bounded_text(path, "config file", DOCUMENT_LIMIT_BYTES, ConfigError))
+        text = read_bounded_text(path, "config file", DOCUMENT_LIMIT_BYTES, ConfigError)
     except FileNotFoundError:
         raise ConfigError(f"config file {path} not found: give the path of a TOML file like simulator/frame.toml") from None
     except OSError as exc:
         raise ConfigError(f"config file {path} cannot be read ({exc.strerror})") from None
     except UnicodeDecodeError as exc:
         raise ConfigError(f"config file {path} is not UTF-8 text ({exc})") from None
+    if too_deeply_nested(text, toml=True):
+        raise ConfigError(f"config file {path} is nested too deeply to be a frame configuration (more than "
+                          f"{NESTING_LIMIT} levels)")
+    try:
+        return _toml.loads(text)
     except _toml.TOMLDecodeError as exc:
         raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
-    except RecursionError:
-        raise ConfigError(f"config file {path} is nested too deeply to be a frame configuration") from None
 
 
 _DEFAULTS_CACHE: dict | None = None

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ReportInputError
 from ..frf import FRFSet
-from ..input_limits import RESULT_LIMIT_BYTES, read_bounded_text
+from ..input_limits import NESTING_LIMIT, RESULT_LIMIT_BYTES, read_bounded_text, too_deeply_nested
 from ..modal import ModalModel
 
 if TYPE_CHECKING:
@@ -149,7 +149,11 @@ def load_fit_json(path: str | Path, frf: FRFSet) -> FitData:
 
     p = Path(path)
     try:
-        doc = json.loads(read_bounded_text(p, "--fit file", RESULT_LIMIT_BYTES, ReportInputError))
+        text = read_bounded_text(p, "--fit file", RESULT_LIMIT_BYTES, ReportInputError)
+        if too_deeply_nested(text):
+            raise ReportInputError(f"{p} is nested too deeply to be a fit file (more than {NESTING_LIMIT} levels); write "
+                                   "it with 'python -m analysis fit INPUT --json FIT.json'")
+        doc = json.loads(text)
         poles = np.array([_cpx(q["pole"]) for q in doc["poles"]])
         fstd = np.array([np.nan if q.get("freq_hz_std") is None else q["freq_hz_std"] for q in doc["poles"]], float)
         zstd = np.array([np.nan if q.get("damping_std") is None else q["damping_std"] for q in doc["poles"]], float)
@@ -173,9 +177,6 @@ def load_fit_json(path: str | Path, frf: FRFSet) -> FitData:
         raise
     except FileNotFoundError:
         raise ReportInputError(f"fit file {p} not found: check the path or leave --fit out to fit here") from None
-    except RecursionError:
-        raise ReportInputError(f"{p} is nested too deeply to be a fit file; write it with 'python -m analysis fit "
-                               "INPUT --json FIT.json'") from None
     except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
         raise ReportInputError(f"{p} is not a fit of this input ({type(exc).__name__}: {exc}); write it with "
                                "'python -m analysis fit INPUT --json FIT.json' on the same INPUT") from None
