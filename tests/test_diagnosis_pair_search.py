@@ -346,3 +346,21 @@ def test_a_first_cause_that_absorbed_the_scatter_is_refined_with_the_second_from
     assert a.params["factor_rotational"] == pytest.approx(factor, rel=1e-3)
     assert b.params["stiffness_factor"] == pytest.approx(stiffer, rel=1e-4)
     assert chi2 < 1e-3
+
+
+def test_a_loose_support_beside_a_crack_is_named_when_no_single_cause_is() -> None:
+    """The support right:0 x 0.0629 and a crack at top:2 x 0.4099, the modes of 20-430 Hz (a hold-out pair's band):
+    neither cause alone is significant (the supports fit best at every support at once), and no second cause on top
+    of a single fit explains the rest (unexplained before). Each support at its own place is a first cause when no
+    single cause is named; on top of right:0 the crack is found, and both come back with their factors."""
+    from test_diagnosis_pairs_one_kind import _named, _verdict
+
+    out = _verdict({"loose_supports": ["right:0"], "loose_support_factor": [0.0629], "cracked_elements": ["top:2"],
+                    "crack_bending_factor": [0.4099]}, above_hz=20.0, below_hz=430.0,
+                   causes=["support_stiffness", "element_stiffness"])
+    assert out.verdict == "combined", out.reason
+    support = _named(out, "support_stiffness", "support")
+    crack = _named(out, "element_stiffness", "element")
+    assert set(support) == {"right:0"} and set(crack) == {"top:2"}
+    assert support["right:0"]["factor_rotational"] == pytest.approx(0.0629, rel=0.01)
+    assert crack["top:2"]["factor"] == pytest.approx(0.4099, rel=0.01)

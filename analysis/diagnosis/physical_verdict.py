@@ -588,7 +588,69 @@ def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=firsts)
     if named is not None and not _named_pair(two):
         two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
+    if named is None:
+        two = _better(two, _local_pairs(sim, specs, mm, fmax, found, judge, names, two))
     return two
+
+
+def _local(spec: CauseSpec) -> bool:
+    """Whether ``spec`` is a change at one place of many (a support or a joint, with an option for each place and
+    one for every place at once; an element's stiffness): a defect of the frame's own, named with its place."""
+    return spec.choice is not None and (spec.every is not None or splits(spec))
+
+
+def _local_firsts(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
+                  names: Sequence[str]) -> list[dict]:
+    """The local causes of ``found`` (:func:`_local`, among ``names``) as first causes of a pair, each at each of its
+    places: a support or a joint fitted alone at each place (every parameter free, from its fit there), cross-
+    validated as the pairs are (:func:`_as_first`); an element's stiffness as fitted (its pairs on one member are
+    searched on a grid of both factors, :func:`split_choice`). Fitted alone at every place, each support or joint
+    stands between two defects; at its own place it leaves the other defect in the data."""
+    out = []
+    for c in found:
+        fit: PhysicalFit = c["_fit"]
+        spec = specs[fit.cause]
+        if fit.cause not in names:
+            continue
+        if spec.every is None:
+            out.append(c)
+            continue
+        widest = max(variants(spec), key=len)
+        starts = {str(o): q for _, o, q in fit.ranked}
+        for place in spec.places:
+            out.append(_as_first(sim, specs, mm, fmax, fit.cause, widest, judge, options=[place],
+                                 nested=[starts[str(place)]] if str(place) in starts else []))
+    out.sort(key=lambda c: c["_fit"].chi2)       # the closest first: a pair named early bounds the others
+    return out
+
+
+def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
+                 names: Sequence[str] | None, best: dict | None) -> dict | None:
+    """Two local causes (:func:`_local`: a support, a joint, an element, each at its place) when no single cause is
+    named: two defects at once leave every single cause short (a loose support beside a crack on the beam, two
+    cracks side by side in one column), and the first causes of :func:`_second_cause`, chosen by their held-out
+    gain alone, may hold no local cause at the right place (the supports fitted at every support at once, a
+    member's stiffness for two cracks). Each local cause at each of its places (:func:`_local_firsts`) is a first
+    cause, the local causes on top of it (:func:`_on_top_of`), judged by the same rule as every pair. A first cause
+    is skipped when no pair with it can beat ``best`` (a named pair): a pair's penalised held-out chi2 is at least
+    its two choices' freedom (:func:`_choice_penalty`), so with ``best``'s below that nothing is dropped that could
+    win. The best judged pair (:func:`_better`), or None."""
+    local = [n for n, s in specs.items() if _local(s) and (names is None or n in names)]
+    if len(local) < 1:
+        return None
+    floor = min(_choice_penalty(specs[n]) for n in local)
+    top = best["_chi2_cv"] if _named_pair(best) else np.inf       # type: ignore[index]
+    if 2.0 * floor >= top:
+        return None
+    out: dict | None = None
+    for first in _local_firsts(sim, specs, mm, fmax, found, judge, local):
+        if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
+            continue
+        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False)
+        out = _better(out, c)
+        if _named_pair(out):
+            top = min(top, out["_chi2_cv"])                       # type: ignore[index]
+    return out
 
 
 def _rival_pair(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
@@ -630,11 +692,13 @@ def _better(best: dict | None, c: dict | None) -> dict | None:
 
 
 def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, name: str, free: tuple,
-              judge: _Judge) -> dict:
-    """The cause ``name`` with the parameters ``free`` fitted alone on all modes (its choice searched over every
-    option) and cross-validated as the pairs are (:func:`_alone_cv`), judged as a single cause."""
+              judge: _Judge, options: Sequence[str] | None = None, nested: Sequence[dict] = ()) -> dict:
+    """The cause ``name`` with the parameters ``free`` fitted alone on all modes (its choice searched over
+    ``options``, None: every option; ``nested``: further starts, :func:`fit_cause`) and cross-validated as the
+    pairs are (:func:`_alone_cv`), judged as a single cause."""
     spec = specs[name]
-    p, chi2, ranked = fit_cause(sim, spec, free, mm, np.ones(mm.freq_hz.size, bool), fmax)
+    p, chi2, ranked = fit_cause(sim, spec, free, mm, np.ones(mm.freq_hz.size, bool), fmax, options=options,
+                                nested=nested)
     fit = PhysicalFit(cause=name, params=p, free=free, chi2=chi2, ranked=ranked)
     alone = fit_pair(sim, [spec], [fit], mm, fmax)
     cv = alone.cv_per_mode
