@@ -64,6 +64,7 @@ from .physical_pairs import (
     OnTop,
     as_places,
     fit_pair,
+    held_open,
     rechoose,
     refit_on_top,
     split_choice,
@@ -520,6 +521,17 @@ def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float
     return [(a, b) for _, a, b in ranked[:N_SECOND]]
 
 
+def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
+                  names: Sequence[str] | None) -> list[tuple[PhysicalFit, PhysicalFit]]:
+    """Second causes of many options (an element's stiffness) refined with ``first`` at every option
+    (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom; the ``N_SECOND`` best as
+    (first refined, second)."""
+    ranked = [(chi2 + _freedom(spec, b.free), a, b) for spec in specs.values() if names is None or spec.name in names
+              for chi2, a, b in held_open(sim, [specs[first.cause], spec], first, mm, fmax)]
+    ranked.sort(key=lambda t: t[0])
+    return [(a, b) for _, a, b in ranked[:N_SECOND]]
+
+
 def _named_pair(c: dict | None) -> bool:
     return c is not None and bool(c["significant"] and c["adequate"])
 
@@ -646,7 +658,7 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     for first in _local_firsts(sim, specs, mm, fmax, found, judge, local):
         if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
             continue
-        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False)
+        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True)
         out = _better(out, c)
         if _named_pair(out):
             top = min(top, out["_chi2_cv"])                       # type: ignore[index]
@@ -708,17 +720,20 @@ def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
 
 
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
-               names: Sequence[str] | None, opened: bool) -> dict | None:
+               names: Sequence[str] | None, opened: bool, held: bool = False) -> dict | None:
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
     (:func:`_seconds`, or :func:`_opened` with its choice held open) refined with it, cross-validated nested
-    and judged (:func:`_second_cause`)."""
+    and judged (:func:`_second_cause`); ``held``: also a second cause of many options refined with it at every
+    option, the ``N_SECOND`` best (:func:`_held_seconds`)."""
     fa: PhysicalFit = first["_fit"]
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
              [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
               for fb in _seconds(sim, specs, mm, fmax, fa, names)] + split_places(specs[fa.cause], fa)
-             + split_choice(sim, specs[fa.cause], fa, mm, fmax))
+             + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
+    if held:
+        pairs += _held_seconds(sim, specs, mm, fmax, fa, names)
     n_seconds = max(1, len({fb.cause for _, fb in pairs}))
     best: dict | None = None
     for fa2, fb in pairs:
