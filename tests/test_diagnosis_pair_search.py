@@ -286,7 +286,7 @@ def test_two_loose_supports_are_named_each_at_its_place() -> None:
     f = np.arange(8.0, 500.0, 0.25)
     measured = FrameModel.from_config(cfg, _sensor_masses(cfg)).analytic_frf(OUTS, REFS, f)
     mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
-    out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), -60.0, 3.0, mm,
+    out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), -60.0, mm,
                            causes=["support_stiffness", "joint_stiffness"])
     assert out.verdict == "combined", out.reason
     got = {c["parameters"]["support"]: c["parameters"] for c in out.named if c["effect"] == "support_stiffness"}
