@@ -21,7 +21,10 @@ Steps, each one able to decide:
    (gain >= ``physical_min_gain_db``, no parameter at the edge of its range) and adequate (the held-out modes
    agree, mean chi2 per mode <= ``discrepancy_chi2``, and the extended simulation's FRFs, through the
    measurement's processing, leave the typical error within ``none_margin_db`` of the noise or
-   remove ``adequate_fraction`` of the excess error in power). None named: when the modes differ,
+   remove ``adequate_fraction`` of the excess error in power). A second cause is searched on top of the
+   first (:mod:`analysis.diagnosis.physical_pairs`); with no single cause named, every local cause (a
+   support, a joint, an element) at each of its places is a first cause too (:func:`_local_pairs`), and
+   the best pair by the same rule is named. None named: when the modes differ,
    ``unexplained`` with the best partial causes (no FRF-level effect moves natural frequencies);
    when only the FRFs differ, not decided here: the FRF-level catalogue is tried, and the physical
    causes are listed in ``Diagnosis.physical["causes"]``.
