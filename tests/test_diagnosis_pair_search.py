@@ -348,6 +348,7 @@ def test_a_first_cause_that_absorbed_the_scatter_is_refined_with_the_second_from
     assert chi2 < 1e-3
 
 
+@pytest.mark.long
 def test_a_loose_support_beside_a_crack_is_named_when_no_single_cause_is() -> None:
     """The support right:0 x 0.0629 and a crack at top:2 x 0.4099, the modes of 20-430 Hz (a hold-out pair's band):
     neither cause alone is significant (the supports fit best at every support at once), and no second cause on top

@@ -152,6 +152,7 @@ def test_a_pair_at_every_joint_and_support_moves_to_the_two_places_together() ->
     assert again.chi2 < 1e-3 < at_all.chi2
 
 
+@pytest.mark.long
 def test_two_cracks_in_one_column_are_not_a_support_beside_one_deeper_crack() -> None:
     """Cracks at left:2 (x 0.5324) and left:7 (x 0.5074) with the modes of 20-430 Hz (a hold-out pair's band): no
     single cause is named, and the supports softened at every support beside one deeper crack at left:7 (x 0.33)
