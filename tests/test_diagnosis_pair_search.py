@@ -286,7 +286,7 @@ def test_two_loose_supports_are_named_each_at_its_place() -> None:
     f = np.arange(8.0, 500.0, 0.25)
     measured = FrameModel.from_config(cfg, _sensor_masses(cfg)).analytic_frf(OUTS, REFS, f)
     mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
-    out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), -60.0, 3.0, mm,
+    out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), -60.0, mm,
                            causes=["support_stiffness", "joint_stiffness"])
     assert out.verdict == "combined", out.reason
     got = {c["parameters"]["support"]: c["parameters"] for c in out.named if c["effect"] == "support_stiffness"}
@@ -348,3 +348,77 @@ def test_a_first_cause_that_absorbed_the_scatter_is_refined_with_the_second_from
     assert a.params["factor_rotational"] == pytest.approx(factor, rel=1e-3)
     assert b.params["stiffness_factor"] == pytest.approx(stiffer, rel=1e-4)
     assert chi2 < 1e-3
+
+
+@pytest.mark.long
+def test_a_loose_support_beside_a_crack_is_named_when_no_single_cause_is() -> None:
+    """The support right:0 x 0.0629 and a crack at top:2 x 0.4099, the modes of 20-430 Hz (a hold-out pair's band):
+    neither cause alone is significant (the supports fit best at every support at once), and no second cause on top
+    of a single fit explains the rest (unexplained before). Each support at its own place is a first cause when no
+    single cause is named; on top of right:0 the crack is found, and both come back with their factors."""
+    from test_diagnosis_pairs_one_kind import _named, _verdict
+
+    out = _verdict({"loose_supports": ["right:0"], "loose_support_factor": [0.0629], "cracked_elements": ["top:2"],
+                    "crack_bending_factor": [0.4099]}, above_hz=20.0, below_hz=430.0,
+                   causes=["support_stiffness", "element_stiffness"])
+    assert out.verdict == "combined", out.reason
+    support = _named(out, "support_stiffness", "support")
+    crack = _named(out, "element_stiffness", "element")
+    assert set(support) == {"right:0"} and set(crack) == {"top:2"}
+    assert support["right:0"]["factor_rotational"] == pytest.approx(0.0629, rel=0.01)
+    assert crack["top:2"]["factor"] == pytest.approx(0.4099, rel=0.01)
+
+
+def _band_modes(fv: FrameVariants, changes: list, lo_hz: float = 20.0, hi_hz: float = 430.0) -> MeasuredModes:
+    mm = _noise_free_modes(fv, changes)
+    keep = (mm.freq_hz > lo_hz) & (mm.freq_hz < hi_hz)
+    return MeasuredModes(mm.freq_hz[keep], mm.freq_std_hz[keep], mm.shapes[:, keep])
+
+
+def test_a_crack_beside_a_support_fitted_alone_is_found_with_its_choice_held_open() -> None:
+    """The support left:0 x 0.2 and a crack at right:4 x 0.45, modes of 20-430 Hz. The support fitted alone at its
+    place absorbs part of the crack, and the crack fitted on top of it goes elsewhere; refined together with the
+    support at every element (:func:`held_open`), the crack's own element comes first with both factors back."""
+    from analysis.diagnosis.physical_pairs import OnTop, held_open
+
+    fv = FrameVariants(None, OUTS, REFS)
+    specs = _specs(fv)
+    both = ("factor_translational", "factor_rotational")
+    mm = _band_modes(fv, [("support_stiffness", {"support": "left:0", **dict.fromkeys(both, 0.2)}),
+                          ("element_stiffness", {"element": "right:4", "factor": 0.45})])
+    allsel = np.ones(mm.freq_hz.size, bool)
+    p, chi2, _ = fit_cause(fv, specs["support_stiffness"], both, mm, allsel, FMAX, options=["left:0"])
+    alone = PhysicalFit("support_stiffness", p, both, chi2)
+    on_top, _, _ = fit_cause(OnTop(fv, [("support_stiffness", p)]), specs["element_stiffness"], ("factor",), mm,
+                             allsel, FMAX)
+    assert on_top["element"] != "right:4"
+    got = held_open(fv, [specs["support_stiffness"], specs["element_stiffness"]], alone, mm, FMAX)
+    assert len(got) == len(specs["element_stiffness"].options)
+    chi2, a, b = got[0]
+    assert b.params["element"] == "right:4" and b.params["factor"] == pytest.approx(0.45, rel=1e-3)
+    assert a.params["support"] == "left:0" and a.params["factor_rotational"] == pytest.approx(0.2, rel=1e-3)
+    assert chi2 < 1e-3 < got[1][0]
+    assert held_open(fv, [specs["element_stiffness"], specs["support_stiffness"]], b, mm, FMAX) == []
+
+
+def test_two_cracks_on_two_members_are_on_the_grid_of_every_two_elements() -> None:
+    """Cracks at left:4 x 0.45 and right:2 x 0.5: the grid of two elements of one member holds no such pair; with
+    ``across`` (no single element named) every two elements are on it, and the pair refined from its grid point
+    gives both cracks back."""
+    from analysis.diagnosis.physical_pairs import split_choice
+
+    fv = FrameVariants(None, OUTS, REFS)
+    specs = _specs(fv)
+    spec = specs["element_stiffness"]
+    mm = _band_modes(fv, [("element_stiffness", {"element": "left:4", "factor": 0.45}),
+                          ("element_stiffness", {"element": "right:2", "factor": 0.5})])
+    fit = PhysicalFit("element_stiffness", {"element": "left:3", "factor": 0.3}, ("factor",), np.inf)
+    one = split_choice(fv, spec, fit, mm, FMAX)
+    assert all(a.params["element"].split(":")[0] == b.params["element"].split(":")[0] for a, b in one)
+    every = split_choice(fv, spec, fit, mm, FMAX, across=True)
+    at = [{a.params["element"], b.params["element"]} for a, b in every]
+    assert {"left:4", "right:2"} in at
+    a, b = every[at.index({"left:4", "right:2"})]
+    two = fit_pair(fv, [spec, spec], [a, b], mm, FMAX, folds=False)
+    factors = {p["element"]: p["factor"] for p in two.params}
+    assert factors["left:4"] == pytest.approx(0.45, rel=1e-3) and factors["right:2"] == pytest.approx(0.5, rel=1e-3)

@@ -46,7 +46,7 @@ from .physical import (
     variants,
 )
 
-__all__ = ["OnTop", "PairFit", "as_places", "besides", "fit_pair", "changes_of", "refit_on_top", "rechoose",
+__all__ = ["OnTop", "PairFit", "as_places", "besides", "fit_pair", "held_open", "changes_of", "refit_on_top", "rechoose",
            "split_choice", "split_places", "splits", "with_options", "pair_starts"]
 
 
@@ -103,14 +103,15 @@ def splits(spec: CauseSpec) -> bool:
 
 
 def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm: MeasuredModes, fmax: float,
-                 n: int = N_SCREEN) -> list[tuple[PhysicalFit, PhysicalFit]]:
+                 n: int = N_SCREEN, across: bool = False) -> list[tuple[PhysicalFit, PhysicalFit]]:
     """The change of ``fit`` as two of its kind on one member (two cracks in one column): an element's
     stiffness (a choice ``element`` among more than ``N_SCREEN`` options ``member:e``, factors: log, nominal 1)
     fitted alone stands for two such changes by one deeper change at one element, often neither of theirs, and a
     second element fitted on top of it explains too little. Pairs to refine: every two elements of one member on a
     grid of their factors (:data:`SPLIT_POWERS`), the ``n`` with the least chi2 there (each at its best grid
-    point). Two elements of different members are found as a second change on top of the first (:func:`besides`).
-    Empty for any other cause."""
+    point). Two elements of different members are found as a second change on top of the first (:func:`besides`);
+    ``across``: every two elements, of one member or not, are on the grid too (no single element is named, so
+    the first element fitted alone may sit at neither crack). Empty for any other cause."""
     free = [s for s in spec.params if s.name in fit.free]
     if not splits(spec) or len(free) != 1 or not free[0].log or free[0].nominal != 1.0:
         return []
@@ -118,7 +119,7 @@ def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm:
     levels = [free[0].lo ** w for w in SPLIT_POWERS]
     ranked = []
     for a, b in combinations(spec.options, 2):
-        if _member(a) != _member(b):
+        if not across and _member(a) != _member(b):
             continue
         best: tuple[float, tuple[dict, dict]] = (np.inf, ({}, {}))
         for fa, fb in product(levels, levels):
@@ -131,6 +132,33 @@ def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm:
     ranked.sort(key=lambda t: t[0])
     return [tuple(PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=np.inf) for p in two)  # type: ignore[misc]
             for _, two in ranked[:n]]
+
+
+def held_open(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: PhysicalFit, mm: MeasuredModes,
+              fmax: float) -> list[tuple[float, PhysicalFit, PhysicalFit]]:
+    """A second change of many options (an element's stiffness, :func:`splits`) beside ``first``, its choice held
+    open: at every option of ``specs[1]`` the first does not hold (:func:`besides`), both refined together on all
+    modes (no cross-validation) from the second's best point of a grid of its factor (:data:`SPLIT_POWERS`). A first
+    cause fitted alone at its place (a support) absorbs part of the second change, so the second fitted on top of
+    it finds its best option elsewhere (the crack's mirror element, a deeper crack beside the support); refined
+    together at every option, both reach the change in the data. Returns ``[(chi2, first, second)]`` at every
+    option, the lowest chi2 first; empty when the second is no such cause."""
+    spec = besides(specs[1], [(first.cause, first.params)])
+    if spec is None or not splits(spec) or len(spec.params) != 1 or not spec.params[0].log:
+        return []
+    ps = spec.params[0]
+    levels = [ps.lo ** w for w in SPLIT_POWERS]
+    out = []
+    for option in spec.options:
+        starts = [{spec.choice: option, ps.name: v} for v in levels]
+        cost = [float(np.sum(residuals(mm, *changes_of(sim, [(first.cause, first.params), (spec.name, q)], fmax)) ** 2))
+                for q in starts]
+        b = PhysicalFit(cause=spec.name, params=starts[int(np.argmin(cost))], free=(ps.name,), chi2=np.inf)
+        two = fit_pair(sim, [specs[0], spec], [first, b], mm, fmax, folds=False)
+        out.append((two.chi2, replace(first, params=two.params[0], chi2=two.chi2),
+                    replace(b, params=two.params[1], chi2=two.chi2)))
+    out.sort(key=lambda t: t[0])
+    return out
 
 
 def as_places(specs: Sequence[CauseSpec], params: Sequence[Mapping]) -> tuple[dict, ...]:

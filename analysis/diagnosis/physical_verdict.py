@@ -21,7 +21,10 @@ Steps, each one able to decide:
    (gain >= ``physical_min_gain_db``, no parameter at the edge of its range) and adequate (the held-out modes
    agree, mean chi2 per mode <= ``discrepancy_chi2``, and the extended simulation's FRFs, through the
    measurement's processing, leave the typical error within ``none_margin_db`` of the noise or
-   remove ``adequate_fraction`` of the excess error in power). None named: when the modes differ,
+   remove ``adequate_fraction`` of the excess error in power). A second cause is searched on top of the
+   first (:mod:`analysis.diagnosis.physical_pairs`); with no single cause named, every local cause (a
+   support, a joint, an element) at each of its places is a first cause too (:func:`_local_pairs`), and
+   the best pair by the same rule is named. None named: when the modes differ,
    ``unexplained`` with the best partial causes (no FRF-level effect moves natural frequencies);
    when only the FRFs differ, not decided here: the FRF-level catalogue is tried, and the physical
    causes are listed in ``Diagnosis.physical["causes"]``.
@@ -64,6 +67,7 @@ from .physical_pairs import (
     OnTop,
     as_places,
     fit_pair,
+    held_open,
     rechoose,
     refit_on_top,
     split_choice,
@@ -523,6 +527,17 @@ def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float
     return [(a, b) for _, a, b in ranked[:N_SECOND]]
 
 
+def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
+                  names: Sequence[str] | None) -> list[tuple[PhysicalFit, PhysicalFit]]:
+    """Second causes of many options (an element's stiffness) refined with ``first`` at every option
+    (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom; the ``N_SECOND`` best as
+    (first refined, second)."""
+    ranked = [(chi2 + _freedom(spec, b.free), a, b) for spec in specs.values() if names is None or spec.name in names
+              for chi2, a, b in held_open(sim, [specs[first.cause], spec], first, mm, fmax)]
+    ranked.sort(key=lambda t: t[0])
+    return [(a, b) for _, a, b in ranked[:N_SECOND]]
+
+
 def _named_pair(c: dict | None) -> bool:
     return c is not None and bool(c["significant"] and c["adequate"])
 
@@ -591,7 +606,69 @@ def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=firsts)
     if named is not None and not _named_pair(two):
         two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
+    if named is None:
+        two = _better(two, _local_pairs(sim, specs, mm, fmax, found, judge, names, two))
     return two
+
+
+def _local(spec: CauseSpec) -> bool:
+    """Whether ``spec`` is a change at one place of many (a support or a joint, with an option for each place and
+    one for every place at once; an element's stiffness): a defect of the frame's own, named with its place."""
+    return spec.choice is not None and (spec.every is not None or splits(spec))
+
+
+def _local_firsts(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
+                  names: Sequence[str]) -> list[dict]:
+    """The local causes of ``found`` (:func:`_local`, among ``names``) as first causes of a pair, each at each of its
+    places: a support or a joint fitted alone at each place (every parameter free, from its fit there), cross-
+    validated as the pairs are (:func:`_as_first`); an element's stiffness as fitted (its pairs on one member are
+    searched on a grid of both factors, :func:`split_choice`). Fitted alone at every place, each support or joint
+    stands between two defects; at its own place it leaves the other defect in the data."""
+    out = []
+    for c in found:
+        fit: PhysicalFit = c["_fit"]
+        spec = specs[fit.cause]
+        if fit.cause not in names:
+            continue
+        if spec.every is None:
+            out.append(c)
+            continue
+        widest = max(variants(spec), key=len)
+        starts = {str(o): q for _, o, q in fit.ranked}
+        for place in spec.places:
+            out.append(_as_first(sim, specs, mm, fmax, fit.cause, widest, judge, options=[place],
+                                 nested=[starts[str(place)]] if str(place) in starts else []))
+    out.sort(key=lambda c: c["_fit"].chi2)       # the closest first: a pair named early bounds the others
+    return out
+
+
+def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
+                 names: Sequence[str] | None, best: dict | None) -> dict | None:
+    """Two local causes (:func:`_local`: a support, a joint, an element, each at its place) when no single cause is
+    named: two defects at once leave every single cause short (a loose support beside a crack on the beam, two
+    cracks side by side in one column), and the first causes of :func:`_second_cause`, chosen by their held-out
+    gain alone, may hold no local cause at the right place (the supports fitted at every support at once, a
+    member's stiffness for two cracks). Each local cause at each of its places (:func:`_local_firsts`) is a first
+    cause, the local causes on top of it (:func:`_on_top_of`), judged by the same rule as every pair. A first cause
+    is skipped when no pair with it can beat ``best`` (a named pair): a pair's penalised held-out chi2 is at least
+    its two choices' freedom (:func:`_choice_penalty`), so with ``best``'s below that nothing is dropped that could
+    win. The best judged pair (:func:`_better`), or None."""
+    local = [n for n, s in specs.items() if _local(s) and (names is None or n in names)]
+    if len(local) < 1:
+        return None
+    floor = min(_choice_penalty(specs[n]) for n in local)
+    top = best["_chi2_cv"] if _named_pair(best) else np.inf       # type: ignore[index]
+    if 2.0 * floor >= top:
+        return None
+    out: dict | None = None
+    for first in _local_firsts(sim, specs, mm, fmax, found, judge, local):
+        if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
+            continue
+        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True)
+        out = _better(out, c)
+        if _named_pair(out):
+            top = min(top, out["_chi2_cv"])                       # type: ignore[index]
+    return out
 
 
 def _rival_pair(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
@@ -633,11 +710,13 @@ def _better(best: dict | None, c: dict | None) -> dict | None:
 
 
 def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, name: str, free: tuple,
-              judge: _Judge) -> dict:
-    """The cause ``name`` with the parameters ``free`` fitted alone on all modes (its choice searched over every
-    option) and cross-validated as the pairs are (:func:`_alone_cv`), judged as a single cause."""
+              judge: _Judge, options: Sequence[str] | None = None, nested: Sequence[dict] = ()) -> dict:
+    """The cause ``name`` with the parameters ``free`` fitted alone on all modes (its choice searched over
+    ``options``, None: every option; ``nested``: further starts, :func:`fit_cause`) and cross-validated as the
+    pairs are (:func:`_alone_cv`), judged as a single cause."""
     spec = specs[name]
-    p, chi2, ranked = fit_cause(sim, spec, free, mm, np.ones(mm.freq_hz.size, bool), fmax)
+    p, chi2, ranked = fit_cause(sim, spec, free, mm, np.ones(mm.freq_hz.size, bool), fmax, options=options,
+                                nested=nested)
     fit = PhysicalFit(cause=name, params=p, free=free, chi2=chi2, ranked=ranked)
     alone = fit_pair(sim, [spec], [fit], mm, fmax)
     cv = alone.cv_per_mode
@@ -647,17 +726,20 @@ def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
 
 
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
-               names: Sequence[str] | None, opened: bool) -> dict | None:
+               names: Sequence[str] | None, opened: bool, held: bool = False) -> dict | None:
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
     (:func:`_seconds`, or :func:`_opened` with its choice held open) refined with it, cross-validated nested
-    and judged (:func:`_second_cause`)."""
+    and judged (:func:`_second_cause`); ``held``: also a second cause of many options refined with it at every
+    option, the ``N_SECOND`` best (:func:`_held_seconds`)."""
     fa: PhysicalFit = first["_fit"]
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
              [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
               for fb in _seconds(sim, specs, mm, fmax, fa, names)] + split_places(specs[fa.cause], fa)
-             + split_choice(sim, specs[fa.cause], fa, mm, fmax))
+             + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
+    if held:
+        pairs += _held_seconds(sim, specs, mm, fmax, fa, names)
     n_seconds = max(1, len({fb.cause for _, fb in pairs}))
     best: dict | None = None
     for fa2, fb in pairs:
