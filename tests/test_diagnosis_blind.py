@@ -105,6 +105,13 @@ def test_paper_resonance_at_band_edge(base):
     assert diag.causes[0]["parameters"]["freq_hz"] == pytest.approx(base.freq_hz[k], rel=2e-3)
 
 
+#: the causes the mains cases weigh: those that make narrow lines or local bumps (a missing mode, a local
+#: resonator) and the residual terms; the others change the FRFs smoothly over the band (sensor high-pass,
+#: delay, mass loading, stiffness, damping, window, sensitivity) and gained at most 0.03 dB on these cases
+#: with the whole catalogue (mains_hum 0.74 dB or more), the hidden-effect cases above weigh them all
+MAINS_RIVALS = ("mains_hum", "missing_mode", "local_resonator", "residual_modes")
+
+
 #: one case per line shape and offset sign, the bases alternating (benchmarks/accuracy/bench_mains_variants.py
 #: runs every shape at 50 and 60 Hz, at and off them, on several seeds)
 @pytest.mark.parametrize("base_hz, offset_hz, width_hz", [
@@ -130,7 +137,7 @@ def test_mains_interference_not_made_by_the_catalogue_formula(base, base_hz, off
             H[..., np.argmin(np.abs(f - fk))] += a
         else:
             H += a[..., None] * np.sinc((f - fk) / width_hz)[None, None, :]      # leakage: a sinc main lobe
-    diag = diagnose(replace(m, H=H), base)
+    diag = diagnose(replace(m, H=H), base, effects=MAINS_RIVALS)
     assert diag.verdict == "mains_hum", [c["evidence"] for c in diag.causes if c["effect"] in ("mains_hum", "missing_mode")]
     p = diag.causes[0]["parameters"]
     assert p["base_hz"] == base_hz

@@ -11,6 +11,8 @@ import threading
 import pytest
 from station_support import Api, StationProcess
 
+from analysis.input_limits import NESTING_LIMIT
+
 POINTS = "left:9:Y,top:4:X"
 
 
@@ -56,6 +58,9 @@ def test_bad_requests_with_the_token_get_4xx_not_a_dropped_connection(station):
     assert all(400 <= s < 500 for s in statuses), statuses
     assert all(isinstance(c[1], dict) and c[1].get("error") for c in cases)
     assert "Infinity is not a JSON number" in cases[4][1]["error"]
+    # nested deeper than the readers take, yet shallow enough for the parser: refused before it is parsed
+    deep = api.request("POST", "/api/setup/check", raw=b'{"setup": ' + b"[" * 100 + b"]" * 100 + b"}")
+    assert deep[0] == 400 and f"nested deeper than {NESTING_LIMIT} levels" in deep[1]["error"]
 
 
 def test_a_nan_channel_name_is_rejected_before_anything_is_applied(station):

@@ -43,6 +43,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
+from analysis.input_limits import NESTING_LIMIT, too_deeply_nested
+
 from .engine import ActionRefused, StationEngine
 
 __all__ = ["STATIC_DIR", "StationServer", "new_token"]
@@ -301,12 +303,13 @@ class _Handler(BaseHTTPRequestHandler):
             self._error(400, f"the request body ended after {len(raw)} of {n} bytes")
             return None
         try:
-            data = json.loads(raw.decode("utf-8"), parse_constant=_no_constant)
+            text = raw.decode("utf-8")
+            if too_deeply_nested(text):      # refused before the parser descends into it
+                self._error(400, f"malformed JSON: nested deeper than {NESTING_LIMIT} levels; send a flatter object")
+                return None
+            data = json.loads(text, parse_constant=_no_constant)
         except (UnicodeDecodeError, ValueError) as exc:
             self._error(400, f"malformed JSON: {exc}")
-            return None
-        except RecursionError:
-            self._error(400, "malformed JSON: nested too deeply")
             return None
         if not isinstance(data, dict):
             self._error(400, "the request body must be a JSON object")
