@@ -13,10 +13,13 @@ Run by hand (not a test; on one core about a minute)::
    make the basis large) and of one local change, against the full solve, at 420, 700 and 900 Hz.
 3. One candidate: an element's stiffness searched on top of a uniform stiffness change (the pair search's
    commonest candidate), its modes with the residuals, and with their derivatives (the fits' Jacobian).
-CPU times (``time.process_time``), milliseconds.
+CPU times (``time.process_time``), milliseconds. ``--write`` replaces ``bench_diagnosis_kernel.md`` with the run;
+the records of the kernel's changes measured before and after (fleet units, the diagnosis tests) are in that
+file's history in version control.
 """
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import time
@@ -32,7 +35,11 @@ import scipy.linalg  # noqa: E402
 import simulator.ritz as ritz  # noqa: E402
 from analysis.diagnosis.physical import MeasuredModes, residuals, residuals_jac  # noqa: E402
 from analysis.diagnosis.physical_pairs import OnTop  # noqa: E402
+from benchmarks.results import add_write_option, recorded  # noqa: E402
 from simulator.physical import FrameVariants  # noqa: E402
+
+#: this benchmark's results file (``--write`` replaces it with the run's figures)
+RESULTS = Path(__file__).with_name("bench_diagnosis_kernel.md")
 
 OUTS = ["right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y"]
 REFS = ["right:6:-X"]
@@ -75,6 +82,15 @@ def per_call_ms(fn, n: int) -> float:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_write_option(ap, RESULTS)
+    args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        run()
+
+
+def run() -> None:
+    """The three parts, printed as markdown tables."""
     fv = FrameVariants(None, OUTS, REFS)
     print("## 1. Natural frequencies up to 700 Hz with stiff springs: largest relative error against the energy "
           "quotients\n")
