@@ -293,10 +293,10 @@ def _start(x0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,
-             fmax: float, folds: bool = True) -> PairFit:
+             fmax: float, folds: bool = True, folds_below: float = np.inf) -> PairFit:
     """Refine the two causes ``fits`` (their free parameters, choices kept) together on all modes, then
-    leave each mode out with both refitted from there (nested cross-validation; ``folds`` False: the
-    refinement alone, ``cv_per_mode`` empty)."""
+    leave each mode out with both refitted from there (nested cross-validation; ``folds`` False, or a chi2 on
+    all modes not below ``folds_below``: the refinement alone, ``cv_per_mode`` empty)."""
     free = [[s for s in spec.params if s.name in fit.free] for spec, fit in zip(specs, fits)]
     flat = [(i, s) for i, ss in enumerate(free) for s in ss]
     lo = np.array([s.x_bounds[0] for _, s in flat])
@@ -328,7 +328,7 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     allsel = np.ones(K, bool)
     x = solve(x0, allsel)
     chi2 = float(np.sum(resid(x, allsel) ** 2))
-    cv = np.empty(K if folds else 0)
+    cv = np.empty(K if folds and chi2 < folds_below else 0)
     for k in range(cv.size):
         sel = allsel.copy()
         sel[k] = False

@@ -751,7 +751,9 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     and judged (:func:`_second_cause`); ``held``: also a second cause of many options refined with it at every
     option, the ``N_SECOND`` best (:func:`_held_seconds`). Two changes of one cause split from ``first``
     (:func:`split_choice`) are taken in the grid's order, each while its lower bound says it could still win
-    (:func:`_win_target`; ``top``: the score of a named pair found elsewhere, which only a better named pair beats)."""
+    (:func:`_win_target`; ``top``: the score of a named pair found elsewhere, which only a better named pair beats);
+    a pair whose refined chi2 on all modes is not below that target is not cross-validated (its nested held-out
+    chi2 is at least its chi2 on all modes where the refinement reaches the least-squares minimum)."""
     fa: PhysicalFit = first["_fit"]
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
@@ -767,11 +769,14 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     best: dict | None = None
     for bound, fa2, fb in pairs:
         freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
-        if not bound.below(_win_target(best, top, judge.rule, first, float(np.sum(cv_alone)), freedom,
-                                       _freedom(specs[fb.cause], fb.free),
-                                       _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]))):
+        target = _win_target(best, top, judge.rule, first, float(np.sum(cv_alone)), freedom,
+                             _freedom(specs[fb.cause], fb.free),
+                             _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]))
+        if not bound.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`)
-        two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+        two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
+        if two.cv_per_mode.size < mm.freq_hz.size:
+            continue                        # refined on all modes, no better than ``target``: not cross-validated
         if gain_db(fa.cv_per_mode, two.cv_per_mode) >= judge.rule.physical_min_gain_db:
             two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
         two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
