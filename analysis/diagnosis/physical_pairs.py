@@ -122,13 +122,14 @@ class SplitBound:
     with the range's ends added, cut into cells whose corners bound the frequencies inside, :func:`_chi2_bound`),
     lifted on demand by splitting its lowest cells (:func:`analysis.diagnosis.physical._tighten`)."""
 
-    def __init__(self, screened: _Screened | None) -> None:
-        self._s = screened
+    def __init__(self, screened: _Screened | None, value: float = -np.inf) -> None:
+        self._s, self._value = screened, value
 
     def below(self, target: float) -> bool:
-        """Whether the pair's chi2 on all modes could be below ``target`` (True without a bound)."""
+        """Whether the pair's chi2 on all modes could be below ``target`` (``value`` without cells: a pair refined on
+        all modes, its chi2 there; -inf: none known)."""
         if self._s is None or self._s.at is None:
-            return True
+            return bool(self._value < target)
         if self._s.bound < target:
             _tighten(self._s.at, self._s, target)
         return bool(self._s.bound < target)

@@ -529,14 +529,15 @@ def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float
 
 
 def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-                  names: Sequence[str] | None) -> list[tuple[PhysicalFit, PhysicalFit]]:
+                  names: Sequence[str] | None) -> list[tuple[SplitBound, PhysicalFit, PhysicalFit]]:
     """Second causes of many options (an element's stiffness) refined with ``first`` at every option
-    (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom; the ``N_SECOND`` best as
-    (first refined, second)."""
-    ranked = [(chi2 + _freedom(spec, b.free), a, b) for spec in specs.values() if names is None or spec.name in names
+    (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom, each as (its chi2 on all modes
+    as its bound, :class:`SplitBound`; first refined, second): the pair's exact score is taken only while that
+    chi2 could still win (:func:`_on_top_of`)."""
+    ranked = [(chi2 + _freedom(spec, b.free), chi2, a, b) for spec in specs.values() if names is None or spec.name in names
               for chi2, a, b in held_open(sim, [specs[first.cause], spec], first, mm, fmax)]
     ranked.sort(key=lambda t: t[0])
-    return [(a, b) for _, a, b in ranked[:N_SECOND]]
+    return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
 
 
 def _named_pair(c: dict | None) -> bool:
@@ -749,7 +750,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
     (:func:`_seconds`, or :func:`_opened` with its choice held open) refined with it, cross-validated nested
     and judged (:func:`_second_cause`); ``held``: also a second cause of many options refined with it at every
-    option, the ``N_SECOND`` best (:func:`_held_seconds`). Two changes of one cause split from ``first``
+    option (:func:`_held_seconds`). Two changes of one cause split from ``first``
     (:func:`split_choice`) are taken in the grid's order, each while its lower bound says it could still win
     (:func:`_win_target`; ``top``: the score of a named pair found elsewhere, which only a better named pair beats);
     a pair whose refined chi2 on all modes is not below that target is not cross-validated (its nested held-out
@@ -764,7 +765,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
              + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
              + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
     if held:
-        pairs += [(unbounded, a, b) for a, b in _held_seconds(sim, specs, mm, fmax, fa, names)]
+        pairs += _held_seconds(sim, specs, mm, fmax, fa, names)
     n_seconds = max(1, len({fb.cause for _, _, fb in pairs}))
     best: dict | None = None
     for bound, fa2, fb in pairs:
