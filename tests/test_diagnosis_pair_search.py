@@ -414,11 +414,35 @@ def test_two_cracks_on_two_members_are_on_the_grid_of_every_two_elements() -> No
                           ("element_stiffness", {"element": "right:2", "factor": 0.5})])
     fit = PhysicalFit("element_stiffness", {"element": "left:3", "factor": 0.3}, ("factor",), np.inf)
     one = split_choice(fv, spec, fit, mm, FMAX)
-    assert all(a.params["element"].split(":")[0] == b.params["element"].split(":")[0] for a, b in one)
+    assert all(a.params["element"].split(":")[0] == b.params["element"].split(":")[0] for _, a, b in one)
     every = split_choice(fv, spec, fit, mm, FMAX, across=True)
-    at = [{a.params["element"], b.params["element"]} for a, b in every]
+    at = [{a.params["element"], b.params["element"]} for _, a, b in every]
     assert {"left:4", "right:2"} in at
-    a, b = every[at.index({"left:4", "right:2"})]
+    bound, a, b = every[at.index({"left:4", "right:2"})]
     two = fit_pair(fv, [spec, spec], [a, b], mm, FMAX, folds=False)
     factors = {p["element"]: p["factor"] for p in two.params}
     assert factors["left:4"] == pytest.approx(0.45, rel=1e-3) and factors["right:2"] == pytest.approx(0.5, rel=1e-3)
+
+
+def test_a_split_pair_outside_the_grids_best_is_kept_while_its_bound_could_win() -> None:
+    """Cracks at top:2 x 0.8 and right:5 x 0.9, milder than every grid level: the grid of every two elements ranks
+    the right pair far below its best five, so a fixed count would drop it; its lower bound over both factors'
+    ranges (the monotone cells, :class:`SplitBound`) cannot rule it out below chi2 1, so it is kept, refined from its
+    grid point it gives both cracks back, and pairs far from the data are ruled out by their bounds."""
+    from analysis.diagnosis.physical_pairs import split_choice
+
+    fv = FrameVariants(None, OUTS, REFS)
+    spec = _specs(fv)["element_stiffness"]
+    mm = _band_modes(fv, [("element_stiffness", {"element": "top:2", "factor": 0.8}),
+                          ("element_stiffness", {"element": "right:5", "factor": 0.9})])
+    fit = PhysicalFit("element_stiffness", {"element": "top:2", "factor": 0.3}, ("factor",), np.inf)
+    every = split_choice(fv, spec, fit, mm, FMAX, across=True)
+    at = [{a.params["element"], b.params["element"]} for _, a, b in every]
+    k = at.index({"top:2", "right:5"})
+    assert k >= 5 and len(every) == len(at) > k
+    bound, a, b = every[k]
+    assert bound.below(1.0)
+    assert not all(other.below(1.0) for other, _, _ in every[:12])
+    two = fit_pair(fv, [spec, spec], [a, b], mm, FMAX, folds=False)
+    factors = {p["element"]: p["factor"] for p in two.params}
+    assert factors["top:2"] == pytest.approx(0.8, rel=1e-3) and factors["right:5"] == pytest.approx(0.9, rel=1e-3)

@@ -38,6 +38,9 @@ from .physical import (
     PhysicalFit,
     PhysicalSimulation,
     ResidualsWithJacobian,
+    _Chi2,
+    _Screened,
+    _tighten,
     dv_dx,
     fit_cause,
     modes_jac,
@@ -46,8 +49,8 @@ from .physical import (
     variants,
 )
 
-__all__ = ["OnTop", "PairFit", "as_places", "besides", "fit_pair", "held_open", "changes_of", "refit_on_top", "rechoose",
-           "split_choice", "split_places", "splits", "with_options", "pair_starts"]
+__all__ = ["OnTop", "PairFit", "SplitBound", "as_places", "besides", "fit_pair", "held_open", "changes_of", "refit_on_top",
+           "rechoose", "split_choice", "split_places", "splits", "with_options", "pair_starts"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -102,36 +105,74 @@ def splits(spec: CauseSpec) -> bool:
     return spec.choice == "element" and spec.every is None and len(spec.options) > N_SCREEN
 
 
+class _SplitGrid:
+    """The cause of ``fit`` at the two options ``at`` (its choice ``choice``), its factor ``name`` free at each: the
+    simulation :class:`analysis.diagnosis.physical._Chi2` asks for the modes of the pair's two factors ``a``, ``b``."""
+
+    def __init__(self, sim: PhysicalSimulation, fit: PhysicalFit, choice: str, name: str, at: tuple[str, str]) -> None:
+        self.sim, self.fit, self.choice, self.name, self.at = sim, fit, choice, name, at
+
+    def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        two = [(self.fit.cause, {**self.fit.params, self.choice: o, self.name: params[k]}) for o, k in zip(self.at, "ab")]
+        return changes_of(self.sim, two, max_freq_hz)
+
+
+class SplitBound:
+    """A lower bound of a split pair's chi2 on all modes over the whole range of both factors (monotone: the grid
+    with the range's ends added, cut into cells whose corners bound the frequencies inside, :func:`_chi2_bound`),
+    lifted on demand by splitting its lowest cells (:func:`analysis.diagnosis.physical._tighten`)."""
+
+    def __init__(self, screened: _Screened | None, value: float = -np.inf) -> None:
+        self._s, self._value = screened, value
+
+    def below(self, target: float) -> bool:
+        """Whether the pair's chi2 on all modes could be below ``target`` (``value`` without cells: a pair refined on
+        all modes, its chi2 there; -inf: none known)."""
+        if self._s is None or self._s.at is None:
+            return bool(self._value < target)
+        if self._s.bound < target:
+            _tighten(self._s.at, self._s, target)
+        return bool(self._s.bound < target)
+
+
 def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm: MeasuredModes, fmax: float,
-                 n: int = N_SCREEN, across: bool = False) -> list[tuple[PhysicalFit, PhysicalFit]]:
+                 across: bool = False) -> list[tuple[SplitBound, PhysicalFit, PhysicalFit]]:
     """The change of ``fit`` as two of its kind on one member (two cracks in one column): an element's
     stiffness (a choice ``element`` among more than ``N_SCREEN`` options ``member:e``, factors: log, nominal 1)
     fitted alone stands for two such changes by one deeper change at one element, often neither of theirs, and a
     second element fitted on top of it explains too little. Pairs to refine: every two elements of one member on a
-    grid of their factors (:data:`SPLIT_POWERS`), the ``n`` with the least chi2 there (each at its best grid
-    point). Two elements of different members are found as a second change on top of the first (:func:`besides`);
-    ``across``: every two elements, of one member or not, are on the grid too (no single element is named, so
-    the first element fitted alone may sit at neither crack). Empty for any other cause."""
+    grid of their factors (:data:`SPLIT_POWERS`), each at its best grid point, in the order of their least chi2
+    there, each with a lower bound of its chi2 on all modes over the whole range of both factors
+    (:class:`SplitBound`; none when the factor is not :attr:`ParamSpec.monotone`). The grid only orders the pairs;
+    the bound says which could still beat a pair already judged. Two elements of different members are found as a
+    second change on top of the first (:func:`besides`); ``across``: every two elements, of one member or not, are
+    on the grid too (no single element is named, so the first element fitted alone may sit at neither crack).
+    Returns ``[(bound, first, second)]``; empty for any other cause."""
     free = [s for s in spec.params if s.name in fit.free]
     if not splits(spec) or len(free) != 1 or not free[0].log or free[0].nominal != 1.0:
         return []
-    name = free[0].name
-    levels = [free[0].lo ** w for w in SPLIT_POWERS]
+    name, ps = free[0].name, free[0]
+    levels = [ps.lo ** w for w in SPLIT_POWERS]
+    two_spec = CauseSpec(f"two {spec.name}", (replace(ps, name="a"), replace(ps, name="b")))
+    ends = [ps.to_x(v) for v in sorted({ps.lo, ps.hi, *levels})]
+    cells = [tuple(box) for box in product(zip(ends[:-1], ends[1:]), repeat=2)]
+    allsel = np.ones(mm.freq_hz.size, bool)
     ranked = []
     for a, b in combinations(spec.options, 2):
         if not across and _member(a) != _member(b):
             continue
-        best: tuple[float, tuple[dict, dict]] = (np.inf, ({}, {}))
-        for fa, fb in product(levels, levels):
-            two = ({**fit.params, spec.choice: a, name: fa}, {**fit.params, spec.choice: b, name: fb})
-            f, P = changes_of(sim, [(fit.cause, two[0]), (fit.cause, two[1])], fmax)
-            c = float(np.sum(residuals(mm, f, P) ** 2))
-            if c < best[0]:
-                best = (c, two)
-        ranked.append(best)
+        at = _Chi2(_SplitGrid(sim, fit, str(spec.choice), name, (a, b)), two_spec,  # type: ignore[arg-type]
+                   two_spec.params, {}, mm, allsel, fmax, "")
+        c, fa, fb = min((at.at((ps.to_x(fa), ps.to_x(fb)))[0], fa, fb) for fa, fb in product(levels, levels))
+        screened = None
+        if ps.monotone:
+            bounded = [(at.bound(box), box) for box in cells]
+            screened = _Screened(c, "", {}, min(t[0] for t in bounded), bounded, at)
+        two = ({**fit.params, spec.choice: a, name: fa}, {**fit.params, spec.choice: b, name: fb})
+        ranked.append((c, SplitBound(screened), two))
     ranked.sort(key=lambda t: t[0])
-    return [tuple(PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=np.inf) for p in two)  # type: ignore[misc]
-            for _, two in ranked[:n]]
+    return [(bound, *(PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=np.inf) for p in two))  # type: ignore[misc]
+            for _, bound, two in ranked]
 
 
 def held_open(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: PhysicalFit, mm: MeasuredModes,
@@ -253,10 +294,10 @@ def _start(x0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,
-             fmax: float, folds: bool = True) -> PairFit:
+             fmax: float, folds: bool = True, folds_below: float = np.inf) -> PairFit:
     """Refine the two causes ``fits`` (their free parameters, choices kept) together on all modes, then
-    leave each mode out with both refitted from there (nested cross-validation; ``folds`` False: the
-    refinement alone, ``cv_per_mode`` empty)."""
+    leave each mode out with both refitted from there (nested cross-validation; ``folds`` False, or a chi2 on
+    all modes not below ``folds_below``: the refinement alone, ``cv_per_mode`` empty)."""
     free = [[s for s in spec.params if s.name in fit.free] for spec, fit in zip(specs, fits)]
     flat = [(i, s) for i, ss in enumerate(free) for s in ss]
     lo = np.array([s.x_bounds[0] for _, s in flat])
@@ -288,7 +329,7 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     allsel = np.ones(K, bool)
     x = solve(x0, allsel)
     chi2 = float(np.sum(resid(x, allsel) ** 2))
-    cv = np.empty(K if folds else 0)
+    cv = np.empty(K if folds and chi2 < folds_below else 0)
     for k in range(cv.size):
         sel = allsel.copy()
         sel[k] = False

@@ -65,6 +65,7 @@ from .physical import (
 )
 from .physical_pairs import (
     OnTop,
+    SplitBound,
     as_places,
     fit_pair,
     held_open,
@@ -528,14 +529,15 @@ def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float
 
 
 def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-                  names: Sequence[str] | None) -> list[tuple[PhysicalFit, PhysicalFit]]:
+                  names: Sequence[str] | None) -> list[tuple[SplitBound, PhysicalFit, PhysicalFit]]:
     """Second causes of many options (an element's stiffness) refined with ``first`` at every option
-    (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom; the ``N_SECOND`` best as
-    (first refined, second)."""
-    ranked = [(chi2 + _freedom(spec, b.free), a, b) for spec in specs.values() if names is None or spec.name in names
+    (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom, each as (its chi2 on all modes
+    as its bound, :class:`SplitBound`; first refined, second): the pair's exact score is taken only while that
+    chi2 could still win (:func:`_on_top_of`)."""
+    ranked = [(chi2 + _freedom(spec, b.free), chi2, a, b) for spec in specs.values() if names is None or spec.name in names
               for chi2, a, b in held_open(sim, [specs[first.cause], spec], first, mm, fmax)]
     ranked.sort(key=lambda t: t[0])
-    return [(a, b) for _, a, b in ranked[:N_SECOND]]
+    return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
 
 
 def _named_pair(c: dict | None) -> bool:
@@ -664,7 +666,7 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     for first in _local_firsts(sim, specs, mm, fmax, found, judge, local):
         if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
             continue
-        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True)
+        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top)
         out = _better(out, c)
         if _named_pair(out):
             top = min(top, out["_chi2_cv"])                       # type: ignore[index]
@@ -725,31 +727,63 @@ def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
     return {**judge.single(spec, fit), "_alone_cv": cv, "_alone_chi2": alone.chi2}
 
 
+def _win_target(best: dict | None, top: float, rule: DecisionRule, first: dict, cv_alone: float, freedom: float,
+                own: float, penalty: float) -> float:
+    """The chi2 on all modes a pair must come below to beat ``best`` (the best judged pair so far) or a named pair
+    of score ``top`` found elsewhere (:func:`_better`); inf: any pair could. A pair's refined chi2 on all modes is
+    at least the least chi2 ``min S`` over its parameters, and so is its nested held-out chi2: with each fit at its
+    least-squares minimum, fold k's held-out chi2 is its fit's chi2 on all modes less that on the other modes, at
+    least ``min S - S_-k(x*)`` (``x*`` the all-modes minimum), which sums over the folds to at least ``min S``. So a
+    pair whose ``min S`` exceeds what it may keep on all modes (``first``'s chi2 alone less the second cause's
+    ``own`` freedom) or held out (``cv_alone`` less ``freedom`` and ``rule.quiet_chi2``, :func:`_on_top_enough`)
+    cannot be named, and its score is at least ``min S`` plus its choices' ``penalty``: one that cannot be named
+    and cannot score below ``best``, or that cannot score below a named pair, cannot win."""
+    nameable = min(first["_alone_chi2"] - own, cv_alone - freedom - rule.quiet_chi2)
+    named_top = min(top, best["_chi2_cv"] if _named_pair(best) else np.inf)    # type: ignore[index]
+    if np.isfinite(named_top):
+        return float(min(nameable, named_top - penalty))
+    return np.inf if best is None else float(max(nameable, best["_chi2_cv"] - penalty))
+
+
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
-               names: Sequence[str] | None, opened: bool, held: bool = False) -> dict | None:
+               names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf) -> dict | None:
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
     (:func:`_seconds`, or :func:`_opened` with its choice held open) refined with it, cross-validated nested
     and judged (:func:`_second_cause`); ``held``: also a second cause of many options refined with it at every
-    option, the ``N_SECOND`` best (:func:`_held_seconds`)."""
+    option (:func:`_held_seconds`). Two changes of one cause split from ``first``
+    (:func:`split_choice`) are taken in the grid's order, each while its lower bound says it could still win
+    (:func:`_win_target`; ``top``: the score of a named pair found elsewhere, which only a better named pair beats);
+    a pair whose refined chi2 on all modes is not below that target is not cross-validated (its nested held-out
+    chi2 is at least its chi2 on all modes where the refinement reaches the least-squares minimum)."""
     fa: PhysicalFit = first["_fit"]
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
-    pairs = (_opened(sim, specs, mm, fmax, fa, names) if opened else
-             [(refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
-              for fb in _seconds(sim, specs, mm, fmax, fa, names)] + split_places(specs[fa.cause], fa)
+    unbounded = SplitBound(None)
+    pairs = ([(unbounded, a, b) for a, b in _opened(sim, specs, mm, fmax, fa, names)] if opened else
+             [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
+              for fb in _seconds(sim, specs, mm, fmax, fa, names)]
+             + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
              + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
     if held:
         pairs += _held_seconds(sim, specs, mm, fmax, fa, names)
-    n_seconds = max(1, len({fb.cause for _, fb in pairs}))
+    n_seconds = max(1, len({fb.cause for _, _, fb in pairs}))
     best: dict | None = None
-    for fa2, fb in pairs:
-        two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+    for bound, fa2, fb in pairs:
+        freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
+        target = _win_target(best, top, judge.rule, first, float(np.sum(cv_alone)), freedom,
+                             _freedom(specs[fb.cause], fb.free),
+                             _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]))
+        if not bound.below(target):
+            continue                        # its exact score cannot win (:func:`_win_target`)
+        two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
+        if two.cv_per_mode.size < mm.freq_hz.size:
+            continue                        # refined on all modes, no better than ``target``: not cross-validated
         if gain_db(fa.cv_per_mode, two.cv_per_mode) >= judge.rule.physical_min_gain_db:
             two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
         two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
-            cv_alone, two.cv_per_mode, 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause]), judge.rule)
+            cv_alone, two.cv_per_mode, freedom, judge.rule)
         # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
         # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
         kept = first["_alone_chi2"] - two.chi2 >= _freedom(specs[fb.cause], fb.free)
