@@ -252,7 +252,11 @@ def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, n
 def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
     """(K, 2) residuals ``(r_f, r_m)`` per measured mode (module docstring), each bounded smoothly by
     ``RESIDUAL_CAP`` (``c tanh(r / c)``); an unpaired mode gets the cap and MAC 0."""
-    idx, macs = pair(mm, f, P)
+    return RESIDUAL_CAP * np.tanh(_raw_residuals(mm, f, *pair(mm, f, P)) / RESIDUAL_CAP)
+
+
+def _raw_residuals(mm: MeasuredModes, f: np.ndarray, idx: np.ndarray, macs: np.ndarray) -> np.ndarray:
+    """(K, 2) residuals before the cap, given the pairing ``idx`` (-1: unpaired) and the MACs of :func:`pair`."""
     r = np.empty((mm.freq_hz.size, 2))
     ok = idx >= 0
     if ok.all():
@@ -261,7 +265,7 @@ def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
         r[ok, 0] = (f[idx[ok]] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
         r[~ok, 0] = RESIDUAL_CAP
     r[:, 1] = (1.0 - macs) / MAC_TOL
-    return RESIDUAL_CAP * np.tanh(r / RESIDUAL_CAP)
+    return r
 
 
 def residuals_jac(mm: MeasuredModes, f: np.ndarray, P: np.ndarray, df: np.ndarray, dP: np.ndarray
@@ -273,15 +277,10 @@ def residuals_jac(mm: MeasuredModes, f: np.ndarray, P: np.ndarray, df: np.ndarra
     (P_j . dP_j) / |P_j|^2``; an unpaired mode's and a mode without shape's residuals are constant; the cap
     ``c tanh(r / c)`` multiplies them by ``1 - tanh^2(r / c)``."""
     idx, macs = pair(mm, f, P)
-    K, n = mm.freq_hz.size, df.shape[1]
-    raw = np.empty((K, 2))
-    J = np.zeros((K, 2, n))
+    raw = _raw_residuals(mm, f, idx, macs)
+    J = np.zeros((mm.freq_hz.size, 2, df.shape[1]))
     ok = idx >= 0
-    j = idx[ok]
-    raw[ok, 0] = (f[j] / mm.freq_hz[ok] - 1.0) / mm.sigma[ok]
-    raw[~ok, 0] = RESIDUAL_CAP
-    raw[:, 1] = (1.0 - macs) / MAC_TOL
-    J[ok, 0] = df[j] / (mm.freq_hz[ok] * mm.sigma[ok])[:, None]
+    J[ok, 0] = df[idx[ok]] / (mm.freq_hz[ok] * mm.sigma[ok])[:, None]
     shaped = np.flatnonzero(ok & ~mm._no_shape)
     if shaped.size:
         Pj = P[:, idx[shaped]]                                   # (N, m)
