@@ -162,3 +162,80 @@ def test_the_scatters_global_cause_is_always_tried_on_top_of_a_first_cause():
     tried = [s.cause for s in _seconds(fleet, specs, mm, 2 * float(f[-1]), first, None, n=1)]
     assert tried == ["m1", GLOBAL_CAUSE]                      # and a fleet's unit tries its scatter's cause too
     assert [s.cause for s in _seconds(fleet, specs, mm, 2 * float(f[-1]), first, None, n=None)][0] == "m1"
+
+
+# ------------------------------------------------------------------ the fleet's simulation of the FE frame
+OUTS = ["right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y"]
+REFS = ["right:6:-X", "top:4:Z"]
+FMAX = 500.0
+K = 1.03
+
+
+@pytest.fixture(scope="module")
+def frame_fleet() -> ScatterSimulation:
+    from simulator.physical import FrameVariants
+
+    return ScatterSimulation(FrameVariants(None, OUTS, REFS))
+
+
+def _moved(changes: list, i: int, name: str, v: float) -> list:
+    out = list(changes)
+    out[i] = (changes[i][0], {**changes[i][1], name: v})
+    return out
+
+
+@pytest.mark.parametrize("changes, wrt", [
+    ([("element_stiffness", {"element": "top:1", "factor": 0.4}), (GLOBAL_CAUSE, {"stiffness_factor": K})],
+     [(0, "factor"), (1, "stiffness_factor")]),
+    ([(GLOBAL_CAUSE, {"stiffness_factor": K}),
+      ("joint_stiffness", {"joint": "left:10", "factor_translational": 0.1, "factor_rotational": 0.3})],
+     [(1, "factor_translational"), (0, "stiffness_factor"), (1, "factor_rotational")]),
+    ([(GLOBAL_CAUSE, {"stiffness_factor": K})], [(0, "stiffness_factor")]),
+    ([("support_stiffness", {"support": "left:0", "factor_translational": 0.2, "factor_rotational": 0.5}),
+      (GLOBAL_CAUSE, {"stiffness_factor": K})], [(0, "factor_translational")]),
+], ids=["crack+global", "global+joint", "global", "support+global(support only)"])
+def test_the_fleets_modes_derivatives_are_the_scaled_full_models_differences(frame_fleet, changes, wrt):
+    """The fleet's simulation of the FE frame gives the modes' derivatives (so its fits take the analytic Jacobian):
+    frequencies and shape products as its ``modes_of``, derivatives as central differences of its full model (every
+    stiffness scaled by the global factor) within 1e-5 (frequencies) and 1e-4 (shape products) of the largest."""
+    assert frame_fleet.modes_jac_of is not None
+    f, P, df, dP = frame_fleet.modes_jac_of(changes, FMAX, wrt)
+    g, Q = frame_fleet.modes_of(changes, FMAX)
+    np.testing.assert_allclose(f, g, rtol=1e-8)
+    np.testing.assert_allclose(P, Q, atol=1e-5 * np.abs(Q).max())
+    assert df.shape == (f.size, len(wrt)) and dP.shape == (*P.shape, len(wrt))
+    for j, (i, name) in enumerate(wrt):
+        v = float(changes[i][1][name])
+        h = 1e-4 * v
+        fu, Pu = frame_fleet.exact_modes_of(_moved(changes, i, name, v + h), FMAX)
+        fd, Pd = frame_fleet.exact_modes_of(_moved(changes, i, name, v - h), FMAX)
+        dg, dQ = (fu - fd) / (2 * h), (Pu - Pd) / (2 * h)
+        assert np.max(np.abs(df[:, j] - dg)) <= 1e-5 * np.max(np.abs(dg))
+        assert np.max(np.abs(dP[:, :, j] - dQ)) <= 1e-4 * max(np.max(np.abs(dQ)), np.abs(P).max() * 1e-3)
+
+
+def test_the_fleets_frame_with_changes_applied_is_that_frame(frame_fleet):
+    """``on_top(first)``: the fleet's frame with ``first`` (a crack and the global cause) as its nominal; its modes
+    and derivatives of further changes are those of ``first + changes`` on the fleet's frame (reduced models of
+    different bases: within 1e-6 on the frequencies)."""
+    crack = ("element_stiffness", {"element": "top:1", "factor": 0.4})
+    glob = (GLOBAL_CAUSE, {"stiffness_factor": K})
+    joint = ("joint_stiffness", {"joint": "left:10", "factor_translational": 0.1, "factor_rotational": 0.3})
+    for first in ([crack, glob], [glob], [crack]):
+        top = frame_fleet.on_top(first)
+        assert isinstance(top, ScatterSimulation)
+        for more in ([joint], [glob, joint], []):
+            want = frame_fleet.exact_modes_of([*first, *more], FMAX)
+            got = top.modes_of(more, FMAX)
+            np.testing.assert_allclose(got[0], want[0], rtol=1e-6)
+            np.testing.assert_allclose(np.abs(got[1]), np.abs(want[1]), atol=1e-4 * np.abs(want[1]).max())
+            np.testing.assert_allclose(top.exact_modes_of(more, FMAX)[0], want[0], rtol=1e-9)
+        f, _, df, _ = top.modes_jac_of([joint], FMAX, [(0, "factor_translational")])
+        f1, _, df1, _ = frame_fleet.modes_jac_of([*first, joint], FMAX, [(len(first), "factor_translational")])
+        np.testing.assert_allclose(f, f1, rtol=1e-6)
+        np.testing.assert_allclose(df, df1, atol=1e-4 * np.abs(df1).max())
+
+
+def test_the_fleets_simulation_offers_derivatives_and_changed_frames_only_when_the_wrapped_one_does():
+    fleet = ScatterSimulation(Chain())
+    assert not hasattr(fleet, "modes_jac_of") and not hasattr(fleet, "on_top")

@@ -38,7 +38,7 @@ Changes = Sequence[tuple[str, Mapping]]
 
 
 def _split(changes: Changes) -> tuple[float, list[tuple[str, Mapping]]]:
-    """The frequency factor (-) of the global cause among ``changes`` (1 without it) and the other changes."""
+    """The stiffness factor (-) of the global cause among ``changes`` (1 without it) and the other changes."""
     k = 1.0
     rest = []
     for cause, params in changes:
@@ -46,29 +46,39 @@ def _split(changes: Changes) -> tuple[float, list[tuple[str, Mapping]]]:
             k *= float(params.get("stiffness_factor", 1.0))
         else:
             rest.append((cause, params))
-    return float(np.sqrt(k)), rest
+    return k, rest
 
 
 class ScatterSimulation:
     """A physical simulation (the protocol of :class:`analysis.diagnosis.physical.PhysicalSimulation`) whose
     global cause :data:`GLOBAL_CAUSE` scales every stiffness (module docstring); the other causes, their answers
-    and the simulation's other attributes are the wrapped simulation's. A method it cannot answer exactly for
-    the scaled frame is not offered (a first pass's bounds); a model with residual terms is refused."""
+    and the simulation's other attributes are the wrapped simulation's. ``stiffness_factor``: the global cause's
+    factor applied before every candidate's (:meth:`on_top`). A method it cannot answer exactly for the scaled
+    frame is not offered (a first pass's bounds); the modes' derivatives (``modes_jac_of``) and a frame with
+    changes applied (``on_top``) are offered when the wrapped simulation has them. A model with residual terms is
+    refused."""
 
     #: the cause a unit's scatter takes: tried as a second cause on top of every first
     #: (:func:`analysis.diagnosis.physical_verdict._seconds`)
     scatter_cause = GLOBAL_CAUSE
 
-    def __init__(self, sim: Any) -> None:
+    def __init__(self, sim: Any, stiffness_factor: float = 1.0) -> None:
         self.simulation = sim
+        self.stiffness_factor = float(stiffness_factor)
 
     def causes(self) -> tuple:
         return tuple(replace(c, description=_DESCRIPTION) if c.name == GLOBAL_CAUSE else c
                      for c in self.simulation.causes())
 
+    def _scale(self, changes: Changes) -> tuple[float, list[tuple[str, Mapping]]]:
+        """The frequency factor (-) of ``changes`` on this frame (its own global factor included) and the other
+        changes."""
+        k, rest = _split(changes)
+        return float(np.sqrt(self.stiffness_factor * k)), rest
+
     def _solved(self, solve: Callable[[list, float], tuple[np.ndarray, np.ndarray]], changes: Changes,
                 max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
-        s, rest = _split(changes)
+        s, rest = self._scale(changes)
         if s == 1.0:
             return solve(rest, max_freq_hz)
         f, P = solve(rest, max_freq_hz / s)
@@ -89,13 +99,54 @@ class ScatterSimulation:
         """:meth:`modes` of the frame changed by every ``(cause, params)`` of ``changes``."""
         return self._solved(self._modes, changes, max_freq_hz)
 
+    def _modes_jac_of(self, changes: Changes, max_freq_hz: float, wrt: Sequence[tuple[int, str]]
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """:meth:`modes_of` with the derivatives of the natural frequencies (Hz per unit) and of the shape
+        products with respect to the parameters ``wrt`` (``(i, name)`` of ``changes[i]``), as the wrapped
+        simulation's ``modes_jac_of``. With ``s`` the frequency factor of the global causes (their stiffness factors
+        ``k_i`` multiplied): ``f = s f_rest``, so ``df/dp = s df_rest/dp`` for a parameter of another cause and
+        ``df/dk_i = f / (2 k_i)``; the shapes do not move with ``s``. None when the wrapped simulation gives no
+        derivatives for the other changes."""
+        s, rest = self._scale(changes)
+        at = [j for j, (c, _) in enumerate(changes) if c != GLOBAL_CAUSE]       # changes[at[r]] is rest[r]
+        theirs = [(at.index(i), name) for i, name in wrt if changes[i][0] != GLOBAL_CAUSE]
+        if theirs:
+            got = self.simulation.modes_jac_of(rest, max_freq_hz / s, theirs)
+            if got is None:
+                return None
+            f0, P, df0, dP0 = got
+        else:
+            f0, P = self._modes(rest, max_freq_hz / s)
+            df0, dP0 = np.zeros((np.size(f0), 0)), np.zeros((*np.shape(P), 0))
+        f = np.asarray(f0) * s
+        df = np.zeros((f.size, len(wrt)))
+        dP = np.zeros((*np.shape(P), len(wrt)))
+        r = 0
+        for j, (i, name) in enumerate(wrt):
+            cause, params = changes[i]
+            if cause == GLOBAL_CAUSE:
+                if name == "stiffness_factor":
+                    df[:, j] = f / (2.0 * float(params.get("stiffness_factor", 1.0)))
+                continue
+            df[:, j] = s * np.asarray(df0)[:, r]
+            dP[:, :, j] = np.asarray(dP0)[:, :, r]
+            r += 1
+        return f, P, df, dP
+
+    def _on_top(self, first: Changes) -> ScatterSimulation:
+        """This frame with the changes ``first`` applied as its nominal (``modes_of(changes)`` is this frame's
+        ``modes_of(first + changes)``): the global cause's factor carried here, the other changes applied by the
+        wrapped simulation's ``on_top`` (its bases built on the changed frame)."""
+        k, rest = _split(first)
+        return ScatterSimulation(self.simulation.on_top(rest) if rest else self.simulation, self.stiffness_factor * k)
+
     def model(self, cause: str | None, params: Mapping) -> Any:
         """The pole-residue model of the frame changed by ``cause``."""
         return self.model_of([] if cause is None else [(cause, params)])
 
     def model_of(self, changes: Changes) -> Any:
         """:meth:`model` of the frame changed by every ``(cause, params)`` of ``changes``."""
-        s, rest = _split(changes)
+        s, rest = self._scale(changes)
         sim = self.simulation
         model = (sim.model(None, {}) if not rest else sim.model(*rest[0]) if len(rest) == 1 else sim.model_of(rest))
         return model if s == 1.0 else scaled_model(model, s)
@@ -107,8 +158,12 @@ class ScatterSimulation:
         attr = getattr(sim, name)              # AttributeError when the simulation has none
         if name == "exact_modes_of":
             return lambda changes, max_freq_hz: self._solved(attr, changes, max_freq_hz)
+        if name == "modes_jac_of":
+            return self._modes_jac_of
+        if name == "on_top":
+            return self._on_top
         if name == "at_points":
-            return lambda outputs, references: ScatterSimulation(attr(outputs, references))
+            return lambda outputs, references: ScatterSimulation(attr(outputs, references), self.stiffness_factor)
         if callable(attr) and name not in ("points", "refined_model", "converged_below_hz"):
             raise AttributeError(f"{name}: not offered by a fleet's simulation")
         return attr
