@@ -239,3 +239,33 @@ def test_the_fleets_frame_with_changes_applied_is_that_frame(frame_fleet):
 def test_the_fleets_simulation_offers_derivatives_and_changed_frames_only_when_the_wrapped_one_does():
     fleet = ScatterSimulation(Chain())
     assert not hasattr(fleet, "modes_jac_of") and not hasattr(fleet, "on_top")
+
+
+def test_a_candidate_asked_at_nearby_bands_and_factors_is_one_question_to_the_simulation():
+    """Each flagged unit asks for modes up to its own band (moved by its scatter) and, with the global cause, up to
+    the band over the frequency factor: the fleet's simulation asks the wrapped one up to the next step of one log
+    grid (so the wrapped simulation's kept answers serve every unit) and cuts the modes at the band asked for."""
+    from analysis.batch.scatter import solve_limit_hz
+
+    class Asked(Chain):
+        def __init__(self) -> None:
+            self.asked: list[float] = []
+
+        def modes_of(self, changes: list, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+            self.asked.append(float(max_freq_hz))
+            return Chain.modes_of(self, changes, max_freq_hz)
+
+    chain = Asked()
+    fleet = ScatterSimulation(chain)
+    f_all = Chain().modes(None, {}, 1e4)[0]
+    step = solve_limit_hz(1.05 * float(f_all[1]))     # a step of the grid above the second mode, below the third
+    assert f_all[2] > step
+    band = step / 1.012
+    support = ("support", {"factor": 0.5})
+    for top in (band, 1.004 * band):
+        for k in (1.0, 1.002 ** 2, 0.999 ** 2):
+            got = fleet.modes_of([support, (GLOBAL_CAUSE, {"stiffness_factor": k})], top)
+            want = Chain().modes_of([support, ("all", {"factor": k})], top)
+            np.testing.assert_allclose(got[0], want[0], rtol=1e-12)        # cut at the band asked for
+            np.testing.assert_allclose(got[1], want[1], rtol=1e-10)
+    assert set(chain.asked) == {step}

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["GLOBAL_CAUSE", "ScatterSimulation", "for_fleet"]
+__all__ = ["GLOBAL_CAUSE", "LIMIT_STEPS_PER_OCTAVE", "ScatterSimulation", "for_fleet", "solve_limit_hz"]
 
 #: the cause that scales the whole frame in a fleet diagnosis (its parameter ``stiffness_factor``)
 GLOBAL_CAUSE = "stiffness_shift"
@@ -35,6 +35,18 @@ _DESCRIPTION = ("every stiffness of the unit scaled alike (members and the joint
                 "frequency by the square root of the factor, the mode shapes unchanged - a fleet's manufacturing scatter")
 
 Changes = Sequence[tuple[str, Mapping]]
+
+#: Steps per octave of the frequencies a fleet's frame is solved up to (:func:`solve_limit_hz`; 2.2 % apart).
+LIMIT_STEPS_PER_OCTAVE = 32
+
+
+def solve_limit_hz(max_freq_hz: float) -> float:
+    """The frequency (Hz) the fleet's frame is solved up to for modes below ``max_freq_hz``: the next step of a log
+    grid (:data:`LIMIT_STEPS_PER_OCTAVE`) at or above it. Each flagged unit asks for modes up to its own band (1.5
+    times its highest measured mode, which the fleet's scatter moves by about a percent) and, with the global cause,
+    up to that band over the frequency factor; solved up to the grid's step and cut at the band, a candidate
+    asked by every unit (a screen's grid point) or at nearby factors is one question, kept by the simulation."""
+    return float(2.0 ** (np.ceil(np.log2(float(max_freq_hz)) * LIMIT_STEPS_PER_OCTAVE) / LIMIT_STEPS_PER_OCTAVE))
 
 
 def _split(changes: Changes) -> tuple[float, list[tuple[str, Mapping]]]:
@@ -79,10 +91,10 @@ class ScatterSimulation:
     def _solved(self, solve: Callable[[list, float], tuple[np.ndarray, np.ndarray]], changes: Changes,
                 max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
         s, rest = self._scale(changes)
-        if s == 1.0:
-            return solve(rest, max_freq_hz)
-        f, P = solve(rest, max_freq_hz / s)
-        return np.asarray(f) * s, P
+        top = max_freq_hz / s
+        f, P = solve(rest, solve_limit_hz(top))
+        n = int(np.count_nonzero(np.asarray(f) < top))          # ascending: the modes below the band's top
+        return np.asarray(f)[:n] * s, np.asarray(P)[:, :n]
 
     def _modes(self, rest: list, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
         if not rest:
@@ -108,17 +120,20 @@ class ScatterSimulation:
         ``df/dk_i = f / (2 k_i)``; the shapes do not move with ``s``. None when the wrapped simulation gives no
         derivatives for the other changes."""
         s, rest = self._scale(changes)
+        top = max_freq_hz / s
         at = [j for j, (c, _) in enumerate(changes) if c != GLOBAL_CAUSE]       # changes[at[r]] is rest[r]
         theirs = [(at.index(i), name) for i, name in wrt if changes[i][0] != GLOBAL_CAUSE]
         if theirs:
-            got = self.simulation.modes_jac_of(rest, max_freq_hz / s, theirs)
+            got = self.simulation.modes_jac_of(rest, solve_limit_hz(top), theirs)
             if got is None:
                 return None
             f0, P, df0, dP0 = got
         else:
-            f0, P = self._modes(rest, max_freq_hz / s)
+            f0, P = self._modes(rest, solve_limit_hz(top))
             df0, dP0 = np.zeros((np.size(f0), 0)), np.zeros((*np.shape(P), 0))
-        f = np.asarray(f0) * s
+        n = int(np.count_nonzero(np.asarray(f0) < top))
+        f0, P, df0, dP0 = np.asarray(f0)[:n], np.asarray(P)[:, :n], np.asarray(df0)[:n], np.asarray(dP0)[:, :n]
+        f = f0 * s
         df = np.zeros((f.size, len(wrt)))
         dP = np.zeros((*np.shape(P), len(wrt)))
         r = 0
