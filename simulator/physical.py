@@ -51,6 +51,7 @@ import copy
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -225,16 +226,27 @@ def damage_changes(damage: DamageConfig) -> list[tuple[str, dict]]:
     return out
 
 
-#: Candidates' modes kept (:meth:`FrameVariants.modes_of`) before the store is emptied.
+#: Candidates' modes kept (:meth:`FrameVariants.modes_of`), the least recently used dropped first: a batch worker's
+#: simulation serves every flagged unit of a fleet, and the candidates every unit asks (a screen's grid points) stay
+#: while each unit's own come and go.
 _MEMO_SIZE = 20000
-#: Candidates' modes with their derivatives kept (:meth:`FrameVariants.modes_jac_of`) before the store is emptied: the
-#: folds of a cross-validation all start from the whole fit's optimum, each asking the same derivatives there.
+#: Candidates' modes with their derivatives kept (:meth:`FrameVariants.modes_jac_of`), the least recently used
+#: dropped first: the folds of a cross-validation all start from the whole fit's optimum, each asking the same
+#: derivatives there.
 _JAC_MEMO_SIZE = 256
 #: Frames with changes applied as their nominal (:meth:`FrameVariants.on_top`) kept before the store is emptied:
 #: each holds four matrices of the frame's size (its K, M, nominal modes and Cholesky factor: 32 bytes per squared
 #: degree of freedom) and its reduced spaces; counted in :data:`DIAGNOSIS_BYTES_PER_DOF2`.
 #: A search on top of a first cause uses one at a time.
 _TOPS_KEPT = 2
+
+
+def _keep(store: dict, key: tuple, value: Any, size: int) -> None:
+    """``store[key] = value`` as the most recently used (last), the least recently used dropped beyond ``size``."""
+    store.pop(key, None)
+    while len(store) >= size:
+        store.pop(next(iter(store)))
+    store[key] = value
 
 
 def _differences(after: Mapping, before: Mapping, h: float) -> dict:
@@ -431,17 +443,16 @@ class FrameVariants:
         :attr:`reduced`, else (and when the basis would not be much smaller) the full model. The answers
         are kept: a candidate asked again is not solved again."""
         key = (tuple((c, tuple(sorted(p.items()))) for c, p in changes), float(max_freq_hz), self.reduced)
-        hit = self._memo.get(key)
+        hit = self._memo.pop(key, None)
         if hit is not None:
+            self._memo[key] = hit                 # the latest used last: the least recently used go first
             return hit
         out = self._modes_reduced(changes, max_freq_hz) if self.reduced and changes else None
         if out is None:
             out = self.exact_modes_of(changes, max_freq_hz)
         for a in out:
             a.setflags(write=False)
-        if len(self._memo) >= _MEMO_SIZE:
-            self._memo.clear()
-        self._memo[key] = out
+        _keep(self._memo, key, out, _MEMO_SIZE)
         return out
 
     def exact_modes_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float
@@ -511,14 +522,12 @@ class FrameVariants:
             return None
         key = (tuple((c, tuple(sorted(p.items()))) for c, p in changes), float(max_freq_hz), self.reduced,
                tuple(wrt))
-        hit = self._jac_memo.get(key)
+        hit = self._jac_memo.pop(key, None)
         if hit is None:
             hit = self._modes_jac(changes, max_freq_hz, wrt)
             for a in hit:
                 a.setflags(write=False)
-            if len(self._jac_memo) >= _JAC_MEMO_SIZE:
-                self._jac_memo.clear()
-            self._jac_memo[key] = hit
+        _keep(self._jac_memo, key, hit, _JAC_MEMO_SIZE)
         return hit
 
     def _modes_jac(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float,

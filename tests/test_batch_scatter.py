@@ -269,3 +269,26 @@ def test_a_candidate_asked_at_nearby_bands_and_factors_is_one_question_to_the_si
             np.testing.assert_allclose(got[0], want[0], rtol=1e-12)        # cut at the band asked for
             np.testing.assert_allclose(got[1], want[1], rtol=1e-10)
     assert set(chain.asked) == {step}
+
+
+def test_the_simulations_kept_answers_drop_the_least_recently_used(monkeypatch, frame_fleet):
+    """A batch worker's simulation serves every flagged unit: the answers it keeps drop the least recently used when
+    full (an answer every unit asks stays while each unit's own come and go), not all at once."""
+    import simulator.physical as physical
+
+    fv = frame_fleet.simulation
+    monkeypatch.setattr(physical, "_MEMO_SIZE", 3)
+    monkeypatch.setattr(fv, "_memo", {})
+    solved: list = []
+    real = fv._modes_reduced
+    monkeypatch.setattr(fv, "_modes_reduced", lambda changes, fmax: solved.append(changes) or real(changes, fmax))
+
+    def ask(factor: float) -> None:
+        fv.modes_of([("element_stiffness", {"element": "top:1", "factor": factor})], FMAX)
+
+    for f in (0.5, 0.6, 0.7, 0.5, 0.8, 0.5, 0.9):       # 0.5 asked again and again between the others
+        ask(f)
+    assert len(solved) == 5                              # 0.5 solved once
+    assert len(fv._memo) == 3
+    ask(0.6)                                             # the least recently used: dropped, solved again
+    assert len(solved) == 6
