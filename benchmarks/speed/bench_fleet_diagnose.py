@@ -3,26 +3,29 @@
 Run by hand (not a test; on 2 cores a few minutes)::
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/speed/bench_fleet_diagnose.py [--units 12]
-        [--defects 4] [--seed 159536] [--fleet DIR]
+        [--defects 4] [--seed 159536] [--fleet DIR] [--ways shared|both] [--write]
 
 A fleet of ``simulator fleet`` (by default 12 units, 4 defective, 2 % scatter) is fitted unit by unit as a
 batch worker fits it (:func:`analysis.batch.task.fit_one`), flagged (:func:`analysis.batch.fleet.assess_fleet`),
 and each flagged unit is diagnosed against the frame as designed, in this one process, one unit after the
-other as a worker takes them, twice:
+other as a worker takes them, and as a worker does it: one process (no forked cause fits) and one BLAS thread
+(``IMPACTLAB_THREADS=1``). By default one way:
 
-* ``own simulation``: each unit builds the SIM's simulation afresh (what ``analysis batch --diagnose`` did
-  before its workers kept it),
 * ``shared simulation``: the worker's one simulation of the SIM (:func:`analysis.cli_batch.shared_simulation`)
   as a fleet's unit is compared with (:func:`analysis.cli_batch.fleet_simulation`: its global cause scales every
-  stiffness alike), as ``analysis batch --diagnose`` runs it now; the first unit builds it.
+  stiffness alike), as ``analysis batch --diagnose`` runs it; the first unit builds it;
 
-``--ways shared`` runs the second way only (half the time). The two ways differ in the global cause (the
-modulus alone, every stiffness), so their causes and parameters may differ a little.
+and with ``--ways both`` first also
 
-The table gives each flagged unit's diagnosis CPU and wall time (s) both ways against the fits' CPU and
-wall time per unit, and checks that the two ways name the same causes with the same parameters (1e-6).
-CPU time is this process's and its forked children's (the diagnosis fits its causes in forked processes
-outside a Dask worker): on a busy machine the wall time also counts the waiting.
+* ``own simulation``: each unit builds the SIM's simulation afresh (``analysis diagnose``'s own, whose global
+  cause is the modulus alone), so its causes and parameters may differ a little from the shared way's.
+
+The table gives each flagged unit's diagnosis CPU and wall time (s) against the fits' CPU time per unit, and the
+simulation's solves for it (candidates' modes solved in a reduced space, on the full model, with their
+derivatives; reduced bases built); with both ways, whether they name the same causes with the same parameters
+(1e-6). On a busy machine the wall time also counts the waiting, and the CPU time grows a little with the load
+(the machine's load average is printed). ``--write`` replaces ``bench_fleet_diagnose.md`` beside the script with
+this run's command line and output.
 """
 from __future__ import annotations
 
@@ -38,8 +41,18 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
+os.environ["IMPACTLAB_THREADS"] = "1"         # as in a Dask worker: one process, one BLAS thread
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+RESULTS = Path(__file__).with_name("bench_fleet_diagnose.md")
+#: the simulation's work counted per unit: (class, method, column)
+_COUNTED = (("simulator.physical", "FrameVariants", "_modes_reduced", "reduced solves"),
+            ("simulator.physical", "FrameVariants", "exact_modes_of", "full solves"),
+            ("simulator.physical", "FrameVariants", "_modes_jac", "solves with derivatives"),
+            ("simulator.ritz", "RitzReduction", "space", "bases built"))
 
 
 def _named(doc: dict) -> list[tuple[str, dict]]:
@@ -71,15 +84,38 @@ def cpu() -> float:
     return time.process_time() + c.ru_utime + c.ru_stime
 
 
+def count_solves() -> dict[str, int]:
+    """Count the simulation's solves from now on (module docstring): the counts, updated as they come."""
+    import importlib
+
+    counts = {col: 0 for *_, col in _COUNTED}
+    for module, cls, name, col in _COUNTED:
+        owner = getattr(importlib.import_module(module), cls)
+        real = getattr(owner, name)
+
+        def run(*a: object, _real: object = real, _col: str = col, **k: object) -> object:
+            counts[_col] += 1
+            return _real(*a, **k)  # type: ignore[operator]
+
+        setattr(owner, name, run)
+    return counts
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=12)
     ap.add_argument("--defects", type=int, default=4)
     ap.add_argument("--seed", type=int, default=159536)
     ap.add_argument("--fleet", help="an existing fleet folder (default: make one in a temporary folder)")
-    ap.add_argument("--ways", choices=("both", "shared"), default="both", help="diagnose each flagged unit both ways "
-                    "or only with the shared simulation")
+    ap.add_argument("--ways", choices=("both", "shared"), default="shared", help="diagnose each flagged unit both "
+                    "ways or only with the shared simulation (default)")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
+    with recorded(RESULTS, args.write):
+        run(args)
+
+
+def run(args: argparse.Namespace) -> None:
     warnings.simplefilter("ignore")
     from analysis.batch.diagnose import diagnosis_summary
     from analysis.batch.fleet import assess_fleet
@@ -88,6 +124,8 @@ def main() -> None:
     from analysis.cli_batch import diagnose_unit
     from analysis.cli_diagnose import run_diagnosis
 
+    counts = count_solves()
+    load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         fleet = Path(args.fleet) if args.fleet else Path(tmp) / "fleet"
         if not args.fleet:
@@ -104,40 +142,49 @@ def main() -> None:
         result = assess_fleet(units, [p.stem for p in paths], [p.name for p in paths])
         flagged = [p for p, u in zip(paths, result.units) if u.flagged]
         truth = {u["name"]: u["defect"] for u in json.loads((fleet / "truth.json").read_text())["units"]}
-        rows = {}
+        rows: dict[str, dict] = {}
         ways = (("own", run_diagnosis), ("shared", diagnose_unit))[1 if args.ways == "shared" else 0:]
-        for way, run in ways:
+        for way, diagnose in ways:
             for p in flagged:
-                t0, c0 = time.perf_counter(), cpu()
-                diag = run(str(p), str(sim), band=None, estimator=None)
+                t0, c0, n0 = time.perf_counter(), cpu(), dict(counts)
+                diag = diagnose(str(p), str(sim), band=None, estimator=None)
                 rows.setdefault(p.stem, {})[way] = (cpu() - c0, time.perf_counter() - t0,
-                                                    diagnosis_summary(diag.to_json()))
+                                                    diagnosis_summary(diag.to_json()),
+                                                    {k: counts[k] - n0[k] for k in counts})
                 print(f"... {p.stem} {way}: {rows[p.stem][way][0]:.1f} s CPU", file=sys.stderr, flush=True)
     n_fit = len(fits)
-    print(f"fleet of {n_fit} units ({args.defects} defective, seed {args.seed}); {len(flagged)} flagged; "
-          f"fits: {sum(fit_cpu) / n_fit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall per unit\n")
-    print("| unit | defect | diagnosis CPU, own simulation (s) | CPU, shared (s) | wall own (s) | "
-          "wall shared (s) | CPU shared / fit CPU per unit | same causes and parameters |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    tot = {"own": [0.0, 0.0], "shared": [0.0, 0.0]}
     fit_unit = sum(fit_cpu) / n_fit
-    none = (float("nan"), float("nan"), {})
+    print(f"fleet of {n_fit} units ({args.defects} defective, seed {args.seed}); {len(flagged)} flagged; "
+          f"fits: {fit_unit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall per unit; load average "
+          f"{load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end\n")
+    cols = list(counts)
+    both = args.ways == "both"
+    print("| unit | defect | diagnosis CPU (s) | wall (s) | CPU / fit CPU per unit | " + " | ".join(cols)
+          + (" | CPU, own simulation (s) | same causes and parameters" if both else "") + " | named |")
+    print("|---|---|---|---|---|" + "---|" * len(cols) + ("---|---|" if both else "") + "---|")
+    none = (float("nan"), float("nan"), {}, {})
+    tot = {"own": 0.0, "shared": [0.0, 0.0], "counts": dict.fromkeys(cols, 0)}
     for name, r in rows.items():
         d = truth.get(name)
         what = "good" if not d else f"{d['kind']} {d.get('support') or d.get('joint') or d.get('element')}"
         own, shared = r.get("own", none), r["shared"]
-        for way, v in (("own", own), ("shared", shared)):
-            tot[way][0] += v[0]
-            tot[way][1] += v[1]
-        same = "-" if "own" not in r else "yes" if (_same(_named(own[2]), _named(shared[2]))
-                                                     and own[2]["verdict"] == shared[2]["verdict"]) else "NO"
+        tot["own"] += own[0]
+        tot["shared"][0] += shared[0]
+        tot["shared"][1] += shared[1]
+        for c in cols:
+            tot["counts"][c] += shared[3][c]
         named = " + ".join(f"{e} {p.get('support') or p.get('joint') or p.get('element') or p.get('component') or ''}"
-                           for e, p in _named(shared[2]))
-        print(f"| {name} | {what} | {own[0]:.1f} | {shared[0]:.1f} | {own[1]:.1f} | "
-              f"{shared[1]:.1f} | {shared[0] / fit_unit:.0f}x | {same} | {named} |")
+                           for e, p in _named(shared[2])) or shared[2]["verdict"]
+        extra = ""
+        if both:
+            same = "yes" if (_same(_named(own[2]), _named(shared[2])) and own[2]["verdict"] == shared[2]["verdict"]) else "NO"
+            extra = f" | {own[0]:.1f} | {same}"
+        print(f"| {name} | {what} | {shared[0]:.1f} | {shared[1]:.1f} | {shared[0] / fit_unit:.0f}x | "
+              + " | ".join(str(shared[3][c]) for c in cols) + f"{extra} | {named} |")
     k = max(len(rows), 1)
-    print(f"| per flagged unit | | {tot['own'][0] / k:.1f} | {tot['shared'][0] / k:.1f} | {tot['own'][1] / k:.1f} | "
-          f"{tot['shared'][1] / k:.1f} | {tot['shared'][0] / k / fit_unit:.0f}x | | |")
+    print(f"| per flagged unit | | {tot['shared'][0] / k:.1f} | {tot['shared'][1] / k:.1f} | "
+          f"{tot['shared'][0] / k / fit_unit:.0f}x | " + " | ".join(f"{tot['counts'][c] / k:.0f}" for c in cols)
+          + (f" | {tot['own'] / k:.1f} | " if both else "") + " | |")
     print(f"\nper unit of fit: {fit_unit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall")
 
 
