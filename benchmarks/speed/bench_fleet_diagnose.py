@@ -162,17 +162,18 @@ def run(args: argparse.Namespace) -> None:
     print("| unit | defect | diagnosis CPU (s) | wall (s) | CPU / fit CPU per unit | " + " | ".join(cols)
           + (" | CPU, own simulation (s) | same causes and parameters" if both else "") + " | named |")
     print("|---|---|---|---|---|" + "---|" * len(cols) + ("---|---|" if both else "") + "---|")
-    none = (float("nan"), float("nan"), {}, {})
-    tot = {"own": 0.0, "shared": [0.0, 0.0], "counts": dict.fromkeys(cols, 0)}
+    none: tuple[float, float, dict, dict] = (float("nan"), float("nan"), {}, {})
+    own_cpu, cpu_sum, wall_sum = 0.0, 0.0, 0.0
+    count_sum = dict.fromkeys(cols, 0)
     for name, r in rows.items():
         d = truth.get(name)
         what = "good" if not d else f"{d['kind']} {d.get('support') or d.get('joint') or d.get('element')}"
         own, shared = r.get("own", none), r["shared"]
-        tot["own"] += own[0]
-        tot["shared"][0] += shared[0]
-        tot["shared"][1] += shared[1]
+        own_cpu += own[0]
+        cpu_sum += shared[0]
+        wall_sum += shared[1]
         for c in cols:
-            tot["counts"][c] += shared[3][c]
+            count_sum[c] += shared[3][c]
         named = " + ".join(f"{e} {p.get('support') or p.get('joint') or p.get('element') or p.get('component') or ''}"
                            for e, p in _named(shared[2])) or shared[2]["verdict"]
         extra = ""
@@ -182,9 +183,9 @@ def run(args: argparse.Namespace) -> None:
         print(f"| {name} | {what} | {shared[0]:.1f} | {shared[1]:.1f} | {shared[0] / fit_unit:.0f}x | "
               + " | ".join(str(shared[3][c]) for c in cols) + f"{extra} | {named} |")
     k = max(len(rows), 1)
-    print(f"| per flagged unit | | {tot['shared'][0] / k:.1f} | {tot['shared'][1] / k:.1f} | "
-          f"{tot['shared'][0] / k / fit_unit:.0f}x | " + " | ".join(f"{tot['counts'][c] / k:.0f}" for c in cols)
-          + (f" | {tot['own'] / k:.1f} | " if both else "") + " | |")
+    print(f"| per flagged unit | | {cpu_sum / k:.1f} | {wall_sum / k:.1f} | "
+          f"{cpu_sum / k / fit_unit:.0f}x | " + " | ".join(f"{count_sum[c] / k:.0f}" for c in cols)
+          + (f" | {own_cpu / k:.1f} | " if both else "") + " | |")
     print(f"\nper unit of fit: {fit_unit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall")
 
 
