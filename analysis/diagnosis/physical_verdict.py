@@ -540,17 +540,19 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
 
 
 def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-            names: Sequence[str] | None, kept: dict | None = None) -> list[tuple[PhysicalFit, PhysicalFit]]:
+            names: Sequence[str] | None, kept: dict | None = None
+            ) -> list[tuple[SplitBound, PhysicalFit, PhysicalFit]]:
     """Second causes with the first cause's choice held open (:func:`with_options`): every other cause
     (its best variant on top of ``first``) refined together with ``first`` at each of the options its own
-    fit ranked; ranked by the pair's chi2 plus the second cause's freedom; the ``N_SECOND`` best as
-    (first at its option, second)."""
+    fit ranked; ranked by the pair's chi2 plus the second cause's freedom, each as (its chi2 on all modes as its
+    bound, :class:`SplitBound`; first at its option, second): every one is kept, and its exact score is taken
+    while that chi2 could still win (:func:`_on_top_of`; the ``N_SECOND`` best are the ones the freedom counts)."""
     ranked = []
     for fb in _seconds(sim, specs, mm, fmax, first, names, n=None, kept=kept):
         fa2, fb2, chi2 = with_options(sim, [specs[first.cause], specs[fb.cause]], first, fb, mm, fmax)
-        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free), fa2, fb2))
+        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free), chi2, fa2, fb2))
     ranked.sort(key=lambda t: t[0])
-    return [(a, b) for _, a, b in ranked[:N_SECOND]]
+    return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
 
 
 def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -790,14 +792,16 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
-    pairs = ([(unbounded, a, b) for a, b in _opened(sim, specs, mm, fmax, fa, names, judge.kept)] if opened else
+    pairs = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
              [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
               for fb in _seconds(sim, specs, mm, fmax, fa, names, kept=judge.kept)]
              + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
              + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
     if held:
         pairs += _held_seconds(sim, specs, mm, fmax, fa, names)
-    n_seconds = max(1, len({fb.cause for _, _, fb in pairs}))
+    # the second causes the freedom counts: held open, the N_SECOND best of the screen (the others are kept by
+    # their bound only)
+    n_seconds = max(1, len({fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)}))
     best: dict | None = None
     for bound, fa2, fb in pairs:
         freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
