@@ -484,3 +484,25 @@ def test_a_pairs_folds_stop_once_its_held_out_chi2_cannot_come_below_the_target(
     assert cut.asked < every.asked
     kept = fit_pair(fv, pair_specs, fits, mm, FMAX, folds_below=1.01 * full.chi2_cv)
     np.testing.assert_allclose(kept.cv_per_mode, full.cv_per_mode, rtol=1e-9)
+
+
+def test_a_pair_that_could_not_be_named_is_not_cross_validated_in_the_local_search() -> None:
+    """What a pair must come below on all modes to be named (:func:`_win_target`, only named pairs of use): its
+    held-out chi2 is at least its chi2 there, so above the target it cannot gain ``physical_min_gain_db`` over its
+    first cause alone, nor be significant and adequate as one candidate (at most ``discrepancy_chi2`` per mode)."""
+    from analysis.diagnosis.physical_verdict import _Judge, _on_top_enough, _win_target
+
+    K = 10
+    judge = _Judge(measured=None, frf=None, weights=np.ones(1), base=np.full(K, 50.0), far=np.zeros(K, bool),
+                   before_db=0.0, noise_db=0.0)
+    rule = judge.rule
+    target = _win_target(None, np.inf, judge, {"_alone_chi2": 30.0}, 40.0, 3.0, 4.0, 6.0, named_only=True)
+    assert 0 < target <= 40.0 * 10 ** (-rule.physical_min_gain_db / 10)
+    _, _, enough = _on_top_enough(np.full(K, 4.0), np.full(K, 1.001 * target / K), 3.0, rule)
+    assert not enough
+    # far from the unchanged frame (50 per mode) with a first cause that leaves much: adequacy bounds it
+    judge.base = np.full(K, 1000.0)
+    target = _win_target(None, np.inf, judge, {"_alone_chi2": 900.0}, 900.0, 3.0, 4.0, 6.0, named_only=True)
+    assert target == pytest.approx(rule.discrepancy_chi2 * K)
+    # unnamed pairs still matter outside the local search: nothing judged yet, every pair is
+    assert _win_target(None, np.inf, judge, {"_alone_chi2": 30.0}, 40.0, 3.0, 4.0, 6.0) == np.inf
