@@ -446,3 +446,63 @@ def test_a_split_pair_outside_the_grids_best_is_kept_while_its_bound_could_win()
     two = fit_pair(fv, [spec, spec], [a, b], mm, FMAX, folds=False)
     factors = {p["element"]: p["factor"] for p in two.params}
     assert factors["top:2"] == pytest.approx(0.8, rel=1e-3) and factors["right:5"] == pytest.approx(0.9, rel=1e-3)
+
+
+class _Counted:
+    """A simulation whose modes (with or without derivatives) are counted as they are asked."""
+
+    def __init__(self, sim: FrameVariants) -> None:
+        self.sim, self.asked = sim, 0
+
+    def modes_of(self, changes, fmax):
+        self.asked += 1
+        return self.sim.modes_of(changes, fmax)
+
+    def modes_jac_of(self, changes, fmax, wrt):
+        self.asked += 1
+        return self.sim.modes_jac_of(changes, fmax, wrt)
+
+
+def test_a_pairs_folds_stop_once_its_held_out_chi2_cannot_come_below_the_target() -> None:
+    """A 1.2 kg mass at top:3 with the supports x 0.28, the pair refined with the mass kept at top:5: its held-out
+    chi2 is above its chi2 on all modes. With a target between the two the folds stop as soon as the folds
+    made and the least the others can pay (their modes' chi2 at the all-modes minimum) reach it: no held-out chi2,
+    fewer solves than every fold; with a target above its held-out chi2 every fold is made, as with none."""
+    fv = FrameVariants(None, OUTS, REFS)
+    specs = _specs(fv)
+    mm = _noise_free_modes(fv, [("added_mass", {"point": "top:3", "mass_kg": 1.2}),
+                                ("support_stiffness", _supports(0.28))])
+    fits = [PhysicalFit("support_stiffness", _supports(0.25), ("factor_rotational",), np.inf),
+            PhysicalFit("added_mass", {"point": "top:5", "mass_kg": 1.0}, ("mass_kg",), np.inf)]
+    pair_specs = [specs["support_stiffness"], specs["added_mass"]]
+    every = _Counted(fv)
+    full = fit_pair(every, pair_specs, fits, mm, FMAX)
+    assert full.cv_per_mode.size == mm.freq_hz.size and full.chi2_cv > 1.5 * full.chi2 > 0
+    cut = _Counted(fv)
+    stopped = fit_pair(cut, pair_specs, fits, mm, FMAX, folds_below=0.5 * (full.chi2 + full.chi2_cv))
+    assert stopped.cv_per_mode.size == 0 and stopped.chi2 == pytest.approx(full.chi2)
+    assert cut.asked < every.asked
+    kept = fit_pair(fv, pair_specs, fits, mm, FMAX, folds_below=1.01 * full.chi2_cv)
+    np.testing.assert_allclose(kept.cv_per_mode, full.cv_per_mode, rtol=1e-9)
+
+
+def test_a_pair_that_could_not_be_named_is_not_cross_validated_in_the_local_search() -> None:
+    """What a pair must come below on all modes to be named (:func:`_win_target`, only named pairs of use): its
+    held-out chi2 is at least its chi2 there, so above the target it cannot gain ``physical_min_gain_db`` over its
+    first cause alone, nor be significant and adequate as one candidate (at most ``discrepancy_chi2`` per mode)."""
+    from analysis.diagnosis.physical_verdict import _Judge, _on_top_enough, _win_target
+
+    K = 10
+    judge = _Judge(measured=None, frf=None, weights=np.ones(1), base=np.full(K, 50.0), far=np.zeros(K, bool),
+                   before_db=0.0, noise_db=0.0)
+    rule = judge.rule
+    target = _win_target(None, np.inf, judge, {"_alone_chi2": 30.0}, 40.0, 3.0, 4.0, 6.0, named_only=True)
+    assert 0 < target <= 40.0 * 10 ** (-rule.physical_min_gain_db / 10)
+    _, _, enough = _on_top_enough(np.full(K, 4.0), np.full(K, 1.001 * target / K), 3.0, rule)
+    assert not enough
+    # far from the unchanged frame (50 per mode) with a first cause that leaves much: adequacy bounds it
+    judge.base = np.full(K, 1000.0)
+    target = _win_target(None, np.inf, judge, {"_alone_chi2": 900.0}, 900.0, 3.0, 4.0, 6.0, named_only=True)
+    assert target == pytest.approx(rule.discrepancy_chi2 * K)
+    # unnamed pairs still matter outside the local search: nothing judged yet, every pair is
+    assert _win_target(None, np.inf, judge, {"_alone_chi2": 30.0}, 40.0, 3.0, 4.0, 6.0) == np.inf

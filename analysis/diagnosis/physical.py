@@ -82,8 +82,8 @@ from .rule import DEFAULT_RULE, DecisionRule, gain_db
 log = logging.getLogger(__name__)
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
-           "fit_cause", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR", "MAC_TOL",
-           "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
+           "fit_cause", "held_out_reaches", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR",
+           "MAC_TOL", "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
            "gain_db"]
 
 FREQ_FLOOR = 0.002
@@ -733,17 +733,34 @@ def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
     return [c for k in range(1, len(names) + 1) for c in combinations(names, k)]
 
 
+def held_out_reaches(done: np.ndarray, least_rest: np.ndarray, target: float) -> bool:
+    """Whether a held-out chi2 is certain to reach ``target``: the folds ``done`` (their held-out chi2) and the rest,
+    each at least its mode's chi2 at the all-modes least-squares minimum ``x`` (``least_rest``). A fold starts from
+    ``x`` and only descends on the other modes, ``S_-k(x_k) <= S_-k(x)``, and ``S(x_k) >= S(x)`` at the least chi2 on
+    all modes, so the left-out mode pays ``S(x_k) - S_-k(x_k) >= S(x) - S_-k(x) = r_k(x)^2``; before any fold the
+    sum is the chi2 on all modes (the rule the fits already follow: a held-out chi2 is at least it)."""
+    return bool(np.sum(done) + np.sum(least_rest) >= target)
+
+
 def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
-                    options: Sequence[str] | None, start: dict) -> np.ndarray:
-    """Held-out chi2 of each measured mode (leave one mode out, everything refitted in the fold)."""
+                    options: Sequence[str] | None, start: dict, fit: Mapping | None = None,
+                    below: float = np.inf) -> np.ndarray | None:
+    """Held-out chi2 of each measured mode (leave one mode out, everything refitted in the fold); None when it
+    cannot come below ``below`` (:func:`held_out_reaches` before each fold, from the modes' chi2 at ``fit``, the
+    parameters of the least chi2 on all modes)."""
     K = mm.freq_hz.size
     out = np.empty(K)
+    least = np.zeros(K)
+    if fit is not None and np.isfinite(below):
+        least = np.sum(residuals(mm, *sim.modes(cause.name, fit, fmax)) ** 2, axis=1)
     for k in range(K):
         sel = np.ones(K, bool)
         sel[k] = False
         p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, start)
         f, P = sim.modes(cause.name, p, fmax)
         out[k] = float(np.sum(residuals(mm, f, P)[k] ** 2))
+        if held_out_reaches(out[:k + 1], least[k + 1:], below):
+            return None
     return out
 
 
@@ -803,7 +820,11 @@ def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax:
             break
         options = [o for _, o, _ in fit.ranked[:N_SCREEN_FOLD]] if fit.ranked else None
         starts = {o: q for _, o, q in fit.ranked} if fit.ranked else fit.params
-        cv = _cross_validate(sim, cause, fit.free, mm, fmax, options, starts)
+        # a variant whose held-out chi2 cannot come below the best so far (or ``bar``) is not chosen: its folds stop
+        cv = _cross_validate(sim, cause, fit.free, mm, fmax, options, starts, fit.params,
+                             min(bar, np.inf if best is None else best.chi2_cv))
+        if cv is None:
+            continue
         done = replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=cause.at_edge(fit.params, fit.free))
         if best is None or done.chi2_cv < best.chi2_cv:
             best = done

@@ -43,6 +43,7 @@ from .physical import (
     _tighten,
     dv_dx,
     fit_cause,
+    held_out_reaches,
     modes_jac,
     off_edges,
     residuals,
@@ -296,8 +297,9 @@ def _start(x0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,
              fmax: float, folds: bool = True, folds_below: float = np.inf) -> PairFit:
     """Refine the two causes ``fits`` (their free parameters, choices kept) together on all modes, then
-    leave each mode out with both refitted from there (nested cross-validation; ``folds`` False, or a chi2 on
-    all modes not below ``folds_below``: the refinement alone, ``cv_per_mode`` empty)."""
+    leave each mode out with both refitted from there (nested cross-validation; ``folds`` False, or a held-out
+    chi2 that cannot come below ``folds_below`` (:func:`held_out_reaches`, checked before each fold): the
+    refinement alone, ``cv_per_mode`` empty)."""
     free = [[s for s in spec.params if s.name in fit.free] for spec, fit in zip(specs, fits)]
     flat = [(i, s) for i, ss in enumerate(free) for s in ss]
     lo = np.array([s.x_bounds[0] for _, s in flat])
@@ -328,13 +330,17 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     x0 = np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat])
     allsel = np.ones(K, bool)
     x = solve(x0, allsel)
-    chi2 = float(np.sum(resid(x, allsel) ** 2))
+    least = np.sum(resid(x, allsel).reshape(K, -1) ** 2, axis=1)
+    chi2 = float(np.sum(least))
     cv = np.empty(K if folds and chi2 < folds_below else 0)
     for k in range(cv.size):
         sel = allsel.copy()
         sel[k] = False
         xk = solve(x, sel)
         cv[k] = float(np.sum(resid(xk, ~sel) ** 2))
+        if held_out_reaches(cv[:k + 1], least[k + 1:], folds_below):
+            cv = np.empty(0)            # its held-out chi2 cannot come below ``folds_below``: the folds stop
+            break
     p = params(x)
     edge = tuple(f"{fits[i].cause}.{s.name}" for i, s in flat if s.at_edge(float(p[i][s.name])))
     return PairFit(causes=tuple(f.cause for f in fits), params=tuple(p), chi2=chi2, cv_per_mode=cv, at_edge=edge)

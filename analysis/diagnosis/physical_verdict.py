@@ -67,6 +67,7 @@ from .physical_pairs import (
     OnTop,
     SplitBound,
     as_places,
+    besides,
     fit_pair,
     held_open,
     rechoose,
@@ -434,6 +435,8 @@ class _Judge:
     before_db: float
     noise_db: float
     rule: DecisionRule = DEFAULT_RULE
+    #: answers of the pair search already solved in this diagnosis, asked again (:func:`_seconds`)
+    kept: dict = field(default_factory=dict)
 
     def _counted(self, cv: np.ndarray) -> np.ndarray:
         lost = self.far & (cv >= 0.5 * RESIDUAL_CAP ** 2)
@@ -455,6 +458,15 @@ class _Judge:
                 "adequate": bool(modes_ok and (rule.explained(after_db, self.noise_db)
                                                or removed >= rule.adequate_fraction)),
                 "_extended": ext, "_removed": removed, "_at_edge": list(at_edge)}
+
+    def most_named_chi2(self) -> float:
+        """The most held-out chi2 (summed over all modes) with which a candidate can be named: significant (its
+        gain over the unchanged frame's chi2 at least ``rule.physical_min_gain_db``) and adequate (at most
+        ``rule.discrepancy_chi2`` per counted mode); with a mode the unchanged frame does not pair, the one mode
+        :meth:`_counted` may leave out (at most ``2 RESIDUAL_CAP^2``) on top."""
+        K = self.base.size
+        most = min(float(np.sum(self.base)) * 10 ** (-self.rule.physical_min_gain_db / 10), self.rule.discrepancy_chi2 * K)
+        return most + (2.0 * RESIDUAL_CAP ** 2 if bool(np.any(self.far)) else 0.0)
 
     def evidence(self, name: str, shown: str, cv: np.ndarray, c: dict, at_edge: tuple) -> str:
         edge = f"; at the edge of its range: {', '.join(at_edge)}" if at_edge else ""
@@ -490,42 +502,57 @@ def _freedom(spec: CauseSpec, free: Sequence[str]) -> float:
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-             names: Sequence[str] | None, n: int | None = N_SECOND) -> list[PhysicalFit]:
+             names: Sequence[str] | None, n: int | None = N_SECOND, kept: dict | None = None) -> list[PhysicalFit]:
     """Every other cause (each nested variant) fitted on top of ``first`` on all modes, ranked by chi2
     plus a penalty for its freedom (2 per parameter, 2 ln(number of options) for a choice); the best
     variant of each cause, the ``n`` best causes (None: all), and the simulation's ``scatter_cause`` when it
     names one (a fleet's unit: the global cause its manufacturing scatter takes is always tried, for the
-    first cause fitted alone absorbs part of the scatter and leaves little for it on top)."""
-    top = OnTop(sim, [(first.cause, first.params)])
-    allsel = np.ones(mm.freq_hz.size, bool)
-    ranked: list[tuple[float, PhysicalFit]] = []
-    for spec in top.causes():
-        if names is not None and spec.name not in names:
-            continue
-        for free in variants(spec):
-            p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax)
-            ranked.append((chi2 + _freedom(spec, free), PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
-    ranked.sort(key=lambda t: t[0])
-    out: list[PhysicalFit] = []
-    for _, f in ranked:            # the best variant of each cause
-        if all(g.cause != f.cause for g in out):
-            out.append(f)
+    first cause fitted alone absorbs part of the scatter and leaves little for it on top). ``kept``: the fits on top
+    of each first cause made so far in this diagnosis (the held-open round asks them again: the same answers)."""
+    out = _on_top_fits(sim, mm, fmax, first, names, {} if kept is None else kept)
     scatter = getattr(sim, "scatter_cause", None)
     return out[:n] + [f for f in out[n:] if f.cause == scatter] if n is not None else out
 
 
+def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first: PhysicalFit,
+                 names: Sequence[str] | None, kept: dict) -> list[PhysicalFit]:
+    """Every other cause (among ``names``) fitted on top of ``first`` on all modes, each nested variant; the best
+    variant of each cause by chi2 plus its freedom, best first (:func:`_seconds`). Each cause's best is kept in
+    ``kept`` under ``first``'s change and asked from there again."""
+    changed = [(first.cause, first.params)]
+    top: OnTop | None = None
+    allsel = np.ones(mm.freq_hz.size, bool)
+    ranked: list[tuple[float, PhysicalFit]] = []
+    for spec in (s for s in (besides(c, changed) for c in sim.causes()) if s is not None):   # OnTop.causes
+        if names is not None and spec.name not in names:
+            continue
+        key = ("on top", first.cause, repr(sorted(first.params.items())), spec.name)
+        if key not in kept:
+            top = top or OnTop(sim, changed)
+            fits = []
+            for free in variants(spec):
+                p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax)
+                fits.append((chi2 + _freedom(spec, free), PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
+            kept[key] = min(fits, key=lambda t: t[0])      # the best variant of the cause (the first of the least)
+        ranked.append(kept[key])
+    ranked.sort(key=lambda t: t[0])
+    return [f for _, f in ranked]
+
+
 def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-            names: Sequence[str] | None) -> list[tuple[PhysicalFit, PhysicalFit]]:
+            names: Sequence[str] | None, kept: dict | None = None
+            ) -> list[tuple[SplitBound, PhysicalFit, PhysicalFit]]:
     """Second causes with the first cause's choice held open (:func:`with_options`): every other cause
     (its best variant on top of ``first``) refined together with ``first`` at each of the options its own
-    fit ranked; ranked by the pair's chi2 plus the second cause's freedom; the ``N_SECOND`` best as
-    (first at its option, second)."""
+    fit ranked; ranked by the pair's chi2 plus the second cause's freedom, each as (its chi2 on all modes as its
+    bound, :class:`SplitBound`; first at its option, second): every one is kept, and its exact score is taken
+    while that chi2 could still win (:func:`_on_top_of`; the ``N_SECOND`` best are the ones the freedom counts)."""
     ranked = []
-    for fb in _seconds(sim, specs, mm, fmax, first, names, n=None):
+    for fb in _seconds(sim, specs, mm, fmax, first, names, n=None, kept=kept):
         fa2, fb2, chi2 = with_options(sim, [specs[first.cause], specs[fb.cause]], first, fb, mm, fmax)
-        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free), fa2, fb2))
+        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free), chi2, fa2, fb2))
     ranked.sort(key=lambda t: t[0])
-    return [(a, b) for _, a, b in ranked[:N_SECOND]]
+    return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
 
 
 def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -654,7 +681,8 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     cause, the local causes on top of it (:func:`_on_top_of`), judged by the same rule as every pair. A first cause
     is skipped when no pair with it can beat ``best`` (a named pair): a pair's penalised held-out chi2 is at least
     its two choices' freedom (:func:`_choice_penalty`), so with ``best``'s below that nothing is dropped that could
-    win. The best judged pair (:func:`_better`), or None."""
+    win. Only a named pair is of use here (the first round's best pair stands for the unnamed): a pair that cannot
+    be named is not cross-validated (:func:`_win_target`, ``named_only``). The best named pair, or None."""
     local = [n for n, s in specs.items() if _local(s) and (names is None or n in names)]
     if len(local) < 1:
         return None
@@ -666,7 +694,7 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     for first in _local_firsts(sim, specs, mm, fmax, found, judge, local):
         if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
             continue
-        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top)
+        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True)
         out = _better(out, c)
         if _named_pair(out):
             top = min(top, out["_chi2_cv"])                       # type: ignore[index]
@@ -727,8 +755,8 @@ def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
     return {**judge.single(spec, fit), "_alone_cv": cv, "_alone_chi2": alone.chi2}
 
 
-def _win_target(best: dict | None, top: float, rule: DecisionRule, first: dict, cv_alone: float, freedom: float,
-                own: float, penalty: float) -> float:
+def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_alone: float, freedom: float,
+                own: float, penalty: float, named_only: bool = False) -> float:
     """The chi2 on all modes a pair must come below to beat ``best`` (the best judged pair so far) or a named pair
     of score ``top`` found elsewhere (:func:`_better`); inf: any pair could. A pair's refined chi2 on all modes is
     at least the least chi2 ``min S`` over its parameters, and so is its nested held-out chi2: with each fit at its
@@ -737,16 +765,21 @@ def _win_target(best: dict | None, top: float, rule: DecisionRule, first: dict, 
     pair whose ``min S`` exceeds what it may keep on all modes (``first``'s chi2 alone less the second cause's
     ``own`` freedom) or held out (``cv_alone`` less ``freedom`` and ``rule.quiet_chi2``, :func:`_on_top_enough`)
     cannot be named, and its score is at least ``min S`` plus its choices' ``penalty``: one that cannot be named
-    and cannot score below ``best``, or that cannot score below a named pair, cannot win."""
-    nameable = min(first["_alone_chi2"] - own, cv_alone - freedom - rule.quiet_chi2)
+    and cannot score below ``best``, or that cannot score below a named pair, cannot win. Named also means
+    ``rule.physical_min_gain_db`` over ``first`` alone held out, and significant and adequate as one candidate
+    (:meth:`_Judge.most_named_chi2`). ``named_only``: only a named pair is of use (the unnamed are not kept)."""
+    rule = judge.rule
+    nameable = min(first["_alone_chi2"] - own, cv_alone - freedom - rule.quiet_chi2,
+                   cv_alone * 10 ** (-rule.physical_min_gain_db / 10), judge.most_named_chi2())
     named_top = min(top, best["_chi2_cv"] if _named_pair(best) else np.inf)    # type: ignore[index]
-    if np.isfinite(named_top):
+    if np.isfinite(named_top) or named_only:
         return float(min(nameable, named_top - penalty))
     return np.inf if best is None else float(max(nameable, best["_chi2_cv"] - penalty))
 
 
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
-               names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf) -> dict | None:
+               names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf,
+               named_only: bool = False) -> dict | None:
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
     (:func:`_seconds`, or :func:`_opened` with its choice held open) refined with it, cross-validated nested
     and judged (:func:`_second_cause`); ``held``: also a second cause of many options refined with it at every
@@ -759,20 +792,22 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
-    pairs = ([(unbounded, a, b) for a, b in _opened(sim, specs, mm, fmax, fa, names)] if opened else
+    pairs = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
              [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
-              for fb in _seconds(sim, specs, mm, fmax, fa, names)]
+              for fb in _seconds(sim, specs, mm, fmax, fa, names, kept=judge.kept)]
              + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
              + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
     if held:
         pairs += _held_seconds(sim, specs, mm, fmax, fa, names)
-    n_seconds = max(1, len({fb.cause for _, _, fb in pairs}))
+    # the second causes the freedom counts: held open, the N_SECOND best of the screen (the others are kept by
+    # their bound only)
+    n_seconds = max(1, len({fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)}))
     best: dict | None = None
     for bound, fa2, fb in pairs:
         freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
-        target = _win_target(best, top, judge.rule, first, float(np.sum(cv_alone)), freedom,
+        target = _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom,
                              _freedom(specs[fb.cause], fb.free),
-                             _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]))
+                             _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
         if not bound.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`)
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
@@ -798,5 +833,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
                          "error_after_db": c["error_after_db"]} for name, p in two.changes]
         c["effect"] = "+".join(two.causes)
         c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(specs[n]) for n in two.causes)
+        if named_only and not _named_pair(c):
+            continue
         best = _better(best, c)
     return best
