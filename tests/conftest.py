@@ -25,10 +25,13 @@ def shared_data() -> Path:
 
 @pytest.fixture(scope="session")
 def report_case(tmp_path_factory) -> dict:
-    """The report tests' small simulated test, its fit and report folders (tests/report_data.py)."""
-    from report_data import make_report_case
+    """The report tests' small simulated test, its fit and report folders (tests/report_data.py), made once
+    per test session whichever process of ``make test`` asks first (shared: read it, do not change it)."""
+    from report_data import make_report_case, report_case_in
 
-    return make_report_case(tmp_path_factory)
+    folder = _shared_folder(tmp_path_factory, "report-case")
+    _once(folder / "done", lambda: make_report_case(folder))
+    return report_case_in(folder)
 
 
 @pytest.fixture(scope="session")
@@ -39,30 +42,46 @@ def sim_capture(tmp_path_factory):
     of ``make test`` asks first (the others wait for it and reuse the file). The file is shared: read
     it, or copy it before changing it."""
     import contextlib
-    import fcntl
     import hashlib
     import io
 
-    shared = tmp_path_factory.getbasetemp().parent if _xdist_worker() else tmp_path_factory.getbasetemp()
-    folder = shared / "sim-captures"
-    folder.mkdir(exist_ok=True)
+    folder = _shared_folder(tmp_path_factory, "sim-captures")
 
     def capture(*args: str) -> Path:
         from acquisition.cli_capture import main
 
         name = hashlib.sha256("\0".join(args).encode()).hexdigest()[:16]
         path = folder / f"{name}.h5"
-        with open(folder / f"{name}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)       # one process captures, the others wait for it
-            if not path.exists():
-                tmp = folder / f"{name}.partial.h5"
-                with contextlib.redirect_stdout(io.StringIO()):
-                    code = main([*args, "--out", str(tmp), "-q"])
-                assert code == 0, f"capture {' '.join(args)} failed"
-                os.replace(tmp, path)
+
+        def make() -> None:
+            tmp = folder / f"{name}.partial.h5"
+            with contextlib.redirect_stdout(io.StringIO()):
+                code = main([*args, "--out", str(tmp), "-q"])
+            assert code == 0, f"capture {' '.join(args)} failed"
+            os.replace(tmp, path)
+
+        _once(path, make)
         return path
 
     return capture
+
+
+def _shared_folder(tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
+    """A folder of this test session that every process of ``make test`` sees (the workers' common parent)."""
+    shared = tmp_path_factory.getbasetemp().parent if _xdist_worker() else tmp_path_factory.getbasetemp()
+    folder = shared / name
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
+def _once(done: Path, make) -> None:
+    """``make()`` unless ``done`` exists (``make`` creates it last), by one process: the others wait for it."""
+    import fcntl
+
+    with open(done.with_name(done.name + ".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            make()
 
 
 #: a roving-hammer capture on the simulated frame: 2 points x 3 hits, exponential window 5 % (``sim_capture``)

@@ -27,22 +27,27 @@ DIAGNOSIS = {
 }
 
 
-def make_report_case(tmp_path_factory) -> dict:
-    """{"dir", "recording", "uff", "fit", "diagnosis", "report" (index.html with the diagnosis), "n_modes"}."""
+def make_report_case(out: Path) -> None:
+    """Write the case in the folder ``out``; its file ``done`` is written last."""
     from acquisition import cli_demo
     from analysis import cli_report
 
-    out = tmp_path_factory.mktemp("report_case")
     assert cli_demo.main(["--out", str(out), "--hits", "2"]) == 0
     diag = out / "diag.json"
     diag.write_text(json.dumps(DIAGNOSIS))
     code = cli_report.main([str(out / "demo.h5"), "--out", str(out / "full"), "--fit", str(out / "fit.json"),
                             "--diagnosis", str(diag), "--geometry", "frame"])
     assert code == 0
+    (out / "done").write_text("")
+
+
+def report_case_in(out: Path) -> dict:
+    """The case made by :func:`make_report_case` in ``out``: {"dir", "recording", "uff", "fit", "diagnosis",
+    "report" (index.html with the diagnosis), "demo_report", "n_modes", "fit_doc"}."""
     fit = json.loads((out / "fit.json").read_text())
     return {"dir": out, "recording": out / "demo.h5", "uff": out / "demo.uff", "fit": out / "fit.json",
-            "diagnosis": diag, "report": out / "full" / "index.html", "demo_report": out / "report" / "index.html",
-            "n_modes": len(fit["poles"]), "fit_doc": fit}
+            "diagnosis": out / "diag.json", "report": out / "full" / "index.html",
+            "demo_report": out / "report" / "index.html", "n_modes": len(fit["poles"]), "fit_doc": fit}
 
 
 def page_root(index: Path) -> Path:

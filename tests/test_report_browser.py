@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -227,10 +228,18 @@ def _click_pole(driver, freq_hz: float) -> dict:
     if found is None:
         return None
     div = driver.find_element("css selector", "[data-plot='stabilization']")
-    # the pause: two clicks within plotly's double-click interval (0.3 s) would be a double click (zoom reset)
-    ActionChains(driver).pause(0.45).move_to_element_with_offset(div, round(found["dx"]), round(found["dy"])) \
+    # two clicks within plotly's double-click interval (0.3 s) would be a double click (zoom reset): the click
+    # waits until 0.45 s have passed since the previous one (the wait for its pick often took that already)
+    pause = max(0.0, _CLICK_GAP_S - (time.monotonic() - _last_click[0]))
+    ActionChains(driver).pause(pause).move_to_element_with_offset(div, round(found["dx"]), round(found["dy"])) \
         .click().perform()
+    _last_click[0] = time.monotonic()
     return found
+
+
+#: the least time between two clicks on the stabilization diagram (s), and when the last one was made
+_CLICK_GAP_S = 0.45
+_last_click = [0.0]
 
 
 def _wait_picks(driver, n: int) -> None:
