@@ -87,19 +87,24 @@ def _damped(K: np.ndarray, C: np.ndarray) -> _Solution | None:
     w2, V = np.linalg.eigh(K)
     W = np.sqrt(np.maximum(w2, 1e-300))
     Ct = V.T @ C @ V
-    gap = np.abs(W[:, None] ** 2 - W[None, :] ** 2)
+    Wsq = W ** 2
+    gap = np.abs(Wsq[:, None] - Wsq[None, :])
     strong = np.abs(Ct) * np.maximum(W[:, None], W[None, :]) > DAMPING_COUPLING * gap
     np.fill_diagonal(strong, False)
     S = np.flatnonzero(strong.any(axis=1))
-    lam = W * (-np.diag(Ct) / (2 * W) + 1j * np.sqrt(np.maximum(1 - (np.diag(Ct) / (2 * W)) ** 2, 0.0)))
-    if np.any(np.diag(Ct) / (2 * W) >= 1):
+    zr = np.diag(Ct) / (2 * W)                          # the projected damping ratios
+    if np.any(zr >= 1):
         return None
+    lam = W * (-zr + 1j * np.sqrt(np.maximum(1 - zr ** 2, 0.0)))
     X = V.astype(complex)
     a = 2j * lam.imag
     ev, vec, up = np.zeros(0, complex), np.zeros((0, 0), complex), np.zeros(0, int)
     if S.size:
         ns = S.size
-        A = np.block([[np.zeros((ns, ns)), np.eye(ns)], [-np.diag(W[S] ** 2), -Ct[np.ix_(S, S)]]])
+        A = np.zeros((2 * ns, 2 * ns))                  # the state matrix [[0, I], [-diag(w2_S), -Ct_SS]]
+        A[:ns, ns:] = np.eye(ns)
+        A[ns:, :ns] = -np.diag(Wsq[S])
+        A[ns:, ns:] = -Ct[np.ix_(S, S)]
         ev, vec = np.linalg.eig(A)
         up = np.flatnonzero(ev.imag > 0)
         if up.size != ns:
