@@ -6,8 +6,6 @@ the best would leave it out (fifth first cause, sixth second cause, fourth rival
 named, each change at its place with its factor."""
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
@@ -123,26 +121,3 @@ def test_a_rival_ranked_fourth_is_still_tried_in_place_of_a_named_cause() -> Non
     ranked = _last(found, ("support_stiffness",))
     named = next(c for c in ranked if c["effect"] == "member_stiffness")
     _both_supports(_rival_pair(fv, specs, mm, fmax, fits, ranked, judge, causes, named))
-
-
-def test_a_pair_stopped_by_its_bound_at_the_wrong_choice_is_made_again(monkeypatch: pytest.MonkeyPatch) -> None:
-    """On top of the support left:0, the joints' cause screened at the wrong joint (left:10) and refined there: its
-    chi2 on all modes is above what a named pair needs, yet it gains enough over the support alone to have its
-    choice made again; at right:10 it comes below, is cross-validated and named (it was dropped by the bound at the
-    choice it was started at)."""
-    import analysis.diagnosis.physical_verdict as pv
-
-    causes = ["support_stiffness", "joint_stiffness"]
-    fv, specs, mm, fmax, fits, found, judge = _searched(SUPPORT_AND_JOINT, causes)
-    first = pv._as_first(fv, specs, mm, fmax, "support_stiffness", ("factor_translational", "factor_rotational"),
-                         judge, options=["left:0"])
-    screen = pv._on_top_fits
-
-    def wrong_joint(*args: object, **kw: object) -> list:
-        out = screen(*args, **kw)  # type: ignore[arg-type]
-        joint = next(f for f in out if f.cause == "joint_stiffness")
-        assert joint.params["joint"] == "right:10"
-        return [replace(joint, params={**joint.params, "joint": "left:10"})]
-
-    monkeypatch.setattr(pv, "_on_top_fits", wrong_joint)
-    _support_and_joint(pv._on_top_of(fv, specs, mm, fmax, first, judge, causes, opened=False, named_only=True))

@@ -65,7 +65,6 @@ from .physical import (
 )
 from .physical_pairs import (
     OnTop,
-    PairFit,
     SplitBound,
     as_places,
     besides,
@@ -772,23 +771,6 @@ def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_al
     return np.inf if best is None else float(max(nameable, best["_chi2_cv"] - penalty))
 
 
-def _rechosen(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], two: PairFit,
-              mm: MeasuredModes, fmax: float, first: PhysicalFit, target: float, rule: DecisionRule) -> PairFit | None:
-    """A pair ``two`` (of ``fits``) refined on all modes and stopped there by its bound (its chi2 not below
-    ``target``) at the choices it was started at, with its choices made again (:func:`rechoose`) as a pair that
-    gains ``rule.physical_min_gain_db`` over ``first`` alone has: when its chi2 could give that gain (its held-out
-    chi2 is at least its chi2) and comes below ``target`` at the new choices, refined and cross-validated from there
-    (the folds stopped as before); else None (it cannot win at any choice it takes)."""
-    if gain_db(first.cv_per_mode, two.chi2) < rule.physical_min_gain_db:
-        return None                 # not even its chi2 on all modes gains enough: its choices are not made again
-    again = rechoose(sim, specs, fits, two, mm, fmax)
-    if again.chi2 >= target:
-        return None
-    moved = [replace(f, params=dict(p)) for f, p in zip(fits, again.params)]
-    out = fit_pair(sim, specs, moved, mm, fmax, folds_below=target)
-    return out if out.cv_per_mode.size == mm.freq_hz.size else None
-
-
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
                names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf,
                named_only: bool = False) -> dict | None:
@@ -831,12 +813,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
             continue                        # its exact score cannot win (:func:`_win_target`)
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
         if two.cv_per_mode.size < mm.freq_hz.size:
-            # refined on all modes, no better than ``target`` at its choices: made again where it could gain
-            again = _rechosen(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax, fa, target,
-                              judge.rule)
-            if again is None:
-                continue                    # no better than ``target`` at any choice it takes: not cross-validated
-            two = again
+            continue                        # refined on all modes, no better than ``target``: not cross-validated
         if gain_db(fa.cv_per_mode, two.cv_per_mode) >= judge.rule.physical_min_gain_db:
             two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
         two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
