@@ -775,9 +775,9 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
                names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf,
                named_only: bool = False) -> dict | None:
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
-    (:func:`_seconds`, or :func:`_opened` with its choice held open) refined with it, cross-validated nested
-    and judged (:func:`_second_cause`); ``held``: also a second cause of many options refined with it at every
-    option (:func:`_held_seconds`). Two changes of one cause split from ``first``
+    (:func:`_seconds`, or :func:`_opened` with its choice held open; the ``N_SECOND`` best of the screen first, then
+    every other) refined with it, cross-validated nested and judged (:func:`_second_cause`); ``held``: also a second
+    cause of many options refined with it at every option (:func:`_held_seconds`). Two changes of one cause split from ``first``
     (:func:`split_choice`) are taken in the grid's order, each while its lower bound says it could still win
     (:func:`_win_target`; ``top``: the score of a named pair found elsewhere, which only a better named pair beats);
     a pair whose refined chi2 on all modes is not below that target is not cross-validated (its nested held-out
