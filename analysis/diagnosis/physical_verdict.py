@@ -484,9 +484,8 @@ class _Judge:
         return c
 
 
-#: First causes tried with a second cause on top (the best by held-out gain), and second causes (the best
-#: by penalised chi2 on top of the first) refined as a pair with nested cross-validation.
-N_FIRST = 4
+#: Second causes the freedom of a pair counts (the best by penalised chi2 on top of the first, :func:`_on_top_of`):
+#: every other second cause is refined with the first too, and cross-validated only while its refined chi2 could win.
 N_SECOND = 3
 
 
@@ -574,9 +573,9 @@ def _named_pair(c: dict | None) -> bool:
 def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
                   judge: _Judge, names: Sequence[str] | None, firsts: list | None = None,
                   opened: bool = False) -> dict | None:
-    """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of the best
-    significant single cause (and, when that gives no adequate pair, the next; when none is significant,
-    the best by held-out gain), the other causes; the best pair by nested held-out error, judged like a
+    """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of each single cause
+    that gains anything held out (the significant first, then by held-out gain; stopped once a named pair leaves the
+    held-out modes within their uncertainty), the other causes; the best pair by nested held-out error, judged like a
     single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of those only. Pairs are
     compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
     naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
@@ -597,7 +596,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     alone = firsts is None
     if firsts is None:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
-        firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])[:N_FIRST]
+        firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])
     best: dict | None = None
     for first in firsts:
         best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
@@ -622,10 +621,6 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
             first = _as_first(sim, specs, mm, fmax, name, free, judge)
             best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
     return best
-
-
-#: Other significant single causes tried as the first of a pair in place of a named cause (:func:`_rival_pair`).
-N_RIVALS = 3
 
 
 def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
@@ -704,16 +699,15 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
 def _rival_pair(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
                 judge: _Judge, names: Sequence[str] | None, best: dict) -> dict | None:
     """Two changes of one kind at two places in place of the named single cause ``best`` (two cracks in one column
-    for its mass grown 10 %): the pairs on top of the next ``N_RIVALS`` single causes with a choice that gain
-    anything held out, and of an element's stiffness among the others (:func:`splits`; :func:`_second_cause`);
+    for its mass grown 10 %): the pairs on top of every other single cause with a choice that gains anything held
+    out (:func:`_second_cause`; each pair cross-validated only while its refined chi2 could win, :func:`_win_target`);
     the best named pair of one cause twice kept only when it predicts
     the held-out modes better than ``best`` alone by the held-out gain rule (:func:`_on_top_enough` against
     ``best`` cross-validated as the pairs are, the freedom of the pair's second cause counted); else None."""
     local = [c for c in found if c["effect"] != best["effect"] and c["gain_db"] > 0 and specs[c["effect"]].choice]
-    rivals = local[:N_RIVALS] + [c for c in local[N_RIVALS:] if splits(specs[c["effect"]])]
-    if not rivals:
+    if not local:
         return None
-    two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=rivals)
+    two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=local)
     if two is None or not _named_pair(two) or len(set(two["_pair"].causes)) != 1:
         return None
     freedom = _freedom(specs[two["_pair"].causes[1]], two["_free"])
@@ -781,9 +775,9 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
                names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf,
                named_only: bool = False) -> dict | None:
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
-    (:func:`_seconds`, or :func:`_opened` with its choice held open) refined with it, cross-validated nested
-    and judged (:func:`_second_cause`); ``held``: also a second cause of many options refined with it at every
-    option (:func:`_held_seconds`). Two changes of one cause split from ``first``
+    (:func:`_seconds`, or :func:`_opened` with its choice held open; the ``N_SECOND`` best of the screen first, then
+    every other) refined with it, cross-validated nested and judged (:func:`_second_cause`); ``held``: also a second
+    cause of many options refined with it at every option (:func:`_held_seconds`). Two changes of one cause split from ``first``
     (:func:`split_choice`) are taken in the grid's order, each while its lower bound says it could still win
     (:func:`_win_target`; ``top``: the score of a named pair found elsewhere, which only a better named pair beats);
     a pair whose refined chi2 on all modes is not below that target is not cross-validated (its nested held-out
@@ -792,9 +786,10 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
+    seconds = [] if opened else _seconds(sim, specs, mm, fmax, fa, names, n=None, kept=judge.kept)
+    counted = [] if opened else _seconds(sim, specs, mm, fmax, fa, names, kept=judge.kept)
     pairs = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
-             [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb)
-              for fb in _seconds(sim, specs, mm, fmax, fa, names, kept=judge.kept)]
+             [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb) for fb in counted]
              + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
              + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
     if held:
@@ -802,8 +797,14 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     # the second causes the freedom counts: held open, the N_SECOND best of the screen (the others are kept by
     # their bound only)
     n_seconds = max(1, len({fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)}))
+    # the other second causes of the screen, each refined with the first last: cross-validated only while its
+    # refined chi2 on all modes could win (:func:`_win_target`), so none is dropped by its rank on the screen
+    todo: list[tuple[SplitBound, PhysicalFit | None, PhysicalFit]] = [
+        *pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))]
     best: dict | None = None
-    for bound, fa2, fb in pairs:
+    for bound, fa2, fb in todo:
+        if fa2 is None:
+            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax)
         freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
         target = _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom,
                              _freedom(specs[fb.cause], fb.free),
