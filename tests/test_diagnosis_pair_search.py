@@ -30,17 +30,23 @@ def _supports(rot: float) -> dict:
     return {"support": "all", "factor_translational": 1.0, "factor_rotational": rot}
 
 
-def test_a_pairs_choice_is_made_again_where_both_causes_are_refined() -> None:
-    """A 1.2 kg mass at top:3 with the supports x 0.28: a pair refined with the mass at top:5 (the node
-    chosen beside the supports' rougher single fit) is searched again with the refined supports applied and
-    gives both back; the options searched are kept for each choice (the supports: all of them first)."""
+def _mass_beside_supports() -> tuple:
+    """A 1.2 kg mass at top:3 with the supports x 0.28 (noise-free modes), and the pair's single fits with the
+    mass chosen at top:5 (the node beside the supports' rougher single fit): (frame, pair specs, fits, modes)."""
     fv = FrameVariants(None, OUTS, REFS)
     specs = _specs(fv)
     mm = _noise_free_modes(fv, [("added_mass", {"point": "top:3", "mass_kg": 1.2}),
                                 ("support_stiffness", _supports(0.28))])
     fits = [PhysicalFit("support_stiffness", _supports(0.25), ("factor_rotational",), np.inf),
             PhysicalFit("added_mass", {"point": "top:5", "mass_kg": 1.0}, ("mass_kg",), np.inf)]
-    pair_specs = [specs["support_stiffness"], specs["added_mass"]]
+    return fv, [specs["support_stiffness"], specs["added_mass"]], fits, mm
+
+
+def test_a_pairs_choice_is_made_again_where_both_causes_are_refined() -> None:
+    """A 1.2 kg mass at top:3 with the supports x 0.28: a pair refined with the mass at top:5 (the node
+    chosen beside the supports' rougher single fit) is searched again with the refined supports applied and
+    gives both back; the options searched are kept for each choice (the supports: all of them first)."""
+    fv, pair_specs, fits, mm = _mass_beside_supports()
     wrong = fit_pair(fv, pair_specs, fits, mm, FMAX, folds=False)
     assert wrong.params[1]["point"] == "top:5" and wrong.cv_per_mode.size == 0
     again = rechoose(fv, pair_specs, fits, wrong, mm, FMAX)
@@ -468,13 +474,7 @@ def test_a_pairs_folds_stop_once_its_held_out_chi2_cannot_come_below_the_target(
     chi2 is above its chi2 on all modes. With a target between the two the folds stop as soon as the folds
     made and the least the others can pay (their modes' chi2 at the all-modes minimum) reach it: no held-out chi2,
     fewer solves than every fold; with a target above its held-out chi2 every fold is made, as with none."""
-    fv = FrameVariants(None, OUTS, REFS)
-    specs = _specs(fv)
-    mm = _noise_free_modes(fv, [("added_mass", {"point": "top:3", "mass_kg": 1.2}),
-                                ("support_stiffness", _supports(0.28))])
-    fits = [PhysicalFit("support_stiffness", _supports(0.25), ("factor_rotational",), np.inf),
-            PhysicalFit("added_mass", {"point": "top:5", "mass_kg": 1.0}, ("mass_kg",), np.inf)]
-    pair_specs = [specs["support_stiffness"], specs["added_mass"]]
+    fv, pair_specs, fits, mm = _mass_beside_supports()
     every = _Counted(fv)
     full = fit_pair(every, pair_specs, fits, mm, FMAX)
     assert full.cv_per_mode.size == mm.freq_hz.size and full.chi2_cv > 1.5 * full.chi2 > 0
