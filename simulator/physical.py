@@ -443,9 +443,9 @@ class FrameVariants:
         :attr:`reduced`, else (and when the basis would not be much smaller) the full model. The answers
         are kept: a candidate asked again is not solved again."""
         key = (tuple((c, tuple(sorted(p.items()))) for c, p in changes), float(max_freq_hz), self.reduced)
-        hit = self._memo.pop(key, None)
+        hit = self._memo.get(key)
         if hit is not None:
-            self._memo[key] = hit                 # the latest used last: the least recently used go first
+            _keep(self._memo, key, hit, _MEMO_SIZE)     # the latest used last: the least recently used go first
             return hit
         out = self._modes_reduced(changes, max_freq_hz) if self.reduced and changes else None
         if out is None:

@@ -49,6 +49,12 @@ def solve_limit_hz(max_freq_hz: float) -> float:
     return float(2.0 ** (np.ceil(np.log2(float(max_freq_hz)) * LIMIT_STEPS_PER_OCTAVE) / LIMIT_STEPS_PER_OCTAVE))
 
 
+def _below(f_hz: Any, top_hz: float) -> int:
+    """How many of the ascending natural frequencies ``f_hz`` (Hz) lie below ``top_hz``: the modes a frame solved up
+    to :func:`solve_limit_hz` keeps for the band asked."""
+    return int(np.count_nonzero(np.asarray(f_hz) < top_hz))
+
+
 def _split(changes: Changes) -> tuple[float, list[tuple[str, Mapping]]]:
     """The stiffness factor (-) of the global cause among ``changes`` (1 without it) and the other changes."""
     k = 1.0
@@ -93,7 +99,7 @@ class ScatterSimulation:
         s, rest = self._scale(changes)
         top = max_freq_hz / s
         f, P = solve(rest, solve_limit_hz(top))
-        n = int(np.count_nonzero(np.asarray(f) < top))          # ascending: the modes below the band's top
+        n = _below(f, top)
         return np.asarray(f)[:n] * s, np.asarray(P)[:, :n]
 
     def _modes(self, rest: list, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
@@ -131,7 +137,7 @@ class ScatterSimulation:
         else:
             f0, P = self._modes(rest, solve_limit_hz(top))
             df0, dP0 = np.zeros((np.size(f0), 0)), np.zeros((*np.shape(P), 0))
-        n = int(np.count_nonzero(np.asarray(f0) < top))
+        n = _below(f0, top)
         f0, P, df0, dP0 = np.asarray(f0)[:n], np.asarray(P)[:, :n], np.asarray(df0)[:n], np.asarray(dP0)[:, :n]
         f = f0 * s
         df = np.zeros((f.size, len(wrt)))

@@ -508,9 +508,14 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
     names one (a fleet's unit: the global cause its manufacturing scatter takes is always tried, for the
     first cause fitted alone absorbs part of the scatter and leaves little for it on top). ``kept``: the fits on top
     of each first cause made so far in this diagnosis (the held-open round asks them again: the same answers)."""
-    out = _on_top_fits(sim, mm, fmax, first, names, {} if kept is None else kept)
+    return _leading(sim, _on_top_fits(sim, mm, fmax, first, names, {} if kept is None else kept), n)
+
+
+def _leading(sim: PhysicalSimulation, ranked: list[PhysicalFit], n: int | None) -> list[PhysicalFit]:
+    """The ``n`` best of the second causes ``ranked`` (None: all) and the simulation's ``scatter_cause`` among the
+    rest (:func:`_seconds`)."""
     scatter = getattr(sim, "scatter_cause", None)
-    return out[:n] + [f for f in out[n:] if f.cause == scatter] if n is not None else out
+    return ranked[:n] + [f for f in ranked[n:] if f.cause == scatter] if n is not None else ranked
 
 
 def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -787,7 +792,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
     seconds = [] if opened else _seconds(sim, specs, mm, fmax, fa, names, n=None, kept=judge.kept)
-    counted = [] if opened else _seconds(sim, specs, mm, fmax, fa, names, kept=judge.kept)
+    counted = _leading(sim, seconds, N_SECOND)
     pairs = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
              [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb) for fb in counted]
              + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
