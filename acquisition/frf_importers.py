@@ -629,7 +629,7 @@ def write_frf_recording(imp: ImportedFRFs, out: str | Path, overwrite: bool = Fa
     with whole_recording(out, overwrite) as tmp, RecordingWriter(
             tmp, instrument=instrument, setup=setup, channels=chans,
             windows=WindowSettings(exp_window_tau_s=first.exp_window_tau_s),
-            plan={"mode": "imported", "points": refs}, overwrite=True) as w:
+            plan={"mode": "imported", "points": refs}, overwrite=True, journal=False) as w:
         w.log("INFO", f"imported the analyser's FRFs of {len(refs)} reference(s) from {imp.source} ({imp.fmt})")
         for j, (s, n) in enumerate(zip(imp.sets, imp.n_averages)):
             w.write_frf(FRFPoint(j, s.references[0]), s, None, n_averages=n,

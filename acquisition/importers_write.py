@@ -56,7 +56,7 @@ def write_imported(
     hits = imported_hits(test, roles)  # refuses what 16-bit counts cannot hold before the file is opened
     with whole_recording(out, overwrite) as tmp, RecordingWriter(
             tmp, instrument=instrument, setup=setup, channels=chans, windows=windows,
-            plan={"mode": "imported", "points": [ref]}, overwrite=True) as w:
+            plan={"mode": "imported", "points": [ref]}, overwrite=True, journal=False) as w:
         w.log("INFO", f"imported {len(test.hits)} hit(s) from {test.source}; " + "; ".join(roles.describe()))
         kept: list[Hit] = []
         continuous = test.meta.get("excitation") == "continuous"  # a shaker's blocks: no hammer pulse to check

@@ -36,7 +36,7 @@ def replay(src: str | Path, out: str | Path, *, windows: WindowSettings | None =
                                          pretrigger_s=rec.pretrigger_s)
         with whole_recording(out, overwrite) as tmp, RecordingWriter(
                 tmp, instrument=rec.instrument, setup=rec.setup, channels=rec.channels,
-                windows=averages[0].windows, plan=rec.plan, overwrite=True) as w:
+                windows=averages[0].windows, plan=rec.plan, overwrite=True, journal=False) as w:
             for t, level, msg in rec.events():
                 w.log(level, f"[original {t:.3f}] {msg}")
             for h in all_hits:

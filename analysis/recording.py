@@ -1,8 +1,9 @@
 """Impact-test recordings: HDF5 schema ``impactlab-recording`` version 1 (``docs/recording-format.md``).
 
 The writer appends as the test goes: every hit (accepted or rejected) is written as raw ADC
-counts (int16) with its scaling and flushed before the analyser is armed again, so a crash
-loses no accepted hit and leaves a file that opens. FRF results are written per measurement
+counts (int16) with its scaling, journaled and flushed before the analyser is armed again, so a
+crash loses no accepted hit (a recording whose writer stopped without closing it is read from its
+journal, ``analysis.recording_journal``). FRF results are written per measurement
 point when its average is complete. The reader validates the schema and checksums and turns
 any damaged, truncated, foreign or wrong-version file into :class:`RecordingError`.
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -26,8 +28,9 @@ from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.spectra import WindowSettings, excitation_limit_hz, excited_top_hz
 
-from .recording_lock import is_lock_error, live_copy, locked_error, writer_alive
+from .recording_lock import is_lock_error, live_copy, live_copy_file, locked_error, writer_alive
 from .recording_schema import _DAMAGE, CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _as_str, _h5py, counts_crc32, scale_counts
+from .recording_writer import journal_left, replay_journal
 
 __all__ = [
     "SCHEMA",
@@ -77,6 +80,8 @@ class Recording:
     """
 
     live = False
+    #: True when the recording was read from the journal its writer left (it stopped without closing)
+    recovered = False
 
     def __init__(self, path: str | Path) -> None:
         h5py = _h5py()
@@ -95,6 +100,8 @@ class Recording:
         self._live_copy: Path | None = None
         if writer_alive(self.path):  # our own lock, also where libhdf5's is off (HDF5_USE_FILE_LOCKING=FALSE)
             self._f = self._open_live()
+        elif journal_left(self.path):
+            self._f = self._open_recovered()
         else:
             try:
                 self._f = h5py.File(self.path, "r")
@@ -131,6 +138,23 @@ class Recording:
         except OSError as exc:
             self._remove_live_copy()
             raise self._unopenable(exc) from None
+
+    def _open_recovered(self) -> Any:
+        """Open the recording rebuilt from the journal its writer left (the writer stopped without
+        closing it): a temporary file, the recording itself unchanged (``analysis.recording_journal``)."""
+        fd, name = live_copy_file(self.path)
+        os.close(fd)
+        os.unlink(name)
+        self._live_copy = Path(name)
+        try:
+            n, torn = replay_journal(self.path, self._live_copy)
+        except RecordingError:
+            self._remove_live_copy()
+            raise
+        self.recovered = True
+        log.warning("%s was not closed by its writer: read from its journal (%d changes%s); 'capture --resume' "
+                    "rebuilds the file", self.path, n, ", the last one cut short and left out" if torn else "")
+        return _h5py().File(self._live_copy, "r")
 
     def _unopenable(self, exc: OSError) -> RecordingError:
         return RecordingError(f"{self.path} is damaged or truncated and cannot be opened ({exc}); recover its intact "

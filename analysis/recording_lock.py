@@ -43,7 +43,7 @@ from typing import Any, TypeVar
 from analysis.errors import OutputBusy, RecordingError
 
 __all__ = ["WriterLock", "locked", "lock_path", "open_lock_file", "writer_alive", "live_copy",
-           "holder_pid", "locked_error", "busy_error", "is_lock_error", "held_by_other_program"]
+           "holder_pid", "live_copy_file", "locked_error", "busy_error", "is_lock_error", "held_by_other_program"]
 
 log = logging.getLogger(__name__)
 
@@ -351,7 +351,7 @@ def live_copy(path: str | Path) -> Path:
         raise locked_error(p)
     try:
         _set(fd, "sh", CHANGING_BYTE, wait=True)
-        tmp_fd, tmp_name = _live_copy_file(p)
+        tmp_fd, tmp_name = live_copy_file(p)
         try:
             with open(p, "rb") as src, os.fdopen(tmp_fd, "wb") as dst:
                 shutil.copyfileobj(src, dst, 1 << 20)
@@ -365,7 +365,7 @@ def live_copy(path: str | Path) -> Path:
         os.close(fd)
 
 
-def _live_copy_file(path: Path) -> tuple[int, str]:
+def live_copy_file(path: Path) -> tuple[int, str]:
     """A new file for the live copy of ``path`` (open fd, name): ``.REC.h5.PID-RANDOM.part`` beside the
     recording, where copies left by killed readers are removed first
     (:func:`analysis.atomic.remove_stale_temporaries`); in the temporary folder when the recording's

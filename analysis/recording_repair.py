@@ -27,6 +27,7 @@ from .errors import RecordingError
 from .outputs import check_outputs
 from .recording_lock import writer_alive
 from .recording_schema import _DAMAGE, SCHEMA, _as_str, _h5py, counts_crc32
+from .recording_writer import journal_left, replay_journal
 
 __all__ = ["RepairResult", "stored_eof", "repair_recording"]
 
@@ -204,7 +205,8 @@ def _rewrite(padded: str, out: str, source: str) -> tuple[list[int], list[int], 
 def repair_recording(rec_path: str | os.PathLike[str], out_path: str | os.PathLike[str], *,
                      overwrite: bool = False, timeout_s: float = REPAIR_TIMEOUT_S) -> RepairResult:
     """Write the recoverable part of ``rec_path`` to ``out_path`` as a clean recording (see the
-    module doc); ``rec_path`` is never changed. Raises :class:`RecordingError` with one line when
+    module doc; a recording whose writer left its journal is rebuilt from the journal whole);
+    ``rec_path`` is never changed. Raises :class:`RecordingError` with one line when
     nothing can be recovered, :class:`~analysis.errors.UsageError` when ``out_path`` is the input."""
     from ._isolated import run_isolated
     from .errors import ChildCrashed, ChildTimeout
@@ -218,6 +220,12 @@ def repair_recording(rec_path: str | os.PathLike[str], out_path: str | os.PathLi
                              "repair; wait for the writer to finish")
     if out.exists() and not overwrite:
         raise RecordingError(f"{out} exists: choose another --out file or give --overwrite")
+    if journal_left(src):  # its writer stopped without closing it: the journal holds every change
+        with atomic_path(out) as tmp:
+            replay_journal(src, tmp)
+            with _h5py().File(tmp, "r") as f:
+                kept = [int(name) for name in sorted(f["hits"].keys())]
+        return RepairResult(kept=tuple(kept), dropped=(), dropped_frf=(), padded_bytes=0)
     with atomic_path(out) as tmp:
         padded = temporary_beside(out)
         try:

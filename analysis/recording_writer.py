@@ -15,7 +15,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,16 +29,20 @@ from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.spectra import AveragedSpectra, WindowSettings
 
+from .disk_space import disk_full_cause
+from .recording_journal import Journal, journal_path, plain, read_journal
 from .recording_lock import WriterLock, busy_error, held_by_other_program, is_lock_error, locked, locked_error, writer_alive
 from .recording_schema import _DAMAGE, SCHEMA, SCHEMA_VERSION, _as_str, _channel_table, _h5py, _now_iso, counts_crc32
 
-__all__ = ["RecordingWriter", "FRFPoint", "SLACK_BYTES", "whole_recording"]
+__all__ = ["RecordingWriter", "FRFPoint", "SLACK_BYTES", "whole_recording", "OPS", "replay_journal", "recover"]
 
 log = logging.getLogger(__name__)
 
 #: room (bytes) reserved after the recording's end beyond a change's own data: the HDF5 groups,
 #: attributes and index blocks the change adds, and what closing the file writes
 SLACK_BYTES = 256 * 1024
+#: room (bytes) reserved after the journal's end beyond a change's own data (its record's header and text)
+JOURNAL_SLACK_BYTES = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -73,12 +77,200 @@ def whole_recording(path: str | Path, overwrite: bool = False) -> Iterator[Path]
                               "again") from None
 
 
+def _json_safe(value: Any) -> Any:
+    """``value`` as the JSON the recording stores it as (a value JSON cannot hold becomes its text)."""
+    return json.loads(json.dumps(value, default=str))
+
+
+def _fsync_file(path: Path) -> None:
+    """Sync a closed file's data to the disk."""
+    with open(path, "rb") as fh:
+        os.fsync(fh.fileno())
+
+
 def _frf_room(counts_shape: tuple) -> int:
     """Bytes the FRF results of a point need whose hits have counts of ``counts_shape`` (channels,
     samples): each hit keeps this room, so the point in progress can be written when the disk fills."""
     n_channels, n_samples = (int(counts_shape[0]), int(counts_shape[-1])) if len(counts_shape) == 2 else (1, 1)
     n_freq = n_samples // 2 + 1
     return n_freq * (16 + 64 * n_channels)  # freq, Gff; H1, H2, Gfx complex, coherence, Gxx per output
+
+
+# -- the changes a writer makes, each applied to an open HDF5 file --------------------------------
+# The writer journals a change (analysis.recording_journal) and then applies it with the same
+# function a replay of the journal uses, so a recording rebuilt from its journal holds what the live
+# writer wrote.
+
+def _set_attrs(target: Any, attrs: dict) -> None:
+    for key, value in attrs.items():
+        target[key] = value
+
+
+def _op_create(f: Any, args: dict) -> None:
+    """The recording's header and its empty groups."""
+    h5py = _h5py()
+    f.attrs["schema"] = SCHEMA
+    f.attrs["schema_version"] = SCHEMA_VERSION
+    f.attrs["created_utc"] = args["created_utc"]
+    f.attrs["software"] = args["software"]
+    instrument = args["instrument"]
+    g = f.create_group("instrument")
+    g.attrs["json"] = json.dumps(instrument, default=str)
+    for k, v in instrument.items():
+        if isinstance(v, (str, int, float, bool)):
+            g.attrs[k] = v
+    s = f.create_group("setup")
+    s.attrs["json"] = json.dumps(args["setup"], default=str)
+    s.create_dataset("channels", data=_channel_table(args["channels"]))
+    f.create_group("windows").attrs["json"] = json.dumps(args["windows"])
+    f.attrs["plan_json"] = json.dumps(args["plan"], default=str)
+    f.create_group("hits")
+    f.create_group("frf")
+    ev = f.create_group("events")
+    sdt = h5py.string_dtype()
+    ev.create_dataset("time_unix_s", shape=(0,), maxshape=(None,), dtype="f8", chunks=(256,))
+    ev.create_dataset("level", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
+    ev.create_dataset("message", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
+
+
+def _op_hit(f: Any, args: dict) -> None:
+    """One hit's group: its counts, then its attributes (``complete`` last)."""
+    g = f["hits"].create_group(f"{int(args['index']):06d}")
+    g.create_dataset("counts", data=args["counts"])
+    _set_attrs(g.attrs, args["attrs"])
+
+
+def _op_withdraw(f: Any, args: dict) -> None:
+    """An accepted hit marked not accepted, with the reason added."""
+    a = f["hits"][f"{int(args['index']):06d}"].attrs
+    a["accepted"] = False  # first: a crash between the two writes leaves the hit out, not in
+    a["reasons"] = json.dumps(json.loads(_as_str(a["reasons"])) + [str(args["reason"])])
+
+
+def _op_frf(f: Any, args: dict) -> None:
+    """A measurement point's FRF group, written or replaced whole."""
+    grp = f["frf"]
+    if args["name"] in grp:
+        del grp[args["name"]]
+    g = grp.create_group(args["name"])
+    for key, val in args["datasets"].items():
+        g.create_dataset(key, data=val)
+    _set_attrs(g.attrs, args["attrs"])
+
+
+def _op_event(f: Any, args: dict) -> None:
+    """One event appended to the log."""
+    ev = f["events"]
+    n = ev["time_unix_s"].shape[0]
+    for name in ("time_unix_s", "level", "message"):
+        ev[name].resize((n + 1,))
+        ev[name][n] = args[name]
+
+
+def _op_attr(f: Any, args: dict) -> None:
+    """A root attribute set (``closed_utc`` and the set-up's other attributes)."""
+    f.attrs[args["key"]] = args["value"]
+
+
+def _op_drop_hits(f: Any, args: dict) -> None:
+    """Hits cut short by a crash removed, and the mark of a clean close (a resumed recording is open)."""
+    for name in args["names"]:
+        del f["hits"][name]
+    if "closed_utc" in f.attrs:
+        del f.attrs["closed_utc"]
+
+
+#: each change a writer journals, by name: the function that applies it to an HDF5 file
+OPS = {"create": _op_create, "hit": _op_hit, "withdraw": _op_withdraw, "frf": _op_frf, "event": _op_event,
+       "attr": _op_attr, "drop_hits": _op_drop_hits}
+
+
+def _replay(ops: Sequence[tuple[str, dict]], out: Path) -> None:
+    """Write the recording the changes ``ops`` make to the new file ``out``."""
+    if not ops or ops[0][0] != "create":
+        raise RecordingError("its journal does not start with the recording's header")
+    with _h5py().File(out, "x") as f:
+        for op, args in ops:
+            if op not in OPS:
+                raise RecordingError(f"its journal holds a change this impactlab does not know ({op!r}): use the "
+                                     "impactlab release that wrote it")
+            OPS[op](f, args)
+
+
+def replay_journal(path: str | Path, out: str | Path) -> tuple[int, bool]:
+    """Rebuild the recording ``path`` from its journal into the new file ``out`` (which must not exist);
+    returns (number of changes replayed, whether the journal ended with a change cut short). Raises
+    :class:`RecordingError` when the journal is not one or cannot be replayed."""
+    jp = journal_path(path)
+    contents = read_journal(jp)
+    if contents.damage:
+        log.warning("%s: %s; the changes before it are used", jp, contents.damage)
+    try:
+        _replay(contents.ops, Path(out))
+    except RecordingError as exc:
+        raise RecordingError(f"{jp} cannot be replayed: {exc}") from None
+    except _DAMAGE as exc:
+        raise RecordingError(f"{jp} cannot be replayed ({type(exc).__name__}: {exc})") from None
+    return len(contents.ops), contents.torn
+
+
+#: root attributes the header (``create``) writes, and the mark of a clean close
+_HEADER_ATTRS = ("schema", "schema_version", "created_utc", "software", "plan_json", "closed_utc")
+
+
+def _as_changes(f: Any, path: Path, cut: list[str], kept: list[int]) -> Iterator[tuple[str, dict]]:
+    """The changes that make the open recording ``f`` as it is, hit by hit (a resumed recording's
+    journal starts with them); the names of hits cut short by a crash are added to ``cut`` (not
+    included), the indices of the others to ``kept``. Damage raises :class:`RecordingError`."""
+    try:
+        table = f["setup/channels"][()]
+        channels = [{k: plain(row[k]) for k in table.dtype.names} for row in table]
+        yield "create", plain({
+            "instrument": json.loads(_as_str(f["instrument"].attrs["json"])),
+            "setup": json.loads(_as_str(f["setup"].attrs["json"])), "channels": channels,
+            "windows": json.loads(_as_str(f["windows"].attrs["json"])),
+            "plan": json.loads(_as_str(f.attrs.get("plan_json", "{}"))),
+            "software": _as_str(f.attrs.get("software", "")), "created_utc": _as_str(f.attrs.get("created_utc", ""))})
+        for name in sorted(f["hits"].keys()):
+            g = f["hits"][name]
+            if not g.attrs.get("complete", False):
+                cut.append(name)
+                continue
+            kept.append(int(name))
+            yield "hit", {"index": int(name), "counts": g["counts"][()], "attrs": plain(dict(g.attrs))}
+        for name in sorted(f["frf"].keys()):
+            g = f["frf"][name]
+            yield "frf", {"name": name, "datasets": {k: g[k][()] for k in g}, "attrs": plain(dict(g.attrs))}
+        ev = f["events"]
+        for t, level, message in zip(ev["time_unix_s"][()], ev["level"][()], ev["message"][()], strict=True):
+            yield "event", plain({"time_unix_s": t, "level": level, "message": message})
+        for key, value in f.attrs.items():
+            if key not in _HEADER_ATTRS:
+                yield "attr", plain({"key": key, "value": value})
+    except _DAMAGE as exc:
+        raise RecordingError(f"{path} is damaged and cannot be resumed ({type(exc).__name__}: {exc})") from None
+
+
+def journal_left(path: str | Path) -> bool:
+    """Whether ``path`` has a journal that no live writer holds: its writer stopped without closing
+    the recording, and the journal holds what it wrote."""
+    return os.path.lexists(journal_path(path)) and not writer_alive(path)
+
+
+def recover(path: str | Path) -> bool:
+    """Rebuild a recording whose writer stopped without closing it from its journal, in place (the
+    file rebuilt beside it replaces it, then the journal is removed); False when there is nothing to
+    recover. The caller holds the recording's writer lock."""
+    p = Path(path)
+    jp = journal_path(p)
+    if not os.path.lexists(jp):
+        return False
+    with atomic_path(p) as tmp:
+        n, torn = replay_journal(p, tmp)
+    log.warning("%s was not closed by its writer: rebuilt from its journal (%d changes%s)", p, n,
+                ", the last one cut short and left out" if torn else "")
+    Journal.discard(jp)
+    return True
 
 
 class RecordingWriter:
@@ -92,6 +284,10 @@ class RecordingWriter:
     channels : one dict per analyser channel with the keys of :data:`CHANNEL_FIELDS`.
     windows : the window settings used for the FRFs.
     plan : the test plan (kind "roving_hammer"/"roving_accelerometer", points...), stored as JSON.
+    journal : keep the journal ``REC.h5.journal`` beside the recording while it is open
+        (``analysis.recording_journal``: what makes a killed writer lose nothing). False only for a
+        file written whole into a temporary and renamed into place (:func:`whole_recording`), which
+        a killed writer leaves unfinished and never renamed anyway.
     """
 
     def __init__(
@@ -105,24 +301,73 @@ class RecordingWriter:
         plan: dict | None = None,
         software: str = "impactlab",
         overwrite: bool = False,
+        journal: bool = True,
     ) -> None:
         self.path = Path(path)
         self._full: DiskFullError | None = None
         self._n_hits = 0
+        self._journal: Journal | None = None
         self._lock = WriterLock(self.path)  # OutputBusy when a live writer has the recording open
         try:
             if os.path.lexists(self.path) and not overwrite:
                 raise RecordingError(f"{self.path} exists: choose another --out file or delete it first")
             if held_by_other_program(self.path):
                 raise locked_error(self.path)
+            header = plain({"instrument": _json_safe(instrument), "setup": _json_safe(setup),
+                            "channels": _json_safe(list(channels)), "windows": windows.to_dict(),
+                            "plan": _json_safe(plan or {}), "software": software, "created_utc": _now_iso()})
             with self._lock.changing():
-                self._create_beside(instrument, setup, channels, windows, plan, software)
+                Journal.discard(journal_path(self.path))  # a journal left there belongs to the file replaced
+                self._create_beside(header)
+                if journal:
+                    self._start_journal([("create", header)])
         except BaseException:
+            if getattr(self, "_f", None) is not None and self._f.id.valid:
+                with contextlib.suppress(*_DAMAGE):
+                    self._f.close()
             self._lock.release()
             raise
 
-    def _create_beside(self, instrument: dict, setup: dict, channels: Sequence[dict], windows: WindowSettings,
-                       plan: dict | None, software: str) -> None:
+    def _start_journal(self, ops: Iterable[tuple[str, dict]]) -> None:
+        """Start the journal with the changes that make the recording as it is now."""
+        try:
+            self._journal = Journal(journal_path(self.path))
+            for op, args in ops:
+                self._journal.append(op, args)
+        except RecordingError:
+            if self._journal is not None:
+                self._journal.remove()
+                self._journal = None
+            raise
+        except OSError as exc:
+            if self._journal is not None:
+                self._journal.remove()
+                self._journal = None
+            if disk_full_cause(exc) is not None:
+                raise DiskFullError(f"no room on the disk to start the journal of {self.path} ({exc.strerror}); free "
+                                    "space (or raise the file size limit) and run the command again") from None
+            raise RecordingError(f"cannot write the journal of {self.path} ({exc.strerror or exc}); check the "
+                                 "folder's permissions and room") from None
+
+    def _change(self, op: str, args: dict, what: str) -> None:
+        """Journal the change ``op`` (``what`` names it in a message), apply it to the HDF5 file and
+        flush: once this returns, the change survives the writer being killed."""
+        args = plain(args)
+        if self._journal is not None:
+            try:
+                self._journal.append(op, args)
+            except OSError as exc:
+                if disk_full_cause(exc) is None:
+                    raise
+                self._full = DiskFullError(
+                    f"no room on the disk to write {what} to {self.path} ({exc.strerror}): the recording is closed "
+                    f"with the {self._n_hits} hit(s) written before it, all readable. Free space (or raise the file "
+                    f"size limit), then resume the test (capture --resume {self.path}, or station --resume)")
+                raise self._full from None
+        OPS[op](self._f, args)
+        self._f.flush()
+
+    def _create_beside(self, header: dict) -> None:
         """Create the new recording in a temporary file beside the target and rename it into place (a
         file there, replaced with ``overwrite``, stays whole until then; a disk without room for its
         header leaves it as it was); the writer keeps it open."""
@@ -132,9 +377,10 @@ class RecordingWriter:
             except OSError as exc:
                 raise RecordingError(f"cannot create recording {self.path}: {exc}") from None
             try:
-                self._room(_channel_table(channels).nbytes + 4 * len(json.dumps(setup, default=str)),
+                self._room(_channel_table(header["channels"]).nbytes + 4 * len(json.dumps(header["setup"])),
                            "its header")
-                self._create(instrument, setup, channels, windows, plan, software)
+                OPS["create"](self._f, header)
+                self._f.flush()
             except BaseException:
                 with contextlib.suppress(*_DAMAGE):
                     self._f.close()
@@ -149,6 +395,8 @@ class RecordingWriter:
             raise self._full
         try:
             reserve(self._f.id.get_vfd_handle(), int(nbytes) + SLACK_BYTES, self.path)
+            if self._journal is not None and self._journal.fd is not None:
+                reserve(self._journal.fd, int(nbytes) + JOURNAL_SLACK_BYTES, self._journal.path)
         except OSError as exc:
             full = DiskFullError(
                 f"no room on the disk to write {what} to {self.path} ({exc.strerror}): the recording is closed "
@@ -167,47 +415,31 @@ class RecordingWriter:
             self._lock.release()
             raise (locked_error(self.path) if is_lock_error(exc) else failed(exc)) from None
 
-    def _create(self, instrument: dict, setup: dict, channels: Sequence[dict], windows: WindowSettings,
-                plan: dict | None, software: str) -> None:
-        h5py = _h5py()
-        f = self._f
-        f.attrs["schema"] = SCHEMA
-        f.attrs["schema_version"] = SCHEMA_VERSION
-        f.attrs["created_utc"] = _now_iso()
-        f.attrs["software"] = software
-        g = f.create_group("instrument")
-        g.attrs["json"] = json.dumps(instrument, default=str)
-        for k, v in instrument.items():
-            if isinstance(v, (str, int, float, bool)):
-                g.attrs[k] = v
-        s = f.create_group("setup")
-        s.attrs["json"] = json.dumps(setup, default=str)
-        s.create_dataset("channels", data=_channel_table(channels))
-        f.create_group("windows").attrs["json"] = json.dumps(windows.to_dict())
-        f.attrs["plan_json"] = json.dumps(plan or {}, default=str)
-        f.create_group("hits")
-        f.create_group("frf")
-        ev = f.create_group("events")
-        sdt = h5py.string_dtype()
-        ev.create_dataset("time_unix_s", shape=(0,), maxshape=(None,), dtype="f8", chunks=(256,))
-        ev.create_dataset("level", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
-        ev.create_dataset("message", shape=(0,), maxshape=(None,), dtype=sdt, chunks=(256,))
-        self._n_hits = 0
-        f.flush()
-
     @classmethod
     def resume(cls, path: str | Path) -> RecordingWriter:
         """Reopen an existing recording to append to it (``capture --resume``).
 
-        Hits cut short by a crash (no ``complete`` attribute) are removed; new hits are numbered
-        after the last complete one. Raises :class:`RecordingError` when the file is not a
-        recording this version writes or cannot be opened for writing."""
+        A recording whose writer stopped without closing it is first rebuilt from its journal
+        (:func:`recover`). Hits cut short by a crash (no ``complete`` attribute) are removed; new
+        hits are numbered after the last complete one. Raises :class:`RecordingError` when the file
+        is not a recording this version writes or cannot be opened for writing."""
         from .recording import verify_recording  # the reader's check (the reader imports this module)
 
-        verify_recording(path)  # in a child process: damage (even a libhdf5 crash) becomes RecordingError
         self = cls.__new__(cls)
         self.path = Path(path)
+        self._journal = None
         self._lock = WriterLock(self.path)  # OutputBusy when a live writer has the recording open
+        try:
+            with self._lock.changing():
+                recover(self.path)
+        except BaseException:
+            self._lock.release()
+            raise
+        try:
+            verify_recording(path)  # in a child process: damage (even a libhdf5 crash) becomes RecordingError
+        except BaseException:
+            self._lock.release()
+            raise
         with self._lock.changing():
             self._open_locked("r+", lambda exc: RecordingError(
                 f"cannot open {self.path} for appending ({exc}); copy it and resume the copy, or start a new "
@@ -221,27 +453,26 @@ class RecordingWriter:
                 self._lock.release()
                 raise DiskFullError(f"no room on the disk to continue {self.path}: free space (or raise the file "
                                     "size limit) and resume again; the recording is unchanged") from None
-            self._drop_cut_hits()
+            self._reopen_journaled()
         return self
 
-    def _drop_cut_hits(self) -> None:
+    def _reopen_journaled(self) -> None:
+        """Journal the recording as it is (its header, every complete hit, FRF group, event and
+        attribute), then remove the hits cut short by a crash: from here on the journal alone can
+        rebuild the file, whatever a later kill does to it."""
+        cut: list[str] = []
+        kept: list[int] = []
         try:
-            hits = self._f["hits"]
-            last = -1
-            for name in sorted(hits.keys()):
-                if not hits[name].attrs.get("complete", False):
-                    log.warning("%s: removing hit %s cut short by the crash", self.path, name)
-                    del hits[name]
-                else:
-                    last = max(last, int(name))
-            self._n_hits = last + 1
-            if "closed_utc" in self._f.attrs:
-                del self._f.attrs["closed_utc"]
-            self._f.flush()
-        except _DAMAGE as exc:
+            self._room(self.path.stat().st_size, "the resumed test's journal")
+            self._start_journal(_as_changes(self._f, self.path, cut, kept))
+        except BaseException:
             self._f.close()
             self._lock.release()
-            raise RecordingError(f"{self.path} is damaged and cannot be resumed ({type(exc).__name__}: {exc})") from None
+            raise
+        for name in cut:
+            log.warning("%s: removing hit %s cut short by the crash", self.path, name)
+        self._n_hits = 1 + max(kept, default=-1)
+        self._change("drop_hits", {"names": cut}, "the removal of cut hits")
 
     # -- writing -------------------------------------------------------------------------------
     @property
@@ -252,12 +483,7 @@ class RecordingWriter:
     def log(self, level: str, message: str) -> None:
         """Append an event (time, level, message) and flush."""
         self._room(8 * len(str(message)) + 64, "an event")
-        ev = self._f["events"]
-        n = ev["time_unix_s"].shape[0]
-        for name, value in (("time_unix_s", time.time()), ("level", str(level)), ("message", str(message))):
-            ev[name].resize((n + 1,))
-            ev[name][n] = value
-        self._f.flush()
+        self._change("event", {"time_unix_s": time.time(), "level": str(level), "message": str(message)}, "an event")
 
     @locked
     def write_hit(self, hit: Hit) -> int:
@@ -267,29 +493,28 @@ class RecordingWriter:
         idx = self._n_hits
         self._room(np.asarray(c).nbytes + 8 * len(json.dumps(hit.check, default=float)) + _frf_room(np.shape(c)),
                    f"hit {idx}")
-        g = self._f["hits"].create_group(f"{idx:06d}")
-        g.create_dataset("counts", data=c)
-        a = g.attrs
-        a["eu_per_count"] = hit.eu_per_count
-        a["volts_per_count"] = hit.volts_per_count
-        a["trigger_index"] = hit.trigger_index
-        a["sample_rate_hz"] = hit.sample_rate_hz
-        a["sequence"] = hit.sequence
-        a["timestamp"] = hit.timestamp
-        a["measurement"] = hit.measurement
-        a["point"] = hit.point
-        a["reference"] = hit.reference
-        a["outputs"] = json.dumps(hit.outputs)
-        a["force_channel"] = hit.force_channel
-        a["response_channels"] = np.asarray(hit.response_channels, dtype=np.int64)
-        a["overload"] = hit.overload
-        a["accepted"] = hit.accepted
-        a["reasons"] = json.dumps(hit.reasons)
-        a["check_json"] = json.dumps(hit.check, default=float)
-        a["crc32"] = counts_crc32(c)
-        a["complete"] = True  # written last: a hit cut short by a crash lacks it
+        attrs = {
+            "eu_per_count": hit.eu_per_count,
+            "volts_per_count": hit.volts_per_count,
+            "trigger_index": hit.trigger_index,
+            "sample_rate_hz": hit.sample_rate_hz,
+            "sequence": hit.sequence,
+            "timestamp": hit.timestamp,
+            "measurement": hit.measurement,
+            "point": hit.point,
+            "reference": hit.reference,
+            "outputs": json.dumps(hit.outputs),
+            "force_channel": hit.force_channel,
+            "response_channels": np.asarray(hit.response_channels, dtype=np.int64),
+            "overload": hit.overload,
+            "accepted": hit.accepted,
+            "reasons": json.dumps(hit.reasons),
+            "check_json": json.dumps(hit.check, default=float),
+            "crc32": counts_crc32(c),
+            "complete": True,  # written last: a hit cut short by a crash lacks it
+        }
+        self._change("hit", {"index": idx, "counts": np.asarray(c), "attrs": attrs}, f"hit {idx}")
         self._n_hits += 1
-        self._f.flush()
         return idx
 
     @locked
@@ -299,10 +524,7 @@ class RecordingWriter:
         if name not in self._f["hits"]:
             raise RecordingError(f"{self.path} has no hit {index} to withdraw")
         self._room(4096, f"the withdrawal of hit {index}")
-        a = self._f["hits"][name].attrs
-        a["accepted"] = False  # first: a crash between the two writes leaves the hit out, not in
-        a["reasons"] = json.dumps(json.loads(_as_str(a["reasons"])) + [str(reason)])
-        self._f.flush()
+        self._change("withdraw", {"index": int(index), "reason": str(reason)}, f"the withdrawal of hit {index}")
 
     @locked
     def write_frf(self, point: FRFPoint, frfset: FRFSet, spectra: AveragedSpectra | None, *,
@@ -326,18 +548,14 @@ class RecordingWriter:
             self._write_frf_only(name, point, frfset, n_averages, windows or WindowSettings())
             return
         arrays = (frfset.freq_hz, frfset.H, frfset.coherence, spectra.H2, spectra.Gff, spectra.Gxx, spectra.Gfx)
-        self._room(sum(np.asarray(a).nbytes for a in arrays if a is not None), f"the FRFs of point {point.label}",
-                   after_full=True)
-        grp = self._f["frf"]
-        if name in grp:
-            del grp[name]
-        g = grp.create_group(name)
+        what = f"the FRFs of point {point.label}"
+        self._room(sum(np.asarray(a).nbytes for a in arrays if a is not None), what, after_full=True)
         coh = frfset.coherence[:, 0, :] if frfset.coherence is not None else np.ones(frfset.H.shape[::2])
-        for key, val in (("freq_hz", frfset.freq_hz), ("H1", frfset.H[:, 0, :]), ("H2", spectra.H2),
-                         ("coherence", coh), ("Gff", spectra.Gff), ("Gxx", spectra.Gxx), ("Gfx", spectra.Gfx)):
-            g.create_dataset(key, data=np.asarray(val))
-        self._frf_attrs(g, point, frfset, int(spectra.n_averages), spectra.windows)
-        self._f.flush()
+        datasets = {key: np.asarray(val) for key, val in (
+            ("freq_hz", frfset.freq_hz), ("H1", frfset.H[:, 0, :]), ("H2", spectra.H2), ("coherence", coh),
+            ("Gff", spectra.Gff), ("Gxx", spectra.Gxx), ("Gfx", spectra.Gfx))}
+        self._change("frf", {"name": name, "datasets": datasets,
+                             "attrs": self._frf_attrs(point, frfset, int(spectra.n_averages), spectra.windows)}, what)
 
     def _write_frf_only(self, name: str, point: FRFPoint, frfset: FRFSet, n_averages: int | None,
                         windows: WindowSettings) -> None:
@@ -346,20 +564,16 @@ class RecordingWriter:
         arrays = [("freq_hz", frfset.freq_hz), ("H1", frfset.H[:, 0, :])]
         if frfset.coherence is not None:
             arrays.append(("coherence", frfset.coherence[:, 0, :]))
-        self._room(sum(np.asarray(a).nbytes for _, a in arrays), f"the FRFs of point {point.label}", after_full=True)
-        grp = self._f["frf"]
-        if name in grp:
-            del grp[name]
-        g = grp.create_group(name)
-        for key, val in arrays:
-            g.create_dataset(key, data=np.asarray(val))
-        self._frf_attrs(g, point, frfset, 0 if n_averages is None else int(n_averages), windows)
-        g.attrs["imported_frf"] = True
-        self._f.flush()
+        what = f"the FRFs of point {point.label}"
+        self._room(sum(np.asarray(a).nbytes for _, a in arrays), what, after_full=True)
+        attrs = self._frf_attrs(point, frfset, 0 if n_averages is None else int(n_averages), windows)
+        attrs["imported_frf"] = True
+        self._change("frf", {"name": name, "datasets": {key: np.asarray(val) for key, val in arrays}, "attrs": attrs},
+                     what)
 
     @staticmethod
-    def _frf_attrs(g: Any, point: FRFPoint, frfset: FRFSet, n_averages: int, windows: WindowSettings) -> None:
-        a = g.attrs
+    def _frf_attrs(point: FRFPoint, frfset: FRFSet, n_averages: int, windows: WindowSettings) -> dict:
+        a: dict[str, Any] = {}
         a["measurement"] = int(point.measurement)
         a["point"] = str(point.label)
         a["outputs"] = json.dumps(list(frfset.outputs))
@@ -372,13 +586,13 @@ class RecordingWriter:
         for key in ("exp_window_tau_s", "sample_rate_hz", "record_s", "pretrigger_s"):
             value = getattr(frfset, key)
             a[key] = float("nan") if value is None else float(value)
+        return a
 
     @locked
     def set_attr(self, key: str, value: Any) -> None:
         """Set a root attribute (str, number or bool) and flush."""
         self._room(len(str(value)) + 64, f"attribute {key}")
-        self._f.attrs[str(key)] = value
-        self._f.flush()
+        self._change("attr", {"key": str(key), "value": value}, f"attribute {key}")
 
     def close(self, discard: bool = False) -> None:
         """Close the recording (``discard``: and delete it, still holding its lock, so that a writer
@@ -388,8 +602,13 @@ class RecordingWriter:
                 self._f.attrs["closed_utc"] = _now_iso()  # in the room the last change kept back
                 self._f.close()
                 release_reserve(self.path)
+                if self._journal is not None:  # the file is whole: synced, then its journal goes
+                    _fsync_file(self.path)
+                    self._journal.remove()
+                    self._journal = None
         if discard:
             self.path.unlink(missing_ok=True)
+            Journal.discard(journal_path(self.path))
         self._lock.release()
 
     def __enter__(self) -> RecordingWriter:
