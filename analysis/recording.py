@@ -28,9 +28,9 @@ from analysis.frf import FRFSet
 from analysis.hit import Hit
 from analysis.spectra import WindowSettings, excitation_limit_hz, excited_top_hz
 
+from .recording_changes import journal_left, replay_journal
 from .recording_lock import is_lock_error, live_copy, live_copy_file, locked_error, writer_alive
 from .recording_schema import _DAMAGE, CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _as_str, _h5py, counts_crc32, scale_counts
-from .recording_writer import journal_left, replay_journal
 
 __all__ = [
     "SCHEMA",

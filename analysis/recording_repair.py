@@ -25,9 +25,9 @@ import numpy as np
 from .atomic import atomic_path, temporary_beside
 from .errors import RecordingError
 from .outputs import check_outputs
+from .recording_changes import journal_left, replay_journal
 from .recording_lock import writer_alive
 from .recording_schema import _DAMAGE, SCHEMA, _as_str, _h5py, counts_crc32
-from .recording_writer import journal_left, replay_journal
 
 __all__ = ["RepairResult", "stored_eof", "repair_recording"]
 

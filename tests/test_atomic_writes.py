@@ -88,7 +88,7 @@ _NOT_WHOLE_FILES = {
     ("analysis/recording_lock.py", "live_copy"): "a reader's temporary copy, removed after reading",
     ("analysis/recording_lock.py", "live_copy_file"): "the same temporary copy, created",
     ("analysis/recording_writer.py", "_open_locked"): "the recording, appended to hit by hit (room reserved first)",
-    ("analysis/recording_writer.py", "_replay"): "a new file (never replacing one): recover gives it atomic_path's "
+    ("analysis/recording_changes.py", "_replay"): "a new file (never replacing one): recover gives it atomic_path's "
                                                   "temporary, a reader its temporary copy",
     ("analysis/recording_repair.py", "_rewrite"): "the temporary atomic_path gave repair_recording, written in a child",
     ("analysis/report_html/build.py", "_write_files"): "files of a new temporary folder moved into place whole",
