@@ -20,7 +20,9 @@ and with ``--ways both`` first also
 * ``own simulation``: each unit builds the SIM's simulation afresh (``analysis diagnose``'s own, whose global
   cause is the modulus alone), so its causes and parameters may differ a little from the shared way's.
 
-The table gives each flagged unit's diagnosis CPU and wall time (s) against the fits' CPU time per unit, and the
+The table gives each flagged unit's diagnosis CPU and wall time (s) against the fits' CPU time per unit, the CPU
+of its two stages (every cause alone at every place, cross-validated: ``one cause``; the search of a second
+cause on top of the first: ``pair search``; the rest, the unit's modal fit and its FRFs, is the difference), and the
 simulation's solves for it (candidates' modes solved in a reduced space, on the full model, with their
 derivatives; reduced bases built); with both ways, whether they name the same causes with the same parameters
 (1e-6). On a busy machine the wall time also counts the waiting, and the CPU time grows a little with the load
@@ -76,6 +78,11 @@ def _same(a: list[tuple[str, dict]], b: list[tuple[str, dict]], tol: float = 1e-
     return True
 
 
+def _cell(col: str, v: float) -> str:
+    """A table cell of column ``col``: a stage's CPU time (s) to 0.1 s, a count (or its mean) to 1."""
+    return f"{v:.1f}" if col.endswith("(s)") else f"{v:.0f}"
+
+
 def cpu() -> float:
     """CPU time (s) of this process and of its children that have ended (the forked cause fits)."""
     import resource
@@ -99,6 +106,31 @@ def count_solves() -> dict[str, int]:
 
         setattr(owner, name, run)
     return counts
+
+
+#: the diagnosis' stages timed per unit: (module, function, column)
+_STAGES = (("analysis.diagnosis.physical_verdict", "physical_causes", "one cause CPU (s)"),
+           ("analysis.diagnosis.physical_verdict", "_pair_search", "pair search CPU (s)"))
+
+
+def time_stages() -> dict[str, float]:
+    """The CPU time (s) of this process in each stage of :data:`_STAGES` from now on, updated as they run."""
+    import importlib
+
+    spent = {col: 0.0 for *_, col in _STAGES}
+    for module, name, col in _STAGES:
+        owner = importlib.import_module(module)
+        real = getattr(owner, name)
+
+        def run(*a: object, _real: object = real, _col: str = col, **k: object) -> object:
+            t0 = time.process_time()
+            try:
+                return _real(*a, **k)  # type: ignore[operator]
+            finally:
+                spent[_col] += time.process_time() - t0
+
+        setattr(owner, name, run)
+    return spent
 
 
 def main() -> None:
@@ -125,6 +157,7 @@ def run(args: argparse.Namespace) -> None:
     from analysis.cli_diagnose import run_diagnosis
 
     counts = count_solves()
+    stages = time_stages()
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         fleet = Path(args.fleet) if args.fleet else Path(tmp) / "fleet"
@@ -146,25 +179,26 @@ def run(args: argparse.Namespace) -> None:
         ways = (("own", run_diagnosis), ("shared", diagnose_unit))[1 if args.ways == "shared" else 0:]
         for way, diagnose in ways:
             for p in flagged:
-                t0, c0, n0 = time.perf_counter(), cpu(), dict(counts)
+                t0, c0, n0, s0 = time.perf_counter(), cpu(), dict(counts), dict(stages)
                 diag = diagnose(str(p), str(sim), band=None, estimator=None)
                 rows.setdefault(p.stem, {})[way] = (cpu() - c0, time.perf_counter() - t0,
                                                     diagnosis_summary(diag.to_json()),
-                                                    {k: counts[k] - n0[k] for k in counts})
+                                                    {**{k: counts[k] - n0[k] for k in counts},
+                                                     **{k: stages[k] - s0[k] for k in stages}})
                 print(f"... {p.stem} {way}: {rows[p.stem][way][0]:.1f} s CPU", file=sys.stderr, flush=True)
     n_fit = len(fits)
     fit_unit = sum(fit_cpu) / n_fit
     print(f"fleet of {n_fit} units ({args.defects} defective, seed {args.seed}); {len(flagged)} flagged; "
           f"fits: {fit_unit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall per unit; load average "
           f"{load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end\n")
-    cols = list(counts)
+    cols = [*stages, *counts]
     both = args.ways == "both"
     print("| unit | defect | diagnosis CPU (s) | wall (s) | CPU / fit CPU per unit | " + " | ".join(cols)
           + (" | CPU, own simulation (s) | same causes and parameters" if both else "") + " | named |")
     print("|---|---|---|---|---|" + "---|" * len(cols) + ("---|---|" if both else "") + "---|")
     none: tuple[float, float, dict, dict] = (float("nan"), float("nan"), {}, {})
     own_cpu, cpu_sum, wall_sum = 0.0, 0.0, 0.0
-    count_sum = dict.fromkeys(cols, 0)
+    count_sum = dict.fromkeys(cols, 0.0)
     for name, r in rows.items():
         d = truth.get(name)
         what = "good" if not d else f"{d['kind']} {d.get('support') or d.get('joint') or d.get('element')}"
@@ -181,10 +215,10 @@ def run(args: argparse.Namespace) -> None:
             same = "yes" if (_same(_named(own[2]), _named(shared[2])) and own[2]["verdict"] == shared[2]["verdict"]) else "NO"
             extra = f" | {own[0]:.1f} | {same}"
         print(f"| {name} | {what} | {shared[0]:.1f} | {shared[1]:.1f} | {shared[0] / fit_unit:.0f}x | "
-              + " | ".join(str(shared[3][c]) for c in cols) + f"{extra} | {named} |")
+              + " | ".join(_cell(c, shared[3][c]) for c in cols) + f"{extra} | {named} |")
     k = max(len(rows), 1)
     print(f"| per flagged unit | | {cpu_sum / k:.1f} | {wall_sum / k:.1f} | "
-          f"{cpu_sum / k / fit_unit:.0f}x | " + " | ".join(f"{count_sum[c] / k:.0f}" for c in cols)
+          f"{cpu_sum / k / fit_unit:.0f}x | " + " | ".join(_cell(c, count_sum[c] / k) for c in cols)
           + (f" | {own_cpu / k:.1f} | " if both else "") + " | |")
     print(f"\nper unit of fit: {fit_unit:.2f} s CPU, {sum(fit_wall) / n_fit:.2f} s wall")
 
