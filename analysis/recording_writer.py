@@ -172,6 +172,11 @@ class RecordingWriter:
         try:
             if os.path.lexists(self.path) and not overwrite:
                 raise RecordingError(f"{self.path} exists: choose another --out file or delete it first")
+            if os.path.lexists(journal_path(self.path)) and not os.path.lexists(self.path):  # ours: we hold the lock
+                raise RecordingError(
+                    f"{journal_path(self.path)} holds the changes of a recording whose writer stopped without closing "
+                    f"it: 'python -m acquisition capture --resume {self.path}' rebuilds that recording from it; move "
+                    "the journal away to start a new recording there")
             if held_by_other_program(self.path):
                 raise locked_error(self.path)
             header = plain({"instrument": _json_safe(instrument), "setup": _json_safe(setup),
@@ -179,9 +184,7 @@ class RecordingWriter:
                             "plan": _json_safe(plan or {}), "software": software, "created_utc": _now_iso()})
             with self._lock.changing():
                 Journal.discard(journal_path(self.path))  # a journal left there belongs to the file replaced
-                self._create_beside(header)
-                if journal:
-                    self._start_journal([("create", header)])
+                self._create_beside(header, journal)
         except BaseException:
             if getattr(self, "_f", None) is not None and self._f.id.valid:
                 with contextlib.suppress(*_DAMAGE):
@@ -228,10 +231,11 @@ class RecordingWriter:
         OPS[op](self._f, args)
         self._f.flush()
 
-    def _create_beside(self, header: dict) -> None:
-        """Create the new recording in a temporary file beside the target and rename it into place (a
-        file there, replaced with ``overwrite``, stays whole until then; a disk without room for its
-        header leaves it as it was); the writer keeps it open."""
+    def _create_beside(self, header: dict, journal: bool) -> None:
+        """Create the new recording in a temporary file beside the target, start its journal
+        (``journal``) and rename it into place (a file there, replaced with ``overwrite``, stays whole
+        until then; a disk without room for its header or journal leaves it as it was); the writer
+        keeps it open."""
         with atomic_path(self.path) as tmp:
             try:
                 self._f = _h5py().File(tmp, "x")
@@ -242,6 +246,8 @@ class RecordingWriter:
                            "its header")
                 OPS["create"](self._f, header)
                 self._f.flush()
+                if journal:
+                    self._start_journal([("create", header)])
             except BaseException:
                 with contextlib.suppress(*_DAMAGE):
                     self._f.close()

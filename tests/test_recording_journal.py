@@ -203,3 +203,17 @@ def test_a_journal_that_cannot_be_replayed_is_a_clear_error(tmp_path):
     journal_path(p).write_bytes(MAGIC + encode_record("event", {"time_unix_s": 1.0, "level": "I", "message": "m"}))
     with pytest.raises(RecordingError, match="journal.*cannot be replayed.*header"):
         Recording(p)
+
+
+def test_a_journal_without_its_recording_is_never_discarded_by_a_new_writer(tmp_path):
+    """A killed writer's journal whose HDF5 file was deleted still holds the hits: a new recording
+    there is refused (the message says how to rebuild it), and a resume rebuilds it from the journal."""
+    p, reported = _killed_writer(tmp_path, 2)
+    p.unlink()
+    kept = journal_path(p).read_bytes()
+    with pytest.raises(RecordingError, match="capture --resume"):
+        RecordingWriter(p, instrument={}, setup={}, channels=[], windows=WindowSettings(), overwrite=True)
+    assert journal_path(p).read_bytes() == kept and not p.exists()
+    RecordingWriter.resume(p).close()
+    with Recording(p) as rec:
+        assert {h.index: int(h.counts.sum()) for h in rec.hits()} == reported
