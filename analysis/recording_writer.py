@@ -198,15 +198,12 @@ class RecordingWriter:
             self._journal = Journal(journal_path(self.path))
             for op, args in ops:
                 self._journal.append(op, args)
-        except RecordingError:
+        except (RecordingError, OSError) as exc:
             if self._journal is not None:
                 self._journal.remove()
                 self._journal = None
-            raise
-        except OSError as exc:
-            if self._journal is not None:
-                self._journal.remove()
-                self._journal = None
+            if isinstance(exc, RecordingError):
+                raise
             if disk_full_cause(exc) is not None:
                 raise DiskFullError(f"no room on the disk to start the journal of {self.path} ({exc.strerror}); free "
                                     "space (or raise the file size limit) and run the command again") from None
@@ -223,10 +220,7 @@ class RecordingWriter:
             except OSError as exc:
                 if disk_full_cause(exc) is None:
                     raise
-                self._full = DiskFullError(
-                    f"no room on the disk to write {what} to {self.path} ({exc.strerror}): the recording is closed "
-                    f"with the {self._n_hits} hit(s) written before it, all readable. Free space (or raise the file "
-                    f"size limit), then resume the test (capture --resume {self.path}, or station --resume)")
+                self._full = self._disk_full(what, exc)
                 raise self._full from None
         OPS[op](self._f, args)
         self._f.flush()
@@ -265,13 +259,17 @@ class RecordingWriter:
             if self._journal is not None and self._journal.fd is not None:
                 reserve(self._journal.fd, int(nbytes) + JOURNAL_SLACK_BYTES, self._journal.path)
         except OSError as exc:
-            full = DiskFullError(
-                f"no room on the disk to write {what} to {self.path} ({exc.strerror}): the recording is closed "
-                f"with the {self._n_hits} hit(s) written before it, all readable. Free space (or raise the file "
-                f"size limit), then resume the test (capture --resume {self.path}, or station --resume)")
+            full = self._disk_full(what, exc)
             if not after_full:
                 self._full = full
             raise full from None
+
+    def _disk_full(self, what: str, exc: OSError) -> DiskFullError:
+        """The one message of a change the disk had no room for."""
+        return DiskFullError(
+            f"no room on the disk to write {what} to {self.path} ({exc.strerror}): the recording is closed "
+            f"with the {self._n_hits} hit(s) written before it, all readable. Free space (or raise the file "
+            f"size limit), then resume the test (capture --resume {self.path}, or station --resume)")
 
     def _open_locked(self, mode: str, failed: Any) -> None:
         """Open the HDF5 file for writing holding the lock readers follow (``analysis.recording_lock``)."""
