@@ -230,7 +230,8 @@ def table(results: list[dict]) -> str:
         rows.append(f"\npairs: {sum(r['right'] for r in pairs)}/{len(pairs)} with both named (kind and place), "
                     f"{sum(r.get('clean', False) for r in pairs)} of them with no other cause; "
                     f"{sum(r.get('defects_named', 0) for r in pairs)}/{2 * len(pairs)} defects named; "
-                    f"CPU of the diagnosis median {np.median([r.get('cpu_s', np.nan) for r in pairs]):.1f} s")
+                    f"CPU of the diagnosis median "
+                    f"{np.median([r.get('cpu_s', np.nan) + r.get('cpu_children_s', 0.0) for r in pairs]):.1f} s")
     if nulls:
         rows.append(f"nulls: {sum(not r['right'] for r in nulls)} false alarms in {len(nulls)}")
     rows.append(cpu_line(results))
