@@ -22,10 +22,13 @@ demo: $(STAMP)
 # spreads over both processes and hands out first); TEST_WORKERS=0 runs it in this process
 TEST_WORKERS ?= 2
 
+# the suite writes bytecode as Python does by default (__pycache__, ignored by git) even where PYTHONDONTWRITEBYTECODE
+# is set: without it each of the two processes rewrites and compiles every test module at every run (collection
+# 11 s of CPU per process instead of 3.5 s), and every child process compiles the project's modules again
 test: $(STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m mypy
-	MPLBACKEND=Agg $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+	MPLBACKEND=Agg PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 lint: $(STAMP)
 	$(PY) -m ruff check .

@@ -147,9 +147,6 @@ def analyser_options(seed: int | None, config: str | None, noise: str | None,
 
 def firmware_factory(options: dict, precomputed: str | None = None) -> Callable[[], Any]:
     """A function building one fresh firmware; ``precomputed`` is an ``.npz`` with ``volts`` and ``fs_hz``."""
-    # the firmware imports its front end (scipy.signal) at the first strike; do it now so that a
-    # client's first ARM does not wait a second or two for an import
-    import simulator.frontend  # noqa: F401
     from simulator.analyser import create_analyser
     from simulator.firmware import PrecomputedStand
 
@@ -169,7 +166,11 @@ def firmware_factory(options: dict, precomputed: str | None = None) -> Callable[
             stand = PrecomputedStand(data["volts"], float(data["fs_hz"]))
 
     def make() -> Any:
-        return create_analyser(dict(options), stand=stand)
+        analyser = create_analyser(dict(options), stand=stand)
+        # the firmware imports its front end (scipy.signal) at the first strike; do it now (once the options are
+        # known to be good: a wrong option is told without it) so that a client's first ARM does not wait for it
+        import simulator.frontend  # noqa: F401
+        return analyser
 
     return make
 

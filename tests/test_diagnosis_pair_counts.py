@@ -6,6 +6,10 @@ the best would leave it out (fifth first cause, sixth second cause, fourth rival
 named, each change at its place with its factor."""
 from __future__ import annotations
 
+import copy
+import functools
+import json
+
 import numpy as np
 import pytest
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
@@ -26,7 +30,7 @@ def _searched(damage: dict, causes: list) -> tuple:
     frame with ``damage``: (simulation, specs, modes, fmax, fits, found, judge)."""
     from analysis.diagnosis.compare import line_weights, typical_error_db
     from analysis.diagnosis.effects import predict
-    from analysis.diagnosis.physical import physical_causes, residuals
+    from analysis.diagnosis.physical import residuals
     from analysis.diagnosis.physical_verdict import FMAX_FACTOR, _Judge
     from analysis.diagnosis.verdict import known_processing
 
@@ -47,9 +51,21 @@ def _searched(damage: dict, causes: list) -> tuple:
     base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
     judge = _Judge(measured, frf, weights, base, np.zeros(base.size, bool),
                    typical_error_db(measured, frf([]).H, weights), -60.0)
-    fits = physical_causes(fv, mm, fmax, causes)
+    fits = copy.deepcopy(_single_fits(json.dumps(damage, sort_keys=True), tuple(causes)))
     found = [judge.single(specs[f.cause], f) for f in fits]
     return fv, specs, mm, fmax, fits, found, judge
+
+
+@functools.cache
+def _single_fits(damage: str, causes: tuple) -> list:
+    """The single causes ``causes`` fitted on the frame with ``damage`` (JSON) as the physical stage fits them
+    (:func:`physical_causes`): made once per module, two tests start from the same frame (each gets a copy)."""
+    from analysis.diagnosis.physical import physical_causes
+    from analysis.diagnosis.physical_verdict import FMAX_FACTOR
+
+    cfg = FrameConfig.from_dict({"damage": json.loads(damage)})
+    mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
+    return physical_causes(FrameVariants(None, OUTS, REFS), mm, FMAX_FACTOR * float(mm.freq_hz[-1]), list(causes))
 
 
 def _named(c: dict | None) -> dict:
