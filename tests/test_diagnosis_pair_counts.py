@@ -96,15 +96,26 @@ def _last(found: list, effects: tuple) -> list:
             + [{**c, "significant": False, "gain_db": max(c["gain_db"], 0.1)} for c in found if c["effect"] in effects])
 
 
-def test_first_causes_ranked_fifth_and_sixth_are_still_tried() -> None:
+def test_first_causes_ranked_fifth_and_sixth_are_still_tried(monkeypatch: pytest.MonkeyPatch) -> None:
     """The supports' and the joints' causes ranked fifth and sixth among the first causes (after four significant
-    others): on top of one of them the other is found, and the pair is named (the four best first causes alone
-    named no pair)."""
-    from analysis.diagnosis.physical_verdict import _second_cause
+    others): the first round of the search tries a second cause on top of them too (not only in a later round with
+    their choice held open), and the pair is named."""
+    import analysis.diagnosis.physical_verdict as pv
 
     fv, specs, mm, fmax, fits, found, judge = _searched(SUPPORT_AND_JOINT, CAUSES)
     ranked = _last(found, ("support_stiffness", "joint_stiffness"))
-    _support_and_joint(_second_cause(fv, specs, mm, fmax, fits, ranked, judge, CAUSES))
+    tried: list[tuple[str, bool]] = []
+    on_top_of = pv._on_top_of
+
+    def spy(*args: object, **kw: object) -> object:
+        first, opened = args[4], args[7]
+        tried.append((first["_fit"].cause, bool(opened)))  # type: ignore[index]
+        return on_top_of(*args, **kw)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pv, "_on_top_of", spy)
+    _support_and_joint(pv._second_cause(fv, specs, mm, fmax, fits, ranked, judge, CAUSES))
+    assert [c["effect"] for c in ranked[:4]] == [cause for cause, _ in tried[:4]]
+    assert {("support_stiffness", False), ("joint_stiffness", False)} & set(tried), tried
 
 
 def test_a_second_cause_ranked_sixth_on_the_screen_is_still_refined(monkeypatch: pytest.MonkeyPatch) -> None:
