@@ -20,6 +20,11 @@ Families and ranges (fixed before any run; factors log-uniform):
   configuration an extra component of two elements with the block's own section, its middle node
   joined to the frame's node by the joint springs (``[joints] pairs`` extended). Right: ``added_mass``
   at that node or a neighbour on the same member, mass within 25 %;
+* ``section_change``: one member (``[components]``) made of another stock bar: its own section of the frame's
+  shape (``[sections]`` ``rect``, ``width_m`` and ``depth_m``), each side scaled by a factor drawn log-uniformly
+  in 0.8..1.25, at least one side by 5 % or more (another bar, not a tolerance); mass and both bending
+  stiffnesses change together, by different factors. Right: every named cause is a member's cause
+  (``member_stiffness`` or ``member_mass``) of that member, at least one named;
 * ``null``: the unchanged frame at another capture seed, with the default test plan's points or with six
   hammer points drawn from the frame's nodes (any of X, Y, Z across the member).
 
@@ -28,6 +33,8 @@ damaged node; the element) - ``named`` with kind and place. A null is right when
 
     # draw a hold-out list (commit it before running it)
     python benchmarks/studies/diagnosis_one_place.py draw --seed 33 --damage 20 --nulls 10 --out CASES.json
+    # with section changes (drawn from their own seed, seed + 2)
+    python benchmarks/studies/diagnosis_one_place.py draw --seed 70 --damage 15 --nulls 0 --sections 5 --out CASES.json
     # run it (one case after the other; the diagnosis forks its own processes); --write: the results go to
     # CASES.results.json beside the list (replaced after every case, atomically)
     OPENBLAS_NUM_THREADS=1 nice -n 10 python benchmarks/studies/diagnosis_one_place.py run CASES.json --write
@@ -40,6 +47,7 @@ import contextlib
 import io
 import json
 import os
+import resource
 import sys
 import tempfile
 import time
@@ -66,6 +74,12 @@ RANGES = {"loose_support": (0.05, 0.3), "soft_joint": (0.02, 0.2), "cracked_elem
 #: Attached blocks: mass (kg) and the two drawn sides (m); steel density of frame.toml's [material].
 BLOCK_MASS_KG = (1.0, 5.0)
 BLOCK_SIDE_M = (0.02, 0.20)
+#: Section changes: each side of the member's section scaled by a factor in this range (log-uniform), at least
+#: one side by SECTION_MIN_CHANGE or more (relative).
+SECTION_SCALE = (0.8, 1.25)
+SECTION_MIN_CHANGE = 0.05
+#: The causes that name a member (a section change is right when every named cause is one of them at its member).
+MEMBER_CAUSES = ("member_stiffness", "member_mass")
 #: The ``[damage]`` lists of each family: (places, factors).
 DAMAGE_KEYS = {"loose_support": ("loose_supports", "loose_support_factor"),
                "soft_joint": ("soft_joints", "soft_joint_factor"),
@@ -148,6 +162,35 @@ def block_toml(case: dict, cfg: dict) -> str:
             f"n_elements = 2\nroll_deg = 0.0\n\n[joints]\npairs = {json.dumps(pairs)}\n")
 
 
+def draw_sections(seed: int, n: int) -> list[dict]:
+    """``n`` section changes: a member, and the factors on its section's width and depth (``rect`` sections)."""
+    rng = np.random.default_rng(seed)
+    cfg = frame()
+    out = []
+    for i in range(n):
+        comp = str(rng.choice(sorted(cfg["components"])))
+        while True:
+            fw, fd = np.exp(rng.uniform(np.log(SECTION_SCALE[0]), np.log(SECTION_SCALE[1]), 2))
+            if max(abs(fw - 1.0), abs(fd - 1.0)) >= SECTION_MIN_CHANGE:
+                break
+        out.append({"name": f"section_change-{i:02d}", "family": "section_change", "place": comp,
+                    "width_factor": round(float(fw), 4), "depth_factor": round(float(fd), 4),
+                    "seed": int(rng.integers(1, 10 ** 6)), "points": list(POINTS)})
+    return out
+
+
+def section_toml(case: dict, cfg: dict) -> str:
+    """A section change as the configuration states it: the member's own ``rect`` section, its width and depth
+    those of the frame's section times the case's factors."""
+    comp = case["place"]
+    sec = cfg["sections"][cfg["components"][comp]["section"]]
+    if sec["shape"] != "rect":
+        raise ValueError(f"section change of {comp}: its section is {sec['shape']!r}, the study draws 'rect' only")
+    w, d = float(sec["width_m"]) * case["width_factor"], float(sec["depth_m"]) * case["depth_factor"]
+    return (f"[sections.changed]\nshape = \"rect\"\nwidth_m = {w!r}\ndepth_m = {d!r}\n\n"
+            f"[components.{comp}]\nsection = \"changed\"\n")
+
+
 def draw(seed: int, n_damage: int, n_nulls: int) -> list[dict]:
     """The case list: ``n_damage`` damage cases (families in turn), ``n_nulls`` nulls (half with drawn points)."""
     rng = np.random.default_rng(seed)
@@ -174,6 +217,8 @@ def frame_toml(case: dict) -> str:
         return "# the unchanged frame\n"
     if case["family"] == "attached_block":
         return block_toml(case, frame())
+    if case["family"] == "section_change":
+        return section_toml(case, frame())
     where, factors = DAMAGE_KEYS[case["family"]]
     return f'[damage]\n{where} = ["{case["place"]}"]\n{factors} = [{case["factor"]}]\n'
 
@@ -203,6 +248,9 @@ def score(case: dict, doc: dict, cfg: dict) -> dict:
             out["factor_fitted"] = mass[0]
             out["factor_error"] = abs(float(mass[0]) / case["mass_kg"] - 1.0)
         return out
+    if case["family"] == "section_change":
+        ours = [c["effect"] in MEMBER_CAUSES and c["parameters"].get("component") == case["place"] for c in named]
+        return {"right": bool(ours) and all(ours), "named_among": any(ours)}
     cause, key = EXPECTED[case["family"]]
     hits = [c for c in named if c["effect"] == cause and same_place(case, str(c["parameters"].get(key)), cfg)]
     out = {"right": verdict == cause and bool(hits), "named_among": bool(hits)}
@@ -222,8 +270,8 @@ def diagnosed_capture(case: dict, cfg: dict, toml: str, capture_args: list[str],
                       score_case: Callable[[dict, dict, dict], dict]) -> dict:
     """The frame ``toml`` (a case's changes) captured through ``sim://`` at the case's seed with ``capture_args``
     (points, hits) and diagnosed against the frame as designed, as the commands a user runs: the case's row
-    (verdict, named causes without their arrays, wall and CPU seconds of the diagnosis) scored by
-    ``score_case(case, doc, cfg)``."""
+    (verdict, named causes without their arrays, the trace, wall and CPU seconds of the diagnosis - ``cpu_s`` this
+    process', ``cpu_children_s`` its worker processes' -) scored by ``score_case(case, doc, cfg)``."""
     from acquisition.cli_capture import main as capture
     from analysis.cli_diagnose import main as diagnose
 
@@ -236,24 +284,32 @@ def diagnosed_capture(case: dict, cfg: dict, toml: str, capture_args: list[str],
             rc = capture(["--device", device, "--out", str(rec), *capture_args, "--auto", "-q"])
             if rc != 0:
                 return {**case, "verdict": f"capture failed ({rc})", "right": False, "named_among": False}
-            t0, c0 = time.perf_counter(), time.process_time()
+            t0, c0, k0 = time.perf_counter(), time.process_time(), _children_cpu()
             rc = diagnose(["--measured", str(rec), "--simulated", str(FRAME), "--json", str(out), "-q"])
-            dt, cpu = time.perf_counter() - t0, time.process_time() - c0
+            dt, cpu, kids = time.perf_counter() - t0, time.process_time() - c0, _children_cpu() - k0
         if rc != 0:
             return {**case, "verdict": f"diagnose failed ({rc})", "right": False, "named_among": False}
         doc = json.loads(out.read_text())
     named = [{"effect": c["effect"], "parameters": {k: v for k, v in c["parameters"].items()
                                                     if not isinstance(v, (list, dict))}} for c in doc.get("named") or []]
     return {**case, "verdict": doc["verdict"], "named": named, "reason": doc.get("reason", ""), "time_s": dt,
-            "cpu_s": cpu, **score_case(case, doc, cfg)}
+            "cpu_s": cpu, "cpu_children_s": kids, "trace": doc.get("trace"), **score_case(case, doc, cfg)}
+
+
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of this process' finished child processes."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 def line(r: dict) -> str:
     mark = "ok " if r["right"] else ("~  " if r.get("named_among") else "BAD")
     what = ("unchanged" if r["family"] == "null" else f"{r['place']} {r['mass_kg']} kg" if "mass_kg" in r
+            else f"{r['place']} w x{r['width_factor']} d x{r['depth_factor']}" if "width_factor" in r
             else f"{r['place']} x{r['factor']}")
     named = "; ".join(f"{c['effect']} {c['parameters']}" for c in r.get("named", []))
-    return f"{mark} {r['name']:20s} {what:22s} -> {r['verdict']} {named} ({r.get('time_s', 0):.1f} s)"
+    cpu = r.get("cpu_s", 0) + r.get("cpu_children_s", 0)
+    return f"{mark} {r['name']:20s} {what:22s} -> {r['verdict']} {named} ({r.get('time_s', 0):.1f} s, CPU {cpu:.1f} s)"
 
 
 def table(results: list[dict]) -> str:
@@ -273,18 +329,29 @@ def table(results: list[dict]) -> str:
         rows.append(f"\ndamage at one place: {sum(r['right'] for r in dmg)}/{len(dmg)} named with kind and place")
     if nul:
         rows.append(f"nulls: {sum(not r['right'] for r in nul)} false alarms in {len(nul)}")
+    rows.append(cpu_line(results))
     return "\n".join(rows)
+
+
+def cpu_line(results: list[dict]) -> str:
+    """The diagnosis' CPU per case (this process and its workers): median and largest, s."""
+    cpu = [r.get("cpu_s", 0.0) + r.get("cpu_children_s", 0.0) for r in results if "cpu_s" in r]
+    return f"CPU of the diagnosis per case: median {np.median(cpu):.1f} s, largest {max(cpu):.1f} s" if cpu else ""
 
 
 def main() -> None:
     ap, sub = study_commands(__doc__)
     d = add_draw(sub, "draw", "draw a case list", damage=20, nulls=10)
     d.add_argument("--blocks", type=int, default=0, help="attached blocks (drawn from their own seed, seed + 1)")
+    d.add_argument("--sections", type=int, default=0, help="section changes (drawn from their own seed, seed + 2)")
     add_run(sub, "run", "capture and diagnose every case of a list")
     args = ap.parse_args()
     if args.cmd == "draw":
         cases = draw(args.seed, args.damage, args.nulls) + draw_blocks(args.seed + 1, args.blocks)
+        cases += draw_sections(args.seed + 2, args.sections)
         ranges = {**RANGES, "attached_block": {"mass_kg": BLOCK_MASS_KG, "side_m": BLOCK_SIDE_M}}
+        if args.sections:
+            ranges["section_change"] = {"side_factor": SECTION_SCALE, "min_change": SECTION_MIN_CHANGE}
         write_text_atomic(args.out, json.dumps({"seed": args.seed, "ranges": ranges, "cases": cases}, indent=1) + "\n")
         print(f"{len(cases)} cases -> {args.out}")
         return

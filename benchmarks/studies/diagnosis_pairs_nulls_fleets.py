@@ -76,6 +76,7 @@ from diagnosis_one_place import (  # noqa: E402  (the one-place study's reading 
     EXPECTED,
     POINTS,
     RANGES,
+    cpu_line,
     diagnosed_capture,
     frame,
     hammer_points,
@@ -211,7 +212,8 @@ def line(r: dict) -> str:
     what = (f"unchanged ({r['setup']})" if r["family"] == "null" else
             " + ".join(f"{d['family']} {d['place']} x{d['factor']}" for d in r["defects"]))
     named = "; ".join(f"{c['effect']} {c['parameters']}" for c in r.get("named", []))
-    return f"{mark} {r['name']:9s} {what:60s} -> {r['verdict']} {named} ({r.get('time_s', 0):.1f} s)"
+    cpu = r.get("cpu_s", 0) + r.get("cpu_children_s", 0)
+    return f"{mark} {r['name']:9s} {what:60s} -> {r['verdict']} {named} ({r.get('time_s', 0):.1f} s, CPU {cpu:.1f} s)"
 
 
 def table(results: list[dict]) -> str:
@@ -231,6 +233,7 @@ def table(results: list[dict]) -> str:
                     f"CPU of the diagnosis median {np.median([r.get('cpu_s', np.nan) for r in pairs]):.1f} s")
     if nulls:
         rows.append(f"nulls: {sum(not r['right'] for r in nulls)} false alarms in {len(nulls)}")
+    rows.append(cpu_line(results))
     return "\n".join(rows)
 
 
