@@ -14,6 +14,11 @@ made part of its nominal (a search on top of a first cause):
 * ``K_c`` axial + torsion and ``K_c,bend`` bending stiffness of each member ``c`` (``left``, ``right``,
   ``top``), ``M_c`` its mass; the springs of the supports and joints split into their translational
   (N/m) and rotational (N m/rad) parts.
+* the same member split by property, for a change of its section (``member_section``): its axial (E A)
+  and torsion (G J) stiffness, its bending about local y (E I_y, the x-z plane) and about local z (E I_z),
+  the rotary inertia of its mass (rho I_p) and, per element, the bending about y (a crack on a member of
+  another section). Summed with equal factors they are the grouped parts; a change that leaves the section
+  alone never touches them, so every other cause's answers are those of the grouped parts.
 * the accelerometers of the channel set-up (mass ``[sensors.accelerometer] mass_kg`` at each output's
   node, all three translations) when ``[sensors] mass_loading`` is on: known processing, part of the
   simulation, not a discrepancy.
@@ -35,6 +40,10 @@ name                   parameters                                   change
                        its pair's first node), factors as above     springs x factor
 ``member_mass``        ``component``, ``factor``                     density (mass) of one member x factor
 ``member_stiffness``   ``component``, ``factor``                     bending stiffness EI of one member x factor
+``member_section``     ``component`` (a member of a ``rect`` or     the member's section of width x
+                       ``rhs`` section), ``width_factor``,          width_factor, depth x depth_factor: area,
+                       ``depth_factor``                             I_y, I_z, J and I_p by
+                                                                    :func:`simulator.fem.section_properties`
 ``element_stiffness``  ``element`` (``member:e``), ``factor``        bending stiffness EI of one element x factor
 ``mass_loading``       ``mass_kg`` (each accelerometer)              accelerometer mass at every output node
 ``stiffness_shift``    ``stiffness_factor`` (and ``factor`` =        Young's modulus x stiffness_factor (all
@@ -145,9 +154,10 @@ def _stiffness_shift(a: Assembly, p: Mapping) -> None:
     a.modulus *= float(p.get("stiffness_factor", 1.0))
 
 
-#: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function. Every
-#: parameter here adds a mass or a stiffness as it grows (a positive semi-definite part times a growing
-#: coefficient), so each natural frequency moves one way only: ``monotone`` (the search bounds a choice by it).
+#: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function. A
+#: parameter that adds only a mass or only a stiffness as it grows (a positive semi-definite part times a growing
+#: coefficient) moves each natural frequency one way only: ``monotone`` (the search bounds a choice by it); a
+#: section's width or depth adds both at once and is not.
 CAUSES: dict[str, PhysicalCause] = {}
 
 
