@@ -79,7 +79,7 @@ BLOCK_SIDE_M = (0.02, 0.20)
 SECTION_SCALE = (0.8, 1.25)
 SECTION_MIN_CHANGE = 0.05
 #: The causes that name a member (a section change is right when every named cause is one of them at its member).
-MEMBER_CAUSES = ("member_stiffness", "member_mass")
+MEMBER_CAUSES = ("member_stiffness", "member_mass", "member_section")
 #: The ``[damage]`` lists of each family: (places, factors).
 DAMAGE_KEYS = {"loose_support": ("loose_supports", "loose_support_factor"),
                "soft_joint": ("soft_joints", "soft_joint_factor"),
@@ -250,7 +250,13 @@ def score(case: dict, doc: dict, cfg: dict) -> dict:
         return out
     if case["family"] == "section_change":
         ours = [c["effect"] in MEMBER_CAUSES and c["parameters"].get("component") == case["place"] for c in named]
-        return {"right": bool(ours) and all(ours), "named_among": any(ours)}
+        out = {"right": bool(ours) and all(ours), "named_among": any(ours)}
+        sides = [c["parameters"] for c, o in zip(named, ours) if o and c["effect"] == "member_section"]
+        if sides:       # the bar's width and depth as fitted: the larger of their relative errors
+            out["factor_fitted"] = [sides[0]["width_factor"], sides[0]["depth_factor"]]
+            out["factor_error"] = max(abs(float(sides[0][f"{k}_factor"]) / case[f"{k}_factor"] - 1.0)
+                                      for k in ("width", "depth"))
+        return out
     cause, key = EXPECTED[case["family"]]
     hits = [c for c in named if c["effect"] == cause and same_place(case, str(c["parameters"].get(key)), cfg)]
     out = {"right": verdict == cause and bool(hits), "named_among": bool(hits)}
