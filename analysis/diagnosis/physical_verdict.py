@@ -64,6 +64,7 @@ from .physical import (
     variants,
 )
 from .physical_pairs import (
+    PARAMETER_CHI2,
     OnTop,
     SplitBound,
     as_places,
@@ -75,6 +76,7 @@ from .physical_pairs import (
     split_choice,
     split_places,
     splits,
+    widened,
     with_options,
 )
 from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
@@ -394,7 +396,7 @@ def _trace_pair(trace: list, two: dict, rule: DecisionRule) -> None:
                       {"gain_db": two["gain_db"], "gain_over_first_db": two["gain_over_first_db"],
                        "removed_over_first_chi2": two["removed_over_first_chi2"],
                        "physical_min_gain_db": rule.physical_min_gain_db, "quiet_chi2": rule.quiet_chi2,
-                       "significant": two["significant"], "adequate": two["adequate"]},
+                       **two.get("_over_first", {}), "significant": two["significant"], "adequate": two["adequate"]},
                       "both named: verdict combined" if _named_pair(two) else "not named"))
 
 
@@ -497,7 +499,7 @@ def _choice_penalty(spec: CauseSpec) -> float:
 def _freedom(spec: CauseSpec, free: Sequence[str]) -> float:
     """The freedom of a cause fitted with the parameters ``free``, in chi2 units: 2 per parameter plus its
     choice's (:func:`_choice_penalty`)."""
-    return 2.0 * len(free) + _choice_penalty(spec)
+    return PARAMETER_CHI2 * len(free) + _choice_penalty(spec)
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -816,6 +818,10 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
                              _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
         if not bound.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`)
+        # each cause's variant made again beside the other (:func:`widened`); the parameters it frees count too
+        n_free, own = len(fa2.free) + len(fb.free), _freedom(specs[fb.cause], fb.free)
+        fa2, fb = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+        own += PARAMETER_CHI2 * (len(fa2.free) + len(fb.free) - n_free)
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
         if two.cv_per_mode.size < mm.freq_hz.size:
             continue                        # refined on all modes, no better than ``target``: not cross-validated
@@ -825,9 +831,12 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
             cv_alone, two.cv_per_mode, freedom, judge.rule)
+        c["_over_first"] = {"held_out_first_chi2": float(np.sum(cv_alone)),
+                            "held_out_pair_chi2": float(np.sum(two.cv_per_mode)), "freedom_chi2": freedom,
+                            "modes": int(cv_alone.size)}
         # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
         # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
-        kept = first["_alone_chi2"] - two.chi2 >= _freedom(specs[fb.cause], fb.free)
+        kept = first["_alone_chi2"] - two.chi2 >= own
         c["significant"] = bool(c["significant"] and enough and kept)
         c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
         c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
