@@ -582,7 +582,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
                   opened: bool = False) -> dict | None:
     """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of each single cause
     that gains anything held out (the significant first, then by held-out gain; stopped once a named pair leaves the
-    held-out modes within their uncertainty), the other causes; the best pair by nested held-out error, judged like a
+    held-out modes within their uncertainty), the other causes (a cause of many options, a crack, also refined with
+    the first at each option, :func:`_held_seconds`); the best pair by nested held-out error, judged like a
     single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of those only. Pairs are
     compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
     naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
@@ -606,7 +607,10 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])
     best: dict | None = None
     for first in firsts:
-        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
+        # a second cause of many options (a crack) is also refined with the first at every option (held): the
+        # first fitted alone (a loose support) absorbed part of it, and on top of that fit the crack's mirror
+        # element explains as much as its own
+        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=not opened))
         if _leaves_within(best, judge.rule):
             break           # a named pair that leaves the held-out modes within their uncertainty: none does better
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
