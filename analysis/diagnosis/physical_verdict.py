@@ -637,13 +637,14 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
 def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
                  judge: _Judge, names: Sequence[str] | None, firsts: list | None, named: dict | None) -> dict | None:
     """The best pair (:func:`_second_cause` on top of ``firsts``); with a named single cause ``named`` and no pair
-    named on top of it, a pair of one kind in its place (:func:`_rival_pair`)."""
+    named on top of it, a pair of one kind in its place (:func:`_rival_pair`); for a fleet's unit, the better of it and
+    another local cause with the unit's scatter (:func:`_scatter_rivals`)."""
     two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=firsts)
     if named is not None and not _named_pair(two):
         two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
     if named is None:
         two = _better(two, _local_pairs(sim, specs, mm, fmax, found, judge, names, two))
-    return two
+    return _better(two, _scatter_rivals(sim, specs, mm, fmax, found, judge, names, named))
 
 
 def _local(spec: CauseSpec) -> bool:
@@ -725,6 +726,39 @@ def _rival_pair(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: f
     over, removed, enough = _on_top_enough(_alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode, freedom,
                                            judge.rule)
     return {**two, "gain_over_first_db": over, "removed_over_first_chi2": removed} if enough else None
+
+
+def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
+                    names: Sequence[str] | None, best: dict | None) -> dict | None:
+    """A fleet unit's defect beside its scatter (a simulation that names a ``scatter_cause``, the global cause every
+    unit holds): each local cause (:func:`_local`) that gains anything held out, other than the named single cause
+    ``best``, with the global cause (and its own cause at another place) on top of it (:func:`_on_top_of`, named pairs
+    only); with ``best``, kept only when it predicts the held-out modes better than ``best`` alone by the held-out gain
+    rule (:func:`_on_top_enough`, ``best`` cross-validated as the pairs are, the second cause's freedom counted). The
+    pair search's first causes are the named one, or the one of the largest held-out gain: the cause that took up
+    most of the unit's scatter (a member's mass for the material's density; the global cause itself, with a joint's
+    springs beside it for a crack next to the joint), while the defect's own cause with the scatter fits the unit to
+    its noise. The best such pair (:func:`_better`), or None (not a fleet's unit: None)."""
+    scatter = getattr(sim, "scatter_cause", None)
+    if scatter is None or scatter not in specs or (names is not None and scatter not in names):
+        return None
+    out: dict | None = None
+    for c in found:
+        if c is best or c["gain_db"] <= 0 or c["effect"] == scatter or not _local(specs[c["effect"]]):
+            continue
+        two = _on_top_of(sim, specs, mm, fmax, c, judge, [c["effect"], scatter], opened=False, named_only=True)
+        if two is None or best is None:
+            out = _better(out, two)
+            continue
+        freedom = _freedom(specs[two["_pair"].causes[1]], two["_free"])
+        cv_best, cv_pair = _alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode
+        over, removed, enough = _on_top_enough(cv_best, cv_pair, freedom, judge.rule)
+        if enough:
+            out = _better(out, {**two, "gain_over_first_db": over, "removed_over_first_chi2": removed,
+                                "_over_first": {"held_out_first_chi2": float(np.sum(cv_best)),
+                                                "held_out_pair_chi2": float(np.sum(cv_pair)), "freedom_chi2": freedom,
+                                                "modes": int(cv_pair.size)}})
+    return out
 
 
 def _leaves_within(c: dict | None, rule: DecisionRule) -> bool:
