@@ -609,8 +609,9 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     for first in firsts:
         # a second cause of many options (a crack) is also refined with the first at every option (held): the
         # first fitted alone (a loose support) absorbed part of it, and on top of that fit the crack's mirror
-        # element explains as much as its own
-        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=not opened))
+        # element explains as much as its own (a crack beside a crack: split_choice's grid, on one member)
+        held = not opened and not splits(specs[first["_fit"].cause])
+        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=held))
         if _leaves_within(best, judge.rule):
             break           # a named pair that leaves the held-out modes within their uncertainty: none does better
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
