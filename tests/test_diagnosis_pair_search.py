@@ -608,3 +608,24 @@ def test_a_fleet_units_crack_is_named_with_its_scatter_not_with_a_members_mass(t
     assert [c["effect"] for c in out.named] == ["element_stiffness", "stiffness_shift"]
     crack = out.named[0]["parameters"]
     assert crack["element"] == "left:5" and crack["factor"] == pytest.approx(0.44, rel=0.03)
+
+
+def test_a_joint_beside_a_named_loose_support_of_its_column_is_named_with_it() -> None:
+    """``loose_supports = ["right:0"]`` x 0.1341 with ``soft_joints = ["top:8"]`` x 0.1859 (the joint at the top of the
+    same column), modes of 20-400 Hz (a hold-out pair named as the support alone before): on top of the support fitted
+    alone the joint's screen chooses the other joint, and no second cause gains 3 dB. On top of the joint as a first
+    cause the support is found; that pair, of two kinds, replaces the named support because it predicts the held-out
+    modes better than the support alone by the same rule (the joint's choice counted), and both come back."""
+    from test_diagnosis_pairs_one_kind import _named, _verdict
+
+    out = _verdict({"loose_supports": ["right:0"], "loose_support_factor": [0.1341], "soft_joints": ["top:8"],
+                    "soft_joint_factor": [0.1859]}, above_hz=20.0, below_hz=400.0,
+                   causes=["support_stiffness", "joint_stiffness", "added_mass"])
+    assert out.verdict == "combined", out.reason
+    support = _named(out, "support_stiffness", "support")
+    joint = _named(out, "joint_stiffness", "joint")
+    assert set(support) == {"right:0"} and set(joint) == {"right:10"}
+    assert support["right:0"]["factor_translational"] == pytest.approx(0.1341, rel=0.01)
+    assert joint["right:10"]["factor_rotational"] == pytest.approx(0.1859, rel=0.01)
+    step = next(s for s in out.trace if s["rule"] == "second_cause")
+    assert step["values"]["gain_over_first_db"] >= 3.0 and step["values"]["held_out_pair_chi2"] < 1.0

@@ -711,22 +711,38 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
 
 def _rival_pair(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
                 judge: _Judge, names: Sequence[str] | None, best: dict) -> dict | None:
-    """Two changes of one kind at two places in place of the named single cause ``best`` (two cracks in one column
-    for its mass grown 10 %): the pairs on top of every other single cause with a choice that gains anything held
-    out (:func:`_second_cause`; each pair cross-validated only while its refined chi2 could win, :func:`_win_target`);
-    the best named pair of one cause twice kept only when it predicts
-    the held-out modes better than ``best`` alone by the held-out gain rule (:func:`_on_top_enough` against
-    ``best`` cross-validated as the pairs are, the freedom of the pair's second cause counted); else None."""
+    """A pair in place of the named single cause ``best`` when no pair is named on top of it: two changes of one kind
+    at two places (two cracks in one column for its mass grown 10 %), or a cause with ``best``'s own kind beside it
+    (a joint at the top of a column beside a loose support at its foot: on top of the support fitted alone, the
+    joint's screen chose the other joint). The pairs on top of every other single cause with a choice that gains
+    anything held out (:func:`_second_cause`; each pair cross-validated only while its refined chi2 could win,
+    :func:`_win_target`); the best named pair kept only when it beats ``best`` alone (:func:`_beats_named`); else
+    None."""
     local = [c for c in found if c["effect"] != best["effect"] and c["gain_db"] > 0 and specs[c["effect"]].choice]
     if not local:
         return None
     two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=local)
-    if two is None or not _named_pair(two) or len(set(two["_pair"].causes)) != 1:
+    return _beats_named(sim, specs, mm, fmax, judge, best, two)
+
+
+def _beats_named(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, judge: _Judge, best: dict,
+                 two: dict | None) -> dict | None:
+    """The named pair ``two``, found on top of another first cause than the named single cause ``best``, when it
+    predicts the held-out modes better than ``best`` alone by the held-out gain rule (:func:`_on_top_enough` against
+    ``best`` cross-validated as the pairs are; the freedom of the pair's second cause counted, and the choice of its
+    first when ``best`` is not that cause): with the gain and the chi2 removed over ``best``; else None."""
+    if two is None or not _named_pair(two):
         return None
-    freedom = _freedom(specs[two["_pair"].causes[1]], two["_free"])
-    over, removed, enough = _on_top_enough(_alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode, freedom,
-                                           judge.rule)
-    return {**two, "gain_over_first_db": over, "removed_over_first_chi2": removed} if enough else None
+    causes = two["_pair"].causes
+    freedom = _freedom(specs[causes[1]], two["_free"]) + (_choice_penalty(specs[causes[0]])
+                                                          if causes[0] != best["effect"] else 0.0)
+    cv_best, cv_pair = _alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode
+    over, removed, enough = _on_top_enough(cv_best, cv_pair, freedom, judge.rule)
+    if not enough:
+        return None
+    return {**two, "gain_over_first_db": over, "removed_over_first_chi2": removed,
+            "_over_first": {"held_out_first_chi2": float(np.sum(cv_best)), "held_out_pair_chi2": float(np.sum(cv_pair)),
+                            "freedom_chi2": freedom, "modes": int(cv_pair.size)}}
 
 
 def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
@@ -748,17 +764,7 @@ def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fma
         if c is best or c["gain_db"] <= 0 or c["effect"] == scatter or not _local(specs[c["effect"]]):
             continue
         two = _on_top_of(sim, specs, mm, fmax, c, judge, [c["effect"], scatter], opened=False, named_only=True)
-        if two is None or best is None:
-            out = _better(out, two)
-            continue
-        freedom = _freedom(specs[two["_pair"].causes[1]], two["_free"])
-        cv_best, cv_pair = _alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode
-        over, removed, enough = _on_top_enough(cv_best, cv_pair, freedom, judge.rule)
-        if enough:
-            out = _better(out, {**two, "gain_over_first_db": over, "removed_over_first_chi2": removed,
-                                "_over_first": {"held_out_first_chi2": float(np.sum(cv_best)),
-                                                "held_out_pair_chi2": float(np.sum(cv_pair)), "freedom_chi2": freedom,
-                                                "modes": int(cv_pair.size)}})
+        out = _better(out, two if best is None else _beats_named(sim, specs, mm, fmax, judge, best, two))
     return out
 
 
