@@ -629,3 +629,24 @@ def test_a_joint_beside_a_named_loose_support_of_its_column_is_named_with_it() -
     assert joint["right:10"]["factor_rotational"] == pytest.approx(0.1859, rel=0.01)
     step = next(s for s in out.trace if s["rule"] == "second_cause")
     assert step["values"]["gain_over_first_db"] >= 3.0 and step["values"]["held_out_pair_chi2"] < 1.0
+
+
+def test_a_cause_at_every_place_keeps_its_variant_beside_another() -> None:
+    """Two cracks in the right column (``cracked_elements = ["right:6", "right:4"]``, x 0.49 and x 0.44): the column's
+    stiffness with every support at once on its rotational springs is a pair of the search. Freed to both springs of
+    every support, that pair bends to the two cracks (every support about twice as stiff, one mode per mode left
+    within its uncertainty) and outscored the two cracks by their choices' freedom; a cause at every place keeps its
+    variant (:func:`at_one_place`), while one joint at one place is widened."""
+    from analysis.diagnosis.physical_pairs import at_one_place, widened
+
+    cfg = FrameConfig.from_dict({"damage": {"cracked_elements": ["right:6", "right:4"],
+                                            "crack_bending_factor": [0.4942, 0.4427]}})
+    mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
+    fv = FrameVariants(None, OUTS, REFS)
+    specs = _specs(fv)
+    pair_specs = [specs["member_stiffness"], specs["support_stiffness"]]
+    fits = [PhysicalFit("member_stiffness", {"component": "right", "factor": 0.83}, ("factor",), np.inf),
+            PhysicalFit("support_stiffness", _supports(1.5), ("factor_rotational",), np.inf)]
+    assert not at_one_place(specs["support_stiffness"], _supports(1.5))
+    assert at_one_place(specs["joint_stiffness"], _joints("left:10", 0.5, 0.5))
+    assert [f.free for f in widened(fv, pair_specs, fits, mm, FMAX)] == [f.free for f in fits]

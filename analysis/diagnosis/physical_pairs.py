@@ -51,7 +51,8 @@ from .physical import (
 )
 
 __all__ = ["OnTop", "PairFit", "SplitBound", "as_places", "besides", "fit_pair", "held_open", "changes_of", "refit_on_top",
-           "rechoose", "split_choice", "split_places", "splits", "with_options", "pair_starts", "widest", "widened"]
+           "rechoose", "split_choice", "split_places", "splits", "with_options", "pair_starts", "widest", "widened",
+           "at_one_place"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -470,6 +471,15 @@ def widest(spec: CauseSpec, free: Sequence[str]) -> tuple[str, ...]:
     return max((v for v in variants(spec) if set(free) <= set(v)), key=len, default=tuple(free))
 
 
+def at_one_place(spec: CauseSpec, params: Mapping) -> bool:
+    """Whether ``params`` put ``spec`` at one of its places (:attr:`CauseSpec.places`: one support, one joint), not at
+    every place at once: a defect there loses all its springs together, so its variant chosen fitted alone (one spring
+    free, the other change in the data) is widened beside a second cause (:func:`widened`). At every place at once the
+    cause is the frame's own model of its springs; freed further beside another cause it lets the pair bend to a change
+    neither holds (every support twice as stiff with a column's stiffness for two cracks in that column)."""
+    return spec.every is not None and spec.choice is not None and params.get(spec.choice) != spec.every
+
+
 #: The freedom of one continuous parameter in chi2 units: what it removes from the chi2 on all modes of data
 #: that do not need it, on average (1), plus one standard deviation of that (the same 2 the pair search counts).
 PARAMETER_CHI2 = 2.0
@@ -477,14 +487,15 @@ PARAMETER_CHI2 = 2.0
 
 def widened(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,
             fmax: float) -> list[PhysicalFit]:
-    """The pair ``fits`` with each cause's widest variant's parameters free (:func:`widest`), when refined together on
+    """The pair ``fits`` with each cause at one of its places (:func:`at_one_place`: a loose support, a soft joint) at
+    its widest variant's parameters free (:func:`widest`), when refined together on
     all modes that lowers the pair's chi2 by more than :data:`PARAMETER_CHI2` per parameter added; else ``fits``.
     Each variant was chosen fitted with the other change in the data, not in the model: one soft joint fitted alone on
     its translational springs (its rotational ones at nominal) sits between two soft joints, and the other joint
     fitted on top of it on its rotational springs alone; held to those variants the pair explains little, refined
     with both factors of both joints free it reaches the data. Returned with the parameters of that wider refinement
     (the pair is refined and cross-validated from there)."""
-    wide = [widest(s, f.free) for s, f in zip(specs, fits)]
+    wide = [widest(s, f.free) if at_one_place(s, f.params) else tuple(f.free) for s, f in zip(specs, fits)]
     added = sum(len(w) - len(f.free) for w, f in zip(wide, fits))
     if added == 0:
         return list(fits)
