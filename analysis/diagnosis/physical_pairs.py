@@ -51,7 +51,8 @@ from .physical import (
 )
 
 __all__ = ["OnTop", "PairFit", "SplitBound", "as_places", "besides", "fit_pair", "held_open", "changes_of", "refit_on_top",
-           "rechoose", "split_choice", "split_places", "splits", "with_options", "pair_starts"]
+           "rechoose", "split_choice", "split_places", "splits", "with_options", "pair_starts", "widest", "widened",
+           "at_one_place"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -428,13 +429,13 @@ def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: Phy
     and the pair's chi2 there."""
     best: tuple[PhysicalFit, PhysicalFit, float] = (first, second, np.inf)
     spec = besides(specs[0], [(second.cause, second.params)])
-    widest = max((v for v in variants(specs[0]) if set(first.free) <= set(v)), key=len, default=first.free)
+    wide = widest(specs[0], first.free)
     own = first.params.get(specs[0].choice) if specs[0].choice else None
     for _, _, params in first.ranked or [(first.chi2, None, first.params)]:
         if spec is None or (spec.choice is not None and params.get(spec.choice) not in spec.options):
             continue                     # the second change's own place: one change, not two
         elsewhere = own is not None and params.get(specs[0].choice) != own
-        for free in dict.fromkeys([first.free, widest] if elsewhere else [first.free]):
+        for free in dict.fromkeys([first.free, wide] if elsewhere else [first.free]):
             start = dict(params)
             if free != first.free:       # its start at that option with every parameter free, the second applied
                 start, _, _ = fit_cause(OnTop(sim, [(second.cause, second.params)]), specs[0], free, mm,
@@ -462,3 +463,44 @@ def pair_starts(spec: CauseSpec, params: Mapping, free: Sequence[str]) -> list[d
     if len(free) > 1:
         starts += [{**params, s.name: s.start()} for s in spec.params if s.name in free]
     return [q for k, q in enumerate(starts) if q not in starts[:k]]
+
+
+def widest(spec: CauseSpec, free: Sequence[str]) -> tuple[str, ...]:
+    """The largest nested variant of ``spec`` (:func:`variants`) that holds every parameter of ``free`` (a joint's
+    translational factor alone -> both factors); ``free`` itself when none does (a refinement is free)."""
+    return max((v for v in variants(spec) if set(free) <= set(v)), key=len, default=tuple(free))
+
+
+def at_one_place(spec: CauseSpec, params: Mapping) -> bool:
+    """Whether ``params`` put ``spec`` at one of its places (:attr:`CauseSpec.places`: one support, one joint), not at
+    every place at once: a defect there loses all its springs together, so its variant chosen fitted alone (one spring
+    free, the other change in the data) is widened beside a second cause (:func:`widened`). At every place at once the
+    cause is the frame's own model of its springs; freed further beside another cause it lets the pair bend to a change
+    neither holds (every support twice as stiff with a column's stiffness for two cracks in that column)."""
+    return spec.every is not None and spec.choice is not None and params.get(spec.choice) != spec.every
+
+
+#: The freedom of one continuous parameter in chi2 units: what it removes from the chi2 on all modes of data
+#: that do not need it, on average (1), plus one standard deviation of that (the same 2 the pair search counts).
+PARAMETER_CHI2 = 2.0
+
+
+def widened(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,
+            fmax: float) -> list[PhysicalFit]:
+    """The pair ``fits`` with each cause at one of its places (:func:`at_one_place`: a loose support, a soft joint) at
+    its widest variant's parameters free (:func:`widest`), when refined together on
+    all modes that lowers the pair's chi2 by more than :data:`PARAMETER_CHI2` per parameter added; else ``fits``.
+    Each variant was chosen fitted with the other change in the data, not in the model: one soft joint fitted alone on
+    its translational springs (its rotational ones at nominal) sits between two soft joints, and the other joint
+    fitted on top of it on its rotational springs alone; held to those variants the pair explains little, refined
+    with both factors of both joints free it reaches the data. Returned with the parameters of that wider refinement
+    (the pair is refined and cross-validated from there)."""
+    wide = [widest(s, f.free) if at_one_place(s, f.params) else tuple(f.free) for s, f in zip(specs, fits)]
+    added = sum(len(w) - len(f.free) for w, f in zip(wide, fits))
+    if added == 0:
+        return list(fits)
+    narrow = fit_pair(sim, specs, fits, mm, fmax, folds=False)
+    wider = fit_pair(sim, specs, [replace(f, free=w) for f, w in zip(fits, wide)], mm, fmax, folds=False)
+    if narrow.chi2 - wider.chi2 <= PARAMETER_CHI2 * added:
+        return list(fits)
+    return [replace(f, free=w, params=dict(p)) for f, w, p in zip(fits, wide, wider.params)]

@@ -64,6 +64,7 @@ from .physical import (
     variants,
 )
 from .physical_pairs import (
+    PARAMETER_CHI2,
     OnTop,
     SplitBound,
     as_places,
@@ -75,6 +76,7 @@ from .physical_pairs import (
     split_choice,
     split_places,
     splits,
+    widened,
     with_options,
 )
 from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
@@ -394,7 +396,7 @@ def _trace_pair(trace: list, two: dict, rule: DecisionRule) -> None:
                       {"gain_db": two["gain_db"], "gain_over_first_db": two["gain_over_first_db"],
                        "removed_over_first_chi2": two["removed_over_first_chi2"],
                        "physical_min_gain_db": rule.physical_min_gain_db, "quiet_chi2": rule.quiet_chi2,
-                       "significant": two["significant"], "adequate": two["adequate"]},
+                       **two.get("_over_first", {}), "significant": two["significant"], "adequate": two["adequate"]},
                       "both named: verdict combined" if _named_pair(two) else "not named"))
 
 
@@ -497,7 +499,7 @@ def _choice_penalty(spec: CauseSpec) -> float:
 def _freedom(spec: CauseSpec, free: Sequence[str]) -> float:
     """The freedom of a cause fitted with the parameters ``free``, in chi2 units: 2 per parameter plus its
     choice's (:func:`_choice_penalty`)."""
-    return 2.0 * len(free) + _choice_penalty(spec)
+    return PARAMETER_CHI2 * len(free) + _choice_penalty(spec)
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -580,7 +582,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
                   opened: bool = False) -> dict | None:
     """Forward selection of a second cause (:mod:`analysis.diagnosis.physical_pairs`): on top of each single cause
     that gains anything held out (the significant first, then by held-out gain; stopped once a named pair leaves the
-    held-out modes within their uncertainty), the other causes; the best pair by nested held-out error, judged like a
+    held-out modes within their uncertainty), the other causes (a cause of many options, a crack, also refined with
+    the first at each option, :func:`_held_seconds`); the best pair by nested held-out error, judged like a
     single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of those only. Pairs are
     compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
     naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
@@ -604,7 +607,11 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])
     best: dict | None = None
     for first in firsts:
-        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
+        # a second cause of many options (a crack) is also refined with the first at every option (held): the
+        # first fitted alone (a loose support) absorbed part of it, and on top of that fit the crack's mirror
+        # element explains as much as its own (a crack beside a crack: split_choice's grid, on one member)
+        held = not opened and not splits(specs[first["_fit"].cause])
+        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=held))
         if _leaves_within(best, judge.rule):
             break           # a named pair that leaves the held-out modes within their uncertainty: none does better
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
@@ -631,13 +638,14 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
 def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
                  judge: _Judge, names: Sequence[str] | None, firsts: list | None, named: dict | None) -> dict | None:
     """The best pair (:func:`_second_cause` on top of ``firsts``); with a named single cause ``named`` and no pair
-    named on top of it, a pair of one kind in its place (:func:`_rival_pair`)."""
+    named on top of it, a pair of one kind in its place (:func:`_rival_pair`); for a fleet's unit, the better of it and
+    another local cause with the unit's scatter (:func:`_scatter_rivals`)."""
     two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=firsts)
     if named is not None and not _named_pair(two):
         two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
     if named is None:
         two = _better(two, _local_pairs(sim, specs, mm, fmax, found, judge, names, two))
-    return two
+    return _better(two, _scatter_rivals(sim, specs, mm, fmax, found, judge, names, named))
 
 
 def _local(spec: CauseSpec) -> bool:
@@ -703,22 +711,61 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
 
 def _rival_pair(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
                 judge: _Judge, names: Sequence[str] | None, best: dict) -> dict | None:
-    """Two changes of one kind at two places in place of the named single cause ``best`` (two cracks in one column
-    for its mass grown 10 %): the pairs on top of every other single cause with a choice that gains anything held
-    out (:func:`_second_cause`; each pair cross-validated only while its refined chi2 could win, :func:`_win_target`);
-    the best named pair of one cause twice kept only when it predicts
-    the held-out modes better than ``best`` alone by the held-out gain rule (:func:`_on_top_enough` against
-    ``best`` cross-validated as the pairs are, the freedom of the pair's second cause counted); else None."""
+    """A pair in place of the named single cause ``best`` when no pair is named on top of it: two changes of one kind
+    at two places (two cracks in one column for its mass grown 10 %), or a cause with ``best``'s own kind beside it
+    (a joint at the top of a column beside a loose support at its foot: on top of the support fitted alone, the
+    joint's screen chose the other joint). The pairs on top of every other single cause with a choice that gains
+    anything held out (:func:`_second_cause`; each pair cross-validated only while its refined chi2 could win,
+    :func:`_win_target`); the best named pair kept only when it beats ``best`` alone (:func:`_beats_named`); else
+    None."""
     local = [c for c in found if c["effect"] != best["effect"] and c["gain_db"] > 0 and specs[c["effect"]].choice]
     if not local:
         return None
     two = _second_cause(sim, specs, mm, fmax, fits, found, judge, names, firsts=local)
-    if two is None or not _named_pair(two) or len(set(two["_pair"].causes)) != 1:
+    return _beats_named(sim, specs, mm, fmax, judge, best, two)
+
+
+def _beats_named(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, judge: _Judge, best: dict,
+                 two: dict | None) -> dict | None:
+    """The named pair ``two``, found on top of another first cause than the named single cause ``best``, when it
+    predicts the held-out modes better than ``best`` alone by the held-out gain rule (:func:`_on_top_enough` against
+    ``best`` cross-validated as the pairs are; the freedom of the pair's second cause counted, and the choice of its
+    first when ``best`` is not that cause): with the gain and the chi2 removed over ``best``; else None."""
+    if two is None or not _named_pair(two):
         return None
-    freedom = _freedom(specs[two["_pair"].causes[1]], two["_free"])
-    over, removed, enough = _on_top_enough(_alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode, freedom,
-                                           judge.rule)
-    return {**two, "gain_over_first_db": over, "removed_over_first_chi2": removed} if enough else None
+    causes = two["_pair"].causes
+    freedom = _freedom(specs[causes[1]], two["_free"]) + (_choice_penalty(specs[causes[0]])
+                                                          if causes[0] != best["effect"] else 0.0)
+    cv_best, cv_pair = _alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode
+    over, removed, enough = _on_top_enough(cv_best, cv_pair, freedom, judge.rule)
+    if not enough:
+        return None
+    return {**two, "gain_over_first_db": over, "removed_over_first_chi2": removed,
+            "_over_first": {"held_out_first_chi2": float(np.sum(cv_best)), "held_out_pair_chi2": float(np.sum(cv_pair)),
+                            "freedom_chi2": freedom, "modes": int(cv_pair.size)}}
+
+
+def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
+                    names: Sequence[str] | None, best: dict | None) -> dict | None:
+    """A fleet unit's defect beside its scatter (a simulation that names a ``scatter_cause``, the global cause every
+    unit holds): each local cause (:func:`_local`) that gains anything held out, other than the named single cause
+    ``best``, with the global cause (and its own cause at another place) on top of it (:func:`_on_top_of`, named pairs
+    only); with ``best``, kept only when it predicts the held-out modes better than ``best`` alone by the held-out gain
+    rule (:func:`_on_top_enough`, ``best`` cross-validated as the pairs are, the second cause's freedom counted). The
+    pair search's first causes are the named one, or the one of the largest held-out gain: the cause that took up
+    most of the unit's scatter (a member's mass for the material's density; the global cause itself, with a joint's
+    springs beside it for a crack next to the joint), while the defect's own cause with the scatter fits the unit to
+    its noise. The best such pair (:func:`_better`), or None (not a fleet's unit: None)."""
+    scatter = getattr(sim, "scatter_cause", None)
+    if scatter is None or scatter not in specs or (names is not None and scatter not in names):
+        return None
+    out: dict | None = None
+    for c in found:
+        if c is best or c["gain_db"] <= 0 or c["effect"] == scatter or not _local(specs[c["effect"]]):
+            continue
+        two = _on_top_of(sim, specs, mm, fmax, c, judge, [c["effect"], scatter], opened=False, named_only=True)
+        out = _better(out, two if best is None else _beats_named(sim, specs, mm, fmax, judge, best, two))
+    return out
 
 
 def _leaves_within(c: dict | None, rule: DecisionRule) -> bool:
@@ -816,6 +863,10 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
                              _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
         if not bound.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`)
+        # each cause's variant made again beside the other (:func:`widened`); the parameters it frees count too
+        n_free, own = len(fa2.free) + len(fb.free), _freedom(specs[fb.cause], fb.free)
+        fa2, fb = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+        own += PARAMETER_CHI2 * (len(fa2.free) + len(fb.free) - n_free)
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
         if two.cv_per_mode.size < mm.freq_hz.size:
             continue                        # refined on all modes, no better than ``target``: not cross-validated
@@ -825,9 +876,12 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
             cv_alone, two.cv_per_mode, freedom, judge.rule)
+        c["_over_first"] = {"held_out_first_chi2": float(np.sum(cv_alone)),
+                            "held_out_pair_chi2": float(np.sum(two.cv_per_mode)), "freedom_chi2": freedom,
+                            "modes": int(cv_alone.size)}
         # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
         # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
-        kept = first["_alone_chi2"] - two.chi2 >= _freedom(specs[fb.cause], fb.free)
+        kept = first["_alone_chi2"] - two.chi2 >= own
         c["significant"] = bool(c["significant"] and enough and kept)
         c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
         c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)

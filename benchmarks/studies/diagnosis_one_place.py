@@ -298,6 +298,7 @@ def diagnosed_capture(case: dict, cfg: dict, toml: str, capture_args: list[str],
         doc = json.loads(out.read_text())
     named = [{"effect": c["effect"], "parameters": {k: v for k, v in c["parameters"].items()
                                                     if not isinstance(v, (list, dict))}} for c in doc.get("named") or []]
+    # the rules that decided (the pair search's values among them: what a second cause gained over the first)
     return {**case, "verdict": doc["verdict"], "named": named, "reason": doc.get("reason", ""), "time_s": dt,
             "cpu_s": cpu, "cpu_children_s": kids, "trace": doc.get("trace"), **score_case(case, doc, cfg)}
 
