@@ -362,17 +362,24 @@ def test_a_loose_support_beside_a_crack_is_named_when_no_single_cause_is() -> No
     neither cause alone is significant (the supports fit best at every support at once), and no second cause on top
     of a single fit explains the rest (unexplained before). Each support at its own place is a first cause when no
     single cause is named; on top of right:0 the crack is found, and both come back with their factors."""
+    out, support, crack = _support_and_crack(0.0629, "top:2", 0.4099, below_hz=430.0)
+    assert support["right:0"]["factor_rotational"] == pytest.approx(0.0629, rel=0.01)
+    assert crack["top:2"]["factor"] == pytest.approx(0.4099, rel=0.01)
+
+
+def _support_and_crack(support_factor: float, element: str, crack_factor: float, below_hz: float) -> tuple:
+    """The verdict on the support right:0 x ``support_factor`` with a crack at ``element`` x ``crack_factor`` (modes
+    of 20 Hz to ``below_hz``), checked to name both at their places: (verdict, support's, crack's parameters)."""
     from test_diagnosis_pairs_one_kind import _named, _verdict
 
-    out = _verdict({"loose_supports": ["right:0"], "loose_support_factor": [0.0629], "cracked_elements": ["top:2"],
-                    "crack_bending_factor": [0.4099]}, above_hz=20.0, below_hz=430.0,
-                   causes=["support_stiffness", "element_stiffness"])
+    out = _verdict({"loose_supports": ["right:0"], "loose_support_factor": [support_factor],
+                    "cracked_elements": [element], "crack_bending_factor": [crack_factor]}, above_hz=20.0,
+                   below_hz=below_hz, causes=["support_stiffness", "element_stiffness"])
     assert out.verdict == "combined", out.reason
     support = _named(out, "support_stiffness", "support")
     crack = _named(out, "element_stiffness", "element")
-    assert set(support) == {"right:0"} and set(crack) == {"top:2"}
-    assert support["right:0"]["factor_rotational"] == pytest.approx(0.0629, rel=0.01)
-    assert crack["top:2"]["factor"] == pytest.approx(0.4099, rel=0.01)
+    assert set(support) == {"right:0"} and set(crack) == {element}
+    return out, support, crack
 
 
 def _band_modes(fv: FrameVariants, changes: list, lo_hz: float = 20.0, hi_hz: float = 430.0) -> MeasuredModes:
@@ -564,15 +571,7 @@ def test_a_crack_beside_a_named_loose_support_is_found_at_its_own_element() -> N
     top of its fit the crack's mirror element (right:7) explains as much as its own, and that pair gained 2.1 dB over
     the support alone (not named: it leaves a mode unexplained). Refined with the support at every element, the crack
     is found at right:2 and both are named with their factors; the trace carries the held-out chi2 compared."""
-    from test_diagnosis_pairs_one_kind import _named, _verdict
-
-    out = _verdict({"loose_supports": ["right:0"], "loose_support_factor": [0.1254], "cracked_elements": ["right:2"],
-                    "crack_bending_factor": [0.5047]}, above_hz=20.0, below_hz=420.0,
-                   causes=["support_stiffness", "element_stiffness"])
-    assert out.verdict == "combined", out.reason
-    support = _named(out, "support_stiffness", "support")
-    crack = _named(out, "element_stiffness", "element")
-    assert set(support) == {"right:0"} and set(crack) == {"right:2"}
+    out, support, crack = _support_and_crack(0.1254, "right:2", 0.5047, below_hz=420.0)
     assert support["right:0"]["factor_translational"] == pytest.approx(0.1254, rel=0.01)
     assert crack["right:2"]["factor"] == pytest.approx(0.5047, rel=0.01)
     step = next(s for s in out.trace if s["rule"] == "second_cause")

@@ -5,7 +5,6 @@ import json
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -25,6 +24,13 @@ from analysis.recording import (
 )
 from analysis.recording_writer import FRFPoint, RecordingWriter
 from analysis.spectra import AveragedSpectra, WindowSettings
+
+
+def _kill_writer_script() -> str:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks.reliability.kill_writer import WRITER as script
+
+    return script
 
 CHANNELS = [
     {"name": "force", "point": "right:6:-X", "direction": "-X", "quantity": "force", "sensitivity": 2.25,
@@ -162,25 +168,8 @@ def test_crc32_known_value():
     assert counts_crc32(np.array([[1, 2]], np.int16)) == zlib.crc32(b"\x01\x00\x02\x00")
 
 
-WRITER = textwrap.dedent("""
-    import sys, numpy as np
-    from analysis.hit import Hit
-    from analysis.recording_writer import RecordingWriter
-    from analysis.spectra import WindowSettings
-    rng = np.random.default_rng(int(sys.argv[2]))
-    with RecordingWriter(sys.argv[1], instrument={"model": "x"}, setup={}, channels=[{"name": "f", "point": "n:1:Z"}],
-                         windows=WindowSettings()) as w:
-        i = 0
-        while True:
-            c = rng.integers(-30000, 30000, size=(4, 8192)).astype(np.int16)
-            idx = w.write_hit(Hit(counts=c, eu_per_count=[1.0] * 4, volts_per_count=[1.0] * 4, trigger_index=10,
-                                  sample_rate_hz=1000.0, sequence=i, timestamp=0.0, measurement=0, point="n:1:Z",
-                                  reference="n:1:Z", outputs=["n:2:Z"] * 3, force_channel=0,
-                                  response_channels=[1, 2, 3], overload=[False] * 4, accepted=True))
-            w.log("INFO", f"hit {idx}")
-            print(idx, int(c.sum()), flush=True)
-            i += 1
-""")
+#: the writer process the SIGKILL tests kill: the one ``benchmarks/reliability/kill_writer.py`` kills many times
+WRITER = _kill_writer_script()
 
 
 @pytest.mark.parametrize("seed,n_before_kill", [(1, 4), (2, 9)])
