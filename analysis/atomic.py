@@ -25,7 +25,7 @@ from .disk_space import disk_full_cause
 from .errors import DiskFullError
 
 __all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_json_atomic", "temporary_beside",
-           "remove_stale_temporaries"]
+           "remove_stale_temporaries", "fsync_file", "fsync_folder"]
 
 
 def temporary_beside(target: str | os.PathLike[str], folder: str | os.PathLike[str] | None = None) -> Path:
@@ -73,8 +73,14 @@ def remove_stale_temporaries(target: str | os.PathLike[str], folder: str | os.Pa
     return removed
 
 
-def _fsync_folder(folder: Path) -> None:
-    """Make a rename in ``folder`` durable (where folders can be opened; not on Windows)."""
+def fsync_file(path: str | os.PathLike[str]) -> None:
+    """Sync a file's data to the disk (the file may be closed)."""
+    with open(path, "rb+") as fh:
+        os.fsync(fh.fileno())
+
+
+def fsync_folder(folder: Path) -> None:
+    """Make a rename, a new or a removed file in ``folder`` durable (where folders can be opened; not on Windows)."""
     with contextlib.suppress(OSError):
         fd = os.open(folder, os.O_RDONLY)
         try:
@@ -93,8 +99,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     tmp = temporary_beside(target)   # created by the writer (umask applies)
     try:
         yield tmp
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
+        fsync_file(tmp)
         os.replace(tmp, target)
     except BaseException as exc:
         with contextlib.suppress(OSError):
@@ -103,7 +108,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         if full is not None and not isinstance(full, DiskFullError):  # named by the file the user asked for
             raise OSError(full.errno, full.strerror, str(target)) from None
         raise
-    _fsync_folder(target.parent)
+    fsync_folder(target.parent)
 
 
 def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:

@@ -30,7 +30,17 @@ from analysis.spectra import WindowSettings, excitation_limit_hz, excited_top_hz
 
 from .recording_changes import journal_left, replay_journal
 from .recording_lock import is_lock_error, live_copy, live_copy_file, locked_error, writer_alive
-from .recording_schema import _DAMAGE, CHANNEL_FIELDS, SCHEMA, SCHEMA_VERSION, _as_str, _h5py, counts_crc32, scale_counts
+from .recording_schema import (
+    _DAMAGE,
+    CHANNEL_FIELDS,
+    SCHEMA,
+    SCHEMA_VERSION,
+    _as_str,
+    _h5py,
+    channel_rows,
+    counts_crc32,
+    scale_counts,
+)
 
 __all__ = [
     "SCHEMA",
@@ -144,7 +154,6 @@ class Recording:
         closing it): a temporary file, the recording itself unchanged (``analysis.recording_journal``)."""
         fd, name = live_copy_file(self.path)
         os.close(fd)
-        os.unlink(name)
         self._live_copy = Path(name)
         try:
             n, torn = replay_journal(self.path, self._live_copy)
@@ -179,11 +188,7 @@ class Recording:
                 raise RecordingError(f"{self.path} is damaged: group '/{g}' is missing")
         self.instrument = json.loads(_as_str(self._f["instrument"].attrs["json"]))
         self.setup = json.loads(_as_str(self._f["setup"].attrs["json"]))
-        table = self._read(self._f["setup/channels"])
-        self.channels = [
-            {k: (_as_str(row[k]) if isinstance(row[k], (bytes, str)) else row[k].item()) for k in table.dtype.names}
-            for row in table
-        ]
+        self.channels = channel_rows(self._read(self._f["setup/channels"]))
         self.windows = WindowSettings.from_dict(json.loads(_as_str(self._f["windows"].attrs["json"])))
         self.plan = json.loads(_as_str(a.get("plan_json", "{}")))
         self.created_utc = _as_str(a.get("created_utc", ""))

@@ -23,11 +23,6 @@ __all__ = ["OPS", "replay_journal", "journal_left", "recover"]
 log = logging.getLogger(__name__)
 
 
-def _set_attrs(target: Any, attrs: dict) -> None:
-    for key, value in attrs.items():
-        target[key] = value
-
-
 def _op_create(f: Any, args: dict) -> None:
     """The recording's header and its empty groups."""
     h5py = _h5py()
@@ -59,7 +54,7 @@ def _op_hit(f: Any, args: dict) -> None:
     """One hit's group: its counts, then its attributes (``complete`` last)."""
     g = f["hits"].create_group(f"{int(args['index']):06d}")
     g.create_dataset("counts", data=args["counts"])
-    _set_attrs(g.attrs, args["attrs"])
+    g.attrs.update(args["attrs"])
 
 
 def _op_withdraw(f: Any, args: dict) -> None:
@@ -77,7 +72,7 @@ def _op_frf(f: Any, args: dict) -> None:
     g = grp.create_group(args["name"])
     for key, val in args["datasets"].items():
         g.create_dataset(key, data=val)
-    _set_attrs(g.attrs, args["attrs"])
+    g.attrs.update(args["attrs"])
 
 
 def _op_event(f: Any, args: dict) -> None:
@@ -108,10 +103,11 @@ OPS = {"create": _op_create, "hit": _op_hit, "withdraw": _op_withdraw, "frf": _o
 
 
 def _replay(ops: Sequence[tuple[str, dict]], out: Path) -> None:
-    """Write the recording the changes ``ops`` make to the new file ``out``."""
+    """Write the recording the changes ``ops`` make to ``out``, a temporary file of the caller's (new,
+    or created empty)."""
     if not ops or ops[0][0] != "create":
         raise RecordingError("its journal does not start with the recording's header")
-    with _h5py().File(out, "x") as f:
+    with _h5py().File(out, "w") as f:
         for op, args in ops:
             if op not in OPS:
                 raise RecordingError(f"its journal holds a change this impactlab does not know ({op!r}): use the "
@@ -120,7 +116,7 @@ def _replay(ops: Sequence[tuple[str, dict]], out: Path) -> None:
 
 
 def replay_journal(path: str | Path, out: str | Path) -> tuple[int, bool]:
-    """Rebuild the recording ``path`` from its journal into the new file ``out`` (which must not exist);
+    """Rebuild the recording ``path`` from its journal into ``out``, a temporary file (new, or created empty);
     returns (number of changes replayed, whether the journal ended with a change cut short). Raises
     :class:`RecordingError` when the journal is not one or cannot be replayed."""
     jp = journal_path(path)

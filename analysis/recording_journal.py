@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from .atomic import fsync_folder
 from .errors import RecordingError
 
 __all__ = ["MAGIC", "journal_path", "Journal", "JournalContents", "read_journal", "plain"]
@@ -126,7 +127,7 @@ class Journal:
             raise RecordingError(f"cannot create the journal {self.path} ({exc.strerror or exc}): a symbolic link or "
                                  "an unwritable file is in its place; move it away and run the command again") from None
         self._write(MAGIC)
-        _fsync_folder(self.path.parent)
+        fsync_folder(self.path.parent)
 
     def _write(self, data: bytes) -> None:
         if self.fd is None:
@@ -159,20 +160,7 @@ class Journal:
         if not os.path.lexists(p):
             return
         p.unlink()
-        _fsync_folder(p.parent)
-
-
-def _fsync_folder(folder: Path) -> None:
-    try:
-        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass  # file systems that cannot sync a folder
-    finally:
-        os.close(fd)
+        fsync_folder(p.parent)
 
 
 @dataclass

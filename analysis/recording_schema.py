@@ -54,6 +54,12 @@ def _channel_table(channels: Sequence[dict]) -> np.ndarray:
     return np.array(rows, dtype=dt)
 
 
+def channel_rows(table: np.ndarray) -> list[dict]:
+    """The rows of the set-up's channel table (:func:`_channel_table`) as dicts of Python values."""
+    return [{k: (_as_str(row[k]) if isinstance(row[k], (bytes, str)) else row[k].item()) for k in table.dtype.names or ()}
+            for row in table]
+
+
 def _as_str(v: Any) -> str:
     if isinstance(v, bytes):
         return v.decode("utf-8", "replace")

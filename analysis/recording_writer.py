@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.atomic import atomic_path
+from analysis.atomic import atomic_path, fsync_file
 from analysis.disk_space import release_reserve, reserve
 from analysis.errors import DiskFullError, RecordingError
 from analysis.frf import FRFSet
@@ -33,7 +33,7 @@ from .disk_space import disk_full_cause
 from .recording_changes import OPS, recover
 from .recording_journal import Journal, journal_path, plain
 from .recording_lock import WriterLock, busy_error, held_by_other_program, is_lock_error, locked, locked_error, writer_alive
-from .recording_schema import _DAMAGE, _as_str, _channel_table, _h5py, _now_iso, counts_crc32
+from .recording_schema import _DAMAGE, _as_str, _channel_table, _h5py, _now_iso, channel_rows, counts_crc32
 
 __all__ = ["RecordingWriter", "FRFPoint", "SLACK_BYTES", "whole_recording"]
 
@@ -83,12 +83,6 @@ def _json_safe(value: Any) -> Any:
     return json.loads(json.dumps(value, default=str))
 
 
-def _fsync_file(path: Path) -> None:
-    """Sync a closed file's data to the disk."""
-    with open(path, "rb") as fh:
-        os.fsync(fh.fileno())
-
-
 def _frf_room(counts_shape: tuple) -> int:
     """Bytes the FRF results of a point need whose hits have counts of ``counts_shape`` (channels,
     samples): each hit keeps this room, so the point in progress can be written when the disk fills."""
@@ -106,8 +100,7 @@ def _as_changes(f: Any, path: Path, cut: list[str], kept: list[int]) -> Iterator
     journal starts with them); the names of hits cut short by a crash are added to ``cut`` (not
     included), the indices of the others to ``kept``. Damage raises :class:`RecordingError`."""
     try:
-        table = f["setup/channels"][()]
-        channels = [{k: plain(row[k]) for k in table.dtype.names} for row in table]
+        channels = channel_rows(f["setup/channels"][()])
         yield "create", plain({
             "instrument": json.loads(_as_str(f["instrument"].attrs["json"])),
             "setup": json.loads(_as_str(f["setup"].attrs["json"])), "channels": channels,
@@ -297,10 +290,6 @@ class RecordingWriter:
         try:
             with self._lock.changing():
                 recover(self.path)
-        except BaseException:
-            self._lock.release()
-            raise
-        try:
             verify_recording(path)  # in a child process: damage (even a libhdf5 crash) becomes RecordingError
         except BaseException:
             self._lock.release()
@@ -468,7 +457,7 @@ class RecordingWriter:
                 self._f.close()
                 release_reserve(self.path)
                 if self._journal is not None:  # the file is whole: synced, then its journal goes
-                    _fsync_file(self.path)
+                    fsync_file(self.path)
                     self._journal.remove()
                     self._journal = None
         if discard:

@@ -83,6 +83,7 @@ _WRITERS = {"write_text", "write_bytes", "savefig", "write_sets", "copyfile", "c
 #: the writers that do not write a whole file in place, and why
 _NOT_WHOLE_FILES = {
     ("analysis/atomic.py", "atomic_path"): "the helper itself (fsync of its temporary)",
+    ("analysis/atomic.py", "fsync_file"): "the helper that syncs a file, opened for it (writes nothing)",
     ("analysis/batch/out_lock.py", "__init__"): "a lock file (a process id), not data",
     ("analysis/recording_lock.py", "__init__"): "the recording's lock file (a process id)",
     ("analysis/recording_lock.py", "live_copy"): "a reader's temporary copy, removed after reading",
