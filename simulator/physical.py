@@ -558,8 +558,7 @@ class FrameVariants:
         space, at = self._space_for(dk, dm, self._ritz.n_modes(w2_max / scale))
         if space is None or at is None:
             return None
-        w2, Y = space.eigen(dk, dm, scale, w2_max)
-        rows = at @ Y
+        w2, rows = space.eigen_at(dk, dm, scale, w2_max, at)
         n_out = len(self._out)
         f = np.sqrt(w2) / (2 * np.pi)
         return f, (rows[:n_out, None, :] * rows[None, n_out:, :]).reshape(n_out * len(self._ref), -1)
@@ -624,23 +623,27 @@ class FrameVariants:
         keep = np.flatnonzero((w2 > 1.0) & (w2 < w2_max))
         Yk = Y[:, keep]
         lk = lam[keep]
+        cols = np.arange(keep.size)
         gap = lk[None, :] - lam[:, None]                        # (r, kept): lambda_i - lambda_k
-        own = keep[None, :] == np.arange(lam.size)[:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv_gap = np.where(own | (gap == 0), 0.0, 1.0 / np.where(gap == 0, 1.0, gap))
+        gap[keep, cols] = np.inf                                # a mode's own term and equal eigenvalues: none
+        gap[gap == 0.0] = np.inf
+        inv_gap = 1.0 / gap
         f = np.sqrt(w2[keep]) / (2 * np.pi)
         df = np.empty((keep.size, len(wrt)))
         AY = at @ Y                                             # the Ritz vectors at the measured points
         drows = np.empty((AY.shape[0], keep.size, len(wrt)))
-        cols = np.arange(keep.size)
         for j, (ds, dkj, dmj) in enumerate(derivs):
             G = Y.T @ (_summed(space.kparts, dkj) @ Yk) if dkj else np.zeros((lam.size, keep.size))
-            H = Y.T @ (_summed(space.mparts, dmj) @ Yk) if dmj else np.zeros((lam.size, keep.size))
-            hii = H[keep, cols]
-            dlam = G[keep, cols] - lk * hii
+            if dmj:
+                H = Y.T @ (_summed(space.mparts, dmj) @ Yk)
+                hii = H[keep, cols]
+                dlam = G[keep, cols] - lk * hii
+                C = (G - lk[None, :] * H) * inv_gap
+                C[keep, cols] = -0.5 * hii
+            else:                                               # a stiffness alone: H = 0
+                dlam = G[keep, cols]
+                C = G * inv_gap
             df[:, j] = (ds * lk + scale * dlam) / (8 * np.pi ** 2 * f)
-            C = (G - lk[None, :] * H) * inv_gap
-            C[keep, cols] = -0.5 * hii
             drows[:, :, j] = AY @ C
         rows = AY[:, keep]
         n_out, n_ref = len(self._out), len(self._ref)

@@ -55,7 +55,7 @@ import scipy.linalg
 from .errors import ModelError
 
 __all__ = ["Part", "RitzReduction", "ReducedSpace", "N_MODES", "LOCAL_DOFS", "MAX_FRACTION", "inverse_eigh",
-           "lowest_modes"]
+           "inverse_eigh_at", "lowest_modes"]
 
 #: Nominal modes in every basis (on the default frame up to ~1.5 kHz, twice the highest mode the
 #: diagnosis compares).
@@ -74,7 +74,8 @@ MAX_FRACTION = 0.75
 #: Basis directions whose M0-Gram eigenvalue is below this fraction of the largest are dropped.
 _RANK_TOL = 1e-10
 
-_sygvd, _potrf, _potri = scipy.linalg.get_lapack_funcs(("sygvd", "potrf", "potri"), (np.zeros((1, 1)),))
+_sygvd, _potrf, _potri, _sygst, _sytrd, _stevd, _ormqr = scipy.linalg.get_lapack_funcs(
+    ("sygvd", "potrf", "potri", "sygst", "sytrd", "stevd", "ormqr"), (np.zeros((1, 1)),))
 
 
 @dataclass(frozen=True)
@@ -135,6 +136,16 @@ class ReducedSpace:
         keep = (w2 > 1.0) & (w2 < w2_max)
         return w2[keep], Y[:, keep]
 
+    def eigen_at(self, dk: Mapping, dm: Mapping, scale: float, w2_max: float, at: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`eigen`'s eigenvalues and ``at @ Y`` (the Ritz vectors' coefficients ``Y`` mapped by ``at`` (p, r):
+        the modes at a few DOFs) instead of ``Y``: by :func:`inverse_eigh_at`, which forms no eigenvector."""
+        K, M = self.matrices(dk, dm)
+        w2, AY = inverse_eigh_at(K, M, at)
+        w2 = scale * w2
+        keep = (w2 > 1.0) & (w2 < w2_max)
+        return w2[keep], AY[:, keep]
+
     def matrices(self, dk: Mapping, dm: Mapping) -> tuple[np.ndarray, np.ndarray | None]:
         """The candidate's reduced ``K0 + sum dk_p K_p`` and ``M0 + sum dm_q M_q`` (None: ``M0``, the identity
         to rounding)."""
@@ -165,29 +176,79 @@ def inverse_eigh(K: np.ndarray, M: np.ndarray | None = None) -> tuple[np.ndarray
     with stiff springs on light rotations is ~1e13 times the lowest mode's: the lowest frequencies come out off
     by 1e-5..1e-3 (relative) with springs x 100. The inverse pencil's largest eigenvalues are the lowest
     modes, each with an error of the machine precision relative to itself (the Cholesky factor of ``K`` is
-    backward stable entry by entry). A ``K`` that is not positive definite (a mechanism) is solved directly."""
+    backward stable entry by entry). A ``K`` that is not positive definite (a mechanism) is solved directly.
+
+    How: ``K^-1`` (Cholesky) and its eigenproblem (``syevd``); with ``M`` LAPACK's divide-and-conquer driver
+    ``sygvd``. The fits' answers depend on these solves to their rounding (a least squares stopped at its tolerance
+    moves with them), so a change of this routine changes the diagnosis' parameters at ~1e-8."""
     K = 0.5 * (K + K.T)
     if M is None:
         L, info = _potrf(K, lower=1)
         if not info:
             Kinv, info = _potri(L, lower=1)
         if info:
-            w2, Y = np.linalg.eigh(K)
-            return w2, Y
+            return _direct_eigh(K, None)
         mu, Y = np.linalg.eigh(Kinv, UPLO="L")
         return 1.0 / mu[::-1], Y[:, ::-1]
     # M y = mu K y, the vectors K-normalised (y^T K y = 1, so y^T M y = mu)
     mu, Y, info = _sygvd(M, K, itype=1, jobz="V", uplo="L")
     if info:
-        # not positive definite: LAPACK's divide-and-conquer driver on the direct pencil (without
-        # ``scipy.linalg.eigh``'s checks, which cost a third of a solve here)
-        w2, Y, info = _sygvd(K, M, itype=1, jobz="V", uplo="L")
-        if info:
-            raise np.linalg.LinAlgError(f"the reduced eigenproblem failed (LAPACK sygvd info {info}): "
-                                        "the changed mass matrix is not positive definite")
-        return w2, Y
+        return _direct_eigh(K, M)
     mu, Y = mu[::-1], Y[:, ::-1]
     return 1.0 / mu, Y / np.sqrt(mu)
+
+
+def inverse_eigh_at(K: np.ndarray, M: np.ndarray | None, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`inverse_eigh`'s eigenvalues ``omega^2`` (ascending) and its vectors ``Y`` seen through ``A`` (p, r):
+    ``A @ Y`` (p, r). The same solve, except that the vectors are not formed: ``A Y = (A Q) Z`` (or ``(A L^-T Q)
+    Z``) costs ~p r^2 instead of the ~r^3 of ``Q Z`` (with p a few measured DOFs and r ~50, a fifth of the
+    solve)."""
+    K = 0.5 * (K + K.T)
+    solved = _inverse_pencil(K, M)
+    if solved is None:
+        w2, Y = _direct_eigh(K, M)
+        return w2, A @ Y
+    L, c, tau, mu, Z = solved
+    B = np.array(A, dtype=float)
+    if M is not None:
+        B = scipy.linalg.solve_triangular(L, B.T, lower=True, check_finite=False).T
+    if Z.shape[0] > 1:
+        B[:, 1:], _, info = _ormqr("R", "N", c[1:, :-1], tau, B[:, 1:], lwork=max(1, 64 * B.shape[0]))
+    AY = (B @ Z)[:, ::-1]
+    mu = mu[::-1]
+    return 1.0 / mu, (AY if M is None else AY / np.sqrt(mu))
+
+
+def _inverse_pencil(K: np.ndarray, M: np.ndarray | None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The inverse pencil ``M y = mu K y`` of :func:`inverse_eigh` (``K`` symmetric) reduced: ``K``'s Cholesky
+    factor ``L`` (lower), ``C`` (``K^-1``; with ``M``, ``L^-1 M L^-T``) tridiagonalised (``sytrd``, lower: its
+    reflectors ``c``, ``tau``) and ``T``'s eigenpairs ``mu`` (ascending), ``Z`` (``stevd``); None when ``K`` is not
+    positive definite (or LAPACK fails)."""
+    L, info = _potrf(K, lower=1)
+    if info:
+        return None
+    C, info = _potri(L, lower=1) if M is None else _sygst(M, L, itype=1, lower=1)
+    if info:
+        return None
+    c, d, e, tau, info = _sytrd(C, lower=1)
+    if info:
+        return None
+    mu, Z, info = _stevd(d, e)
+    return None if info else (L, c, tau, mu, Z)
+
+
+def _direct_eigh(K: np.ndarray, M: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`inverse_eigh` of a ``K`` that is not positive definite: the direct pencil ``K y = omega^2 M y``."""
+    if M is None:
+        w2, Y = np.linalg.eigh(K)
+        return w2, Y
+    # LAPACK's divide-and-conquer driver (without ``scipy.linalg.eigh``'s checks, which cost a third of a solve here)
+    w2, Y, info = _sygvd(K, M, itype=1, jobz="V", uplo="L")
+    if info:
+        raise np.linalg.LinAlgError(f"the reduced eigenproblem failed (LAPACK sygvd info {info}): "
+                                    "the changed mass matrix is not positive definite")
+    return w2, Y
 
 
 def lowest_modes(K: np.ndarray, M: np.ndarray, w2_max: float) -> tuple[np.ndarray, np.ndarray]:
@@ -245,8 +306,8 @@ class RitzReduction:
             else:
                 X.append(p.times(phi))
         if X:
-            A = scipy.linalg.cho_solve(self._chol, np.hstack(X))
-            B = scipy.linalg.cho_solve(self._chol, self.M0 @ A)
+            A = scipy.linalg.cho_solve(self._chol, np.hstack(X), check_finite=False)
+            B = scipy.linalg.cho_solve(self._chol, self.M0 @ A, check_finite=False)
             R = np.hstack([A, B])
             R -= phi @ (phi.T @ (self.M0 @ R))
             norms = np.sqrt(np.maximum(np.einsum("ij,ij->j", R, self.M0 @ R), 0.0))
@@ -257,7 +318,7 @@ class RitzReduction:
             V = np.hstack([phi, Q])
             # M0-orthonormal to rounding (the standard eigenproblem of a stiffness change relies on it)
             L = np.linalg.cholesky(V.T @ self.M0 @ V)
-            V = scipy.linalg.solve_triangular(L, V.T, lower=True).T
+            V = scipy.linalg.solve_triangular(L, V.T, lower=True, check_finite=False).T
         else:
             V = phi
         if V.shape[1] > MAX_FRACTION * n:

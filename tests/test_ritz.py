@@ -8,7 +8,7 @@ import scipy.linalg
 
 from analysis.diagnosis.physical import MeasuredModes, fit_cause, physical_causes
 from simulator.physical import FrameVariants
-from simulator.ritz import MAX_FRACTION, Part, RitzReduction
+from simulator.ritz import MAX_FRACTION, Part, RitzReduction, inverse_eigh, inverse_eigh_at
 
 OUTS = ["right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y"]
 REFS = ["right:6:-X"]
@@ -295,3 +295,75 @@ def test_a_kept_space_holds_nothing_of_the_frames_size() -> None:
     assert np.array_equal(np.abs(at), np.abs(space.at)) and at.shape == (len(OUTS) + len(REFS), space.size)
     g, Q = fv.exact_modes_of(changes, 700.0)
     assert_as_the_full_model(f, P, g, Q)
+
+
+def _reduced_pencils(fv: FrameVariants) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
+    """A candidate's reduced ``K`` and ``M`` (None: the identity) as the search solves them: springs x 100 and a
+    soft joint (stiffness only), 2 kg with its rotary inertia on top:3 and a member's mass (a changed mass)."""
+    out = []
+    for name, changes in (("stiff springs", STIFF_SPRINGS[0]),
+                          ("soft joint", [("joint_stiffness", {"joint": "right:10", "factor_translational": 0.07,
+                                                               "factor_rotational": 0.06})]),
+                          ("2 kg", [("added_mass", {"point": "top:3", "mass_kg": 2.0})]),
+                          ("member mass", [("member_mass", {"component": "left", "factor": 1.5})])):
+        scale, k, m = fv._coefficients(changes)
+        dk, dm = fv._changed(k, m)
+        red = RitzReduction(fv._K0, fv._M0)
+        space = red.space({q: fv._kparts[q] for q in dk}, {q: fv._mparts[q] for q in dm}, 30)
+        assert space is not None
+        K, M = space.matrices(dk, dm)
+        out.append((name, K, M))
+    return out
+
+
+def test_the_solve_at_a_few_dofs_is_the_full_solve_there(fv: FrameVariants) -> None:
+    """``inverse_eigh_at`` (the modes' search: the vectors seen at the measured points only, never formed) gives
+    ``inverse_eigh``'s eigenvalues and ``A @ Y`` for the modes up to 1.5 kHz, each column up to its sign, with a
+    stiffness change (K^-1's eigenproblem) and with a changed mass (the generalized one, M-normalised)."""
+    rng = np.random.default_rng(3)
+    for name, K, M in _reduced_pencils(fv):
+        A = rng.standard_normal((7, K.shape[0]))
+        w2, Y = inverse_eigh(K, M)
+        v2, AY = inverse_eigh_at(K, M, A)
+        low = w2 < (2 * np.pi * 1500.0) ** 2
+        assert low.sum() >= 12, name
+        np.testing.assert_allclose(v2[low], w2[low], rtol=1e-12, err_msg=name)
+        ref = A @ Y[:, low]
+        sign = np.sign(np.sum(ref * AY[:, low], axis=0))
+        assert np.max(np.abs(AY[:, low] * sign - ref)) < 1e-9 * np.max(np.abs(ref)), name
+
+
+def test_the_inverse_solve_is_an_eigendecomposition(fv: FrameVariants) -> None:
+    """``inverse_eigh``: ascending eigenvalues, vectors M-normalised (``Y^T M Y = I``) that solve ``K Y = M Y
+    diag(omega^2)`` (the residual at rounding against ``|K| |y|``), equal to LAPACK's direct solve of
+    the well-conditioned pencils; a ``K`` that is not positive definite (a mechanism) is solved directly."""
+    for name, K, M in _reduced_pencils(fv):
+        Mm = np.eye(K.shape[0]) if M is None else M
+        w2, Y = inverse_eigh(K, M)
+        assert np.all(np.diff(w2) >= 0), name
+        np.testing.assert_allclose(Y.T @ Mm @ Y, np.eye(w2.size), atol=1e-12, err_msg=name)
+        low = w2 < (2 * np.pi * 1500.0) ** 2
+        res = K @ Y[:, low] - Mm @ Y[:, low] * w2[low]          # backward error: against |K| |y|
+        assert np.max(np.abs(res)) < 1e-13 * np.max(np.abs(K)) * np.max(np.abs(Y[:, low])), name
+        if name != "stiff springs":       # there the direct solve is the inexact one (test_stiff_springs_...)
+            np.testing.assert_allclose(w2[low], scipy.linalg.eigh(K, Mm, eigvals_only=True)[low], rtol=1e-9)
+    mechanism = np.diag([-1.0, 2.0, 5.0]) + 0.1
+    for M in (None, np.diag([1.0, 2.0, 3.0])):
+        w2, Y = inverse_eigh(mechanism, M)
+        np.testing.assert_allclose(w2, scipy.linalg.eigh(mechanism, M, eigvals_only=True), rtol=1e-12)
+        v2, AY = inverse_eigh_at(mechanism, M, np.eye(3)[:2])
+        np.testing.assert_allclose(v2, w2, rtol=1e-12)
+        np.testing.assert_allclose(np.abs(AY), np.abs(Y[:2]), atol=1e-12)
+
+
+def test_a_basis_is_mass_orthonormal(fv: FrameVariants) -> None:
+    """Every reduced space's basis is M0-orthonormal to rounding (``V^T M0 V = I`` within 1e-13; the solve of a
+    stiffness change takes the mass matrix as the identity) and its nominal stiffness is the nominal modes' on
+    their block (``V^T K0 V`` = diag(omega^2) there, to the nominal solve's own 3e-10)."""
+    red = RitzReduction(fv._K0, fv._M0)
+    for dk, dm in (({("elem", "top:3"): 1.0}, {}), ({("spring", "joint", "rotational", "right:10"): 1.0}, {}),
+                   ({}, {("lump", "top:3"): 1.0, ("rot", "top:3", "x"): 1.0}), ({}, {("mass", "left"): 1.0})):
+        space = red.space({q: fv._kparts[q] for q in dk}, {q: fv._mparts[q] for q in dm}, 30)
+        assert space is not None and space.size > 30
+        np.testing.assert_allclose(space.M0, np.eye(space.size), atol=1e-13)
+        np.testing.assert_allclose(np.diag(space.K0)[:30], red.w2[:30], rtol=1e-9)
