@@ -7,6 +7,12 @@ from pathlib import Path
 # The tests solve many small linear-algebra problems; threaded OpenBLAS on the shared 2-core
 # machine is 10-100x slower for them under contention. Must be set before numpy is imported.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# The physical diagnosis fits its causes in one forked process per core unless the user's thread count says
+# otherwise (analysis.threads.worker_processes). `make test` already keeps both cores busy with its two
+# processes: the forks there gain no time and cost about a tenth more CPU (the forks' start and copies, the
+# fits' results sent back), so the suite asks for one. The forked fits are tested by name
+# (tests/test_ritz.py, processes=2) and the default by tests/test_threads.py, which unset the variable.
+os.environ.setdefault("IMPACTLAB_THREADS", "1")
 
 import pytest
 
