@@ -34,3 +34,5 @@ def one_line_exit_1(done: subprocess.CompletedProcess) -> str:
 
 #: capture arguments of a recording of one point with two hits (for the ``sim_capture`` fixture)
 ONE_POINT = (*CAPTURE[2:-3], "--points", "right:6:-X")
+#: capture arguments of CAPTURE's recording (for the ``sim_capture`` fixture)
+THREE_POINTS = (*CAPTURE[2:-3], "--points", POINTS)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import os
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -18,7 +19,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 import pytest
-from disk_full_support import CAPTURE, ONE_POINT, POINTS, one_line_exit_1, run
+from disk_full_support import CAPTURE, ONE_POINT, POINTS, THREE_POINTS, one_line_exit_1, run
 from station_support import WAIT_S, Api
 
 from analysis.recording import Recording, verify_recording
@@ -93,14 +94,15 @@ def test_the_station_on_a_full_disk_ends_with_one_line_and_keeps_every_hit(tmp_p
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.h5"]
 
 
-def test_replay_and_import_onto_a_full_disk_leave_no_partial_recording(tmp_path):
-    assert run([*CAPTURE, "--out", "src.h5"], tmp_path).returncode == 0
+def test_replay_and_import_onto_a_full_disk_leave_no_partial_recording(tmp_path, sim_capture, one_point):
+    # the inputs: the 3-point and the one-point recordings of the session (shared: copied here)
+    shutil.copy(sim_capture(*THREE_POINTS), tmp_path / "src.h5")
     (tmp_path / "old.h5").write_bytes(b"the user's earlier file")
     replayed = run(["acquisition", "replay", "src.h5", "--out", "old.h5", "--overwrite"], tmp_path, 400_000)
     assert "no room on the disk" in one_line_exit_1(replayed)
     assert (tmp_path / "old.h5").read_bytes() == b"the user's earlier file"
     # the hits of one point (an import names one reference point)
-    assert run([*CAPTURE[:-2], "--points", "right:6:-X", "--out", "one.h5"], tmp_path).returncode == 0
+    shutil.copy(one_point, tmp_path / "one.h5")
     assert run(["acquisition", "export", "one.h5", "--sep005", "hits.json"], tmp_path).returncode == 0
     imported = run(["acquisition", "import", "hits.json", "--out", "imp.h5", "--reference", "right:6:-X"],
                    tmp_path, 400_000)

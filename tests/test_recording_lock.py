@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -227,10 +228,9 @@ def test_a_stale_lock_of_a_killed_writer_is_taken_over_with_a_note(tmp_path, cap
     assert not lock.exists()
 
 
-def test_an_output_that_a_live_writer_holds_is_refused_by_every_face(tmp_path):
-    done = tmp_path / "done.h5"  # a finished recording with FRFs, the input
-    assert run("-m", "acquisition", "capture", "--device", "sim://?seed=1", "--out", str(done), "--hits", "1",
-               "--auto", "-q").returncode == 0
+def test_an_output_that_a_live_writer_holds_is_refused_by_every_face(tmp_path, sim_capture):
+    done = tmp_path / "done.h5"  # a finished recording with FRFs, the input (the session's, copied)
+    shutil.copy(sim_capture("--device", "sim://?seed=1", "--hits", "1", "--auto"), done)
     live = tmp_path / "live.h5"
     proc = start_writer(live)
     try:

@@ -34,13 +34,10 @@ def _digest(p: Path) -> str:
 
 
 @pytest.fixture(scope="module")
-def recording(tmp_path_factory) -> Path:
-    """A real capture on the simulated frame: 2 points, 2 accepted hits each (4 hits, 2 FRF groups)."""
-    folder = tmp_path_factory.mktemp("rec")
-    done = _run(["acquisition", "capture", "--device", "sim://?seed=1", "--hits", "2", "--auto", "-q", "--points",
-                 POINTS, "--out", "src.h5"], folder)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return folder / "src.h5"
+def recording(sim_capture) -> Path:
+    """A real capture on the simulated frame: 2 points, 2 accepted hits each (4 hits, 2 FRF groups); the
+    session's (``sim_capture``: read it or copy it)."""
+    return sim_capture("--device", "sim://?seed=1", "--hits", "2", "--auto", "--points", POINTS)
 
 
 def _cut_mid_hit(src: Path, folder: Path) -> Path:

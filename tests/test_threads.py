@@ -166,3 +166,21 @@ def test_commands_load_blas_single_threaded_and_kernels_raise_it(user, expected)
         env["OPENBLAS_NUM_THREADS"] = user
     out = subprocess.run([sys.executable, "-c", _START], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == expected
+
+
+def test_physical_causes_fork_one_process_per_core_unless_the_user_says_otherwise(monkeypatch):
+    """The physical diagnosis' default (processes=None): one forked process per core this process may run
+    on (at most one per cause), one with ``IMPACTLAB_THREADS=1`` (as the suite sets it) or ``--threads 1``."""
+    import threading
+
+    from analysis.diagnosis.physical import _cause_processes
+
+    monkeypatch.delenv(ENV_VAR, raising=False)
+    alone = threading.active_count() == 1          # a process with other threads never forks (their locks)
+    assert _cause_processes(9, None) == (min(threads._cores(), 9) if alone else 1)
+    assert _cause_processes(9, 2) == 2 and _cause_processes(1, None) == 1
+    monkeypatch.setenv(ENV_VAR, "1")
+    assert _cause_processes(9, None) == 1
+    monkeypatch.setenv(ENV_VAR, "auto")
+    with use_threads(1):
+        assert _cause_processes(9, None) == 1
