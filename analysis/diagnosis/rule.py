@@ -74,6 +74,10 @@ class DecisionRule:
         and two changes of one member must reach it.
     on_top_margin_db : a named physical cause whose FRF error stays more than this (dB) above the noise is
         tried with an FRF-level effect on top.
+    range_chi2 : chi2 (summed over the modes) above the least within which the values of a named cause's
+        parameter fit the measured modes alike (the profile over it, its refinements refitted: a block's
+        mass with its rotary inertia, :mod:`.param_range`): 1, one standard deviation of one parameter (the
+        profile likelihood's 68 % interval). It names a range; it decides nothing.
 
     Hits before the comparison (:mod:`.stray_hits`):
 
@@ -97,6 +101,7 @@ class DecisionRule:
     quiet_chi2: float = 1.0
     leaves_chi2: float = 1.0
     on_top_margin_db: float = 1.0
+    range_chi2: float = 1.0
     stray_excess_db: float = 6.0
     stray_min_hits: int = 3
 
