@@ -8,7 +8,6 @@ configuration states it), not the catalogue's lumped mass.
 """
 from __future__ import annotations
 
-import numpy as np
 from test_diagnosis_one_place import FMAX, OUTS, REFS, _plate_modes
 
 from analysis.diagnosis.param_range import parameters_text, supported_ranges
