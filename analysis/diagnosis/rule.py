@@ -146,6 +146,8 @@ RULES: dict[str, str] = {
     "significance": "an effect's held-out gain reaches min_gain_db and its z reaches z_min, or the gain "
                     "strong_gain_db",
     "range_edge": "veto: a fitted parameter at the edge of the effect's physical range",
+    "hum_on_a_mode": "veto: mains hum whose held-out gain one harmonic carries alone (the rest not significant), "
+                     "that harmonic inside a mode's half-power band",
     "resonator_beyond_mass": "veto: a resonator gains less than resonator_over_mass_db more than a mass at a sensor",
     "mass_or_stiffness": "veto: the modes that separate a mass at every sensor from a stiffness change favour "
                          "the other",
