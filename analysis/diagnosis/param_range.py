@@ -114,17 +114,19 @@ def supported_ranges(sim: PhysicalSimulation, cause: CauseSpec, fit: PhysicalFit
             for n in fit.free if refinements_of(cause, n)}
 
 
+def _unit(name: str) -> str:
+    """The unit a parameter's name ends with, as shown after its value (" kg", " Hz", " s"; "" for a factor)."""
+    return " kg" if name.endswith("_kg") else " Hz" if name.endswith("_hz") else " s" if name.endswith("_s") else ""
+
+
 def value_text(name: str, v: object) -> str:
     """A parameter as shown: masses in kg, frequencies in Hz, times in s, 4 digits; the rest as it is."""
-    if not isinstance(v, float):
-        return str(v)
-    unit = " kg" if name.endswith("_kg") else " Hz" if name.endswith("_hz") else " s" if name.endswith("_s") else ""
-    return f"{v:.4g}{unit}"
+    return f"{v:.4g}{_unit(name)}" if isinstance(v, float) else str(v)
 
 
 def parameters_text(params: Mapping) -> str:
     """A cause's parameters in words, ``name = value``, a value with a range (``<name>_range``, the values that fit
-    the data alike) followed by it: ``mass_kg = 1.806 kg (0.32-2.5 kg fit the data alike)``; lists and dicts (a
+    the data alike) followed by it: ``mass_kg = 1.806 kg (0.05-2.6 kg fit the data alike)``; lists and dicts (a
     gain per channel) left out."""
     out = []
     for k, v in params.items():
@@ -133,7 +135,6 @@ def parameters_text(params: Mapping) -> str:
         text = f"{k} = {value_text(k, v)}"
         span = params.get(f"{k}{RANGE}")
         if isinstance(v, float) and isinstance(span, (list, tuple)) and len(span) == 2:
-            unit = value_text(k, 1.0)[1:]
-            text += f" ({float(span[0]):.2g}-{float(span[1]):.2g}{unit} fit the data alike)"
+            text += f" ({float(span[0]):.2g}-{float(span[1]):.2g}{_unit(k)} fit the data alike)"
         out.append(text)
     return ", ".join(out)
