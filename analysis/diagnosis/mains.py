@@ -317,6 +317,17 @@ def _fit_penalty(err: np.ndarray, noise_lines: np.ndarray, on: np.ndarray, n_par
     return out
 
 
+#: Half-width (Hz) of a harmonic's neighbourhood beyond two line spacings: the largest mains offset looked for
+#: (:data:`MAX_OFFSET_HZ`) and a line's width. The cross-validation by harmonics holds it out with the harmonic.
+NEAR_HARMONIC_HZ = 0.6
+
+
+def _near_harmonic(f: np.ndarray, fh: float, df: float) -> np.ndarray:
+    """Mask of the lines ``f`` (Hz, spacing ``df``) in the neighbourhood of a harmonic at ``fh`` (Hz): within
+    :data:`NEAR_HARMONIC_HZ` plus two line spacings."""
+    return np.abs(f - fh) <= NEAR_HARMONIC_HZ + 2 * df
+
+
 def held_out_mains_hum(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     """The cross-validation of ``mains_hum``: by harmonics (:func:`held_out_by_harmonics`), for single
     lines and lines with a width alike (neighbouring lines of a line with a width are not independent,
@@ -346,14 +357,14 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     quiet = np.ones(f.size, bool)       # lines near no harmonic of either base: the noise of the penalty
     for b in HUM_BASES_HZ:
         for fh in b * np.arange(1, int(f[-1] // b) + 2):
-            quiet &= np.abs(f - fh) > 0.6 + 2 * df
+            quiet &= ~_near_harmonic(f, fh, df)
     for parity in (0, 1):
         # the held-out harmonics' neighbourhoods (both mains bases) are left out of the fit
         near = np.zeros(f.size, bool)
         for b in HUM_BASES_HZ:
             k = np.arange(1, int(f[-1] // b) + 2)
             for fh in b * k[(k % 2) == parity]:
-                near |= np.abs(f - fh) <= 0.6 + 2 * df
+                near |= _near_harmonic(f, fh, df)
         params = fit_mains_hum(ctx, ~near)
         fk, K = hum_kernels(f, params["base_hz"] + params["offset_hz"], params["width_hz"], params["shape"])
         order = np.rint(fk / params["base_hz"]).astype(int)
@@ -381,11 +392,11 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
 def _reach(f: np.ndarray, params: Mapping) -> tuple[np.ndarray, np.ndarray]:
     """The fitted hum's harmonics (Hz) on the lines ``f`` (Hz) and, per harmonic, the mask of the lines it reaches:
     its kernel's (:func:`hum_kernels`, up to :data:`TAIL_WIDTHS` widths) and the neighbourhood
-    :func:`held_out_by_harmonics` holds out with it (0.6 Hz plus two line spacings)."""
+    :func:`held_out_by_harmonics` holds out with it (:func:`_near_harmonic`)."""
     df = float(np.median(np.diff(f)))
     fk, K = hum_kernels(f, float(params["base_hz"]) + float(params.get("offset_hz", 0.0)),
                         float(params.get("width_hz", 0.0)), str(params.get("shape", "lorentzian")))
-    return fk, (np.abs(K) > 0) | (np.abs(f[None, :] - fk[:, None]) <= 0.6 + 2 * df)
+    return fk, (np.abs(K) > 0) | np.array([_near_harmonic(f, h, df) for h in fk]).reshape(fk.size, f.size)
 
 
 def carried_by_one_harmonic(ctx: FitContext, params: Mapping, before: np.ndarray, after: np.ndarray,
