@@ -204,6 +204,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; returns the exit code (0 done, 2 bad input)."""
     from .bands import FitError
     from .diagnosis import EFFECTS, EffectError
+    from .diagnosis.param_range import parameters_text
     from .diagnosis.rule import why_lines
     from .errors import FEModelError
     from .inputs import InputError, parse_band_text, parse_float_list
@@ -252,7 +253,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 for m in row["modes"] if m["determined"]))
     print(f"verdict: {doc['verdict']}" + (f" ({diag.reason})" if diag.reason else ""))
     for c in diag.named:
-        print(f"  named: {c['effect']} {c['parameters']}")
+        print(f"  named: {c['effect']} ({parameters_text(c['parameters'])})")
     print("why this verdict:")
     for line in why_lines(diag.trace):
         print(f"  {line}")

@@ -73,7 +73,7 @@ from .fem import FrameModel, ModelError, SectionProperties, element_matrices, me
 from .ritz import Part, ReducedSpace, RitzReduction, lowest_modes
 
 __all__ = ["FrameVariants", "CAUSES", "PhysicalCause", "Assembly", "register_cause", "DIAGNOSIS_BYTES_PER_DOF2",
-           "check_diagnosis_size", "ALL_PLACES", "DAMAGE_CAUSES", "damage_changes"]
+           "check_diagnosis_size", "ALL_PLACES", "DAMAGE_CAUSES", "damage_changes", "SIZED_MEMBERS"]
 
 
 @dataclass
@@ -103,6 +103,9 @@ class PhysicalCause:
 
     spec: CauseSpec
     apply: Callable[[Assembly, Mapping], None]
+    #: the set of options its choice takes when not the one named as the choice (every node, member, element,
+    #: support or joint): :data:`SIZED_MEMBERS`; the choice's parameter keeps its name (``component``)
+    options: str = ""
 
 
 def _added_mass(a: Assembly, p: Mapping) -> None:
@@ -153,6 +156,10 @@ def _mass_loading(a: Assembly, p: Mapping) -> None:
 def _stiffness_shift(a: Assembly, p: Mapping) -> None:
     a.modulus *= float(p.get("stiffness_factor", 1.0))
 
+
+#: The sets of options a cause's choice may take beyond those named as the choice (``point``, ``component``,
+#: ``element``, ``support``, ``joint``): the members whose section has a width and a depth (:attr:`PhysicalCause.options`).
+SIZED_MEMBERS = "sized_members"
 
 #: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function. A
 #: parameter that adds only a mass or only a stiffness as it grows (a positive semi-definite part times a growing
@@ -215,7 +222,8 @@ for _row in (
                     "(a hollow rhs section: its outer width and depth, the wall kept; members of an explicit "
                     "section have no width and depth and are not options)",
         advice="One member is of another bar than modelled: measure its section (width and depth) and check it "
-               "against the drawing, or model it with the fitted width and depth."), _member_section),
+               "against the drawing, or model it with the fitted width and depth."), _member_section,
+        options=SIZED_MEMBERS),
     PhysicalCause(CauseSpec(
         "element_stiffness", (ParamSpec("factor", 0.02, 2.0, monotone=True),), choice="element",
         description="the bending stiffness EI of one element scaled (a crack or local damage)",
@@ -465,14 +473,14 @@ class FrameVariants:
     def causes(self) -> tuple[CauseSpec, ...]:
         """The physical causes with their choices filled in (every node, member, element)."""
         options = {"point": self.nodes, "component": self.components, "element": self.elements,
-                   **{kind: (ALL_PLACES, *places) for kind, places in self.places.items()}}
+                   **{kind: (ALL_PLACES, *places) for kind, places in self.places.items()},
+                   SIZED_MEMBERS: self.sized_members}
         out = []
         for row in CAUSES.values():
             c = row.spec
             if c.choice is not None:
-                c = replace(c, options=options[c.choice], every=ALL_PLACES if c.choice in self.places else None)
-            if c.name == "member_section":
-                c = replace(c, options=self.sized_members)
+                c = replace(c, options=options[row.options or c.choice],
+                            every=ALL_PLACES if c.choice in self.places else None)
             if c.name == "mass_loading":
                 c = replace(c, params=(replace(c.params[0], nominal=self.sensor_mass_kg),))
             out.append(c)

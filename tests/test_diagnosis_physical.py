@@ -281,7 +281,7 @@ def _capture_and_diagnose(tmp_path: Path, overrides: dict, seed: int, extra=()) 
 
 def test_steel_block_on_the_beam_is_an_added_mass_at_its_node(tmp_path) -> None:
     """A 3 kg steel block (two beam elements with consistent mass on joint springs: not a lumped mass)
-    at top:6, captured through sim://."""
+    at top:6, captured through sim://: named with its mass and the narrow range of masses that fit alike."""
     over = _bench().steel_block(FrameConfig.load(), "top:6", 3.0)
     doc = _capture_and_diagnose(tmp_path, over, seed=21)
     assert doc["verdict"] == "added_mass", doc["reason"]
@@ -290,6 +290,9 @@ def test_steel_block_on_the_beam_is_an_added_mass_at_its_node(tmp_path) -> None:
     assert best["kind"] == "physical" and best["significant"] and best["adequate"]
     assert best["parameters"]["point"] == "top:6"
     assert best["parameters"]["mass_kg"] == pytest.approx(3.0, rel=0.1)
+    # mid-beam the modes fix the mass: the masses that fit alike (its rotary inertia refitted) lie close around it
+    lo, hi = best["parameters"]["mass_kg_range"]
+    assert lo <= best["parameters"]["mass_kg"] <= hi and hi / lo < 1.15
     assert doc["error_after_db"] < doc["error_before_db"] - 6
 
 

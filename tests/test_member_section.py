@@ -232,3 +232,25 @@ def test_the_one_place_study_scores_a_section_change_named_member_section_with_i
     got = study.score(case, named("right"), study.frame())
     assert got["right"] and got["named_among"] and got["factor_error"] == pytest.approx(0.05)
     assert study.score(case, named("left"), study.frame()) == {"right": False, "named_among": False}
+
+
+def test_a_cause_takes_its_options_from_its_row_not_its_name(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The members with a width and a depth are the options of a row that says so (``options=SIZED_MEMBERS``),
+    whatever its name: a row registered under another name gets them, with its parameter still ``component``;
+    member_section's own row says so, and the other member causes keep every member."""
+    from dataclasses import replace
+
+    from simulator.physical import CAUSES, SIZED_MEMBERS, PhysicalCause
+
+    base = FrameConfig.load()
+    sec = base.sections["beam"]
+    explicit = base.with_overrides({"sections": {"beam": {"shape": "explicit", "area_m2": sec.width_m * sec.depth_m,
+                                                          "iy_m4": 1e-6, "iz_m4": 1e-6, "j_m4": 2e-6}}})
+    row = CAUSES["member_section"]
+    assert row.options == SIZED_MEMBERS
+    monkeypatch.setitem(CAUSES, "bar_swap", PhysicalCause(replace(row.spec, name="bar_swap"), row.apply,
+                                                          options=SIZED_MEMBERS))
+    specs = {c.name: c for c in FrameVariants(explicit, OUTS, REFS).causes()}
+    assert specs["bar_swap"].choice == "component" and specs["bar_swap"].options == ("left", "right")
+    assert specs["member_section"].options == ("left", "right")
+    assert specs["member_stiffness"].options == specs["member_mass"].options == ("left", "right", "top")

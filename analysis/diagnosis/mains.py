@@ -2,17 +2,19 @@
 record, or broadened), their fit and their cross-validation by harmonics."""
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import replace
 
 import numpy as np
 
 from ..frf import FRFSet, line_spacing_hz
+from ..modal import ModalModel
 from .effect_types import EffectError, FitContext
 from .effect_types import check_positive as _check_positive
+from .rule import db, paired_z
 
 __all__ = ["HUM_BASES_HZ", "hum_kernels", "mains_hum_applies", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
-           "held_out_mains_hum", "held_out_by_harmonics"]
+           "held_out_mains_hum", "held_out_by_harmonics", "carried_by_one_harmonic", "half_power_mode"]
 
 HUM_BASES_HZ = (50.0, 60.0)
 #: Largest departure of the mains frequency from its nominal value that is looked for (Hz): grids hold
@@ -315,6 +317,17 @@ def _fit_penalty(err: np.ndarray, noise_lines: np.ndarray, on: np.ndarray, n_par
     return out
 
 
+#: Half-width (Hz) of a harmonic's neighbourhood beyond two line spacings: the largest mains offset looked for
+#: (:data:`MAX_OFFSET_HZ`) and a line's width. The cross-validation by harmonics holds it out with the harmonic.
+NEAR_HARMONIC_HZ = 0.6
+
+
+def _near_harmonic(f: np.ndarray, fh: float, df: float) -> np.ndarray:
+    """Mask of the lines ``f`` (Hz, spacing ``df``) in the neighbourhood of a harmonic at ``fh`` (Hz): within
+    :data:`NEAR_HARMONIC_HZ` plus two line spacings."""
+    return np.abs(f - fh) <= NEAR_HARMONIC_HZ + 2 * df
+
+
 def held_out_mains_hum(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     """The cross-validation of ``mains_hum``: by harmonics (:func:`held_out_by_harmonics`), for single
     lines and lines with a width alike (neighbouring lines of a line with a width are not independent,
@@ -344,14 +357,14 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     quiet = np.ones(f.size, bool)       # lines near no harmonic of either base: the noise of the penalty
     for b in HUM_BASES_HZ:
         for fh in b * np.arange(1, int(f[-1] // b) + 2):
-            quiet &= np.abs(f - fh) > 0.6 + 2 * df
+            quiet &= ~_near_harmonic(f, fh, df)
     for parity in (0, 1):
         # the held-out harmonics' neighbourhoods (both mains bases) are left out of the fit
         near = np.zeros(f.size, bool)
         for b in HUM_BASES_HZ:
             k = np.arange(1, int(f[-1] // b) + 2)
             for fh in b * k[(k % 2) == parity]:
-                near |= np.abs(f - fh) <= 0.6 + 2 * df
+                near |= _near_harmonic(f, fh, df)
         params = fit_mains_hum(ctx, ~near)
         fk, K = hum_kernels(f, params["base_hz"] + params["offset_hz"], params["width_hz"], params["shape"])
         order = np.rint(fk / params["base_hz"]).astype(int)
@@ -374,3 +387,57 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
         before.append(err.ravel())
         after.append((w_all * np.abs(R) ** 2 + penalty).ravel())
     return np.concatenate(before), np.concatenate(after)
+
+
+def _reach(f: np.ndarray, params: Mapping) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted hum's harmonics (Hz) on the lines ``f`` (Hz) and, per harmonic, the mask of the lines it reaches:
+    its kernel's (:func:`hum_kernels`, up to :data:`TAIL_WIDTHS` widths) and the neighbourhood
+    :func:`held_out_by_harmonics` holds out with it (:func:`_near_harmonic`)."""
+    df = float(np.median(np.diff(f)))
+    fk, K = hum_kernels(f, float(params["base_hz"]) + float(params.get("offset_hz", 0.0)),
+                        float(params.get("width_hz", 0.0)), str(params.get("shape", "lorentzian")))
+    return fk, (np.abs(K) > 0) | np.array([_near_harmonic(f, h, df) for h in fk]).reshape(fk.size, f.size)
+
+
+def carried_by_one_harmonic(ctx: FitContext, params: Mapping, before: np.ndarray, after: np.ndarray,
+                            significant: Callable[[float, float], bool]) -> dict | None:
+    """The one harmonic that carries a fitted mains hum's held-out gain, or None. ``before``, ``after``: the
+    held-out errors of :func:`held_out_by_harmonics` (each fold's raveled (n_out, n_ref, n_lines)); ``params``:
+    the fit (its ``harmonics_hz``); ``significant(gain_db, z)``: the rule the hum was found significant by. The
+    harmonic whose lines (:func:`_reach`) hold the most of the gain carries it when the gain
+    on every other line is not significant. Returns ``{"harmonic_hz", "share", "gain_without_db", "z_without"}``
+    (``share``: its part of the gain, 0-1)."""
+    m = ctx.measured
+    f = np.asarray(m.freq_hz, float)
+    if not params.get("harmonics_hz") or before.size != 2 * m.H.size or after.size != before.size:
+        return None
+    fk, near = _reach(f, params)
+    if fk.size == 0:
+        return None
+    shape = (2, *m.H.shape)
+    b, a = before.reshape(shape), after.reshape(shape)
+    drop = (b - a).sum(axis=(0, 1, 2))                        # what the hum removed, per line
+    total = float(drop.sum())
+    if total <= 0:
+        return None
+    shares = [float(drop[n].sum()) / total for n in near]
+    k = int(np.argmax(shares))
+    rest = ~near[k]
+    b_rest, a_rest = b[..., rest].ravel(), a[..., rest].ravel()
+    gain = db(float(np.mean(b_rest))) - db(float(np.mean(a_rest))) if b_rest.size else 0.0
+    z = paired_z(b_rest, a_rest) if b_rest.size else 0.0
+    if significant(gain, z):
+        return None
+    return {"harmonic_hz": float(fk[k]), "share": shares[k], "gain_without_db": gain, "z_without": z}
+
+
+def half_power_mode(model: ModalModel, freq_hz: float) -> dict | None:
+    """The mode of ``model`` whose half-power band ``f_r (1 +- zeta_r)`` (Hz) holds ``freq_hz`` (the nearest when
+    several do), or None: ``{"mode_hz", "half_power_hz"}`` (the band's half-width ``zeta_r f_r``)."""
+    fr, zeta = np.asarray(model.freq_hz, float), np.asarray(model.damping, float)
+    half = np.abs(zeta) * fr
+    inside = np.flatnonzero((fr > 0) & (np.abs(freq_hz - fr) <= half))
+    if inside.size == 0:
+        return None
+    j = int(inside[np.argmin(np.abs(freq_hz - fr[inside]))])
+    return {"mode_hz": float(fr[j]), "half_power_hz": float(half[j])}

@@ -47,6 +47,7 @@ from .effect_types import named as named_form
 from .effect_types import stage_entry
 from .effects import predict
 from .next_measurement import pair_rivals, propose, rivals
+from .param_range import supported_ranges
 from .physical import (
     RESIDUAL_CAP,
     CauseSpec,
@@ -242,6 +243,8 @@ def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence
     if named:
         best = named[0]
         out.verdict, out.extended, out.error_after_db = best["effect"], best["_extended"], best["error_after_db"]
+        # the values of its parameters the modes do not tell apart (a block's mass and its rotary inertia)
+        best["parameters"].update(supported_ranges(sim, specs[best["effect"]], best["_fit"], mm, fmax, rule.range_chi2))
         out.combined = [stage_entry(best)]
         out.named = [named_form(best)]
         trace.append(step("largest_gain", best["effect"], {"gain_db": best["gain_db"], "named": len(named)},

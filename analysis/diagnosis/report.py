@@ -13,6 +13,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..atomic import atomic_path, write_text_atomic
+from .param_range import parameters_text
 from .rule import why_lines
 from .verdict import Diagnosis
 
@@ -98,8 +99,8 @@ def report_text(diag: Diagnosis) -> str:
     L = ["# Model discrepancy diagnosis", "", f"**Verdict: `{diag.verdict}`.** {_action(diag)}", ""]
     advice = {c["effect"]: c.get("advice") for c in diag.causes}
     for c in diag.named:
-        shown = ", ".join(f"{k} = {_value(k, v)}" for k, v in c["parameters"].items() if not isinstance(v, (list, dict)))
-        L.append(f"- **{c['effect']}** ({shown}): {advice.get(c['effect']) or ACTIONS.get(c['effect'], '')}")
+        act = advice.get(c["effect"]) or ACTIONS.get(c["effect"], "")
+        L.append(f"- **{c['effect']}** ({parameters_text(c['parameters'])}): {act}")
     if diag.named:
         L.append("")
     L += ["## Why this verdict", "", "The rules that decided, in the order they were applied (docs/diagnosis.md):", ""]
@@ -154,14 +155,6 @@ def _action(diag: Diagnosis) -> str:
         c: dict = next((c for c in diag.causes if c["effect"] == diag.named[0]["effect"]), {})
         return str(c.get("advice") or ACTIONS.get(diag.verdict, ""))
     return ACTIONS.get(diag.verdict, "")
-
-
-def _value(name: str, v: object) -> str:
-    """A parameter as shown: masses in kg, factors plain, times in s, the rest with 4 digits."""
-    if not isinstance(v, float):
-        return str(v)
-    unit = " kg" if name.endswith("_kg") else " Hz" if name.endswith("_hz") else " s" if name.endswith("_s") else ""
-    return f"{v:.4g}{unit}"
 
 
 def write_report(diag: Diagnosis, outdir: str | Path, max_frf_plots: int = 6) -> Path:

@@ -74,6 +74,10 @@ class DecisionRule:
         and two changes of one member must reach it.
     on_top_margin_db : a named physical cause whose FRF error stays more than this (dB) above the noise is
         tried with an FRF-level effect on top.
+    range_chi2 : chi2 (summed over the modes) above the least within which the values of a named cause's
+        parameter fit the measured modes alike (the profile over it, its refinements refitted: a block's
+        mass with its rotary inertia, :mod:`.param_range`): 1, one standard deviation of one parameter (the
+        profile likelihood's 68 % interval). It names a range; it decides nothing.
 
     Hits before the comparison (:mod:`.stray_hits`):
 
@@ -97,6 +101,7 @@ class DecisionRule:
     quiet_chi2: float = 1.0
     leaves_chi2: float = 1.0
     on_top_margin_db: float = 1.0
+    range_chi2: float = 1.0
     stray_excess_db: float = 6.0
     stray_min_hits: int = 3
 
@@ -141,6 +146,8 @@ RULES: dict[str, str] = {
     "significance": "an effect's held-out gain reaches min_gain_db and its z reaches z_min, or the gain "
                     "strong_gain_db",
     "range_edge": "veto: a fitted parameter at the edge of the effect's physical range",
+    "hum_on_a_mode": "veto: mains hum whose held-out gain one harmonic carries alone (the rest not significant), "
+                     "that harmonic inside a mode's half-power band",
     "resonator_beyond_mass": "veto: a resonator gains less than resonator_over_mass_db more than a mass at a sensor",
     "mass_or_stiffness": "veto: the modes that separate a mass at every sensor from a stiffness change favour "
                          "the other",

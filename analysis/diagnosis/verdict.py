@@ -231,7 +231,7 @@ def _stage(ctx: FitContext, names: Sequence[str], rule: DecisionRule, trace: lis
             "error_after_db": a_db, "z": z,
             "significant": replace(rule, min_gain_db=floor).significant(gain, z),
             "evidence": _evidence(name, params, b_db, a_db, z, band_gain), "_extended": ext,
-            "_held_out_after": after,
+            "_held_out_after": after, "_held_out_before": before,
         })
         trace.append(step("significance", name, {"gain_db": gain, "z": z, "min_gain_db": floor, "z_min": rule.z_min,
                                                  "strong_gain_db": rule.strong_gain_db},
@@ -241,9 +241,31 @@ def _stage(ctx: FitContext, names: Sequence[str], rule: DecisionRule, trace: lis
             causes[-1]["significant"] = False
             causes[-1]["evidence"] += f"; {edge} at the edge of its physical range"
             trace.append(step("range_edge", name, {"parameter": edge}, "vetoed: not significant"))
+        if name == "mains_hum" and causes[-1]["significant"]:
+            _hum_on_a_mode(causes[-1], ctx, replace(rule, min_gain_db=floor), trace)
     _resonator_beyond_mass(causes, rule, trace)
     causes.sort(key=lambda c: c["gain_db"], reverse=True)
     return causes, skipped
+
+
+def _hum_on_a_mode(c: dict, ctx: FitContext, rule: DecisionRule, trace: list) -> None:
+    """A significant ``mains_hum`` whose held-out gain one harmonic carries alone
+    (:func:`analysis.diagnosis.mains.carried_by_one_harmonic`: the gain on every other line not significant by
+    ``rule``) and that harmonic inside a mode's half-power band (:func:`analysis.diagnosis.mains.half_power_mode`,
+    the simulation's modes): a line there fits what the simulation leaves of a mode it misplaces (a mode a little
+    off in frequency leaves a lobe a line's shape follows), which one harmonic cannot tell from interference.
+    Not significant; the veto is appended to ``trace``."""
+    from .mains import carried_by_one_harmonic, half_power_mode
+
+    one = carried_by_one_harmonic(ctx, c["parameters"], c["_held_out_before"], c["_held_out_after"], rule.significant)
+    mode = None if one is None else half_power_mode(ctx.base, one["harmonic_hz"])
+    if one is None or mode is None:
+        return
+    c["significant"] = False
+    c["evidence"] += (f"; {100 * one['share']:.0f} % of its gain from the one harmonic at {one['harmonic_hz']:.2f} Hz, "
+                      f"inside the half-power band of the mode at {mode['mode_hz']:.2f} Hz "
+                      f"(+-{mode['half_power_hz']:.2f} Hz)")
+    trace.append(step("hum_on_a_mode", "mains_hum", {**one, **mode}, "vetoed: not significant"))
 
 
 def _resonator_beyond_mass(causes: list, rule: DecisionRule = DEFAULT_RULE, trace: list | None = None) -> None:

@@ -296,8 +296,10 @@ def diagnosed_capture(case: dict, cfg: dict, toml: str, capture_args: list[str],
         if rc != 0:
             return {**case, "verdict": f"diagnose failed ({rc})", "right": False, "named_among": False}
         doc = json.loads(out.read_text())
+    # the parameters without their arrays (a gain per channel); a parameter's range (``<name>_range``) kept
     named = [{"effect": c["effect"], "parameters": {k: v for k, v in c["parameters"].items()
-                                                    if not isinstance(v, (list, dict))}} for c in doc.get("named") or []]
+                                                    if not isinstance(v, (list, dict)) or k.endswith("_range")}}
+             for c in doc.get("named") or []]
     # the rules that decided (the pair search's values among them: what a second cause gained over the first)
     return {**case, "verdict": doc["verdict"], "named": named, "reason": doc.get("reason", ""), "time_s": dt,
             "cpu_s": cpu, "cpu_children_s": kids, "trace": doc.get("trace"), **score_case(case, doc, cfg)}
