@@ -82,7 +82,7 @@ from .rule import DEFAULT_RULE, DecisionRule, gain_db
 log = logging.getLogger(__name__)
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
-           "fit_cause", "held_out_reaches", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR",
+           "fit_cause", "held_out_reaches", "kept_fit", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR",
            "MAC_TOL", "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
            "gain_db"]
 
@@ -232,6 +232,13 @@ class MeasuredModes:
         """Mask of the modes known by their frequency only (a zero shape column)."""
         return ~np.any(self.shapes != 0, axis=0)
 
+    @cached_property
+    def fits_made(self) -> dict:
+        """The fits made on these modes so far, each under its simulation and its start (:func:`kept_fit`): the
+        search's stages ask some of them again (a pair refined on all modes before its variants are widened, then
+        refined and cross-validated; a first cause refitted on top of the same second cause by two stages)."""
+        return {}
+
 
 def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Candidate mode index paired with each measured mode (-1: none) and the MAC of the pair."""
@@ -247,6 +254,18 @@ def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, n
     idx[rows] = cols
     macs[rows] = M[rows, cols]
     return idx, macs
+
+
+def kept_fit(mm: MeasuredModes, sim: Any, key: tuple, make: Any) -> Any:
+    """The answer ``make()`` of the fit ``key`` on the simulation ``sim`` and the modes ``mm``, made once: asked again
+    (by any stage of the search of these modes), the answer made the first time (:attr:`MeasuredModes.fits_made`).
+    ``key`` holds everything the fit depends on besides ``sim`` and ``mm`` (its causes, their parameters and starts,
+    the modes it is fitted on, the band); a fit is a function of these (the simulation's answers are functions of
+    their arguments), so the kept answer is the one ``make()`` would give again."""
+    got = mm.fits_made.get((id(sim), *key))
+    if got is None or got[0] is not sim:       # (an id is reused only after its simulation is gone)
+        got = mm.fits_made[(id(sim), *key)] = (sim, make())
+    return got[1]
 
 
 def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -418,14 +437,24 @@ def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[Pa
     rj = ResidualsWithJacobian(sim, lambda x: [(cause.name, full(x))], lambda x: sim.modes(cause.name, full(x), fmax),
                                [(0, s.name) for s in free], lambda x: dv_dx(free, x), mm, sel, fmax, (lo, hi))
     best: tuple[dict, float] = ({}, np.inf)
-    for x0 in starts:
-        x0 = np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
+    for x0 in distinct_starts([np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo)) for x0 in starts]):
         res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=30 * len(free), ftol=FIT_TOL, xtol=FIT_TOL,
                             **rj.options())
         x, cost = off_edges(free, res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))
         if cost < best[1]:
             best = (full(x), cost)
     return best
+
+
+def distinct_starts(starts: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """The starts of a least-squares fit, each once (the first of equal ones): a fit is a function of its start, so
+    a start equal to an earlier one (a grid's best point at the nominal, a nested variant's fit with its other
+    parameters at their nominal) gives that fit again and cannot be lower."""
+    out: list[np.ndarray] = []
+    for x0 in starts:
+        if not any(np.array_equal(x0, y) for y in out):
+            out.append(x0)
+    return out
 
 
 #: Fits whose chi2 differ by less than this are not told apart (:data:`FIT_TOL`: a chi2 is compared with others to
