@@ -106,3 +106,21 @@ def test_a_start_equal_to_an_earlier_one_is_not_fitted_again(monkeypatch) -> Non
     nested = _fit_continuous(fv, spec, specs, fixed, mm, sel, FMAX, also=[{**fixed, "factor_rotational": 1.0}])
     assert calls.n == 2 * alone
     assert nested == plain and plain[0]["factor_rotational"] == pytest.approx(0.3, rel=1e-3)
+
+
+@pytest.mark.parametrize("node", ["top:3", "left:5"])
+def test_a_search_asked_for_its_best_fit_alone_fits_fewer_options_for_the_same_fit(monkeypatch, node) -> None:
+    """A mass's node searched when only the best fit is of use (a cause fitted on top of another, ranked by its best):
+    the options of the screen's first few whose bound is above the best fit so far are not fitted; the best fit is
+    the one of the search that fits them (its node, parameters and chi2)."""
+    fv = FrameVariants(None, OUTS, REFS)
+    spec = {c.name: c for c in fv.causes()}["added_mass"]
+    mm = _noise_free_modes(fv, [("added_mass", {"point": node, "mass_kg": 5.0, "inertia_factor": 6.0})])
+    sel = np.ones(mm.freq_hz.size, bool)
+    calls = _Calls(monkeypatch, physical)
+    p, chi2, ranked = physical.fit_cause(fv, spec, ("mass_kg",), mm, sel, FMAX)
+    every = calls.n
+    q, chi2_best, fitted = physical.fit_cause(fv, spec, ("mass_kg",), mm, sel, FMAX, best_only=True)
+    assert (q, chi2_best) == (p, chi2)
+    assert {o for _, o, _ in fitted} < {o for _, o, _ in ranked}
+    assert calls.n - every < every

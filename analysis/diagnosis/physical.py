@@ -683,8 +683,8 @@ def _inside(s: _Screened, specs: Sequence[ParamSpec]) -> list[dict]:
 
 def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm: MeasuredModes,
               sel: np.ndarray, fmax: float, options: Sequence[str] | None = None,
-              start: dict | None = None, nested: Sequence[Mapping] = (), below: float = np.inf
-              ) -> tuple[dict, float, list]:
+              start: dict | None = None, nested: Sequence[Mapping] = (), below: float = np.inf,
+              best_only: bool = False) -> tuple[dict, float, list]:
     """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
     With a choice of at most ``N_SCREEN`` options: each fitted in full (:func:`_fit_continuous`), no screen.
     More: every option screened on a grid (:func:`_screen`), then fitted from its best grid point in the
@@ -693,7 +693,10 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
     that could win. ``nested``: fits of a variant with fewer free parameters (with the choice, at their option):
     each is a start too (a screened option's best point when its chi2 there is lower), so a variant's chi2 is
     never above a nested one's. ``below``: only a fit below this chi2 is of use (:func:`_best_variant`): an
-    option whose bound is not below it is not fitted (none fitted: chi2 inf).
+    option whose bound is not below it is not fitted (none fitted: chi2 inf). ``best_only``: the caller takes the best
+    fit alone (not the options ranked): an option among the ``N_SCREEN`` best of the screen whose bound (made as
+    without it) is not below the best fit so far is not fitted either; its fit could not be lower, so the best fit
+    is the same, and the ranked options are those fitted.
     Returns (params, chi2, [(chi2, option, params)] of the fitted options, sorted)."""
     specs = [s for s in cause.params if s.name in free]
     fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
@@ -736,7 +739,7 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
             i += 1
             if s.bound < target and s.at is not None:
                 _tighten(s.at, s, target)
-            if s.bound >= target:
+            if s.bound >= target or (best_only and s.bound >= best[1]):
                 continue                    # its chi2 cannot come below the best fit's (or ``below``) in its range
             p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: s.option}, mm, sel, fmax,
                                    s.params or None, [*held.get(s.option, ()), *_inside(s, specs)])

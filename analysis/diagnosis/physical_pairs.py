@@ -32,6 +32,7 @@ from scipy.optimize import least_squares
 
 from ..modal import ModalModel
 from .physical import (
+    FIT_TOL,
     N_SCREEN,
     CauseSpec,
     MeasuredModes,
@@ -335,7 +336,8 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
         rj = ResidualsWithJacobian(sim, changes, lambda x: changes_of(sim, changes(x), fmax),
                                    [(i, s.name) for i, s in flat], lambda x: dv_dx([s for _, s in flat], x), mm, sel,
                                    fmax, (lo, hi))
-        res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=20 * len(flat), **rj.options())
+        res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=20 * len(flat), ftol=FIT_TOL, xtol=FIT_TOL,
+                            **rj.options())
         return off_edges([s for _, s in flat], res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))[0]
 
     K = mm.freq_hz.size
@@ -367,23 +369,26 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
 
 
 def refit_on_top(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, other: PhysicalFit, mm: MeasuredModes,
-                 fmax: float) -> PhysicalFit:
+                 fmax: float, best_only: bool = False) -> PhysicalFit:
     """``fit`` (its cause and free parameters) fitted again on all modes with ``other``'s change applied:
     a choice (node, member, element) is searched over every option again, so a first cause whose choice
     was pulled aside by the second change in the data finds its place. ``fit`` itself when the cause has
-    no choice (its parameters are refined with the pair anyway)."""
+    no choice (its parameters are refined with the pair anyway). ``best_only``: the caller takes its best option's
+    fit alone, not the options ranked (:func:`analysis.diagnosis.physical.fit_cause`: the same fit, fewer options
+    fitted)."""
     beside = besides(spec, [(other.cause, other.params)])
     if spec.choice is None or beside is None:
         return fit
 
     def refit() -> PhysicalFit:
         top = OnTop(sim, [(other.cause, other.params)])
-        p, chi2, ranked = fit_cause(top, beside, fit.free, mm, np.ones(mm.freq_hz.size, bool), fmax)
+        p, chi2, ranked = fit_cause(top, beside, fit.free, mm, np.ones(mm.freq_hz.size, bool), fmax,
+                                    best_only=best_only)
         return PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=chi2, ranked=ranked)
 
     # the same cause refitted on top of the same change by another stage of the search: the fit made then
     made: PhysicalFit = kept_fit(mm, sim, ("on top", fmax, other.cause, repr(sorted(other.params.items())), beside,
-                                           tuple(fit.free)), refit)
+                                           tuple(fit.free), best_only), refit)
     return replace(made, params=dict(made.params), ranked=list(made.ranked))
 
 
