@@ -650,14 +650,15 @@ def _screened(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSp
 TIGHTEN_SPLITS = 12
 
 
-def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLITS) -> None:
+def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLITS) -> int:
     """Lift ``s.bound`` towards ``target`` by splitting its lowest box in halves (along its widest parameter,
     relative to the range) at most ``splits`` times; a corner with a lower chi2 than the grid's best becomes the
-    option's best point."""
+    option's best point. Returns the splits made (the lowest box is split first: ``n`` splits towards one target and
+    the rest towards a higher one are the splits made towards the higher one at once)."""
     widths = [max(b - a, 1e-30) for a, b in (sp.x_bounds for sp in at.specs)]
-    for _ in range(splits):
+    for done in range(splits):
         if not s.cells or s.bound >= target:
-            return
+            return done
         s.cells.sort(key=lambda t: t[0])
         _, box = s.cells.pop(0)
         d = int(np.argmax([(b - a) / w for (a, b), w in zip(box, widths)]))
@@ -670,6 +671,7 @@ def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLIT
                 if c < s.chi2:
                     s.chi2, s.params = c, at.params(x)
         s.bound = min(b for b, _ in s.cells)
+    return splits
 
 
 def _inside(s: _Screened, specs: Sequence[ParamSpec]) -> list[dict]:
@@ -737,8 +739,14 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
         for s in screened:
             target = below if i < N_SCREEN else min(below, best[1])
             i += 1
+            splits = TIGHTEN_SPLITS
+            if best_only and best[1] < target and s.bound < best[1] and s.at is not None:
+                # first towards the best fit so far: an option lifted above it is not fitted (its chi2 cannot be lower)
+                splits -= _tighten(s.at, s, best[1], splits)
+            if best_only and s.bound >= best[1]:
+                continue
             if s.bound < target and s.at is not None:
-                _tighten(s.at, s, target)
+                _tighten(s.at, s, target, splits)
             if s.bound >= target or (best_only and s.bound >= best[1]):
                 continue                    # its chi2 cannot come below the best fit's (or ``below``) in its range
             p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: s.option}, mm, sel, fmax,
