@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_diagnosis_physical import OUTS, REFS, _noise_free_modes
 from test_diagnosis_pair_search import _mass_beside_supports
+from test_diagnosis_physical import OUTS, REFS, _noise_free_modes
 
 from analysis.diagnosis import physical, physical_pairs
 from analysis.diagnosis.physical import PhysicalFit, _fit_continuous, _nominal
