@@ -82,7 +82,8 @@ from .rule import DEFAULT_RULE, DecisionRule, gain_db
 log = logging.getLogger(__name__)
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
-           "fit_cause", "held_out_reaches", "variants", "physical_causes", "paired_well", "same_structure", "FREQ_FLOOR",
+           "fit_cause", "held_out_reaches", "kept_fit", "variants", "physical_causes", "paired_well", "same_structure",
+           "FREQ_FLOOR",
            "MAC_TOL", "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
            "gain_db"]
 
@@ -232,6 +233,13 @@ class MeasuredModes:
         """Mask of the modes known by their frequency only (a zero shape column)."""
         return ~np.any(self.shapes != 0, axis=0)
 
+    @cached_property
+    def fits_made(self) -> dict:
+        """The fits made on these modes so far, each under its simulation and its start (:func:`kept_fit`): the
+        search's stages ask some of them again (a pair refined on all modes before its variants are widened, then
+        refined and cross-validated; a first cause refitted on top of the same second cause by two stages)."""
+        return {}
+
 
 def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Candidate mode index paired with each measured mode (-1: none) and the MAC of the pair."""
@@ -247,6 +255,18 @@ def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, n
     idx[rows] = cols
     macs[rows] = M[rows, cols]
     return idx, macs
+
+
+def kept_fit(mm: MeasuredModes, sim: Any, key: tuple, make: Any) -> Any:
+    """The answer ``make()`` of the fit ``key`` on the simulation ``sim`` and the modes ``mm``, made once: asked again
+    (by any stage of the search of these modes), the answer made the first time (:attr:`MeasuredModes.fits_made`).
+    ``key`` holds everything the fit depends on besides ``sim`` and ``mm`` (its causes, their parameters and starts,
+    the modes it is fitted on, the band); a fit is a function of these (the simulation's answers are functions of
+    their arguments), so the kept answer is the one ``make()`` would give again."""
+    got = mm.fits_made.get((id(sim), *key))
+    if got is None or got[0] is not sim:       # (an id is reused only after its simulation is gone)
+        got = mm.fits_made[(id(sim), *key)] = (sim, make())
+    return got[1]
 
 
 def residuals(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -418,14 +438,24 @@ def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[Pa
     rj = ResidualsWithJacobian(sim, lambda x: [(cause.name, full(x))], lambda x: sim.modes(cause.name, full(x), fmax),
                                [(0, s.name) for s in free], lambda x: dv_dx(free, x), mm, sel, fmax, (lo, hi))
     best: tuple[dict, float] = ({}, np.inf)
-    for x0 in starts:
-        x0 = np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
+    for x0 in distinct_starts([np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo)) for x0 in starts]):
         res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=30 * len(free), ftol=FIT_TOL, xtol=FIT_TOL,
                             **rj.options())
         x, cost = off_edges(free, res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))
         if cost < best[1]:
             best = (full(x), cost)
     return best
+
+
+def distinct_starts(starts: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """The starts of a least-squares fit, each once (the first of equal ones): a fit is a function of its start, so
+    a start equal to an earlier one (a grid's best point at the nominal, a nested variant's fit with its other
+    parameters at their nominal) gives that fit again and cannot be lower."""
+    out: list[np.ndarray] = []
+    for x0 in starts:
+        if not any(np.array_equal(x0, y) for y in out):
+            out.append(x0)
+    return out
 
 
 #: Fits whose chi2 differ by less than this are not told apart (:data:`FIT_TOL`: a chi2 is compared with others to
@@ -621,14 +651,15 @@ def _screened(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSp
 TIGHTEN_SPLITS = 12
 
 
-def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLITS) -> None:
+def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLITS) -> int:
     """Lift ``s.bound`` towards ``target`` by splitting its lowest box in halves (along its widest parameter,
     relative to the range) at most ``splits`` times; a corner with a lower chi2 than the grid's best becomes the
-    option's best point."""
+    option's best point. Returns the splits made (the lowest box is split first: ``n`` splits towards one target and
+    the rest towards a higher one are the splits made towards the higher one at once)."""
     widths = [max(b - a, 1e-30) for a, b in (sp.x_bounds for sp in at.specs)]
-    for _ in range(splits):
+    for done in range(splits):
         if not s.cells or s.bound >= target:
-            return
+            return done
         s.cells.sort(key=lambda t: t[0])
         _, box = s.cells.pop(0)
         d = int(np.argmax([(b - a) / w for (a, b), w in zip(box, widths)]))
@@ -641,6 +672,7 @@ def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLIT
                 if c < s.chi2:
                     s.chi2, s.params = c, at.params(x)
         s.bound = min(b for b, _ in s.cells)
+    return splits
 
 
 def _inside(s: _Screened, specs: Sequence[ParamSpec]) -> list[dict]:
@@ -654,8 +686,8 @@ def _inside(s: _Screened, specs: Sequence[ParamSpec]) -> list[dict]:
 
 def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm: MeasuredModes,
               sel: np.ndarray, fmax: float, options: Sequence[str] | None = None,
-              start: dict | None = None, nested: Sequence[Mapping] = (), below: float = np.inf
-              ) -> tuple[dict, float, list]:
+              start: dict | None = None, nested: Sequence[Mapping] = (), below: float = np.inf,
+              best_only: bool = False) -> tuple[dict, float, list]:
     """Fit ``cause`` with the parameters ``free`` (others nominal) on the measured modes ``sel``.
     With a choice of at most ``N_SCREEN`` options: each fitted in full (:func:`_fit_continuous`), no screen.
     More: every option screened on a grid (:func:`_screen`), then fitted from its best grid point in the
@@ -664,7 +696,10 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
     that could win. ``nested``: fits of a variant with fewer free parameters (with the choice, at their option):
     each is a start too (a screened option's best point when its chi2 there is lower), so a variant's chi2 is
     never above a nested one's. ``below``: only a fit below this chi2 is of use (:func:`_best_variant`): an
-    option whose bound is not below it is not fitted (none fitted: chi2 inf).
+    option whose bound is not below it is not fitted (none fitted: chi2 inf). ``best_only``: the caller takes the best
+    fit alone (not the options ranked): an option among the ``N_SCREEN`` best of the screen whose bound (made as
+    without it) is not below the best fit so far is not fitted either; its fit could not be lower, so the best fit
+    is the same, and the ranked options are those fitted.
     Returns (params, chi2, [(chi2, option, params)] of the fitted options, sorted)."""
     specs = [s for s in cause.params if s.name in free]
     fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
@@ -705,9 +740,15 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
         for s in screened:
             target = below if i < N_SCREEN else min(below, best[1])
             i += 1
+            splits = TIGHTEN_SPLITS
+            if best_only and best[1] < target and s.bound < best[1] and s.at is not None:
+                # first towards the best fit so far: an option lifted above it is not fitted (its chi2 cannot be lower)
+                splits -= _tighten(s.at, s, best[1], splits)
+            if best_only and s.bound >= best[1]:
+                continue
             if s.bound < target and s.at is not None:
-                _tighten(s.at, s, target)
-            if s.bound >= target:
+                _tighten(s.at, s, target, splits)
+            if s.bound >= target or (best_only and s.bound >= best[1]):
                 continue                    # its chi2 cannot come below the best fit's (or ``below``) in its range
             p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: s.option}, mm, sel, fmax,
                                    s.params or None, [*held.get(s.option, ()), *_inside(s, specs)])

@@ -32,6 +32,7 @@ from scipy.optimize import least_squares
 
 from ..modal import ModalModel
 from .physical import (
+    FIT_TOL,
     N_SCREEN,
     CauseSpec,
     MeasuredModes,
@@ -44,6 +45,7 @@ from .physical import (
     dv_dx,
     fit_cause,
     held_out_reaches,
+    kept_fit,
     modes_jac,
     off_edges,
     residuals,
@@ -287,6 +289,16 @@ class PairFit:
         return float(np.sum(self.cv_per_mode))
 
 
+@dataclass
+class _Refined:
+    """A pair refined on all modes (:func:`fit_pair`): the minimum ``x`` (its search variables), its modes' chi2 there
+    (``least``), the held-out chi2 of the folds made so far from there (fold k leaves mode k out)."""
+
+    x: np.ndarray
+    least: np.ndarray
+    folds: list
+
+
 def _start(x0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """A start for least squares strictly inside the bounds; a log-factor within rounding of its nominal
     (0) is set to it: the finite-difference step (``diff_step``) is relative to ``|x|``, so a start at
@@ -324,21 +336,30 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
         rj = ResidualsWithJacobian(sim, changes, lambda x: changes_of(sim, changes(x), fmax),
                                    [(i, s.name) for i, s in flat], lambda x: dv_dx([s for _, s in flat], x), mm, sel,
                                    fmax, (lo, hi))
-        res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=20 * len(flat), **rj.options())
+        res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=20 * len(flat), ftol=FIT_TOL, xtol=FIT_TOL,
+                            **rj.options())
         return off_edges([s for _, s in flat], res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))[0]
 
     K = mm.freq_hz.size
-    x0 = np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat])
     allsel = np.ones(K, bool)
-    x = solve(x0, allsel)
-    least = np.sum(resid(x, allsel).reshape(K, -1) ** 2, axis=1)
+
+    def refine() -> _Refined:
+        x = solve(np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat]), allsel)
+        return _Refined(x, np.sum(resid(x, allsel).reshape(K, -1) ** 2, axis=1), [])
+
+    # the same pair from the same start refined before in this search (by another stage, or before its variants
+    # were widened): its minimum and the folds made so far are taken from there (each fold starts at the minimum)
+    made: _Refined = kept_fit(mm, sim, ("pair", fmax, *((f.cause, tuple(ss), repr(sorted(f.params.items())))
+                                                         for f, ss in zip(fits, free))), refine)
+    x, least = made.x, made.least
     chi2 = float(np.sum(least))
     cv = np.empty(K if folds and chi2 < folds_below else 0)
     for k in range(cv.size):
-        sel = allsel.copy()
-        sel[k] = False
-        xk = solve(x, sel)
-        cv[k] = float(np.sum(resid(xk, ~sel) ** 2))
+        if k == len(made.folds):
+            sel = allsel.copy()
+            sel[k] = False
+            made.folds.append(float(np.sum(resid(solve(x, sel), ~sel) ** 2)))
+        cv[k] = made.folds[k]
         if held_out_reaches(cv[:k + 1], least[k + 1:], folds_below):
             cv = np.empty(0)            # its held-out chi2 cannot come below ``folds_below``: the folds stop
             break
@@ -348,17 +369,27 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
 
 
 def refit_on_top(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, other: PhysicalFit, mm: MeasuredModes,
-                 fmax: float) -> PhysicalFit:
+                 fmax: float, best_only: bool = False) -> PhysicalFit:
     """``fit`` (its cause and free parameters) fitted again on all modes with ``other``'s change applied:
     a choice (node, member, element) is searched over every option again, so a first cause whose choice
     was pulled aside by the second change in the data finds its place. ``fit`` itself when the cause has
-    no choice (its parameters are refined with the pair anyway)."""
+    no choice (its parameters are refined with the pair anyway). ``best_only``: the caller takes its best option's
+    fit alone, not the options ranked (:func:`analysis.diagnosis.physical.fit_cause`: the same fit, fewer options
+    fitted)."""
     beside = besides(spec, [(other.cause, other.params)])
     if spec.choice is None or beside is None:
         return fit
-    top = OnTop(sim, [(other.cause, other.params)])
-    p, chi2, ranked = fit_cause(top, beside, fit.free, mm, np.ones(mm.freq_hz.size, bool), fmax)
-    return PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=chi2, ranked=ranked)
+
+    def refit() -> PhysicalFit:
+        top = OnTop(sim, [(other.cause, other.params)])
+        p, chi2, ranked = fit_cause(top, beside, fit.free, mm, np.ones(mm.freq_hz.size, bool), fmax,
+                                    best_only=best_only)
+        return PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=chi2, ranked=ranked)
+
+    # the same cause refitted on top of the same change by another stage of the search: the fit made then
+    made: PhysicalFit = kept_fit(mm, sim, ("on top", fmax, other.cause, repr(sorted(other.params.items())), beside,
+                                           tuple(fit.free), best_only), refit)
+    return replace(made, params=dict(made.params), ranked=list(made.ranked))
 
 
 def rechoose(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], pair: PairFit,

@@ -540,7 +540,7 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
             top = top or OnTop(sim, changed)
             fits = []
             for free in variants(spec):
-                p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax)
+                p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax, best_only=True)
                 fits.append((chi2 + _freedom(spec, free), PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
             kept[key] = min(fits, key=lambda t: t[0])      # the best variant of the cause (the first of the least)
         ranked.append(kept[key])
@@ -844,7 +844,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     seconds = [] if opened else _seconds(sim, specs, mm, fmax, fa, names, n=None, kept=judge.kept)
     counted = _leading(sim, seconds, N_SECOND)
     pairs = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
-             [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax), fb) for fb in counted]
+             [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True), fb) for fb in counted]
              + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
              + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
     if held:
@@ -859,7 +859,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     best: dict | None = None
     for bound, fa2, fb in todo:
         if fa2 is None:
-            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax)
+            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
         freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
         target = _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom,
                              _freedom(specs[fb.cause], fb.free),
