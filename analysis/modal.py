@@ -151,7 +151,8 @@ class ModalModel:
         return damping_ratio(self.poles)
 
 
-def transfer(model: ModalModel, s: np.ndarray) -> np.ndarray:
+def transfer(model: ModalModel, s: np.ndarray, poles: np.ndarray | None = None,
+             residues: np.ndarray | None = None) -> np.ndarray:
     """The model's transfer function at complex frequencies ``s`` (rad/s), shape (n_out, n_ref, n_s):
     the one synthesis kernel of the package (eq. 11 continued off the j omega axis)::
 
@@ -161,14 +162,19 @@ def transfer(model: ModalModel, s: np.ndarray) -> np.ndarray:
     power of s), ``"paper"`` ``(1, -1/s^2)``; on ``s = j omega`` these are :func:`residual_basis`.
     At ``s = 0`` the second basis term is set to 0, as :func:`residual_basis` does at omega = 0.
     ``s = j omega`` gives the FRF (:func:`synthesize`); ``s = j omega + a`` the FRF seen through an
-    exponential window ``exp(-a t)``."""
+    exponential window ``exp(-a t)``.
+
+    ``poles`` (..., n_modes) and ``residues`` (..., n_out, n_ref, n_modes), with the same leading axes: several
+    variants of the model's modes at once (its residual terms), shape (..., n_out, n_ref, n_s); each variant as
+    the model with those poles and residues gives it."""
     s = np.asarray(s, dtype=complex).ravel()
-    lam = np.asarray(model.poles, dtype=complex)
-    R = np.asarray(model.residues, dtype=complex)
-    n_out, n_ref = R.shape[:2]
-    Rf = R.reshape(n_out * n_ref, lam.size)
+    lam = np.asarray(model.poles if poles is None else poles, dtype=complex)
+    R = np.asarray(model.residues if residues is None else residues, dtype=complex)
+    n_out, n_ref = R.shape[-3:-1]
+    lead = R.shape[:-3]
+    Rf = R.reshape(*lead, n_out * n_ref, lam.shape[-1])
     # (n_modes, n_s) pole kernels, summed by matrix products (BLAS)
-    G = Rf @ (1.0 / (s[None, :] - lam[:, None])) + np.conj(Rf) @ (1.0 / (s[None, :] - np.conj(lam)[:, None]))
+    G = Rf @ (1.0 / (s - lam[..., :, None])) + np.conj(Rf) @ (1.0 / (s - np.conj(lam)[..., :, None]))
     if model.residual_form != "none":
         p = _POWER[model.quantity]
         zero = s == 0
@@ -182,7 +188,7 @@ def transfer(model: ModalModel, s: np.ndarray) -> np.ndarray:
             G = G + np.asarray(model.upper_residual).reshape(-1, 1) * upper
         if model.lower_residual is not None:
             G = G + np.asarray(model.lower_residual).reshape(-1, 1) * lower
-    return G.reshape(n_out, n_ref, s.size)
+    return G.reshape(*lead, n_out, n_ref, s.size)
 
 
 def synthesize(model: ModalModel, freq_hz: np.ndarray) -> FRFSet:
