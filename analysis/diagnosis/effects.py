@@ -636,4 +636,4 @@ def _frf_effects(frf: FRFSet, effects: Sequence[Mapping]) -> FRFSet:
 
 #: The catalogue as the resonator search uses it (:mod:`.resonator_search`): :func:`predict` and the lookup
 #: of an applied effect's row.
-CATALOGUE = Catalogue(predict=predict, lookup=_lookup)
+CATALOGUE = Catalogue(predict=predict, lookup=_lookup, synthesised=_synthesised)
