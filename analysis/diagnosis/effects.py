@@ -52,7 +52,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
-from scipy.linalg import eigh
+from scipy.linalg.lapack import dsygvd
 from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
@@ -273,11 +273,20 @@ def _mass_sensors(model: ModalModel, sensor: object) -> np.ndarray:
 def _loaded_modes(wn: np.ndarray, loaded: np.ndarray, masses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``K_r V = M_r V diag(w2)`` for ``K_r = diag(wn^2)`` (``wn`` rad/s) and ``M_r = I + m L^T L`` (``L`` the loaded
     outputs' shapes), for every mass m of ``masses`` (kg, shape (G,)) at once: w2 (G, n) ascending (rad/s)^2 and
-    V (G, n, n) M_r-normalised (``V^T M_r V = I``). One stacked generalized eigenproblem (each mass's the same
-    as solved alone)."""
+    V (G, n, n) M_r-normalised (``V^T M_r V = I``). LAPACK's divide-and-conquer generalized solver (``dsygvd``,
+    what :func:`scipy.linalg.eigh` calls for these, without its checks per mass) on each mass in turn."""
     n = wn.size
     Mr = np.eye(n)[None] + (np.asarray(masses, float)[:, None, None] * loaded.T[None]) @ loaded[None]
-    w2, V = eigh(np.broadcast_to(np.diag(wn ** 2), Mr.shape), Mr)
+    K = np.diag(np.asarray(wn, float) ** 2)
+    if not (np.all(np.isfinite(K)) and np.all(np.isfinite(Mr))):
+        raise ValueError("mass_loading: the modes or the mass are not finite numbers")
+    # each mass's vectors in LAPACK's (column-major) layout, as scipy's stacked eigh returns them: the products
+    # that follow then run the same BLAS kernels
+    w2, V = np.empty((Mr.shape[0], n)), np.empty(Mr.shape).transpose(0, 2, 1)
+    for i, M in enumerate(Mr):
+        w2[i], V[i], info = dsygvd(K, M, itype=1, jobz="V", uplo="L")
+        if info != 0:
+            raise np.linalg.LinAlgError(f"mass_loading: the loaded modes' eigenproblem failed (LAPACK info {info})")
     return w2, V
 
 
