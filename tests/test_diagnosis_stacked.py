@@ -22,7 +22,7 @@ from analysis.diagnosis.effects import (
 )
 from analysis.diagnosis.processing import RECORD_KEY, WINDOW_SHIFT_KEY, windowed_transfer
 from analysis.diagnosis.resonator_search import _start_costs
-from analysis.modal import ModalModel, pole_from_fz, transfer
+from analysis.modal import ModalModel, pole_from_fz, pole_kernels, transfer
 
 LABELS = ("a:1:X", "b:1:X", "c:1:X")
 
@@ -54,6 +54,8 @@ def test_transfer_of_stacked_variants_is_each_variants_own() -> None:
     for i in range(5):
         assert np.array_equal(H[i], transfer(replace(model, poles=poles[i], residues=residues[i]), s))
     assert np.array_equal(transfer(model, s, model.poles, model.residues), transfer(model, s))
+    # the kernels given (as the windowed synthesis shares them with the record's tail) change nothing
+    assert np.array_equal(transfer(model, s, poles, residues, pole_kernels(poles, s)), H)
 
 
 def test_windowed_synthesis_of_stacked_variants_is_each_variants_own() -> None:

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity, window_pole_shift
-from ..modal import ModalModel, transfer
+from ..modal import ModalModel, pole_kernels, transfer
 from .effect_types import EffectError
 
 __all__ = ["WINDOW_SHIFT_KEY", "RECORD_KEY", "apply_exponential_window", "apply_record_length", "truncation_tail",
@@ -48,7 +48,8 @@ def apply_record_length(model: ModalModel, params: Mapping) -> ModalModel:
 
 
 def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: float,
-                    poles: np.ndarray | None = None, residues: np.ndarray | None = None) -> np.ndarray:
+                    poles: np.ndarray | None = None, residues: np.ndarray | None = None,
+                    kernels: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """What a record of ``record_s`` seconds after the pulse misses of each mode's impulse response
     in the measured ``quantity``, at the Laplace points ``s`` (rad/s):
 
@@ -57,7 +58,8 @@ def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: f
     so the tail returned, ``exp(-s T) sum_r N_r exp(lambda_r T) / (s - lambda_r) + c.c.``, is
     subtracted from the full FRF. At the DFT lines ``exp(-j w_k T_rec) = 1``; the residual terms (mass
     and stiffness lines, deltas at t = 0) are not truncated. (n_out, n_ref, n_freq) complex; ``poles`` and
-    ``residues`` with leading axes: the model's variants (:func:`analysis.modal.transfer`), (..., n_out, n_ref, n_freq)."""
+    ``residues`` with leading axes: the model's variants (:func:`analysis.modal.transfer`), (..., n_out, n_ref, n_freq).
+    ``kernels``: :func:`analysis.modal.pole_kernels` of the poles at ``s`` when the caller has them already."""
     lam = np.asarray(model.poles if poles is None else poles, complex)
     R = np.asarray(model.residues if residues is None else residues, complex)
     N = R * (lam ** float(_POWER[quantity] - _POWER[model.quantity]))[..., None, None, :]
@@ -65,7 +67,7 @@ def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: f
     n_out, n_ref = a.shape[-3:-1]
     lead = a.shape[:-3]
     both = np.concatenate([lam, np.conj(lam)], axis=-1)     # the poles and their conjugates, one product
-    den = 1.0 / (s - both[..., :, None])
+    den = np.concatenate(pole_kernels(lam, s) if kernels is None else kernels, axis=-2)
     tail = (np.concatenate([a, np.conj(a)], axis=-1).reshape(*lead, n_out * n_ref, both.shape[-1]) @ den
             ).reshape(*lead, n_out, n_ref, s.size)
     return tail * np.exp(-s * record_s)
@@ -113,14 +115,16 @@ def windowed_transfer(model: ModalModel, freq_hz: np.ndarray, quantity: str, pol
     f = np.asarray(freq_hz, float)
     record = model.meta.get(RECORD_KEY)
     s = 2j * np.pi * f + sigma_w
+    # the record's tail sums the same pole kernels as the synthesis: computed once
+    kernels = pole_kernels(model.poles if poles is None else poles, s) if record else None
     if sigma_w == 0.0:
         # the model's synthesis (eq. 11) in its own quantity, converted: one FRF set built (the fits call this often)
-        H = transfer(model, 2j * np.pi * f, poles, residues)
+        H = transfer(model, 2j * np.pi * f, poles, residues, kernels)
         H = convert_quantity(H, f, model.quantity, quantity) if model.quantity != quantity else H
     else:
-        H = transfer(model, s, poles, residues) * s ** float(_POWER[quantity] - _POWER[model.quantity])
+        H = transfer(model, s, poles, residues, kernels) * s ** float(_POWER[quantity] - _POWER[model.quantity])
     if record:
-        H = H - truncation_tail(model, s, quantity, float(record), poles, residues)
+        H = H - truncation_tail(model, s, quantity, float(record), poles, residues, kernels)
     return H
 
 
