@@ -39,6 +39,7 @@ __all__ = [
     "residual_basis",
     "synthesize",
     "transfer",
+    "pole_kernels",
     "pole_from_fz",
     "natural_freq_hz",
     "damping_ratio",
@@ -151,7 +152,17 @@ class ModalModel:
         return damping_ratio(self.poles)
 
 
-def transfer(model: ModalModel, s: np.ndarray) -> np.ndarray:
+def pole_kernels(poles: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``1 / (s - lambda_r)`` and ``1 / (s - conj(lambda_r))`` (..., n_modes, n_s) of the poles (..., n_modes)
+    at the complex frequencies ``s`` (rad/s): the kernels :func:`transfer` sums."""
+    lam = np.asarray(poles, dtype=complex)
+    s = np.asarray(s, dtype=complex).ravel()
+    return 1.0 / (s - lam[..., :, None]), 1.0 / (s - np.conj(lam)[..., :, None])
+
+
+def transfer(model: ModalModel, s: np.ndarray, poles: np.ndarray | None = None,
+             residues: np.ndarray | None = None,
+             kernels: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The model's transfer function at complex frequencies ``s`` (rad/s), shape (n_out, n_ref, n_s):
     the one synthesis kernel of the package (eq. 11 continued off the j omega axis)::
 
@@ -161,14 +172,21 @@ def transfer(model: ModalModel, s: np.ndarray) -> np.ndarray:
     power of s), ``"paper"`` ``(1, -1/s^2)``; on ``s = j omega`` these are :func:`residual_basis`.
     At ``s = 0`` the second basis term is set to 0, as :func:`residual_basis` does at omega = 0.
     ``s = j omega`` gives the FRF (:func:`synthesize`); ``s = j omega + a`` the FRF seen through an
-    exponential window ``exp(-a t)``."""
+    exponential window ``exp(-a t)``.
+
+    ``poles`` (..., n_modes) and ``residues`` (..., n_out, n_ref, n_modes), with the same leading axes: several
+    variants of the model's modes at once (its residual terms), shape (..., n_out, n_ref, n_s); each variant as
+    the model with those poles and residues gives it. ``kernels``: :func:`pole_kernels` of those poles at ``s``
+    when the caller has them already."""
     s = np.asarray(s, dtype=complex).ravel()
-    lam = np.asarray(model.poles, dtype=complex)
-    R = np.asarray(model.residues, dtype=complex)
-    n_out, n_ref = R.shape[:2]
-    Rf = R.reshape(n_out * n_ref, lam.size)
+    lam = np.asarray(model.poles if poles is None else poles, dtype=complex)
+    R = np.asarray(model.residues if residues is None else residues, dtype=complex)
+    n_out, n_ref = R.shape[-3:-1]
+    lead = R.shape[:-3]
+    Rf = R.reshape(*lead, n_out * n_ref, lam.shape[-1])
     # (n_modes, n_s) pole kernels, summed by matrix products (BLAS)
-    G = Rf @ (1.0 / (s[None, :] - lam[:, None])) + np.conj(Rf) @ (1.0 / (s[None, :] - np.conj(lam)[:, None]))
+    k, kc = pole_kernels(lam, s) if kernels is None else kernels
+    G = Rf @ k + np.conj(Rf) @ kc
     if model.residual_form != "none":
         p = _POWER[model.quantity]
         zero = s == 0
@@ -182,7 +200,7 @@ def transfer(model: ModalModel, s: np.ndarray) -> np.ndarray:
             G = G + np.asarray(model.upper_residual).reshape(-1, 1) * upper
         if model.lower_residual is not None:
             G = G + np.asarray(model.lower_residual).reshape(-1, 1) * lower
-    return G.reshape(n_out, n_ref, s.size)
+    return G.reshape(*lead, n_out, n_ref, s.size)
 
 
 def synthesize(model: ModalModel, freq_hz: np.ndarray) -> FRFSet:

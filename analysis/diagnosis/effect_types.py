@@ -1,8 +1,9 @@
 """What every effect of the catalogue shares: the entry type, the fitting context, the error."""
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -63,6 +64,15 @@ class FitContext:
     weights: np.ndarray
     sim: FRFSet
     prior: tuple = ()
+    #: fits already made in this context (:meth:`remembered`), not part of its value
+    _memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def remembered(self, key: tuple, fit: Callable[[], dict]) -> dict:
+        """``fit()`` made once per context and ``key`` (e.g. an effect's name and the lines' bytes: one effect's
+        fit on the same lines asked by two effects); each caller gets its own copy of the parameters."""
+        if key not in self._memo:
+            self._memo[key] = fit()
+        return copy.deepcopy(self._memo[key])
 
     def effects(self, spec: Mapping) -> list:
         """The effects already accepted (``prior``) followed by ``spec``."""
@@ -198,9 +208,9 @@ def shapes_at_references(model: ModalModel, phi: np.ndarray) -> np.ndarray | Non
     return phi[[outs.index(r) for r in model.references]]
 
 
-def _mode_kernels(ctx: FitContext, freq_hz: float, zeta: float) -> tuple[np.ndarray, np.ndarray]:
-    """Measured-quantity response of a unit real and a unit imaginary residue (model units)."""
-    f = ctx.measured.freq_hz
+def _mode_kernels(ctx: FitContext, freq_hz: float, zeta: float, lines: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Measured-quantity response of a unit real and a unit imaginary residue (model units) on ``lines``."""
+    f = ctx.measured.freq_hz[lines]
     jw = 2j * np.pi * f
     lam = complex(pole_from_fz(freq_hz, zeta))
     k1 = 1 / (jw - lam)
@@ -214,8 +224,7 @@ def mode_residuals(ctx: FitContext, lines: np.ndarray, fz: np.ndarray) -> tuple[
     linear, solved in closed form) of one mode ``fz`` = (f Hz, zeta) added to the simulation ``ctx.sim``
     on ``lines``; residues shape (n_out, n_ref, 2), [re, im] in model units (the ``missing_mode`` effect's
     fit, and the local resonator's starts)."""
-    a, b = _mode_kernels(ctx, fz[0], fz[1])
-    a, b = a[lines], b[lines]
+    a, b = _mode_kernels(ctx, fz[0], fz[1], lines)
     E = ctx.measured.H[..., lines] - ctx.sim.H[..., lines]
     W = ctx.weights[..., lines]
     # normal equations per FRF: [[aa, ab], [ab, bb]] x = [ae, be] (real inner products, weighted)

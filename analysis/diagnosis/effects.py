@@ -52,7 +52,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
-from scipy.linalg import eigh
+from scipy.linalg.lapack import dsygvd
 from scipy.optimize import least_squares
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity
@@ -80,6 +80,7 @@ from .processing import (
     apply_record_length,
     synthesize_windowed,
     truncation_tail,
+    windowed_transfer,
 )
 from .resonator import apply_local_resonator
 from .resonator_search import RESONATOR_BEYOND_BAND, Catalogue, search_resonator
@@ -272,17 +273,32 @@ def _mass_sensors(model: ModalModel, sensor: object) -> np.ndarray:
 def _loaded_modes(wn: np.ndarray, loaded: np.ndarray, masses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``K_r V = M_r V diag(w2)`` for ``K_r = diag(wn^2)`` (``wn`` rad/s) and ``M_r = I + m L^T L`` (``L`` the loaded
     outputs' shapes), for every mass m of ``masses`` (kg, shape (G,)) at once: w2 (G, n) ascending (rad/s)^2 and
-    V (G, n, n) M_r-normalised (``V^T M_r V = I``). One stacked generalized eigenproblem (each mass's the same
-    as solved alone)."""
+    V (G, n, n) M_r-normalised (``V^T M_r V = I``). LAPACK's divide-and-conquer generalized solver (``dsygvd``,
+    what :func:`scipy.linalg.eigh` calls for these, without its checks per mass) on each mass in turn."""
     n = wn.size
     Mr = np.eye(n)[None] + (np.asarray(masses, float)[:, None, None] * loaded.T[None]) @ loaded[None]
-    w2, V = eigh(np.broadcast_to(np.diag(wn ** 2), Mr.shape), Mr)
+    K = np.diag(np.asarray(wn, float) ** 2)
+    if not (np.all(np.isfinite(K)) and np.all(np.isfinite(Mr))):
+        raise ValueError("mass_loading: the modes or the mass are not finite numbers")
+    # each mass's vectors in LAPACK's (column-major) layout, as scipy's stacked eigh returns them: the products
+    # that follow then run the same BLAS kernels
+    w2, V = np.empty((Mr.shape[0], n)), np.empty(Mr.shape).transpose(0, 2, 1)
+    for i, M in enumerate(Mr):
+        w2[i], V[i], info = dsygvd(K, M, itype=1, jobz="V", uplo="L")
+        if info != 0:
+            raise np.linalg.LinAlgError(f"mass_loading: the loaded modes' eigenproblem failed (LAPACK info {info})")
     return w2, V
 
 
 def _mass_loaded(model: ModalModel, mask: np.ndarray, masses: np.ndarray) -> list[ModalModel]:
     """``model`` with the mass m at the outputs ``mask``, for every m of ``masses`` (kg): the re-analysed modes
     of :func:`apply_mass_loading` (its docstring), the eigenproblems of all masses solved together."""
+    poles, residues = _mass_loaded_modes(model, mask, masses)
+    return [replace(model, poles=poles[i], residues=residues[i]) for i in range(poles.shape[0])]
+
+
+def _mass_loaded_modes(model: ModalModel, mask: np.ndarray, masses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The poles (G, n) and residues (G, n_out, n_ref, n) of :func:`_mass_loaded`'s models, G = ``masses.size``."""
     masses = np.asarray(masses, float)
     phi = np.asarray(model.meta["output_shapes"], float)
     loaded = phi[mask]
@@ -306,8 +322,7 @@ def _mass_loaded(model: ModalModel, mask: np.ndarray, masses: np.ndarray) -> lis
         coupled = (po[:, :, None, :] * pr[:, None, :, :]
                    - (d ** 2)[:, None, None, :] * phi[None, :, None, :] * ref[None, None, :, :])
         R = R + np.where((masses > 0)[:, None, None, None], coupled / (2j * new.imag)[:, None, None, :], 0.0)
-    Rp = R * new[:, None, None, :] ** p
-    return [replace(model, poles=new[i], residues=Rp[i]) for i in range(masses.size)]
+    return new, R * new[:, None, None, :] ** p
 
 
 def apply_mass_loading(model: ModalModel, params: Mapping) -> ModalModel:
@@ -364,12 +379,17 @@ def _mass_grid_costs(ctx: FitContext, lines: np.ndarray, place: str, grid: np.nd
         loading = FRFMassLoading(bare, predict(bare, f, ctx.measured.quantity))
         prior_kg, mask_kg = frf_masses_kg(model), np.asarray(mask, float)
         loaded_H = loading.loaded_H(prior_kg[None, :] + np.asarray(grid, float)[:, None] * mask_kg[None, :])
-        predicted = (_frf_effects(replace(loading.frf, H=H), frf_prior) for H in loaded_H)
+        predicted = (_frf_effects(replace(loading.frf, H=H), frf_prior).H for H in loaded_H)
     else:
-        predicted = (predict(loaded, f, ctx.measured.quantity, frf_prior) for loaded in _mass_loaded(model, mask, grid))
+        # the loaded models' FRFs of the whole grid in one synthesis, as predict gives each
+        poles, residues = _mass_loaded_modes(model, mask, grid)
+        loaded = _synthesised(model, f, ctx.measured.quantity, model.meta.get("frf_correction"), poles, residues)
+        predicted = (_frf_effects(FRFSet(freq_hz=f, H=H, quantity=ctx.measured.quantity, outputs=model.outputs,
+                                         references=model.references), frf_prior).H if frf_prior else H
+                     for H in loaded)
     vals = []
-    for frf in predicted:
-        e = Hm - frf.H
+    for H in predicted:
+        e = Hm - H
         vals.append(float(np.sum(W * (e.real ** 2 + e.imag ** 2))))
     return np.array(vals)
 
@@ -423,6 +443,13 @@ def apply_missing_mode(model: ModalModel, params: Mapping) -> ModalModel:
 
 
 def fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
+    """The extra mode's frequency, damping and residues on ``lines`` (:func:`_fit_missing_mode`), fitted once per
+    context and lines: the local resonator's search starts from the same fit (:mod:`.resonator_search`)."""
+    key = ("missing_mode", np.asarray(lines).dtype.str, np.shape(lines), np.asarray(lines).tobytes())
+    return ctx.remembered(key, lambda: _fit_missing_mode(ctx, lines))
+
+
+def _fit_missing_mode(ctx: FitContext, lines: np.ndarray) -> dict:
     f = ctx.measured.freq_hz
     E = ctx.measured.H - ctx.sim.H
     power = np.sum(ctx.weights * np.abs(E) ** 2, axis=(0, 1))
@@ -561,6 +588,17 @@ def _correction(corr: FRFSet, freq_hz: np.ndarray, quantity: str, warp: float = 
     return convert_quantity(H, f, corr.quantity, quantity) if corr.quantity != quantity else H
 
 
+def _synthesised(model: ModalModel, freq_hz: np.ndarray, quantity: str, corr: FRFSet | None,
+                 poles: np.ndarray | None = None, residues: np.ndarray | None = None) -> np.ndarray:
+    """The FRFs of ``model`` (:func:`windowed_transfer`; with ``poles`` and ``residues`` its variants with those
+    modes, leading axes first) plus the fixed FRF term ``corr`` (a base's ``meta["frf_correction"]``, warped by
+    the model's stiffness), at ``freq_hz`` (Hz) in ``quantity``."""
+    H = windowed_transfer(model, freq_hz, quantity, poles=poles, residues=residues)
+    if corr is not None:
+        H = H + _correction(corr, freq_hz, quantity, float(model.meta.get("frequency_warp", 1.0)))
+    return H
+
+
 def predict(
     base: ModalModel,
     freq_hz: np.ndarray,
@@ -585,11 +623,9 @@ def predict(
         eff, params = _lookup(spec)
         if eff.kind == "modal":
             model = eff.apply(model, params)
-    frf = synthesize_windowed(model, freq_hz, quantity)
-    corr = base.meta.get("frf_correction")
-    if corr is not None:
-        frf = replace(frf, H=frf.H + _correction(corr, frf.freq_hz, quantity,
-                                                 float(model.meta.get("frequency_warp", 1.0))))
+    f = np.asarray(freq_hz, float)
+    frf = FRFSet(freq_hz=f, H=_synthesised(model, f, quantity, base.meta.get("frf_correction")), quantity=quantity,
+                 outputs=model.outputs, references=model.references)
     if model.meta.get(FRF_MASSES_KEY):
         frf = add_frf_masses(model, frf)
     if outputs is not None or references is not None:
@@ -609,4 +645,4 @@ def _frf_effects(frf: FRFSet, effects: Sequence[Mapping]) -> FRFSet:
 
 #: The catalogue as the resonator search uses it (:mod:`.resonator_search`): :func:`predict` and the lookup
 #: of an applied effect's row.
-CATALOGUE = Catalogue(predict=predict, lookup=_lookup)
+CATALOGUE = Catalogue(predict=predict, lookup=_lookup, synthesised=_synthesised)

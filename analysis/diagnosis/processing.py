@@ -9,11 +9,11 @@ from dataclasses import replace
 import numpy as np
 
 from ..frf import QUANTITY_POWER, FRFSet, convert_quantity, window_pole_shift
-from ..modal import ModalModel, transfer
+from ..modal import ModalModel, pole_kernels, transfer
 from .effect_types import EffectError
 
 __all__ = ["WINDOW_SHIFT_KEY", "RECORD_KEY", "apply_exponential_window", "apply_record_length", "truncation_tail",
-           "synthesize_windowed", "synthesis_derivative"]
+           "synthesize_windowed", "windowed_transfer", "synthesis_derivative"]
 
 _POWER = QUANTITY_POWER
 WINDOW_SHIFT_KEY = "exp_window_pole_shift_per_s"  # model.meta key: summed 1/tau of the exponential windows (1/s)
@@ -47,7 +47,9 @@ def apply_record_length(model: ModalModel, params: Mapping) -> ModalModel:
     return replace(model, meta={**model.meta, RECORD_KEY: T})
 
 
-def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: float) -> np.ndarray:
+def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: float,
+                    poles: np.ndarray | None = None, residues: np.ndarray | None = None,
+                    kernels: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """What a record of ``record_s`` seconds after the pulse misses of each mode's impulse response
     in the measured ``quantity``, at the Laplace points ``s`` (rad/s):
 
@@ -55,15 +57,20 @@ def truncation_tail(model: ModalModel, s: np.ndarray, quantity: str, record_s: f
 
     so the tail returned, ``exp(-s T) sum_r N_r exp(lambda_r T) / (s - lambda_r) + c.c.``, is
     subtracted from the full FRF. At the DFT lines ``exp(-j w_k T_rec) = 1``; the residual terms (mass
-    and stiffness lines, deltas at t = 0) are not truncated. (n_out, n_ref, n_freq) complex."""
-    lam = np.asarray(model.poles, complex)
-    N = np.asarray(model.residues, complex) * (lam ** float(_POWER[quantity] - _POWER[model.quantity]))[None, None, :]
-    a = N * np.exp(lam * record_s)[None, None, :]
-    n_out, n_ref, _ = a.shape
-    both = np.concatenate([lam, np.conj(lam)])               # the poles and their conjugates, one product
-    den = 1.0 / (s[None, :] - both[:, None])
-    tail = (np.concatenate([a, np.conj(a)], axis=2).reshape(n_out * n_ref, both.size) @ den).reshape(n_out, n_ref, s.size)
-    return tail * np.exp(-s * record_s)[None, None, :]
+    and stiffness lines, deltas at t = 0) are not truncated. (n_out, n_ref, n_freq) complex; ``poles`` and
+    ``residues`` with leading axes: the model's variants (:func:`analysis.modal.transfer`), (..., n_out, n_ref, n_freq).
+    ``kernels``: :func:`analysis.modal.pole_kernels` of the poles at ``s`` when the caller has them already."""
+    lam = np.asarray(model.poles if poles is None else poles, complex)
+    R = np.asarray(model.residues if residues is None else residues, complex)
+    N = R * (lam ** float(_POWER[quantity] - _POWER[model.quantity]))[..., None, None, :]
+    a = N * np.exp(lam * record_s)[..., None, None, :]
+    n_out, n_ref = a.shape[-3:-1]
+    lead = a.shape[:-3]
+    both = np.concatenate([lam, np.conj(lam)], axis=-1)     # the poles and their conjugates, one product
+    den = np.concatenate(pole_kernels(lam, s) if kernels is None else kernels, axis=-2)
+    tail = (np.concatenate([a, np.conj(a)], axis=-1).reshape(*lead, n_out * n_ref, both.shape[-1]) @ den
+            ).reshape(*lead, n_out, n_ref, s.size)
+    return tail * np.exp(-s * record_s)
 
 
 def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
@@ -89,7 +96,17 @@ def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
     With ``meta[RECORD_KEY]`` (:func:`apply_record_length`) the finite record is applied too
     (:func:`truncation_tail`, at the windowed ``s``: the window and the record act on the same response).
     Returns an :class:`FRFSet` in ``quantity``; with ``sigma_w = 0`` and no record this is plain synthesis and
-    conversion."""
+    conversion (its FRFs: :func:`windowed_transfer`)."""
+    f = np.asarray(freq_hz, float)
+    H = windowed_transfer(model, f, quantity, pole_shift_per_s)
+    return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=model.outputs, references=model.references)
+
+
+def windowed_transfer(model: ModalModel, freq_hz: np.ndarray, quantity: str, pole_shift_per_s: float | None = None,
+                      poles: np.ndarray | None = None, residues: np.ndarray | None = None) -> np.ndarray:
+    """The FRFs of :func:`synthesize_windowed` (n_out, n_ref, n_freq); with ``poles`` (..., n_modes) and
+    ``residues`` (..., n_out, n_ref, n_modes) those of the model's variants with these modes, all at once
+    (..., n_out, n_ref, n_freq): each as :func:`synthesize_windowed` gives the model with those modes."""
     if quantity not in _POWER:
         raise EffectError(f"quantity {quantity!r} is not one of {tuple(_POWER)}")
     sigma_w = float(model.meta.get(WINDOW_SHIFT_KEY, 0.0)) if pole_shift_per_s is None else float(pole_shift_per_s)
@@ -98,15 +115,17 @@ def synthesize_windowed(model: ModalModel, freq_hz: np.ndarray, quantity: str,
     f = np.asarray(freq_hz, float)
     record = model.meta.get(RECORD_KEY)
     s = 2j * np.pi * f + sigma_w
+    # the record's tail sums the same pole kernels as the synthesis: computed once
+    kernels = pole_kernels(model.poles if poles is None else poles, s) if record else None
     if sigma_w == 0.0:
         # the model's synthesis (eq. 11) in its own quantity, converted: one FRF set built (the fits call this often)
-        H = transfer(model, 2j * np.pi * f)
+        H = transfer(model, 2j * np.pi * f, poles, residues, kernels)
         H = convert_quantity(H, f, model.quantity, quantity) if model.quantity != quantity else H
     else:
-        H = transfer(model, s) * s ** float(_POWER[quantity] - _POWER[model.quantity])
+        H = transfer(model, s, poles, residues, kernels) * s ** float(_POWER[quantity] - _POWER[model.quantity])
     if record:
-        H = H - truncation_tail(model, s, quantity, float(record))
-    return FRFSet(freq_hz=f, H=H, quantity=quantity, outputs=model.outputs, references=model.references)
+        H = H - truncation_tail(model, s, quantity, float(record), poles, residues, kernels)
+    return H
 
 
 def _pole_sums(R: np.ndarray, dR: np.ndarray, lam: np.ndarray, dlam: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -40,12 +40,20 @@ class Predict(Protocol):
                  ) -> FRFSet: ...
 
 
+class Synthesised(Protocol):
+    def __call__(self, model: ModalModel, freq_hz: np.ndarray, quantity: str, corr: FRFSet | None,
+                 poles: np.ndarray | None = None, residues: np.ndarray | None = None) -> np.ndarray: ...
+
+
 class Catalogue(NamedTuple):
     """What the search needs of the effects registry: ``predict`` (the simulation extended by effects,
-    :func:`analysis.diagnosis.effects.predict`) and ``lookup`` (an applied effect's row and parameters)."""
+    :func:`analysis.diagnosis.effects.predict`), ``lookup`` (an applied effect's row and parameters) and
+    ``synthesised`` (the FRFs of a model's variants at once with its fixed FRF term, what ``predict`` gives
+    each without FRF effects)."""
 
     predict: Predict
     lookup: Lookup
+    synthesised: Synthesised
 
 
 def _initial_coupling(ctx: FitContext, fit: dict, wn: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
@@ -146,6 +154,34 @@ def _resonator_jacobian(ctx: FitContext, freq_hz: np.ndarray, sw: np.ndarray, n_
     return jac
 
 
+def _start_costs(ctx: FitContext, f: np.ndarray, Hm: np.ndarray, sw: np.ndarray, spec: Callable[[np.ndarray], dict],
+                 cost: Callable[[np.ndarray], float], catalogue: Catalogue) -> Callable[[list], list[float]]:
+    """The costs of several starts (``cost`` of each, the weighted squared error on the lines ``f``): the
+    resonated models of all of them synthesised at once (``catalogue.synthesised``) on the model with the modal
+    effects accepted before; one by one (``cost``) when FRF effects were accepted before or a mass is added to
+    an FRF-file simulation's FRFs (:mod:`.mass_frf`), which act on each prediction."""
+    model = ctx.base
+    for e in ctx.prior:
+        eff, params = catalogue.lookup(e)
+        if eff.kind != "modal":
+            return lambda xs: [cost(x) for x in xs]
+        model = eff.apply(model, params)
+    if model.meta.get(FRF_MASSES_KEY):
+        return lambda xs: [cost(x) for x in xs]
+    resonator = catalogue.lookup({"effect": "local_resonator"})[0]
+
+    def costs(xs: list) -> list[float]:
+        moved = [resonator.apply(model, split(spec(x))[1]) for x in xs]
+        H = catalogue.synthesised(moved[0], f, ctx.measured.quantity, ctx.base.meta.get("frf_correction"),
+                                  np.stack([m.poles for m in moved]), np.stack([m.residues for m in moved]))
+        out = []
+        for Hx in H:
+            e = (Hm - Hx) * sw
+            out.append(float(np.sum(e.real ** 2) + np.sum(e.imag ** 2)))
+        return out
+    return costs
+
+
 def search_resonator(ctx: FitContext, lines: np.ndarray, catalogue: Catalogue) -> dict:
     """The resonator's frequency, damping and coupling to every mode by least squares on ``lines``, the
     simulation extended through ``catalogue`` (its ``predict`` and ``lookup``).
@@ -185,6 +221,8 @@ def search_resonator(ctx: FitContext, lines: np.ndarray, catalogue: Catalogue) -
     def cost(x: np.ndarray) -> float:
         return float(np.sum(resid(x) ** 2))
 
+    costs = _start_costs(ctx, f, Hm, sw, spec, cost, catalogue)
+
     jac = _resonator_jacobian(ctx, f, sw, n_real, spec, catalogue.lookup)
     mm = catalogue.lookup({"effect": "missing_mode"})[0].fit(ctx, lines)
     inband = np.sort(wn[(wn >= 2 * np.pi * lo) & (wn <= 2 * np.pi * hi)]) / (2 * np.pi)
@@ -204,7 +242,7 @@ def search_resonator(ctx: FitContext, lines: np.ndarray, catalogue: Catalogue) -
         tied = [np.concatenate([[fc, np.log(zc)], np.clip(_attached_coupling(phi, p, ratio), -0.5, 0.5)])
                 for p in points for ratio in RESONATOR_SCREEN_RATIOS]
         if tied:                                        # the best attachment at this frequency
-            attached.append(min(((cost(x0), x0) for x0 in tied), key=lambda t: t[0]))
+            attached.append(min(zip(costs(tied), tied), key=lambda t: t[0]))
     if not first and not attached:
         raise EffectError("local_resonator: no extra mode in the band and no output with a mode shape to start from")
     starts = [x0 for kind in (first, attached) for _, x0 in sorted(kind, key=lambda t: t[0])[:RESONATOR_REFINED]]
