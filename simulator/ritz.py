@@ -132,9 +132,7 @@ class ReducedSpace:
         """Eigenvalues ``omega^2`` in ``(1, w2_max)`` (rad/s)^2 of ``(scale (K0 + sum dk_p K_p), M0 + sum
         dm_q M_q)`` in this space and the Ritz vectors' coefficients (r, n_modes), M-normalised."""
         w2, Y = self.eigen_all(dk, dm)
-        w2 = scale * w2
-        keep = (w2 > 1.0) & (w2 < w2_max)
-        return w2[keep], Y[:, keep]
+        return _in_band(scale * w2, Y, w2_max)
 
     def eigen_at(self, dk: Mapping, dm: Mapping, scale: float, w2_max: float, at: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -142,9 +140,7 @@ class ReducedSpace:
         the modes at a few DOFs) instead of ``Y``: by :func:`inverse_eigh_at`, which forms no eigenvector."""
         K, M = self.matrices(dk, dm)
         w2, AY = inverse_eigh_at(K, M, at)
-        w2 = scale * w2
-        keep = (w2 > 1.0) & (w2 < w2_max)
-        return w2[keep], AY[:, keep]
+        return _in_band(scale * w2, AY, w2_max)
 
     def matrices(self, dk: Mapping, dm: Mapping) -> tuple[np.ndarray, np.ndarray | None]:
         """The candidate's reduced ``K0 + sum dk_p K_p`` and ``M0 + sum dm_q M_q`` (None: ``M0``, the identity
@@ -164,6 +160,12 @@ class ReducedSpace:
         not applied), ascending, the vectors M-normalised: by the inverse pencil (:func:`inverse_eigh`)."""
         K, M = self.matrices(dk, dm)
         return inverse_eigh(K, M)
+
+
+def _in_band(w2: np.ndarray, X: np.ndarray, w2_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """The eigenvalues ``w2`` (rad/s)^2 in ``(1, w2_max)`` and the columns of ``X`` that go with them."""
+    keep = (w2 > 1.0) & (w2 < w2_max)
+    return w2[keep], X[:, keep]
 
 
 def inverse_eigh(K: np.ndarray, M: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -214,6 +216,8 @@ def inverse_eigh_at(K: np.ndarray, M: np.ndarray | None, A: np.ndarray) -> tuple
         B = scipy.linalg.solve_triangular(L, B.T, lower=True, check_finite=False).T
     if Z.shape[0] > 1:
         B[:, 1:], _, info = _ormqr("R", "N", c[1:, :-1], tau, B[:, 1:], lwork=max(1, 64 * B.shape[0]))
+        if info:
+            raise np.linalg.LinAlgError(f"the reduced eigenproblem's reflectors failed (LAPACK ormqr info {info})")
     AY = (B @ Z)[:, ::-1]
     mu = mu[::-1]
     return 1.0 / mu, (AY if M is None else AY / np.sqrt(mu))

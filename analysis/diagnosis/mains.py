@@ -214,7 +214,7 @@ def _hum_candidates(f: np.ndarray) -> list[tuple[float, float, float, str]]:
     """(mains base Hz, offset Hz, width Hz, shape) tried: 50 and 60 Hz, offsets up to
     +-``MAX_OFFSET_HZ``, single lines (synchronous, width 0) and lines two lines wide of both shapes
     (Lorentzian, sinc)."""
-    df = float(np.median(np.diff(f)))
+    df = line_spacing_hz(f)
 
     def offsets(step: float) -> np.ndarray:     # 0, +-1, +-2, ... steps, up to and just past the limit
         k = np.arange(1, int(np.ceil(MAX_OFFSET_HZ / step - 1e-9)) + 1) * step
@@ -349,7 +349,7 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     predicted lines gives tens of dB."""
     m = ctx.measured
     f = m.freq_hz
-    df = float(np.median(np.diff(f)))
+    df = m.line_spacing_hz
     E = m.H - ctx.sim.H
     w_all = ctx.weights
     before, after = [], []
@@ -389,11 +389,10 @@ def held_out_by_harmonics(ctx: FitContext) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(before), np.concatenate(after)
 
 
-def _reach(f: np.ndarray, params: Mapping) -> tuple[np.ndarray, np.ndarray]:
-    """The fitted hum's harmonics (Hz) on the lines ``f`` (Hz) and, per harmonic, the mask of the lines it reaches:
-    its kernel's (:func:`hum_kernels`, up to :data:`TAIL_WIDTHS` widths) and the neighbourhood
+def _reach(f: np.ndarray, df: float, params: Mapping) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted hum's harmonics (Hz) on the lines ``f`` (Hz, spacing ``df``) and, per harmonic, the mask of the
+    lines it reaches: its kernel's (:func:`hum_kernels`, up to :data:`TAIL_WIDTHS` widths) and the neighbourhood
     :func:`held_out_by_harmonics` holds out with it (:func:`_near_harmonic`)."""
-    df = float(np.median(np.diff(f)))
     fk, K = hum_kernels(f, float(params["base_hz"]) + float(params.get("offset_hz", 0.0)),
                         float(params.get("width_hz", 0.0)), str(params.get("shape", "lorentzian")))
     return fk, (np.abs(K) > 0) | np.array([_near_harmonic(f, h, df) for h in fk]).reshape(fk.size, f.size)
@@ -411,7 +410,7 @@ def carried_by_one_harmonic(ctx: FitContext, params: Mapping, before: np.ndarray
     f = np.asarray(m.freq_hz, float)
     if not params.get("harmonics_hz") or before.size != 2 * m.H.size or after.size != before.size:
         return None
-    fk, near = _reach(f, params)
+    fk, near = _reach(f, m.line_spacing_hz, params)
     if fk.size == 0:
         return None
     shape = (2, *m.H.shape)

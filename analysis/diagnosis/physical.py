@@ -651,15 +651,14 @@ def _screened(sim: PhysicalSimulation, cause: CauseSpec, specs: Sequence[ParamSp
 TIGHTEN_SPLITS = 12
 
 
-def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLITS) -> int:
+def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLITS) -> None:
     """Lift ``s.bound`` towards ``target`` by splitting its lowest box in halves (along its widest parameter,
     relative to the range) at most ``splits`` times; a corner with a lower chi2 than the grid's best becomes the
-    option's best point. Returns the splits made (the lowest box is split first: ``n`` splits towards one target and
-    the rest towards a higher one are the splits made towards the higher one at once)."""
+    option's best point."""
     widths = [max(b - a, 1e-30) for a, b in (sp.x_bounds for sp in at.specs)]
-    for done in range(splits):
+    for _ in range(splits):
         if not s.cells or s.bound >= target:
-            return done
+            return
         s.cells.sort(key=lambda t: t[0])
         _, box = s.cells.pop(0)
         d = int(np.argmax([(b - a) / w for (a, b), w in zip(box, widths)]))
@@ -672,7 +671,6 @@ def _tighten(at: _Chi2, s: _Screened, target: float, splits: int = TIGHTEN_SPLIT
                 if c < s.chi2:
                     s.chi2, s.params = c, at.params(x)
         s.bound = min(b for b, _ in s.cells)
-    return splits
 
 
 def _inside(s: _Screened, specs: Sequence[ParamSpec]) -> list[dict]:
@@ -740,15 +738,11 @@ def fit_cause(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[str], mm
         for s in screened:
             target = below if i < N_SCREEN else min(below, best[1])
             i += 1
-            splits = TIGHTEN_SPLITS
-            if best_only and best[1] < target and s.bound < best[1] and s.at is not None:
-                # first towards the best fit so far: an option lifted above it is not fitted (its chi2 cannot be lower)
-                splits -= _tighten(s.at, s, best[1], splits)
-            if best_only and s.bound >= best[1]:
-                continue
+            if best_only:               # an option lifted above the best fit so far is not fitted either
+                target = min(target, best[1])
             if s.bound < target and s.at is not None:
-                _tighten(s.at, s, target, splits)
-            if s.bound >= target or (best_only and s.bound >= best[1]):
+                _tighten(s.at, s, target)
+            if s.bound >= target:
                 continue                    # its chi2 cannot come below the best fit's (or ``below``) in its range
             p, c = _fit_continuous(sim, cause, specs, {**fixed, cause.choice: s.option}, mm, sel, fmax,
                                    s.params or None, [*held.get(s.option, ()), *_inside(s, specs)])
