@@ -58,8 +58,8 @@ def run_unesp(band: str, out: Path) -> int:
         m, s = Path(tmp) / "rand_0p30.uff", Path(tmp) / "rand_0p05.uff"
         write_uff58(m, hi, overwrite=True)
         write_uff58(s, lo, overwrite=True)
-        return diagnose_main(["--measured", str(m), "--simulated", str(s), "--json", str(out / "diagnosis.json"),
-                              "--report", str(out), "--band", band])
+        # the report folder holds diagnosis.json beside report.md and the plots
+        return diagnose_main(["--measured", str(m), "--simulated", str(s), "--report", str(out), "--band", band])
 
 
 def uliege_frfset() -> tuple[FRFSet, np.ndarray]:
