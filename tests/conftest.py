@@ -109,9 +109,10 @@ def _xdist_worker() -> bool:
 SPREAD = ("test_diagnosis_blind.py", "test_diagnosis_physical.py", "test_importers_fuzz.py",
           "test_recording_fuzz.py", "test_crash_safety.py", "test_station_resume.py",
           "test_diagnosis_frf_beam.py", "test_diagnosis_frf_mass.py", "test_diagnosis_physical_verdict.py",
-          "test_diagnosis_frame_untuned.py", "test_station_browser.py", "test_diagnosis_pairs_one_kind.py",
+          "test_diagnosis_frame_untuned.py", "test_diagnosis_pairs_one_kind.py",
           "test_diagnosis_pair_search.py", "test_diagnosis_one_place.py", "test_realdata_key.py")
 HEAVY = ("test_examples_run.py", "test_diagnosis_pair_counts.py", "test_batch_dask.py", "test_batch_diagnose.py",
+         "test_station_browser.py",                     # not spread: one Chromium (its module fixture) for both tests
          "test_station_api.py", "test_disk_full.py", "test_fuzz_protocol.py", "test_faults.py", "test_diagnosis_cli.py")
 
 

@@ -22,14 +22,18 @@ ROOT = Path(__file__).resolve().parents[1]
 SEED = 5
 
 
-def _server(*args: str):
-    proc = subprocess.Popen([sys.executable, "-m", "simulator", "serve", *args, "--seed", str(SEED)], cwd=ROOT,
+def _start(*args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "simulator", "serve", *args, "--seed", str(SEED)], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _url(proc: subprocess.Popen) -> str:
+    """The URL the started server prints once it listens."""
     url = proc.stdout.readline().strip()
     if not url:
         proc.kill()
         pytest.fail(f"the server printed no URL: {proc.communicate(timeout=10)[1]}")
-    return proc, url
+    return url
 
 
 def _shutdown(proc: subprocess.Popen) -> int:
@@ -45,8 +49,14 @@ def _shutdown(proc: subprocess.Popen) -> int:
 
 @pytest.fixture(scope="module")
 def servers():
-    tcp, tcp_url = _server("--tcp", "127.0.0.1:0")
-    pty, pty_path = _server("--pty")
+    tcp, pty = _start("--tcp", "127.0.0.1:0"), _start("--pty")    # both start at once (each waits for its imports)
+    try:
+        tcp_url, pty_path = _url(tcp), _url(pty)
+    except BaseException:
+        for proc in (tcp, pty):
+            proc.kill()
+            proc.communicate(timeout=10)
+        raise
     yield {"socket": tcp_url, "pty": pty_path}
     assert _shutdown(tcp) == 0
     assert _shutdown(pty) == 0
