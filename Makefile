@@ -19,11 +19,14 @@ demo: $(STAMP)
 
 # the suite on TEST_WORKERS processes (pytest-xdist; one test file stays on one process, so a
 # module's shared fixture is made once, except the heavy independent tests that tests/conftest.py
-# spreads over both processes and hands out first); TEST_WORKERS=0 runs it in this process
-TEST_WORKERS ?= 2
+# spreads over the processes and hands out first); TEST_WORKERS=0 runs it in this process. Three
+# processes on two cores: many tests wait without computing (a server or a browser starting, a
+# timeout the test provokes, a child process killed and restarted), and a third process computes
+# meanwhile; the computing part alone keeps two cores busy for most of the run
+TEST_WORKERS ?= 3
 
 # the suite writes bytecode as Python does by default (__pycache__, ignored by git) even where PYTHONDONTWRITEBYTECODE
-# is set: without it each of the two processes rewrites and compiles every test module at every run (collection
+# is set: without it each of the processes rewrites and compiles every test module at every run (collection
 # 11 s of CPU per process instead of 3.5 s), and every child process compiles the project's modules again
 test: $(STAMP)
 	$(PY) -m ruff check .

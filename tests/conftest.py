@@ -8,7 +8,7 @@ from pathlib import Path
 # machine is 10-100x slower for them under contention. Must be set before numpy is imported.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # The physical diagnosis fits its causes in one forked process per core unless the user's thread count says
-# otherwise (analysis.threads.worker_processes). `make test` already keeps both cores busy with its two
+# otherwise (analysis.threads.worker_processes). `make test` already keeps both cores busy with its
 # processes: the forks there gain no time and cost about a tenth more CPU (the forks' start and copies, the
 # fits' results sent back), so the suite asks for one. The forked fits are tested by name
 # (tests/test_ritz.py, processes=2) and the default by tests/test_threads.py, which unset the variable.
@@ -102,9 +102,9 @@ def _xdist_worker() -> bool:
 # --- how `make test` shares the suite between processes (pytest-xdist, --dist loadfile) ---
 # A test file is one unit of work, kept on one process (its module fixtures are made once), except
 # the files of SPREAD: their tests are heavy and independent (no costly module fixture), so each
-# test is a unit of its own and both processes share them. The units are handed out heaviest
+# test is a unit of its own and the processes share them. The units are handed out heaviest
 # first (the SPREAD tests, then the files of HEAVY in its order, heaviest first, then the rest in
-# file order) and the light files fill in behind, so the two processes end together. Only the
+# file order) and the light files fill in behind, so the processes end together. Only the
 # speed depends on these lists.
 SPREAD = ("test_diagnosis_blind.py", "test_diagnosis_physical.py", "test_importers_fuzz.py",
           "test_recording_fuzz.py", "test_crash_safety.py", "test_station_resume.py",
