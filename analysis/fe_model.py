@@ -67,7 +67,7 @@ from .modal import ModalModel, pole_from_fz
 from .points import parse_point
 
 __all__ = ["FEModel", "FEVariants", "FE_CAUSES", "FECause", "load_fe_model", "is_fe_config", "sparse_modes",
-           "DENSE_MAX_DOF", "RITZ_FACTOR"]
+           "DENSE_MAX_DOF", "RITZ_FACTOR", "MODEL_MASS", "MODEL_STIFFNESS", "SENSOR_MASS"]
 
 log = logging.getLogger(__name__)
 
@@ -436,6 +436,20 @@ class FECause:
 
     spec: CauseSpec
     apply: Callable[[Change, Mapping], None]
+    #: what its first parameter's range is a multiple of (:meth:`FEVariants.causes`): :data:`MODEL_MASS` (kg),
+    #: :data:`MODEL_STIFFNESS` (N/m); "": the range as it is
+    scale: str = ""
+    #: the model's own value its first parameter takes as its nominal (the unchanged model), the range's top at
+    #: least twice it: :data:`SENSOR_MASS` (``[sensors] mass_kg``); "": the row's nominal
+    nominal: str = ""
+
+
+#: :attr:`FECause.scale`: the model's total mass (kg, the mapped translations)
+MODEL_MASS = "model_mass"
+#: :attr:`FECause.scale`: the median diagonal stiffness of the mapped DOFs (N/m)
+MODEL_STIFFNESS = "model_stiffness"
+#: :attr:`FECause.nominal`: the sensors' mass at each measured output's node (kg, ``[sensors] mass_kg``)
+SENSOR_MASS = "sensor_mass_kg"
 
 
 def _added_mass(c: Change, p: Mapping) -> None:
@@ -476,12 +490,14 @@ FE_CAUSES: dict[str, FECause] = {row.spec.name: row for row in (
     FECause(CauseSpec("added_mass", (ParamSpec("mass_kg", 1e-3, 1.0, nominal=0.0, unit="kg", monotone=True),), choice="point",
                       description="a lumped mass at one node (every mapped direction)",
                       advice="A mass the model lacks sits at the named node (a fixture, a block, cabling): add it "
-                             "to the model as a lumped mass there, or remove it from the structure."), _added_mass),
+                             "to the model as a lumped mass there, or remove it from the structure."), _added_mass,
+            scale=MODEL_MASS),
     FECause(CauseSpec("ground_spring", (ParamSpec("stiffness_n_m", 1e-4, 1e2, nominal=0.0, unit="N/m", monotone=True),),
                       choice="point",
                       description="a spring to ground at one node (a support or contact the model lacks)",
                       advice="The structure is held at the named node (a support, a contact, a cable): model the "
-                             "support there with the fitted stiffness, or free the structure."), _ground_spring),
+                             "support there with the fitted stiffness, or free the structure."), _ground_spring,
+            scale=MODEL_STIFFNESS),
     FECause(CauseSpec("stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6, monotone=True),),
                       description="the whole stiffness matrix scaled (Young's modulus, every section)",
                       advice="Every part is stiffer or softer by the same factor: update Young's modulus (or the "
@@ -503,7 +519,8 @@ FE_CAUSES: dict[str, FECause] = {row.spec.name: row for row in (
     FECause(CauseSpec("mass_loading", (ParamSpec("mass_kg", 0.0, 0.1, nominal=None, unit="kg", log=False, monotone=True),),
                       description="the sensors' mass at every measured output's node",
                       advice="The accelerometers' mass lowers the frequencies: add the sensors' mass at their "
-                             "nodes to the model ([sensors] mass_kg), or use lighter sensors."), _mass_loading),
+                             "nodes to the model ([sensors] mass_kg), or use lighter sensors."), _mass_loading,
+            scale=MODEL_MASS, nominal=SENSOR_MASS),
 )}
 
 
@@ -737,6 +754,8 @@ class FEVariants:
     def causes(self) -> tuple[CauseSpec, ...]:
         """The causes with the model's nodes and groups as choices and ranges scaled to the model: masses
         by its total mass, springs by the median diagonal stiffness of the mapped DOFs."""
+        scales = {MODEL_MASS: self._m_total, MODEL_STIFFNESS: self._k_ref}
+        nominals = {SENSOR_MASS: self.fe.sensor_mass_kg}
         out = []
         for row in FE_CAUSES.values():
             c = row.spec
@@ -747,13 +766,12 @@ class FEVariants:
             elif c.choice == "point":
                 c = replace(c, options=self.nodes)
             s = c.params[0]
-            if c.name in ("added_mass", "mass_loading"):
-                s = replace(s, lo=s.lo * self._m_total, hi=s.hi * self._m_total)
-            if c.name == "mass_loading":
-                s = replace(s, nominal=self.fe.sensor_mass_kg, hi=max(s.hi, 2 * self.fe.sensor_mass_kg))
-            if c.name == "ground_spring":
-                s = replace(s, lo=s.lo * self._k_ref, hi=s.hi * self._k_ref)
-            out.append(replace(c, params=(s,)))
+            if row.scale:
+                s = replace(s, lo=s.lo * scales[row.scale], hi=s.hi * scales[row.scale])
+            if row.nominal:
+                known = nominals[row.nominal]
+                s = replace(s, nominal=known, hi=max(s.hi, 2 * known))
+            out.append(replace(c, params=(s, *c.params[1:])))
         return tuple(out)
 
     def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:

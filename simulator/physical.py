@@ -73,7 +73,7 @@ from .fem import FrameModel, ModelError, SectionProperties, element_matrices, me
 from .ritz import Part, ReducedSpace, RitzReduction, lowest_modes
 
 __all__ = ["FrameVariants", "CAUSES", "PhysicalCause", "Assembly", "register_cause", "DIAGNOSIS_BYTES_PER_DOF2",
-           "check_diagnosis_size", "ALL_PLACES", "DAMAGE_CAUSES", "damage_changes", "SIZED_MEMBERS"]
+           "check_diagnosis_size", "ALL_PLACES", "DAMAGE_CAUSES", "damage_changes", "SIZED_MEMBERS", "SENSOR_MASS"]
 
 
 @dataclass
@@ -106,6 +106,9 @@ class PhysicalCause:
     #: the set of options its choice takes when not the one named as the choice (every node, member, element,
     #: support or joint): :data:`SIZED_MEMBERS`; the choice's parameter keeps its name (``component``)
     options: str = ""
+    #: the frame's own value its first parameter takes as its nominal (the unchanged frame), when not the row's:
+    #: :data:`SENSOR_MASS` (the accelerometers' mass of the channel set-up, 0 without mass loading)
+    nominal: str = ""
 
 
 def _added_mass(a: Assembly, p: Mapping) -> None:
@@ -160,6 +163,10 @@ def _stiffness_shift(a: Assembly, p: Mapping) -> None:
 #: The sets of options a cause's choice may take beyond those named as the choice (``point``, ``component``,
 #: ``element``, ``support``, ``joint``): the members whose section has a width and a depth (:attr:`PhysicalCause.options`).
 SIZED_MEMBERS = "sized_members"
+
+#: The frame's own values a cause's first parameter may take as its nominal (:attr:`PhysicalCause.nominal`): the
+#: accelerometers' mass (kg) at each output when ``[sensors] mass_loading`` is on, else 0.
+SENSOR_MASS = "sensor_mass_kg"
 
 #: The cause registry (factors are dimensionless, masses kg). Adding a cause: one row and its function. A
 #: parameter that adds only a mass or only a stiffness as it grows (a positive semi-definite part times a growing
@@ -234,7 +241,8 @@ for _row in (
         "mass_loading", (ParamSpec("mass_kg", 0.0, 1.0, nominal=None, unit="kg", log=False, monotone=True),),
         description="the accelerometers' mass at every measured output (all three translations)",
         advice="The accelerometers' mass lowers the frequencies: put the sensors' mass at their nodes in the "
-               "model (the channel set-up's accelerometer mass), or use lighter sensors."), _mass_loading),
+               "model (the channel set-up's accelerometer mass), or use lighter sensors."), _mass_loading,
+        nominal=SENSOR_MASS),
     PhysicalCause(CauseSpec(
         "stiffness_shift", (ParamSpec("stiffness_factor", 0.6, 1.6, monotone=True),),
         description="the material's Young's modulus scaled (every member; springs unchanged)",
@@ -475,14 +483,15 @@ class FrameVariants:
         options = {"point": self.nodes, "component": self.components, "element": self.elements,
                    **{kind: (ALL_PLACES, *places) for kind, places in self.places.items()},
                    SIZED_MEMBERS: self.sized_members}
+        nominals = {SENSOR_MASS: self.sensor_mass_kg}
         out = []
         for row in CAUSES.values():
             c = row.spec
             if c.choice is not None:
                 c = replace(c, options=options[row.options or c.choice],
                             every=ALL_PLACES if c.choice in self.places else None)
-            if c.name == "mass_loading":
-                c = replace(c, params=(replace(c.params[0], nominal=self.sensor_mass_kg),))
+            if row.nominal:
+                c = replace(c, params=(replace(c.params[0], nominal=nominals[row.nominal]), *c.params[1:]))
             out.append(c)
         return tuple(out)
 

@@ -14,7 +14,7 @@ from .effect_types import check_positive as _check_positive
 from .rule import db, paired_z
 
 __all__ = ["HUM_BASES_HZ", "hum_kernels", "mains_hum_applies", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
-           "held_out_mains_hum", "held_out_by_harmonics", "carried_by_one_harmonic", "half_power_mode"]
+           "held_out_mains_hum", "held_out_by_harmonics", "carried_by_one_harmonic", "half_power_mode", "off_the_mode"]
 
 HUM_BASES_HZ = (50.0, 60.0)
 #: Largest departure of the mains frequency from its nominal value that is looked for (Hz): grids hold
@@ -428,6 +428,19 @@ def carried_by_one_harmonic(ctx: FitContext, params: Mapping, before: np.ndarray
     if significant(gain, z):
         return None
     return {"harmonic_hz": float(fk[k]), "share": shares[k], "gain_without_db": gain, "z_without": z}
+
+
+def off_the_mode(f: np.ndarray, df: float, harmonic_hz: float, base_hz: float, mode: Mapping) -> np.ndarray:
+    """Mask of the lines ``f`` (Hz, spacing ``df``) that no line of the fitted hum's harmonic at ``harmonic_hz``
+    (of the mains base ``base_hz``, Hz) can reach wherever the mains frequency lies (within :data:`MAX_OFFSET_HZ`
+    of the base, each shape's kernel out to :data:`TAIL_WIDTHS` widths, and the neighbourhood the cross-validation
+    holds out, :func:`_near_harmonic`) and outside the half-power band of the mode ``mode`` (:func:`half_power_mode`'s
+    ``{"mode_hz", "half_power_hz"}``): a hum fitted on them sees nothing of a misplaced mode's lobe there."""
+    k = max(int(np.rint(harmonic_hz / base_hz)), 1)
+    reach = max(TAIL_WIDTHS * default_hum_width(df), NEAR_HARMONIC_HZ) + 2 * df
+    harmonic = (f >= k * (base_hz - MAX_OFFSET_HZ) - reach) & (f <= k * (base_hz + MAX_OFFSET_HZ) + reach)
+    lobe = np.abs(f - float(mode["mode_hz"])) <= float(mode["half_power_hz"])
+    return ~(harmonic | lobe)
 
 
 def half_power_mode(model: ModalModel, freq_hz: float) -> dict | None:

@@ -14,17 +14,31 @@ when it has them). The range is the values around the profile's least chi2 withi
 ``within`` of it (:attr:`analysis.diagnosis.rule.DecisionRule.range_chi2`: one standard deviation of one
 parameter). The profile walks out from the fitted value in steps of :data:`STEP` (relative) until chi2 rises
 above the bound or the parameter's search range ends, and each edge is refined by bisection to :data:`EDGE_TOL`.
+
+A block named beside a second cause (a loose support, a soft joint) has its range from the pair's profile
+(:func:`pair_ranges`): at each mass its refinements and every free parameter of the other cause are refitted
+with it, so the range says what the data allow with the other change free to take up what it can.
 """
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
-from .physical import CauseSpec, MeasuredModes, PhysicalFit, PhysicalSimulation, _fit_continuous, residuals
+from .physical import (
+    CauseSpec,
+    MeasuredModes,
+    PhysicalFit,
+    PhysicalSimulation,
+    _fit_continuous,
+    modes_jac,
+    residuals,
+)
+from .physical_pairs import PairFit, changes_of
 
-__all__ = ["supported_range", "supported_ranges", "refinements_of", "parameters_text", "value_text", "RANGE", "STEP",
-           "EDGE_TOL"]
+__all__ = ["supported_range", "supported_ranges", "pair_ranges", "refinements_of", "parameters_text", "value_text",
+           "RANGE", "STEP", "EDGE_TOL"]
 
 #: a parameter's range is reported beside it as ``<name>_range``: ``[lo, hi]`` in its unit
 RANGE = "_range"
@@ -61,7 +75,8 @@ def supported_range(sim: PhysicalSimulation, cause: CauseSpec, params: Mapping, 
         if x not in seen:
             fixed = {k: v for k, v in held.items() if k not in free_rest}
             fixed[name] = spec.from_x(x)
-            start = fitted[min(fitted, key=lambda y: abs(y - x))] if fitted else {n: held[n] for n in free_rest}
+            start = (fitted[min(fitted, key=lambda y: abs(y - x))] if fitted
+                     else {n: held.get(n, specs[n].start()) for n in free_rest})
             if rest:
                 p, seen[x] = _fit_continuous(sim, cause, rest, fixed, mm, allsel, fmax, start=start)
                 fitted[x] = {n: p[n] for n in free_rest}
@@ -112,6 +127,60 @@ def supported_ranges(sim: PhysicalSimulation, cause: CauseSpec, fit: PhysicalFit
     ``requires`` (the mass of ``added_mass``); empty for a cause without refinements."""
     return {f"{n}{RANGE}": [float(v) for v in supported_range(sim, cause, fit.params, fit.free, mm, fmax, n, within)]
             for n in fit.free if refinements_of(cause, n)}
+
+
+class _Joined:
+    """Several causes at once as one cause for :func:`supported_range`: the parameter ``name`` of the ``i``-th
+    cause is ``"i.name"`` (its ``requires`` alike), its modes (and their derivatives) are the simulation's with
+    every cause's change applied (``modes_of``)."""
+
+    def __init__(self, sim: PhysicalSimulation, specs: Sequence[CauseSpec]) -> None:
+        self.sim, self.names = sim, [s.name for s in specs]
+        self.spec = CauseSpec("+".join(self.names), tuple(
+            replace(p, name=f"{i}.{p.name}", requires=None if p.requires is None else f"{i}.{p.requires}")
+            for i, s in enumerate(specs) for p in s.params))
+
+    def joined(self, params: Sequence[Mapping]) -> dict:
+        """The causes' parameters (choices included) as the joined cause's."""
+        return {f"{i}.{k}": v for i, p in enumerate(params) for k, v in p.items()}
+
+    def split(self, params: Mapping) -> list[tuple[str, dict]]:
+        """The joined cause's parameters as the causes' changes ``[(cause, params)]``."""
+        out: list[dict] = [{} for _ in self.names]
+        for k, v in params.items():
+            i, name = k.split(".", 1)
+            out[int(i)][name] = v
+        return list(zip(self.names, out))
+
+    def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        return changes_of(self.sim, self.split(params), max_freq_hz)
+
+    def modes_jac_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float,
+                     wrt: Sequence[tuple[int, str]]) -> tuple | None:
+        """The simulation's modes of the joined change with their derivatives by the joined parameters ``wrt``
+        (None when it has none)."""
+        ((_, params),) = changes
+        moved = [(int(i), name) for i, name in (n.split(".", 1) for _, n in wrt)]
+        return modes_jac(self.sim, self.split(params), max_freq_hz, moved)
+
+
+def pair_ranges(sim: PhysicalSimulation, specs: Sequence[CauseSpec], pair: PairFit, mm: MeasuredModes, fmax: float,
+                within: float) -> list[dict[str, list[float]]]:
+    """Per cause of the refined ``pair`` (of the causes ``specs``), ``{name + RANGE: [lo, hi]}`` of each of its free
+    parameters that a refinement ``requires`` (the mass of ``added_mass``): :func:`supported_range` of the pair as
+    one cause, every other free parameter of both causes (and the parameter's refinements) refitted at each value;
+    empty dicts when no cause has one."""
+    out: list[dict[str, list[float]]] = [{} for _ in specs]
+    wanted = [(i, n) for i, (s, free) in enumerate(zip(specs, pair.free)) for n in free if refinements_of(s, n)]
+    if not wanted:
+        return out
+    joined = _Joined(sim, specs)
+    free = [f"{i}.{n}" for i, names in enumerate(pair.free) for n in names]
+    params = joined.joined(pair.params)
+    for i, n in wanted:
+        lo, hi = supported_range(joined, joined.spec, params, free, mm, fmax, f"{i}.{n}", within)  # type: ignore[arg-type]
+        out[i][f"{n}{RANGE}"] = [float(lo), float(hi)]
+    return out
 
 
 def _unit(name: str) -> str:

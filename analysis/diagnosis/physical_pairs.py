@@ -279,6 +279,8 @@ class PairFit:
     #: per cause, its choice's options searched with the other cause applied ([(chi2, option, params)], best
     #: first; empty for a cause without a choice or not searched again): :func:`rechoose`
     ranked: tuple = ()
+    #: per cause, the names of its parameters refined (its free parameters; the choices kept)
+    free: tuple = ()
 
     @property
     def changes(self) -> list[tuple[str, dict]]:
@@ -365,7 +367,8 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
             break
     p = params(x)
     edge = tuple(f"{fits[i].cause}.{s.name}" for i, s in flat if s.at_edge(float(p[i][s.name])))
-    return PairFit(causes=tuple(f.cause for f in fits), params=tuple(p), chi2=chi2, cv_per_mode=cv, at_edge=edge)
+    return PairFit(causes=tuple(f.cause for f in fits), params=tuple(p), chi2=chi2, cv_per_mode=cv, at_edge=edge,
+                   free=tuple(tuple(s.name for s in ss) for ss in free))
 
 
 def refit_on_top(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, other: PhysicalFit, mm: MeasuredModes,
@@ -415,7 +418,7 @@ def rechoose(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
         out = again if again.chi2 < pair.chi2 else pair
     out = _both_choices(sim, specs, fits, out, mm, fmax)
     return PairFit(causes=out.causes, params=out.params, chi2=out.chi2, cv_per_mode=out.cv_per_mode,
-                   at_edge=out.at_edge, ranked=tuple(ranked))
+                   at_edge=out.at_edge, ranked=tuple(ranked), free=out.free)
 
 
 def _both_choices(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], pair: PairFit,

@@ -47,7 +47,7 @@ from .effect_types import named as named_form
 from .effect_types import stage_entry
 from .effects import predict
 from .next_measurement import pair_rivals, propose, rivals
-from .param_range import supported_ranges
+from .param_range import pair_ranges, supported_ranges
 from .physical import (
     RESIDUAL_CAP,
     CauseSpec,
@@ -67,6 +67,7 @@ from .physical import (
 from .physical_pairs import (
     PARAMETER_CHI2,
     OnTop,
+    PairFit,
     SplitBound,
     as_places,
     besides,
@@ -261,6 +262,7 @@ def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence
             _trace_pair(trace, two, rule)
         if two is not None and two["significant"] and two["adequate"]:
             out.verdict, out.extended, out.error_after_db = "combined", two["_extended"], two["error_after_db"]
+            _with_ranges(sim, specs, two, mm, fmax, rule)
             out.combined = [stage_entry(c) for c in two["_stages"]]
             out.named = [named_form(c) for c in two["_stages"]]
     if named and out.verdict != "combined" and named[0]["error_after_db"] - noise_db > rule.on_top_margin_db:
@@ -294,6 +296,16 @@ def _physical_verdict(measured: FRFSet, sim: PhysicalSimulation, prior: Sequence
         return other
     out.causes = [{k: v for k, v in c.items() if not k.startswith("_")} for c in found]
     return out
+
+
+def _with_ranges(sim: PhysicalSimulation, specs: dict, two: dict, mm: MeasuredModes, fmax: float,
+                 rule: DecisionRule) -> None:
+    """The named pair ``two``'s stages with the values of their parameters the modes do not tell apart (a block's
+    mass beside a loose support), both causes refitted at each value (:func:`pair_ranges`)."""
+    fit: PairFit = two["_pair"]
+    for stage, ranges in zip(two["_stages"], pair_ranges(sim, [specs[n] for n in fit.causes], fit, mm, fmax,
+                                                         rule.range_chi2)):
+        stage["parameters"].update(ranges)
 
 
 def _leaves_evidence(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, best: dict,

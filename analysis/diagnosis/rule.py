@@ -147,7 +147,8 @@ RULES: dict[str, str] = {
                     "strong_gain_db",
     "range_edge": "veto: a fitted parameter at the edge of the effect's physical range",
     "hum_on_a_mode": "veto: mains hum whose held-out gain one harmonic carries alone (the rest not significant), "
-                     "that harmonic inside a mode's half-power band",
+                     "that harmonic inside a mode's half-power band, and not significant fitted again off that "
+                     "harmonic's reach and the mode's band",
     "resonator_beyond_mass": "veto: a resonator gains less than resonator_over_mass_db more than a mass at a sensor",
     "mass_or_stiffness": "veto: the modes that separate a mass at every sensor from a stiffness change favour "
                          "the other",

@@ -261,11 +261,52 @@ def _hum_on_a_mode(c: dict, ctx: FitContext, rule: DecisionRule, trace: list) ->
     mode = None if one is None else half_power_mode(ctx.base, one["harmonic_hz"])
     if one is None or mode is None:
         return
+    kept, off = _hum_beside_the_mode(c, ctx, rule, one, mode)
+    if kept:
+        trace.append(step("hum_on_a_mode", "mains_hum", {**one, **mode, **off},
+                          "kept: significant off the mode, fitted there"))
+        return
     c["significant"] = False
     c["evidence"] += (f"; {100 * one['share']:.0f} % of its gain from the one harmonic at {one['harmonic_hz']:.2f} Hz, "
                       f"inside the half-power band of the mode at {mode['mode_hz']:.2f} Hz "
                       f"(+-{mode['half_power_hz']:.2f} Hz)")
-    trace.append(step("hum_on_a_mode", "mains_hum", {**one, **mode}, "vetoed: not significant"))
+    trace.append(step("hum_on_a_mode", "mains_hum", {**one, **mode, **off}, "vetoed: not significant"))
+
+
+def _hum_beside_the_mode(c: dict, ctx: FitContext, rule: DecisionRule, one: dict, mode: dict) -> tuple[bool, dict]:
+    """Real interference whose fit locked onto a misplaced mode's lobe: the hum fitted and cross-validated again
+    with the lines of that harmonic and of the mode's half-power band weighted out
+    (:func:`analysis.diagnosis.mains.off_the_mode`). Significant there by ``rule`` (the lines at the other harmonics
+    hold interference of their own): ``c`` becomes that fit (parameters, held-out errors and gain on the lines kept,
+    prediction), True. Else False (the veto stands): a lobe leaves nothing at the other harmonics, and a hum fitted
+    there is held to the same rule as on any band. With the gain and z off the mode (the trace's values)."""
+    from .mains import fit_mains_hum, held_out_mains_hum, off_the_mode
+
+    m = ctx.measured
+    keep = off_the_mode(np.asarray(m.freq_hz, float), m.line_spacing_hz, one["harmonic_hz"],
+                        float(c["parameters"]["base_hz"]), mode)
+    off = replace(ctx, weights=np.where(keep, ctx.weights, 0.0))
+    before, after = held_out_mains_hum(off)
+    lines = np.broadcast_to(keep, (before.size // keep.size, keep.size)).ravel()
+    if before.size != lines.size:
+        return False, {}
+    b_db, a_db = db(float(np.mean(before[lines]))), db(float(np.mean(after[lines])))
+    z = paired_z(before[lines], after[lines])
+    values = {"gain_off_the_mode_db": b_db - a_db, "z_off_the_mode": z}
+    if not rule.significant(b_db - a_db, z):
+        return False, values
+    params = fit_mains_hum(off, np.ones(m.freq_hz.size, bool))
+    if EFFECTS["mains_hum"].at_range_edge(params, (float(m.freq_hz[0]), float(m.freq_hz[-1]))):
+        return False, values
+    c.update({"parameters": params, "gain_db": b_db - a_db, "error_before_db": b_db, "error_after_db": a_db, "z": z,
+              "_held_out_before": before, "_held_out_after": after,
+              "_extended": predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": "mains_hum", **params}),
+                                   outputs=m.outputs, references=m.references)})
+    c["evidence"] = (_evidence("mains_hum", params, b_db, a_db, z, []) +
+                     f"; fitted with the harmonic at {one['harmonic_hz']:.2f} Hz and the half-power band of the mode at "
+                     f"{mode['mode_hz']:.2f} Hz (+-{mode['half_power_hz']:.2f} Hz) left out: the fit there followed the "
+                     f"mode's lobe, the other harmonics hold interference of their own")
+    return True, values
 
 
 def _resonator_beyond_mass(causes: list, rule: DecisionRule = DEFAULT_RULE, trace: list | None = None) -> None:
