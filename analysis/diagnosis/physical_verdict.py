@@ -74,9 +74,11 @@ from .physical_pairs import (
     held_open,
     rechoose,
     refit_on_top,
+    held_spec,
     split_choice,
     split_places,
     splits,
+    splits_in_two,
     widened,
     with_options,
 )
@@ -576,6 +578,41 @@ def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
 
 
+@dataclass(frozen=True)
+class _Later:
+    """Pairs of a search on top of a first cause made only when the search reaches them (:func:`_expanded`):
+    ``make()`` gives them, each ``(bound, first, second)``, the second cause among ``causes``."""
+
+    causes: tuple[str, ...]
+    make: Any
+
+
+def _expanded(items: Sequence, skip: Any) -> Any:
+    """The pairs of ``items`` in turn, each :class:`_Later` group replaced by the pairs it makes when reached,
+    unless ``skip(group)`` says none of them could win then (the search's state at that point)."""
+    for item in items:
+        if isinstance(item, _Later):
+            if not skip(item):
+                yield from item.make()
+        else:
+            yield item
+
+
+def _hopeless(best: dict | None, top: float, first: CauseSpec, second: CauseSpec) -> bool:
+    """Whether no pair of the causes ``first`` and ``second`` can win against the best named pair so far (``best``, or
+    one of score ``top`` found elsewhere): a pair's score is its nested held-out chi2 (>= 0) plus both choices'
+    freedom (:func:`_choice_penalty`), so with that freedom alone at or above the named score it cannot
+    (:func:`_win_target` is then <= 0)."""
+    named_top = min(top, best["_chi2_cv"] if _named_pair(best) else np.inf)    # type: ignore[index]
+    return bool(np.isfinite(named_top) and named_top - _choice_penalty(first) - _choice_penalty(second) <= 0.0)
+
+
+def _named_score(c: dict | None) -> float:
+    """The score (penalised nested held-out chi2, ``_chi2_cv``) of a named pair; inf for any other (:func:`_better`:
+    only a named pair of a lower score replaces a named one)."""
+    return float(c["_chi2_cv"]) if _named_pair(c) else np.inf     # type: ignore[index]
+
+
 def _named_pair(c: dict | None) -> bool:
     return c is not None and bool(c["significant"] and c["adequate"])
 
@@ -614,7 +651,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         # first fitted alone (a loose support) absorbed part of it, and on top of that fit the crack's mirror
         # element explains as much as its own (a crack beside a crack: split_choice's grid, on one member)
         held = not opened and not splits(specs[first["_fit"].cause])
-        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=held))
+        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=held,
+                                        top=_named_score(best)))
         if _leaves_within(best, judge.rule):
             break           # a named pair that leaves the held-out modes within their uncertainty: none does better
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
@@ -634,7 +672,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         name, free = first_round["_pair"].causes[1], first_round["_free"]
         if all((c["_fit"].cause, c["_fit"].free) != (name, free) for c in firsts):
             first = _as_first(sim, specs, mm, fmax, name, free, judge)
-            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
+            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, top=_named_score(best)))
     return best
 
 
@@ -648,7 +686,7 @@ def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
         two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
     if named is None:
         two = _better(two, _local_pairs(sim, specs, mm, fmax, found, judge, names, two))
-    return _better(two, _scatter_rivals(sim, specs, mm, fmax, found, judge, names, named))
+    return _better(two, _scatter_rivals(sim, specs, mm, fmax, found, judge, names, named, top=_named_score(two)))
 
 
 def _local(spec: CauseSpec) -> bool:
@@ -749,7 +787,7 @@ def _beats_named(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
 
 
 def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
-                    names: Sequence[str] | None, best: dict | None) -> dict | None:
+                    names: Sequence[str] | None, best: dict | None, top: float = np.inf) -> dict | None:
     """A fleet unit's defect beside its scatter (a simulation that names a ``scatter_cause``, the global cause every
     unit holds): each local cause (:func:`_local`) that gains anything held out, other than the named single cause
     ``best``, with the global cause (and its own cause at another place) on top of it (:func:`_on_top_of`, named pairs
@@ -766,7 +804,8 @@ def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fma
     for c in found:
         if c is best or c["gain_db"] <= 0 or c["effect"] == scatter or not _local(specs[c["effect"]]):
             continue
-        two = _on_top_of(sim, specs, mm, fmax, c, judge, [c["effect"], scatter], opened=False, named_only=True)
+        two = _on_top_of(sim, specs, mm, fmax, c, judge, [c["effect"], scatter], opened=False, named_only=True,
+                         top=min(top, _named_score(out)))
         out = _better(out, two if best is None else _beats_named(sim, specs, mm, fmax, judge, best, two))
     return out
 
@@ -843,29 +882,37 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     unbounded = SplitBound(None)
     seconds = [] if opened else _seconds(sim, specs, mm, fmax, fa, names, n=None, kept=judge.kept)
     counted = _leading(sim, seconds, N_SECOND)
-    pairs = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
-             [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True), fb) for fb in counted]
-             + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
-             + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
+    # the pairs in the order they are judged; a group of pairs made only when it is reached and one of them could
+    # still win (:func:`_hopeless`): the first refitted beside a counted second cause, every two elements split from
+    # the first (:func:`split_choice`), a second cause of many options refined with the first at every option
+    pairs: list = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
+                   [(unbounded, None, fb) for fb in counted]
+                   + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)])
+    causes = {fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)}
+    if not opened and splits_in_two(specs[fa.cause], fa, across=held):
+        causes.add(fa.cause)
+        pairs.append(_Later((fa.cause,), lambda: split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held)))
     if held:
-        pairs += _held_seconds(sim, specs, mm, fmax, fa, names)
+        spread = tuple(n for n, spec in specs.items() if (names is None or n in names) and held_spec(spec, fa) is not None)
+        causes.update(spread)
+        pairs.append(_Later(spread, lambda: _held_seconds(sim, specs, mm, fmax, fa, names)))
     # the second causes the freedom counts: held open, the N_SECOND best of the screen (the others are kept by
     # their bound only)
-    n_seconds = max(1, len({fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)}))
+    n_seconds = max(1, len(causes))
     # the other second causes of the screen, each refined with the first last: cross-validated only while its
     # refined chi2 on all modes could win (:func:`_win_target`), so none is dropped by its rank on the screen
-    todo: list[tuple[SplitBound, PhysicalFit | None, PhysicalFit]] = [
-        *pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))]
+    todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))],
+                     lambda group: all(_hopeless(best, top, specs[fa.cause], specs[n]) for n in group.causes))
     best: dict | None = None
     for bound, fa2, fb in todo:
-        if fa2 is None:
-            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
         freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
         target = _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom,
                              _freedom(specs[fb.cause], fb.free),
                              _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
-        if not bound.below(target):
-            continue                        # its exact score cannot win (:func:`_win_target`)
+        if target <= 0.0 or not bound.below(target):
+            continue                        # its exact score cannot win (:func:`_win_target`; a chi2 is >= 0)
+        if fa2 is None:
+            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
         # each cause's variant made again beside the other (:func:`widened`); the parameters it frees count too
         n_free, own = len(fa2.free) + len(fb.free), _freedom(specs[fb.cause], fb.free)
         fa2, fb = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
