@@ -515,7 +515,7 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
     names one (a fleet's unit: the global cause its manufacturing scatter takes is always tried, for the
     first cause fitted alone absorbs part of the scatter and leaves little for it on top). ``kept``: the fits on top
     of each first cause made so far in this diagnosis (the held-open round asks them again: the same answers)."""
-    return _leading(sim, _on_top_fits(sim, mm, fmax, first, names, {} if kept is None else kept), n)
+    return _leading(sim, _on_top_fits(sim, mm, fmax, first, names, {} if kept is None else kept)[0], n)
 
 
 def _leading(sim: PhysicalSimulation, ranked: list[PhysicalFit], n: int | None) -> list[PhysicalFit]:
@@ -526,18 +526,31 @@ def _leading(sim: PhysicalSimulation, ranked: list[PhysicalFit], n: int | None) 
 
 
 def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-                 names: Sequence[str] | None, kept: dict) -> list[PhysicalFit]:
+                 names: Sequence[str] | None, kept: dict, hopeless: Any = None, n: int = N_SECOND
+                 ) -> tuple[list[PhysicalFit], list[str]]:
     """Every other cause (among ``names``) fitted on top of ``first`` on all modes, each nested variant; the best
     variant of each cause by chi2 plus its freedom, best first (:func:`_seconds`). Each cause's best is kept in
-    ``kept`` under ``first``'s change and asked from there again."""
+    ``kept`` under ``first``'s change and asked from there again. ``hopeless(spec)``: a cause whose pairs with
+    ``first`` cannot win (:func:`_hopeless`) is not fitted when its place in the ranking cannot matter either: every
+    cause is among the ``n`` best (at most ``n`` of them), or ``n`` causes fitted rank strictly below the least its
+    ranking key can be (its smallest variant's freedom, a chi2 being >= 0). Returns the ranked fits and the names of
+    the causes not fitted (those that would have been among the ``n`` best: all of them when every cause is)."""
     changed = [(first.cause, first.params)]
     top: OnTop | None = None
     allsel = np.ones(mm.freq_hz.size, bool)
-    ranked: list[tuple[float, PhysicalFit]] = []
-    for spec in (s for s in (besides(c, changed) for c in sim.causes()) if s is not None):   # OnTop.causes
-        if names is not None and spec.name not in names:
-            continue
+    on = [spec for spec in (besides(c, changed) for c in sim.causes())     # OnTop.causes
+          if spec is not None and (names is None or spec.name in names)]
+    ranked: list[tuple[int, float, PhysicalFit]] = []
+    later = [] if hopeless is None else [i for i, spec in enumerate(on) if hopeless(spec)]
+    left: list[str] = []
+    for i in [*(i for i in range(len(on)) if i not in later), *later]:
+        spec = on[i]
         key = ("on top", first.cause, repr(sorted(first.params.items())), spec.name)
+        if i in later and key not in kept:
+            least = min(_freedom(spec, free) for free in variants(spec))
+            if len(on) <= n or sum(r[1] < least for r in ranked) >= n:
+                left.append(spec.name)
+                continue
         if key not in kept:
             top = top or OnTop(sim, changed)
             fits = []
@@ -545,9 +558,9 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
                 p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax, best_only=True)
                 fits.append((chi2 + _freedom(spec, free), PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
             kept[key] = min(fits, key=lambda t: t[0])      # the best variant of the cause (the first of the least)
-        ranked.append(kept[key])
-    ranked.sort(key=lambda t: t[0])
-    return [f for _, f in ranked]
+        ranked.append((i, *kept[key]))
+    ranked.sort(key=lambda t: (t[1], t[0]))              # as fitted in the causes' order: ties in that order
+    return [f for _, _, f in ranked], (left if len(on) <= n else [c for c in left if c == getattr(sim, "scatter_cause", None)])
 
 
 def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -880,7 +893,11 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
-    seconds = [] if opened else _seconds(sim, specs, mm, fmax, fa, names, n=None, kept=judge.kept)
+    seconds, left = [], []
+    if not opened:
+        # a second cause whose pairs with the first cannot win (:func:`_hopeless`) is fitted only for its rank
+        seconds, left = _on_top_fits(sim, mm, fmax, fa, names, judge.kept,
+                                     lambda spec: _hopeless(None, top, specs[fa.cause], spec))
     counted = _leading(sim, seconds, N_SECOND)
     # the pairs in the order they are judged; a group of pairs made only when it is reached and one of them could
     # still win (:func:`_hopeless`): the first refitted beside a counted second cause, every two elements split from
@@ -888,7 +905,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     pairs: list = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
                    [(unbounded, None, fb) for fb in counted]
                    + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)])
-    causes = {fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)}
+    causes = {fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)} | set(left)
     if not opened and splits_in_two(specs[fa.cause], fa, across=held):
         causes.add(fa.cause)
         pairs.append(_Later((fa.cause,), lambda: split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held)))
