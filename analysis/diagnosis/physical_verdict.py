@@ -533,7 +533,8 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
     ``kept`` under ``first``'s change and asked from there again. ``hopeless(spec)``: a cause whose pairs with
     ``first`` cannot win (:func:`_hopeless`) is not fitted when its place in the ranking cannot matter either: every
     cause is among the ``n`` best (at most ``n`` of them), or ``n`` causes fitted rank strictly below the least its
-    ranking key can be (its smallest variant's freedom, a chi2 being >= 0). Returns the ranked fits and the names of
+    ranking key can be (its smallest variant's freedom, a chi2 being >= 0); such causes are taken after the others,
+    those of fewer options (no screen) first. Returns the ranked fits and the names of
     the causes not fitted (those that would have been among the ``n`` best: all of them when every cause is)."""
     changed = [(first.cause, first.params)]
     top: OnTop | None = None
@@ -541,7 +542,9 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
     on = [spec for spec in (besides(c, changed) for c in sim.causes())     # OnTop.causes
           if spec is not None and (names is None or spec.name in names)]
     ranked: list[tuple[int, float, PhysicalFit]] = []
-    later = [] if hopeless is None else [i for i, spec in enumerate(on) if hopeless(spec)]
+    # the causes that cannot win last, those of fewer options first: the ranks of those fitted may spare the others
+    later = [] if hopeless is None else sorted((i for i, spec in enumerate(on) if hopeless(spec)),
+                                               key=lambda i: len(on[i].options))
     left: list[str] = []
     for i in [*(i for i in range(len(on)) if i not in later), *later]:
         spec = on[i]
@@ -659,14 +662,18 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])
     best: dict | None = None
-    for first in firsts:
+    # a fleet's unit: the first cause its scatter takes is searched first (:func:`_scatter_first`); the firsts before
+    # it are still searched, each only for a pair that beats the best named so far
+    lead = _scatter_first(sim, firsts) if alone and not opened else None
+    order = ([] if lead is None else [firsts[lead]]) + [c for i, c in enumerate(firsts) if i != lead]
+    for k, first in enumerate(order):
         # a second cause of many options (a crack) is also refined with the first at every option (held): the
         # first fitted alone (a loose support) absorbed part of it, and on top of that fit the crack's mirror
         # element explains as much as its own (a crack beside a crack: split_choice's grid, on one member)
         held = not opened and not splits(specs[first["_fit"].cause])
         best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=held,
                                         top=_named_score(best)))
-        if _leaves_within(best, judge.rule):
+        if _leaves_within(best, judge.rule) and (lead is None or k >= lead):
             break           # a named pair that leaves the held-out modes within their uncertainty: none does better
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
     explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= judge.rule.leaves_chi2 for c in firsts)
@@ -687,6 +694,16 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
             first = _as_first(sim, specs, mm, fmax, name, free, judge)
             best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, top=_named_score(best)))
     return best
+
+
+def _scatter_first(sim: PhysicalSimulation, firsts: Sequence[dict]) -> int | None:
+    """The place among ``firsts`` of the simulation's ``scatter_cause`` (a fleet's unit: the global cause every unit
+    holds), None without one. Searched first, its pair with the unit's defect (the whole change of a fleet's
+    defective unit) bounds the search on top of the firsts before it (:func:`_win_target`): on top of a cause of many
+    options (a mass at one of ~30 nodes) every pair's score is at least that choice's freedom, above a pair that fits
+    the unit to its noise, and nothing there is made (:func:`_hopeless`)."""
+    scatter = getattr(sim, "scatter_cause", None)
+    return next((i for i, c in enumerate(firsts) if c["_fit"].cause == scatter), None) if scatter else None
 
 
 def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
@@ -890,6 +907,10 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     a pair whose refined chi2 on all modes is not below that target is not cross-validated (its nested held-out
     chi2 is at least its chi2 on all modes where the refinement reaches the least-squares minimum)."""
     fa: PhysicalFit = first["_fit"]
+    on = [spec for spec in (besides(c, [(fa.cause, fa.params)]) for c in specs.values()) if spec is not None
+          and (names is None or spec.name in names)]
+    if all(_hopeless(None, top, specs[fa.cause], spec) for spec in [*on, specs[fa.cause]]):
+        return None                         # no pair on top of it can beat the named score ``top`` (:func:`_hopeless`)
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
