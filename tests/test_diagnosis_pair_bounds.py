@@ -100,7 +100,12 @@ def test_a_first_cause_whose_pairs_cannot_beat_a_named_score_makes_nothing(monke
     fv, specs, mm, fmax, judge, first = _searched()
     fitted = _fitted_on_top(monkeypatch)
     refined: list[object] = []
-    monkeypatch.setattr(pv, "fit_pair", lambda *a, **k: refined.append(a) or pp.fit_pair(*a, **k))
+
+    def fit_pair(*a: object, **k: object) -> object:
+        refined.append(a)
+        return pp.fit_pair(*a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pv, "fit_pair", fit_pair)
     assert pv._choice_penalty(specs["support_stiffness"]) > 2.0
     assert pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False, top=2.0) is None
     assert fitted == [] and refined == []
@@ -157,7 +162,7 @@ def test_a_fleets_scatter_cause_is_searched_first_and_bounds_the_firsts_before_i
     on_top_of = pv._on_top_of
 
     def spy(*a: object, **k: object) -> object:
-        searched.append((a[4]["_fit"].cause, float(k.get("top", np.inf))))  # type: ignore[index]
+        searched.append((a[4]["_fit"].cause, float(k.get("top", np.inf))))  # type: ignore[index, arg-type]
         return on_top_of(*a, **k)  # type: ignore[arg-type]
 
     monkeypatch.setattr(pv, "_on_top_of", spy)
@@ -165,6 +170,7 @@ def test_a_fleets_scatter_cause_is_searched_first_and_bounds_the_firsts_before_i
     assert [c for c, _ in searched[:2]] == ["stiffness_shift", "support_stiffness"]
     assert searched[0][1] == np.inf and np.isfinite(searched[1][1])
     # the same two changes named (in either order), at a score no worse than the old order's
+    assert plain is not None and fleet is not None
     for got in (plain, fleet):
         assert pv._named_pair(got)
         changes = dict(got["_pair"].changes)

@@ -72,9 +72,9 @@ from .physical_pairs import (
     besides,
     fit_pair,
     held_open,
+    held_spec,
     rechoose,
     refit_on_top,
-    held_spec,
     split_choice,
     split_places,
     splits,
@@ -914,7 +914,8 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
-    seconds, left = [], []
+    seconds: list[PhysicalFit] = []
+    left: list[str] = []
     if not opened:
         # a second cause whose pairs with the first cannot win (:func:`_hopeless`) is fitted only for its rank
         seconds, left = _on_top_fits(sim, mm, fmax, fa, names, judge.kept,
