@@ -162,7 +162,7 @@ def test_a_fleets_scatter_cause_is_searched_first_and_bounds_the_firsts_before_i
     on_top_of = pv._on_top_of
 
     def spy(*a: object, **k: object) -> object:
-        searched.append((a[4]["_fit"].cause, float(k.get("top", np.inf))))  # type: ignore[index, arg-type]
+        searched.append((a[4]["_fit"].cause, float(k.get("bound", np.inf))))  # type: ignore[index, arg-type]
         return on_top_of(*a, **k)  # type: ignore[arg-type]
 
     monkeypatch.setattr(pv, "_on_top_of", spy)

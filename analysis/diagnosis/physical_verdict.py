@@ -672,7 +672,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         # element explains as much as its own (a crack beside a crack: split_choice's grid, on one member)
         held = not opened and not splits(specs[first["_fit"].cause])
         best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=held,
-                                        top=_named_score(best)))
+                                        bound=_named_score(best)))
         if _leaves_within(best, judge.rule) and (lead is None or k >= lead):
             break           # a named pair that leaves the held-out modes within their uncertainty: none does better
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
@@ -692,7 +692,8 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         name, free = first_round["_pair"].causes[1], first_round["_free"]
         if all((c["_fit"].cause, c["_fit"].free) != (name, free) for c in firsts):
             first = _as_first(sim, specs, mm, fmax, name, free, judge)
-            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, top=_named_score(best)))
+            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened,
+                                            bound=_named_score(best)))
     return best
 
 
@@ -716,7 +717,7 @@ def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
         two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
     if named is None:
         two = _better(two, _local_pairs(sim, specs, mm, fmax, found, judge, names, two))
-    return _better(two, _scatter_rivals(sim, specs, mm, fmax, found, judge, names, named, top=_named_score(two)))
+    return _better(two, _scatter_rivals(sim, specs, mm, fmax, found, judge, names, named, bound=_named_score(two)))
 
 
 def _local(spec: CauseSpec) -> bool:
@@ -773,7 +774,8 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     for first in _local_firsts(sim, specs, mm, fmax, found, judge, local):
         if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
             continue
-        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True)
+        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True,
+                       bound=top)
         out = _better(out, c)
         if _named_pair(out):
             top = min(top, out["_chi2_cv"])                       # type: ignore[index]
@@ -817,7 +819,7 @@ def _beats_named(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
 
 
 def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
-                    names: Sequence[str] | None, best: dict | None, top: float = np.inf) -> dict | None:
+                    names: Sequence[str] | None, best: dict | None, bound: float = np.inf) -> dict | None:
     """A fleet unit's defect beside its scatter (a simulation that names a ``scatter_cause``, the global cause every
     unit holds): each local cause (:func:`_local`) that gains anything held out, other than the named single cause
     ``best``, with the global cause (and its own cause at another place) on top of it (:func:`_on_top_of`, named pairs
@@ -835,7 +837,7 @@ def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fma
         if c is best or c["gain_db"] <= 0 or c["effect"] == scatter or not _local(specs[c["effect"]]):
             continue
         two = _on_top_of(sim, specs, mm, fmax, c, judge, [c["effect"], scatter], opened=False, named_only=True,
-                         top=min(top, _named_score(out)))
+                         bound=min(bound, _named_score(out)))
         out = _better(out, two if best is None else _beats_named(sim, specs, mm, fmax, judge, best, two))
     return out
 
@@ -897,7 +899,7 @@ def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_al
 
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
                names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf,
-               named_only: bool = False) -> dict | None:
+               named_only: bool = False, bound: float = np.inf) -> dict | None:
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
     (:func:`_seconds`, or :func:`_opened` with its choice held open; the ``N_SECOND`` best of the screen first, then
     every other) refined with it, cross-validated nested and judged (:func:`_second_cause`); ``held``: also a second
@@ -905,11 +907,17 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     (:func:`split_choice`) are taken in the grid's order, each while its lower bound says it could still win
     (:func:`_win_target`; ``top``: the score of a named pair found elsewhere, which only a better named pair beats);
     a pair whose refined chi2 on all modes is not below that target is not cross-validated (its nested held-out
-    chi2 is at least its chi2 on all modes where the refinement reaches the least-squares minimum)."""
+    chi2 is at least its chi2 on all modes where the refinement reaches the least-squares minimum). ``bound`` (and
+    ``top``): the score of a named pair found elsewhere; a pair whose two choices' freedom alone reaches it cannot
+    beat it whatever its choices become (:func:`rechoose` keeps the causes), so it is not made (:func:`_hopeless`):
+    nothing when no second cause can, and a second cause that cannot is fitted on top of the first only for its rank.
+    Unlike ``top`` it does not lower the target a pair's refined chi2 must come below (a pair refined at its first
+    choices may still be chosen again to a better one)."""
     fa: PhysicalFit = first["_fit"]
     on = [spec for spec in (besides(c, [(fa.cause, fa.params)]) for c in specs.values()) if spec is not None
           and (names is None or spec.name in names)]
-    if all(_hopeless(None, top, specs[fa.cause], spec) for spec in [*on, specs[fa.cause]]):
+    bound = min(bound, top)
+    if all(_hopeless(None, bound, specs[fa.cause], spec) for spec in [*on, specs[fa.cause]]):
         return None                         # no pair on top of it can beat the named score ``top`` (:func:`_hopeless`)
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
@@ -919,7 +927,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     if not opened:
         # a second cause whose pairs with the first cannot win (:func:`_hopeless`) is fitted only for its rank
         seconds, left = _on_top_fits(sim, mm, fmax, fa, names, judge.kept,
-                                     lambda spec: _hopeless(None, top, specs[fa.cause], spec))
+                                     lambda spec: _hopeless(None, bound, specs[fa.cause], spec))
     counted = _leading(sim, seconds, N_SECOND)
     # the pairs in the order they are judged; a group of pairs made only when it is reached and one of them could
     # still win (:func:`_hopeless`): the first refitted beside a counted second cause, every two elements split from
@@ -941,14 +949,14 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     # the other second causes of the screen, each refined with the first last: cross-validated only while its
     # refined chi2 on all modes could win (:func:`_win_target`), so none is dropped by its rank on the screen
     todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))],
-                     lambda group: all(_hopeless(best, top, specs[fa.cause], specs[n]) for n in group.causes))
+                     lambda group: all(_hopeless(best, bound, specs[fa.cause], specs[n]) for n in group.causes))
     best: dict | None = None
-    for bound, fa2, fb in todo:
+    for below, fa2, fb in todo:
         freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
         target = _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom,
                              _freedom(specs[fb.cause], fb.free),
                              _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
-        if target <= 0.0 or not bound.below(target):
+        if target <= 0.0 or _hopeless(best, bound, specs[fa.cause], specs[fb.cause]) or not below.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`; a chi2 is >= 0)
         if fa2 is None:
             fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
