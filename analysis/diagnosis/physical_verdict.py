@@ -700,9 +700,9 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
 def _scatter_first(sim: PhysicalSimulation, firsts: Sequence[dict]) -> int | None:
     """The place among ``firsts`` of the simulation's ``scatter_cause`` (a fleet's unit: the global cause every unit
     holds), None without one. Searched first, its pair with the unit's defect (the whole change of a fleet's
-    defective unit) bounds the search on top of the firsts before it (:func:`_win_target`): on top of a cause of many
-    options (a mass at one of ~30 nodes) every pair's score is at least that choice's freedom, above a pair that fits
-    the unit to its noise, and nothing there is made (:func:`_hopeless`)."""
+    defective unit) bounds the search on top of the firsts before it by the pairs' choices' freedom: on top of a cause
+    of many options (a mass at one of ~30 nodes) every pair's score is at least that choice's freedom, above a pair
+    that fits the unit to its noise, and nothing there is made (:func:`_hopeless`)."""
     scatter = getattr(sim, "scatter_cause", None)
     return next((i for i, c in enumerate(firsts) if c["_fit"].cause == scatter), None) if scatter else None
 
@@ -918,7 +918,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
           and (names is None or spec.name in names)]
     bound = min(bound, top)
     if all(_hopeless(None, bound, specs[fa.cause], spec) for spec in [*on, specs[fa.cause]]):
-        return None                         # no pair on top of it can beat the named score ``top`` (:func:`_hopeless`)
+        return None                         # no pair on top of it can beat the named score ``bound`` (:func:`_hopeless`)
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
