@@ -128,10 +128,10 @@ def test_a_second_cause_ranked_sixth_on_the_screen_is_still_refined(monkeypatch:
                          judge, options=["left:0"])
     screen = pv._on_top_fits
 
-    def joint_last(*args: object, **kw: object) -> list:
-        out = screen(*args, **kw)  # type: ignore[arg-type]
-        assert len(out) == 6
-        return [f for f in out if f.cause != "joint_stiffness"] + [f for f in out if f.cause == "joint_stiffness"]
+    def joint_last(*args: object, **kw: object) -> tuple:
+        out, left = screen(*args, **kw)  # type: ignore[arg-type]
+        assert len(out) == 6 and not left
+        return [f for f in out if f.cause != "joint_stiffness"] + [f for f in out if f.cause == "joint_stiffness"], left
 
     monkeypatch.setattr(pv, "_on_top_fits", joint_last)
     _support_and_joint(pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False))

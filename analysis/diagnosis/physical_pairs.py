@@ -52,9 +52,9 @@ from .physical import (
     variants,
 )
 
-__all__ = ["OnTop", "PairFit", "SplitBound", "as_places", "besides", "fit_pair", "held_open", "changes_of", "refit_on_top",
-           "rechoose", "split_choice", "split_places", "splits", "with_options", "pair_starts", "widest", "widened",
-           "at_one_place"]
+__all__ = ["OnTop", "PairFit", "SplitBound", "as_places", "besides", "fit_pair", "held_open", "held_spec", "changes_of",
+           "refit_on_top", "rechoose", "split_choice", "splits_in_two", "split_places", "splits", "with_options",
+           "pair_starts", "widest", "widened", "at_one_place"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -139,6 +139,21 @@ class SplitBound:
         return bool(self._s.bound < target)
 
 
+def _split_pairs(spec: CauseSpec, across: bool) -> list[tuple[str, str]]:
+    """The two options of every pair :func:`split_choice` puts on its grid: two elements of one member (``across``:
+    any two)."""
+    return [(a, b) for a, b in combinations(spec.options, 2) if across or _member(a) == _member(b)]
+
+
+def splits_in_two(spec: CauseSpec, fit: PhysicalFit, across: bool = False) -> bool:
+    """Whether :func:`split_choice` has pairs for ``fit`` of ``spec``: an element's stiffness (:func:`splits`) fitted
+    with one free factor (log, nominal 1) and two options to pair. Known without a solve (a search counts the second
+    causes it holds before it makes them)."""
+    free = [s for s in spec.params if s.name in fit.free]
+    return (splits(spec) and len(free) == 1 and free[0].log and free[0].nominal == 1.0
+            and bool(_split_pairs(spec, across)))
+
+
 def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm: MeasuredModes, fmax: float,
                  across: bool = False) -> list[tuple[SplitBound, PhysicalFit, PhysicalFit]]:
     """The change of ``fit`` as two of its kind on one member (two cracks in one column): an element's
@@ -152,19 +167,17 @@ def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm:
     second change on top of the first (:func:`besides`); ``across``: every two elements, of one member or not, are
     on the grid too (no single element is named, so the first element fitted alone may sit at neither crack).
     Returns ``[(bound, first, second)]``; empty for any other cause."""
-    free = [s for s in spec.params if s.name in fit.free]
-    if not splits(spec) or len(free) != 1 or not free[0].log or free[0].nominal != 1.0:
+    if not splits_in_two(spec, fit, across):
         return []
-    name, ps = free[0].name, free[0]
+    ps = next(s for s in spec.params if s.name in fit.free)
+    name = ps.name
     levels = [ps.lo ** w for w in SPLIT_POWERS]
     two_spec = CauseSpec(f"two {spec.name}", (replace(ps, name="a"), replace(ps, name="b")))
     ends = [ps.to_x(v) for v in sorted({ps.lo, ps.hi, *levels})]
     cells = [tuple(box) for box in product(zip(ends[:-1], ends[1:]), repeat=2)]
     allsel = np.ones(mm.freq_hz.size, bool)
     ranked = []
-    for a, b in combinations(spec.options, 2):
-        if not across and _member(a) != _member(b):
-            continue
+    for a, b in _split_pairs(spec, across):
         at = _Chi2(_SplitGrid(sim, fit, str(spec.choice), name, (a, b)), two_spec,  # type: ignore[arg-type]
                    two_spec.params, {}, mm, allsel, fmax, "")
         c, fa, fb = min((at.at((ps.to_x(fa), ps.to_x(fb)))[0], fa, fb) for fa, fb in product(levels, levels))
@@ -179,6 +192,16 @@ def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm:
             for _, bound, two in ranked]
 
 
+def held_spec(spec: CauseSpec, first: PhysicalFit) -> CauseSpec | None:
+    """``spec`` as :func:`held_open` refines it beside ``first`` (at the options ``first`` does not hold,
+    :func:`besides`), or None when it holds no pair there: a cause of many options (:func:`splits`) with one log
+    factor. Known without a solve."""
+    spec2 = besides(spec, [(first.cause, first.params)])
+    if spec2 is None or not splits(spec2) or len(spec2.params) != 1 or not spec2.params[0].log:
+        return None
+    return spec2
+
+
 def held_open(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: PhysicalFit, mm: MeasuredModes,
               fmax: float) -> list[tuple[float, PhysicalFit, PhysicalFit]]:
     """A second change of many options (an element's stiffness, :func:`splits`) beside ``first``, its choice held
@@ -188,8 +211,8 @@ def held_open(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: Physic
     it finds its best option elsewhere (the crack's mirror element, a deeper crack beside the support); refined
     together at every option, both reach the change in the data. Returns ``[(chi2, first, second)]`` at every
     option, the lowest chi2 first; empty when the second is no such cause."""
-    spec = besides(specs[1], [(first.cause, first.params)])
-    if spec is None or not splits(spec) or len(spec.params) != 1 or not spec.params[0].log:
+    spec = held_spec(specs[1], first)
+    if spec is None:
         return []
     ps = spec.params[0]
     levels = [ps.lo ** w for w in SPLIT_POWERS]

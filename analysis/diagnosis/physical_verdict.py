@@ -73,11 +73,13 @@ from .physical_pairs import (
     besides,
     fit_pair,
     held_open,
+    held_spec,
     rechoose,
     refit_on_top,
     split_choice,
     split_places,
     splits,
+    splits_in_two,
     widened,
     with_options,
 )
@@ -525,7 +527,7 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
     names one (a fleet's unit: the global cause its manufacturing scatter takes is always tried, for the
     first cause fitted alone absorbs part of the scatter and leaves little for it on top). ``kept``: the fits on top
     of each first cause made so far in this diagnosis (the held-open round asks them again: the same answers)."""
-    return _leading(sim, _on_top_fits(sim, mm, fmax, first, names, {} if kept is None else kept), n)
+    return _leading(sim, _on_top_fits(sim, mm, fmax, first, names, {} if kept is None else kept)[0], n)
 
 
 def _leading(sim: PhysicalSimulation, ranked: list[PhysicalFit], n: int | None) -> list[PhysicalFit]:
@@ -536,18 +538,34 @@ def _leading(sim: PhysicalSimulation, ranked: list[PhysicalFit], n: int | None) 
 
 
 def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-                 names: Sequence[str] | None, kept: dict) -> list[PhysicalFit]:
+                 names: Sequence[str] | None, kept: dict, hopeless: Any = None, n: int = N_SECOND
+                 ) -> tuple[list[PhysicalFit], list[str]]:
     """Every other cause (among ``names``) fitted on top of ``first`` on all modes, each nested variant; the best
     variant of each cause by chi2 plus its freedom, best first (:func:`_seconds`). Each cause's best is kept in
-    ``kept`` under ``first``'s change and asked from there again."""
+    ``kept`` under ``first``'s change and asked from there again. ``hopeless(spec)``: a cause whose pairs with
+    ``first`` cannot win (:func:`_hopeless`) is not fitted when its place in the ranking cannot matter either: every
+    cause is among the ``n`` best (at most ``n`` of them), or ``n`` causes fitted rank strictly below the least its
+    ranking key can be (its smallest variant's freedom, a chi2 being >= 0); such causes are taken after the others,
+    those of fewer options (no screen) first. Returns the ranked fits and the names of
+    the causes not fitted (those that would have been among the ``n`` best: all of them when every cause is)."""
     changed = [(first.cause, first.params)]
     top: OnTop | None = None
     allsel = np.ones(mm.freq_hz.size, bool)
-    ranked: list[tuple[float, PhysicalFit]] = []
-    for spec in (s for s in (besides(c, changed) for c in sim.causes()) if s is not None):   # OnTop.causes
-        if names is not None and spec.name not in names:
-            continue
+    on = [spec for spec in (besides(c, changed) for c in sim.causes())     # OnTop.causes
+          if spec is not None and (names is None or spec.name in names)]
+    ranked: list[tuple[int, float, PhysicalFit]] = []
+    # the causes that cannot win last, those of fewer options first: the ranks of those fitted may spare the others
+    later = [] if hopeless is None else sorted((i for i, spec in enumerate(on) if hopeless(spec)),
+                                               key=lambda i: len(on[i].options))
+    left: list[str] = []
+    for i in [*(i for i in range(len(on)) if i not in later), *later]:
+        spec = on[i]
         key = ("on top", first.cause, repr(sorted(first.params.items())), spec.name)
+        if i in later and key not in kept:
+            least = min(_freedom(spec, free) for free in variants(spec))
+            if len(on) <= n or sum(r[1] < least for r in ranked) >= n:
+                left.append(spec.name)
+                continue
         if key not in kept:
             top = top or OnTop(sim, changed)
             fits = []
@@ -555,9 +573,9 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
                 p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax, best_only=True)
                 fits.append((chi2 + _freedom(spec, free), PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
             kept[key] = min(fits, key=lambda t: t[0])      # the best variant of the cause (the first of the least)
-        ranked.append(kept[key])
-    ranked.sort(key=lambda t: t[0])
-    return [f for _, f in ranked]
+        ranked.append((i, *kept[key]))
+    ranked.sort(key=lambda t: (t[1], t[0]))              # as fitted in the causes' order: ties in that order
+    return [f for _, _, f in ranked], (left if len(on) <= n else [c for c in left if c == getattr(sim, "scatter_cause", None)])
 
 
 def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -586,6 +604,41 @@ def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
               for chi2, a, b in held_open(sim, [specs[first.cause], spec], first, mm, fmax)]
     ranked.sort(key=lambda t: t[0])
     return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
+
+
+@dataclass(frozen=True)
+class _Later:
+    """Pairs of a search on top of a first cause made only when the search reaches them (:func:`_expanded`):
+    ``make()`` gives them, each ``(bound, first, second)``, the second cause among ``causes``."""
+
+    causes: tuple[str, ...]
+    make: Any
+
+
+def _expanded(items: Sequence, skip: Any) -> Any:
+    """The pairs of ``items`` in turn, each :class:`_Later` group replaced by the pairs it makes when reached,
+    unless ``skip(group)`` says none of them could win then (the search's state at that point)."""
+    for item in items:
+        if isinstance(item, _Later):
+            if not skip(item):
+                yield from item.make()
+        else:
+            yield item
+
+
+def _hopeless(best: dict | None, top: float, first: CauseSpec, second: CauseSpec) -> bool:
+    """Whether no pair of the causes ``first`` and ``second`` can win against the best named pair so far (``best``, or
+    one of score ``top`` found elsewhere): a pair's score is its nested held-out chi2 (>= 0) plus both choices'
+    freedom (:func:`_choice_penalty`), so with that freedom alone at or above the named score it cannot
+    (:func:`_win_target` is then <= 0)."""
+    named_top = min(top, best["_chi2_cv"] if _named_pair(best) else np.inf)    # type: ignore[index]
+    return bool(np.isfinite(named_top) and named_top - _choice_penalty(first) - _choice_penalty(second) <= 0.0)
+
+
+def _named_score(c: dict | None) -> float:
+    """The score (penalised nested held-out chi2, ``_chi2_cv``) of a named pair; inf for any other (:func:`_better`:
+    only a named pair of a lower score replaces a named one)."""
+    return float(c["_chi2_cv"]) if _named_pair(c) else np.inf     # type: ignore[index]
 
 
 def _named_pair(c: dict | None) -> bool:
@@ -621,13 +674,18 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         # two changes at once may leave every single cause short of significance: then the best by held-out gain
         firsts = sorted((c for c in found if c["gain_db"] > 0), key=lambda c: not c["significant"])
     best: dict | None = None
-    for first in firsts:
+    # a fleet's unit: the first cause its scatter takes is searched first (:func:`_scatter_first`); the firsts before
+    # it are still searched, each only for a pair that beats the best named so far
+    lead = _scatter_first(sim, firsts) if alone and not opened else None
+    order = ([] if lead is None else [firsts[lead]]) + [c for i, c in enumerate(firsts) if i != lead]
+    for k, first in enumerate(order):
         # a second cause of many options (a crack) is also refined with the first at every option (held): the
         # first fitted alone (a loose support) absorbed part of it, and on top of that fit the crack's mirror
         # element explains as much as its own (a crack beside a crack: split_choice's grid, on one member)
         held = not opened and not splits(specs[first["_fit"].cause])
-        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=held))
-        if _leaves_within(best, judge.rule):
+        best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened, held=held,
+                                        bound=_named_score(best)))
+        if _leaves_within(best, judge.rule) and (lead is None or k >= lead):
             break           # a named pair that leaves the held-out modes within their uncertainty: none does better
     # a first cause that leaves the held-out modes within their uncertainty leaves no second physical change to find
     explained = any(_held_out_per_mode(c["_fit"].cv_per_mode, judge) <= judge.rule.leaves_chi2 for c in firsts)
@@ -646,8 +704,19 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         name, free = first_round["_pair"].causes[1], first_round["_free"]
         if all((c["_fit"].cause, c["_fit"].free) != (name, free) for c in firsts):
             first = _as_first(sim, specs, mm, fmax, name, free, judge)
-            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened))
+            best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened,
+                                            bound=_named_score(best)))
     return best
+
+
+def _scatter_first(sim: PhysicalSimulation, firsts: Sequence[dict]) -> int | None:
+    """The place among ``firsts`` of the simulation's ``scatter_cause`` (a fleet's unit: the global cause every unit
+    holds), None without one. Searched first, its pair with the unit's defect (the whole change of a fleet's
+    defective unit) bounds the search on top of the firsts before it by the pairs' choices' freedom: on top of a cause
+    of many options (a mass at one of ~30 nodes) every pair's score is at least that choice's freedom, above a pair
+    that fits the unit to its noise, and nothing there is made (:func:`_hopeless`)."""
+    scatter = getattr(sim, "scatter_cause", None)
+    return next((i for i, c in enumerate(firsts) if c["_fit"].cause == scatter), None) if scatter else None
 
 
 def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, fits: list, found: list,
@@ -660,7 +729,7 @@ def _pair_search(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
         two = _rival_pair(sim, specs, mm, fmax, fits, found, judge, names, named) or two
     if named is None:
         two = _better(two, _local_pairs(sim, specs, mm, fmax, found, judge, names, two))
-    return _better(two, _scatter_rivals(sim, specs, mm, fmax, found, judge, names, named))
+    return _better(two, _scatter_rivals(sim, specs, mm, fmax, found, judge, names, named, bound=_named_score(two)))
 
 
 def _local(spec: CauseSpec) -> bool:
@@ -717,7 +786,8 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     for first in _local_firsts(sim, specs, mm, fmax, found, judge, local):
         if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
             continue
-        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True)
+        c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True,
+                       bound=top)
         out = _better(out, c)
         if _named_pair(out):
             top = min(top, out["_chi2_cv"])                       # type: ignore[index]
@@ -761,7 +831,7 @@ def _beats_named(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
 
 
 def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
-                    names: Sequence[str] | None, best: dict | None) -> dict | None:
+                    names: Sequence[str] | None, best: dict | None, bound: float = np.inf) -> dict | None:
     """A fleet unit's defect beside its scatter (a simulation that names a ``scatter_cause``, the global cause every
     unit holds): each local cause (:func:`_local`) that gains anything held out, other than the named single cause
     ``best``, with the global cause (and its own cause at another place) on top of it (:func:`_on_top_of`, named pairs
@@ -778,7 +848,8 @@ def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fma
     for c in found:
         if c is best or c["gain_db"] <= 0 or c["effect"] == scatter or not _local(specs[c["effect"]]):
             continue
-        two = _on_top_of(sim, specs, mm, fmax, c, judge, [c["effect"], scatter], opened=False, named_only=True)
+        two = _on_top_of(sim, specs, mm, fmax, c, judge, [c["effect"], scatter], opened=False, named_only=True,
+                         bound=min(bound, _named_score(out)))
         out = _better(out, two if best is None else _beats_named(sim, specs, mm, fmax, judge, best, two))
     return out
 
@@ -840,7 +911,7 @@ def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_al
 
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
                names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf,
-               named_only: bool = False) -> dict | None:
+               named_only: bool = False, bound: float = np.inf) -> dict | None:
     """The best pair with the first cause ``first`` (a judged single cause): its second causes
     (:func:`_seconds`, or :func:`_opened` with its choice held open; the ``N_SECOND`` best of the screen first, then
     every other) refined with it, cross-validated nested and judged (:func:`_second_cause`); ``held``: also a second
@@ -848,36 +919,59 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     (:func:`split_choice`) are taken in the grid's order, each while its lower bound says it could still win
     (:func:`_win_target`; ``top``: the score of a named pair found elsewhere, which only a better named pair beats);
     a pair whose refined chi2 on all modes is not below that target is not cross-validated (its nested held-out
-    chi2 is at least its chi2 on all modes where the refinement reaches the least-squares minimum)."""
+    chi2 is at least its chi2 on all modes where the refinement reaches the least-squares minimum). ``bound`` (and
+    ``top``): the score of a named pair found elsewhere; a pair whose two choices' freedom alone reaches it cannot
+    beat it whatever its choices become (:func:`rechoose` keeps the causes), so it is not made (:func:`_hopeless`):
+    nothing when no second cause can, and a second cause that cannot is fitted on top of the first only for its rank.
+    Unlike ``top`` it does not lower the target a pair's refined chi2 must come below (a pair refined at its first
+    choices may still be chosen again to a better one)."""
     fa: PhysicalFit = first["_fit"]
+    on = [spec for spec in (besides(c, [(fa.cause, fa.params)]) for c in specs.values()) if spec is not None
+          and (names is None or spec.name in names)]
+    bound = min(bound, top)
+    if all(_hopeless(None, bound, specs[fa.cause], spec) for spec in [*on, specs[fa.cause]]):
+        return None                         # no pair on top of it can beat the named score ``bound`` (:func:`_hopeless`)
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
     cv_alone = _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
-    seconds = [] if opened else _seconds(sim, specs, mm, fmax, fa, names, n=None, kept=judge.kept)
+    seconds: list[PhysicalFit] = []
+    left: list[str] = []
+    if not opened:
+        # a second cause whose pairs with the first cannot win (:func:`_hopeless`) is fitted only for its rank
+        seconds, left = _on_top_fits(sim, mm, fmax, fa, names, judge.kept,
+                                     lambda spec: _hopeless(None, bound, specs[fa.cause], spec))
     counted = _leading(sim, seconds, N_SECOND)
-    pairs = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
-             [(unbounded, refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True), fb) for fb in counted]
-             + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)]
-             + split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held))
+    # the pairs in the order they are judged; a group of pairs made only when it is reached and one of them could
+    # still win (:func:`_hopeless`): the first refitted beside a counted second cause, every two elements split from
+    # the first (:func:`split_choice`), a second cause of many options refined with the first at every option
+    pairs: list = (_opened(sim, specs, mm, fmax, fa, names, judge.kept) if opened else
+                   [(unbounded, None, fb) for fb in counted]
+                   + [(unbounded, a, b) for a, b in split_places(specs[fa.cause], fa)])
+    causes = {fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)} | set(left)
+    if not opened and splits_in_two(specs[fa.cause], fa, across=held):
+        causes.add(fa.cause)
+        pairs.append(_Later((fa.cause,), lambda: split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held)))
     if held:
-        pairs += _held_seconds(sim, specs, mm, fmax, fa, names)
+        spread = tuple(n for n, spec in specs.items() if (names is None or n in names) and held_spec(spec, fa) is not None)
+        causes.update(spread)
+        pairs.append(_Later(spread, lambda: _held_seconds(sim, specs, mm, fmax, fa, names)))
     # the second causes the freedom counts: held open, the N_SECOND best of the screen (the others are kept by
     # their bound only)
-    n_seconds = max(1, len({fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)}))
+    n_seconds = max(1, len(causes))
     # the other second causes of the screen, each refined with the first last: cross-validated only while its
     # refined chi2 on all modes could win (:func:`_win_target`), so none is dropped by its rank on the screen
-    todo: list[tuple[SplitBound, PhysicalFit | None, PhysicalFit]] = [
-        *pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))]
+    todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))],
+                     lambda group: all(_hopeless(best, bound, specs[fa.cause], specs[n]) for n in group.causes))
     best: dict | None = None
-    for bound, fa2, fb in todo:
-        if fa2 is None:
-            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
+    for below, fa2, fb in todo:
         freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
         target = _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom,
                              _freedom(specs[fb.cause], fb.free),
                              _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
-        if not bound.below(target):
-            continue                        # its exact score cannot win (:func:`_win_target`)
+        if target <= 0.0 or _hopeless(best, bound, specs[fa.cause], specs[fb.cause]) or not below.below(target):
+            continue                        # its exact score cannot win (:func:`_win_target`; a chi2 is >= 0)
+        if fa2 is None:
+            fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
         # each cause's variant made again beside the other (:func:`widened`); the parameters it frees count too
         n_free, own = len(fa2.free) + len(fb.free), _freedom(specs[fb.cause], fb.free)
         fa2, fb = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)

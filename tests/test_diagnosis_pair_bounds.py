@@ -1,0 +1,180 @@
+"""The pair search makes no pair that cannot win, and the bound that says so never drops the pair the full search
+names. A pair's score is its nested held-out chi2 (>= 0) plus both choices' freedom, so against a named pair of score
+``top`` a first cause whose choice alone costs ``top`` has nothing to search, and a second cause whose choice does
+with the first's is not fitted on top of it (it still counts in the pair's freedom); on a fleet's unit the first
+cause its scatter takes is searched first, and its named pair bounds the firsts before it. The frame: a loose support
+and a stiffer material (the FE frame's own modes, no noise)."""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
+
+from simulator.config import FrameConfig
+from simulator.fem import FrameModel
+from simulator.physical import FrameVariants
+
+#: the causes fitted (the named pair is the support's and the material's); three of them: every one is counted
+CAUSES = ["support_stiffness", "joint_stiffness", "stiffness_shift"]
+LOOSE = {"loose_supports": ["left:0"], "loose_support_factor": [0.15]}
+STIFFER = 1.04
+
+
+@functools.cache
+def _frame() -> tuple:
+    """The frame with a loose support and its material STIFFER: (its FRFs at the outputs, its modes)."""
+    cfg = FrameConfig.from_dict({"damage": LOOSE})
+    cfg = cfg.with_overrides({"material": {"youngs_modulus_pa": STIFFER * cfg.material.youngs_modulus_pa}})
+    measured = FrameModel.from_config(cfg, _sensor_masses(cfg)).analytic_frf(OUTS, REFS, np.arange(8.0, 500.0, 0.25))
+    return measured, _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
+
+
+@functools.cache
+def _fits() -> list:
+    from analysis.diagnosis.physical import physical_causes
+    from analysis.diagnosis.physical_verdict import FMAX_FACTOR
+
+    _, mm = _frame()
+    return physical_causes(FrameVariants(None, OUTS, REFS), mm, FMAX_FACTOR * float(mm.freq_hz[-1]), CAUSES, processes=1)
+
+
+def _searched() -> tuple:
+    """The single causes fitted and judged as the physical stage does: (simulation, specs, modes, fmax, judge, the
+    support fitted alone at left:0 as a first cause)."""
+    from analysis.diagnosis.compare import line_weights, typical_error_db
+    from analysis.diagnosis.effects import predict
+    from analysis.diagnosis.physical import residuals
+    from analysis.diagnosis.physical_verdict import FMAX_FACTOR, _as_first, _Judge
+    from analysis.diagnosis.verdict import known_processing
+
+    measured, mm = _frame()
+    fv = FrameVariants(None, OUTS, REFS)
+    specs = {c.name: c for c in fv.causes()}
+    fmax = FMAX_FACTOR * float(mm.freq_hz[-1])
+    prior, weights = known_processing(measured), line_weights(measured)
+
+    def frf(changes: list):
+        model = fv.model(None, {}) if not changes else fv.model_of(changes)
+        return predict(model, measured.freq_hz, measured.quantity, prior, outputs=measured.outputs,
+                       references=measured.references)
+
+    f0, P0 = fv.modes(None, {}, fmax)
+    base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
+    judge = _Judge(measured, frf, weights, base, np.zeros(base.size, bool),
+                   typical_error_db(measured, frf([]).H, weights), -60.0)
+    first = _as_first(fv, specs, mm, fmax, "support_stiffness", ("factor_translational", "factor_rotational"), judge,
+                      options=["left:0"])
+    return fv, specs, mm, fmax, judge, first
+
+
+def _fitted_on_top(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The causes fitted from now on (:func:`fit_cause` as the pair search calls it), in turn."""
+    import analysis.diagnosis.physical_verdict as pv
+
+    fitted: list[str] = []
+    real = pv.fit_cause
+
+    def spy(sim: object, cause: object, *a: object, **k: object) -> object:
+        fitted.append(cause.name)  # type: ignore[attr-defined]
+        return real(sim, cause, *a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pv, "fit_cause", spy)
+    return fitted
+
+
+def _pair(c: dict | None) -> tuple:
+    """A judged pair as the search returns it: its causes, parameters, nested held-out chi2, score and freedom."""
+    assert c is not None
+    return (c["_pair"].causes, c["_pair"].params, c["_pair"].cv_per_mode.tolist(), c["_chi2_cv"], c["_over_first"],
+            c["significant"], c["adequate"])
+
+
+def test_a_first_cause_whose_pairs_cannot_beat_a_named_score_makes_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Against a named pair of a score below the support's own choice's freedom (2 ln 3), no pair on top of the support
+    can win whatever its held-out chi2: nothing is fitted on top of it and no pair is refined."""
+    import analysis.diagnosis.physical_pairs as pp
+    import analysis.diagnosis.physical_verdict as pv
+
+    fv, specs, mm, fmax, judge, first = _searched()
+    fitted = _fitted_on_top(monkeypatch)
+    refined: list[object] = []
+
+    def fit_pair(*a: object, **k: object) -> object:
+        refined.append(a)
+        return pp.fit_pair(*a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pv, "fit_pair", fit_pair)
+    assert pv._choice_penalty(specs["support_stiffness"]) > 2.0
+    assert pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False, top=2.0) is None
+    assert fitted == [] and refined == []
+
+
+def test_the_bound_keeps_the_pair_the_full_search_names(monkeypatch: pytest.MonkeyPatch) -> None:
+    """On top of the loose support fitted alone: the full search (no named pair known) names the support with the
+    stiffer material. Given a named score just above that pair's, the joints' cause (its choice's freedom with the
+    support's above the score) is not fitted on top of the support, yet counts in the pair's freedom, and the same
+    pair is named with the same parameters, held-out chi2, score and freedom; given that pair's own score, none is
+    (only a lower score beats a named pair)."""
+    import analysis.diagnosis.physical_verdict as pv
+
+    fv, specs, mm, fmax, judge, first = _searched()
+    full = pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False)
+    assert full is not None and pv._named_pair(full)
+    assert full["_pair"].causes == ("support_stiffness", "stiffness_shift")
+    assert full["_pair"].params[1]["stiffness_factor"] == pytest.approx(STIFFER, rel=1e-3)
+    score = float(full["_chi2_cv"])
+    assert pv._choice_penalty(specs["support_stiffness"]) * 2 > score + 1e-6
+    judge.kept.clear()                  # the second causes fitted on top of the support anew
+    fitted = _fitted_on_top(monkeypatch)
+    bounded = pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False, top=score + 1e-6)
+    assert _pair(bounded) == _pair(full)
+    assert "joint_stiffness" not in fitted and "support_stiffness" not in fitted
+    assert pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False, top=score) is None
+
+
+def test_a_fleets_scatter_cause_is_searched_first_and_bounds_the_firsts_before_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A simulation that names a ``scatter_cause`` (a fleet's unit): among first causes ranked [support, material],
+    the material's is searched first; the support's is still searched, with the named pair found on top of the
+    material as the score to beat; the same two changes are named as in the causes' own order, at a score no worse."""
+    import analysis.diagnosis.physical_verdict as pv
+
+    fv, specs, mm, fmax, judge, first = _searched()
+    fits = _fits()
+    found = [judge.single(specs[f.cause], f) for f in fits]
+    firsts = [c for c in found if c["effect"] == "support_stiffness"] + \
+             [c for c in found if c["effect"] == "stiffness_shift"]
+    for c in firsts:
+        c["significant"] = True
+        c["gain_db"] = max(c["gain_db"], 0.1)
+    plain = pv._second_cause(fv, specs, mm, fmax, fits, firsts, judge, CAUSES)
+
+    class Fleet:
+        """The frame as a fleet's unit sees it: the same answers, and the material's cause its scatter's."""
+        scatter_cause = "stiffness_shift"
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(fv, name)
+
+    searched: list[tuple[str, float]] = []
+    on_top_of = pv._on_top_of
+
+    def spy(*a: object, **k: object) -> object:
+        searched.append((a[4]["_fit"].cause, float(k.get("bound", np.inf))))  # type: ignore[index, arg-type]
+        return on_top_of(*a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pv, "_on_top_of", spy)
+    fleet = pv._second_cause(Fleet(), specs, mm, fmax, fits, firsts, judge, CAUSES)  # type: ignore[arg-type]
+    assert [c for c, _ in searched[:2]] == ["stiffness_shift", "support_stiffness"]
+    assert searched[0][1] == np.inf and np.isfinite(searched[1][1])
+    # the same two changes named (in either order), at a score no worse than the old order's
+    assert plain is not None and fleet is not None
+    for got in (plain, fleet):
+        assert pv._named_pair(got)
+        changes = dict(got["_pair"].changes)
+        assert set(changes) == {"support_stiffness", "stiffness_shift"}
+        assert changes["support_stiffness"]["support"] == "left:0"
+        assert changes["stiffness_shift"]["stiffness_factor"] == pytest.approx(STIFFER, rel=1e-3)
+    assert fleet["_chi2_cv"] <= plain["_chi2_cv"]
