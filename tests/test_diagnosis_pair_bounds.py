@@ -10,6 +10,7 @@ import functools
 
 import numpy as np
 import pytest
+from pair_stage_support import physical_stage
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
 
 from simulator.config import FrameConfig
@@ -43,27 +44,10 @@ def _fits() -> list:
 def _searched() -> tuple:
     """The single causes fitted and judged as the physical stage does: (simulation, specs, modes, fmax, judge, the
     support fitted alone at left:0 as a first cause)."""
-    from analysis.diagnosis.compare import line_weights, typical_error_db
-    from analysis.diagnosis.effects import predict
-    from analysis.diagnosis.physical import residuals
-    from analysis.diagnosis.physical_verdict import FMAX_FACTOR, _as_first, _Judge
-    from analysis.diagnosis.verdict import known_processing
+    from analysis.diagnosis.physical_verdict import _as_first
 
     measured, mm = _frame()
-    fv = FrameVariants(None, OUTS, REFS)
-    specs = {c.name: c for c in fv.causes()}
-    fmax = FMAX_FACTOR * float(mm.freq_hz[-1])
-    prior, weights = known_processing(measured), line_weights(measured)
-
-    def frf(changes: list):
-        model = fv.model(None, {}) if not changes else fv.model_of(changes)
-        return predict(model, measured.freq_hz, measured.quantity, prior, outputs=measured.outputs,
-                       references=measured.references)
-
-    f0, P0 = fv.modes(None, {}, fmax)
-    base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
-    judge = _Judge(measured, frf, weights, base, np.zeros(base.size, bool),
-                   typical_error_db(measured, frf([]).H, weights), -60.0)
+    fv, specs, fmax, judge = physical_stage(measured, mm)
     first = _as_first(fv, specs, mm, fmax, "support_stiffness", ("factor_translational", "factor_rotational"), judge,
                       options=["left:0"])
     return fv, specs, mm, fmax, judge, first

@@ -12,6 +12,7 @@ import json
 
 import numpy as np
 import pytest
+from pair_stage_support import physical_stage
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
 
 from simulator.config import FrameConfig
@@ -31,29 +32,10 @@ RIVAL_SECONDS = ["support_stiffness"]
 def _searched(damage: dict, causes: list) -> tuple:
     """The single causes ``causes`` fitted and judged as the physical stage does (:mod:`physical_verdict`) on the
     frame with ``damage``: (simulation, specs, modes, fmax, fits, found, judge)."""
-    from analysis.diagnosis.compare import line_weights, typical_error_db
-    from analysis.diagnosis.effects import predict
-    from analysis.diagnosis.physical import residuals
-    from analysis.diagnosis.physical_verdict import FMAX_FACTOR, _Judge
-    from analysis.diagnosis.verdict import known_processing
-
     cfg = FrameConfig.from_dict({"damage": damage})
     measured = FrameModel.from_config(cfg, _sensor_masses(cfg)).analytic_frf(OUTS, REFS, np.arange(8.0, 500.0, 0.25))
     mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
-    fv = FrameVariants(None, OUTS, REFS)
-    specs = {c.name: c for c in fv.causes()}
-    fmax = FMAX_FACTOR * float(mm.freq_hz[-1])
-    prior, weights = known_processing(measured), line_weights(measured)
-
-    def frf(changes: list):
-        model = fv.model(None, {}) if not changes else fv.model_of(changes)
-        return predict(model, measured.freq_hz, measured.quantity, prior, outputs=measured.outputs,
-                       references=measured.references)
-
-    f0, P0 = fv.modes(None, {}, fmax)
-    base = np.sum(residuals(mm, f0, P0) ** 2, axis=1)
-    judge = _Judge(measured, frf, weights, base, np.zeros(base.size, bool),
-                   typical_error_db(measured, frf([]).H, weights), -60.0)
+    fv, specs, fmax, judge = physical_stage(measured, mm)
     fits = copy.deepcopy(_single_fits(json.dumps(damage, sort_keys=True), tuple(causes)))
     found = [judge.single(specs[f.cause], f) for f in fits]
     return fv, specs, mm, fmax, fits, found, judge
