@@ -165,14 +165,16 @@ def probe_refine(case: dict, fv: FrameVariants) -> list[str]:
     spec = {c.name: c for c in fv.causes()}["added_mass"]
     out = [f"{case['name']} {case['place']}: {case['mass_kg']} kg, span {case['span_m']} m along {case['span_axis']}, "
            f"section {case['section_m']} m; modes {np.round(mm.freq_hz, 1).tolist()} Hz"]
-    rows = []
+    rows: list[tuple[tuple[str, ...], np.ndarray]] = []
     every = np.ones(mm.freq_hz.size, bool)
     # the mass alone searched over every node as the diagnosis does; each refinement from that fit at its node
-    p, chi2, ranked = fit_cause(fv, spec, ("mass_kg",), mm, every, FMAX_HZ)  # type: ignore[arg-type]
+    p, chi2, ranked = fit_cause(fv, spec, ("mass_kg",), mm, every, FMAX_HZ)
     nested = [q for _, _, q in ranked]
-    for free in [("mass_kg",)] + [("mass_kg", x) for x in ("inertia_factor", "inertia_x", "inertia_y", "inertia_z")]:
+    frees: list[tuple[str, ...]] = [("mass_kg",)]
+    frees += [("mass_kg", x) for x in ("inertia_factor", "inertia_x", "inertia_y", "inertia_z")]
+    for free in frees:
         if len(free) > 1:
-            p, chi2, ranked = fit_cause(fv, spec, free, mm, every, FMAX_HZ, nested=nested)  # type: ignore[arg-type]
+            p, chi2, ranked = fit_cause(fv, spec, free, mm, every, FMAX_HZ, nested=nested)
         cv = _held_out(fv, spec, free, mm, ranked)
         rows.append((free, cv))
         out.append(f"  {' + '.join(free)}: {p['point']}, {', '.join(f'{k} {p[k]:.3f}' for k in free)}; chi2 {chi2:.2f}; held out "

@@ -8,7 +8,7 @@ it ``right``; a null is right when its verdict is ``none`` (a miss there is a fa
 its defective units (named with kind and place, no other local cause) and its good units given a local cause.
 
     python benchmarks/studies/diagnosis_holdout_summary.py benchmarks/studies/diagnosis_*_seed1206.results.json ...
-    # --out FILE: write the summary there (replaced whole) as well as printing it
+    # --write: the summary replaces diagnosis_holdout_summary.md beside this script (with the command line)
 """
 from __future__ import annotations
 
@@ -22,7 +22,10 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from analysis.atomic import write_text_atomic  # noqa: E402
+from benchmarks.results import add_write_option, recorded  # noqa: E402
+
+#: this script's results file (``--write`` replaces it with the run's summary)
+RESULTS = Path(__file__).with_name("diagnosis_holdout_summary.md")
 
 
 def _truth(r: dict) -> str:
@@ -96,12 +99,10 @@ def summary(files: list[Path]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("results", nargs="+", help="results files of hold-out runs (CASES[.LABEL].results.json)")
-    ap.add_argument("--out", help="write the summary to this markdown file as well (replaced whole)")
+    add_write_option(ap, RESULTS)
     args = ap.parse_args()
-    text = summary([Path(p) for p in args.results])
-    print(text, end="")
-    if args.out:
-        write_text_atomic(args.out, text)
+    with recorded(RESULTS, args.write):
+        print(summary([Path(p) for p in args.results]), end="")
 
 
 if __name__ == "__main__":
