@@ -43,7 +43,8 @@ model. A cause with several parameters is also fitted with each subset alone (th
 value, each variant started also from the fits of the variants it contains): nested models, the one that
 predicts best (leave one mode out) wins. A refinement (a parameter that ``requires`` another: a mass's
 rotary inertia, about every axis or one) is freed one at a time on top of the best variant, at the options
-that variant fitted, and kept only when it predicts the held-out modes ``physical_min_gain_db`` better.
+that variant fitted, and kept only when it predicts the held-out modes ``physical_min_gain_db`` better; one mode
+that neither predicts when it is held out is left out of that comparison (:func:`refinement_gain_db`).
 
 Cross-validation: leave one mode out. Each measured mode is predicted by the cause fitted to the
 other modes (the choice searched again inside the fold among the ``N_SCREEN_FOLD`` best options of the
@@ -85,6 +86,7 @@ __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "Phy
            "fit_cause", "held_out_reaches", "kept_fit", "variants", "physical_causes", "paired_well", "same_structure",
            "FREQ_FLOOR",
            "MAC_TOL", "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
+           "LOST_MODE_CHI2", "MODE_CHI2_MAX", "lost_modes", "refinement_gain_db",
            "gain_db"]
 
 FREQ_FLOOR = 0.002
@@ -92,6 +94,10 @@ MAC_TOL = 0.1
 #: Residuals are bounded smoothly by this (``c tanh(r / c)``): one mode the fit could not resolve (a close
 #: pair merged by the window's damping, a spurious peak) counts as a large error, not as all of them.
 RESIDUAL_CAP = 10.0
+#: A held-out mode with at least this chi2 is not predicted (its residuals near the cap: unpaired, or paired far off).
+LOST_MODE_CHI2 = 0.5 * RESIDUAL_CAP ** 2
+#: The most chi2 one mode can hold (its frequency and its shape residual, each at most the cap).
+MODE_CHI2_MAX = 2.0 * RESIDUAL_CAP ** 2
 N_SCREEN = 5
 #: Options searched again inside each leave-one-mode-out fold (the best of the full fit).
 N_SCREEN_FOLD = 3
@@ -805,7 +811,8 @@ def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, 
     :func:`fit_cause`'s ``nested``) and cross-validated; the one with the least held-out chi2. Then its
     refinements (parameters that ``require`` one of its free parameters: a mass's rotary inertia about X, Y, Z),
     one parameter more at a time: the best variant with one refinement more replaces the current one only when it
-    predicts the held-out modes ``rule.physical_min_gain_db`` better and none of its parameters stops at an edge of its range.
+    predicts the held-out modes ``rule.physical_min_gain_db`` better (:func:`refinement_gain_db`) and none of its
+    parameters stops at an edge of its range.
     A refinement refines the current fit where it was made: its choice is searched among the options the current
     variant fitted (every option whose chi2 could come below that variant's best, :func:`fit_cause`).
 
@@ -828,15 +835,44 @@ def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, 
     while best is not None:
         more = [s.name for s in cause.params if s.requires in best.free and s.name not in best.free]
         # one refinement more must bring the held-out chi2 physical_min_gain_db below the current's: its chi2 on all modes too
-        bar = best.chi2_cv * 10 ** (-rule.physical_min_gain_db / 10)
+        bar = _refinement_bar(best.cv_per_mode, rule)
         frees = [tuple(n for n in (s.name for s in cause.params) if n in best.free or n == extra) for extra in more]
         for free in frees:
             fit(free, bar)
         refined = _best_of(sim, cause, mm, fmax, [fits[v] for v in frees if v in fits], bar)
-        if refined is None or refined.at_edge or gain_db(best.cv_per_mode, refined.cv_per_mode) < rule.physical_min_gain_db:
+        if (refined is None or refined.at_edge
+                or refinement_gain_db(best.cv_per_mode, refined.cv_per_mode) < rule.physical_min_gain_db):
             break
         best = refined
     return best
+
+
+def lost_modes(cv: np.ndarray) -> np.ndarray:
+    """Mask of the held-out modes not predicted: chi2 (per mode, held out) at least :data:`LOST_MODE_CHI2`."""
+    return np.asarray(cv) >= LOST_MODE_CHI2
+
+
+def refinement_gain_db(current: np.ndarray, refined: np.ndarray) -> float:
+    """How much better (dB) a refined variant predicts the held-out modes than the current one (``current``,
+    ``refined``: held-out chi2 per mode). One mode that neither predicts when it is held out (:func:`lost_modes` in
+    both) is left out: it says nothing about which predicts better, and a mode only the refinement gives rise to (a
+    heavy block's rotary inertia about one axis makes a mode the point mass has not) is such a mode, its own fold
+    having no other witness of the refinement; its capped chi2 would drown the other modes' gain. Several such modes
+    are all counted (the refinement explains none of them)."""
+    both = lost_modes(current) & lost_modes(refined)
+    keep = ~both if int(both.sum()) == 1 else np.ones(np.size(current), bool)
+    return gain_db(np.asarray(current)[keep], np.asarray(refined)[keep])
+
+
+def _refinement_bar(current: np.ndarray, rule: DecisionRule) -> float:
+    """The most held-out chi2 (all modes) with which a refinement can beat the current variant (held-out chi2 per
+    mode ``current``) by :func:`refinement_gain_db`: ``rule.physical_min_gain_db`` below the current's sum, or, with a
+    mode the current variant loses, below the sum without that mode plus the most that mode can hold."""
+    scale = 10 ** (-rule.physical_min_gain_db / 10)
+    lost = np.asarray(current)[lost_modes(current)]
+    if lost.size == 0:
+        return float(np.sum(current)) * scale
+    return max(float(np.sum(current)) * scale, (float(np.sum(current)) - float(lost.min())) * scale + MODE_CHI2_MAX)
 
 
 def _fitted_params(fit: PhysicalFit) -> list[dict]:

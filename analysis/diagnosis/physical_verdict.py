@@ -49,13 +49,14 @@ from .effects import predict
 from .next_measurement import pair_rivals, propose, rivals
 from .param_range import pair_ranges, supported_ranges
 from .physical import (
-    RESIDUAL_CAP,
+    MODE_CHI2_MAX,
     CauseSpec,
     MeasuredModes,
     PhysicalFit,
     PhysicalSimulation,
     fit_cause,
     gain_db,
+    lost_modes,
     pair,
     paired_well,
     physical_causes,
@@ -458,7 +459,7 @@ class _Judge:
     kept: dict = field(default_factory=dict)
 
     def _counted(self, cv: np.ndarray) -> np.ndarray:
-        lost = self.far & (cv >= 0.5 * RESIDUAL_CAP ** 2)
+        lost = self.far & lost_modes(cv)
         return ~lost if lost.sum() <= 1 else np.ones(cv.size, bool)
 
     def judge(self, changes: list, cv: np.ndarray, at_edge: tuple) -> dict:
@@ -482,10 +483,10 @@ class _Judge:
         """The most held-out chi2 (summed over all modes) with which a candidate can be named: significant (its
         gain over the unchanged frame's chi2 at least ``rule.physical_min_gain_db``) and adequate (at most
         ``rule.discrepancy_chi2`` per counted mode); with a mode the unchanged frame does not pair, the one mode
-        :meth:`_counted` may leave out (at most ``2 RESIDUAL_CAP^2``) on top."""
+        :meth:`_counted` may leave out (at most :data:`MODE_CHI2_MAX`) on top."""
         K = self.base.size
         most = min(float(np.sum(self.base)) * 10 ** (-self.rule.physical_min_gain_db / 10), self.rule.discrepancy_chi2 * K)
-        return most + (2.0 * RESIDUAL_CAP ** 2 if bool(np.any(self.far)) else 0.0)
+        return most + (MODE_CHI2_MAX if bool(np.any(self.far)) else 0.0)
 
     def evidence(self, name: str, shown: str, cv: np.ndarray, c: dict, at_edge: tuple) -> str:
         edge = f"; at the edge of its range: {', '.join(at_edge)}" if at_edge else ""

@@ -13,11 +13,18 @@ diagnosis minimises; measured modes hold about one unit of chi2 per mode of nois
 * ``block CASES NAME...``: an attached block's mass fitted by ``added_mass`` at its node with the rotary
   inertia about Y fixed at several multiples of the cube's: how far the modes pin the mass when the inertia is
   not known.
+* ``refine CASES NAME...``: an attached block fitted by ``added_mass`` at its node with the mass alone and with
+  the mass and each rotary-inertia factor, on the block frame's ten lowest noise-free modes (as the diagnosis
+  uses): chi2 on all modes and held out per mode (leave one mode out, refitted from the full fit), and the
+  held-out gain of the best refinement over the mass alone summed over all modes and as the diagnosis compares
+  them (:func:`analysis.diagnosis.physical.refinement_gain_db`: without one mode neither predicts).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/studies/diagnosis_holdout_probes.py section \\
         benchmarks/studies/diagnosis_one_place_holdout_seed70.json
     OPENBLAS_NUM_THREADS=1 python benchmarks/studies/diagnosis_holdout_probes.py block \\
         benchmarks/studies/diagnosis_attached_block_holdout_seed72.json attached_block-02
+    OPENBLAS_NUM_THREADS=1 python benchmarks/studies/diagnosis_holdout_probes.py refine \
+        benchmarks/studies/diagnosis_attached_block_holdout_seed1207.json attached_block-09
 """
 from __future__ import annotations
 
@@ -38,7 +45,15 @@ import numpy as np  # noqa: E402
 from diagnosis_one_place import POINTS, block_toml, frame  # noqa: E402
 from scipy.optimize import least_squares, minimize_scalar  # noqa: E402
 
-from analysis.diagnosis.physical import MeasuredModes, residuals  # noqa: E402
+from analysis.diagnosis.physical import (  # noqa: E402
+    MAX_MODES,
+    N_SCREEN_FOLD,
+    MeasuredModes,
+    fit_cause,
+    gain_db,
+    refinement_gain_db,
+    residuals,
+)
 from simulator.config import FrameConfig  # noqa: E402
 from simulator.fem import FrameModel, section_properties  # noqa: E402
 from simulator.physical import FrameVariants  # noqa: E402
@@ -128,6 +143,49 @@ def probe_block(case: dict, fv: FrameVariants, inertia_y: Sequence[float] = (0.2
     return out
 
 
+def _held_out(fv: FrameVariants, spec: object, free: tuple, mm: MeasuredModes, ranked: list) -> np.ndarray:
+    """Held-out chi2 of each mode as the diagnosis has it: the cause refitted on the other modes at the
+    ``N_SCREEN_FOLD`` best nodes of the full fit (``ranked``), each from its full fit."""
+    options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]]
+    starts = {o: q for _, o, q in ranked}
+    out = np.empty(mm.freq_hz.size)
+    for k in range(mm.freq_hz.size):
+        sel = np.arange(mm.freq_hz.size) != k
+        p, _, _ = fit_cause(fv, spec, free, mm, sel, FMAX_HZ, options, starts)  # type: ignore[arg-type]
+        out[k] = float(np.sum(residuals(mm, *fv.modes("added_mass", p, FMAX_HZ))[k] ** 2))
+    return out
+
+
+def probe_refine(case: dict, fv: FrameVariants) -> list[str]:
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "frame.toml"
+        path.write_text(block_toml(case, frame()))
+        mm = measured(FrameConfig.load(path))
+    mm = mm.subset(np.arange(mm.freq_hz.size) < MAX_MODES)
+    spec = {c.name: c for c in fv.causes()}["added_mass"]
+    out = [f"{case['name']} {case['place']}: {case['mass_kg']} kg, span {case['span_m']} m along {case['span_axis']}, "
+           f"section {case['section_m']} m; modes {np.round(mm.freq_hz, 1).tolist()} Hz"]
+    rows: list[tuple[tuple[str, ...], np.ndarray]] = []
+    every = np.ones(mm.freq_hz.size, bool)
+    # the mass alone searched over every node as the diagnosis does; each refinement from that fit at its node
+    p, chi2, ranked = fit_cause(fv, spec, ("mass_kg",), mm, every, FMAX_HZ)
+    nested = [q for _, _, q in ranked]
+    frees: list[tuple[str, ...]] = [("mass_kg",)]
+    frees += [("mass_kg", x) for x in ("inertia_factor", "inertia_x", "inertia_y", "inertia_z")]
+    for free in frees:
+        if len(free) > 1:
+            p, chi2, ranked = fit_cause(fv, spec, free, mm, every, FMAX_HZ, nested=nested)
+        cv = _held_out(fv, spec, free, mm, ranked)
+        rows.append((free, cv))
+        out.append(f"  {' + '.join(free)}: {p['point']}, {', '.join(f'{k} {p[k]:.3f}' for k in free)}; chi2 {chi2:.2f}; held out "
+                   f"{cv.sum():.1f} per mode {np.round(cv, 2).tolist()}")
+    base = rows[0][1]
+    best = min(rows[1:], key=lambda r: float(r[1].sum()))
+    out.append(f"  best refinement {best[0][1]}: held-out gain over the mass alone {gain_db(base, best[1]):.1f} dB over "
+               f"all modes, {refinement_gain_db(base, best[1]):.1f} dB as compared (one mode neither predicts left out)")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -136,6 +194,9 @@ def main() -> None:
     b = sub.add_parser("block", help="an attached block's mass against its rotary inertia")
     b.add_argument("cases")
     b.add_argument("names", nargs="+")
+    r = sub.add_parser("refine", help="an attached block: the mass alone against each rotary-inertia refinement")
+    r.add_argument("cases")
+    r.add_argument("names", nargs="+")
     args = ap.parse_args()
     base = FrameConfig.load()
     fv = FrameVariants(None, _outputs(base), list(POINTS))
@@ -143,6 +204,9 @@ def main() -> None:
     if args.cmd == "section":
         todo = [c for c in cases.values() if c["family"] == "section_change"]
         lines: Callable[[dict], list[str]] = lambda c: probe_section(c, base, fv)  # noqa: E731
+    elif args.cmd == "refine":
+        todo = [cases[n] for n in args.names]
+        lines = lambda c: probe_refine(c, fv)  # noqa: E731
     else:
         todo = [cases[n] for n in args.names]
         lines = lambda c: probe_block(c, fv)  # noqa: E731
