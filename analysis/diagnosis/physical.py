@@ -777,27 +777,10 @@ def held_out_reaches(done: np.ndarray, least_rest: np.ndarray, target: float) ->
     return bool(np.sum(done) + np.sum(least_rest) >= target)
 
 
-def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
-                    options: Sequence[str] | None, start: dict, fit: Mapping | None = None,
-                    below: float = np.inf) -> np.ndarray | None:
-    """Held-out chi2 of each measured mode (leave one mode out, everything refitted in the fold); None when it
-    cannot come below ``below`` (:func:`held_out_reaches` before each fold, from the modes' chi2 at ``fit``, the
-    parameters of the least chi2 on all modes)."""
-    K = mm.freq_hz.size
-    out = np.empty(K)
-    least = np.zeros(K)
-    if fit is not None and np.isfinite(below):
-        least = np.sum(residuals(mm, *sim.modes(cause.name, fit, fmax)) ** 2, axis=1)
-    for k in range(K):
-        out[k] = _held_out(sim, cause, free, mm, fmax, options, start, k)
-        if held_out_reaches(out[:k + 1], least[k + 1:], below):
-            return None
-    return out
-
-
 def _held_out(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
               options: Sequence[str] | None, start: dict, k: int) -> float:
-    """One fold of :func:`_cross_validate`: the held-out chi2 of mode ``k``, the cause refitted on the other modes."""
+    """One fold of the cross-validation (leave one mode out): the held-out chi2 of mode ``k``, the cause refitted on the
+    other modes (the choice searched again among ``options``, each from its fit on all modes in ``start``)."""
     sel = np.ones(mm.freq_hz.size, bool)
     sel[k] = False
     p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, start)
@@ -859,9 +842,10 @@ def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax:
     each mode's chi2 at its fit on all modes (:func:`held_out_reaches`; before any fold, its chi2 on all modes), and
     the next fold is always the one of the variant with the least bound (the lower chi2 on all modes first among
     equal bounds). A variant whose folds are all done then has the least held-out chi2 of all: every other one's is
-    at least its bound, which is not below it; its folds are those :func:`_cross_validate` makes, so it is the same
+    at least its bound, which is not below it; each fold is made alone (:func:`_held_out`), so it is the same
     variant with the same held-out chi2 as when each variant is cross-validated in turn with the best so far as its
-    limit, and the folds of a variant that cannot win stop as soon as its bound passes the least one's
+    limit (both rest on the same bound, :func:`held_out_reaches`, which holds where each fit on all modes is the
+    least chi2 there; where a fold finds a lower one, either order may keep another variant), and the folds of a variant that cannot win stop as soon as its bound passes the least one's
     (before, a variant with a low chi2 on all modes that predicts the held-out modes worse than a simpler one was
     cross-validated to its end first, and the simpler one after it)."""
     K = mm.freq_hz.size
