@@ -845,9 +845,9 @@ def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax:
     at least its bound, which is not below it; each fold is made alone (:func:`_held_out`), so it is the same
     variant with the same held-out chi2 as when each variant is cross-validated in turn with the best so far as its
     limit (both rest on the same bound, :func:`held_out_reaches`, which holds where each fit on all modes is the
-    least chi2 there; where a fold finds a lower one, either order may keep another variant), and the folds of a variant that cannot win stop as soon as its bound passes the least one's
-    (before, a variant with a low chi2 on all modes that predicts the held-out modes worse than a simpler one was
-    cross-validated to its end first, and the simpler one after it)."""
+    least chi2 there; where a fold finds a lower one, either order may keep another variant). The folds of a
+    variant that cannot win stop as soon as its bound passes the least one's: a variant with a low chi2 on all modes
+    that predicts the held-out modes worse than a simpler one is not cross-validated to its end first."""
     K = mm.freq_hz.size
     runs: list[tuple[PhysicalFit, list[str] | None, dict, np.ndarray, list[float]]] = []
     for fit in sorted(fits, key=lambda f: f.chi2):
