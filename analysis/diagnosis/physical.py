@@ -783,26 +783,15 @@ def held_out_reaches(done: np.ndarray, least_rest: np.ndarray, target: float) ->
     return bool(np.sum(done) + np.sum(least_rest) >= target)
 
 
-def _cross_validate(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
-                    options: Sequence[str] | None, start: dict, fit: Mapping | None = None,
-                    below: float = np.inf) -> np.ndarray | None:
-    """Held-out chi2 of each measured mode (leave one mode out, everything refitted in the fold); None when it
-    cannot come below ``below`` (:func:`held_out_reaches` before each fold, from the modes' chi2 at ``fit``, the
-    parameters of the least chi2 on all modes)."""
-    K = mm.freq_hz.size
-    out = np.empty(K)
-    least = np.zeros(K)
-    if fit is not None and np.isfinite(below):
-        least = np.sum(residuals(mm, *sim.modes(cause.name, fit, fmax)) ** 2, axis=1)
-    for k in range(K):
-        sel = np.ones(K, bool)
-        sel[k] = False
-        p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, start)
-        f, P = sim.modes(cause.name, p, fmax)
-        out[k] = float(np.sum(residuals(mm, f, P)[k] ** 2))
-        if held_out_reaches(out[:k + 1], least[k + 1:], below):
-            return None
-    return out
+def _held_out(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
+              options: Sequence[str] | None, start: dict, k: int) -> float:
+    """One fold of the cross-validation (leave one mode out): the held-out chi2 of mode ``k``, the cause refitted on the
+    other modes (the choice searched again among ``options``, each from its fit on all modes in ``start``)."""
+    sel = np.ones(mm.freq_hz.size, bool)
+    sel[k] = False
+    p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, start)
+    f, P = sim.modes(cause.name, p, fmax)
+    return float(np.sum(residuals(mm, f, P)[k] ** 2))
 
 
 def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
@@ -883,23 +872,42 @@ def _fitted_params(fit: PhysicalFit) -> list[dict]:
 def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
              fits: Sequence[PhysicalFit], bar: float) -> PhysicalFit | None:
     """Of the fitted variants ``fits``, cross-validated, the one with the least held-out chi2 below ``bar``
-    (None: none can be). They are taken by their chi2 on all modes, and one whose chi2 there is not below the
-    best held-out chi2 so far (or ``bar``) is left out (:func:`_best_variant`: its held-out chi2 cannot be)."""
-    best: PhysicalFit | None = None
+    (None: none can be).
+
+    Best first: each variant's held-out chi2 is bounded from below by its folds done plus, for the folds to come,
+    each mode's chi2 at its fit on all modes (:func:`held_out_reaches`; before any fold, its chi2 on all modes), and
+    the next fold is always the one of the variant with the least bound (the lower chi2 on all modes first among
+    equal bounds). A variant whose folds are all done then has the least held-out chi2 of all: every other one's is
+    at least its bound, which is not below it; each fold is made alone (:func:`_held_out`), so it is the same
+    variant with the same held-out chi2 as when each variant is cross-validated in turn with the best so far as its
+    limit (both rest on the same bound, :func:`held_out_reaches`, which holds where each fit on all modes is the
+    least chi2 there; where a fold finds a lower one, either order may keep another variant). The folds of a
+    variant that cannot win stop as soon as its bound passes the least one's: a variant with a low chi2 on all modes
+    that predicts the held-out modes worse than a simpler one is not cross-validated to its end first."""
+    K = mm.freq_hz.size
+    runs: list[tuple[PhysicalFit, list[str] | None, dict, np.ndarray, list[float]]] = []
     for fit in sorted(fits, key=lambda f: f.chi2):
-        if fit.chi2 >= min(bar, np.inf if best is None else best.chi2_cv):
+        if fit.chi2 >= bar:
             break
         options = [o for _, o, _ in fit.ranked[:N_SCREEN_FOLD]] if fit.ranked else None
         starts = {o: q for _, o, q in fit.ranked} if fit.ranked else fit.params
-        # a variant whose held-out chi2 cannot come below the best so far (or ``bar``) is not chosen: its folds stop
-        cv = _cross_validate(sim, cause, fit.free, mm, fmax, options, starts, fit.params,
-                             min(bar, np.inf if best is None else best.chi2_cv))
-        if cv is None:
-            continue
-        done = replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=cause.at_edge(fit.params, fit.free))
-        if best is None or done.chi2_cv < best.chi2_cv:
-            best = done
-    return best
+        least = np.sum(residuals(mm, *sim.modes(cause.name, fit.params, fmax)) ** 2, axis=1)
+        runs.append((fit, options, starts, least, []))
+
+    def bound(run: tuple) -> float:
+        done, least = run[4], run[3]
+        return float(np.sum(done) + np.sum(least[len(done):]))
+
+    while runs:
+        i = min(range(len(runs)), key=lambda j: (bound(runs[j]), j))
+        fit, options, starts, _, done = runs[i]
+        if held_out_reaches(np.asarray(done), runs[i][3][len(done):], bar):
+            return None                 # no variant's held-out chi2 can come below ``bar``
+        if len(done) == K:
+            cv = np.array(done)
+            return replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=cause.at_edge(fit.params, fit.free))
+        done.append(_held_out(sim, cause, fit.free, mm, fmax, options, starts, len(done)))
+    return None
 
 
 def physical_causes(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float,

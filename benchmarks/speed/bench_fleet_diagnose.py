@@ -22,7 +22,8 @@ and with ``--ways both`` first also
 
 The table gives each flagged unit's diagnosis CPU and wall time (s) against the fits' CPU time per unit, the CPU
 of its two stages (every cause alone at every place, cross-validated: ``one cause``; the search of a second
-cause on top of the first: ``pair search``; the rest, the unit's modal fit and its FRFs, is the difference), and the
+cause on top of the first: ``pair search``; the rest, the unit's modal fit and its FRFs, is the difference; of the one
+cause stage, its held-out folds, each mode left out and a cause's variant fitted again without it: ``of which folds``), and the
 simulation's solves for it (candidates' modes solved in a reduced space, on the full model, with their
 derivatives; reduced bases built); with both ways, whether they name the same causes with the same parameters
 (1e-6). On a busy machine the wall time also counts the waiting, and the CPU time grows a little with the load
@@ -110,6 +111,7 @@ def count_solves() -> dict[str, int]:
 
 #: the diagnosis' stages timed per unit: (module, function, column)
 _STAGES = (("analysis.diagnosis.physical_verdict", "physical_causes", "one cause CPU (s)"),
+           ("analysis.diagnosis.physical", "_held_out", "of which folds CPU (s)"),
            ("analysis.diagnosis.physical_verdict", "_pair_search", "pair search CPU (s)"))
 
 
