@@ -86,7 +86,7 @@ __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "Phy
            "fit_cause", "held_out_reaches", "kept_fit", "variants", "physical_causes", "paired_well", "same_structure",
            "FREQ_FLOOR",
            "MAC_TOL", "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
-           "LOST_MODE_CHI2", "MODE_CHI2_MAX", "lost_modes", "refinement_gain_db",
+           "LOST_MODE_CHI2", "MODE_CHI2_MAX", "lost_modes", "counted_modes", "refinement_gain_db",
            "gain_db"]
 
 FREQ_FLOOR = 0.002
@@ -841,6 +841,14 @@ def lost_modes(cv: np.ndarray) -> np.ndarray:
     return np.asarray(cv) >= LOST_MODE_CHI2
 
 
+def counted_modes(lost: np.ndarray) -> np.ndarray:
+    """Mask of the held-out modes a comparison counts, given the mask ``lost`` of those it may leave out (modes no
+    fit predicts, :func:`lost_modes`): all but the lost one when exactly one is lost; all when none or several are
+    (several lost modes say the fit explains none of them, so each counts)."""
+    lost = np.asarray(lost, bool)
+    return ~lost if int(lost.sum()) == 1 else np.ones(lost.size, bool)
+
+
 def refinement_gain_db(current: np.ndarray, refined: np.ndarray) -> float:
     """How much better (dB) a refined variant predicts the held-out modes than the current one (``current``,
     ``refined``: held-out chi2 per mode). One mode that neither predicts when it is held out (:func:`lost_modes` in
@@ -848,8 +856,7 @@ def refinement_gain_db(current: np.ndarray, refined: np.ndarray) -> float:
     heavy block's rotary inertia about one axis makes a mode the point mass has not) is such a mode, its own fold
     having no other witness of the refinement; its capped chi2 would drown the other modes' gain. Several such modes
     are all counted (the refinement explains none of them)."""
-    both = lost_modes(current) & lost_modes(refined)
-    keep = ~both if int(both.sum()) == 1 else np.ones(np.size(current), bool)
+    keep = counted_modes(lost_modes(current) & lost_modes(refined))
     return gain_db(np.asarray(current)[keep], np.asarray(refined)[keep])
 
 

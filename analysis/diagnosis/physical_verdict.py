@@ -54,6 +54,7 @@ from .physical import (
     MeasuredModes,
     PhysicalFit,
     PhysicalSimulation,
+    counted_modes,
     fit_cause,
     gain_db,
     lost_modes,
@@ -459,8 +460,7 @@ class _Judge:
     kept: dict = field(default_factory=dict)
 
     def _counted(self, cv: np.ndarray) -> np.ndarray:
-        lost = self.far & lost_modes(cv)
-        return ~lost if lost.sum() <= 1 else np.ones(cv.size, bool)
+        return counted_modes(self.far & lost_modes(cv))
 
     def judge(self, changes: list, cv: np.ndarray, at_edge: tuple) -> dict:
         ext = self.frf(changes)
