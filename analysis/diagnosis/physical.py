@@ -864,7 +864,7 @@ def _refinement_bar(current: np.ndarray, rule: DecisionRule) -> float:
     """The most held-out chi2 (all modes) with which a refinement can beat the current variant (held-out chi2 per
     mode ``current``) by :func:`refinement_gain_db`: ``rule.physical_min_gain_db`` below the current's sum, or, with a
     mode the current variant loses, below the sum without that mode plus the most that mode can hold."""
-    scale = 10 ** (-rule.physical_min_gain_db / 10)
+    scale = rule.physical_min_gain_factor
     lost = np.asarray(current)[lost_modes(current)]
     if lost.size == 0:
         return float(np.sum(current)) * scale

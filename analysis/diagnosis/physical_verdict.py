@@ -485,7 +485,7 @@ class _Judge:
         ``rule.discrepancy_chi2`` per counted mode); with a mode the unchanged frame does not pair, the one mode
         :meth:`_counted` may leave out (at most :data:`MODE_CHI2_MAX`) on top."""
         K = self.base.size
-        most = min(float(np.sum(self.base)) * 10 ** (-self.rule.physical_min_gain_db / 10), self.rule.discrepancy_chi2 * K)
+        most = min(float(np.sum(self.base)) * self.rule.physical_min_gain_factor, self.rule.discrepancy_chi2 * K)
         return most + (MODE_CHI2_MAX if bool(np.any(self.far)) else 0.0)
 
     def evidence(self, name: str, shown: str, cv: np.ndarray, c: dict, at_edge: tuple) -> str:
@@ -632,7 +632,7 @@ def _hopeless(best: dict | None, top: float, first: CauseSpec, second: CauseSpec
     one of score ``top`` found elsewhere): a pair's score is its nested held-out chi2 (>= 0) plus both choices'
     freedom (:func:`_choice_penalty`), so with that freedom alone at or above the named score it cannot
     (:func:`_win_target` is then <= 0)."""
-    named_top = min(top, best["_chi2_cv"] if _named_pair(best) else np.inf)    # type: ignore[index]
+    named_top = min(top, _named_score(best))
     return bool(np.isfinite(named_top) and named_top - _choice_penalty(first) - _choice_penalty(second) <= 0.0)
 
 
@@ -903,8 +903,8 @@ def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_al
     (:meth:`_Judge.most_named_chi2`). ``named_only``: only a named pair is of use (the unnamed are not kept)."""
     rule = judge.rule
     nameable = min(first["_alone_chi2"] - own, cv_alone - freedom - rule.quiet_chi2,
-                   cv_alone * 10 ** (-rule.physical_min_gain_db / 10), judge.most_named_chi2())
-    named_top = min(top, best["_chi2_cv"] if _named_pair(best) else np.inf)    # type: ignore[index]
+                   cv_alone * rule.physical_min_gain_factor, judge.most_named_chi2())
+    named_top = min(top, _named_score(best))
     if np.isfinite(named_top) or named_only:
         return float(min(nameable, named_top - penalty))
     return np.inf if best is None else float(max(nameable, best["_chi2_cv"] - penalty))

@@ -118,6 +118,12 @@ class DecisionRule:
         ``z`` the paired z-score (:func:`paired_z`)."""
         return bool(gain >= self.min_gain_db and (z >= self.z_min or gain >= self.strong_gain_db))
 
+    @property
+    def physical_min_gain_factor(self) -> float:
+        """The factor (dimensionless, at most 1) a held-out chi2 must come down by to gain ``physical_min_gain_db``:
+        ``10^(-physical_min_gain_db / 10)`` (a chi2 is a power, :func:`db`)."""
+        return float(10 ** (-self.physical_min_gain_db / 10))
+
     def explained(self, error_db: float, noise_db: float) -> bool:
         """An FRF error (dB) within ``none_margin_db`` of the noise level (dB)."""
         return bool(error_db - noise_db <= self.none_margin_db)
