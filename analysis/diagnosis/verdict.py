@@ -165,6 +165,12 @@ def _jsonable(x: Any) -> Any:
     return x
 
 
+def _held_out_db(before: np.ndarray, after: np.ndarray) -> tuple[float, float, float]:
+    """The held-out errors ``before`` and ``after`` an effect (per line, |H|^2 units) as the verdict reports them:
+    their means in dB (before, after; the gain is their difference) and the paired z-score of the lines."""
+    return db(float(np.mean(before))), db(float(np.mean(after))), paired_z(before, after)
+
+
 def _held_out(ctx: FitContext, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Per line/FRF weighted squared errors (before, after) on held-out lines, both folds. With the
     default folds each is the raveled (n_out, n_ref, n_freq) array of every line's error as predicted by
@@ -218,9 +224,8 @@ def _stage(ctx: FitContext, names: Sequence[str], rule: DecisionRule, trace: lis
             skipped[name] = f"fit failed: {exc}"
             log.info("effect %s skipped: %s", name, exc)
             continue
-        b_db, a_db = db(float(np.mean(before))), db(float(np.mean(after)))
+        b_db, a_db, z = _held_out_db(before, after)
         gain = b_db - a_db
-        z = paired_z(before, after)
         ext = predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **params}),
                       outputs=m.outputs, references=m.references)
         bb = band_errors(m, ctx.sim.H, w)
@@ -290,8 +295,7 @@ def _hum_beside_the_mode(c: dict, ctx: FitContext, rule: DecisionRule, one: dict
     lines = np.broadcast_to(keep, (before.size // keep.size, keep.size)).ravel()
     if before.size != lines.size:
         return False, {}
-    b_db, a_db = db(float(np.mean(before[lines]))), db(float(np.mean(after[lines])))
-    z = paired_z(before[lines], after[lines])
+    b_db, a_db, z = _held_out_db(before[lines], after[lines])
     values = {"gain_off_the_mode_db": b_db - a_db, "z_off_the_mode": z}
     if not rule.significant(b_db - a_db, z):
         return False, values
