@@ -49,6 +49,7 @@ from analysis.diagnosis.physical import (  # noqa: E402
     MAX_MODES,
     N_SCREEN_FOLD,
     MeasuredModes,
+    _held_out,
     fit_cause,
     gain_db,
     refinement_gain_db,
@@ -143,17 +144,13 @@ def probe_block(case: dict, fv: FrameVariants, inertia_y: Sequence[float] = (0.2
     return out
 
 
-def _held_out(fv: FrameVariants, spec: object, free: tuple, mm: MeasuredModes, ranked: list) -> np.ndarray:
+def _cv_per_mode(fv: FrameVariants, spec: object, free: tuple, mm: MeasuredModes, ranked: list) -> np.ndarray:
     """Held-out chi2 of each mode as the diagnosis has it: the cause refitted on the other modes at the
     ``N_SCREEN_FOLD`` best nodes of the full fit (``ranked``), each from its full fit."""
     options = [o for _, o, _ in ranked[:N_SCREEN_FOLD]]
     starts = {o: q for _, o, q in ranked}
-    out = np.empty(mm.freq_hz.size)
-    for k in range(mm.freq_hz.size):
-        sel = np.arange(mm.freq_hz.size) != k
-        p, _, _ = fit_cause(fv, spec, free, mm, sel, FMAX_HZ, options, starts)  # type: ignore[arg-type]
-        out[k] = float(np.sum(residuals(mm, *fv.modes("added_mass", p, FMAX_HZ))[k] ** 2))
-    return out
+    return np.array([_held_out(fv, spec, free, mm, FMAX_HZ, options, starts, k)  # type: ignore[arg-type]
+                     for k in range(mm.freq_hz.size)])
 
 
 def probe_refine(case: dict, fv: FrameVariants) -> list[str]:
@@ -175,7 +172,7 @@ def probe_refine(case: dict, fv: FrameVariants) -> list[str]:
     for free in frees:
         if len(free) > 1:
             p, chi2, ranked = fit_cause(fv, spec, free, mm, every, FMAX_HZ, nested=nested)
-        cv = _held_out(fv, spec, free, mm, ranked)
+        cv = _cv_per_mode(fv, spec, free, mm, ranked)
         rows.append((free, cv))
         out.append(f"  {' + '.join(free)}: {p['point']}, {', '.join(f'{k} {p[k]:.3f}' for k in free)}; chi2 {chi2:.2f}; held out "
                    f"{cv.sum():.1f} per mode {np.round(cv, 2).tolist()}")
