@@ -34,7 +34,7 @@ appended to :attr:`PhysicalOutcome.trace` in order.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -538,8 +538,16 @@ def _leading(sim: PhysicalSimulation, ranked: list[PhysicalFit], n: int | None) 
     return ranked[:n] + [f for f in ranked[n:] if f.cause == scatter] if n is not None else ranked
 
 
+def _on_top_specs(causes: Iterable[CauseSpec], first: PhysicalFit, names: Sequence[str] | None) -> list[CauseSpec]:
+    """The second causes on top of ``first`` (:func:`besides`: each of ``causes`` at the options ``first`` leaves),
+    among ``names`` (None: all), in the order of ``causes``."""
+    on = (besides(c, [(first.cause, first.params)]) for c in causes)
+    return [spec for spec in on if spec is not None and (names is None or spec.name in names)]
+
+
 def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first: PhysicalFit,
-                 names: Sequence[str] | None, kept: dict, hopeless: Any = None, n: int = N_SECOND
+                 names: Sequence[str] | None, kept: dict, hopeless: Callable[[CauseSpec], bool] | None = None,
+                 n: int = N_SECOND
                  ) -> tuple[list[PhysicalFit], list[str]]:
     """Every other cause (among ``names``) fitted on top of ``first`` on all modes, each nested variant; the best
     variant of each cause by chi2 plus its freedom, best first (:func:`_seconds`). Each cause's best is kept in
@@ -552,8 +560,7 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
     changed = [(first.cause, first.params)]
     top: OnTop | None = None
     allsel = np.ones(mm.freq_hz.size, bool)
-    on = [spec for spec in (besides(c, changed) for c in sim.causes())     # OnTop.causes
-          if spec is not None and (names is None or spec.name in names)]
+    on = _on_top_specs(sim.causes(), first, names)                          # OnTop.causes
     ranked: list[tuple[int, float, PhysicalFit]] = []
     # the causes that cannot win last, those of fewer options first: the ranks of those fitted may spare the others
     later = [] if hopeless is None else sorted((i for i, spec in enumerate(on) if hopeless(spec)),
@@ -613,10 +620,10 @@ class _Later:
     ``make()`` gives them, each ``(bound, first, second)``, the second cause among ``causes``."""
 
     causes: tuple[str, ...]
-    make: Any
+    make: Callable[[], list]
 
 
-def _expanded(items: Sequence, skip: Any) -> Any:
+def _expanded(items: Sequence, skip: Callable[[_Later], bool]) -> Iterator:
     """The pairs of ``items`` in turn, each :class:`_Later` group replaced by the pairs it makes when reached,
     unless ``skip(group)`` says none of them could win then (the search's state at that point)."""
     for item in items:
@@ -927,8 +934,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     Unlike ``top`` it does not lower the target a pair's refined chi2 must come below (a pair refined at its first
     choices may still be chosen again to a better one)."""
     fa: PhysicalFit = first["_fit"]
-    on = [spec for spec in (besides(c, [(fa.cause, fa.params)]) for c in specs.values()) if spec is not None
-          and (names is None or spec.name in names)]
+    on = _on_top_specs(specs.values(), fa, names)
     bound = min(bound, top)
     if all(_hopeless(None, bound, specs[fa.cause], spec) for spec in [*on, specs[fa.cause]]):
         return None                         # no pair on top of it can beat the named score ``bound`` (:func:`_hopeless`)
