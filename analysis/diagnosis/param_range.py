@@ -153,6 +153,9 @@ class _Joined:
         return list(zip(self.names, out))
 
     def modes(self, cause: str | None, params: Mapping, max_freq_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        """The simulation's modes (natural frequencies in Hz, shapes at the measured points) up to
+        ``max_freq_hz`` (Hz) with every cause's change of the joined ``params`` applied; ``cause`` is unused (the
+        joined cause is the only one)."""
         return changes_of(self.sim, self.split(params), max_freq_hz)
 
     def modes_jac_of(self, changes: Sequence[tuple[str, Mapping]], max_freq_hz: float,
@@ -168,8 +171,9 @@ def pair_ranges(sim: PhysicalSimulation, specs: Sequence[CauseSpec], pair: PairF
                 within: float) -> list[dict[str, list[float]]]:
     """Per cause of the refined ``pair`` (of the causes ``specs``), ``{name + RANGE: [lo, hi]}`` of each of its free
     parameters that a refinement ``requires`` (the mass of ``added_mass``): :func:`supported_range` of the pair as
-    one cause, every other free parameter of both causes (and the parameter's refinements) refitted at each value;
-    empty dicts when no cause has one."""
+    one cause, every other free parameter of both causes (and the parameter's refinements) refitted at each value,
+    the modes solved up to ``fmax`` (Hz), ``within`` the chi2 above the profile's least (dimensionless); empty dicts
+    when no cause has one."""
     out: list[dict[str, list[float]]] = [{} for _ in specs]
     wanted = [(i, n) for i, (s, free) in enumerate(zip(specs, pair.free)) for n in free if refinements_of(s, n)]
     if not wanted:
