@@ -11,7 +11,7 @@ from ..frf import FRFSet, line_spacing_hz
 from ..modal import ModalModel
 from .effect_types import EffectError, FitContext
 from .effect_types import check_positive as _check_positive
-from .rule import db, paired_z
+from .rule import held_out_db
 
 __all__ = ["HUM_BASES_HZ", "hum_kernels", "mains_hum_applies", "default_hum_width", "apply_mains_hum", "fit_mains_hum",
            "held_out_mains_hum", "held_out_by_harmonics", "carried_by_one_harmonic", "half_power_mode", "off_the_mode"]
@@ -423,8 +423,10 @@ def carried_by_one_harmonic(ctx: FitContext, params: Mapping, before: np.ndarray
     k = int(np.argmax(shares))
     rest = ~near[k]
     b_rest, a_rest = b[..., rest].ravel(), a[..., rest].ravel()
-    gain = db(float(np.mean(b_rest))) - db(float(np.mean(a_rest))) if b_rest.size else 0.0
-    z = paired_z(b_rest, a_rest) if b_rest.size else 0.0
+    gain, z = 0.0, 0.0
+    if b_rest.size:
+        b_db, a_db, z = held_out_db(b_rest, a_rest)
+        gain = b_db - a_db
     if significant(gain, z):
         return None
     return {"harmonic_hz": float(fk[k]), "share": shares[k], "gain_without_db": gain, "z_without": z}

@@ -189,6 +189,12 @@ def paired_z(before: Any, after: Any) -> float:
     return float(np.mean(d) / (sd / np.sqrt(d.size))) if sd > 0 else 0.0
 
 
+def held_out_db(before: Any, after: Any) -> tuple[float, float, float]:
+    """Held-out errors ``before`` and ``after`` an effect (per line, |H|^2 units) as a verdict reports them: their
+    means in dB (before, after; the gain is their difference) and their paired z-score (:func:`paired_z`)."""
+    return db(float(np.mean(before))), db(float(np.mean(after))), paired_z(before, after)
+
+
 def step(rule: str, cause: str | None, values: Mapping, outcome: str) -> dict:
     """One step of a trace: the named ``rule`` (a :data:`RULES` key) applied to ``cause`` (None: the
     verdict as a whole) with the ``values`` it compared (numbers, names) and its ``outcome``."""

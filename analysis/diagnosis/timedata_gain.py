@@ -15,7 +15,7 @@ from ..modal import ModalModel
 from ..spectra import WindowSettings, exponential_window, force_window, hit_spectra, tau_from_end_fraction
 from .compare import held_out_errors
 from .effects import synthesize_windowed
-from .rule import DEFAULT_RULE, DecisionRule, db, paired_z
+from .rule import DEFAULT_RULE, DecisionRule, db, held_out_db
 from .timedata import (
     FORCE_TAPER_S,
     FORCE_WINDOW_S,
@@ -148,8 +148,8 @@ def _score(measured: np.ndarray | tuple[np.ndarray, np.ndarray], before: np.ndar
     one array or a (before-measured, after-measured) pair for the exclusion effects."""
     m_b, m_a = measured if isinstance(measured, tuple) else (measured, measured)
     b, a = held_out_errors(m_b, before, np.broadcast_to(weights, m_b.shape), lambda train: after_of(train)[0], m_a)
-    bd, ad = db(float(np.mean(b))), db(float(np.mean(a)))
-    return {"error_before_db": bd, "error_after_db": ad, "gain_db": bd - ad, "z": paired_z(b, a)}
+    bd, ad, z = held_out_db(b, a)
+    return {"error_before_db": bd, "error_after_db": ad, "gain_db": bd - ad, "z": z}
 
 
 def _fit_nonlinearity(spec: HitSpectraSet, peaks: np.ndarray, base: ModalModel, measured: np.ndarray,

@@ -46,7 +46,7 @@ from ..threads import limits_blas_threads
 from .compare import band_errors, compare, effective_noise_db, held_out_errors, line_weights, noise_level, typical_error_db
 from .effect_types import applied, named, stage_entry
 from .effects import EFFECTS, EffectError, FitContext, predict
-from .rule import DEFAULT_RULE, DecisionRule, db, paired_z, step
+from .rule import DEFAULT_RULE, DecisionRule, held_out_db, step
 from .verdict_part import VerdictPart
 
 if TYPE_CHECKING:
@@ -165,12 +165,6 @@ def _jsonable(x: Any) -> Any:
     return x
 
 
-def _held_out_db(before: np.ndarray, after: np.ndarray) -> tuple[float, float, float]:
-    """The held-out errors ``before`` and ``after`` an effect (per line, |H|^2 units) as the verdict reports them:
-    their means in dB (before, after; the gain is their difference) and the paired z-score of the lines."""
-    return db(float(np.mean(before))), db(float(np.mean(after))), paired_z(before, after)
-
-
 def _held_out(ctx: FitContext, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Per line/FRF weighted squared errors (before, after) on held-out lines, both folds. With the
     default folds each is the raveled (n_out, n_ref, n_freq) array of every line's error as predicted by
@@ -224,7 +218,7 @@ def _stage(ctx: FitContext, names: Sequence[str], rule: DecisionRule, trace: lis
             skipped[name] = f"fit failed: {exc}"
             log.info("effect %s skipped: %s", name, exc)
             continue
-        b_db, a_db, z = _held_out_db(before, after)
+        b_db, a_db, z = held_out_db(before, after)
         gain = b_db - a_db
         ext = predict(ctx.base, m.freq_hz, m.quantity, ctx.effects({"effect": name, **params}),
                       outputs=m.outputs, references=m.references)
@@ -295,7 +289,7 @@ def _hum_beside_the_mode(c: dict, ctx: FitContext, rule: DecisionRule, one: dict
     lines = np.broadcast_to(keep, (before.size // keep.size, keep.size)).ravel()
     if before.size != lines.size:
         return False, {}
-    b_db, a_db, z = _held_out_db(before[lines], after[lines])
+    b_db, a_db, z = held_out_db(before[lines], after[lines])
     values = {"gain_off_the_mode_db": b_db - a_db, "z_off_the_mode": z}
     if not rule.significant(b_db - a_db, z):
         return False, values
