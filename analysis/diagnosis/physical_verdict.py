@@ -531,10 +531,16 @@ def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: floa
     return _leading(sim, _on_top_fits(sim, mm, fmax, first, names, {} if kept is None else kept)[0], n)
 
 
+def _scatter_cause(sim: PhysicalSimulation) -> str | None:
+    """The global cause a fleet's manufacturing scatter takes, when ``sim`` is a fleet's simulation that names one
+    (its ``scatter_cause``); None for any other simulation."""
+    return getattr(sim, "scatter_cause", None)
+
+
 def _leading(sim: PhysicalSimulation, ranked: list[PhysicalFit], n: int | None) -> list[PhysicalFit]:
     """The ``n`` best of the second causes ``ranked`` (None: all) and the simulation's ``scatter_cause`` among the
     rest (:func:`_seconds`)."""
-    scatter = getattr(sim, "scatter_cause", None)
+    scatter = _scatter_cause(sim)
     return ranked[:n] + [f for f in ranked[n:] if f.cause == scatter] if n is not None else ranked
 
 
@@ -583,7 +589,7 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
             kept[key] = min(fits, key=lambda t: t[0])      # the best variant of the cause (the first of the least)
         ranked.append((i, *kept[key]))
     ranked.sort(key=lambda t: (t[1], t[0]))              # as fitted in the causes' order: ties in that order
-    return [f for _, _, f in ranked], (left if len(on) <= n else [c for c in left if c == getattr(sim, "scatter_cause", None)])
+    return [f for _, _, f in ranked], (left if len(on) <= n else [c for c in left if c == _scatter_cause(sim)])
 
 
 def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -723,7 +729,7 @@ def _scatter_first(sim: PhysicalSimulation, firsts: Sequence[dict]) -> int | Non
     defective unit) bounds the search on top of the firsts before it by the pairs' choices' freedom: on top of a cause
     of many options (a mass at one of ~30 nodes) every pair's score is at least that choice's freedom, above a pair
     that fits the unit to its noise, and nothing there is made (:func:`_hopeless`)."""
-    scatter = getattr(sim, "scatter_cause", None)
+    scatter = _scatter_cause(sim)
     return next((i for i, c in enumerate(firsts) if c["_fit"].cause == scatter), None) if scatter else None
 
 
@@ -849,7 +855,7 @@ def _scatter_rivals(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fma
     most of the unit's scatter (a member's mass for the material's density; the global cause itself, with a joint's
     springs beside it for a crack next to the joint), while the defect's own cause with the scatter fits the unit to
     its noise. The best such pair (:func:`_better`), or None (not a fleet's unit: None)."""
-    scatter = getattr(sim, "scatter_cause", None)
+    scatter = _scatter_cause(sim)
     if scatter is None or scatter not in specs or (names is not None and scatter not in names):
         return None
     out: dict | None = None
