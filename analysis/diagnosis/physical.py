@@ -83,8 +83,8 @@ from .rule import DEFAULT_RULE, DecisionRule, gain_db
 log = logging.getLogger(__name__)
 
 __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "PhysicalFit",
-           "fit_cause", "held_out_reaches", "kept_fit", "variants", "physical_causes", "paired_well", "same_structure",
-           "FREQ_FLOOR",
+           "fit_cause", "held_out_reaches", "held_out_bound", "kept_fit", "variants", "physical_causes", "paired_well",
+           "same_structure", "FREQ_FLOOR",
            "MAC_TOL", "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
            "LOST_MODE_CHI2", "MODE_CHI2_MAX", "lost_modes", "counted_modes", "refinement_gain_db",
            "gain_db"]
@@ -775,12 +775,17 @@ def variants(cause: CauseSpec) -> list[tuple[str, ...]]:
 
 
 def held_out_reaches(done: np.ndarray, least_rest: np.ndarray, target: float) -> bool:
-    """Whether a held-out chi2 is certain to reach ``target``: the folds ``done`` (their held-out chi2) and the rest,
+    """Whether a held-out chi2 is certain to reach ``target``: its bound (:func:`held_out_bound`) reaches it."""
+    return bool(held_out_bound(done, least_rest) >= target)
+
+
+def held_out_bound(done: np.ndarray | Sequence[float], least_rest: np.ndarray) -> float:
+    """The least a held-out chi2 can be: the folds ``done`` (their held-out chi2) and the rest,
     each at least its mode's chi2 at the all-modes least-squares minimum ``x`` (``least_rest``). A fold starts from
     ``x`` and only descends on the other modes, ``S_-k(x_k) <= S_-k(x)``, and ``S(x_k) >= S(x)`` at the least chi2 on
     all modes, so the left-out mode pays ``S(x_k) - S_-k(x_k) >= S(x) - S_-k(x) = r_k(x)^2``; before any fold the
     sum is the chi2 on all modes (the rule the fits already follow: a held-out chi2 is at least it)."""
-    return bool(np.sum(done) + np.sum(least_rest) >= target)
+    return float(np.sum(done) + np.sum(least_rest))
 
 
 def _held_out(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
@@ -903,7 +908,7 @@ def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax:
 
     def bound(run: tuple) -> float:
         done, least = run[4], run[3]
-        return float(np.sum(done) + np.sum(least[len(done):]))
+        return held_out_bound(done, least[len(done):])
 
     while runs:
         i = min(range(len(runs)), key=lambda j: (bound(runs[j]), j))
