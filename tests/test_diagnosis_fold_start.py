@@ -166,3 +166,81 @@ def test_a_fit_by_newton_steps_is_the_least_squares_fit_without_least_squares(fr
         assert c == pytest.approx(d, rel=1e-5, abs=1e-6)
         for s in free:
             assert p[s.name] == pytest.approx(q[s.name], rel=1e-3)
+
+
+def test_the_screen_of_a_folds_options_stays_below_the_folds_minimum() -> None:
+    """Linear residuals: the first step's predicted decrease is the fold's, so the screen's least chi2 is the
+    fold's minimum less the allowance (:data:`FOLD_SCREEN_FACTOR` - 1 predictions and the margin)."""
+    rng = np.random.default_rng(9)
+    K = 5
+    A, b = rng.normal(size=(2 * K, 1)), rng.normal(size=2 * K)
+    rj = _Linear(A, b)
+    start = FoldStart(rj, np.linalg.lstsq(A, b, rcond=None)[0], _specs(1))  # type: ignore[arg-type]
+    for k in range(K):
+        x, chi2, _ = start.minimum(k)
+        rows = np.repeat(np.arange(K) != k, 2)
+        r0 = start.r[rows]
+        pred = float(np.sum(r0 ** 2)) - chi2
+        assert pred >= 0.0
+        assert start.reach(k) == pytest.approx(chi2 - (physical.FOLD_SCREEN_FACTOR - 1) * pred
+                                               - physical.FOLD_SCREEN_MARGIN, rel=1e-9, abs=1e-9)
+
+
+def test_options_the_screen_leaves_out_change_no_fold(frame, monkeypatch) -> None:
+    """A member's stiffness (three members): options whose refit the screen says cannot win are not refitted, and
+    every fold holds out what refitting every option gives."""
+    fv, specs, mm = frame
+    spec = specs["member_stiffness"]
+    free = ("factor",)
+    K = mm.freq_hz.size
+    p, chi2, ranked = fit_cause(fv, spec, free, mm, np.ones(K, bool), FMAX)
+    options = [o for _, o, _ in ranked[:physical.N_SCREEN_FOLD]]
+    starts = {o: q for _, o, q in ranked}
+    screened = physical._folds_of(fv, spec, free, mm, FMAX, options, starts)
+    every = physical._folds_of(fv, spec, free, mm, FMAX, options, starts)
+    refits = []
+    minimum = FoldStart.minimum
+    monkeypatch.setattr(FoldStart, "minimum", lambda s, k: refits.append(k) or minimum(s, k))
+    quick = [screened.held_out(k) for k in range(K)]
+    made = len(refits)
+    monkeypatch.setattr(FoldStart, "reach", lambda s, k: -np.inf)
+    full = [every.held_out(k) for k in range(K)]
+    assert made < len(refits) - made == len(options) * K
+    np.testing.assert_allclose(quick, full, rtol=1e-12)
+
+
+def test_a_start_on_its_way_to_a_minimum_found_before_stops_there() -> None:
+    """A second start whose Newton step lands on the minimum a first start reached: that minimum, with fewer
+    evaluations than descending to it again."""
+    A = np.array([[1.0], [2.0], [0.5]])
+    b = np.array([1.0, 2.5, 0.2])
+
+    class _Bent(_Linear):
+        def fun(self, x: np.ndarray) -> np.ndarray:        # a little curvature of its own: several Newton steps
+            return super().fun(x) + 0.05 * np.sin(x[0]) * np.ones(3)
+
+        def jac(self, x: np.ndarray) -> np.ndarray:
+            self.fun(x)
+            return self.A + 0.05 * np.cos(x[0]) * np.ones((3, 1))
+
+    rj = _Bent(A, b)
+    x_a, chi2_a = least_chi2(rj, _specs(1), np.array([0.3]), 30)  # type: ignore[arg-type]
+    x0 = np.array([-20.0])
+    rj.calls = 0
+    alone = least_chi2(rj, _specs(1), x0, 30)  # type: ignore[arg-type]
+    again = rj.calls
+    rj.calls = 0
+    x_b, chi2_b = least_chi2(rj, _specs(1), x0, 30, [(x_a, chi2_a)])  # type: ignore[arg-type]
+    assert rj.calls < again
+    assert x_b[0] == x_a[0] and chi2_b == chi2_a
+    assert alone[0][0] == pytest.approx(x_a[0], abs=1e-6)
+
+
+def test_a_fit_of_three_parameters_is_left_to_least_squares(monkeypatch) -> None:
+    """More parameters than :data:`DESCENT_PARAMETERS`: no Newton descent, least squares from the start."""
+    rng = np.random.default_rng(10)
+    A, b = rng.normal(size=(10, 3)), rng.normal(size=10)
+    rj = _Linear(A, b)
+    monkeypatch.setattr(physical, "descend", lambda *a, **k: pytest.fail("descended"))
+    x, chi2 = least_chi2(rj, _specs(3), np.zeros(3), 90)  # type: ignore[arg-type]
+    np.testing.assert_allclose(x, np.linalg.lstsq(A, b, rcond=None)[0], atol=1e-5)
