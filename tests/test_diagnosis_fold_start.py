@@ -3,7 +3,8 @@
 :class:`analysis.diagnosis.physical.FoldStart` keeps a fit's residuals and Jacobian on all modes; each fold's first
 step from there is the grouped-deletion formula of least squares (exact for residuals linear in the parameters),
 the rest :func:`analysis.diagnosis.physical.descend`'s Newton steps; where those do not converge inside the box the
-fold is left to least squares. :func:`analysis.diagnosis.physical.least_chi2` fits the same way from a start.
+fold is left to least squares. :func:`analysis.diagnosis.physical.least_chi2` fits the same way from a start
+(with at most two parameters).
 Checked on a linear problem against the formula, and on the FE frame against the least squares the folds stood in
 for, with and without a choice, and where the start lies in a parameter's edge band (the fallback).
 """
@@ -85,9 +86,9 @@ def test_a_fold_started_in_an_edge_band_is_left_to_least_squares() -> None:
     assert start.minimum(0) is None
 
 
-def test_a_descent_that_would_leave_the_box_hands_least_squares_its_lowest_point() -> None:
-    """The minimum beyond the upper bound: the descent stops before the box's edge band, and :func:`least_chi2`
-    finds from there what bounded least squares finds from the start."""
+def test_a_descent_that_would_leave_the_box_is_left_to_least_squares() -> None:
+    """The minimum beyond the upper bound: the descent gives up at its first step (out of the box), and
+    :func:`least_chi2` gives what bounded least squares gives from the start."""
     A = np.array([[1.0], [2.0], [0.5], [1.5]])
     b = 80.0 * A[:, 0]                                   # unbounded minimum at x = 80, beyond the bound 50
     rj = _Linear(A, b)

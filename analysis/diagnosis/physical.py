@@ -22,9 +22,11 @@ frequency difference is not a discrepancy; ``MAC_TOL`` (0.1) likewise for shapes
 bounded smoothly, ``c tanh(r / c)`` with ``c = RESIDUAL_CAP`` (10), so one mode the fit could not
 resolve (a close pair merged, a spurious peak) counts as one large error; ``chi2 = sum r^2``.
 
-Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
-cause's search range), with the residuals' exact Jacobian when the simulation gives the modes' derivatives
-(``modes_jac_of``: :class:`ResidualsWithJacobian`; else forward differences), a log-factor that stops at an
+Fit. Continuous parameters by least squares on log-factors (bounded by the cause's search range), with the
+residuals' exact Jacobian when the simulation gives the modes' derivatives (``modes_jac_of``:
+:class:`ResidualsWithJacobian`; else forward differences): with at most two parameters by Newton steps with a
+secant-corrected curvature where they converge inside the range (:func:`descend`), else (and with more parameters)
+by :func:`scipy.optimize.least_squares` (:func:`least_chi2`), a log-factor that stops at an
 edge where chi2 is flat within ``CHI2_RESOLUTION`` moved just inside (:func:`off_edges`);
 a choice (the node of an added mass, the element of a crack) of more than
 ``N_SCREEN`` options by a screen that orders the work and a bound that keeps every option that could win:
@@ -49,8 +51,10 @@ that neither predicts when it is held out is left out of that comparison (:func:
 Cross-validation: leave one mode out. Each measured mode is predicted by the cause fitted to the
 other modes (the choice searched again inside the fold among the ``N_SCREEN_FOLD`` best options of the
 full fit, and the parameters refitted), so a cause that only bends to fit some modes predicts the
-left-out mode badly. ``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal
-simulation's. A cause is significant when ``gain_db >= physical_min_gain_db`` (a field of the one
+left-out mode badly. Each fold starts from the fit on all modes, its first step the grouped-deletion formula of
+least squares made from that fit's residuals and Jacobian without a solve (:class:`FoldStart`).
+``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal simulation's. A cause is
+significant when ``gain_db >= physical_min_gain_db`` (a field of the one
 :class:`analysis.diagnosis.rule.DecisionRule`, as the adequacy thresholds below).
 
 Exactness: a simulation may solve candidates approximately (the FE frame by Rayleigh-Ritz reduction,
@@ -469,7 +473,7 @@ def least_chi2(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x0: np.nda
     x0 = np.asarray(x0, float)
     if rj.analytic and x0.size <= DESCENT_PARAMETERS:
         got = descend(rj, specs, x0, np.array(rj.fun(x0)), np.array(rj.jac(x0)), None, FIT_STEPS, known)
-        if isinstance(got, tuple):
+        if got is not None:
             return got[0], got[1]
     lo, hi = rj.bounds
     res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=max_nfev, ftol=FIT_TOL, xtol=FIT_TOL, **rj.options())
@@ -488,15 +492,15 @@ SAME_MINIMUM = 1e-3
 
 def descend(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x: np.ndarray, r: np.ndarray, J: np.ndarray,
             rows: np.ndarray | None, steps: int, known: Sequence[tuple[np.ndarray, float]] = ()
-            ) -> tuple[np.ndarray, float, np.ndarray] | np.ndarray | None:
+            ) -> tuple[np.ndarray, float, np.ndarray] | None:
     """The least chi2 of the residuals ``rj`` on the rows ``rows`` (None: all) from ``x`` (residuals ``r`` and
     Jacobian ``J`` there) by Newton steps: ``d = -B^-1 g`` with ``g = J^T r`` (half chi2's gradient) and ``B`` half
     its curvature, Gauss-Newton's ``J^T J`` corrected by the last step's secant (:func:`_curvature`: the residuals are
     not small, so ``J^T J`` alone converges only linearly), halved while chi2 does not come down (twice at most).
     Converged when one more step would lower chi2 by at most :data:`DESCENT_TOL` of it: (the point, its chi2, all
-    residuals there). Not converged within ``steps`` steps, or a step that leaves the box or stops in a parameter's
-    edge band (:meth:`ParamSpec.at_edge`: where the bounds and :func:`off_edges` decide): the lowest point reached
-    (an array; None when that is ``x`` or ``x`` is not inside), for least squares to go on from. ``known``: minima
+    residuals there). None (for least squares to fit it): ``x`` not inside, no convergence within ``steps`` steps,
+    or a step that leaves the box or stops in a parameter's edge band (:meth:`ParamSpec.at_edge`: where the bounds
+    and :func:`off_edges` decide). ``known``: minima
     ``(x_j, chi2_j)`` of the same residuals from other starts; a step that would land within :data:`SAME_MINIMUM`
     of one whose chi2 is not above the current point's is on its way there (the descent would take the step and
     converge to it): that minimum is the answer, its residuals not returned (an empty array)."""
@@ -512,7 +516,6 @@ def descend(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x: np.ndarray
     chi2 = float(r[on] @ r[on])
     g = J[on].T @ r[on]
     before: tuple[np.ndarray, np.ndarray] | None = None
-    x_start = x
     for step in range(steps + 1):
         try:
             d = -np.linalg.solve(_curvature(J[on], x, g, before), g)
@@ -530,7 +533,7 @@ def descend(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x: np.ndarray
         for _ in range(3):
             y = x + d
             if not inside(y):
-                return None if x is x_start else x
+                return None
             r_y = np.array(rj.fun(y))
             chi2_y = float(r_y[on] @ r_y[on])
             if chi2_y <= chi2:
@@ -542,7 +545,7 @@ def descend(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x: np.ndarray
         before = (x, g)
         x, r, J, chi2 = y, r_y, J_y, chi2_y
         g = J[on].T @ r[on]
-    return None if x is x_start else x
+    return None
 
 
 def _curvature(J: np.ndarray, x: np.ndarray, g: np.ndarray, before: tuple[np.ndarray, np.ndarray] | None
@@ -979,9 +982,7 @@ class FoldStart:
         mode k there), or None (class docstring)."""
         rows = self._rows(k)
         got = descend(self.rj, self.specs, self.x, self.r, self.J, rows, FOLD_STEPS)
-        if not isinstance(got, tuple):
-            return None
-        return got[0], got[1], got[2][~rows]
+        return None if got is None else (got[0], got[1], got[2][~rows])
 
 
 class _Folds:
