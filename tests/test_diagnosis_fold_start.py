@@ -93,7 +93,7 @@ def test_a_descent_that_would_leave_the_box_is_left_to_least_squares() -> None:
     b = 80.0 * A[:, 0]                                   # unbounded minimum at x = 80, beyond the bound 50
     rj = _Linear(A, b)
     x0 = np.array([0.0])
-    assert descend(rj, _specs(1), x0, rj.fun(x0), rj.jac(x0), None, 10) is None   # the first step leaves the box
+    assert descend(rj, _specs(1), x0, rj.fun(x0), rj.jac(x0), None, 10) is None  # type: ignore[arg-type]
     x, chi2 = least_chi2(rj, _specs(1), x0, 30)  # type: ignore[arg-type]
     ref = least_squares(lambda y: A @ y - b, x0, bounds=rj.bounds, ftol=physical.FIT_TOL, xtol=physical.FIT_TOL)
     assert x[0] == pytest.approx(ref.x[0], abs=1e-6)
@@ -155,9 +155,14 @@ def test_a_fit_by_newton_steps_is_the_least_squares_fit_without_least_squares(fr
     spec = specs["support_stiffness"]
     free = [s for s in spec.params]
     sel = np.ones(mm.freq_hz.size, bool)
-    calls = []
+    calls: list[int] = []
     inner = physical.least_squares
-    monkeypatch.setattr(physical, "least_squares", lambda *a, **k: calls.append(1) or inner(*a, **k))
+
+    def counted(*a, **k):
+        calls.append(1)
+        return inner(*a, **k)
+
+    monkeypatch.setattr(physical, "least_squares", counted)
     quick = [physical._fit_continuous(fv, spec, free, {"support": o}, mm, sel, FMAX) for o in spec.options]
     newton = len(calls)
     monkeypatch.setattr(physical, "descend", lambda *a, **k: None)
@@ -178,7 +183,9 @@ def test_the_screen_of_a_folds_options_stays_below_the_folds_minimum() -> None:
     rj = _Linear(A, b)
     start = FoldStart(rj, np.linalg.lstsq(A, b, rcond=None)[0], _specs(1))  # type: ignore[arg-type]
     for k in range(K):
-        x, chi2, _ = start.minimum(k)
+        got = start.minimum(k)
+        assert got is not None
+        chi2 = got[1]
         rows = np.repeat(np.arange(K) != k, 2)
         r0 = start.r[rows]
         pred = float(np.sum(r0 ** 2)) - chi2
@@ -199,9 +206,15 @@ def test_options_the_screen_leaves_out_change_no_fold(frame, monkeypatch) -> Non
     starts = {o: q for _, o, q in ranked}
     screened = physical._folds_of(fv, spec, free, mm, FMAX, options, starts)
     every = physical._folds_of(fv, spec, free, mm, FMAX, options, starts)
-    refits = []
+    assert screened is not None and every is not None
+    refits: list[int] = []
     minimum = FoldStart.minimum
-    monkeypatch.setattr(FoldStart, "minimum", lambda s, k: refits.append(k) or minimum(s, k))
+
+    def counted(start: FoldStart, k: int):
+        refits.append(k)
+        return minimum(start, k)
+
+    monkeypatch.setattr(FoldStart, "minimum", counted)
     quick = [screened.held_out(k) for k in range(K)]
     made = len(refits)
     monkeypatch.setattr(FoldStart, "reach", lambda s, k: -np.inf)
