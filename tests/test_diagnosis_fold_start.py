@@ -174,55 +174,6 @@ def test_a_fit_by_newton_steps_is_the_least_squares_fit_without_least_squares(fr
             assert p[s.name] == pytest.approx(q[s.name], rel=1e-3)
 
 
-def test_the_screen_of_a_folds_options_stays_below_the_folds_minimum() -> None:
-    """Linear residuals: the first step's predicted decrease is the fold's, so the screen's least chi2 is the
-    fold's minimum less the allowance (:data:`FOLD_SCREEN_FACTOR` - 1 predictions and the margin)."""
-    rng = np.random.default_rng(9)
-    K = 5
-    A, b = rng.normal(size=(2 * K, 1)), rng.normal(size=2 * K)
-    rj = _Linear(A, b)
-    start = FoldStart(rj, np.linalg.lstsq(A, b, rcond=None)[0], _specs(1))  # type: ignore[arg-type]
-    for k in range(K):
-        got = start.minimum(k)
-        assert got is not None
-        chi2 = got[1]
-        rows = np.repeat(np.arange(K) != k, 2)
-        r0 = start.r[rows]
-        pred = float(np.sum(r0 ** 2)) - chi2
-        assert pred >= 0.0
-        assert start.reach(k) == pytest.approx(chi2 - (physical.FOLD_SCREEN_FACTOR - 1) * pred
-                                               - physical.FOLD_SCREEN_MARGIN, rel=1e-9, abs=1e-9)
-
-
-def test_options_the_screen_leaves_out_change_no_fold(frame, monkeypatch) -> None:
-    """A member's stiffness (three members): options whose refit the screen says cannot win are not refitted, and
-    every fold holds out what refitting every option gives."""
-    fv, specs, mm = frame
-    spec = specs["member_stiffness"]
-    free = ("factor",)
-    K = mm.freq_hz.size
-    p, chi2, ranked = fit_cause(fv, spec, free, mm, np.ones(K, bool), FMAX)
-    options = [o for _, o, _ in ranked[:physical.N_SCREEN_FOLD]]
-    starts = {o: q for _, o, q in ranked}
-    screened = physical._folds_of(fv, spec, free, mm, FMAX, options, starts)
-    every = physical._folds_of(fv, spec, free, mm, FMAX, options, starts)
-    assert screened is not None and every is not None
-    refits: list[int] = []
-    minimum = FoldStart.minimum
-
-    def counted(start: FoldStart, k: int):
-        refits.append(k)
-        return minimum(start, k)
-
-    monkeypatch.setattr(FoldStart, "minimum", counted)
-    quick = [screened.held_out(k) for k in range(K)]
-    made = len(refits)
-    monkeypatch.setattr(FoldStart, "reach", lambda s, k: -np.inf)
-    full = [every.held_out(k) for k in range(K)]
-    assert made < len(refits) - made == len(options) * K
-    np.testing.assert_allclose(quick, full, rtol=1e-12)
-
-
 def test_a_start_on_its_way_to_a_minimum_found_before_stops_there() -> None:
     """A second start whose Newton step lands on the minimum a first start reached: that minimum, with fewer
     evaluations than descending to it again."""

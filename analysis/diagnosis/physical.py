@@ -923,15 +923,6 @@ def held_out_bound(done: np.ndarray | Sequence[float], least_rest: np.ndarray) -
 #: Newton steps a fold takes from the fit on all modes (:class:`FoldStart`) before it is left to least squares.
 FOLD_STEPS = 4
 
-
-#: The screen of a fold's options (:meth:`FoldStart.reach`): an option's refit is taken to lower its chi2 on the other
-#: modes by at most this many times the decrease its first step predicts, plus :data:`FOLD_SCREEN_MARGIN` (chi2).
-#: On the flagged units of a 12-unit fleet the refits lowered it by at most 7 times the prediction (at most 3 times
-#: in 99 % of the folds); with 3 and 1 a few folds chose another option than the refits of every option would.
-FOLD_SCREEN_FACTOR = 10.0
-FOLD_SCREEN_MARGIN = 5.0
-
-
 class FoldStart:
     """A fit on all modes as each leave-one-mode-out fold starts from it: its search variables ``x`` (inside the
     box ``bounds``), the residuals ``r`` of every mode there and their Jacobian ``J`` (``rj``: a
@@ -959,23 +950,6 @@ class FoldStart:
         rows = np.ones(self.r.size // 2, bool)
         rows[k] = False
         return np.repeat(rows, 2)
-
-    def reach(self, k: int) -> float:
-        """The least chi2 fold ``k`` can come to on the other modes, by the screen: ``S_-k(x*)`` less
-        :data:`FOLD_SCREEN_FACTOR` times the decrease its first step predicts (``g^T (J_-k^T J_-k)^-1 g``, ``g =
-        J_-k^T r_-k``: exact for linear residuals) and :data:`FOLD_SCREEN_MARGIN`; made from ``r`` and ``J`` at
-        ``x*`` without a solve."""
-        rows = self._rows(k)
-        r, J = self.r[rows], self.J[rows]
-        g = J.T @ r
-        A = J.T @ J
-        try:
-            pred = float(g @ np.linalg.solve(A + 1e-12 * max(float(np.trace(A)), 1e-300) * np.eye(g.size), g))
-        except np.linalg.LinAlgError:
-            return -np.inf
-        if not np.isfinite(pred):
-            return -np.inf
-        return float(r @ r) - FOLD_SCREEN_FACTOR * max(pred, 0.0) - FOLD_SCREEN_MARGIN
 
     def minimum(self, k: int) -> tuple[np.ndarray, float, np.ndarray] | None:
         """Fold ``k``'s minimum from ``x`` by :func:`descend`: (its search variables, ``S_-k`` there, the residuals of
@@ -1019,14 +993,11 @@ class _Folds:
     def held_out(self, k: int) -> float:
         """Fold ``k``: the held-out chi2 of mode k, the cause refitted on the other modes at each option (the least
         chi2 there, the first of equal ones, as :func:`fit_cause` chooses), each by :meth:`FoldStart.minimum` or,
-        where that gives up, by least squares from the option's fit (:func:`_fit_continuous`). An option after the
-        first whose fold cannot come below the best so far by the screen (:meth:`FoldStart.reach`) is not refitted."""
+        where that gives up, by least squares from the option's fit (:func:`_fit_continuous`)."""
         sel = np.ones(self.mm.freq_hz.size, bool)
         sel[k] = False
         best: tuple[float, dict, np.ndarray | None] = (np.inf, {}, None)
         for option in (self.options if self.options is not None else [None]):
-            if self.start(option).reach(k) >= best[0]:
-                continue                # the screen: this option's refit cannot come below the best so far
             got = self.start(option).minimum(k)
             if got is None:
                 fixed = self.fixed if option is None else {**self.fixed, self.cause.choice: option}
