@@ -22,17 +22,25 @@ FMAX = 700.0
 
 
 class _Calls:
-    """``least_squares`` of a module, its calls counted."""
+    """The least-squares fits a module makes, counted: its calls of ``least_chi2`` (a fit from one start) and the
+    folds :class:`~analysis.diagnosis.physical.FoldStart` fits without it."""
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch, module) -> None:
         self.n = 0
-        inner = module.least_squares
+        inner = module.least_chi2
+        minimum = physical.FoldStart.minimum
 
         def counted(*args, **kwargs):
             self.n += 1
             return inner(*args, **kwargs)
 
-        monkeypatch.setattr(module, "least_squares", counted)
+        def fold(start, k):
+            got = minimum(start, k)
+            self.n += got is not None
+            return got
+
+        monkeypatch.setattr(module, "least_chi2", counted)
+        monkeypatch.setattr(physical.FoldStart, "minimum", fold)
 
 
 def test_a_pair_refined_again_from_the_same_start_takes_the_kept_minimum_and_folds(monkeypatch) -> None:

@@ -22,9 +22,11 @@ frequency difference is not a discrepancy; ``MAC_TOL`` (0.1) likewise for shapes
 bounded smoothly, ``c tanh(r / c)`` with ``c = RESIDUAL_CAP`` (10), so one mode the fit could not
 resolve (a close pair merged, a spurious peak) counts as one large error; ``chi2 = sum r^2``.
 
-Fit. Continuous parameters by :func:`scipy.optimize.least_squares` on log-factors (bounded by the
-cause's search range), with the residuals' exact Jacobian when the simulation gives the modes' derivatives
-(``modes_jac_of``: :class:`ResidualsWithJacobian`; else forward differences), a log-factor that stops at an
+Fit. Continuous parameters by least squares on log-factors (bounded by the cause's search range), with the
+residuals' exact Jacobian when the simulation gives the modes' derivatives (``modes_jac_of``:
+:class:`ResidualsWithJacobian`; else forward differences): with at most two parameters by Newton steps with a
+secant-corrected curvature where they converge inside the range (:func:`descend`), else (and with more parameters)
+by :func:`scipy.optimize.least_squares` (:func:`least_chi2`), a log-factor that stops at an
 edge where chi2 is flat within ``CHI2_RESOLUTION`` moved just inside (:func:`off_edges`);
 a choice (the node of an added mass, the element of a crack) of more than
 ``N_SCREEN`` options by a screen that orders the work and a bound that keeps every option that could win:
@@ -49,8 +51,10 @@ that neither predicts when it is held out is left out of that comparison (:func:
 Cross-validation: leave one mode out. Each measured mode is predicted by the cause fitted to the
 other modes (the choice searched again inside the fold among the ``N_SCREEN_FOLD`` best options of the
 full fit, and the parameters refitted), so a cause that only bends to fit some modes predicts the
-left-out mode badly. ``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal
-simulation's. A cause is significant when ``gain_db >= physical_min_gain_db`` (a field of the one
+left-out mode badly. Each fold starts from the fit on all modes, its first step the grouped-deletion formula of
+least squares made from that fit's residuals and Jacobian without a solve (:class:`FoldStart`).
+``gain_db = 10 log10(chi2_base / chi2_cv)`` with ``chi2_base`` the nominal simulation's. A cause is
+significant when ``gain_db >= physical_min_gain_db`` (a field of the one
 :class:`analysis.diagnosis.rule.DecisionRule`, as the adequacy thresholds below).
 
 Exactness: a simulation may solve candidates approximately (the FE frame by Rayleigh-Ritz reduction,
@@ -431,8 +435,7 @@ def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[Pa
         f, P = sim.modes(cause.name, full(x), fmax)
         return residuals(mm, f, P)[sel].ravel()
 
-    lo = np.array([s.x_bounds[0] for s in free])
-    hi = np.array([s.x_bounds[1] for s in free])
+    lo, hi = _x_box(free)
     first = start or {}
     starts = [np.array([s.to_x(float(first.get(s.name, s.start()))) for s in free])]
     if start is None:      # and the best point of a coarse grid over the range
@@ -441,16 +444,145 @@ def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[Pa
         costs = [float(np.sum(resid(x) ** 2)) for x in grid]
         starts.append(grid[int(np.argmin(costs))])
     starts += [np.array([s.to_x(float(q.get(s.name, s.start()))) for s in free]) for q in also]
-    rj = ResidualsWithJacobian(sim, lambda x: [(cause.name, full(x))], lambda x: sim.modes(cause.name, full(x), fmax),
-                               [(0, s.name) for s in free], lambda x: dv_dx(free, x), mm, sel, fmax, (lo, hi))
+    rj = _cause_residuals(sim, cause, free, full, mm, sel, fmax)
     best: tuple[dict, float] = ({}, np.inf)
+    minima: list[tuple[np.ndarray, float]] = []
     for x0 in distinct_starts([np.clip(x0, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo)) for x0 in starts]):
-        res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=30 * len(free), ftol=FIT_TOL, xtol=FIT_TOL,
-                            **rj.options())
-        x, cost = off_edges(free, res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))
+        x, cost = least_chi2(rj, free, x0, 30 * len(free), minima)
+        minima.append((x, cost))
         if cost < best[1]:
             best = (full(x), cost)
     return best
+
+
+#: Newton steps :func:`descend` takes from a fit's start before it leaves the fit to least squares.
+FIT_STEPS = 10
+#: :func:`descend` has converged when one more step would lower the chi2 by at most this fraction of it. Least
+#: squares stops when its last step did by :data:`FIT_TOL`; a thousandth of that (one step more, where the steps
+#: converge superlinearly) leaves a fit closer to the exact minimum than least squares leaves it.
+DESCENT_TOL = 1e-3 * FIT_TOL
+
+
+def least_chi2(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x0: np.ndarray, max_nfev: int,
+               known: Sequence[tuple[np.ndarray, float]] = ()) -> tuple[np.ndarray, float]:
+    """The least chi2 of the residuals ``rj`` (search variables of ``specs``) from the start ``x0`` inside their box:
+    (its point, its chi2). With at most :data:`DESCENT_PARAMETERS` parameters by :func:`descend` where it converges
+    inside the box (or reaches one of the minima ``known`` from other starts: that one); else by
+    :func:`scipy.optimize.least_squares` (bounded, at most ``max_nfev`` evaluations) from ``x0``, a log-factor that
+    stops at an edge moved inside where chi2 allows (:func:`off_edges`)."""
+    x0 = np.asarray(x0, float)
+    if rj.analytic and x0.size <= DESCENT_PARAMETERS:
+        got = descend(rj, specs, x0, np.array(rj.fun(x0)), np.array(rj.jac(x0)), None, FIT_STEPS, known)
+        if got is not None:
+            return got[0], got[1]
+    lo, hi = rj.bounds
+    res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=max_nfev, ftol=FIT_TOL, xtol=FIT_TOL, **rj.options())
+    x, cost = off_edges(specs, res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))
+    return x, cost
+
+
+#: :func:`least_chi2` descends by Newton steps with at most this many parameters; with more (a mass's rotary inertia
+#: about two axes on top of its mass) the surface has several valleys near the start, and least squares' trust region
+#: is left to choose among them as it did.
+DESCENT_PARAMETERS = 2
+#: A Newton step that lands within this (search variables, each) of a minimum another start reached goes there
+#: (:func:`descend`'s ``known``).
+SAME_MINIMUM = 1e-3
+
+
+def descend(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x: np.ndarray, r: np.ndarray, J: np.ndarray,
+            rows: np.ndarray | None, steps: int, known: Sequence[tuple[np.ndarray, float]] = ()
+            ) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """The least chi2 of the residuals ``rj`` on the rows ``rows`` (None: all) from ``x`` (residuals ``r`` and
+    Jacobian ``J`` there) by Newton steps: ``d = -B^-1 g`` with ``g = J^T r`` (half chi2's gradient) and ``B`` half
+    its curvature, Gauss-Newton's ``J^T J`` corrected by the last step's secant (:func:`_curvature`: the residuals are
+    not small, so ``J^T J`` alone converges only linearly), halved while chi2 does not come down (twice at most).
+    Converged when one more step would lower chi2 by at most :data:`DESCENT_TOL` of it: (the point, its chi2, all
+    residuals there). None (for least squares to fit it): ``x`` not inside, no convergence within ``steps`` steps,
+    or a step that leaves the box or stops in a parameter's edge band (:meth:`ParamSpec.at_edge`: where the bounds
+    and :func:`off_edges` decide). ``known``: minima
+    ``(x_j, chi2_j)`` of the same residuals from other starts; a step that would land within :data:`SAME_MINIMUM`
+    of one whose chi2 is not above the current point's is on its way there (the descent would take the step and
+    converge to it): that minimum is the answer, its residuals not returned (an empty array)."""
+    lo, hi = rj.bounds
+
+    def inside(y: np.ndarray) -> bool:
+        return bool(np.all(y > lo) and np.all(y < hi) and not any(s.at_edge(s.from_x(float(yi)))
+                                                                   for s, yi in zip(specs, y)))
+
+    if not inside(x):
+        return None
+    on = np.ones(r.size, bool) if rows is None else rows
+    chi2 = float(r[on] @ r[on])
+    g = J[on].T @ r[on]
+    before: tuple[np.ndarray, np.ndarray] | None = None
+    for step in range(steps + 1):
+        try:
+            d = -np.linalg.solve(_curvature(J[on], x, g, before), g)
+        except np.linalg.LinAlgError:
+            break
+        if not np.all(np.isfinite(d)):
+            break
+        if -float(g @ d) <= DESCENT_TOL * chi2:
+            return x, chi2, r
+        for x_j, chi2_j in known:
+            if chi2_j <= chi2 and float(np.max(np.abs(x + d - x_j))) <= SAME_MINIMUM:
+                return np.array(x_j), float(chi2_j), np.zeros(0)
+        if step == steps:
+            break
+        for _ in range(3):
+            y = x + d
+            if not inside(y):
+                return None
+            r_y = np.array(rj.fun(y))
+            chi2_y = float(r_y[on] @ r_y[on])
+            if chi2_y <= chi2:
+                break
+            d = 0.5 * d
+        else:
+            break
+        J_y = np.array(rj.jac(y))
+        before = (x, g)
+        x, r, J, chi2 = y, r_y, J_y, chi2_y
+        g = J[on].T @ r[on]
+    return None
+
+
+def _curvature(J: np.ndarray, x: np.ndarray, g: np.ndarray, before: tuple[np.ndarray, np.ndarray] | None
+               ) -> np.ndarray:
+    """Half the curvature of chi2 at ``x`` for :func:`descend`'s step (``g = J^T r``, half its gradient): Gauss-Newton's
+    ``A = J^T J``, corrected with the previous point's ``before = (x', g')`` by the symmetric rank-one update that
+    makes it hold the secant ``B s = y`` (``s = x - x'``, ``y = g - g'``; with one parameter ``B = y / s``): the
+    residuals' own curvature, which ``A`` leaves out, along the last step. ``A`` when the update is ill-defined or
+    not positive definite."""
+    A = J.T @ J
+    A = A + 1e-12 * max(float(np.trace(A)), 1e-300) * np.eye(x.size)
+    if before is None:
+        return A
+    s_, y_ = x - before[0], g - before[1]
+    u = y_ - A @ s_
+    den = float(u @ s_)
+    if not np.isfinite(den) or abs(den) <= 1e-8 * float(np.linalg.norm(u) * np.linalg.norm(s_)) or den == 0.0:
+        return A
+    B = A + np.outer(u, u) / den
+    try:
+        np.linalg.cholesky(B)
+    except np.linalg.LinAlgError:
+        return A
+    return B
+
+
+def _x_box(specs: Sequence[ParamSpec]) -> tuple[np.ndarray, np.ndarray]:
+    """The search variables' bounds (:attr:`ParamSpec.x_bounds`) of ``specs``: (lower, upper)."""
+    return np.array([s.x_bounds[0] for s in specs]), np.array([s.x_bounds[1] for s in specs])
+
+
+def _cause_residuals(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[ParamSpec], full: Any,
+                     mm: MeasuredModes, sel: np.ndarray, fmax: float) -> ResidualsWithJacobian:
+    """The residuals of ``cause`` at the parameters ``full(x)`` of the search variables ``x`` of ``free`` on the
+    modes ``sel``, with their Jacobian (:class:`ResidualsWithJacobian`)."""
+    return ResidualsWithJacobian(sim, lambda x: [(cause.name, full(x))], lambda x: sim.modes(cause.name, full(x), fmax),
+                                 [(0, s.name) for s in free], lambda x: dv_dx(free, x), mm, sel, fmax, _x_box(free))
 
 
 def distinct_starts(starts: Sequence[np.ndarray]) -> list[np.ndarray]:
@@ -788,10 +920,107 @@ def held_out_bound(done: np.ndarray | Sequence[float], least_rest: np.ndarray) -
     return float(np.sum(done) + np.sum(least_rest))
 
 
+#: Newton steps a fold takes from the fit on all modes (:class:`FoldStart`) before it is left to least squares.
+FOLD_STEPS = 4
+
+class FoldStart:
+    """A fit on all modes as each leave-one-mode-out fold starts from it: its search variables ``x`` (inside the
+    box ``bounds``), the residuals ``r`` of every mode there and their Jacobian ``J`` (``rj``: a
+    :class:`ResidualsWithJacobian` on all modes), made once for all the folds.
+
+    Fold k minimises ``S_-k(x) = |r_-k(x)|^2``, the residuals of every mode but k. Its first Gauss-Newton step from
+    the fit on all modes ``x*`` is ``d = -(J_-k^T J_-k)^-1 J_-k^T r_-k``; at an interior least-squares minimum
+    ``J^T r = 0``, so ``J_-k^T r_-k = -J_k^T r_k`` and ``d = (A - J_k^T J_k)^-1 J_k^T r_k`` with ``A = J^T J``: the
+    grouped-deletion formula of least squares, which for residuals linear in ``x`` is the fold's exact minimum and
+    gives the held-out residual ``r_k + J_k d = (I - H_kk)^-1 r_k`` (``H_kk = J_k A^-1 J_k^T``) without a refit.
+    The residuals here are not linear (the pairing, the cap, the modes' own dependence on the parameters), so the
+    step is only the first of :func:`descend`'s (Newton steps, each with the residuals and Jacobian at the new point:
+    one solve with derivatives each) to the fold's minimum, as close as least squares reaches it or closer
+    (:data:`DESCENT_TOL`). The first step needs no solve (``r`` and ``J`` at ``x*`` serve every fold), so a fold costs
+    one to three solves instead of least squares' four to eight. :meth:`minimum` gives up (None: the caller fits the
+    fold by least squares from ``x*``, :func:`_fit_continuous`) when :func:`descend` does not converge inside the box
+    within :data:`FOLD_STEPS` steps."""
+
+    def __init__(self, rj: ResidualsWithJacobian, x: np.ndarray, specs: Sequence[ParamSpec]) -> None:
+        self.rj, self.x, self.specs = rj, np.asarray(x, float), list(specs)
+        self.r = np.array(rj.fun(self.x))
+        self.J = np.array(rj.jac(self.x))
+
+    def _rows(self, k: int) -> np.ndarray:
+        rows = np.ones(self.r.size // 2, bool)
+        rows[k] = False
+        return np.repeat(rows, 2)
+
+    def minimum(self, k: int) -> tuple[np.ndarray, float, np.ndarray] | None:
+        """Fold ``k``'s minimum from ``x`` by :func:`descend`: (its search variables, ``S_-k`` there, the residuals of
+        mode k there), or None (class docstring)."""
+        rows = self._rows(k)
+        got = descend(self.rj, self.specs, self.x, self.r, self.J, rows, FOLD_STEPS)
+        return None if got is None else (got[0], got[1], got[2][~rows])
+
+
+class _Folds:
+    """The folds of one fitted variant (:func:`_best_of`): the cause ``cause`` with the parameters ``free``, its choice
+    searched among ``options`` (None: no choice), each option from its fit on all modes in ``starts`` (the fit's
+    parameters without a choice); each option's :class:`FoldStart` made when a fold first asks it."""
+
+    def __init__(self, sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
+                 options: Sequence[str] | None, starts: dict) -> None:
+        self.sim, self.cause, self.mm, self.fmax, self.options, self.starts = sim, cause, mm, fmax, options, starts
+        self.specs = [s for s in cause.params if s.name in free]
+        self.fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
+        self._kept: dict[str | None, FoldStart] = {}
+
+    def _full(self, option: str | None) -> Any:
+        fixed = self.fixed if option is None else {**self.fixed, self.cause.choice: option}
+
+        def full(x: np.ndarray) -> dict:
+            return {**fixed, **{s.name: s.from_x(float(xi)) for s, xi in zip(self.specs, x)}}
+        return full
+
+    def _start(self, option: str | None) -> dict:
+        return self.starts if option is None else self.starts[option]
+
+    def start(self, option: str | None) -> FoldStart:
+        if option not in self._kept:
+            q = self._start(option)
+            x = np.array([s.to_x(float(q.get(s.name, s.start()))) for s in self.specs])
+            rj = _cause_residuals(self.sim, self.cause, self.specs, self._full(option), self.mm,
+                                  np.ones(self.mm.freq_hz.size, bool), self.fmax)
+            self._kept[option] = FoldStart(rj, x, self.specs)
+        return self._kept[option]
+
+    def held_out(self, k: int) -> float:
+        """Fold ``k``: the held-out chi2 of mode k, the cause refitted on the other modes at each option (the least
+        chi2 there, the first of equal ones, as :func:`fit_cause` chooses), each by :meth:`FoldStart.minimum` or,
+        where that gives up, by least squares from the option's fit (:func:`_fit_continuous`)."""
+        sel = np.ones(self.mm.freq_hz.size, bool)
+        sel[k] = False
+        best: tuple[float, dict, np.ndarray | None] = (np.inf, {}, None)
+        for option in (self.options if self.options is not None else [None]):
+            got = self.start(option).minimum(k)
+            if got is None:
+                fixed = self.fixed if option is None else {**self.fixed, self.cause.choice: option}
+                p, c = _fit_continuous(self.sim, self.cause, self.specs, fixed, self.mm, sel, self.fmax,
+                                       self._start(option))
+                held = None
+            else:
+                p, c, held = self._full(option)(got[0]), got[1], got[2]
+            if c < best[0]:
+                best = (c, p, held)
+        if best[2] is None:
+            best = (best[0], best[1], residuals(self.mm, *self.sim.modes(self.cause.name, best[1], self.fmax))[k])
+        return float(np.sum(np.asarray(best[2]) ** 2))
+
+
 def _held_out(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
-              options: Sequence[str] | None, start: dict, k: int) -> float:
+              options: Sequence[str] | None, start: dict, k: int, folds: _Folds | None = None) -> float:
     """One fold of the cross-validation (leave one mode out): the held-out chi2 of mode ``k``, the cause refitted on the
-    other modes (the choice searched again among ``options``, each from its fit on all modes in ``start``)."""
+    other modes (the choice searched again among ``options``, each from its fit on all modes in ``start``). ``folds``
+    (the variant's :class:`_Folds`, made for these arguments): each option's refit from Gauss-Newton steps shared by
+    the folds (:class:`FoldStart`) where they converge."""
+    if folds is not None:
+        return folds.held_out(k)
     sel = np.ones(mm.freq_hz.size, bool)
     sel[k] = False
     p, _, _ = fit_cause(sim, cause, free, mm, sel, fmax, options, start)
@@ -897,14 +1126,14 @@ def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax:
     variant that cannot win stop as soon as its bound passes the least one's: a variant with a low chi2 on all modes
     that predicts the held-out modes worse than a simpler one is not cross-validated to its end first."""
     K = mm.freq_hz.size
-    runs: list[tuple[PhysicalFit, list[str] | None, dict, np.ndarray, list[float]]] = []
+    runs: list[tuple[PhysicalFit, list[str] | None, dict, np.ndarray, list[float], _Folds | None]] = []
     for fit in sorted(fits, key=lambda f: f.chi2):
         if fit.chi2 >= bar:
             break
         options = [o for _, o, _ in fit.ranked[:N_SCREEN_FOLD]] if fit.ranked else None
         starts = {o: q for _, o, q in fit.ranked} if fit.ranked else fit.params
         least = np.sum(residuals(mm, *sim.modes(cause.name, fit.params, fmax)) ** 2, axis=1)
-        runs.append((fit, options, starts, least, []))
+        runs.append((fit, options, starts, least, [], _folds_of(sim, cause, fit.free, mm, fmax, options, starts)))
 
     def bound(run: tuple) -> float:
         done, least = run[4], run[3]
@@ -912,13 +1141,25 @@ def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax:
 
     while runs:
         i = min(range(len(runs)), key=lambda j: (bound(runs[j]), j))
-        fit, options, starts, _, done = runs[i]
+        fit, options, starts, _, done, folds = runs[i]
         if held_out_reaches(np.asarray(done), runs[i][3][len(done):], bar):
             return None                 # no variant's held-out chi2 can come below ``bar``
         if len(done) == K:
             cv = np.array(done)
             return replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=cause.at_edge(fit.params, fit.free))
-        done.append(_held_out(sim, cause, fit.free, mm, fmax, options, starts, len(done)))
+        done.append(_held_out(sim, cause, fit.free, mm, fmax, options, starts, len(done), folds))
+    return None
+
+
+def _folds_of(sim: PhysicalSimulation, cause: CauseSpec, free: tuple, mm: MeasuredModes, fmax: float,
+              options: Sequence[str] | None, starts: dict) -> _Folds | None:
+    """The variant's folds by :class:`_Folds` when :func:`fit_cause` would refit each fold at ``options`` from its
+    ``starts`` alone (a cause without a choice, or a choice with a start for each option) and the simulation gives
+    the modes' derivatives; None: by :func:`fit_cause` itself."""
+    if getattr(sim, "modes_jac_of", None) is None:
+        return None
+    if cause.choice is None or (options is not None and set(options) <= set(starts)):
+        return _Folds(sim, cause, free, mm, fmax, options if cause.choice is not None else None, starts)
     return None
 
 

@@ -28,13 +28,12 @@ from dataclasses import dataclass, field, replace
 from itertools import combinations, product
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..modal import ModalModel
 from .physical import (
-    FIT_TOL,
     N_SCREEN,
     CauseSpec,
+    FoldStart,
     MeasuredModes,
     PhysicalFit,
     PhysicalSimulation,
@@ -46,8 +45,8 @@ from .physical import (
     fit_cause,
     held_out_reaches,
     kept_fit,
+    least_chi2,
     modes_jac,
-    off_edges,
     residuals,
     variants,
 )
@@ -322,6 +321,8 @@ class _Refined:
     x: np.ndarray
     least: np.ndarray
     folds: list
+    #: the folds' common start at ``x`` (:class:`analysis.diagnosis.physical.FoldStart`), made by the first fold
+    start: FoldStart | None = None
 
 
 def _start(x0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -337,7 +338,9 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     """Refine the two causes ``fits`` (their free parameters, choices kept) together on all modes, then
     leave each mode out with both refitted from there (nested cross-validation; ``folds`` False, or a held-out
     chi2 that cannot come below ``folds_below`` (:func:`held_out_reaches`, checked before each fold): the
-    refinement alone, ``cv_per_mode`` empty)."""
+    refinement alone, ``cv_per_mode`` empty). Each fit is :func:`analysis.diagnosis.physical.least_chi2`'s, the folds
+    from the refined pair's residuals and Jacobian (:class:`analysis.diagnosis.physical.FoldStart`) where they
+    converge."""
     free = [[s for s in spec.params if s.name in fit.free] for spec, fit in zip(specs, fits)]
     flat = [(i, s) for i, ss in enumerate(free) for s in ss]
     lo = np.array([s.x_bounds[0] for _, s in flat])
@@ -356,14 +359,13 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
         f, P = changes_of(sim, changes(x), fmax)
         return residuals(mm, f, P)[sel].ravel()
 
+    def on(sel: np.ndarray) -> ResidualsWithJacobian:
+        return ResidualsWithJacobian(sim, changes, lambda x: changes_of(sim, changes(x), fmax),
+                                     [(i, s.name) for i, s in flat], lambda x: dv_dx([s for _, s in flat], x), mm, sel,
+                                     fmax, (lo, hi))
+
     def solve(x0: np.ndarray, sel: np.ndarray) -> np.ndarray:
-        x0 = _start(x0, lo, hi)
-        rj = ResidualsWithJacobian(sim, changes, lambda x: changes_of(sim, changes(x), fmax),
-                                   [(i, s.name) for i, s in flat], lambda x: dv_dx([s for _, s in flat], x), mm, sel,
-                                   fmax, (lo, hi))
-        res = least_squares(rj.fun, x0, bounds=(lo, hi), max_nfev=20 * len(flat), ftol=FIT_TOL, xtol=FIT_TOL,
-                            **rj.options())
-        return off_edges([s for _, s in flat], res.x, float(2 * res.cost), lambda y: float(np.sum(rj.fun(y) ** 2)))[0]
+        return least_chi2(on(sel), [s for _, s in flat], _start(x0, lo, hi), 20 * len(flat))[0]
 
     K = mm.freq_hz.size
     allsel = np.ones(K, bool)
@@ -383,7 +385,11 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
         if k == len(made.folds):
             sel = allsel.copy()
             sel[k] = False
-            made.folds.append(float(np.sum(resid(solve(x, sel), ~sel) ** 2)))
+            if made.start is None and getattr(sim, "modes_jac_of", None) is not None:
+                made.start = FoldStart(on(allsel), x, [s for _, s in flat])
+            got = made.start.minimum(k) if made.start is not None else None
+            held = got[2] if got is not None else resid(solve(x, sel), ~sel)
+            made.folds.append(float(np.sum(held ** 2)))
         cv[k] = made.folds[k]
         if held_out_reaches(cv[:k + 1], least[k + 1:], folds_below):
             cv = np.empty(0)            # its held-out chi2 cannot come below ``folds_below``: the folds stop
