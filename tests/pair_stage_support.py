@@ -3,9 +3,8 @@ the pair search's parts directly (the pair counts and the pair bounds)."""
 from __future__ import annotations
 
 import numpy as np
+from shared_frames import frame_variants
 from test_diagnosis_physical import OUTS, REFS
-
-from simulator.physical import FrameVariants
 
 
 def physical_stage(measured, mm) -> tuple:
@@ -17,7 +16,7 @@ def physical_stage(measured, mm) -> tuple:
     from analysis.diagnosis.physical_verdict import FMAX_FACTOR, _Judge
     from analysis.diagnosis.verdict import known_processing
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = {c.name: c for c in fv.causes()}
     fmax = FMAX_FACTOR * float(mm.freq_hz[-1])
     prior, weights = known_processing(measured), line_weights(measured)

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shared_frames import frame_variants
 from test_diagnosis_physical import OUTS, REFS, _capture_and_diagnose, _sensor_masses
 
 from analysis.diagnosis.physical import MeasuredModes, fit_cause
 from simulator.config import FrameConfig
 from simulator.fem import FrameModel
-from simulator.physical import FrameVariants
 
 FMAX = 700.0
 
@@ -30,7 +30,7 @@ def _damaged_modes(damage: dict) -> MeasuredModes:
 def test_every_place_of_a_support_is_fitted_with_its_own_model() -> None:
     """A support at left:0 loosened to 0.1 of its six springs: both factors free, every option (all, each
     support) is fitted in full and the right one comes back exactly."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     mm = _damaged_modes({"loose_supports": ["left:0"], "loose_support_factor": [0.1]})
     spec = {c.name: c for c in fv.causes()}["support_stiffness"]
     assert spec.choice == "support" and spec.options == ("all", "left:0", "right:0")
@@ -45,7 +45,7 @@ def test_every_place_of_a_support_is_fitted_with_its_own_model() -> None:
 
 def test_a_soft_joint_named_by_a_beam_node_is_that_joint() -> None:
     """``soft_joints = ["top:8"]``: the joint pair that holds top:8 (right:10 - top:8) is the joint named."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     mm = _damaged_modes({"soft_joints": ["top:8"], "soft_joint_factor": [0.05]})
     spec = {c.name: c for c in fv.causes()}["joint_stiffness"]
     p, chi2, _ = fit_cause(fv, spec, ("factor_translational", "factor_rotational"), mm,
@@ -98,7 +98,7 @@ def test_a_plate_is_a_mass_with_more_rotary_inertia_than_a_cube() -> None:
     goes astray."""
     from analysis.diagnosis.physical import physical_causes
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     mm = _plate_modes("left:5", 0.14, 0.02)
     (fit,) = physical_causes(fv, mm, FMAX, ["added_mass"], processes=1)
     assert fit.free[:2] == ("mass_kg", "inertia_factor")
@@ -115,7 +115,7 @@ def test_a_cube_keeps_the_cubes_inertia() -> None:
     as well), every inertia factor stays 1."""
     from analysis.diagnosis.physical import physical_causes
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     side = (3.0 / 7850) ** (1 / 3)
     (fit,) = physical_causes(fv, _plate_modes("top:6", side, side), FMAX, ["added_mass"], processes=1)
     assert fit.free == ("mass_kg",)
@@ -130,7 +130,7 @@ def test_a_bar_gets_the_rotary_inertia_of_its_own_axis() -> None:
     uncertainty, and the mass comes back at its node within 1 %."""
     from analysis.diagnosis.physical import physical_causes
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     mm = _plate_modes("right:9", 0.0977, 0.0291, 0.1906)
     (fit,) = physical_causes(fv, mm, FMAX, ["added_mass"], processes=1)
     assert fit.free == ("mass_kg", "inertia_y")

@@ -11,6 +11,7 @@ import functools
 import numpy as np
 import pytest
 from pair_stage_support import physical_stage
+from shared_frames import frame_variants
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
 
 from simulator.config import FrameConfig
@@ -38,7 +39,7 @@ def _fits() -> list:
     from analysis.diagnosis.physical_verdict import FMAX_FACTOR
 
     _, mm = _frame()
-    return physical_causes(FrameVariants(None, OUTS, REFS), mm, FMAX_FACTOR * float(mm.freq_hz[-1]), CAUSES, processes=1)
+    return physical_causes(frame_variants(None, OUTS, REFS), mm, FMAX_FACTOR * float(mm.freq_hz[-1]), CAUSES, processes=1)
 
 
 def _searched() -> tuple:

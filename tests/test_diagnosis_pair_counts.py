@@ -13,6 +13,7 @@ import json
 import numpy as np
 import pytest
 from pair_stage_support import physical_stage
+from shared_frames import frame_variants
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
 
 from simulator.config import FrameConfig
@@ -50,7 +51,7 @@ def _single_fits(damage: str, causes: tuple) -> list:
 
     cfg = FrameConfig.from_dict({"damage": json.loads(damage)})
     mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
-    return physical_causes(FrameVariants(None, OUTS, REFS), mm, FMAX_FACTOR * float(mm.freq_hz[-1]), list(causes))
+    return physical_causes(frame_variants(None, OUTS, REFS), mm, FMAX_FACTOR * float(mm.freq_hz[-1]), list(causes))
 
 
 def _named(c: dict | None) -> dict:

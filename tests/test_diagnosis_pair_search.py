@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shared_frames import frame_variants
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
 
 from analysis.diagnosis.physical import MeasuredModes, PhysicalFit, fit_cause
@@ -33,7 +34,7 @@ def _supports(rot: float) -> dict:
 def _mass_beside_supports() -> tuple:
     """A 1.2 kg mass at top:3 with the supports x 0.28 (noise-free modes), and the pair's single fits with the
     mass chosen at top:5 (the node beside the supports' rougher single fit): (frame, pair specs, fits, modes)."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     mm = _noise_free_modes(fv, [("added_mass", {"point": "top:3", "mass_kg": 1.2}),
                                 ("support_stiffness", _supports(0.28))])
@@ -63,7 +64,7 @@ def test_a_first_cause_that_absorbed_the_second_finds_its_option_when_held_open(
     supports' softening, so the supports applied on top of it explain almost nothing; held open among the
     options the mass's own fit ranked, the pair refined together gives both back. The supports start at
     their nominal within rounding (as a fit on top returns them) and still move."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     mm = _noise_free_modes(fv, [("added_mass", {"point": "top:6", "mass_kg": 3.8}),
                                 ("support_stiffness", _supports(0.24))])
@@ -104,7 +105,7 @@ def test_a_longer_span_leaves_the_pair_of_member_changes_above_the_noise() -> No
 
     LEAVES_CHI2 = DEFAULT_RULE.leaves_chi2
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     fits = [PhysicalFit("member_stiffness", {"component": "top", "factor": 1.0}, ("factor",), np.inf),
             PhysicalFit("member_mass", {"component": "top", "factor": 1.0}, ("factor",), np.inf)]
@@ -121,7 +122,7 @@ def test_a_longer_span_leaves_the_pair_of_member_changes_above_the_noise() -> No
 def test_two_causes_change_one_member_when_both_choose_it() -> None:
     from analysis.diagnosis.physical_verdict import _one_member
 
-    specs = _specs(FrameVariants(None, OUTS, REFS))
+    specs = _specs(frame_variants(None, OUTS, REFS))
     both = [specs["member_stiffness"], specs["member_mass"]]
     assert _one_member(both, [{"component": "top", "factor": 0.85}, {"component": "top", "factor": 1.07}]) == "top"
     assert _one_member(both, [{"component": "top", "factor": 0.85}, {"component": "left", "factor": 1.07}]) is None
@@ -140,7 +141,7 @@ def test_a_longer_span_is_unexplained_and_an_in_catalogue_pair_is_named() -> Non
     from analysis.diagnosis.physical_verdict import physical_verdict
     from analysis.diagnosis.verdict import known_processing
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     f = np.arange(8.0, 500.0, 0.25)
     causes = ["member_stiffness", "member_mass"]
     for cfg, span in ((_span_config(), True), (_thicker_beam(), False)):
@@ -202,7 +203,7 @@ def test_a_named_cause_keeps_its_choice_and_is_refined_with_the_second() -> None
     """The right column x 1.29 with accelerometers of 0.23 kg: the member's stiffness fitted alone comes out low
     (heavier sensors lower the modes it raises) and the sensors on top of it find almost nothing; with no ranked
     options (a named cause keeps its member) the pair refined together gives both back."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     mm = _noise_free_modes(fv, [("member_stiffness", {"component": "right", "factor": 1.29}),
                                 ("mass_loading", {"mass_kg": 0.23})])
@@ -244,7 +245,7 @@ def test_a_pair_whose_member_is_no_leading_single_cause_is_found() -> None:
     from analysis.diagnosis.verdict import known_processing
 
     measured, mm = _block_beside_softer_supports()
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     out = physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, mm,
                            causes=["added_mass", "support_stiffness", "joint_stiffness"])
     alone = {c["effect"]: c for c in out.causes}
@@ -268,7 +269,7 @@ def test_a_second_change_of_the_same_cause_is_searched_at_the_other_places() -> 
     choice of all at once); a cause without a choice is not searched twice."""
     from analysis.diagnosis.physical_pairs import OnTop, besides
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     top = {c.name: c for c in OnTop(fv, [_loose("left:0", 0.2)]).causes()}
     assert "left:0" in specs["support_stiffness"].options
@@ -286,7 +287,7 @@ def test_two_loose_supports_are_named_each_at_its_place() -> None:
     from analysis.diagnosis.physical_verdict import physical_verdict
     from analysis.diagnosis.verdict import known_processing
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     cfg = FrameConfig.from_dict({"damage": {"loose_supports": ["left:0", "right:0"],
                                             "loose_support_factor": [0.12, 0.3]}})
     f = np.arange(8.0, 500.0, 0.25)
@@ -309,7 +310,7 @@ def test_a_first_cause_held_open_at_another_option_gets_all_its_parameters() -> 
     springs' nominal and fitted neither)."""
     from analysis.diagnosis.physical import fit_cause
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     mm = _noise_free_modes(fv, [_loose("left:0", 0.25), ("stiffness_shift", {"stiffness_factor": 1.012})])
     allsel = np.ones(mm.freq_hz.size, bool)
@@ -334,7 +335,7 @@ def test_a_first_cause_that_absorbed_the_scatter_is_refined_with_the_second_from
     derivatives the pair with the material's stiffness refined from there did not move; with the exact ones
     (the derivative along the rigid springs' valley is small but not zero) it gives both back, and held open
     (the joint refined with its rotational springs from their nominal too) the pair gives both back."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     both = ("factor_translational", "factor_rotational")
     mm = _noise_free_modes(fv, [("joint_stiffness", {"joint": "left:10", "factor_translational": factor,
@@ -394,7 +395,7 @@ def test_a_crack_beside_a_support_fitted_alone_is_found_with_its_choice_held_ope
     support at every element (:func:`held_open`), the crack's own element comes first with both factors back."""
     from analysis.diagnosis.physical_pairs import OnTop, held_open
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     both = ("factor_translational", "factor_rotational")
     mm = _band_modes(fv, [("support_stiffness", {"support": "left:0", **dict.fromkeys(both, 0.2)}),
@@ -420,7 +421,7 @@ def test_two_cracks_on_two_members_are_on_the_grid_of_every_two_elements() -> No
     gives both cracks back."""
     from analysis.diagnosis.physical_pairs import split_choice
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     spec = specs["element_stiffness"]
     mm = _band_modes(fv, [("element_stiffness", {"element": "left:4", "factor": 0.45}),
@@ -444,7 +445,7 @@ def test_a_split_pair_outside_the_grids_best_is_kept_while_its_bound_could_win()
     grid point it gives both cracks back, and pairs far from the data are ruled out by their bounds."""
     from analysis.diagnosis.physical_pairs import split_choice
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     spec = _specs(fv)["element_stiffness"]
     mm = _band_modes(fv, [("element_stiffness", {"element": "top:2", "factor": 0.8}),
                           ("element_stiffness", {"element": "right:5", "factor": 0.9})])
@@ -528,7 +529,7 @@ def test_a_pairs_variants_are_made_again_beside_each_other() -> None:
 
     cfg = FrameConfig.from_dict({"damage": {"soft_joints": ["top:8", "top:0"], "soft_joint_factor": [0.0232, 0.1732]}})
     mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     spec = _specs(fv)["joint_stiffness"]
     both = ("factor_translational", "factor_rotational")
     assert widest(spec, ("factor_translational",)) == both and widest(spec, both) == both
@@ -641,7 +642,7 @@ def test_a_cause_at_every_place_keeps_its_variant_beside_another() -> None:
     cfg = FrameConfig.from_dict({"damage": {"cracked_elements": ["right:6", "right:4"],
                                             "crack_bending_factor": [0.4942, 0.4427]}})
     mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = _specs(fv)
     pair_specs = [specs["member_stiffness"], specs["support_stiffness"]]
     fits = [PhysicalFit("member_stiffness", {"component": "right", "factor": 0.83}, ("factor",), np.inf),

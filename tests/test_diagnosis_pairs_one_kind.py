@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shared_frames import frame_variants
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes, _sensor_masses
 
 from analysis.diagnosis.physical import MeasuredModes, PhysicalFit
@@ -33,7 +34,7 @@ def _verdict(damage: dict, above_hz: float = 0.0, causes: list[str] = SPRINGS, b
     mm = _noise_free_modes(FrameVariants(cfg, OUTS, REFS), [])
     keep = (mm.freq_hz > above_hz) & (mm.freq_hz < below_hz)
     mm = MeasuredModes(mm.freq_hz[keep], mm.freq_std_hz[keep], mm.shapes[:, keep])
-    return physical_verdict(measured, FrameVariants(None, OUTS, REFS), known_processing(measured),
+    return physical_verdict(measured, frame_variants(None, OUTS, REFS), known_processing(measured),
                             line_weights(measured), -60.0, mm, causes=causes)
 
 
@@ -78,7 +79,7 @@ def test_one_cause_at_two_places_is_split_from_its_fit_at_every_place() -> None:
     gives none."""
     from analysis.diagnosis.physical_pairs import split_places
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = {c.name: c for c in fv.causes()}
     spec = specs["support_stiffness"]
     assert spec.every == "all" and spec.places == ("left:0", "right:0")
@@ -95,7 +96,7 @@ def test_every_place_with_one_of_two_places_is_said_place_by_place() -> None:
     """Every support x 0.2 with left:0 x 0.5 on top is left:0 x 0.1 and right:0 x 0.2: the same modes."""
     from analysis.diagnosis.physical_pairs import as_places
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     spec = {c.name: c for c in fv.causes()}["support_stiffness"]
     every = {"support": "all", "factor_translational": 0.2, "factor_rotational": 0.2}
     one = {"support": "left:0", "factor_translational": 0.5, "factor_rotational": 0.5}
@@ -136,7 +137,7 @@ def test_a_pair_at_every_joint_and_support_moves_to_the_two_places_together() ->
     hold-out pair named as every joint with every support)."""
     from analysis.diagnosis.physical_pairs import fit_pair, rechoose
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = {c.name: c for c in fv.causes()}
     both = ("factor_translational", "factor_rotational")
     mm = _noise_free_modes(fv, [("support_stiffness", {"support": "left:0", **dict.fromkeys(both, 0.2412)}),

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from benchmark_modules import load_benchmark
+from shared_frames import frame_variants
 
 from analysis.diagnosis.compare import second_difference_gain
 from analysis.diagnosis.effects import RECORD_KEY, synthesize_windowed
@@ -94,7 +95,7 @@ def test_member_stiffness_scales_bending_stiffness_only() -> None:
     ("element_stiffness", {"element": "right:2", "factor": 0.25}, ("factor",)),
 ])
 def test_noise_free_modes_give_the_parameters_back(cause, truth, free) -> None:
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     model = fv.model(cause, truth)
     keep = model.freq_hz < 460.0
     mm = MeasuredModes(model.freq_hz[keep], np.zeros(int(keep.sum())),
@@ -112,7 +113,7 @@ def test_noise_free_modes_give_the_parameters_back(cause, truth, free) -> None:
 def test_every_cause_is_one_registry_row_with_its_advice() -> None:
     from simulator.physical import CAUSES
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     assert [c.name for c in fv.causes()] == list(CAUSES)
     for name, row in CAUSES.items():
         assert row.spec.name == name and row.spec.description and row.spec.advice and callable(row.apply)
@@ -136,7 +137,7 @@ def test_two_noise_free_causes_are_found_together() -> None:
     from analysis.diagnosis.physical import PhysicalFit
     from analysis.diagnosis.physical_pairs import OnTop, fit_pair, rechoose
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     mm = _noise_free_modes(fv, [("element_stiffness", {"element": "left:2", "factor": 0.3}),
                                 ("support_stiffness", {"factor_translational": 1.0, "factor_rotational": 0.3})])
     specs = {c.name: c for c in fv.causes()}
@@ -163,7 +164,7 @@ def test_a_mass_placed_wrong_beside_a_second_change_finds_its_node() -> None:
     from analysis.diagnosis.physical import PhysicalFit
     from analysis.diagnosis.physical_pairs import OnTop, fit_pair, rechoose, refit_on_top
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     mm = _noise_free_modes(fv, [("added_mass", {"point": "top:6", "mass_kg": 2.0}),
                                 ("support_stiffness", {"factor_translational": 1.0, "factor_rotational": 0.3})])
     specs = {c.name: c for c in fv.causes()}
@@ -186,7 +187,7 @@ def test_a_mass_placed_wrong_beside_a_second_change_finds_its_node() -> None:
 
 
 def test_modes_of_another_structure_do_not_pair() -> None:
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     f0, P0 = fv.modes(None, {}, 700.0)
     rng = np.random.default_rng(4)
     other = MeasuredModes(np.array([21.0, 57.0, 143.0, 290.0, 505.0]), np.zeros(5),
@@ -275,7 +276,7 @@ def _capture_and_diagnose(tmp_path: Path, overrides: dict, seed: int, extra=()) 
         assert capture(["--device", device, "--out", str(rec), "--points", ",".join(REFS), "--hits", "3", "--auto",
                         "-q", *extra]) == 0
     m = load_input(rec)
-    frame = FrameVariants(ROOT / "simulator" / "frame.toml", m.outputs, m.references)
+    frame = frame_variants(ROOT / "simulator" / "frame.toml", m.outputs, m.references)
     return json.loads(json.dumps(diagnose(rec, frame).to_json(), default=lambda x: x.tolist()))
 
 
@@ -358,7 +359,7 @@ def test_another_structure_relabelled_with_frame_points_is_not_the_same_structur
     diagnosis says so and fits nothing, with an FRF-level simulation and with the FE model."""
     from analysis.diagnosis import diagnose, predict
 
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     rng = np.random.default_rng(8)
     fz = np.array([22.4, 61.7, 121.0, 200.0, 298.8, 417.3])          # free-free beam: (2n+1)^2 pattern
     lam = pole_from_fz(fz, np.full(fz.size, 0.004))

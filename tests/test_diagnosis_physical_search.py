@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shared_frames import frame_variants
 from test_diagnosis_physical import OUTS, REFS, _noise_free_modes
 
 from analysis.diagnosis.physical import _chi2_bound, _fit_continuous, _nominal, _screen, fit_cause
@@ -32,7 +33,7 @@ def test_a_heavy_mass_fitted_with_the_wrong_inertia_gets_the_exhaustive_searchs_
     """5 kg with six times a cube's rotary inertia, fitted as a mass with a cube's: the search's fit is at least
     as good as fitting every node in full (a screen that kept its five best grid points returned top:0 at chi2
     754 for right:8, where right:6 fits at 608)."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     spec = {c.name: c for c in fv.causes()}["added_mass"]
     mm = _noise_free_modes(fv, [("added_mass", {"point": node, "mass_kg": 5.0, "inertia_factor": 6.0})])
     p, chi2, ranked = fit_cause(fv, spec, ("mass_kg",), mm, np.ones(mm.freq_hz.size, bool), FMAX)
@@ -43,7 +44,7 @@ def test_a_heavy_mass_fitted_with_the_wrong_inertia_gets_the_exhaustive_searchs_
 
 def test_a_mass_with_its_rotary_inertia_is_found_at_its_node() -> None:
     """5 kg with six times a cube's rotary inertia, both fitted: found exactly at its node."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     spec = {c.name: c for c in fv.causes()}["added_mass"]
     mm = _noise_free_modes(fv, [("added_mass", {"point": "right:2", "mass_kg": 5.0, "inertia_factor": 6.0})])
     p, chi2, _ = fit_cause(fv, spec, ("mass_kg", "inertia_factor"), mm, np.ones(mm.freq_hz.size, bool), FMAX)
@@ -59,7 +60,7 @@ def test_a_mass_with_its_rotary_inertia_is_found_at_its_node() -> None:
 def test_the_bound_of_a_box_is_below_the_chi2_everywhere_inside_it(cause, free, option) -> None:
     """The screen's lower bound of a box holds at random points inside it (monotone parameters: a mass or a
     stiffness added moves every frequency one way)."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     spec = {c.name: c for c in fv.causes()}[cause]
     mm = _noise_free_modes(fv, [("added_mass", {"point": "left:7", "mass_kg": 2.0}),
                                 ("element_stiffness", {"element": "top:3", "factor": 0.5})])
@@ -98,7 +99,7 @@ def test_a_stiffer_right_column_is_that_member() -> None:
     model = FrameModel.from_config(cfg, _sensor_masses(cfg)).modal_model(OUTS, REFS, "receptance")
     keep = (model.freq_hz > 1.0) & (model.freq_hz < 460.0)
     mm = MeasuredModes(model.freq_hz[keep], np.zeros(int(keep.sum())), model.residues[..., keep].reshape(-1, int(keep.sum())))
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     spec = {c.name: c for c in fv.causes()}["member_stiffness"]
     p, chi2, ranked = fit_cause(fv, spec, ("factor",), mm, np.ones(mm.freq_hz.size, bool), FMAX)
     assert p["component"] == "right" and p["factor"] == pytest.approx(1.4, rel=0.01)

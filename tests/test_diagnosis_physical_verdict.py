@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from benchmark_modules import load_benchmark
+from shared_frames import frame_variants
 
 from analysis.diagnosis.compare import line_weights
 from analysis.diagnosis.physical import FREQ_FLOOR, MAX_STD_FRACTION, MeasuredModes
@@ -17,7 +18,6 @@ from analysis.diagnosis.rule import DEFAULT_RULE
 from analysis.diagnosis.verdict import known_processing
 from simulator.config import FrameConfig
 from simulator.fem import FrameModel
-from simulator.physical import FrameVariants
 
 OUTS = ["left:9:Y", "top:4:X", "right:4:-Z"]
 REFS = ["right:6:-X", "right:4:-X", "left:6:X", "top:4:Z", "top:2:Z", "left:9:Y"]
@@ -46,7 +46,7 @@ def _block_frame(joint_factor: float, scatter_seed: int | None = None):
 
 
 def _verdict(measured, mm):
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     return physical_verdict(measured, fv, known_processing(measured), line_weights(measured), 0.0, mm,
                             causes=CAUSES)
 

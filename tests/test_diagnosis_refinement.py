@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shared_frames import frame_variants
 from test_diagnosis_physical import OUTS, REFS, _sensor_masses
 
 from analysis.diagnosis.physical import (
@@ -25,7 +26,6 @@ from analysis.diagnosis.physical import (
 from analysis.diagnosis.rule import DEFAULT_RULE, gain_db
 from simulator.config import FrameConfig
 from simulator.fem import FrameModel
-from simulator.physical import FrameVariants
 
 FMAX = 700.0
 MASS_KG = 4.6855
@@ -52,7 +52,7 @@ def test_a_heavy_block_s_rotary_inertia_is_kept_though_one_mode_alone_witnesses_
     """Fitted by added_mass, the block's inertia about Y is set free (its best variant predicts the held-out modes
     far better than the mass alone); before, the mass alone was kept (its held-out chi2 234 against 182, 1.1 dB, the
     mode at 347 Hz capped in both) and the diagnosis said unexplained."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     spec = {c.name: c for c in fv.causes()}["added_mass"]
     best = _best_variant(fv, spec, _block_modes(), FMAX)
     assert best is not None and best.params["point"] == "left:6"

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from benchmark_modules import load_benchmark
+from shared_frames import frame_variants
 from test_diagnosis_one_place import FMAX, OUTS, REFS, _plate_modes
 from test_diagnosis_physical import _sensor_masses
 
@@ -23,7 +24,6 @@ from analysis.diagnosis.physical_pairs import OnTop, fit_pair
 from analysis.diagnosis.rule import DEFAULT_RULE
 from simulator.config import FrameConfig, overrides_to_toml
 from simulator.fem import FrameModel
-from simulator.physical import FrameVariants
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _fitted_range(node: str, span: float, thick: float, width: float) -> tuple[float, float, float, float]:
     """A steel block (span along Y x width x thick, m) at ``node``: its mass (kg), the fitted mass and the range
     of masses that fit alike."""
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     mm = _plate_modes(node, span, thick, width)
     (fit,) = physical_causes(fv, mm, FMAX, ["added_mass"], processes=1)
     spec = {c.name: c for c in fv.causes()}["added_mass"]
@@ -80,7 +80,7 @@ def test_a_block_beside_a_loose_support_has_the_range_of_the_pair_refitted() -> 
     keep = (model.freq_hz > 1.0) & (model.freq_hz < 460.0)
     n = int(keep.sum())
     mm = MeasuredModes(model.freq_hz[keep], np.zeros(n), model.residues[..., keep].reshape(-1, n))
-    fv = FrameVariants(None, OUTS, REFS)
+    fv = frame_variants(None, OUTS, REFS)
     specs = {c.name: c for c in fv.causes()}
     pair_specs = [specs["support_stiffness"], specs["added_mass"]]
     both = ("factor_translational", "factor_rotational")
