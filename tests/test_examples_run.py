@@ -138,6 +138,7 @@ MAKERS: dict[str, Callable[[], object]] = {
     "diag.json": lambda: _ok("diagnose --measured rec.h5 --simulated sim.uff --json diag.json"),
     "fleet/*.h5": lambda: _ok(SPECIAL[EXAMPLES["python -m simulator fleet"][0]][0] or ""),
     "golden.json": lambda: _ok("fit fleet/unit_0001.h5 --json golden.json"),
+    "levels.h5": lambda: _ok(next(line for line in EXAMPLES["python -m acquisition capture"] if "levels.h5" in line)),
 }
 #: options whose value is written, not read
 OUTPUT_OPTIONS = {"--out", "--json", "--uff", "--plot", "--png", "--report"}
@@ -161,8 +162,16 @@ def _make(name: str) -> None:
 
 
 def _prepare(line: str) -> None:
+    """The inputs ``line`` reads made (:data:`MAKERS`); an output file of ``line`` that another example or a maker
+    wrote before is removed first unless ``line`` replaces it (``--overwrite``), so that each example runs as in a
+    folder without it whichever order the examples run in (a maker makes it again for a later reader)."""
     for name in _inputs(line):
         _make(name)
+    args = shlex.split(line, comments=True)
+    if "--overwrite" not in args:
+        for i, a in enumerate(args[1:], 1):
+            if args[i - 1] in OUTPUT_OPTIONS and Path(a).is_file():
+                Path(a).unlink()
 
 
 @pytest.fixture(scope="module")
