@@ -485,7 +485,9 @@ def least_chi2(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x0: np.nda
     stops at an edge moved inside where chi2 allows (:func:`off_edges`)."""
     x0 = np.asarray(x0, float)
     if rj.analytic and x0.size <= DESCENT_PARAMETERS:
-        rj.hold(x0)                        # least squares starts here again when the descent leaves the fit to it
+        hold = getattr(rj, "hold", None)   # least squares starts here again when the descent leaves the fit to it
+        if hold is not None:
+            hold(x0)
         got = descend(rj, specs, x0, np.array(rj.fun(x0)), np.array(rj.jac(x0)), None, FIT_STEPS, known)
         if got is not None:
             return got[0], got[1]
