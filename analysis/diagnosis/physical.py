@@ -341,10 +341,11 @@ class ResidualsWithJacobian:
     """The residual vector of the candidates ``changes_at(x)`` on the measured modes ``sel`` and its Jacobian
     with respect to ``x`` (``dv_dx(x)``: the parameters' derivatives by ``x``, a log-factor's ``v``) for
     :func:`scipy.optimize.least_squares` (:meth:`options`): one solve per point (the last point's answers
-    kept, for the optimizer asks the residuals and then the Jacobian at a point). ``plain(x)``: the modes
-    without derivatives. A simulation without derivatives (no ``modes_jac_of``) is differentiated by
-    least_squares' own forward differences (``diff_step`` 1e-3), a candidate it gives none for (``modes_jac``:
-    None) by the same differences here, inside ``bounds``."""
+    kept, for the optimizer asks the residuals and then the Jacobian at a point; and a point :meth:`hold` names,
+    a fit's start, which least squares asks again when :func:`descend` leaves the fit to it from there).
+    ``plain(x)``: the modes without derivatives. A simulation without derivatives (no ``modes_jac_of``) is
+    differentiated by least_squares' own forward differences (``diff_step`` 1e-3), a candidate it gives none for
+    (``modes_jac``: None) by the same differences here, inside ``bounds``."""
 
     def __init__(self, sim: PhysicalSimulation, changes_at: Any, plain: Any, wrt: Sequence[tuple[int, str]],
                  dv_dx: Any, mm: MeasuredModes, sel: np.ndarray, fmax: float,
@@ -355,6 +356,7 @@ class ResidualsWithJacobian:
         self._x: bytes | None = None
         self._r = np.zeros(0)
         self._J: np.ndarray | None = None
+        self._held: tuple[bytes, np.ndarray, np.ndarray | None] | None = None
 
     def options(self) -> dict:
         """least_squares' ``jac`` (and ``diff_step``) for this simulation."""
@@ -368,6 +370,10 @@ class ResidualsWithJacobian:
         key = np.asarray(x, float).tobytes()
         if key == self._x:
             return
+        if self._held is not None and key == self._held[0]:
+            r, J = self._held[1], self._held[2]
+            self._x, self._r, self._J = key, r.copy(), None if J is None else J.copy()
+            return
         got = modes_jac(self.sim, self.changes_at(x), self.fmax, self.wrt) if self.analytic else None
         if got is None:
             self._r, self._J = self._plain(x), None
@@ -377,6 +383,13 @@ class ResidualsWithJacobian:
             r, J = residuals_jac(self.mm, f, P, df * d, dP * d)
             self._r, self._J = r[self.sel].ravel(), J[self.sel].reshape(-1, d.size)
         self._x = key
+
+    def hold(self, x: np.ndarray) -> None:
+        """Keep the answers at ``x`` (a fit's start) until another point is held: asked there again after other
+        points, they are not solved again (a copy each time: the optimizer may scale what it is given)."""
+        self._at(x)
+        assert self._x is not None
+        self._held = (self._x, self._r.copy(), None if self._J is None else self._J.copy())
 
     def fun(self, x: np.ndarray) -> np.ndarray:
         self._at(x)
@@ -472,6 +485,9 @@ def least_chi2(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x0: np.nda
     stops at an edge moved inside where chi2 allows (:func:`off_edges`)."""
     x0 = np.asarray(x0, float)
     if rj.analytic and x0.size <= DESCENT_PARAMETERS:
+        hold = getattr(rj, "hold", None)   # least squares starts here again when the descent leaves the fit to it
+        if hold is not None:
+            hold(x0)
         got = descend(rj, specs, x0, np.array(rj.fun(x0)), np.array(rj.jac(x0)), None, FIT_STEPS, known)
         if got is not None:
             return got[0], got[1]

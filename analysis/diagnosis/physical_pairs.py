@@ -23,7 +23,7 @@ held-out modes better than the first cause alone by at least ``physical_min_gain
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from itertools import combinations, product
 
@@ -123,14 +123,19 @@ class _SplitGrid:
 class SplitBound:
     """A lower bound of a split pair's chi2 on all modes over the whole range of both factors (monotone: the grid
     with the range's ends added, cut into cells whose corners bound the frequencies inside, :func:`_chi2_bound`),
-    lifted on demand by splitting its lowest cells (:func:`analysis.diagnosis.physical._tighten`)."""
+    lifted on demand by splitting its lowest cells (:func:`analysis.diagnosis.physical._tighten`). ``make``: gives
+    the screened cells when :meth:`below` is first asked (their corners are solved only for a pair the search
+    reaches with a target its other tests leave open), in place of ``screened``."""
 
-    def __init__(self, screened: _Screened | None, value: float = -np.inf) -> None:
-        self._s, self._value = screened, value
+    def __init__(self, screened: _Screened | None, value: float = -np.inf,
+                 make: Callable[[], _Screened] | None = None) -> None:
+        self._s, self._value, self._make = screened, value, make
 
     def below(self, target: float) -> bool:
         """Whether the pair's chi2 on all modes could be below ``target`` (``value`` without cells: a pair refined on
         all modes, its chi2 there; -inf: none known)."""
+        if self._make is not None:
+            self._s, self._make = self._make(), None
         if self._s is None or self._s.at is None:
             return bool(self._value < target)
         if self._s.bound < target:
@@ -180,12 +185,13 @@ def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm:
         at = _Chi2(_SplitGrid(sim, fit, str(spec.choice), name, (a, b)), two_spec,  # type: ignore[arg-type]
                    two_spec.params, {}, mm, allsel, fmax, "")
         c, fa, fb = min((at.at((ps.to_x(fa), ps.to_x(fb)))[0], fa, fb) for fa, fb in product(levels, levels))
-        screened = None
-        if ps.monotone:
+
+        def screened(at: _Chi2 = at, c: float = c) -> _Screened:     # the cells' bounds, made when first asked
             bounded = [(at.bound(box), box) for box in cells]
-            screened = _Screened(c, "", {}, min(t[0] for t in bounded), bounded, at)
+            return _Screened(c, "", {}, min(t[0] for t in bounded), bounded, at)
+
         two = ({**fit.params, spec.choice: a, name: fa}, {**fit.params, spec.choice: b, name: fb})
-        ranked.append((c, SplitBound(screened), two))
+        ranked.append((c, SplitBound(None, make=screened if ps.monotone else None), two))
     ranked.sort(key=lambda t: t[0])
     return [(bound, *(PhysicalFit(cause=fit.cause, params=p, free=fit.free, chi2=np.inf) for p in two))  # type: ignore[misc]
             for _, bound, two in ranked]
@@ -323,6 +329,8 @@ class _Refined:
     folds: list
     #: the folds' common start at ``x`` (:class:`analysis.diagnosis.physical.FoldStart`), made by the first fold
     start: FoldStart | None = None
+    #: the refinement's residuals on all modes (its last point's answers kept: the folds' start is made from there)
+    rj: ResidualsWithJacobian | None = None
 
 
 def _start(x0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -371,8 +379,10 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
     allsel = np.ones(K, bool)
 
     def refine() -> _Refined:
-        x = solve(np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat]), allsel)
-        return _Refined(x, np.sum(resid(x, allsel).reshape(K, -1) ** 2, axis=1), [])
+        rj = on(allsel)
+        x0 = _start(np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat]), lo, hi)
+        x = least_chi2(rj, [s for _, s in flat], x0, 20 * len(flat))[0]
+        return _Refined(x, np.sum(resid(x, allsel).reshape(K, -1) ** 2, axis=1), [], rj=rj)
 
     # the same pair from the same start refined before in this search (by another stage, or before its variants
     # were widened): its minimum and the folds made so far are taken from there (each fold starts at the minimum)
@@ -386,7 +396,7 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
             sel = allsel.copy()
             sel[k] = False
             if made.start is None and getattr(sim, "modes_jac_of", None) is not None:
-                made.start = FoldStart(on(allsel), x, [s for _, s in flat])
+                made.start = FoldStart(made.rj or on(allsel), x, [s for _, s in flat])
             got = made.start.minimum(k) if made.start is not None else None
             held = got[2] if got is not None else resid(solve(x, sel), ~sel)
             made.folds.append(float(np.sum(held ** 2)))
