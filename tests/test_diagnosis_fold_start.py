@@ -47,6 +47,9 @@ class _Linear:
     def options(self) -> dict:
         return {"jac": self.jac}
 
+    def hold(self, x: np.ndarray) -> None:
+        """Nothing to keep: the residuals cost no solve."""
+
 
 def _specs(n: int) -> list[ParamSpec]:
     return [ParamSpec(f"p{i}", -50.0, 50.0, nominal=0.0, log=False) for i in range(n)]

@@ -450,13 +450,13 @@ def _fit_continuous(sim: PhysicalSimulation, cause: CauseSpec, free: Sequence[Pa
 
     lo, hi = _x_box(free)
     first = start or {}
-    starts = [np.array([s.to_x(float(first.get(s.name, s.start()))) for s in free])]
+    starts = [search_x(free, first)]
     if start is None:      # and the best point of a coarse grid over the range
         inner = 9 if len(free) == 1 else 7
         grid = np.array(np.meshgrid(*[np.linspace(a, b, inner)[1:-1] for a, b in zip(lo, hi)])).reshape(len(free), -1).T
         costs = [float(np.sum(resid(x) ** 2)) for x in grid]
         starts.append(grid[int(np.argmin(costs))])
-    starts += [np.array([s.to_x(float(q.get(s.name, s.start()))) for s in free]) for q in also]
+    starts += [search_x(free, q) for q in also]
     rj = _cause_residuals(sim, cause, free, full, mm, sel, fmax)
     best: tuple[dict, float] = ({}, np.inf)
     minima: list[tuple[np.ndarray, float]] = []
@@ -485,9 +485,7 @@ def least_chi2(rj: ResidualsWithJacobian, specs: Sequence[ParamSpec], x0: np.nda
     stops at an edge moved inside where chi2 allows (:func:`off_edges`)."""
     x0 = np.asarray(x0, float)
     if rj.analytic and x0.size <= DESCENT_PARAMETERS:
-        hold = getattr(rj, "hold", None)   # least squares starts here again when the descent leaves the fit to it
-        if hold is not None:
-            hold(x0)
+        rj.hold(x0)         # least squares starts here again when the descent leaves the fit to it
         got = descend(rj, specs, x0, np.array(rj.fun(x0)), np.array(rj.jac(x0)), None, FIT_STEPS, known)
         if got is not None:
             return got[0], got[1]
@@ -586,6 +584,12 @@ def _curvature(J: np.ndarray, x: np.ndarray, g: np.ndarray, before: tuple[np.nda
     except np.linalg.LinAlgError:
         return A
     return B
+
+
+def search_x(specs: Sequence[ParamSpec], params: Mapping) -> np.ndarray:
+    """The search variables (:meth:`ParamSpec.to_x`) of ``specs`` at the parameters ``params`` (a parameter they
+    lack at its start, :meth:`ParamSpec.start`)."""
+    return np.array([s.to_x(float(params.get(s.name, s.start()))) for s in specs])
 
 
 def _x_box(specs: Sequence[ParamSpec]) -> tuple[np.ndarray, np.ndarray]:
@@ -987,8 +991,11 @@ class _Folds:
         self.fixed = {k: v for k, v in _nominal(cause).items() if k not in free}
         self._kept: dict[str | None, FoldStart] = {}
 
+    def _fixed(self, option: str | None) -> dict:
+        return self.fixed if option is None else {**self.fixed, self.cause.choice: option}
+
     def _full(self, option: str | None) -> Any:
-        fixed = self.fixed if option is None else {**self.fixed, self.cause.choice: option}
+        fixed = self._fixed(option)
 
         def full(x: np.ndarray) -> dict:
             return {**fixed, **{s.name: s.from_x(float(xi)) for s, xi in zip(self.specs, x)}}
@@ -1000,7 +1007,7 @@ class _Folds:
     def start(self, option: str | None) -> FoldStart:
         if option not in self._kept:
             q = self._start(option)
-            x = np.array([s.to_x(float(q.get(s.name, s.start()))) for s in self.specs])
+            x = search_x(self.specs, q)
             rj = _cause_residuals(self.sim, self.cause, self.specs, self._full(option), self.mm,
                                   np.ones(self.mm.freq_hz.size, bool), self.fmax)
             self._kept[option] = FoldStart(rj, x, self.specs)
@@ -1016,8 +1023,7 @@ class _Folds:
         for option in (self.options if self.options is not None else [None]):
             got = self.start(option).minimum(k)
             if got is None:
-                fixed = self.fixed if option is None else {**self.fixed, self.cause.choice: option}
-                p, c = _fit_continuous(self.sim, self.cause, self.specs, fixed, self.mm, sel, self.fmax,
+                p, c = _fit_continuous(self.sim, self.cause, self.specs, self._fixed(option), self.mm, sel, self.fmax,
                                        self._start(option))
                 held = None
             else:
