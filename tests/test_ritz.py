@@ -335,8 +335,8 @@ def test_the_solve_at_a_few_dofs_is_the_full_solve_there(fv: FrameVariants) -> N
 
 def test_the_inverse_solve_is_an_eigendecomposition(fv: FrameVariants) -> None:
     """``inverse_eigh``: ascending eigenvalues, vectors M-normalised (``Y^T M Y = I``) that solve ``K Y = M Y
-    diag(omega^2)`` (the residual at rounding against ``|K| |y|``), equal to LAPACK's direct solve of
-    the well-conditioned pencils; a ``K`` that is not positive definite (a mechanism) is solved directly."""
+    diag(omega^2)`` (the residual at rounding against ``|K| |y|``), equal to LAPACK's direct solve within that
+    solve's rounding; a ``K`` that is not positive definite (a mechanism) is solved directly."""
     for name, K, M in _reduced_pencils(fv):
         Mm = np.eye(K.shape[0]) if M is None else M
         w2, Y = inverse_eigh(K, M)
@@ -345,8 +345,11 @@ def test_the_inverse_solve_is_an_eigendecomposition(fv: FrameVariants) -> None:
         low = w2 < (2 * np.pi * 1500.0) ** 2
         res = K @ Y[:, low] - Mm @ Y[:, low] * w2[low]          # backward error: against |K| |y|
         assert np.max(np.abs(res)) < 1e-13 * np.max(np.abs(K)) * np.max(np.abs(Y[:, low])), name
-        if name != "stiff springs":       # there the direct solve is the inexact one (test_stiff_springs_...)
-            np.testing.assert_allclose(w2[low], scipy.linalg.eigh(K, Mm, eigvals_only=True)[low], rtol=1e-9)
+        # LAPACK's direct solve is exact to its own rounding, a few machine epsilons times the pencil's largest
+        # eigenvalue (on the stiff springs 1e-3 of the lowest mode: test_stiff_springs_...); the two agree to it
+        direct = scipy.linalg.eigh(K, Mm, eigvals_only=True)
+        rounding = np.finfo(float).eps * np.max(direct)
+        assert np.max(np.abs(w2[low] - direct[low])) < 20 * rounding, name
     mechanism = np.diag([-1.0, 2.0, 5.0]) + 0.1
     for M in (None, np.diag([1.0, 2.0, 3.0])):
         w2, Y = inverse_eigh(mechanism, M)
