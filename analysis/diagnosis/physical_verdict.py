@@ -963,7 +963,10 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     causes = {fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)} | set(left)
     if not opened and splits_in_two(specs[fa.cause], fa, across=held):
         causes.add(fa.cause)
-        pairs.append(_Later((fa.cause,), lambda: split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held)))
+        # made when reached, at the target a split pair has then (:func:`split_choice` leaves out those that cannot
+        # come below it; the search's targets only fall)
+        pairs.append(_Later((fa.cause,), lambda: split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held,
+                                                              below=target_of(fa))))
     if held:
         spread = tuple(n for n, spec in specs.items() if (names is None or n in names) and held_spec(spec, fa) is not None)
         causes.update(spread)
@@ -976,11 +979,18 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))],
                      lambda group: all(_hopeless(best, bound, specs[fa.cause], specs[n]) for n in group.causes))
     best: dict | None = None
+
+    def target_of(fb: PhysicalFit) -> float:
+        """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`)."""
+        return _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom_of(fb),
+                           _freedom(specs[fb.cause], fb.free),
+                           _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
+
+    def freedom_of(fb: PhysicalFit) -> float:
+        return 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
+
     for below, fa2, fb in todo:
-        freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
-        target = _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom,
-                             _freedom(specs[fb.cause], fb.free),
-                             _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
+        freedom, target = freedom_of(fb), target_of(fb)
         if target <= 0.0 or _hopeless(best, bound, specs[fa.cause], specs[fb.cause]) or not below.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`; a chi2 is >= 0)
         if fa2 is None:
