@@ -180,9 +180,9 @@ def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm:
     the pairs; its targets only fall): a pair whose bound over the whole range of both factors is not below it, the
     range as one cell (its four corners, :func:`analysis.diagnosis.physical._chi2_bound`) or as 2 x 2 cells, is left
     out before its grid is solved (its finer cells lie inside those, so its bound could not be below it either; the
-    other pairs keep their order, and the corners solved are among their cells').
+    other pairs keep their order, and the corners solved are among their cells'); none when ``below`` is not above 0.
     Returns ``[(bound, first, second)]``; empty for any other cause."""
-    if not splits_in_two(spec, fit, across):
+    if not splits_in_two(spec, fit, across) or below <= 0.0:
         return []
     ps = next(s for s in spec.params if s.name in fit.free)
     name = ps.name
