@@ -49,7 +49,7 @@ def _searched() -> tuple:
 
     measured, mm = _frame()
     fv, specs, fmax, judge = physical_stage(measured, mm)
-    first = _as_first(fv, specs, mm, fmax, "support_stiffness", ("factor_translational", "factor_rotational"), judge,
+    first = _as_first(fv, specs, mm, fmax, "support_stiffness", ("factor_translational", "factor_rotational"),
                       options=["left:0"])
     return fv, specs, mm, fmax, judge, first
 
