@@ -49,7 +49,7 @@ def _searched() -> tuple:
 
     measured, mm = _frame()
     fv, specs, fmax, judge = physical_stage(measured, mm)
-    first = _as_first(fv, specs, mm, fmax, "support_stiffness", ("factor_translational", "factor_rotational"), judge,
+    first = _as_first(fv, specs, mm, fmax, "support_stiffness", ("factor_translational", "factor_rotational"),
                       options=["left:0"])
     return fv, specs, mm, fmax, judge, first
 
@@ -163,3 +163,55 @@ def test_a_fleets_scatter_cause_is_searched_first_and_bounds_the_firsts_before_i
         assert changes["support_stiffness"]["support"] == "left:0"
         assert changes["stiffness_shift"]["stiffness_factor"] == pytest.approx(STIFFER, rel=1e-3)
     assert fleet["_chi2_cv"] <= plain["_chi2_cv"]
+
+
+def test_a_first_causes_folds_are_made_only_when_a_pair_needs_them() -> None:
+    """The support fitted alone at left:0 as a first cause is refined on all modes, not cross-validated. Against a
+    named score that leaves the pairs on top of it a target below the chi2 they refine to (no pair cross-validated),
+    its held-out chi2 is not made either; the full search (no score) makes it, as its pair is cross-validated, and
+    names the same pair as with the first cause cross-validated from the start."""
+    import analysis.diagnosis.physical_verdict as pv
+
+    fv, specs, mm, fmax, judge, first = _searched()
+    assert "_alone_cv" not in first and first["_alone_chi2"] <= first["_fit"].chi2 + 1e-9
+    lazy = dict(first)
+    full = pv._on_top_of(fv, specs, mm, fmax, lazy, judge, CAUSES, opened=False)
+    assert full is not None and "_alone_cv" in lazy
+    eager = dict(first)
+    pv._alone_cv(fv, specs, mm, fmax, eager)
+    assert _pair(pv._on_top_of(fv, specs, mm, fmax, eager, judge, CAUSES, opened=False)) == _pair(full)
+    top = pv._choice_penalty(specs["support_stiffness"]) + 0.5 * full["_pair"].chi2
+    assert pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False, top=top) is None
+    assert "_alone_cv" not in first
+
+
+def test_a_target_is_the_same_whether_its_held_out_chi2_is_made_or_not() -> None:
+    """:func:`_win_target` given the first cause's held-out chi2 or a function that makes it: the same target, the
+    function asked only where the target depends on it."""
+    from analysis.diagnosis.physical_verdict import _Judge, _win_target
+
+    K = 10
+    judge = _Judge(measured=None, frf=None, weights=np.ones(1), base=np.full(K, 50.0), far=np.zeros(K, bool),
+                   before_db=0.0, noise_db=0.0)
+    asked: list[float] = []
+
+    def made(cv: float) -> object:
+        def make() -> float:
+            asked.append(cv)
+            return cv
+        return make
+
+    named = {"significant": True, "adequate": True, "_chi2_cv": 12.0}
+    unnamed = {"significant": False, "adequate": False, "_chi2_cv": 300.0}
+    for alone in (30.0, 80.0, 900.0):
+        for cv in (alone, 1.2 * alone, 3.0 * alone):
+            for best, top, named_only in ((None, np.inf, True), (named, np.inf, False), (None, 15.0, False),
+                                          (unnamed, np.inf, False), (None, np.inf, False)):
+                first = {"_alone_chi2": alone}
+                args = (3.0, 4.0, 6.0, named_only)
+                assert _win_target(best, top, judge, first, made(cv), *args) == \
+                    _win_target(best, top, judge, first, cv, *args)         # type: ignore[arg-type]
+    # far from the first cause's reach (a named score of 12 less a freedom of 6): never asked
+    asked.clear()
+    assert _win_target(named, np.inf, judge, {"_alone_chi2": 900.0}, made(900.0), 3.0, 4.0, 6.0) == 6.0  # type: ignore[arg-type]
+    assert asked == []

@@ -111,7 +111,7 @@ def test_a_second_cause_ranked_sixth_on_the_screen_is_still_refined(monkeypatch:
 
     fv, specs, mm, fmax, fits, found, judge = _searched(SUPPORT_AND_JOINT, CAUSES)
     first = pv._as_first(fv, specs, mm, fmax, "support_stiffness", ("factor_translational", "factor_rotational"),
-                         judge, options=["left:0"])
+                         options=["left:0"])
     screen = pv._on_top_fits
 
     def joint_last(*args: object, **kw: object) -> tuple:

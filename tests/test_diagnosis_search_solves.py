@@ -66,3 +66,29 @@ def test_a_fits_start_held_is_solved_once_between_other_points() -> None:
     assert counted.asked == 2
     rj.fun(x1)
     assert counted.asked == 3
+
+
+def test_a_split_pair_that_cannot_come_below_the_target_is_left_out_before_its_grid() -> None:
+    """The two cracks of the first test, every two elements paired (``across``): given the chi2 a pair must come below
+    when the pairs are made, a pair whose bound over both factors' whole range (one cell, or 2 x 2 cells) is not below
+    it is left out before its grid is solved; those kept are the pairs of the search without it whose bound could
+    come below it, in the same order with the same points, and each has the same bound."""
+    fv = frame_variants(None, OUTS, REFS)
+    spec = _specs(fv)["element_stiffness"]
+    mm = _band_modes(fv, CRACKS)
+    fit = PhysicalFit("element_stiffness", {"element": "top:2", "factor": 0.3}, ("factor",), np.inf)
+    every = split_choice(fv, spec, fit, mm, FMAX, across=True)
+    target = 1.0
+    counted = _Counted(fv)
+    kept = split_choice(counted, spec, fit, mm, FMAX, across=True, below=target)    # type: ignore[arg-type]
+    grid = len(SPLIT_POWERS) ** 2
+    assert 0 < len(kept) < len(every)
+    # the coarse cells' 9 corners for every pair, the rest of the grid for those kept (one grid point is a corner):
+    # far fewer than the grid and the 16 further corners of the cells the search would solve for every pair
+    assert counted.asked <= 9 * len(every) + (grid - 1) * len(kept) < (grid + 16) * len(every)
+    answers = {repr((a.params, b.params)): bound.below(target) for bound, a, b in every}
+    got = [(a.params, b.params) for _, a, b in kept]
+    assert got == [(a.params, b.params) for _, a, b in every if (a.params, b.params) in got]
+    assert all(not could for pair, could in answers.items() if pair not in set(map(repr, got)))
+    assert [bound.below(target) for bound, _, _ in kept] == [answers[repr(pair)] for pair in got]
+    assert any(bound.below(target) for bound, _, _ in kept)

@@ -149,6 +149,12 @@ def _split_pairs(spec: CauseSpec, across: bool) -> list[tuple[str, str]]:
     return [(a, b) for a, b in combinations(spec.options, 2) if across or _member(a) == _member(b)]
 
 
+def _cells_bound(at: _Chi2, axis: Sequence[float]) -> float:
+    """The least lower bound of ``at``'s chi2 (:meth:`analysis.diagnosis.physical._Chi2.bound`) over the cells of the
+    lattice ``axis`` x ``axis`` (search variables of both factors)."""
+    return min(at.bound(box) for box in product(zip(axis[:-1], axis[1:]), repeat=2))
+
+
 def splits_in_two(spec: CauseSpec, fit: PhysicalFit, across: bool = False) -> bool:
     """Whether :func:`split_choice` has pairs for ``fit`` of ``spec``: an element's stiffness (:func:`splits`) fitted
     with one free factor (log, nominal 1) and two options to pair. Known without a solve (a search counts the second
@@ -159,7 +165,7 @@ def splits_in_two(spec: CauseSpec, fit: PhysicalFit, across: bool = False) -> bo
 
 
 def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm: MeasuredModes, fmax: float,
-                 across: bool = False) -> list[tuple[SplitBound, PhysicalFit, PhysicalFit]]:
+                 across: bool = False, below: float = np.inf) -> list[tuple[SplitBound, PhysicalFit, PhysicalFit]]:
     """The change of ``fit`` as two of its kind on one member (two cracks in one column): an element's
     stiffness (a choice ``element`` among more than ``N_SCREEN`` options ``member:e``, factors: log, nominal 1)
     fitted alone stands for two such changes by one deeper change at one element, often neither of theirs, and a
@@ -170,8 +176,13 @@ def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm:
     the bound says which could still beat a pair already judged. Two elements of different members are found as a
     second change on top of the first (:func:`besides`); ``across``: every two elements, of one member or not, are
     on the grid too (no single element is named, so the first element fitted alone may sit at neither crack).
+    ``below``: only a pair whose chi2 on all modes could come below it is of use (the search's target when it makes
+    the pairs; its targets only fall): a pair whose bound over the whole range of both factors is not below it, the
+    range as one cell (its four corners, :func:`analysis.diagnosis.physical._chi2_bound`) or as 2 x 2 cells, is left
+    out before its grid is solved (its finer cells lie inside those, so its bound could not be below it either; the
+    other pairs keep their order, and the corners solved are among their cells'); none when ``below`` is not above 0.
     Returns ``[(bound, first, second)]``; empty for any other cause."""
-    if not splits_in_two(spec, fit, across):
+    if not splits_in_two(spec, fit, across) or below <= 0.0:
         return []
     ps = next(s for s in spec.params if s.name in fit.free)
     name = ps.name
@@ -180,10 +191,14 @@ def split_choice(sim: PhysicalSimulation, spec: CauseSpec, fit: PhysicalFit, mm:
     ends = [ps.to_x(v) for v in sorted({ps.lo, ps.hi, *levels})]
     cells = [tuple(box) for box in product(zip(ends[:-1], ends[1:]), repeat=2)]
     allsel = np.ones(mm.freq_hz.size, bool)
+    # before the grid: the whole range as one cell, then as 2 x 2 cells (corners the cells solve anyway)
+    coarse = [[ends[0], ends[-1]], [ends[0], ends[len(ends) // 2], ends[-1]]]
     ranked = []
     for a, b in _split_pairs(spec, across):
         at = _Chi2(_SplitGrid(sim, fit, str(spec.choice), name, (a, b)), two_spec,  # type: ignore[arg-type]
                    two_spec.params, {}, mm, allsel, fmax, "")
+        if ps.monotone and below < np.inf and any(_cells_bound(at, axis) >= below for axis in coarse):
+            continue                # no point of the range can come below ``below``: the pair cannot be of use
         c, fa, fb = min((at.at((ps.to_x(fa), ps.to_x(fb)))[0], fa, fb) for fa, fb in product(levels, levels))
 
         def screened(at: _Chi2 = at, c: float = c) -> _Screened:     # the cells' bounds, made when first asked

@@ -334,6 +334,16 @@ def _alone_cv(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: flo
     return first["_alone_cv"]
 
 
+def _alone_refined(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict) -> float:
+    """The chi2 on all modes of the single cause ``first`` refined as :func:`_alone_cv` refines it, kept in
+    ``first["_alone_chi2"]``: its folds are left for :func:`_alone_cv` to make when they are asked (from the same
+    refinement, :func:`fit_pair`)."""
+    if "_alone_chi2" not in first:
+        fa: PhysicalFit = first["_fit"]
+        first["_alone_chi2"] = fit_pair(sim, [specs[fa.cause]], [fa], mm, fmax, folds=False).chi2
+    return float(first["_alone_chi2"])
+
+
 def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float,
                    rule: DecisionRule = DEFAULT_RULE) -> tuple[float, float, bool]:
     """The pair's nested held-out chi2 per mode ``cv_pair`` against the first cause's alone ``cv_first``,
@@ -717,7 +727,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         # the freedom its own change needs, and fitted alone in that form it leaves the other change in the data
         name, free = first_round["_pair"].causes[1], first_round["_free"]
         if all((c["_fit"].cause, c["_fit"].free) != (name, free) for c in firsts):
-            first = _as_first(sim, specs, mm, fmax, name, free, judge)
+            first = _as_first(sim, specs, mm, fmax, name, free)
             best = _better(best, _on_top_of(sim, specs, mm, fmax, first, judge, names, opened,
                                             bound=_named_score(best)))
     return best
@@ -752,7 +762,7 @@ def _local(spec: CauseSpec) -> bool:
     return spec.choice is not None and (spec.every is not None or splits(spec))
 
 
-def _local_firsts(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list, judge: _Judge,
+def _local_firsts(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, found: list,
                   names: Sequence[str]) -> list[dict]:
     """The local causes of ``found`` (:func:`_local`, among ``names``) as first causes of a pair, each at each of its
     places: a support or a joint fitted alone at each place (every parameter free, from its fit there), cross-
@@ -771,7 +781,7 @@ def _local_firsts(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
         widest = max(variants(spec), key=len)
         starts = {str(o): q for _, o, q in fit.ranked}
         for place in spec.places:
-            out.append(_as_first(sim, specs, mm, fmax, fit.cause, widest, judge, options=[place],
+            out.append(_as_first(sim, specs, mm, fmax, fit.cause, widest, options=[place],
                                  nested=[starts[str(place)]] if str(place) in starts else []))
     out.sort(key=lambda c: c["_fit"].chi2)       # the closest first: a pair named early bounds the others
     return out
@@ -797,7 +807,7 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     if 2.0 * floor >= top:
         return None
     out: dict | None = None
-    for first in _local_firsts(sim, specs, mm, fmax, found, judge, local):
+    for first in _local_firsts(sim, specs, mm, fmax, found, local):
         if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
             continue
         c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True,
@@ -886,23 +896,21 @@ def _better(best: dict | None, c: dict | None) -> dict | None:
 
 
 def _as_first(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, name: str, free: tuple,
-              judge: _Judge, options: Sequence[str] | None = None, nested: Sequence[dict] = ()) -> dict:
+              options: Sequence[str] | None = None, nested: Sequence[dict] = ()) -> dict:
     """The cause ``name`` with the parameters ``free`` fitted alone on all modes (its choice searched over
-    ``options``, None: every option; ``nested``: further starts, :func:`fit_cause`) and cross-validated as the
-    pairs are (:func:`_alone_cv`), judged as a single cause."""
+    ``options``, None: every option; ``nested``: further starts, :func:`fit_cause`) as a first cause of pairs
+    (:func:`_on_top_of`): refined as the pairs refine it (:func:`_alone_refined`), cross-validated so when a pair on
+    top of it is (:func:`_alone_cv`, its held-out chi2 per mode then the fit's ``cv_per_mode`` too)."""
     spec = specs[name]
     p, chi2, ranked = fit_cause(sim, spec, free, mm, np.ones(mm.freq_hz.size, bool), fmax, options=options,
                                 nested=nested)
-    fit = PhysicalFit(cause=name, params=p, free=free, chi2=chi2, ranked=ranked)
-    alone = fit_pair(sim, [spec], [fit], mm, fmax)
-    cv = alone.cv_per_mode
-    edge = spec.at_edge(p, free)
-    fit = replace(fit, chi2_cv=float(cv.sum()), cv_per_mode=cv, at_edge=edge)
-    return {**judge.single(spec, fit), "_alone_cv": cv, "_alone_chi2": alone.chi2}
+    first = {"_fit": PhysicalFit(cause=name, params=p, free=free, chi2=chi2, ranked=ranked, at_edge=spec.at_edge(p, free))}
+    _alone_refined(sim, specs, mm, fmax, first)
+    return first
 
 
-def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_alone: float, freedom: float,
-                own: float, penalty: float, named_only: bool = False) -> float:
+def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_alone: float | Callable[[], float],
+                freedom: float, own: float, penalty: float, named_only: bool = False) -> float:
     """The chi2 on all modes a pair must come below to beat ``best`` (the best judged pair so far) or a named pair
     of score ``top`` found elsewhere (:func:`_better`); inf: any pair could. A pair's refined chi2 on all modes is
     at least the least chi2 ``min S`` over its parameters, and so is its nested held-out chi2: with each fit at its
@@ -913,14 +921,32 @@ def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_al
     cannot be named, and its score is at least ``min S`` plus its choices' ``penalty``: one that cannot be named
     and cannot score below ``best``, or that cannot score below a named pair, cannot win. Named also means
     ``rule.physical_min_gain_db`` over ``first`` alone held out, and significant and adequate as one candidate
-    (:meth:`_Judge.most_named_chi2`). ``named_only``: only a named pair is of use (the unnamed are not kept)."""
+    (:meth:`_Judge.most_named_chi2`). ``named_only``: only a named pair is of use (the unnamed are not kept).
+    ``cv_alone`` may be given as a function that makes it: asked only when the target depends on it (by the same rule,
+    ``cv_alone`` is at least ``first``'s chi2 alone on all modes; where the terms of it could not be the least even
+    there, or the target is the other bound whatever they are, it is not made)."""
     rule = judge.rule
-    nameable = min(first["_alone_chi2"] - own, cv_alone - freedom - rule.quiet_chi2,
-                   cv_alone * rule.physical_min_gain_factor, judge.most_named_chi2())
     named_top = min(top, _named_score(best))
-    if np.isfinite(named_top) or named_only:
-        return float(min(nameable, named_top - penalty))
-    return np.inf if best is None else float(max(nameable, best["_chi2_cv"] - penalty))
+    bounded = bool(np.isfinite(named_top) or named_only)
+    if not bounded and best is None:
+        return np.inf
+    fixed = min(first["_alone_chi2"] - own, judge.most_named_chi2())
+    other = named_top - penalty if bounded else best["_chi2_cv"] - penalty    # type: ignore[index]
+
+    def nameable(cv: float) -> float:
+        return min(fixed, cv - freedom - rule.quiet_chi2, cv * rule.physical_min_gain_factor)
+
+    if callable(cv_alone):
+        least = nameable(float(first["_alone_chi2"]))
+        if least == fixed:
+            can = fixed                     # the terms of the held-out chi2 are not the least
+        elif least >= other if bounded else fixed <= other:
+            return float(other)             # the other bound decides whatever the held-out chi2 is
+        else:
+            can = nameable(float(cv_alone()))
+    else:
+        can = nameable(float(cv_alone))
+    return float(min(can, other)) if bounded else float(max(can, other))
 
 
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
@@ -945,7 +971,10 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     if all(_hopeless(None, bound, specs[fa.cause], spec) for spec in [*on, specs[fa.cause]]):
         return None                         # no pair on top of it can beat the named score ``bound`` (:func:`_hopeless`)
     progress("diagnosis: second cause on top of %s%s", fa.cause, ", its choice held open" if opened else "")
-    cv_alone = _alone_cv(sim, specs, mm, fmax, first)
+    _alone_refined(sim, specs, mm, fmax, first)
+
+    def cv_alone() -> np.ndarray:           # made when a pair is cross-validated or a target needs it
+        return _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
     seconds: list[PhysicalFit] = []
     left: list[str] = []
@@ -963,7 +992,10 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     causes = {fb.cause for _, _, fb in (pairs[:N_SECOND] if opened else pairs)} | set(left)
     if not opened and splits_in_two(specs[fa.cause], fa, across=held):
         causes.add(fa.cause)
-        pairs.append(_Later((fa.cause,), lambda: split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held)))
+        # made when reached, at the target a split pair has then (:func:`split_choice` leaves out those that cannot
+        # come below it; the search's targets only fall)
+        pairs.append(_Later((fa.cause,), lambda: split_choice(sim, specs[fa.cause], fa, mm, fmax, across=held,
+                                                              below=target_of(fa))))
     if held:
         spread = tuple(n for n, spec in specs.items() if (names is None or n in names) and held_spec(spec, fa) is not None)
         causes.update(spread)
@@ -976,11 +1008,18 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))],
                      lambda group: all(_hopeless(best, bound, specs[fa.cause], specs[n]) for n in group.causes))
     best: dict | None = None
+
+    def target_of(fb: PhysicalFit) -> float:
+        """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`)."""
+        return _win_target(best, top, judge, first, lambda: float(np.sum(cv_alone())), freedom_of(fb),
+                           _freedom(specs[fb.cause], fb.free),
+                           _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
+
+    def freedom_of(fb: PhysicalFit) -> float:
+        return 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
+
     for below, fa2, fb in todo:
-        freedom = 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
-        target = _win_target(best, top, judge, first, float(np.sum(cv_alone)), freedom,
-                             _freedom(specs[fb.cause], fb.free),
-                             _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
+        freedom, target = freedom_of(fb), target_of(fb)
         if target <= 0.0 or _hopeless(best, bound, specs[fa.cause], specs[fb.cause]) or not below.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`; a chi2 is >= 0)
         if fa2 is None:
@@ -992,15 +1031,15 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
         if two.cv_per_mode.size < mm.freq_hz.size:
             continue                        # refined on all modes, no better than ``target``: not cross-validated
-        if gain_db(fa.cv_per_mode, two.cv_per_mode) >= judge.rule.physical_min_gain_db:
+        if gain_db(fa.cv_per_mode if fa.cv_per_mode.size else cv_alone(), two.cv_per_mode) >= judge.rule.physical_min_gain_db:
             two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
         two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
-            cv_alone, two.cv_per_mode, freedom, judge.rule)
-        c["_over_first"] = {"held_out_first_chi2": float(np.sum(cv_alone)),
+            cv_alone(), two.cv_per_mode, freedom, judge.rule)
+        c["_over_first"] = {"held_out_first_chi2": float(np.sum(cv_alone())),
                             "held_out_pair_chi2": float(np.sum(two.cv_per_mode)), "freedom_chi2": freedom,
-                            "modes": int(cv_alone.size)}
+                            "modes": int(cv_alone().size)}
         # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
         # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
         kept = first["_alone_chi2"] - two.chi2 >= own
