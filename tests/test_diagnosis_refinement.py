@@ -21,6 +21,7 @@ from analysis.diagnosis.physical import (
     MeasuredModes,
     _best_variant,
     _refinement_bar,
+    refinement_gain_bound,
     refinement_gain_db,
 )
 from analysis.diagnosis.rule import DEFAULT_RULE, gain_db
@@ -86,3 +87,26 @@ def test_the_refinement_s_bar_holds_every_refined_variant_that_can_win() -> None
     assert np.sum(winner) <= _refinement_bar(current, DEFAULT_RULE)
     plain = np.array([1.0, 2.0, 3.0])
     assert _refinement_bar(plain, DEFAULT_RULE) == pytest.approx(6.0 * scale)
+
+
+def test_the_refinement_s_gain_bound_holds_every_held_out_chi2_its_folds_may_still_reach() -> None:
+    """Part way through a refinement's folds (the folds done, each remaining mode at least its chi2 at the fit on all
+    modes), the bound on its gain is at least the gain of every way the remaining folds may come out (a mode lost or
+    not, in either variant), and equal to the gain once every fold is done."""
+    rng = np.random.default_rng(7)
+    for _ in range(400):
+        K = int(rng.integers(3, 9))
+        current = rng.uniform(0.0, 40.0, K)
+        current[rng.random(K) < 0.3] = rng.uniform(50.0, 200.0)           # modes the current variant loses
+        refined = rng.uniform(0.0, 40.0, K)
+        refined[rng.random(K) < 0.3] = rng.uniform(50.0, 200.0)
+        least = refined * rng.uniform(0.0, 1.0, K)                         # each mode's chi2 on all modes: below
+        assert refinement_gain_bound(current, refined, least[K:]) == refinement_gain_db(current, refined)
+        for d in range(K):
+            bound = refinement_gain_bound(current, refined[:d], least[d:])
+            assert refinement_gain_db(current, refined) <= bound
+            assert refinement_gain_db(current, np.r_[refined[:d], least[d:]]) <= bound
+    # a mode lost by the current variant: the comparison without it is the most the refinement can gain
+    current = np.array([0.1, 131.0, 0.2, 3.2, 99.0])
+    assert refinement_gain_bound(current, np.array([0.1]), np.array([34.0, 0.2, 2.7, 1.0])) == pytest.approx(
+        gain_db(current[[0, 2, 3, 4]], [0.1, 0.2, 2.7, 1.0]))

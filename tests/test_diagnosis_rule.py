@@ -159,7 +159,7 @@ def test_the_second_cause_rule_and_a_refinement_take_the_physical_gain_from_the_
     chi2 = {plain.free: plain.chi2, refined.free: refined.chi2}
     # fit_cause and the cross-validation stand in: each variant's fit and held-out chi2 as above
     monkeypatch.setattr(physical, "fit_cause", lambda sim, cause, free, *a, **k: ({}, chi2[tuple(free)], []))
-    monkeypatch.setattr(physical, "_best_of", lambda sim, cause, mm, fmax, fits, bar:
+    monkeypatch.setattr(physical, "_best_of", lambda sim, cause, mm, fmax, fits, bar, *_:
                         refined if any("inertia_factor" in f.free for f in fits) else plain)
     nothing: Any = None                                          # no simulation: the stand-ins answer
     modes: Any = SimpleNamespace(freq_hz=np.arange(5.0))

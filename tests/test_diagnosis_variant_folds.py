@@ -46,7 +46,8 @@ class _Table:
         return {"tag": ("fold", tuple(free), k)}, 0.0, []
 
 
-def _run(monkeypatch: pytest.MonkeyPatch, table: _Table, bar: float = np.inf) -> PhysicalFit | None:
+def _run(monkeypatch: pytest.MonkeyPatch, table: _Table, bar: float = np.inf, could_pass: object = None
+         ) -> PhysicalFit | None:
     monkeypatch.setattr(physical, "residuals", table.residuals)
     monkeypatch.setattr(physical, "fit_cause", table.fit_cause)
     cause = CauseSpec("toy", (ParamSpec("a", 0.1, 10.0), ParamSpec("b", 0.1, 10.0)))
@@ -54,7 +55,7 @@ def _run(monkeypatch: pytest.MonkeyPatch, table: _Table, bar: float = np.inf) ->
                        shapes=np.ones((1, K), complex))
     fits = [PhysicalFit(cause="toy", params={"tag": ("full", free), "a": 1.0, "b": 1.0}, free=free, chi2=float(np.sum(table.least[free])))
             for free in table.least]
-    return physical._best_of(table, cause, mm, 100.0, fits, bar)  # type: ignore[arg-type]
+    return physical._best_of(table, cause, mm, 100.0, fits, bar, could_pass)  # type: ignore[arg-type]
 
 
 def test_a_variant_that_fits_all_modes_best_but_predicts_them_worst_stops_its_folds_early(monkeypatch) -> None:
@@ -96,3 +97,43 @@ def test_the_variant_chosen_is_the_one_every_variant_cross_validated_in_full_cho
     assert best.chi2_cv == pytest.approx(totals[want], rel=1e-12)
     assert len(table.folds) <= K * len(frees)
     assert len(set(table.folds)) == len(table.folds)        # no fold made twice
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_refinements_that_cannot_gain_enough_stop_their_folds_with_the_same_outcome(monkeypatch, seed) -> None:
+    """Refinements of a current variant (its held-out chi2 per mode ``current``): the one chosen is kept only when it
+    gains the rule's dB over the current one (:func:`analysis.diagnosis.physical.refinement_gain_db`). Asked to stop
+    when no refinement can (:func:`analysis.diagnosis.physical.refinement_gain_bound`), the cross-validation keeps the
+    same refinement where it is kept, stops where it would not be, and never makes more folds."""
+    from analysis.diagnosis.physical import refinement_gain_bound, refinement_gain_db
+    from analysis.diagnosis.rule import DEFAULT_RULE
+
+    rng = np.random.default_rng(seed)
+    frees = [("a",), ("b",), ("a", "b")]
+    least = {f: rng.uniform(0.0, 20.0, K) for f in frees}
+    held = {f: least[f] + rng.exponential(rng.uniform(1.0, 40.0), K) for f in frees}
+    current = rng.uniform(5.0, 60.0, K)
+    full = _Table(least, held)
+    chosen = _run(monkeypatch, full)
+    kept = chosen is not None and refinement_gain_db(current, chosen.cv_per_mode) >= DEFAULT_RULE.physical_min_gain_db
+    table = _Table(least, held)
+    got = _run(monkeypatch, table, could_pass=lambda done, rest: refinement_gain_bound(current, done, rest)
+               >= DEFAULT_RULE.physical_min_gain_db)
+    if kept:
+        assert got is not None and chosen is not None and got.free == chosen.free
+        assert np.array_equal(got.cv_per_mode, chosen.cv_per_mode)
+    else:
+        assert got is None or refinement_gain_db(current, got.cv_per_mode) < DEFAULT_RULE.physical_min_gain_db
+    assert len(table.folds) <= len(full.folds)
+
+
+def test_refinements_far_from_the_gain_make_no_fold(monkeypatch) -> None:
+    """Refinements whose chi2 on all modes is already above half the current held-out chi2 (3 dB) cannot gain it:
+    none, without a fold."""
+    from analysis.diagnosis.physical import refinement_gain_bound
+
+    table = _Table({("a", "b"): np.full(K, 2.5), ("a",): np.full(K, 5.0)},
+                   {("a", "b"): np.full(K, 30.0), ("a",): np.full(K, 6.0)})
+    current = np.full(K, 4.0)                      # 16 held out: a refinement must come to 8, its bound is 10
+    assert _run(monkeypatch, table, could_pass=lambda done, rest: refinement_gain_bound(current, done, rest) >= 3.0) is None
+    assert table.folds == []

@@ -90,7 +90,7 @@ __all__ = ["ParamSpec", "CauseSpec", "PhysicalSimulation", "MeasuredModes", "Phy
            "fit_cause", "held_out_reaches", "held_out_bound", "kept_fit", "variants", "physical_causes", "paired_well",
            "same_structure", "FREQ_FLOOR",
            "MAC_TOL", "N_SCREEN", "N_SCREEN_FOLD", "MAX_MODES",
-           "LOST_MODE_CHI2", "MODE_CHI2_MAX", "lost_modes", "counted_modes", "refinement_gain_db",
+           "LOST_MODE_CHI2", "MODE_CHI2_MAX", "lost_modes", "counted_modes", "refinement_gain_db", "refinement_gain_bound",
            "gain_db"]
 
 FREQ_FLOOR = 0.002
@@ -1084,7 +1084,9 @@ def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, 
         frees = [tuple(n for n in (s.name for s in cause.params) if n in best.free or n == extra) for extra in more]
         for free in frees:
             fit(free, bar)
-        refined = _best_of(sim, cause, mm, fmax, [fits[v] for v in frees if v in fits], bar)
+        current = best.cv_per_mode
+        refined = _best_of(sim, cause, mm, fmax, [fits[v] for v in frees if v in fits], bar,
+                           lambda done, rest: refinement_gain_bound(current, done, rest) >= rule.physical_min_gain_db)
         if (refined is None or refined.at_edge
                 or refinement_gain_db(best.cv_per_mode, refined.cv_per_mode) < rule.physical_min_gain_db):
             break
@@ -1116,6 +1118,35 @@ def refinement_gain_db(current: np.ndarray, refined: np.ndarray) -> float:
     return gain_db(np.asarray(current)[keep], np.asarray(refined)[keep])
 
 
+def refinement_gain_bound(current: np.ndarray, done: np.ndarray, least_rest: np.ndarray) -> float:
+    """The most a refinement can gain (dB, :func:`refinement_gain_db`) over the current variant (held-out chi2 per mode
+    ``current``) when its first folds are ``done`` (held-out chi2 per mode) and each remaining mode's held-out chi2 is
+    at least ``least_rest`` (:func:`held_out_bound`'s, its chi2 at the fit on all modes). The gain compares all modes,
+    or all but the one mode lost in both (:func:`counted_modes`): each mode the current variant loses could be that
+    one when the refinement may lose it too (done and lost, or not done) and may keep every other mode the current
+    variant loses (done and kept, or not done with a bound below :data:`LOST_MODE_CHI2`); all modes are compared when
+    none may be lost in both or several may. Each comparison's refined sum is bounded from below by the folds done and
+    the bounds of the rest, so the gain by the most of these; with every fold done, the gain itself."""
+    current = np.asarray(current, float)
+    refined = np.concatenate([np.asarray(done, float), np.asarray(least_rest, float)])
+    d = len(done)
+    lost_now = lost_modes(current)
+    may_lose = np.ones(refined.size, bool)
+    may_lose[:d] = lost_modes(refined[:d])
+    may_keep = refined < LOST_MODE_CHI2
+    # all modes compared: none lost in both (each mode the current variant loses may be kept) or several
+    best = (gain_db(current, refined) if np.all(may_keep[lost_now]) or np.count_nonzero(lost_now & may_lose) > 1
+            else -np.inf)
+    for j in np.flatnonzero(lost_now & may_lose):
+        others = lost_now.copy()
+        others[j] = False
+        if np.all(may_keep[others]):
+            keep = np.ones(refined.size, bool)
+            keep[j] = False
+            best = max(best, gain_db(current[keep], refined[keep]))
+    return best
+
+
 def _refinement_bar(current: np.ndarray, rule: DecisionRule) -> float:
     """The most held-out chi2 (all modes) with which a refinement can beat the current variant (held-out chi2 per
     mode ``current``) by :func:`refinement_gain_db`: ``rule.physical_min_gain_db`` below the current's sum, or, with a
@@ -1133,9 +1164,12 @@ def _fitted_params(fit: PhysicalFit) -> list[dict]:
 
 
 def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax: float,
-             fits: Sequence[PhysicalFit], bar: float) -> PhysicalFit | None:
+             fits: Sequence[PhysicalFit], bar: float, could_pass: Any = None) -> PhysicalFit | None:
     """Of the fitted variants ``fits``, cross-validated, the one with the least held-out chi2 below ``bar``
-    (None: none can be).
+    (None: none can be). ``could_pass(done, least_rest)``: whether a variant whose folds ``done`` (held-out chi2 per
+    mode) and bounds of the rest (as below) are these could still pass the caller's test of the answer (a refinement's
+    gain over the current variant, :func:`refinement_gain_bound`); None (the caller would reject the answer) as soon
+    as no variant could, whichever of them would be the answer.
 
     Best first: each variant's held-out chi2 is bounded from below by its folds done plus, for the folds to come,
     each mode's chi2 at its fit on all modes (:func:`held_out_reaches`; before any fold, its chi2 on all modes), and
@@ -1162,6 +1196,8 @@ def _best_of(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, fmax:
         return held_out_bound(done, least[len(done):])
 
     while runs:
+        if could_pass is not None and not any(could_pass(np.asarray(r[4]), r[3][len(r[4]):]) for r in runs):
+            return None                 # whichever variant is the answer, the caller rejects it
         i = min(range(len(runs)), key=lambda j: (bound(runs[j]), j))
         fit, options, starts, _, done, folds = runs[i]
         if held_out_reaches(np.asarray(done), runs[i][3][len(done):], bar):
