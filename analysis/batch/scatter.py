@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -42,6 +43,7 @@ Changes = Sequence[tuple[str, Mapping]]
 LIMIT_STEPS_PER_OCTAVE = 4
 
 
+@lru_cache(maxsize=4096)
 def solve_limit_hz(max_freq_hz: float) -> float:
     """The frequency (Hz) the fleet's frame is solved up to for modes below ``max_freq_hz``: the next step of a log
     grid (:data:`LIMIT_STEPS_PER_OCTAVE`) at or above it. Each flagged unit asks for modes up to its own band (1.5
@@ -129,6 +131,13 @@ class ScatterSimulation:
         derivatives for the other changes."""
         s, rest = self._scale(changes)
         top = max_freq_hz / s
+        if wrt and len(rest) == len(changes):     # no global cause among the changes: the wrapped answers, scaled
+            got = self.simulation.modes_jac_of(rest, solve_limit_hz(top), wrt)
+            if got is None:
+                return None
+            f0, P, df0, dP0 = got
+            n = _below(f0, top)
+            return f0[:n] * s, P[:, :n], s * df0[:n], dP0[:, :n]
         at = [j for j, (c, _) in enumerate(changes) if c != GLOBAL_CAUSE]       # changes[at[r]] is rest[r]
         theirs = [(at.index(i), name) for i, name in wrt if changes[i][0] != GLOBAL_CAUSE]
         if theirs:

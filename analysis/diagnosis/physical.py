@@ -244,6 +244,17 @@ class MeasuredModes:
         return ~np.any(self.shapes != 0, axis=0)
 
     @cached_property
+    def _rows(self) -> np.ndarray:
+        """The shapes' conjugates ``R_k^H`` as real rows (2, K, N): real parts, imaginary parts (:func:`_pairing`)."""
+        a_h = self._mac.a_h
+        return np.ascontiguousarray(np.stack([a_h.real, a_h.imag]))
+
+    @cached_property
+    def _f_sigma(self) -> np.ndarray:
+        """``f_k sigma_k`` (Hz): a frequency residual's unit."""
+        return self.freq_hz * self.sigma
+
+    @cached_property
     def fits_made(self) -> dict:
         """The fits made on these modes so far, each under its simulation and its start (:func:`kept_fit`): the
         search's stages ask some of them again (a pair refined on all modes before its variants are widened, then
@@ -253,18 +264,41 @@ class MeasuredModes:
 
 def pair(mm: MeasuredModes, f: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Candidate mode index paired with each measured mode (-1: none) and the MAC of the pair."""
+    idx, macs, _ = _pairing(mm, f, P)
+    return idx, macs
+
+
+def _pairing(mm: MeasuredModes, f: np.ndarray, P: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
+    """:func:`pair`'s answer and the products it is made of: the real and imaginary parts of ``R_k^H P_j`` (K, n) and
+    the candidate shapes' energies ``|P_j|^2`` (n) (None without candidate modes). Real shape products (a model's
+    real modes) are multiplied by the shapes' real and imaginary parts at once (:attr:`MeasuredModes._rows`)."""
     K = mm.freq_hz.size
     idx = np.full(K, -1)
     macs = np.zeros(K)
     if f.size == 0:
-        return idx, macs
-    M = mm._mac.against(P)
+        return idx, macs, None
+    if np.iscomplexobj(P):
+        S = mm._mac.a_h @ P
+        re, im = S.real, S.imag
+        bb = np.sum(np.abs(P) ** 2, axis=0)
+    else:
+        X = mm._rows.reshape(2 * K, -1) @ P
+        re, im = X[:K], X[K:]
+        bb = np.einsum("ij,ij->j", P, P)
+    num = re * re + im * im
+    den = np.outer(mm._mac.energy, bb)
+    if np.all(den > 0):
+        M = num / den
+    else:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            M = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
     M[mm._no_shape] = 1.0                            # modes measured without shapes pair by frequency
     C = np.abs(np.log(f[None, :] / mm.freq_hz[:, None])) / 0.1 + (1.0 - M)
     rows, cols = linear_sum_assignment(C)
     idx[rows] = cols
     macs[rows] = M[rows, cols]
-    return idx, macs
+    return idx, macs, (re, im, bb)
 
 
 def kept_fit(mm: MeasuredModes, sim: Any, key: tuple, make: Any) -> Any:
@@ -304,26 +338,36 @@ def residuals_jac(mm: MeasuredModes, f: np.ndarray, P: np.ndarray, df: np.ndarra
     (n_modes, n: Hz per unit) and ``dP`` (n_products, n_modes, n) with respect to n parameters, the pairing
     held (it changes only where the residuals jump). ``d r_f,k = df_j / (f_k sigma_k)``; with ``s = R_k^H P_j``,
     ``MAC = |s|^2 / (|R_k|^2 |P_j|^2)``: ``d MAC = 2 Re(conj(s) R_k^H dP_j) / (|R_k|^2 |P_j|^2) - 2 MAC
-    (P_j . dP_j) / |P_j|^2``; an unpaired mode's and a mode without shape's residuals are constant; the cap
-    ``c tanh(r / c)`` multiplies them by ``1 - tanh^2(r / c)``."""
-    idx, macs = pair(mm, f, P)
+    (P_j . dP_j) / |P_j|^2`` (with real shape products ``P``, the real and imaginary parts of ``R_k^H dP_j`` at once);
+    an unpaired mode's and a mode without shape's residuals are constant; the cap ``c tanh(r / c)`` multiplies them by
+    ``1 - tanh^2(r / c)``."""
+    idx, macs, products = _pairing(mm, f, P)
     raw = _raw_residuals(mm, f, idx, macs)
-    J = np.zeros((mm.freq_hz.size, 2, df.shape[1]))
+    K, n = mm.freq_hz.size, df.shape[1]
+    J = np.zeros((K, 2, n))
     ok = idx >= 0
-    J[ok, 0] = df[idx[ok]] / (mm.freq_hz[ok] * mm.sigma[ok])[:, None]
+    if ok.all():
+        J[:, 0] = df[idx] / mm._f_sigma[:, None]
+    else:
+        J[ok, 0] = df[idx[ok]] / mm._f_sigma[ok][:, None]
     shaped = np.flatnonzero(ok & ~mm._no_shape)
-    if shaped.size:
-        Pj = P[:, idx[shaped]]                                   # (N, m)
-        dPj = dP[:, idx[shaped]]                                 # (N, m, n)
-        Rh = mm._mac.a_h[shaped]                                 # (m, N)
-        s_ = np.einsum("mN,Nm->m", Rh, Pj)
-        bb = np.sum(Pj * Pj, axis=0)
-        ea = mm._mac.energy[shaped]
-        good = (bb > 0) & (ea > 0)
-        cross = np.einsum("mN,Nmn->mn", Rh, dPj)
-        dmac = (2 * np.real(np.conj(s_)[:, None] * cross) / np.where(good, ea * bb, 1.0)[:, None]
-                - 2 * macs[shaped][:, None] * np.einsum("Nm,Nmn->mn", Pj, dPj) / np.where(good, bb, 1.0)[:, None])
-        J[shaped, 1] = np.where(good[:, None], -dmac / MAC_TOL, 0.0)
+    if shaped.size and products is not None:
+        re, im, bb = products
+        j = idx[shaped]
+        dPj = dP[:, j]                                            # (N, m, n)
+        bbj, ea = bb[j], mm._mac.energy[shaped]
+        good = (bbj > 0) & (ea > 0)
+        # -d MAC / MAC_TOL = u . Re(R^H dP_j) + v . Im(R^H dP_j) + w P_j . dP_j (0 where a MAC is not defined)
+        scale = np.where(good, -2.0 / MAC_TOL, 0.0) / np.where(good, bbj, 1.0)
+        uv = np.stack([re[shaped, j], im[shaped, j]]) * (scale / np.where(good, ea, 1.0))
+        w = -scale * macs[shaped]
+        if np.iscomplexobj(P) or np.iscomplexobj(dP):
+            cross = np.einsum("mN,Nmn->mn", mm._mac.a_h[shaped], dPj)
+            J[shaped, 1] = (uv[0][:, None] * cross.real + uv[1][:, None] * cross.imag
+                            + w[:, None] * np.einsum("Nm,Nmn->mn", P[:, j], dPj))
+        else:                                                     # all three terms in one product
+            W = np.concatenate([mm._rows[:, shaped] * uv[:, :, None], (P[:, j] * w).T[None]])   # (3, m, N)
+            J[shaped, 1] = np.einsum("smN,Nmn->mn", W, dPj)
     t = np.tanh(raw / RESIDUAL_CAP)
     return RESIDUAL_CAP * t, J * (1.0 - t * t)[:, :, None]
 
@@ -352,7 +396,9 @@ class ResidualsWithJacobian:
                  bounds: tuple[np.ndarray, np.ndarray]) -> None:
         self.sim, self.changes_at, self.plain, self.wrt, self.dv_dx = sim, changes_at, plain, list(wrt), dv_dx
         self.mm, self.sel, self.fmax, self.bounds = mm, sel, fmax, bounds
-        self.analytic = getattr(sim, "modes_jac_of", None) is not None
+        self._modes_jac = getattr(sim, "modes_jac_of", None)
+        self.analytic = self._modes_jac is not None
+        self._every = np.asarray(sel).dtype == bool and bool(np.all(sel))         # every mode: no selection to make
         self._x: bytes | None = None
         self._r = np.zeros(0)
         self._J: np.ndarray | None = None
@@ -364,7 +410,8 @@ class ResidualsWithJacobian:
 
     def _plain(self, x: np.ndarray) -> np.ndarray:
         f, P = self.plain(x)
-        return residuals(self.mm, f, P)[self.sel].ravel()
+        r = residuals(self.mm, f, P)
+        return r.ravel() if self._every else r[self.sel].ravel()
 
     def _at(self, x: np.ndarray) -> None:
         key = np.asarray(x, float).tobytes()
@@ -374,14 +421,17 @@ class ResidualsWithJacobian:
             r, J = self._held[1], self._held[2]
             self._x, self._r, self._J = key, r.copy(), None if J is None else J.copy()
             return
-        got = modes_jac(self.sim, self.changes_at(x), self.fmax, self.wrt) if self.analytic else None
+        got = self._modes_jac(list(self.changes_at(x)), self.fmax, self.wrt) if self._modes_jac is not None else None
         if got is None:
             self._r, self._J = self._plain(x), None
         else:
             f, P, df, dP = got
             d = np.asarray(self.dv_dx(x), float)
             r, J = residuals_jac(self.mm, f, P, df * d, dP * d)
-            self._r, self._J = r[self.sel].ravel(), J[self.sel].reshape(-1, d.size)
+            if self._every:
+                self._r, self._J = r.ravel(), J.reshape(-1, d.size)
+            else:
+                self._r, self._J = r[self.sel].ravel(), J[self.sel].reshape(-1, d.size)
         self._x = key
 
     def hold(self, x: np.ndarray) -> None:
