@@ -47,6 +47,7 @@ the energy quotients of the modes (``tests/test_ritz.py``).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,8 +75,8 @@ MAX_FRACTION = 0.75
 #: Basis directions whose M0-Gram eigenvalue is below this fraction of the largest are dropped.
 _RANK_TOL = 1e-10
 
-_sygvd, _potrf, _potri, _sygst, _sytrd, _stevd, _ormqr = scipy.linalg.get_lapack_funcs(
-    ("sygvd", "potrf", "potri", "sygst", "sytrd", "stevd", "ormqr"), (np.zeros((1, 1)),))
+_sygvd, _potrf, _potri, _sygst, _sytrd, _stevd, _ormqr, _sterf, _stein = scipy.linalg.get_lapack_funcs(
+    ("sygvd", "potrf", "potri", "sygst", "sytrd", "stevd", "ormqr", "sterf", "stein"), (np.zeros((1, 1)),))
 
 
 @dataclass(frozen=True)
@@ -137,10 +138,11 @@ class ReducedSpace:
     def eigen_at(self, dk: Mapping, dm: Mapping, scale: float, w2_max: float, at: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`eigen`'s eigenvalues and ``at @ Y`` (the Ritz vectors' coefficients ``Y`` mapped by ``at`` (p, r):
-        the modes at a few DOFs) instead of ``Y``: by :func:`inverse_eigh_at`, which forms no eigenvector."""
+        the modes at a few DOFs) instead of ``Y``: by :func:`inverse_eigh_at`, which forms no eigenvector and solves
+        for the modes in the band alone."""
         K, M = self.matrices(dk, dm)
-        w2, AY = inverse_eigh_at(K, M, at)
-        return _in_band(scale * w2, AY, w2_max)
+        w2, AY = inverse_eigh_at(K, M, at, lambda w2: (scale * w2 > 1.0) & (scale * w2 < w2_max))
+        return scale * w2, AY
 
     def matrices(self, dk: Mapping, dm: Mapping) -> tuple[np.ndarray, np.ndarray | None]:
         """The candidate's reduced ``K0 + sum dk_p K_p`` and ``M0 + sum dm_q M_q`` (None: ``M0``, the identity
@@ -200,21 +202,47 @@ def inverse_eigh(K: np.ndarray, M: np.ndarray | None = None) -> tuple[np.ndarray
     return 1.0 / mu, Y / np.sqrt(mu)
 
 
-def inverse_eigh_at(K: np.ndarray, M: np.ndarray | None, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def inverse_eigh_at(K: np.ndarray, M: np.ndarray | None, A: np.ndarray, keep: Any = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`inverse_eigh`'s eigenvalues ``omega^2`` (ascending) and its vectors ``Y`` seen through ``A`` (p, r):
     ``A @ Y`` (p, r). The same solve, except that the vectors are not formed: ``A Y = (A Q) Z`` (or ``(A L^-T Q)
     Z``) costs ~p r^2 instead of the ~r^3 of ``Q Z`` (with p a few measured DOFs and r ~50, a fifth of the
-    solve)."""
+    solve). ``keep``: a function of the eigenvalues ``omega^2`` (ascending) that selects the modes wanted (a mask,
+    the band a search compares): only those are returned, the tridiagonal form's eigenvalues solved alone (``sterf``)
+    and the eigenvectors of the modes kept by inverse iteration (``stein``: a few of ~50, each ~r operations, instead
+    of every eigenvector by divide and conquer)."""
     K = 0.5 * (K + K.T)
-    solved = _inverse_pencil(K, M)
-    if solved is None:
+    reduced = _tridiagonal(K, M)
+    if reduced is None:
         w2, Y = _direct_eigh(K, M)
-        return w2, A @ Y
-    L, c, tau, mu, Z = solved
+        if keep is None:
+            return w2, A @ Y
+        chosen = np.asarray(keep(w2), bool)
+        return w2[chosen], A @ Y[:, chosen]
+    L, c, d, e, tau = reduced
+    if keep is None:
+        mu, Z, info = _stevd(d, e)
+        if info:
+            return _at_direct(K, M, A)
+    else:
+        mu, info = _sterf(d, e)[:2] if d.size > 1 else (d.copy(), 0)
+        if info:
+            return _at_direct(K, M, A, keep)
+        w2 = 1.0 / mu[::-1]
+        wanted = np.flatnonzero(np.asarray(keep(w2), bool))
+        n = d.size
+        order = (n - 1 - wanted)[::-1]                 # ascending mu, as inverse iteration takes them
+        mu = mu[order]
+        if mu.size:
+            Z, info = _stein(d, e, mu, np.ones(n, np.int32), np.r_[n, np.zeros(n - 1, np.int32)].astype(np.int32))
+            if info:
+                return _at_direct(K, M, A, keep)
+        else:
+            Z = np.zeros((n, 0))
     B = np.array(A, dtype=float)
     if M is not None:
         B = scipy.linalg.solve_triangular(L, B.T, lower=True, check_finite=False).T
-    if Z.shape[0] > 1:
+    if d.size > 1:
         B[:, 1:], _, info = _ormqr("R", "N", c[1:, :-1], tau, B[:, 1:], lwork=max(1, 64 * B.shape[0]))
         if info:
             raise np.linalg.LinAlgError(f"the reduced eigenproblem's reflectors failed (LAPACK ormqr info {info})")
@@ -223,12 +251,19 @@ def inverse_eigh_at(K: np.ndarray, M: np.ndarray | None, A: np.ndarray) -> tuple
     return 1.0 / mu, (AY if M is None else AY / np.sqrt(mu))
 
 
-def _inverse_pencil(K: np.ndarray, M: np.ndarray | None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+def _at_direct(K: np.ndarray, M: np.ndarray | None, A: np.ndarray, keep: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`inverse_eigh_at` by :func:`inverse_eigh` (when LAPACK's tridiagonal solvers fail)."""
+    w2, Y = inverse_eigh(K, M)
+    chosen = np.ones(w2.size, bool) if keep is None else np.asarray(keep(w2), bool)
+    return w2[chosen], A @ Y[:, chosen]
+
+
+def _tridiagonal(K: np.ndarray, M: np.ndarray | None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The inverse pencil ``M y = mu K y`` of :func:`inverse_eigh` (``K`` symmetric) reduced: ``K``'s Cholesky
-    factor ``L`` (lower), ``C`` (``K^-1``; with ``M``, ``L^-1 M L^-T``) tridiagonalised (``sytrd``, lower: its
-    reflectors ``c``, ``tau``) and ``T``'s eigenpairs ``mu`` (ascending), ``Z`` (``stevd``); None when ``K`` is not
-    positive definite (or LAPACK fails)."""
+    factor ``L`` (lower) and ``C`` (``K^-1``; with ``M``, ``L^-1 M L^-T``) tridiagonalised (``sytrd``, lower: its
+    reflectors ``c``, diagonal ``d``, off-diagonal ``e``, ``tau``); None when ``K`` is not positive definite (or LAPACK
+    fails)."""
     L, info = _potrf(K, lower=1)
     if info:
         return None
@@ -236,10 +271,7 @@ def _inverse_pencil(K: np.ndarray, M: np.ndarray | None
     if info:
         return None
     c, d, e, tau, info = _sytrd(C, lower=1)
-    if info:
-        return None
-    mu, Z, info = _stevd(d, e)
-    return None if info else (L, c, tau, mu, Z)
+    return None if info else (L, c, d, e, tau)
 
 
 def _direct_eigh(K: np.ndarray, M: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:

@@ -333,6 +333,25 @@ def test_the_solve_at_a_few_dofs_is_the_full_solve_there(fv: FrameVariants) -> N
         assert np.max(np.abs(AY[:, low] * sign - ref)) < 1e-9 * np.max(np.abs(ref)), name
 
 
+def test_the_solve_of_a_band_alone_is_the_full_solve_there(fv: FrameVariants) -> None:
+    """``inverse_eigh_at`` asked for the modes of a band alone (a search's band: each eigenvector found by inverse
+    iteration after the eigenvalues) gives the band's eigenvalues and ``A @ Y`` of the solve of every mode, each column
+    up to its sign; a band that holds no mode gives none."""
+    rng = np.random.default_rng(4)
+    for name, K, M in _reduced_pencils(fv):
+        A = rng.standard_normal((7, K.shape[0]))
+        w2, AY = inverse_eigh_at(K, M, A)
+        band = (w2 > (2 * np.pi * 30.0) ** 2) & (w2 < (2 * np.pi * 700.0) ** 2)
+        assert 6 <= band.sum() < w2.size, name
+        v2, AZ = inverse_eigh_at(K, M, A, lambda w: (w > (2 * np.pi * 30.0) ** 2) & (w < (2 * np.pi * 700.0) ** 2))
+        np.testing.assert_allclose(v2, w2[band], rtol=1e-12, err_msg=name)
+        ref = AY[:, band]
+        sign = np.sign(np.sum(ref * AZ, axis=0))
+        assert np.max(np.abs(AZ * sign - ref)) < 1e-9 * np.max(np.abs(ref)), name
+        none = inverse_eigh_at(K, M, A, lambda w: w < 0.0)
+        assert none[0].size == 0 and none[1].shape == (7, 0), name
+
+
 def test_the_inverse_solve_is_an_eigendecomposition(fv: FrameVariants) -> None:
     """``inverse_eigh``: ascending eigenvalues, vectors M-normalised (``Y^T M Y = I``) that solve ``K Y = M Y
     diag(omega^2)`` (the residual at rounding against ``|K| |y|``), equal to LAPACK's direct solve within that
