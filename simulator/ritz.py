@@ -128,6 +128,10 @@ class ReducedSpace:
         self.M0 = 0.5 * (self.M0 + self.M0.T)
         self.kparts = {k: p.project(V) for k, p in kparts.items()}
         self.mparts = {k: p.project(V) for k, p in mparts.items()}
+        #: for a change of masses alone (``K0`` unchanged): ``K0``'s Cholesky factor ``L`` and ``L^-1 M L^-T`` of the
+        #: nominal and of each mass part (lower triangles), made when first asked (False: ``K0`` not positive definite)
+        self._factor: tuple[np.ndarray, np.ndarray] | bool | None = None
+        self._mass_pencils: dict = {}
 
     def eigen(self, dk: Mapping, dm: Mapping, scale: float, w2_max: float) -> tuple[np.ndarray, np.ndarray]:
         """Eigenvalues ``omega^2`` in ``(1, w2_max)`` (rad/s)^2 of ``(scale (K0 + sum dk_p K_p), M0 + sum
@@ -141,7 +145,8 @@ class ReducedSpace:
         the modes at a few DOFs) instead of ``Y``: by :func:`inverse_eigh_at`, which forms no eigenvector and solves
         for the modes in the band alone."""
         K, M = self.matrices(dk, dm)
-        w2, AY = inverse_eigh_at(K, M, at, lambda w2: (scale * w2 > 1.0) & (scale * w2 < w2_max))
+        w2, AY = inverse_eigh_at(K, M, at, lambda w2: (scale * w2 > 1.0) & (scale * w2 < w2_max),
+                                 None if dk else self._mass_pencil(dm))
         return scale * w2, AY
 
     def matrices(self, dk: Mapping, dm: Mapping) -> tuple[np.ndarray, np.ndarray | None]:
@@ -161,7 +166,42 @@ class ReducedSpace:
         """Every eigenpair of ``(K0 + sum dk_p K_p, M0 + sum dm_q M_q)`` in this space (the modulus' ``scale``
         not applied), ascending, the vectors M-normalised: by the inverse pencil (:func:`inverse_eigh`)."""
         K, M = self.matrices(dk, dm)
+        pencil = None if dk else self._mass_pencil(dm)
+        if pencil is not None:
+            L, C = pencil
+            try:
+                mu, Z = np.linalg.eigh(C, UPLO="L")          # as sygvd: the pencil's eigenpairs, then y = L^-T z
+            except np.linalg.LinAlgError:
+                return inverse_eigh(K, M)
+            Y = scipy.linalg.solve_triangular(L, Z, trans="T", lower=True, check_finite=False)
+            mu, Y = mu[::-1], Y[:, ::-1]
+            return 1.0 / mu, Y / np.sqrt(mu)
         return inverse_eigh(K, M)
+
+    def _mass_pencil(self, dm: Mapping) -> tuple[np.ndarray, np.ndarray] | None:
+        """A change of the masses ``dm`` alone as the inverse pencil of :func:`inverse_eigh` reduced by ``K0``'s
+        Cholesky factor ``L``: ``(L, L^-1 (M0 + sum dm_q M_q) L^-T)`` (lower triangle), a sum of the nominal's and
+        each part's, each made once (``K0`` is every such candidate's); None without a mass change or when ``K0`` is
+        not positive definite."""
+        if not dm:
+            return None
+        if self._factor is None:
+            L, info = _potrf(self.K0, lower=1)
+            C0, info_c = _sygst(self.M0, L, itype=1, lower=1) if not info else (None, 1)
+            self._factor = (L, C0) if not info and not info_c else False
+        if self._factor is False:
+            return None
+        L, C0 = self._factor  # type: ignore[misc]
+        C = C0.copy()
+        for key, c in dm.items():
+            part = self._mass_pencils.get(key)
+            if part is None:
+                part, info = _sygst(self.mparts[key], L, itype=1, lower=1)
+                if info:
+                    return None
+                self._mass_pencils[key] = part
+            C += c * part
+        return L, C
 
 
 def _in_band(w2: np.ndarray, X: np.ndarray, w2_max: float) -> tuple[np.ndarray, np.ndarray]:
@@ -202,17 +242,18 @@ def inverse_eigh(K: np.ndarray, M: np.ndarray | None = None) -> tuple[np.ndarray
     return 1.0 / mu, Y / np.sqrt(mu)
 
 
-def inverse_eigh_at(K: np.ndarray, M: np.ndarray | None, A: np.ndarray, keep: Any = None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def inverse_eigh_at(K: np.ndarray, M: np.ndarray | None, A: np.ndarray, keep: Any = None,
+                    pencil: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`inverse_eigh`'s eigenvalues ``omega^2`` (ascending) and its vectors ``Y`` seen through ``A`` (p, r):
     ``A @ Y`` (p, r). The same solve, except that the vectors are not formed: ``A Y = (A Q) Z`` (or ``(A L^-T Q)
     Z``) costs ~p r^2 instead of the ~r^3 of ``Q Z`` (with p a few measured DOFs and r ~50, a fifth of the
     solve). ``keep``: a function of the eigenvalues ``omega^2`` (ascending) that selects the modes wanted (a mask,
     the band a search compares): only those are returned, the tridiagonal form's eigenvalues solved alone (``sterf``)
     and the eigenvectors of the modes kept by inverse iteration (``stein``: a few of ~50, each ~r operations, instead
-    of every eigenvector by divide and conquer)."""
+    of every eigenvector by divide and conquer). ``pencil``: ``K``'s Cholesky factor and the reduced pencil
+    ``L^-1 M L^-T`` (lower triangle) when known (:meth:`ReducedSpace._mass_pencil`)."""
     K = 0.5 * (K + K.T)
-    reduced = _tridiagonal(K, M)
+    reduced = _tridiagonal(K, M, pencil)
     if reduced is None:
         w2, Y = _direct_eigh(K, M)
         if keep is None:
@@ -234,7 +275,9 @@ def inverse_eigh_at(K: np.ndarray, M: np.ndarray | None, A: np.ndarray, keep: An
         order = (n - 1 - wanted)[::-1]                 # ascending mu, as inverse iteration takes them
         mu = mu[order]
         if mu.size:
-            Z, info = _stein(d, e, mu, np.ones(n, np.int32), np.r_[n, np.zeros(n - 1, np.int32)].astype(np.int32))
+            split = np.zeros(n, np.int32)
+            split[0] = n                               # one block: the whole tridiagonal form
+            Z, info = _stein(d, e, mu, np.ones(n, np.int32), split)
             if info:
                 return _at_direct(K, M, A, keep)
         else:
@@ -258,18 +301,21 @@ def _at_direct(K: np.ndarray, M: np.ndarray | None, A: np.ndarray, keep: Any = N
     return w2[chosen], A @ Y[:, chosen]
 
 
-def _tridiagonal(K: np.ndarray, M: np.ndarray | None
+def _tridiagonal(K: np.ndarray, M: np.ndarray | None, pencil: tuple[np.ndarray, np.ndarray] | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The inverse pencil ``M y = mu K y`` of :func:`inverse_eigh` (``K`` symmetric) reduced: ``K``'s Cholesky
     factor ``L`` (lower) and ``C`` (``K^-1``; with ``M``, ``L^-1 M L^-T``) tridiagonalised (``sytrd``, lower: its
     reflectors ``c``, diagonal ``d``, off-diagonal ``e``, ``tau``); None when ``K`` is not positive definite (or LAPACK
-    fails)."""
-    L, info = _potrf(K, lower=1)
-    if info:
-        return None
-    C, info = _potri(L, lower=1) if M is None else _sygst(M, L, itype=1, lower=1)
-    if info:
-        return None
+    fails); ``pencil``: ``L`` and ``C`` known."""
+    if pencil is not None and M is not None:
+        L, C = pencil
+    else:
+        L, info = _potrf(K, lower=1)
+        if info:
+            return None
+        C, info = _potri(L, lower=1) if M is None else _sygst(M, L, itype=1, lower=1)
+        if info:
+            return None
     c, d, e, tau, info = _sytrd(C, lower=1)
     return None if info else (L, c, d, e, tau)
 

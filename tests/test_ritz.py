@@ -352,6 +352,37 @@ def test_the_solve_of_a_band_alone_is_the_full_solve_there(fv: FrameVariants) ->
         assert none[0].size == 0 and none[1].shape == (7, 0), name
 
 
+def test_a_change_of_masses_alone_is_solved_on_the_nominal_stiffness_s_factor(fv: FrameVariants) -> None:
+    """A candidate that changes masses alone (a block, a member's mass) keeps ``K0``: its space solves the inverse
+    pencil on ``K0``'s Cholesky factor and the reduced masses made once (the nominal's and each part's), with the
+    eigenpairs of the solve of its matrices (every mode, and the band at a few DOFs), each column up to its sign."""
+    red = RitzReduction(fv._K0, fv._M0)
+    rng = np.random.default_rng(5)
+    for changes in ([("added_mass", {"point": "top:3", "mass_kg": 2.0, "inertia_x": 3.0})],
+                    [("member_mass", {"component": "left", "factor": 1.5})]):
+        scale, k, m = fv._coefficients(changes)
+        dk, dm = fv._changed(k, m)
+        assert not dk and dm
+        space = red.space({}, {q: fv._mparts[q] for q in dm}, 30)
+        assert space is not None
+        K, M = space.matrices(dk, dm)
+        w2, Y = inverse_eigh(K, M)
+        v2, Z = space.eigen_all(dk, dm)
+        low = w2 < (2 * np.pi * 1500.0) ** 2
+        np.testing.assert_allclose(v2[low], w2[low], rtol=1e-12)
+        np.testing.assert_allclose(v2, w2, rtol=1e-10)       # the highest: to the largest one's rounding
+        sign = np.sign(np.sum(Y * Z, axis=0))
+        assert np.max(np.abs(Z[:, low] * sign[low] - Y[:, low])) < 1e-9 * np.max(np.abs(Y[:, low]))
+        A = rng.standard_normal((5, K.shape[0]))
+        u2, AZ = space.eigen_at(dk, dm, 1.0, (2 * np.pi * 700.0) ** 2, A)
+        band = w2 < (2 * np.pi * 700.0) ** 2
+        np.testing.assert_allclose(u2, w2[band], rtol=1e-12)
+        ref = A @ Y[:, band]
+        sign = np.sign(np.sum(ref * AZ, axis=0))
+        assert np.max(np.abs(AZ * sign - ref)) < 1e-9 * np.max(np.abs(ref))
+        assert set(space._mass_pencils) == set(dm)            # each part's reduced mass made once, kept
+
+
 def test_the_inverse_solve_is_an_eigendecomposition(fv: FrameVariants) -> None:
     """``inverse_eigh``: ascending eigenvalues, vectors M-normalised (``Y^T M Y = I``) that solve ``K Y = M Y
     diag(omega^2)`` (the residual at rounding against ``|K| |y|``), equal to LAPACK's direct solve within that
