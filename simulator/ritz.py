@@ -47,8 +47,8 @@ the energy quotients of the modes (``tests/test_ritz.py``).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -186,12 +186,15 @@ class ReducedSpace:
         if not dm:
             return None
         if self._factor is None:
+            self._factor = False
             L, info = _potrf(self.K0, lower=1)
-            C0, info_c = _sygst(self.M0, L, itype=1, lower=1) if not info else (None, 1)
-            self._factor = (L, C0) if not info and not info_c else False
-        if self._factor is False:
+            if not info:
+                C0, info = _sygst(self.M0, L, itype=1, lower=1)
+                if not info:
+                    self._factor = (L, C0)
+        if not isinstance(self._factor, tuple):
             return None
-        L, C0 = self._factor  # type: ignore[misc]
+        L, C0 = self._factor
         C = C0.copy()
         for key, c in dm.items():
             part = self._mass_pencils.get(key)

@@ -1134,9 +1134,9 @@ def _best_variant(sim: PhysicalSimulation, cause: CauseSpec, mm: MeasuredModes, 
         frees = [tuple(n for n in (s.name for s in cause.params) if n in best.free or n == extra) for extra in more]
         for free in frees:
             fit(free, bar)
-        current = best.cv_per_mode
         refined = _best_of(sim, cause, mm, fmax, [fits[v] for v in frees if v in fits], bar,
-                           lambda done, rest: refinement_gain_bound(current, done, rest) >= rule.physical_min_gain_db)
+                           lambda done, rest, now=best.cv_per_mode:
+                           refinement_gain_bound(now, done, rest) >= rule.physical_min_gain_db)
         if (refined is None or refined.at_edge
                 or refinement_gain_db(best.cv_per_mode, refined.cv_per_mode) < rule.physical_min_gain_db):
             break
