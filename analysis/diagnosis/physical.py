@@ -46,7 +46,8 @@ value, each variant started also from the fits of the variants it contains): nes
 predicts best (leave one mode out) wins. A refinement (a parameter that ``requires`` another: a mass's
 rotary inertia, about every axis or one) is freed one at a time on top of the best variant, at the options
 that variant fitted, and kept only when it predicts the held-out modes ``physical_min_gain_db`` better; one mode
-that neither predicts when it is held out is left out of that comparison (:func:`refinement_gain_db`).
+that neither predicts when it is held out is left out of that comparison (:func:`refinement_gain_db`); the refined
+variants' cross-validation stops as soon as none of them can gain that much (:func:`refinement_gain_bound`).
 
 Cross-validation: leave one mode out. Each measured mode is predicted by the cause fitted to the
 other modes (the choice searched again inside the fold among the ``N_SCREEN_FOLD`` best options of the
