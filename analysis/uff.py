@@ -63,21 +63,27 @@ def _pyuff() -> ModuleType:
 def _write_sets(path: Path, sets: list) -> None:
     """Write ``sets`` as the whole file ``path``, atomically (:func:`analysis.atomic.atomic_path`: a
     failure, a full disk included, leaves ``path`` as it was). pyuff's binary dataset-58 writer
-    reopens the file and leaves that handle to the garbage collector (a ResourceWarning when it is
-    released, right after the call); the data are complete by then. Silence only that warning, only
-    around the call. pyuff reports a failed write as a bare ``Exception``: the ``OSError`` it hides
-    (disk full, permission) is raised instead."""
+    reopens the file and leaves that handle open (a ResourceWarning when it is released); the data
+    are complete by then. Silence only that warning, only around the call. A write that returns has
+    released the handle already (its last reference went with the writer's frame); only a failed one
+    can leave it to the garbage collector (held by the traceback's frames), which is then run here, still
+    inside the silenced block: a full collection costs about a tenth of a second in a process holding
+    many objects, too much for every file written. pyuff reports a failed write as a bare
+    ``Exception``: the ``OSError`` it hides (disk full, permission) is raised instead."""
     with atomic_path(path) as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore", ResourceWarning)
+        written = False
         try:
             _pyuff().UFF(str(tmp)).write_sets(sets, "add", force_double=True)
+            written = True
         except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception around the real error
             cause = exc.__cause__ or exc.__context__
             if isinstance(cause, OSError):
                 raise OSError(cause.errno, cause.strerror, str(path)) from None
             raise
         finally:
-            gc.collect()
+            if not written:
+                gc.collect()
 
 
 #: characters of a UFF ID line

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 # The tests solve many small linear-algebra problems; threaded OpenBLAS on the shared 2-core
@@ -114,6 +115,56 @@ SPREAD = ("test_diagnosis_blind.py", "test_diagnosis_physical.py", "test_importe
 HEAVY = ("test_examples_run.py", "test_diagnosis_pair_counts.py", "test_batch_dask.py", "test_batch_diagnose.py",
          "test_station_browser.py",                     # not spread: one Chromium (its module fixture) for both tests
          "test_station_api.py", "test_disk_full.py", "test_fuzz_protocol.py", "test_faults.py", "test_diagnosis_cli.py")
+
+
+def pytest_collection(session: pytest.Session) -> None:
+    config = session.config
+    tests = Path(__file__).resolve().parent
+    here = config.invocation_params.dir
+    if _xdist_worker() and any((here / a.split("::")[0]).resolve() in (tests, tests.parent) for a in config.args):
+        worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:] or 0)
+        rewrite_in_turn(config, sorted(tests.glob("test_*.py")), worker,
+                        int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+
+
+def rewrite_in_turn(config: pytest.Config, files: list[Path], worker: int, workers: int) -> int:
+    """pytest rewrites a test module's asserts on its first import and keeps the result (a pyc in __pycache__).
+    In a fresh clone every process of ``make test`` would rewrite all the test modules (about 4 s of CPU each):
+    before collecting the whole tests folder, process ``worker`` of ``workers`` rewrites ``files`` starting at
+    its own share of them, so a file is rewritten about once and the others read its pyc (written whole:
+    pytest's own atomic write). A pyc newer than its source is left alone. Returns the count rewritten. Only
+    the speed depends on it: pytest's import still checks every pyc against its source (pytest's internals:
+    without them, nothing is done here; a file pytest cannot rewrite is left to pytest, which reports it)."""
+    try:
+        from _pytest.assertion.rewrite import (
+            PYC_TAIL,
+            _rewrite_test,
+            _write_pyc,
+            assertstate_key,
+            get_cache_dir,
+            try_makedirs,
+        )
+    except ImportError:
+        return 0
+    if sys.dont_write_bytecode or config.getoption("assertmode") != "rewrite" or not files:
+        return 0
+    start = len(files) * worker // max(1, workers)
+    state = config.stash[assertstate_key]
+    done = 0
+    for fn in files[start:] + files[:start]:
+        cache = get_cache_dir(fn)
+        pyc = cache / (fn.name[:-3] + PYC_TAIL)
+        if pyc.exists() and pyc.stat().st_mtime >= fn.stat().st_mtime:
+            continue
+        try:
+            if not try_makedirs(cache):
+                return done
+            source_hash, co = _rewrite_test(fn, config)
+            _write_pyc(state, co, source_hash, pyc)
+        except (SyntaxError, ValueError, OSError):
+            continue
+        done += 1
+    return done
 
 
 def _file(nodeid: str) -> str:

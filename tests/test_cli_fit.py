@@ -1,7 +1,6 @@
 """``python -m analysis fit`` and ``python -m analysis stabilization`` on a UFF 58 file written with pyuff."""
 from __future__ import annotations
 
-import gc
 import json
 import subprocess
 import sys
@@ -44,12 +43,11 @@ def _write_uff58_with_pyuff(path: Path, noise: float = 0.005) -> None:
             ref_ent_name="frame", ordinate_spec_data_type=12, orddenom_spec_data_type=13,
             ordinate_axis_units_lab="m/s^2", orddenom_axis_units_lab="N", id1="synthetic FRF", id4=out,
         ))
-    # pyuff's binary writer leaves a file handle to the garbage collector (a ResourceWarning,
-    # pyuff's own leak, after the data are complete): collect it here, inside this block only
+    # pyuff's binary writer leaves a file handle open (a ResourceWarning, pyuff's own leak, after the data are
+    # complete), released when the call returns: inside this block only
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ResourceWarning)
         pyuff.UFF(str(path)).write_sets(sets, "add", force_double=True)
-        gc.collect()
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,8 @@
 """analysis.uff: UFF 58 FRF/coherence/time round trips through pyuff, UFF 55 shapes, bad files."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import pyuff
@@ -103,6 +105,34 @@ def test_errors(tmp_path):
         read_uff58(tmp_path / "none.uff")
     with pytest.raises(UFFError, match="shape"):
         write_uff55(tmp_path / "s.uff", np.array([1j]), np.ones((2, 2)), OUTS)
+
+
+def _open_files() -> set[str]:
+    """The paths of the regular files this process holds open (Linux /proc)."""
+    fds = Path("/proc/self/fd")
+    return {str(fd.resolve()) for fd in fds.iterdir() if fd.resolve().is_file()} if fds.is_dir() else set()
+
+
+def test_a_written_file_is_closed_without_a_garbage_collection(tmp_path):
+    """pyuff's binary writer leaves its last handle of the file open; the handle goes with the writer's frame
+    when the write returns, so write_uff58 runs no (costly) garbage collection then and the file is closed all
+    the same, with no ResourceWarning later (the suite turns warnings into errors)."""
+    import gc
+    import warnings
+
+    if not Path("/proc/self/fd").is_dir():
+        pytest.skip("needs /proc/self/fd to list the open files")
+    s = example_set()
+    gc.disable()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            before = _open_files()
+            write_uff58(tmp_path / "frf.uff", s)
+            write_uff55(tmp_path / "shapes.uff", np.array([-1 + 100j]), np.ones((3, 1), complex), OUTS)
+            assert _open_files() == before
+    finally:
+        gc.enable()
 
 
 @pytest.mark.realdata

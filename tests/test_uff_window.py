@@ -3,7 +3,6 @@
 their own for labels that are not ``component:node:direction``)."""
 from __future__ import annotations
 
-import gc
 import logging
 import warnings
 
@@ -91,10 +90,9 @@ def _rewrite_id3(path, make) -> None:
             d["id3"] = make(k)
             k += 1
     path.unlink()
-    with warnings.catch_warnings():   # pyuff leaves its file handle to the garbage collector
+    with warnings.catch_warnings():   # pyuff leaves its file handle open, released when the call returns
         warnings.simplefilter("ignore", ResourceWarning)
         pyuff.UFF(str(path)).write_sets(sets, "add")
-        gc.collect()
 
 
 def test_windows_in_words_of_older_files_are_read(tmp_path):

@@ -41,7 +41,6 @@ message names the driving point to measure.
 from __future__ import annotations
 
 import argparse
-import gc
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -288,10 +287,9 @@ def write_uff(path: Path, case: Case, freq_hz: np.ndarray, H: np.ndarray, title:
             for i, n in enumerate(outs)]
     if path.exists():
         path.unlink()
-    with warnings.catch_warnings():
+    with warnings.catch_warnings():    # pyuff's writer leaves its last handle open: released when the call returns
         warnings.simplefilter("ignore", ResourceWarning)
         pyuff.UFF(str(path)).write_sets(sets, "add", force_double=True)
-        gc.collect()
 
 
 def write_case(case: Case, folder: Path) -> tuple[Path, Path]:
