@@ -95,12 +95,15 @@ class Api:
 
     def act_here(self, action: str, **extra: Any) -> tuple[int, Any]:
         """``action`` naming what the state shows now, as the page does: the hit waiting for a decision
-        (``hit``, its number) or the point on now (``point``, its plan index)."""
+        (``hit``, its number) or the point on now (``point``, its plan index; for ``undo`` also ``hits``, its
+        accepted hits)."""
         st = self.state()
         if action in ("accept", "reject"):
             extra.setdefault("hit", (st.get("verdict") or {}).get("number"))
         elif action in ("next-point", "undo", "remeasure", "arm"):
             extra.setdefault("point", st["current"])
+        if action == "undo":
+            extra.setdefault("hits", st.get("point_hits"))
         return self.act(action, **extra)
 
     def wait(self, pred, what: str, timeout_s: float = WAIT_S) -> dict:

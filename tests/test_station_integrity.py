@@ -104,11 +104,16 @@ def test_double_undo_and_double_accept_act_once_and_hits_are_numbered_from_1(tmp
         assert api.act("accept", hit=n)[0] == 409
         st = api.wait(lambda x: x["phase"] in ("ready", "complete"), "the accept")
         assert st["point_hits"] == 2
-        # a double click of undo withdraws one hit, not two
-        assert api.act("undo", point=0)[0] == 200
-        assert api.act("undo", point=0)[0] == 409
+        # a double click of undo withdraws one hit, not two: refused while the first is carried out, and
+        # refused after it (the second click still names the 2 hits the page showed), however fast the first was
+        assert api.act("undo", point=0)[0] == 400                # how many hits did the page show?
+        assert api.act("undo", point=0, hits=2)[0] == 200
+        assert api.act("undo", point=0, hits=2)[0] == 409
         st = api.wait(lambda x: x["phase"] == "ready" and x["point_hits"] < 2, "the undo")
         assert st["point_hits"] == 1
+        code, body = api.act("undo", point=0, hits=2)                # a late second click: the first is done
+        assert code == 409 and "has 1 now" in str(body), body
+        assert api.state()["point_hits"] == 1
         assert api.act_here("next-point")[0] == 200
         api.wait(lambda x: x["phase"] == "finished", "the end")
     finally:

@@ -18,8 +18,10 @@ Actions that act on a hit or a point name it, so a click made on a page that is 
 double click, a second key press before the page caught up) is refused (409) instead of acting on
 the next hit or point: ``accept``/``reject`` carry ``"hit": N`` (the number of the hit waiting for
 the decision, ``verdict.number``), ``next-point``, ``undo`` and ``remeasure`` carry ``"point":
-INDEX`` (the plan row, ``current`` for the point on now), ``arm`` may carry it. While one such
-action waits for the session (or is being carried out: phase ``busy``), the next is refused too.
+INDEX`` (the plan row, ``current`` for the point on now), ``arm`` may carry it; ``undo`` also carries
+``"hits": N`` (the point's accepted hits on screen, ``point_hits``), so a second click sent after the first
+was carried out is refused as well. While one such action waits for the session (or is being carried out:
+phase ``busy``), the next is refused too.
 
 ``pause``/``resume`` and ``auto`` (on/off) are allowed in every running phase. Auto mode arms,
 accepts every hit that passed the checks and moves to the next point; pause holds it before the
@@ -325,6 +327,23 @@ class StationEngine(PagePublisher):
                                 "is on now; look at the page again")
         if action in ("undo", "remeasure") and not self.state.get("point_hits"):
             raise ActionRefused(f"{action}: this point has no accepted hit")
+        if action == "undo":
+            self._check_hits_shown(params)
+
+    def _check_hits_shown(self, params: dict) -> None:
+        """An ``undo`` names the point's accepted hits the page shows (``"hits": N``, the state's ``point_hits``):
+        a second click sent after the first was carried out names a count the point no longer has and is
+        refused (409) instead of withdrawing a second hit, however quickly the first was done."""
+        shown = params.get("hits")
+        if shown is None:
+            raise ActionRefused("undo must name the accepted hits the page shows: give {\"hits\": N} (the state's "
+                                "point_hits)", 400)
+        if not isinstance(shown, int) or isinstance(shown, bool):
+            raise ActionRefused(f"undo: hits must be an integer, not {shown!r}", 400)
+        now = int(self.state.get("point_hits") or 0)
+        if shown != now:
+            raise ActionRefused(f"undo refused: the page showed {shown} accepted hits at this point but it has {now} "
+                                "now (an undo was already carried out); look at the page again")
 
     # -- set-up ------------------------------------------------------------------------------------
     def check_setup(self, params: dict) -> tuple[AcquisitionSetup, WindowSettings]:

@@ -68,6 +68,7 @@
     } else if (NAMES_POINT.includes(action) && body.point === undefined) {
       body.point = state.current || 0;
     }
+    if (action === "undo") body.hits = state.point_hits || 0;  // the hits on screen: a late second click is refused
     sending = state.version;
     api("/api/action", body).then(() => { if (state && state.version === sending) state.allowed = []; })
       .catch((e) => {
