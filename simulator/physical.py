@@ -447,6 +447,9 @@ class FrameVariants:
                     stamp_spring(K, self.frame.node(a), None if b is None else self.frame.node(b), k * f)
                     self._kparts[("spring", kind, part, str(a))] = _part(np.arange(n), K)
         self._spring_keys = tuple(key for key in self._kparts if key[0] == "spring")
+        #: every member's coefficients of an unchanged assembly, in :meth:`_coefficients`' order (copied per call)
+        self._member_k = {key: 1.0 for c in self.components for key in (("rest", c), ("bend", c))}
+        self._member_m = {("mass", c): 1.0 for c in self.components}
         index = self.frame.node_index
         self.nodes = tuple(f"{c}:{i}" for (c, i) in sorted(index, key=lambda k: index[k]))
         sens = cfg.sensors
@@ -773,12 +776,14 @@ class FrameVariants:
                 raise ModelError(f"unknown physical cause {cause!r}; the registry has {', '.join(CAUSES)}")
             CAUSES[cause].apply(a, params)
         E = a.modulus
-        k: dict[tuple, float] = {}
-        m: dict[tuple, float] = {}
-        for c in self.components:
-            k[("rest", c)] = 1.0
-            k[("bend", c)] = a.bending.get(c, 1.0)
-            m[("mass", c)] = a.mass.get(c, 1.0)
+        k: dict[tuple, float] = self._member_k.copy()
+        m: dict[tuple, float] = self._member_m.copy()
+        for c, b in a.bending.items():            # a member's factors (one that is not the frame's: none)
+            if ("bend", c) in k:
+                k[("bend", c)] = b
+        for c, mc in a.mass.items():
+            if ("mass", c) in m:
+                m[("mass", c)] = mc
         ratios: dict[str, tuple[float, float, float, float, float]] = {}
         for c, (w, d) in a.section.items():
             ratios[c] = r_area, r_j, r_iy, r_iz, r_ip = self._section_ratios(c, w, d)
@@ -811,9 +816,12 @@ class FrameVariants:
                     raise ModelError(f"{where!r} is not a {kind} of the frame; its {kind}s are "
                                      f"{', '.join(self.places[kind])} (or {ALL_PLACES!r})")
                 local[(kind, part, place)] = local.get((kind, part, place), 1.0) * float(f)
-        for key in self._spring_keys:
-            kind, part, place = key[1:]
-            k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
+        if a.springs:
+            for key in self._spring_keys:
+                kind, part, place = key[1:]
+                k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
+        else:                                     # every spring unchanged: 1.0 * 1.0 / E
+            k.update(dict.fromkeys(self._spring_keys, 1.0 / E))
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
         lumped = [(node, sensor_mass, None) for node in self.sensor_nodes] + list(a.lumped)
         for node, mass, rotary in lumped:
