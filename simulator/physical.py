@@ -304,8 +304,9 @@ def _keep(store: dict, key: tuple, value: Any, size: int) -> None:
 
 def _differences(after: Mapping, before: Mapping, h: float) -> dict:
     """The nonzero ``(after - before) / h`` of two coefficient maps (a key missing from one: 0 there)."""
-    keys = after.keys() if after.keys() == before.keys() else after.keys() | before.keys()
-    return {q: d for q in keys if (d := (after.get(q, 0.0) - before.get(q, 0.0)) / h)}
+    if after.keys() == before.keys():
+        return {q: d for q, a in after.items() if (d := (a - before[q]) / h)}
+    return {q: d for q in after.keys() | before.keys() if (d := (after.get(q, 0.0) - before.get(q, 0.0)) / h)}
 
 
 def _summed(parts: Mapping, coefficients: Mapping) -> np.ndarray:
@@ -857,8 +858,8 @@ class FrameVariants:
     def _changed(self, k: dict, m: dict) -> tuple[dict, dict]:
         """The coefficients' changes from the unchanged frame's (only the parts that change)."""
         _, k0, m0 = self._nominal
-        dk = {key: c - k0.get(key, 0.0) for key, c in k.items() if c != k0.get(key, 0.0)}
-        dm = {key: c - m0.get(key, 0.0) for key, c in m.items() if c != m0.get(key, 0.0)}
+        dk = {key: c - c0 for key, c in k.items() if c != (c0 := k0.get(key, 0.0))}
+        dm = {key: c - c0 for key, c in m.items() if c != (c0 := m0.get(key, 0.0))}
         dm.update({key: -c for key, c in m0.items() if key not in m})
         return dk, dm
 
