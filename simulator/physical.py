@@ -809,18 +809,8 @@ class FrameVariants:
                     k[("elem_y", e)] = crack * (r_iy - r_iz)
             else:
                 k[("elem", e)] = crack
-        local: dict[tuple, float] = {}
-        for (kind, part, where), f in a.springs.items():
-            if where is not None:
-                place = self._place_of[kind].get(where)
-                if place is None:
-                    raise ModelError(f"{where!r} is not a {kind} of the frame; its {kind}s are "
-                                     f"{', '.join(self.places[kind])} (or {ALL_PLACES!r})")
-                local[(kind, part, place)] = local.get((kind, part, place), 1.0) * float(f)
         if a.springs:
-            for key in self._spring_keys:
-                kind, part, place = key[1:]
-                k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
+            k.update(self._spring_coefficients(a.springs, E))
         else:                                     # every spring unchanged: 1.0 * 1.0 / E
             k.update(dict.fromkeys(self._spring_keys, 1.0 / E))
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
@@ -837,6 +827,23 @@ class FrameVariants:
                 for axis, factor in zip("xyz", rotary):
                     m[("rot", node, axis)] = m.get(("rot", node, axis), 0.0) + float(factor) * mass * side * side / 6.0
         return E, k, m
+
+    def _spring_coefficients(self, springs: Mapping, E: float) -> dict:
+        """The springs' coefficients of an assembly whose spring factors are ``springs`` (``(kind, part, where)``:
+        ``where`` None for every place of the kind), divided by the modulus factor ``E``."""
+        local: dict[tuple, float] = {}
+        for (kind, part, where), f in springs.items():
+            if where is not None:
+                place = self._place_of[kind].get(where)
+                if place is None:
+                    raise ModelError(f"{where!r} is not a {kind} of the frame; its {kind}s are "
+                                     f"{', '.join(self.places[kind])} (or {ALL_PLACES!r})")
+                local[(kind, part, place)] = local.get((kind, part, place), 1.0) * float(f)
+        out = {}
+        for key in self._spring_keys:
+            kind, part, place = key[1:]
+            out[key] = springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
+        return out
 
     def _section_ratios(self, member: str, width: float, depth: float) -> tuple[float, float, float, float, float]:
         """The section of ``member`` with its width and depth times ``width``, ``depth`` (rhs: its outer ones,
