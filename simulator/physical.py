@@ -304,8 +304,9 @@ def _keep(store: dict, key: tuple, value: Any, size: int) -> None:
 
 def _differences(after: Mapping, before: Mapping, h: float) -> dict:
     """The nonzero ``(after - before) / h`` of two coefficient maps (a key missing from one: 0 there)."""
-    keys = after.keys() if after.keys() == before.keys() else after.keys() | before.keys()
-    return {q: d for q in keys if (d := (after.get(q, 0.0) - before.get(q, 0.0)) / h)}
+    if after.keys() == before.keys():
+        return {q: d for q, a in after.items() if (d := (a - before[q]) / h)}
+    return {q: d for q in after.keys() | before.keys() if (d := (after.get(q, 0.0) - before.get(q, 0.0)) / h)}
 
 
 def _summed(parts: Mapping, coefficients: Mapping) -> np.ndarray:
@@ -447,6 +448,9 @@ class FrameVariants:
                     stamp_spring(K, self.frame.node(a), None if b is None else self.frame.node(b), k * f)
                     self._kparts[("spring", kind, part, str(a))] = _part(np.arange(n), K)
         self._spring_keys = tuple(key for key in self._kparts if key[0] == "spring")
+        #: every member's coefficients of an unchanged assembly, in :meth:`_coefficients`' order (copied per call)
+        self._member_k = {key: 1.0 for c in self.components for key in (("rest", c), ("bend", c))}
+        self._member_m = {("mass", c): 1.0 for c in self.components}
         index = self.frame.node_index
         self.nodes = tuple(f"{c}:{i}" for (c, i) in sorted(index, key=lambda k: index[k]))
         sens = cfg.sensors
@@ -773,12 +777,14 @@ class FrameVariants:
                 raise ModelError(f"unknown physical cause {cause!r}; the registry has {', '.join(CAUSES)}")
             CAUSES[cause].apply(a, params)
         E = a.modulus
-        k: dict[tuple, float] = {}
-        m: dict[tuple, float] = {}
-        for c in self.components:
-            k[("rest", c)] = 1.0
-            k[("bend", c)] = a.bending.get(c, 1.0)
-            m[("mass", c)] = a.mass.get(c, 1.0)
+        k: dict[tuple, float] = self._member_k.copy()
+        m: dict[tuple, float] = self._member_m.copy()
+        for c, b in a.bending.items():            # a member's factors (one that is not the frame's: none)
+            if ("bend", c) in k:
+                k[("bend", c)] = b
+        for c, mc in a.mass.items():
+            if ("mass", c) in m:
+                m[("mass", c)] = mc
         ratios: dict[str, tuple[float, float, float, float, float]] = {}
         for c, (w, d) in a.section.items():
             ratios[c] = r_area, r_j, r_iy, r_iz, r_ip = self._section_ratios(c, w, d)
@@ -803,17 +809,10 @@ class FrameVariants:
                     k[("elem_y", e)] = crack * (r_iy - r_iz)
             else:
                 k[("elem", e)] = crack
-        local: dict[tuple, float] = {}
-        for (kind, part, where), f in a.springs.items():
-            if where is not None:
-                place = self._place_of[kind].get(where)
-                if place is None:
-                    raise ModelError(f"{where!r} is not a {kind} of the frame; its {kind}s are "
-                                     f"{', '.join(self.places[kind])} (or {ALL_PLACES!r})")
-                local[(kind, part, place)] = local.get((kind, part, place), 1.0) * float(f)
-        for key in self._spring_keys:
-            kind, part, place = key[1:]
-            k[key] = a.springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
+        if a.springs:
+            k.update(self._spring_coefficients(a.springs, E))
+        else:                                     # every spring unchanged: 1.0 * 1.0 / E
+            k.update(dict.fromkeys(self._spring_keys, 1.0 / E))
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
         lumped = [(node, sensor_mass, None) for node in self.sensor_nodes] + list(a.lumped)
         for node, mass, rotary in lumped:
@@ -828,6 +827,23 @@ class FrameVariants:
                 for axis, factor in zip("xyz", rotary):
                     m[("rot", node, axis)] = m.get(("rot", node, axis), 0.0) + float(factor) * mass * side * side / 6.0
         return E, k, m
+
+    def _spring_coefficients(self, springs: Mapping, E: float) -> dict:
+        """The springs' coefficients of an assembly whose spring factors are ``springs`` (``(kind, part, where)``:
+        ``where`` None for every place of the kind), divided by the modulus factor ``E``."""
+        local: dict[tuple, float] = {}
+        for (kind, part, where), f in springs.items():
+            if where is not None:
+                place = self._place_of[kind].get(where)
+                if place is None:
+                    raise ModelError(f"{where!r} is not a {kind} of the frame; its {kind}s are "
+                                     f"{', '.join(self.places[kind])} (or {ALL_PLACES!r})")
+                local[(kind, part, place)] = local.get((kind, part, place), 1.0) * float(f)
+        out = {}
+        for key in self._spring_keys:
+            kind, part, place = key[1:]
+            out[key] = springs.get((kind, part, None), 1.0) * local.get((kind, part, place), 1.0) / E
+        return out
 
     def _section_ratios(self, member: str, width: float, depth: float) -> tuple[float, float, float, float, float]:
         """The section of ``member`` with its width and depth times ``width``, ``depth`` (rhs: its outer ones,
@@ -849,8 +865,8 @@ class FrameVariants:
     def _changed(self, k: dict, m: dict) -> tuple[dict, dict]:
         """The coefficients' changes from the unchanged frame's (only the parts that change)."""
         _, k0, m0 = self._nominal
-        dk = {key: c - k0.get(key, 0.0) for key, c in k.items() if c != k0.get(key, 0.0)}
-        dm = {key: c - m0.get(key, 0.0) for key, c in m.items() if c != m0.get(key, 0.0)}
+        dk = {key: c - c0 for key, c in k.items() if c != (c0 := k0.get(key, 0.0))}
+        dm = {key: c - c0 for key, c in m.items() if c != (c0 := m0.get(key, 0.0))}
         dm.update({key: -c for key, c in m0.items() if key not in m})
         return dk, dm
 

@@ -275,7 +275,8 @@ def _pairing(mm: MeasuredModes, f: np.ndarray, P: np.ndarray
     the candidate shapes' energies ``|P_j|^2`` (n) (None without candidate modes). Real shape products (a model's
     real modes) are multiplied by the shapes' real and imaginary parts at once (:attr:`MeasuredModes._rows`)."""
     K = mm.freq_hz.size
-    idx = np.full(K, -1)
+    idx = np.empty(K, dtype=np.intp)
+    idx.fill(-1)
     macs = np.zeros(K)
     if f.size == 0:
         return idx, macs, None
@@ -288,8 +289,8 @@ def _pairing(mm: MeasuredModes, f: np.ndarray, P: np.ndarray
         re, im = X[:K], X[K:]
         bb = np.einsum("ij,ij->j", P, P)
     num = re * re + im * im
-    den = np.outer(mm._mac.energy, bb)
-    if np.all(den > 0):
+    den = mm._mac.energy[:, None] * bb[None, :]
+    if (den > 0).all():
         M = num / den
     else:
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -359,8 +360,12 @@ def residuals_jac(mm: MeasuredModes, f: np.ndarray, P: np.ndarray, df: np.ndarra
         bbj, ea = bb[j], mm._mac.energy[shaped]
         good = (bbj > 0) & (ea > 0)
         # -d MAC / MAC_TOL = u . Re(R^H dP_j) + v . Im(R^H dP_j) + w P_j . dP_j (0 where a MAC is not defined)
-        scale = np.where(good, -2.0 / MAC_TOL, 0.0) / np.where(good, bbj, 1.0)
-        uv = np.stack([re[shaped, j], im[shaped, j]]) * (scale / np.where(good, ea, 1.0))
+        if good.all():
+            scale = (-2.0 / MAC_TOL) / bbj
+            uv = np.array([re[shaped, j], im[shaped, j]]) * (scale / ea)
+        else:
+            scale = np.where(good, -2.0 / MAC_TOL, 0.0) / np.where(good, bbj, 1.0)
+            uv = np.array([re[shaped, j], im[shaped, j]]) * (scale / np.where(good, ea, 1.0))
         w = -scale * macs[shaped]
         if np.iscomplexobj(P) or np.iscomplexobj(dP):
             cross = np.einsum("mN,Nmn->mn", mm._mac.a_h[shaped], dPj)
