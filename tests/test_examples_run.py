@@ -232,14 +232,29 @@ def _served() -> Iterator[str]:
         serve.communicate(timeout=30)  # reaps it and closes its pipes
 
 
-def _served_capture(line: str) -> None:
+@pytest.fixture(scope="module")
+def served() -> Iterator[Callable[[], str]]:
+    """The URL of the serve example's server (:func:`_served`), started at the first example that asks for it
+    and shared by the module's examples: it builds a fresh analyser for each client, so the capture example
+    and the serve example's ``identify`` each talk to their own, as with a server of their own."""
+    with contextlib.ExitStack() as stack:
+        urls: list[str] = []
+
+        def url() -> str:
+            if not urls:
+                urls.append(stack.enter_context(_served()))
+            return urls[0]
+
+        yield url
+
+
+def _served_capture(line: str, url: str) -> None:
     """The capture example against a served simulated analyser, one Enter per hit on stdin."""
-    with _served() as url:
-        args = shlex.split(line.replace("socket://127.0.0.1:5025", url).replace("rec.h5", "served.h5"), comments=True)
-        res = subprocess.run([sys.executable, "-m", "impactlab", *args], input="\n" * 40, capture_output=True,
-                             text=True, timeout=120)
-        assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
-        assert "recording written: served.h5" in res.stdout
+    args = shlex.split(line.replace("socket://127.0.0.1:5025", url).replace("rec.h5", "served.h5"), comments=True)
+    res = subprocess.run([sys.executable, "-m", "impactlab", *args], input="\n" * 40, capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert "recording written: served.h5" in res.stdout
 
 
 @pytest.fixture
@@ -265,7 +280,8 @@ def _usb_backend_present() -> bool:
 
 
 @pytest.mark.parametrize(("prog", "line"), _help_examples(), ids=[line for _, line in _help_examples()])
-def test_every_help_example_runs(in_work: Path, work: dict, no_thread_left: None, prog: str, line: str) -> None:
+def test_every_help_example_runs(in_work: Path, work: dict, served: Callable[[], str], no_thread_left: None, prog: str,
+                                 line: str) -> None:
     if line == FIRST_CAPTURE:
         code, text = work["first_capture"]
         assert code == 0 and (in_work / "rec.h5").is_file(), text[-3000:]
@@ -278,15 +294,14 @@ def test_every_help_example_runs(in_work: Path, work: dict, no_thread_left: None
     if instead is None:
         _parse_only(line)
     elif instead == "SERVED":
-        _served_capture(line)
+        _served_capture(line, served())
     elif instead == "NO_DEVICE":
         code, text = _run(line)
         # without libusb on the machine pyusb has no backend at all: the one-line error says so instead
         expected = "no USB device" if _usb_backend_present() else "no USB backend"
         assert code == 1 and expected in text and "Traceback" not in text, text
     elif instead == "SERVE":
-        with _served() as url:
-            _ok(f"identify --device {url}")
+        _ok(f"identify --device {served()}")
     elif instead == "CHILD":
         _prepare(line)
         res = subprocess.run([sys.executable, "-m", "impactlab", *_expanded(line)], capture_output=True, text=True,
