@@ -809,10 +809,7 @@ class FrameVariants:
                     k[("elem_y", e)] = crack * (r_iy - r_iz)
             else:
                 k[("elem", e)] = crack
-        if a.springs:
-            k.update(self._spring_coefficients(a.springs, E))
-        else:                                     # every spring unchanged: 1.0 * 1.0 / E
-            k.update(dict.fromkeys(self._spring_keys, 1.0 / E))
+        k.update(self._spring_coefficients(a.springs, E))
         sensor_mass = self.sensor_mass_kg if a.sensor_mass_kg is None else a.sensor_mass_kg
         lumped = [(node, sensor_mass, None) for node in self.sensor_nodes] + list(a.lumped)
         for node, mass, rotary in lumped:
@@ -831,6 +828,8 @@ class FrameVariants:
     def _spring_coefficients(self, springs: Mapping, E: float) -> dict:
         """The springs' coefficients of an assembly whose spring factors are ``springs`` (``(kind, part, where)``:
         ``where`` None for every place of the kind), divided by the modulus factor ``E``."""
+        if not springs:                           # every spring unchanged: 1.0 * 1.0 / E
+            return dict.fromkeys(self._spring_keys, 1.0 / E)
         local: dict[tuple, float] = {}
         for (kind, part, where), f in springs.items():
             if where is not None:

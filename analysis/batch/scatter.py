@@ -131,13 +131,6 @@ class ScatterSimulation:
         derivatives for the other changes."""
         s, rest = self._scale(changes)
         top = max_freq_hz / s
-        if wrt and len(rest) == len(changes):     # no global cause among the changes: the wrapped answers, scaled
-            got = self.simulation.modes_jac_of(rest, solve_limit_hz(top), wrt)
-            if got is None:
-                return None
-            f0, P, df0, dP0 = got
-            n = _below(f0, top)
-            return f0[:n] * s, P[:, :n], s * df0[:n], dP0[:, :n]
         at = [j for j, (c, _) in enumerate(changes) if c != GLOBAL_CAUSE]       # changes[at[r]] is rest[r]
         theirs = [(at.index(i), name) for i, name in wrt if changes[i][0] != GLOBAL_CAUSE]
         if theirs:
@@ -151,6 +144,8 @@ class ScatterSimulation:
         n = _below(f0, top)
         f0, P, df0, dP0 = np.asarray(f0)[:n], np.asarray(P)[:, :n], np.asarray(df0)[:n], np.asarray(dP0)[:, :n]
         f = f0 * s
+        if len(theirs) == len(wrt):               # no parameter of a global cause: the wrapped derivatives, scaled
+            return f, P, s * df0, dP0
         df = np.zeros((f.size, len(wrt)))
         dP = np.zeros((*np.shape(P), len(wrt)))
         r = 0

@@ -387,16 +387,15 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
                                      [(i, s.name) for i, s in flat], lambda x: dv_dx([s for _, s in flat], x), mm, sel,
                                      fmax, (lo, hi))
 
-    def solve(x0: np.ndarray, sel: np.ndarray) -> np.ndarray:
-        return least_chi2(on(sel), [s for _, s in flat], _start(x0, lo, hi), 20 * len(flat))[0]
+    def solve(x0: np.ndarray, rj: ResidualsWithJacobian) -> np.ndarray:
+        return least_chi2(rj, [s for _, s in flat], _start(x0, lo, hi), 20 * len(flat))[0]
 
     K = mm.freq_hz.size
     allsel = np.ones(K, bool)
 
     def refine() -> _Refined:
         rj = on(allsel)
-        x0 = _start(np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat]), lo, hi)
-        x = least_chi2(rj, [s for _, s in flat], x0, 20 * len(flat))[0]
+        x = solve(np.array([s.to_x(float(fits[i].params[s.name])) for i, s in flat]), rj)
         return _Refined(x, np.sum(resid(x, allsel).reshape(K, -1) ** 2, axis=1), [], rj=rj)
 
     # the same pair from the same start refined before in this search (by another stage, or before its variants
@@ -413,7 +412,7 @@ def fit_pair(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
             if made.start is None and getattr(sim, "modes_jac_of", None) is not None:
                 made.start = FoldStart(made.rj or on(allsel), x, [s for _, s in flat])
             got = made.start.minimum(k) if made.start is not None else None
-            held = got[2] if got is not None else resid(solve(x, sel), ~sel)
+            held = got[2] if got is not None else resid(solve(x, on(sel)), ~sel)
             made.folds.append(float(np.sum(held ** 2)))
         cv[k] = made.folds[k]
         if held_out_reaches(cv[:k + 1], least[k + 1:], folds_below):
