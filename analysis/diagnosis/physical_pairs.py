@@ -53,7 +53,7 @@ from .physical import (
 
 __all__ = ["OnTop", "PairFit", "SplitBound", "as_places", "besides", "fit_pair", "held_open", "held_spec", "changes_of",
            "refit_on_top", "rechoose", "split_choice", "splits_in_two", "split_places", "splits", "with_options",
-           "pair_starts", "widest", "widened", "at_one_place"]
+           "pair_starts", "widest", "widened", "at_one_place", "choice_freedom", "least_choice_freedom"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -464,11 +464,14 @@ def rechoose(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
             continue
         new[i] = refit_on_top(sim, spec, new[i], new[1 - i], mm, fmax)
         ranked[i] = new[i].ranked
+        if ranked[i]:               # the option of the least chi2 plus its choice's freedom (:func:`choice_freedom`)
+            c, _, p = min(ranked[i], key=lambda t: t[0] + choice_freedom(spec, t[2]))
+            new[i] = replace(new[i], params=dict(p), chi2=c)
         moved |= new[i].params[spec.choice] != pair.params[i][spec.choice]
     out = pair
     if moved:
         again = fit_pair(sim, specs, new, mm, fmax, folds=pair.cv_per_mode.size > 0)
-        out = again if again.chi2 < pair.chi2 else pair
+        out = again if _scored(specs, again) < _scored(specs, pair) else pair
     out = _both_choices(sim, specs, fits, out, mm, fmax)
     return PairFit(causes=out.causes, params=out.params, chi2=out.chi2, cv_per_mode=out.cv_per_mode,
                    at_edge=out.at_edge, ranked=tuple(ranked), free=out.free)
@@ -485,7 +488,7 @@ def _both_choices(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Seq
     if len(specs) != 2 or any(s.choice is None or len(s.options) > N_SCREEN for s in specs):
         return pair
     own = tuple(p[s.choice] for s, p in zip(specs, pair.params))
-    best: tuple[float, list[PhysicalFit]] = (pair.chi2, [])
+    best: tuple[float, list[PhysicalFit]] = (_scored(specs, pair), [])
     for at in product(specs[0].options, specs[1].options):
         if at == own or (specs[0].name == specs[1].name and at[0] == at[1]):
             continue
@@ -493,12 +496,18 @@ def _both_choices(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Seq
                              free=f.free if o == p[s.choice] else max(variants(s), key=len, default=f.free))
                  for f, p, s, o in zip(fits, pair.params, specs, at)]
         two = fit_pair(sim, specs, start, mm, fmax, folds=False)
-        if two.chi2 < best[0]:
-            best = (two.chi2, [replace(f, params=p) for f, p in zip(start, two.params)])
+        if _scored(specs, two) < best[0]:
+            best = (_scored(specs, two), [replace(f, params=p) for f, p in zip(start, two.params)])
     if not best[1]:
         return pair
     again = fit_pair(sim, specs, best[1], mm, fmax, folds=pair.cv_per_mode.size > 0)
-    return again if again.chi2 < pair.chi2 else pair
+    return again if _scored(specs, again) < _scored(specs, pair) else pair
+
+
+def _scored(specs: Sequence[CauseSpec], pair: PairFit) -> float:
+    """The pair's chi2 on all modes plus its choices' freedom at their options (:func:`choice_freedom`): how
+    :func:`rechoose` compares the options of a pair (every place at once chooses nothing, one place among n does)."""
+    return pair.chi2 + sum(choice_freedom(s, p) for s, p in zip(specs, pair.params))
 
 
 def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: PhysicalFit, second: PhysicalFit,
@@ -570,6 +579,21 @@ def at_one_place(spec: CauseSpec, params: Mapping) -> bool:
 #: The freedom of one continuous parameter in chi2 units: what it removes from the chi2 on all modes of data
 #: that do not need it, on average (1), plus one standard deviation of that (the same 2 the pair search counts).
 PARAMETER_CHI2 = 2.0
+
+
+def choice_freedom(spec: CauseSpec, params: Mapping) -> float:
+    """The freedom of a cause's choice in chi2 units, at the option ``params`` hold: 2 ln(number of options) for
+    one place among them (0 without a choice); 0 at :attr:`CauseSpec.every`, the cause at every place at once (all
+    supports softened together), which is the cause as the frame's own model has it and chooses no place."""
+    if not spec.choice or params.get(spec.choice) == spec.every:
+        return 0.0
+    return 2.0 * float(np.log(max(len(spec.options), 1)))
+
+
+def least_choice_freedom(spec: CauseSpec) -> float:
+    """The least freedom of ``spec``'s choice over its options (:func:`choice_freedom`): the bound a pair whose choice
+    may still move (:func:`rechoose`) is held to."""
+    return min((choice_freedom(spec, {spec.choice: o}) for o in spec.options), default=0.0) if spec.choice else 0.0
 
 
 def widened(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,

@@ -34,7 +34,7 @@ appended to :attr:`PhysicalOutcome.trace` in order.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -73,9 +73,11 @@ from .physical_pairs import (
     SplitBound,
     as_places,
     besides,
+    choice_freedom,
     fit_pair,
     held_open,
     held_spec,
+    least_choice_freedom,
     rechoose,
     refit_on_top,
     split_choice,
@@ -350,7 +352,7 @@ def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float,
     cross-validated alike (leave one mode out, the choices kept and every continuous parameter refitted
     in each fold): (gain in dB, chi2 removed net of ``freedom``, enough). ``freedom`` (chi2 units) is what
     the pair chose on all modes, which no fold re-does: the second cause among those refined and its own
-    choice, 2 ln(number of options) each (:func:`_choice_penalty`). Enough: at least
+    choice, 2 ln(number of options) each (:func:`choice_freedom`). Enough: at least
     ``rule.physical_min_gain_db`` better (a cause that only bends to fit some modes does not predict the
     left-out ones) and, net of that
     freedom, at least ``rule.quiet_chi2`` removed (one mode predicted one standard deviation better, the
@@ -519,15 +521,10 @@ class _Judge:
 N_SECOND = 3
 
 
-def _choice_penalty(spec: CauseSpec) -> float:
-    """The freedom of a cause's choice in chi2 units: 2 ln(number of options) (0 without a choice)."""
-    return 2.0 * float(np.log(max(len(spec.options), 1))) if spec.choice else 0.0
-
-
-def _freedom(spec: CauseSpec, free: Sequence[str]) -> float:
-    """The freedom of a cause fitted with the parameters ``free``, in chi2 units: 2 per parameter plus its
-    choice's (:func:`_choice_penalty`)."""
-    return PARAMETER_CHI2 * len(free) + _choice_penalty(spec)
+def _freedom(spec: CauseSpec, free: Sequence[str], params: Mapping) -> float:
+    """The freedom of a cause fitted with the parameters ``free`` at the option ``params`` hold, in chi2 units: 2 per
+    parameter plus its choice's (:func:`choice_freedom`)."""
+    return PARAMETER_CHI2 * len(free) + choice_freedom(spec, params)
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -561,23 +558,38 @@ def _on_top_specs(causes: Iterable[CauseSpec], first: PhysicalFit, names: Sequen
     return [spec for spec in on if spec is not None and (names is None or spec.name in names)]
 
 
+def _kinds(spec: CauseSpec) -> list[tuple[str, ...] | None]:
+    """The options of ``spec`` fitted apart on top of a first cause (:func:`_on_top_fits`): every place at once
+    (:attr:`CauseSpec.every`) and the places, for their choices' freedom differs (:func:`choice_freedom`), so the
+    least chi2 of all options alone would drop the other kind (the joints all softened, next to a block that took
+    up part of them, fit a little worse than one joint but choose nothing); None (all options at once) for any other
+    cause."""
+    if spec.choice is None or spec.every is None or spec.every not in spec.options or not spec.places:
+        return [None]
+    return [(spec.every,), spec.places]
+
+
 def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first: PhysicalFit,
                  names: Sequence[str] | None, kept: dict, hopeless: Callable[[CauseSpec], bool] | None = None,
                  n: int = N_SECOND
-                 ) -> tuple[list[PhysicalFit], list[str]]:
+                 ) -> tuple[list[PhysicalFit], list[str], list[PhysicalFit]]:
     """Every other cause (among ``names``) fitted on top of ``first`` on all modes, each nested variant; the best
-    variant of each cause by chi2 plus its freedom, best first (:func:`_seconds`). Each cause's best is kept in
+    variant of each cause by chi2 plus its freedom, best first (:func:`_seconds`); a cause with an option for every
+    place fitted at that option and at its places apart (:func:`_kinds`), its best kind ranked and the other's best
+    returned apart. Each cause's fits are kept in
     ``kept`` under ``first``'s change and asked from there again. ``hopeless(spec)``: a cause whose pairs with
     ``first`` cannot win (:func:`_hopeless`) is not fitted when its place in the ranking cannot matter either: every
     cause is among the ``n`` best (at most ``n`` of them), or ``n`` causes fitted rank strictly below the least its
     ranking key can be (its smallest variant's freedom, a chi2 being >= 0); such causes are taken after the others,
-    those of fewer options (no screen) first. Returns the ranked fits and the names of
-    the causes not fitted (those that would have been among the ``n`` best: all of them when every cause is)."""
+    those of fewer options (no screen) first. Returns the ranked fits, the names of
+    the causes not fitted (those that would have been among the ``n`` best: all of them when every cause is) and the
+    other kinds' fits."""
     changed = [(first.cause, first.params)]
     top: OnTop | None = None
     allsel = np.ones(mm.freq_hz.size, bool)
     on = _on_top_specs(sim.causes(), first, names)                          # OnTop.causes
     ranked: list[tuple[int, float, PhysicalFit]] = []
+    others: list[PhysicalFit] = []
     # the causes that cannot win last, those of fewer options first: the ranks of those fitted may spare the others
     later = [] if hopeless is None else sorted((i for i, spec in enumerate(on) if hopeless(spec)),
                                                key=lambda i: len(on[i].options))
@@ -586,20 +598,27 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
         spec = on[i]
         key = ("on top", first.cause, repr(sorted(first.params.items())), spec.name)
         if i in later and key not in kept:
-            least = min(_freedom(spec, free) for free in variants(spec))
+            least = min(PARAMETER_CHI2 * len(free) for free in variants(spec)) + least_choice_freedom(spec)
             if len(on) <= n or sum(r[1] < least for r in ranked) >= n:
                 left.append(spec.name)
                 continue
         if key not in kept:
             top = top or OnTop(sim, changed)
-            fits = []
-            for free in variants(spec):
-                p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax, best_only=True)
-                fits.append((chi2 + _freedom(spec, free), PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
-            kept[key] = min(fits, key=lambda t: t[0])      # the best variant of the cause (the first of the least)
-        ranked.append((i, *kept[key]))
+            best = []
+            for kind in _kinds(spec):
+                fits = []
+                for free in variants(spec):
+                    p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax, options=kind, best_only=True)
+                    fits.append((chi2 + _freedom(spec, free, p),
+                                 PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
+                best.append(min(fits, key=lambda t: t[0]))  # the best variant of the kind (the first of the least)
+            best.sort(key=lambda t: t[0])                     # the best kind first (ties: every place first)
+            kept[key] = best
+        ranked.append((i, *kept[key][0]))
+        others.extend(f for _, f in kept[key][1:])
     ranked.sort(key=lambda t: (t[1], t[0]))              # as fitted in the causes' order: ties in that order
-    return [f for _, _, f in ranked], (left if len(on) <= n else [c for c in left if c == _scatter_cause(sim)])
+    return ([f for _, _, f in ranked], (left if len(on) <= n else [c for c in left if c == _scatter_cause(sim)]),
+            others)
 
 
 def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -613,7 +632,7 @@ def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float
     ranked = []
     for fb in _seconds(sim, specs, mm, fmax, first, names, n=None, kept=kept):
         fa2, fb2, chi2 = with_options(sim, [specs[first.cause], specs[fb.cause]], first, fb, mm, fmax)
-        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free), chi2, fa2, fb2))
+        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free, fb2.params), chi2, fa2, fb2))
     ranked.sort(key=lambda t: t[0])
     return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
 
@@ -624,7 +643,8 @@ def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom, each as (its chi2 on all modes
     as its bound, :class:`SplitBound`; first refined, second): the pair's exact score is taken only while that
     chi2 could still win (:func:`_on_top_of`)."""
-    ranked = [(chi2 + _freedom(spec, b.free), chi2, a, b) for spec in specs.values() if names is None or spec.name in names
+    ranked = [(chi2 + _freedom(spec, b.free, b.params), chi2, a, b) for spec in specs.values()
+              if names is None or spec.name in names
               for chi2, a, b in held_open(sim, [specs[first.cause], spec], first, mm, fmax)]
     ranked.sort(key=lambda t: t[0])
     return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
@@ -653,10 +673,11 @@ def _expanded(items: Sequence, skip: Callable[[_Later], bool]) -> Iterator:
 def _hopeless(best: dict | None, top: float, first: CauseSpec, second: CauseSpec) -> bool:
     """Whether no pair of the causes ``first`` and ``second`` can win against the best named pair so far (``best``, or
     one of score ``top`` found elsewhere): a pair's score is its nested held-out chi2 (>= 0) plus both choices'
-    freedom (:func:`_choice_penalty`), so with that freedom alone at or above the named score it cannot
+    freedom (:func:`choice_freedom`), so with that freedom alone at or above the named score it cannot
     (:func:`_win_target` is then <= 0)."""
     named_top = min(top, _named_score(best))
-    return bool(np.isfinite(named_top) and named_top - _choice_penalty(first) - _choice_penalty(second) <= 0.0)
+    return bool(np.isfinite(named_top)
+                and named_top - least_choice_freedom(first) - least_choice_freedom(second) <= 0.0)
 
 
 def _named_score(c: dict | None) -> float:
@@ -677,7 +698,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     held-out modes within their uncertainty), the other causes (a cause of many options, a crack, also refined with
     the first at each option, :func:`_held_seconds`); the best pair by nested held-out error, judged like a
     single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of those only. Pairs are
-    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
+    compared by nested held-out chi2 plus their choices' freedom (:func:`choice_freedom`). A pair worth
     naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
     change one member (:func:`_one_member`) are adequate only when they also leave the held-out modes within
     their uncertainty (:func:`_held_out_per_mode` at most ``rule.leaves_chi2``): the stiffness and the mass of
@@ -796,19 +817,19 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     member's stiffness for two cracks). Each local cause at each of its places (:func:`_local_firsts`) is a first
     cause, the local causes on top of it (:func:`_on_top_of`), judged by the same rule as every pair. A first cause
     is skipped when no pair with it can beat ``best`` (a named pair): a pair's penalised held-out chi2 is at least
-    its two choices' freedom (:func:`_choice_penalty`), so with ``best``'s below that nothing is dropped that could
+    its two choices' freedom (:func:`choice_freedom`), so with ``best``'s below that nothing is dropped that could
     win. Only a named pair is of use here (the first round's best pair stands for the unnamed): a pair that cannot
     be named is not cross-validated (:func:`_win_target`, ``named_only``). The best named pair, or None."""
     local = [n for n, s in specs.items() if _local(s) and (names is None or n in names)]
     if len(local) < 1:
         return None
-    floor = min(_choice_penalty(specs[n]) for n in local)
+    floor = min(least_choice_freedom(specs[n]) for n in local)
     top = best["_chi2_cv"] if _named_pair(best) else np.inf       # type: ignore[index]
     if 2.0 * floor >= top:
         return None
     out: dict | None = None
     for first in _local_firsts(sim, specs, mm, fmax, found, local):
-        if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
+        if least_choice_freedom(specs[first["_fit"].cause]) + floor >= top:
             continue
         c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True,
                        bound=top)
@@ -843,8 +864,9 @@ def _beats_named(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     if two is None or not _named_pair(two):
         return None
     causes = two["_pair"].causes
-    freedom = _freedom(specs[causes[1]], two["_free"]) + (_choice_penalty(specs[causes[0]])
-                                                          if causes[0] != best["effect"] else 0.0)
+    chosen = two["_choices_chi2"]
+    freedom = (PARAMETER_CHI2 * len(two["_free"]) + chosen[1]
+               + (chosen[0] if causes[0] != best["effect"] else 0.0))
     cv_best, cv_pair = _alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode
     over, removed, enough = _on_top_enough(cv_best, cv_pair, freedom, judge.rule)
     if not enough:
@@ -977,11 +999,12 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         return _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
     seconds: list[PhysicalFit] = []
+    others: list[PhysicalFit] = []
     left: list[str] = []
     if not opened:
         # a second cause whose pairs with the first cannot win (:func:`_hopeless`) is fitted only for its rank
-        seconds, left = _on_top_fits(sim, mm, fmax, fa, names, judge.kept,
-                                     lambda spec: _hopeless(None, bound, specs[fa.cause], spec))
+        seconds, left, others = _on_top_fits(sim, mm, fmax, fa, names, judge.kept,
+                                             lambda spec: _hopeless(None, bound, specs[fa.cause], spec))
     counted = _leading(sim, seconds, N_SECOND)
     # the pairs in the order they are judged; a group of pairs made only when it is reached and one of them could
     # still win (:func:`_hopeless`): the first refitted beside a counted second cause, every two elements split from
@@ -1005,18 +1028,20 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     n_seconds = max(1, len(causes))
     # the other second causes of the screen, each refined with the first last: cross-validated only while its
     # refined chi2 on all modes could win (:func:`_win_target`), so none is dropped by its rank on the screen
-    todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))],
+    # (the other kind of a cause with an option for every place after them, :func:`_kinds`)
+    todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted)),
+                      *((unbounded, None, fb) for fb in others)],
                      lambda group: all(_hopeless(best, bound, specs[fa.cause], specs[n]) for n in group.causes))
     best: dict | None = None
 
     def target_of(fb: PhysicalFit) -> float:
         """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`)."""
         return _win_target(best, top, judge, first, lambda: float(np.sum(cv_alone())), freedom_of(fb),
-                           _freedom(specs[fb.cause], fb.free),
-                           _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
+                           _freedom(specs[fb.cause], fb.free, fb.params),
+                           least_choice_freedom(specs[fa.cause]) + least_choice_freedom(specs[fb.cause]), named_only)
 
     def freedom_of(fb: PhysicalFit) -> float:
-        return 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
+        return 2.0 * float(np.log(n_seconds)) + choice_freedom(specs[fb.cause], fb.params)
 
     for below, fa2, fb in todo:
         freedom, target = freedom_of(fb), target_of(fb)
@@ -1025,7 +1050,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         if fa2 is None:
             fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
         # each cause's variant made again beside the other (:func:`widened`); the parameters it frees count too
-        n_free, own = len(fa2.free) + len(fb.free), _freedom(specs[fb.cause], fb.free)
+        n_free, own = len(fa2.free) + len(fb.free), _freedom(specs[fb.cause], fb.free, fb.params)
         fa2, fb = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
         own += PARAMETER_CHI2 * (len(fa2.free) + len(fb.free) - n_free)
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
@@ -1033,6 +1058,9 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
             continue                        # refined on all modes, no better than ``target``: not cross-validated
         if gain_db(fa.cv_per_mode if fa.cv_per_mode.size else cv_alone(), two.cv_per_mode) >= judge.rule.physical_min_gain_db:
             two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
+        # each choice's freedom at the options the pair was fitted at (one cause at every place and at one of two
+        # places, said place by place below, chose one place)
+        chosen = [choice_freedom(specs[n], p) for n, p in zip(two.causes, two.params)]
         two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
         c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
         c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
@@ -1053,7 +1081,8 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
                          "error_after_db": c["error_after_db"]} for name, p in two.changes]
         c["effect"] = "+".join(two.causes)
-        c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(specs[n]) for n in two.causes)
+        c["_choices_chi2"] = chosen
+        c["_chi2_cv"] = two.chi2_cv + sum(chosen)
         if named_only and not _named_pair(c):
             continue
         best = _better(best, c)
