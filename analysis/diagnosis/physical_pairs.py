@@ -464,14 +464,11 @@ def rechoose(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence
             continue
         new[i] = refit_on_top(sim, spec, new[i], new[1 - i], mm, fmax)
         ranked[i] = new[i].ranked
-        if ranked[i]:               # the option of the least chi2 plus its choice's freedom (:func:`choice_freedom`)
-            c, _, p = min(ranked[i], key=lambda t: t[0] + choice_freedom(spec, t[2]))
-            new[i] = replace(new[i], params=dict(p), chi2=c)
         moved |= new[i].params[spec.choice] != pair.params[i][spec.choice]
     out = pair
     if moved:
         again = fit_pair(sim, specs, new, mm, fmax, folds=pair.cv_per_mode.size > 0)
-        out = again if _scored(specs, again) < _scored(specs, pair) else pair
+        out = again if again.chi2 < pair.chi2 else pair
     out = _both_choices(sim, specs, fits, out, mm, fmax)
     return PairFit(causes=out.causes, params=out.params, chi2=out.chi2, cv_per_mode=out.cv_per_mode,
                    at_edge=out.at_edge, ranked=tuple(ranked), free=out.free)
@@ -488,7 +485,7 @@ def _both_choices(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Seq
     if len(specs) != 2 or any(s.choice is None or len(s.options) > N_SCREEN for s in specs):
         return pair
     own = tuple(p[s.choice] for s, p in zip(specs, pair.params))
-    best: tuple[float, list[PhysicalFit]] = (_scored(specs, pair), [])
+    best: tuple[float, list[PhysicalFit]] = (pair.chi2, [])
     for at in product(specs[0].options, specs[1].options):
         if at == own or (specs[0].name == specs[1].name and at[0] == at[1]):
             continue
@@ -496,18 +493,12 @@ def _both_choices(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Seq
                              free=f.free if o == p[s.choice] else max(variants(s), key=len, default=f.free))
                  for f, p, s, o in zip(fits, pair.params, specs, at)]
         two = fit_pair(sim, specs, start, mm, fmax, folds=False)
-        if _scored(specs, two) < best[0]:
-            best = (_scored(specs, two), [replace(f, params=p) for f, p in zip(start, two.params)])
+        if two.chi2 < best[0]:
+            best = (two.chi2, [replace(f, params=p) for f, p in zip(start, two.params)])
     if not best[1]:
         return pair
     again = fit_pair(sim, specs, best[1], mm, fmax, folds=pair.cv_per_mode.size > 0)
-    return again if _scored(specs, again) < _scored(specs, pair) else pair
-
-
-def _scored(specs: Sequence[CauseSpec], pair: PairFit) -> float:
-    """The pair's chi2 on all modes plus its choices' freedom at their options (:func:`choice_freedom`): how
-    :func:`rechoose` compares the options of a pair (every place at once chooses nothing, one place among n does)."""
-    return pair.chi2 + sum(choice_freedom(s, p) for s, p in zip(specs, pair.params))
+    return again if again.chi2 < pair.chi2 else pair
 
 
 def with_options(sim: PhysicalSimulation, specs: Sequence[CauseSpec], first: PhysicalFit, second: PhysicalFit,

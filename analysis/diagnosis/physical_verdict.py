@@ -971,6 +971,43 @@ def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_al
     return float(min(can, other)) if bounded else float(max(can, other))
 
 
+def _judged_pair(judge: _Judge, specs: dict, two: PairFit, cv_first: np.ndarray, first_chi2: float,
+                 free: tuple, own_params: float, counted: float) -> dict:
+    """The pair ``two`` (first cause, second cause) judged as a candidate (:meth:`_Judge.judge`) and against its first
+    cause alone, of held-out chi2 per mode ``cv_first`` and chi2 on all modes ``first_chi2`` (:func:`_on_top_enough`):
+    its freedom is its choices' at the options it holds (:func:`choice_freedom`), the second cause's parameters
+    ``free`` (their freedom ``own_params``, chi2 units) and ``counted``, 2 ln(number of second causes refined). Its
+    score (``_chi2_cv``): the nested held-out chi2 plus both choices' freedom."""
+    # each choice's freedom at the options the pair was fitted at (one cause at every place and at one of two
+    # places, said place by place below, chose one place)
+    causes = [specs[n] for n in two.causes]
+    chosen = [choice_freedom(spec, p) for spec, p in zip(causes, two.params)]
+    freedom = counted + chosen[1]
+    two = replace(two, params=as_places(causes, two.params))
+    c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
+    c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
+        cv_first, two.cv_per_mode, freedom, judge.rule)
+    c["_over_first"] = {"held_out_first_chi2": float(np.sum(cv_first)),
+                        "held_out_pair_chi2": float(np.sum(two.cv_per_mode)), "freedom_chi2": freedom,
+                        "modes": int(cv_first.size)}
+    # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
+    # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
+    kept = first_chi2 - two.chi2 >= own_params + chosen[1]
+    c["significant"] = bool(c["significant"] and enough and kept)
+    c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
+    c["one_member"] = _one_member(causes, two.params)
+    if c["one_member"] is not None and c["held_out_chi2_per_mode"] > judge.rule.leaves_chi2:
+        c["adequate"] = False
+    c["_pair"] = two
+    c["_free"] = free
+    c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
+                     "error_after_db": c["error_after_db"]} for name, p in two.changes]
+    c["effect"] = "+".join(two.causes)
+    c["_choices_chi2"] = chosen
+    c["_chi2_cv"] = two.chi2_cv + sum(chosen)
+    return c
+
+
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
                names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf,
                named_only: bool = False, bound: float = np.inf) -> dict | None:
@@ -1035,55 +1072,37 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     best: dict | None = None
 
     def target_of(fb: PhysicalFit) -> float:
-        """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`)."""
-        return _win_target(best, top, judge, first, lambda: float(np.sum(cv_alone())), freedom_of(fb),
-                           _freedom(specs[fb.cause], fb.free, fb.params),
-                           least_choice_freedom(specs[fa.cause]) + least_choice_freedom(specs[fb.cause]), named_only)
-
-    def freedom_of(fb: PhysicalFit) -> float:
-        return 2.0 * float(np.log(n_seconds)) + choice_freedom(specs[fb.cause], fb.params)
+        """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`), each
+        choice's freedom at its least (:func:`rechoose` may still move it)."""
+        least = least_choice_freedom(specs[fb.cause])
+        return _win_target(best, top, judge, first, lambda: float(np.sum(cv_alone())),
+                           2.0 * float(np.log(n_seconds)) + least, PARAMETER_CHI2 * len(fb.free) + least,
+                           least_choice_freedom(specs[fa.cause]) + least, named_only)
 
     for below, fa2, fb in todo:
-        freedom, target = freedom_of(fb), target_of(fb)
+        target = target_of(fb)
         if target <= 0.0 or _hopeless(best, bound, specs[fa.cause], specs[fb.cause]) or not below.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`; a chi2 is >= 0)
         if fa2 is None:
             fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
         # each cause's variant made again beside the other (:func:`widened`); the parameters it frees count too
-        n_free, own = len(fa2.free) + len(fb.free), _freedom(specs[fb.cause], fb.free, fb.params)
-        fa2, fb = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
-        own += PARAMETER_CHI2 * (len(fa2.free) + len(fb.free) - n_free)
+        n_free = len(fa2.free) + len(fb.free)
+        fa2, fb2 = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+        own = PARAMETER_CHI2 * (len(fb.free) + len(fa2.free) + len(fb2.free) - n_free)
+        fb = fb2
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
         if two.cv_per_mode.size < mm.freq_hz.size:
             continue                        # refined on all modes, no better than ``target``: not cross-validated
+        made = [two]
         if gain_db(fa.cv_per_mode if fa.cv_per_mode.size else cv_alone(), two.cv_per_mode) >= judge.rule.physical_min_gain_db:
-            two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
-        # each choice's freedom at the options the pair was fitted at (one cause at every place and at one of two
-        # places, said place by place below, chose one place)
-        chosen = [choice_freedom(specs[n], p) for n, p in zip(two.causes, two.params)]
-        two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
-        c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
-        c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
-            cv_alone(), two.cv_per_mode, freedom, judge.rule)
-        c["_over_first"] = {"held_out_first_chi2": float(np.sum(cv_alone())),
-                            "held_out_pair_chi2": float(np.sum(two.cv_per_mode)), "freedom_chi2": freedom,
-                            "modes": int(cv_alone().size)}
-        # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
-        # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
-        kept = first["_alone_chi2"] - two.chi2 >= own
-        c["significant"] = bool(c["significant"] and enough and kept)
-        c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
-        c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
-        if c["one_member"] is not None and c["held_out_chi2_per_mode"] > judge.rule.leaves_chi2:
-            c["adequate"] = False
-        c["_pair"] = two
-        c["_free"] = fb.free
-        c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
-                         "error_after_db": c["error_after_db"]} for name, p in two.changes]
-        c["effect"] = "+".join(two.causes)
-        c["_choices_chi2"] = chosen
-        c["_chi2_cv"] = two.chi2_cv + sum(chosen)
-        if named_only and not _named_pair(c):
-            continue
-        best = _better(best, c)
+            again = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
+            # chosen again by chi2 on all modes; the pair as refined is judged too, for the choices' freedom differs
+            # between options (a joint at one place fits a little better than every joint, and chooses a place)
+            made = [again] if again.params == two.params else [again, two]
+        for two in made:
+            c = _judged_pair(judge, specs, two, cv_alone(), first["_alone_chi2"], fb.free, own,
+                             2.0 * float(np.log(n_seconds)))
+            if named_only and not _named_pair(c):
+                continue
+            best = _better(best, c)
     return best
