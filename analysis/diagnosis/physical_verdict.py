@@ -351,8 +351,8 @@ def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float,
     """The pair's nested held-out chi2 per mode ``cv_pair`` against the first cause's alone ``cv_first``,
     cross-validated alike (leave one mode out, the choices kept and every continuous parameter refitted
     in each fold): (gain in dB, chi2 removed net of ``freedom``, enough). ``freedom`` (chi2 units) is what
-    the pair chose on all modes, which no fold re-does: the second cause among those refined and its own
-    choice, 2 ln(number of options) each (:func:`choice_freedom`). Enough: at least
+    the pair chose on all modes, which no fold re-does: the second cause among those refined, 2 ln(number of them),
+    and its own choice at the option it holds (:func:`choice_freedom`). Enough: at least
     ``rule.physical_min_gain_db`` better (a cause that only bends to fit some modes does not predict the
     left-out ones) and, net of that
     freedom, at least ``rule.quiet_chi2`` removed (one mode predicted one standard deviation better, the
