@@ -573,17 +573,18 @@ PARAMETER_CHI2 = 2.0
 
 
 def choice_freedom(spec: CauseSpec, params: Mapping) -> float:
-    """The freedom of a cause's choice in chi2 units, at the option ``params`` hold: 2 ln(number of options) for
-    one place among them (0 without a choice); 0 at :attr:`CauseSpec.every`, the cause at every place at once (all
-    supports softened together), which is the cause as the frame's own model has it and chooses no place."""
+    """What a cause's choice chose, in chi2 units, at the option ``params`` hold: 2 ln(number of options) for one
+    place among them (0 without a choice); 0 at :attr:`CauseSpec.every`, the cause at every place at once (all
+    supports softened together), which is the cause as the frame's own model has it and chooses no place. A second
+    cause's test against its first cause alone counts it (no fold re-makes the choice)."""
     if not spec.choice or params.get(spec.choice) == spec.every:
         return 0.0
     return 2.0 * float(np.log(max(len(spec.options), 1)))
 
 
 def least_choice_freedom(spec: CauseSpec) -> float:
-    """The least freedom of ``spec``'s choice over its options (:func:`choice_freedom`): the bound a pair whose choice
-    may still move (:func:`rechoose`) is held to."""
+    """The least of :func:`choice_freedom` over ``spec``'s options: the bound a pair whose choice may still move
+    (:func:`rechoose`) is held to."""
     return min((choice_freedom(spec, {spec.choice: o}) for o in spec.options), default=0.0) if spec.choice else 0.0
 
 

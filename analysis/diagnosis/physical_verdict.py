@@ -34,7 +34,7 @@ appended to :attr:`PhysicalOutcome.trace` in order.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -352,7 +352,8 @@ def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float,
     cross-validated alike (leave one mode out, the choices kept and every continuous parameter refitted
     in each fold): (gain in dB, chi2 removed net of ``freedom``, enough). ``freedom`` (chi2 units) is what
     the pair chose on all modes, which no fold re-does: the second cause among those refined, 2 ln(number of them),
-    and its own choice at the option it holds (:func:`choice_freedom`). Enough: at least
+    and its own choice at the option it holds (:func:`choice_freedom`: a place among n, 2 ln n; every place at
+    once chose none). Enough: at least
     ``rule.physical_min_gain_db`` better (a cause that only bends to fit some modes does not predict the
     left-out ones) and, net of that
     freedom, at least ``rule.quiet_chi2`` removed (one mode predicted one standard deviation better, the
@@ -521,10 +522,17 @@ class _Judge:
 N_SECOND = 3
 
 
-def _freedom(spec: CauseSpec, free: Sequence[str], params: Mapping) -> float:
-    """The freedom of a cause fitted with the parameters ``free`` at the option ``params`` hold, in chi2 units: 2 per
-    parameter plus its choice's (:func:`choice_freedom`)."""
-    return PARAMETER_CHI2 * len(free) + choice_freedom(spec, params)
+def _choice_penalty(spec: CauseSpec) -> float:
+    """What a cause's choice adds to a pair's score, in chi2 units: 2 ln(number of options) whatever the option (0
+    without a choice), so pairs are compared like for like. What the pair chose, which its test against the first
+    cause alone counts, depends on the option (:func:`choice_freedom`)."""
+    return 2.0 * float(np.log(max(len(spec.options), 1))) if spec.choice else 0.0
+
+
+def _freedom(spec: CauseSpec, free: Sequence[str]) -> float:
+    """The freedom of a cause fitted with the parameters ``free`` as pairs are ranked and scored, in chi2 units: 2 per
+    parameter plus its choice's (:func:`_choice_penalty`)."""
+    return PARAMETER_CHI2 * len(free) + _choice_penalty(spec)
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -560,10 +568,10 @@ def _on_top_specs(causes: Iterable[CauseSpec], first: PhysicalFit, names: Sequen
 
 def _kinds(spec: CauseSpec) -> list[tuple[str, ...] | None]:
     """The options of ``spec`` fitted apart on top of a first cause (:func:`_on_top_fits`): every place at once
-    (:attr:`CauseSpec.every`) and the places, for their choices' freedom differs (:func:`choice_freedom`), so the
-    least chi2 of all options alone would drop the other kind (the joints all softened, next to a block that took
-    up part of them, fit a little worse than one joint but choose nothing); None (all options at once) for any other
-    cause."""
+    (:attr:`CauseSpec.every`) and the places, for what a pair chose differs between them (:func:`choice_freedom`), so
+    the least chi2 of all options alone would drop the other kind (the joints all softened, next to a block that took
+    up part of them, fit a little worse than one joint but choose no place); None (all options at once) for any
+    other cause."""
     if spec.choice is None or spec.every is None or spec.every not in spec.options or not spec.places:
         return [None]
     return [(spec.every,), spec.places]
@@ -598,7 +606,7 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
         spec = on[i]
         key = ("on top", first.cause, repr(sorted(first.params.items())), spec.name)
         if i in later and key not in kept:
-            least = min(PARAMETER_CHI2 * len(free) for free in variants(spec)) + least_choice_freedom(spec)
+            least = min(_freedom(spec, free) for free in variants(spec))
             if len(on) <= n or sum(r[1] < least for r in ranked) >= n:
                 left.append(spec.name)
                 continue
@@ -609,7 +617,7 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
                 fits = []
                 for free in variants(spec):
                     p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax, options=kind, best_only=True)
-                    fits.append((chi2 + _freedom(spec, free, p),
+                    fits.append((chi2 + _freedom(spec, free),
                                  PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
                 best.append(min(fits, key=lambda t: t[0]))  # the best variant of the kind (the first of the least)
             best.sort(key=lambda t: t[0])                     # the best kind first (ties: every place first)
@@ -632,7 +640,7 @@ def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float
     ranked = []
     for fb in _seconds(sim, specs, mm, fmax, first, names, n=None, kept=kept):
         fa2, fb2, chi2 = with_options(sim, [specs[first.cause], specs[fb.cause]], first, fb, mm, fmax)
-        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free, fb2.params), chi2, fa2, fb2))
+        ranked.append((chi2 + _freedom(specs[fb.cause], fb.free), chi2, fa2, fb2))
     ranked.sort(key=lambda t: t[0])
     return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
 
@@ -643,7 +651,7 @@ def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom, each as (its chi2 on all modes
     as its bound, :class:`SplitBound`; first refined, second): the pair's exact score is taken only while that
     chi2 could still win (:func:`_on_top_of`)."""
-    ranked = [(chi2 + _freedom(spec, b.free, b.params), chi2, a, b) for spec in specs.values()
+    ranked = [(chi2 + _freedom(spec, b.free), chi2, a, b) for spec in specs.values()
               if names is None or spec.name in names
               for chi2, a, b in held_open(sim, [specs[first.cause], spec], first, mm, fmax)]
     ranked.sort(key=lambda t: t[0])
@@ -673,11 +681,10 @@ def _expanded(items: Sequence, skip: Callable[[_Later], bool]) -> Iterator:
 def _hopeless(best: dict | None, top: float, first: CauseSpec, second: CauseSpec) -> bool:
     """Whether no pair of the causes ``first`` and ``second`` can win against the best named pair so far (``best``, or
     one of score ``top`` found elsewhere): a pair's score is its nested held-out chi2 (>= 0) plus both choices'
-    freedom (:func:`choice_freedom`), so with that freedom alone at or above the named score it cannot
+    freedom (:func:`_choice_penalty`), so with that freedom alone at or above the named score it cannot
     (:func:`_win_target` is then <= 0)."""
     named_top = min(top, _named_score(best))
-    return bool(np.isfinite(named_top)
-                and named_top - least_choice_freedom(first) - least_choice_freedom(second) <= 0.0)
+    return bool(np.isfinite(named_top) and named_top - _choice_penalty(first) - _choice_penalty(second) <= 0.0)
 
 
 def _named_score(c: dict | None) -> float:
@@ -698,7 +705,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     held-out modes within their uncertainty), the other causes (a cause of many options, a crack, also refined with
     the first at each option, :func:`_held_seconds`); the best pair by nested held-out error, judged like a
     single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of those only. Pairs are
-    compared by nested held-out chi2 plus their choices' freedom (:func:`choice_freedom`). A pair worth
+    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
     naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
     change one member (:func:`_one_member`) are adequate only when they also leave the held-out modes within
     their uncertainty (:func:`_held_out_per_mode` at most ``rule.leaves_chi2``): the stiffness and the mass of
@@ -817,19 +824,19 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     member's stiffness for two cracks). Each local cause at each of its places (:func:`_local_firsts`) is a first
     cause, the local causes on top of it (:func:`_on_top_of`), judged by the same rule as every pair. A first cause
     is skipped when no pair with it can beat ``best`` (a named pair): a pair's penalised held-out chi2 is at least
-    its two choices' freedom (:func:`choice_freedom`), so with ``best``'s below that nothing is dropped that could
+    its two choices' freedom (:func:`_choice_penalty`), so with ``best``'s below that nothing is dropped that could
     win. Only a named pair is of use here (the first round's best pair stands for the unnamed): a pair that cannot
     be named is not cross-validated (:func:`_win_target`, ``named_only``). The best named pair, or None."""
     local = [n for n, s in specs.items() if _local(s) and (names is None or n in names)]
     if len(local) < 1:
         return None
-    floor = min(least_choice_freedom(specs[n]) for n in local)
+    floor = min(_choice_penalty(specs[n]) for n in local)
     top = best["_chi2_cv"] if _named_pair(best) else np.inf       # type: ignore[index]
     if 2.0 * floor >= top:
         return None
     out: dict | None = None
     for first in _local_firsts(sim, specs, mm, fmax, found, local):
-        if least_choice_freedom(specs[first["_fit"].cause]) + floor >= top:
+        if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
             continue
         c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True,
                        bound=top)
@@ -975,10 +982,11 @@ def _judged_pair(judge: _Judge, specs: dict, two: PairFit, cv_first: np.ndarray,
                  free: tuple, own_params: float, counted: float) -> dict:
     """The pair ``two`` (first cause, second cause) judged as a candidate (:meth:`_Judge.judge`) and against its first
     cause alone, of held-out chi2 per mode ``cv_first`` and chi2 on all modes ``first_chi2`` (:func:`_on_top_enough`):
-    its freedom is its choices' at the options it holds (:func:`choice_freedom`), the second cause's parameters
+    what it chose is the second cause's choice at the option it holds (:func:`choice_freedom`), its parameters
     ``free`` (their freedom ``own_params``, chi2 units) and ``counted``, 2 ln(number of second causes refined). Its
-    score (``_chi2_cv``): the nested held-out chi2 plus both choices' freedom."""
-    # each choice's freedom at the options the pair was fitted at (one cause at every place and at one of two
+    score (``_chi2_cv``): the nested held-out chi2 plus both choices' penalty (:func:`_choice_penalty`), alike at
+    every option."""
+    # what each choice chose at the options the pair was fitted at (one cause at every place and at one of two
     # places, said place by place below, chose one place)
     causes = [specs[n] for n in two.causes]
     chosen = [choice_freedom(spec, p) for spec, p in zip(causes, two.params)]
@@ -1004,7 +1012,7 @@ def _judged_pair(judge: _Judge, specs: dict, two: PairFit, cv_first: np.ndarray,
                      "error_after_db": c["error_after_db"]} for name, p in two.changes]
     c["effect"] = "+".join(two.causes)
     c["_choices_chi2"] = chosen
-    c["_chi2_cv"] = two.chi2_cv + sum(chosen)
+    c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(spec) for spec in causes)
     return c
 
 
@@ -1072,12 +1080,12 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     best: dict | None = None
 
     def target_of(fb: PhysicalFit) -> float:
-        """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`), each
-        choice's freedom at its least (:func:`rechoose` may still move it)."""
+        """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`), what
+        its second cause chose at its least (:func:`rechoose` may still move it)."""
         least = least_choice_freedom(specs[fb.cause])
         return _win_target(best, top, judge, first, lambda: float(np.sum(cv_alone())),
                            2.0 * float(np.log(n_seconds)) + least, PARAMETER_CHI2 * len(fb.free) + least,
-                           least_choice_freedom(specs[fa.cause]) + least, named_only)
+                           _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
 
     for below, fa2, fb in todo:
         target = target_of(fb)
