@@ -215,3 +215,47 @@ def test_a_target_is_the_same_whether_its_held_out_chi2_is_made_or_not() -> None
     asked.clear()
     assert _win_target(named, np.inf, judge, {"_alone_chi2": 900.0}, made(900.0), 3.0, 4.0, 6.0) == 6.0  # type: ignore[arg-type]
     assert asked == []
+
+
+def test_a_choice_costs_its_freedom_at_the_option_it_holds() -> None:
+    """What a choice chose (the second cause's test against its first alone): one place among n, 2 ln n; the option
+    of every support (every joint) at once, nothing; a choice without such an option (a mass's node), 2 ln n at every
+    option; a cause without a choice, nothing. A pair's score counts 2 ln n at every option (like for like)."""
+    import analysis.diagnosis.physical_verdict as pv
+
+    _, specs, *_ = _searched()
+    support, mass = specs["support_stiffness"], specs["added_mass"]
+    assert support.every == "all" and len(support.options) == 3
+    assert pv.choice_freedom(support, {"support": "right:0"}) == pytest.approx(2.0 * np.log(3.0))
+    assert pv.choice_freedom(support, {"support": "all"}) == 0.0
+    assert pv.least_choice_freedom(support) == 0.0
+    n = len(mass.options)
+    assert n > 20 and mass.every is None
+    assert pv.choice_freedom(mass, {"point": mass.options[3]}) == pytest.approx(2.0 * np.log(n))
+    assert pv.least_choice_freedom(mass) == pytest.approx(2.0 * np.log(n))
+    assert pv.choice_freedom(specs["stiffness_shift"], {}) == pv.least_choice_freedom(specs["stiffness_shift"]) == 0.0
+    assert pv._choice_penalty(support) == pytest.approx(2.0 * np.log(3.0))
+    assert pv._choice_penalty(mass) == pytest.approx(2.0 * np.log(n))
+
+
+def test_on_top_of_a_first_cause_every_place_and_one_place_are_both_kept() -> None:
+    """On top of the loose support fitted alone, the joints' cause is fitted at every joint at once and at each joint
+    apart: the better by chi2 plus its freedom is ranked, the other returned beside the ranking, so neither kind is
+    lost to the other's lower chi2; a cause without an option for every place is fitted once."""
+    import analysis.diagnosis.physical_verdict as pv
+
+    fv, specs, mm, fmax, judge, first = _searched()
+    ranked, left, others = pv._on_top_fits(fv, mm, fmax, first["_fit"], CAUSES, {})
+    assert not left
+    joints = [f for f in ranked if f.cause == "joint_stiffness"] + [f for f in others if f.cause == "joint_stiffness"]
+    assert len(joints) == 2
+    kinds = sorted(f.params["joint"] == "all" for f in joints)
+    assert kinds == [False, True]
+    spec = specs["joint_stiffness"]
+
+    def key(f: object) -> float:
+        return f.chi2 + pv._freedom(spec, f.free)  # type: ignore[attr-defined]
+
+    assert key(joints[0]) <= key(joints[1])
+    assert [f.cause for f in ranked].count("stiffness_shift") == 1
+    assert all(f.cause != "stiffness_shift" for f in others)

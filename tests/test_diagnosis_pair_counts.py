@@ -106,7 +106,8 @@ def test_first_causes_ranked_fifth_and_sixth_are_still_tried(monkeypatch: pytest
 
 def test_a_second_cause_ranked_sixth_on_the_screen_is_still_refined(monkeypatch: pytest.MonkeyPatch) -> None:
     """On top of the support left:0 (fitted alone there), the joints' cause ranked last of six on the screen of
-    second causes: it is refined with the first, and the pair is named."""
+    second causes (and its other kind of option not tried at all): it is refined with the first, and the pair is
+    named."""
     import analysis.diagnosis.physical_verdict as pv
 
     fv, specs, mm, fmax, fits, found, judge = _searched(SUPPORT_AND_JOINT, CAUSES)
@@ -115,9 +116,10 @@ def test_a_second_cause_ranked_sixth_on_the_screen_is_still_refined(monkeypatch:
     screen = pv._on_top_fits
 
     def joint_last(*args: object, **kw: object) -> tuple:
-        out, left = screen(*args, **kw)  # type: ignore[arg-type]
+        out, left, others = screen(*args, **kw)  # type: ignore[arg-type]
         assert len(out) == 6 and not left
-        return [f for f in out if f.cause != "joint_stiffness"] + [f for f in out if f.cause == "joint_stiffness"], left
+        return ([f for f in out if f.cause != "joint_stiffness"] + [f for f in out if f.cause == "joint_stiffness"], left,
+                [f for f in others if f.cause != "joint_stiffness"])
 
     monkeypatch.setattr(pv, "_on_top_fits", joint_last)
     _support_and_joint(pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False))

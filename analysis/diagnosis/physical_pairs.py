@@ -53,7 +53,7 @@ from .physical import (
 
 __all__ = ["OnTop", "PairFit", "SplitBound", "as_places", "besides", "fit_pair", "held_open", "held_spec", "changes_of",
            "refit_on_top", "rechoose", "split_choice", "splits_in_two", "split_places", "splits", "with_options",
-           "pair_starts", "widest", "widened", "at_one_place"]
+           "pair_starts", "widest", "widened", "at_one_place", "choice_freedom", "least_choice_freedom"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -570,6 +570,22 @@ def at_one_place(spec: CauseSpec, params: Mapping) -> bool:
 #: The freedom of one continuous parameter in chi2 units: what it removes from the chi2 on all modes of data
 #: that do not need it, on average (1), plus one standard deviation of that (the same 2 the pair search counts).
 PARAMETER_CHI2 = 2.0
+
+
+def choice_freedom(spec: CauseSpec, params: Mapping) -> float:
+    """What a cause's choice chose, in chi2 units, at the option ``params`` hold: 2 ln(number of options) for one
+    place among them (0 without a choice); 0 at :attr:`CauseSpec.every`, the cause at every place at once (all
+    supports softened together), which is the cause as the frame's own model has it and chooses no place. A second
+    cause's test against its first cause alone counts it (no fold re-makes the choice)."""
+    if not spec.choice or params.get(spec.choice) == spec.every:
+        return 0.0
+    return 2.0 * float(np.log(max(len(spec.options), 1)))
+
+
+def least_choice_freedom(spec: CauseSpec) -> float:
+    """The least of :func:`choice_freedom` over ``spec``'s options: the bound a pair whose choice may still move
+    (:func:`rechoose`) is held to."""
+    return min((choice_freedom(spec, {spec.choice: o}) for o in spec.options), default=0.0) if spec.choice else 0.0
 
 
 def widened(sim: PhysicalSimulation, specs: Sequence[CauseSpec], fits: Sequence[PhysicalFit], mm: MeasuredModes,

@@ -73,9 +73,11 @@ from .physical_pairs import (
     SplitBound,
     as_places,
     besides,
+    choice_freedom,
     fit_pair,
     held_open,
     held_spec,
+    least_choice_freedom,
     rechoose,
     refit_on_top,
     split_choice,
@@ -349,8 +351,9 @@ def _on_top_enough(cv_first: np.ndarray, cv_pair: np.ndarray, freedom: float,
     """The pair's nested held-out chi2 per mode ``cv_pair`` against the first cause's alone ``cv_first``,
     cross-validated alike (leave one mode out, the choices kept and every continuous parameter refitted
     in each fold): (gain in dB, chi2 removed net of ``freedom``, enough). ``freedom`` (chi2 units) is what
-    the pair chose on all modes, which no fold re-does: the second cause among those refined and its own
-    choice, 2 ln(number of options) each (:func:`_choice_penalty`). Enough: at least
+    the pair chose on all modes, which no fold re-does: the second cause among those refined, 2 ln(number of them),
+    and its own choice at the option it holds (:func:`choice_freedom`: a place among n, 2 ln n; every place at
+    once chose none). Enough: at least
     ``rule.physical_min_gain_db`` better (a cause that only bends to fit some modes does not predict the
     left-out ones) and, net of that
     freedom, at least ``rule.quiet_chi2`` removed (one mode predicted one standard deviation better, the
@@ -520,13 +523,15 @@ N_SECOND = 3
 
 
 def _choice_penalty(spec: CauseSpec) -> float:
-    """The freedom of a cause's choice in chi2 units: 2 ln(number of options) (0 without a choice)."""
+    """What a cause's choice adds to a pair's score, in chi2 units: 2 ln(number of options) whatever the option (0
+    without a choice), so pairs are compared like for like. What the pair chose, which its test against the first
+    cause alone counts, depends on the option (:func:`choice_freedom`)."""
     return 2.0 * float(np.log(max(len(spec.options), 1))) if spec.choice else 0.0
 
 
 def _freedom(spec: CauseSpec, free: Sequence[str]) -> float:
-    """The freedom of a cause fitted with the parameters ``free``, in chi2 units: 2 per parameter plus its
-    choice's (:func:`_choice_penalty`)."""
+    """The freedom of a cause fitted with the parameters ``free`` as pairs are ranked and scored, in chi2 units: 2 per
+    parameter plus its choice's (:func:`_choice_penalty`)."""
     return PARAMETER_CHI2 * len(free) + _choice_penalty(spec)
 
 
@@ -561,23 +566,38 @@ def _on_top_specs(causes: Iterable[CauseSpec], first: PhysicalFit, names: Sequen
     return [spec for spec in on if spec is not None and (names is None or spec.name in names)]
 
 
+def _kinds(spec: CauseSpec) -> list[tuple[str, ...] | None]:
+    """The options of ``spec`` fitted apart on top of a first cause (:func:`_on_top_fits`): every place at once
+    (:attr:`CauseSpec.every`) and the places, for what a pair chose differs between them (:func:`choice_freedom`), so
+    the least chi2 of all options alone would drop the other kind (the joints all softened, next to a block that took
+    up part of them, fit a little worse than one joint but choose no place); None (all options at once) for any
+    other cause."""
+    if spec.choice is None or spec.every is None or spec.every not in spec.options or not spec.places:
+        return [None]
+    return [(spec.every,), spec.places]
+
+
 def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first: PhysicalFit,
                  names: Sequence[str] | None, kept: dict, hopeless: Callable[[CauseSpec], bool] | None = None,
                  n: int = N_SECOND
-                 ) -> tuple[list[PhysicalFit], list[str]]:
+                 ) -> tuple[list[PhysicalFit], list[str], list[PhysicalFit]]:
     """Every other cause (among ``names``) fitted on top of ``first`` on all modes, each nested variant; the best
-    variant of each cause by chi2 plus its freedom, best first (:func:`_seconds`). Each cause's best is kept in
+    variant of each cause by chi2 plus its freedom, best first (:func:`_seconds`); a cause with an option for every
+    place fitted at that option and at its places apart (:func:`_kinds`), its best kind ranked and the other's best
+    returned apart. Each cause's fits are kept in
     ``kept`` under ``first``'s change and asked from there again. ``hopeless(spec)``: a cause whose pairs with
     ``first`` cannot win (:func:`_hopeless`) is not fitted when its place in the ranking cannot matter either: every
     cause is among the ``n`` best (at most ``n`` of them), or ``n`` causes fitted rank strictly below the least its
     ranking key can be (its smallest variant's freedom, a chi2 being >= 0); such causes are taken after the others,
-    those of fewer options (no screen) first. Returns the ranked fits and the names of
-    the causes not fitted (those that would have been among the ``n`` best: all of them when every cause is)."""
+    those of fewer options (no screen) first. Returns the ranked fits, the names of
+    the causes not fitted (those that would have been among the ``n`` best: all of them when every cause is) and the
+    other kinds' fits."""
     changed = [(first.cause, first.params)]
     top: OnTop | None = None
     allsel = np.ones(mm.freq_hz.size, bool)
     on = _on_top_specs(sim.causes(), first, names)                          # OnTop.causes
     ranked: list[tuple[int, float, PhysicalFit]] = []
+    others: list[PhysicalFit] = []
     # the causes that cannot win last, those of fewer options first: the ranks of those fitted may spare the others
     later = [] if hopeless is None else sorted((i for i, spec in enumerate(on) if hopeless(spec)),
                                                key=lambda i: len(on[i].options))
@@ -592,14 +612,21 @@ def _on_top_fits(sim: PhysicalSimulation, mm: MeasuredModes, fmax: float, first:
                 continue
         if key not in kept:
             top = top or OnTop(sim, changed)
-            fits = []
-            for free in variants(spec):
-                p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax, best_only=True)
-                fits.append((chi2 + _freedom(spec, free), PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
-            kept[key] = min(fits, key=lambda t: t[0])      # the best variant of the cause (the first of the least)
-        ranked.append((i, *kept[key]))
+            best = []
+            for kind in _kinds(spec):
+                fits = []
+                for free in variants(spec):
+                    p, chi2, _ = fit_cause(top, spec, free, mm, allsel, fmax, options=kind, best_only=True)
+                    fits.append((chi2 + _freedom(spec, free),
+                                 PhysicalFit(cause=spec.name, params=p, free=free, chi2=chi2)))
+                best.append(min(fits, key=lambda t: t[0]))  # the best variant of the kind (the first of the least)
+            best.sort(key=lambda t: t[0])                     # the best kind first (ties: every place first)
+            kept[key] = best
+        ranked.append((i, *kept[key][0]))
+        others.extend(f for _, f in kept[key][1:])
     ranked.sort(key=lambda t: (t[1], t[0]))              # as fitted in the causes' order: ties in that order
-    return [f for _, _, f in ranked], (left if len(on) <= n else [c for c in left if c == _scatter_cause(sim)])
+    return ([f for _, _, f in ranked], (left if len(on) <= n else [c for c in left if c == _scatter_cause(sim)]),
+            others)
 
 
 def _opened(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -624,7 +651,8 @@ def _held_seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     (:func:`held_open`), ranked by the pair's chi2 plus the second cause's freedom, each as (its chi2 on all modes
     as its bound, :class:`SplitBound`; first refined, second): the pair's exact score is taken only while that
     chi2 could still win (:func:`_on_top_of`)."""
-    ranked = [(chi2 + _freedom(spec, b.free), chi2, a, b) for spec in specs.values() if names is None or spec.name in names
+    ranked = [(chi2 + _freedom(spec, b.free), chi2, a, b) for spec in specs.values()
+              if names is None or spec.name in names
               for chi2, a, b in held_open(sim, [specs[first.cause], spec], first, mm, fmax)]
     ranked.sort(key=lambda t: t[0])
     return [(SplitBound(None, chi2), a, b) for _, chi2, a, b in ranked]
@@ -843,8 +871,9 @@ def _beats_named(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     if two is None or not _named_pair(two):
         return None
     causes = two["_pair"].causes
-    freedom = _freedom(specs[causes[1]], two["_free"]) + (_choice_penalty(specs[causes[0]])
-                                                          if causes[0] != best["effect"] else 0.0)
+    chosen = two["_choices_chi2"]
+    freedom = (PARAMETER_CHI2 * len(two["_free"]) + chosen[1]
+               + (chosen[0] if causes[0] != best["effect"] else 0.0))
     cv_best, cv_pair = _alone_cv(sim, specs, mm, fmax, best), two["_pair"].cv_per_mode
     over, removed, enough = _on_top_enough(cv_best, cv_pair, freedom, judge.rule)
     if not enough:
@@ -949,6 +978,44 @@ def _win_target(best: dict | None, top: float, judge: _Judge, first: dict, cv_al
     return float(min(can, other)) if bounded else float(max(can, other))
 
 
+def _judged_pair(judge: _Judge, specs: dict, two: PairFit, cv_first: np.ndarray, first_chi2: float,
+                 free: tuple, own_params: float, counted: float) -> dict:
+    """The pair ``two`` (first cause, second cause) judged as a candidate (:meth:`_Judge.judge`) and against its first
+    cause alone, of held-out chi2 per mode ``cv_first`` and chi2 on all modes ``first_chi2`` (:func:`_on_top_enough`):
+    what it chose is the second cause's choice at the option it holds (:func:`choice_freedom`), its parameters
+    ``free`` (their freedom ``own_params``, chi2 units) and ``counted``, 2 ln(number of second causes refined). Its
+    score (``_chi2_cv``): the nested held-out chi2 plus both choices' penalty (:func:`_choice_penalty`), alike at
+    every option."""
+    # what each choice chose at the options the pair was fitted at (one cause at every place and at one of two
+    # places, said place by place below, chose one place)
+    causes = [specs[n] for n in two.causes]
+    chosen = [choice_freedom(spec, p) for spec, p in zip(causes, two.params)]
+    freedom = counted + chosen[1]
+    two = replace(two, params=as_places(causes, two.params))
+    c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
+    c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
+        cv_first, two.cv_per_mode, freedom, judge.rule)
+    c["_over_first"] = {"held_out_first_chi2": float(np.sum(cv_first)),
+                        "held_out_pair_chi2": float(np.sum(two.cv_per_mode)), "freedom_chi2": freedom,
+                        "modes": int(cv_first.size)}
+    # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
+    # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
+    kept = first_chi2 - two.chi2 >= own_params + chosen[1]
+    c["significant"] = bool(c["significant"] and enough and kept)
+    c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
+    c["one_member"] = _one_member(causes, two.params)
+    if c["one_member"] is not None and c["held_out_chi2_per_mode"] > judge.rule.leaves_chi2:
+        c["adequate"] = False
+    c["_pair"] = two
+    c["_free"] = free
+    c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
+                     "error_after_db": c["error_after_db"]} for name, p in two.changes]
+    c["effect"] = "+".join(two.causes)
+    c["_choices_chi2"] = chosen
+    c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(spec) for spec in causes)
+    return c
+
+
 def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: dict, judge: _Judge,
                names: Sequence[str] | None, opened: bool, held: bool = False, top: float = np.inf,
                named_only: bool = False, bound: float = np.inf) -> dict | None:
@@ -977,11 +1044,12 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         return _alone_cv(sim, specs, mm, fmax, first)
     unbounded = SplitBound(None)
     seconds: list[PhysicalFit] = []
+    others: list[PhysicalFit] = []
     left: list[str] = []
     if not opened:
         # a second cause whose pairs with the first cannot win (:func:`_hopeless`) is fitted only for its rank
-        seconds, left = _on_top_fits(sim, mm, fmax, fa, names, judge.kept,
-                                     lambda spec: _hopeless(None, bound, specs[fa.cause], spec))
+        seconds, left, others = _on_top_fits(sim, mm, fmax, fa, names, judge.kept,
+                                             lambda spec: _hopeless(None, bound, specs[fa.cause], spec))
     counted = _leading(sim, seconds, N_SECOND)
     # the pairs in the order they are judged; a group of pairs made only when it is reached and one of them could
     # still win (:func:`_hopeless`): the first refitted beside a counted second cause, every two elements split from
@@ -1005,56 +1073,44 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
     n_seconds = max(1, len(causes))
     # the other second causes of the screen, each refined with the first last: cross-validated only while its
     # refined chi2 on all modes could win (:func:`_win_target`), so none is dropped by its rank on the screen
-    todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted))],
+    # (the other kind of a cause with an option for every place after them, :func:`_kinds`)
+    todo = _expanded([*pairs, *((unbounded, None, fb) for fb in seconds if all(fb is not g for g in counted)),
+                      *((unbounded, None, fb) for fb in others)],
                      lambda group: all(_hopeless(best, bound, specs[fa.cause], specs[n]) for n in group.causes))
     best: dict | None = None
 
     def target_of(fb: PhysicalFit) -> float:
-        """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`)."""
-        return _win_target(best, top, judge, first, lambda: float(np.sum(cv_alone())), freedom_of(fb),
-                           _freedom(specs[fb.cause], fb.free),
+        """The chi2 on all modes a pair with the second cause ``fb`` must come below now (:func:`_win_target`), what
+        its second cause chose at its least (:func:`rechoose` may still move it)."""
+        least = least_choice_freedom(specs[fb.cause])
+        return _win_target(best, top, judge, first, lambda: float(np.sum(cv_alone())),
+                           2.0 * float(np.log(n_seconds)) + least, PARAMETER_CHI2 * len(fb.free) + least,
                            _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
 
-    def freedom_of(fb: PhysicalFit) -> float:
-        return 2.0 * float(np.log(n_seconds)) + _choice_penalty(specs[fb.cause])
-
     for below, fa2, fb in todo:
-        freedom, target = freedom_of(fb), target_of(fb)
+        target = target_of(fb)
         if target <= 0.0 or _hopeless(best, bound, specs[fa.cause], specs[fb.cause]) or not below.below(target):
             continue                        # its exact score cannot win (:func:`_win_target`; a chi2 is >= 0)
         if fa2 is None:
             fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
         # each cause's variant made again beside the other (:func:`widened`); the parameters it frees count too
-        n_free, own = len(fa2.free) + len(fb.free), _freedom(specs[fb.cause], fb.free)
-        fa2, fb = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
-        own += PARAMETER_CHI2 * (len(fa2.free) + len(fb.free) - n_free)
+        n_free = len(fa2.free) + len(fb.free)
+        fa2, fb2 = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+        own = PARAMETER_CHI2 * (len(fb.free) + len(fa2.free) + len(fb2.free) - n_free)
+        fb = fb2
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
         if two.cv_per_mode.size < mm.freq_hz.size:
             continue                        # refined on all modes, no better than ``target``: not cross-validated
+        made = [two]
         if gain_db(fa.cv_per_mode if fa.cv_per_mode.size else cv_alone(), two.cv_per_mode) >= judge.rule.physical_min_gain_db:
-            two = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
-        two = replace(two, params=as_places([specs[fa.cause], specs[fb.cause]], two.params))
-        c = judge.judge(two.changes, two.cv_per_mode, two.at_edge)
-        c["gain_over_first_db"], c["removed_over_first_chi2"], enough = _on_top_enough(
-            cv_alone(), two.cv_per_mode, freedom, judge.rule)
-        c["_over_first"] = {"held_out_first_chi2": float(np.sum(cv_alone())),
-                            "held_out_pair_chi2": float(np.sum(two.cv_per_mode)), "freedom_chi2": freedom,
-                            "modes": int(cv_alone().size)}
-        # the second cause earns its keep on all modes too: the pair lowers chi2 there by at least its freedom (a
-        # cause left near its nominal changes nothing, whatever its refits in the folds gained on held-out modes)
-        kept = first["_alone_chi2"] - two.chi2 >= own
-        c["significant"] = bool(c["significant"] and enough and kept)
-        c["held_out_chi2_per_mode"] = _held_out_per_mode(two.cv_per_mode, judge)
-        c["one_member"] = _one_member([specs[n] for n in two.causes], two.params)
-        if c["one_member"] is not None and c["held_out_chi2_per_mode"] > judge.rule.leaves_chi2:
-            c["adequate"] = False
-        c["_pair"] = two
-        c["_free"] = fb.free
-        c["_stages"] = [{"effect": name, "parameters": shown_params(specs[name], p), "gain_db": c["gain_db"],
-                         "error_after_db": c["error_after_db"]} for name, p in two.changes]
-        c["effect"] = "+".join(two.causes)
-        c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(specs[n]) for n in two.causes)
-        if named_only and not _named_pair(c):
-            continue
-        best = _better(best, c)
+            again = rechoose(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], two, mm, fmax)
+            # chosen again by chi2 on all modes; the pair as refined is judged too, for the choices' freedom differs
+            # between options (a joint at one place fits a little better than every joint, and chooses a place)
+            made = [again] if again.params == two.params else [again, two]
+        for two in made:
+            c = _judged_pair(judge, specs, two, cv_alone(), first["_alone_chi2"], fb.free, own,
+                             2.0 * float(np.log(n_seconds)))
+            if named_only and not _named_pair(c):
+                continue
+            best = _better(best, c)
     return best
