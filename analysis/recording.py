@@ -58,6 +58,13 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
+def _open_own_copy(path: Path) -> Any:
+    """Open for reading a copy of a recording that this reader made for itself (a live copy, a recording rebuilt
+    from its journal), without libhdf5's file lock: nobody else writes it, and a child process forked by another
+    thread while the copy was being written may still hold the lock that writing took for an instant (the open
+    file is inherited until the child execs), which would refuse the read."""
+    return _h5py().File(path, "r", locking=False)
+
 
 class Recording:
     """Read-only view of a recording; validates the schema on open. Use as a context manager.
@@ -144,7 +151,7 @@ class Recording:
         self.live = True
         log.info("%s is being written: reading the hits flushed so far", self.path)
         try:
-            return _h5py().File(self._live_copy, "r")
+            return _open_own_copy(self._live_copy)
         except OSError as exc:
             self._remove_live_copy()
             raise self._unopenable(exc) from None
@@ -163,7 +170,7 @@ class Recording:
         self.recovered = True
         log.warning("%s was not closed by its writer: read from its journal (%d changes%s); 'capture --resume' "
                     "rebuilds the file", self.path, n, ", the last one cut short and left out" if torn else "")
-        return _h5py().File(self._live_copy, "r")
+        return _open_own_copy(self._live_copy)
 
     def _unopenable(self, exc: OSError) -> RecordingError:
         return RecordingError(f"{self.path} is damaged or truncated and cannot be opened ({exc}); recover its intact "

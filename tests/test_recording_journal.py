@@ -4,6 +4,7 @@ written), loses no hit it reported written, no event and no operator's decision.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -217,3 +218,33 @@ def test_a_journal_without_its_recording_is_never_discarded_by_a_new_writer(tmp_
     RecordingWriter.resume(p).close()
     with Recording(p) as rec:
         assert {h.index: int(h.counts.sum()) for h in rec.hits()} == reported
+
+
+def test_a_rebuilt_copy_still_locked_by_an_inherited_handle_is_read(tmp_path, monkeypatch):
+    """While the reader rebuilds a killed writer's recording into its own copy, a subprocess forked by another
+    thread inherits the copy's open file and, until it execs, holds the lock that writing took. The reader's copy
+    is its own: it is read regardless (before, libhdf5 refused it: 'unable to lock file', errno 11)."""
+    import fcntl
+
+    import analysis.recording as recording
+
+    p, reported = _killed_writer(tmp_path)
+    real = recording.replay_journal
+    held: list[int] = []
+
+    def replay_then_held(path, out):
+        result = real(path, out)
+        fd = os.open(out, os.O_RDWR)
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # as the inherited handle holds it
+        held.append(fd)
+        return result
+
+    monkeypatch.setattr(recording, "replay_journal", replay_then_held)
+    try:
+        with Recording(p) as rec:
+            assert rec.recovered
+            assert {h.index: int(h.counts.sum()) for h in rec.hits()} == reported
+        assert held
+    finally:
+        for fd in held:
+            os.close(fd)
