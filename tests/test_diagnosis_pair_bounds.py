@@ -91,7 +91,7 @@ def test_a_first_cause_whose_pairs_cannot_beat_a_named_score_makes_nothing(monke
         return pp.fit_pair(*a, **k)  # type: ignore[arg-type]
 
     monkeypatch.setattr(pv, "fit_pair", fit_pair)
-    assert pv._choice_penalty(specs["support_stiffness"]) > 2.0
+    assert pv.choice_penalty(specs["support_stiffness"]) > 2.0
     assert pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False, top=2.0) is None
     assert fitted == [] and refined == []
 
@@ -110,7 +110,7 @@ def test_the_bound_keeps_the_pair_the_full_search_names(monkeypatch: pytest.Monk
     assert full["_pair"].causes == ("support_stiffness", "stiffness_shift")
     assert full["_pair"].params[1]["stiffness_factor"] == pytest.approx(STIFFER, rel=1e-3)
     score = float(full["_chi2_cv"])
-    assert pv._choice_penalty(specs["support_stiffness"]) * 2 > score + 1e-6
+    assert pv.choice_penalty(specs["support_stiffness"]) * 2 > score + 1e-6
     judge.kept.clear()                  # the second causes fitted on top of the support anew
     fitted = _fitted_on_top(monkeypatch)
     bounded = pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False, top=score + 1e-6)
@@ -180,7 +180,7 @@ def test_a_first_causes_folds_are_made_only_when_a_pair_needs_them() -> None:
     eager = dict(first)
     pv._alone_cv(fv, specs, mm, fmax, eager)
     assert _pair(pv._on_top_of(fv, specs, mm, fmax, eager, judge, CAUSES, opened=False)) == _pair(full)
-    top = pv._choice_penalty(specs["support_stiffness"]) + 0.5 * full["_pair"].chi2
+    top = pv.choice_penalty(specs["support_stiffness"]) + 0.5 * full["_pair"].chi2
     assert pv._on_top_of(fv, specs, mm, fmax, first, judge, CAUSES, opened=False, top=top) is None
     assert "_alone_cv" not in first
 
@@ -234,8 +234,8 @@ def test_a_choice_costs_its_freedom_at_the_option_it_holds() -> None:
     assert pv.choice_freedom(mass, {"point": mass.options[3]}) == pytest.approx(2.0 * np.log(n))
     assert pv.least_choice_freedom(mass) == pytest.approx(2.0 * np.log(n))
     assert pv.choice_freedom(specs["stiffness_shift"], {}) == pv.least_choice_freedom(specs["stiffness_shift"]) == 0.0
-    assert pv._choice_penalty(support) == pytest.approx(2.0 * np.log(3.0))
-    assert pv._choice_penalty(mass) == pytest.approx(2.0 * np.log(n))
+    assert pv.choice_penalty(support) == pytest.approx(2.0 * np.log(3.0))
+    assert pv.choice_penalty(mass) == pytest.approx(2.0 * np.log(n))
 
 
 def test_on_top_of_a_first_cause_every_place_and_one_place_are_both_kept() -> None:

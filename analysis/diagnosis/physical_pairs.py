@@ -53,7 +53,8 @@ from .physical import (
 
 __all__ = ["OnTop", "PairFit", "SplitBound", "as_places", "besides", "fit_pair", "held_open", "held_spec", "changes_of",
            "refit_on_top", "rechoose", "split_choice", "splits_in_two", "split_places", "splits", "with_options",
-           "pair_starts", "widest", "widened", "at_one_place", "choice_freedom", "least_choice_freedom"]
+           "pair_starts", "widest", "widened", "at_one_place", "choice_freedom", "choice_penalty",
+           "least_choice_freedom"]
 
 
 def changes_of(sim: PhysicalSimulation, changes: Sequence[tuple[str, Mapping]], fmax: float
@@ -572,14 +573,21 @@ def at_one_place(spec: CauseSpec, params: Mapping) -> bool:
 PARAMETER_CHI2 = 2.0
 
 
+def choice_penalty(spec: CauseSpec) -> float:
+    """What a cause's choice adds to a pair's score, in chi2 units: 2 ln(number of options) whatever the option (0
+    without a choice), so pairs are compared like for like. What the pair chose, which its test against the first
+    cause alone counts, depends on the option (:func:`choice_freedom`)."""
+    return 2.0 * float(np.log(max(len(spec.options), 1))) if spec.choice else 0.0
+
+
 def choice_freedom(spec: CauseSpec, params: Mapping) -> float:
-    """What a cause's choice chose, in chi2 units, at the option ``params`` hold: 2 ln(number of options) for one
-    place among them (0 without a choice); 0 at :attr:`CauseSpec.every`, the cause at every place at once (all
-    supports softened together), which is the cause as the frame's own model has it and chooses no place. A second
-    cause's test against its first cause alone counts it (no fold re-makes the choice)."""
+    """What a cause's choice chose, in chi2 units, at the option ``params`` hold: for one place among its options,
+    their :func:`choice_penalty`; 0 at :attr:`CauseSpec.every`, the cause at every place at once (all supports
+    softened together), which is the cause as the frame's own model has it and chooses no place (0 without a
+    choice). A second cause's test against its first cause alone counts it (no fold re-makes the choice)."""
     if not spec.choice or params.get(spec.choice) == spec.every:
         return 0.0
-    return 2.0 * float(np.log(max(len(spec.options), 1)))
+    return choice_penalty(spec)
 
 
 def least_choice_freedom(spec: CauseSpec) -> float:

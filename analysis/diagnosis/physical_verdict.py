@@ -74,6 +74,7 @@ from .physical_pairs import (
     as_places,
     besides,
     choice_freedom,
+    choice_penalty,
     fit_pair,
     held_open,
     held_spec,
@@ -522,17 +523,10 @@ class _Judge:
 N_SECOND = 3
 
 
-def _choice_penalty(spec: CauseSpec) -> float:
-    """What a cause's choice adds to a pair's score, in chi2 units: 2 ln(number of options) whatever the option (0
-    without a choice), so pairs are compared like for like. What the pair chose, which its test against the first
-    cause alone counts, depends on the option (:func:`choice_freedom`)."""
-    return 2.0 * float(np.log(max(len(spec.options), 1))) if spec.choice else 0.0
-
-
 def _freedom(spec: CauseSpec, free: Sequence[str]) -> float:
     """The freedom of a cause fitted with the parameters ``free`` as pairs are ranked and scored, in chi2 units: 2 per
-    parameter plus its choice's (:func:`_choice_penalty`)."""
-    return PARAMETER_CHI2 * len(free) + _choice_penalty(spec)
+    parameter plus its choice's (:func:`choice_penalty`)."""
+    return PARAMETER_CHI2 * len(free) + choice_penalty(spec)
 
 
 def _seconds(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: float, first: PhysicalFit,
@@ -681,10 +675,10 @@ def _expanded(items: Sequence, skip: Callable[[_Later], bool]) -> Iterator:
 def _hopeless(best: dict | None, top: float, first: CauseSpec, second: CauseSpec) -> bool:
     """Whether no pair of the causes ``first`` and ``second`` can win against the best named pair so far (``best``, or
     one of score ``top`` found elsewhere): a pair's score is its nested held-out chi2 (>= 0) plus both choices'
-    freedom (:func:`_choice_penalty`), so with that freedom alone at or above the named score it cannot
+    freedom (:func:`choice_penalty`), so with that freedom alone at or above the named score it cannot
     (:func:`_win_target` is then <= 0)."""
     named_top = min(top, _named_score(best))
-    return bool(np.isfinite(named_top) and named_top - _choice_penalty(first) - _choice_penalty(second) <= 0.0)
+    return bool(np.isfinite(named_top) and named_top - choice_penalty(first) - choice_penalty(second) <= 0.0)
 
 
 def _named_score(c: dict | None) -> float:
@@ -705,7 +699,7 @@ def _second_cause(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax:
     held-out modes within their uncertainty), the other causes (a cause of many options, a crack, also refined with
     the first at each option, :func:`_held_seconds`); the best pair by nested held-out error, judged like a
     single cause and against the first cause alone (:func:`_on_top_enough`); ``firsts`` given: on top of those only. Pairs are
-    compared by nested held-out chi2 plus their choices' freedom (:func:`_choice_penalty`). A pair worth
+    compared by nested held-out chi2 plus their choices' freedom (:func:`choice_penalty`). A pair worth
     naming has its choices made again where both causes are refined (:func:`rechoose`). Two causes that
     change one member (:func:`_one_member`) are adequate only when they also leave the held-out modes within
     their uncertainty (:func:`_held_out_per_mode` at most ``rule.leaves_chi2``): the stiffness and the mass of
@@ -824,19 +818,19 @@ def _local_pairs(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: 
     member's stiffness for two cracks). Each local cause at each of its places (:func:`_local_firsts`) is a first
     cause, the local causes on top of it (:func:`_on_top_of`), judged by the same rule as every pair. A first cause
     is skipped when no pair with it can beat ``best`` (a named pair): a pair's penalised held-out chi2 is at least
-    its two choices' freedom (:func:`_choice_penalty`), so with ``best``'s below that nothing is dropped that could
+    its two choices' freedom (:func:`choice_penalty`), so with ``best``'s below that nothing is dropped that could
     win. Only a named pair is of use here (the first round's best pair stands for the unnamed): a pair that cannot
     be named is not cross-validated (:func:`_win_target`, ``named_only``). The best named pair, or None."""
     local = [n for n, s in specs.items() if _local(s) and (names is None or n in names)]
     if len(local) < 1:
         return None
-    floor = min(_choice_penalty(specs[n]) for n in local)
+    floor = min(choice_penalty(specs[n]) for n in local)
     top = best["_chi2_cv"] if _named_pair(best) else np.inf       # type: ignore[index]
     if 2.0 * floor >= top:
         return None
     out: dict | None = None
     for first in _local_firsts(sim, specs, mm, fmax, found, local):
-        if _choice_penalty(specs[first["_fit"].cause]) + floor >= top:
+        if choice_penalty(specs[first["_fit"].cause]) + floor >= top:
             continue
         c = _on_top_of(sim, specs, mm, fmax, first, judge, local, opened=False, held=True, top=top, named_only=True,
                        bound=top)
@@ -984,7 +978,7 @@ def _judged_pair(judge: _Judge, specs: dict, two: PairFit, cv_first: np.ndarray,
     cause alone, of held-out chi2 per mode ``cv_first`` and chi2 on all modes ``first_chi2`` (:func:`_on_top_enough`):
     what it chose is the second cause's choice at the option it holds (:func:`choice_freedom`), its parameters
     ``free`` (their freedom ``own_params``, chi2 units) and ``counted``, 2 ln(number of second causes refined). Its
-    score (``_chi2_cv``): the nested held-out chi2 plus both choices' penalty (:func:`_choice_penalty`), alike at
+    score (``_chi2_cv``): the nested held-out chi2 plus both choices' penalty (:func:`choice_penalty`), alike at
     every option."""
     # what each choice chose at the options the pair was fitted at (one cause at every place and at one of two
     # places, said place by place below, chose one place)
@@ -1012,7 +1006,7 @@ def _judged_pair(judge: _Judge, specs: dict, two: PairFit, cv_first: np.ndarray,
                      "error_after_db": c["error_after_db"]} for name, p in two.changes]
     c["effect"] = "+".join(two.causes)
     c["_choices_chi2"] = chosen
-    c["_chi2_cv"] = two.chi2_cv + sum(_choice_penalty(spec) for spec in causes)
+    c["_chi2_cv"] = two.chi2_cv + sum(choice_penalty(spec) for spec in causes)
     return c
 
 
@@ -1085,7 +1079,7 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         least = least_choice_freedom(specs[fb.cause])
         return _win_target(best, top, judge, first, lambda: float(np.sum(cv_alone())),
                            2.0 * float(np.log(n_seconds)) + least, PARAMETER_CHI2 * len(fb.free) + least,
-                           _choice_penalty(specs[fa.cause]) + _choice_penalty(specs[fb.cause]), named_only)
+                           choice_penalty(specs[fa.cause]) + choice_penalty(specs[fb.cause]), named_only)
 
     for below, fa2, fb in todo:
         target = target_of(fb)
@@ -1094,10 +1088,9 @@ def _on_top_of(sim: PhysicalSimulation, specs: dict, mm: MeasuredModes, fmax: fl
         if fa2 is None:
             fa2 = refit_on_top(sim, specs[fa.cause], fa, fb, mm, fmax, best_only=True)
         # each cause's variant made again beside the other (:func:`widened`); the parameters it frees count too
-        n_free = len(fa2.free) + len(fb.free)
-        fa2, fb2 = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
-        own = PARAMETER_CHI2 * (len(fb.free) + len(fa2.free) + len(fb2.free) - n_free)
-        fb = fb2
+        n_free, own = len(fa2.free) + len(fb.free), PARAMETER_CHI2 * len(fb.free)
+        fa2, fb = widened(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax)
+        own += PARAMETER_CHI2 * (len(fa2.free) + len(fb.free) - n_free)
         two = fit_pair(sim, [specs[fa.cause], specs[fb.cause]], [fa2, fb], mm, fmax, folds_below=target)
         if two.cv_per_mode.size < mm.freq_hz.size:
             continue                        # refined on all modes, no better than ``target``: not cross-validated
